@@ -1,1 +1,345 @@
-//! placeholder
+//! A fake OpenXR loader.
+//!
+//! It loads API layer libraries the way the Khronos loader does (`dlopen` with
+//! `RTLD_LAZY | RTLD_LOCAL`, `xrNegotiateLoaderApiLayerInterface` with the loader's own version
+//! ranges, one `XrApiLayerNextInfo` per layer, the topmost `xrGetInstanceProcAddr` for everything
+//! after creation; openxr-layer-facts.md §2) and ends in the simulated runtime, linked in-process,
+//! so a test can drive a layer and read exactly what reached the runtime through
+//! [`fovea_sim::control`].
+//!
+//! Differences from the real loader, on purpose: several instances may live at once (tests run in
+//! parallel), and layers are named by path rather than discovered from manifests (the system-loader
+//! tests cover discovery).
+
+use std::ffi::{c_char, CStr, CString};
+use std::path::{Path, PathBuf};
+
+use openxr_sys as xr;
+
+pub use fovea_sim as sim;
+
+/// The Khronos loader's interface and API version ranges (identical in 1.0.20 and 1.1.x).
+pub const LOADER_MIN_API: xr::Version = xr::Version::new(1, 0, 0);
+pub const LOADER_MAX_API: xr::Version = xr::Version::new(1, 0x3ff, 0xfff);
+
+/// The layer name fovea registers under.
+pub const FOVEA_LAYER: &str = "XR_APILAYER_FOVEA_foveation";
+/// The Khronos core validation layer's name and where Debian installs it.
+pub const CORE_VALIDATION_LAYER: &str = "XR_APILAYER_LUNARG_core_validation";
+pub const CORE_VALIDATION_PATH: &str = "/usr/lib/x86_64-linux-gnu/openxr/1/api_layers/libXrApiLayer_core_validation.so";
+
+/// A layer to load: its library and the name the loader would hand it.
+#[derive(Clone, Debug)]
+pub struct LayerSpec {
+    pub path: PathBuf,
+    pub name: String,
+}
+
+impl LayerSpec {
+    /// The fovea layer built in this workspace (`target/<profile>/libfovea.so`), or the library
+    /// named by `FOVEA_LAYER_LIB`.
+    pub fn fovea() -> Result<LayerSpec, String> {
+        let path = match std::env::var_os("FOVEA_LAYER_LIB") {
+            Some(p) => PathBuf::from(p),
+            None => artifact("libfovea.so")?,
+        };
+        Ok(LayerSpec { path, name: FOVEA_LAYER.to_owned() })
+    }
+
+    /// Debian's Khronos core validation layer (`openxr-layer-corevalidation`), if installed.
+    pub fn core_validation() -> Option<LayerSpec> {
+        Path::new(CORE_VALIDATION_PATH)
+            .exists()
+            .then(|| LayerSpec { path: CORE_VALIDATION_PATH.into(), name: CORE_VALIDATION_LAYER.to_owned() })
+    }
+}
+
+/// A build artifact of this workspace, found next to the running executable: a test binary sits in
+/// `target/<profile>/deps`, the `fovea` binary in `target/<profile>`.
+pub fn artifact(file: &str) -> Result<PathBuf, String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let mut dir = exe.parent();
+    while let Some(d) = dir {
+        let candidate = d.join(file);
+        if candidate.exists() {
+            return Ok(candidate);
+        }
+        if d.file_name().is_some_and(|n| n == "target") {
+            break;
+        }
+        dir = d.parent();
+    }
+    Err(format!("{file} not found next to {}: run `cargo build` first", exe.display()))
+}
+
+/// Whether tests that need a system component must fail rather than skip (`FOVEA_REQUIRE_SYSTEM=1`,
+/// set by CI).
+pub fn require_system() -> bool {
+    std::env::var("FOVEA_REQUIRE_SYSTEM").is_ok_and(|v| v == "1")
+}
+
+/// Skips (prints why and returns `true`) or, under `FOVEA_REQUIRE_SYSTEM=1`, panics.
+pub fn skip(reason: &str) -> bool {
+    if require_system() {
+        panic!("required system component missing: {reason}");
+    }
+    eprintln!("SKIPPED: {reason}");
+    true
+}
+
+/// One loaded, negotiated layer library.
+pub struct LoadedLayer {
+    pub spec: LayerSpec,
+    name: CString,
+    pub gipa: xr::pfn::GetInstanceProcAddr,
+    pub create: xr::pfn::CreateApiLayerInstance,
+    _lib: libloading::Library,
+}
+
+/// Opens a library as the loader does: `RTLD_LAZY | RTLD_LOCAL`.
+pub fn open_library(path: &Path) -> Result<libloading::Library, String> {
+    use libloading::os::unix::{Library, RTLD_LAZY, RTLD_LOCAL};
+    // SAFETY: loading a layer runs its initialisers; that is what loading a layer means.
+    unsafe { Library::open(Some(path), RTLD_LAZY | RTLD_LOCAL) }
+        .map(Into::into)
+        .map_err(|e| format!("dlopen {}: {e}", path.display()))
+}
+
+/// The loader's `XrNegotiateLoaderInfo`.
+pub fn loader_info() -> xr::NegotiateLoaderInfo {
+    xr::NegotiateLoaderInfo {
+        struct_type: xr::NegotiateLoaderInfo::TYPE,
+        struct_version: xr::NegotiateLoaderInfo::VERSION,
+        struct_size: std::mem::size_of::<xr::NegotiateLoaderInfo>(),
+        min_interface_version: 1,
+        max_interface_version: 1,
+        min_api_version: LOADER_MIN_API,
+        max_api_version: LOADER_MAX_API,
+    }
+}
+
+/// The loader's empty `XrNegotiateApiLayerRequest`.
+pub fn layer_request() -> xr::NegotiateApiLayerRequest {
+    xr::NegotiateApiLayerRequest {
+        struct_type: xr::NegotiateApiLayerRequest::TYPE,
+        struct_version: xr::NegotiateApiLayerRequest::VERSION,
+        struct_size: std::mem::size_of::<xr::NegotiateApiLayerRequest>(),
+        layer_interface_version: 0,
+        layer_api_version: xr::Version::new(0, 0, 0),
+        get_instance_proc_addr: None,
+        create_api_layer_instance: None,
+    }
+}
+
+impl LoadedLayer {
+    /// Loads and negotiates a layer.
+    pub fn load(spec: LayerSpec) -> Result<LoadedLayer, String> {
+        let lib = open_library(&spec.path)?;
+        let name = CString::new(spec.name.clone()).map_err(|e| e.to_string())?;
+        let negotiate = negotiate_symbol(&lib)?;
+        let info = loader_info();
+        let mut request = layer_request();
+        // SAFETY: both structs are valid and live across the call.
+        let r = unsafe { negotiate(&info, name.as_ptr(), &mut request) };
+        if r != xr::Result::SUCCESS {
+            return Err(format!("{}: negotiation failed with {r:?}", spec.name));
+        }
+        match (request.get_instance_proc_addr, request.create_api_layer_instance) {
+            (Some(gipa), Some(create)) => Ok(LoadedLayer { spec, name, gipa, create, _lib: lib }),
+            _ => Err(format!("{}: negotiation returned NULL entry points", spec.name)),
+        }
+    }
+}
+
+/// A library's `xrNegotiateLoaderApiLayerInterface`.
+pub fn negotiate_symbol(lib: &libloading::Library) -> Result<xr::pfn::NegotiateLoaderApiLayerInterface, String> {
+    // SAFETY: the symbol's type is fixed by the loader interface.
+    unsafe {
+        lib.get::<xr::pfn::NegotiateLoaderApiLayerInterface>(b"xrNegotiateLoaderApiLayerInterface\0")
+            .map(|s| *s)
+            .map_err(|e| format!("no xrNegotiateLoaderApiLayerInterface: {e}"))
+    }
+}
+
+/// A stack of layers in front of the simulated runtime; index 0 is closest to the application.
+pub struct Chain {
+    pub layers: Vec<LoadedLayer>,
+}
+
+/// The terminator's `xrCreateApiLayerInstance`: ignores the layer info and calls the runtime's
+/// `xrCreateInstance` with the create info it receives, as the Khronos loader's terminator does.
+unsafe extern "system" fn terminator_create(
+    info: *const xr::InstanceCreateInfo,
+    _layer_info: *const xr::ApiLayerCreateInfo,
+    instance: *mut xr::Instance,
+) -> xr::Result {
+    match runtime_fn::<xr::pfn::CreateInstance>(xr::Instance::NULL, c"xrCreateInstance") {
+        Ok(create) => create(info, instance),
+        Err(r) => r,
+    }
+}
+
+/// The runtime's own `xrGetInstanceProcAddr`.
+pub fn runtime_gipa() -> xr::pfn::GetInstanceProcAddr {
+    fovea_sim::get_instance_proc_addr
+}
+
+/// A typed function from the runtime, bypassing every layer.
+///
+/// # Safety
+/// `F` must be the function type the name implies.
+pub unsafe fn runtime_fn<F: Copy>(instance: xr::Instance, name: &CStr) -> Result<F, xr::Result> {
+    lookup(runtime_gipa(), instance, name)
+}
+
+/// A typed function through a `xrGetInstanceProcAddr`.
+///
+/// # Safety
+/// `F` must be the function type the name implies (a function pointer).
+pub unsafe fn lookup<F: Copy>(
+    gipa: xr::pfn::GetInstanceProcAddr,
+    instance: xr::Instance,
+    name: &CStr,
+) -> Result<F, xr::Result> {
+    assert_eq!(std::mem::size_of::<F>(), std::mem::size_of::<xr::pfn::VoidFunction>());
+    let mut f = None;
+    let r = gipa(instance, name.as_ptr(), &mut f);
+    match (r, f) {
+        (xr::Result::SUCCESS, Some(f)) => Ok(std::mem::transmute_copy::<xr::pfn::VoidFunction, F>(&f)),
+        (xr::Result::SUCCESS, None) => panic!("{name:?}: XR_SUCCESS with a NULL pointer"),
+        (r, _) => Err(r),
+    }
+}
+
+impl Chain {
+    /// Loads and negotiates every layer, outermost first.
+    pub fn new(specs: Vec<LayerSpec>) -> Result<Chain, String> {
+        Ok(Chain { layers: specs.into_iter().map(LoadedLayer::load).collect::<Result<_, _>>()? })
+    }
+
+    /// fovea alone in front of the runtime.
+    pub fn fovea() -> Result<Chain, String> {
+        Chain::new(vec![LayerSpec::fovea()?])
+    }
+
+    /// No layer: the application talks to the runtime directly (the baseline for comparisons).
+    pub fn bare() -> Chain {
+        Chain { layers: Vec::new() }
+    }
+
+    /// The `xrGetInstanceProcAddr` the application uses: the topmost layer's, or the runtime's.
+    pub fn gipa(&self) -> xr::pfn::GetInstanceProcAddr {
+        self.layers.first().map_or(runtime_gipa(), |l| l.gipa)
+    }
+
+    /// What the loader checks before any layer runs (openxr-layer-facts.md §2.8): every enabled
+    /// extension must come from the runtime or an enabled layer.
+    pub fn available_extensions(&self) -> Vec<String> {
+        let mut names = Vec::new();
+        // SAFETY: the enumerate functions are called with valid buffers.
+        unsafe {
+            if let Ok(f) = runtime_fn::<xr::pfn::EnumerateInstanceExtensionProperties>(
+                xr::Instance::NULL,
+                c"xrEnumerateInstanceExtensionProperties",
+            ) {
+                names.extend(enumerate_extensions(f, std::ptr::null()));
+            }
+            for l in &self.layers {
+                if let Ok(f) = lookup::<xr::pfn::EnumerateInstanceExtensionProperties>(
+                    l.gipa,
+                    xr::Instance::NULL,
+                    c"xrEnumerateInstanceExtensionProperties",
+                ) {
+                    names.extend(enumerate_extensions(f, l.name.as_ptr()));
+                }
+            }
+        }
+        names
+    }
+
+    /// `xrCreateInstance` as the loader performs it: the pre-check, then one next-info per layer and
+    /// the topmost layer's `xrCreateApiLayerInstance`.
+    ///
+    /// # Safety
+    /// `info` must be a valid `XrInstanceCreateInfo`.
+    pub unsafe fn create_instance(&self, info: *const xr::InstanceCreateInfo, instance: *mut xr::Instance) -> xr::Result {
+        if !info.is_null() {
+            let available = self.available_extensions();
+            let i = &*info;
+            for k in 0..i.enabled_extension_count as usize {
+                let name = CStr::from_ptr(*i.enabled_extension_names.add(k)).to_string_lossy();
+                if !available.iter().any(|a| *a == name) {
+                    return xr::Result::ERROR_EXTENSION_NOT_PRESENT;
+                }
+            }
+        }
+        let Some(top) = self.layers.first() else {
+            return terminator_create(info, std::ptr::null(), instance);
+        };
+        let n = self.layers.len();
+        let mut infos: Vec<xr::ApiLayerNextInfo> = (0..n)
+            .map(|k| {
+                let mut ni = xr::ApiLayerNextInfo {
+                    struct_type: xr::ApiLayerNextInfo::TYPE,
+                    struct_version: xr::ApiLayerNextInfo::VERSION,
+                    struct_size: std::mem::size_of::<xr::ApiLayerNextInfo>(),
+                    layer_name: [0; xr::MAX_API_LAYER_NAME_SIZE],
+                    next_get_instance_proc_addr: Some(self.layers.get(k + 1).map_or(runtime_gipa(), |l| l.gipa)),
+                    next_create_api_layer_instance: Some(
+                        self.layers.get(k + 1).map_or(terminator_create as xr::pfn::CreateApiLayerInstance, |l| l.create),
+                    ),
+                    next: std::ptr::null_mut(),
+                };
+                for (d, s) in ni.layer_name.iter_mut().zip(self.layers[k].name.as_bytes()) {
+                    *d = *s as c_char;
+                }
+                ni
+            })
+            .collect();
+        for k in (0..n.saturating_sub(1)).rev() {
+            let next: *mut xr::ApiLayerNextInfo = &mut infos[k + 1];
+            infos[k].next = next;
+        }
+        let create_info = xr::ApiLayerCreateInfo {
+            struct_type: xr::ApiLayerCreateInfo::TYPE,
+            struct_version: xr::ApiLayerCreateInfo::VERSION,
+            struct_size: std::mem::size_of::<xr::ApiLayerCreateInfo>(),
+            loader_instance: std::ptr::null_mut(),
+            settings_file_location: [0; xr::API_LAYER_MAX_SETTINGS_PATH_SIZE],
+            next_info: infos.as_mut_ptr(),
+        };
+        (top.create)(info, &create_info, instance)
+    }
+}
+
+/// Extension names from an `xrEnumerateInstanceExtensionProperties`.
+///
+/// # Safety
+/// `f` must be such a function; `layer` NULL or NUL-terminated.
+pub unsafe fn enumerate_extensions(
+    f: xr::pfn::EnumerateInstanceExtensionProperties,
+    layer: *const c_char,
+) -> Vec<String> {
+    let mut n = 0;
+    if f(layer, 0, &mut n, std::ptr::null_mut()) != xr::Result::SUCCESS {
+        return Vec::new();
+    }
+    let empty = xr::ExtensionProperties {
+        ty: xr::StructureType::EXTENSION_PROPERTIES,
+        next: std::ptr::null_mut(),
+        extension_name: [0; xr::MAX_EXTENSION_NAME_SIZE],
+        extension_version: 0,
+    };
+    let mut props = vec![empty; n as usize];
+    if f(layer, n, &mut n, props.as_mut_ptr()) != xr::Result::SUCCESS {
+        return Vec::new();
+    }
+    props
+        .iter()
+        .take(n as usize)
+        .map(|p| CStr::from_ptr(p.extension_name.as_ptr()).to_string_lossy().into_owned())
+        .collect()
+}
+
+pub mod app;
+pub use app::App;

@@ -1,0 +1,84 @@
+//! Session lifetime and view configuration.
+
+use std::sync::Arc;
+
+use openxr_sys as xr;
+use xr::Handle;
+
+use super::{finish, instance, next, session, succeeded};
+use crate::ffi::{self, guard};
+use crate::state::{registry, Session, VulkanBinding};
+
+/// `xrCreateSession`: records the Vulkan binding (XrGraphicsBindingVulkanKHR; the enable2 type is an
+/// alias with the same value) so density images can be made on the application's device.
+pub unsafe extern "system" fn create_session(
+    inst: xr::Instance,
+    info: *const xr::SessionCreateInfo,
+    out: *mut xr::Session,
+) -> xr::Result {
+    guard("xrCreateSession", || {
+        finish((|| {
+            let state = instance(inst)?;
+            let f = next(state.next.create_session)?;
+            if info.is_null() || out.is_null() || (*info).ty != xr::StructureType::SESSION_CREATE_INFO {
+                return Ok(f(inst, info, out));
+            }
+            let binding = match ffi::find_in_chain::<xr::GraphicsBindingVulkanKHR>(
+                (*info).next,
+                xr::StructureType::GRAPHICS_BINDING_VULKAN_KHR,
+            ) {
+                Ok(b) => b.map(|b| {
+                    let b = &*b;
+                    VulkanBinding {
+                        instance: b.instance as u64,
+                        physical_device: b.physical_device as u64,
+                        device: b.device as u64,
+                        queue_family_index: b.queue_family_index,
+                        queue_index: b.queue_index,
+                    }
+                }),
+                Err(_) => return Err(xr::Result::ERROR_VALIDATION_FAILURE),
+            };
+            let r = f(inst, info, out);
+            if succeeded(r) {
+                let handle = *out;
+                let record = Session { handle, instance: state, vulkan: binding };
+                registry().sessions.write().insert(handle.into_raw(), Arc::new(record));
+            }
+            Ok(r)
+        })())
+    })
+}
+
+/// `xrDestroySession`: the session's swapchains and profiles die with it (xr.xml parents); their
+/// layer resources are released before the call goes down, while the application's device still
+/// exists.
+pub unsafe extern "system" fn destroy_session(handle: xr::Session) -> xr::Result {
+    guard("xrDestroySession", || {
+        finish((|| {
+            let state = session(handle)?;
+            let f = next(state.instance.next.destroy_session)?;
+            drop(registry().remove_session_children(handle));
+            registry().sessions.write().remove(&handle.into_raw());
+            Ok(f(handle))
+        })())
+    })
+}
+
+/// `xrEnumerateViewConfigurationViews`: passed on.
+pub unsafe extern "system" fn enumerate_view_configuration_views(
+    inst: xr::Instance,
+    system: xr::SystemId,
+    config: xr::ViewConfigurationType,
+    capacity: u32,
+    count: *mut u32,
+    views: *mut xr::ViewConfigurationView,
+) -> xr::Result {
+    guard("xrEnumerateViewConfigurationViews", || {
+        finish((|| {
+            let state = instance(inst)?;
+            let f = next(state.next.enumerate_view_configuration_views)?;
+            Ok(f(inst, system, config, capacity, count, views))
+        })())
+    })
+}

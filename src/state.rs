@@ -1,0 +1,208 @@
+//! Per-handle state: what the layer knows of each instance, session, swapchain and foveation profile.
+//!
+//! Handles are the runtime's own (fovea wraps none of them, so calls it does not intercept need no
+//! translation); profiles are the one handle type fovea mints itself. Each kind lives in a map behind
+//! a `parking_lot` reader-writer lock; records are `Arc`s so a hook can drop the map lock before
+//! calling down. Children hold their parent's `Arc`, which is how a hook on a swapchain reaches the
+//! instance's next-layer table.
+//!
+//! Lock order, where more than one is held: a map lock is never held while calling into the next
+//! layer or while taking a record's own lock. Record locks are leaves.
+
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
+
+use openxr_sys as xr;
+use xr::Handle;
+use parking_lot::RwLock;
+
+use crate::dispatch::Next;
+use crate::extensions::Extensions;
+
+/// The application's instance and everything fovea learned when it was created.
+pub struct Instance {
+    pub handle: xr::Instance,
+    /// The next layer's `xrGetInstanceProcAddr`, for functions fovea does not intercept.
+    pub next_gipa: xr::pfn::GetInstanceProcAddr,
+    /// The next layer's pointers for every intercepted function.
+    pub next: Next,
+    pub extensions: Extensions,
+    /// The API version the application asked for.
+    pub api_version: xr::Version,
+    /// `FOVEA_SYMMETRIC_FOV=1` when the instance was created.
+    pub symmetric_fov: bool,
+}
+
+/// A session and its graphics binding.
+pub struct Session {
+    pub handle: xr::Session,
+    pub instance: Arc<Instance>,
+    /// The Vulkan binding, when the session has one (not for headless sessions).
+    pub vulkan: Option<VulkanBinding>,
+}
+
+/// `XrGraphicsBindingVulkanKHR`'s handles, as raw values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VulkanBinding {
+    pub instance: u64,
+    pub physical_device: u64,
+    pub device: u64,
+    pub queue_family_index: u32,
+    pub queue_index: u32,
+}
+
+/// What fovea keeps of `XrSwapchainCreateInfo`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SwapchainInfo {
+    pub usage: u64,
+    pub format: i64,
+    pub sample_count: u32,
+    pub width: u32,
+    pub height: u32,
+    pub face_count: u32,
+    pub array_size: u32,
+    pub mip_count: u32,
+}
+
+/// A swapchain and, when the application asked for foveation, its foveation state.
+pub struct Swapchain {
+    pub handle: xr::Swapchain,
+    pub session: Arc<Session>,
+    pub info: SwapchainInfo,
+}
+
+/// A foveation profile fovea created.
+pub struct Profile {
+    pub handle: xr::FoveationProfileFB,
+    /// The session it belongs to (xr.xml: `parent="XrSession"`).
+    pub session: xr::Session,
+}
+
+/// A `Hasher` for handle keys: handles are already unique integers, so a multiplicative mix is all a
+/// hash map needs, at a fraction of SipHash's cost on the per-frame path.
+#[derive(Default)]
+pub struct HandleHasher(u64);
+
+impl Hasher for HandleHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(8) ^ u64::from(b)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        }
+    }
+
+    fn write_u64(&mut self, v: u64) {
+        self.0 = v.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+/// A map from raw handle values to records.
+pub type HandleMap<T> = RwLock<HashMap<u64, Arc<T>, BuildHasherDefault<HandleHasher>>>;
+
+/// Every live handle fovea knows.
+#[derive(Default)]
+pub struct Registry {
+    pub instances: HandleMap<Instance>,
+    pub sessions: HandleMap<Session>,
+    pub swapchains: HandleMap<Swapchain>,
+    pub profiles: HandleMap<Profile>,
+    next_profile: AtomicU64,
+}
+
+/// The process-wide registry. A static behind `OnceLock`: no `static mut`.
+pub fn registry() -> &'static Registry {
+    static REGISTRY: OnceLock<Registry> = OnceLock::new();
+    REGISTRY.get_or_init(Registry::default)
+}
+
+fn get<T>(map: &HandleMap<T>, raw: u64) -> Option<Arc<T>> {
+    map.read().get(&raw).cloned()
+}
+
+impl Registry {
+    pub fn instance(&self, h: xr::Instance) -> Option<Arc<Instance>> {
+        get(&self.instances, h.into_raw())
+    }
+
+    pub fn session(&self, h: xr::Session) -> Option<Arc<Session>> {
+        get(&self.sessions, h.into_raw())
+    }
+
+    pub fn swapchain(&self, h: xr::Swapchain) -> Option<Arc<Swapchain>> {
+        get(&self.swapchains, h.into_raw())
+    }
+
+    pub fn profile(&self, h: xr::FoveationProfileFB) -> Option<Arc<Profile>> {
+        get(&self.profiles, h.into_raw())
+    }
+
+    /// A new profile handle value: never 0 (XR_NULL_HANDLE) and never reused in this process, so a
+    /// destroyed profile's handle stays invalid.
+    pub fn mint_profile_handle(&self) -> xr::FoveationProfileFB {
+        xr::FoveationProfileFB::from_raw(self.next_profile.fetch_add(1, Ordering::Relaxed) + 0xF0FE_A000_0000_0001)
+    }
+
+    /// Forgets a session's swapchains and profiles (they die with it: xr.xml parents) and returns
+    /// the swapchain records so their resources can be released outside the map locks.
+    pub fn remove_session_children(&self, session: xr::Session) -> Vec<Arc<Swapchain>> {
+        self.profiles.write().retain(|_, p| p.session != session);
+        let mut swapchains = self.swapchains.write();
+        let dead: Vec<u64> =
+            swapchains.iter().filter(|(_, s)| s.session.handle == session).map(|(k, _)| *k).collect();
+        dead.iter().filter_map(|k| swapchains.remove(k)).collect()
+    }
+
+    /// Forgets an instance's sessions (and their children); returns the sessions removed.
+    pub fn remove_instance_children(&self, instance: xr::Instance) -> Vec<Arc<Session>> {
+        let dead: Vec<Arc<Session>> = {
+            let mut sessions = self.sessions.write();
+            let keys: Vec<u64> =
+                sessions.iter().filter(|(_, s)| s.instance.handle == instance).map(|(k, _)| *k).collect();
+            keys.iter().filter_map(|k| sessions.remove(k)).collect()
+        };
+        for s in &dead {
+            self.remove_session_children(s.handle);
+        }
+        dead
+    }
+
+    /// How many records of each kind are alive: (instances, sessions, swapchains, profiles).
+    pub fn counts(&self) -> (usize, usize, usize, usize) {
+        (
+            self.instances.read().len(),
+            self.sessions.read().len(),
+            self.swapchains.read().len(),
+            self.profiles.read().len(),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn minted_profile_handles_are_distinct_and_non_null() {
+        let r = Registry::default();
+        let a = r.mint_profile_handle();
+        let b = r.mint_profile_handle();
+        assert_ne!(a, b);
+        assert_ne!(a.into_raw(), 0);
+    }
+
+    #[test]
+    fn handle_hasher_spreads_sequential_handles() {
+        let mut seen = std::collections::HashSet::new();
+        for v in 0..1000u64 {
+            let mut h = HandleHasher::default();
+            h.write_u64(v);
+            seen.insert(h.finish() >> 56);
+        }
+        assert!(seen.len() > 100, "top byte takes {} values", seen.len());
+    }
+}
