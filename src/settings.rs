@@ -7,6 +7,34 @@
 /// fixed-foveated-rendering seed) and give pixels outside each eye's true FOV the lowest density.
 pub const SYMMETRIC_FOV_ENV: &str = "FOVEA_SYMMETRIC_FOV";
 
+/// Quest's `debug.oculus.foveation.*` properties (fixed-foveated-rendering seed), as environment
+/// variables: `DEBUG_OCULUS_FOVEATION_LEVEL` (0 off, 1 low, 2 medium, 3 high, 4 high top),
+/// `DEBUG_OCULUS_FOVEATION_DYNAMIC` (0/1), `DEBUG_OCULUS_FOVEATION_SUBSAMPLED` (0/1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DebugProperties {
+    pub level: Option<u32>,
+    pub dynamic: Option<bool>,
+    pub subsampled: Option<bool>,
+}
+
+/// The debug properties in force now.
+pub fn debug_properties() -> DebugProperties {
+    let get = |k: &str| std::env::var(k).ok();
+    DebugProperties {
+        level: get("DEBUG_OCULUS_FOVEATION_LEVEL").and_then(|v| v.trim().parse().ok()).filter(|l| *l <= 4),
+        dynamic: get("DEBUG_OCULUS_FOVEATION_DYNAMIC").and_then(|v| bool01(&v)),
+        subsampled: get("DEBUG_OCULUS_FOVEATION_SUBSAMPLED").and_then(|v| bool01(&v)),
+    }
+}
+
+fn bool01(v: &str) -> Option<bool> {
+    match v.trim() {
+        "0" => Some(false),
+        "1" => Some(true),
+        _ => None,
+    }
+}
+
 /// Settings fixed for an instance's life, read when it is created.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Settings {

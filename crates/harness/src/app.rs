@@ -5,6 +5,7 @@
 use std::ffi::{CStr, CString};
 
 use openxr_sys as xr;
+use xr::Handle;
 
 use crate::{lookup, Chain};
 

@@ -15,6 +15,7 @@ use std::ffi::{c_char, CStr, CString};
 use std::path::{Path, PathBuf};
 
 use openxr_sys as xr;
+use xr::Handle;
 
 pub use fovea_sim as sim;
 
