@@ -1,22 +1,46 @@
-//! Simulated headset runtime (being written).
+//! fovea-sim: a simulated headset OpenXR runtime for testing the fovea layer without a headset.
+//!
+//! It plays a *desktop* runtime: Vulkan (XR_KHR_vulkan_enable, XR_KHR_vulkan_enable2), headless
+//! sessions (XR_MND_headless) and none of the foveation extensions. Optionally it offers
+//! XR_FB_swapchain_update_state with no state types of its own, so the layer's pass-through path can
+//! be exercised.
+//!
+//! Two ways in:
+//! - the Khronos loader loads `libfovea_sim.so` through `manifest/runtime/fovea_sim_runtime.json`
+//!   and calls [`xrNegotiateLoaderRuntimeInterface`];
+//! - the in-process fake loader links this crate and calls [`get_instance_proc_addr`] directly.
+//!
+//! Time is virtual and deterministic (see [`frame`](crate::frame) docs), every call is journaled, and
+//! faults and GPU load can be injected through [`control`].
 
-use std::ffi::c_char;
+mod actions;
+mod config;
+pub mod control;
+mod dispatch;
+mod ffi;
+mod frame;
+mod instance;
+mod negotiate;
+mod session;
+mod space;
+mod state;
+mod swapchain;
+mod system;
+mod vulkan;
 
 use openxr_sys as xr;
 
-/// The runtime's `xrGetInstanceProcAddr` (being written).
+pub use dispatch::{command_names, get_instance_proc_addr};
+
+/// The runtime's only export (spec api_initialization.adoc, "Runtime Interface Negotiation").
 ///
 /// # Safety
-/// `function` must be writable.
-pub unsafe extern "system" fn get_instance_proc_addr(
-    _instance: xr::Instance,
-    _name: *const c_char,
-    function: *mut Option<xr::pfn::VoidFunction>,
+/// Both pointers must be NULL or point to the loader's structs.
+#[no_mangle]
+pub unsafe extern "system" fn xrNegotiateLoaderRuntimeInterface(
+    loader_info: *const xr::NegotiateLoaderInfo,
+    request: *mut xr::NegotiateRuntimeRequest,
 ) -> xr::Result {
-    if !function.is_null() {
-        *function = None;
-    }
-    xr::Result::ERROR_RUNTIME_UNAVAILABLE
+    std::panic::catch_unwind(|| negotiate::negotiate(loader_info, request))
+        .unwrap_or(xr::Result::ERROR_INITIALIZATION_FAILED)
 }
-
-pub mod control {}

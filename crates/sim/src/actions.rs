@@ -1,0 +1,424 @@
+//! Minimal input (spec chapter "Input and Haptics"): action sets and actions can be created,
+//! bindings suggested and sets attached, but the simulated headset has no controllers, so every
+//! action state is inactive and no interaction profile is ever current. Enough for applications
+//! such as Khronos hello_xr to run their input code unchanged.
+
+use std::ffi::c_char;
+
+use openxr_sys as xr;
+use openxr_sys::Handle;
+
+use crate::ffi;
+use crate::space::{check_pose, Space, SpaceKind};
+use crate::state::{entry, world, World};
+
+pub(crate) struct ActionSet {
+    pub instance: u64,
+    name: String,
+    /// Attached to a session: no more actions may be added (XR_ERROR_ACTIONSETS_ALREADY_ATTACHED).
+    attached: bool,
+}
+
+pub(crate) struct Action {
+    pub instance: u64,
+    set: u64,
+    name: String,
+    ty: xr::ActionType,
+}
+
+/// Action and action set names follow path-component rules (spec "Well-Formed Path Strings").
+fn check_names(name: &[c_char], localized: &[c_char]) -> Result<String, xr::Result> {
+    let name = ffi::fixed_str(name).ok_or(xr::Result::ERROR_NAME_INVALID)?;
+    let ok = !name.is_empty()
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b"-_.".contains(&b));
+    if !ok {
+        return Err(xr::Result::ERROR_NAME_INVALID);
+    }
+    match ffi::fixed_str(localized) {
+        Some(l) if !l.is_empty() => Ok(name.to_string()),
+        _ => Err(xr::Result::ERROR_LOCALIZED_NAME_INVALID),
+    }
+}
+
+pub(crate) unsafe extern "system" fn create_action_set(
+    instance: xr::Instance,
+    create_info: *const xr::ActionSetCreateInfo,
+    action_set: *mut xr::ActionSet,
+) -> xr::Result {
+    entry("xrCreateActionSet", |ctx| {
+        let mut w = world();
+        let inst = w.enter_instance(ctx, instance)?;
+        let info = ffi::input(create_info, xr::StructureType::ACTION_SET_CREATE_INFO)?;
+        ffi::non_null(action_set)?;
+        let name = check_names(&info.action_set_name, &info.localized_action_set_name)?;
+        if w.action_sets
+            .values()
+            .any(|s| s.instance == inst && s.name == name)
+        {
+            return Err(xr::Result::ERROR_NAME_DUPLICATED);
+        }
+        ctx.detail = name.clone();
+        let id = w.alloc_handle();
+        w.action_sets.insert(
+            id,
+            ActionSet {
+                instance: inst,
+                name,
+                attached: false,
+            },
+        );
+        *action_set = xr::ActionSet::from_raw(id);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn destroy_action_set(action_set: xr::ActionSet) -> xr::Result {
+    entry("xrDestroyActionSet", |ctx| {
+        ctx.allow_lost = true;
+        let mut w = world();
+        let id = w.enter_action_set(ctx, action_set)?;
+        w.action_sets.remove(&id);
+        w.actions.retain(|_, a| a.set != id);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn create_action(
+    action_set: xr::ActionSet,
+    create_info: *const xr::ActionCreateInfo,
+    action: *mut xr::Action,
+) -> xr::Result {
+    entry("xrCreateAction", |ctx| {
+        let mut w = world();
+        let set = w.enter_action_set(ctx, action_set)?;
+        let info = ffi::input(create_info, xr::StructureType::ACTION_CREATE_INFO)?;
+        ffi::non_null(action)?;
+        let name = check_names(&info.action_name, &info.localized_action_name)?;
+        let known = [
+            xr::ActionType::BOOLEAN_INPUT,
+            xr::ActionType::FLOAT_INPUT,
+            xr::ActionType::VECTOR2F_INPUT,
+            xr::ActionType::POSE_INPUT,
+            xr::ActionType::VIBRATION_OUTPUT,
+        ];
+        if !known.contains(&info.action_type) {
+            return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+        }
+        if w.action_sets[&set].attached {
+            return Err(xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED);
+        }
+        if w.actions.values().any(|a| a.set == set && a.name == name) {
+            return Err(xr::Result::ERROR_NAME_DUPLICATED);
+        }
+        ctx.detail = name.clone();
+        let instance = w.action_sets[&set].instance;
+        let id = w.alloc_handle();
+        w.actions.insert(
+            id,
+            Action {
+                instance,
+                set,
+                name,
+                ty: info.action_type,
+            },
+        );
+        *action = xr::Action::from_raw(id);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn destroy_action(action: xr::Action) -> xr::Result {
+    entry("xrDestroyAction", |ctx| {
+        ctx.allow_lost = true;
+        let mut w = world();
+        let id = w.enter_action(ctx, action)?;
+        w.actions.remove(&id);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn suggest_interaction_profile_bindings(
+    instance: xr::Instance,
+    suggested: *const xr::InteractionProfileSuggestedBinding,
+) -> xr::Result {
+    entry("xrSuggestInteractionProfileBindings", |ctx| {
+        let mut w = world();
+        let id = w.enter_instance(ctx, instance)?;
+        let info = ffi::input(
+            suggested,
+            xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
+        )?;
+        let profile = w.instances[&id]
+            .path(info.interaction_profile)
+            .ok_or(xr::Result::ERROR_PATH_INVALID)?;
+        ctx.detail = profile.to_string();
+        if info.count_suggested_bindings == 0 {
+            return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+        }
+        ffi::non_null(info.suggested_bindings)?;
+        for i in 0..info.count_suggested_bindings as usize {
+            let b = &*info.suggested_bindings.add(i);
+            let action = w
+                .actions
+                .get(&b.action.into_raw())
+                .ok_or(xr::Result::ERROR_HANDLE_INVALID)?;
+            if action.instance != id {
+                return Err(xr::Result::ERROR_HANDLE_INVALID);
+            }
+            if w.action_sets[&action.set].attached {
+                return Err(xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED);
+            }
+            w.instances[&id]
+                .path(b.binding)
+                .ok_or(xr::Result::ERROR_PATH_INVALID)?;
+        }
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn attach_session_action_sets(
+    session: xr::Session,
+    attach_info: *const xr::SessionActionSetsAttachInfo,
+) -> xr::Result {
+    entry("xrAttachSessionActionSets", |ctx| {
+        let mut w = world();
+        let id = w.enter_session(ctx, session)?;
+        let info = ffi::input(
+            attach_info,
+            xr::StructureType::SESSION_ACTION_SETS_ATTACH_INFO,
+        )?;
+        if !w.sessions[&id].action_sets_attached.is_empty() {
+            return Err(xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED);
+        }
+        if info.count_action_sets == 0 {
+            return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+        }
+        ffi::non_null(info.action_sets)?;
+        let sets: Vec<u64> = (0..info.count_action_sets as usize)
+            .map(|i| (*info.action_sets.add(i)).into_raw())
+            .collect();
+        if sets.iter().any(|s| !w.action_sets.contains_key(s)) {
+            return Err(xr::Result::ERROR_HANDLE_INVALID);
+        }
+        for s in &sets {
+            w.action_sets.get_mut(s).expect("checked above").attached = true;
+        }
+        w.sessions
+            .get_mut(&id)
+            .expect("entered session exists")
+            .action_sets_attached = sets;
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn get_current_interaction_profile(
+    session: xr::Session,
+    top_level_user_path: xr::Path,
+    profile: *mut xr::InteractionProfileState,
+) -> xr::Result {
+    entry("xrGetCurrentInteractionProfile", |ctx| {
+        let mut w = world();
+        let id = w.enter_session(ctx, session)?;
+        let p = ffi::output(profile, xr::StructureType::INTERACTION_PROFILE_STATE)?;
+        let instance = w.sessions[&id].instance;
+        w.instances[&instance]
+            .path(top_level_user_path)
+            .ok_or(xr::Result::ERROR_PATH_INVALID)?;
+        if w.sessions[&id].action_sets_attached.is_empty() {
+            return Err(xr::Result::ERROR_ACTIONSET_NOT_ATTACHED);
+        }
+        (*p).interaction_profile = xr::Path::NULL;
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn sync_actions(
+    session: xr::Session,
+    sync_info: *const xr::ActionsSyncInfo,
+) -> xr::Result {
+    entry("xrSyncActions", |ctx| {
+        let mut w = world();
+        let id = w.enter_session(ctx, session)?;
+        let info = ffi::input(sync_info, xr::StructureType::ACTIONS_SYNC_INFO)?;
+        let s = &w.sessions[&id];
+        if info.count_active_action_sets > 0 {
+            ffi::non_null(info.active_action_sets)?;
+            for i in 0..info.count_active_action_sets as usize {
+                let set = (*info.active_action_sets.add(i)).action_set.into_raw();
+                if !s.action_sets_attached.contains(&set) {
+                    return Err(xr::Result::ERROR_ACTIONSET_NOT_ATTACHED);
+                }
+            }
+        }
+        // Spec: input is only delivered to the focused session.
+        if s.state != xr::SessionState::FOCUSED {
+            return Ok(xr::Result::SESSION_NOT_FOCUSED);
+        }
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+/// Validates an XrActionStateGetInfo (or the equivalent haptic info) against the expected type.
+unsafe fn check_action(
+    w: &World,
+    session: u64,
+    action: xr::Action,
+    types: &[xr::ActionType],
+) -> Result<(), xr::Result> {
+    let a = w
+        .actions
+        .get(&action.into_raw())
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)?;
+    if !types.contains(&a.ty) {
+        return Err(xr::Result::ERROR_ACTION_TYPE_MISMATCH);
+    }
+    if !w.sessions[&session].action_sets_attached.contains(&a.set) {
+        return Err(xr::Result::ERROR_ACTIONSET_NOT_ATTACHED);
+    }
+    Ok(())
+}
+
+macro_rules! action_state_getter {
+    ($fn_name:ident, $command:literal, $state:ty, $state_type:ident, $action_type:ident) => {
+        pub(crate) unsafe extern "system" fn $fn_name(
+            session: xr::Session,
+            get_info: *const xr::ActionStateGetInfo,
+            state: *mut $state,
+        ) -> xr::Result {
+            entry($command, |ctx| {
+                let mut w = world();
+                let id = w.enter_session(ctx, session)?;
+                let info = ffi::input(get_info, xr::StructureType::ACTION_STATE_GET_INFO)?;
+                let p = ffi::output(state, xr::StructureType::$state_type)?;
+                check_action(&w, id, info.action, &[xr::ActionType::$action_type])?;
+                // No controller: the action is inactive and every value is zero.
+                let (ty, next) = ((*p).ty, (*p).next);
+                std::ptr::write_bytes(p, 0, 1);
+                (*p).ty = ty;
+                (*p).next = next;
+                Ok(xr::Result::SUCCESS)
+            })
+        }
+    };
+}
+
+action_state_getter!(
+    get_action_state_boolean,
+    "xrGetActionStateBoolean",
+    xr::ActionStateBoolean,
+    ACTION_STATE_BOOLEAN,
+    BOOLEAN_INPUT
+);
+action_state_getter!(
+    get_action_state_float,
+    "xrGetActionStateFloat",
+    xr::ActionStateFloat,
+    ACTION_STATE_FLOAT,
+    FLOAT_INPUT
+);
+action_state_getter!(
+    get_action_state_vector2f,
+    "xrGetActionStateVector2f",
+    xr::ActionStateVector2f,
+    ACTION_STATE_VECTOR2F,
+    VECTOR2F_INPUT
+);
+action_state_getter!(
+    get_action_state_pose,
+    "xrGetActionStatePose",
+    xr::ActionStatePose,
+    ACTION_STATE_POSE,
+    POSE_INPUT
+);
+
+pub(crate) unsafe extern "system" fn apply_haptic_feedback(
+    session: xr::Session,
+    info: *const xr::HapticActionInfo,
+    feedback: *const xr::HapticBaseHeader,
+) -> xr::Result {
+    entry("xrApplyHapticFeedback", |ctx| {
+        let mut w = world();
+        let id = w.enter_session(ctx, session)?;
+        let info = ffi::input(info, xr::StructureType::HAPTIC_ACTION_INFO)?;
+        ffi::input(
+            feedback as *const xr::HapticVibration,
+            xr::StructureType::HAPTIC_VIBRATION,
+        )?;
+        check_action(&w, id, info.action, &[xr::ActionType::VIBRATION_OUTPUT])?;
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn stop_haptic_feedback(
+    session: xr::Session,
+    info: *const xr::HapticActionInfo,
+) -> xr::Result {
+    entry("xrStopHapticFeedback", |ctx| {
+        let mut w = world();
+        let id = w.enter_session(ctx, session)?;
+        let info = ffi::input(info, xr::StructureType::HAPTIC_ACTION_INFO)?;
+        check_action(&w, id, info.action, &[xr::ActionType::VIBRATION_OUTPUT])?;
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn create_action_space(
+    session: xr::Session,
+    create_info: *const xr::ActionSpaceCreateInfo,
+    space: *mut xr::Space,
+) -> xr::Result {
+    entry("xrCreateActionSpace", |ctx| {
+        let mut w = world();
+        let id = w.enter_session(ctx, session)?;
+        let info = ffi::input(create_info, xr::StructureType::ACTION_SPACE_CREATE_INFO)?;
+        ffi::non_null(space)?;
+        let action = w
+            .actions
+            .get(&info.action.into_raw())
+            .ok_or(xr::Result::ERROR_HANDLE_INVALID)?;
+        if action.ty != xr::ActionType::POSE_INPUT {
+            return Err(xr::Result::ERROR_ACTION_TYPE_MISMATCH);
+        }
+        check_pose(&info.pose_in_action_space)?;
+        let space_id = w.alloc_handle();
+        w.spaces.insert(
+            space_id,
+            Space {
+                session: id,
+                kind: SpaceKind::Action,
+                pose_in_parent: info.pose_in_action_space,
+            },
+        );
+        *space = xr::Space::from_raw(space_id);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn enumerate_bound_sources_for_action(
+    session: xr::Session,
+    enumerate_info: *const xr::BoundSourcesForActionEnumerateInfo,
+    capacity: u32,
+    count_out: *mut u32,
+    sources: *mut xr::Path,
+) -> xr::Result {
+    entry("xrEnumerateBoundSourcesForAction", |ctx| {
+        let mut w = world();
+        let id = w.enter_session(ctx, session)?;
+        let info = ffi::input(
+            enumerate_info,
+            xr::StructureType::BOUND_SOURCES_FOR_ACTION_ENUMERATE_INFO,
+        )?;
+        let all = [
+            xr::ActionType::BOOLEAN_INPUT,
+            xr::ActionType::FLOAT_INPUT,
+            xr::ActionType::VECTOR2F_INPUT,
+            xr::ActionType::POSE_INPUT,
+            xr::ActionType::VIBRATION_OUTPUT,
+        ];
+        check_action(&w, id, info.action, &all)?;
+        ffi::two_call(capacity, count_out, sources, 0, |_, _| Ok(()))?;
+        Ok(xr::Result::SUCCESS)
+    })
+}

@@ -1,0 +1,81 @@
+//! The test-facing control API: configure the simulated headset, inject faults and load, and read
+//! back exactly what reached the runtime.
+//!
+//! Plain Rust; no OpenXR call goes through here.
+
+use openxr_sys as xr;
+use openxr_sys::Handle;
+
+pub use crate::config::{set_thread_config, Fault, Load, SimConfig};
+use crate::state::world;
+
+/// One call that reached the runtime (xrGetInstanceProcAddr lookups are not journaled: the loader
+/// makes hundreds of them and they change no state).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Call {
+    /// The OpenXR command name.
+    pub function: &'static str,
+    /// What the runtime returned.
+    pub result: xr::Result,
+    /// The structure types seen in the main input struct's `next` chain (xrCreateSwapchain,
+    /// xrCreateSession, xrCreateInstance, xrEndFrame, ...).
+    pub next_types: Vec<xr::StructureType>,
+    /// Call-specific facts: enabled extensions, frame timing, submitted views, injected faults.
+    pub detail: String,
+}
+
+/// One projection view as xrEndFrame received it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SubmittedView {
+    /// Index of the projection layer in the frame's layer list.
+    pub layer: usize,
+    /// The raw swapchain handle.
+    pub swapchain: u64,
+    pub image_rect: xr::Rect2Di,
+    pub image_array_index: u32,
+    pub fov: xr::Fovf,
+}
+
+/// Fails a call to `fault.function` on `instance` (see [`Fault`]).
+pub fn inject_fault(instance: xr::Instance, fault: Fault) {
+    if let Some(inst) = world().instances.get_mut(&instance.into_raw()) {
+        inst.faults.push(fault);
+    }
+}
+
+/// Replaces the instance's simulated GPU load.
+pub fn set_load(instance: xr::Instance, load: Load) {
+    if let Some(inst) = world().instances.get_mut(&instance.into_raw()) {
+        inst.config.load = load;
+    }
+}
+
+/// Every call that reached the runtime for `instance`, in order; still available after the instance
+/// is destroyed.
+pub fn journal(instance: xr::Instance) -> Vec<Call> {
+    world()
+        .record(instance.into_raw())
+        .map(|r| r.journal.clone())
+        .unwrap_or_default()
+}
+
+/// The extension names the instance was created with.
+pub fn enabled_extensions(instance: xr::Instance) -> Vec<String> {
+    world()
+        .record(instance.into_raw())
+        .map(|r| r.enabled_extensions.clone())
+        .unwrap_or_default()
+}
+
+/// Per successful xrEndFrame, the projection views submitted.
+pub fn end_frame_views(instance: xr::Instance) -> Vec<Vec<SubmittedView>> {
+    world()
+        .record(instance.into_raw())
+        .map(|r| r.end_frames.clone())
+        .unwrap_or_default()
+}
+
+/// Instances, sessions, swapchains and spaces alive across all instances (leak checks).
+pub fn live_objects() -> usize {
+    world().live_objects()
+}

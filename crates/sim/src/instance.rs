@@ -1,0 +1,415 @@
+//! Instance lifetime, extensions, events, strings and paths (spec chapters "Instance", "Events",
+//! "Semantic Paths").
+
+use std::collections::{HashMap, VecDeque};
+use std::ffi::c_char;
+
+use openxr_sys as xr;
+use openxr_sys::Handle;
+
+use crate::config::{self, Fault, SimConfig};
+use crate::ffi;
+use crate::state::{entry, world, Record, World};
+use crate::vulkan::VulkanInstanceState;
+
+pub(crate) const RUNTIME_NAME: &str = "fovea simulated headset";
+pub(crate) const RUNTIME_VERSION: xr::Version = xr::Version::new(0, 1, 0);
+
+pub(crate) const KHR_VULKAN_ENABLE: &str = "XR_KHR_vulkan_enable";
+pub(crate) const KHR_VULKAN_ENABLE2: &str = "XR_KHR_vulkan_enable2";
+pub(crate) const MND_HEADLESS: &str = "XR_MND_headless";
+pub(crate) const FB_SWAPCHAIN_UPDATE_STATE: &str = "XR_FB_swapchain_update_state";
+
+/// Virtual time starts here (1000 s) so that "zero" and small times stay recognisably invalid.
+pub(crate) const CLOCK_START_NS: i64 = 1_000_000_000_000;
+
+/// The extensions this runtime offers under `cfg`, with their spec versions.
+pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
+    let mut list = vec![
+        (KHR_VULKAN_ENABLE, 8),
+        (KHR_VULKAN_ENABLE2, 2),
+        (MND_HEADLESS, 2),
+    ];
+    if cfg.native_swapchain_update_state {
+        list.push((FB_SWAPCHAIN_UPDATE_STATE, 3));
+    }
+    list
+}
+
+/// An event waiting for xrPollEvent.
+pub(crate) enum Event {
+    SessionStateChanged {
+        session: u64,
+        state: xr::SessionState,
+        time: i64,
+    },
+}
+
+pub(crate) struct InstanceState {
+    pub config: SimConfig,
+    pub record: Record,
+    pub faults: Vec<Fault>,
+    pub call_counts: HashMap<&'static str, u32>,
+    pub lost: bool,
+    pub events: VecDeque<Event>,
+    /// Path strings; `XrPath` n is `paths[n - 1]`.
+    pub paths: Vec<String>,
+    /// The virtual clock: advanced by frame timing, never by wall time.
+    pub now_ns: i64,
+    /// xrGetVulkanGraphicsRequirements(2)KHR was called (required before xrCreateSession).
+    pub graphics_requirements_queried: bool,
+    pub vulkan: VulkanInstanceState,
+}
+
+impl InstanceState {
+    pub fn has_extension(&self, name: &str) -> bool {
+        self.record.enabled_extensions.iter().any(|e| e == name)
+    }
+
+    pub fn path(&self, path: xr::Path) -> Option<&str> {
+        let i = usize::try_from(path.into_raw()).ok()?.checked_sub(1)?;
+        self.paths.get(i).map(String::as_str)
+    }
+}
+
+pub(crate) unsafe extern "system" fn enumerate_instance_extension_properties(
+    layer_name: *const c_char,
+    capacity: u32,
+    count_out: *mut u32,
+    properties: *mut xr::ExtensionProperties,
+) -> xr::Result {
+    entry("xrEnumerateInstanceExtensionProperties", |_| {
+        // The runtime has no layers of its own to answer for.
+        if !layer_name.is_null() {
+            return Err(xr::Result::ERROR_API_LAYER_NOT_PRESENT);
+        }
+        let list = extensions(&config::current());
+        ffi::two_call(capacity, count_out, properties, list.len(), |i, p| {
+            let p = ffi::output(p, xr::StructureType::EXTENSION_PROPERTIES)?;
+            ffi::copy_str(&mut (*p).extension_name, list[i].0);
+            (*p).extension_version = list[i].1;
+            Ok(())
+        })?;
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn enumerate_api_layer_properties(
+    capacity: u32,
+    count_out: *mut u32,
+    properties: *mut xr::ApiLayerProperties,
+) -> xr::Result {
+    entry("xrEnumerateApiLayerProperties", |_| {
+        ffi::two_call(capacity, count_out, properties, 0, |_, _| Ok(()))?;
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn create_instance(
+    create_info: *const xr::InstanceCreateInfo,
+    instance: *mut xr::Instance,
+) -> xr::Result {
+    entry("xrCreateInstance", |ctx| {
+        let cfg = config::current();
+        // A fault on xrCreateInstance comes from the configuration: there is no instance to inject
+        // it into yet.
+        if let Some(f) = cfg
+            .faults
+            .iter()
+            .find(|f| f.function == ctx.name && f.nth <= 1)
+        {
+            return Err(f.result);
+        }
+        let info = ffi::input(create_info, xr::StructureType::INSTANCE_CREATE_INFO)?;
+        ffi::non_null(instance)?;
+        let next_types = ffi::chain_types(info.next);
+        if info.create_flags != xr::InstanceCreateFlags::EMPTY {
+            return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+        }
+        let app = &info.application_info;
+        match ffi::fixed_str(&app.application_name) {
+            Some(name) if !name.is_empty() => {}
+            _ => return Err(xr::Result::ERROR_NAME_INVALID),
+        }
+        ffi::fixed_str(&app.engine_name).ok_or(xr::Result::ERROR_NAME_INVALID)?;
+        let v = app.api_version;
+        if v.major() != 1 || v.minor() > 1 {
+            return Err(xr::Result::ERROR_API_VERSION_UNSUPPORTED);
+        }
+        // API layer names are the loader's business; the Khronos loader passes the application's
+        // list through unchanged, so they are not validated here.
+        let offered = extensions(&cfg);
+        let mut enabled = Vec::new();
+        if info.enabled_extension_count > 0 {
+            ffi::non_null(info.enabled_extension_names)?;
+        }
+        for i in 0..info.enabled_extension_count as usize {
+            let name = ffi::c_str(*info.enabled_extension_names.add(i))
+                .ok_or(xr::Result::ERROR_VALIDATION_FAILURE)?;
+            if !offered.iter().any(|(o, _)| *o == name) {
+                return Err(xr::Result::ERROR_EXTENSION_NOT_PRESENT);
+            }
+            if !enabled.iter().any(|e| e == name) {
+                enabled.push(name.to_string());
+            }
+        }
+        let mut w = world();
+        let id = w.alloc_handle();
+        ctx.set_instance(id);
+        ctx.next_types = next_types;
+        ctx.detail = format!(
+            "api {v}; extensions [{}]; headset {}",
+            enabled.join(", "),
+            cfg.headset.id
+        );
+        let state = InstanceState {
+            faults: cfg.faults.clone(),
+            config: cfg,
+            record: Record {
+                enabled_extensions: enabled,
+                ..Record::default()
+            },
+            call_counts: HashMap::from([("xrCreateInstance", 1)]),
+            lost: false,
+            events: VecDeque::new(),
+            paths: Vec::new(),
+            now_ns: CLOCK_START_NS,
+            graphics_requirements_queried: false,
+            vulkan: VulkanInstanceState::default(),
+        };
+        w.instances.insert(id, state);
+        *instance = xr::Instance::from_raw(id);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn destroy_instance(instance: xr::Instance) -> xr::Result {
+    entry("xrDestroyInstance", |ctx| {
+        ctx.allow_lost = true;
+        let mut w = world();
+        let id = w.enter_instance(ctx, instance)?;
+        destroy_instance_objects(&mut w, id);
+        let state = w.instances.remove(&id).expect("entered instance exists");
+        w.retired.insert(id, state.record);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+/// Destroys everything the instance owns (spec: destroying a handle destroys its children).
+fn destroy_instance_objects(w: &mut World, id: u64) {
+    let sessions: Vec<u64> = w
+        .sessions
+        .iter()
+        .filter(|(_, s)| s.instance == id)
+        .map(|(k, _)| *k)
+        .collect();
+    for s in sessions {
+        crate::session::destroy_session_objects(w, s);
+        w.sessions.remove(&s);
+    }
+    w.actions.retain(|_, a| a.instance != id);
+    w.action_sets.retain(|_, a| a.instance != id);
+}
+
+pub(crate) unsafe extern "system" fn get_instance_properties(
+    instance: xr::Instance,
+    properties: *mut xr::InstanceProperties,
+) -> xr::Result {
+    entry("xrGetInstanceProperties", |ctx| {
+        let mut w = world();
+        w.enter_instance(ctx, instance)?;
+        let p = ffi::output(properties, xr::StructureType::INSTANCE_PROPERTIES)?;
+        (*p).runtime_version = RUNTIME_VERSION;
+        ffi::copy_str(&mut (*p).runtime_name, RUNTIME_NAME);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn poll_event(
+    instance: xr::Instance,
+    buffer: *mut xr::EventDataBuffer,
+) -> xr::Result {
+    entry("xrPollEvent", |ctx| {
+        let mut w = world();
+        let id = w.enter_instance(ctx, instance)?;
+        let buffer = ffi::output(buffer, xr::StructureType::EVENT_DATA_BUFFER)?;
+        let inst = w.instances.get_mut(&id).expect("entered instance exists");
+        let Some(event) = inst.events.pop_front() else {
+            return Ok(xr::Result::EVENT_UNAVAILABLE);
+        };
+        match event {
+            Event::SessionStateChanged {
+                session,
+                state,
+                time,
+            } => {
+                ctx.detail = format!("session state {state:?}");
+                (buffer as *mut xr::EventDataSessionStateChanged).write(
+                    xr::EventDataSessionStateChanged {
+                        ty: xr::StructureType::EVENT_DATA_SESSION_STATE_CHANGED,
+                        next: std::ptr::null(),
+                        session: xr::Session::from_raw(session),
+                        state,
+                        time: xr::Time::from_nanos(time),
+                    },
+                );
+            }
+        }
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+/// `XR_<NAME>` from openxr-sys' Debug output, which prints the bare name for known values and the
+/// number otherwise.
+fn enum_name(debug: String) -> Option<String> {
+    let numeric = debug
+        .trim_start_matches('-')
+        .chars()
+        .all(|c| c.is_ascii_digit());
+    (!numeric).then(|| format!("XR_{debug}"))
+}
+
+pub(crate) unsafe extern "system" fn result_to_string(
+    instance: xr::Instance,
+    value: xr::Result,
+    buffer: *mut c_char,
+) -> xr::Result {
+    entry("xrResultToString", |ctx| {
+        let mut w = world();
+        w.enter_instance(ctx, instance)?;
+        ffi::non_null(buffer)?;
+        // Spec: unknown values print as XR_UNKNOWN_SUCCESS_<n> / XR_UNKNOWN_FAILURE_<n>.
+        let s = enum_name(format!("{value:?}")).unwrap_or_else(|| {
+            let kind = if value.into_raw() >= 0 {
+                "SUCCESS"
+            } else {
+                "FAILURE"
+            };
+            format!("XR_UNKNOWN_{kind}_{}", value.into_raw())
+        });
+        ffi::copy_str(
+            std::slice::from_raw_parts_mut(buffer, xr::MAX_RESULT_STRING_SIZE),
+            &s,
+        );
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn structure_type_to_string(
+    instance: xr::Instance,
+    value: xr::StructureType,
+    buffer: *mut c_char,
+) -> xr::Result {
+    entry("xrStructureTypeToString", |ctx| {
+        let mut w = world();
+        w.enter_instance(ctx, instance)?;
+        ffi::non_null(buffer)?;
+        let s = enum_name(format!("{value:?}"))
+            .map(|n| n.replacen("XR_", "XR_TYPE_", 1))
+            .unwrap_or_else(|| format!("XR_UNKNOWN_STRUCTURE_TYPE_{}", value.into_raw()));
+        ffi::copy_str(
+            std::slice::from_raw_parts_mut(buffer, xr::MAX_STRUCTURE_NAME_SIZE),
+            &s,
+        );
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+/// Path syntax (spec "Path Names"): absolute, lower-case letters, digits, `-_./`, no empty, `.` or
+/// `..` components, no trailing slash.
+fn well_formed_path(s: &str) -> bool {
+    s.len() < xr::MAX_PATH_LENGTH
+        && s.starts_with('/')
+        && s[1..].split('/').all(|c| {
+            !c.is_empty()
+                && c != "."
+                && c != ".."
+                && c.bytes()
+                    .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b"-_.".contains(&b))
+        })
+}
+
+pub(crate) unsafe extern "system" fn string_to_path(
+    instance: xr::Instance,
+    path_string: *const c_char,
+    path: *mut xr::Path,
+) -> xr::Result {
+    entry("xrStringToPath", |ctx| {
+        let mut w = world();
+        let id = w.enter_instance(ctx, instance)?;
+        ffi::non_null(path)?;
+        let s = ffi::c_str(path_string).ok_or(xr::Result::ERROR_VALIDATION_FAILURE)?;
+        ctx.detail = s.to_string();
+        if !well_formed_path(s) {
+            return Err(xr::Result::ERROR_PATH_FORMAT_INVALID);
+        }
+        let inst = w.instances.get_mut(&id).expect("entered instance exists");
+        let index = match inst.paths.iter().position(|p| p == s) {
+            Some(i) => i,
+            None => {
+                inst.paths.push(s.to_string());
+                inst.paths.len() - 1
+            }
+        };
+        *path = xr::Path::from_raw(index as u64 + 1);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn path_to_string(
+    instance: xr::Instance,
+    path: xr::Path,
+    capacity: u32,
+    count_out: *mut u32,
+    buffer: *mut c_char,
+) -> xr::Result {
+    entry("xrPathToString", |ctx| {
+        let mut w = world();
+        let id = w.enter_instance(ctx, instance)?;
+        let s = w.instances[&id]
+            .path(path)
+            .ok_or(xr::Result::ERROR_PATH_INVALID)?
+            .to_string();
+        ffi::two_call_str(capacity, count_out, buffer, &s)?;
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+/// Validates an `XrSystemId` against the only system the runtime has.
+pub(crate) fn check_system(system: xr::SystemId) -> Result<(), xr::Result> {
+    if system.into_raw() == crate::system::SYSTEM_ID {
+        Ok(())
+    } else {
+        Err(xr::Result::ERROR_SYSTEM_INVALID)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn path_syntax() {
+        for good in [
+            "/user/hand/left",
+            "/interaction_profiles/khr/simple_controller",
+            "/a.b-c_d/0",
+        ] {
+            assert!(well_formed_path(good), "{good}");
+        }
+        for bad in [
+            "", "user", "/", "/user/", "//a", "/a/./b", "/a/../b", "/User", "/a b",
+        ] {
+            assert!(!well_formed_path(bad), "{bad}");
+        }
+    }
+
+    #[test]
+    fn enum_names() {
+        assert_eq!(
+            enum_name(format!("{:?}", xr::Result::ERROR_HANDLE_INVALID)).unwrap(),
+            "XR_ERROR_HANDLE_INVALID"
+        );
+        assert_eq!(enum_name(format!("{:?}", xr::Result::from_raw(-987))), None);
+    }
+}

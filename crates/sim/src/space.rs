@@ -1,0 +1,391 @@
+//! Spaces and view location (spec chapters "Spaces", "View Configurations": xrLocateViews).
+//!
+//! The simulated head does not move: the VIEW space coincides with LOCAL, and STAGE's origin lies on
+//! the floor 1.6 m below. Eyes sit ±31.5 mm (IPD 63 mm) along the head's x axis and look down −z
+//! with the headset preset's per-eye FOV.
+
+use openxr_sys as xr;
+use openxr_sys::Handle;
+
+use crate::ffi;
+use crate::state::{entry, world, World};
+use crate::system::VIEW_COUNT;
+
+const EYE_HEIGHT_M: f32 = 1.6;
+pub(crate) const IPD_M: f32 = 0.063;
+
+pub(crate) enum SpaceKind {
+    Reference(xr::ReferenceSpaceType),
+    /// Action spaces exist so applications can create them; no device is tracked, so they never
+    /// locate.
+    Action,
+}
+
+pub(crate) struct Space {
+    pub session: u64,
+    pub kind: SpaceKind,
+    pub pose_in_parent: xr::Posef,
+}
+
+impl Space {
+    /// The space's pose in LOCAL, or `None` when untracked.
+    fn pose_in_local(&self) -> Option<xr::Posef> {
+        let origin = match self.kind {
+            SpaceKind::Reference(xr::ReferenceSpaceType::STAGE) => {
+                translation(0.0, -EYE_HEIGHT_M, 0.0)
+            }
+            SpaceKind::Reference(_) => IDENTITY,
+            SpaceKind::Action => return None,
+        };
+        Some(compose(origin, self.pose_in_parent))
+    }
+}
+
+const IDENTITY: xr::Posef = xr::Posef {
+    orientation: xr::Quaternionf {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+        w: 1.0,
+    },
+    position: xr::Vector3f {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+    },
+};
+
+fn translation(x: f32, y: f32, z: f32) -> xr::Posef {
+    xr::Posef {
+        position: xr::Vector3f { x, y, z },
+        ..IDENTITY
+    }
+}
+
+fn quat_mul(a: xr::Quaternionf, b: xr::Quaternionf) -> xr::Quaternionf {
+    xr::Quaternionf {
+        w: a.w * b.w - a.x * b.x - a.y * b.y - a.z * b.z,
+        x: a.w * b.x + a.x * b.w + a.y * b.z - a.z * b.y,
+        y: a.w * b.y - a.x * b.z + a.y * b.w + a.z * b.x,
+        z: a.w * b.z + a.x * b.y - a.y * b.x + a.z * b.w,
+    }
+}
+
+fn conjugate(q: xr::Quaternionf) -> xr::Quaternionf {
+    xr::Quaternionf {
+        x: -q.x,
+        y: -q.y,
+        z: -q.z,
+        w: q.w,
+    }
+}
+
+fn rotate(q: xr::Quaternionf, v: xr::Vector3f) -> xr::Vector3f {
+    let p = quat_mul(
+        quat_mul(
+            q,
+            xr::Quaternionf {
+                x: v.x,
+                y: v.y,
+                z: v.z,
+                w: 0.0,
+            },
+        ),
+        conjugate(q),
+    );
+    xr::Vector3f {
+        x: p.x,
+        y: p.y,
+        z: p.z,
+    }
+}
+
+/// `a ∘ b`: `b` expressed in `a`'s frame, mapped to `a`'s parent.
+fn compose(a: xr::Posef, b: xr::Posef) -> xr::Posef {
+    let r = rotate(a.orientation, b.position);
+    xr::Posef {
+        orientation: quat_mul(a.orientation, b.orientation),
+        position: xr::Vector3f {
+            x: a.position.x + r.x,
+            y: a.position.y + r.y,
+            z: a.position.z + r.z,
+        },
+    }
+}
+
+fn inverse(p: xr::Posef) -> xr::Posef {
+    let q = conjugate(p.orientation);
+    let t = rotate(q, p.position);
+    xr::Posef {
+        orientation: q,
+        position: xr::Vector3f {
+            x: -t.x,
+            y: -t.y,
+            z: -t.z,
+        },
+    }
+}
+
+/// Spec "Valid Usage" for XrPosef inputs: the orientation must be a unit quaternion (runtimes accept
+/// about 1% deviation), otherwise XR_ERROR_POSE_INVALID.
+pub(crate) fn check_pose(p: &xr::Posef) -> Result<(), xr::Result> {
+    let q = p.orientation;
+    let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
+    let finite = [q.x, q.y, q.z, q.w, p.position.x, p.position.y, p.position.z]
+        .iter()
+        .all(|v| v.is_finite());
+    if finite && (norm - 1.0).abs() <= 0.01 {
+        Ok(())
+    } else {
+        Err(xr::Result::ERROR_POSE_INVALID)
+    }
+}
+
+const REFERENCE_SPACES: [xr::ReferenceSpaceType; 3] = [
+    xr::ReferenceSpaceType::VIEW,
+    xr::ReferenceSpaceType::LOCAL,
+    xr::ReferenceSpaceType::STAGE,
+];
+
+pub(crate) unsafe extern "system" fn enumerate_reference_spaces(
+    session: xr::Session,
+    capacity: u32,
+    count_out: *mut u32,
+    spaces: *mut xr::ReferenceSpaceType,
+) -> xr::Result {
+    entry("xrEnumerateReferenceSpaces", |ctx| {
+        let mut w = world();
+        w.enter_session(ctx, session)?;
+        ffi::two_call(
+            capacity,
+            count_out,
+            spaces,
+            REFERENCE_SPACES.len(),
+            |i, p| {
+                *p = REFERENCE_SPACES[i];
+                Ok(())
+            },
+        )?;
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn create_reference_space(
+    session: xr::Session,
+    create_info: *const xr::ReferenceSpaceCreateInfo,
+    space: *mut xr::Space,
+) -> xr::Result {
+    entry("xrCreateReferenceSpace", |ctx| {
+        let mut w = world();
+        let session = w.enter_session(ctx, session)?;
+        let info = ffi::input(create_info, xr::StructureType::REFERENCE_SPACE_CREATE_INFO)?;
+        ffi::non_null(space)?;
+        ctx.next_types = ffi::chain_types(info.next);
+        if !REFERENCE_SPACES.contains(&info.reference_space_type) {
+            return Err(xr::Result::ERROR_REFERENCE_SPACE_UNSUPPORTED);
+        }
+        check_pose(&info.pose_in_reference_space)?;
+        ctx.detail = format!("{:?}", info.reference_space_type);
+        let id = w.alloc_handle();
+        let kind = SpaceKind::Reference(info.reference_space_type);
+        w.spaces.insert(
+            id,
+            Space {
+                session,
+                kind,
+                pose_in_parent: info.pose_in_reference_space,
+            },
+        );
+        *space = xr::Space::from_raw(id);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+pub(crate) unsafe extern "system" fn get_reference_space_bounds_rect(
+    session: xr::Session,
+    reference_space_type: xr::ReferenceSpaceType,
+    bounds: *mut xr::Extent2Df,
+) -> xr::Result {
+    entry("xrGetReferenceSpaceBoundsRect", |ctx| {
+        let mut w = world();
+        w.enter_session(ctx, session)?;
+        ffi::non_null(bounds)?;
+        if !REFERENCE_SPACES.contains(&reference_space_type) {
+            return Err(xr::Result::ERROR_REFERENCE_SPACE_UNSUPPORTED);
+        }
+        // Spec: with no known bounds the runtime returns XR_SPACE_BOUNDS_UNAVAILABLE and zero extents.
+        *bounds = xr::Extent2Df {
+            width: 0.0,
+            height: 0.0,
+        };
+        Ok(xr::Result::SPACE_BOUNDS_UNAVAILABLE)
+    })
+}
+
+pub(crate) unsafe extern "system" fn destroy_space(space: xr::Space) -> xr::Result {
+    entry("xrDestroySpace", |ctx| {
+        ctx.allow_lost = true;
+        let mut w = world();
+        let id = w.enter_space(ctx, space)?;
+        w.spaces.remove(&id);
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+fn check_time(time: xr::Time) -> Result<(), xr::Result> {
+    if time.as_nanos() > 0 {
+        Ok(())
+    } else {
+        Err(xr::Result::ERROR_TIME_INVALID)
+    }
+}
+
+fn tracked() -> xr::SpaceLocationFlags {
+    xr::SpaceLocationFlags::ORIENTATION_VALID
+        | xr::SpaceLocationFlags::POSITION_VALID
+        | xr::SpaceLocationFlags::ORIENTATION_TRACKED
+        | xr::SpaceLocationFlags::POSITION_TRACKED
+}
+
+pub(crate) unsafe extern "system" fn locate_space(
+    space: xr::Space,
+    base_space: xr::Space,
+    time: xr::Time,
+    location: *mut xr::SpaceLocation,
+) -> xr::Result {
+    entry("xrLocateSpace", |ctx| {
+        let mut w = world();
+        let id = w.enter_space(ctx, space)?;
+        let base = base_space.into_raw();
+        let base_space = w
+            .spaces
+            .get(&base)
+            .ok_or(xr::Result::ERROR_HANDLE_INVALID)?;
+        let space = &w.spaces[&id];
+        if base_space.session != space.session {
+            return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+        }
+        let location = ffi::output(location, xr::StructureType::SPACE_LOCATION)?;
+        check_time(time)?;
+        match (space.pose_in_local(), base_space.pose_in_local()) {
+            (Some(s), Some(b)) => {
+                (*location).pose = compose(inverse(b), s);
+                (*location).location_flags = tracked();
+            }
+            _ => {
+                (*location).pose = IDENTITY;
+                (*location).location_flags = xr::SpaceLocationFlags::EMPTY;
+            }
+        }
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+/// The per-eye FOVs of the session's headset.
+pub(crate) fn eye_fovs(w: &World, session: u64) -> [xr::Fovf; VIEW_COUNT] {
+    let headset = w.instances[&w.sessions[&session].instance].config.headset;
+    headset.eyes.map(|t| {
+        let f = t.to_fov();
+        xr::Fovf {
+            angle_left: f.angle_left,
+            angle_right: f.angle_right,
+            angle_up: f.angle_up,
+            angle_down: f.angle_down,
+        }
+    })
+}
+
+pub(crate) unsafe extern "system" fn locate_views(
+    session: xr::Session,
+    view_locate_info: *const xr::ViewLocateInfo,
+    view_state: *mut xr::ViewState,
+    capacity: u32,
+    count_out: *mut u32,
+    views: *mut xr::View,
+) -> xr::Result {
+    entry("xrLocateViews", |ctx| {
+        let mut w = world();
+        let session = w.enter_session(ctx, session)?;
+        let info = ffi::input(view_locate_info, xr::StructureType::VIEW_LOCATE_INFO)?;
+        ctx.next_types = ffi::chain_types(info.next);
+        let view_state = ffi::output(view_state, xr::StructureType::VIEW_STATE)?;
+        if info.view_configuration_type != xr::ViewConfigurationType::PRIMARY_STEREO {
+            return Err(xr::Result::ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED);
+        }
+        check_time(info.display_time)?;
+        let space = w
+            .spaces
+            .get(&info.space.into_raw())
+            .ok_or(xr::Result::ERROR_HANDLE_INVALID)?;
+        if space.session != session {
+            return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+        }
+        let base = space.pose_in_local();
+        let fovs = eye_fovs(&w, session);
+        ffi::two_call(capacity, count_out, views, VIEW_COUNT, |i, p| {
+            let p = ffi::output(p, xr::StructureType::VIEW)?;
+            let x = if i == 0 { -IPD_M / 2.0 } else { IPD_M / 2.0 };
+            (*p).pose = base.map_or(IDENTITY, |b| compose(inverse(b), translation(x, 0.0, 0.0)));
+            (*p).fov = fovs[i];
+            Ok(())
+        })?;
+        (*view_state).view_state_flags = if base.is_some() {
+            xr::ViewStateFlags::ORIENTATION_VALID
+                | xr::ViewStateFlags::POSITION_VALID
+                | xr::ViewStateFlags::ORIENTATION_TRACKED
+                | xr::ViewStateFlags::POSITION_TRACKED
+        } else {
+            xr::ViewStateFlags::EMPTY
+        };
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pose_algebra() {
+        let yaw90 = xr::Posef {
+            orientation: xr::Quaternionf {
+                x: 0.0,
+                y: std::f32::consts::FRAC_1_SQRT_2,
+                z: 0.0,
+                w: std::f32::consts::FRAC_1_SQRT_2,
+            },
+            position: xr::Vector3f {
+                x: 1.0,
+                y: 2.0,
+                z: 3.0,
+            },
+        };
+        let id = compose(inverse(yaw90), yaw90);
+        assert!(
+            id.position.x.abs() < 1e-6
+                && id.position.z.abs() < 1e-6
+                && (id.orientation.w - 1.0).abs() < 1e-6
+        );
+        // Rotating +x by 90° about +y gives −z.
+        let r = rotate(
+            yaw90.orientation,
+            xr::Vector3f {
+                x: 1.0,
+                y: 0.0,
+                z: 0.0,
+            },
+        );
+        assert!((r.z + 1.0).abs() < 1e-6 && r.x.abs() < 1e-6);
+        assert!(check_pose(&yaw90).is_ok());
+        let bad = xr::Posef {
+            orientation: xr::Quaternionf {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 0.0,
+            },
+            ..IDENTITY
+        };
+        assert_eq!(check_pose(&bad), Err(xr::Result::ERROR_POSE_INVALID));
+    }
+}
