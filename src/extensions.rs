@@ -27,15 +27,30 @@ pub struct ExtInfo {
 
 /// The extensions fovea implements, in registry order.
 pub const EXTENSIONS: [ExtInfo; 5] = [
-    ExtInfo { ext: Ext::SwapchainUpdateState, name: c"XR_FB_swapchain_update_state", version: 3, depends: &[] },
-    ExtInfo { ext: Ext::Foveation, name: c"XR_FB_foveation", version: 1, depends: &[Ext::SwapchainUpdateState] },
+    ExtInfo {
+        ext: Ext::SwapchainUpdateState,
+        name: c"XR_FB_swapchain_update_state",
+        version: 3,
+        depends: &[],
+    },
+    ExtInfo {
+        ext: Ext::Foveation,
+        name: c"XR_FB_foveation",
+        version: 1,
+        depends: &[Ext::SwapchainUpdateState],
+    },
     ExtInfo {
         ext: Ext::FoveationConfiguration,
         name: c"XR_FB_foveation_configuration",
         version: 1,
         depends: &[Ext::Foveation],
     },
-    ExtInfo { ext: Ext::FoveationVulkan, name: c"XR_FB_foveation_vulkan", version: 1, depends: &[Ext::Foveation] },
+    ExtInfo {
+        ext: Ext::FoveationVulkan,
+        name: c"XR_FB_foveation_vulkan",
+        version: 1,
+        depends: &[Ext::Foveation],
+    },
     ExtInfo {
         ext: Ext::MetaVulkanSwapchainCreateInfo,
         name: c"XR_META_vulkan_swapchain_create_info",
@@ -80,7 +95,10 @@ impl ExtSet {
     }
 
     pub fn iter(self) -> impl Iterator<Item = Ext> {
-        EXTENSIONS.iter().map(|e| e.ext).filter(move |e| self.contains(*e))
+        EXTENSIONS
+            .iter()
+            .map(|e| e.ext)
+            .filter(move |e| self.contains(*e))
     }
 }
 
@@ -118,13 +136,24 @@ pub struct MissingDependency {
 
 /// The first dependency of an enabled extension that the application did not enable.
 /// `other_enabled` answers for extensions outside fovea's set (the Vulkan enable extensions).
-pub fn missing_dependency(enabled: ExtSet, other_enabled: impl Fn(&CStr) -> bool) -> Option<MissingDependency> {
+pub fn missing_dependency(
+    enabled: ExtSet,
+    other_enabled: impl Fn(&CStr) -> bool,
+) -> Option<MissingDependency> {
     for e in EXTENSIONS.iter().filter(|e| enabled.contains(e.ext)) {
         if let Some(d) = e.depends.iter().find(|d| !enabled.contains(**d)) {
-            return Some(MissingDependency { ext: e.ext, needs: d.info().name.to_str().unwrap_or_default() });
+            return Some(MissingDependency {
+                ext: e.ext,
+                needs: d.info().name.to_str().unwrap_or_default(),
+            });
         }
-        if e.ext == Ext::MetaVulkanSwapchainCreateInfo && !VULKAN_ENABLE.iter().any(|v| other_enabled(v)) {
-            return Some(MissingDependency { ext: e.ext, needs: "XR_KHR_vulkan_enable or XR_KHR_vulkan_enable2" });
+        if e.ext == Ext::MetaVulkanSwapchainCreateInfo
+            && !VULKAN_ENABLE.iter().any(|v| other_enabled(v))
+        {
+            return Some(MissingDependency {
+                ext: e.ext,
+                needs: "XR_KHR_vulkan_enable or XR_KHR_vulkan_enable2",
+            });
         }
     }
     None
@@ -154,7 +183,10 @@ mod tests {
         assert!(!x.provided(Ext::SwapchainUpdateState));
         assert!(!x.provided(Ext::FoveationVulkan));
         assert!(x.any_provided());
-        assert_eq!(x.enabled.iter().collect::<Vec<_>>(), [Ext::SwapchainUpdateState, Ext::Foveation]);
+        assert_eq!(
+            x.enabled.iter().collect::<Vec<_>>(),
+            [Ext::SwapchainUpdateState, Ext::Foveation]
+        );
     }
 
     #[test]
@@ -162,13 +194,22 @@ mod tests {
         let mut s = ExtSet::default();
         s.insert(Ext::FoveationConfiguration);
         let m = missing_dependency(s, |_| false).unwrap();
-        assert_eq!((m.ext, m.needs), (Ext::FoveationConfiguration, "XR_FB_foveation"));
+        assert_eq!(
+            (m.ext, m.needs),
+            (Ext::FoveationConfiguration, "XR_FB_foveation")
+        );
         s.insert(Ext::Foveation);
-        assert_eq!(missing_dependency(s, |_| false).unwrap().needs, "XR_FB_swapchain_update_state");
+        assert_eq!(
+            missing_dependency(s, |_| false).unwrap().needs,
+            "XR_FB_swapchain_update_state"
+        );
         s.insert(Ext::SwapchainUpdateState);
         assert_eq!(missing_dependency(s, |_| false), None);
         s.insert(Ext::MetaVulkanSwapchainCreateInfo);
         assert!(missing_dependency(s, |_| false).is_some());
-        assert_eq!(missing_dependency(s, |n| n == c"XR_KHR_vulkan_enable2"), None);
+        assert_eq!(
+            missing_dependency(s, |n| n == c"XR_KHR_vulkan_enable2"),
+            None
+        );
     }
 }

@@ -13,6 +13,12 @@ use openxr_sys as xr;
 /// behaviour across `extern "system"`). A panic becomes `XR_ERROR_RUNTIME_FAILURE` and one error
 /// line naming the function; the application goes on.
 pub fn guard(function: &'static str, body: impl FnOnce() -> xr::Result) -> xr::Result {
+    let body = || {
+        if injected_panic().is_some_and(|f| f == function) {
+            panic!("{INJECT_PANIC_ENV} asked for a panic in {function}");
+        }
+        body()
+    };
     match catch_unwind(AssertUnwindSafe(body)) {
         Ok(result) => result,
         Err(payload) => {
@@ -25,6 +31,17 @@ pub fn guard(function: &'static str, body: impl FnOnce() -> xr::Result) -> xr::R
             xr::Result::ERROR_RUNTIME_FAILURE
         }
     }
+}
+
+/// `FOVEA_INJECT_PANIC=<function name>` makes that hook panic, to prove the guard holds in a real
+/// process (tests/panic_containment.rs). Read once per process.
+pub const INJECT_PANIC_ENV: &str = "FOVEA_INJECT_PANIC";
+
+fn injected_panic() -> Option<&'static str> {
+    static TARGET: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
+    TARGET
+        .get_or_init(|| std::env::var(INJECT_PANIC_ENV).ok())
+        .as_deref()
 }
 
 /// The longest next chain the layer follows. The spec puts no bound on chains, but a real chain holds
@@ -85,7 +102,9 @@ pub unsafe fn find_in_chain<T>(
 pub fn known_struct_size(ty: xr::StructureType) -> Option<usize> {
     use std::mem::size_of;
     Some(match ty {
-        xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB => size_of::<xr::SwapchainCreateInfoFoveationFB>(),
+        xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB => {
+            size_of::<xr::SwapchainCreateInfoFoveationFB>()
+        }
         TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META => size_of::<VulkanSwapchainCreateInfoMETA>(),
         xr::StructureType::VULKAN_SWAPCHAIN_FORMAT_LIST_CREATE_INFO_KHR => {
             size_of::<xr::VulkanSwapchainFormatListCreateInfoKHR>()
@@ -156,7 +175,11 @@ impl ChainCopy {
             match known_struct_size(ty) {
                 Some(size) => {
                     let mut storage = vec![0u64; size.div_ceil(8)].into_boxed_slice();
-                    std::ptr::copy_nonoverlapping(node as *const u8, storage.as_mut_ptr() as *mut u8, size);
+                    std::ptr::copy_nonoverlapping(
+                        node as *const u8,
+                        storage.as_mut_ptr() as *mut u8,
+                        size,
+                    );
                     let copy = storage.as_mut_ptr() as *mut xr::BaseInStructure;
                     (*copy).next = tail;
                     tail = copy;
@@ -165,7 +188,10 @@ impl ChainCopy {
                 None => {
                     // Cannot relink an unknown struct: keep the app's node and its original tail, so
                     // whatever was removed behind it goes down after all (legal, see above).
-                    tracing::debug!(?ty, "unknown struct precedes a removed one; keeping the chain from here");
+                    tracing::debug!(
+                        ?ty,
+                        "unknown struct precedes a removed one; keeping the chain from here"
+                    );
                     removed.clear();
                     tail = node;
                     shared = true;
@@ -174,7 +200,11 @@ impl ChainCopy {
             }
         }
         removed.reverse();
-        Ok(ChainCopy { head: tail as *const c_void, _nodes: owned, removed })
+        Ok(ChainCopy {
+            head: tail as *const c_void,
+            _nodes: owned,
+            removed,
+        })
     }
 }
 
@@ -216,7 +246,11 @@ pub fn write_fixed(dst: &mut [c_char], s: &str) {
 
 /// Reads a fixed-size C `char` array up to its first NUL (or its end).
 pub fn read_fixed(src: &[c_char]) -> String {
-    let bytes: Vec<u8> = src.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
+    let bytes: Vec<u8> = src
+        .iter()
+        .take_while(|&&c| c != 0)
+        .map(|&c| c as u8)
+        .collect();
     String::from_utf8_lossy(&bytes).into_owned()
 }
 
@@ -225,7 +259,12 @@ pub fn read_fixed(src: &[c_char]) -> String {
 ///
 /// # Safety
 /// `count_out` must be valid for writes; `out` valid for `capacity` writes when `capacity > 0`.
-pub unsafe fn two_call<T: Copy>(items: &[T], capacity: u32, count_out: *mut u32, out: *mut T) -> xr::Result {
+pub unsafe fn two_call<T: Copy>(
+    items: &[T],
+    capacity: u32,
+    count_out: *mut u32,
+    out: *mut T,
+) -> xr::Result {
     if count_out.is_null() || (capacity > 0 && out.is_null()) {
         return xr::Result::ERROR_VALIDATION_FAILURE;
     }
@@ -265,21 +304,35 @@ mod tests {
     #[test]
     fn meta_struct_matches_c_layout() {
         assert_eq!(std::mem::size_of::<VulkanSwapchainCreateInfoMETA>(), 24);
-        assert_eq!(std::mem::offset_of!(VulkanSwapchainCreateInfoMETA, additional_create_flags), 16);
-        assert_eq!(std::mem::offset_of!(VulkanSwapchainCreateInfoMETA, additional_usage_flags), 20);
+        assert_eq!(
+            std::mem::offset_of!(VulkanSwapchainCreateInfoMETA, additional_create_flags),
+            16
+        );
+        assert_eq!(
+            std::mem::offset_of!(VulkanSwapchainCreateInfoMETA, additional_usage_flags),
+            20
+        );
     }
 
     #[test]
     fn removes_without_touching_the_original() {
-        let unknown_tail = xr::BaseInStructure { ty: xr::StructureType::from_raw(42), next: std::ptr::null() };
+        let unknown_tail = xr::BaseInStructure {
+            ty: xr::StructureType::from_raw(42),
+            next: std::ptr::null(),
+        };
         let m = meta(&unknown_tail as *const _ as *const c_void);
         let f = fov_info(&m as *const _ as *const c_void);
         let head = &f as *const _ as *const c_void;
-        let copy = unsafe { ChainCopy::without(head, |t| t == TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META) }.unwrap();
+        let copy =
+            unsafe { ChainCopy::without(head, |t| t == TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META) }
+                .unwrap();
         let types = unsafe { chain_types(copy.head()) }.unwrap();
         assert_eq!(
             types,
-            [xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB, xr::StructureType::from_raw(42)]
+            [
+                xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
+                xr::StructureType::from_raw(42)
+            ]
         );
         assert_eq!(copy.removed(), [TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META]);
         // The app's structs are untouched and the unknown tail is shared, not copied.
@@ -287,7 +340,10 @@ mod tests {
         let copied = copy.head() as *const xr::SwapchainCreateInfoFoveationFB;
         assert_ne!(copied, &f as *const _);
         assert_eq!(unsafe { (*copied).flags }, f.flags);
-        assert_eq!(unsafe { (*copied).next } as *const c_void, &unknown_tail as *const _ as *const c_void);
+        assert_eq!(
+            unsafe { (*copied).next } as *const c_void,
+            &unknown_tail as *const _ as *const c_void
+        );
     }
 
     #[test]
@@ -298,19 +354,30 @@ mod tests {
             next: &m as *const _ as *const xr::BaseInStructure,
         };
         let head = &unknown as *const _ as *const c_void;
-        let copy = unsafe { ChainCopy::without(head, |t| t == TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META) }.unwrap();
+        let copy =
+            unsafe { ChainCopy::without(head, |t| t == TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META) }
+                .unwrap();
         assert_eq!(copy.head(), head);
         assert!(copy.removed().is_empty());
     }
 
     #[test]
     fn loops_are_refused() {
-        let mut a = xr::BaseInStructure { ty: xr::StructureType::from_raw(1), next: std::ptr::null() };
-        let b = xr::BaseInStructure { ty: xr::StructureType::from_raw(2), next: &a };
+        let mut a = xr::BaseInStructure {
+            ty: xr::StructureType::from_raw(1),
+            next: std::ptr::null(),
+        };
+        let b = xr::BaseInStructure {
+            ty: xr::StructureType::from_raw(2),
+            next: &a,
+        };
         a.next = &b;
         let head = &a as *const _ as *const c_void;
         assert_eq!(unsafe { chain_types(head) }, Err(ChainError::TooLong));
-        assert_eq!(unsafe { find_in_chain::<u8>(head, xr::StructureType::from_raw(3)) }, Err(ChainError::TooLong));
+        assert_eq!(
+            unsafe { find_in_chain::<u8>(head, xr::StructureType::from_raw(3)) },
+            Err(ChainError::TooLong)
+        );
         assert!(unsafe { ChainCopy::without(head, |_| false) }.is_err());
         assert_eq!(
             unsafe { find_in_chain::<u8>(head, xr::StructureType::from_raw(2)) }.unwrap(),
@@ -320,7 +387,10 @@ mod tests {
 
     #[test]
     fn guard_turns_panics_into_runtime_failure() {
-        assert_eq!(guard("t", || panic!("boom")), xr::Result::ERROR_RUNTIME_FAILURE);
+        assert_eq!(
+            guard("t", || panic!("boom")),
+            xr::Result::ERROR_RUNTIME_FAILURE
+        );
         assert_eq!(guard("t", || xr::Result::SUCCESS), xr::Result::SUCCESS);
     }
 
@@ -330,11 +400,23 @@ mod tests {
         let mut count = 0;
         let mut out = [0u32; 3];
         unsafe {
-            assert_eq!(two_call(&items, 0, &mut count, std::ptr::null_mut()), xr::Result::SUCCESS);
+            assert_eq!(
+                two_call(&items, 0, &mut count, std::ptr::null_mut()),
+                xr::Result::SUCCESS
+            );
             assert_eq!(count, 3);
-            assert_eq!(two_call(&items, 2, &mut count, out.as_mut_ptr()), xr::Result::ERROR_SIZE_INSUFFICIENT);
-            assert_eq!(two_call(&items, 3, &mut count, out.as_mut_ptr()), xr::Result::SUCCESS);
-            assert_eq!(two_call(&items, 3, std::ptr::null_mut(), out.as_mut_ptr()), xr::Result::ERROR_VALIDATION_FAILURE);
+            assert_eq!(
+                two_call(&items, 2, &mut count, out.as_mut_ptr()),
+                xr::Result::ERROR_SIZE_INSUFFICIENT
+            );
+            assert_eq!(
+                two_call(&items, 3, &mut count, out.as_mut_ptr()),
+                xr::Result::SUCCESS
+            );
+            assert_eq!(
+                two_call(&items, 3, std::ptr::null_mut(), out.as_mut_ptr()),
+                xr::Result::ERROR_VALIDATION_FAILURE
+            );
         }
         assert_eq!(out, items);
     }

@@ -15,7 +15,7 @@ pub mod density;
 pub mod dispatch;
 pub mod extensions;
 pub mod ffi;
-pub mod hooks;
+mod hooks;
 pub mod loader;
 pub mod log;
 pub mod projection;

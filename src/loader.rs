@@ -34,7 +34,9 @@ pub unsafe extern "system" fn xrNegotiateLoaderApiLayerInterface(
     layer_name: *const c_char,
     request: *mut xr::NegotiateApiLayerRequest,
 ) -> xr::Result {
-    guard("xrNegotiateLoaderApiLayerInterface", || negotiate(loader_info, layer_name, request))
+    guard("xrNegotiateLoaderApiLayerInterface", || {
+        negotiate(loader_info, layer_name, request)
+    })
 }
 
 unsafe fn negotiate(
@@ -74,11 +76,18 @@ unsafe fn negotiate(
     }
     if let Some(name) = ffi::cstr(layer_name) {
         if name.to_bytes() != LAYER_NAME.as_bytes() {
-            tracing::warn!(?name, "loaded under another layer name; answering as {LAYER_NAME}");
+            tracing::warn!(
+                ?name,
+                "loaded under another layer name; answering as {LAYER_NAME}"
+            );
         }
     }
     req.layer_interface_version = INTERFACE_VERSION;
-    req.layer_api_version = if mm(info.max_api_version) >= (1, 1) { xr::Version::new(1, 1, 0) } else { MIN_API };
+    req.layer_api_version = if mm(info.max_api_version) >= (1, 1) {
+        xr::Version::new(1, 1, 0)
+    } else {
+        MIN_API
+    };
     req.get_instance_proc_addr = Some(get_instance_proc_addr);
     req.create_api_layer_instance = Some(create_api_layer_instance);
     xr::Result::SUCCESS
@@ -93,7 +102,9 @@ pub unsafe extern "system" fn create_api_layer_instance(
     layer_info: *const xr::ApiLayerCreateInfo,
     instance: *mut xr::Instance,
 ) -> xr::Result {
-    guard("xrCreateApiLayerInstance", || create_instance(info, layer_info, instance))
+    guard("xrCreateApiLayerInstance", || {
+        create_instance(info, layer_info, instance)
+    })
 }
 
 unsafe fn create_instance(
@@ -102,7 +113,8 @@ unsafe fn create_instance(
     instance: *mut xr::Instance,
 ) -> xr::Result {
     crate::log::init();
-    if info.is_null() || instance.is_null() || (*info).ty != xr::StructureType::INSTANCE_CREATE_INFO {
+    if info.is_null() || instance.is_null() || (*info).ty != xr::StructureType::INSTANCE_CREATE_INFO
+    {
         return xr::Result::ERROR_VALIDATION_FAILURE;
     }
     if layer_info.is_null() {
@@ -127,12 +139,16 @@ unsafe fn create_instance(
     }
     let next_name = ffi::read_fixed(&next_info.layer_name);
     if next_name != LAYER_NAME {
-        tracing::error!(next_name, "the loader's next-info entry belongs to another layer");
+        tracing::error!(
+            next_name,
+            "the loader's next-info entry belongs to another layer"
+        );
         return xr::Result::ERROR_INITIALIZATION_FAILED;
     }
-    let (Some(next_gipa), Some(next_create)) =
-        (next_info.next_get_instance_proc_addr, next_info.next_create_api_layer_instance)
-    else {
+    let (Some(next_gipa), Some(next_create)) = (
+        next_info.next_get_instance_proc_addr,
+        next_info.next_create_api_layer_instance,
+    ) else {
         return xr::Result::ERROR_INITIALIZATION_FAILED;
     };
 
@@ -177,7 +193,11 @@ unsafe fn create_instance(
         .collect();
     let mut down = *app;
     down.enabled_extension_count = kept.len() as u32;
-    down.enabled_extension_names = if kept.is_empty() { std::ptr::null() } else { kept.as_ptr() };
+    down.enabled_extension_names = if kept.is_empty() {
+        std::ptr::null()
+    } else {
+        kept.as_ptr()
+    };
     let mut next_layer_info = *li;
     next_layer_info.next_info = next_info.next;
     let result = next_create(&down, &next_layer_info, instance);
@@ -200,7 +220,10 @@ unsafe fn create_instance(
         native = ?exts.native.iter().collect::<Vec<_>>(),
         "instance created"
     );
-    registry().instances.write().insert(handle.into_raw(), Arc::new(state));
+    registry()
+        .instances
+        .write()
+        .insert(handle.into_raw(), Arc::new(state));
     result
 }
 
@@ -209,7 +232,11 @@ unsafe fn create_instance(
 /// fovea then provides every extension the app enabled, which is the safe assumption for a runtime
 /// that cannot even list them.
 unsafe fn extensions_below(next_gipa: xr::pfn::GetInstanceProcAddr) -> Vec<CString> {
-    let Some(f) = dispatch::load(next_gipa, xr::Instance::NULL, c"xrEnumerateInstanceExtensionProperties") else {
+    let Some(f) = dispatch::load(
+        next_gipa,
+        xr::Instance::NULL,
+        c"xrEnumerateInstanceExtensionProperties",
+    ) else {
         tracing::warn!("the next layer does not offer xrEnumerateInstanceExtensionProperties");
         return Vec::new();
     };
@@ -229,7 +256,10 @@ unsafe fn extensions_below(next_gipa: xr::pfn::GetInstanceProcAddr) -> Vec<CStri
         return Vec::new();
     }
     props.truncate(count as usize);
-    props.iter().filter_map(|p| CString::new(ffi::read_fixed(&p.extension_name)).ok()).collect()
+    props
+        .iter()
+        .filter_map(|p| CString::new(ffi::read_fixed(&p.extension_name)).ok())
+        .collect()
 }
 
 /// The layer's `xrGetInstanceProcAddr`, following the spec's table (api_initialization.adoc):
@@ -254,28 +284,38 @@ pub unsafe extern "system" fn get_instance_proc_addr(
     })
 }
 
-unsafe fn resolve(instance: xr::Instance, name: &CStr, out: &mut Option<xr::pfn::VoidFunction>) -> xr::Result {
+unsafe fn resolve(
+    instance: xr::Instance,
+    name: &CStr,
+    out: &mut Option<xr::pfn::VoidFunction>,
+) -> xr::Result {
     if name == c"xrGetInstanceProcAddr" {
-        *out = Some(std::mem::transmute::<xr::pfn::GetInstanceProcAddr, xr::pfn::VoidFunction>(
-            get_instance_proc_addr,
-        ));
+        *out = Some(std::mem::transmute::<
+            xr::pfn::GetInstanceProcAddr,
+            xr::pfn::VoidFunction,
+        >(get_instance_proc_addr));
         return xr::Result::SUCCESS;
     }
     if instance == xr::Instance::NULL {
         // Without an instance there is no next layer to ask: fovea answers the three functions the
         // table requires, and nothing else.
         return if name == c"xrEnumerateInstanceExtensionProperties" {
-            *out = Some(std::mem::transmute::<xr::pfn::EnumerateInstanceExtensionProperties, xr::pfn::VoidFunction>(
-                enumerate_instance_extension_properties,
-            ));
+            *out = Some(std::mem::transmute::<
+                xr::pfn::EnumerateInstanceExtensionProperties,
+                xr::pfn::VoidFunction,
+            >(enumerate_instance_extension_properties));
             xr::Result::SUCCESS
         } else if name == c"xrEnumerateApiLayerProperties" {
-            *out = Some(std::mem::transmute::<xr::pfn::EnumerateApiLayerProperties, xr::pfn::VoidFunction>(
-                enumerate_api_layer_properties,
-            ));
+            *out = Some(std::mem::transmute::<
+                xr::pfn::EnumerateApiLayerProperties,
+                xr::pfn::VoidFunction,
+            >(enumerate_api_layer_properties));
             xr::Result::SUCCESS
         } else if name == c"xrCreateInstance" {
-            *out = Some(std::mem::transmute::<xr::pfn::CreateInstance, xr::pfn::VoidFunction>(create_instance_direct));
+            *out = Some(std::mem::transmute::<
+                xr::pfn::CreateInstance,
+                xr::pfn::VoidFunction,
+            >(create_instance_direct));
             xr::Result::SUCCESS
         } else {
             xr::Result::ERROR_HANDLE_INVALID
@@ -285,9 +325,10 @@ unsafe fn resolve(instance: xr::Instance, name: &CStr, out: &mut Option<xr::pfn:
         return xr::Result::ERROR_HANDLE_INVALID;
     };
     if name == c"xrEnumerateInstanceExtensionProperties" {
-        *out = Some(std::mem::transmute::<xr::pfn::EnumerateInstanceExtensionProperties, xr::pfn::VoidFunction>(
-            enumerate_instance_extension_properties,
-        ));
+        *out = Some(std::mem::transmute::<
+            xr::pfn::EnumerateInstanceExtensionProperties,
+            xr::pfn::VoidFunction,
+        >(enumerate_instance_extension_properties));
         return xr::Result::SUCCESS;
     }
     let exts = &state.extensions;
@@ -311,7 +352,10 @@ unsafe fn resolve(instance: xr::Instance, name: &CStr, out: &mut Option<xr::pfn:
     }
     let r = (state.next_gipa)(instance, name.as_ptr(), out);
     if r == xr::Result::SUCCESS && out.is_none() {
-        tracing::warn!(?name, "the next layer answered XR_SUCCESS with a NULL pointer");
+        tracing::warn!(
+            ?name,
+            "the next layer answered XR_SUCCESS with a NULL pointer"
+        );
         return xr::Result::ERROR_FUNCTION_UNSUPPORTED;
     }
     r
@@ -323,7 +367,9 @@ unsafe extern "system" fn create_instance_direct(
     _info: *const xr::InstanceCreateInfo,
     _instance: *mut xr::Instance,
 ) -> xr::Result {
-    tracing::error!("xrCreateInstance called on the layer directly; layers are created by the loader");
+    tracing::error!(
+        "xrCreateInstance called on the layer directly; layers are created by the loader"
+    );
     xr::Result::ERROR_INITIALIZATION_FAILED
 }
 
@@ -388,8 +434,14 @@ unsafe extern "system" fn enumerate_api_layer_properties(
             description: [0; xr::MAX_API_LAYER_DESCRIPTION_SIZE],
         };
         ffi::write_fixed(&mut p.layer_name, LAYER_NAME);
-        ffi::write_fixed(&mut p.description, "fovea: fixed foveated rendering (XR_FB_foveation) for Vulkan");
-        if capacity > 0 && !properties.is_null() && (*properties).ty != xr::StructureType::API_LAYER_PROPERTIES {
+        ffi::write_fixed(
+            &mut p.description,
+            "fovea: fixed foveated rendering (XR_FB_foveation) for Vulkan",
+        );
+        if capacity > 0
+            && !properties.is_null()
+            && (*properties).ty != xr::StructureType::API_LAYER_PROPERTIES
+        {
             return xr::Result::ERROR_VALIDATION_FAILURE;
         }
         ffi::two_call(&[p], capacity, count_out, properties)

@@ -61,7 +61,10 @@ pub fn init() {
             match OpenOptions::new().create(true).append(true).open(&path) {
                 Ok(f) => Some(Arc::new(Mutex::new(f))),
                 Err(e) => {
-                    eprintln!("fovea: cannot open {LOG_FILE_ENV}={}: {e}", path.to_string_lossy());
+                    eprintln!(
+                        "fovea: cannot open {LOG_FILE_ENV}={}: {e}",
+                        path.to_string_lossy()
+                    );
                     None
                 }
             }

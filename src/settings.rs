@@ -21,7 +21,9 @@ pub struct DebugProperties {
 pub fn debug_properties() -> DebugProperties {
     let get = |k: &str| std::env::var(k).ok();
     DebugProperties {
-        level: get("DEBUG_OCULUS_FOVEATION_LEVEL").and_then(|v| v.trim().parse().ok()).filter(|l| *l <= 4),
+        level: get("DEBUG_OCULUS_FOVEATION_LEVEL")
+            .and_then(|v| v.trim().parse().ok())
+            .filter(|l| *l <= 4),
         dynamic: get("DEBUG_OCULUS_FOVEATION_DYNAMIC").and_then(|v| bool01(&v)),
         subsampled: get("DEBUG_OCULUS_FOVEATION_SUBSAMPLED").and_then(|v| bool01(&v)),
     }
@@ -48,7 +50,9 @@ impl Settings {
 
     /// From any key-value source, so tests need not touch the process environment.
     pub fn from_lookup(get: impl Fn(&str) -> Option<String>) -> Settings {
-        Settings { symmetric_fov: flag(get(SYMMETRIC_FOV_ENV).as_deref(), SYMMETRIC_FOV_ENV) }
+        Settings {
+            symmetric_fov: flag(get(SYMMETRIC_FOV_ENV).as_deref(), SYMMETRIC_FOV_ENV),
+        }
     }
 }
 
@@ -58,7 +62,11 @@ fn flag(v: Option<&str>, name: &str) -> bool {
         None | Some("") | Some("0") => false,
         Some("1") => true,
         Some(other) => {
-            tracing::warn!(variable = name, value = other, "accepted values are 0 and 1; ignored");
+            tracing::warn!(
+                variable = name,
+                value = other,
+                "accepted values are 0 and 1; ignored"
+            );
             false
         }
     }
@@ -70,7 +78,14 @@ mod tests {
 
     #[test]
     fn symmetric_fov_switch() {
-        let s = |v: Option<&str>| Settings::from_lookup(|k| (k == SYMMETRIC_FOV_ENV).then(|| v).flatten().map(String::from));
+        let s = |v: Option<&str>| {
+            Settings::from_lookup(|k| {
+                (k == SYMMETRIC_FOV_ENV)
+                    .then_some(v)
+                    .flatten()
+                    .map(String::from)
+            })
+        };
         assert!(s(Some("1")).symmetric_fov);
         assert!(!s(Some("0")).symmetric_fov);
         assert!(!s(Some("yes")).symmetric_fov);

@@ -15,8 +15,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use openxr_sys as xr;
-use xr::Handle;
 use parking_lot::RwLock;
+use xr::Handle;
 
 use crate::dispatch::Next;
 use crate::extensions::Extensions;
@@ -144,7 +144,9 @@ impl Registry {
     /// A new profile handle value: never 0 (XR_NULL_HANDLE) and never reused in this process, so a
     /// destroyed profile's handle stays invalid.
     pub fn mint_profile_handle(&self) -> xr::FoveationProfileFB {
-        xr::FoveationProfileFB::from_raw(self.next_profile.fetch_add(1, Ordering::Relaxed) + 0xF0FE_A000_0000_0001)
+        xr::FoveationProfileFB::from_raw(
+            self.next_profile.fetch_add(1, Ordering::Relaxed) + 0xF0FE_A000_0000_0001,
+        )
     }
 
     /// Forgets a session's swapchains and profiles (they die with it: xr.xml parents) and returns
@@ -152,8 +154,11 @@ impl Registry {
     pub fn remove_session_children(&self, session: xr::Session) -> Vec<Arc<Swapchain>> {
         self.profiles.write().retain(|_, p| p.session != session);
         let mut swapchains = self.swapchains.write();
-        let dead: Vec<u64> =
-            swapchains.iter().filter(|(_, s)| s.session.handle == session).map(|(k, _)| *k).collect();
+        let dead: Vec<u64> = swapchains
+            .iter()
+            .filter(|(_, s)| s.session.handle == session)
+            .map(|(k, _)| *k)
+            .collect();
         dead.iter().filter_map(|k| swapchains.remove(k)).collect()
     }
 
@@ -161,8 +166,11 @@ impl Registry {
     pub fn remove_instance_children(&self, instance: xr::Instance) -> Vec<Arc<Session>> {
         let dead: Vec<Arc<Session>> = {
             let mut sessions = self.sessions.write();
-            let keys: Vec<u64> =
-                sessions.iter().filter(|(_, s)| s.instance.handle == instance).map(|(k, _)| *k).collect();
+            let keys: Vec<u64> = sessions
+                .iter()
+                .filter(|(_, s)| s.instance.handle == instance)
+                .map(|(k, _)| *k)
+                .collect();
             keys.iter().filter_map(|k| sessions.remove(k)).collect()
         };
         for s in &dead {

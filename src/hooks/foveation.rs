@@ -9,7 +9,9 @@ pub unsafe extern "system" fn update_swapchain(
     _swapchain: xr::Swapchain,
     _state: *const xr::SwapchainStateBaseHeaderFB,
 ) -> xr::Result {
-    guard("xrUpdateSwapchainFB", || xr::Result::ERROR_FUNCTION_UNSUPPORTED)
+    guard("xrUpdateSwapchainFB", || {
+        xr::Result::ERROR_FUNCTION_UNSUPPORTED
+    })
 }
 
 /// `xrGetSwapchainStateFB`.
@@ -17,7 +19,9 @@ pub unsafe extern "system" fn get_swapchain_state(
     _swapchain: xr::Swapchain,
     _state: *mut xr::SwapchainStateBaseHeaderFB,
 ) -> xr::Result {
-    guard("xrGetSwapchainStateFB", || xr::Result::ERROR_FUNCTION_UNSUPPORTED)
+    guard("xrGetSwapchainStateFB", || {
+        xr::Result::ERROR_FUNCTION_UNSUPPORTED
+    })
 }
 
 /// `xrCreateFoveationProfileFB`.
@@ -26,10 +30,14 @@ pub unsafe extern "system" fn create_profile(
     _info: *const xr::FoveationProfileCreateInfoFB,
     _profile: *mut xr::FoveationProfileFB,
 ) -> xr::Result {
-    guard("xrCreateFoveationProfileFB", || xr::Result::ERROR_FUNCTION_UNSUPPORTED)
+    guard("xrCreateFoveationProfileFB", || {
+        xr::Result::ERROR_FUNCTION_UNSUPPORTED
+    })
 }
 
 /// `xrDestroyFoveationProfileFB`.
 pub unsafe extern "system" fn destroy_profile(_profile: xr::FoveationProfileFB) -> xr::Result {
-    guard("xrDestroyFoveationProfileFB", || xr::Result::ERROR_FUNCTION_UNSUPPORTED)
+    guard("xrDestroyFoveationProfileFB", || {
+        xr::Result::ERROR_FUNCTION_UNSUPPORTED
+    })
 }

@@ -20,7 +20,10 @@ pub unsafe extern "system" fn wait_frame(
 }
 
 /// `xrBeginFrame`: passed on.
-pub unsafe extern "system" fn begin_frame(sess: xr::Session, info: *const xr::FrameBeginInfo) -> xr::Result {
+pub unsafe extern "system" fn begin_frame(
+    sess: xr::Session,
+    info: *const xr::FrameBeginInfo,
+) -> xr::Result {
     guard("xrBeginFrame", || {
         finish((|| {
             let s = session(sess)?;
@@ -30,7 +33,10 @@ pub unsafe extern "system" fn begin_frame(sess: xr::Session, info: *const xr::Fr
 }
 
 /// `xrEndFrame`: passed on.
-pub unsafe extern "system" fn end_frame(sess: xr::Session, info: *const xr::FrameEndInfo) -> xr::Result {
+pub unsafe extern "system" fn end_frame(
+    sess: xr::Session,
+    info: *const xr::FrameEndInfo,
+) -> xr::Result {
     guard("xrEndFrame", || {
         finish((|| {
             let s = session(sess)?;
@@ -51,7 +57,9 @@ pub unsafe extern "system" fn locate_views(
     guard("xrLocateViews", || {
         finish((|| {
             let s = session(sess)?;
-            Ok(next(s.instance.next.locate_views)?(sess, info, view_state, capacity, count, views))
+            Ok(next(s.instance.next.locate_views)?(
+                sess, info, view_state, capacity, count, views,
+            ))
         })())
     })
 }

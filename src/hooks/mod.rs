@@ -28,17 +28,23 @@ pub fn finish(r: HookResult<xr::Result>) -> xr::Result {
 
 /// The record for an instance handle, or XR_ERROR_HANDLE_INVALID.
 pub fn instance(h: xr::Instance) -> HookResult<Arc<Instance>> {
-    registry().instance(h).ok_or(xr::Result::ERROR_HANDLE_INVALID)
+    registry()
+        .instance(h)
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)
 }
 
 /// The record for a session handle, or XR_ERROR_HANDLE_INVALID.
 pub fn session(h: xr::Session) -> HookResult<Arc<Session>> {
-    registry().session(h).ok_or(xr::Result::ERROR_HANDLE_INVALID)
+    registry()
+        .session(h)
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)
 }
 
 /// The record for a swapchain handle, or XR_ERROR_HANDLE_INVALID.
 pub fn swapchain(h: xr::Swapchain) -> HookResult<Arc<Swapchain>> {
-    registry().swapchain(h).ok_or(xr::Result::ERROR_HANDLE_INVALID)
+    registry()
+        .swapchain(h)
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)
 }
 
 /// The next layer's pointer. A hook is only handed out where the next layer offers the function

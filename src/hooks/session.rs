@@ -20,7 +20,10 @@ pub unsafe extern "system" fn create_session(
         finish((|| {
             let state = instance(inst)?;
             let f = next(state.next.create_session)?;
-            if info.is_null() || out.is_null() || (*info).ty != xr::StructureType::SESSION_CREATE_INFO {
+            if info.is_null()
+                || out.is_null()
+                || (*info).ty != xr::StructureType::SESSION_CREATE_INFO
+            {
                 return Ok(f(inst, info, out));
             }
             let binding = match ffi::find_in_chain::<xr::GraphicsBindingVulkanKHR>(
@@ -42,8 +45,15 @@ pub unsafe extern "system" fn create_session(
             let r = f(inst, info, out);
             if succeeded(r) {
                 let handle = *out;
-                let record = Session { handle, instance: state, vulkan: binding };
-                registry().sessions.write().insert(handle.into_raw(), Arc::new(record));
+                let record = Session {
+                    handle,
+                    instance: state,
+                    vulkan: binding,
+                };
+                registry()
+                    .sessions
+                    .write()
+                    .insert(handle.into_raw(), Arc::new(record));
             }
             Ok(r)
         })())

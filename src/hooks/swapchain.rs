@@ -19,7 +19,10 @@ pub unsafe extern "system" fn create_swapchain(
         finish((|| {
             let state = session(sess)?;
             let f = next(state.instance.next.create_swapchain)?;
-            if info.is_null() || out.is_null() || (*info).ty != xr::StructureType::SWAPCHAIN_CREATE_INFO {
+            if info.is_null()
+                || out.is_null()
+                || (*info).ty != xr::StructureType::SWAPCHAIN_CREATE_INFO
+            {
                 return Ok(f(sess, info, out));
             }
             let i = &*info;
@@ -39,7 +42,10 @@ pub unsafe extern "system" fn create_swapchain(
                         mip_count: i.mip_count,
                     },
                 };
-                registry().swapchains.write().insert((*out).into_raw(), Arc::new(record));
+                registry()
+                    .swapchains
+                    .write()
+                    .insert((*out).into_raw(), Arc::new(record));
             }
             Ok(r)
         })())

@@ -16,7 +16,9 @@ pub unsafe extern "system" fn get_vulkan_device_extensions(
     guard("xrGetVulkanDeviceExtensionsKHR", || {
         finish((|| {
             let s = instance(inst)?;
-            Ok(next(s.next.get_vulkan_device_extensions)?(inst, system, capacity, count, buffer))
+            Ok(next(s.next.get_vulkan_device_extensions)?(
+                inst, system, capacity, count, buffer,
+            ))
         })())
     })
 }
@@ -31,7 +33,9 @@ pub unsafe extern "system" fn create_vulkan_device(
     guard("xrCreateVulkanDeviceKHR", || {
         finish((|| {
             let s = instance(inst)?;
-            Ok(next(s.next.create_vulkan_device)?(inst, info, device, vk_result))
+            Ok(next(s.next.create_vulkan_device)?(
+                inst, info, device, vk_result,
+            ))
         })())
     })
 }

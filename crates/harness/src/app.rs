@@ -17,8 +17,15 @@ pub struct App {
 }
 
 /// Builds an `XrInstanceCreateInfo` for `extensions` and calls `f` with it.
-pub fn with_create_info<R>(extensions: &[&str], api: xr::Version, f: impl FnOnce(&xr::InstanceCreateInfo) -> R) -> R {
-    let names: Vec<CString> = extensions.iter().map(|e| CString::new(*e).unwrap()).collect();
+pub fn with_create_info<R>(
+    extensions: &[&str],
+    api: xr::Version,
+    f: impl FnOnce(&xr::InstanceCreateInfo) -> R,
+) -> R {
+    let names: Vec<CString> = extensions
+        .iter()
+        .map(|e| CString::new(*e).unwrap())
+        .collect();
     let ptrs: Vec<*const std::ffi::c_char> = names.iter().map(|n| n.as_ptr()).collect();
     let mut app_info = xr::ApplicationInfo {
         application_name: [0; xr::MAX_APPLICATION_NAME_SIZE],
@@ -38,7 +45,11 @@ pub fn with_create_info<R>(extensions: &[&str], api: xr::Version, f: impl FnOnce
         enabled_api_layer_count: 0,
         enabled_api_layer_names: std::ptr::null(),
         enabled_extension_count: ptrs.len() as u32,
-        enabled_extension_names: if ptrs.is_empty() { std::ptr::null() } else { ptrs.as_ptr() },
+        enabled_extension_names: if ptrs.is_empty() {
+            std::ptr::null()
+        } else {
+            ptrs.as_ptr()
+        },
     };
     f(&info)
 }
@@ -53,11 +64,17 @@ impl App {
     pub fn new(chain: Chain, extensions: &[&str], api: xr::Version) -> Result<App, xr::Result> {
         let mut instance = xr::Instance::NULL;
         // SAFETY: the create info and its strings live across the call.
-        let r = with_create_info(extensions, api, |info| unsafe { chain.create_instance(info, &mut instance) });
+        let r = with_create_info(extensions, api, |info| unsafe {
+            chain.create_instance(info, &mut instance)
+        });
         if r != xr::Result::SUCCESS {
             return Err(r);
         }
-        Ok(App { chain, instance, destroyed: false })
+        Ok(App {
+            chain,
+            instance,
+            destroyed: false,
+        })
     }
 
     /// A function through the topmost `xrGetInstanceProcAddr`.
@@ -73,7 +90,8 @@ impl App {
     /// # Safety
     /// As [`App::try_fn`].
     pub unsafe fn func<F: Copy>(&self, name: &CStr) -> F {
-        self.try_fn(name).unwrap_or_else(|r| panic!("{name:?}: {r:?}"))
+        self.try_fn(name)
+            .unwrap_or_else(|r| panic!("{name:?}: {r:?}"))
     }
 
     /// The head-mounted display system.
@@ -85,7 +103,9 @@ impl App {
         };
         let mut system = xr::SystemId::NULL;
         // SAFETY: valid pointers; the type matches the name.
-        let r = unsafe { self.func::<xr::pfn::GetSystem>(c"xrGetSystem")(self.instance, &info, &mut system) };
+        let r = unsafe {
+            self.func::<xr::pfn::GetSystem>(c"xrGetSystem")(self.instance, &info, &mut system)
+        };
         assert_eq!(r, xr::Result::SUCCESS, "xrGetSystem");
         system
     }
@@ -100,7 +120,13 @@ impl App {
         };
         let mut session = xr::Session::NULL;
         // SAFETY: valid pointers; the type matches the name.
-        let r = unsafe { self.func::<xr::pfn::CreateSession>(c"xrCreateSession")(self.instance, &info, &mut session) };
+        let r = unsafe {
+            self.func::<xr::pfn::CreateSession>(c"xrCreateSession")(
+                self.instance,
+                &info,
+                &mut session,
+            )
+        };
         if r == xr::Result::SUCCESS {
             Ok(session)
         } else {

@@ -27,7 +27,8 @@ pub const LOADER_MAX_API: xr::Version = xr::Version::new(1, 0x3ff, 0xfff);
 pub const FOVEA_LAYER: &str = "XR_APILAYER_FOVEA_foveation";
 /// The Khronos core validation layer's name and where Debian installs it.
 pub const CORE_VALIDATION_LAYER: &str = "XR_APILAYER_LUNARG_core_validation";
-pub const CORE_VALIDATION_PATH: &str = "/usr/lib/x86_64-linux-gnu/openxr/1/api_layers/libXrApiLayer_core_validation.so";
+pub const CORE_VALIDATION_PATH: &str =
+    "/usr/lib/x86_64-linux-gnu/openxr/1/api_layers/libXrApiLayer_core_validation.so";
 
 /// A layer to load: its library and the name the loader would hand it.
 #[derive(Clone, Debug)]
@@ -44,14 +45,18 @@ impl LayerSpec {
             Some(p) => PathBuf::from(p),
             None => artifact("libfovea.so")?,
         };
-        Ok(LayerSpec { path, name: FOVEA_LAYER.to_owned() })
+        Ok(LayerSpec {
+            path,
+            name: FOVEA_LAYER.to_owned(),
+        })
     }
 
     /// Debian's Khronos core validation layer (`openxr-layer-corevalidation`), if installed.
     pub fn core_validation() -> Option<LayerSpec> {
-        Path::new(CORE_VALIDATION_PATH)
-            .exists()
-            .then(|| LayerSpec { path: CORE_VALIDATION_PATH.into(), name: CORE_VALIDATION_LAYER.to_owned() })
+        Path::new(CORE_VALIDATION_PATH).exists().then(|| LayerSpec {
+            path: CORE_VALIDATION_PATH.into(),
+            name: CORE_VALIDATION_LAYER.to_owned(),
+        })
     }
 }
 
@@ -70,7 +75,10 @@ pub fn artifact(file: &str) -> Result<PathBuf, String> {
         }
         dir = d.parent();
     }
-    Err(format!("{file} not found next to {}: run `cargo build` first", exe.display()))
+    Err(format!(
+        "{file} not found next to {}: run `cargo build` first",
+        exe.display()
+    ))
 }
 
 /// Whether tests that need a system component must fail rather than skip (`FOVEA_REQUIRE_SYSTEM=1`,
@@ -145,20 +153,36 @@ impl LoadedLayer {
         if r != xr::Result::SUCCESS {
             return Err(format!("{}: negotiation failed with {r:?}", spec.name));
         }
-        match (request.get_instance_proc_addr, request.create_api_layer_instance) {
-            (Some(gipa), Some(create)) => Ok(LoadedLayer { spec, name, gipa, create, _lib: lib }),
-            _ => Err(format!("{}: negotiation returned NULL entry points", spec.name)),
+        match (
+            request.get_instance_proc_addr,
+            request.create_api_layer_instance,
+        ) {
+            (Some(gipa), Some(create)) => Ok(LoadedLayer {
+                spec,
+                name,
+                gipa,
+                create,
+                _lib: lib,
+            }),
+            _ => Err(format!(
+                "{}: negotiation returned NULL entry points",
+                spec.name
+            )),
         }
     }
 }
 
 /// A library's `xrNegotiateLoaderApiLayerInterface`.
-pub fn negotiate_symbol(lib: &libloading::Library) -> Result<xr::pfn::NegotiateLoaderApiLayerInterface, String> {
+pub fn negotiate_symbol(
+    lib: &libloading::Library,
+) -> Result<xr::pfn::NegotiateLoaderApiLayerInterface, String> {
     // SAFETY: the symbol's type is fixed by the loader interface.
     unsafe {
-        lib.get::<xr::pfn::NegotiateLoaderApiLayerInterface>(b"xrNegotiateLoaderApiLayerInterface\0")
-            .map(|s| *s)
-            .map_err(|e| format!("no xrNegotiateLoaderApiLayerInterface: {e}"))
+        lib.get::<xr::pfn::NegotiateLoaderApiLayerInterface>(
+            b"xrNegotiateLoaderApiLayerInterface\0",
+        )
+        .map(|s| *s)
+        .map_err(|e| format!("no xrNegotiateLoaderApiLayerInterface: {e}"))
     }
 }
 
@@ -202,11 +226,16 @@ pub unsafe fn lookup<F: Copy>(
     instance: xr::Instance,
     name: &CStr,
 ) -> Result<F, xr::Result> {
-    assert_eq!(std::mem::size_of::<F>(), std::mem::size_of::<xr::pfn::VoidFunction>());
+    assert_eq!(
+        std::mem::size_of::<F>(),
+        std::mem::size_of::<xr::pfn::VoidFunction>()
+    );
     let mut f = None;
     let r = gipa(instance, name.as_ptr(), &mut f);
     match (r, f) {
-        (xr::Result::SUCCESS, Some(f)) => Ok(std::mem::transmute_copy::<xr::pfn::VoidFunction, F>(&f)),
+        (xr::Result::SUCCESS, Some(f)) => {
+            Ok(std::mem::transmute_copy::<xr::pfn::VoidFunction, F>(&f))
+        }
         (xr::Result::SUCCESS, None) => panic!("{name:?}: XR_SUCCESS with a NULL pointer"),
         (r, _) => Err(r),
     }
@@ -215,7 +244,12 @@ pub unsafe fn lookup<F: Copy>(
 impl Chain {
     /// Loads and negotiates every layer, outermost first.
     pub fn new(specs: Vec<LayerSpec>) -> Result<Chain, String> {
-        Ok(Chain { layers: specs.into_iter().map(LoadedLayer::load).collect::<Result<_, _>>()? })
+        Ok(Chain {
+            layers: specs
+                .into_iter()
+                .map(LoadedLayer::load)
+                .collect::<Result<_, _>>()?,
+        })
     }
 
     /// fovea alone in front of the runtime.
@@ -263,7 +297,11 @@ impl Chain {
     ///
     /// # Safety
     /// `info` must be a valid `XrInstanceCreateInfo`.
-    pub unsafe fn create_instance(&self, info: *const xr::InstanceCreateInfo, instance: *mut xr::Instance) -> xr::Result {
+    pub unsafe fn create_instance(
+        &self,
+        info: *const xr::InstanceCreateInfo,
+        instance: *mut xr::Instance,
+    ) -> xr::Result {
         if !info.is_null() {
             let available = self.available_extensions();
             let i = &*info;
@@ -278,25 +316,30 @@ impl Chain {
             return terminator_create(info, std::ptr::null(), instance);
         };
         let n = self.layers.len();
-        let mut infos: Vec<xr::ApiLayerNextInfo> = (0..n)
-            .map(|k| {
-                let mut ni = xr::ApiLayerNextInfo {
-                    struct_type: xr::ApiLayerNextInfo::TYPE,
-                    struct_version: xr::ApiLayerNextInfo::VERSION,
-                    struct_size: std::mem::size_of::<xr::ApiLayerNextInfo>(),
-                    layer_name: [0; xr::MAX_API_LAYER_NAME_SIZE],
-                    next_get_instance_proc_addr: Some(self.layers.get(k + 1).map_or(runtime_gipa(), |l| l.gipa)),
-                    next_create_api_layer_instance: Some(
-                        self.layers.get(k + 1).map_or(terminator_create as xr::pfn::CreateApiLayerInstance, |l| l.create),
-                    ),
-                    next: std::ptr::null_mut(),
-                };
-                for (d, s) in ni.layer_name.iter_mut().zip(self.layers[k].name.as_bytes()) {
-                    *d = *s as c_char;
-                }
-                ni
-            })
-            .collect();
+        let mut infos: Vec<xr::ApiLayerNextInfo> =
+            (0..n)
+                .map(|k| {
+                    let mut ni =
+                        xr::ApiLayerNextInfo {
+                            struct_type: xr::ApiLayerNextInfo::TYPE,
+                            struct_version: xr::ApiLayerNextInfo::VERSION,
+                            struct_size: std::mem::size_of::<xr::ApiLayerNextInfo>(),
+                            layer_name: [0; xr::MAX_API_LAYER_NAME_SIZE],
+                            next_get_instance_proc_addr: Some(
+                                self.layers.get(k + 1).map_or(runtime_gipa(), |l| l.gipa),
+                            ),
+                            next_create_api_layer_instance: Some(self.layers.get(k + 1).map_or(
+                                terminator_create as xr::pfn::CreateApiLayerInstance,
+                                |l| l.create,
+                            )),
+                            next: std::ptr::null_mut(),
+                        };
+                    for (d, s) in ni.layer_name.iter_mut().zip(self.layers[k].name.as_bytes()) {
+                        *d = *s as c_char;
+                    }
+                    ni
+                })
+                .collect();
         for k in (0..n.saturating_sub(1)).rev() {
             let next: *mut xr::ApiLayerNextInfo = &mut infos[k + 1];
             infos[k].next = next;
@@ -338,7 +381,11 @@ pub unsafe fn enumerate_extensions(
     props
         .iter()
         .take(n as usize)
-        .map(|p| CStr::from_ptr(p.extension_name.as_ptr()).to_string_lossy().into_owned())
+        .map(|p| {
+            CStr::from_ptr(p.extension_name.as_ptr())
+                .to_string_lossy()
+                .into_owned()
+        })
         .collect()
 }
 
