@@ -32,7 +32,11 @@ pub struct FovRadians {
 impl Tangents {
     /// The horizontal mirror image: what a right eye with the same optics sees.
     pub fn mirrored(self) -> Self {
-        Tangents { left: self.right, right: self.left, ..self }
+        Tangents {
+            left: self.right,
+            right: self.left,
+            ..self
+        }
     }
 
     /// As an `XrFovf`-style FOV in radians.
@@ -79,7 +83,20 @@ pub struct Headset {
 }
 
 const fn oculus(left: f64, right: f64, down: f64, up: f64) -> [Tangents; 2] {
-    [Tangents { left, right, down, up }, Tangents { left: right, right: left, down, up }]
+    [
+        Tangents {
+            left,
+            right,
+            down,
+            up,
+        },
+        Tangents {
+            left: right,
+            right: left,
+            down,
+            up,
+        },
+    ]
 }
 
 /// Every preset, in the order the documentation lists them.
@@ -128,8 +145,18 @@ pub const HEADSETS: &[Headset] = &[
         id: "index",
         name: "Valve Index",
         eyes: [
-            Tangents { left: 1.279120, right: 1.258676, down: 1.408557, up: 1.413973 },
-            Tangents { left: 1.257541, right: 1.281748, down: 1.407222, up: 1.415720 },
+            Tangents {
+                left: 1.279120,
+                right: 1.258676,
+                down: 1.408557,
+                up: 1.413973,
+            },
+            Tangents {
+                left: 1.257541,
+                right: 1.281748,
+                down: 1.407222,
+                up: 1.415720,
+            },
         ],
         // Derived so that the sizing rule gives SteamVR's recommended 2468×2740 (SS-dependent).
         pixels_per_tangent: [972.49, 970.76],
@@ -175,13 +202,20 @@ pub fn recommended_size(t: Tangents, pixels_per_tangent: [f64; 2]) -> [u32; 2] {
 pub fn symmetric(eyes: &[Tangents]) -> Tangents {
     let h = eyes.iter().fold(0.0f64, |m, t| m.max(t.left).max(t.right));
     let v = eyes.iter().fold(0.0f64, |m, t| m.max(t.up).max(t.down));
-    Tangents { left: h, right: h, down: v, up: v }
+    Tangents {
+        left: h,
+        right: h,
+        down: v,
+        up: v,
+    }
 }
 
 impl Headset {
     /// Recommended per-eye size with the runtime's own (asymmetric) FOVs: the larger of the two eyes.
     pub fn recommended_size(&self) -> [u32; 2] {
-        let [a, b] = self.eyes.map(|t| recommended_size(t, self.pixels_per_tangent));
+        let [a, b] = self
+            .eyes
+            .map(|t| recommended_size(t, self.pixels_per_tangent));
         [a[0].max(b[0]), a[1].max(b[1])]
     }
 
@@ -242,7 +276,18 @@ mod tests {
     #[test]
     fn every_id_resolves_and_is_unique() {
         let all: Vec<_> = ids().collect();
-        assert_eq!(all, ["quest2", "quest3", "quest-pro", "rift-cv1", "rift-s", "index", "pico4"]);
+        assert_eq!(
+            all,
+            [
+                "quest2",
+                "quest3",
+                "quest-pro",
+                "rift-cv1",
+                "rift-s",
+                "index",
+                "pico4"
+            ]
+        );
         assert!(by_id("quest4").is_none());
     }
 }

@@ -37,14 +37,17 @@ impl Args {
 
     /// The value of `--name`, or an error naming it.
     pub fn required(&self, name: &str) -> Result<&str, String> {
-        self.value(name).ok_or_else(|| format!("--{name} is required"))
+        self.value(name)
+            .ok_or_else(|| format!("--{name} is required"))
     }
 
     /// The value of `--name` parsed, or `default` when absent.
     pub fn parsed_or<T: std::str::FromStr>(&self, name: &str, default: T) -> Result<T, String> {
         match self.value(name) {
             None => Ok(default),
-            Some(v) => v.parse().map_err(|_| format!("--{name}: cannot parse '{v}'")),
+            Some(v) => v
+                .parse()
+                .map_err(|_| format!("--{name}: cannot parse '{v}'")),
         }
     }
 
