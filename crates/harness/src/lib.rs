@@ -390,4 +390,5 @@ pub unsafe fn enumerate_extensions(
 }
 
 pub mod app;
+pub mod frame_loop;
 pub use app::App;

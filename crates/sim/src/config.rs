@@ -27,6 +27,9 @@ pub struct SimConfig {
     pub faults: Vec<Fault>,
     /// The application's simulated GPU time per frame.
     pub load: Load,
+    /// Keep the call journal and the submitted views (`FOVEA_SIM_JOURNAL=0` turns it off): tests read
+    /// it, but a benchmark running millions of frames must not grow memory without bound.
+    pub journal: bool,
 }
 
 /// A call that fails on purpose: `function` returns `result` without doing anything.
@@ -76,6 +79,7 @@ impl Default for SimConfig {
             exit_after_frames: None,
             faults: Vec::new(),
             load: Load::default(),
+            journal: true,
         }
     }
 }
@@ -91,7 +95,7 @@ impl SimConfig {
     }
 
     /// Reads `FOVEA_SIM_HEADSET`, `FOVEA_SIM_REFRESH_HZ`, `FOVEA_SIM_NATIVE_UPDATE_STATE`,
-    /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_EXIT_AFTER_FRAMES`, `FOVEA_SIM_FAULT` and `FOVEA_SIM_LOAD`.
+    /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_JOURNAL`, `FOVEA_SIM_EXIT_AFTER_FRAMES`, `FOVEA_SIM_FAULT` and `FOVEA_SIM_LOAD`.
     /// The error names the variable and what it accepts.
     pub fn from_env() -> Result<SimConfig, String> {
         Self::from_vars(|name| std::env::var(name).ok())
@@ -122,6 +126,9 @@ impl SimConfig {
         }
         cfg.native_swapchain_update_state = flag(&var, "FOVEA_SIM_NATIVE_UPDATE_STATE")?;
         cfg.realtime = flag(&var, "FOVEA_SIM_REALTIME")?;
+        if var("FOVEA_SIM_JOURNAL").is_some() {
+            cfg.journal = flag(&var, "FOVEA_SIM_JOURNAL")?;
+        }
         if let Some(v) = var("FOVEA_SIM_EXIT_AFTER_FRAMES") {
             cfg.exit_after_frames = Some(v.trim().parse::<u64>().map_err(|_| {
                 format!(

@@ -305,7 +305,9 @@ unsafe fn end_frame_impl(
         .instances
         .get_mut(&instance)
         .expect("session's instance exists");
-    inst.record.end_frames.push(views);
+    if inst.config.journal {
+        inst.record.end_frames.push(views);
+    }
     let exit_after = inst.config.exit_after_frames;
     match (state, ends) {
         (xr::SessionState::SYNCHRONIZED, _) => set_state(&mut w, id, xr::SessionState::VISIBLE),

@@ -93,7 +93,8 @@ pub(crate) fn entry(name: &'static str, body: impl FnOnce(&mut Ctx) -> XrResult)
         };
         let _ = catch_unwind(AssertUnwindSafe(|| {
             let mut w = world();
-            if let Some(record) = w.record_mut(id) {
+            let keep = w.instances.get(&id).is_none_or(|i| i.config.journal);
+            if let Some(record) = w.record_mut(id).filter(|_| keep) {
                 record.journal.push(call);
             }
         }));

@@ -1,0 +1,218 @@
+//! The layer's added CPU per frame in steady state, and its heap allocations per frame.
+//!
+//! Both loops run in this process, through the fake loader harness, on the simulated runtime (Quest 3
+//! preset, headless): `bare` calls the runtime directly, `fovea` goes through the layer with a
+//! foveated multiview swapchain whose state asks for HIGH with dynamic foveation on. A frame is wait,
+//! begin, locate views, one acquire/wait/release, end with one two-view projection layer.
+//!
+//! Allocations are counted by interposing `malloc` and friends in this executable: the layer is a
+//! separately dlopened library with its own Rust runtime, so a `#[global_allocator]` here would not
+//! see its allocations, but ELF symbol interposition routes its `malloc` calls through these.
+//!
+//! Besides criterion's own report, the run ends with a summary line: ns per frame for both loops from
+//! interleaved timing rounds in the same run, the difference, the ratio, and allocations per frame.
+
+use std::ffi::c_void;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use criterion::{criterion_group, Criterion};
+use fovea_harness::app::API_1_0;
+use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
+use fovea_harness::{sim, App, Chain};
+use openxr_sys as xr;
+use xr::Handle;
+
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+extern "C" {
+    fn __libc_malloc(size: usize) -> *mut c_void;
+    fn __libc_calloc(n: usize, size: usize) -> *mut c_void;
+    fn __libc_realloc(p: *mut c_void, size: usize) -> *mut c_void;
+    fn __libc_memalign(align: usize, size: usize) -> *mut c_void;
+}
+
+/// # Safety
+/// The C `malloc` contract.
+#[no_mangle]
+pub unsafe extern "C" fn malloc(size: usize) -> *mut c_void {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    __libc_malloc(size)
+}
+
+/// # Safety
+/// The C `calloc` contract.
+#[no_mangle]
+pub unsafe extern "C" fn calloc(n: usize, size: usize) -> *mut c_void {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    __libc_calloc(n, size)
+}
+
+/// # Safety
+/// The C `realloc` contract.
+#[no_mangle]
+pub unsafe extern "C" fn realloc(p: *mut c_void, size: usize) -> *mut c_void {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    __libc_realloc(p, size)
+}
+
+/// # Safety
+/// The C `posix_memalign` contract.
+#[no_mangle]
+pub unsafe extern "C" fn posix_memalign(out: *mut *mut c_void, align: usize, size: usize) -> i32 {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    let p = __libc_memalign(align, size);
+    if p.is_null() {
+        return 12; // ENOMEM
+    }
+    *out = p;
+    0
+}
+
+/// # Safety
+/// The C `aligned_alloc` contract.
+#[no_mangle]
+pub unsafe extern "C" fn aligned_alloc(align: usize, size: usize) -> *mut c_void {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    __libc_memalign(align, size)
+}
+
+fn running_loop(chain: Chain) -> HeadlessLoop {
+    let mut cfg = sim::control::SimConfig::from_env().expect("simulated runtime configuration");
+    cfg.journal = false;
+    sim::control::set_thread_config(Some(cfg));
+    // The bare runtime offers none of the foveation extensions: its loop is the same without them.
+    let layered = !chain.layers.is_empty();
+    let extensions: &[&str] = if layered {
+        &FOVEATION_EXTENSIONS
+    } else {
+        &["XR_MND_headless"]
+    };
+    let app = App::new(chain, extensions, API_1_0).expect("instance");
+    let spec = SwapchainSpec {
+        foveation: layered,
+        array_size: 2,
+    };
+    let mut lp = HeadlessLoop::new(app, spec).expect("session");
+    apply_dynamic_high(&lp);
+    for _ in 0..300 {
+        lp.frame().expect("warm-up frame");
+    }
+    lp
+}
+
+/// Applies a HIGH, dynamic profile to the loop's swapchain where the chain offers the extension (the
+/// bare runtime does not: it then just runs the loop).
+fn apply_dynamic_high(lp: &HeadlessLoop) {
+    // SAFETY: names and types match; structs live across the calls.
+    unsafe {
+        let Ok(create) = lp
+            .app
+            .try_fn::<xr::pfn::CreateFoveationProfileFB>(c"xrCreateFoveationProfileFB")
+        else {
+            return;
+        };
+        let update: xr::pfn::UpdateSwapchainFB = lp.func(c"xrUpdateSwapchainFB");
+        let destroy: xr::pfn::DestroyFoveationProfileFB = lp.func(c"xrDestroyFoveationProfileFB");
+        let level = xr::FoveationLevelProfileCreateInfoFB {
+            ty: xr::StructureType::FOVEATION_LEVEL_PROFILE_CREATE_INFO_FB,
+            next: std::ptr::null_mut(),
+            level: xr::FoveationLevelFB::HIGH,
+            vertical_offset: 0.0,
+            dynamic: xr::FoveationDynamicFB::LEVEL_ENABLED,
+        };
+        let info = xr::FoveationProfileCreateInfoFB {
+            ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
+            next: &level as *const _ as *mut _,
+        };
+        let mut profile = xr::FoveationProfileFB::NULL;
+        if create(lp.session, &info, &mut profile) != xr::Result::SUCCESS {
+            return;
+        }
+        let state = xr::SwapchainStateFoveationFB {
+            ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
+            next: std::ptr::null_mut(),
+            flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
+            profile,
+        };
+        update(lp.swapchain, &state as *const _ as *const _);
+        destroy(profile);
+    }
+}
+
+fn bench_frames(c: &mut Criterion) {
+    let mut group = c.benchmark_group("frame");
+    let mut bare = running_loop(Chain::bare());
+    group.bench_function("bare", |b| b.iter(|| bare.frame().unwrap()));
+    let mut fovea = running_loop(Chain::fovea().expect("libfovea.so is built"));
+    group.bench_function("fovea", |b| b.iter(|| fovea.frame().unwrap()));
+    group.finish();
+}
+
+/// Mean ns per frame over `n` frames, and allocations per frame.
+fn timed(lp: &mut HeadlessLoop, n: u32) -> (f64, f64) {
+    let a0 = ALLOCATIONS.load(Ordering::Relaxed);
+    let t0 = Instant::now();
+    for _ in 0..n {
+        lp.frame().unwrap();
+    }
+    let ns = t0.elapsed().as_nanos() as f64 / f64::from(n);
+    let allocs = (ALLOCATIONS.load(Ordering::Relaxed) - a0) as f64 / f64::from(n);
+    (ns, allocs)
+}
+
+/// The allocation counter must see allocations made inside the dlopened layer, or "zero added
+/// allocations" would prove nothing: the layer's xrEnumerateInstanceExtensionProperties builds a Vec.
+fn check_counter_sees_the_layer() {
+    let chain = Chain::fovea().expect("libfovea.so is built");
+    // SAFETY: the name's type matches; the count pointer is valid.
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    unsafe {
+        let f: xr::pfn::EnumerateInstanceExtensionProperties = fovea_harness::lookup(
+            chain.gipa(),
+            xr::Instance::NULL,
+            c"xrEnumerateInstanceExtensionProperties",
+        )
+        .unwrap();
+        let mut n = 0;
+        f(std::ptr::null(), 0, &mut n, std::ptr::null_mut());
+    }
+    let seen = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    assert!(
+        seen > 0,
+        "the malloc interposer does not see the layer's allocations"
+    );
+}
+
+/// Interleaved rounds of both loops in the same run; the median round of each.
+fn summary() {
+    let mut bare = running_loop(Chain::bare());
+    let mut fovea = running_loop(Chain::fovea().expect("libfovea.so is built"));
+    let (mut b, mut f) = (Vec::new(), Vec::new());
+    for _ in 0..15 {
+        b.push(timed(&mut bare, 20_000));
+        f.push(timed(&mut fovea, 20_000));
+    }
+    let median = |v: &mut Vec<(f64, f64)>| {
+        v.sort_by(|x, y| x.0.total_cmp(&y.0));
+        v[v.len() / 2]
+    };
+    let (bare_ns, bare_allocs) = median(&mut b);
+    let (fovea_ns, fovea_allocs) = median(&mut f);
+    println!(
+        "summary: bare {bare_ns:.0} ns/frame, fovea {fovea_ns:.0} ns/frame, added {:.0} ns/frame, ratio {:.3}; \
+         heap allocations per frame: bare {bare_allocs:.2}, fovea {fovea_allocs:.2}, added by the layer {:.2}",
+        fovea_ns - bare_ns,
+        fovea_ns / bare_ns,
+        fovea_allocs - bare_allocs,
+    );
+}
+
+criterion_group!(benches, bench_frames);
+
+fn main() {
+    check_counter_sees_the_layer();
+    benches();
+    summary();
+    Criterion::default().configure_from_args().final_summary();
+}
