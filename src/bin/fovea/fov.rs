@@ -1,7 +1,83 @@
-//! `fovea fov` (in progress).
+//! `fovea fov --headset NAME [--json]`: each eye's FOV and projection centre, and the recommended
+//! eye-buffer size with the asymmetric FOVs against one shared symmetric FOV (asymmetric FOV FAQ).
+
+use fovea_headsets::{by_id, ids, Headset, Tangents};
 
 use crate::args::Args;
 
-pub fn run(_args: &Args) -> Result<(), String> {
-    Err("not built yet".into())
+/// Where the straight-ahead direction lands in NDC (x right, y up). An off-centre projection does
+/// not put it at the image centre: the FAQ's `ProjectionMatrix * (0, 0, -zNear, 1)`, which for an
+/// FOV given as tangents is `((l - r) / (l + r), (d - u) / (d + u))`.
+pub fn projection_center_ndc(t: Tangents) -> [f64; 2] {
+    [
+        (t.left - t.right) / (t.left + t.right),
+        (t.down - t.up) / (t.down + t.up),
+    ]
+}
+
+/// Resolves `--headset`, naming the accepted values when it is wrong.
+pub fn headset(args: &Args) -> Result<&'static Headset, String> {
+    let id = args.required("headset")?;
+    by_id(id).ok_or_else(|| {
+        format!(
+            "unknown headset '{id}'; accepted: {}",
+            ids().collect::<Vec<_>>().join(", ")
+        )
+    })
+}
+
+pub fn run(args: &Args) -> Result<(), String> {
+    let h = headset(args)?;
+    let [aw, ah] = h.recommended_size();
+    let [sw, sh] = h.symmetric_size();
+    let saving = h.symmetric_pixel_saving();
+    let eyes: Vec<(&str, [f64; 4], [f64; 2])> = ["left", "right"]
+        .iter()
+        .zip(h.eyes)
+        .map(|(name, t)| (*name, t.degrees(), projection_center_ndc(t)))
+        .collect();
+    if args.switch("json") {
+        let eyes_json: Vec<String> = eyes
+            .iter()
+            .map(|(name, [l, r, u, d], [x, y])| {
+                format!(
+                    "{{\"eye\":\"{name}\",\"fov_deg\":{{\"left\":{l:.4},\"right\":{r:.4},\"up\":{u:.4},\"down\":{d:.4}}},\
+                     \"projection_center_ndc\":[{x:.6},{y:.6}]}}"
+                )
+            })
+            .collect();
+        println!(
+            "{{\"headset\":\"{}\",\"eyes\":[{}],\"recommended\":{{\"asymmetric\":[{aw},{ah}],\"symmetric\":[{sw},{sh}]}},\
+             \"symmetric_pixel_saving\":{saving:.6}}}",
+            h.id,
+            eyes_json.join(",")
+        );
+        return Ok(());
+    }
+    println!("{} ({})", h.name, h.source);
+    println!(
+        "{:<6} {:>7} {:>7} {:>7} {:>7}   projection centre (NDC)",
+        "eye", "left", "right", "up", "down"
+    );
+    for (name, [l, r, u, d], [x, y]) in &eyes {
+        println!("{name:<6} {l:>6.2}° {r:>6.2}° {u:>6.2}° {d:>6.2}°   ({x:+.3}, {y:+.3})");
+    }
+    println!("recommended per eye: asymmetric {aw}x{ah}, symmetric {sw}x{sh}, asymmetric saves {:.1}% of pixels", saving * 100.0);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn projection_centre_of_an_off_centre_fov() {
+        // Quest 3 left eye: more FOV outward (left) and down, so straight ahead sits right of and
+        // above the image centre.
+        let [x, y] = projection_center_ndc(by_id("quest3").unwrap().eyes[0]);
+        assert!((x - 0.2424).abs() < 1e-3, "{x}");
+        assert!((y - 0.1932).abs() < 1e-3, "{y}");
+        let [x, y] = projection_center_ndc(by_id("pico4").unwrap().eyes[0]);
+        assert_eq!([x, y], [0.0, 0.0]);
+    }
 }
