@@ -62,12 +62,17 @@ impl LayerSpec {
 
 /// A build artifact of this workspace, found next to the running executable: a test binary sits in
 /// `target/<profile>/deps`, the `fovea` binary in `target/<profile>`.
+///
+/// `cargo test` links crates as rlibs and does not rebuild the cdylibs the harness loads, so a
+/// library older than its sources is refused: testing yesterday's layer and passing would be worse
+/// than failing.
 pub fn artifact(file: &str) -> Result<PathBuf, String> {
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let mut dir = exe.parent();
     while let Some(d) = dir {
         let candidate = d.join(file);
         if candidate.exists() {
+            check_fresh(&candidate, file)?;
             return Ok(candidate);
         }
         if d.file_name().is_some_and(|n| n == "target") {
@@ -79,6 +84,47 @@ pub fn artifact(file: &str) -> Result<PathBuf, String> {
         "{file} not found next to {}: run `cargo build` first",
         exe.display()
     ))
+}
+
+/// The source folders each library of this workspace is built from.
+fn sources_of(file: &str) -> Vec<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    match file {
+        "libfovea.so" => vec![root.join("src"), root.join("crates/headsets/src")],
+        "libfovea_sim.so" => vec![
+            root.join("crates/sim/src"),
+            root.join("crates/headsets/src"),
+        ],
+        _ => Vec::new(),
+    }
+}
+
+fn newest(dir: &Path) -> Option<std::time::SystemTime> {
+    let mut best = None;
+    for entry in std::fs::read_dir(dir).ok()?.flatten() {
+        let path = entry.path();
+        let t = if path.is_dir() {
+            newest(&path)
+        } else {
+            entry.metadata().ok()?.modified().ok()
+        };
+        best = best.max(t);
+    }
+    best
+}
+
+fn check_fresh(library: &Path, file: &str) -> Result<(), String> {
+    let built = std::fs::metadata(library)
+        .and_then(|m| m.modified())
+        .map_err(|e| e.to_string())?;
+    let source = sources_of(file).iter().filter_map(|d| newest(d)).max();
+    match source {
+        Some(s) if s > built => Err(format!(
+            "{} is older than its sources: run `cargo build` first (cargo test does not rebuild it)",
+            library.display()
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// Whether tests that need a system component must fail rather than skip (`FOVEA_REQUIRE_SYSTEM=1`,
