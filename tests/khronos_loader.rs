@@ -1,0 +1,155 @@
+//! fovea through the real Khronos loader (Debian's libopenxr-loader1, 1.0.20): discovered by manifest
+//! through `XR_API_LAYER_PATH`, enabled by `XR_ENABLE_API_LAYERS`, in front of the simulated runtime
+//! selected by `XR_RUNTIME_JSON`, alone and with the Khronos core validation layer above and below.
+//!
+//! The loader allows one live instance per process and reads the environment, so everything runs in
+//! one test, in order.
+
+use std::ffi::{c_char, CStr};
+use std::path::Path;
+
+use fovea_harness::app::{with_create_info, API_1_0};
+use fovea_harness::{artifact, enumerate_extensions, skip, CORE_VALIDATION_LAYER};
+use openxr_sys as xr;
+use xr::Handle;
+
+const DEBIAN_LAYERS: &str = "/usr/share/openxr/1/api_layers/explicit.d";
+
+fn write_manifests(dir: &Path) {
+    let layer = artifact("libfovea.so").expect("libfovea.so");
+    let runtime = artifact("libfovea_sim.so").expect("libfovea_sim.so");
+    std::fs::create_dir_all(dir.join("layers")).unwrap();
+    let checked_in = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("manifest/XR_APILAYER_FOVEA_foveation.json"),
+    )
+    .unwrap();
+    // The checked-in manifest, pointed at this build's library.
+    let manifest = checked_in.replace("../target/release/libfovea.so", layer.to_str().unwrap());
+    assert_ne!(manifest, checked_in);
+    std::fs::write(dir.join("layers/fovea.json"), manifest).unwrap();
+    std::fs::write(
+        dir.join("runtime.json"),
+        format!(r#"{{"file_format_version": "1.0.0", "runtime": {{"name": "fovea simulated headset", "library_path": "{}"}}}}"#, runtime.display()),
+    )
+    .unwrap();
+}
+
+type Gipa = xr::pfn::GetInstanceProcAddr;
+
+unsafe fn get<F: Copy>(gipa: Gipa, instance: xr::Instance, name: &CStr) -> Result<F, xr::Result> {
+    fovea_harness::lookup(gipa, instance, name)
+}
+
+/// Creates an instance with the foveation extensions and a headless session, then tears both down.
+unsafe fn instance_and_session(gipa: Gipa, label: &str) {
+    let create: xr::pfn::CreateInstance =
+        get(gipa, xr::Instance::NULL, c"xrCreateInstance").unwrap();
+    let exts = [
+        "XR_FB_swapchain_update_state",
+        "XR_FB_foveation",
+        "XR_FB_foveation_configuration",
+        "XR_MND_headless",
+    ];
+    let mut instance = xr::Instance::NULL;
+    let r = with_create_info(&exts, API_1_0, |info| create(info, &mut instance));
+    assert_eq!(r, xr::Result::SUCCESS, "{label}: xrCreateInstance");
+    // The layer's functions resolve through the loader's trampoline chain.
+    for name in [
+        c"xrCreateFoveationProfileFB",
+        c"xrUpdateSwapchainFB",
+        c"xrGetSwapchainStateFB",
+    ] {
+        assert!(
+            get::<xr::pfn::VoidFunction>(gipa, instance, name).is_ok(),
+            "{label}: {name:?}"
+        );
+    }
+    let get_system: xr::pfn::GetSystem = get(gipa, instance, c"xrGetSystem").unwrap();
+    let system_info = xr::SystemGetInfo {
+        ty: xr::StructureType::SYSTEM_GET_INFO,
+        next: std::ptr::null(),
+        form_factor: xr::FormFactor::HEAD_MOUNTED_DISPLAY,
+    };
+    let mut system = xr::SystemId::NULL;
+    assert_eq!(
+        get_system(instance, &system_info, &mut system),
+        xr::Result::SUCCESS,
+        "{label}"
+    );
+    let create_session: xr::pfn::CreateSession = get(gipa, instance, c"xrCreateSession").unwrap();
+    let info = xr::SessionCreateInfo {
+        ty: xr::StructureType::SESSION_CREATE_INFO,
+        next: std::ptr::null(),
+        create_flags: xr::SessionCreateFlags::EMPTY,
+        system_id: system,
+    };
+    let mut session = xr::Session::NULL;
+    assert_eq!(
+        create_session(instance, &info, &mut session),
+        xr::Result::SUCCESS,
+        "{label}: xrCreateSession"
+    );
+    let destroy_session: xr::pfn::DestroySession =
+        get(gipa, instance, c"xrDestroySession").unwrap();
+    assert_eq!(destroy_session(session), xr::Result::SUCCESS, "{label}");
+    let destroy: xr::pfn::DestroyInstance = get(gipa, instance, c"xrDestroyInstance").unwrap();
+    assert_eq!(destroy(instance), xr::Result::SUCCESS, "{label}");
+}
+
+#[test]
+fn discovered_by_manifest_and_stacked_with_core_validation() {
+    let loader = match unsafe { libloading::Library::new("libopenxr_loader.so.1") } {
+        Ok(l) => l,
+        Err(e) => {
+            skip(&format!(
+                "the Khronos OpenXR loader (libopenxr-loader1) is not installed: {e}"
+            ));
+            return;
+        }
+    };
+    let dir = std::env::temp_dir().join(format!("fovea-khronos-loader-{}", std::process::id()));
+    write_manifests(&dir);
+    std::env::set_var("XR_RUNTIME_JSON", dir.join("runtime.json"));
+    std::env::set_var(
+        "XR_API_LAYER_PATH",
+        format!("{}:{DEBIAN_LAYERS}", dir.join("layers").display()),
+    );
+    std::env::set_var("XR_ENABLE_API_LAYERS", fovea::LAYER_NAME);
+    let gipa: Gipa = unsafe { *loader.get::<Gipa>(b"xrGetInstanceProcAddr\0").unwrap() };
+
+    // Enabled by the environment, the layer's extensions are listed with the runtime's.
+    let enumerate: xr::pfn::EnumerateInstanceExtensionProperties = unsafe {
+        get(
+            gipa,
+            xr::Instance::NULL,
+            c"xrEnumerateInstanceExtensionProperties",
+        )
+    }
+    .unwrap();
+    let listed = unsafe { enumerate_extensions(enumerate, std::ptr::null::<c_char>()) };
+    for e in fovea::extensions::EXTENSIONS {
+        assert!(
+            listed.iter().any(|l| l.as_bytes() == e.name.to_bytes()),
+            "{:?} not listed: {listed:?}",
+            e.name
+        );
+    }
+    assert!(listed.iter().any(|l| l == "XR_MND_headless"), "{listed:?}");
+    unsafe { instance_and_session(gipa, "fovea alone") };
+
+    if !Path::new(DEBIAN_LAYERS)
+        .join("XrApiLayer_core_validation.x86_64-linux-gnu.json")
+        .exists()
+    {
+        skip("openxr-layer-corevalidation is not installed");
+        return;
+    }
+    for order in [
+        format!("{CORE_VALIDATION_LAYER}:{}", fovea::LAYER_NAME),
+        format!("{}:{CORE_VALIDATION_LAYER}", fovea::LAYER_NAME),
+    ] {
+        std::env::set_var("XR_ENABLE_API_LAYERS", &order);
+        unsafe { instance_and_session(gipa, &order) };
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
