@@ -15,7 +15,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use openxr_sys as xr;
-use parking_lot::RwLock;
+use parking_lot::{Mutex, RwLock};
 use xr::Handle;
 
 use crate::dispatch::Next;
@@ -71,6 +71,30 @@ pub struct Swapchain {
     pub handle: xr::Swapchain,
     pub session: Arc<Session>,
     pub info: SwapchainInfo,
+    /// Present when the swapchain was created with `XrSwapchainCreateInfoFoveationFB` and fovea
+    /// provides XR_FB_foveation: profiles may be applied to it.
+    pub foveation: Option<Mutex<FoveationState>>,
+}
+
+/// What an `XrFoveationLevelProfileCreateInfoFB` asks for. A profile without one applies no
+/// foveation (fb_foveation.adoc), which is level NONE.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ProfileParams {
+    /// `XrFoveationLevelFB`: 0 none, 1 low, 2 medium, 3 high; the maximum when dynamic.
+    pub level: u32,
+    /// Degrees, positive up: where the centre of the pattern sits.
+    pub vertical_offset_deg: f32,
+    /// XR_FOVEATION_DYNAMIC_LEVEL_ENABLED_FB.
+    pub dynamic: bool,
+}
+
+/// A foveated swapchain's current state: a copy of the last applied profile's parameters, so
+/// destroying the profile afterwards changes nothing (fb_foveation.adoc).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FoveationState {
+    pub params: ProfileParams,
+    /// The profile last applied (XR_NULL_HANDLE before the first update).
+    pub profile: xr::FoveationProfileFB,
 }
 
 /// A foveation profile fovea created.
@@ -78,6 +102,7 @@ pub struct Profile {
     pub handle: xr::FoveationProfileFB,
     /// The session it belongs to (xr.xml: `parent="XrSession"`).
     pub session: xr::Session,
+    pub params: ProfileParams,
 }
 
 /// A `Hasher` for handle keys: handles are already unique integers, so a multiplicative mix is all a

@@ -5,11 +5,57 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{finish, next, session, succeeded, swapchain};
-use crate::ffi::guard;
-use crate::state::{registry, Swapchain, SwapchainInfo};
+use parking_lot::Mutex;
 
-/// `xrCreateSwapchain`: records the swapchain's layout.
+use super::{finish, next, session, succeeded, swapchain, HookResult};
+use crate::extensions::Ext;
+use crate::ffi::{self, guard};
+use crate::state::{registry, FoveationState, Swapchain, SwapchainInfo};
+
+/// VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT (VK_EXT_fragment_density_map).
+const VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT: u32 = 0x4000;
+
+/// What the foveation structs in a swapchain create info ask for.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FoveationRequest {
+    /// `XrSwapchainCreateInfoFoveationFB` was chained.
+    pub foveation: bool,
+    /// Its flags (SCALED_BIN 0x1, FRAGMENT_DENSITY_MAP 0x2).
+    pub flags: u64,
+    /// `XrVulkanSwapchainCreateInfoMETA`'s flags, when chained.
+    pub meta: Option<(u32, u32)>,
+}
+
+/// Checks a request against what fovea can honour without runtime support for the structs:
+/// SCALED_BIN is a GLES flag (QCOM_texture_foveated) and a Vulkan or headless session cannot use it;
+/// the runtime allocates the images, so additional Vulkan flags cannot be honoured, except
+/// SUBSAMPLED, which Quest's runtime also drops when unsupported (fixed-foveated-rendering seed).
+pub fn check_request(req: FoveationRequest) -> HookResult<()> {
+    if req.flags & !0x3 != 0 {
+        return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+    }
+    if req.flags & 0x1 != 0 {
+        tracing::warn!("XR_SWAPCHAIN_CREATE_FOVEATION_SCALED_BIN_BIT_FB needs OpenGL ES; this is not a GLES session");
+        return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+    }
+    if let Some((create, usage)) = req.meta {
+        if usage != 0 || create & !VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT != 0 {
+            tracing::warn!(
+                create,
+                usage,
+                "additional Vulkan swapchain flags the runtime cannot honour"
+            );
+            return Err(xr::Result::ERROR_FEATURE_UNSUPPORTED);
+        }
+        if create != 0 {
+            tracing::warn!("VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT dropped: the runtime cannot allocate subsampled images");
+        }
+    }
+    Ok(())
+}
+
+/// `xrCreateSwapchain`: takes the foveation structs fovea provides out of a copied chain, checks
+/// them, and records the swapchain's layout and foveation state.
 pub unsafe extern "system" fn create_swapchain(
     sess: xr::Session,
     info: *const xr::SwapchainCreateInfo,
@@ -25,8 +71,41 @@ pub unsafe extern "system" fn create_swapchain(
             {
                 return Ok(f(sess, info, out));
             }
+            let exts = state.instance.extensions;
             let i = &*info;
-            let r = f(sess, info, out);
+            let provided_fov = exts.provided(Ext::Foveation);
+            let provided_meta = exts.provided(Ext::MetaVulkanSwapchainCreateInfo);
+            let mut req = FoveationRequest::default();
+            if provided_fov {
+                let fov = ffi::find_in_chain::<xr::SwapchainCreateInfoFoveationFB>(
+                    i.next,
+                    xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
+                )
+                .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
+                if let Some(fov) = fov {
+                    req.foveation = true;
+                    req.flags = (*fov).flags.into_raw();
+                }
+            }
+            if provided_meta {
+                let meta = ffi::find_in_chain::<ffi::VulkanSwapchainCreateInfoMETA>(
+                    i.next,
+                    ffi::TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META,
+                )
+                .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
+                req.meta =
+                    meta.map(|m| ((*m).additional_create_flags, (*m).additional_usage_flags));
+            }
+            check_request(req)?;
+            // Structs of extensions fovea provides are unknown below: take them out of a copy.
+            let chain = ffi::ChainCopy::without(i.next, |t| {
+                (provided_fov && t == xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB)
+                    || (provided_meta && t == ffi::TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META)
+            })
+            .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
+            let mut down = *i;
+            down.next = chain.head();
+            let r = f(sess, &down, out);
             if succeeded(r) {
                 let record = Swapchain {
                     handle: *out,
@@ -41,6 +120,7 @@ pub unsafe extern "system" fn create_swapchain(
                         array_size: i.array_size,
                         mip_count: i.mip_count,
                     },
+                    foveation: req.foveation.then(|| Mutex::new(FoveationState::default())),
                 };
                 registry()
                     .swapchains
@@ -124,4 +204,35 @@ pub unsafe extern "system" fn release_swapchain_image(
             Ok(f(handle, info))
         })())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn requests_fovea_can_and_cannot_honour() {
+        let ok = |flags, meta| {
+            check_request(FoveationRequest {
+                foveation: true,
+                flags,
+                meta,
+            })
+        };
+        assert_eq!(ok(0x2, None), Ok(()));
+        assert_eq!(
+            ok(0x0, Some((VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT, 0))),
+            Ok(())
+        );
+        assert_eq!(ok(0x1, None), Err(xr::Result::ERROR_VALIDATION_FAILURE));
+        assert_eq!(ok(0x4, None), Err(xr::Result::ERROR_VALIDATION_FAILURE));
+        assert_eq!(
+            ok(0x2, Some((0, 0x200))),
+            Err(xr::Result::ERROR_FEATURE_UNSUPPORTED)
+        );
+        assert_eq!(
+            ok(0x2, Some((0x1, 0))),
+            Err(xr::Result::ERROR_FEATURE_UNSUPPORTED)
+        );
+    }
 }
