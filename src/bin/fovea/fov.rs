@@ -1,6 +1,7 @@
 //! `fovea fov --headset NAME [--json]`: each eye's FOV and projection centre, and the recommended
 //! eye-buffer size with the asymmetric FOVs against one shared symmetric FOV (asymmetric FOV FAQ).
 
+use fovea::density::{Fov, Grid, Rect, View};
 use fovea_headsets::{by_id, ids, Headset, Tangents};
 
 use crate::args::Args;
@@ -80,4 +81,29 @@ mod tests {
         let [x, y] = projection_center_ndc(by_id("pico4").unwrap().eyes[0]);
         assert_eq!([x, y], [0.0, 0.0]);
     }
+}
+
+/// One eye of a preset at its recommended size, as the density model sees it.
+pub fn eye_view(h: &Headset, eye: usize, texel: u32) -> (Grid, View) {
+    let [w, hh] = h.recommended_size();
+    let view = View {
+        fov: Fov::from_tangents(h.eyes[eye]),
+        rect: Rect {
+            x: 0,
+            y: 0,
+            width: w,
+            height: hh,
+        },
+        visible: None,
+    };
+    (Grid::new([w, hh], [texel, texel]), view)
+}
+
+/// Resolves `--texel` (default 32): the density map texel size in pixels.
+pub fn texel(args: &Args) -> Result<u32, String> {
+    let t: u32 = args.parsed_or("texel", 32)?;
+    if !(1..=1024).contains(&t) {
+        return Err(format!("--texel {t}: expected 1..1024 pixels"));
+    }
+    Ok(t)
 }

@@ -1,0 +1,157 @@
+//! `fovea report` and `fovea maps` from the built binary: the JSON the issue names, the PNGs' size,
+//! colours and legend, and clear errors.
+
+use std::process::Command;
+
+fn fovea(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_fovea"))
+        .args(args)
+        .output()
+        .expect("run fovea");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn report_json_lists_every_level_with_its_figures() {
+    let (ok, out, err) = fovea(&["report", "--headset", "quest3", "--texel", "32", "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("report --json is JSON");
+    assert_eq!(v["headset"], "quest3");
+    assert_eq!(v["texel"], 32);
+    let levels = v["levels"].as_array().expect("levels");
+    let names: Vec<&str> = levels
+        .iter()
+        .map(|l| l["level"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["none", "low", "medium", "high", "high-top"]);
+    let shaded: Vec<f64> = levels
+        .iter()
+        .map(|l| l["shaded_fraction"].as_f64().unwrap())
+        .collect();
+    assert_eq!(shaded[0], 1.0);
+    assert!(shaded[0] > shaded[1] && shaded[1] > shaded[2] && shaded[2] > shaded[3]);
+    // The issue's reference figures for Quest 3 at texel 32.
+    for (i, want) in [(1, 0.83), (2, 0.28), (3, 0.14)] {
+        assert!(
+            (shaded[i] - want).abs() < 0.03,
+            "{}: {}",
+            names[i],
+            shaded[i]
+        );
+    }
+    assert!(levels[0]["full_rate_radius_deg"].is_null());
+    let radius = |i: usize| levels[i]["full_rate_radius_deg"].as_f64().unwrap();
+    assert!((radius(2) - 20.0).abs() < 1.0 && (radius(3) - 15.0).abs() < 1.0);
+    for l in levels {
+        assert!(l["min_relative_ppd"].as_f64().unwrap() > 0.0);
+        assert!(l["min_relative_ppd_within_15deg"].as_f64().unwrap() >= 1.0 - 1e-9);
+    }
+}
+
+fn read_png(path: &std::path::Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::fs::File::open(path).expect("png written"));
+    let mut reader = decoder.read_info().expect("png header");
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).expect("png data");
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, buf)
+}
+
+#[test]
+fn maps_draw_each_level_in_metas_colours() {
+    let dir = std::env::temp_dir().join(format!("fovea-maps-{}", std::process::id()));
+    let out = dir.to_str().unwrap();
+    for (level, centre, corner) in [
+        ("none", [255, 255, 255], [255, 255, 255]),
+        // MEDIUM's floor beyond 20° is 1/2 per axis, and the planar projection oversamples Quest 3's
+        // corners by more than 2× per axis, so they reach 4×4 too.
+        ("medium", [255, 255, 255], [220, 40, 220]),
+        ("high", [255, 255, 255], [220, 40, 220]),
+    ] {
+        let (ok, stdout, err) = fovea(&[
+            "maps",
+            "--headset",
+            "quest3",
+            "--level",
+            level,
+            "--eye",
+            "both",
+            "--out",
+            out,
+        ]);
+        assert!(ok, "{err}");
+        assert_eq!(stdout.lines().count(), 2, "{stdout}");
+        for eye in ["left", "right"] {
+            let (w, h, rgb) = read_png(&dir.join(format!("quest3_{level}_{eye}.png")));
+            assert_eq!(w, 2064, "recommended width");
+            assert!(h > 2240, "legend below the 2240-row eye buffer");
+            let px = |x: u32, y: u32| rgb[((y * w + x) * 3) as usize..][..3].to_vec();
+            // Quest 3's left eye sees 54° left and 40° right: its projection centre is right of
+            // the image centre (x = 0.58 w), the right eye's mirrored. 60 px beside it (the cross).
+            let cx = if eye == "left" {
+                w * 58 / 100
+            } else {
+                w * 42 / 100
+            };
+            assert_eq!(
+                px(cx + 60, 2240 * 45 / 100),
+                centre,
+                "{level} {eye} near the fovea"
+            );
+            // The temporal top corner: top-left for the left eye, top-right for the right.
+            let temporal = if eye == "left" { 4 } else { w - 5 };
+            assert_eq!(px(temporal, 4), corner, "{level} {eye} temporal top corner");
+            // Legend: the last cell is black ("not shown"), the first white.
+            assert_eq!(px(4, h - 2), [255, 255, 255]);
+            assert_eq!(px(w - 2, h - 2), [0, 0, 0]);
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn maps_and_report_reject_bad_arguments_clearly() {
+    for (args, needle) in [
+        (
+            &[
+                "maps",
+                "--headset",
+                "quest3",
+                "--level",
+                "ultra",
+                "--out",
+                "/tmp/x",
+            ][..],
+            "unknown foveation level 'ultra'",
+        ),
+        (
+            &[
+                "maps",
+                "--headset",
+                "quest3",
+                "--level",
+                "low",
+                "--eye",
+                "middle",
+                "--out",
+                "/tmp/x",
+            ],
+            "--eye middle",
+        ),
+        (&["maps", "--headset", "quest3", "--level", "low"], "out"),
+        (
+            &["report", "--headset", "quest3", "--texel", "0"],
+            "--texel 0",
+        ),
+        (&["report", "--headset", "vive"], "accepted: quest2"),
+    ] {
+        let (ok, _, err) = fovea(args);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+}
