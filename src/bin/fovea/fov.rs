@@ -67,22 +67,6 @@ pub fn run(args: &Args) -> Result<(), String> {
     Ok(())
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn projection_centre_of_an_off_centre_fov() {
-        // Quest 3 left eye: more FOV outward (left) and down, so straight ahead sits right of and
-        // above the image centre.
-        let [x, y] = projection_center_ndc(by_id("quest3").unwrap().eyes[0]);
-        assert!((x - 0.2424).abs() < 1e-3, "{x}");
-        assert!((y - 0.1932).abs() < 1e-3, "{y}");
-        let [x, y] = projection_center_ndc(by_id("pico4").unwrap().eyes[0]);
-        assert_eq!([x, y], [0.0, 0.0]);
-    }
-}
-
 /// One eye of a preset at its recommended size, as the density model sees it.
 pub fn eye_view(h: &Headset, eye: usize, texel: u32) -> (Grid, View) {
     let [w, hh] = h.recommended_size();
@@ -106,4 +90,20 @@ pub fn texel(args: &Args) -> Result<u32, String> {
         return Err(format!("--texel {t}: expected 1..1024 pixels"));
     }
     Ok(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn projection_centre_of_an_off_centre_fov() {
+        // Quest 3 left eye: more FOV outward (left) and down, so straight ahead sits right of and
+        // above the image centre.
+        let [x, y] = projection_center_ndc(by_id("quest3").unwrap().eyes[0]);
+        assert!((x - 0.2424).abs() < 1e-3, "{x}");
+        assert!((y - 0.1932).abs() < 1e-3, "{y}");
+        let [x, y] = projection_center_ndc(by_id("pico4").unwrap().eyes[0]);
+        assert_eq!([x, y], [0.0, 0.0]);
+    }
 }
