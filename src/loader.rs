@@ -214,6 +214,7 @@ unsafe fn create_instance(
         extensions: exts,
         api_version,
         symmetric_fov: settings.symmetric_fov,
+        stereo_fovs: parking_lot::Mutex::new(None),
     };
     tracing::info!(
         provided = ?exts.enabled.iter().filter(|e| exts.provided(*e)).collect::<Vec<_>>(),

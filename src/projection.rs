@@ -87,6 +87,46 @@ pub fn ndc_depth(m: &Mat4, dist: f32) -> f32 {
     c.z / c.w
 }
 
+/// One symmetric FOV containing every given FOV: the largest half-angle on each axis, mirrored.
+/// Quest's symmetric-FOV mode renders both eyes with it (fixed-foveated-rendering seed); the pixels
+/// outside an eye's own FOV are never shown. `None` for no FOVs.
+pub fn symmetric_fov(fovs: &[Fov]) -> Option<Fov> {
+    let h = fovs
+        .iter()
+        .map(|f| (-f.left).max(f.right))
+        .reduce(f32::max)?;
+    let v = fovs.iter().map(|f| f.up.max(-f.down)).reduce(f32::max)?;
+    Some(Fov {
+        left: -h,
+        right: h,
+        up: v,
+        down: -v,
+    })
+}
+
+/// The image size that keeps `size`'s pixels per tangent when the FOV grows from `from` to `to`:
+/// rounded to nearest, then up to a multiple of 16 (the sizing rule, headsets-and-numbers.md).
+pub fn rescaled_size(size: [u32; 2], from: Fov, to: Fov) -> [u32; 2] {
+    let span = |a: f32, b: f32| f64::from(b).tan() - f64::from(a).tan();
+    let scale = |px: u32, old: f64, new: f64| {
+        if !(old > 0.0 && new.is_finite()) {
+            return px;
+        }
+        let n = (f64::from(px) * new / old)
+            .round()
+            .clamp(1.0, f64::from(u32::MAX - 15)) as u32;
+        n.div_ceil(16) * 16
+    };
+    [
+        scale(
+            size[0],
+            span(from.left, from.right),
+            span(to.left, to.right),
+        ),
+        scale(size[1], span(from.down, from.up), span(to.down, to.up)),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -247,5 +287,32 @@ mod tests {
             down: -0.7,
         };
         assert_eq!(sym.projection_center_ndc(), [0.0, 0.0]);
+    }
+
+    #[test]
+    fn symmetric_fov_contains_both_eyes_and_sizes_follow_it() {
+        let q3 = by_id("quest3").unwrap();
+        let eyes = q3.eyes.map(Fov::from_tangents);
+        let shared = symmetric_fov(&eyes).unwrap();
+        assert_eq!(shared.left, -shared.right);
+        assert_eq!(shared.up, -shared.down);
+        for e in eyes {
+            assert!(shared.left <= e.left && shared.right >= e.right);
+            assert!(shared.down <= e.down && shared.up >= e.up);
+        }
+        assert_eq!(
+            shared.right, -eyes[0].left,
+            "Quest 3's widest half-angle is 54° outward"
+        );
+        // From the runtime's recommended size to the symmetric one, as the preset computes it
+        // from pixels per tangent (the recommended size was already rounded up, hence ±16).
+        let got = rescaled_size(q3.recommended_size(), eyes[0], shared);
+        let want = q3.symmetric_size();
+        for axis in 0..2 {
+            assert_eq!(got[axis] % 16, 0);
+            assert!(got[axis].abs_diff(want[axis]) <= 16, "{got:?} vs {want:?}");
+        }
+        assert_eq!(rescaled_size([1000, 1000], eyes[0], eyes[0]), [1008, 1008]);
+        assert!(symmetric_fov(&[]).is_none());
     }
 }

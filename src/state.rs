@@ -11,15 +11,17 @@
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use openxr_sys as xr;
 use parking_lot::{Mutex, RwLock};
 use xr::Handle;
 
+use crate::density::Fov;
 use crate::dispatch::Next;
 use crate::extensions::Extensions;
+use crate::projection::symmetric_fov;
 
 /// The application's instance and everything fovea learned when it was created.
 pub struct Instance {
@@ -33,6 +35,25 @@ pub struct Instance {
     pub api_version: xr::Version,
     /// `FOVEA_SYMMETRIC_FOV=1` when the instance was created.
     pub symmetric_fov: bool,
+    /// The primary stereo views' FOVs as the runtime reports them (not the symmetric ones fovea
+    /// may hand on), learned from `xrLocateViews`.
+    pub stereo_fovs: Mutex<Option<[Fov; 2]>>,
+}
+
+impl Instance {
+    /// The runtime's own stereo FOVs, once known.
+    pub fn stereo_fovs(&self) -> Option<[Fov; 2]> {
+        *self.stereo_fovs.lock()
+    }
+
+    /// What the views are rendered with: the shared symmetric FOV in symmetric-FOV mode, else the
+    /// runtime's own.
+    pub fn render_fovs(&self, fovs: [Fov; 2]) -> [Fov; 2] {
+        match self.symmetric_fov.then(|| symmetric_fov(&fovs)).flatten() {
+            Some(shared) => [shared; 2],
+            None => fovs,
+        }
+    }
 }
 
 /// A session and its graphics binding.
@@ -41,6 +62,8 @@ pub struct Session {
     pub instance: Arc<Instance>,
     /// The Vulkan binding, when the session has one (not for headless sessions).
     pub vulkan: Option<VulkanBinding>,
+    /// The last `predictedDisplayTime` from `xrWaitFrame`, in nanoseconds (0 before the first).
+    pub last_display_time: AtomicI64,
 }
 
 /// `XrGraphicsBindingVulkanKHR`'s handles, as raw values.
@@ -156,6 +179,15 @@ impl Registry {
 
     pub fn session(&self, h: xr::Session) -> Option<Arc<Session>> {
         get(&self.sessions, h.into_raw())
+    }
+
+    /// Some live session of `instance`.
+    pub fn any_session_of(&self, instance: xr::Instance) -> Option<Arc<Session>> {
+        self.sessions
+            .read()
+            .values()
+            .find(|s| s.instance.handle == instance)
+            .cloned()
     }
 
     pub fn swapchain(&self, h: xr::Swapchain) -> Option<Arc<Swapchain>> {
