@@ -13,6 +13,7 @@
 
 pub mod density;
 pub mod dispatch;
+pub mod dynamic;
 pub mod extensions;
 pub mod ffi;
 mod hooks;
