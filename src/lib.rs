@@ -22,6 +22,7 @@ pub mod log;
 pub mod projection;
 pub mod settings;
 pub mod state;
+pub mod stats;
 
 /// The layer's name, as in its manifests and `XR_ENABLE_API_LAYERS`.
 pub const LAYER_NAME: &str = "XR_APILAYER_FOVEA_foveation";

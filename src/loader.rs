@@ -214,6 +214,7 @@ unsafe fn create_instance(
         extensions: exts,
         api_version,
         symmetric_fov: settings.symmetric_fov,
+        overrides: settings::Overrides::from_env(),
         stereo_fovs: parking_lot::Mutex::new(None),
     };
     tracing::info!(

@@ -11,17 +11,21 @@
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
-use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicI64, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
+use std::time::Instant;
 
 use openxr_sys as xr;
 use parking_lot::{Mutex, RwLock};
 use xr::Handle;
 
-use crate::density::Fov;
+use crate::density::{Fov, Level, Pattern};
 use crate::dispatch::Next;
+use crate::dynamic::{level_at, step_of, Controller};
 use crate::extensions::Extensions;
 use crate::projection::symmetric_fov;
+use crate::settings::{DebugProperties, Overrides};
+use crate::stats::Stats;
 
 /// The application's instance and everything fovea learned when it was created.
 pub struct Instance {
@@ -35,6 +39,8 @@ pub struct Instance {
     pub api_version: xr::Version,
     /// `FOVEA_SYMMETRIC_FOV=1` when the instance was created.
     pub symmetric_fov: bool,
+    /// Quest's debug properties: environment and `FOVEA_PROPS`, re-read while the app runs.
+    pub overrides: Overrides,
     /// The primary stereo views' FOVs as the runtime reports them (not the symmetric ones fovea
     /// may hand on), learned from `xrLocateViews`.
     pub stereo_fovs: Mutex<Option<[Fov; 2]>>,
@@ -64,6 +70,93 @@ pub struct Session {
     pub vulkan: Option<VulkanBinding>,
     /// The last `predictedDisplayTime` from `xrWaitFrame`, in nanoseconds (0 before the first).
     pub last_display_time: AtomicI64,
+    /// Frame timing, the dynamic controller and the stats window.
+    pub frame: Mutex<FrameLoop>,
+    /// The dynamic controller's step ([`crate::dynamic::LADDER`]), read when maps are built.
+    pub dynamic_step: AtomicUsize,
+    /// The highest step any of the session's dynamic swapchains allows (0: none is dynamic).
+    pub dynamic_max: AtomicUsize,
+    /// Density maps built and uploaded, for the stats line.
+    pub maps_built: AtomicU64,
+    pub maps_uploaded: AtomicU64,
+}
+
+impl Session {
+    pub fn new(
+        handle: xr::Session,
+        instance: Arc<Instance>,
+        vulkan: Option<VulkanBinding>,
+    ) -> Session {
+        Session {
+            handle,
+            instance,
+            vulkan,
+            last_display_time: AtomicI64::new(0),
+            frame: Mutex::new(FrameLoop::default()),
+            dynamic_step: AtomicUsize::new(0),
+            dynamic_max: AtomicUsize::new(0),
+            maps_built: AtomicU64::new(0),
+            maps_uploaded: AtomicU64::new(0),
+        }
+    }
+
+    /// The pattern a foveated swapchain's maps use now, and whether it is dynamic: the
+    /// application's state under the debug overrides and the dynamic step.
+    pub fn pattern_for(&self, state: &FoveationState) -> (Pattern, bool) {
+        effective(
+            state.params,
+            self.instance.overrides.current(),
+            self.dynamic_step.load(Ordering::Relaxed),
+        )
+    }
+
+    /// Recomputes [`Session::dynamic_max`] after a swapchain's state or the overrides changed.
+    pub fn refresh_dynamic_max(&self) {
+        let over = self.instance.overrides.current();
+        let max = registry()
+            .foveated_swapchains_of(self.handle)
+            .iter()
+            .filter_map(|sc| {
+                let (p, dynamic) =
+                    effective(sc.foveation.as_ref()?.lock().params, over, usize::MAX);
+                dynamic.then_some(step_of(p.level))
+            })
+            .max()
+            .unwrap_or(0);
+        self.dynamic_max.store(max, Ordering::Relaxed);
+    }
+}
+
+/// What the layer tracks of a session's frame loop between `xrWaitFrame`, `xrBeginFrame` and
+/// `xrEndFrame`.
+#[derive(Debug, Default)]
+pub struct FrameLoop {
+    pub controller: Controller,
+    pub stats: Stats,
+    /// The last predicted display time and period, in nanoseconds.
+    pub display: Option<i64>,
+    pub period: i64,
+    /// Display periods the frame being rendered skipped.
+    pub missed: u32,
+    /// When `xrBeginFrame` returned for the frame being rendered.
+    pub begin_at: Option<Instant>,
+}
+
+/// The pattern for a swapchain state under debug overrides at a dynamic step. As on Quest: the
+/// level property replaces the application's level (the maximum when dynamic), the dynamic property
+/// replaces its dynamic flag.
+pub fn effective(params: ProfileParams, over: DebugProperties, step: usize) -> (Pattern, bool) {
+    let asked = Level::from_index(params.level).unwrap_or(Level::None);
+    let max = over.level.unwrap_or(asked);
+    let dynamic = over.dynamic.unwrap_or(params.dynamic);
+    let level = if dynamic { level_at(step, max) } else { max };
+    (
+        Pattern {
+            level,
+            vertical_offset_deg: params.vertical_offset_deg,
+        },
+        dynamic,
+    )
 }
 
 /// `XrGraphicsBindingVulkanKHR`'s handles, as raw values.
@@ -179,6 +272,16 @@ impl Registry {
 
     pub fn session(&self, h: xr::Session) -> Option<Arc<Session>> {
         get(&self.sessions, h.into_raw())
+    }
+
+    /// The session's swapchains created with foveation.
+    pub fn foveated_swapchains_of(&self, session: xr::Session) -> Vec<Arc<Swapchain>> {
+        self.swapchains
+            .read()
+            .values()
+            .filter(|sc| sc.session.handle == session && sc.foveation.is_some())
+            .cloned()
+            .collect()
     }
 
     /// Some live session of `instance`.

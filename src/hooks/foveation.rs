@@ -119,9 +119,12 @@ pub unsafe extern "system" fn update_swapchain(
             if profile.session != sc.session.handle {
                 return Err(xr::Result::ERROR_HANDLE_INVALID);
             }
-            let mut f = foveation.lock();
-            f.params = profile.params;
-            f.profile = profile.handle;
+            {
+                let mut f = foveation.lock();
+                f.params = profile.params;
+                f.profile = profile.handle;
+            }
+            sc.session.refresh_dynamic_max();
             Ok(xr::Result::SUCCESS)
         })())
     })

@@ -1,14 +1,19 @@
-//! The frame loop.
+//! The frame loop: timing for the dynamic controller and the stats, the views the application
+//! locates.
+
+use std::sync::atomic::Ordering;
+use std::time::Instant;
 
 use openxr_sys as xr;
 
 use super::{finish, fov_from_xr, fov_to_xr, next, session, succeeded};
-use std::sync::atomic::Ordering;
-
+use crate::dynamic::LADDER;
 use crate::ffi::guard;
-use crate::state::Instance;
+use crate::state::{registry, Instance, Session};
+use crate::stats::{Line, Window};
 
-/// `xrWaitFrame`: passed on.
+/// `xrWaitFrame`: the predicted display time and period tell how many display periods the previous
+/// frame missed, the dynamic controller's and the stats' input.
 pub unsafe extern "system" fn wait_frame(
     sess: xr::Session,
     info: *const xr::FrameWaitInfo,
@@ -19,15 +24,26 @@ pub unsafe extern "system" fn wait_frame(
             let s = session(sess)?;
             let r = next(s.instance.next.wait_frame)?(sess, info, state);
             if succeeded(r) && !state.is_null() {
-                let t = (*state).predicted_display_time.as_nanos();
-                s.last_display_time.store(t, Ordering::Relaxed);
+                let display = (*state).predicted_display_time.as_nanos();
+                let period = (*state).predicted_display_period.as_nanos();
+                s.last_display_time.store(display, Ordering::Relaxed);
+                let mut f = s.frame.lock();
+                if let (Some(last), true) = (f.display, period > 0) {
+                    let interval = display - last;
+                    f.missed = u32::try_from(((interval + period / 2) / period - 1).max(0))
+                        .unwrap_or(u32::MAX);
+                    let missed = f.missed;
+                    f.stats.waited(interval, missed);
+                }
+                f.display = Some(display);
+                f.period = period;
             }
             Ok(r)
         })())
     })
 }
 
-/// `xrBeginFrame`: passed on.
+/// `xrBeginFrame`: starts the application's frame time.
 pub unsafe extern "system" fn begin_frame(
     sess: xr::Session,
     info: *const xr::FrameBeginInfo,
@@ -35,12 +51,17 @@ pub unsafe extern "system" fn begin_frame(
     guard("xrBeginFrame", || {
         finish((|| {
             let s = session(sess)?;
-            Ok(next(s.instance.next.begin_frame)?(sess, info))
+            let r = next(s.instance.next.begin_frame)?(sess, info);
+            if succeeded(r) {
+                s.frame.lock().begin_at = Some(Instant::now());
+            }
+            Ok(r)
         })())
     })
 }
 
-/// `xrEndFrame`: passed on.
+/// `xrEndFrame`: runs the dynamic controller, checks the debug property file when due, and once a
+/// second of display time writes the stats line; then passes the frame on untouched.
 pub unsafe extern "system" fn end_frame(
     sess: xr::Session,
     info: *const xr::FrameEndInfo,
@@ -48,9 +69,64 @@ pub unsafe extern "system" fn end_frame(
     guard("xrEndFrame", || {
         finish((|| {
             let s = session(sess)?;
+            let entered = Instant::now();
+            let overrides_changed = {
+                let mut f = s.frame.lock();
+                let display = if !info.is_null() && (*info).ty == xr::StructureType::FRAME_END_INFO
+                {
+                    (*info).display_time.as_nanos()
+                } else {
+                    f.display.unwrap_or(0)
+                };
+                let app_ns = f.begin_at.take().map(|b| (entered - b).as_nanos() as u64);
+                let max = s.dynamic_max.load(Ordering::Relaxed);
+                let missed = f.missed;
+                if f.controller.frame(display, missed, max) {
+                    let step = f.controller.step();
+                    s.dynamic_step.store(step, Ordering::Relaxed);
+                    tracing::info!(step, level = ?LADDER[step], "dynamic foveation");
+                }
+                let changed = s.instance.overrides.poll(display);
+                let own = (Instant::now() - entered).as_nanos() as u64;
+                let window = f.stats.ended(display, app_ns, own);
+                let period = f.period;
+                drop(f);
+                if let Some(w) = window {
+                    report(&s, w, period);
+                }
+                changed
+            };
+            if overrides_changed {
+                s.refresh_dynamic_max();
+            }
             Ok(next(s.instance.next.end_frame)?(sess, info))
         })())
     })
+}
+
+/// Writes the stats line for a finished window, when `fovea::stats` is enabled.
+fn report(s: &Session, window: Window, period_ns: i64) {
+    if !tracing::enabled!(target: "fovea::stats", tracing::Level::INFO) {
+        return;
+    }
+    let level = registry()
+        .foveated_swapchains_of(s.handle)
+        .iter()
+        .filter_map(|sc| Some(s.pattern_for(&sc.foveation.as_ref()?.lock())))
+        .map(|(p, dynamic)| (p.level, dynamic))
+        .max();
+    let line = Line {
+        window,
+        refresh_hz: if period_ns > 0 {
+            (1e9 / period_ns as f64).round() as u32
+        } else {
+            0
+        },
+        level,
+        maps_built: s.maps_built.load(Ordering::Relaxed),
+        maps_uploaded: s.maps_uploaded.load(Ordering::Relaxed),
+    };
+    tracing::info!(target: "fovea::stats", "{line}");
 }
 
 /// `xrLocateViews`: passed on.

@@ -1,6 +1,6 @@
 //! Session lifetime and view configuration.
 
-use std::sync::atomic::{AtomicI64, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 use openxr_sys as xr;
@@ -49,12 +49,7 @@ pub unsafe extern "system" fn create_session(
             let r = f(inst, info, out);
             if succeeded(r) {
                 let handle = *out;
-                let record = Session {
-                    handle,
-                    instance: state,
-                    vulkan: binding,
-                    last_display_time: AtomicI64::new(0),
-                };
+                let record = Session::new(handle, state, binding);
                 registry()
                     .sessions
                     .write()

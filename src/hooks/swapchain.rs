@@ -141,6 +141,9 @@ pub unsafe extern "system" fn destroy_swapchain(handle: xr::Swapchain) -> xr::Re
             let r = f(handle);
             if succeeded(r) {
                 registry().swapchains.write().remove(&handle.into_raw());
+                if state.foveation.is_some() {
+                    state.session.refresh_dynamic_max();
+                }
             }
             Ok(r)
         })())

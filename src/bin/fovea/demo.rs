@@ -1,7 +1,7 @@
 //! `fovea demo`: a small application runs its frame loop through the fake loader harness, the layer
 //! and the simulated Quest 3, paced in real time. It applies a HIGH profile with dynamic foveation,
-//! the simulated GPU load rises past the frame budget and falls back, and halfway through a Quest
-//! debug property file changes the maximum level while the app runs. The layer's once-a-second
+//! the simulated GPU load rises past the frame budget and falls back (the dynamic level follows),
+//! and four fifths through, a Quest debug property file fixes the level at MEDIUM while the app runs. The layer's once-a-second
 //! stats lines (target `fovea::stats`) show what it does.
 
 use std::path::PathBuf;
@@ -16,10 +16,10 @@ use xr::Handle;
 use crate::args::Args;
 
 /// The load script, in frames at 90 Hz: light, then past the 11.1 ms budget, then light again.
-const LOAD: [(u64, f32); 3] = [(0, 6.0), (270, 14.0), (900, 6.0)];
+const LOAD: [(u64, f32); 3] = [(0, 6.0), (270, 14.0), (630, 6.0)];
 
 pub fn run(args: &Args) -> Result<(), String> {
-    let seconds: u64 = args.parsed_or("seconds", 14)?;
+    let seconds: u64 = args.parsed_or("seconds", 20)?;
     let out = PathBuf::from(args.value("out").unwrap_or("target/demo"));
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     // The layer reads these when it is loaded, so they are set before the harness opens it.
@@ -80,11 +80,14 @@ pub fn run(args: &Args) -> Result<(), String> {
     let mut override_written = false;
     while start.elapsed().as_secs() < seconds {
         lp.frame().map_err(|(f, r)| format!("{f}: {r:?}"))?;
-        if !override_written && start.elapsed().as_secs() >= seconds / 2 {
-            std::fs::write(&props, "debug.oculus.foveation.level=1\n")
-                .map_err(|e| e.to_string())?;
+        if !override_written && start.elapsed().as_secs() >= seconds * 4 / 5 {
+            std::fs::write(
+                &props,
+                "debug.oculus.foveation.level=2\ndebug.oculus.foveation.dynamic=0\n",
+            )
+            .map_err(|e| e.to_string())?;
             println!(
-                "-- wrote debug.oculus.foveation.level=1 to {}",
+                "-- wrote debug.oculus.foveation.level=2, dynamic=0 to {}",
                 props.display()
             );
             override_written = true;

@@ -1,0 +1,173 @@
+//! Once a second, what the layer does: a line through `tracing` (target `fovea::stats`, level info)
+//! in the spirit of Quest's VrApi logcat line, e.g.
+//!
+//! ```text
+//! FPS=45/90 App=6.02ms Int=22.22ms Miss=45 Fov=3D Maps=2/4 Cpu=0.41us
+//! ```
+//!
+//! `FPS` frames ended in the last second against the display's refresh rate; `App` the mean time from
+//! `xrBeginFrame` to `xrEndFrame`; `Int` the mean interval between predicted display times; `Miss`
+//! display periods missed; `Fov` the highest effective level of the session's foveated swapchains,
+//! `D` when dynamic; `Maps` density maps built and uploaded; `Cpu` the layer's own time per frame
+//! in its frame hooks. Windows are measured in display time, so the simulated runtime's virtual
+//! clock gives the same lines on every run.
+
+use std::fmt;
+
+use crate::density::Level;
+
+/// One window of display time between two lines.
+pub const WINDOW_NS: i64 = 1_000_000_000;
+/// Display times are whole nanoseconds, so 90 periods of 11 111 111 ns fall 10 ns short of a
+/// second: a window closes this much early so that it holds 90 frames at 90 Hz, not 91.
+const SLACK_NS: i64 = 1_000_000;
+
+/// Accumulates one window; no allocation.
+#[derive(Clone, Debug, Default)]
+pub struct Stats {
+    window_start: Option<i64>,
+    frames: u32,
+    app_ns: u64,
+    app_frames: u32,
+    interval_ns: i64,
+    intervals: u32,
+    missed: u32,
+    own_ns: u64,
+}
+
+/// A finished window's figures, without the session-wide fields the line adds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Window {
+    pub frames: u32,
+    pub app_ms: f64,
+    pub interval_ms: f64,
+    pub missed: u32,
+    pub cpu_us: f64,
+}
+
+impl Stats {
+    /// An `xrWaitFrame`: the interval since the previous predicted display time, and the periods it
+    /// skipped.
+    pub fn waited(&mut self, interval_ns: i64, missed: u32) {
+        self.interval_ns += interval_ns;
+        self.intervals += 1;
+        self.missed += missed;
+    }
+
+    /// An `xrEndFrame` for the frame displayed at `display_ns`, `app_ns` after its `xrBeginFrame`,
+    /// with `own_ns` spent in the layer. Returns the window when a second of display time is full.
+    pub fn ended(&mut self, display_ns: i64, app_ns: Option<u64>, own_ns: u64) -> Option<Window> {
+        let start = *self.window_start.get_or_insert(display_ns);
+        let mut finished = None;
+        if display_ns - start >= WINDOW_NS - SLACK_NS {
+            // This frame opens the next window.
+            let mean = |sum: f64, n: u32| if n == 0 { 0.0 } else { sum / f64::from(n) };
+            finished = Some(Window {
+                frames: self.frames,
+                app_ms: mean(self.app_ns as f64, self.app_frames) / 1e6,
+                interval_ms: mean(self.interval_ns as f64, self.intervals) / 1e6,
+                missed: self.missed,
+                cpu_us: mean(self.own_ns as f64, self.frames) / 1e3,
+            });
+            *self = Stats {
+                window_start: Some(display_ns),
+                ..Stats::default()
+            };
+        }
+        self.frames += 1;
+        if let Some(a) = app_ns {
+            self.app_ns += a;
+            self.app_frames += 1;
+        }
+        self.own_ns += own_ns;
+        finished
+    }
+}
+
+/// The whole line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line {
+    pub window: Window,
+    pub refresh_hz: u32,
+    /// The highest effective level, and whether it is dynamic; `None` without foveated swapchains.
+    pub level: Option<(Level, bool)>,
+    pub maps_built: u64,
+    pub maps_uploaded: u64,
+}
+
+impl fmt::Display for Line {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let w = &self.window;
+        write!(
+            f,
+            "FPS={}/{} App={:.2}ms Int={:.2}ms Miss={} Fov=",
+            w.frames, self.refresh_hz, w.app_ms, w.interval_ms, w.missed
+        )?;
+        match self.level {
+            Some((level, dynamic)) => {
+                write!(f, "{}{}", level as u32, if dynamic { "D" } else { "" })?
+            }
+            None => write!(f, "-")?,
+        }
+        write!(
+            f,
+            " Maps={}/{} Cpu={:.2}us",
+            self.maps_built, self.maps_uploaded, w.cpu_us
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_window_closes_after_a_second_of_display_time_with_its_means() {
+        let mut s = Stats::default();
+        let period = 11_111_111;
+        let mut t = 0;
+        let mut windows = Vec::new();
+        for i in 0..200 {
+            let missed = u32::from(i % 2 == 0);
+            t += period * (1 + i64::from(missed));
+            s.waited(period * (1 + i64::from(missed)), missed);
+            if let Some(w) = s.ended(t, Some(6_000_000), 400) {
+                windows.push(w);
+            }
+        }
+        assert_eq!(windows.len(), 3, "3.3 s of display time");
+        let w = windows[0];
+        assert!((60..=61).contains(&w.frames), "{w:?}");
+        let mut steady = Stats::default();
+        let full: Vec<Window> = (1..=300)
+            .filter_map(|i| steady.ended(i * period, None, 0))
+            .collect();
+        assert!(
+            full.iter().all(|w| w.frames == 90),
+            "90 Hz gives 90 frames a line: {full:?}"
+        );
+        assert!((w.app_ms - 6.0).abs() < 1e-9);
+        assert!((w.interval_ms - 16.67).abs() < 0.2, "{w:?}");
+        assert!(w.missed.abs_diff(w.frames / 2) <= 1);
+        assert!((w.cpu_us - 0.4).abs() < 1e-9);
+        let line = Line {
+            window: w,
+            refresh_hz: 90,
+            level: Some((Level::High, true)),
+            maps_built: 2,
+            maps_uploaded: 4,
+        };
+        let text = line.to_string();
+        assert!(
+            text.starts_with(&format!("FPS={}/90 App=6.00ms Int=", w.frames)),
+            "{text}"
+        );
+        assert!(text.ends_with("Fov=3D Maps=2/4 Cpu=0.40us"), "{text}");
+        let none = Line {
+            level: None,
+            ..line
+        }
+        .to_string();
+        assert!(none.contains("Fov=- "), "{none}");
+    }
+}
