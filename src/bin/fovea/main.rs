@@ -29,6 +29,7 @@ commands:
   uninstall [--implicit] [--system]
                             remove what install wrote
   doctor                    show what the OpenXR loader would find and name misconfigurations
+                            (exit status 1 when there are any)
 
 headsets: quest2, quest3, quest-pro, rift-cv1, rift-s, index, pico4";
 
