@@ -25,10 +25,14 @@ commands:
   fov     --headset NAME [--json]
                             per-eye FOV, projection centre, asymmetric vs symmetric sizes
   install [--implicit] [--system]
-                            write a layer manifest with an absolute library path
+                            write a layer manifest with an absolute library path (libfovea.so
+                            next to this binary, or the file FOVEA_LIBRARY names) to
+                            $XDG_DATA_HOME (default ~/.local/share), or /usr/local/share with
+                            --system, under openxr/1/api_layers/{explicit,implicit}.d
   uninstall [--implicit] [--system]
                             remove what install wrote
   doctor                    show what the OpenXR loader would find and name misconfigurations
+                            (exit status 1 when there are any)
 
 headsets: quest2, quest3, quest-pro, rift-cv1, rift-s, index, pico4";
 
