@@ -27,6 +27,7 @@
 #define FOVEA_ENV_DISABLE "FOVEA_DISABLE"           /* set (any value): the loader skips implicit fovea */
 #define FOVEA_ENV_SYMMETRIC_FOV "FOVEA_SYMMETRIC_FOV" /* 0/1: one shared symmetric FOV for both eyes */
 #define FOVEA_ENV_INJECT_PANIC "FOVEA_INJECT_PANIC" /* testing aid: that hook panics */
+#define FOVEA_ENV_PROPS "FOVEA_PROPS"               /* a file of debug.oculus.foveation.*=value lines, re-read live */
 /* Quest's debug.oculus.foveation.* properties: level 0-4, dynamic 0/1, subsampled 0/1. */
 #define FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL "DEBUG_OCULUS_FOVEATION_LEVEL"
 #define FOVEA_ENV_DEBUG_OCULUS_FOVEATION_DYNAMIC "DEBUG_OCULUS_FOVEATION_DYNAMIC"
@@ -39,6 +40,7 @@
     X(FOVEA_ENV_DISABLE)                         \
     X(FOVEA_ENV_SYMMETRIC_FOV)                   \
     X(FOVEA_ENV_INJECT_PANIC)                    \
+    X(FOVEA_ENV_PROPS)                           \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL)    \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_DYNAMIC)  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_SUBSAMPLED)
