@@ -214,6 +214,7 @@ unsafe fn create_instance(
         extensions: exts,
         api_version,
         symmetric_fov: settings.symmetric_fov,
+        vulkan: Default::default(),
     };
     tracing::info!(
         provided = ?exts.enabled.iter().filter(|e| exts.provided(*e)).collect::<Vec<_>>(),

@@ -2,7 +2,8 @@
 
 use openxr_sys as xr;
 
-use super::{finish, next, session};
+use super::{finish, next, session, succeeded};
+use crate::density::Fov;
 use crate::ffi::guard;
 
 /// `xrWaitFrame`: passed on.
@@ -45,7 +46,8 @@ pub unsafe extern "system" fn end_frame(
     })
 }
 
-/// `xrLocateViews`: passed on.
+/// `xrLocateViews`: passed on; the FOVs the application gets are recorded, since the density maps
+/// of its swapchains are computed for the FOVs it renders with. No allocation: this runs every frame.
 pub unsafe extern "system" fn locate_views(
     sess: xr::Session,
     info: *const xr::ViewLocateInfo,
@@ -57,9 +59,24 @@ pub unsafe extern "system" fn locate_views(
     guard("xrLocateViews", || {
         finish((|| {
             let s = session(sess)?;
-            Ok(next(s.instance.next.locate_views)?(
-                sess, info, view_state, capacity, count, views,
-            ))
+            let r =
+                next(s.instance.next.locate_views)?(sess, info, view_state, capacity, count, views);
+            if succeeded(r)
+                && s.gpu.is_some()
+                && capacity > 0
+                && !views.is_null()
+                && !count.is_null()
+            {
+                let n = (*count).min(capacity) as usize;
+                let located = std::slice::from_raw_parts(views, n);
+                s.views.lock().record(located.iter().map(|v| Fov {
+                    left: v.fov.angle_left,
+                    right: v.fov.angle_right,
+                    up: v.fov.angle_up,
+                    down: v.fov.angle_down,
+                }));
+            }
+            Ok(r)
         })())
     })
 }
