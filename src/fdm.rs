@@ -1,26 +1,28 @@
 //! The Vulkan image work behind XR_FB_foveation_vulkan: fragment density map (FDM) images on the
 //! application's device, filled from the density model.
 //!
-//! fb_foveation_vulkan.adoc: a swapchain created with XR_SWAPCHAIN_CREATE_FOVEATION_FRAGMENT_DENSITY_MAP_BIT_FB
-//! hands out, through XrSwapchainImageFoveationVulkanFB, one density image per swapchain image.
-//! Runtimes that implement it allocate those images themselves; fovea does the same on the device of
-//! the session's XrGraphicsBindingVulkanKHR:
+//! fb_foveation_vulkan.adoc: a swapchain created with
+//! XR_SWAPCHAIN_CREATE_FOVEATION_FRAGMENT_DENSITY_MAP_BIT_FB hands out, through
+//! XrSwapchainImageFoveationVulkanFB, one density image per swapchain image. Runtimes that
+//! implement it allocate those images themselves; fovea does the same on the device of the
+//! session's XrGraphicsBindingVulkanKHR:
 //!
-//! * one image per swapchain image, `VK_FORMAT_R8G8_UNORM` (the one format Vulkan requires to support
-//!   FDM, openxr-layer-facts.md §4), 2D, `arrayLayers` = the swapchain's `arraySize` (with multiview,
-//!   layer = view index), extent = `ceil(swapchain extent / texel size)`;
+//! * one image per swapchain image, `VK_FORMAT_R8G8_UNORM` (the one format Vulkan requires to
+//!   support FDM, openxr-layer-facts.md §4), 2D, `arrayLayers` = the swapchain's `arraySize` (with
+//!   multiview, layer = view index), extent = `ceil(swapchain extent / texel size)`;
 //! * usage FRAGMENT_DENSITY_MAP where the device has VK_EXT_fragment_density_map enabled, plus
-//!   SAMPLED, STORAGE, TRANSFER_SRC and TRANSFER_DST where the format supports them: engines wrap the
-//!   images in their own views, and on drivers without FDM convert them into shading-rate images;
+//!   SAMPLED, STORAGE, TRANSFER_SRC and TRANSFER_DST where the format supports them: engines wrap
+//!   the images in their own views, and on drivers without FDM convert them into shading-rate
+//!   images;
 //! * filled only inside xrAcquireSwapchainImage (one of the four calls where the spec lets the
 //!   runtime use the application's queue, XR_KHR_vulkan_enable "Concurrency"), through a persistent
-//!   staging buffer and one command buffer per image, and finished (fence) before the acquire returns:
-//!   by default the map is read by the host when the application *records* its render pass
+//!   staging buffer and one command buffer per image, and finished (fence) before the acquire
+//!   returns: by default the map is read by the host when the application *records* its render pass
 //!   (openxr-layer-facts.md §4, "When the map is read").
 //!
-//! Entry points come from the system Vulkan loader (`ash::Entry::load`), as with XR_KHR_vulkan_enable
-//! (v1) a runtime must do too: the binding carries no `vkGetInstanceProcAddr`. That assumes the
-//! application uses the same loader, which is what the spec assumes of runtimes.
+//! Entry points come from the system Vulkan loader (`ash::Entry::load`), as with
+//! XR_KHR_vulkan_enable (v1) a runtime must do too: the binding carries no `vkGetInstanceProcAddr`.
+//! That assumes the application uses the same loader, which is what the spec assumes of runtimes.
 //!
 //! Fail open: where any Vulkan step fails, a warning is logged and the swapchain goes on without
 //! density images (XrSwapchainImageFoveationVulkanFB stays as the application passed it).
@@ -132,9 +134,10 @@ unsafe fn instance_proc(
 }
 
 /// Asks a physical device what it offers of VK_EXT_fragment_density_map. Features and properties
-/// need vkGetPhysicalDevice{Features,Properties}2 (core 1.1, or VK_KHR_get_physical_device_properties2,
-/// which FDM requires anyway); they are only asked for when the extension is there, so a device
-/// without FDM (lavapipe, desktop drivers) sees core 1.0 calls only.
+/// need vkGetPhysicalDevice{Features,Properties}2 (core 1.1, or
+/// VK_KHR_get_physical_device_properties2, which FDM requires anyway); they are only asked for when
+/// the extension is there, so a device without FDM (lavapipe, desktop drivers) sees core 1.0 calls
+/// only.
 ///
 /// # Safety
 /// `instance` must be the physical device's live instance.
@@ -188,8 +191,8 @@ pub unsafe fn query_support(
 
 /// The density images' usage: FRAGMENT_DENSITY_MAP where FDM is usable on the device and the format
 /// supports it, plus SAMPLED, STORAGE and the transfers where the format's optimal-tiling features
-/// allow. Before Vulkan 1.1 (and VK_KHR_maintenance1) formats do not report TRANSFER_SRC/DST and every
-/// format allows transfers.
+/// allow. Before Vulkan 1.1 (and VK_KHR_maintenance1) formats do not report TRANSFER_SRC/DST and
+/// every format allows transfers.
 pub fn usage_for(
     features: vk::FormatFeatureFlags,
     fdm: bool,
@@ -285,8 +288,8 @@ pub struct SessionGpu {
 impl SessionGpu {
     /// Sets up for a session: reads what the device supports, creates the command pool on the
     /// binding's queue family and the fence. `fdm_enabled`: the application's device has
-    /// VK_EXT_fragment_density_map enabled (known from xrCreateVulkanDeviceKHR or the extension list
-    /// fovea handed out, see `hooks::vulkan`).
+    /// VK_EXT_fragment_density_map enabled (known from xrCreateVulkanDeviceKHR or the extension
+    /// list fovea handed out, see `hooks::vulkan`).
     ///
     /// # Safety
     /// The binding's handles must be live objects of the system Vulkan loader.
@@ -370,7 +373,8 @@ pub struct Inputs {
 
 impl Inputs {
     /// The inputs for a swapchain of `layers` layers: the swapchain's current level and offset, and
-    /// per layer `i` the FOV of view `i` the application last located ([`FALLBACK_FOV`] before that).
+    /// per layer `i` the FOV of view `i` the application last located ([`FALLBACK_FOV`] before
+    /// that).
     pub fn new(params: ProfileParams, located: &[Option<Fov>; MAX_VIEWS], layers: u32) -> Inputs {
         Inputs {
             pattern: Pattern {
@@ -459,9 +463,9 @@ pub struct DensityImages {
 }
 
 impl DensityImages {
-    /// Creates `count` density images for a swapchain of `extent` pixels and `layers` array layers,
-    /// with device-local memory, the staging buffer (host-visible and coherent, mapped for good) and
-    /// a command buffer per image. On error, whatever was made is destroyed.
+    /// Creates `count` density images for a swapchain of `extent` pixels and `layers` array
+    /// layers, with device-local memory, the staging buffer (host-visible and coherent, mapped for
+    /// good) and a command buffer per image. On error, whatever was made is destroyed.
     ///
     /// # Safety
     /// The session's device must be live.
@@ -670,8 +674,9 @@ impl DensityImages {
         };
         let (layout, read) = final_layout(self.gpu.usage);
         // The whole image is overwritten, so its old contents may be discarded (UNDEFINED). The
-        // source scope (all commands) orders the write after the application's earlier reads on this
-        // queue, e.g. of the frame that last used this image.
+        // source scope (all commands) orders the write after the application's earlier reads on
+        // this queue, e.g. of the frame that last used this image. The fence wait therefore also
+        // waits for the GPU work already queued: only when a map changed.
         let to_transfer = vk::ImageMemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::empty())
             .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
