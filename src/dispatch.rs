@@ -94,6 +94,10 @@ hooks! {
         hooks::vulkan::get_vulkan_device_extensions, Owner::Below;
     c"xrCreateVulkanDeviceKHR" => create_vulkan_device: CreateVulkanDeviceKHR =
         hooks::vulkan::create_vulkan_device, Owner::Below;
+    c"xrGetVulkanGraphicsDeviceKHR" => get_vulkan_graphics_device: GetVulkanGraphicsDeviceKHR =
+        hooks::vulkan::get_vulkan_graphics_device, Owner::Below;
+    c"xrGetVulkanGraphicsDevice2KHR" => get_vulkan_graphics_device2: GetVulkanGraphicsDevice2KHR =
+        hooks::vulkan::get_vulkan_graphics_device2, Owner::Below;
     c"xrUpdateSwapchainFB" => update_swapchain: UpdateSwapchainFB =
         hooks::foveation::update_swapchain, Owner::Layer(Ext::SwapchainUpdateState);
     c"xrGetSwapchainStateFB" => get_swapchain_state: GetSwapchainStateFB =

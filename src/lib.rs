@@ -9,12 +9,14 @@
 //! - [`hooks`]: the intercepted functions, thin adapters over the model;
 //! - [`extensions`]: the provided extensions, their versions and dependencies;
 //! - [`density`] and [`projection`]: the density model and projection math, pure functions;
+//! - [`fdm`]: the Vulkan density images of XR_FB_foveation_vulkan, filled from the density model;
 //! - [`settings`], [`log`]: what the environment configures.
 
 pub mod density;
 pub mod dispatch;
 pub mod dynamic;
 pub mod extensions;
+pub mod fdm;
 pub mod ffi;
 mod hooks;
 pub mod loader;

@@ -216,6 +216,7 @@ unsafe fn create_instance(
         symmetric_fov: settings.symmetric_fov,
         overrides: settings::Overrides::from_env(),
         stereo_fovs: parking_lot::Mutex::new(None),
+        vulkan: Default::default(),
     };
     tracing::info!(
         provided = ?exts.enabled.iter().filter(|e| exts.provided(*e)).collect::<Vec<_>>(),

@@ -23,6 +23,7 @@ use crate::density::{Fov, Level, Pattern};
 use crate::dispatch::Next;
 use crate::dynamic::{level_at, step_of, Controller};
 use crate::extensions::Extensions;
+use crate::fdm::{DensityImages, SessionGpu};
 use crate::projection::symmetric_fov;
 use crate::settings::{DebugProperties, Overrides};
 use crate::stats::Stats;
@@ -44,6 +45,8 @@ pub struct Instance {
     /// The primary stereo views' FOVs as the runtime reports them (not the symmetric ones fovea
     /// may hand on), learned from `xrLocateViews`.
     pub stereo_fovs: Mutex<Option<[Fov; 2]>>,
+    /// What the application told the runtime about its Vulkan objects.
+    pub vulkan: Mutex<VulkanSetup>,
 }
 
 impl Instance {
@@ -62,6 +65,36 @@ impl Instance {
     }
 }
 
+/// The Vulkan set-up calls fovea watches (XR_KHR_vulkan_enable / enable2), as raw handle values.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct VulkanSetup {
+    /// The VkInstance and the VkPhysicalDevice xrGetVulkanGraphicsDevice(2)KHR returned: the spec
+    /// makes the session's device come from that physical device.
+    pub graphics_device: Option<(u64, u64)>,
+    /// xrGetVulkanDeviceExtensionsKHR (enable) listed VK_EXT_fragment_density_map, which the
+    /// application must then enable on its device ("required" extensions, khr_vulkan_enable.adoc).
+    pub fdm_listed: bool,
+    /// The physical device it was listed for; `None` when it was listed before fovea knew the device.
+    pub fdm_listed_for: Option<u64>,
+}
+
+impl VulkanSetup {
+    /// Whether the application was told to enable VK_EXT_fragment_density_map on a device of
+    /// `physical_device`.
+    pub fn fdm_listed_for(&self, physical_device: u64) -> bool {
+        self.fdm_listed && self.fdm_listed_for.is_none_or(|p| p == physical_device)
+    }
+}
+
+/// A VkDevice created through xrCreateVulkanDeviceKHR (enable2), where fovea saw its create info.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VulkanDevice {
+    /// The XrInstance it was created through (the record goes with that instance).
+    pub instance: u64,
+    /// VK_EXT_fragment_density_map and its `fragmentDensityMap` feature are both enabled.
+    pub fdm_enabled: bool,
+}
+
 /// A session and its graphics binding.
 pub struct Session {
     pub handle: xr::Session,
@@ -76,9 +109,16 @@ pub struct Session {
     pub dynamic_step: AtomicUsize,
     /// The highest step any of the session's dynamic swapchains allows (0: none is dynamic).
     pub dynamic_max: AtomicUsize,
+    /// Bumped when the dynamic step or the debug overrides change what the swapchains' maps hold.
+    pub pattern_generation: AtomicU64,
     /// Density maps built and uploaded, for the stats line.
     pub maps_built: AtomicU64,
     pub maps_uploaded: AtomicU64,
+    /// fovea's Vulkan objects on the binding's device, where it provides XR_FB_foveation_vulkan and
+    /// could set them up.
+    pub gpu: Option<Arc<SessionGpu>>,
+    /// The FOVs xrLocateViews last returned, which the density maps are computed for.
+    pub views: Mutex<ViewFovs>,
 }
 
 impl Session {
@@ -86,11 +126,15 @@ impl Session {
         handle: xr::Session,
         instance: Arc<Instance>,
         vulkan: Option<VulkanBinding>,
+        gpu: Option<Arc<SessionGpu>>,
     ) -> Session {
         Session {
             handle,
             instance,
             vulkan,
+            gpu,
+            views: Mutex::default(),
+            pattern_generation: AtomicU64::new(0),
             last_display_time: AtomicI64::new(0),
             frame: Mutex::new(FrameLoop::default()),
             dynamic_step: AtomicUsize::new(0),
@@ -159,6 +203,31 @@ pub fn effective(params: ProfileParams, over: DebugProperties, step: usize) -> (
     )
 }
 
+/// Most views fovea records per session (quad views is the largest configuration there is).
+pub const MAX_VIEWS: usize = 4;
+
+/// The views' FOVs as the application last got them from xrLocateViews.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ViewFovs {
+    pub fovs: [Option<Fov>; MAX_VIEWS],
+    /// Bumped whenever a FOV changes, so density maps computed for older FOVs are refreshed.
+    pub generation: u64,
+}
+
+impl ViewFovs {
+    /// Records the FOVs of one xrLocateViews call; bumps the generation only when one changed.
+    pub fn record(&mut self, fovs: impl IntoIterator<Item = Fov>) {
+        let mut new = [None; MAX_VIEWS];
+        for (slot, fov) in new.iter_mut().zip(fovs) {
+            *slot = Some(fov);
+        }
+        if new != self.fovs {
+            self.fovs = new;
+            self.generation += 1;
+        }
+    }
+}
+
 /// `XrGraphicsBindingVulkanKHR`'s handles, as raw values.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct VulkanBinding {
@@ -190,6 +259,9 @@ pub struct Swapchain {
     /// Present when the swapchain was created with `XrSwapchainCreateInfoFoveationFB` and fovea
     /// provides XR_FB_foveation: profiles may be applied to it.
     pub foveation: Option<Mutex<FoveationState>>,
+    /// The density images (one per swapchain image) of a FRAGMENT_DENSITY_MAP swapchain on a Vulkan
+    /// session, where fovea provides XR_FB_foveation_vulkan and could create them.
+    pub density: Option<DensityImages>,
 }
 
 /// What an `XrFoveationLevelProfileCreateInfoFB` asks for. A profile without one applies no
@@ -211,6 +283,8 @@ pub struct FoveationState {
     pub params: ProfileParams,
     /// The profile last applied (XR_NULL_HANDLE before the first update).
     pub profile: xr::FoveationProfileFB,
+    /// Bumped by every xrUpdateSwapchainFB: density images filled for an older state are dirty.
+    pub generation: u64,
 }
 
 /// A foveation profile fovea created.
@@ -252,6 +326,8 @@ pub struct Registry {
     pub sessions: HandleMap<Session>,
     pub swapchains: HandleMap<Swapchain>,
     pub profiles: HandleMap<Profile>,
+    /// VkDevices created through xrCreateVulkanDeviceKHR, keyed by the raw VkDevice.
+    pub vulkan_devices: Mutex<HashMap<u64, VulkanDevice>>,
     next_profile: AtomicU64,
 }
 
@@ -336,6 +412,8 @@ impl Registry {
         for s in &dead {
             self.remove_session_children(s.handle);
         }
+        let raw = instance.into_raw();
+        self.vulkan_devices.lock().retain(|_, d| d.instance != raw);
         dead
     }
 

@@ -123,6 +123,9 @@ pub unsafe extern "system" fn update_swapchain(
                 let mut f = foveation.lock();
                 f.params = profile.params;
                 f.profile = profile.handle;
+                // Every density image of the swapchain is now dirty; each is refreshed when its
+                // index is next acquired (the queue may not be used here, openxr-layer-facts.md §3).
+                f.generation += 1;
             }
             sc.session.refresh_dynamic_max();
             Ok(xr::Result::SUCCESS)

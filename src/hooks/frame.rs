@@ -84,6 +84,7 @@ pub unsafe extern "system" fn end_frame(
                 if f.controller.frame(display, missed, max) {
                     let step = f.controller.step();
                     s.dynamic_step.store(step, Ordering::Relaxed);
+                    s.pattern_generation.fetch_add(1, Ordering::Relaxed);
                     tracing::info!(step, level = ?LADDER[step], "dynamic foveation");
                 }
                 let changed = s.instance.overrides.poll(display);
@@ -97,6 +98,7 @@ pub unsafe extern "system" fn end_frame(
                 changed
             };
             if overrides_changed {
+                s.pattern_generation.fetch_add(1, Ordering::Relaxed);
                 s.refresh_dynamic_max();
             }
             Ok(next(s.instance.next.end_frame)?(sess, info))
@@ -130,6 +132,8 @@ fn report(s: &Session, window: Window, period_ns: i64) {
 }
 
 /// `xrLocateViews`: passed on.
+/// `xrLocateViews`: the FOVs the application gets are recorded, since the density maps
+/// of its swapchains are computed for the FOVs it renders with. No allocation: this runs every frame.
 pub unsafe extern "system" fn locate_views(
     sess: xr::Session,
     info: *const xr::ViewLocateInfo,
@@ -145,6 +149,18 @@ pub unsafe extern "system" fn locate_views(
                 next(s.instance.next.locate_views)?(sess, info, view_state, capacity, count, views);
             if succeeded(r) {
                 learn_stereo_views(&s.instance, info, capacity, count, views);
+            }
+            if succeeded(r)
+                && s.gpu.is_some()
+                && capacity > 0
+                && !views.is_null()
+                && !count.is_null()
+            {
+                let n = (*count).min(capacity) as usize;
+                let located = std::slice::from_raw_parts(views, n);
+                s.views
+                    .lock()
+                    .record(located.iter().map(|v| fov_from_xr(v.fov)));
             }
             Ok(r)
         })())

@@ -9,9 +9,41 @@ use xr::Handle;
 use super::{finish, fov_from_xr, instance, next, session, succeeded};
 use crate::density::Fov;
 use crate::dispatch;
+use crate::extensions::Ext;
+use crate::fdm::SessionGpu;
 use crate::ffi::{self, guard};
 use crate::projection::rescaled_size;
 use crate::state::{registry, Instance, Session, VulkanBinding};
+
+/// fovea's Vulkan objects for a new session on `binding`'s device, or `None` (logged) where they
+/// cannot be made: the session then works without density images (fail open).
+///
+/// Whether VK_EXT_fragment_density_map is enabled on the device is known where fovea saw the device
+/// created (xrCreateVulkanDeviceKHR, enable2) or told the application to enable it
+/// (xrGetVulkanDeviceExtensionsKHR, enable); the application's own vkCreateDevice cannot be seen.
+///
+/// # Safety
+/// The binding's handles must be live (the runtime accepted the session).
+unsafe fn session_gpu(instance: &Instance, binding: &VulkanBinding) -> Option<Arc<SessionGpu>> {
+    let recorded = registry()
+        .vulkan_devices
+        .lock()
+        .get(&binding.device)
+        .map(|d| d.fdm_enabled);
+    let fdm_enabled = recorded.unwrap_or_else(|| {
+        instance
+            .vulkan
+            .lock()
+            .fdm_listed_for(binding.physical_device)
+    });
+    match SessionGpu::new(binding, fdm_enabled) {
+        Ok(gpu) => Some(Arc::new(gpu)),
+        Err(e) => {
+            tracing::warn!(error = %e, "no density images for this session");
+            None
+        }
+    }
+}
 
 /// `xrCreateSession`: records the Vulkan binding (XrGraphicsBindingVulkanKHR; the enable2 type is an
 /// alias with the same value) so density images can be made on the application's device.
@@ -49,7 +81,10 @@ pub unsafe extern "system" fn create_session(
             let r = f(inst, info, out);
             if succeeded(r) {
                 let handle = *out;
-                let record = Session::new(handle, state, binding);
+                let gpu = binding
+                    .filter(|_| state.extensions.provided(Ext::FoveationVulkan))
+                    .and_then(|b| session_gpu(&state, &b));
+                let record = Session::new(handle, state, binding, gpu);
                 registry()
                     .sessions
                     .write()

@@ -1,5 +1,6 @@
 //! Swapchain lifetime and image access.
 
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 use openxr_sys as xr;
@@ -9,8 +10,9 @@ use parking_lot::Mutex;
 
 use super::{finish, next, session, succeeded, swapchain, HookResult};
 use crate::extensions::Ext;
+use crate::fdm::{DensityImages, Inputs, Refreshed};
 use crate::ffi::{self, guard};
-use crate::state::{registry, FoveationState, Swapchain, SwapchainInfo};
+use crate::state::{registry, FoveationState, Session, Swapchain, SwapchainInfo};
 
 /// VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT (VK_EXT_fragment_density_map).
 const VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT: u32 = 0x4000;
@@ -107,6 +109,13 @@ pub unsafe extern "system" fn create_swapchain(
             down.next = chain.head();
             let r = f(sess, &down, out);
             if succeeded(r) {
+                let density = if req.flags & FRAGMENT_DENSITY_MAP_BIT != 0
+                    && exts.provided(Ext::FoveationVulkan)
+                {
+                    density_images(&state, *out, i)
+                } else {
+                    None
+                };
                 let record = Swapchain {
                     handle: *out,
                     session: state,
@@ -121,6 +130,7 @@ pub unsafe extern "system" fn create_swapchain(
                         mip_count: i.mip_count,
                     },
                     foveation: req.foveation.then(|| Mutex::new(FoveationState::default())),
+                    density,
                 };
                 registry()
                     .swapchains
@@ -132,7 +142,8 @@ pub unsafe extern "system" fn create_swapchain(
     })
 }
 
-/// `xrDestroySwapchain`: forgets the swapchain (its layer resources go with the record).
+/// `xrDestroySwapchain`: forgets the swapchain; its density images and their Vulkan objects are
+/// destroyed with the record, after the runtime destroyed its images.
 pub unsafe extern "system" fn destroy_swapchain(handle: xr::Swapchain) -> xr::Result {
     guard("xrDestroySwapchain", || {
         finish((|| {
@@ -150,7 +161,11 @@ pub unsafe extern "system" fn destroy_swapchain(handle: xr::Swapchain) -> xr::Re
     })
 }
 
-/// `xrEnumerateSwapchainImages`: passed on.
+/// `xrEnumerateSwapchainImages`: the runtime fills the images; then, on a swapchain with density
+/// images, every XrSwapchainImageFoveationVulkanFB chained on an XrSwapchainImageVulkanKHR element
+/// gets the density image of that index and its size (fb_foveation_vulkan.adoc). Those are output
+/// structs, the only ones fovea writes. Capacity 0 (the count query of the two-call idiom) writes
+/// nothing.
 pub unsafe extern "system" fn enumerate_swapchain_images(
     handle: xr::Swapchain,
     capacity: u32,
@@ -161,12 +176,43 @@ pub unsafe extern "system" fn enumerate_swapchain_images(
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.enumerate_swapchain_images)?;
-            Ok(f(handle, capacity, count, images))
+            let r = f(handle, capacity, count, images);
+            let Some(density) = &state.density else {
+                return Ok(r);
+            };
+            if !succeeded(r) || capacity == 0 || images.is_null() || count.is_null() {
+                return Ok(r);
+            }
+            if (*images).ty != xr::StructureType::SWAPCHAIN_IMAGE_VULKAN_KHR {
+                return Ok(r);
+            }
+            let n = (*count).min(capacity) as usize;
+            let elements = images as *mut xr::SwapchainImageVulkanKHR;
+            for i in 0..n.min(density.count()) {
+                let element = &*elements.add(i);
+                let found = ffi::find_in_chain::<xr::SwapchainImageFoveationVulkanFB>(
+                    element.next,
+                    xr::StructureType::SWAPCHAIN_IMAGE_FOVEATION_VULKAN_FB,
+                )
+                .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
+                if let (Some(out), Some(image)) = (found, density.image(i)) {
+                    let out = out as *mut xr::SwapchainImageFoveationVulkanFB;
+                    (*out).image = image;
+                    (*out).width = density.extent[0];
+                    (*out).height = density.extent[1];
+                }
+            }
+            Ok(r)
         })())
     })
 }
 
-/// `xrAcquireSwapchainImage`: passed on.
+/// `xrAcquireSwapchainImage`: once the runtime has handed out the index, that index's density image
+/// is refreshed if the swapchain's foveation state or the located FOVs changed since it was filled.
+/// xrAcquireSwapchainImage is one of the calls where the application synchronises its queue for the
+/// runtime (XR_KHR_vulkan_enable, "Concurrency"), and the upload is finished before the call returns,
+/// because by default the map is read when the application records its render pass
+/// (openxr-layer-facts.md §4). With nothing changed this costs two uncontended locks.
 pub unsafe extern "system" fn acquire_swapchain_image(
     handle: xr::Swapchain,
     info: *const xr::SwapchainImageAcquireInfo,
@@ -176,9 +222,96 @@ pub unsafe extern "system" fn acquire_swapchain_image(
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.acquire_swapchain_image)?;
-            Ok(f(handle, info, index))
+            let r = f(handle, info, index);
+            if let (Some(density), true) = (&state.density, succeeded(r) && !index.is_null()) {
+                refresh_density(&state, density, *index);
+            }
+            Ok(r)
         })())
     })
+}
+
+/// Refreshes one density image; a failure is logged and the acquire still succeeds (fail open).
+/// The map holds the swapchain's effective pattern (its state under the debug overrides and the
+/// dynamic step) for the FOVs the application renders with; in symmetric-FOV mode each eye's own
+/// FOV is what is shown.
+unsafe fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32) {
+    let session = &state.session;
+    let foveation = state
+        .foveation
+        .as_ref()
+        .map(|f| *f.lock())
+        .unwrap_or_default();
+    let views = *session.views.lock();
+    let key = (
+        foveation.generation,
+        views.generation,
+        session.pattern_generation.load(Ordering::Relaxed),
+    );
+    let inputs = || {
+        let (pattern, _) = session.pattern_for(&foveation);
+        let visible = session
+            .instance
+            .symmetric_fov
+            .then(|| session.instance.stereo_fovs())
+            .flatten();
+        Inputs::new(pattern, &views.fovs, visible, density.layers)
+    };
+    match density.refresh(index, key, inputs) {
+        Ok(Refreshed::Nothing) => {}
+        Ok(done) => {
+            if done == Refreshed::Built {
+                session.maps_built.fetch_add(1, Ordering::Relaxed);
+            }
+            session.maps_uploaded.fetch_add(1, Ordering::Relaxed);
+            tracing::debug!(index, ?key, ?done, "density image refreshed");
+        }
+        Err(e) => tracing::warn!(error = %e, index, "density image not refreshed"),
+    }
+}
+
+/// `XR_SWAPCHAIN_CREATE_FOVEATION_FRAGMENT_DENSITY_MAP_BIT_FB`.
+const FRAGMENT_DENSITY_MAP_BIT: u64 = 0x2;
+
+/// The density images for a new FRAGMENT_DENSITY_MAP swapchain on a session with fovea's Vulkan
+/// objects, one per swapchain image (the runtime is asked for the count). `None`, with a warning,
+/// where they cannot be made: the swapchain then works without them.
+///
+/// # Safety
+/// `handle` must be the swapchain the runtime just created from `info`.
+unsafe fn density_images(
+    session: &Session,
+    handle: xr::Swapchain,
+    info: &xr::SwapchainCreateInfo,
+) -> Option<DensityImages> {
+    let Some(gpu) = &session.gpu else {
+        if session.vulkan.is_some() {
+            tracing::warn!("no Vulkan objects for this session; swapchain without density images");
+        }
+        return None;
+    };
+    let enumerate = session.instance.next.enumerate_swapchain_images?;
+    let mut count = 0;
+    let r = enumerate(handle, 0, &mut count, std::ptr::null_mut());
+    if !succeeded(r) || count == 0 {
+        tracing::warn!(?r, "cannot count the swapchain's images; no density images");
+        return None;
+    }
+    match DensityImages::new(gpu, [info.width, info.height], info.array_size, count) {
+        Ok(d) => {
+            tracing::info!(
+                count,
+                extent = ?d.extent,
+                layers = d.layers,
+                "density images created"
+            );
+            Some(d)
+        }
+        Err(e) => {
+            tracing::warn!(error = %e, "swapchain without density images");
+            None
+        }
+    }
 }
 
 /// `xrWaitSwapchainImage`: passed on.
