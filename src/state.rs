@@ -23,7 +23,7 @@ use crate::density::{Fov, Level, Pattern};
 use crate::dispatch::Next;
 use crate::dynamic::{level_at, step_of, Controller};
 use crate::extensions::Extensions;
-use crate::fdm::{DensityImages, SessionGpu};
+use crate::fdm::{DensityImages, SessionGpu, SubmittedView};
 use crate::projection::symmetric_fov;
 use crate::settings::{DebugProperties, Overrides};
 use crate::stats::Stats;
@@ -262,6 +262,16 @@ pub struct Swapchain {
     /// The density images (one per swapchain image) of a FRAGMENT_DENSITY_MAP swapchain on a Vulkan
     /// session, where fovea provides XR_FB_foveation_vulkan and could create them.
     pub density: Option<DensityImages>,
+    /// The views the application last submitted into this swapchain (xrEndFrame).
+    pub submitted: Mutex<Submitted>,
+}
+
+/// The projection views one `xrEndFrame` put into a swapchain.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Submitted {
+    pub views: [Option<SubmittedView>; MAX_VIEWS],
+    /// Bumped when the views change (FOV, rectangle or array layer): the maps are rebuilt once.
+    pub generation: u64,
 }
 
 /// What an `XrFoveationLevelProfileCreateInfoFB` asks for. A profile without one applies no

@@ -1145,3 +1145,165 @@ fn vulkan_enable_device_extensions_gain_fdm_where_it_can_be_had() {
     assert_eq!(fov.destroy(), xr::Result::SUCCESS);
     unsafe { instance.destroy_instance(None) };
 }
+
+/// Releases the image and ends the frame with one projection layer whose two views are drawn
+/// side by side into array layer 0 of `swapchain` (a double-wide layout).
+fn release_side_by_side(frame: &Frame, swapchain: xr::Swapchain, time: xr::Time, fovs: [Fov; 2]) {
+    let release: xr::pfn::ReleaseSwapchainImage = func(frame.app, "xrReleaseSwapchainImage");
+    let end_frame: xr::pfn::EndFrame = func(frame.app, "xrEndFrame");
+    let half = (WIDTH / 2) as i32;
+    let view = |eye: usize| xr::CompositionLayerProjectionView {
+        ty: xr::StructureType::COMPOSITION_LAYER_PROJECTION_VIEW,
+        next: null(),
+        pose: xr::Posef::IDENTITY,
+        fov: xr::Fovf {
+            angle_left: fovs[eye].left,
+            angle_right: fovs[eye].right,
+            angle_up: fovs[eye].up,
+            angle_down: fovs[eye].down,
+        },
+        sub_image: xr::SwapchainSubImage {
+            swapchain,
+            image_rect: xr::Rect2Di {
+                offset: xr::Offset2Di {
+                    x: half * eye as i32,
+                    y: 0,
+                },
+                extent: xr::Extent2Di {
+                    width: half,
+                    height: HEIGHT as i32,
+                },
+            },
+            image_array_index: 0,
+        },
+    };
+    let views = [view(0), view(1)];
+    let layer = xr::CompositionLayerProjection {
+        ty: xr::StructureType::COMPOSITION_LAYER_PROJECTION,
+        next: null(),
+        layer_flags: xr::CompositionLayerFlags::EMPTY,
+        space: frame.space,
+        view_count: 2,
+        views: views.as_ptr(),
+    };
+    let layers = [&layer as *const _ as *const xr::CompositionLayerBaseHeader];
+    let end = xr::FrameEndInfo {
+        ty: xr::StructureType::FRAME_END_INFO,
+        next: null(),
+        display_time: time,
+        environment_blend_mode: xr::EnvironmentBlendMode::OPAQUE,
+        layer_count: 1,
+        layers: layers.as_ptr(),
+    };
+    unsafe {
+        assert_eq!(release(swapchain, null()), xr::Result::SUCCESS);
+        assert_eq!(end_frame(frame.session, &end), xr::Result::SUCCESS);
+    }
+}
+
+/// Maps follow what the application submits: once both eyes are drawn side by side into layer 0,
+/// every image's layer 0 holds both views' maps in their own halves and layer 1, which nothing
+/// is drawn into, the lowest density.
+#[test]
+fn submitted_views_decide_what_each_layer_holds() {
+    let _serial = VALIDATED.lock();
+    pick_lavapipe();
+    let Some(entry) = vulkan() else { return };
+    let app = app("XR_KHR_vulkan_enable2", true);
+    let sys = app.system();
+    let Some(v) = vulkan_through_xr(&entry, &app, sys) else {
+        return;
+    };
+    let (session, space) = running_session(&app, sys, &v);
+    let create_swapchain: xr::pfn::CreateSwapchain = func(&app, "xrCreateSwapchain");
+    let fdm_flag = xr::SwapchainCreateInfoFoveationFB {
+        ty: xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
+        next: null_mut(),
+        flags: xr::SwapchainCreateFoveationFlagsFB::from_raw(FDM_BIT),
+    };
+    let mut swapchain = xr::Swapchain::NULL;
+    let info = swapchain_info(&fdm_flag as *const _ as *const c_void);
+    assert_eq!(
+        unsafe { create_swapchain(session, &info, &mut swapchain) },
+        xr::Result::SUCCESS
+    );
+    let images = enumerate(&app, swapchain);
+    let create_profile: xr::pfn::CreateFoveationProfileFB =
+        func(&app, "xrCreateFoveationProfileFB");
+    let update: xr::pfn::UpdateSwapchainFB = func(&app, "xrUpdateSwapchainFB");
+    let level = level_info(3, 0.0);
+    let profile_info = xr::FoveationProfileCreateInfoFB {
+        ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
+        next: &level as *const _ as *mut c_void,
+    };
+    let mut profile = xr::FoveationProfileFB::NULL;
+    unsafe {
+        assert_eq!(
+            create_profile(session, &profile_info, &mut profile),
+            xr::Result::SUCCESS
+        );
+        let state = xr::SwapchainStateFoveationFB {
+            ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
+            next: null_mut(),
+            flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
+            profile,
+        };
+        assert_eq!(
+            update(swapchain, &state as *const _ as *const _),
+            xr::Result::SUCCESS
+        );
+    }
+    let frame = Frame {
+        app: &app,
+        session,
+        space,
+    };
+    let (_, fovs, time) = frame.acquire(swapchain);
+    release_side_by_side(&frame, swapchain, time, fovs);
+
+    let grid = Grid::new([WIDTH, HEIGHT], TEXEL);
+    let [mw, mh] = grid.map_extent();
+    let layer_bytes = (mw * mh * 2) as usize;
+    let pattern = Pattern {
+        level: fovea::density::Level::High,
+        vertical_offset_deg: 0.0,
+    };
+    let half = |eye: usize| View {
+        fov: fovs[eye],
+        rect: Rect {
+            x: (WIDTH / 2 * eye as u32) as i32,
+            y: 0,
+            width: WIDTH / 2,
+            height: HEIGHT,
+        },
+        visible: None,
+    };
+    let mut want0 = vec![0u8; layer_bytes];
+    density::fill(&grid, &[half(0), half(1)], pattern, &mut want0);
+    let mut want1 = vec![0u8; layer_bytes];
+    density::fill(&grid, &[], pattern, &mut want1);
+    assert_ne!(want0, model(fovs[0], pattern), "the layout changes the map");
+    let readback = Readback::new(&v, (layer_bytes * 2) as u64);
+    for _ in 0..images.len() {
+        let (index, fovs, time) = frame.acquire(swapchain);
+        let got = readback.read(&v, images[index as usize].image, [mw, mh], 2);
+        assert!(got[..layer_bytes] == want0[..], "image {index} layer 0");
+        assert!(got[layer_bytes..] == want1[..], "image {index} layer 1");
+        release_side_by_side(&frame, swapchain, time, fovs);
+    }
+
+    let destroy_session: xr::pfn::DestroySession = func(&app, "xrDestroySession");
+    assert_eq!(unsafe { destroy_session(session) }, xr::Result::SUCCESS);
+    readback.destroy(&v);
+    unsafe {
+        v.device.device_wait_idle().unwrap();
+        v.device.destroy_device(None);
+    }
+    assert_eq!(app.destroy(), xr::Result::SUCCESS);
+    unsafe {
+        v.debug_utils
+            .destroy_debug_utils_messenger(v.messenger, None);
+        v.instance.destroy_instance(None);
+    }
+    assert_no_messages();
+}

@@ -5,11 +5,14 @@ use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 use openxr_sys as xr;
+use xr::Handle;
 
 use super::{finish, fov_from_xr, fov_to_xr, next, session, succeeded};
+use crate::density::Rect;
 use crate::dynamic::LADDER;
+use crate::fdm::SubmittedView;
 use crate::ffi::guard;
-use crate::state::{registry, Instance, Session};
+use crate::state::{registry, Instance, Session, MAX_VIEWS};
 use crate::stats::{Line, Window};
 
 /// `xrWaitFrame`: the predicted display time and period tell how many display periods the previous
@@ -101,9 +104,83 @@ pub unsafe extern "system" fn end_frame(
                 s.pattern_generation.fetch_add(1, Ordering::Relaxed);
                 s.refresh_dynamic_max();
             }
+            if s.gpu.is_some() {
+                learn_submitted(&s, info);
+            }
             Ok(next(s.instance.next.end_frame)?(sess, info))
         })())
     })
+}
+
+/// Most composition layers read per frame when learning views.
+const MAX_LAYERS: usize = 16;
+
+/// Records which views this frame's projection layers put into which rectangle and array layer of
+/// which of the session's swapchains with density images, so each map covers exactly the views
+/// rendered into it (multiview arrays, double-wide images, one swapchain per eye alike). A change
+/// bumps the swapchain's generation, rebuilding its maps once. Read-only on the application's
+/// structs, no allocation; other layer types and chained structs are not looked at.
+unsafe fn learn_submitted(s: &Session, info: *const xr::FrameEndInfo) {
+    if info.is_null() || (*info).ty != xr::StructureType::FRAME_END_INFO || (*info).layers.is_null()
+    {
+        return;
+    }
+    let count = ((*info).layer_count as usize).min(MAX_LAYERS);
+    let layers = std::slice::from_raw_parts((*info).layers, count);
+    let mut found = [(xr::Swapchain::NULL, [None; MAX_VIEWS]); MAX_VIEWS];
+    for &layer in layers {
+        if layer.is_null() || (*layer).ty != xr::StructureType::COMPOSITION_LAYER_PROJECTION {
+            continue;
+        }
+        let p = layer.cast::<xr::CompositionLayerProjection>();
+        if (*p).views.is_null() {
+            continue;
+        }
+        let n = ((*p).view_count as usize).min(MAX_VIEWS);
+        for (eye, v) in std::slice::from_raw_parts((*p).views, n).iter().enumerate() {
+            let (offset, extent) = (v.sub_image.image_rect.offset, v.sub_image.image_rect.extent);
+            if v.ty != xr::StructureType::COMPOSITION_LAYER_PROJECTION_VIEW
+                || extent.width <= 0
+                || extent.height <= 0
+            {
+                continue;
+            }
+            let sc = v.sub_image.swapchain;
+            let Some(slot) = found
+                .iter_mut()
+                .find(|f| f.0 == sc || f.0 == xr::Swapchain::NULL)
+            else {
+                continue;
+            };
+            slot.0 = sc;
+            if let Some(free) = slot.1.iter_mut().find(|v| v.is_none()) {
+                *free = Some(SubmittedView {
+                    eye,
+                    layer: v.sub_image.image_array_index,
+                    rect: Rect {
+                        x: offset.x,
+                        y: offset.y,
+                        width: extent.width as u32,
+                        height: extent.height as u32,
+                    },
+                    fov: fov_from_xr(v.fov),
+                });
+            }
+        }
+    }
+    for (sc, views) in found.iter().take_while(|f| f.0 != xr::Swapchain::NULL) {
+        let Some(record) = registry().swapchain(*sc) else {
+            continue;
+        };
+        if record.density.is_none() || record.session.handle != s.handle {
+            continue;
+        }
+        let mut sub = record.submitted.lock();
+        if sub.views != *views {
+            sub.views = *views;
+            sub.generation += 1;
+        }
+    }
 }
 
 /// Writes the stats line for a finished window, when `fovea::stats` is enabled.

@@ -131,6 +131,7 @@ pub unsafe extern "system" fn create_swapchain(
                     },
                     foveation: req.foveation.then(|| Mutex::new(FoveationState::default())),
                     density,
+                    submitted: Mutex::default(),
                 };
                 registry()
                     .swapchains
@@ -243,10 +244,12 @@ unsafe fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32
         .map(|f| *f.lock())
         .unwrap_or_default();
     let views = *session.views.lock();
+    let submitted = *state.submitted.lock();
     let key = (
         foveation.generation,
         views.generation,
         session.pattern_generation.load(Ordering::Relaxed),
+        submitted.generation,
     );
     let inputs = || {
         let (pattern, _) = session.pattern_for(&foveation);
@@ -255,7 +258,14 @@ unsafe fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32
             .symmetric_fov
             .then(|| session.instance.stereo_fovs())
             .flatten();
-        Inputs::new(pattern, &views.fovs, visible, density.layers)
+        Inputs::new(
+            pattern,
+            [state.info.width, state.info.height],
+            density.layers,
+            &submitted.views,
+            &views.fovs,
+            visible,
+        )
     };
     match density.refresh(index, key, inputs) {
         Ok(Refreshed::Nothing) => {}
