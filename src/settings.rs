@@ -4,6 +4,7 @@
 //! include/fovea.h), so there is one place to look.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicI64, Ordering};
 use std::time::SystemTime;
 
 use parking_lot::Mutex;
@@ -140,13 +141,13 @@ pub struct Overrides {
     env: DebugProperties,
     file: Option<PathBuf>,
     state: Mutex<FileState>,
+    next_poll_ns: AtomicI64,
 }
 
 #[derive(Debug, Default)]
 struct FileState {
     stamp: Option<(SystemTime, u64)>,
     current: DebugProperties,
-    next_poll_ns: i64,
 }
 
 impl Overrides {
@@ -166,6 +167,7 @@ impl Overrides {
                 current: env,
                 ..FileState::default()
             }),
+            next_poll_ns: AtomicI64::new(0),
         };
         o.reload();
         o
@@ -180,13 +182,12 @@ impl Overrides {
     /// properties changed. A `stat` when due, a read only when the file changed: no allocation
     /// otherwise.
     pub fn poll(&self, display_ns: i64) -> bool {
-        {
-            let mut s = self.state.lock();
-            if self.file.is_none() || display_ns < s.next_poll_ns {
-                return false;
-            }
-            s.next_poll_ns = display_ns.saturating_add(PROPS_POLL_NS);
+        // Lock-free on the frames in between: this runs in every xrEndFrame.
+        if self.file.is_none() || display_ns < self.next_poll_ns.load(Ordering::Relaxed) {
+            return false;
         }
+        self.next_poll_ns
+            .store(display_ns.saturating_add(PROPS_POLL_NS), Ordering::Relaxed);
         self.reload()
     }
 
