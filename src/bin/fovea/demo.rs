@@ -13,7 +13,10 @@ use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 use xr::Handle;
 
+use fovea::density::{Level, Pattern};
+
 use crate::args::Args;
+use crate::maps::render;
 
 /// The load script, in frames at 90 Hz: light, then past the 11.1 ms budget, then light again.
 const LOAD: [(u64, f32); 3] = [(0, 6.0), (270, 14.0), (630, 6.0)];
@@ -98,6 +101,22 @@ pub fn run(args: &Args) -> Result<(), String> {
         lp.frames(),
         start.elapsed().as_secs_f64()
     );
+    // The session is headless (no Vulkan device, so no density images to read back): the maps the
+    // layer builds for this swapchain at the levels the run went through come from the same model.
+    for (level, name) in [
+        (Level::High, "dynamic maximum (HIGH)"),
+        (Level::Medium, "the override (MEDIUM)"),
+    ] {
+        let pattern = Pattern {
+            level,
+            vertical_offset_deg: 0.0,
+        };
+        for (eye, side) in [(0, "left"), (1, "right")] {
+            let path = out.join(format!("map_{}_{side}.png", level.name()));
+            render(cfg.headset, eye, 32, pattern).write_png(&path)?;
+            println!("map, {name}, {side} eye: {}", path.display());
+        }
+    }
     Ok(())
 }
 

@@ -48,7 +48,7 @@ fn glyph(c: char) -> [u8; 5] {
     }
 }
 
-struct Image {
+pub(crate) struct Image {
     width: usize,
     height: usize,
     rgb: Vec<u8>,
@@ -76,7 +76,7 @@ impl Image {
         }
     }
 
-    fn write_png(&self, path: &Path) -> Result<(), String> {
+    pub(crate) fn write_png(&self, path: &Path) -> Result<(), String> {
         let file = std::fs::File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
         let mut enc = png::Encoder::new(
             std::io::BufWriter::new(file),
@@ -93,7 +93,12 @@ impl Image {
 }
 
 /// Renders one eye's map at full eye-buffer size with the legend below.
-fn render(h: &fovea_headsets::Headset, eye: usize, texel: u32, pattern: Pattern) -> Image {
+pub(crate) fn render(
+    h: &fovea_headsets::Headset,
+    eye: usize,
+    texel: u32,
+    pattern: Pattern,
+) -> Image {
     let (grid, view) = eye_view(h, eye, texel);
     let [mw, mh] = grid.map_extent().map(|v| v as usize);
     let mut map = vec![0; mw * mh * 2];
