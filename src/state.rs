@@ -461,4 +461,58 @@ mod tests {
         }
         assert!(seen.len() > 100, "top byte takes {} values", seen.len());
     }
+
+    /// Quest's semantics for the debug properties: the level property is the level, or the
+    /// maximum when dynamic; the dynamic property overrides the application's flag.
+    #[test]
+    fn overrides_apply_above_the_application() {
+        let app = ProfileParams {
+            level: 1,
+            vertical_offset_deg: 5.0,
+            dynamic: false,
+        };
+        let none = DebugProperties::default();
+        let level = |p: ProfileParams, o: DebugProperties, step| {
+            let (pat, dynamic) = effective(p, o, step);
+            (pat.level, dynamic)
+        };
+        assert_eq!(level(app, none, 0), (Level::Low, false));
+        assert_eq!(effective(app, none, 0).0.vertical_offset_deg, 5.0);
+        let high = DebugProperties {
+            level: Some(Level::High),
+            ..none
+        };
+        assert_eq!(
+            level(app, high, 0),
+            (Level::High, false),
+            "the level, not dynamic"
+        );
+        let high_dynamic = DebugProperties {
+            dynamic: Some(true),
+            ..high
+        };
+        assert_eq!(level(app, high_dynamic, 0), (Level::None, true));
+        assert_eq!(level(app, high_dynamic, 2), (Level::Medium, true));
+        assert_eq!(
+            level(app, high_dynamic, 3),
+            (Level::High, true),
+            "the maximum"
+        );
+        let app_dynamic = ProfileParams {
+            dynamic: true,
+            level: 3,
+            ..app
+        };
+        let off = DebugProperties {
+            dynamic: Some(false),
+            ..none
+        };
+        assert_eq!(level(app_dynamic, off, 1), (Level::High, false));
+        assert_eq!(level(app_dynamic, none, 1), (Level::Low, true));
+        let top = DebugProperties {
+            level: Some(Level::HighTop),
+            ..none
+        };
+        assert_eq!(level(app, top, 0).0, Level::HighTop);
+    }
 }
