@@ -164,7 +164,7 @@ unsafe fn create_instance(
     if names.len() != app.enabled_extension_count as usize {
         return xr::Result::ERROR_VALIDATION_FAILURE;
     }
-    let below = extensions_below(next_gipa);
+    let below = extensions_below(enumeration_gipa(next_gipa, next_info));
     let mut exts = Extensions::default();
     for n in &names {
         if let Some(e) = Ext::by_name(n) {
@@ -228,6 +228,37 @@ unsafe fn create_instance(
         .write()
         .insert(handle.into_raw(), Arc::new(state));
     result
+}
+
+/// Layers known to mishandle an `xrGetInstanceProcAddr` with XR_NULL_HANDLE and to provide no
+/// instance extensions: Debian's core validation layer (1.0.20) prints "INTERNAL VALIDATION LAYER
+/// ERROR: Null handle passed to HandleInfoBase::get()" and answers nothing. fovea asks the layer
+/// below it instead, so a stack with core validation under fovea stays silent and still learns what
+/// the runtime offers natively.
+const NO_NULL_INSTANCE_LOOKUP: [&str; 1] = ["XR_APILAYER_LUNARG_core_validation"];
+
+/// The `xrGetInstanceProcAddr` to ask for the extensions below: the next layer's, or, past layers in
+/// [`NO_NULL_INSTANCE_LOOKUP`], the first one below them (the runtime's at the end of the chain).
+///
+/// # Safety
+/// `ours` must be fovea's own, validated next-info entry.
+unsafe fn enumeration_gipa(
+    next_gipa: xr::pfn::GetInstanceProcAddr,
+    ours: &xr::ApiLayerNextInfo,
+) -> xr::pfn::GetInstanceProcAddr {
+    let mut gipa = next_gipa;
+    let mut below = ours.next;
+    while !below.is_null()
+        && (*below).struct_type == xr::ApiLayerNextInfo::TYPE
+        && NO_NULL_INSTANCE_LOOKUP.contains(&ffi::read_fixed(&(*below).layer_name).as_ref())
+    {
+        match (*below).next_get_instance_proc_addr {
+            Some(g) => gipa = g,
+            None => break,
+        }
+        below = (*below).next;
+    }
+    gipa
 }
 
 /// The extension names the layers and runtime below offer, asked through the next layer's
