@@ -28,11 +28,27 @@ pub struct FoveationRequest {
     pub meta: Option<(u32, u32)>,
 }
 
+/// What becomes of VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT for a swapchain.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Subsampled {
+    /// Not asked for, not forced.
+    No,
+    /// Asked for; dropped because the runtime allocates the images (as Quest does where the
+    /// device cannot subsample).
+    Dropped,
+    /// Asked for; `debug.oculus.foveation.subsampled=0` turns it off.
+    Off,
+    /// `debug.oculus.foveation.subsampled=1` on a foveated swapchain: it cannot be forced on, for
+    /// the same reason.
+    CannotForce,
+}
+
 /// Checks a request against what fovea can honour without runtime support for the structs:
 /// SCALED_BIN is a GLES flag (QCOM_texture_foveated) and a Vulkan or headless session cannot use it;
 /// the runtime allocates the images, so additional Vulkan flags cannot be honoured, except
-/// SUBSAMPLED, which Quest's runtime also drops when unsupported (fixed-foveated-rendering seed).
-pub fn check_request(req: FoveationRequest) -> HookResult<()> {
+/// SUBSAMPLED, which Quest's runtime also drops when unsupported (fixed-foveated-rendering seed) and
+/// which `debug.oculus.foveation.subsampled` forces on or off.
+pub fn check_request(req: FoveationRequest, forced: Option<bool>) -> HookResult<Subsampled> {
     if req.flags & !0x3 != 0 {
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     }
@@ -40,6 +56,7 @@ pub fn check_request(req: FoveationRequest) -> HookResult<()> {
         tracing::warn!("XR_SWAPCHAIN_CREATE_FOVEATION_SCALED_BIN_BIT_FB needs OpenGL ES; this is not a GLES session");
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     }
+    let mut asked = false;
     if let Some((create, usage)) = req.meta {
         if usage != 0 || create & !VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT != 0 {
             tracing::warn!(
@@ -49,11 +66,14 @@ pub fn check_request(req: FoveationRequest) -> HookResult<()> {
             );
             return Err(xr::Result::ERROR_FEATURE_UNSUPPORTED);
         }
-        if create != 0 {
-            tracing::warn!("VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT dropped: the runtime cannot allocate subsampled images");
-        }
+        asked = create != 0;
     }
-    Ok(())
+    Ok(match (asked, forced) {
+        (true, Some(false)) => Subsampled::Off,
+        (true, _) => Subsampled::Dropped,
+        (false, Some(true)) if req.foveation => Subsampled::CannotForce,
+        (false, _) => Subsampled::No,
+    })
 }
 
 /// `xrCreateSwapchain`: takes the foveation structs fovea provides out of a copied chain, checks
@@ -98,7 +118,20 @@ pub unsafe extern "system" fn create_swapchain(
                 req.meta =
                     meta.map(|m| ((*m).additional_create_flags, (*m).additional_usage_flags));
             }
-            check_request(req)?;
+            match check_request(req, state.instance.overrides.current().subsampled)? {
+                Subsampled::Dropped => tracing::warn!(
+                    "VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT dropped: the runtime allocates the images \
+                     and cannot make them subsampled"
+                ),
+                Subsampled::Off => tracing::info!(
+                    "VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT off: debug.oculus.foveation.subsampled=0"
+                ),
+                Subsampled::CannotForce => tracing::warn!(
+                    "debug.oculus.foveation.subsampled=1 cannot be honoured: the runtime \
+                     allocates the images"
+                ),
+                Subsampled::No => {}
+            }
             // Structs of extensions fovea provides are unknown below: take them out of a copy.
             let chain = ffi::ChainCopy::without(i.next, |t| {
                 (provided_fov && t == xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB)
@@ -358,18 +391,29 @@ mod tests {
 
     #[test]
     fn requests_fovea_can_and_cannot_honour() {
-        let ok = |flags, meta| {
-            check_request(FoveationRequest {
-                foveation: true,
-                flags,
-                meta,
-            })
+        let req = |flags, meta| FoveationRequest {
+            foveation: true,
+            flags,
+            meta,
         };
-        assert_eq!(ok(0x2, None), Ok(()));
+        let ok = |flags, meta| check_request(req(flags, meta), None);
+        let sub = Some((VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT, 0));
+        assert_eq!(ok(0x2, None), Ok(Subsampled::No));
+        assert_eq!(ok(0x0, sub), Ok(Subsampled::Dropped));
         assert_eq!(
-            ok(0x0, Some((VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT, 0))),
-            Ok(())
+            check_request(req(0x2, sub), Some(false)),
+            Ok(Subsampled::Off)
         );
+        assert_eq!(
+            check_request(req(0x2, sub), Some(true)),
+            Ok(Subsampled::Dropped)
+        );
+        assert_eq!(
+            check_request(req(0x2, None), Some(true)),
+            Ok(Subsampled::CannotForce)
+        );
+        let plain = FoveationRequest::default();
+        assert_eq!(check_request(plain, Some(true)), Ok(Subsampled::No));
         assert_eq!(ok(0x1, None), Err(xr::Result::ERROR_VALIDATION_FAILURE));
         assert_eq!(ok(0x4, None), Err(xr::Result::ERROR_VALIDATION_FAILURE));
         assert_eq!(
