@@ -94,50 +94,17 @@ fn running_loop(chain: Chain) -> HeadlessLoop {
         array_size: 2,
     };
     let mut lp = HeadlessLoop::new(app, spec).expect("session");
-    apply_dynamic_high(&lp);
+    if layered {
+        lp.apply_profile(
+            xr::FoveationLevelFB::HIGH,
+            xr::FoveationDynamicFB::LEVEL_ENABLED,
+        )
+        .expect("HIGH dynamic profile");
+    }
     for _ in 0..300 {
         lp.frame().expect("warm-up frame");
     }
     lp
-}
-
-/// Applies a HIGH, dynamic profile to the loop's swapchain where the chain offers the extension (the
-/// bare runtime does not: it then just runs the loop).
-fn apply_dynamic_high(lp: &HeadlessLoop) {
-    // SAFETY: names and types match; structs live across the calls.
-    unsafe {
-        let Ok(create) = lp
-            .app
-            .try_fn::<xr::pfn::CreateFoveationProfileFB>(c"xrCreateFoveationProfileFB")
-        else {
-            return;
-        };
-        let update: xr::pfn::UpdateSwapchainFB = lp.func(c"xrUpdateSwapchainFB");
-        let destroy: xr::pfn::DestroyFoveationProfileFB = lp.func(c"xrDestroyFoveationProfileFB");
-        let level = xr::FoveationLevelProfileCreateInfoFB {
-            ty: xr::StructureType::FOVEATION_LEVEL_PROFILE_CREATE_INFO_FB,
-            next: std::ptr::null_mut(),
-            level: xr::FoveationLevelFB::HIGH,
-            vertical_offset: 0.0,
-            dynamic: xr::FoveationDynamicFB::LEVEL_ENABLED,
-        };
-        let info = xr::FoveationProfileCreateInfoFB {
-            ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
-            next: &level as *const _ as *mut _,
-        };
-        let mut profile = xr::FoveationProfileFB::NULL;
-        if create(lp.session, &info, &mut profile) != xr::Result::SUCCESS {
-            return;
-        }
-        let state = xr::SwapchainStateFoveationFB {
-            ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
-            next: std::ptr::null_mut(),
-            flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
-            profile,
-        };
-        update(lp.swapchain, &state as *const _ as *const _);
-        destroy(profile);
-    }
 }
 
 fn bench_frames(c: &mut Criterion) {

@@ -10,35 +10,6 @@ use fovea_harness::app::API_1_0;
 use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
-use xr::Handle;
-
-fn apply(lp: &HeadlessLoop, level: xr::FoveationLevelFB, dynamic: xr::FoveationDynamicFB) {
-    unsafe {
-        let create: xr::pfn::CreateFoveationProfileFB = lp.func(c"xrCreateFoveationProfileFB");
-        let update: xr::pfn::UpdateSwapchainFB = lp.func(c"xrUpdateSwapchainFB");
-        let level_info = xr::FoveationLevelProfileCreateInfoFB {
-            ty: xr::StructureType::FOVEATION_LEVEL_PROFILE_CREATE_INFO_FB,
-            next: std::ptr::null_mut(),
-            level,
-            vertical_offset: 0.0,
-            dynamic,
-        };
-        let info = xr::FoveationProfileCreateInfoFB {
-            ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
-            next: &level_info as *const _ as *mut _,
-        };
-        let mut profile = xr::FoveationProfileFB::NULL;
-        assert_eq!(create(lp.session, &info, &mut profile), xr::Result::SUCCESS);
-        let state = xr::SwapchainStateFoveationFB {
-            ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
-            next: std::ptr::null_mut(),
-            flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
-            profile,
-        };
-        let r = update(lp.swapchain, &state as *const _ as *const _);
-        assert_eq!(r, xr::Result::SUCCESS);
-    }
-}
 
 fn running(load: &[(u64, f32)]) -> HeadlessLoop {
     let mut cfg = sim::control::SimConfig::for_headset(fovea_headsets::by_id("quest3").unwrap());
@@ -95,11 +66,11 @@ fn dynamic_level_stats_and_live_overrides() {
     // Phase 1: 6 ms per frame (headroom at 90 Hz), 14 ms from frame 200 (every frame misses a
     // period), 6 ms again from frame 600. 1500 frames of virtual time, no sleeping.
     let mut lp = running(&[(0, 6.0), (200, 14.0), (600, 6.0)]);
-    apply(
-        &lp,
+    lp.apply_profile(
         xr::FoveationLevelFB::HIGH,
         xr::FoveationDynamicFB::LEVEL_ENABLED,
-    );
+    )
+    .unwrap();
     for _ in 0..1500 {
         lp.frame().unwrap();
     }

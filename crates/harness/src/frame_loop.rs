@@ -316,6 +316,54 @@ impl HeadlessLoop {
     pub unsafe fn func<F: Copy>(&self, name: &std::ffi::CStr) -> F {
         self.app.func(name)
     }
+
+    /// Applies a foveation profile of `level` (dynamic or not) to the loop's swapchain with
+    /// xrUpdateSwapchainFB, then destroys the profile (the swapchain keeps a copy of its state).
+    /// `Err` names the call that failed, or says the chain lacks XR_FB_foveation.
+    pub fn apply_profile(
+        &self,
+        level: xr::FoveationLevelFB,
+        dynamic: xr::FoveationDynamicFB,
+    ) -> Result<(), String> {
+        // SAFETY: the names' types match; the structs live across the calls.
+        unsafe {
+            let create: xr::pfn::CreateFoveationProfileFB = self
+                .app
+                .try_fn(c"xrCreateFoveationProfileFB")
+                .map_err(|r| format!("no xrCreateFoveationProfileFB: {r:?}"))?;
+            let update: xr::pfn::UpdateSwapchainFB = self.func(c"xrUpdateSwapchainFB");
+            let destroy: xr::pfn::DestroyFoveationProfileFB =
+                self.func(c"xrDestroyFoveationProfileFB");
+            let level_info = xr::FoveationLevelProfileCreateInfoFB {
+                ty: xr::StructureType::FOVEATION_LEVEL_PROFILE_CREATE_INFO_FB,
+                next: std::ptr::null_mut(),
+                level,
+                vertical_offset: 0.0,
+                dynamic,
+            };
+            let info = xr::FoveationProfileCreateInfoFB {
+                ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
+                next: &level_info as *const _ as *mut _,
+            };
+            let mut profile = xr::FoveationProfileFB::NULL;
+            let r = create(self.session, &info, &mut profile);
+            if r != xr::Result::SUCCESS {
+                return Err(format!("xrCreateFoveationProfileFB: {r:?}"));
+            }
+            let state = xr::SwapchainStateFoveationFB {
+                ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
+                next: std::ptr::null_mut(),
+                flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
+                profile,
+            };
+            let r = update(self.swapchain, &state as *const _ as *const _);
+            destroy(profile);
+            if r != xr::Result::SUCCESS {
+                return Err(format!("xrUpdateSwapchainFB: {r:?}"));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Drop for HeadlessLoop {

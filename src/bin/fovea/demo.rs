@@ -11,7 +11,6 @@ use fovea_harness::app::API_1_0;
 use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
-use xr::Handle;
 
 use fovea::density::{Level, Pattern};
 
@@ -69,8 +68,7 @@ pub fn run(args: &Args) -> Result<(), String> {
         "swapchain: {}x{}, 2 layers (multiview)",
         lp.eye_size[0], lp.eye_size[1]
     );
-    match apply_profile(
-        &lp,
+    match lp.apply_profile(
         xr::FoveationLevelFB::HIGH,
         xr::FoveationDynamicFB::LEVEL_ENABLED,
     ) {
@@ -152,49 +150,6 @@ fn ensure_layer_built() -> Result<(), String> {
         .map_err(|e| format!("cargo: {e}"))?;
     if !status.success() {
         return Err(format!("building libfovea.so failed: {status}"));
-    }
-    Ok(())
-}
-
-/// Creates a level profile, applies it to the loop's swapchain, and destroys it (as Quest samples do:
-/// the swapchain keeps the parameters).
-fn apply_profile(
-    lp: &HeadlessLoop,
-    level: xr::FoveationLevelFB,
-    dynamic: xr::FoveationDynamicFB,
-) -> Result<(), String> {
-    // SAFETY: names and types match; structs live across the calls.
-    unsafe {
-        let create: xr::pfn::CreateFoveationProfileFB = lp.func(c"xrCreateFoveationProfileFB");
-        let update: xr::pfn::UpdateSwapchainFB = lp.func(c"xrUpdateSwapchainFB");
-        let destroy: xr::pfn::DestroyFoveationProfileFB = lp.func(c"xrDestroyFoveationProfileFB");
-        let level_info = xr::FoveationLevelProfileCreateInfoFB {
-            ty: xr::StructureType::FOVEATION_LEVEL_PROFILE_CREATE_INFO_FB,
-            next: std::ptr::null_mut(),
-            level,
-            vertical_offset: 0.0,
-            dynamic,
-        };
-        let info = xr::FoveationProfileCreateInfoFB {
-            ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
-            next: &level_info as *const _ as *mut _,
-        };
-        let mut profile = xr::FoveationProfileFB::NULL;
-        let r = create(lp.session, &info, &mut profile);
-        if r != xr::Result::SUCCESS {
-            return Err(format!("xrCreateFoveationProfileFB: {r:?}"));
-        }
-        let state = xr::SwapchainStateFoveationFB {
-            ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
-            next: std::ptr::null_mut(),
-            flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
-            profile,
-        };
-        let r = update(lp.swapchain, &state as *const _ as *const _);
-        destroy(profile);
-        if r != xr::Result::SUCCESS {
-            return Err(format!("xrUpdateSwapchainFB: {r:?}"));
-        }
     }
     Ok(())
 }
