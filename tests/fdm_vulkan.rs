@@ -953,9 +953,14 @@ fn density_images_on_lavapipe_hold_the_model_and_leave_nothing_behind() {
         xr::Result::ERROR_HANDLE_INVALID
     );
     readback.destroy(&v);
+    teardown(app, &v);
+}
+
+/// Destroys the device (the validation layer reports every object still alive on it here), the
+/// OpenXR instance and the Vulkan instance, and requires that validation said nothing.
+fn teardown(app: App, v: &Vulkan) {
     unsafe {
         v.device.device_wait_idle().unwrap();
-        // The validation layer reports every object still alive on the device here.
         v.device.destroy_device(None);
     }
     assert_eq!(app.destroy(), xr::Result::SUCCESS);
@@ -1295,15 +1300,5 @@ fn submitted_views_decide_what_each_layer_holds() {
     let destroy_session: xr::pfn::DestroySession = func(&app, "xrDestroySession");
     assert_eq!(unsafe { destroy_session(session) }, xr::Result::SUCCESS);
     readback.destroy(&v);
-    unsafe {
-        v.device.device_wait_idle().unwrap();
-        v.device.destroy_device(None);
-    }
-    assert_eq!(app.destroy(), xr::Result::SUCCESS);
-    unsafe {
-        v.debug_utils
-            .destroy_debug_utils_messenger(v.messenger, None);
-        v.instance.destroy_instance(None);
-    }
-    assert_no_messages();
+    teardown(app, &v);
 }
