@@ -256,7 +256,7 @@ fn hello_xr_passes(graphics: &str, layers: &[&str]) {
             .join(CORE_VALIDATION_MANIFEST)
             .exists()
     {
-        skip("the Khronos core validation layer is not installed (Debian: openxr-layer-corevalidation)");
+        skip("the Khronos core validation layer is not installed (openxr-layer-corevalidation)");
         return;
     }
     let run = run_hello_xr(&system, graphics, layers);
