@@ -30,6 +30,10 @@ pub struct SimConfig {
     /// Keep the call journal and the submitted views (`FOVEA_SIM_JOURNAL=0` turns it off): tests read
     /// it, but a benchmark running millions of frames must not grow memory without bound.
     pub journal: bool,
+    /// Print one `fovea-sim: summary frames=N errors=M ...` line to stderr when the instance is
+    /// destroyed (`FOVEA_SIM_SUMMARY=1`): an application run as a child process (hello_xr) has no
+    /// other way to tell a test how many frames reached the runtime and which calls failed.
+    pub summary: bool,
 }
 
 /// A call that fails on purpose: `function` returns `result` without doing anything.
@@ -80,6 +84,7 @@ impl Default for SimConfig {
             faults: Vec::new(),
             load: Load::default(),
             journal: true,
+            summary: false,
         }
     }
 }
@@ -95,7 +100,8 @@ impl SimConfig {
     }
 
     /// Reads `FOVEA_SIM_HEADSET`, `FOVEA_SIM_REFRESH_HZ`, `FOVEA_SIM_NATIVE_UPDATE_STATE`,
-    /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_JOURNAL`, `FOVEA_SIM_EXIT_AFTER_FRAMES`, `FOVEA_SIM_FAULT` and `FOVEA_SIM_LOAD`.
+    /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_JOURNAL`, `FOVEA_SIM_SUMMARY`, `FOVEA_SIM_EXIT_AFTER_FRAMES`,
+    /// `FOVEA_SIM_FAULT` and `FOVEA_SIM_LOAD`.
     /// The error names the variable and what it accepts.
     pub fn from_env() -> Result<SimConfig, String> {
         Self::from_vars(|name| std::env::var(name).ok())
@@ -126,6 +132,7 @@ impl SimConfig {
         }
         cfg.native_swapchain_update_state = flag(&var, "FOVEA_SIM_NATIVE_UPDATE_STATE")?;
         cfg.realtime = flag(&var, "FOVEA_SIM_REALTIME")?;
+        cfg.summary = flag(&var, "FOVEA_SIM_SUMMARY")?;
         if var("FOVEA_SIM_JOURNAL").is_some() {
             cfg.journal = flag(&var, "FOVEA_SIM_JOURNAL")?;
         }
@@ -255,6 +262,7 @@ mod tests {
             ("FOVEA_SIM_REFRESH_HZ", "120"),
             ("FOVEA_SIM_NATIVE_UPDATE_STATE", "1"),
             ("FOVEA_SIM_REALTIME", "1"),
+            ("FOVEA_SIM_SUMMARY", "1"),
             ("FOVEA_SIM_EXIT_AFTER_FRAMES", "30"),
             ("FOVEA_SIM_FAULT", "xrCreateSwapchain:-2@2, xrEndFrame:-17"),
             ("FOVEA_SIM_LOAD", "8@0,14@100"),
@@ -262,7 +270,7 @@ mod tests {
         .unwrap();
         assert_eq!(cfg.headset.id, "rift-s");
         assert_eq!(cfg.refresh_hz, 120.0);
-        assert!(cfg.native_swapchain_update_state && cfg.realtime);
+        assert!(cfg.native_swapchain_update_state && cfg.realtime && cfg.summary);
         assert_eq!(cfg.exit_after_frames, Some(30));
         assert_eq!(
             cfg.faults,

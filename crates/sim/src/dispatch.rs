@@ -287,6 +287,11 @@ fn commands() -> &'static [Command] {
                 actions::enumerate_bound_sources_for_action as EnumerateBoundSourcesForAction
             ),
             command!(
+                "xrGetInputSourceLocalizedName",
+                core,
+                actions::get_input_source_localized_name as GetInputSourceLocalizedName
+            ),
+            command!(
                 "xrGetVulkanInstanceExtensionsKHR",
                 vk1,
                 vulkan::get_vulkan_instance_extensions as GetVulkanInstanceExtensionsKHR

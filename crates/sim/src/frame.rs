@@ -305,6 +305,7 @@ unsafe fn end_frame_impl(
         .instances
         .get_mut(&instance)
         .expect("session's instance exists");
+    inst.frames += 1;
     if inst.config.journal {
         inst.record.end_frames.push(views);
     }

@@ -1,7 +1,7 @@
 //! Instance lifetime, extensions, events, strings and paths (spec chapters "Instance", "Events",
 //! "Semantic Paths").
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::ffi::c_char;
 
 use openxr_sys as xr;
@@ -59,6 +59,11 @@ pub(crate) struct InstanceState {
     /// xrGetVulkanGraphicsRequirements(2)KHR was called (required before xrCreateSession).
     pub graphics_requirements_queried: bool,
     pub vulkan: VulkanInstanceState,
+    /// Successful xrEndFrame calls over all the instance's sessions, for the summary line.
+    pub frames: u64,
+    /// Calls that returned an error code, by command, for the summary line (kept whether or not
+    /// the journal is).
+    pub errors: BTreeMap<&'static str, u64>,
 }
 
 impl InstanceState {
@@ -176,6 +181,8 @@ pub(crate) unsafe extern "system" fn create_instance(
             now_ns: CLOCK_START_NS,
             graphics_requirements_queried: false,
             vulkan: VulkanInstanceState::default(),
+            frames: 0,
+            errors: BTreeMap::new(),
         };
         w.instances.insert(id, state);
         *instance = xr::Instance::from_raw(id);
@@ -190,9 +197,23 @@ pub(crate) unsafe extern "system" fn destroy_instance(instance: xr::Instance) ->
         let id = w.enter_instance(ctx, instance)?;
         destroy_instance_objects(&mut w, id);
         let state = w.instances.remove(&id).expect("entered instance exists");
+        if state.config.summary {
+            eprintln!("{}", summary_line(state.frames, &state.errors));
+        }
         w.retired.insert(id, state.record);
         Ok(xr::Result::SUCCESS)
     })
+}
+
+/// `fovea-sim: summary frames=N errors=M [xrFoo:2 xrBar:1]`: what a test driving an application as
+/// a child process reads back (see [`SimConfig::summary`]).
+fn summary_line(frames: u64, errors: &BTreeMap<&'static str, u64>) -> String {
+    let total: u64 = errors.values().sum();
+    let each: Vec<String> = errors.iter().map(|(f, n)| format!("{f}:{n}")).collect();
+    format!(
+        "fovea-sim: summary frames={frames} errors={total} [{}]",
+        each.join(" ")
+    )
 }
 
 /// Destroys everything the instance owns (spec: destroying a handle destroys its children).
@@ -387,6 +408,19 @@ pub(crate) fn check_system(system: xr::SystemId) -> Result<(), xr::Result> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn summary_line_counts_frames_and_errors_by_command() {
+        assert_eq!(
+            summary_line(300, &BTreeMap::new()),
+            "fovea-sim: summary frames=300 errors=0 []"
+        );
+        let errors = BTreeMap::from([("xrEndFrame", 1), ("xrCreateSwapchain", 2)]);
+        assert_eq!(
+            summary_line(7, &errors),
+            "fovea-sim: summary frames=7 errors=3 [xrCreateSwapchain:2 xrEndFrame:1]"
+        );
+    }
 
     #[test]
     fn path_syntax() {

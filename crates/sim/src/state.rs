@@ -93,6 +93,11 @@ pub(crate) fn entry(name: &'static str, body: impl FnOnce(&mut Ctx) -> XrResult)
         };
         let _ = catch_unwind(AssertUnwindSafe(|| {
             let mut w = world();
+            if result.into_raw() < 0 {
+                if let Some(inst) = w.instances.get_mut(&id) {
+                    *inst.errors.entry(name).or_default() += 1;
+                }
+            }
             let keep = w.instances.get(&id).is_none_or(|i| i.config.journal);
             if let Some(record) = w.record_mut(id).filter(|_| keep) {
                 record.journal.push(call);

@@ -418,7 +418,14 @@ impl Drop for SwapchainImages {
     }
 }
 
-const INSTANCE_EXTENSIONS: &str = "VK_KHR_external_memory_capabilities";
+/// What a desktop runtime asks of the application's VkInstance (Monado's list, trimmed to memory).
+/// VK_KHR_external_memory_capabilities requires VK_KHR_get_physical_device_properties2 on a Vulkan
+/// 1.0 instance (hello_xr's `-g Vulkan` makes one), so both are listed: a list that names one
+/// without the other makes the Vulkan validation layer report VUID-vkCreateInstance-
+/// ppEnabledExtensionNames-01388 in every app that follows it.
+const INSTANCE_EXTENSIONS: &str =
+    "VK_KHR_external_memory_capabilities VK_KHR_get_physical_device_properties2";
+/// What the runtime asks of the VkDevice: what a compositor importing app images would need.
 const DEVICE_EXTENSIONS: &str = "VK_KHR_external_memory";
 
 pub(crate) unsafe extern "system" fn get_vulkan_instance_extensions(
