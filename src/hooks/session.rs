@@ -95,17 +95,27 @@ pub unsafe extern "system" fn create_session(
     })
 }
 
-/// `xrDestroySession`: the session's swapchains and profiles die with it (xr.xml parents); their
-/// layer resources are released before the call goes down, while the application's device still
-/// exists.
+/// `xrDestroySession`: the session's swapchains and profiles die with it (xr.xml parents). Their
+/// records leave the registry before the call goes down and are released once the runtime has
+/// destroyed the session, still before the call returns and so while the application's device
+/// exists (it must outlive the session). Where the runtime refuses, the session is still alive and
+/// the records go back: a retry, or any other call on it, finds them.
 pub unsafe extern "system" fn destroy_session(handle: xr::Session) -> xr::Result {
     guard("xrDestroySession", || {
         finish((|| {
             let state = session(handle)?;
             let f = next(state.instance.next.destroy_session)?;
-            drop(registry().remove_session_children(handle));
-            registry().sessions.write().remove(&handle.into_raw());
-            Ok(f(handle))
+            drop(state);
+            let detached = registry().detach_session(handle);
+            let r = f(handle);
+            if !succeeded(r) {
+                tracing::warn!(
+                    ?r,
+                    "the runtime refused xrDestroySession; the session lives on"
+                );
+                registry().restore(detached);
+            }
+            Ok(r)
         })())
     })
 }

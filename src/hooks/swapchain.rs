@@ -143,18 +143,29 @@ pub unsafe extern "system" fn create_swapchain(
 }
 
 /// `xrDestroySwapchain`: forgets the swapchain; its density images and their Vulkan objects are
-/// destroyed with the record, after the runtime destroyed its images.
+/// destroyed with the record, after the runtime destroyed its images. The record leaves the registry
+/// before the call goes down (a handle value the runtime reuses at once cannot meet it) and goes
+/// back where the runtime refuses, since the swapchain then still lives.
 pub unsafe extern "system" fn destroy_swapchain(handle: xr::Swapchain) -> xr::Result {
     guard("xrDestroySwapchain", || {
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.destroy_swapchain)?;
+            let Some(record) = registry().swapchains.write().remove(&handle.into_raw()) else {
+                // Another thread destroyed it meanwhile (the application broke external
+                // synchronisation): the handle is gone.
+                return Err(xr::Result::ERROR_HANDLE_INVALID);
+            };
             let r = f(handle);
             if succeeded(r) {
-                registry().swapchains.write().remove(&handle.into_raw());
                 if state.foveation.is_some() {
                     state.session.refresh_dynamic_max();
                 }
+            } else {
+                registry()
+                    .swapchains
+                    .write()
+                    .insert(handle.into_raw(), record);
             }
             Ok(r)
         })())
