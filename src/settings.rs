@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 use std::time::SystemTime;
 
-use parking_lot::Mutex;
+use crate::lock::{Mutex, Rank};
 
 use crate::density::Level;
 
@@ -162,10 +162,14 @@ impl Overrides {
         let o = Overrides {
             env,
             file,
-            state: Mutex::new(FileState {
-                current: env,
-                ..FileState::default()
-            }),
+            state: Mutex::ranked(
+                Rank::Settings,
+                "debug properties",
+                FileState {
+                    current: env,
+                    ..FileState::default()
+                },
+            ),
         };
         o.reload();
         o

@@ -6,8 +6,17 @@
 //! calling down. Children hold their parent's `Arc`, which is how a hook on a swapchain reaches the
 //! instance's next-layer table.
 //!
-//! Lock order, where more than one is held: a map lock is never held while calling into the next
-//! layer or while taking a record's own lock. Record locks are leaves.
+//! Lock order ([`crate::lock::Rank`], outermost first; checked in debug builds by [`crate::lock`]):
+//! 1. a map lock (the handle maps, the Vulkan device list) is held alone: never while another lock
+//!    is held, never while taking another lock, never while calling into the next layer;
+//! 2. a record's own lock (a session's frame loop or views, a swapchain's foveation state, an
+//!    instance's FOVs or Vulkan set-up); records never lock each other;
+//! 3. a swapchain's density-image fill state;
+//! 4. the session's GPU submission state (queue, command pool, fence);
+//! 5. the debug properties, read under any of the above.
+//!
+//! No lock is held while calling into the next layer. The logging file's lock is a leaf inside
+//! `tracing` and is not ranked.
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
@@ -15,8 +24,8 @@ use std::sync::atomic::{AtomicI64, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
+use crate::lock::{MapLock, Mutex, Rank};
 use openxr_sys as xr;
-use parking_lot::{Mutex, RwLock};
 use xr::Handle;
 
 use crate::density::{Fov, Level, Pattern};
@@ -317,10 +326,9 @@ impl Hasher for HandleHasher {
 }
 
 /// A map from raw handle values to records.
-pub type HandleMap<T> = RwLock<HashMap<u64, Arc<T>, BuildHasherDefault<HandleHasher>>>;
+pub type HandleMap<T> = MapLock<HashMap<u64, Arc<T>, BuildHasherDefault<HandleHasher>>>;
 
 /// Every live handle fovea knows.
-#[derive(Default)]
 pub struct Registry {
     pub instances: HandleMap<Instance>,
     pub sessions: HandleMap<Session>,
@@ -340,6 +348,19 @@ pub struct Detached {
     pub swapchains: Vec<Arc<Swapchain>>,
     pub profiles: Vec<Arc<Profile>>,
     pub vulkan_devices: Vec<(u64, VulkanDevice)>,
+}
+
+impl Default for Registry {
+    fn default() -> Registry {
+        Registry {
+            instances: MapLock::new("instances", HashMap::default()),
+            sessions: MapLock::new("sessions", HashMap::default()),
+            swapchains: MapLock::new("swapchains", HashMap::default()),
+            profiles: MapLock::new("profiles", HashMap::default()),
+            vulkan_devices: Mutex::ranked(Rank::Map, "vulkan devices", HashMap::new()),
+            next_profile: AtomicU64::new(0),
+        }
+    }
 }
 
 /// The process-wide registry. A static behind `OnceLock`: no `static mut`.

@@ -51,6 +51,7 @@ pub fn swapchain(h: xr::Swapchain) -> HookResult<Arc<Swapchain>> {
 /// The next layer's pointer. A hook is only handed out where the next layer offers the function
 /// (see `loader::resolve`), so `None` means the table was corrupted: report a runtime failure.
 pub fn next<F>(f: Option<F>) -> HookResult<F> {
+    crate::lock::assert_none_held("going down to the next layer");
     f.ok_or(xr::Result::ERROR_RUNTIME_FAILURE)
 }
 

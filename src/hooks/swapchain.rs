@@ -6,7 +6,7 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use parking_lot::Mutex;
+use crate::lock::Mutex;
 
 use super::{finish, next, session, succeeded, swapchain, HookResult};
 use crate::extensions::Ext;
@@ -259,13 +259,15 @@ unsafe fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32
         views.generation,
         session.pattern_generation.load(Ordering::Relaxed),
     );
+    // Read before the fill lock is taken: the FOVs sit behind a record lock, which ranks outside
+    // it (crate::lock::Rank).
+    let visible = session
+        .instance
+        .symmetric_fov
+        .then(|| session.instance.stereo_fovs())
+        .flatten();
     let inputs = || {
         let (pattern, _) = session.pattern_for(&foveation);
-        let visible = session
-            .instance
-            .symmetric_fov
-            .then(|| session.instance.stereo_fovs())
-            .flatten();
         Inputs::new(pattern, &views.fovs, visible, density.layers)
     };
     match density.refresh(index, key, inputs) {
