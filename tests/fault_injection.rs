@@ -61,13 +61,9 @@ struct Fns {
 impl Fns {
     unsafe fn load(chain: &Chain, instance: xr::Instance) -> Fns {
         let gipa = chain.gipa();
-        let f = |name: &CStr| {
-            lookup::<xr::pfn::VoidFunction>(gipa, instance, name)
-                .unwrap_or_else(|r| panic!("{name:?}: {r:?}"))
-        };
         macro_rules! get {
             ($name:literal) => {
-                std::mem::transmute(f($name))
+                lookup(gipa, instance, $name).unwrap_or_else(|r| panic!("{:?}: {r:?}", $name))
             };
         }
         Fns {
