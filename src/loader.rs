@@ -217,6 +217,7 @@ unsafe fn create_instance(
         overrides: settings::Overrides::from_env(),
         stereo_fovs: crate::lock::Mutex::new(None),
         vulkan: Default::default(),
+        lost: Default::default(),
     };
     tracing::info!(
         provided = ?exts.enabled.iter().filter(|e| exts.provided(*e)).collect::<Vec<_>>(),

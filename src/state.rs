@@ -20,7 +20,7 @@
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
-use std::sync::atomic::{AtomicI64, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
@@ -56,6 +56,8 @@ pub struct Instance {
     pub stereo_fovs: Mutex<Option<[Fov; 2]>>,
     /// What the application told the runtime about its Vulkan objects.
     pub vulkan: Mutex<VulkanSetup>,
+    /// The runtime returned XR_ERROR_INSTANCE_LOST through a call fovea passed on.
+    pub lost: AtomicBool,
 }
 
 impl Instance {
@@ -128,6 +130,8 @@ pub struct Session {
     pub gpu: Option<Arc<SessionGpu>>,
     /// The FOVs xrLocateViews last returned, which the density maps are computed for.
     pub views: Mutex<ViewFovs>,
+    /// The runtime returned XR_ERROR_SESSION_LOST through a call fovea passed on.
+    pub lost: AtomicBool,
 }
 
 impl Session {
@@ -150,6 +154,7 @@ impl Session {
             dynamic_max: AtomicUsize::new(0),
             maps_built: AtomicU64::new(0),
             maps_uploaded: AtomicU64::new(0),
+            lost: AtomicBool::new(false),
         }
     }
 

@@ -408,14 +408,40 @@ unsafe fn session_flow(
     run.call("xrEndSession", (f.end_session)(h.session))
 }
 
+/// The loss fovea saw, when the fault was XR_ERROR_SESSION_LOST or XR_ERROR_INSTANCE_LOST on a call
+/// it intercepts: from then on its own functions must answer that loss as the runtime does.
+fn loss_seen_by_fovea(fault: &Option<Fault>) -> Option<xr::Result> {
+    let f = fault.as_ref()?;
+    let loss = matches!(
+        f.result,
+        xr::Result::ERROR_SESSION_LOST | xr::Result::ERROR_INSTANCE_LOST
+    );
+    let name = std::ffi::CString::new(f.function.clone()).unwrap();
+    (loss && fovea::dispatch::hook(&name).is_some()).then_some(f.result)
+}
+
 /// fovea's own state after whatever failed: the swapchain reads back the profile last applied, and
-/// a new profile still applies. Neither call reaches the runtime, so a lost session does not
-/// change them.
-unsafe fn check_layer_state(f: &Fns, h: &Handles) {
+/// a new profile still applies; after a loss fovea saw, all three answer the loss instead.
+unsafe fn check_layer_state(f: &Fns, h: &Handles, lost: Option<xr::Result>) {
     if h.swapchain == xr::Swapchain::NULL {
         return;
     }
     let mut st = foveation_state(xr::FoveationProfileFB::from_raw(0x77));
+    if let Some(loss) = lost {
+        assert_eq!(
+            (f.get_state)(h.swapchain, &mut st as *mut _ as *mut _),
+            loss
+        );
+        let info = xr::FoveationProfileCreateInfoFB {
+            ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
+            next: null_mut(),
+        };
+        let mut p = xr::FoveationProfileFB::NULL;
+        assert_eq!((f.create_profile)(h.session, &info, &mut p), loss);
+        let st = foveation_state(h.applied);
+        assert_eq!((f.update)(h.swapchain, &st as *const _ as *const _), loss);
+        return;
+    }
     assert_eq!(
         (f.get_state)(h.swapchain, &mut st as *mut _ as *mut _),
         xr::Result::SUCCESS
@@ -504,7 +530,7 @@ fn headless_run(chain: &Chain, fault: Option<Fault>) -> (Run, Vec<&'static str>)
         let f = Fns::load(chain, instance);
         let flowed = headless_flow(&mut run, &f, &mut h);
         if flowed.is_err() {
-            check_layer_state(&f, &h);
+            check_layer_state(&f, &h, loss_seen_by_fovea(&run.fault));
         }
         teardown(&mut run, &f, &h);
         assert_forgotten(&f, &h);
@@ -573,8 +599,14 @@ fn every_runtime_call_of_a_headless_session_failing_in_turn() {
         );
         retried += run.retried;
     }
+    let losses = faults
+        .iter()
+        .filter(|f| !f.function.starts_with("xrDestroy"))
+        .filter(|f| loss_seen_by_fovea(&Some((*f).clone())).is_some())
+        .count();
     eprintln!(
-        "fault_injection: {} runtime calls, {} faults injected, {retried} refused destroys retried",
+        "fault_injection: {} runtime calls, {} faults injected, {losses} losses fovea saw and \
+         answered, {retried} refused destroys retried",
         seen.len(),
         faults.len()
     );
@@ -795,7 +827,7 @@ fn vulkan_run(chain: &Chain, entry: &ash::Entry, fault: Option<Fault>) -> Result
                 )
             });
         if flowed.is_err() {
-            check_layer_state(&f, &h);
+            check_layer_state(&f, &h, loss_seen_by_fovea(&run.fault));
         }
         teardown(&mut run, &f, &h);
         assert_forgotten(&f, &h);

@@ -16,13 +16,15 @@
 use std::collections::HashSet;
 use std::ptr::null_mut;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Barrier, Mutex};
+use std::sync::{Arc, Barrier};
 use std::time::{Duration, Instant};
 
 use fovea_harness::app::API_1_0;
 use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
+// parking_lot rather than std: ThreadSanitizer sees its atomics (std is not instrumented).
+use parking_lot::Mutex;
 use xr::Handle;
 
 const WORKERS: usize = 4;
@@ -179,7 +181,7 @@ fn four_threads_of_profiles_and_updates_beside_the_frame_loop() {
                     let mut last = xr::FoveationProfileFB::NULL;
                     for i in 0..n {
                         let p = profile(&f, session, ((w as u64 + i) % 4) as i32);
-                        created.lock().unwrap().insert(p.into_raw());
+                        created.lock().insert(p.into_raw());
                         update(&f, own, p);
                         update(&f, shared, p);
                         updates.fetch_add(2, Ordering::Relaxed);
@@ -188,7 +190,7 @@ fn four_threads_of_profiles_and_updates_beside_the_frame_loop() {
                         let seen = state(&f, shared);
                         assert!(
                             seen == xr::FoveationProfileFB::NULL
-                                || created.lock().unwrap().contains(&seen.into_raw()),
+                                || created.lock().contains(&seen.into_raw()),
                             "the shared swapchain reads {seen:?}, which no worker created"
                         );
                         // Keep every 7th profile a while; destroy the rest at once (while other

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{finish, fov_from_xr, instance, next, session, succeeded};
+use super::{finish, fov_from_xr, instance, next, observed_instance, session, succeeded};
 use crate::density::Fov;
 use crate::dispatch;
 use crate::extensions::Ext;
@@ -60,7 +60,7 @@ pub unsafe extern "system" fn create_session(
                 || out.is_null()
                 || (*info).ty != xr::StructureType::SESSION_CREATE_INFO
             {
-                return Ok(f(inst, info, out));
+                return Ok(observed_instance(&state, f(inst, info, out)));
             }
             let binding = match ffi::find_in_chain::<xr::GraphicsBindingVulkanKHR>(
                 (*info).next,
@@ -78,7 +78,7 @@ pub unsafe extern "system" fn create_session(
                 }),
                 Err(_) => return Err(xr::Result::ERROR_VALIDATION_FAILURE),
             };
-            let r = f(inst, info, out);
+            let r = observed_instance(&state, f(inst, info, out));
             if succeeded(r) {
                 let handle = *out;
                 let gpu = binding
@@ -105,9 +105,10 @@ pub unsafe extern "system" fn destroy_session(handle: xr::Session) -> xr::Result
         finish((|| {
             let state = session(handle)?;
             let f = next(state.instance.next.destroy_session)?;
+            let instance = state.instance.clone();
             drop(state);
             let detached = registry().detach_session(handle);
-            let r = f(handle);
+            let r = observed_instance(&instance, f(handle));
             if !succeeded(r) {
                 tracing::warn!(
                     ?r,
@@ -133,7 +134,7 @@ pub unsafe extern "system" fn enumerate_view_configuration_views(
         finish((|| {
             let state = instance(inst)?;
             let f = next(state.next.enumerate_view_configuration_views)?;
-            let r = f(inst, system, config, capacity, count, views);
+            let r = observed_instance(&state, f(inst, system, config, capacity, count, views));
             if succeeded(r)
                 && state.symmetric_fov
                 && config == xr::ViewConfigurationType::PRIMARY_STEREO

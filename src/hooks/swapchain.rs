@@ -8,7 +8,7 @@ use xr::Handle;
 
 use crate::lock::Mutex;
 
-use super::{finish, next, session, succeeded, swapchain, HookResult};
+use super::{finish, next, observed, session, succeeded, swapchain, HookResult};
 use crate::extensions::Ext;
 use crate::fdm::{DensityImages, Inputs, Refreshed};
 use crate::ffi::{self, guard};
@@ -71,7 +71,7 @@ pub unsafe extern "system" fn create_swapchain(
                 || out.is_null()
                 || (*info).ty != xr::StructureType::SWAPCHAIN_CREATE_INFO
             {
-                return Ok(f(sess, info, out));
+                return Ok(observed(&state, f(sess, info, out)));
             }
             let exts = state.instance.extensions;
             let i = &*info;
@@ -107,7 +107,7 @@ pub unsafe extern "system" fn create_swapchain(
             .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
             let mut down = *i;
             down.next = chain.head();
-            let r = f(sess, &down, out);
+            let r = observed(&state, f(sess, &down, out));
             if succeeded(r) {
                 let density = if req.flags & FRAGMENT_DENSITY_MAP_BIT != 0
                     && exts.provided(Ext::FoveationVulkan)
@@ -156,7 +156,7 @@ pub unsafe extern "system" fn destroy_swapchain(handle: xr::Swapchain) -> xr::Re
                 // synchronisation): the handle is gone.
                 return Err(xr::Result::ERROR_HANDLE_INVALID);
             };
-            let r = f(handle);
+            let r = observed(&state.session, f(handle));
             if succeeded(r) {
                 if state.foveation.is_some() {
                     state.session.refresh_dynamic_max();
@@ -187,7 +187,7 @@ pub unsafe extern "system" fn enumerate_swapchain_images(
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.enumerate_swapchain_images)?;
-            let r = f(handle, capacity, count, images);
+            let r = observed(&state.session, f(handle, capacity, count, images));
             let Some(density) = &state.density else {
                 return Ok(r);
             };
@@ -233,7 +233,7 @@ pub unsafe extern "system" fn acquire_swapchain_image(
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.acquire_swapchain_image)?;
-            let r = f(handle, info, index);
+            let r = observed(&state.session, f(handle, info, index));
             if let (Some(density), true) = (&state.density, succeeded(r) && !index.is_null()) {
                 refresh_density(&state, density, *index);
             }
@@ -336,7 +336,7 @@ pub unsafe extern "system" fn wait_swapchain_image(
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.wait_swapchain_image)?;
-            Ok(f(handle, info))
+            Ok(observed(&state.session, f(handle, info)))
         })())
     })
 }
@@ -350,7 +350,7 @@ pub unsafe extern "system" fn release_swapchain_image(
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.release_swapchain_image)?;
-            Ok(f(handle, info))
+            Ok(observed(&state.session, f(handle, info)))
         })())
     })
 }
