@@ -223,6 +223,9 @@ fn four_threads_of_profiles_and_updates_beside_the_frame_loop() {
         while !workers.iter().all(|w| w.is_finished()) {
             lp.frame().expect("frame");
             frames += 1;
+            // The simulated runtime does not block in xrWaitFrame: without a pause the loop would
+            // starve the workers wherever threads are serialised (valgrind runs one at a time).
+            std::thread::sleep(Duration::from_micros(200));
         }
         let finals: Vec<_> = workers.into_iter().map(|w| w.join().unwrap()).collect();
         (frames, finals)
