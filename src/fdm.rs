@@ -30,9 +30,9 @@
 use std::ffi::CStr;
 use std::sync::{Arc, OnceLock};
 
+use crate::lock::{Mutex, Rank};
 use ash::vk;
 use ash::vk::Handle as _;
-use parking_lot::Mutex;
 
 use crate::density::{self, Fov, Grid, Pattern, Rect, View};
 use crate::state::{VulkanBinding, MAX_VIEWS};
@@ -346,7 +346,7 @@ impl SessionGpu {
             texel: support.texel(),
             usage,
             physical_device,
-            submit: Mutex::new(Submit { queue, pool, fence }),
+            submit: Mutex::ranked(Rank::GpuSubmit, "gpu submit", Submit { queue, pool, fence }),
         })
     }
 }
@@ -552,12 +552,16 @@ impl DensityImages {
             images: Vec::new(),
             staging: (vk::Buffer::null(), vk::DeviceMemory::null()),
             command_buffers: Vec::new(),
-            fill: Mutex::new(Fill {
-                filled: vec![None; count as usize],
-                cached: None,
-                bytes: vec![0; size as usize],
-                mapped: Mapped(std::ptr::null_mut()),
-            }),
+            fill: Mutex::ranked(
+                Rank::DensityFill,
+                "density fill",
+                Fill {
+                    filled: vec![None; count as usize],
+                    cached: None,
+                    bytes: vec![0; size as usize],
+                    mapped: Mapped(std::ptr::null_mut()),
+                },
+            ),
         };
         // From here on, an early return drops `out`, which destroys what exists so far.
         for _ in 0..count {

@@ -20,6 +20,7 @@ pub mod fdm;
 pub mod ffi;
 mod hooks;
 pub mod loader;
+pub mod lock;
 pub mod log;
 pub mod projection;
 pub mod settings;

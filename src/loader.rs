@@ -215,8 +215,9 @@ unsafe fn create_instance(
         api_version,
         symmetric_fov: settings.symmetric_fov,
         overrides: settings::Overrides::from_env(),
-        stereo_fovs: parking_lot::Mutex::new(None),
+        stereo_fovs: crate::lock::Mutex::new(None),
         vulkan: Default::default(),
+        lost: Default::default(),
     };
     tracing::info!(
         provided = ?exts.enabled.iter().filter(|e| exts.provided(*e)).collect::<Vec<_>>(),

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::time::SystemTime;
 
-use parking_lot::Mutex;
+use crate::lock::{Mutex, Rank};
 
 use crate::density::Level;
 
@@ -163,10 +163,14 @@ impl Overrides {
         let o = Overrides {
             env,
             file,
-            state: Mutex::new(FileState {
-                current: env,
-                ..FileState::default()
-            }),
+            state: Mutex::ranked(
+                Rank::Settings,
+                "debug properties",
+                FileState {
+                    current: env,
+                    ..FileState::default()
+                },
+            ),
             next_poll_ns: AtomicI64::new(0),
         };
         o.reload();

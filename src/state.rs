@@ -6,17 +6,26 @@
 //! calling down. Children hold their parent's `Arc`, which is how a hook on a swapchain reaches the
 //! instance's next-layer table.
 //!
-//! Lock order, where more than one is held: a map lock is never held while calling into the next
-//! layer or while taking a record's own lock. Record locks are leaves.
+//! Lock order ([`crate::lock::Rank`], outermost first; checked in debug builds by [`crate::lock`]):
+//! 1. a map lock (the handle maps, the Vulkan device list) is held alone: never while another lock
+//!    is held, never while taking another lock, never while calling into the next layer;
+//! 2. a record's own lock (a session's frame loop or views, a swapchain's foveation state, an
+//!    instance's FOVs or Vulkan set-up); records never lock each other;
+//! 3. a swapchain's density-image fill state;
+//! 4. the session's GPU submission state (queue, command pool, fence);
+//! 5. the debug properties, read under any of the above.
+//!
+//! No lock is held while calling into the next layer. The logging file's lock is a leaf inside
+//! `tracing` and is not ranked.
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
-use std::sync::atomic::{AtomicI64, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
+use crate::lock::{MapLock, Mutex, Rank};
 use openxr_sys as xr;
-use parking_lot::{Mutex, RwLock};
 use xr::Handle;
 
 use crate::density::{Fov, Level, Pattern};
@@ -47,6 +56,8 @@ pub struct Instance {
     pub stereo_fovs: Mutex<Option<[Fov; 2]>>,
     /// What the application told the runtime about its Vulkan objects.
     pub vulkan: Mutex<VulkanSetup>,
+    /// The runtime returned XR_ERROR_INSTANCE_LOST through a call fovea passed on.
+    pub lost: AtomicBool,
 }
 
 impl Instance {
@@ -119,6 +130,8 @@ pub struct Session {
     pub gpu: Option<Arc<SessionGpu>>,
     /// The FOVs xrLocateViews last returned, which the density maps are computed for.
     pub views: Mutex<ViewFovs>,
+    /// The runtime returned XR_ERROR_SESSION_LOST through a call fovea passed on.
+    pub lost: AtomicBool,
 }
 
 impl Session {
@@ -141,6 +154,7 @@ impl Session {
             dynamic_max: AtomicUsize::new(0),
             maps_built: AtomicU64::new(0),
             maps_uploaded: AtomicU64::new(0),
+            lost: AtomicBool::new(false),
         }
     }
 
@@ -327,10 +341,9 @@ impl Hasher for HandleHasher {
 }
 
 /// A map from raw handle values to records.
-pub type HandleMap<T> = RwLock<HashMap<u64, Arc<T>, BuildHasherDefault<HandleHasher>>>;
+pub type HandleMap<T> = MapLock<HashMap<u64, Arc<T>, BuildHasherDefault<HandleHasher>>>;
 
 /// Every live handle fovea knows.
-#[derive(Default)]
 pub struct Registry {
     pub instances: HandleMap<Instance>,
     pub sessions: HandleMap<Session>,
@@ -339,6 +352,30 @@ pub struct Registry {
     /// VkDevices created through xrCreateVulkanDeviceKHR, keyed by the raw VkDevice.
     pub vulkan_devices: Mutex<HashMap<u64, VulkanDevice>>,
     next_profile: AtomicU64,
+}
+
+/// Records taken out of the [`Registry`] while a destroy goes down. Dropping it releases them (and
+/// with the last reference, the density images and fovea's Vulkan objects they own).
+#[derive(Default)]
+pub struct Detached {
+    pub instance: Option<Arc<Instance>>,
+    pub sessions: Vec<Arc<Session>>,
+    pub swapchains: Vec<Arc<Swapchain>>,
+    pub profiles: Vec<Arc<Profile>>,
+    pub vulkan_devices: Vec<(u64, VulkanDevice)>,
+}
+
+impl Default for Registry {
+    fn default() -> Registry {
+        Registry {
+            instances: MapLock::new("instances", HashMap::default()),
+            sessions: MapLock::new("sessions", HashMap::default()),
+            swapchains: MapLock::new("swapchains", HashMap::default()),
+            profiles: MapLock::new("profiles", HashMap::default()),
+            vulkan_devices: Mutex::ranked(Rank::Map, "vulkan devices", HashMap::new()),
+            next_profile: AtomicU64::new(0),
+        }
+    }
 }
 
 /// The process-wide registry. A static behind `OnceLock`: no `static mut`.
@@ -395,36 +432,89 @@ impl Registry {
         )
     }
 
-    /// Forgets a session's swapchains and profiles (they die with it: xr.xml parents) and returns
-    /// the swapchain records so their resources can be released outside the map locks.
-    pub fn remove_session_children(&self, session: xr::Session) -> Vec<Arc<Swapchain>> {
-        self.profiles.write().retain(|_, p| p.session != session);
+    /// Takes a session, its swapchains and its profiles (they die with it: xr.xml parents) out of
+    /// the maps, for `xrDestroySession`. They are taken out before the call goes down, so that a
+    /// handle value the runtime frees and hands out again at once cannot meet a stale record, and
+    /// kept until the runtime answered: a destroy the runtime refuses leaves the session alive, and
+    /// [`Registry::restore`] puts them back.
+    pub fn detach_session(&self, session: xr::Session) -> Detached {
+        let mut d = Detached::default();
+        self.detach_session_into(session, &mut d);
+        d
+    }
+
+    fn detach_session_into(&self, session: xr::Session, d: &mut Detached) {
+        d.sessions
+            .extend(self.sessions.write().remove(&session.into_raw()));
+        let mut profiles = self.profiles.write();
+        let dead: Vec<u64> = profiles
+            .iter()
+            .filter(|(_, p)| p.session == session)
+            .map(|(k, _)| *k)
+            .collect();
+        d.profiles
+            .extend(dead.iter().filter_map(|k| profiles.remove(k)));
+        drop(profiles);
         let mut swapchains = self.swapchains.write();
         let dead: Vec<u64> = swapchains
             .iter()
             .filter(|(_, s)| s.session.handle == session)
             .map(|(k, _)| *k)
             .collect();
-        dead.iter().filter_map(|k| swapchains.remove(k)).collect()
+        d.swapchains
+            .extend(dead.iter().filter_map(|k| swapchains.remove(k)));
     }
 
-    /// Forgets an instance's sessions (and their children); returns the sessions removed.
-    pub fn remove_instance_children(&self, instance: xr::Instance) -> Vec<Arc<Session>> {
-        let dead: Vec<Arc<Session>> = {
-            let mut sessions = self.sessions.write();
-            let keys: Vec<u64> = sessions
-                .iter()
-                .filter(|(_, s)| s.instance.handle == instance)
-                .map(|(k, _)| *k)
-                .collect();
-            keys.iter().filter_map(|k| sessions.remove(k)).collect()
+    /// Takes an instance and everything under it out of the maps, for `xrDestroyInstance` (see
+    /// [`Registry::detach_session`]).
+    pub fn detach_instance(&self, instance: xr::Instance) -> Detached {
+        let mut d = Detached {
+            instance: self.instances.write().remove(&instance.into_raw()),
+            ..Detached::default()
         };
-        for s in &dead {
-            self.remove_session_children(s.handle);
+        let sessions: Vec<xr::Session> = self
+            .sessions
+            .read()
+            .values()
+            .filter(|s| s.instance.handle == instance)
+            .map(|s| s.handle)
+            .collect();
+        for s in sessions {
+            self.detach_session_into(s, &mut d);
         }
         let raw = instance.into_raw();
-        self.vulkan_devices.lock().retain(|_, d| d.instance != raw);
-        dead
+        let mut devices = self.vulkan_devices.lock();
+        let dead: Vec<u64> = devices
+            .iter()
+            .filter(|(_, dev)| dev.instance == raw)
+            .map(|(k, _)| *k)
+            .collect();
+        d.vulkan_devices
+            .extend(dead.iter().filter_map(|k| devices.remove_entry(k)));
+        d
+    }
+
+    /// Puts detached records back: the runtime refused the destroy, so the handles still live.
+    pub fn restore(&self, d: Detached) {
+        if let Some(i) = d.instance {
+            self.instances.write().insert(i.handle.into_raw(), i);
+        }
+        let mut sessions = self.sessions.write();
+        for s in d.sessions {
+            sessions.insert(s.handle.into_raw(), s);
+        }
+        drop(sessions);
+        let mut swapchains = self.swapchains.write();
+        for s in d.swapchains {
+            swapchains.insert(s.handle.into_raw(), s);
+        }
+        drop(swapchains);
+        let mut profiles = self.profiles.write();
+        for p in d.profiles {
+            profiles.insert(p.handle.into_raw(), p);
+        }
+        drop(profiles);
+        self.vulkan_devices.lock().extend(d.vulkan_devices);
     }
 
     /// How many records of each kind are alive: (instances, sessions, swapchains, profiles).

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{finish, session, swapchain, HookResult};
+use super::{check_lost, finish, session, swapchain, HookResult};
 use crate::extensions::Ext;
 use crate::ffi::{self, guard};
 use crate::state::{registry, Profile, ProfileParams};
@@ -55,6 +55,7 @@ pub unsafe extern "system" fn create_profile(
     guard("xrCreateFoveationProfileFB", || {
         finish((|| {
             let s = session(sess)?;
+            check_lost(&s)?;
             if info.is_null()
                 || out.is_null()
                 || (*info).ty != xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB
@@ -98,6 +99,7 @@ pub unsafe extern "system" fn update_swapchain(
     guard("xrUpdateSwapchainFB", || {
         finish((|| {
             let sc = swapchain(handle)?;
+            check_lost(&sc.session)?;
             if state.is_null() {
                 return Err(xr::Result::ERROR_VALIDATION_FAILURE);
             }
@@ -155,6 +157,7 @@ pub unsafe extern "system" fn get_swapchain_state(
     guard("xrGetSwapchainStateFB", || {
         finish((|| {
             let sc = swapchain(handle)?;
+            check_lost(&sc.session)?;
             if state.is_null() {
                 return Err(xr::Result::ERROR_VALIDATION_FAILURE);
             }

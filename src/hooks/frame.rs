@@ -7,7 +7,7 @@ use std::time::Instant;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{finish, fov_from_xr, fov_to_xr, next, session, succeeded};
+use super::{finish, fov_from_xr, fov_to_xr, next, observed, session, succeeded};
 use crate::density::Rect;
 use crate::dynamic::LADDER;
 use crate::fdm::SubmittedView;
@@ -25,7 +25,7 @@ pub unsafe extern "system" fn wait_frame(
     guard("xrWaitFrame", || {
         finish((|| {
             let s = session(sess)?;
-            let r = next(s.instance.next.wait_frame)?(sess, info, state);
+            let r = observed(&s, next(s.instance.next.wait_frame)?(sess, info, state));
             if succeeded(r) && !state.is_null() {
                 let display = (*state).predicted_display_time.as_nanos();
                 let period = (*state).predicted_display_period.as_nanos();
@@ -54,7 +54,7 @@ pub unsafe extern "system" fn begin_frame(
     guard("xrBeginFrame", || {
         finish((|| {
             let s = session(sess)?;
-            let r = next(s.instance.next.begin_frame)?(sess, info);
+            let r = observed(&s, next(s.instance.next.begin_frame)?(sess, info));
             if succeeded(r) {
                 s.frame.lock().begin_at = Some(Instant::now());
             }
@@ -107,7 +107,7 @@ pub unsafe extern "system" fn end_frame(
             if s.gpu.is_some() {
                 learn_submitted(&s, info);
             }
-            Ok(next(s.instance.next.end_frame)?(sess, info))
+            Ok(observed(&s, next(s.instance.next.end_frame)?(sess, info)))
         })())
     })
 }
@@ -222,8 +222,8 @@ pub unsafe extern "system" fn locate_views(
     guard("xrLocateViews", || {
         finish((|| {
             let s = session(sess)?;
-            let r =
-                next(s.instance.next.locate_views)?(sess, info, view_state, capacity, count, views);
+            let locate = next(s.instance.next.locate_views)?;
+            let r = observed(&s, locate(sess, info, view_state, capacity, count, views));
             if succeeded(r) {
                 learn_stereo_views(&s.instance, info, capacity, count, views);
             }

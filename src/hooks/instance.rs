@@ -1,23 +1,31 @@
 //! Instance lifetime.
 
 use openxr_sys as xr;
-use xr::Handle;
 
-use super::{finish, instance, next};
+use super::{finish, instance, next, succeeded};
 use crate::ffi::guard;
 use crate::state::registry;
 
-/// `xrDestroyInstance`: destroys the instance's sessions' layer state (their children die with them,
-/// fundamentals.adoc "Object Lifetime"), then passes the call on.
+/// `xrDestroyInstance`: the instance's sessions, swapchains and profiles die with it
+/// (fundamentals.adoc "Object Lifetime"). As in `xrDestroySession`, their records leave the
+/// registry before the call goes down, are released once the runtime has destroyed the instance,
+/// and go back where it refuses, so the application can retry.
 pub unsafe extern "system" fn destroy_instance(handle: xr::Instance) -> xr::Result {
     guard("xrDestroyInstance", || {
         finish((|| {
             let state = instance(handle)?;
             let f = next(state.next.destroy_instance)?;
-            let sessions = registry().remove_instance_children(handle);
-            drop(sessions);
-            registry().instances.write().remove(&handle.into_raw());
-            Ok(f(handle))
+            drop(state);
+            let detached = registry().detach_instance(handle);
+            let r = f(handle);
+            if !succeeded(r) {
+                tracing::warn!(
+                    ?r,
+                    "the runtime refused xrDestroyInstance; the instance lives on"
+                );
+                registry().restore(detached);
+            }
+            Ok(r)
         })())
     })
 }

@@ -51,7 +51,44 @@ pub fn swapchain(h: xr::Swapchain) -> HookResult<Arc<Swapchain>> {
 /// The next layer's pointer. A hook is only handed out where the next layer offers the function
 /// (see `loader::resolve`), so `None` means the table was corrupted: report a runtime failure.
 pub fn next<F>(f: Option<F>) -> HookResult<F> {
+    crate::lock::assert_none_held("going down to the next layer");
     f.ok_or(xr::Result::ERROR_RUNTIME_FAILURE)
+}
+
+/// A loss the runtime reported is final: once XR_ERROR_INSTANCE_LOST or XR_ERROR_SESSION_LOST is
+/// returned, every later non-destroy call on that object or its children returns it too
+/// (fundamentals.adoc, "Instance Lost", "Session Lost"). fovea's own functions are part of the
+/// runtime as the application sees it, so they follow: they answer the loss once fovea saw the
+/// runtime report it through a call it passed on. Losses reported through calls fovea does not
+/// intercept (xrPollEvent, xrBeginSession, ...) stay unseen until an intercepted call reports them.
+pub fn check_lost(session: &Session) -> HookResult<()> {
+    use std::sync::atomic::Ordering::Relaxed;
+    if session.instance.lost.load(Relaxed) {
+        return Err(xr::Result::ERROR_INSTANCE_LOST);
+    }
+    if session.lost.load(Relaxed) {
+        return Err(xr::Result::ERROR_SESSION_LOST);
+    }
+    Ok(())
+}
+
+/// Notes a loss in the result of a call on `session` (or its children) that fovea passed on.
+pub fn observed(session: &Session, r: xr::Result) -> xr::Result {
+    use std::sync::atomic::Ordering::Relaxed;
+    if r == xr::Result::ERROR_SESSION_LOST {
+        session.lost.store(true, Relaxed);
+    }
+    observed_instance(&session.instance, r)
+}
+
+/// Notes an instance loss in the result of a call on `instance` that fovea passed on.
+pub fn observed_instance(instance: &Instance, r: xr::Result) -> xr::Result {
+    if r == xr::Result::ERROR_INSTANCE_LOST {
+        instance
+            .lost
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+    r
 }
 
 /// Whether a result is a success code (XR_SUCCEEDED).

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{finish, fov_from_xr, instance, next, session, succeeded};
+use super::{finish, fov_from_xr, instance, next, observed_instance, session, succeeded};
 use crate::density::Fov;
 use crate::dispatch;
 use crate::extensions::Ext;
@@ -60,7 +60,7 @@ pub unsafe extern "system" fn create_session(
                 || out.is_null()
                 || (*info).ty != xr::StructureType::SESSION_CREATE_INFO
             {
-                return Ok(f(inst, info, out));
+                return Ok(observed_instance(&state, f(inst, info, out)));
             }
             let binding = match ffi::find_in_chain::<xr::GraphicsBindingVulkanKHR>(
                 (*info).next,
@@ -78,7 +78,7 @@ pub unsafe extern "system" fn create_session(
                 }),
                 Err(_) => return Err(xr::Result::ERROR_VALIDATION_FAILURE),
             };
-            let r = f(inst, info, out);
+            let r = observed_instance(&state, f(inst, info, out));
             if succeeded(r) {
                 let handle = *out;
                 let gpu = binding
@@ -95,17 +95,28 @@ pub unsafe extern "system" fn create_session(
     })
 }
 
-/// `xrDestroySession`: the session's swapchains and profiles die with it (xr.xml parents); their
-/// layer resources are released before the call goes down, while the application's device still
-/// exists.
+/// `xrDestroySession`: the session's swapchains and profiles die with it (xr.xml parents). Their
+/// records leave the registry before the call goes down and are released once the runtime has
+/// destroyed the session, still before the call returns and so while the application's device
+/// exists (it must outlive the session). Where the runtime refuses, the session is still alive and
+/// the records go back: a retry, or any other call on it, finds them.
 pub unsafe extern "system" fn destroy_session(handle: xr::Session) -> xr::Result {
     guard("xrDestroySession", || {
         finish((|| {
             let state = session(handle)?;
             let f = next(state.instance.next.destroy_session)?;
-            drop(registry().remove_session_children(handle));
-            registry().sessions.write().remove(&handle.into_raw());
-            Ok(f(handle))
+            let instance = state.instance.clone();
+            drop(state);
+            let detached = registry().detach_session(handle);
+            let r = observed_instance(&instance, f(handle));
+            if !succeeded(r) {
+                tracing::warn!(
+                    ?r,
+                    "the runtime refused xrDestroySession; the session lives on"
+                );
+                registry().restore(detached);
+            }
+            Ok(r)
         })())
     })
 }
@@ -123,7 +134,7 @@ pub unsafe extern "system" fn enumerate_view_configuration_views(
         finish((|| {
             let state = instance(inst)?;
             let f = next(state.next.enumerate_view_configuration_views)?;
-            let r = f(inst, system, config, capacity, count, views);
+            let r = observed_instance(&state, f(inst, system, config, capacity, count, views));
             if succeeded(r)
                 && state.symmetric_fov
                 && config == xr::ViewConfigurationType::PRIMARY_STEREO

@@ -6,9 +6,9 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use parking_lot::Mutex;
+use crate::lock::Mutex;
 
-use super::{finish, next, session, succeeded, swapchain, HookResult};
+use super::{finish, next, observed, session, succeeded, swapchain, HookResult};
 use crate::extensions::Ext;
 use crate::fdm::{DensityImages, Inputs, Refreshed};
 use crate::ffi::{self, guard};
@@ -91,7 +91,7 @@ pub unsafe extern "system" fn create_swapchain(
                 || out.is_null()
                 || (*info).ty != xr::StructureType::SWAPCHAIN_CREATE_INFO
             {
-                return Ok(f(sess, info, out));
+                return Ok(observed(&state, f(sess, info, out)));
             }
             let exts = state.instance.extensions;
             let i = &*info;
@@ -140,7 +140,7 @@ pub unsafe extern "system" fn create_swapchain(
             .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
             let mut down = *i;
             down.next = chain.head();
-            let r = f(sess, &down, out);
+            let r = observed(&state, f(sess, &down, out));
             if succeeded(r) {
                 let density = if req.flags & FRAGMENT_DENSITY_MAP_BIT != 0
                     && exts.provided(Ext::FoveationVulkan)
@@ -177,18 +177,29 @@ pub unsafe extern "system" fn create_swapchain(
 }
 
 /// `xrDestroySwapchain`: forgets the swapchain; its density images and their Vulkan objects are
-/// destroyed with the record, after the runtime destroyed its images.
+/// destroyed with the record, after the runtime destroyed its images. The record leaves the registry
+/// before the call goes down (a handle value the runtime reuses at once cannot meet it) and goes
+/// back where the runtime refuses, since the swapchain then still lives.
 pub unsafe extern "system" fn destroy_swapchain(handle: xr::Swapchain) -> xr::Result {
     guard("xrDestroySwapchain", || {
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.destroy_swapchain)?;
-            let r = f(handle);
+            let Some(record) = registry().swapchains.write().remove(&handle.into_raw()) else {
+                // Another thread destroyed it meanwhile (the application broke external
+                // synchronisation): the handle is gone.
+                return Err(xr::Result::ERROR_HANDLE_INVALID);
+            };
+            let r = observed(&state.session, f(handle));
             if succeeded(r) {
-                registry().swapchains.write().remove(&handle.into_raw());
                 if state.foveation.is_some() {
                     state.session.refresh_dynamic_max();
                 }
+            } else {
+                registry()
+                    .swapchains
+                    .write()
+                    .insert(handle.into_raw(), record);
             }
             Ok(r)
         })())
@@ -210,7 +221,7 @@ pub unsafe extern "system" fn enumerate_swapchain_images(
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.enumerate_swapchain_images)?;
-            let r = f(handle, capacity, count, images);
+            let r = observed(&state.session, f(handle, capacity, count, images));
             let Some(density) = &state.density else {
                 return Ok(r);
             };
@@ -256,7 +267,7 @@ pub unsafe extern "system" fn acquire_swapchain_image(
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.acquire_swapchain_image)?;
-            let r = f(handle, info, index);
+            let r = observed(&state.session, f(handle, info, index));
             if let (Some(density), true) = (&state.density, succeeded(r) && !index.is_null()) {
                 refresh_density(&state, density, *index);
             }
@@ -284,13 +295,15 @@ unsafe fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32
         session.pattern_generation.load(Ordering::Relaxed),
         submitted.generation,
     );
+    // Read before the fill lock is taken: the FOVs sit behind a record lock, which ranks outside
+    // it (crate::lock::Rank).
+    let visible = session
+        .instance
+        .symmetric_fov
+        .then(|| session.instance.stereo_fovs())
+        .flatten();
+    let (pattern, _) = session.pattern_for(&foveation);
     let inputs = || {
-        let (pattern, _) = session.pattern_for(&foveation);
-        let visible = session
-            .instance
-            .symmetric_fov
-            .then(|| session.instance.stereo_fovs())
-            .flatten();
         Inputs::new(
             pattern,
             [state.info.width, state.info.height],
@@ -366,7 +379,7 @@ pub unsafe extern "system" fn wait_swapchain_image(
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.wait_swapchain_image)?;
-            Ok(f(handle, info))
+            Ok(observed(&state.session, f(handle, info)))
         })())
     })
 }
@@ -380,7 +393,7 @@ pub unsafe extern "system" fn release_swapchain_image(
         finish((|| {
             let state = swapchain(handle)?;
             let f = next(state.session.instance.next.release_swapchain_image)?;
-            Ok(f(handle, info))
+            Ok(observed(&state.session, f(handle, info)))
         })())
     })
 }
