@@ -14,8 +14,10 @@
 //!    projection layer; after `--frames N` (default: each level twice) the app requests exit.
 //!
 //! It does not render *through* the density images: that needs a render pass with a
-//! `VkRenderPassFragmentDensityMapCreateInfoEXT` on a GPU with the extension (lavapipe has none);
-//! the images are the ones such a render pass would attach.
+//! `VkRenderPassFragmentDensityMapCreateInfoEXT` on a GPU with the extension (lavapipe has none),
+//! and no such GPU has run this example yet. Where the device has no fragment density maps, each
+//! frame blits the density map over a corner of the image as a debug overlay, which is how an
+//! engine without FDM can still see what fovea computed.
 //!
 //! Against the simulated headset through the system loader (the checked-in manifests point at
 //! target/release):
@@ -58,6 +60,8 @@ struct Outcome {
     levels_applied: Vec<xr::FoveationLevelFB>,
     /// VK_EXT_fragment_density_map and its feature were enabled on the device.
     fdm_enabled: bool,
+    /// Frames drawn with the density map overlaid (where the device has no FDM).
+    overlays: u64,
 }
 
 fn main() {
@@ -73,7 +77,7 @@ fn main() {
         Ok(o) => {
             println!(
                 "foveated_vulkan: {} frames on a {}x{} swapchain; density images {:?}; \
-                 levels {:?}; VK_EXT_fragment_density_map {}",
+                 levels {:?}; VK_EXT_fragment_density_map {}; density overlay on {} frames",
                 o.frames,
                 o.swapchain_size.0,
                 o.swapchain_size.1,
@@ -83,6 +87,7 @@ fn main() {
                     .collect::<Vec<_>>(),
                 o.levels_applied,
                 if o.fdm_enabled { "enabled" } else { "absent" },
+                o.overlays,
             );
         }
         Err(e) => {
@@ -248,6 +253,18 @@ unsafe fn run_vulkan(
         vk::Device::from_raw(raw_device as u64),
     );
     let queue = device.get_device_queue(queue_family, 0);
+    // The debug overlay blits the R8G8 density map onto the colour image: both formats must allow it.
+    let blit = |format, feature| {
+        vk_instance
+            .get_physical_device_format_properties(physical_device, format)
+            .optimal_tiling_features
+            .contains(feature)
+    };
+    let overlay = !fdm_enabled
+        && blit(vk::Format::R8G8_UNORM, vk::FormatFeatureFlags::BLIT_SRC)
+        && [vk::Format::R8G8B8A8_SRGB, vk::Format::B8G8R8A8_SRGB]
+            .into_iter()
+            .all(|f| blit(f, vk::FormatFeatureFlags::BLIT_DST));
 
     let result = session_loop(
         instance,
@@ -256,6 +273,7 @@ unsafe fn run_vulkan(
         max_frames,
         (&device, queue, queue_family),
         (raw_instance, physical_device, raw_device),
+        overlay,
     );
     // OpenXR objects are gone (dropped in `session_loop`) before the Vulkan objects they used.
     device.device_wait_idle().ok();
@@ -283,6 +301,7 @@ unsafe fn session_loop(
         vk::PhysicalDevice,
         xr::sys::platform::VkDevice,
     ),
+    overlay: bool,
 ) -> Result<Outcome, String> {
     let (session, mut frame_wait, mut frame_stream) = instance
         .create_session::<xr::Vulkan>(
@@ -453,6 +472,7 @@ unsafe fn session_loop(
     let mut event_storage = xr::EventDataBuffer::new();
     let mut running = false;
     let mut frames = 0u64;
+    let mut overlays = 0u64;
     let mut level = None;
     let mut exit_requested = false;
     let result = 'main: loop {
@@ -519,14 +539,16 @@ unsafe fn session_loop(
         swapchain
             .wait_image(xr::Duration::INFINITE)
             .map_err(|e| format!("xrWaitSwapchainImage: {e}"))?;
+        let (density_image, dw, dh) = density_images[index as usize];
         clear(
             device,
-            queue,
-            cmd,
-            fence,
+            (queue, cmd, fence),
             vk::Image::from_raw(images[index as usize].image),
+            (width, height),
             level.unwrap_or(0),
+            overlay.then(|| (vk::Image::from_raw(density_image), dw, dh)),
         )?;
+        overlays += u64::from(overlay);
         swapchain
             .release_image()
             .map_err(|e| format!("xrReleaseSwapchainImage: {e}"))?;
@@ -577,22 +599,26 @@ unsafe fn session_loop(
         density_images,
         levels_applied,
         fdm_enabled: false,
+        overlays,
     })
 }
 
-/// Clears both layers of a swapchain image to the colour of level `level` and waits for it.
-/// xrWaitSwapchainImage hands the image over in COLOR_ATTACHMENT_OPTIMAL, and
-/// xrReleaseSwapchainImage expects it back in that layout.
+/// Clears both layers of a swapchain image to the colour of level `level` and, where the device has
+/// no fragment density maps to render with, blits each layer's density map over the lower-left
+/// quarter of that layer as a debug overlay (red = horizontal density, green = vertical: yellow is
+/// full rate, darker is coarser), then waits for it. xrWaitSwapchainImage hands the image over in
+/// COLOR_ATTACHMENT_OPTIMAL and xrReleaseSwapchainImage expects it back in that layout; fovea
+/// leaves a density image in SHADER_READ_ONLY_OPTIMAL on such devices, and it goes back there.
 ///
 /// # Safety
 /// `image` must be the acquired, waited swapchain image; `cmd` and `fence` idle.
 unsafe fn clear(
     device: &ash::Device,
-    queue: vk::Queue,
-    cmd: vk::CommandBuffer,
-    fence: vk::Fence,
+    (queue, cmd, fence): (vk::Queue, vk::CommandBuffer, vk::Fence),
     image: vk::Image,
+    (width, height): (u32, u32),
     level: usize,
+    density: Option<(vk::Image, u32, u32)>,
 ) -> Result<(), String> {
     const COLOURS: [[f32; 4]; 4] = [
         [0.1, 0.1, 0.1, 1.0],
@@ -646,6 +672,89 @@ unsafe fn clear(
         },
         &[range],
     );
+    if let Some((map, dw, dh)) = density {
+        let map_barrier = |from, to, src, dst| {
+            vk::ImageMemoryBarrier::default()
+                .image(map)
+                .subresource_range(range)
+                .old_layout(from)
+                .new_layout(to)
+                .src_access_mask(src)
+                .dst_access_mask(dst)
+        };
+        // The clear's writes are done before the blit writes over them.
+        device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::FRAGMENT_SHADER,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::DependencyFlags::empty(),
+            &[vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)],
+            &[],
+            &[map_barrier(
+                vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                vk::AccessFlags::SHADER_READ,
+                vk::AccessFlags::TRANSFER_READ,
+            )],
+        );
+        let layers = |layer| {
+            vk::ImageSubresourceLayers::default()
+                .aspect_mask(vk::ImageAspectFlags::COLOR)
+                .base_array_layer(layer)
+                .layer_count(1)
+        };
+        let corner = |x: u32, y: u32| vk::Offset3D {
+            x: x as i32,
+            y: y as i32,
+            z: 0,
+        };
+        let regions: Vec<vk::ImageBlit> = (0..2)
+            .map(|layer| {
+                vk::ImageBlit::default()
+                    .src_subresource(layers(layer))
+                    .src_offsets([
+                        corner(0, 0),
+                        vk::Offset3D {
+                            z: 1,
+                            ..corner(dw, dh)
+                        },
+                    ])
+                    .dst_subresource(layers(layer))
+                    .dst_offsets([
+                        corner(0, height / 2),
+                        vk::Offset3D {
+                            z: 1,
+                            ..corner(width / 2, height)
+                        },
+                    ])
+            })
+            .collect();
+        device.cmd_blit_image(
+            cmd,
+            map,
+            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+            image,
+            vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+            &regions,
+            vk::Filter::NEAREST,
+        );
+        device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::FRAGMENT_SHADER,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &[map_barrier(
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+                vk::AccessFlags::TRANSFER_READ,
+                vk::AccessFlags::SHADER_READ,
+            )],
+        );
+    }
     device.cmd_pipeline_barrier(
         cmd,
         vk::PipelineStageFlags::TRANSFER,
@@ -736,6 +845,10 @@ mod tests {
         // The runtime may take a frame or two to stop after xrRequestExitSession.
         assert!(o.frames >= frames, "{o:?}");
         assert_eq!(o.levels_applied, LEVELS, "{o:?}");
+        // lavapipe has no fragment density maps: every rendered frame shows the overlay.
+        if !o.fdm_enabled {
+            assert_eq!(o.overlays, o.frames, "{o:?}");
+        }
         assert!(!o.density_images.is_empty(), "{o:?}");
         let (w, h) = o.swapchain_size;
         for &(image, dw, dh) in &o.density_images {
