@@ -20,7 +20,7 @@
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
-use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
@@ -112,8 +112,6 @@ pub struct Session {
     pub instance: Arc<Instance>,
     /// The Vulkan binding, when the session has one (not for headless sessions).
     pub vulkan: Option<VulkanBinding>,
-    /// The last `predictedDisplayTime` from `xrWaitFrame`, in nanoseconds (0 before the first).
-    pub last_display_time: AtomicI64,
     /// Frame timing, the dynamic controller and the stats window.
     pub frame: Mutex<FrameLoop>,
     /// The dynamic controller's step ([`crate::dynamic::LADDER`]), read when maps are built.
@@ -148,7 +146,6 @@ impl Session {
             gpu,
             views: Mutex::default(),
             pattern_generation: AtomicU64::new(0),
-            last_display_time: AtomicI64::new(0),
             frame: Mutex::new(FrameLoop::default()),
             dynamic_step: AtomicUsize::new(0),
             dynamic_max: AtomicUsize::new(0),

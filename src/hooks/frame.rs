@@ -29,7 +29,6 @@ pub unsafe extern "system" fn wait_frame(
             if succeeded(r) && !state.is_null() {
                 let display = (*state).predicted_display_time.as_nanos();
                 let period = (*state).predicted_display_period.as_nanos();
-                s.last_display_time.store(display, Ordering::Relaxed);
                 let mut f = s.frame.lock();
                 if let (Some(last), true) = (f.display, period > 0) {
                     let interval = display - last;
@@ -73,6 +72,9 @@ pub unsafe extern "system" fn end_frame(
         finish((|| {
             let s = session(sess)?;
             let entered = Instant::now();
+            if s.gpu.is_some() {
+                learn_submitted(&s, info);
+            }
             let overrides_changed = {
                 let mut f = s.frame.lock();
                 let display = if !info.is_null() && (*info).ty == xr::StructureType::FRAME_END_INFO
@@ -103,9 +105,6 @@ pub unsafe extern "system" fn end_frame(
             if overrides_changed {
                 s.pattern_generation.fetch_add(1, Ordering::Relaxed);
                 s.refresh_dynamic_max();
-            }
-            if s.gpu.is_some() {
-                learn_submitted(&s, info);
             }
             Ok(observed(&s, next(s.instance.next.end_frame)?(sess, info)))
         })())
@@ -235,6 +234,9 @@ pub unsafe extern "system" fn locate_views(
             {
                 let n = (*count).min(capacity) as usize;
                 let located = std::slice::from_raw_parts(views, n);
+                if located.iter().any(|v| v.ty != xr::StructureType::VIEW) {
+                    return Ok(r);
+                }
                 s.views
                     .lock()
                     .record(located.iter().map(|v| fov_from_xr(v.fov)));
@@ -255,6 +257,7 @@ unsafe fn learn_stereo_views(
     views: *mut xr::View,
 ) {
     if info.is_null()
+        || (*info).ty != xr::StructureType::VIEW_LOCATE_INFO
         || (*info).view_configuration_type != xr::ViewConfigurationType::PRIMARY_STEREO
         || views.is_null()
         || count.is_null()
@@ -268,12 +271,7 @@ unsafe fn learn_stereo_views(
         return;
     }
     let fovs = [0, 1].map(|i| fov_from_xr(views[i].fov));
-    {
-        let mut known = instance.stereo_fovs.lock();
-        if *known != Some(fovs) {
-            *known = Some(fovs);
-        }
-    }
+    *instance.stereo_fovs.lock() = Some(fovs);
     if instance.symmetric_fov {
         for (v, f) in views.iter_mut().zip(instance.render_fovs(fovs)) {
             v.fov = fov_to_xr(f);

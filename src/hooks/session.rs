@@ -1,6 +1,5 @@
 //! Session lifetime and view configuration.
 
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 use openxr_sys as xr;
@@ -231,7 +230,7 @@ unsafe fn probe_stereo_fovs(state: &Instance) -> Option<[Fov; 2]> {
         ty: xr::StructureType::VIEW_LOCATE_INFO,
         next: std::ptr::null(),
         view_configuration_type: xr::ViewConfigurationType::PRIMARY_STEREO,
-        display_time: xr::Time::from_nanos(s.last_display_time.load(Ordering::Relaxed).max(1)),
+        display_time: xr::Time::from_nanos(s.frame.lock().display.unwrap_or(0).max(1)),
         space,
     };
     let mut view_state = xr::ViewState {

@@ -190,7 +190,11 @@ pub unsafe extern "system" fn get_vulkan_graphics_device2(
         finish((|| {
             let s = instance(inst)?;
             let r = next(s.next.get_vulkan_graphics_device2)?(inst, info, physical_device);
-            if succeeded(r) && !physical_device.is_null() && !info.is_null() {
+            if succeeded(r)
+                && !physical_device.is_null()
+                && !info.is_null()
+                && (*info).ty == xr::StructureType::VULKAN_GRAPHICS_DEVICE_GET_INFO_KHR
+            {
                 record_graphics_device(&s, (*info).vulkan_instance, *physical_device as u64);
             }
             Ok(r)
@@ -271,6 +275,10 @@ pub unsafe extern "system" fn create_vulkan_device(
             }
             let app_info = &*info;
             let app_vk = &*(app_info.vulkan_create_info as *const vk::DeviceCreateInfo);
+            if app_vk.s_type != vk::StructureType::DEVICE_CREATE_INFO {
+                // Not a VkDeviceCreateInfo: the runtime (and Vulkan) answer it as it is.
+                return Ok(f(inst, info, device, vk_result));
+            }
             let pd = app_info.vulkan_physical_device as u64;
             let support = match s.vulkan.lock().graphics_device {
                 Some((vk_instance, recorded)) if recorded == pd => fdm::entry().map(|e| {
