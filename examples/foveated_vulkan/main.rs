@@ -1,0 +1,1192 @@
+//! The whole XR_FB_foveation flow on Vulkan, written the way a Quest app writes it, on the `openxr`
+//! crate: nothing in it knows about fovea, so it runs unchanged on a runtime with native support.
+//!
+//! 1. Instance with XR_KHR_vulkan_enable2 and the four foveation extensions (fovea provides them
+//!    where the runtime does not).
+//! 2. VkInstance and VkDevice made through the runtime (xrCreateVulkanInstanceKHR,
+//!    xrCreateVulkanDeviceKHR), asking for VK_EXT_fragment_density_map where the GPU has it.
+//! 3. One two-layer colour swapchain (layer i is eye i) created with `XrSwapchainCreateInfoFoveationFB`
+//!    and `FRAGMENT_DENSITY_MAP`, its images enumerated with an `XrSwapchainImageFoveationVulkanFB`
+//!    chained on each: one density image per swapchain image.
+//! 4. One profile per level (NONE, LOW, MEDIUM, HIGH by default), applied in turn with
+//!    xrUpdateSwapchainFB and read back with xrGetSwapchainStateFB while frames run.
+//! 5. Every frame a render pass per eye draws fine diagonal stripes in the level's tint into that
+//!    eye's layer, and the layers are submitted as a projection layer. Where the device has
+//!    VK_EXT_fragment_density_map (with `fragmentDensityMapNonSubsampledImages`, since the runtime's
+//!    images are not subsampled) the image's density map is the render pass's fragment density map
+//!    attachment, and the periphery is shaded in coarser fragments; elsewhere the fragment shader
+//!    samples the density map into the lower-left quarter of each view as a debug overlay
+//!    (`render.rs`).
+//!
+//! Options: `--frames N` (default: each level twice), `--frames-per-level N` (30), `--levels
+//! none,low,medium,high`, `--dynamic` (profiles with XR_FOVEATION_DYNAMIC_LEVEL_ENABLED_FB),
+//! `--dump DIR` (read back each new density map and the frames where a level starts, and the last
+//! frame, as PNGs), `--validate` (the Vulkan validation layer with a messenger; the run fails on
+//! any message).
+//!
+//! `fovea demo` runs it against the simulated headset through the system loader where that is
+//! installed. By hand (the checked-in manifests point at target/release):
+//!
+//! ```sh
+//! cargo build --release
+//! XR_RUNTIME_JSON=$PWD/manifest/runtime/fovea_sim_runtime.json XR_API_LAYER_PATH=$PWD/manifest \
+//!     XR_ENABLE_API_LAYERS=XR_APILAYER_FOVEA_foveation FOVEA_LOG=info \
+//!     cargo run --release --example foveated_vulkan
+//! ```
+//!
+//! `cargo test --example foveated_vulkan` runs it the same way (debug build, temporary manifests),
+//! reads back what it drew and checks it against fovea's density model.
+
+mod render;
+
+use std::ffi::{c_void, CStr};
+use std::path::{Path, PathBuf};
+use std::ptr;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use ash::vk::{self, Handle as _};
+use openxr as xr;
+use xr::sys::Handle as _;
+
+use render::{Mode, Read, Renderer, Targets};
+
+const VIEW_TYPE: xr::ViewConfigurationType = xr::ViewConfigurationType::PRIMARY_STEREO;
+const LEVELS: [xr::FoveationLevelFB; 4] = [
+    xr::FoveationLevelFB::NONE,
+    xr::FoveationLevelFB::LOW,
+    xr::FoveationLevelFB::MEDIUM,
+    xr::FoveationLevelFB::HIGH,
+];
+/// The stripes' tint per level (linear RGB): grey, green, yellow, red.
+const TINTS: [[f32; 4]; 4] = [
+    [0.6, 0.6, 0.6, 1.0],
+    [0.2, 0.7, 0.2, 1.0],
+    [0.7, 0.7, 0.1, 1.0],
+    [0.8, 0.2, 0.1, 1.0],
+];
+/// Long enough at 90 Hz for a level to be seen in a headset, short enough for a test.
+const FRAMES_PER_LEVEL: u64 = 30;
+
+/// What to run: the command line.
+#[derive(Clone, Debug)]
+struct Options {
+    frames: u64,
+    frames_per_level: u64,
+    /// Indices into [`LEVELS`], applied in turn.
+    levels: Vec<usize>,
+    dynamic: bool,
+    /// Read back density maps and frames into [`Outcome::captures`].
+    capture: bool,
+    /// Write the captures there as PNGs.
+    dump: Option<PathBuf>,
+    validate: bool,
+}
+
+impl Options {
+    fn parse(args: &[String]) -> Result<Options, String> {
+        let mut o = Options {
+            frames: 0,
+            frames_per_level: FRAMES_PER_LEVEL,
+            levels: (0..LEVELS.len()).collect(),
+            dynamic: false,
+            capture: false,
+            dump: None,
+            validate: false,
+        };
+        let mut frames = None;
+        let mut it = args.iter();
+        while let Some(arg) = it.next() {
+            let mut value = || it.next().ok_or(format!("{arg} takes a value"));
+            let count = |v: &String| {
+                v.parse::<u64>()
+                    .ok()
+                    .filter(|n| *n > 0)
+                    .ok_or(format!("{arg} takes a positive count, not {v:?}"))
+            };
+            match arg.as_str() {
+                "--frames" => frames = Some(count(value()?)?),
+                "--frames-per-level" => o.frames_per_level = count(value()?)?,
+                "--levels" => {
+                    o.levels = value()?
+                        .split(',')
+                        .map(|name| {
+                            ["none", "low", "medium", "high"]
+                                .iter()
+                                .position(|l| l.eq_ignore_ascii_case(name.trim()))
+                                .ok_or(format!(
+                                    "--levels: {name:?} is not one of none, low, medium, high"
+                                ))
+                        })
+                        .collect::<Result<_, _>>()?
+                }
+                "--dynamic" => o.dynamic = true,
+                "--dump" => {
+                    o.dump = Some(PathBuf::from(value()?));
+                    o.capture = true;
+                }
+                "--validate" => o.validate = true,
+                other => return Err(format!("unknown option {other:?}")),
+            }
+        }
+        o.frames = frames.unwrap_or(o.levels.len() as u64 * o.frames_per_level * 2);
+        Ok(o)
+    }
+}
+
+/// What a frame read back (with `--dump`, and in the test).
+#[derive(Debug)]
+struct Capture {
+    /// The frame's number, from 0.
+    frame: u64,
+    /// The level the app had applied: an index into [`LEVELS`].
+    level: usize,
+    /// Both layers of the density map, R8G8 (a capture is made whenever it changed).
+    density: Vec<u8>,
+    /// Both layers of the swapchain image, RGBA8 in `format`, on the first frame of each level
+    /// and the last frame.
+    eyes: Option<Vec<u8>>,
+}
+
+/// What a run did: printed at the end, checked by the test.
+#[derive(Debug)]
+struct Outcome {
+    frames: u64,
+    swapchain_size: (u32, u32),
+    format: vk::Format,
+    /// `(VkImage, width, height)` per swapchain image, from XrSwapchainImageFoveationVulkanFB.
+    density_images: Vec<(u64, u32, u32)>,
+    /// Each level in the order xrUpdateSwapchainFB applied it (xrGetSwapchainStateFB confirmed).
+    levels_applied: Vec<xr::FoveationLevelFB>,
+    /// VK_EXT_fragment_density_map and its feature were enabled on the device.
+    fdm_enabled: bool,
+    /// How the density maps took part in rendering.
+    mode: Mode,
+    /// The FOVs the views were rendered with (the last xrLocateViews).
+    fovs: Vec<xr::Fovf>,
+    captures: Vec<Capture>,
+    /// Messages from the Vulkan validation layer (`--validate`).
+    vk_messages: u64,
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let options = match Options::parse(&args) {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("foveated_vulkan: {e}");
+            std::process::exit(2);
+        }
+    };
+    let outcome = run(&options).and_then(|o| {
+        if let Some(dir) = &options.dump {
+            dump(&o, dir)?;
+        }
+        Ok(o)
+    });
+    match outcome {
+        Ok(o) => {
+            println!(
+                "foveated_vulkan: {} frames on a {}x{} swapchain; density images {:?}; \
+                 levels {:?}; FOVs (left, right, up, down) {}; VK_EXT_fragment_density_map {}; \
+                 density maps {}",
+                o.frames,
+                o.swapchain_size.0,
+                o.swapchain_size.1,
+                o.density_images
+                    .iter()
+                    .map(|(_, w, h)| format!("{w}x{h}"))
+                    .collect::<Vec<_>>(),
+                o.levels_applied,
+                o.fovs
+                    .iter()
+                    .map(|f| format!(
+                        "{:.1}/{:.1}/{:.1}/{:.1}°",
+                        f.angle_left.to_degrees(),
+                        f.angle_right.to_degrees(),
+                        f.angle_up.to_degrees(),
+                        f.angle_down.to_degrees()
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(" and "),
+                if o.fdm_enabled { "enabled" } else { "absent" },
+                match o.mode {
+                    Mode::Attachment => "attached to the render pass",
+                    Mode::Overlay => "sampled into the debug overlay (lower left of each eye)",
+                    Mode::None => "not used (the device can neither render with nor sample them)",
+                },
+            );
+            if o.vk_messages > 0 {
+                eprintln!(
+                    "foveated_vulkan: {} Vulkan validation messages",
+                    o.vk_messages
+                );
+                std::process::exit(1);
+            }
+        }
+        Err(e) => {
+            eprintln!("foveated_vulkan: {e}");
+            std::process::exit(1);
+        }
+    }
+}
+
+/// An OpenXR result as this example's error.
+fn check(r: xr::sys::Result, what: &str) -> Result<(), String> {
+    if r.into_raw() >= 0 {
+        Ok(())
+    } else {
+        Err(format!("{what}: {r}"))
+    }
+}
+
+fn run(options: &Options) -> Result<Outcome, String> {
+    // SAFETY: loading the system's OpenXR loader runs its initialisers; that is its purpose.
+    let entry = unsafe { xr::Entry::load(&()) }.map_err(|e| format!("OpenXR loader: {e}"))?;
+    let available = entry
+        .enumerate_extensions()
+        .map_err(|e| format!("xrEnumerateInstanceExtensionProperties: {e}"))?;
+    if !(available.khr_vulkan_enable2
+        && available.fb_swapchain_update_state
+        && available.fb_foveation
+        && available.fb_foveation_configuration
+        && available.fb_foveation_vulkan)
+    {
+        return Err(
+            "the runtime (or a layer) lacks XR_KHR_vulkan_enable2 or the foveation \
+                    extensions: is fovea enabled (XR_ENABLE_API_LAYERS)?"
+                .into(),
+        );
+    }
+    let mut extensions = xr::ExtensionSet::default();
+    extensions.khr_vulkan_enable2 = true;
+    extensions.fb_swapchain_update_state = true;
+    extensions.fb_foveation = true;
+    extensions.fb_foveation_configuration = true;
+    extensions.fb_foveation_vulkan = true;
+    let instance = entry
+        .create_instance(
+            &xr::ApplicationInfo {
+                application_name: "fovea foveated_vulkan",
+                application_version: 1,
+                engine_name: "none",
+                engine_version: 0,
+                // The Debian 1.0.20 loader refuses anything newer.
+                api_version: xr::Version::new(1, 0, 0),
+            },
+            &extensions,
+            &[],
+            &(),
+        )
+        .map_err(|e| format!("xrCreateInstance: {e}"))?;
+    let system = instance
+        .system(xr::FormFactor::HEAD_MOUNTED_DISPLAY)
+        .map_err(|e| format!("xrGetSystem: {e}"))?;
+    let blend_mode = instance
+        .enumerate_environment_blend_modes(system, VIEW_TYPE)
+        .map_err(|e| format!("xrEnumerateEnvironmentBlendModes: {e}"))?[0];
+    let requirements = instance
+        .graphics_requirements::<xr::Vulkan>(system)
+        .map_err(|e| format!("xrGetVulkanGraphicsRequirements2KHR: {e}"))?;
+    // Vulkan 1.1: vkGetPhysicalDeviceFeatures2, which the FDM query needs, is core.
+    if requirements.max_api_version_supported < xr::Version::new(1, 1, 0) {
+        return Err(format!(
+            "the runtime supports Vulkan up to {} only",
+            requirements.max_api_version_supported
+        ));
+    }
+    // SAFETY: every Vulkan object below is made, used and destroyed on this thread, in order.
+    unsafe { run_vulkan(&instance, system, blend_mode, options) }
+}
+
+/// Validation messages seen by [`on_vulkan_message`].
+static VK_MESSAGES: AtomicU64 = AtomicU64::new(0);
+
+/// The debug messenger's callback (`--validate`): prints and counts warnings and errors.
+unsafe extern "system" fn on_vulkan_message(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    _types: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    _user: *mut c_void,
+) -> vk::Bool32 {
+    let message = data
+        .as_ref()
+        .filter(|d| !d.p_message.is_null())
+        .map(|d| CStr::from_ptr(d.p_message).to_string_lossy())
+        .unwrap_or_default();
+    eprintln!("foveated_vulkan: Vulkan {severity:?}: {message}");
+    VK_MESSAGES.fetch_add(1, Ordering::Relaxed);
+    vk::FALSE
+}
+
+/// The Vulkan side: instance, device, session, swapchain, frames.
+///
+/// # Safety
+/// Plain Vulkan use; see the comments where handles cross between OpenXR and Vulkan.
+unsafe fn run_vulkan(
+    instance: &xr::Instance,
+    system: xr::SystemId,
+    blend_mode: xr::EnvironmentBlendMode,
+    options: &Options,
+) -> Result<Outcome, String> {
+    let vk_entry = ash::Entry::load().map_err(|e| format!("Vulkan loader: {e}"))?;
+    let gipa = vk_entry.static_fn().get_instance_proc_addr;
+    let app_info = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_1);
+    let layers = [c"VK_LAYER_KHRONOS_validation".as_ptr()];
+    let instance_extensions = [ash::ext::debug_utils::NAME.as_ptr()];
+    let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+        .message_severity(
+            vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+        )
+        .message_type(
+            vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+        )
+        .pfn_user_callback(Some(on_vulkan_message));
+    let mut instance_info = vk::InstanceCreateInfo::default().application_info(&app_info);
+    if options.validate {
+        // Chained, the messenger also sees vkCreateInstance and vkDestroyInstance.
+        instance_info = instance_info
+            .enabled_layer_names(&layers)
+            .enabled_extension_names(&instance_extensions)
+            .push_next(&mut messenger_info);
+    }
+    let raw_instance = instance
+        .create_vulkan_instance(
+            system,
+            std::mem::transmute::<
+                vk::PFN_vkGetInstanceProcAddr,
+                xr::sys::platform::VkGetInstanceProcAddr,
+            >(gipa),
+            &instance_info as *const _ as *const _,
+        )
+        .map_err(|e| format!("xrCreateVulkanInstanceKHR: {e}"))?
+        .map_err(|r| format!("vkCreateInstance: {:?}", vk::Result::from_raw(r)))?;
+    let vk_instance = ash::Instance::load(
+        vk_entry.static_fn(),
+        vk::Instance::from_raw(raw_instance as u64),
+    );
+    let debug_utils = options
+        .validate
+        .then(|| ash::ext::debug_utils::Instance::new(&vk_entry, &vk_instance));
+    let messenger = match &debug_utils {
+        Some(d) => d
+            .create_debug_utils_messenger(&messenger_info, None)
+            .map_err(|e| format!("vkCreateDebugUtilsMessengerEXT: {e}"))?,
+        None => vk::DebugUtilsMessengerEXT::null(),
+    };
+    let result = with_instance(
+        instance,
+        system,
+        blend_mode,
+        options,
+        (&vk_instance, raw_instance),
+    );
+    if let Some(d) = &debug_utils {
+        d.destroy_debug_utils_messenger(messenger, None);
+    }
+    vk_instance.destroy_instance(None);
+    result.map(|mut o| {
+        o.vk_messages = VK_MESSAGES.load(Ordering::Relaxed);
+        o
+    })
+}
+
+/// The device, and everything made on it.
+///
+/// # Safety
+/// `vk_instance` is the instance the runtime made for `raw_instance`.
+unsafe fn with_instance(
+    instance: &xr::Instance,
+    system: xr::SystemId,
+    blend_mode: xr::EnvironmentBlendMode,
+    options: &Options,
+    (vk_instance, raw_instance): (&ash::Instance, xr::sys::platform::VkInstance),
+) -> Result<Outcome, String> {
+    let gipa = ash::Entry::load()
+        .map_err(|e| format!("Vulkan loader: {e}"))?
+        .static_fn()
+        .get_instance_proc_addr;
+    let physical_device = vk::PhysicalDevice::from_raw(
+        instance
+            .vulkan_graphics_device(system, raw_instance)
+            .map_err(|e| format!("xrGetVulkanGraphicsDevice2KHR: {e}"))? as u64,
+    );
+    let queue_family = vk_instance
+        .get_physical_device_queue_family_properties(physical_device)
+        .iter()
+        .position(|q| q.queue_flags.contains(vk::QueueFlags::GRAPHICS))
+        .ok_or("the Vulkan device has no graphics queue")? as u32;
+
+    // XR_FB_foveation's FRAGMENT_DENSITY_MAP bit makes the app responsible for enabling the
+    // extension and its feature where the GPU has them.
+    let has_fdm = vk_instance
+        .enumerate_device_extension_properties(physical_device)
+        .map_err(|e| format!("vkEnumerateDeviceExtensionProperties: {e}"))?
+        .iter()
+        .any(|e| e.extension_name_as_c_str() == Ok(ash::ext::fragment_density_map::NAME));
+    let mut fdm_query = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default();
+    if has_fdm {
+        let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut fdm_query);
+        vk_instance.get_physical_device_features2(physical_device, &mut features);
+    }
+    let fdm_enabled = has_fdm && fdm_query.fragment_density_map == vk::TRUE;
+    let non_subsampled = fdm_query.fragment_density_map_non_subsampled_images == vk::TRUE;
+    let mut fdm_features = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+        .fragment_density_map(true)
+        .fragment_density_map_non_subsampled_images(non_subsampled);
+    let device_extensions = [ash::ext::fragment_density_map::NAME.as_ptr()];
+    let priorities = [1.0];
+    let queues = [vk::DeviceQueueCreateInfo::default()
+        .queue_family_index(queue_family)
+        .queue_priorities(&priorities)];
+    let mut device_info = vk::DeviceCreateInfo::default().queue_create_infos(&queues);
+    if fdm_enabled {
+        device_info = device_info
+            .enabled_extension_names(&device_extensions)
+            .push_next(&mut fdm_features);
+    }
+    let raw_device = instance
+        .create_vulkan_device(
+            system,
+            std::mem::transmute::<
+                vk::PFN_vkGetInstanceProcAddr,
+                xr::sys::platform::VkGetInstanceProcAddr,
+            >(gipa),
+            physical_device.as_raw() as usize as _,
+            &device_info as *const _ as *const _,
+        )
+        .map_err(|e| format!("xrCreateVulkanDeviceKHR: {e}"))?
+        .map_err(|r| format!("vkCreateDevice: {:?}", vk::Result::from_raw(r)))?;
+    let device = ash::Device::load(
+        vk_instance.fp_v1_0(),
+        vk::Device::from_raw(raw_device as u64),
+    );
+    let queue = device.get_device_queue(queue_family, 0);
+    let sampled = vk_instance
+        .get_physical_device_format_properties(physical_device, vk::Format::R8G8_UNORM)
+        .optimal_tiling_features
+        .contains(vk::FormatFeatureFlags::SAMPLED_IMAGE);
+    // The runtime's swapchain images are not subsampled, so rendering them with a density map
+    // needs fragmentDensityMapNonSubsampledImages (VUID-VkFramebufferCreateInfo-renderPass-02553).
+    // fovea leaves the maps in FRAGMENT_DENSITY_MAP_OPTIMAL_EXT on any device with FDM enabled, where
+    // they cannot be sampled either.
+    let mode = match (fdm_enabled, non_subsampled, sampled) {
+        (true, true, _) => Mode::Attachment,
+        (false, _, true) => Mode::Overlay,
+        _ => Mode::None,
+    };
+
+    let result = session_loop(
+        instance,
+        system,
+        blend_mode,
+        options,
+        (vk_instance, physical_device),
+        (&device, queue, queue_family),
+        (raw_instance, raw_device),
+        mode,
+    );
+    // OpenXR objects are gone (dropped in `session_loop`) before the Vulkan objects they used.
+    device.device_wait_idle().ok();
+    device.destroy_device(None);
+    result.map(|mut o| {
+        o.fdm_enabled = fdm_enabled;
+        o
+    })
+}
+
+/// Session, foveated swapchain, profiles and the frame loop; every OpenXR object made here is
+/// dropped before it returns.
+///
+/// # Safety
+/// `device` must be the device the runtime created; `queue` one of its queues.
+#[allow(clippy::too_many_arguments)]
+unsafe fn session_loop(
+    instance: &xr::Instance,
+    system: xr::SystemId,
+    blend_mode: xr::EnvironmentBlendMode,
+    options: &Options,
+    (vk_instance, physical_device): (&ash::Instance, vk::PhysicalDevice),
+    (device, queue, queue_family): (&ash::Device, vk::Queue, u32),
+    (raw_instance, raw_device): (xr::sys::platform::VkInstance, xr::sys::platform::VkDevice),
+    mode: Mode,
+) -> Result<Outcome, String> {
+    let (session, mut frame_wait, mut frame_stream) = instance
+        .create_session::<xr::Vulkan>(
+            system,
+            &xr::vulkan::SessionCreateInfo {
+                instance: raw_instance,
+                physical_device: physical_device.as_raw() as usize as _,
+                device: raw_device,
+                queue_family_index: queue_family,
+                queue_index: 0,
+            },
+        )
+        .map_err(|e| format!("xrCreateSession: {e}"))?;
+    let stage = session
+        .create_reference_space(xr::ReferenceSpaceType::LOCAL, xr::Posef::IDENTITY)
+        .map_err(|e| format!("xrCreateReferenceSpace: {e}"))?;
+
+    // The swapchain: the `openxr` crate's create_swapchain takes no next chain, so the foveation
+    // struct goes in through the raw call and the handle is wrapped afterwards.
+    let views = instance
+        .enumerate_view_configuration_views(system, VIEW_TYPE)
+        .map_err(|e| format!("xrEnumerateViewConfigurationViews: {e}"))?;
+    let (width, height) = (
+        views[0].recommended_image_rect_width,
+        views[0].recommended_image_rect_height,
+    );
+    let formats = session
+        .enumerate_swapchain_formats()
+        .map_err(|e| format!("xrEnumerateSwapchainFormats: {e}"))?;
+    let format = [vk::Format::R8G8B8A8_SRGB, vk::Format::B8G8R8A8_SRGB]
+        .into_iter()
+        .find(|f| formats.contains(&(f.as_raw() as u32)))
+        .ok_or(format!("no sRGB colour format among {formats:?}"))?;
+    let foveation = xr::sys::SwapchainCreateInfoFoveationFB {
+        ty: xr::sys::SwapchainCreateInfoFoveationFB::TYPE,
+        next: ptr::null_mut(),
+        flags: xr::SwapchainCreateFoveationFlagsFB::FRAGMENT_DENSITY_MAP,
+    };
+    let mut usage = xr::SwapchainUsageFlags::COLOR_ATTACHMENT;
+    if options.capture {
+        usage |= xr::SwapchainUsageFlags::TRANSFER_SRC;
+    }
+    let create_info = xr::sys::SwapchainCreateInfo {
+        ty: xr::sys::SwapchainCreateInfo::TYPE,
+        next: &foveation as *const _ as *const c_void,
+        create_flags: xr::SwapchainCreateFlags::EMPTY,
+        usage_flags: usage,
+        format: i64::from(format.as_raw()),
+        sample_count: 1,
+        width,
+        height,
+        face_count: 1,
+        array_size: 2,
+        mip_count: 1,
+    };
+    let mut handle = xr::sys::Swapchain::NULL;
+    check(
+        (instance.fp().create_swapchain)(session.as_raw(), &create_info, &mut handle),
+        "xrCreateSwapchain with FRAGMENT_DENSITY_MAP",
+    )?;
+    let mut swapchain = xr::Swapchain::<xr::Vulkan>::from_raw(session.clone(), handle);
+
+    // The images, each with its density image chained (two-call idiom).
+    let mut count = 0;
+    check(
+        (instance.fp().enumerate_swapchain_images)(handle, 0, &mut count, ptr::null_mut()),
+        "xrEnumerateSwapchainImages",
+    )?;
+    let mut density = vec![
+        xr::sys::SwapchainImageFoveationVulkanFB {
+            ty: xr::sys::SwapchainImageFoveationVulkanFB::TYPE,
+            next: ptr::null_mut(),
+            image: 0,
+            width: 0,
+            height: 0,
+        };
+        count as usize
+    ];
+    let mut images: Vec<xr::sys::SwapchainImageVulkanKHR> = density
+        .iter_mut()
+        .map(|d| xr::sys::SwapchainImageVulkanKHR {
+            ty: xr::sys::SwapchainImageVulkanKHR::TYPE,
+            next: d as *mut _ as *mut c_void,
+            image: 0,
+        })
+        .collect();
+    check(
+        (instance.fp().enumerate_swapchain_images)(
+            handle,
+            count,
+            &mut count,
+            images.as_mut_ptr() as *mut xr::sys::SwapchainImageBaseHeader,
+        ),
+        "xrEnumerateSwapchainImages",
+    )?;
+    let density_images: Vec<(u64, u32, u32)> = density
+        .iter()
+        .map(|d| (d.image, d.width, d.height))
+        .collect();
+    if let Some(i) = density_images.iter().position(|(image, ..)| *image == 0) {
+        return Err(format!("swapchain image {i} came without a density image"));
+    }
+
+    // One profile per level, made up front: profiles may be destroyed once applied, but keeping
+    // them lets the loop switch levels without creating anything per frame.
+    let dynamic = if options.dynamic {
+        xr::FoveationDynamicFB::LEVEL_ENABLED
+    } else {
+        xr::FoveationDynamicFB::DISABLED
+    };
+    let profiles = options
+        .levels
+        .iter()
+        .map(|&i| {
+            session
+                .create_foveation_profile(Some(xr::FoveationLevelProfile {
+                    level: LEVELS[i],
+                    vertical_offset: 0.0,
+                    dynamic,
+                }))
+                .map_err(|e| format!("xrCreateFoveationProfileFB({:?}): {e}", LEVELS[i]))
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    let update_state = instance
+        .exts()
+        .fb_swapchain_update_state
+        .ok_or("XR_FB_swapchain_update_state was enabled but has no functions")?;
+    let mut levels_applied = Vec::new();
+    let mut apply = |i: usize| -> Result<(), String> {
+        let state = xr::sys::SwapchainStateFoveationFB {
+            ty: xr::sys::SwapchainStateFoveationFB::TYPE,
+            next: ptr::null_mut(),
+            flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
+            profile: profiles[i].as_raw(),
+        };
+        check(
+            (update_state.update_swapchain)(handle, &state as *const _ as *const _),
+            "xrUpdateSwapchainFB",
+        )?;
+        let mut read = xr::sys::SwapchainStateFoveationFB {
+            profile: xr::sys::FoveationProfileFB::NULL,
+            ..state
+        };
+        check(
+            (update_state.get_swapchain_state)(handle, &mut read as *mut _ as *mut _),
+            "xrGetSwapchainStateFB",
+        )?;
+        if read.profile != state.profile {
+            return Err(format!(
+                "xrGetSwapchainStateFB returned another profile after {:?}",
+                LEVELS[options.levels[i]]
+            ));
+        }
+        levels_applied.push(LEVELS[options.levels[i]]);
+        Ok(())
+    };
+
+    let vk_images: Vec<vk::Image> = images
+        .iter()
+        .map(|i| vk::Image::from_raw(i.image))
+        .collect();
+    let vk_density: Vec<(vk::Image, u32, u32)> = density_images
+        .iter()
+        .map(|&(image, w, h)| (vk::Image::from_raw(image), w, h))
+        .collect();
+    let mut renderer = Renderer::new(
+        (vk_instance, physical_device),
+        device,
+        (queue, queue_family),
+        &Targets {
+            format,
+            extent: (width, height),
+            images: &vk_images,
+            density: &vk_density,
+        },
+        mode,
+        options.capture,
+    )?;
+
+    let mut event_storage = xr::EventDataBuffer::new();
+    let mut running = false;
+    let mut frames = 0u64;
+    let mut applied = None;
+    let mut exit_requested = false;
+    let mut fovs = Vec::new();
+    let mut captures: Vec<Capture> = Vec::new();
+    // The first frame drawn at each level is read back (frames the runtime says not to render
+    // draw nothing).
+    let mut read_eyes = false;
+    let result = 'main: loop {
+        while let Some(event) = instance
+            .poll_event(&mut event_storage)
+            .map_err(|e| format!("xrPollEvent: {e}"))?
+        {
+            match event {
+                xr::Event::SessionStateChanged(e) => match e.state() {
+                    xr::SessionState::READY => {
+                        session
+                            .begin(VIEW_TYPE)
+                            .map_err(|e| format!("xrBeginSession: {e}"))?;
+                        running = true;
+                    }
+                    xr::SessionState::STOPPING => {
+                        session.end().map_err(|e| format!("xrEndSession: {e}"))?;
+                        running = false;
+                    }
+                    xr::SessionState::EXITING | xr::SessionState::LOSS_PENDING => {
+                        break 'main Ok(())
+                    }
+                    _ => {}
+                },
+                xr::Event::InstanceLossPending(_) => {
+                    break 'main Err("instance loss pending".to_string())
+                }
+                _ => {}
+            }
+        }
+        if !running {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+            continue;
+        }
+        // Frames go on until the runtime says STOPPING, at the level they had.
+        if frames >= options.frames && !exit_requested {
+            session
+                .request_exit()
+                .map_err(|e| format!("xrRequestExitSession: {e}"))?;
+            exit_requested = true;
+        }
+        // A new level every `frames_per_level` frames, applied between frames.
+        let wanted = (frames / options.frames_per_level) as usize % options.levels.len();
+        if applied != Some(wanted) && !exit_requested {
+            apply(wanted)?;
+            applied = Some(wanted);
+            read_eyes = options.capture;
+        }
+        let level = options.levels[applied.unwrap_or(0)];
+        let state = frame_wait.wait().map_err(|e| format!("xrWaitFrame: {e}"))?;
+        frame_stream
+            .begin()
+            .map_err(|e| format!("xrBeginFrame: {e}"))?;
+        if !state.should_render {
+            frame_stream
+                .end(state.predicted_display_time, blend_mode, &[])
+                .map_err(|e| format!("xrEndFrame: {e}"))?;
+            continue;
+        }
+        let (_, located) = session
+            .locate_views(VIEW_TYPE, state.predicted_display_time, &stage)
+            .map_err(|e| format!("xrLocateViews: {e}"))?;
+        let index = swapchain
+            .acquire_image()
+            .map_err(|e| format!("xrAcquireSwapchainImage: {e}"))? as usize;
+        swapchain
+            .wait_image(xr::Duration::INFINITE)
+            .map_err(|e| format!("xrWaitSwapchainImage: {e}"))?;
+        let read = Read {
+            eyes: read_eyes || (options.capture && frames + 1 == options.frames),
+            density: options.capture,
+        };
+        renderer.draw(index, TINTS[level], read)?;
+        read_eyes = false;
+        if options.capture {
+            let map = renderer.density(index).unwrap_or_default();
+            let changed = captures.last().is_none_or(|c| c.density != map);
+            if changed || read.eyes {
+                captures.push(Capture {
+                    frame: frames,
+                    level,
+                    density: map.to_vec(),
+                    eyes: read
+                        .eyes
+                        .then(|| renderer.eyes().unwrap_or_default().to_vec()),
+                });
+            }
+        }
+        swapchain
+            .release_image()
+            .map_err(|e| format!("xrReleaseSwapchainImage: {e}"))?;
+        let rect = xr::Rect2Di {
+            offset: xr::Offset2Di { x: 0, y: 0 },
+            extent: xr::Extent2Di {
+                width: width as i32,
+                height: height as i32,
+            },
+        };
+        let projection_views: [_; 2] = std::array::from_fn(|eye| {
+            xr::CompositionLayerProjectionView::new()
+                .pose(located[eye].pose)
+                .fov(located[eye].fov)
+                .sub_image(
+                    xr::SwapchainSubImage::new()
+                        .swapchain(&swapchain)
+                        .image_array_index(eye as u32)
+                        .image_rect(rect),
+                )
+        });
+        frame_stream
+            .end(
+                state.predicted_display_time,
+                blend_mode,
+                &[&xr::CompositionLayerProjection::new()
+                    .space(&stage)
+                    .views(&projection_views)],
+            )
+            .map_err(|e| format!("xrEndFrame: {e}"))?;
+        if fovs.is_empty() {
+            fovs = located.iter().map(|v| v.fov).collect();
+        }
+        frames += 1;
+    };
+    renderer.destroy();
+    drop((
+        profiles,
+        swapchain,
+        stage,
+        frame_stream,
+        frame_wait,
+        session,
+    ));
+    result.map(|()| Outcome {
+        frames,
+        swapchain_size: (width, height),
+        format,
+        density_images,
+        levels_applied,
+        fdm_enabled: false,
+        mode,
+        fovs,
+        captures,
+        vk_messages: 0,
+    })
+}
+
+/// Writes the captures as PNGs, named for the frame and the app's level:
+/// `fNNNNN_LEVEL_density_{left,right}.png` (red = horizontal density, green = vertical; one pixel
+/// per texel) and `fNNNNN_LEVEL_{left,right}.png` (the frame as drawn).
+fn dump(o: &Outcome, dir: &Path) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let (w, h) = o.swapchain_size;
+    let (dw, dh) = o.density_images.first().map_or((0, 0), |d| (d.1, d.2));
+    let mut written = 0;
+    for c in &o.captures {
+        let level = ["none", "low", "medium", "high"][c.level];
+        for (layer, eye) in ["left", "right"].into_iter().enumerate() {
+            let texels = (dw * dh) as usize;
+            if let Some(map) = c.density.chunks_exact(texels * 2).nth(layer) {
+                let rgb: Vec<u8> = map.chunks_exact(2).flat_map(|t| [t[0], t[1], 0]).collect();
+                let path = dir.join(format!("f{:05}_{level}_density_{eye}.png", c.frame));
+                write_png(&path, (dw, dh), png::ColorType::Rgb, &rgb)?;
+                written += 1;
+            }
+            if let Some(eyes) = &c.eyes {
+                let pixels = (w * h) as usize * 4;
+                let mut rgba = eyes[layer * pixels..][..pixels].to_vec();
+                if o.format == vk::Format::B8G8R8A8_SRGB {
+                    rgba.chunks_exact_mut(4).for_each(|p| p.swap(0, 2));
+                }
+                let path = dir.join(format!("f{:05}_{level}_{eye}.png", c.frame));
+                write_png(&path, (w, h), png::ColorType::Rgba, &rgba)?;
+                written += 1;
+            }
+        }
+    }
+    println!("foveated_vulkan: wrote {written} PNGs to {}", dir.display());
+    Ok(())
+}
+
+fn write_png(
+    path: &Path,
+    (width, height): (u32, u32),
+    colour: png::ColorType,
+    data: &[u8],
+) -> Result<(), String> {
+    let file = std::fs::File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    enc.set_color(colour);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.write_header()
+        .and_then(|mut w| w.write_image_data(data))
+        .map_err(|e| format!("{}: {e}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    //! The example against the simulated headset on lavapipe, through the system loader, fovea
+    //! enabled by the environment, the Vulkan validation layer watching. One run: the loader allows
+    //! one instance per process and reads the environment.
+
+    use std::path::Path;
+
+    use fovea::density::{Fov, Grid, Level, Pattern, Rect, View};
+    use fovea::fdm::{fill_layers, Inputs};
+    use fovea_harness::{artifact, skip, FOVEA_LAYER};
+
+    use super::*;
+
+    const LAVAPIPE: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
+    const VALIDATION: &str = "/usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json";
+    /// fovea's density texel without VK_EXT_fragment_density_map (lavapipe).
+    const TEXEL: u32 = 32;
+
+    #[test]
+    fn draws_with_fovea_s_density_maps_through_the_system_loader() {
+        if let Err(e) = unsafe { libloading::Library::new("libopenxr_loader.so.1") } {
+            skip(&format!("the Khronos OpenXR loader is not installed: {e}"));
+            return;
+        }
+        if !Path::new(LAVAPIPE).exists() {
+            skip("Mesa's lavapipe Vulkan driver is not installed (mesa-vulkan-drivers)");
+            return;
+        }
+        if !Path::new(VALIDATION).exists() {
+            skip("the Vulkan validation layer is not installed (vulkan-validationlayers)");
+            return;
+        }
+        let layer = artifact("libfovea.so").expect("run `cargo build --workspace`");
+        let runtime = artifact("libfovea_sim.so").expect("run `cargo build --workspace`");
+        let dir = std::env::temp_dir().join(format!("fovea-example-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("layers")).unwrap();
+        let checked_in = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("manifest/XR_APILAYER_FOVEA_foveation.json"),
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("layers/fovea.json"),
+            checked_in.replace("../target/release/libfovea.so", layer.to_str().unwrap()),
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("runtime.json"),
+            format!(
+                r#"{{"file_format_version": "1.0.0", "runtime": {{"name": "fovea simulated headset", "library_path": "{}"}}}}"#,
+                runtime.display()
+            ),
+        )
+        .unwrap();
+        std::env::set_var("XR_RUNTIME_JSON", dir.join("runtime.json"));
+        std::env::set_var("XR_API_LAYER_PATH", dir.join("layers"));
+        std::env::set_var("XR_ENABLE_API_LAYERS", FOVEA_LAYER);
+        std::env::set_var("VK_ICD_FILENAMES", LAVAPIPE);
+        std::env::set_var("VK_DRIVER_FILES", LAVAPIPE);
+        // The maps must be the app's levels: no debug override from the environment.
+        for var in [
+            "FOVEA_PROPS",
+            "FOVEA_SYMMETRIC_FOV",
+            "DEBUG_OCULUS_FOVEATION_LEVEL",
+            "DEBUG_OCULUS_FOVEATION_DYNAMIC",
+        ] {
+            std::env::remove_var(var);
+        }
+        // A small headset keeps lavapipe quick.
+        std::env::set_var("FOVEA_SIM_HEADSET", "rift-cv1");
+
+        let options = Options {
+            frames: LEVELS.len() as u64 * FRAMES_PER_LEVEL,
+            capture: true,
+            validate: true,
+            ..Options::parse(&[]).unwrap()
+        };
+        let o = run(&options).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::remove_dir_all(&dir).ok();
+        let summary = format!(
+            "{} frames, {:?}, {:?}, {} captures",
+            o.frames,
+            o.levels_applied,
+            o.mode,
+            o.captures.len()
+        );
+        // The runtime may take a frame or two to stop after xrRequestExitSession.
+        assert!(o.frames >= options.frames, "{summary}");
+        assert_eq!(o.levels_applied, LEVELS, "{summary}");
+        assert_eq!(o.vk_messages, 0, "Vulkan validation messages (stderr)");
+        // lavapipe has no fragment density maps: they are sampled into the overlay.
+        assert!(!o.fdm_enabled, "{summary}");
+        assert_eq!(o.mode, Mode::Overlay, "{summary}");
+
+        let (w, h) = o.swapchain_size;
+        let distinct: std::collections::HashSet<u64> =
+            o.density_images.iter().map(|d| d.0).collect();
+        assert_eq!(distinct.len(), o.density_images.len(), "one per image");
+        for &(image, dw, dh) in &o.density_images {
+            assert!(image != 0, "{summary}");
+            assert_eq!((dw, dh), (w.div_ceil(TEXEL), h.div_ceil(TEXEL)));
+        }
+
+        // What fovea's model gives for the views the example rendered: every map read back is
+        // that of the level the app had applied.
+        let grid = Grid::new([w, h], [TEXEL, TEXEL]);
+        let rect = Rect {
+            x: 0,
+            y: 0,
+            width: w,
+            height: h,
+        };
+        let views: Vec<Vec<View>> = o
+            .fovs
+            .iter()
+            .map(|f| {
+                vec![View {
+                    fov: Fov {
+                        left: f.angle_left,
+                        right: f.angle_right,
+                        up: f.angle_up,
+                        down: f.angle_down,
+                    },
+                    rect,
+                    visible: None,
+                }]
+            })
+            .collect();
+        assert_eq!(views.len(), 2, "{summary}");
+        let expected: Vec<Vec<u8>> = (0..LEVELS.len())
+            .map(|level| {
+                let inputs = Inputs {
+                    pattern: Pattern {
+                        level: Level::from_index(level as u32).unwrap(),
+                        vertical_offset_deg: 0.0,
+                    },
+                    layers: views.clone(),
+                };
+                let [mw, mh] = grid.map_extent();
+                let mut out = vec![0; (mw * mh * 2 * 2) as usize];
+                fill_layers(&grid, &inputs, &mut out);
+                out
+            })
+            .collect();
+        for (a, b) in [(0, 1), (1, 2), (2, 3)] {
+            assert_ne!(expected[a], expected[b], "levels {a} and {b} give one map");
+        }
+        for c in &o.captures {
+            assert!(
+                c.density == expected[c.level],
+                "frame {}: the density map read back is not {:?}'s",
+                c.frame,
+                LEVELS[c.level]
+            );
+        }
+        let drawn: Vec<usize> = o
+            .captures
+            .iter()
+            .filter(|c| c.eyes.is_some())
+            .map(|c| c.level)
+            .collect();
+        assert!(
+            drawn.starts_with(&[0, 1, 2, 3]),
+            "frames read back: {drawn:?}"
+        );
+        for c in o.captures.iter().filter(|c| c.eyes.is_some()) {
+            check_frame(&o, c);
+        }
+    }
+
+    /// The frame as the shaders drew it: outside the overlay the level's tinted stripes, inside it
+    /// each view's own layer of the density map, one texel per (nearest-sampled) pixel.
+    fn check_frame(o: &Outcome, c: &Capture) {
+        let (w, h) = (o.swapchain_size.0 as usize, o.swapchain_size.1 as usize);
+        let (dw, dh) = (
+            o.density_images[0].1 as usize,
+            o.density_images[0].2 as usize,
+        );
+        let eyes = c.eyes.as_ref().unwrap();
+        let rgb = |r: f32, g: f32, b: f32| {
+            let rgb = [r, g, b].map(srgb);
+            if o.format == vk::Format::B8G8R8A8_SRGB {
+                [rgb[2], rgb[1], rgb[0]]
+            } else {
+                rgb
+            }
+        };
+        let tint = TINTS[c.level];
+        let stripes = [0.5, 1.0].map(|k| rgb(tint[0] * k, tint[1] * k, tint[2] * k));
+        let close = |a: &[u8], b: [u8; 3]| a.iter().zip(b).all(|(x, y)| x.abs_diff(y) <= 1);
+        // Texel coordinates the overlay samples; pixels whose coordinate falls within 1% of a
+        // texel's edge could sample either neighbour and are left out.
+        let texel = |p: usize, size: usize, n: usize, shift: usize| {
+            let t = ((2 * p + 1 - shift) as f64 / size as f64) * n as f64;
+            (t - t.round()).abs().gt(&0.01).then_some(t as usize)
+        };
+        let (mut overlay, mut stripe) = (0, 0);
+        for layer in 0..2 {
+            let image = &eyes[layer * w * h * 4..][..w * h * 4];
+            let map = &c.density[layer * dw * dh * 2..][..dw * dh * 2];
+            for y in 0..h {
+                for x in 0..w {
+                    let px = &image[(y * w + x) * 4..][..3];
+                    let at = format!("frame {}, layer {layer}, pixel ({x}, {y})", c.frame);
+                    if x < w / 2 && y >= h / 2 {
+                        // Sampled at uv * 2 (x) and uv * 2 - 1 (y) over the lower-left quarter.
+                        let (Some(i), Some(j)) = (texel(x, w, dw, 0), texel(y, h, dh, h)) else {
+                            continue;
+                        };
+                        let t = &map[(j.min(dh - 1) * dw + i.min(dw - 1)) * 2..][..2];
+                        let want = rgb(f32::from(t[0]) / 255.0, f32::from(t[1]) / 255.0, 0.0);
+                        assert!(close(px, want), "{at}: {px:?}, map texel {t:?}");
+                        overlay += 1;
+                    } else {
+                        let want = stripes[usize::from((x + y + 1) % 8 >= 4)];
+                        assert!(close(px, want), "{at}: {px:?}, stripe {want:?}");
+                        stripe += 1;
+                    }
+                }
+            }
+        }
+        assert!(overlay > w * h / 3 && stripe > w * h, "{overlay} {stripe}");
+    }
+
+    /// Linear to sRGB-encoded 8-bit, as the sRGB attachment stores it.
+    fn srgb(linear: f32) -> u8 {
+        let v = if linear <= 0.003_130_8 {
+            linear * 12.92
+        } else {
+            1.055 * linear.powf(1.0 / 2.4) - 0.055
+        };
+        (v * 255.0).round().clamp(0.0, 255.0) as u8
+    }
+
+    #[test]
+    fn shaders_match_their_sources() {
+        let found = std::process::Command::new("glslangValidator")
+            .arg("--version")
+            .output();
+        if found.is_err() {
+            skip("glslangValidator is not installed (glslang-tools)");
+            return;
+        }
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/foveated_vulkan/shaders");
+        let out = std::env::temp_dir().join(format!("fovea-shaders-{}", std::process::id()));
+        std::fs::create_dir_all(&out).unwrap();
+        for (source, define, built) in [
+            ("fullscreen.vert", None, render::VERTEX),
+            ("pattern.frag", None, render::PATTERN),
+            ("pattern.frag", Some("-DOVERLAY"), render::OVERLAY),
+        ] {
+            let spv = out.join("out.spv");
+            let run = std::process::Command::new("glslangValidator")
+                .args(["-V", "--target-env", "vulkan1.1", "-o"])
+                .arg(&spv)
+                .args(define)
+                .arg(dir.join(source))
+                .output()
+                .unwrap();
+            assert!(
+                run.status.success(),
+                "{source} {define:?} does not compile: {}",
+                String::from_utf8_lossy(&run.stdout)
+            );
+            assert!(
+                std::fs::read(&spv).unwrap() == built,
+                "{source} {define:?}: the checked-in SPIR-V is stale; run shaders/build.sh"
+            );
+        }
+        std::fs::remove_dir_all(&out).ok();
+    }
+
+    #[test]
+    fn options_say_what_is_wrong() {
+        let parse =
+            |s: &str| Options::parse(&s.split_whitespace().map(String::from).collect::<Vec<_>>());
+        let o = parse("").unwrap();
+        assert_eq!(o.levels, [0, 1, 2, 3]);
+        assert_eq!(o.frames, 4 * FRAMES_PER_LEVEL * 2);
+        let o = parse("--levels high --dynamic --frames-per-level 5 --dump d").unwrap();
+        assert_eq!(
+            (o.levels.as_slice(), o.dynamic, o.frames),
+            (&[3][..], true, 10)
+        );
+        assert!(o.capture && o.dump == Some(PathBuf::from("d")));
+        for (bad, says) in [
+            ("--levels ultra", "\"ultra\" is not one of"),
+            ("--frames 0", "positive count"),
+            ("--frames", "takes a value"),
+            ("--fast", "unknown option"),
+        ] {
+            let e = parse(bad).unwrap_err();
+            assert!(e.contains(says), "{bad}: {e}");
+        }
+    }
+}
