@@ -437,4 +437,5 @@ pub unsafe fn enumerate_extensions(
 
 pub mod app;
 pub mod frame_loop;
+pub mod vulkan;
 pub use app::App;
