@@ -14,10 +14,11 @@ use std::ffi::c_void;
 use std::ptr::{null, null_mut};
 
 use fovea_harness::app::{with_create_info, API_1_0};
+use fovea_harness::fns::Fns;
 use fovea_harness::frame_loop::FOVEATION_EXTENSIONS;
 use fovea_harness::sim::control::{self, Fault, SimConfig};
 use fovea_harness::vulkan::{pick_lavapipe, take_messages, validated_entry, Vulkan};
-use fovea_harness::{lookup, skip, Chain};
+use fovea_harness::{skip, Chain};
 use openxr_sys as xr;
 use parking_lot::Mutex;
 use xr::Handle;
@@ -25,76 +26,6 @@ use xr::Handle;
 /// Serialises the tests of this file (the runtime's object count and the validation messages are
 /// process-wide).
 static SERIAL: Mutex<()> = Mutex::new(());
-
-/// Every function a run calls, looked up once per instance.
-#[derive(Clone, Copy)]
-struct Fns {
-    gipa: xr::pfn::GetInstanceProcAddr,
-    destroy_instance: xr::pfn::DestroyInstance,
-    get_system: xr::pfn::GetSystem,
-    enumerate_views: xr::pfn::EnumerateViewConfigurationViews,
-    create_session: xr::pfn::CreateSession,
-    destroy_session: xr::pfn::DestroySession,
-    poll_event: xr::pfn::PollEvent,
-    begin_session: xr::pfn::BeginSession,
-    request_exit: xr::pfn::RequestExitSession,
-    end_session: xr::pfn::EndSession,
-    create_space: xr::pfn::CreateReferenceSpace,
-    destroy_space: xr::pfn::DestroySpace,
-    create_swapchain: xr::pfn::CreateSwapchain,
-    destroy_swapchain: xr::pfn::DestroySwapchain,
-    enumerate_images: xr::pfn::EnumerateSwapchainImages,
-    acquire: xr::pfn::AcquireSwapchainImage,
-    wait_image: xr::pfn::WaitSwapchainImage,
-    release: xr::pfn::ReleaseSwapchainImage,
-    wait_frame: xr::pfn::WaitFrame,
-    begin_frame: xr::pfn::BeginFrame,
-    end_frame: xr::pfn::EndFrame,
-    locate_views: xr::pfn::LocateViews,
-    create_profile: xr::pfn::CreateFoveationProfileFB,
-    destroy_profile: xr::pfn::DestroyFoveationProfileFB,
-    update: xr::pfn::UpdateSwapchainFB,
-    get_state: xr::pfn::GetSwapchainStateFB,
-}
-
-impl Fns {
-    unsafe fn load(chain: &Chain, instance: xr::Instance) -> Fns {
-        let gipa = chain.gipa();
-        macro_rules! get {
-            ($name:literal) => {
-                lookup(gipa, instance, $name).unwrap_or_else(|r| panic!("{:?}: {r:?}", $name))
-            };
-        }
-        Fns {
-            gipa,
-            destroy_instance: get!(c"xrDestroyInstance"),
-            get_system: get!(c"xrGetSystem"),
-            enumerate_views: get!(c"xrEnumerateViewConfigurationViews"),
-            create_session: get!(c"xrCreateSession"),
-            destroy_session: get!(c"xrDestroySession"),
-            poll_event: get!(c"xrPollEvent"),
-            begin_session: get!(c"xrBeginSession"),
-            request_exit: get!(c"xrRequestExitSession"),
-            end_session: get!(c"xrEndSession"),
-            create_space: get!(c"xrCreateReferenceSpace"),
-            destroy_space: get!(c"xrDestroySpace"),
-            create_swapchain: get!(c"xrCreateSwapchain"),
-            destroy_swapchain: get!(c"xrDestroySwapchain"),
-            enumerate_images: get!(c"xrEnumerateSwapchainImages"),
-            acquire: get!(c"xrAcquireSwapchainImage"),
-            wait_image: get!(c"xrWaitSwapchainImage"),
-            release: get!(c"xrReleaseSwapchainImage"),
-            wait_frame: get!(c"xrWaitFrame"),
-            begin_frame: get!(c"xrBeginFrame"),
-            end_frame: get!(c"xrEndFrame"),
-            locate_views: get!(c"xrLocateViews"),
-            create_profile: get!(c"xrCreateFoveationProfileFB"),
-            destroy_profile: get!(c"xrDestroyFoveationProfileFB"),
-            update: get!(c"xrUpdateSwapchainFB"),
-            get_state: get!(c"xrGetSwapchainStateFB"),
-        }
-    }
-}
 
 /// The handles a run made, to tear down and to probe afterwards.
 #[derive(Default)]
