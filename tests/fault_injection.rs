@@ -10,15 +10,15 @@
 //!
 //! The runtime's object count is process-wide, so the tests of this file run one at a time.
 
-use std::ffi::{c_void, CStr};
+use std::ffi::c_void;
 use std::ptr::{null, null_mut};
 
-use ash::vk;
-use ash::vk::Handle as _;
 use fovea_harness::app::{with_create_info, API_1_0};
+use fovea_harness::fns::Fns;
 use fovea_harness::frame_loop::FOVEATION_EXTENSIONS;
 use fovea_harness::sim::control::{self, Fault, SimConfig};
-use fovea_harness::{lookup, skip, Chain};
+use fovea_harness::vulkan::{pick_lavapipe, take_messages, validated_entry, Vulkan};
+use fovea_harness::{skip, Chain};
 use openxr_sys as xr;
 use parking_lot::Mutex;
 use xr::Handle;
@@ -26,76 +26,6 @@ use xr::Handle;
 /// Serialises the tests of this file (the runtime's object count and the validation messages are
 /// process-wide).
 static SERIAL: Mutex<()> = Mutex::new(());
-
-/// Every function a run calls, looked up once per instance.
-#[derive(Clone, Copy)]
-struct Fns {
-    gipa: xr::pfn::GetInstanceProcAddr,
-    destroy_instance: xr::pfn::DestroyInstance,
-    get_system: xr::pfn::GetSystem,
-    enumerate_views: xr::pfn::EnumerateViewConfigurationViews,
-    create_session: xr::pfn::CreateSession,
-    destroy_session: xr::pfn::DestroySession,
-    poll_event: xr::pfn::PollEvent,
-    begin_session: xr::pfn::BeginSession,
-    request_exit: xr::pfn::RequestExitSession,
-    end_session: xr::pfn::EndSession,
-    create_space: xr::pfn::CreateReferenceSpace,
-    destroy_space: xr::pfn::DestroySpace,
-    create_swapchain: xr::pfn::CreateSwapchain,
-    destroy_swapchain: xr::pfn::DestroySwapchain,
-    enumerate_images: xr::pfn::EnumerateSwapchainImages,
-    acquire: xr::pfn::AcquireSwapchainImage,
-    wait_image: xr::pfn::WaitSwapchainImage,
-    release: xr::pfn::ReleaseSwapchainImage,
-    wait_frame: xr::pfn::WaitFrame,
-    begin_frame: xr::pfn::BeginFrame,
-    end_frame: xr::pfn::EndFrame,
-    locate_views: xr::pfn::LocateViews,
-    create_profile: xr::pfn::CreateFoveationProfileFB,
-    destroy_profile: xr::pfn::DestroyFoveationProfileFB,
-    update: xr::pfn::UpdateSwapchainFB,
-    get_state: xr::pfn::GetSwapchainStateFB,
-}
-
-impl Fns {
-    unsafe fn load(chain: &Chain, instance: xr::Instance) -> Fns {
-        let gipa = chain.gipa();
-        macro_rules! get {
-            ($name:literal) => {
-                lookup(gipa, instance, $name).unwrap_or_else(|r| panic!("{:?}: {r:?}", $name))
-            };
-        }
-        Fns {
-            gipa,
-            destroy_instance: get!(c"xrDestroyInstance"),
-            get_system: get!(c"xrGetSystem"),
-            enumerate_views: get!(c"xrEnumerateViewConfigurationViews"),
-            create_session: get!(c"xrCreateSession"),
-            destroy_session: get!(c"xrDestroySession"),
-            poll_event: get!(c"xrPollEvent"),
-            begin_session: get!(c"xrBeginSession"),
-            request_exit: get!(c"xrRequestExitSession"),
-            end_session: get!(c"xrEndSession"),
-            create_space: get!(c"xrCreateReferenceSpace"),
-            destroy_space: get!(c"xrDestroySpace"),
-            create_swapchain: get!(c"xrCreateSwapchain"),
-            destroy_swapchain: get!(c"xrDestroySwapchain"),
-            enumerate_images: get!(c"xrEnumerateSwapchainImages"),
-            acquire: get!(c"xrAcquireSwapchainImage"),
-            wait_image: get!(c"xrWaitSwapchainImage"),
-            release: get!(c"xrReleaseSwapchainImage"),
-            wait_frame: get!(c"xrWaitFrame"),
-            begin_frame: get!(c"xrBeginFrame"),
-            end_frame: get!(c"xrEndFrame"),
-            locate_views: get!(c"xrLocateViews"),
-            create_profile: get!(c"xrCreateFoveationProfileFB"),
-            destroy_profile: get!(c"xrDestroyFoveationProfileFB"),
-            update: get!(c"xrUpdateSwapchainFB"),
-            get_state: get!(c"xrGetSwapchainStateFB"),
-        }
-    }
-}
 
 /// The handles a run made, to tear down and to probe afterwards.
 #[derive(Default)]
@@ -615,152 +545,6 @@ fn every_runtime_call_of_a_headless_session_failing_in_turn() {
 // ---------------------------------------------------------------------------------------------
 // Vulkan: faults around density images on lavapipe, under the validation layer.
 
-static MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
-
-unsafe extern "system" fn on_message(
-    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
-    _types: vk::DebugUtilsMessageTypeFlagsEXT,
-    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
-    _user: *mut c_void,
-) -> vk::Bool32 {
-    let text = CStr::from_ptr((*data).p_message).to_string_lossy();
-    MESSAGES.lock().push(format!("{severity:?}: {text}"));
-    vk::FALSE
-}
-
-const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
-
-/// The application's Vulkan objects, made through XR_KHR_vulkan_enable2.
-struct Vulkan {
-    instance: ash::Instance,
-    debug_utils: ash::ext::debug_utils::Instance,
-    messenger: vk::DebugUtilsMessengerEXT,
-    device: ash::Device,
-    binding: xr::GraphicsBindingVulkanKHR,
-}
-
-/// The VkInstance (validation layer, messenger) and VkDevice through the runtime; `Err` with the
-/// reason to skip.
-unsafe fn vulkan_through_xr(
-    entry: &ash::Entry,
-    gipa: xr::pfn::GetInstanceProcAddr,
-    xr_instance: xr::Instance,
-    sys: xr::SystemId,
-) -> Result<Vulkan, String> {
-    let f = |name: &CStr| lookup::<xr::pfn::VoidFunction>(gipa, xr_instance, name).unwrap();
-    let requirements: xr::pfn::GetVulkanGraphicsRequirements2KHR =
-        std::mem::transmute(f(c"xrGetVulkanGraphicsRequirements2KHR"));
-    let create_instance: xr::pfn::CreateVulkanInstanceKHR =
-        std::mem::transmute(f(c"xrCreateVulkanInstanceKHR"));
-    let graphics_device: xr::pfn::GetVulkanGraphicsDevice2KHR =
-        std::mem::transmute(f(c"xrGetVulkanGraphicsDevice2KHR"));
-    let create_device: xr::pfn::CreateVulkanDeviceKHR =
-        std::mem::transmute(f(c"xrCreateVulkanDeviceKHR"));
-    let mut reqs = xr::GraphicsRequirementsVulkanKHR {
-        ty: xr::GraphicsRequirementsVulkanKHR::TYPE,
-        next: null_mut(),
-        min_api_version_supported: xr::Version::new(0, 0, 0),
-        max_api_version_supported: xr::Version::new(0, 0, 0),
-    };
-    assert_eq!(
-        requirements(xr_instance, sys, &mut reqs),
-        xr::Result::SUCCESS
-    );
-    let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-        .message_severity(
-            vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-                | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
-        )
-        .message_type(
-            vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-                | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION,
-        )
-        .pfn_user_callback(Some(on_message));
-    let app_info = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_1);
-    let layer_names = [VALIDATION.as_ptr()];
-    let ext_names = [ash::ext::debug_utils::NAME.as_ptr()];
-    let vk_create = vk::InstanceCreateInfo::default()
-        .application_info(&app_info)
-        .enabled_layer_names(&layer_names)
-        .enabled_extension_names(&ext_names)
-        .push_next(&mut messenger_info);
-    let vk_gipa: xr::platform::VkGetInstanceProcAddr =
-        std::mem::transmute(entry.static_fn().get_instance_proc_addr);
-    let xr_create = xr::VulkanInstanceCreateInfoKHR {
-        ty: xr::VulkanInstanceCreateInfoKHR::TYPE,
-        next: null(),
-        system_id: sys,
-        create_flags: xr::VulkanInstanceCreateFlagsKHR::EMPTY,
-        pfn_get_instance_proc_addr: Some(vk_gipa),
-        vulkan_create_info: &vk_create as *const _ as *const c_void,
-        vulkan_allocator: null(),
-    };
-    let mut raw_instance: xr::platform::VkInstance = null();
-    let mut vk_result = 0;
-    let r = create_instance(xr_instance, &xr_create, &mut raw_instance, &mut vk_result);
-    assert_eq!((r, vk_result), (xr::Result::SUCCESS, 0));
-    let instance = ash::Instance::load(
-        entry.static_fn(),
-        vk::Instance::from_raw(raw_instance as u64),
-    );
-    let debug_utils = ash::ext::debug_utils::Instance::new(entry, &instance);
-    let messenger = debug_utils
-        .create_debug_utils_messenger(&messenger_info, None)
-        .unwrap();
-    let get_info = xr::VulkanGraphicsDeviceGetInfoKHR {
-        ty: xr::VulkanGraphicsDeviceGetInfoKHR::TYPE,
-        next: null(),
-        system_id: sys,
-        vulkan_instance: raw_instance,
-    };
-    let mut raw_pd: xr::platform::VkPhysicalDevice = null();
-    if graphics_device(xr_instance, &get_info, &mut raw_pd) != xr::Result::SUCCESS {
-        debug_utils.destroy_debug_utils_messenger(messenger, None);
-        instance.destroy_instance(None);
-        return Err("lavapipe (llvmpipe) is not available".into());
-    }
-    let pd = vk::PhysicalDevice::from_raw(raw_pd as u64);
-    let family = instance
-        .get_physical_device_queue_family_properties(pd)
-        .iter()
-        .position(|q| q.queue_flags.contains(vk::QueueFlags::GRAPHICS))
-        .unwrap() as u32;
-    let priorities = [1.0];
-    let queue_info = [vk::DeviceQueueCreateInfo::default()
-        .queue_family_index(family)
-        .queue_priorities(&priorities)];
-    let device_create = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
-    let xr_device = xr::VulkanDeviceCreateInfoKHR {
-        ty: xr::VulkanDeviceCreateInfoKHR::TYPE,
-        next: null(),
-        system_id: sys,
-        create_flags: xr::VulkanDeviceCreateFlagsKHR::EMPTY,
-        pfn_get_instance_proc_addr: Some(vk_gipa),
-        vulkan_physical_device: raw_pd,
-        vulkan_create_info: &device_create as *const _ as *const c_void,
-        vulkan_allocator: null(),
-    };
-    let mut raw_device: xr::platform::VkDevice = null();
-    let r = create_device(xr_instance, &xr_device, &mut raw_device, &mut vk_result);
-    assert_eq!((r, vk_result), (xr::Result::SUCCESS, 0));
-    let device = ash::Device::load(instance.fp_v1_0(), vk::Device::from_raw(raw_device as u64));
-    Ok(Vulkan {
-        instance,
-        debug_utils,
-        messenger,
-        device,
-        binding: xr::GraphicsBindingVulkanKHR {
-            ty: xr::StructureType::GRAPHICS_BINDING_VULKAN_KHR,
-            next: null(),
-            instance: raw_instance,
-            physical_device: raw_pd,
-            device: raw_device,
-            queue_family_index: family,
-            queue_index: 0,
-        },
-    })
-}
-
 const VULKAN_EXTENSIONS: [&str; 5] = [
     "XR_KHR_vulkan_enable2",
     "XR_FB_swapchain_update_state",
@@ -794,16 +578,17 @@ fn vulkan_run(chain: &Chain, entry: &ash::Entry, fault: Option<Fault>) -> Result
             (f.get_system)(instance, &info, &mut sys),
             xr::Result::SUCCESS
         );
-        let v = match vulkan_through_xr(entry, f.gipa, instance, sys) {
+        let v = match Vulkan::through_xr(entry, f.gipa, instance, sys) {
             Ok(v) => v,
             Err(why) => {
                 assert_eq!((f.destroy_instance)(instance), xr::Result::SUCCESS);
                 return Err(why);
             }
         };
+        let binding = v.binding();
         let session_info = xr::SessionCreateInfo {
             ty: xr::StructureType::SESSION_CREATE_INFO,
-            next: &v.binding as *const _ as *const c_void,
+            next: &binding as *const _ as *const c_void,
             create_flags: xr::SessionCreateFlags::EMPTY,
             system_id: sys,
         };
@@ -832,14 +617,10 @@ fn vulkan_run(chain: &Chain, entry: &ash::Entry, fault: Option<Fault>) -> Result
         teardown(&mut run, &f, &h);
         assert_forgotten(&f, &h);
         // The validation layer reports every object still alive on the device here.
-        v.device.device_wait_idle().unwrap();
-        v.device.destroy_device(None);
-        v.debug_utils
-            .destroy_debug_utils_messenger(v.messenger, None);
-        v.instance.destroy_instance(None);
+        v.destroy();
     }
     assert_eq!(control::live_objects(), 0, "the runtime holds objects");
-    let messages = std::mem::take(&mut *MESSAGES.lock());
+    let messages = take_messages();
     assert!(
         messages.is_empty(),
         "{:?}: validation reported {} message(s):\n{}",
@@ -853,23 +634,10 @@ fn vulkan_run(chain: &Chain, entry: &ash::Entry, fault: Option<Fault>) -> Result
 #[test]
 fn faults_around_density_images_leave_no_vulkan_object_behind() {
     let _serial = SERIAL.lock();
-    // The simulated runtime picks lavapipe; set before anything reads the environment.
-    std::env::set_var("FOVEA_SIM_VK_DEVICE", "llvmpipe");
-    let entry = match unsafe { ash::Entry::load() } {
-        Ok(e) => e,
-        Err(e) => {
-            skip(&format!("no Vulkan loader ({e})"));
-            return;
-        }
-    };
-    let layers = unsafe { entry.enumerate_instance_layer_properties() }.unwrap_or_default();
-    if !layers
-        .iter()
-        .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION))
-    {
-        skip("VK_LAYER_KHRONOS_validation is not installed");
+    pick_lavapipe();
+    let Ok(entry) = validated_entry().map_err(|why| skip(&why)) else {
         return;
-    }
+    };
     let chain = Chain::fovea().unwrap();
     let fault = |function: &str, result, nth| {
         Some(Fault {

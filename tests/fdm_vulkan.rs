@@ -9,35 +9,20 @@
 
 use std::ffi::{c_void, CStr, CString};
 use std::ptr::{null, null_mut};
-use std::sync::Once;
 
 use ash::vk;
 use ash::vk::Handle as _;
 use fovea::density::{self, Fov, Grid, Level, Pattern, Rect, View};
 use fovea_harness::app::API_1_0;
+use fovea_harness::vulkan::{self, assert_no_messages, pick_lavapipe, Vulkan};
 use fovea_harness::{skip, App, Chain};
 use openxr_sys as xr;
 use parking_lot::Mutex;
 use xr::Handle;
 
-static MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
 /// Held by each test that creates a validated device, so the messages are that test's own.
 static VALIDATED: Mutex<()> = Mutex::new(());
 
-unsafe extern "system" fn on_message(
-    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
-    _types: vk::DebugUtilsMessageTypeFlagsEXT,
-    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
-    _user: *mut c_void,
-) -> vk::Bool32 {
-    let text = CStr::from_ptr((*data).p_message)
-        .to_string_lossy()
-        .into_owned();
-    MESSAGES.lock().push(format!("{severity:?}: {text}"));
-    vk::FALSE
-}
-
-const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
 const FDM_BIT: u64 = 0x2;
 const SRGB: i64 = 43; // VK_FORMAT_R8G8B8A8_SRGB
 const WIDTH: u32 = 640;
@@ -45,22 +30,13 @@ const HEIGHT: u32 = 500;
 /// lavapipe has no VK_EXT_fragment_density_map: fovea's documented default texel size.
 const TEXEL: [u32; 2] = fovea::fdm::DEFAULT_TEXEL;
 
-/// The simulated runtime picks lavapipe. Every test calls this first, before anything reads the
-/// environment, so setting it is race-free.
-fn pick_lavapipe() {
-    static ONCE: Once = Once::new();
-    ONCE.call_once(|| std::env::set_var("FOVEA_SIM_VK_DEVICE", "llvmpipe"));
-}
-
-/// The system Vulkan loader, or a skip.
-fn vulkan() -> Option<ash::Entry> {
-    match unsafe { ash::Entry::load() } {
-        Ok(e) => Some(e),
-        Err(e) => {
-            skip(&format!("no Vulkan loader ({e})"));
-            None
-        }
-    }
+/// The application's VkInstance and VkDevice through the runtime, under the validation layer, or
+/// `None` after a skip.
+fn vulkan_through_xr(app: &App, sys: xr::SystemId) -> Option<Vulkan> {
+    vulkan::validated_entry()
+        .and_then(|entry| Vulkan::through_xr(&entry, app.chain.gipa(), app.instance, sys))
+        .map_err(|why| skip(&why))
+        .ok()
 }
 
 fn func<T: Copy>(app: &App, name: &str) -> T {
@@ -82,144 +58,6 @@ fn app(vulkan_ext: &str, foveation: bool) -> App {
         exts.extend(FOVEATION_VULKAN);
     }
     App::new(Chain::fovea().unwrap(), &exts, API_1_0).unwrap()
-}
-
-/// The application's Vulkan objects, made through XR_KHR_vulkan_enable2.
-struct Vulkan {
-    instance: ash::Instance,
-    debug_utils: ash::ext::debug_utils::Instance,
-    messenger: vk::DebugUtilsMessengerEXT,
-    raw_instance: xr::platform::VkInstance,
-    raw_pd: xr::platform::VkPhysicalDevice,
-    raw_device: xr::platform::VkDevice,
-    device: ash::Device,
-    family: u32,
-    memory: vk::PhysicalDeviceMemoryProperties,
-}
-
-/// Creates the VkInstance (validation layer + messenger) and VkDevice through the runtime, or
-/// `None` after a skip.
-fn vulkan_through_xr(entry: &ash::Entry, app: &App, sys: xr::SystemId) -> Option<Vulkan> {
-    let layers = unsafe { entry.enumerate_instance_layer_properties() }.unwrap_or_default();
-    if !layers
-        .iter()
-        .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION))
-    {
-        skip("VK_LAYER_KHRONOS_validation is not installed");
-        return None;
-    }
-    let mut reqs = xr::GraphicsRequirementsVulkanKHR {
-        ty: xr::GraphicsRequirementsVulkanKHR::TYPE,
-        next: null_mut(),
-        min_api_version_supported: xr::Version::new(0, 0, 0),
-        max_api_version_supported: xr::Version::new(0, 0, 0),
-    };
-    let requirements: xr::pfn::GetVulkanGraphicsRequirements2KHR =
-        func(app, "xrGetVulkanGraphicsRequirements2KHR");
-    assert_eq!(
-        unsafe { requirements(app.instance, sys, &mut reqs) },
-        xr::Result::SUCCESS
-    );
-    let severity = vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-        | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR;
-    let types = vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-        | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
-        | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE;
-    let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-        .message_severity(severity)
-        .message_type(types)
-        .pfn_user_callback(Some(on_message));
-    let app_info = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_1);
-    let layer_names = [VALIDATION.as_ptr()];
-    let ext_names = [ash::ext::debug_utils::NAME.as_ptr()];
-    let vk_create = vk::InstanceCreateInfo::default()
-        .application_info(&app_info)
-        .enabled_layer_names(&layer_names)
-        .enabled_extension_names(&ext_names)
-        .push_next(&mut messenger_info);
-    let gipa: xr::platform::VkGetInstanceProcAddr =
-        unsafe { std::mem::transmute(entry.static_fn().get_instance_proc_addr) };
-    let xr_create = xr::VulkanInstanceCreateInfoKHR {
-        ty: xr::VulkanInstanceCreateInfoKHR::TYPE,
-        next: null(),
-        system_id: sys,
-        create_flags: xr::VulkanInstanceCreateFlagsKHR::EMPTY,
-        pfn_get_instance_proc_addr: Some(gipa),
-        vulkan_create_info: &vk_create as *const _ as *const c_void,
-        vulkan_allocator: null(),
-    };
-    let create_instance: xr::pfn::CreateVulkanInstanceKHR = func(app, "xrCreateVulkanInstanceKHR");
-    let mut raw_instance: xr::platform::VkInstance = null();
-    let mut vk_result = 0;
-    let r = unsafe { create_instance(app.instance, &xr_create, &mut raw_instance, &mut vk_result) };
-    assert_eq!((r, vk_result), (xr::Result::SUCCESS, 0));
-    let instance = unsafe {
-        ash::Instance::load(
-            entry.static_fn(),
-            vk::Instance::from_raw(raw_instance as u64),
-        )
-    };
-    let debug_utils = ash::ext::debug_utils::Instance::new(entry, &instance);
-    let messenger =
-        unsafe { debug_utils.create_debug_utils_messenger(&messenger_info, None) }.unwrap();
-    let get_info = xr::VulkanGraphicsDeviceGetInfoKHR {
-        ty: xr::VulkanGraphicsDeviceGetInfoKHR::TYPE,
-        next: null(),
-        system_id: sys,
-        vulkan_instance: raw_instance,
-    };
-    let graphics_device: xr::pfn::GetVulkanGraphicsDevice2KHR =
-        func(app, "xrGetVulkanGraphicsDevice2KHR");
-    let mut raw_pd: xr::platform::VkPhysicalDevice = null();
-    if unsafe { graphics_device(app.instance, &get_info, &mut raw_pd) } != xr::Result::SUCCESS {
-        unsafe {
-            debug_utils.destroy_debug_utils_messenger(messenger, None);
-            instance.destroy_instance(None);
-        }
-        skip("lavapipe (llvmpipe) is not available");
-        return None;
-    }
-    let pd = vk::PhysicalDevice::from_raw(raw_pd as u64);
-    let family = unsafe { instance.get_physical_device_queue_family_properties(pd) }
-        .iter()
-        .position(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
-        .unwrap() as u32;
-    let priorities = [1.0];
-    let queue_info = [vk::DeviceQueueCreateInfo::default()
-        .queue_family_index(family)
-        .queue_priorities(&priorities)];
-    let device_create = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
-    let xr_device = xr::VulkanDeviceCreateInfoKHR {
-        ty: xr::VulkanDeviceCreateInfoKHR::TYPE,
-        next: null(),
-        system_id: sys,
-        create_flags: xr::VulkanDeviceCreateFlagsKHR::EMPTY,
-        pfn_get_instance_proc_addr: Some(gipa),
-        vulkan_physical_device: raw_pd,
-        vulkan_create_info: &device_create as *const _ as *const c_void,
-        vulkan_allocator: null(),
-    };
-    let create_device: xr::pfn::CreateVulkanDeviceKHR = func(app, "xrCreateVulkanDeviceKHR");
-    let mut raw_device: xr::platform::VkDevice = null();
-    let r = unsafe { create_device(app.instance, &xr_device, &mut raw_device, &mut vk_result) };
-    assert_eq!((r, vk_result), (xr::Result::SUCCESS, 0));
-    // The application's create info is untouched: fovea went down with copies.
-    assert_eq!(device_create.enabled_extension_count, 0);
-    assert!(device_create.p_next.is_null());
-    let device =
-        unsafe { ash::Device::load(instance.fp_v1_0(), vk::Device::from_raw(raw_device as u64)) };
-    let memory = unsafe { instance.get_physical_device_memory_properties(pd) };
-    Some(Vulkan {
-        instance,
-        debug_utils,
-        messenger,
-        raw_instance,
-        raw_pd,
-        raw_device,
-        device,
-        family,
-        memory,
-    })
 }
 
 /// A host-visible buffer and a command buffer to read density images back with.
@@ -262,10 +100,13 @@ impl Readback {
             let req = d.get_buffer_memory_requirements(buffer);
             let wanted =
                 vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
-            let index = (0..v.memory.memory_type_count)
+            let types = v
+                .instance
+                .get_physical_device_memory_properties(v.physical_device);
+            let index = (0..types.memory_type_count)
                 .find(|i| {
                     req.memory_type_bits & (1 << i) != 0
-                        && v.memory.memory_types[*i as usize]
+                        && types.memory_types[*i as usize]
                             .property_flags
                             .contains(wanted)
                 })
@@ -690,15 +531,7 @@ impl Frame<'_> {
 
 /// A Vulkan session on the application's device, begun, with a LOCAL space.
 fn running_session(app: &App, sys: xr::SystemId, v: &Vulkan) -> (xr::Session, xr::Space) {
-    let binding = xr::GraphicsBindingVulkanKHR {
-        ty: xr::StructureType::GRAPHICS_BINDING_VULKAN_KHR,
-        next: null(),
-        instance: v.raw_instance,
-        physical_device: v.raw_pd,
-        device: v.raw_device,
-        queue_family_index: v.family,
-        queue_index: 0,
-    };
+    let binding = v.binding();
     let create_session: xr::pfn::CreateSession = func(app, "xrCreateSession");
     let session_info = xr::SessionCreateInfo {
         ty: xr::StructureType::SESSION_CREATE_INFO,
@@ -777,10 +610,9 @@ fn frame_fovs(frame: &Frame) -> Fov {
 fn density_images_on_lavapipe_hold_the_model_and_leave_nothing_behind() {
     let _serial = VALIDATED.lock();
     pick_lavapipe();
-    let Some(entry) = vulkan() else { return };
     let app = app("XR_KHR_vulkan_enable2", true);
     let sys = app.system();
-    let Some(v) = vulkan_through_xr(&entry, &app, sys) else {
+    let Some(v) = vulkan_through_xr(&app, sys) else {
         return;
     };
 
@@ -953,43 +785,26 @@ fn density_images_on_lavapipe_hold_the_model_and_leave_nothing_behind() {
         xr::Result::ERROR_HANDLE_INVALID
     );
     readback.destroy(&v);
-    teardown(app, &v);
+    teardown(app, v);
 }
 
 /// Destroys the device (the validation layer reports every object still alive on it here), the
 /// OpenXR instance and the Vulkan instance, and requires that validation said nothing.
-fn teardown(app: App, v: &Vulkan) {
-    unsafe {
-        v.device.device_wait_idle().unwrap();
-        v.device.destroy_device(None);
-    }
+fn teardown(app: App, v: Vulkan) {
+    // SAFETY: the test is done with the device; the instance goes after it.
+    unsafe { v.destroy_device() };
     assert_eq!(app.destroy(), xr::Result::SUCCESS);
-    unsafe {
-        v.debug_utils
-            .destroy_debug_utils_messenger(v.messenger, None);
-        v.instance.destroy_instance(None);
-    }
+    unsafe { v.destroy_instance() };
     assert_no_messages();
-}
-
-fn assert_no_messages() {
-    let messages = std::mem::take(&mut *MESSAGES.lock());
-    assert!(
-        messages.is_empty(),
-        "validation reported {} message(s):\n{}",
-        messages.len(),
-        messages.join("\n")
-    );
 }
 
 #[test]
 fn instance_destruction_takes_live_sessions_density_images_with_it() {
     let _serial = VALIDATED.lock();
     pick_lavapipe();
-    let Some(entry) = vulkan() else { return };
     let app = app("XR_KHR_vulkan_enable2", true);
     let sys = app.system();
-    let Some(v) = vulkan_through_xr(&entry, &app, sys) else {
+    let Some(v) = vulkan_through_xr(&app, sys) else {
         return;
     };
     let (session, space) = running_session(&app, sys, &v);
@@ -1019,13 +834,7 @@ fn instance_destruction_takes_live_sessions_density_images_with_it() {
     frame.release(swapchain, time);
     // Neither the swapchain nor the session is destroyed: xrDestroyInstance takes them along.
     assert_eq!(app.destroy(), xr::Result::SUCCESS);
-    unsafe {
-        v.device.device_wait_idle().unwrap();
-        v.device.destroy_device(None);
-        v.debug_utils
-            .destroy_debug_utils_messenger(v.messenger, None);
-        v.instance.destroy_instance(None);
-    }
+    v.destroy();
     assert_no_messages();
 }
 
@@ -1105,7 +914,9 @@ fn vulkan_enable_device_extensions_gain_fdm_where_it_can_be_had() {
     );
 
     // Once the physical device is known, only what it supports: lavapipe has no FDM.
-    let Some(entry) = vulkan() else { return };
+    let Ok(entry) = vulkan::entry().map_err(|why| skip(&why)) else {
+        return;
+    };
     let app_info = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_1);
     let instance = unsafe {
         entry.create_instance(
@@ -1213,10 +1024,9 @@ fn release_side_by_side(frame: &Frame, swapchain: xr::Swapchain, time: xr::Time,
 fn submitted_views_decide_what_each_layer_holds() {
     let _serial = VALIDATED.lock();
     pick_lavapipe();
-    let Some(entry) = vulkan() else { return };
     let app = app("XR_KHR_vulkan_enable2", true);
     let sys = app.system();
-    let Some(v) = vulkan_through_xr(&entry, &app, sys) else {
+    let Some(v) = vulkan_through_xr(&app, sys) else {
         return;
     };
     let (session, space) = running_session(&app, sys, &v);
@@ -1300,5 +1110,5 @@ fn submitted_views_decide_what_each_layer_holds() {
     let destroy_session: xr::pfn::DestroySession = func(&app, "xrDestroySession");
     assert_eq!(unsafe { destroy_session(session) }, xr::Result::SUCCESS);
     readback.destroy(&v);
-    teardown(app, &v);
+    teardown(app, v);
 }

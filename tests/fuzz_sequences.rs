@@ -26,6 +26,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use fovea_harness::app::{with_create_info, API_1_0};
+use fovea_harness::fns::Fns;
 use fovea_harness::frame_loop::FOVEATION_EXTENSIONS;
 use fovea_harness::{lookup, sim, Chain};
 use openxr_sys as xr;
@@ -51,65 +52,6 @@ fn tally(name: &'static str, r: xr::Result) {
 const MAX_INSTANCES: usize = 3;
 /// The longest chain fovea follows (`fovea::ffi::MAX_CHAIN_LENGTH`).
 const MAX_CHAIN: usize = fovea::ffi::MAX_CHAIN_LENGTH;
-
-/// Every function the sequences call, looked up once; hooks and runtime functions alike are the
-/// same for every instance.
-#[derive(Clone, Copy)]
-struct Fns {
-    gipa: xr::pfn::GetInstanceProcAddr,
-    destroy_instance: xr::pfn::DestroyInstance,
-    create_session: xr::pfn::CreateSession,
-    destroy_session: xr::pfn::DestroySession,
-    begin_session: xr::pfn::BeginSession,
-    create_space: xr::pfn::CreateReferenceSpace,
-    create_swapchain: xr::pfn::CreateSwapchain,
-    destroy_swapchain: xr::pfn::DestroySwapchain,
-    enumerate_images: xr::pfn::EnumerateSwapchainImages,
-    acquire: xr::pfn::AcquireSwapchainImage,
-    wait_image: xr::pfn::WaitSwapchainImage,
-    release: xr::pfn::ReleaseSwapchainImage,
-    wait_frame: xr::pfn::WaitFrame,
-    begin_frame: xr::pfn::BeginFrame,
-    end_frame: xr::pfn::EndFrame,
-    locate_views: xr::pfn::LocateViews,
-    create_profile: xr::pfn::CreateFoveationProfileFB,
-    destroy_profile: xr::pfn::DestroyFoveationProfileFB,
-    update: xr::pfn::UpdateSwapchainFB,
-    get_state: xr::pfn::GetSwapchainStateFB,
-}
-
-impl Fns {
-    unsafe fn load(chain: &Chain, instance: xr::Instance) -> Fns {
-        let gipa = chain.gipa();
-        macro_rules! get {
-            ($name:literal) => {
-                lookup(gipa, instance, $name).unwrap_or_else(|r| panic!("{:?}: {r:?}", $name))
-            };
-        }
-        Fns {
-            gipa,
-            destroy_instance: get!(c"xrDestroyInstance"),
-            create_session: get!(c"xrCreateSession"),
-            destroy_session: get!(c"xrDestroySession"),
-            begin_session: get!(c"xrBeginSession"),
-            create_space: get!(c"xrCreateReferenceSpace"),
-            create_swapchain: get!(c"xrCreateSwapchain"),
-            destroy_swapchain: get!(c"xrDestroySwapchain"),
-            enumerate_images: get!(c"xrEnumerateSwapchainImages"),
-            acquire: get!(c"xrAcquireSwapchainImage"),
-            wait_image: get!(c"xrWaitSwapchainImage"),
-            release: get!(c"xrReleaseSwapchainImage"),
-            wait_frame: get!(c"xrWaitFrame"),
-            begin_frame: get!(c"xrBeginFrame"),
-            end_frame: get!(c"xrEndFrame"),
-            locate_views: get!(c"xrLocateViews"),
-            create_profile: get!(c"xrCreateFoveationProfileFB"),
-            destroy_profile: get!(c"xrDestroyFoveationProfileFB"),
-            update: get!(c"xrUpdateSwapchainFB"),
-            get_state: get!(c"xrGetSwapchainStateFB"),
-        }
-    }
-}
 
 // ---------------------------------------------------------------------------------------------
 // What a sequence is made of.
@@ -1361,6 +1303,8 @@ fn random_call_sequences_match_the_reference_model() {
     sim::control::set_thread_config(None);
     // One chain for the whole run keeps libfovea.so loaded, so the function pointers stay valid.
     let chain = Chain::fovea().unwrap();
+    // Looked up once, on an instance made for the purpose: hooks and runtime functions alike are
+    // the same for every instance.
     let f = {
         let mut boot = xr::Instance::NULL;
         let r = with_create_info(&FOVEATION_EXTENSIONS, API_1_0, |info| unsafe {

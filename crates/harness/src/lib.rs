@@ -436,5 +436,7 @@ pub unsafe fn enumerate_extensions(
 }
 
 pub mod app;
+pub mod fns;
 pub mod frame_loop;
+pub mod vulkan;
 pub use app::App;

@@ -4,66 +4,28 @@
 
 mod common;
 
-use std::ffi::{c_void, CStr};
+use std::ffi::c_void;
 use std::ptr::{null, null_mut};
 
 use ash::vk;
 use ash::vk::Handle as _;
 use common::*;
+use fovea_harness::skip;
+use fovea_harness::vulkan::{assert_no_messages, pick_lavapipe, validated_entry, Vulkan};
 use fovea_sim::control;
 use openxr_sys as xr;
-use parking_lot::Mutex;
-
-static MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
-
-unsafe extern "system" fn on_message(
-    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
-    _types: vk::DebugUtilsMessageTypeFlagsEXT,
-    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
-    _user: *mut c_void,
-) -> vk::Bool32 {
-    let text = CStr::from_ptr((*data).p_message)
-        .to_string_lossy()
-        .into_owned();
-    MESSAGES.lock().push(format!("{severity:?}: {text}"));
-    vk::FALSE
-}
-
-fn skip(reason: &str) {
-    if std::env::var("FOVEA_REQUIRE_SYSTEM").as_deref() == Ok("1") {
-        panic!("FOVEA_REQUIRE_SYSTEM=1 but {reason}");
-    }
-    eprintln!("skipping: {reason}");
-}
-
-const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
 
 #[test]
 fn vulkan_session_on_lavapipe_is_validation_clean() {
-    let entry = match unsafe { ash::Entry::load() } {
-        Ok(e) => e,
-        Err(e) => return skip(&format!("no Vulkan loader ({e})")),
+    let Ok(entry) = validated_entry().map_err(|why| skip(&why)) else {
+        return;
     };
-    let layers = unsafe { entry.enumerate_instance_layer_properties() }.unwrap_or_default();
-    if !layers
-        .iter()
-        .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION))
-    {
-        return skip("VK_LAYER_KHRONOS_validation is not installed");
-    }
     // The only test in this binary, so setting the process environment is race-free.
-    std::env::set_var("FOVEA_SIM_VK_DEVICE", "llvmpipe");
+    pick_lavapipe();
 
     let instance = create_instance(config("quest3"), &["XR_KHR_vulkan_enable2"]);
     let sys = system(instance);
 
-    // XR_KHR_vulkan_enable2: the runtime creates the VkInstance through our vkGetInstanceProcAddr.
-    let mut reqs = xr::GraphicsRequirementsVulkanKHR {
-        ty: xr::GraphicsRequirementsVulkanKHR::TYPE,
-        next: null_mut(),
-        min_api_version_supported: xr::Version::new(0, 0, 0),
-        max_api_version_supported: xr::Version::new(0, 0, 0),
-    };
     let binding_early = xr::GraphicsBindingVulkanKHR {
         ty: xr::GraphicsBindingVulkanKHR::TYPE,
         next: null(),
@@ -77,124 +39,22 @@ fn vulkan_session_on_lavapipe_is_validation_clean() {
         create_session_with(instance, &binding_early as *const _ as *const c_void),
         Err(xr::Result::ERROR_GRAPHICS_REQUIREMENTS_CALL_MISSING)
     );
-    assert_eq!(
-        unsafe { xrfn!(instance, GetVulkanGraphicsRequirements2KHR)(instance, sys, &mut reqs) },
-        xr::Result::SUCCESS
-    );
-    assert_eq!(reqs.max_api_version_supported, xr::Version::new(1, 3, 0));
-
-    let severity = vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-        | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR;
-    let types = vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-        | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
-        | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE;
-    let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-        .message_severity(severity)
-        .message_type(types)
-        .pfn_user_callback(Some(on_message));
-    let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_1);
-    let layer_names = [VALIDATION.as_ptr()];
-    let ext_names = [ash::ext::debug_utils::NAME.as_ptr()];
-    let vk_create = vk::InstanceCreateInfo::default()
-        .application_info(&app)
-        .enabled_layer_names(&layer_names)
-        .enabled_extension_names(&ext_names)
-        .push_next(&mut messenger_info);
-    let gipa: xr::platform::VkGetInstanceProcAddr =
-        unsafe { std::mem::transmute(entry.static_fn().get_instance_proc_addr) };
-    let xr_create = xr::VulkanInstanceCreateInfoKHR {
-        ty: xr::VulkanInstanceCreateInfoKHR::TYPE,
-        next: null(),
-        system_id: sys,
-        create_flags: xr::VulkanInstanceCreateFlagsKHR::EMPTY,
-        pfn_get_instance_proc_addr: Some(gipa),
-        vulkan_create_info: &vk_create as *const _ as *const c_void,
-        vulkan_allocator: null(),
-    };
-    let mut raw_instance: xr::platform::VkInstance = null();
-    let mut vk_result = 0;
-    let r = unsafe {
-        xrfn!(instance, CreateVulkanInstanceKHR)(
-            instance,
-            &xr_create,
-            &mut raw_instance,
-            &mut vk_result,
-        )
-    };
-    assert_eq!((r, vk_result), (xr::Result::SUCCESS, 0));
-    let vk_instance = unsafe {
-        ash::Instance::load(
-            entry.static_fn(),
-            vk::Instance::from_raw(raw_instance as u64),
-        )
-    };
-    let debug_utils = ash::ext::debug_utils::Instance::new(&entry, &vk_instance);
-    let messenger =
-        unsafe { debug_utils.create_debug_utils_messenger(&messenger_info, None) }.unwrap();
-
-    let get_info = xr::VulkanGraphicsDeviceGetInfoKHR {
-        ty: xr::VulkanGraphicsDeviceGetInfoKHR::TYPE,
-        next: null(),
-        system_id: sys,
-        vulkan_instance: raw_instance,
-    };
-    let mut raw_pd: xr::platform::VkPhysicalDevice = null();
-    let r =
-        unsafe { xrfn!(instance, GetVulkanGraphicsDevice2KHR)(instance, &get_info, &mut raw_pd) };
-    if r != xr::Result::SUCCESS {
-        unsafe {
-            debug_utils.destroy_debug_utils_messenger(messenger, None);
-            vk_instance.destroy_instance(None);
+    // XR_KHR_vulkan_enable2: the runtime creates the VkInstance through our vkGetInstanceProcAddr.
+    let v = match Vulkan::through_xr(&entry, fovea_sim::get_instance_proc_addr, instance, sys) {
+        Ok(v) => v,
+        Err(why) => {
+            destroy_instance(instance);
+            skip(&why);
+            return;
         }
-        destroy_instance(instance);
-        return skip("lavapipe (llvmpipe) is not available");
-    }
-    let pd = vk::PhysicalDevice::from_raw(raw_pd as u64);
-    let family = unsafe { vk_instance.get_physical_device_queue_family_properties(pd) }
-        .iter()
-        .position(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
-        .unwrap() as u32;
-    let priorities = [1.0];
-    let queue_info = [vk::DeviceQueueCreateInfo::default()
-        .queue_family_index(family)
-        .queue_priorities(&priorities)];
-    let device_create = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
-    let xr_device = xr::VulkanDeviceCreateInfoKHR {
-        ty: xr::VulkanDeviceCreateInfoKHR::TYPE,
-        next: null(),
-        system_id: sys,
-        create_flags: xr::VulkanDeviceCreateFlagsKHR::EMPTY,
-        pfn_get_instance_proc_addr: Some(gipa),
-        vulkan_physical_device: raw_pd,
-        vulkan_create_info: &device_create as *const _ as *const c_void,
-        vulkan_allocator: null(),
     };
-    let mut raw_device: xr::platform::VkDevice = null();
-    let r = unsafe {
-        xrfn!(instance, CreateVulkanDeviceKHR)(
-            instance,
-            &xr_device,
-            &mut raw_device,
-            &mut vk_result,
-        )
-    };
-    assert_eq!((r, vk_result), (xr::Result::SUCCESS, 0));
-    let device = unsafe {
-        ash::Device::load(
-            vk_instance.fp_v1_0(),
-            vk::Device::from_raw(raw_device as u64),
-        )
-    };
+    assert_eq!(
+        v.requirements.max_api_version_supported,
+        xr::Version::new(1, 3, 0)
+    );
+    let (device, family) = (&v.device, v.family);
 
-    let binding = xr::GraphicsBindingVulkanKHR {
-        ty: xr::GraphicsBindingVulkanKHR::TYPE,
-        next: null(),
-        instance: raw_instance,
-        physical_device: raw_pd,
-        device: raw_device,
-        queue_family_index: family,
-        queue_index: 0,
-    };
+    let binding = v.binding();
     let session = create_session_with(instance, &binding as *const _ as *const c_void).unwrap();
     assert_eq!(begin_session(instance, session), xr::Result::SUCCESS);
     let space = reference_space(instance, session, xr::ReferenceSpaceType::LOCAL);
@@ -413,21 +273,12 @@ fn vulkan_session_on_lavapipe_is_validation_clean() {
         unsafe { xrfn!(instance, DestroySession)(session) },
         xr::Result::SUCCESS
     );
+    // SAFETY: the queue is idle (waited after each submit); nothing uses the device afterwards.
     unsafe {
-        device.device_wait_idle().unwrap();
         device.destroy_command_pool(pool, None);
-        device.destroy_device(None);
+        v.destroy_device();
     }
     destroy_instance(instance);
-    unsafe {
-        debug_utils.destroy_debug_utils_messenger(messenger, None);
-        vk_instance.destroy_instance(None);
-    }
-    let messages = MESSAGES.lock();
-    assert!(
-        messages.is_empty(),
-        "validation reported {} message(s):\n{}",
-        messages.len(),
-        messages.join("\n")
-    );
+    unsafe { v.destroy_instance() };
+    assert_no_messages();
 }
