@@ -16,7 +16,10 @@ const USAGE: &str = "\
 usage: fovea <command> [options]
 
 commands:
-  demo                      run a frame loop through the layer on the simulated Quest 3
+  demo    [--via loader|harness] [--seconds N] [--headset NAME] [--out DIR]
+                            an app on the simulated headset through the layer: the example app
+                            through the system loader where it and Vulkan are there, else a
+                            headless loop through the fake loader harness
   maps    --headset NAME --level none|low|medium|high|high-top [--vertical-offset DEG]
           [--eye left|right|both] [--texel N] --out DIR
                             write PNGs of the resolution multiplier maps
