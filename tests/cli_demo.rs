@@ -45,6 +45,20 @@ fn fov_sequence(text: &str) -> Vec<String> {
     seen
 }
 
+/// Overload raises the dynamic level one step at a time; the override fixes it at MEDIUM.
+fn assert_story(text: &str) {
+    let fovs = fov_sequence(text);
+    assert!(
+        fovs.starts_with(&["0D", "1D", "2D", "3D"].map(String::from)),
+        "{fovs:?}\n{text}"
+    );
+    assert_eq!(
+        fovs.last().map(String::as_str),
+        Some("2"),
+        "{fovs:?}\n{text}"
+    );
+}
+
 #[test]
 fn through_the_system_loader_it_runs_the_example_and_reads_back_its_maps() {
     if let Err(e) = unsafe { libloading::Library::new("libopenxr_loader.so.1") } {
@@ -63,17 +77,7 @@ fn through_the_system_loader_it_runs_the_example_and_reads_back_its_maps() {
         text.contains("examples/foveated_vulkan through the Khronos loader"),
         "{text}"
     );
-    // Overload raises the dynamic level one step at a time; the override fixes it at MEDIUM.
-    let fovs = fov_sequence(&text);
-    assert!(
-        fovs.starts_with(&["0D", "1D", "2D", "3D"].map(String::from)),
-        "{fovs:?}\n{text}"
-    );
-    assert_eq!(
-        fovs.last().map(String::as_str),
-        Some("2"),
-        "{fovs:?}\n{text}"
-    );
+    assert_story(&text);
     assert!(
         text.contains("-- wrote debug.oculus.foveation.level=2"),
         "{text}"
@@ -100,16 +104,7 @@ fn through_the_system_loader_it_runs_the_example_and_reads_back_its_maps() {
 fn through_the_harness_it_needs_nothing_installed() {
     let (text, out) = demo(&["--via", "harness", "--seconds", "10"], "harness");
     assert!(text.contains("in real time"), "{text}");
-    let fovs = fov_sequence(&text);
-    assert!(
-        fovs.starts_with(&["0D", "1D", "2D", "3D"].map(String::from)),
-        "{fovs:?}\n{text}"
-    );
-    assert_eq!(
-        fovs.last().map(String::as_str),
-        Some("2"),
-        "{fovs:?}\n{text}"
-    );
+    assert_story(&text);
     assert!(out.join("map_high_left.png").is_file(), "{text}");
     std::fs::remove_dir_all(&out).ok();
 }
