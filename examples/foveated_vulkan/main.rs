@@ -40,6 +40,7 @@
 mod render;
 
 use std::ffi::{c_void, CStr};
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::ptr;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -313,7 +314,11 @@ unsafe extern "system" fn on_vulkan_message(
         .filter(|d| !d.p_message.is_null())
         .map(|d| CStr::from_ptr(d.p_message).to_string_lossy())
         .unwrap_or_default();
-    eprintln!("foveated_vulkan: Vulkan {severity:?}: {message}");
+    // Not eprintln!: a closed stderr must not panic inside a callback the driver calls.
+    let _ = writeln!(
+        std::io::stderr(),
+        "foveated_vulkan: Vulkan {severity:?}: {message}"
+    );
     VK_MESSAGES.fetch_add(1, Ordering::Relaxed);
     vk::FALSE
 }

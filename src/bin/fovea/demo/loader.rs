@@ -180,15 +180,11 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
     // Four fifths through in display time, which misses stretch: a frame whose GPU time is over
     // the period takes as many periods as it needs.
     let period_ms = 1000.0 / headset.refresh_hz;
+    let load = fovea_harness::sim::control::Load {
+        gpu_ms: LOAD.to_vec(),
+    };
     let periods: f32 = (0..frames)
-        .map(|f| {
-            let ms = LOAD
-                .iter()
-                .rev()
-                .find(|(first, _)| *first <= f)
-                .map_or(0.0, |l| l.1);
-            (ms / period_ms).ceil().max(1.0)
-        })
+        .map(|f| (load.gpu_ms_at(f) / period_ms).ceil().max(1.0))
         .sum();
     let override_at = (periods / headset.refresh_hz * 0.8).round() as u64;
     let mut seconds = 0;
