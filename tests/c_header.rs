@@ -10,7 +10,7 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use fovea::extensions::EXTENSIONS;
+use fovea_abi::EXTENSIONS;
 use fovea_harness::{artifact, skip};
 
 fn root() -> PathBuf {
@@ -109,7 +109,7 @@ fn header_matches_the_rust_sources() {
         defines(&h, "FOVEA_LAYER_NAME"),
         [(
             "FOVEA_LAYER_NAME".to_owned(),
-            format!("\"{}\"", fovea::LAYER_NAME)
+            format!("\"{}\"", fovea_abi::LAYER_NAME)
         )]
     );
 
@@ -378,7 +378,7 @@ fn a_c_and_a_cpp_program_compile_against_the_header_and_find_the_symbol() {
         printed[EXTENSIONS.len()..].sort();
         assert_eq!(printed, expected, "{out}");
         assert!(
-            out.contains(&format!("layer {}\n", fovea::LAYER_NAME)),
+            out.contains(&format!("layer {}\n", fovea_abi::LAYER_NAME)),
             "{out}"
         );
         assert!(out.contains("symbol found\n"), "{out}");

@@ -338,6 +338,27 @@ unsafe fn session_flow(
     run.call("xrEndSession", (f.end_session)(h.session))
 }
 
+/// Whether fovea intercepts `function`, found as an application could: the pointer the layer chain
+/// hands out differs from the runtime's own. Asked on an instance of its own, so faults do not matter.
+fn intercepted_by_fovea(function: &str) -> bool {
+    let chain = Chain::fovea().unwrap();
+    let name = std::ffi::CString::new(function).unwrap();
+    let mut instance = xr::Instance::NULL;
+    let r = with_create_info(&FOVEATION_EXTENSIONS, API_1_0, |info| unsafe {
+        chain.create_instance(info, &mut instance)
+    });
+    assert_eq!(r, xr::Result::SUCCESS);
+    let (mut through_layer, mut runtime) = (None, None);
+    unsafe {
+        (chain.gipa())(instance, name.as_ptr(), &mut through_layer);
+        (fovea_harness::runtime_gipa())(instance, name.as_ptr(), &mut runtime);
+        let destroy: xr::pfn::DestroyInstance =
+            fovea_harness::lookup(chain.gipa(), instance, c"xrDestroyInstance").unwrap();
+        assert_eq!(destroy(instance), xr::Result::SUCCESS);
+    }
+    through_layer.map(|f| f as usize) != runtime.map(|f| f as usize)
+}
+
 /// The loss fovea saw, when the fault was XR_ERROR_SESSION_LOST or XR_ERROR_INSTANCE_LOST on a call
 /// it intercepts: from then on its own functions must answer that loss as the runtime does.
 fn loss_seen_by_fovea(fault: &Option<Fault>) -> Option<xr::Result> {
@@ -346,8 +367,7 @@ fn loss_seen_by_fovea(fault: &Option<Fault>) -> Option<xr::Result> {
         f.result,
         xr::Result::ERROR_SESSION_LOST | xr::Result::ERROR_INSTANCE_LOST
     );
-    let name = std::ffi::CString::new(f.function.clone()).unwrap();
-    (loss && fovea::dispatch::hook(&name).is_some()).then_some(f.result)
+    (loss && intercepted_by_fovea(&f.function)).then_some(f.result)
 }
 
 /// fovea's own state after whatever failed: the swapchain reads back the profile last applied, and

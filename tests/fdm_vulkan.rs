@@ -12,10 +12,11 @@ use std::ptr::{null, null_mut};
 
 use ash::vk;
 use ash::vk::Handle as _;
-use fovea::density::{self, Fov, Grid, Level, Pattern, Rect, View};
 use fovea_harness::app::API_1_0;
 use fovea_harness::vulkan::{self, assert_no_messages, pick_lavapipe, Vulkan};
 use fovea_harness::{skip, App, Chain};
+use fovea_model::density::{self, Grid, Level, Pattern, Rect, View};
+use fovea_model::Fov;
 use openxr_sys as xr;
 use parking_lot::Mutex;
 use xr::Handle;
@@ -28,7 +29,7 @@ const SRGB: i64 = 43; // VK_FORMAT_R8G8B8A8_SRGB
 const WIDTH: u32 = 640;
 const HEIGHT: u32 = 500;
 /// lavapipe has no VK_EXT_fragment_density_map: fovea's documented default texel size.
-const TEXEL: [u32; 2] = fovea::fdm::DEFAULT_TEXEL;
+const TEXEL: [u32; 2] = fovea_model::maps::DEFAULT_TEXEL;
 
 /// The application's VkInstance and VkDevice through the runtime, under the validation layer, or
 /// `None` after a skip.
@@ -1080,7 +1081,7 @@ fn submitted_views_decide_what_each_layer_holds() {
     let [mw, mh] = grid.map_extent();
     let layer_bytes = (mw * mh * 2) as usize;
     let pattern = Pattern {
-        level: fovea::density::Level::High,
+        level: fovea_model::density::Level::High,
         vertical_offset_deg: 0.0,
     };
     let half = |eye: usize| View {

@@ -50,8 +50,8 @@ fn tally(name: &'static str, r: xr::Result) {
 
 /// The most instances alive at once (each costs a layer record and a runtime instance).
 const MAX_INSTANCES: usize = 3;
-/// The longest chain fovea follows (`fovea::ffi::MAX_CHAIN_LENGTH`).
-const MAX_CHAIN: usize = fovea::ffi::MAX_CHAIN_LENGTH;
+/// The longest chain fovea follows (`fovea_abi::MAX_CHAIN_LENGTH`).
+const MAX_CHAIN: usize = fovea_abi::MAX_CHAIN_LENGTH;
 
 // ---------------------------------------------------------------------------------------------
 // What a sequence is made of.

@@ -161,7 +161,7 @@ fn scenario() {
         "XR_API_LAYER_PATH",
         format!("{}:{DEBIAN_LAYERS}", dir.join("layers").display()),
     );
-    std::env::set_var("XR_ENABLE_API_LAYERS", fovea::LAYER_NAME);
+    std::env::set_var("XR_ENABLE_API_LAYERS", fovea_abi::LAYER_NAME);
     let gipa: Gipa = unsafe { *loader.get::<Gipa>(b"xrGetInstanceProcAddr\0").unwrap() };
 
     // Enabled by the environment, the layer's extensions are listed with the runtime's.
@@ -174,7 +174,7 @@ fn scenario() {
     }
     .unwrap();
     let listed = unsafe { enumerate_extensions(enumerate, std::ptr::null::<c_char>()) };
-    for e in fovea::extensions::EXTENSIONS {
+    for e in fovea_abi::EXTENSIONS {
         assert!(
             listed.iter().any(|l| l.as_bytes() == e.name.to_bytes()),
             "{:?} not listed: {listed:?}",
@@ -192,8 +192,8 @@ fn scenario() {
         return;
     }
     for order in [
-        format!("{CORE_VALIDATION_LAYER}:{}", fovea::LAYER_NAME),
-        format!("{}:{CORE_VALIDATION_LAYER}", fovea::LAYER_NAME),
+        format!("{CORE_VALIDATION_LAYER}:{}", fovea_abi::LAYER_NAME),
+        format!("{}:{CORE_VALIDATION_LAYER}", fovea_abi::LAYER_NAME),
     ] {
         std::env::set_var("XR_ENABLE_API_LAYERS", &order);
         unsafe { instance_and_session(gipa, &order) };

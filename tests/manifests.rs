@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use fovea::extensions::EXTENSIONS;
+use fovea_abi::EXTENSIONS;
 use serde_json::Value;
 
 fn root() -> PathBuf {
@@ -19,7 +19,7 @@ fn check_layer(path: &Path, implicit: bool) {
     let m = read(path);
     assert_eq!(m["file_format_version"], "1.0.0");
     let l = &m["api_layer"];
-    assert_eq!(l["name"], fovea::LAYER_NAME);
+    assert_eq!(l["name"], fovea_abi::LAYER_NAME);
     // Required fields must be strings: the loader drops numbers as "missing required fields".
     for key in [
         "name",

@@ -12,7 +12,8 @@ use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 
 fn running(load: &[(u64, f32)]) -> HeadlessLoop {
-    let mut cfg = sim::control::SimConfig::for_headset(fovea_headsets::by_id("quest3").unwrap());
+    let mut cfg =
+        sim::control::SimConfig::for_headset(fovea_model::headsets::by_id("quest3").unwrap());
     cfg.journal = false;
     cfg.load = sim::control::Load {
         gpu_ms: load.to_vec(),
@@ -41,7 +42,7 @@ fn lines_since(log: &Path, from: usize) -> Vec<String> {
 fn fov_values(lines: &[String]) -> Vec<String> {
     lines
         .iter()
-        .filter(|l| l.contains("fovea::stats"))
+        .filter(|l| l.contains(fovea_abi::log_target::STATS))
         .map(|l| {
             let at = l.find("Fov=").expect("Fov= in the stats line") + 4;
             l[at..].split(' ').next().unwrap().to_string()
@@ -58,7 +59,10 @@ fn dynamic_level_stats_and_live_overrides() {
     std::fs::write(&props, "").unwrap();
     std::env::set_var(
         "FOVEA_LOG",
-        "warn,fovea::stats=info,fovea::hooks::frame=info",
+        format!(
+            "warn,{}=info,fovea::xr::hooks::frame=info",
+            fovea_abi::log_target::STATS
+        ),
     );
     std::env::set_var("FOVEA_LOG_FILE", &log);
     std::env::set_var("FOVEA_PROPS", &props);
@@ -77,7 +81,7 @@ fn dynamic_level_stats_and_live_overrides() {
     let lines = lines_since(&log, 0);
     let stats: Vec<&String> = lines
         .iter()
-        .filter(|l| l.contains("fovea::stats"))
+        .filter(|l| l.contains(fovea_abi::log_target::STATS))
         .collect();
     // 200 frames at 90 Hz, 400 at 45 Hz, 900 at 90 Hz: 2.2 + 8.9 + 10 s of display time.
     assert!(

@@ -2,10 +2,10 @@
 //! shared symmetric FOV from xrLocateViews, recommended sizes enlarged to keep pixels per tangent,
 //! and nothing changed without the switch. One test function: the switch is process-wide.
 
-use fovea::density::Fov;
-use fovea::projection::symmetric_fov;
 use fovea_harness::app::API_1_0;
 use fovea_harness::{sim, App, Chain};
+use fovea_model::projection::symmetric_fov;
+use fovea_model::Fov;
 use openxr_sys as xr;
 use xr::Handle;
 
@@ -101,8 +101,8 @@ fn run(symmetric: bool) -> ([[u32; 4]; 2], [[u32; 4]; 2], [Fov; 2]) {
 
 #[test]
 fn symmetric_mode_shares_one_fov_and_enlarges_the_sizes() {
-    let q3 = fovea_headsets::by_id("quest3").unwrap();
-    let true_fovs = q3.eyes.map(Fov::from_tangents);
+    let q3 = fovea_model::headsets::by_id("quest3").unwrap();
+    let true_fovs = q3.fovs();
     let [rw, rh] = q3.recommended_size();
 
     let (before, with_session, fovs) = run(false);

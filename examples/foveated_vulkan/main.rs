@@ -907,9 +907,10 @@ mod tests {
 
     use std::path::Path;
 
-    use fovea::density::{Fov, Grid, Level, Pattern, Rect, View};
-    use fovea::fdm::{fill_layers, Inputs};
     use fovea_harness::{artifact, skip, FOVEA_LAYER};
+    use fovea_model::density::{Grid, Level, Pattern, Rect, View};
+    use fovea_model::maps::{fill_layers, Inputs};
+    use fovea_model::Fov;
 
     use super::*;
 

@@ -6,7 +6,7 @@
 
 use std::cell::RefCell;
 
-use fovea_headsets::Headset;
+use fovea_model::headsets::Headset;
 use openxr_sys as xr;
 
 /// The simulated runtime's settings, fixed for an instance at xrCreateInstance.
@@ -74,7 +74,7 @@ impl Load {
 
 impl Default for SimConfig {
     fn default() -> Self {
-        let headset = fovea_headsets::by_id("quest3").expect("quest3 preset exists");
+        let headset = fovea_model::headsets::by_id("quest3").expect("quest3 preset exists");
         SimConfig {
             headset,
             refresh_hz: headset.refresh_hz,
@@ -112,13 +112,15 @@ impl SimConfig {
     pub fn from_vars(var: impl Fn(&str) -> Option<String>) -> Result<SimConfig, String> {
         let mut cfg = SimConfig::default();
         if let Some(id) = var("FOVEA_SIM_HEADSET") {
-            cfg = SimConfig::for_headset(fovea_headsets::by_id(id.trim()).ok_or_else(|| {
-                let ids: Vec<_> = fovea_headsets::ids().collect();
-                format!(
-                    "FOVEA_SIM_HEADSET={id:?}: unknown headset; accepted: {}",
-                    ids.join(", ")
-                )
-            })?);
+            cfg = SimConfig::for_headset(fovea_model::headsets::by_id(id.trim()).ok_or_else(
+                || {
+                    let ids: Vec<_> = fovea_model::headsets::ids().collect();
+                    format!(
+                        "FOVEA_SIM_HEADSET={id:?}: unknown headset; accepted: {}",
+                        ids.join(", ")
+                    )
+                },
+            )?);
         }
         if let Some(v) = var("FOVEA_SIM_REFRESH_HZ") {
             cfg.refresh_hz = v
@@ -313,7 +315,7 @@ mod tests {
 
     #[test]
     fn thread_config_overrides_and_resets() {
-        let mut cfg = SimConfig::for_headset(fovea_headsets::by_id("index").unwrap());
+        let mut cfg = SimConfig::for_headset(fovea_model::headsets::by_id("index").unwrap());
         cfg.native_swapchain_update_state = true;
         set_thread_config(Some(cfg));
         assert_eq!(current().headset.id, "index");

@@ -284,14 +284,11 @@ pub(crate) unsafe extern "system" fn locate_space(
 /// The per-eye FOVs of the session's headset.
 pub(crate) fn eye_fovs(w: &World, session: u64) -> [xr::Fovf; VIEW_COUNT] {
     let headset = w.instances[&w.sessions[&session].instance].config.headset;
-    headset.eyes.map(|t| {
-        let f = t.to_fov();
-        xr::Fovf {
-            angle_left: f.angle_left,
-            angle_right: f.angle_right,
-            angle_up: f.angle_up,
-            angle_down: f.angle_down,
-        }
+    headset.fovs().map(|f| xr::Fovf {
+        angle_left: f.left,
+        angle_right: f.right,
+        angle_up: f.up,
+        angle_down: f.down,
     })
 }
 

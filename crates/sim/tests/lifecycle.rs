@@ -427,9 +427,9 @@ fn located_views_carry_the_preset_fovs_and_ipd() {
         },
         xr::Result::SUCCESS
     );
-    let q3 = fovea_headsets::by_id("quest3").unwrap();
+    let q3 = fovea_model::headsets::by_id("quest3").unwrap();
     for (eye, view) in views.iter().enumerate() {
-        let want = q3.eyes[eye].to_fov();
+        let want = q3.fovs()[eye];
         assert_eq!(
             [
                 view.fov.angle_left,
@@ -437,12 +437,7 @@ fn located_views_carry_the_preset_fovs_and_ipd() {
                 view.fov.angle_up,
                 view.fov.angle_down
             ],
-            [
-                want.angle_left,
-                want.angle_right,
-                want.angle_up,
-                want.angle_down
-            ]
+            [want.left, want.right, want.up, want.down]
         );
     }
     // Left eye: 54° out to the left, 40° in to the nose (hmdgdb MetaQuest3).

@@ -30,7 +30,7 @@ macro_rules! xrfn {
 }
 
 pub fn config(headset: &str) -> SimConfig {
-    SimConfig::for_headset(fovea_headsets::by_id(headset).unwrap())
+    SimConfig::for_headset(fovea_model::headsets::by_id(headset).unwrap())
 }
 
 pub fn app_info(api: xr::Version) -> xr::ApplicationInfo {

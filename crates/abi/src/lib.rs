@@ -1,0 +1,107 @@
+//! What fovea promises the outside world: its layers' names, the extensions it provides and their
+//! versions, the environment variables it reads, its limits and its log targets.
+//!
+//! The layer, the `fovea` command-line tool and the tests all take these from here, so a name is
+//! written once. `include/fovea.h` is the C mirror of this crate (its test compares the two).
+#![forbid(unsafe_code)]
+
+use std::ffi::CStr;
+
+/// The OpenXR API layer's name, as in its manifests and `XR_ENABLE_API_LAYERS`.
+pub const LAYER_NAME: &str = "XR_APILAYER_FOVEA_foveation";
+
+/// One of the five extensions the layer can provide.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Ext {
+    SwapchainUpdateState,
+    Foveation,
+    FoveationConfiguration,
+    FoveationVulkan,
+    MetaVulkanSwapchainCreateInfo,
+}
+
+/// What the registry says of one extension.
+#[derive(Clone, Copy, Debug)]
+pub struct ExtInfo {
+    pub ext: Ext,
+    pub name: &'static CStr,
+    pub version: u32,
+    /// Extensions that must be enabled with it (xr.xml `depends`).
+    pub depends: &'static [Ext],
+}
+
+/// The extensions fovea implements, in registry order.
+pub const EXTENSIONS: [ExtInfo; 5] = [
+    ExtInfo {
+        ext: Ext::SwapchainUpdateState,
+        name: c"XR_FB_swapchain_update_state",
+        version: 3,
+        depends: &[],
+    },
+    ExtInfo {
+        ext: Ext::Foveation,
+        name: c"XR_FB_foveation",
+        version: 1,
+        depends: &[Ext::SwapchainUpdateState],
+    },
+    ExtInfo {
+        ext: Ext::FoveationConfiguration,
+        name: c"XR_FB_foveation_configuration",
+        version: 1,
+        depends: &[Ext::Foveation],
+    },
+    ExtInfo {
+        ext: Ext::FoveationVulkan,
+        name: c"XR_FB_foveation_vulkan",
+        version: 1,
+        depends: &[Ext::Foveation],
+    },
+    ExtInfo {
+        ext: Ext::MetaVulkanSwapchainCreateInfo,
+        name: c"XR_META_vulkan_swapchain_create_info",
+        version: 1,
+        depends: &[],
+    },
+];
+
+/// The Vulkan enable extensions XR_META_vulkan_swapchain_create_info needs one of (its prose; the
+/// registry lists no dependency).
+pub const VULKAN_ENABLE: [&CStr; 2] = [c"XR_KHR_vulkan_enable", c"XR_KHR_vulkan_enable2"];
+
+impl Ext {
+    /// What the registry says of this extension.
+    pub fn info(self) -> &'static ExtInfo {
+        &EXTENSIONS[self as usize]
+    }
+
+    /// The extension named `name`, if fovea implements it.
+    pub fn by_name(name: &CStr) -> Option<Ext> {
+        EXTENSIONS.iter().find(|e| e.name == name).map(|e| e.ext)
+    }
+}
+
+/// Environment variables the layer reads (the README's settings table lists each with its meaning).
+pub mod env {
+    /// `FOVEA_SYMMETRIC_FOV=1`: report one shared symmetric FOV for both eyes.
+    pub const SYMMETRIC_FOV: &str = "FOVEA_SYMMETRIC_FOV";
+    /// A file of `debug.oculus.foveation.*=value` lines, re-read while the app runs.
+    pub const PROPS: &str = "FOVEA_PROPS";
+    /// The log filter (a `tracing_subscriber::EnvFilter` string; default: warnings).
+    pub const LOG: &str = "FOVEA_LOG";
+    /// A file that receives a copy of every log line.
+    pub const LOG_FILE: &str = "FOVEA_LOG_FILE";
+    /// Names a hook that panics on purpose, to prove panics never cross the FFI boundary.
+    pub const INJECT_PANIC: &str = "FOVEA_INJECT_PANIC";
+}
+
+/// The longest `next` chain the layer follows. The spec puts no bound on chains, but real ones
+/// hold a handful of structs; a longer one is almost certainly a loop, which the spec forbids
+/// (https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#valid-usage-for-structure-pointer-chains),
+/// and following it would hang the application.
+pub const MAX_CHAIN_LENGTH: usize = 64;
+
+/// `tracing` targets that tools and tests filter on.
+pub mod log_target {
+    /// The once-a-second stats line.
+    pub const STATS: &str = "fovea::stats";
+}

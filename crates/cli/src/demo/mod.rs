@@ -1,0 +1,143 @@
+//! `fovea demo`: an application applies a HIGH profile with dynamic foveation on the simulated
+//! headset; the simulated GPU load rises past the frame budget and falls back (the dynamic level
+//! follows), and four fifths through, a Quest debug property file fixes the level at MEDIUM while
+//! the app runs. The layer's once-a-second stats lines (target `fovea_model::stats`) show what it does.
+//!
+//! Where the system's Khronos loader is installed and Vulkan has a device, the application is
+//! `examples/foveated_vulkan` running through that loader, fovea and the simulated runtime, and the
+//! density maps and frames it reads back from the GPU are written as PNGs ([`loader`]); otherwise it
+//! is a headless frame loop through fovea's fake loader harness ([`harness`]). `--via loader` or
+//! `--via harness` chooses instead.
+
+mod harness;
+mod loader;
+
+use std::path::PathBuf;
+
+use fovea_model::headsets::Headset;
+
+use crate::args::Args;
+
+/// The load script, in frames at 90 Hz: light, then past the 11.1 ms budget, then light again.
+const LOAD: [(u64, f32); 3] = [(0, 6.0), (270, 14.0), (630, 6.0)];
+
+/// What the override writes, four fifths through.
+const OVERRIDE: &str = "debug.oculus.foveation.level=2\ndebug.oculus.foveation.dynamic=0\n";
+
+/// What both ways share: the command line, the output folder and the property file.
+pub struct Setup {
+    /// `--seconds`, when given.
+    seconds: Option<u64>,
+    out: PathBuf,
+    props: PathBuf,
+    /// `FOVEA_LOG` for the layer: the caller's, else warnings and the stats lines.
+    log: String,
+    /// `--headset`, when given.
+    headset: &'static Headset,
+    headset_given: bool,
+}
+
+impl Setup {
+    fn new(args: &Args) -> Result<Setup, String> {
+        let seconds: Option<u64> = args
+            .value("seconds")
+            .map(str::parse)
+            .transpose()
+            .map_err(|_| "--seconds takes a whole number of seconds".to_owned())?;
+        if seconds == Some(0) {
+            return Err("--seconds must be at least 1".into());
+        }
+        let out = PathBuf::from(args.value("out").unwrap_or("target/demo"));
+        std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+        let out = std::fs::canonicalize(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+        let props = out.join("foveation.props");
+        std::fs::write(
+            &props,
+            "# Quest debug properties, re-read while the app runs\n",
+        )
+        .map_err(|e| format!("{}: {e}", props.display()))?;
+        let id = args.value("headset");
+        let headset = fovea_model::headsets::by_id(id.unwrap_or("quest3")).ok_or_else(|| {
+            let ids: Vec<_> = fovea_model::headsets::ids().collect();
+            format!("--headset {id:?}: accepted: {}", ids.join(", "))
+        })?;
+        Ok(Setup {
+            seconds,
+            out,
+            props,
+            log: std::env::var("FOVEA_LOG")
+                .unwrap_or_else(|_| format!("warn,{}=info", fovea_abi::log_target::STATS)),
+            headset,
+            headset_given: id.is_some(),
+        })
+    }
+
+    fn write_override(&self) -> Result<(), String> {
+        std::fs::write(&self.props, OVERRIDE)
+            .map_err(|e| format!("{}: {e}", self.props.display()))?;
+        println!(
+            "-- wrote debug.oculus.foveation.level=2, dynamic=0 to {}",
+            self.props.display()
+        );
+        Ok(())
+    }
+
+    /// The run's length: `--seconds`, else `default`.
+    fn seconds_or(&self, default: u64) -> u64 {
+        self.seconds.unwrap_or(default)
+    }
+}
+
+pub fn run(args: &Args) -> Result<(), String> {
+    let setup = Setup::new(args)?;
+    match args.value("via") {
+        Some("harness") => harness::run(&setup),
+        Some("loader") => loader::run(&setup, loader::System::find()?),
+        Some(other) => Err(format!("--via {other}: expected loader or harness")),
+        None => match loader::System::find() {
+            Ok(system) => loader::run(&setup, system),
+            Err(why) => {
+                println!("fovea demo: {why}; running through fovea's fake loader harness instead");
+                harness::run(&setup)
+            }
+        },
+    }
+}
+
+fn load_description() -> String {
+    LOAD.iter()
+        .map(|(f, ms)| format!("{ms} ms from frame {f}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The folder the running `fovea` was built into (`target/release`, `target/debug`), where Cargo
+/// also puts the libraries and examples the demo runs.
+fn build_dir() -> Result<PathBuf, String> {
+    let exe = std::env::current_exe().map_err(|e| format!("current executable: {e}"))?;
+    let exe = std::fs::canonicalize(&exe).unwrap_or(exe);
+    exe.parent()
+        .map(PathBuf::from)
+        .ok_or_else(|| "the executable has no directory".into())
+}
+
+/// Builds `what` with the profile the running `fovea` was built with, when the demo was started by
+/// Cargo (`$CARGO` is set): `cargo run` builds only what the binary links.
+fn cargo_build(what: &[&str]) -> Result<(), String> {
+    let cargo = std::env::var_os("CARGO").ok_or("not started by cargo")?;
+    let dir = build_dir()?;
+    let profile = match dir.file_name().and_then(|n| n.to_str()) {
+        Some("debug") | None => "dev".to_owned(),
+        Some(p) => p.to_owned(),
+    };
+    let status = std::process::Command::new(cargo)
+        .args(["build", "--quiet", "--profile", &profile])
+        .args(what)
+        .status()
+        .map_err(|e| format!("cargo: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("cargo build {} failed: {status}", what.join(" ")))
+    }
+}

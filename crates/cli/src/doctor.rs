@@ -1,0 +1,858 @@
+//! `fovea doctor`: what the Khronos loader would find on Linux (the active runtime, the explicit and
+//! implicit layer manifests, which layers it enables and in which order) and the misconfigurations
+//! that keep fovea from loading or load it twice.
+//!
+//! The model follows the loader's `manifest_file.cpp` and `api_layer_interface.cpp` (1.1.x;
+//! openxr-layer-facts.md §2.6–2.8). [`discover`] and [`problems`] take the environment and the
+//! filesystem root as arguments, so tests drive them without the real home directory or `/etc`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde_json::Value;
+
+use crate::args::Args;
+
+/// fovea's manifest file name, as `fovea install` writes it.
+pub const MANIFEST_FILE: &str = "XR_APILAYER_FOVEA_foveation.json";
+
+/// Explicit layers load only when named (`XR_ENABLE_API_LAYERS` or the application); implicit ones
+/// load for every application unless their `disable_environment` variable is set.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Explicit,
+    Implicit,
+}
+
+impl Kind {
+    /// The directory under each base directory: `openxr/1/api_layers/{explicit,implicit}.d`.
+    pub fn relative_dir(self) -> &'static str {
+        match self {
+            Kind::Explicit => "openxr/1/api_layers/explicit.d",
+            Kind::Implicit => "openxr/1/api_layers/implicit.d",
+        }
+    }
+}
+
+/// What the loader reads: the process environment, and where the fixed directories are.
+pub struct Environment<'a> {
+    pub vars: &'a BTreeMap<String, String>,
+    /// Prefix of the loader's built-in directories (`/etc/xdg`, `/etc`, `/usr/local/share`,
+    /// `/usr/share`): `/` for the real system. Directories named by variables are taken as they are.
+    pub root: &'a Path,
+}
+
+impl Environment<'_> {
+    /// A variable's value; the loader treats an empty one as unset.
+    fn get(&self, name: &str) -> Option<&str> {
+        self.vars
+            .get(name)
+            .map(String::as_str)
+            .filter(|v| !v.is_empty())
+    }
+
+    /// Whether a variable is present, even empty: the test for `disable_environment`.
+    fn is_set(&self, name: &str) -> bool {
+        self.vars.contains_key(name)
+    }
+
+    fn fixed(&self, path: &str) -> PathBuf {
+        self.root.join(path.trim_start_matches('/'))
+    }
+
+    /// A ':'-separated list of directories, or the built-in default when unset.
+    fn dirs(&self, name: &str, default: &[&str]) -> Vec<PathBuf> {
+        match self.get(name) {
+            Some(v) => v
+                .split(':')
+                .filter(|d| !d.is_empty())
+                .map(PathBuf::from)
+                .collect(),
+            None => default.iter().map(|d| self.fixed(d)).collect(),
+        }
+    }
+}
+
+/// `$XDG_DATA_HOME`, else `$HOME/.local/share`: where per-user layer manifests go.
+pub fn data_home(get: impl Fn(&str) -> Option<String>) -> Option<PathBuf> {
+    let get = |k: &str| get(k).filter(|v| !v.is_empty());
+    get("XDG_DATA_HOME")
+        .map(PathBuf::from)
+        .or_else(|| get("HOME").map(|h| Path::new(&h).join(".local/share")))
+}
+
+/// The directories the loader reads layer manifests of one kind from, in its order, and whether
+/// `XR_API_LAYER_PATH` replaced them (explicit layers only).
+pub fn layer_dirs(env: &Environment, kind: Kind) -> (Vec<PathBuf>, bool) {
+    if kind == Kind::Explicit {
+        if let Some(p) = env.get("XR_API_LAYER_PATH") {
+            let dirs = p.split(':').filter(|d| !d.is_empty()).map(PathBuf::from);
+            return (dirs.collect(), true);
+        }
+    }
+    let mut bases = env.dirs("XDG_CONFIG_DIRS", &["/etc/xdg"]);
+    // SYSCONFDIR, compiled in: /etc in Debian's loader.
+    bases.push(env.fixed("/etc"));
+    bases.extend(env.dirs("XDG_DATA_DIRS", &["/usr/local/share", "/usr/share"]));
+    bases.extend(data_home(|k| env.get(k).map(String::from)));
+    let rel = kind.relative_dir();
+    (bases.iter().map(|b| b.join(rel)).collect(), false)
+}
+
+/// `XR_ARCH_ABI` as the loader spells it, for `active_runtime.<abi>.json`.
+fn arch_abi() -> &'static str {
+    match std::env::consts::ARCH {
+        "x86" => "i686",
+        "arm" => "armv7a-vfp",
+        other => other,
+    }
+}
+
+/// The runtime manifest paths the loader tries, in order, and what chose them; the first that
+/// exists wins. Newer loaders try `active_runtime.<abi>.json` before `active_runtime.json`.
+pub fn runtime_candidates(env: &Environment) -> Vec<(PathBuf, &'static str)> {
+    if let Some(p) = env.get("XR_RUNTIME_JSON") {
+        return vec![(PathBuf::from(p), "XR_RUNTIME_JSON")];
+    }
+    let mut bases = Vec::new();
+    let config_home = env
+        .get("XDG_CONFIG_HOME")
+        .map(PathBuf::from)
+        .or_else(|| env.get("HOME").map(|h| Path::new(h).join(".config")));
+    bases.extend(config_home.map(|d| (d, "XDG_CONFIG_HOME")));
+    bases.extend(
+        env.dirs("XDG_CONFIG_DIRS", &["/etc/xdg"])
+            .into_iter()
+            .map(|d| (d, "XDG_CONFIG_DIRS")),
+    );
+    bases.push((env.fixed("/etc"), "the loader's SYSCONFDIR"));
+    let decorated = format!("active_runtime.{}.json", arch_abi());
+    bases
+        .into_iter()
+        .flat_map(|(b, why)| {
+            let dir = b.join("openxr/1");
+            [
+                (dir.join(&decorated), why),
+                (dir.join("active_runtime.json"), why),
+            ]
+        })
+        .collect()
+}
+
+/// The active runtime, as far as the loader's discovery goes.
+#[derive(Debug)]
+pub struct Runtime {
+    pub manifest: PathBuf,
+    /// What chose it: `XR_RUNTIME_JSON`, `XDG_CONFIG_HOME`, ...
+    pub source: &'static str,
+    /// Its name and library, or why the loader cannot use it.
+    pub read: Result<(String, PathBuf), String>,
+}
+
+fn read_json(path: &Path) -> Result<Value, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read it: {e}"))?;
+    let v: Value = serde_json::from_str(&text).map_err(|e| format!("not valid JSON: {e}"))?;
+    if !v.is_object() {
+        return Err("not a JSON object".into());
+    }
+    if v["file_format_version"] != "1.0.0" {
+        return Err("file_format_version is not the string \"1.0.0\"".into());
+    }
+    Ok(v)
+}
+
+/// A manifest's `library_path` as the loader resolves it: a bare file name goes to the dynamic
+/// linker's search path (returned as is), anything else is absolute or relative to the manifest.
+fn resolve_library(manifest: &Path, library: &str) -> PathBuf {
+    let p = Path::new(library);
+    if !library.contains('/') || p.is_absolute() {
+        return p.to_path_buf();
+    }
+    let dir = manifest.parent().unwrap_or(Path::new("."));
+    // Relative to the real manifest file, not to a symlink to it.
+    let dir = std::fs::canonicalize(manifest)
+        .ok()
+        .and_then(|m| m.parent().map(Path::to_path_buf))
+        .unwrap_or_else(|| dir.to_path_buf());
+    dir.join(p)
+}
+
+fn find_runtime(env: &Environment) -> Option<Runtime> {
+    let (manifest, source) = runtime_candidates(env).into_iter().find(|(p, why)| {
+        // XR_RUNTIME_JSON is used whether or not the file exists.
+        *why == "XR_RUNTIME_JSON" || p.exists()
+    })?;
+    let read = read_json(&manifest).and_then(|v| {
+        let rt = &v["runtime"];
+        let library = rt["library_path"]
+            .as_str()
+            .ok_or("no \"runtime\" object with a string library_path")?;
+        let name = rt["name"].as_str().unwrap_or("(no name)").to_owned();
+        Ok((name, resolve_library(&manifest, library)))
+    });
+    Some(Runtime {
+        manifest,
+        source,
+        read,
+    })
+}
+
+/// One `*.json` file in a layer directory.
+#[derive(Clone, Debug)]
+pub struct Manifest {
+    pub path: PathBuf,
+    pub kind: Kind,
+    /// The layer name, when the file has one.
+    pub name: Option<String>,
+    /// `library_path`, resolved.
+    pub library: Option<PathBuf>,
+    pub disable_environment: Option<String>,
+    /// The file holds a runtime manifest, not a layer manifest.
+    pub runtime_manifest: bool,
+    /// `Ok` when the loader would use it; otherwise why it skips it.
+    pub verdict: Result<(), Skip>,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Skip {
+    /// An implicit layer switched off by the environment: the reason.
+    Disabled(String),
+    /// The loader rejects the file: the reason.
+    Invalid(String),
+}
+
+impl Manifest {
+    pub fn is_fovea(&self) -> bool {
+        match &self.name {
+            Some(n) => n == fovea_abi::LAYER_NAME,
+            None => self.path.file_name().is_some_and(|f| f == MANIFEST_FILE),
+        }
+    }
+
+    pub fn usable(&self) -> bool {
+        self.verdict.is_ok()
+    }
+}
+
+/// Reads one layer manifest the way the loader's `ApiLayerManifestFile::CreateIfValid` does.
+pub fn read_layer(path: &Path, kind: Kind, env: &Environment) -> Manifest {
+    let mut m = Manifest {
+        path: path.to_path_buf(),
+        kind,
+        name: None,
+        library: None,
+        disable_environment: None,
+        runtime_manifest: false,
+        verdict: Ok(()),
+    };
+    let invalid = |why: &str| Err(Skip::Invalid(why.to_owned()));
+    let v = match read_json(path) {
+        Ok(v) => v,
+        Err(e) => {
+            m.verdict = invalid(&e);
+            return m;
+        }
+    };
+    let l = &v["api_layer"];
+    m.runtime_manifest = l.is_null() && v["runtime"].is_object();
+    m.name = l["name"].as_str().map(String::from);
+    m.library = l["library_path"]
+        .as_str()
+        .map(|lib| resolve_library(path, lib));
+    m.disable_environment = l["disable_environment"].as_str().map(String::from);
+    if m.runtime_manifest {
+        m.verdict = invalid("a runtime manifest, not a layer manifest");
+        return m;
+    }
+    // Required fields must be strings: the loader drops numbers as "missing required fields".
+    let required = [
+        "name",
+        "library_path",
+        "api_version",
+        "implementation_version",
+    ];
+    if let Some(k) = required.iter().find(|k| !l[**k].is_string()) {
+        m.verdict = invalid(&format!("missing required field {k} (a string)"));
+        return m;
+    }
+    if kind == Kind::Implicit {
+        let Some(disable) = &m.disable_environment else {
+            m.verdict = invalid("implicit layer without disable_environment");
+            return m;
+        };
+        // disable wins over enable; "set" means present, even empty.
+        if env.is_set(disable) {
+            m.verdict = Err(Skip::Disabled(format!("{disable} is set")));
+            return m;
+        }
+        if let Some(enable) = l["enable_environment"].as_str() {
+            if !env.is_set(enable) {
+                m.verdict = Err(Skip::Disabled(format!("{enable} is not set")));
+                return m;
+            }
+        }
+    }
+    let api = l["api_version"].as_str().unwrap_or_default();
+    let api_ok = api
+        .split_once('.')
+        .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
+        .is_some_and(|(major, minor)| major <= 1 && (major, minor) != (0, 0));
+    if !api_ok {
+        m.verdict = invalid(&format!("api_version {api:?} is not 1.x"));
+        return m;
+    }
+    if let Some(lib) = &m.library {
+        if lib.is_absolute() && !lib.exists() {
+            m.verdict = invalid(&format!("library {} does not exist", lib.display()));
+        }
+    }
+    m
+}
+
+/// The `*.json` files of a directory. The loader takes them in `readdir` order, which no filesystem
+/// promises; sorted here so the report is stable.
+fn json_files(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
+        .collect();
+    files.sort();
+    files
+}
+
+/// One layer the loader would load, in order.
+#[derive(Clone, Debug)]
+pub struct Load {
+    /// Index into [`Discovery::implicit`] or [`Discovery::explicit`], by `kind`.
+    pub kind: Kind,
+    pub index: usize,
+}
+
+/// Everything the loader would find.
+#[derive(Debug)]
+pub struct Discovery {
+    pub runtime: Option<Runtime>,
+    pub explicit_dirs: Vec<PathBuf>,
+    /// `XR_API_LAYER_PATH` replaced the standard explicit directories.
+    pub explicit_override: bool,
+    pub implicit_dirs: Vec<PathBuf>,
+    pub explicit: Vec<Manifest>,
+    pub implicit: Vec<Manifest>,
+    /// `XR_ENABLE_API_LAYERS`, in order.
+    pub requested: Vec<String>,
+    /// What loads, next to the application first (before any layer the application names).
+    pub order: Vec<Load>,
+    /// Requested names no usable manifest provides.
+    pub not_found: Vec<String>,
+}
+
+impl Discovery {
+    pub fn manifest(&self, l: &Load) -> &Manifest {
+        match l.kind {
+            Kind::Explicit => &self.explicit[l.index],
+            Kind::Implicit => &self.implicit[l.index],
+        }
+    }
+}
+
+/// Discovery and load order as the 1.1.x loader does it (`LoadApiLayers`): every usable implicit
+/// manifest, in directory order; then, for each name in `XR_ENABLE_API_LAYERS` not already loaded,
+/// every usable explicit manifest of that name.
+pub fn discover(env: &Environment) -> Discovery {
+    let (explicit_dirs, explicit_override) = layer_dirs(env, Kind::Explicit);
+    let (implicit_dirs, _) = layer_dirs(env, Kind::Implicit);
+    let read = |dirs: &[PathBuf], kind| -> Vec<Manifest> {
+        dirs.iter()
+            .flat_map(|d| json_files(d))
+            .map(|p| read_layer(&p, kind, env))
+            .collect()
+    };
+    let explicit = read(&explicit_dirs, Kind::Explicit);
+    let implicit = read(&implicit_dirs, Kind::Implicit);
+    let requested: Vec<String> = env
+        .get("XR_ENABLE_API_LAYERS")
+        .unwrap_or_default()
+        .split(':')
+        .filter(|n| !n.is_empty())
+        .map(String::from)
+        .collect();
+    let mut order: Vec<Load> = (0..implicit.len())
+        .filter(|&i| implicit[i].usable())
+        .map(|index| Load {
+            kind: Kind::Implicit,
+            index,
+        })
+        .collect();
+    let mut loaded: Vec<&str> = order
+        .iter()
+        .filter_map(|l| implicit[l.index].name.as_deref())
+        .collect();
+    let mut not_found = Vec::new();
+    for name in &requested {
+        if loaded.contains(&name.as_str()) {
+            continue;
+        }
+        let matching: Vec<usize> = (0..explicit.len())
+            .filter(|&i| explicit[i].usable() && explicit[i].name.as_deref() == Some(name))
+            .collect();
+        if matching.is_empty() {
+            not_found.push(name.clone());
+            continue;
+        }
+        loaded.push(name);
+        order.extend(matching.into_iter().map(|index| Load {
+            kind: Kind::Explicit,
+            index,
+        }));
+    }
+    Discovery {
+        runtime: find_runtime(env),
+        explicit_dirs,
+        explicit_override,
+        implicit_dirs,
+        explicit,
+        implicit,
+        requested,
+        order,
+        not_found,
+    }
+}
+
+/// The misconfigurations, one line each.
+pub fn problems(d: &Discovery) -> Vec<String> {
+    let mut out = Vec::new();
+    match &d.runtime {
+        None => out.push(
+            "no active runtime: neither XR_RUNTIME_JSON nor an active_runtime.json; \
+             xrCreateInstance fails with XR_ERROR_RUNTIME_UNAVAILABLE"
+                .to_owned(),
+        ),
+        Some(rt) => match &rt.read {
+            Err(e) => out.push(format!("runtime manifest {}: {e}", rt.manifest.display())),
+            Ok((_, lib)) if lib.is_absolute() && !lib.is_file() => out.push(format!(
+                "runtime manifest {}: library {} is not a file",
+                rt.manifest.display(),
+                lib.display()
+            )),
+            Ok(_) => {}
+        },
+    }
+    if d.explicit_override {
+        for dir in &d.explicit_dirs {
+            if dir.is_file() {
+                out.push(format!(
+                    "XR_API_LAYER_PATH names the file {}: it lists directories, and the loader reads \
+                     every *.json in each",
+                    dir.display()
+                ));
+            }
+        }
+        for m in d.explicit.iter().filter(|m| m.runtime_manifest) {
+            out.push(format!(
+                "{} is a runtime manifest in an XR_API_LAYER_PATH directory: the loader reads every \
+                 *.json there as a layer manifest and logs \"missing required fields\" on every \
+                 enumeration; move it out",
+                m.path.display()
+            ));
+        }
+    }
+    let fovea: Vec<&Manifest> = d
+        .implicit
+        .iter()
+        .chain(&d.explicit)
+        .filter(|m| m.is_fovea())
+        .collect();
+    for m in &fovea {
+        let path = m.path.display();
+        let before = out.len();
+        match &m.library {
+            Some(lib) if lib.is_absolute() && !lib.exists() => out.push(format!(
+                "{path}: fovea's library_path {} does not exist, so the loader ignores this manifest \
+                 (`cargo build --release` builds it; `fovea install` points a manifest at a build)",
+                lib.display()
+            )),
+            Some(lib) if lib.is_absolute() && !lib.is_file() => out.push(format!(
+                "{path}: fovea's library_path {} is not a file: loading the layer fails",
+                lib.display()
+            )),
+            _ => {}
+        }
+        if m.kind == Kind::Implicit && m.name.is_some() && m.disable_environment.is_none() {
+            out.push(format!(
+                "{path}: implicit fovea manifest without disable_environment: the loader rejects it \
+                 (`fovea install --implicit` writes FOVEA_DISABLE)"
+            ));
+        }
+        match &m.verdict {
+            Err(Skip::Disabled(why)) => out.push(format!(
+                "{path}: the implicit fovea layer is disabled because {why}"
+            )),
+            // Anything not named above.
+            Err(Skip::Invalid(why)) if out.len() == before => out.push(format!(
+                "{path}: the loader skips this fovea manifest: {why}"
+            )),
+            _ => {}
+        }
+    }
+    let loads: Vec<&Manifest> = d
+        .order
+        .iter()
+        .map(|l| d.manifest(l))
+        .filter(|m| m.is_fovea())
+        .collect();
+    if loads.len() > 1 {
+        out.push(format!(
+            "fovea would be loaded {} times, stacked on itself: {}; keep one manifest",
+            loads.len(),
+            loads
+                .iter()
+                .map(|m| m.path.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    let implicit_fovea = d
+        .order
+        .iter()
+        .any(|l| l.kind == Kind::Implicit && d.manifest(l).is_fovea());
+    if implicit_fovea && d.requested.iter().any(|n| n == fovea_abi::LAYER_NAME) {
+        let explicit: Vec<String> = d
+            .explicit
+            .iter()
+            .filter(|m| m.is_fovea() && m.usable())
+            .map(|m| m.path.display().to_string())
+            .collect();
+        let consequence = if explicit.is_empty() {
+            "fail with XR_ERROR_API_LAYER_NOT_PRESENT".to_owned()
+        } else {
+            format!(
+                "load it twice, stacked on itself (also from {})",
+                explicit.join(", ")
+            )
+        };
+        out.push(format!(
+            "fovea is implicit and also named in XR_ENABLE_API_LAYERS: loaders before 1.0.30 \
+             (Debian 12 ships 1.0.20) {consequence}; drop it from XR_ENABLE_API_LAYERS"
+        ));
+    }
+    for name in &d.not_found {
+        let hint = if name == fovea_abi::LAYER_NAME {
+            " (`fovea install` writes one)"
+        } else {
+            ""
+        };
+        out.push(format!(
+            "XR_ENABLE_API_LAYERS names {name} but no usable manifest provides it: xrCreateInstance \
+             fails with XR_ERROR_API_LAYER_NOT_PRESENT{hint}"
+        ));
+    }
+    out
+}
+
+fn describe(m: &Manifest) -> String {
+    let name = m.name.as_deref().unwrap_or("(no name)");
+    match &m.verdict {
+        Ok(()) => match &m.library {
+            Some(lib) => format!("{name}, library {}", lib.display()),
+            None => name.to_owned(),
+        },
+        Err(Skip::Disabled(why)) => format!("{name}, disabled: {why}"),
+        Err(Skip::Invalid(why)) => format!("skipped: {why}"),
+    }
+}
+
+fn join(dirs: &[PathBuf]) -> String {
+    let s: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
+    s.join(", ")
+}
+
+/// The report, problems last.
+pub fn render(d: &Discovery, problems: &[String]) -> String {
+    let mut out = String::new();
+    let mut line = |s: String| {
+        out.push_str(&s);
+        out.push('\n');
+    };
+    match &d.runtime {
+        None => line("active runtime: none found".into()),
+        Some(rt) => {
+            line(format!(
+                "active runtime: {} ({})",
+                rt.manifest.display(),
+                rt.source
+            ));
+            match &rt.read {
+                Ok((name, lib)) => line(format!("  {name}, library {}", lib.display())),
+                Err(e) => line(format!("  unusable: {e}")),
+            }
+        }
+    }
+    let sections = [
+        (
+            if d.explicit_override {
+                "explicit layers (XR_API_LAYER_PATH replaces the standard directories):"
+            } else {
+                "explicit layers:"
+            },
+            &d.explicit_dirs,
+            &d.explicit,
+        ),
+        ("implicit layers:", &d.implicit_dirs, &d.implicit),
+    ];
+    for (title, dirs, manifests) in sections {
+        line(title.into());
+        line(format!("  searched: {}", join(dirs)));
+        if manifests.is_empty() {
+            line("  (no manifests)".into());
+        }
+        for m in manifests {
+            line(format!("  {}: {}", m.path.display(), describe(m)));
+        }
+    }
+    if !d.requested.is_empty() {
+        line(format!("XR_ENABLE_API_LAYERS: {}", d.requested.join(":")));
+    }
+    line("load order (next to the application first; layers the application names follow):".into());
+    if d.order.is_empty() {
+        line("  (none)".into());
+    }
+    for (i, l) in d.order.iter().enumerate() {
+        let m = d.manifest(l);
+        let how = match l.kind {
+            Kind::Implicit => "implicit",
+            Kind::Explicit => "XR_ENABLE_API_LAYERS",
+        };
+        line(format!(
+            "  {}. {} ({how}) {}",
+            i + 1,
+            m.name.as_deref().unwrap_or_default(),
+            m.path.display()
+        ));
+    }
+    let positions: Vec<String> = d
+        .order
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| d.manifest(l).is_fovea())
+        .map(|(i, _)| (i + 1).to_string())
+        .collect();
+    let found = d.implicit.iter().chain(&d.explicit).any(Manifest::is_fovea);
+    line(if !positions.is_empty() {
+        format!(
+            "fovea: enabled, layer {} of {}",
+            positions.join(" and "),
+            d.order.len()
+        )
+    } else if found {
+        format!(
+            "fovea: found, not enabled (an application enables it by name, or XR_ENABLE_API_LAYERS={})",
+            fovea_abi::LAYER_NAME
+        )
+    } else {
+        "fovea: no manifest found (`fovea install` writes one)".into()
+    });
+    for p in problems {
+        line(format!("problem: {p}"));
+    }
+    out
+}
+
+pub fn run(_args: &Args) -> Result<(), String> {
+    let vars: BTreeMap<String, String> = std::env::vars_os()
+        .map(|(k, v)| {
+            (
+                k.to_string_lossy().into_owned(),
+                v.to_string_lossy().into_owned(),
+            )
+        })
+        .collect();
+    let env = Environment {
+        vars: &vars,
+        root: Path::new("/"),
+    };
+    let d = discover(&env);
+    let found = problems(&d);
+    print!("{}", render(&d, &found));
+    match found.len() {
+        0 => Ok(()),
+        1 => Err("1 problem".into()),
+        n => Err(format!("{n} problems")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scratch directory standing in for `/`.
+    fn root(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("fovea-doctor-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn vars(pairs: &[(&str, &str)]) -> BTreeMap<String, String> {
+        pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect()
+    }
+
+    fn layer(dir: &Path, file: &str, name: &str, library: &Path, disable: Option<&str>) {
+        std::fs::create_dir_all(dir).unwrap();
+        let disable = disable
+            .map(|d| format!(r#", "disable_environment": "{d}""#))
+            .unwrap_or_default();
+        std::fs::write(
+            dir.join(file),
+            format!(
+                r#"{{"file_format_version": "1.0.0", "api_layer": {{"name": "{name}",
+                "library_path": "{}", "api_version": "1.0", "implementation_version": "1"{disable}}}}}"#,
+                library.display()
+            ),
+        )
+        .unwrap();
+    }
+
+    #[test]
+    fn search_order_follows_the_loader() {
+        let r = root("order");
+        let v = vars(&[("HOME", "/home/u")]);
+        let env = Environment { vars: &v, root: &r };
+        let (dirs, over) = layer_dirs(&env, Kind::Implicit);
+        assert!(!over);
+        let rel = "openxr/1/api_layers/implicit.d";
+        assert_eq!(
+            dirs,
+            [
+                r.join("etc/xdg").join(rel),
+                r.join("etc").join(rel),
+                r.join("usr/local/share").join(rel),
+                r.join("usr/share").join(rel),
+                PathBuf::from("/home/u/.local/share").join(rel),
+            ]
+        );
+        // XR_API_LAYER_PATH replaces the explicit search and leaves the implicit one alone; an
+        // empty variable counts as unset.
+        let v = vars(&[
+            ("XR_API_LAYER_PATH", "/a::/b"),
+            ("XDG_DATA_DIRS", "/d"),
+            ("XDG_DATA_HOME", ""),
+            ("HOME", "/h"),
+        ]);
+        let env = Environment { vars: &v, root: &r };
+        assert_eq!(
+            layer_dirs(&env, Kind::Explicit),
+            (vec![PathBuf::from("/a"), PathBuf::from("/b")], true)
+        );
+        let (dirs, _) = layer_dirs(&env, Kind::Implicit);
+        assert_eq!(dirs[2], Path::new("/d").join(rel));
+        assert_eq!(dirs[3], Path::new("/h/.local/share").join(rel));
+        assert_eq!(dirs.len(), 4);
+    }
+
+    #[test]
+    fn runtime_from_the_first_existing_config_dir() {
+        let r = root("runtime");
+        let v = vars(&[("HOME", r.join("home").to_str().unwrap())]);
+        let env = Environment { vars: &v, root: &r };
+        assert!(discover(&env).runtime.is_none());
+        let etc = r.join("etc/openxr/1");
+        std::fs::create_dir_all(&etc).unwrap();
+        std::fs::write(
+            etc.join("active_runtime.json"),
+            r#"{"file_format_version": "1.0.0", "runtime": {"name": "sys", "library_path": "./librt.so"}}"#,
+        )
+        .unwrap();
+        let rt = discover(&env).runtime.unwrap();
+        assert_eq!(rt.source, "the loader's SYSCONFDIR");
+        let (name, lib) = rt.read.unwrap();
+        assert_eq!(name, "sys");
+        assert_eq!(lib, std::fs::canonicalize(&etc).unwrap().join("./librt.so"));
+        // A user's runtime wins over the system's.
+        let user = r.join("home/.config/openxr/1");
+        std::fs::create_dir_all(&user).unwrap();
+        let decorated = format!("active_runtime.{}.json", arch_abi());
+        std::fs::write(user.join(&decorated), "{}").unwrap();
+        let rt = discover(&env).runtime.unwrap();
+        assert_eq!(rt.manifest, user.join(&decorated));
+        assert_eq!(rt.source, "XDG_CONFIG_HOME");
+        assert!(rt.read.unwrap_err().contains("file_format_version"));
+    }
+
+    #[test]
+    fn implicit_layers_first_then_requested_explicit_ones_once_each() {
+        let r = root("load");
+        let lib = r.join("lib.so");
+        std::fs::write(&lib, "").unwrap();
+        let sys = r.join("etc/xdg/openxr/1/api_layers/implicit.d");
+        layer(
+            &sys,
+            "other.json",
+            "XR_APILAYER_OTHER",
+            &lib,
+            Some("NO_OTHER"),
+        );
+        layer(&sys, "off.json", "XR_APILAYER_OFF", &lib, Some("NO_OFF"));
+        let user = r.join("home/.local/share/openxr/1/api_layers/explicit.d");
+        layer(&user, MANIFEST_FILE, fovea_abi::LAYER_NAME, &lib, None);
+        layer(&user, "b.json", "XR_APILAYER_B", &lib, None);
+        let v = vars(&[
+            ("HOME", r.join("home").to_str().unwrap()),
+            ("NO_OFF", ""),
+            (
+                "XR_ENABLE_API_LAYERS",
+                "XR_APILAYER_B:XR_APILAYER_OTHER:XR_APILAYER_FOVEA_foveation:XR_APILAYER_B",
+            ),
+        ]);
+        let env = Environment { vars: &v, root: &r };
+        let d = discover(&env);
+        let names: Vec<&str> = d
+            .order
+            .iter()
+            .map(|l| d.manifest(l).name.as_deref().unwrap())
+            .collect();
+        // An empty disable variable still disables; a layer already loaded implicitly is not
+        // loaded again; a name given twice loads once.
+        assert_eq!(
+            names,
+            ["XR_APILAYER_OTHER", "XR_APILAYER_B", fovea_abi::LAYER_NAME]
+        );
+        assert_eq!(
+            d.implicit[0].verdict,
+            Err(Skip::Disabled("NO_OFF is set".into()))
+        );
+        let p = problems(&d);
+        // Only the missing runtime.
+        assert_eq!(p.len(), 1, "{p:?}");
+        assert!(p[0].starts_with("no active runtime"), "{p:?}");
+        let text = render(&d, &p);
+        assert!(text.contains("fovea: enabled, layer 3 of 3"), "{text}");
+    }
+
+    #[test]
+    fn relative_library_paths_resolve_against_the_manifest_directory() {
+        let r = root("relative");
+        std::fs::create_dir_all(r.join("lib")).unwrap();
+        std::fs::write(r.join("lib/libfovea.so"), "").unwrap();
+        let dir = r.join("layers");
+        layer(&dir, "a.json", "A", Path::new("../lib/libfovea.so"), None);
+        layer(&dir, "b.json", "B", Path::new("../lib/missing.so"), None);
+        layer(&dir, "c.json", "C", Path::new("libbare.so"), None);
+        let v = vars(&[]);
+        let env = Environment { vars: &v, root: &r };
+        let a = read_layer(&dir.join("a.json"), Kind::Explicit, &env);
+        assert!(a.usable(), "{a:?}");
+        assert!(a.library.unwrap().is_file());
+        let b = read_layer(&dir.join("b.json"), Kind::Explicit, &env);
+        assert!(matches!(b.verdict, Err(Skip::Invalid(ref w)) if w.contains("does not exist")));
+        // A bare file name is left to the dynamic linker.
+        let c = read_layer(&dir.join("c.json"), Kind::Explicit, &env);
+        assert!(c.usable());
+        assert_eq!(c.library.unwrap(), Path::new("libbare.so"));
+    }
+}

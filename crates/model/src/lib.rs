@@ -1,0 +1,22 @@
+//! fovea's model: plain Rust, no FFI, no `unsafe`. Everything here is a pure function of its inputs
+//! and is tested directly; the layer's hooks translate OpenXR and Vulkan values into these types and
+//! call in.
+//!
+//! - [`fov`]: the one FOV type and the projection centre;
+//! - [`projection`]: projection matrices and symmetric-FOV sizing;
+//! - [`density`]: the density model (which fragment size each density-map texel may use);
+//! - [`dynamic`]: the dynamic-level controller;
+//! - [`stats`]: the once-a-second stats window and its line;
+//! - [`maps`]: what each layer of a density map holds, and filling it;
+//! - [`headsets`]: headset presets as runtimes report them, and eye-buffer sizing.
+#![forbid(unsafe_code)]
+
+pub mod density;
+pub mod dynamic;
+pub mod fov;
+pub mod headsets;
+pub mod maps;
+pub mod projection;
+pub mod stats;
+
+pub use fov::Fov;

@@ -1,0 +1,280 @@
+//! The layer's locks, with the lock order of [`crate::xr::registry`] checked in debug builds.
+//!
+//! A layer runs on the application's threads, and a deadlock in it hangs the application. The order
+//! that rules it out is written down in `state.rs`; here it is enforced: every lock has a [`Rank`],
+//! and a debug build keeps, per thread, the ranks it holds and panics (which the hook's guard turns
+//! into XR_ERROR_RUNTIME_FAILURE and an error line, and the tests into a failure) as soon as a
+//! thread takes a lock out of order, whether or not another thread is there to deadlock with. A
+//! cycle needs two threads taking the same two locks in opposite orders; a total order that every
+//! thread follows has none. Release builds compile to plain `parking_lot` locks.
+//!
+//! The logging file's lock (`log.rs`) is left out: it is taken inside `tracing` calls, which may run
+//! under any lock, and takes no other lock itself.
+
+use std::ops::{Deref, DerefMut};
+
+/// Where a lock sits in the order, outermost first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Rank {
+    /// The registry's handle maps. Held alone: taken with no other lock held, and no lock is taken
+    /// while one is held (hooks copy the `Arc` out and drop the map lock first).
+    Map,
+    /// A record's own state (a session's frame loop and views, a swapchain's foveation state, an
+    /// instance's FOVs and Vulkan set-up). Records never lock each other.
+    Record,
+    /// A swapchain's density images being filled.
+    DensityFill,
+    /// A session's queue, command pool and fence.
+    GpuSubmit,
+    /// The debug properties, read by everything above.
+    Settings,
+}
+
+#[cfg(debug_assertions)]
+mod check {
+    use super::Rank;
+    use std::cell::RefCell;
+
+    thread_local! {
+        static HELD: RefCell<Vec<(Rank, &'static str)>> = const { RefCell::new(Vec::new()) };
+    }
+
+    pub fn acquire(rank: Rank, what: &'static str) {
+        HELD.with(|h| {
+            let mut h = h.borrow_mut();
+            if let Some(&(top, top_what)) = h.iter().max_by_key(|(r, _)| *r) {
+                let map_held = h.iter().any(|(r, _)| *r == Rank::Map);
+                if rank <= top || map_held {
+                    let held: Vec<_> = h.iter().map(|(_, w)| *w).collect();
+                    drop(h);
+                    panic!(
+                        "lock order violated: taking {what} ({rank:?}) while holding {top_what} \
+                         ({top:?}); held: {held:?}"
+                    );
+                }
+            }
+            h.push((rank, what));
+        });
+    }
+
+    pub fn release(rank: Rank, what: &'static str) {
+        HELD.with(|h| {
+            let mut h = h.borrow_mut();
+            if let Some(i) = h.iter().rposition(|e| *e == (rank, what)) {
+                h.remove(i);
+            }
+        });
+    }
+
+    pub fn assert_none_held(why: &str) {
+        HELD.with(|h| {
+            let h = h.borrow();
+            if !h.is_empty() {
+                let held: Vec<_> = h.iter().map(|(_, w)| *w).collect();
+                drop(h);
+                panic!("lock order violated: {why} while holding {held:?}");
+            }
+        });
+    }
+}
+
+#[cfg(not(debug_assertions))]
+mod check {
+    use super::Rank;
+
+    #[inline(always)]
+    pub fn acquire(_: Rank, _: &'static str) {}
+
+    #[inline(always)]
+    pub fn release(_: Rank, _: &'static str) {}
+
+    #[inline(always)]
+    pub fn assert_none_held(_: &str) {}
+}
+
+/// Debug builds: panics if this thread holds any lock. Called before going down to the next layer,
+/// which may block (xrWaitFrame) or call back into the application.
+#[inline]
+pub fn assert_none_held(why: &str) {
+    check::assert_none_held(why);
+}
+
+/// A mutex with a rank.
+pub struct Mutex<T> {
+    rank: Rank,
+    what: &'static str,
+    inner: parking_lot::Mutex<T>,
+}
+
+impl<T> Mutex<T> {
+    /// A record's lock ([`Rank::Record`]).
+    pub const fn new(value: T) -> Mutex<T> {
+        Mutex::ranked(Rank::Record, "record", value)
+    }
+
+    /// A lock of another rank; `what` names it in violation reports.
+    pub const fn ranked(rank: Rank, what: &'static str, value: T) -> Mutex<T> {
+        Mutex {
+            rank,
+            what,
+            inner: parking_lot::Mutex::new(value),
+        }
+    }
+
+    pub fn lock(&self) -> MutexGuard<'_, T> {
+        check::acquire(self.rank, self.what);
+        MutexGuard {
+            rank: self.rank,
+            what: self.what,
+            inner: self.inner.lock(),
+        }
+    }
+
+    /// Through `&mut self` no lock is taken, so none is checked.
+    pub fn get_mut(&mut self) -> &mut T {
+        self.inner.get_mut()
+    }
+}
+
+impl<T: Default> Default for Mutex<T> {
+    fn default() -> Mutex<T> {
+        Mutex::new(T::default())
+    }
+}
+
+impl<T: std::fmt::Debug> std::fmt::Debug for Mutex<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.inner.fmt(f)
+    }
+}
+
+pub struct MutexGuard<'a, T> {
+    rank: Rank,
+    what: &'static str,
+    inner: parking_lot::MutexGuard<'a, T>,
+}
+
+impl<T> Deref for MutexGuard<'_, T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        &self.inner
+    }
+}
+
+impl<T> DerefMut for MutexGuard<'_, T> {
+    fn deref_mut(&mut self) -> &mut T {
+        &mut self.inner
+    }
+}
+
+impl<T> Drop for MutexGuard<'_, T> {
+    fn drop(&mut self) {
+        check::release(self.rank, self.what);
+    }
+}
+
+/// A reader-writer lock of rank [`Rank::Map`]: the registry's handle maps.
+pub struct MapLock<T> {
+    what: &'static str,
+    inner: parking_lot::RwLock<T>,
+}
+
+impl<T> MapLock<T> {
+    pub const fn new(what: &'static str, value: T) -> MapLock<T> {
+        MapLock {
+            what,
+            inner: parking_lot::RwLock::new(value),
+        }
+    }
+
+    pub fn read(&self) -> MapGuard<'_, parking_lot::RwLockReadGuard<'_, T>> {
+        check::acquire(Rank::Map, self.what);
+        MapGuard {
+            _lock: std::marker::PhantomData,
+            what: self.what,
+            inner: self.inner.read(),
+        }
+    }
+
+    pub fn write(&self) -> MapGuard<'_, parking_lot::RwLockWriteGuard<'_, T>> {
+        check::acquire(Rank::Map, self.what);
+        MapGuard {
+            _lock: std::marker::PhantomData,
+            what: self.what,
+            inner: self.inner.write(),
+        }
+    }
+}
+
+/// A held map lock (read or write).
+pub struct MapGuard<'a, G> {
+    _lock: std::marker::PhantomData<&'a ()>,
+    what: &'static str,
+    inner: G,
+}
+
+impl<G: Deref> Deref for MapGuard<'_, G> {
+    type Target = G::Target;
+    fn deref(&self) -> &G::Target {
+        &self.inner
+    }
+}
+
+impl<G: DerefMut> DerefMut for MapGuard<'_, G> {
+    fn deref_mut(&mut self) -> &mut G::Target {
+        &mut self.inner
+    }
+}
+
+impl<G> Drop for MapGuard<'_, G> {
+    fn drop(&mut self) {
+        check::release(Rank::Map, self.what);
+    }
+}
+
+#[cfg(all(test, debug_assertions))]
+mod tests {
+    use super::*;
+
+    fn panics(f: impl FnOnce()) -> bool {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).is_err()
+    }
+
+    #[test]
+    fn the_order_is_enforced() {
+        let map = MapLock::new("map", 0);
+        let a = Mutex::new(1);
+        let b = Mutex::new(2);
+        let settings = Mutex::ranked(Rank::Settings, "settings", 3);
+        // In order: fine, and released guards are forgotten.
+        {
+            let _a = a.lock();
+            let _s = settings.lock();
+        }
+        drop(map.write());
+        // Two records at once, a record inside a map lock, a map lock inside a record lock, and
+        // inverted ranks all panic.
+        assert!(panics(|| {
+            let _a = a.lock();
+            let _b = b.lock();
+        }));
+        assert!(panics(|| {
+            let _m = map.read();
+            let _a = a.lock();
+        }));
+        assert!(panics(|| {
+            let _a = a.lock();
+            let _m = map.read();
+        }));
+        assert!(panics(|| {
+            let _s = settings.lock();
+            let _a = a.lock();
+        }));
+        assert!(panics(|| {
+            let _a = a.lock();
+            assert_none_held("calling down");
+        }));
+        // Unwinding released everything.
+        assert_none_held("after the panics");
+    }
+}

@@ -1,0 +1,788 @@
+//! The Vulkan image work behind XR_FB_foveation_vulkan: fragment density map (FDM) images on the
+//! application's device, filled from the density model.
+//!
+//! fb_foveation_vulkan.adoc: a swapchain created with
+//! XR_SWAPCHAIN_CREATE_FOVEATION_FRAGMENT_DENSITY_MAP_BIT_FB hands out, through
+//! XrSwapchainImageFoveationVulkanFB, one density image per swapchain image. Runtimes that
+//! implement it allocate those images themselves; fovea does the same on the device of the
+//! session's XrGraphicsBindingVulkanKHR:
+//!
+//! * one image per swapchain image, `VK_FORMAT_R8G8_UNORM` (the one format Vulkan requires to
+//!   support FDM, openxr-layer-facts.md §4), 2D, `arrayLayers` = the swapchain's `arraySize` (with
+//!   multiview, layer = view index), extent = `ceil(swapchain extent / texel size)`;
+//! * usage FRAGMENT_DENSITY_MAP where the device has VK_EXT_fragment_density_map enabled, plus
+//!   SAMPLED, STORAGE, TRANSFER_SRC and TRANSFER_DST where the format supports them: engines wrap
+//!   the images in their own views, and on drivers without FDM convert them into shading-rate
+//!   images;
+//! * filled only inside xrAcquireSwapchainImage (one of the four calls where the spec lets the
+//!   runtime use the application's queue, XR_KHR_vulkan_enable "Concurrency"), through a persistent
+//!   staging buffer and one command buffer per image, and finished (fence) before the acquire
+//!   returns: by default the map is read by the host when the application *records* its render pass
+//!   (openxr-layer-facts.md §4, "When the map is read").
+//!
+//! Entry points come from the system Vulkan loader (`ash::Entry::load`), as with
+//! XR_KHR_vulkan_enable (v1) a runtime must do too: the binding carries no `vkGetInstanceProcAddr`.
+//! That assumes the application uses the same loader, which is what the spec assumes of runtimes.
+//!
+//! Fail open: where any Vulkan step fails, a warning is logged and the swapchain goes on without
+//! density images (XrSwapchainImageFoveationVulkanFB stays as the application passed it).
+
+use std::ffi::CStr;
+use std::sync::{Arc, OnceLock};
+
+use crate::common::lock::{Mutex, Rank};
+use ash::vk;
+use ash::vk::Handle as _;
+
+use fovea_model::density::Grid;
+use fovea_model::maps::{fill_layers, Inputs, DEFAULT_TEXEL};
+
+use crate::bridge::MapKey;
+use crate::xr::registry::VulkanBinding;
+
+/// The density image format: the one Vulkan makes mandatory for FDM (fragmentdensitymapops.adoc).
+pub const FORMAT: vk::Format = vk::Format::R8G8_UNORM;
+
+/// A failed Vulkan step, for the log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VkError {
+    pub step: &'static str,
+    pub result: vk::Result,
+}
+
+impl std::fmt::Display for VkError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} failed: {:?}", self.step, self.result)
+    }
+}
+
+fn step(step: &'static str) -> impl Fn(vk::Result) -> VkError {
+    move |result| VkError { step, result }
+}
+
+/// The system Vulkan loader, loaded once per process (never unloaded: the application's objects
+/// live in it).
+pub fn entry() -> Option<&'static ash::Entry> {
+    static ENTRY: OnceLock<Option<ash::Entry>> = OnceLock::new();
+    ENTRY
+        .get_or_init(|| match unsafe { ash::Entry::load() } {
+            Ok(e) => Some(e),
+            Err(e) => {
+                tracing::warn!(error = %e, "cannot load the Vulkan loader; no density images");
+                None
+            }
+        })
+        .as_ref()
+}
+
+/// Instance-level functions for the application's VkInstance.
+///
+/// # Safety
+/// `instance` must be a live VkInstance of the system loader.
+pub unsafe fn instance_fns(entry: &ash::Entry, instance: u64) -> ash::Instance {
+    ash::Instance::load(entry.static_fn(), vk::Instance::from_raw(instance))
+}
+
+/// What a physical device offers of VK_EXT_fragment_density_map(2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FdmSupport {
+    /// VK_EXT_fragment_density_map is among the device's extensions.
+    pub extension: bool,
+    /// VK_EXT_fragment_density_map2 is among the device's extensions.
+    pub extension2: bool,
+    /// `VkPhysicalDeviceFragmentDensityMapFeaturesEXT::fragmentDensityMap`.
+    pub feature: bool,
+    /// `VkPhysicalDeviceFragmentDensityMapPropertiesEXT` texel sizes ([0, 0] when unknown).
+    pub min_texel: [u32; 2],
+    pub max_texel: [u32; 2],
+}
+
+impl FdmSupport {
+    /// The density texel size: the device's smallest (the finest map it can use), clamped into its
+    /// [min, max] range; [`DEFAULT_TEXEL`] where the device has no FDM or reports nonsense.
+    pub fn texel(&self) -> [u32; 2] {
+        let valid = self.extension
+            && (0..2).all(|i| self.min_texel[i] >= 1 && self.min_texel[i] <= self.max_texel[i]);
+        if !valid {
+            return DEFAULT_TEXEL;
+        }
+        [0, 1].map(|i| self.min_texel[i].clamp(self.min_texel[i], self.max_texel[i]))
+    }
+}
+
+/// Looks an instance-level command up, `None` where the loader has none (a 1.1 command on a 1.0
+/// loader, say), so ash's panicking placeholder is never called.
+unsafe fn instance_proc(
+    entry: &ash::Entry,
+    instance: &ash::Instance,
+    names: &[&CStr],
+) -> Option<vk::PFN_vkVoidFunction> {
+    names.iter().find_map(|n| {
+        let f = entry.get_instance_proc_addr(instance.handle(), n.as_ptr());
+        f.is_some().then_some(f)
+    })
+}
+
+/// Asks a physical device what it offers of VK_EXT_fragment_density_map. Features and properties
+/// need vkGetPhysicalDevice{Features,Properties}2 (core 1.1, or
+/// VK_KHR_get_physical_device_properties2, which FDM requires anyway); they are only asked for when
+/// the extension is there, so a device without FDM (lavapipe, desktop drivers) sees core 1.0 calls
+/// only.
+///
+/// # Safety
+/// `instance` must be the physical device's live instance.
+pub unsafe fn query_support(
+    entry: &ash::Entry,
+    instance: &ash::Instance,
+    physical_device: vk::PhysicalDevice,
+) -> FdmSupport {
+    let mut s = FdmSupport::default();
+    let Ok(exts) = instance.enumerate_device_extension_properties(physical_device) else {
+        return s;
+    };
+    let has = |name: &CStr| exts.iter().any(|e| e.extension_name_as_c_str() == Ok(name));
+    s.extension = has(ash::ext::fragment_density_map::NAME);
+    s.extension2 = has(ash::ext::fragment_density_map2::NAME);
+    if !s.extension {
+        return s;
+    }
+    if let Some(f) = instance_proc(
+        entry,
+        instance,
+        &[
+            c"vkGetPhysicalDeviceFeatures2",
+            c"vkGetPhysicalDeviceFeatures2KHR",
+        ],
+    ) {
+        let f: vk::PFN_vkGetPhysicalDeviceFeatures2 = std::mem::transmute(f);
+        let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default();
+        let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut fdm);
+        f(physical_device, &mut features);
+        s.feature = fdm.fragment_density_map == vk::TRUE;
+    }
+    if let Some(f) = instance_proc(
+        entry,
+        instance,
+        &[
+            c"vkGetPhysicalDeviceProperties2",
+            c"vkGetPhysicalDeviceProperties2KHR",
+        ],
+    ) {
+        let f: vk::PFN_vkGetPhysicalDeviceProperties2 = std::mem::transmute(f);
+        let mut fdm = vk::PhysicalDeviceFragmentDensityMapPropertiesEXT::default();
+        let mut props = vk::PhysicalDeviceProperties2::default().push_next(&mut fdm);
+        f(physical_device, &mut props);
+        let e = |x: vk::Extent2D| [x.width, x.height];
+        s.min_texel = e(fdm.min_fragment_density_texel_size);
+        s.max_texel = e(fdm.max_fragment_density_texel_size);
+    }
+    s
+}
+
+/// The density images' usage: FRAGMENT_DENSITY_MAP where FDM is usable on the device and the format
+/// supports it, plus SAMPLED, STORAGE and the transfers where the format's optimal-tiling features
+/// allow. Before Vulkan 1.1 (and VK_KHR_maintenance1) formats do not report TRANSFER_SRC/DST and
+/// every format allows transfers.
+pub fn usage_for(
+    features: vk::FormatFeatureFlags,
+    fdm: bool,
+    device_api: u32,
+) -> vk::ImageUsageFlags {
+    use vk::FormatFeatureFlags as F;
+    use vk::ImageUsageFlags as U;
+    let pre_1_1 = vk::api_version_major(device_api) == 1 && vk::api_version_minor(device_api) == 0;
+    let mut usage = U::empty();
+    let pairs = [
+        (
+            F::FRAGMENT_DENSITY_MAP_EXT,
+            U::FRAGMENT_DENSITY_MAP_EXT,
+            fdm,
+        ),
+        (F::SAMPLED_IMAGE, U::SAMPLED, true),
+        (F::STORAGE_IMAGE, U::STORAGE, true),
+        (F::TRANSFER_SRC, U::TRANSFER_SRC, true),
+        (F::TRANSFER_DST, U::TRANSFER_DST, true),
+    ];
+    for (feature, bit, wanted) in pairs {
+        if wanted && features.contains(feature) {
+            usage |= bit;
+        }
+    }
+    if pre_1_1 {
+        usage |= U::TRANSFER_SRC | U::TRANSFER_DST;
+    }
+    usage
+}
+
+/// The layout (and the access that reads it) density images are left in after an upload:
+/// FRAGMENT_DENSITY_MAP_OPTIMAL_EXT for an FDM attachment; SHADER_READ_ONLY_OPTIMAL for images
+/// engines sample or convert; GENERAL where the images can do neither.
+pub fn final_layout(usage: vk::ImageUsageFlags) -> (vk::ImageLayout, vk::AccessFlags) {
+    use vk::ImageUsageFlags as U;
+    if usage.contains(U::FRAGMENT_DENSITY_MAP_EXT) {
+        (
+            vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT,
+            vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT,
+        )
+    } else if usage.contains(U::SAMPLED) {
+        (
+            vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+            vk::AccessFlags::SHADER_READ,
+        )
+    } else {
+        (vk::ImageLayout::GENERAL, vk::AccessFlags::MEMORY_READ)
+    }
+}
+
+/// A memory type allowed by `bits` with all of `wanted`, else (when `fallback`) any allowed type.
+fn memory_type(
+    props: &vk::PhysicalDeviceMemoryProperties,
+    bits: u32,
+    wanted: vk::MemoryPropertyFlags,
+    fallback: bool,
+) -> Option<u32> {
+    let allowed = |i: &u32| bits & (1 << i) != 0;
+    let types = &props.memory_types[..props.memory_type_count as usize];
+    (0..props.memory_type_count)
+        .filter(allowed)
+        .find(|i| types[*i as usize].property_flags.contains(wanted))
+        .or_else(|| {
+            fallback
+                .then(|| (0..props.memory_type_count).find(allowed))
+                .flatten()
+        })
+}
+
+/// What the queue mutex guards: the binding's queue and the session's command pool and fence.
+/// Command pools and queues need external synchronisation (Vulkan "Threading Behavior"), and one
+/// session's swapchains may be acquired from different threads.
+struct Submit {
+    queue: vk::Queue,
+    pool: vk::CommandPool,
+    fence: vk::Fence,
+}
+
+/// fovea's Vulkan objects for one session, on the device of its XrGraphicsBindingVulkanKHR.
+pub struct SessionGpu {
+    instance: ash::Instance,
+    device: ash::Device,
+    /// Density texel size in framebuffer pixels.
+    pub texel: [u32; 2],
+    /// Usage of the density images.
+    pub usage: vk::ImageUsageFlags,
+    memory: vk::PhysicalDeviceMemoryProperties,
+    physical_device: vk::PhysicalDevice,
+    submit: Mutex<Submit>,
+}
+
+impl SessionGpu {
+    /// Sets up for a session: reads what the device supports, creates the command pool on the
+    /// binding's queue family and the fence. `fdm_enabled`: the application's device has
+    /// VK_EXT_fragment_density_map enabled (known from xrCreateVulkanDeviceKHR or the extension
+    /// list fovea handed out, see `hooks::vulkan`).
+    ///
+    /// # Safety
+    /// The binding's handles must be live objects of the system Vulkan loader.
+    pub unsafe fn new(binding: &VulkanBinding, fdm_enabled: bool) -> Result<SessionGpu, VkError> {
+        let no_loader = VkError {
+            step: "loading the Vulkan loader",
+            result: vk::Result::ERROR_INITIALIZATION_FAILED,
+        };
+        let entry = entry().ok_or(no_loader)?;
+        let instance = instance_fns(entry, binding.instance);
+        let physical_device = vk::PhysicalDevice::from_raw(binding.physical_device);
+        let support = query_support(entry, &instance, physical_device);
+        let props = instance.get_physical_device_properties(physical_device);
+        let features = instance
+            .get_physical_device_format_properties(physical_device, FORMAT)
+            .optimal_tiling_features;
+        let fdm = fdm_enabled && support.extension;
+        let usage = usage_for(features, fdm, props.api_version);
+        if !usage.contains(vk::ImageUsageFlags::TRANSFER_DST) {
+            return Err(VkError {
+                step: "R8G8_UNORM as a transfer destination",
+                result: vk::Result::ERROR_FORMAT_NOT_SUPPORTED,
+            });
+        }
+        let device = ash::Device::load(instance.fp_v1_0(), vk::Device::from_raw(binding.device));
+        let queue = device.get_device_queue(binding.queue_family_index, binding.queue_index);
+        let pool = device
+            .create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
+                    .queue_family_index(binding.queue_family_index),
+                None,
+            )
+            .map_err(step("vkCreateCommandPool"))?;
+        let fence = match device.create_fence(&vk::FenceCreateInfo::default(), None) {
+            Ok(f) => f,
+            Err(e) => {
+                device.destroy_command_pool(pool, None);
+                return Err(step("vkCreateFence")(e));
+            }
+        };
+        tracing::info!(
+            texel = ?support.texel(),
+            ?usage,
+            fdm_extension = support.extension,
+            fdm_feature = support.feature,
+            fdm_enabled,
+            "density images for this session"
+        );
+        Ok(SessionGpu {
+            memory: instance.get_physical_device_memory_properties(physical_device),
+            instance,
+            device,
+            texel: support.texel(),
+            usage,
+            physical_device,
+            submit: Mutex::ranked(Rank::GpuSubmit, "gpu submit", Submit { queue, pool, fence }),
+        })
+    }
+}
+
+impl Drop for SessionGpu {
+    fn drop(&mut self) {
+        let s = self.submit.get_mut();
+        // SAFETY: every submission was waited on the fence before its call returned, and the
+        // swapchains' command buffers were freed with them (they hold this record's Arc).
+        unsafe {
+            self.device.destroy_fence(s.fence, None);
+            self.device.destroy_command_pool(s.pool, None);
+        }
+    }
+}
+
+/// What a refresh did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Refreshed {
+    /// The image already held its key's map.
+    Nothing,
+    /// Uploaded from the cached map (its inputs had not changed).
+    Uploaded,
+    /// Computed anew and uploaded.
+    Built,
+}
+
+/// A persistently mapped host pointer. It is only used under the `Fill` mutex.
+struct Mapped(*mut u8);
+
+// SAFETY: the pointer is into device memory mapped for the record's lifetime; access is serialised
+// by the mutex that owns it.
+unsafe impl Send for Mapped {}
+
+/// The mutable half of [`DensityImages`].
+struct Fill {
+    /// Per image: the key it was last filled for (`None`: never, its contents are undefined).
+    filled: Vec<Option<MapKey>>,
+    /// The inputs of the bytes in `bytes` (and in the staging buffer), once computed.
+    cached: Option<Inputs>,
+    /// The last computed map, all layers: the cache, so images with unchanged inputs are only
+    /// re-uploaded. Allocated once.
+    bytes: Vec<u8>,
+    mapped: Mapped,
+}
+
+/// One swapchain's density images, their staging buffer and command buffers.
+pub struct DensityImages {
+    gpu: Arc<SessionGpu>,
+    /// The density map size in texels (XrSwapchainImageFoveationVulkanFB width and height).
+    pub extent: [u32; 2],
+    pub layers: u32,
+    pub grid: Grid,
+    images: Vec<(vk::Image, vk::DeviceMemory)>,
+    staging: (vk::Buffer, vk::DeviceMemory),
+    command_buffers: Vec<vk::CommandBuffer>,
+    fill: Mutex<Fill>,
+}
+
+impl DensityImages {
+    /// Creates `count` density images for a swapchain of `extent` pixels and `layers` array
+    /// layers, with device-local memory, the staging buffer (host-visible and coherent, mapped for
+    /// good) and a command buffer per image. On error, whatever was made is destroyed.
+    ///
+    /// # Safety
+    /// The session's device must be live.
+    pub unsafe fn new(
+        gpu: &Arc<SessionGpu>,
+        extent: [u32; 2],
+        layers: u32,
+        count: u32,
+    ) -> Result<DensityImages, VkError> {
+        let grid = Grid::new(extent, gpu.texel);
+        let [mw, mh] = grid.map_extent();
+        let layers = layers.max(1);
+        let d = &gpu.device;
+        let props = gpu
+            .instance
+            .get_physical_device_image_format_properties(
+                gpu.physical_device,
+                FORMAT,
+                vk::ImageType::TYPE_2D,
+                vk::ImageTiling::OPTIMAL,
+                gpu.usage,
+                vk::ImageCreateFlags::empty(),
+            )
+            .map_err(step("vkGetPhysicalDeviceImageFormatProperties"))?;
+        if props.max_extent.width < mw
+            || props.max_extent.height < mh
+            || props.max_array_layers < layers
+            || mw == 0
+            || mh == 0
+        {
+            return Err(VkError {
+                step: "density image size",
+                result: vk::Result::ERROR_FORMAT_NOT_SUPPORTED,
+            });
+        }
+        let size = u64::from(mw) * u64::from(mh) * 2 * u64::from(layers);
+        let mut out = DensityImages {
+            gpu: gpu.clone(),
+            extent: [mw, mh],
+            layers,
+            grid,
+            images: Vec::new(),
+            staging: (vk::Buffer::null(), vk::DeviceMemory::null()),
+            command_buffers: Vec::new(),
+            fill: Mutex::ranked(
+                Rank::DensityFill,
+                "density fill",
+                Fill {
+                    filled: vec![None; count as usize],
+                    cached: None,
+                    bytes: vec![0; size as usize],
+                    mapped: Mapped(std::ptr::null_mut()),
+                },
+            ),
+        };
+        // From here on, an early return drops `out`, which destroys what exists so far.
+        for _ in 0..count {
+            let create = vk::ImageCreateInfo::default()
+                .image_type(vk::ImageType::TYPE_2D)
+                .format(FORMAT)
+                .extent(vk::Extent3D {
+                    width: mw,
+                    height: mh,
+                    depth: 1,
+                })
+                .mip_levels(1)
+                .array_layers(layers)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .tiling(vk::ImageTiling::OPTIMAL)
+                .usage(gpu.usage)
+                .sharing_mode(vk::SharingMode::EXCLUSIVE)
+                .initial_layout(vk::ImageLayout::UNDEFINED);
+            let image = d
+                .create_image(&create, None)
+                .map_err(step("vkCreateImage"))?;
+            let req = d.get_image_memory_requirements(image);
+            let memory = memory_type(
+                &gpu.memory,
+                req.memory_type_bits,
+                vk::MemoryPropertyFlags::DEVICE_LOCAL,
+                true,
+            )
+            .ok_or(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY)
+            .and_then(|i| {
+                d.allocate_memory(
+                    &vk::MemoryAllocateInfo::default()
+                        .allocation_size(req.size)
+                        .memory_type_index(i),
+                    None,
+                )
+            });
+            let memory = match memory {
+                Ok(m) => m,
+                Err(e) => {
+                    d.destroy_image(image, None);
+                    return Err(step("vkAllocateMemory (image)")(e));
+                }
+            };
+            out.images.push((image, memory));
+            d.bind_image_memory(image, memory, 0)
+                .map_err(step("vkBindImageMemory"))?;
+        }
+        let buffer = d
+            .create_buffer(
+                &vk::BufferCreateInfo::default()
+                    .size(size)
+                    .usage(vk::BufferUsageFlags::TRANSFER_SRC)
+                    .sharing_mode(vk::SharingMode::EXCLUSIVE),
+                None,
+            )
+            .map_err(step("vkCreateBuffer"))?;
+        out.staging.0 = buffer;
+        let req = d.get_buffer_memory_requirements(buffer);
+        // Vulkan guarantees a HOST_VISIBLE | HOST_COHERENT type for buffers ("Memory Types").
+        let index = memory_type(
+            &gpu.memory,
+            req.memory_type_bits,
+            vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
+            false,
+        )
+        .ok_or(VkError {
+            step: "a host-coherent memory type",
+            result: vk::Result::ERROR_OUT_OF_HOST_MEMORY,
+        })?;
+        out.staging.1 = d
+            .allocate_memory(
+                &vk::MemoryAllocateInfo::default()
+                    .allocation_size(req.size)
+                    .memory_type_index(index),
+                None,
+            )
+            .map_err(step("vkAllocateMemory (staging)"))?;
+        d.bind_buffer_memory(buffer, out.staging.1, 0)
+            .map_err(step("vkBindBufferMemory"))?;
+        let mapped = d
+            .map_memory(
+                out.staging.1,
+                0,
+                vk::WHOLE_SIZE,
+                vk::MemoryMapFlags::empty(),
+            )
+            .map_err(step("vkMapMemory"))?;
+        out.fill.get_mut().mapped = Mapped(mapped as *mut u8);
+        let s = gpu.submit.lock();
+        out.command_buffers = d
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(s.pool)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(count),
+            )
+            .map_err(step("vkAllocateCommandBuffers"))?;
+        drop(s);
+        Ok(out)
+    }
+
+    /// The VkImage of swapchain image `i`, as XrSwapchainImageFoveationVulkanFB wants it.
+    pub fn image(&self, i: usize) -> Option<u64> {
+        self.images.get(i).map(|(image, _)| image.as_raw())
+    }
+
+    /// How many images there are (the swapchain's image count).
+    pub fn count(&self) -> usize {
+        self.images.len()
+    }
+
+    /// Makes image `index` hold the map for `key`: nothing when it already does; otherwise the map
+    /// is computed from `inputs()` (unless the cached map has the same inputs) and uploaded on the
+    /// binding's queue, waited for before returning. Returns whether an upload happened.
+    ///
+    /// # Safety
+    /// Call only where the spec lets the runtime use the binding's queue (the application
+    /// synchronises it there), e.g. inside xrAcquireSwapchainImage.
+    pub unsafe fn refresh(
+        &self,
+        index: u32,
+        key: MapKey,
+        inputs: impl FnOnce() -> Inputs,
+    ) -> Result<Refreshed, VkError> {
+        let mut fill = self.fill.lock();
+        let i = index as usize;
+        if i >= self.images.len() || fill.filled[i] == Some(key) {
+            return Ok(Refreshed::Nothing);
+        }
+        let inputs = inputs();
+        let mut done = Refreshed::Uploaded;
+        if fill.cached.as_ref() != Some(&inputs) {
+            done = Refreshed::Built;
+            let f = &mut *fill;
+            fill_layers(&self.grid, &inputs, &mut f.bytes);
+            std::ptr::copy_nonoverlapping(f.bytes.as_ptr(), f.mapped.0, f.bytes.len());
+            f.cached = Some(inputs);
+        }
+        // Until the upload succeeds the image counts as undefined.
+        fill.filled[i] = None;
+        self.upload(i)?;
+        fill.filled[i] = Some(key);
+        Ok(done)
+    }
+
+    /// Records and submits the staging buffer's copy into image `i` and waits for it.
+    unsafe fn upload(&self, i: usize) -> Result<(), VkError> {
+        let d = &self.gpu.device;
+        let cb = self.command_buffers[i];
+        let image = self.images[i].0;
+        let range = vk::ImageSubresourceRange {
+            aspect_mask: vk::ImageAspectFlags::COLOR,
+            base_mip_level: 0,
+            level_count: 1,
+            base_array_layer: 0,
+            layer_count: self.layers,
+        };
+        let (layout, read) = final_layout(self.gpu.usage);
+        // The whole image is overwritten, so its old contents may be discarded (UNDEFINED). The
+        // source scope (all commands) orders the write after the application's earlier reads on
+        // this queue, e.g. of the frame that last used this image. The fence wait therefore also
+        // waits for the GPU work already queued: only when a map changed.
+        let to_transfer = vk::ImageMemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::empty())
+            .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .old_layout(vk::ImageLayout::UNDEFINED)
+            .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .image(image)
+            .subresource_range(range);
+        let to_final = to_transfer
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(read)
+            .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+            .new_layout(layout);
+        let region = vk::BufferImageCopy {
+            buffer_offset: 0,
+            buffer_row_length: 0,
+            buffer_image_height: 0,
+            image_subresource: vk::ImageSubresourceLayers {
+                aspect_mask: vk::ImageAspectFlags::COLOR,
+                mip_level: 0,
+                base_array_layer: 0,
+                layer_count: self.layers,
+            },
+            image_offset: vk::Offset3D::default(),
+            image_extent: vk::Extent3D {
+                width: self.extent[0],
+                height: self.extent[1],
+                depth: 1,
+            },
+        };
+        let s = self.gpu.submit.lock();
+        d.begin_command_buffer(
+            cb,
+            &vk::CommandBufferBeginInfo::default()
+                .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+        )
+        .map_err(step("vkBeginCommandBuffer"))?;
+        d.cmd_pipeline_barrier(
+            cb,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &[to_transfer],
+        );
+        d.cmd_copy_buffer_to_image(
+            cb,
+            self.staging.0,
+            image,
+            vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+            &[region],
+        );
+        d.cmd_pipeline_barrier(
+            cb,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &[to_final],
+        );
+        d.end_command_buffer(cb)
+            .map_err(step("vkEndCommandBuffer"))?;
+        let cbs = [cb];
+        d.queue_submit(
+            s.queue,
+            &[vk::SubmitInfo::default().command_buffers(&cbs)],
+            s.fence,
+        )
+        .map_err(step("vkQueueSubmit"))?;
+        let waited = d.wait_for_fences(&[s.fence], true, u64::MAX);
+        let reset = d.reset_fences(&[s.fence]);
+        waited.map_err(step("vkWaitForFences"))?;
+        reset.map_err(step("vkResetFences"))?;
+        Ok(())
+    }
+}
+
+impl Drop for DensityImages {
+    fn drop(&mut self) {
+        let d = &self.gpu.device;
+        // SAFETY: fovea's own submissions were all waited on before their calls returned. The
+        // application must not use a destroyed swapchain's images (spec); fovea cannot wait for the
+        // queue here, because xrDestroySwapchain and xrDestroySession are not among the calls where
+        // the application synchronises the queue for the runtime (XR_KHR_vulkan_enable).
+        unsafe {
+            if !self.command_buffers.is_empty() {
+                let s = self.gpu.submit.lock();
+                d.free_command_buffers(s.pool, &self.command_buffers);
+            }
+            if !self.fill.get_mut().mapped.0.is_null() {
+                d.unmap_memory(self.staging.1);
+            }
+            if self.staging.0 != vk::Buffer::null() {
+                d.destroy_buffer(self.staging.0, None);
+            }
+            if self.staging.1 != vk::DeviceMemory::null() {
+                d.free_memory(self.staging.1, None);
+            }
+            for (image, memory) in self.images.drain(..) {
+                d.destroy_image(image, None);
+                d.free_memory(memory, None);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn texel_size_is_the_devices_minimum_or_the_default() {
+        let mut s = FdmSupport::default();
+        assert_eq!(s.texel(), DEFAULT_TEXEL);
+        s.extension = true;
+        assert_eq!(s.texel(), DEFAULT_TEXEL, "no properties read");
+        s.min_texel = [16, 8];
+        s.max_texel = [64, 64];
+        assert_eq!(s.texel(), [16, 8]);
+        s.max_texel = [8, 8];
+        assert_eq!(s.texel(), DEFAULT_TEXEL, "min above max is nonsense");
+    }
+
+    #[test]
+    fn usage_follows_format_features_and_fdm() {
+        use vk::FormatFeatureFlags as F;
+        use vk::ImageUsageFlags as U;
+        let all = F::FRAGMENT_DENSITY_MAP_EXT
+            | F::SAMPLED_IMAGE
+            | F::STORAGE_IMAGE
+            | F::TRANSFER_SRC
+            | F::TRANSFER_DST;
+        let v13 = vk::make_api_version(0, 1, 3, 0);
+        assert_eq!(
+            usage_for(all, true, v13),
+            U::FRAGMENT_DENSITY_MAP_EXT
+                | U::SAMPLED
+                | U::STORAGE
+                | U::TRANSFER_SRC
+                | U::TRANSFER_DST
+        );
+        assert_eq!(
+            usage_for(all, false, v13),
+            U::SAMPLED | U::STORAGE | U::TRANSFER_SRC | U::TRANSFER_DST
+        );
+        assert_eq!(
+            usage_for(F::SAMPLED_IMAGE, false, v13),
+            U::SAMPLED,
+            "no transfer bits reported on 1.1+"
+        );
+        assert_eq!(
+            usage_for(F::SAMPLED_IMAGE, false, vk::make_api_version(0, 1, 0, 0)),
+            U::SAMPLED | U::TRANSFER_SRC | U::TRANSFER_DST,
+            "1.0 formats do not report transfers and allow them"
+        );
+        assert_eq!(
+            final_layout(U::FRAGMENT_DENSITY_MAP_EXT | U::SAMPLED).0,
+            vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT
+        );
+        assert_eq!(
+            final_layout(U::SAMPLED | U::TRANSFER_DST).0,
+            vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL
+        );
+        assert_eq!(final_layout(U::TRANSFER_DST).0, vk::ImageLayout::GENERAL);
+    }
+}

@@ -1,0 +1,3 @@
+//! The GPU work: fovea's density images on the application's Vulkan device and their upload.
+
+pub mod density_images;

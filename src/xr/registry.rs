@@ -1,0 +1,468 @@
+//! Per-handle state: what the layer knows of each instance, session, swapchain and foveation profile.
+//!
+//! Handles are the runtime's own (fovea wraps none of them, so calls it does not intercept need no
+//! translation); profiles are the one handle type fovea mints itself. Each kind lives in a map behind
+//! a `parking_lot` reader-writer lock; records are `Arc`s so a hook can drop the map lock before
+//! calling down. Children hold their parent's `Arc`, which is how a hook on a swapchain reaches the
+//! instance's next-layer table.
+//!
+//! Lock order ([`crate::common::lock::Rank`], outermost first; checked in debug builds by [`crate::common::lock`]):
+//! 1. a map lock (the handle maps, the Vulkan device list) is held alone: never while another lock
+//!    is held, never while taking another lock, never while calling into the next layer;
+//! 2. a record's own lock (a session's frame loop or views, a swapchain's foveation state, an
+//!    instance's FOVs or Vulkan set-up); records never lock each other;
+//! 3. a swapchain's density-image fill state;
+//! 4. the session's GPU submission state (queue, command pool, fence);
+//! 5. the debug properties, read under any of the above.
+//!
+//! No lock is held while calling into the next layer. The logging file's lock is a leaf inside
+//! `tracing` and is not ranked.
+
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::Instant;
+
+use crate::common::lock::{MapLock, Mutex, Rank};
+use openxr_sys as xr;
+use xr::Handle;
+
+use crate::bridge::{effective, FoveationState, ProfileParams, Submitted, ViewFovs};
+use crate::common::settings::Overrides;
+use crate::gpu::density_images::{DensityImages, SessionGpu};
+use crate::xr::dispatch::Next;
+use crate::xr::extensions::Extensions;
+use fovea_model::density::Pattern;
+use fovea_model::dynamic::{step_of, Controller};
+use fovea_model::projection::symmetric_fov;
+use fovea_model::stats::Stats;
+use fovea_model::Fov;
+
+/// The application's instance and everything fovea learned when it was created.
+pub struct Instance {
+    pub handle: xr::Instance,
+    /// The next layer's `xrGetInstanceProcAddr`, for functions fovea does not intercept.
+    pub next_gipa: xr::pfn::GetInstanceProcAddr,
+    /// The next layer's pointers for every intercepted function.
+    pub next: Next,
+    pub extensions: Extensions,
+    /// `FOVEA_SYMMETRIC_FOV=1` when the instance was created.
+    pub symmetric_fov: bool,
+    /// Quest's debug properties: environment and `FOVEA_PROPS`, re-read while the app runs.
+    pub overrides: Overrides,
+    /// The primary stereo views' FOVs as the runtime reports them (not the symmetric ones fovea
+    /// may hand on), learned from `xrLocateViews`.
+    pub stereo_fovs: Mutex<Option<[Fov; 2]>>,
+    /// What the application told the runtime about its Vulkan objects.
+    pub vulkan: Mutex<VulkanSetup>,
+    /// The runtime returned XR_ERROR_INSTANCE_LOST through a call fovea passed on.
+    pub lost: AtomicBool,
+}
+
+impl Instance {
+    /// The runtime's own stereo FOVs, once known.
+    pub fn stereo_fovs(&self) -> Option<[Fov; 2]> {
+        *self.stereo_fovs.lock()
+    }
+
+    /// What the views are rendered with: the shared symmetric FOV in symmetric-FOV mode, else the
+    /// runtime's own.
+    pub fn render_fovs(&self, fovs: [Fov; 2]) -> [Fov; 2] {
+        match self.symmetric_fov.then(|| symmetric_fov(&fovs)).flatten() {
+            Some(shared) => [shared; 2],
+            None => fovs,
+        }
+    }
+}
+
+/// The Vulkan set-up calls fovea watches (XR_KHR_vulkan_enable / enable2), as raw handle values.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct VulkanSetup {
+    /// The VkInstance and the VkPhysicalDevice xrGetVulkanGraphicsDevice(2)KHR returned: the spec
+    /// makes the session's device come from that physical device.
+    pub graphics_device: Option<(u64, u64)>,
+    /// xrGetVulkanDeviceExtensionsKHR (enable) listed VK_EXT_fragment_density_map, which the
+    /// application must then enable on its device ("required" extensions, khr_vulkan_enable.adoc).
+    pub fdm_listed: bool,
+    /// The physical device it was listed for; `None` when it was listed before fovea knew the device.
+    pub fdm_listed_for: Option<u64>,
+}
+
+impl VulkanSetup {
+    /// Whether the application was told to enable VK_EXT_fragment_density_map on a device of
+    /// `physical_device`.
+    pub fn fdm_listed_for(&self, physical_device: u64) -> bool {
+        self.fdm_listed && self.fdm_listed_for.is_none_or(|p| p == physical_device)
+    }
+}
+
+/// A VkDevice created through xrCreateVulkanDeviceKHR (enable2), where fovea saw its create info.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VulkanDevice {
+    /// The XrInstance it was created through (the record goes with that instance).
+    pub instance: u64,
+    /// VK_EXT_fragment_density_map and its `fragmentDensityMap` feature are both enabled.
+    pub fdm_enabled: bool,
+}
+
+/// A session and its graphics binding.
+pub struct Session {
+    pub handle: xr::Session,
+    pub instance: Arc<Instance>,
+    /// The Vulkan binding, when the session has one (not for headless sessions).
+    pub vulkan: Option<VulkanBinding>,
+    /// Frame timing, the dynamic controller and the stats window.
+    pub frame: Mutex<FrameLoop>,
+    /// The dynamic controller's step ([`fovea_model::dynamic::LADDER`]), read when maps are built.
+    pub dynamic_step: AtomicUsize,
+    /// The highest step any of the session's dynamic swapchains allows (0: none is dynamic).
+    pub dynamic_max: AtomicUsize,
+    /// Bumped when the dynamic step or the debug overrides change what the swapchains' maps hold.
+    pub pattern_generation: AtomicU64,
+    /// Density maps built and uploaded, for the stats line.
+    pub maps_built: AtomicU64,
+    pub maps_uploaded: AtomicU64,
+    /// fovea's Vulkan objects on the binding's device, where it provides XR_FB_foveation_vulkan and
+    /// could set them up.
+    pub gpu: Option<Arc<SessionGpu>>,
+    /// The FOVs xrLocateViews last returned, which the density maps are computed for.
+    pub views: Mutex<ViewFovs>,
+    /// The runtime returned XR_ERROR_SESSION_LOST through a call fovea passed on.
+    pub lost: AtomicBool,
+}
+
+impl Session {
+    pub fn new(
+        handle: xr::Session,
+        instance: Arc<Instance>,
+        vulkan: Option<VulkanBinding>,
+        gpu: Option<Arc<SessionGpu>>,
+    ) -> Session {
+        Session {
+            handle,
+            instance,
+            vulkan,
+            gpu,
+            views: Mutex::default(),
+            pattern_generation: AtomicU64::new(0),
+            frame: Mutex::new(FrameLoop::default()),
+            dynamic_step: AtomicUsize::new(0),
+            dynamic_max: AtomicUsize::new(0),
+            maps_built: AtomicU64::new(0),
+            maps_uploaded: AtomicU64::new(0),
+            lost: AtomicBool::new(false),
+        }
+    }
+
+    /// The pattern a foveated swapchain's maps use now, and whether it is dynamic: the
+    /// application's state under the debug overrides and the dynamic step.
+    pub fn pattern_for(&self, state: &FoveationState) -> (Pattern, bool) {
+        effective(
+            state.params,
+            self.instance.overrides.current(),
+            self.dynamic_step.load(Ordering::Relaxed),
+        )
+    }
+
+    /// Recomputes [`Session::dynamic_max`] after a swapchain's state or the overrides changed.
+    pub fn refresh_dynamic_max(&self) {
+        let over = self.instance.overrides.current();
+        let max = registry()
+            .foveated_swapchains_of(self.handle)
+            .iter()
+            .filter_map(|sc| {
+                let (p, dynamic) =
+                    effective(sc.foveation.as_ref()?.lock().params, over, usize::MAX);
+                dynamic.then_some(step_of(p.level))
+            })
+            .max()
+            .unwrap_or(0);
+        self.dynamic_max.store(max, Ordering::Relaxed);
+    }
+}
+
+/// What the layer tracks of a session's frame loop between `xrWaitFrame`, `xrBeginFrame` and
+/// `xrEndFrame`.
+#[derive(Debug, Default)]
+pub struct FrameLoop {
+    pub controller: Controller,
+    pub stats: Stats,
+    /// The last predicted display time and period, in nanoseconds.
+    pub display: Option<i64>,
+    pub period: i64,
+    /// Display periods the frame being rendered skipped.
+    pub missed: u32,
+    /// When `xrBeginFrame` returned for the frame being rendered.
+    pub begin_at: Option<Instant>,
+}
+
+/// `XrGraphicsBindingVulkanKHR`'s handles, as raw values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VulkanBinding {
+    pub instance: u64,
+    pub physical_device: u64,
+    pub device: u64,
+    pub queue_family_index: u32,
+    pub queue_index: u32,
+}
+
+/// What fovea keeps of `XrSwapchainCreateInfo`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SwapchainInfo {
+    pub usage: u64,
+    pub format: i64,
+    pub sample_count: u32,
+    pub width: u32,
+    pub height: u32,
+    pub face_count: u32,
+    pub array_size: u32,
+    pub mip_count: u32,
+}
+
+/// A swapchain and, when the application asked for foveation, its foveation state.
+pub struct Swapchain {
+    pub handle: xr::Swapchain,
+    pub session: Arc<Session>,
+    pub info: SwapchainInfo,
+    /// Present when the swapchain was created with `XrSwapchainCreateInfoFoveationFB` and fovea
+    /// provides XR_FB_foveation: profiles may be applied to it.
+    pub foveation: Option<Mutex<FoveationState>>,
+    /// The density images (one per swapchain image) of a FRAGMENT_DENSITY_MAP swapchain on a Vulkan
+    /// session, where fovea provides XR_FB_foveation_vulkan and could create them.
+    pub density: Option<DensityImages>,
+    /// The views the application last submitted into this swapchain (xrEndFrame).
+    pub submitted: Mutex<Submitted>,
+}
+
+/// A foveation profile fovea created.
+pub struct Profile {
+    pub handle: xr::FoveationProfileFB,
+    /// The session it belongs to (xr.xml: `parent="XrSession"`).
+    pub session: xr::Session,
+    pub params: ProfileParams,
+}
+
+/// A `Hasher` for handle keys: handles are already unique integers, so a multiplicative mix is all a
+/// hash map needs, at a fraction of SipHash's cost on the per-frame path.
+#[derive(Default)]
+pub struct HandleHasher(u64);
+
+impl Hasher for HandleHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(8) ^ u64::from(b)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        }
+    }
+
+    fn write_u64(&mut self, v: u64) {
+        self.0 = v.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+/// A map from raw handle values to records.
+pub type HandleMap<T> = MapLock<HashMap<u64, Arc<T>, BuildHasherDefault<HandleHasher>>>;
+
+/// Every live handle fovea knows.
+pub struct Registry {
+    pub instances: HandleMap<Instance>,
+    pub sessions: HandleMap<Session>,
+    pub swapchains: HandleMap<Swapchain>,
+    pub profiles: HandleMap<Profile>,
+    /// VkDevices created through xrCreateVulkanDeviceKHR, keyed by the raw VkDevice.
+    pub vulkan_devices: Mutex<HashMap<u64, VulkanDevice>>,
+    next_profile: AtomicU64,
+}
+
+/// Records taken out of the [`Registry`] while a destroy goes down. Dropping it releases them (and
+/// with the last reference, the density images and fovea's Vulkan objects they own).
+#[derive(Default)]
+pub struct Detached {
+    pub instance: Option<Arc<Instance>>,
+    pub sessions: Vec<Arc<Session>>,
+    pub swapchains: Vec<Arc<Swapchain>>,
+    pub profiles: Vec<Arc<Profile>>,
+    pub vulkan_devices: Vec<(u64, VulkanDevice)>,
+}
+
+impl Default for Registry {
+    fn default() -> Registry {
+        Registry {
+            instances: MapLock::new("instances", HashMap::default()),
+            sessions: MapLock::new("sessions", HashMap::default()),
+            swapchains: MapLock::new("swapchains", HashMap::default()),
+            profiles: MapLock::new("profiles", HashMap::default()),
+            vulkan_devices: Mutex::ranked(Rank::Map, "vulkan devices", HashMap::new()),
+            next_profile: AtomicU64::new(0),
+        }
+    }
+}
+
+/// The process-wide registry. A static behind `OnceLock`: no `static mut`.
+pub fn registry() -> &'static Registry {
+    static REGISTRY: OnceLock<Registry> = OnceLock::new();
+    REGISTRY.get_or_init(Registry::default)
+}
+
+fn get<T>(map: &HandleMap<T>, raw: u64) -> Option<Arc<T>> {
+    map.read().get(&raw).cloned()
+}
+
+impl Registry {
+    pub fn instance(&self, h: xr::Instance) -> Option<Arc<Instance>> {
+        get(&self.instances, h.into_raw())
+    }
+
+    pub fn session(&self, h: xr::Session) -> Option<Arc<Session>> {
+        get(&self.sessions, h.into_raw())
+    }
+
+    /// The session's swapchains created with foveation.
+    pub fn foveated_swapchains_of(&self, session: xr::Session) -> Vec<Arc<Swapchain>> {
+        self.swapchains
+            .read()
+            .values()
+            .filter(|sc| sc.session.handle == session && sc.foveation.is_some())
+            .cloned()
+            .collect()
+    }
+
+    /// Some live session of `instance`.
+    pub fn any_session_of(&self, instance: xr::Instance) -> Option<Arc<Session>> {
+        self.sessions
+            .read()
+            .values()
+            .find(|s| s.instance.handle == instance)
+            .cloned()
+    }
+
+    pub fn swapchain(&self, h: xr::Swapchain) -> Option<Arc<Swapchain>> {
+        get(&self.swapchains, h.into_raw())
+    }
+
+    pub fn profile(&self, h: xr::FoveationProfileFB) -> Option<Arc<Profile>> {
+        get(&self.profiles, h.into_raw())
+    }
+
+    /// A new profile handle value: never 0 (XR_NULL_HANDLE) and never reused in this process, so a
+    /// destroyed profile's handle stays invalid.
+    pub fn mint_profile_handle(&self) -> xr::FoveationProfileFB {
+        xr::FoveationProfileFB::from_raw(
+            self.next_profile.fetch_add(1, Ordering::Relaxed) + 0xF0FE_A000_0000_0001,
+        )
+    }
+
+    /// Takes a session, its swapchains and its profiles (they die with it: xr.xml parents) out of
+    /// the maps, for `xrDestroySession`. They are taken out before the call goes down, so that a
+    /// handle value the runtime frees and hands out again at once cannot meet a stale record, and
+    /// kept until the runtime answered: a destroy the runtime refuses leaves the session alive, and
+    /// [`Registry::restore`] puts them back.
+    pub fn detach_session(&self, session: xr::Session) -> Detached {
+        let mut d = Detached::default();
+        self.detach_session_into(session, &mut d);
+        d
+    }
+
+    fn detach_session_into(&self, session: xr::Session, d: &mut Detached) {
+        d.sessions
+            .extend(self.sessions.write().remove(&session.into_raw()));
+        let mut profiles = self.profiles.write();
+        let dead: Vec<u64> = profiles
+            .iter()
+            .filter(|(_, p)| p.session == session)
+            .map(|(k, _)| *k)
+            .collect();
+        d.profiles
+            .extend(dead.iter().filter_map(|k| profiles.remove(k)));
+        drop(profiles);
+        let mut swapchains = self.swapchains.write();
+        let dead: Vec<u64> = swapchains
+            .iter()
+            .filter(|(_, s)| s.session.handle == session)
+            .map(|(k, _)| *k)
+            .collect();
+        d.swapchains
+            .extend(dead.iter().filter_map(|k| swapchains.remove(k)));
+    }
+
+    /// Takes an instance and everything under it out of the maps, for `xrDestroyInstance` (see
+    /// [`Registry::detach_session`]).
+    pub fn detach_instance(&self, instance: xr::Instance) -> Detached {
+        let mut d = Detached {
+            instance: self.instances.write().remove(&instance.into_raw()),
+            ..Detached::default()
+        };
+        let sessions: Vec<xr::Session> = self
+            .sessions
+            .read()
+            .values()
+            .filter(|s| s.instance.handle == instance)
+            .map(|s| s.handle)
+            .collect();
+        for s in sessions {
+            self.detach_session_into(s, &mut d);
+        }
+        let raw = instance.into_raw();
+        let mut devices = self.vulkan_devices.lock();
+        let dead: Vec<u64> = devices
+            .iter()
+            .filter(|(_, dev)| dev.instance == raw)
+            .map(|(k, _)| *k)
+            .collect();
+        d.vulkan_devices
+            .extend(dead.iter().filter_map(|k| devices.remove_entry(k)));
+        d
+    }
+
+    /// Puts detached records back: the runtime refused the destroy, so the handles still live.
+    pub fn restore(&self, d: Detached) {
+        if let Some(i) = d.instance {
+            self.instances.write().insert(i.handle.into_raw(), i);
+        }
+        let mut sessions = self.sessions.write();
+        for s in d.sessions {
+            sessions.insert(s.handle.into_raw(), s);
+        }
+        drop(sessions);
+        let mut swapchains = self.swapchains.write();
+        for s in d.swapchains {
+            swapchains.insert(s.handle.into_raw(), s);
+        }
+        drop(swapchains);
+        let mut profiles = self.profiles.write();
+        for p in d.profiles {
+            profiles.insert(p.handle.into_raw(), p);
+        }
+        drop(profiles);
+        self.vulkan_devices.lock().extend(d.vulkan_devices);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn minted_profile_handles_are_distinct_and_non_null() {
+        let r = Registry::default();
+        let a = r.mint_profile_handle();
+        let b = r.mint_profile_handle();
+        assert_ne!(a, b);
+        assert_ne!(a.into_raw(), 0);
+    }
+
+    #[test]
+    fn handle_hasher_spreads_sequential_handles() {
+        let mut seen = std::collections::HashSet::new();
+        for v in 0..1000u64 {
+            let mut h = HandleHasher::default();
+            h.write_u64(v);
+            seen.insert(h.finish() >> 56);
+        }
+        assert!(seen.len() > 100, "top byte takes {} values", seen.len());
+    }
+}
