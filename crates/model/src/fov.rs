@@ -49,14 +49,13 @@ impl Fov {
     /// projection centre, where fovea puts the fovea.
     ///
     /// The asymmetric-FOV FAQ computes it as `ProjectionMatrix × (0, 0, −near, 1)`; for an
-    /// off-centre frustum with signed tangents `l, r, d, u` that is `(−(r+l)/(r−l), −(u+d)/(u−d))`
+    /// off-centre frustum with positive tangents `l, r, u, d` that is `((l−r)/(l+r), (d−u)/(d+u))`
     /// after the divide by w (checked against a projection matrix in [`crate::projection`]'s
     /// tests). For Quest 3's left eye (54° left, 40° right) it is at x ≈ +0.24: right of the image
     /// centre. This is the only place fovea computes it.
     pub fn projection_center_ndc(&self) -> [f32; 2] {
         let [l, r, u, d] = self.tangents();
-        let (l, d) = (-l, -d);
-        [(-(r + l) / (r - l)) as f32, (-(u + d) / (u - d)) as f32]
+        [((l - r) / (l + r)) as f32, ((d - u) / (d + u)) as f32]
     }
 }
 
