@@ -17,6 +17,24 @@
 //! this crate as an rlib has its own, separate copy of the statics. So the records are read
 //! through the loaded copy: [`Loaded`] dlopens the same file (the dynamic linker hands back the
 //! same instance) and calls its exported `fovea_vkdouble_*` functions.
+//!
+//! Handles in the records are the ones the double sees. The validation layer wraps non-dispatchable
+//! handles by default, so a test that compares them with its own disables that with
+//! `VkValidationFeaturesEXT { VK_VALIDATION_FEATURE_DISABLE_UNIQUE_HANDLES_EXT }`
+//! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkValidationFeatureDisableEXT.html>);
+//! dispatchable handles (command buffers) are never wrapped.
+//!
+//! Records (`kind` and fields): `instance` {profile}; `device` {extension, features}; `image`
+//! {image, format, extent, layers} and `image_view` {view, image, base_layer, layers} for
+//! shading-rate images only; `render_pass` {render_pass, attachments, subpasses[{shading_rate:
+//! null | {attachment, layout, texel}}]}; `framebuffer` {framebuffer, render_pass, attachments,
+//! extent, layers}; `pipeline` {pipeline, render_pass, subpass, shading_rate_state: null |
+//! {fragment_size, combiner_ops}, rendering_attachment_flag, dynamic_rate};
+//! `begin_render_pass` {command_buffer, render_pass, framebuffer, shading_rate_views};
+//! `begin_rendering` {command_buffer, shading_rate: null | {view, layout, texel}};
+//! `set_fragment_shading_rate` {command_buffer, fragment_size, combiner_ops}; `submit`
+//! {command_buffers, shading_rate_images[{image, extent, layers, codes}]}, the codes read back
+//! after the submit completed. With the `none` profile nothing but `instance` is recorded.
 
 #![deny(unsafe_op_in_unsafe_fn)]
 

@@ -141,3 +141,62 @@ impl Profile {
         p.fragment_shading_rate_strict_multiply_combiner = vk::TRUE;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rates_are_ordered_widest_then_tallest_and_end_in_1x1() {
+        for p in [Profile::Nvidia, Profile::Amd] {
+            let rates = p.rates();
+            let sizes: Vec<(u32, u32)> = rates.iter().map(|(e, _)| (e.width, e.height)).collect();
+            let mut sorted = sizes.clone();
+            sorted.sort_by(|a, b| b.cmp(a));
+            assert_eq!(sizes, sorted);
+            assert_eq!(sizes.last(), Some(&(1, 1)));
+            assert_eq!(rates.last().unwrap().1.as_raw(), !0);
+            // The spec requires 2x2, 2x1, 1x2 and 1x1 everywhere.
+            for r in [(2, 2), (2, 1), (1, 2)] {
+                assert!(sizes.contains(&r), "{p:?} lacks {r:?}");
+            }
+        }
+        assert!(Profile::None.rates().is_empty());
+    }
+
+    #[test]
+    fn properties_meet_the_required_limits() {
+        for p in [Profile::Nvidia, Profile::Amd] {
+            let mut props = vk::PhysicalDeviceFragmentShadingRatePropertiesKHR::default();
+            p.fill_properties(&mut props);
+            let min = props.min_fragment_shading_rate_attachment_texel_size;
+            let max = props.max_fragment_shading_rate_attachment_texel_size;
+            assert!(min.width <= 32 && min.height <= 32);
+            assert!(max.width >= 8 && max.height >= 8);
+            assert!(props.max_fragment_shading_rate_attachment_texel_size_aspect_ratio >= 1);
+            assert!(props.max_fragment_size_aspect_ratio >= 2);
+            let m = props.max_fragment_size;
+            assert!(m.width >= 2 && m.height >= 2);
+            assert!(props.max_fragment_shading_rate_coverage_samples <= m.width * m.height * 16);
+            for (size, samples) in p.rates() {
+                assert!(size.width <= m.width && size.height <= m.height);
+                if samples.as_raw() != !0 {
+                    let most = 1 << (31 - samples.as_raw().leading_zeros());
+                    assert!(
+                        size.width * size.height * most
+                            <= props.max_fragment_shading_rate_coverage_samples
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for p in [Profile::Nvidia, Profile::Amd, Profile::None] {
+            assert_eq!(Profile::parse(p.name()), Some(p));
+        }
+        assert_eq!(Profile::parse(" NVIDIA "), Some(Profile::Nvidia));
+        assert_eq!(Profile::parse("intel"), None);
+    }
+}

@@ -120,9 +120,21 @@ struct Vk {
 impl Vk {
     fn new(env: &Env, profile: Profile) -> Result<Vk, String> {
         env.double.set_profile(Some(profile));
+        Self::new_without_override(env)
+    }
+
+    /// An instance whose profile comes from `FOVEA_VKDOUBLE_PROFILE` (or the override already set).
+    fn new_without_override(env: &Env) -> Result<Vk, String> {
         take_messages();
         let layers = [VALIDATION.as_ptr(), LAYER_NAME.as_ptr()];
-        let exts = [ash::ext::debug_utils::NAME.as_ptr()];
+        let exts = [
+            ash::ext::debug_utils::NAME.as_ptr(),
+            ash::ext::validation_features::NAME.as_ptr(),
+        ];
+        // Without handle wrapping, the double records the handles the application holds.
+        let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
+        let mut features =
+            vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
         let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
             .message_severity(
@@ -139,7 +151,8 @@ impl Vk {
             .application_info(&app)
             .enabled_layer_names(&layers)
             .enabled_extension_names(&exts)
-            .push_next(&mut messenger_info);
+            .push_next(&mut messenger_info)
+            .push_next(&mut features);
         // SAFETY: every struct lives across the calls; handles are used while alive.
         unsafe {
             let instance = env
@@ -452,6 +465,12 @@ fn advertises_per_profile() {
                     4,
                     vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR,
                 );
+                let images = env.double.events("image");
+                assert_eq!(
+                    images[0]["image"],
+                    json!(image.0.as_raw()),
+                    "validation must not wrap handles"
+                );
                 dev.device.destroy_image(image.0, None);
                 dev.device.free_memory(image.1, None);
             }
@@ -615,6 +634,12 @@ struct Drawn {
     pixels: Vec<u8>,
     codes: Vec<u8>,
     command_buffer: u64,
+    /// Raw handles as the application holds them (0 where not made).
+    render_pass: u64,
+    framebuffer: u64,
+    pipeline: u64,
+    fsr_image: u64,
+    fsr_view: u64,
 }
 
 /// Uploads rate codes into a shading-rate image (`SIZE / texel` texels per side), draws a
@@ -1063,6 +1088,11 @@ fn draw(
             pixels,
             codes,
             command_buffer: cb.as_raw(),
+            render_pass: render_pass.map_or(0, |h| h.as_raw()),
+            framebuffer: framebuffer.map_or(0, |h| h.as_raw()),
+            pipeline: pipeline.as_raw(),
+            fsr_image: fsr.map_or(0, |f| f.0.as_raw()),
+            fsr_view: fsr.map_or(0, |f| f.2.as_raw()),
         }
     }
 }
@@ -1126,6 +1156,7 @@ fn render_pass_with_shading_rate_attachment_draws_and_is_recorded() {
         let passes = env.double.events("render_pass");
         assert_eq!(passes.len(), 1, "{passes:?}");
         let rp = &passes[0];
+        assert_eq!(rp["render_pass"], json!(drawn.render_pass));
         assert_eq!(
             rp["subpasses"][0]["shading_rate"],
             json!({"attachment": 1, "layout": vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR.as_raw(), "texel": [16, 16]})
@@ -1133,19 +1164,18 @@ fn render_pass_with_shading_rate_attachment_draws_and_is_recorded() {
         let fbs = env.double.events("framebuffer");
         assert_eq!(fbs.len(), 1);
         assert_eq!(fbs[0]["render_pass"], rp["render_pass"]);
-        assert_eq!(fbs[0]["attachments"].as_array().unwrap().len(), 2);
+        assert_eq!(fbs[0]["framebuffer"], json!(drawn.framebuffer));
+        assert_eq!(fbs[0]["attachments"][1], json!(drawn.fsr_view));
         let begins = env.double.events("begin_render_pass");
         assert_eq!(begins.len(), 1);
         assert_eq!(begins[0]["command_buffer"], json!(drawn.command_buffer));
         assert_eq!(begins[0]["render_pass"], rp["render_pass"]);
         assert_eq!(begins[0]["framebuffer"], fbs[0]["framebuffer"]);
-        assert_eq!(
-            begins[0]["shading_rate_views"],
-            json!([fbs[0]["attachments"][1]])
-        );
+        assert_eq!(begins[0]["shading_rate_views"], json!([drawn.fsr_view]));
         let pipelines = env.double.events("pipeline");
         assert_eq!(pipelines.len(), 1);
         assert_eq!(pipelines[0]["render_pass"], rp["render_pass"]);
+        assert_eq!(pipelines[0]["pipeline"], json!(drawn.pipeline));
         assert_eq!(
             pipelines[0]["shading_rate_state"],
             json!({"fragment_size": [1, 1], "combiner_ops": [0, 1]})
@@ -1179,12 +1209,15 @@ fn dynamic_rendering_with_shading_rate_attachment_draws_and_is_recorded() {
         assert_eq!(begins[0]["command_buffer"], json!(drawn.command_buffer));
         let views = env.double.events("image_view");
         assert_eq!(views.len(), 1, "only the shading-rate image's view");
+        assert_eq!(views[0]["view"], json!(drawn.fsr_view));
+        assert_eq!(views[0]["image"], json!(drawn.fsr_image));
         assert_eq!(
             begins[0]["shading_rate"],
-            json!({"view": views[0]["view"], "layout": vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR.as_raw(), "texel": [8, 8]})
+            json!({"view": drawn.fsr_view, "layout": vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR.as_raw(), "texel": [8, 8]})
         );
         let pipelines = env.double.events("pipeline");
         assert_eq!(pipelines.len(), 1);
+        assert_eq!(pipelines[0]["pipeline"], json!(drawn.pipeline));
         assert_eq!(pipelines[0]["rendering_attachment_flag"], true);
         assert_eq!(pipelines[0]["dynamic_rate"], false);
         assert_codes(env, &drawn, 8);
@@ -1248,7 +1281,119 @@ fn texel_size_other_than_the_devices_is_recorded_as_an_error() {
             "validation should refuse it too: {messages:?}"
         );
         env.double.clear();
+
+        // Refusals a real driver makes at creation: a cleared load, a format without the
+        // shading-rate feature, a multisampled shading-rate image.
+        let fsr_layout = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
+        for (format, load, want) in [
+            (
+                vk::Format::R8_UINT,
+                vk::AttachmentLoadOp::CLEAR,
+                "loadOp CLEAR",
+            ),
+            (
+                vk::Format::R8_UNORM,
+                vk::AttachmentLoadOp::LOAD,
+                "attachment format",
+            ),
+        ] {
+            let atts = [vk::AttachmentDescription2::default()
+                .format(format)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(load)
+                .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                .initial_layout(fsr_layout)
+                .final_layout(fsr_layout)];
+            let fsr_ref = vk::AttachmentReference2::default()
+                .attachment(0)
+                .layout(fsr_layout);
+            let mut fsr_info = vk::FragmentShadingRateAttachmentInfoKHR::default()
+                .fragment_shading_rate_attachment(&fsr_ref)
+                .shading_rate_attachment_texel_size(vk::Extent2D {
+                    width: 16,
+                    height: 16,
+                });
+            let subpass = [vk::SubpassDescription2::default()
+                .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+                .push_next(&mut fsr_info)];
+            // SAFETY: the structs live across the call.
+            unsafe {
+                if let Ok(rp) = dev.device.create_render_pass2(
+                    &vk::RenderPassCreateInfo2::default()
+                        .attachments(&atts)
+                        .subpasses(&subpass),
+                    None,
+                ) {
+                    dev.device.destroy_render_pass(rp, None);
+                }
+            }
+            let errors = env.double.errors();
+            assert!(
+                errors.iter().any(|e| e.contains(want)),
+                "{want}: {errors:?}"
+            );
+            env.double.clear();
+        }
+        // SAFETY: the struct lives across the call.
+        unsafe {
+            let info = vk::ImageCreateInfo::default()
+                .image_type(vk::ImageType::TYPE_2D)
+                .format(vk::Format::R8_UINT)
+                .extent(vk::Extent3D {
+                    width: 4,
+                    height: 4,
+                    depth: 1,
+                })
+                .mip_levels(1)
+                .array_layers(1)
+                .samples(vk::SampleCountFlags::TYPE_4)
+                .tiling(vk::ImageTiling::OPTIMAL)
+                .usage(
+                    vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+                        | vk::ImageUsageFlags::COLOR_ATTACHMENT,
+                );
+            if let Ok(image) = dev.device.create_image(&info, None) {
+                dev.device.destroy_image(image, None);
+            }
+        }
+        let errors = env.double.errors();
+        assert!(errors.iter().any(|e| e.contains("TYPE_4")), "{errors:?}");
+        env.double.clear();
         drop(dev);
         take_messages();
     });
+}
+
+#[test]
+fn profile_comes_from_the_environment_without_an_override() {
+    let (_guard, env) = match env() {
+        Ok(e) => e,
+        Err(reason) => {
+            skip(&reason);
+            return;
+        }
+    };
+    env.double.clear();
+    env.double.set_profile(None);
+    // Tests run one at a time (SERIAL), and the variable is read only at vkCreateInstance.
+    std::env::set_var(fovea_vkdouble::PROFILE_ENV, "amd");
+    let vk = Vk::new_without_override(env);
+    std::env::remove_var(fovea_vkdouble::PROFILE_ENV);
+    let vk = match vk {
+        Ok(v) => v,
+        Err(reason) => {
+            skip(&reason);
+            return;
+        }
+    };
+    let mut p = vk::PhysicalDeviceFragmentShadingRatePropertiesKHR::default();
+    let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut p);
+    // SAFETY: the structs live across the call.
+    unsafe {
+        vk.instance
+            .get_physical_device_properties2(vk.physical, &mut p2)
+    };
+    assert_eq!(p.max_fragment_shading_rate_attachment_texel_size.width, 8);
+    drop(vk);
+    drop_ok(env, Profile::Amd);
 }
