@@ -281,6 +281,7 @@ table! { device_commands:
     b"vkCmdPipelineBarrier2" => cmd_pipeline_barrier2 as PFN_vkCmdPipelineBarrier2,
     b"vkCmdPipelineBarrier2KHR" => cmd_pipeline_barrier2 as PFN_vkCmdPipelineBarrier2,
     b"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate as PFN_vkCmdSetFragmentShadingRateKHR,
+    b"vkCmdExecuteCommands" => cmd_execute_commands as PFN_vkCmdExecuteCommands,
     b"vkQueueSubmit" => queue_submit as PFN_vkQueueSubmit,
     b"vkQueueSubmit2" => queue_submit2 as PFN_vkQueueSubmit2,
     b"vkQueueSubmit2KHR" => queue_submit2 as PFN_vkQueueSubmit2,
@@ -1646,6 +1647,34 @@ unsafe extern "system" fn cmd_set_fragment_shading_rate(
     })
 }
 
+unsafe extern "system" fn cmd_execute_commands(
+    cb: vk::CommandBuffer,
+    count: u32,
+    secondaries: *const vk::CommandBuffer,
+) {
+    guard("vkCmdExecuteCommands", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            {
+                // A secondary's shading-rate images are read when its primary is submitted.
+                let mut st = lock(&d.state);
+                let mut images: Vec<u64> = Vec::new();
+                for s in slice(secondaries, count) {
+                    images.extend(st.commands.get(&s.as_raw()).into_iter().flatten());
+                }
+                let list = st.commands.entry(cb.as_raw()).or_default();
+                for i in images {
+                    if !list.contains(&i) {
+                        list.push(i);
+                    }
+                }
+            }
+            (d.fns.fp_v1_0().cmd_execute_commands)(cb, count, secondaries);
+        }
+    })
+}
+
 /// After a submit that read shading-rate images: waits for the queue and copies each image to the
 /// host with the layer's own command buffer, so tests see the rate codes the GPU would have used.
 ///
@@ -1861,6 +1890,25 @@ unsafe extern "system" fn queue_submit(
     })
 }
 
+/// Copies semaphore infos with shading-rate stage bits made fragment-shader bits.
+///
+/// # Safety
+/// `p` must be null or valid for `n` elements.
+unsafe fn fix_semaphores<'a>(
+    p: *const vk::SemaphoreSubmitInfo<'a>,
+    n: u32,
+) -> Vec<vk::SemaphoreSubmitInfo<'a>> {
+    // SAFETY: the caller's promise.
+    unsafe { slice(p, n) }
+        .iter()
+        .map(|i| {
+            let mut i = *i;
+            i.stage_mask = fix_stage2(i.stage_mask);
+            i
+        })
+        .collect()
+}
+
 unsafe extern "system" fn queue_submit2(
     queue: vk::Queue,
     count: u32,
@@ -1868,10 +1916,30 @@ unsafe extern "system" fn queue_submit2(
     fence: vk::Fence,
 ) -> vk::Result {
     guard("vkQueueSubmit2", vk::Result::ERROR_UNKNOWN, || {
-        // SAFETY: the caller's arguments, forwarded unchanged.
+        // SAFETY: the caller's submits are read; semaphore stage masks are rewritten in copies
+        // that live across the call.
         unsafe {
             let d = device_of(queue.as_raw());
-            let r = (d.fns.fp_v1_3().queue_submit2)(queue, count, submits, fence);
+            let subs = slice(submits, count);
+            let waits: Vec<_> = subs
+                .iter()
+                .map(|s| fix_semaphores(s.p_wait_semaphore_infos, s.wait_semaphore_info_count))
+                .collect();
+            let signals: Vec<_> = subs
+                .iter()
+                .map(|s| fix_semaphores(s.p_signal_semaphore_infos, s.signal_semaphore_info_count))
+                .collect();
+            let copies: Vec<vk::SubmitInfo2<'_>> = subs
+                .iter()
+                .zip(waits.iter().zip(&signals))
+                .map(|(s, (w, g))| {
+                    let mut c = *s;
+                    c.p_wait_semaphore_infos = w.as_ptr();
+                    c.p_signal_semaphore_infos = g.as_ptr();
+                    c
+                })
+                .collect();
+            let r = (d.fns.fp_v1_3().queue_submit2)(queue, count, copies.as_ptr(), fence);
             if r == vk::Result::SUCCESS {
                 let cbs = slice(submits, count)
                     .iter()

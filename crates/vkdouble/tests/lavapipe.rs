@@ -1046,12 +1046,23 @@ fn draw(
             .create_fence(&vk::FenceCreateInfo::default(), None)
             .unwrap();
         let cbs = [cb];
-        d.queue_submit(
-            dev.queue,
-            &[vk::SubmitInfo::default().command_buffers(&cbs)],
-            fence,
-        )
-        .expect("vkQueueSubmit");
+        if path == Path::Dynamic {
+            // vkQueueSubmit2, so both submit paths of the double are crossed.
+            let infos = [vk::CommandBufferSubmitInfo::default().command_buffer(cb)];
+            d.queue_submit2(
+                dev.queue,
+                &[vk::SubmitInfo2::default().command_buffer_infos(&infos)],
+                fence,
+            )
+            .expect("vkQueueSubmit2");
+        } else {
+            d.queue_submit(
+                dev.queue,
+                &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                fence,
+            )
+            .expect("vkQueueSubmit");
+        }
         d.wait_for_fences(&[fence], true, u64::MAX).unwrap();
         let p = d
             .map_memory(readback_mem, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty())
