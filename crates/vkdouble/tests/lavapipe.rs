@@ -54,7 +54,9 @@ fn take_messages() -> Vec<String> {
     std::mem::take(&mut *MESSAGES.lock().unwrap_or_else(|e| e.into_inner()))
 }
 
-/// The built library, next to the test binary (`target/<profile>/deps/..`).
+/// The built library, searched from the test binary's folder upwards. `cargo test` builds the
+/// cdylib into `target/<profile>/deps` together with the rlib it links (it does not copy it up to
+/// `target/<profile>`), so the search finds this build's library first.
 fn library() -> Result<PathBuf, String> {
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let mut dir = exe.parent();
@@ -1407,4 +1409,76 @@ fn profile_comes_from_the_environment_without_an_override() {
     assert_eq!(p.max_fragment_shading_rate_attachment_texel_size.width, 8);
     drop(vk);
     drop_ok(env, Profile::Amd);
+}
+
+#[test]
+fn multi_layer_views_need_layered_attachments() {
+    for profile in [Profile::Nvidia, Profile::Amd] {
+        with_vk(profile, |env, vk| {
+            let dev = vk.device(true);
+            // SAFETY: every struct lives across its call; objects are destroyed before the device.
+            unsafe {
+                let d = &dev.device;
+                let image = d
+                    .create_image(
+                        &vk::ImageCreateInfo::default()
+                            .image_type(vk::ImageType::TYPE_2D)
+                            .format(vk::Format::R8_UINT)
+                            .extent(vk::Extent3D {
+                                width: 4,
+                                height: 4,
+                                depth: 1,
+                            })
+                            .mip_levels(1)
+                            .array_layers(2)
+                            .samples(vk::SampleCountFlags::TYPE_1)
+                            .tiling(vk::ImageTiling::OPTIMAL)
+                            .usage(vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR),
+                        None,
+                    )
+                    .unwrap();
+                let memory = allocate(
+                    &dev,
+                    d.get_image_memory_requirements(image),
+                    vk::MemoryPropertyFlags::DEVICE_LOCAL,
+                );
+                d.bind_image_memory(image, memory, 0).unwrap();
+                let view = d
+                    .create_image_view(
+                        &vk::ImageViewCreateInfo::default()
+                            .image(image)
+                            .view_type(vk::ImageViewType::TYPE_2D_ARRAY)
+                            .format(vk::Format::R8_UINT)
+                            .subresource_range(vk::ImageSubresourceRange {
+                                layer_count: 2,
+                                ..color_range()
+                            }),
+                        None,
+                    )
+                    .unwrap();
+                d.destroy_image_view(view, None);
+                d.destroy_image(image, None);
+                d.free_memory(memory, None);
+            }
+            drop(dev);
+            let errors = env.double.errors();
+            let messages = take_messages();
+            if profile == Profile::Nvidia {
+                assert_eq!(errors, Vec::<String>::new());
+                assert!(messages.is_empty(), "{messages:?}");
+            } else {
+                assert!(
+                    errors
+                        .iter()
+                        .any(|e| e.contains("layeredShadingRateAttachments")),
+                    "{errors:?}"
+                );
+                assert!(
+                    messages.iter().any(|m| m.contains("04551")),
+                    "validation should refuse it too: {messages:?}"
+                );
+                env.double.clear();
+            }
+        });
+    }
 }
