@@ -134,6 +134,28 @@ pub fn write_manifest(dir: &Path, library: &Path) -> std::io::Result<PathBuf> {
     Ok(path)
 }
 
+/// This build's library, searched from the running executable's folder upwards to `target`.
+/// `cargo test` builds the cdylib into `target/<profile>/deps` beside the rlib it links (it does
+/// not copy it up to `target/<profile>`), so a test binary finds the library built with it first.
+pub fn find_library() -> Result<PathBuf, String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let mut dir = exe.parent();
+    while let Some(d) = dir {
+        let c = d.join(LIBRARY_FILE);
+        if c.exists() {
+            return c.canonicalize().map_err(|e| e.to_string());
+        }
+        if d.file_name().is_some_and(|n| n == "target") {
+            break;
+        }
+        dir = d.parent();
+    }
+    Err(format!(
+        "{LIBRARY_FILE} not found next to {} (cargo build -p fovea-vkdouble)",
+        exe.display()
+    ))
+}
+
 /// The double's library as the loader loads it, for reading its records in-process.
 pub struct Loaded {
     lib: libloading::Library,
@@ -141,7 +163,9 @@ pub struct Loaded {
 
 impl Loaded {
     /// Opens the library at `path`. Open it by the same file the manifest names: the dynamic
-    /// linker then returns the instance the loader uses (or will use).
+    /// linker then returns the instance the loader uses (or will use). Open it before the first
+    /// VkInstance and keep it: the loader closes the layer's library at vkDestroyInstance, and
+    /// with the last reference gone the records would be unloaded with it.
     pub fn open(path: &Path) -> Result<Loaded, String> {
         // SAFETY: loading the double runs no initialisers beyond Rust's own.
         let lib = unsafe { libloading::Library::new(path) }

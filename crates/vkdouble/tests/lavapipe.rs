@@ -12,12 +12,11 @@
 //! `FOVEA_REQUIRE_SYSTEM=1`.
 
 use std::ffi::{c_void, CStr};
-use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
 use ash::vk;
 use ash::vk::Handle as _;
-use fovea_vkdouble::{Loaded, Profile, LAYER_NAME, LIBRARY_FILE};
+use fovea_vkdouble::{Loaded, Profile, LAYER_NAME};
 use serde_json::{json, Value};
 
 const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
@@ -54,27 +53,6 @@ fn take_messages() -> Vec<String> {
     std::mem::take(&mut *MESSAGES.lock().unwrap_or_else(|e| e.into_inner()))
 }
 
-/// The built library, searched from the test binary's folder upwards. `cargo test` builds the
-/// cdylib into `target/<profile>/deps` together with the rlib it links (it does not copy it up to
-/// `target/<profile>`), so the search finds this build's library first.
-fn library() -> Result<PathBuf, String> {
-    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
-    let mut dir = exe.parent();
-    while let Some(d) = dir {
-        let c = d.join(LIBRARY_FILE);
-        if c.exists() {
-            return c.canonicalize().map_err(|e| e.to_string());
-        }
-        if d.file_name().is_some_and(|n| n == "target") {
-            break;
-        }
-        dir = d.parent();
-    }
-    Err(format!(
-        "{LIBRARY_FILE} not built (cargo build -p fovea-vkdouble)"
-    ))
-}
-
 struct Env {
     entry: ash::Entry,
     double: Loaded,
@@ -85,7 +63,7 @@ fn env() -> Result<(MutexGuard<'static, ()>, &'static Env), String> {
     let guard = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     static ENV: OnceLock<Result<Env, String>> = OnceLock::new();
     let env = ENV.get_or_init(|| {
-        let lib = library()?;
+        let lib = fovea_vkdouble::find_library()?;
         let dir = std::env::temp_dir().join(format!("fovea-vkdouble-{}", std::process::id()));
         fovea_vkdouble::write_manifest(&dir, &lib).map_err(|e| e.to_string())?;
         // Set before the loader first reads the environment (the first Vulkan call below), with
