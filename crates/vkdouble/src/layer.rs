@@ -266,6 +266,10 @@ table! { device_commands:
     b"vkGetDeviceQueue" => get_device_queue as PFN_vkGetDeviceQueue,
     b"vkGetDeviceQueue2" => get_device_queue2 as PFN_vkGetDeviceQueue2,
     b"vkCreateImage" => create_image as PFN_vkCreateImage,
+    b"vkDestroyImage" => destroy_image as PFN_vkDestroyImage,
+    b"vkDestroyImageView" => destroy_image_view as PFN_vkDestroyImageView,
+    b"vkDestroyRenderPass" => destroy_render_pass as PFN_vkDestroyRenderPass,
+    b"vkDestroyFramebuffer" => destroy_framebuffer as PFN_vkDestroyFramebuffer,
     b"vkCreateImageView" => create_image_view as PFN_vkCreateImageView,
     b"vkCreateRenderPass2" => create_render_pass2 as PFN_vkCreateRenderPass2,
     b"vkCreateRenderPass2KHR" => create_render_pass2 as PFN_vkCreateRenderPass2,
@@ -893,6 +897,56 @@ unsafe extern "system" fn get_device_queue2(
         }
     })
 }
+
+macro_rules! forgetting_destroy {
+    ($f:ident, $name:literal, $handle:ty, $next:ident, $map:ident) => {
+        /// Forgets the object before the driver frees it: drivers reuse addresses as handles, so a
+        /// stale entry would make a later, unrelated object look like a shading-rate one.
+        unsafe extern "system" fn $f(
+            device: vk::Device,
+            handle: $handle,
+            alloc: *const vk::AllocationCallbacks<'_>,
+        ) {
+            guard($name, (), || {
+                // SAFETY: the caller's arguments, forwarded unchanged.
+                unsafe {
+                    let d = device_of(device.as_raw());
+                    lock(&d.state).$map.remove(&handle.as_raw());
+                    (d.fns.fp_v1_0().$next)(device, handle, alloc);
+                }
+            })
+        }
+    };
+}
+
+forgetting_destroy!(
+    destroy_image,
+    "vkDestroyImage",
+    vk::Image,
+    destroy_image,
+    images
+);
+forgetting_destroy!(
+    destroy_image_view,
+    "vkDestroyImageView",
+    vk::ImageView,
+    destroy_image_view,
+    views
+);
+forgetting_destroy!(
+    destroy_render_pass,
+    "vkDestroyRenderPass",
+    vk::RenderPass,
+    destroy_render_pass,
+    passes
+);
+forgetting_destroy!(
+    destroy_framebuffer,
+    "vkDestroyFramebuffer",
+    vk::Framebuffer,
+    destroy_framebuffer,
+    framebuffers
+);
 
 unsafe extern "system" fn create_image(
     device: vk::Device,
