@@ -1,0 +1,2008 @@
+//! The layer: loader plumbing, dispatch, and the intercepted commands.
+//!
+//! Plumbing follows the Vulkan-Loader's LoaderLayerInterface
+//! (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>):
+//! `vkNegotiateLoaderLayerInterfaceVersion` hands the loader our `vkGetInstanceProcAddr` and
+//! `vkGetDeviceProcAddr`; at `vkCreateInstance`/`vkCreateDevice` the layer takes the next layer's
+//! proc-addr functions from the `VK_LAYER_LINK_INFO` element the loader chained in, and advances
+//! that element's `pLayerInfo` for the layer below (the loader owns that struct and expects the
+//! write). Per-object data is keyed by a dispatchable handle's first pointer word, the loader's
+//! dispatch table, which an instance shares with its physical devices and a device with its queues
+//! and command buffers.
+//!
+//! The application's structs are never written: each rewrite works on a copy.
+
+use std::collections::BTreeMap;
+use std::ffi::{c_char, c_void, CStr};
+use std::panic::AssertUnwindSafe;
+use std::sync::{Arc, Mutex};
+
+use ash::vk::{self, Handle as _};
+use serde_json::{json, Value};
+
+use crate::chain::{self, find};
+use crate::ffi;
+use crate::record::{self, error, event};
+use crate::Profile;
+
+type Key = usize;
+
+/// The loader's dispatch pointer in a dispatchable handle.
+///
+/// # Safety
+/// `raw` must be a live dispatchable handle.
+unsafe fn key(raw: u64) -> Key {
+    // SAFETY: dispatchable handles point at an object whose first word is the dispatch pointer.
+    unsafe { *(raw as usize as *const usize) }
+}
+
+struct InstanceData {
+    handle: vk::Instance,
+    gipa: vk::PFN_vkGetInstanceProcAddr,
+    fns: ash::Instance,
+    profile: Profile,
+}
+
+struct DeviceData {
+    handle: vk::Device,
+    physical: vk::PhysicalDevice,
+    instance: Arc<InstanceData>,
+    gdpa: vk::PFN_vkGetDeviceProcAddr,
+    fns: ash::Device,
+    set_loader_data: Option<ffi::PfnSetDeviceLoaderData>,
+    state: Mutex<DeviceState>,
+}
+
+#[derive(Clone, Copy)]
+struct ImageInfo {
+    extent: vk::Extent3D,
+    layers: u32,
+}
+
+#[derive(Default)]
+struct DeviceState {
+    /// Images created with the shading-rate usage.
+    images: BTreeMap<u64, ImageInfo>,
+    /// Views of those images → image.
+    views: BTreeMap<u64, u64>,
+    /// Per render pass, per subpass: the shading-rate attachment index and texel size.
+    passes: BTreeMap<u64, Vec<Option<(u32, vk::Extent2D)>>>,
+    /// Framebuffer → its attachments' views.
+    framebuffers: BTreeMap<u64, Vec<u64>>,
+    /// Command buffer → shading-rate images its render passes read.
+    commands: BTreeMap<u64, Vec<u64>>,
+    /// Queue → family.
+    queues: BTreeMap<u64, u32>,
+    /// The layer's own command pools for read-backs, per family.
+    pools: BTreeMap<u32, vk::CommandPool>,
+}
+
+static INSTANCES: Mutex<BTreeMap<Key, Arc<InstanceData>>> = Mutex::new(BTreeMap::new());
+static DEVICES: Mutex<BTreeMap<Key, Arc<DeviceData>>> = Mutex::new(BTreeMap::new());
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The data of the instance (or physical device) `raw`.
+///
+/// # Safety
+/// `raw` must be a live instance or physical device.
+unsafe fn instance_of(raw: u64) -> Option<Arc<InstanceData>> {
+    // SAFETY: forwarded from the caller.
+    let k = unsafe { key(raw) };
+    lock(&INSTANCES).get(&k).cloned()
+}
+
+/// The data of the device (or queue, or command buffer) `raw`; panics (caught by [`guard`]) for a
+/// handle the double never saw.
+///
+/// # Safety
+/// `raw` must be a live device, queue or command buffer.
+unsafe fn device_of(raw: u64) -> Arc<DeviceData> {
+    // SAFETY: forwarded from the caller.
+    let k = unsafe { key(raw) };
+    lock(&DEVICES)
+        .get(&k)
+        .cloned()
+        .expect("a device the double created")
+}
+
+/// Runs `f`, turning a panic into `fail` and a recorded error: no panic crosses the C ABI.
+fn guard<R>(what: &str, fail: R, f: impl FnOnce() -> R) -> R {
+    match std::panic::catch_unwind(AssertUnwindSafe(f)) {
+        Ok(r) => r,
+        Err(p) => {
+            let why = p
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| p.downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            error(format!("{what}: internal failure: {why}"));
+            fail
+        }
+    }
+}
+
+/// A slice from a Vulkan (pointer, count) pair; empty for null.
+///
+/// # Safety
+/// `p` must be null or valid for `n` elements.
+unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
+    if p.is_null() || n == 0 {
+        &[]
+    } else {
+        // SAFETY: the caller's promise.
+        unsafe { std::slice::from_raw_parts(p, n as usize) }
+    }
+}
+
+/// The two-call idiom: count only when `out` is null, else fill and report `VK_INCOMPLETE` when
+/// the array was short
+/// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-commandsyntax>).
+///
+/// # Safety
+/// `count` must be valid; `out` null or valid for `*count` elements.
+unsafe fn two_call<T: Copy>(items: &[T], count: *mut u32, out: *mut T) -> vk::Result {
+    // SAFETY: the caller's promise.
+    unsafe {
+        if out.is_null() {
+            *count = items.len() as u32;
+            return vk::Result::SUCCESS;
+        }
+        let n = (*count as usize).min(items.len());
+        std::ptr::copy_nonoverlapping(items.as_ptr(), out, n);
+        *count = n as u32;
+        if n < items.len() {
+            vk::Result::INCOMPLETE
+        } else {
+            vk::Result::SUCCESS
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Rewrites lavapipe needs: the shading-rate layout, stage and access bits become ones it knows.
+
+const FSR_USAGE: vk::ImageUsageFlags = vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
+const FSR_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
+const FSR_EXT: &CStr = c"VK_KHR_fragment_shading_rate";
+
+fn fix_layout(l: vk::ImageLayout) -> vk::ImageLayout {
+    if l == FSR_LAYOUT {
+        vk::ImageLayout::GENERAL
+    } else {
+        l
+    }
+}
+
+fn fix_stage(s: vk::PipelineStageFlags) -> vk::PipelineStageFlags {
+    let fsr = vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
+    if s.contains(fsr) {
+        (s & !fsr) | vk::PipelineStageFlags::FRAGMENT_SHADER
+    } else {
+        s
+    }
+}
+
+fn fix_access(a: vk::AccessFlags) -> vk::AccessFlags {
+    let fsr = vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR;
+    if a.contains(fsr) {
+        (a & !fsr) | vk::AccessFlags::SHADER_READ
+    } else {
+        a
+    }
+}
+
+fn fix_stage2(s: vk::PipelineStageFlags2) -> vk::PipelineStageFlags2 {
+    let fsr = vk::PipelineStageFlags2::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
+    if s.contains(fsr) {
+        (s & !fsr) | vk::PipelineStageFlags2::FRAGMENT_SHADER
+    } else {
+        s
+    }
+}
+
+fn fix_access2(a: vk::AccessFlags2) -> vk::AccessFlags2 {
+    let fsr = vk::AccessFlags2::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR;
+    if a.contains(fsr) {
+        (a & !fsr) | vk::AccessFlags2::SHADER_READ
+    } else {
+        a
+    }
+}
+
+fn pair(e: vk::Extent2D) -> Value {
+    json!([e.width, e.height])
+}
+
+// ---------------------------------------------------------------------------------------------
+// Dispatch tables: each intercepted command is named once; the proc-addr lookups derive from them.
+
+macro_rules! table {
+    ($lookup:ident: $($name:literal => $f:ident as $pfn:ident),* $(,)?) => {
+        fn $lookup(name: &[u8]) -> vk::PFN_vkVoidFunction {
+            match name {
+                $($name => {
+                    let f: vk::$pfn = $f;
+                    // SAFETY: the loader's generic function pointer type; the caller casts it back
+                    // to the type its name implies, which is `$pfn`.
+                    Some(unsafe { std::mem::transmute::<vk::$pfn, unsafe extern "system" fn()>(f) })
+                })*
+                _ => None,
+            }
+        }
+    };
+}
+
+// Intercepted whatever the profile: without them the layer could not stay in the chain.
+table! { lifecycle:
+    b"vkGetInstanceProcAddr" => get_instance_proc_addr as PFN_vkGetInstanceProcAddr,
+    b"vkCreateInstance" => create_instance as PFN_vkCreateInstance,
+    b"vkDestroyInstance" => destroy_instance as PFN_vkDestroyInstance,
+    b"vkCreateDevice" => create_device as PFN_vkCreateDevice,
+    b"vkGetDeviceProcAddr" => get_device_proc_addr as PFN_vkGetDeviceProcAddr,
+    b"vkDestroyDevice" => destroy_device as PFN_vkDestroyDevice,
+}
+
+// Physical-device queries the double answers for a profile that offers shading rates.
+table! { instance_commands:
+    b"vkEnumerateDeviceExtensionProperties" => enumerate_device_extension_properties as PFN_vkEnumerateDeviceExtensionProperties,
+    b"vkGetPhysicalDeviceFeatures2" => get_features2 as PFN_vkGetPhysicalDeviceFeatures2,
+    b"vkGetPhysicalDeviceFeatures2KHR" => get_features2 as PFN_vkGetPhysicalDeviceFeatures2,
+    b"vkGetPhysicalDeviceProperties2" => get_properties2 as PFN_vkGetPhysicalDeviceProperties2,
+    b"vkGetPhysicalDeviceProperties2KHR" => get_properties2 as PFN_vkGetPhysicalDeviceProperties2,
+    b"vkGetPhysicalDeviceFragmentShadingRatesKHR" => get_fragment_shading_rates as PFN_vkGetPhysicalDeviceFragmentShadingRatesKHR,
+    b"vkGetPhysicalDeviceFormatProperties" => get_format_properties as PFN_vkGetPhysicalDeviceFormatProperties,
+    b"vkGetPhysicalDeviceFormatProperties2" => get_format_properties2 as PFN_vkGetPhysicalDeviceFormatProperties2,
+    b"vkGetPhysicalDeviceFormatProperties2KHR" => get_format_properties2 as PFN_vkGetPhysicalDeviceFormatProperties2,
+    b"vkGetPhysicalDeviceImageFormatProperties" => get_image_format_properties as PFN_vkGetPhysicalDeviceImageFormatProperties,
+    b"vkGetPhysicalDeviceImageFormatProperties2" => get_image_format_properties2 as PFN_vkGetPhysicalDeviceImageFormatProperties2,
+    b"vkGetPhysicalDeviceImageFormatProperties2KHR" => get_image_format_properties2 as PFN_vkGetPhysicalDeviceImageFormatProperties2,
+}
+
+// Device commands the double rewrites or records for a profile that offers shading rates.
+table! { device_commands:
+    b"vkGetDeviceQueue" => get_device_queue as PFN_vkGetDeviceQueue,
+    b"vkGetDeviceQueue2" => get_device_queue2 as PFN_vkGetDeviceQueue2,
+    b"vkCreateImage" => create_image as PFN_vkCreateImage,
+    b"vkDestroyImage" => destroy_image as PFN_vkDestroyImage,
+    b"vkDestroyImageView" => destroy_image_view as PFN_vkDestroyImageView,
+    b"vkDestroyRenderPass" => destroy_render_pass as PFN_vkDestroyRenderPass,
+    b"vkDestroyFramebuffer" => destroy_framebuffer as PFN_vkDestroyFramebuffer,
+    b"vkCreateImageView" => create_image_view as PFN_vkCreateImageView,
+    b"vkCreateRenderPass2" => create_render_pass2 as PFN_vkCreateRenderPass2,
+    b"vkCreateRenderPass2KHR" => create_render_pass2 as PFN_vkCreateRenderPass2,
+    b"vkCreateFramebuffer" => create_framebuffer as PFN_vkCreateFramebuffer,
+    b"vkCreateGraphicsPipelines" => create_graphics_pipelines as PFN_vkCreateGraphicsPipelines,
+    b"vkBeginCommandBuffer" => begin_command_buffer as PFN_vkBeginCommandBuffer,
+    b"vkCmdBeginRenderPass" => cmd_begin_render_pass as PFN_vkCmdBeginRenderPass,
+    b"vkCmdBeginRenderPass2" => cmd_begin_render_pass2 as PFN_vkCmdBeginRenderPass2,
+    b"vkCmdBeginRenderPass2KHR" => cmd_begin_render_pass2 as PFN_vkCmdBeginRenderPass2,
+    b"vkCmdBeginRendering" => cmd_begin_rendering as PFN_vkCmdBeginRendering,
+    b"vkCmdBeginRenderingKHR" => cmd_begin_rendering as PFN_vkCmdBeginRendering,
+    b"vkCmdPipelineBarrier" => cmd_pipeline_barrier as PFN_vkCmdPipelineBarrier,
+    b"vkCmdPipelineBarrier2" => cmd_pipeline_barrier2 as PFN_vkCmdPipelineBarrier2,
+    b"vkCmdPipelineBarrier2KHR" => cmd_pipeline_barrier2 as PFN_vkCmdPipelineBarrier2,
+    b"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate as PFN_vkCmdSetFragmentShadingRateKHR,
+    b"vkCmdExecuteCommands" => cmd_execute_commands as PFN_vkCmdExecuteCommands,
+    b"vkQueueSubmit" => queue_submit as PFN_vkQueueSubmit,
+    b"vkQueueSubmit2" => queue_submit2 as PFN_vkQueueSubmit2,
+    b"vkQueueSubmit2KHR" => queue_submit2 as PFN_vkQueueSubmit2,
+}
+
+/// The loader's entry: agree on interface version 2, which hands over both proc-addr functions.
+///
+/// # Safety
+/// `p` must point at the loader's `VkNegotiateLayerInterface`.
+#[no_mangle]
+pub unsafe extern "system" fn vkNegotiateLoaderLayerInterfaceVersion(
+    p: *mut ffi::NegotiateLayerInterface,
+) -> vk::Result {
+    guard(
+        "vkNegotiateLoaderLayerInterfaceVersion",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: the loader passes a valid struct it owns, for us to fill.
+            let n = unsafe { &mut *p };
+            if n.s_type != ffi::NEGOTIATE_INTERFACE_STRUCT || n.loader_layer_interface_version < 2 {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            }
+            n.loader_layer_interface_version = 2;
+            n.pfn_get_instance_proc_addr = Some(get_instance_proc_addr);
+            n.pfn_get_device_proc_addr = Some(get_device_proc_addr);
+            n.pfn_get_physical_device_proc_addr = None;
+            vk::Result::SUCCESS
+        },
+    )
+}
+
+unsafe extern "system" fn get_instance_proc_addr(
+    instance: vk::Instance,
+    name: *const c_char,
+) -> vk::PFN_vkVoidFunction {
+    guard("vkGetInstanceProcAddr", None, || {
+        if name.is_null() {
+            return None;
+        }
+        // SAFETY: the loader passes a NUL-terminated name.
+        let n = unsafe { CStr::from_ptr(name) }.to_bytes();
+        if let Some(f) = lifecycle(n) {
+            return Some(f);
+        }
+        if instance == vk::Instance::null() {
+            return None;
+        }
+        // SAFETY: a live instance (the loader asks only about instances it created through us).
+        let data = unsafe { instance_of(instance.as_raw()) }?;
+        if data.profile.offers_fsr() {
+            if let Some(f) = instance_commands(n).or_else(|| device_commands(n)) {
+                return Some(f);
+            }
+        }
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { (data.gipa)(instance, name) }
+    })
+}
+
+unsafe extern "system" fn get_device_proc_addr(
+    device: vk::Device,
+    name: *const c_char,
+) -> vk::PFN_vkVoidFunction {
+    guard("vkGetDeviceProcAddr", None, || {
+        if name.is_null() || device == vk::Device::null() {
+            return None;
+        }
+        // SAFETY: the loader passes a NUL-terminated name and a device made through us.
+        let (n, data) = unsafe { (CStr::from_ptr(name).to_bytes(), device_of(device.as_raw())) };
+        if n == b"vkGetDeviceProcAddr" || n == b"vkDestroyDevice" {
+            return lifecycle(n);
+        }
+        if data.instance.profile.offers_fsr() {
+            if let Some(f) = device_commands(n) {
+                return Some(f);
+            }
+        }
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { (data.gdpa)(device, name) }
+    })
+}
+
+unsafe extern "system" fn create_instance(
+    info: *const vk::InstanceCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Instance,
+) -> vk::Result {
+    guard(
+        "vkCreateInstance",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: the loader's create info carries its link info; advancing `pLayerInfo` in
+            // it is the documented protocol (the struct is the loader's, not the application's).
+            // The next layer's functions get the caller's arguments.
+            unsafe {
+                let links = chain::find_all(
+                    (*info).p_next,
+                    vk::StructureType::LOADER_INSTANCE_CREATE_INFO,
+                );
+                let Some(link) = links
+                    .into_iter()
+                    .map(|l| l as *mut ffi::LayerInstanceCreateInfo)
+                    .find(|&l| (*l).function == ffi::LAYER_LINK_INFO)
+                else {
+                    return vk::Result::ERROR_INITIALIZATION_FAILED;
+                };
+                let layer = (*link).u[0] as *mut ffi::LayerInstanceLink;
+                if layer.is_null() {
+                    return vk::Result::ERROR_INITIALIZATION_FAILED;
+                }
+                let gipa = (*layer).pfn_next_get_instance_proc_addr;
+                (*link).u[0] = (*layer).p_next as *mut c_void;
+                let Some(create) = gipa(vk::Instance::null(), c"vkCreateInstance".as_ptr()) else {
+                    return vk::Result::ERROR_INITIALIZATION_FAILED;
+                };
+                let create: vk::PFN_vkCreateInstance = std::mem::transmute(create);
+                let r = create(info, alloc, out);
+                if r != vk::Result::SUCCESS {
+                    return r;
+                }
+                let handle = *out;
+                let fns = ash::Instance::load_with(
+                    |n| std::mem::transmute(gipa(handle, n.as_ptr())),
+                    handle,
+                );
+                let profile = record::profile();
+                event(json!({"kind": "instance", "profile": profile.name()}));
+                lock(&INSTANCES).insert(
+                    key(handle.as_raw()),
+                    Arc::new(InstanceData {
+                        handle,
+                        gipa,
+                        fns,
+                        profile,
+                    }),
+                );
+                r
+            }
+        },
+    )
+}
+
+unsafe extern "system" fn destroy_instance(
+    instance: vk::Instance,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyInstance", (), || {
+        if instance == vk::Instance::null() {
+            return;
+        }
+        // SAFETY: a live instance made through us; the next layer gets the caller's arguments.
+        unsafe {
+            let k = key(instance.as_raw());
+            let data = lock(&INSTANCES).remove(&k);
+            if let Some(d) = data {
+                (d.fns.fp_v1_0().destroy_instance)(instance, alloc);
+            }
+        }
+    })
+}
+
+unsafe extern "system" fn create_device(
+    physical: vk::PhysicalDevice,
+    info: *const vk::DeviceCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Device,
+) -> vk::Result {
+    guard(
+        "vkCreateDevice",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as in create_instance: the loader's link info is advanced in place; the
+            // application's create info is read only, its rewrite is a copy that lives across the
+            // call.
+            unsafe {
+                let Some(inst) = instance_of(physical.as_raw()) else {
+                    return vk::Result::ERROR_INITIALIZATION_FAILED;
+                };
+                let ci = &*info;
+                let links =
+                    chain::find_all(ci.p_next, vk::StructureType::LOADER_DEVICE_CREATE_INFO)
+                        .into_iter()
+                        .map(|l| l as *mut ffi::LayerDeviceCreateInfo)
+                        .collect::<Vec<_>>();
+                let Some(&link) = links
+                    .iter()
+                    .find(|&&l| (*l).function == ffi::LAYER_LINK_INFO)
+                else {
+                    return vk::Result::ERROR_INITIALIZATION_FAILED;
+                };
+                let set_loader_data = links
+                    .iter()
+                    .find(|&&l| (*l).function == ffi::LOADER_DATA_CALLBACK)
+                    .map(|&l| {
+                        std::mem::transmute::<*mut c_void, ffi::PfnSetDeviceLoaderData>((*l).u)
+                    });
+                let layer = (*link).u as *mut ffi::LayerDeviceLink;
+                if layer.is_null() {
+                    return vk::Result::ERROR_INITIALIZATION_FAILED;
+                }
+                let gipa = (*layer).pfn_next_get_instance_proc_addr;
+                let gdpa = (*layer).pfn_next_get_device_proc_addr;
+                (*link).u = (*layer).p_next as *mut c_void;
+                let Some(create) = gipa(inst.handle, c"vkCreateDevice".as_ptr()) else {
+                    return vk::Result::ERROR_INITIALIZATION_FAILED;
+                };
+                let create: vk::PFN_vkCreateDevice = std::mem::transmute(create);
+
+                let mut copy = *ci;
+                let exts: Vec<*const c_char>;
+                let stripped;
+                if inst.profile.offers_fsr() {
+                    let names = slice(ci.pp_enabled_extension_names, ci.enabled_extension_count);
+                    let asked = names.iter().any(|&n| CStr::from_ptr(n) == FSR_EXT);
+                    exts = names
+                        .iter()
+                        .copied()
+                        .filter(|&n| CStr::from_ptr(n) != FSR_EXT)
+                        .collect();
+                    let features = find::<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR>(
+                        ci.p_next,
+                    )
+                    .map(|f| {
+                        json!({
+                            "pipeline": (*f).pipeline_fragment_shading_rate != 0,
+                            "primitive": (*f).primitive_fragment_shading_rate != 0,
+                            "attachment": (*f).attachment_fragment_shading_rate != 0,
+                        })
+                    });
+                    if let Some(f) =
+                        find::<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR>(ci.p_next)
+                    {
+                        if (*f).primitive_fragment_shading_rate != 0 {
+                            error(
+                                "vkCreateDevice: primitiveFragmentShadingRate is not offered"
+                                    .into(),
+                            );
+                        }
+                    }
+                    event(json!({"kind": "device", "extension": asked, "features": features}));
+                    stripped = match chain::strip(
+                        ci.p_next,
+                        &[vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR],
+                    ) {
+                        Ok(s) => s,
+                        Err(s) => {
+                            error(format!("vkCreateDevice: cannot copy a {s:?} in the chain"));
+                            return vk::Result::ERROR_INITIALIZATION_FAILED;
+                        }
+                    };
+                    copy.p_next = stripped.head;
+                    copy.enabled_extension_count = exts.len() as u32;
+                    copy.pp_enabled_extension_names = exts.as_ptr();
+                }
+                let r = create(physical, &copy, alloc, out);
+                if r != vk::Result::SUCCESS {
+                    return r;
+                }
+                let handle = *out;
+                let fns = ash::Device::load_with(
+                    |n| std::mem::transmute(gdpa(handle, n.as_ptr())),
+                    handle,
+                );
+                lock(&DEVICES).insert(
+                    key(handle.as_raw()),
+                    Arc::new(DeviceData {
+                        handle,
+                        physical,
+                        instance: inst,
+                        gdpa,
+                        fns,
+                        set_loader_data,
+                        state: Mutex::new(DeviceState::default()),
+                    }),
+                );
+                r
+            }
+        },
+    )
+}
+
+unsafe extern "system" fn destroy_device(
+    device: vk::Device,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyDevice", (), || {
+        if device == vk::Device::null() {
+            return;
+        }
+        // SAFETY: a live device made through us; the pools are ours.
+        unsafe {
+            let k = key(device.as_raw());
+            let data = lock(&DEVICES).remove(&k);
+            if let Some(d) = data {
+                for (_, pool) in std::mem::take(&mut lock(&d.state).pools) {
+                    d.fns.destroy_command_pool(pool, None);
+                }
+                (d.fns.fp_v1_0().destroy_device)(device, alloc);
+            }
+        }
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Physical-device queries.
+
+unsafe extern "system" fn enumerate_device_extension_properties(
+    physical: vk::PhysicalDevice,
+    layer: *const c_char,
+    count: *mut u32,
+    out: *mut vk::ExtensionProperties,
+) -> vk::Result {
+    guard(
+        "vkEnumerateDeviceExtensionProperties",
+        vk::Result::ERROR_UNKNOWN,
+        || {
+            // SAFETY: the caller's arguments, forwarded or filled per the two-call idiom.
+            unsafe {
+                let inst = instance_of(physical.as_raw()).expect("instance");
+                let next = inst.fns.fp_v1_0().enumerate_device_extension_properties;
+                let fsr = vk::ExtensionProperties {
+                    spec_version: 2,
+                    ..Default::default()
+                }
+                .extension_name(FSR_EXT)
+                .expect("a short name");
+                if !layer.is_null() {
+                    if CStr::from_ptr(layer) == crate::LAYER_NAME {
+                        return two_call(&[fsr], count, out);
+                    }
+                    return next(physical, layer, count, out);
+                }
+                let mut n = 0;
+                let r = next(physical, layer, &mut n, std::ptr::null_mut());
+                if r != vk::Result::SUCCESS {
+                    return r;
+                }
+                let mut all = vec![vk::ExtensionProperties::default(); n as usize];
+                let r = next(physical, layer, &mut n, all.as_mut_ptr());
+                if r != vk::Result::SUCCESS {
+                    return r;
+                }
+                all.truncate(n as usize);
+                if !all
+                    .iter()
+                    .any(|e| e.extension_name_as_c_str() == Ok(FSR_EXT))
+                {
+                    all.push(fsr);
+                }
+                two_call(&all, count, out)
+            }
+        },
+    )
+}
+
+unsafe extern "system" fn get_features2(
+    physical: vk::PhysicalDevice,
+    out: *mut vk::PhysicalDeviceFeatures2<'_>,
+) {
+    guard("vkGetPhysicalDeviceFeatures2", (), || {
+        // SAFETY: the caller's output chain, which a query may fill.
+        unsafe {
+            let inst = instance_of(physical.as_raw()).expect("instance");
+            (inst.fns.fp_v1_1().get_physical_device_features2)(physical, out);
+            if let Some(f) = chain::find_raw(
+                (*out).p_next,
+                vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR,
+            ) {
+                let f = &mut *(f as *mut vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'_>);
+                f.pipeline_fragment_shading_rate = vk::TRUE;
+                f.primitive_fragment_shading_rate = vk::FALSE;
+                f.attachment_fragment_shading_rate = vk::TRUE;
+            }
+        }
+    })
+}
+
+unsafe extern "system" fn get_properties2(
+    physical: vk::PhysicalDevice,
+    out: *mut vk::PhysicalDeviceProperties2<'_>,
+) {
+    guard("vkGetPhysicalDeviceProperties2", (), || {
+        // SAFETY: the caller's output chain, which a query may fill.
+        unsafe {
+            let inst = instance_of(physical.as_raw()).expect("instance");
+            (inst.fns.fp_v1_1().get_physical_device_properties2)(physical, out);
+            if let Some(p) = chain::find_raw(
+                (*out).p_next,
+                vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_PROPERTIES_KHR,
+            ) {
+                let p = &mut *(p as *mut vk::PhysicalDeviceFragmentShadingRatePropertiesKHR<'_>);
+                inst.profile.fill_properties(p);
+            }
+        }
+    })
+}
+
+unsafe extern "system" fn get_fragment_shading_rates(
+    physical: vk::PhysicalDevice,
+    count: *mut u32,
+    out: *mut vk::PhysicalDeviceFragmentShadingRateKHR<'_>,
+) -> vk::Result {
+    guard(
+        "vkGetPhysicalDeviceFragmentShadingRatesKHR",
+        vk::Result::ERROR_UNKNOWN,
+        || {
+            // SAFETY: the caller's output array per the two-call idiom; each element's sType and
+            // pNext are the caller's and stay.
+            unsafe {
+                let inst = instance_of(physical.as_raw()).expect("instance");
+                let rates = inst.profile.rates();
+                if out.is_null() {
+                    *count = rates.len() as u32;
+                    return vk::Result::SUCCESS;
+                }
+                let n = (*count as usize).min(rates.len());
+                for (i, (size, samples)) in rates.iter().take(n).enumerate() {
+                    let o = &mut *out.add(i);
+                    o.fragment_size = *size;
+                    o.sample_counts = *samples;
+                }
+                *count = n as u32;
+                if n < rates.len() {
+                    vk::Result::INCOMPLETE
+                } else {
+                    vk::Result::SUCCESS
+                }
+            }
+        },
+    )
+}
+
+/// Only R8_UINT gets the attachment bit: the spec makes it the one mandatory shading-rate format
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkFormatFeatureFlagBits.html>).
+const FSR_FORMAT: vk::Format = vk::Format::R8_UINT;
+
+unsafe extern "system" fn get_format_properties(
+    physical: vk::PhysicalDevice,
+    format: vk::Format,
+    out: *mut vk::FormatProperties,
+) {
+    guard("vkGetPhysicalDeviceFormatProperties", (), || {
+        // SAFETY: the caller's output struct.
+        unsafe {
+            let inst = instance_of(physical.as_raw()).expect("instance");
+            (inst.fns.fp_v1_0().get_physical_device_format_properties)(physical, format, out);
+            if format == FSR_FORMAT {
+                (*out).optimal_tiling_features |=
+                    vk::FormatFeatureFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
+            }
+        }
+    })
+}
+
+unsafe extern "system" fn get_format_properties2(
+    physical: vk::PhysicalDevice,
+    format: vk::Format,
+    out: *mut vk::FormatProperties2<'_>,
+) {
+    guard("vkGetPhysicalDeviceFormatProperties2", (), || {
+        // SAFETY: the caller's output chain.
+        unsafe {
+            let inst = instance_of(physical.as_raw()).expect("instance");
+            (inst.fns.fp_v1_1().get_physical_device_format_properties2)(physical, format, out);
+            if format == FSR_FORMAT {
+                (*out).format_properties.optimal_tiling_features |=
+                    vk::FormatFeatureFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
+                if let Some(p3) =
+                    chain::find_raw((*out).p_next, vk::StructureType::FORMAT_PROPERTIES_3)
+                {
+                    let p3 = &mut *(p3 as *mut vk::FormatProperties3<'_>);
+                    p3.optimal_tiling_features |=
+                        vk::FormatFeatureFlags2::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
+                }
+            }
+        }
+    })
+}
+
+/// Whether a shading-rate image of this shape exists on the impersonated device: R8_UINT, 2D,
+/// optimal tiling (VUID-VkImageCreateInfo-imageType-02082 and the format feature).
+fn fsr_image_possible(format: vk::Format, ty: vk::ImageType, tiling: vk::ImageTiling) -> bool {
+    format == FSR_FORMAT && ty == vk::ImageType::TYPE_2D && tiling == vk::ImageTiling::OPTIMAL
+}
+
+/// The usage lavapipe is asked about instead: without the shading-rate bit, never empty.
+fn lavapipe_usage(usage: vk::ImageUsageFlags) -> vk::ImageUsageFlags {
+    let rest = usage & !FSR_USAGE;
+    if rest.is_empty() {
+        vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST
+    } else {
+        rest
+    }
+}
+
+unsafe extern "system" fn get_image_format_properties(
+    physical: vk::PhysicalDevice,
+    format: vk::Format,
+    ty: vk::ImageType,
+    tiling: vk::ImageTiling,
+    usage: vk::ImageUsageFlags,
+    flags: vk::ImageCreateFlags,
+    out: *mut vk::ImageFormatProperties,
+) -> vk::Result {
+    guard(
+        "vkGetPhysicalDeviceImageFormatProperties",
+        vk::Result::ERROR_UNKNOWN,
+        || {
+            // SAFETY: the caller's output struct.
+            unsafe {
+                let inst = instance_of(physical.as_raw()).expect("instance");
+                let next = inst
+                    .fns
+                    .fp_v1_0()
+                    .get_physical_device_image_format_properties;
+                if !usage.contains(FSR_USAGE) {
+                    return next(physical, format, ty, tiling, usage, flags, out);
+                }
+                if !fsr_image_possible(format, ty, tiling) {
+                    return vk::Result::ERROR_FORMAT_NOT_SUPPORTED;
+                }
+                let r = next(
+                    physical,
+                    format,
+                    ty,
+                    tiling,
+                    lavapipe_usage(usage),
+                    flags,
+                    out,
+                );
+                if r == vk::Result::SUCCESS {
+                    (*out).sample_counts = vk::SampleCountFlags::TYPE_1;
+                }
+                r
+            }
+        },
+    )
+}
+
+unsafe extern "system" fn get_image_format_properties2(
+    physical: vk::PhysicalDevice,
+    info: *const vk::PhysicalDeviceImageFormatInfo2<'_>,
+    out: *mut vk::ImageFormatProperties2<'_>,
+) -> vk::Result {
+    guard(
+        "vkGetPhysicalDeviceImageFormatProperties2",
+        vk::Result::ERROR_UNKNOWN,
+        || {
+            // SAFETY: the caller's input is read (its rewrite is a local copy), its output filled.
+            unsafe {
+                let inst = instance_of(physical.as_raw()).expect("instance");
+                let next = inst
+                    .fns
+                    .fp_v1_1()
+                    .get_physical_device_image_format_properties2;
+                let i = &*info;
+                if !i.usage.contains(FSR_USAGE) {
+                    return next(physical, info, out);
+                }
+                if !fsr_image_possible(i.format, i.ty, i.tiling) {
+                    return vk::Result::ERROR_FORMAT_NOT_SUPPORTED;
+                }
+                let mut copy = *i;
+                copy.usage = lavapipe_usage(i.usage);
+                let r = next(physical, &copy, out);
+                if r == vk::Result::SUCCESS {
+                    (*out).image_format_properties.sample_counts = vk::SampleCountFlags::TYPE_1;
+                }
+                r
+            }
+        },
+    )
+}
+
+// ---------------------------------------------------------------------------------------------
+// Device commands.
+
+unsafe extern "system" fn get_device_queue(
+    device: vk::Device,
+    family: u32,
+    index: u32,
+    out: *mut vk::Queue,
+) {
+    guard("vkGetDeviceQueue", (), || {
+        // SAFETY: the caller's arguments, forwarded.
+        unsafe {
+            let d = device_of(device.as_raw());
+            (d.fns.fp_v1_0().get_device_queue)(device, family, index, out);
+            lock(&d.state).queues.insert((*out).as_raw(), family);
+        }
+    })
+}
+
+unsafe extern "system" fn get_device_queue2(
+    device: vk::Device,
+    info: *const vk::DeviceQueueInfo2<'_>,
+    out: *mut vk::Queue,
+) {
+    guard("vkGetDeviceQueue2", (), || {
+        // SAFETY: the caller's arguments, forwarded.
+        unsafe {
+            let d = device_of(device.as_raw());
+            (d.fns.fp_v1_1().get_device_queue2)(device, info, out);
+            if !(*out).is_null() {
+                lock(&d.state)
+                    .queues
+                    .insert((*out).as_raw(), (*info).queue_family_index);
+            }
+        }
+    })
+}
+
+macro_rules! forgetting_destroy {
+    ($f:ident, $name:literal, $handle:ty, $next:ident, $map:ident) => {
+        /// Forgets the object before the driver frees it: drivers reuse addresses as handles, so a
+        /// stale entry would make a later, unrelated object look like a shading-rate one.
+        unsafe extern "system" fn $f(
+            device: vk::Device,
+            handle: $handle,
+            alloc: *const vk::AllocationCallbacks<'_>,
+        ) {
+            guard($name, (), || {
+                // SAFETY: the caller's arguments, forwarded unchanged.
+                unsafe {
+                    let d = device_of(device.as_raw());
+                    lock(&d.state).$map.remove(&handle.as_raw());
+                    (d.fns.fp_v1_0().$next)(device, handle, alloc);
+                }
+            })
+        }
+    };
+}
+
+forgetting_destroy!(
+    destroy_image,
+    "vkDestroyImage",
+    vk::Image,
+    destroy_image,
+    images
+);
+forgetting_destroy!(
+    destroy_image_view,
+    "vkDestroyImageView",
+    vk::ImageView,
+    destroy_image_view,
+    views
+);
+forgetting_destroy!(
+    destroy_render_pass,
+    "vkDestroyRenderPass",
+    vk::RenderPass,
+    destroy_render_pass,
+    passes
+);
+forgetting_destroy!(
+    destroy_framebuffer,
+    "vkDestroyFramebuffer",
+    vk::Framebuffer,
+    destroy_framebuffer,
+    framebuffers
+);
+
+unsafe extern "system" fn create_image(
+    device: vk::Device,
+    info: *const vk::ImageCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Image,
+) -> vk::Result {
+    guard("vkCreateImage", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's create info is read; lavapipe gets a copy.
+        unsafe {
+            let d = device_of(device.as_raw());
+            let ci = &*info;
+            let next = d.fns.fp_v1_0().create_image;
+            if !ci.usage.contains(FSR_USAGE) {
+                return next(device, info, alloc, out);
+            }
+            if !fsr_image_possible(ci.format, ci.image_type, ci.tiling) {
+                error(format!(
+                    "vkCreateImage: shading-rate usage on {:?} {:?} {:?} (only R8_UINT 2D optimal)",
+                    ci.format, ci.image_type, ci.tiling
+                ));
+            }
+            if ci.samples != vk::SampleCountFlags::TYPE_1 {
+                error(format!(
+                    "vkCreateImage: shading-rate usage with {:?} samples",
+                    ci.samples
+                ));
+            }
+            let mut copy = *ci;
+            // TRANSFER_SRC lets the double read the rates back after a submit.
+            copy.usage = lavapipe_usage(ci.usage) | vk::ImageUsageFlags::TRANSFER_SRC;
+            let r = next(device, &copy, alloc, out);
+            if r == vk::Result::SUCCESS {
+                let image = (*out).as_raw();
+                lock(&d.state).images.insert(
+                    image,
+                    ImageInfo {
+                        extent: ci.extent,
+                        layers: ci.array_layers,
+                    },
+                );
+                event(json!({
+                    "kind": "image",
+                    "image": image,
+                    "format": ci.format.as_raw(),
+                    "extent": [ci.extent.width, ci.extent.height],
+                    "layers": ci.array_layers,
+                }));
+            }
+            r
+        }
+    })
+}
+
+unsafe extern "system" fn create_image_view(
+    device: vk::Device,
+    info: *const vk::ImageViewCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::ImageView,
+) -> vk::Result {
+    guard("vkCreateImageView", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(device.as_raw());
+            let r = (d.fns.fp_v1_0().create_image_view)(device, info, alloc, out);
+            let ci = &*info;
+            let image = ci.image.as_raw();
+            if r == vk::Result::SUCCESS && lock(&d.state).images.contains_key(&image) {
+                let layers = ci.subresource_range.layer_count;
+                if layers != 1 && !d.instance.profile.layered() {
+                    error(format!(
+                        "vkCreateImageView: {layers} layers of a shading-rate image, but \
+                         layeredShadingRateAttachments is FALSE"
+                    ));
+                }
+                lock(&d.state).views.insert((*out).as_raw(), image);
+                event(json!({
+                    "kind": "image_view",
+                    "view": (*out).as_raw(),
+                    "image": image,
+                    "base_layer": ci.subresource_range.base_array_layer,
+                    "layers": layers,
+                }));
+            }
+            r
+        }
+    })
+}
+
+unsafe extern "system" fn create_render_pass2(
+    device: vk::Device,
+    info: *const vk::RenderPassCreateInfo2<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    guard("vkCreateRenderPass2", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's create info is read; lavapipe gets copies that live across the
+        // call.
+        unsafe {
+            let d = device_of(device.as_raw());
+            let profile = d.instance.profile;
+            let ci = &*info;
+            let attachments_in = slice(ci.p_attachments, ci.attachment_count);
+            let attachments: Vec<vk::AttachmentDescription2<'_>> = attachments_in
+                .iter()
+                .map(|a| {
+                    let mut a = *a;
+                    a.initial_layout = fix_layout(a.initial_layout);
+                    a.final_layout = fix_layout(a.final_layout);
+                    a
+                })
+                .collect();
+            let mut refs: Vec<Vec<vk::AttachmentReference2<'_>>> = Vec::new();
+            let mut chains = Vec::new();
+            let mut subpasses = Vec::new();
+            let mut per_subpass = Vec::new();
+            let mut record_subpasses = Vec::new();
+            for (i, s) in slice(ci.p_subpasses, ci.subpass_count).iter().enumerate() {
+                let mut c = *s;
+                let mut fsr = None;
+                if let Some(f) = find::<vk::FragmentShadingRateAttachmentInfoKHR>(s.p_next) {
+                    let f = &*f;
+                    let texel = f.shading_rate_attachment_texel_size;
+                    if let Some(r) = f.p_fragment_shading_rate_attachment.as_ref() {
+                        if r.attachment != vk::ATTACHMENT_UNUSED {
+                            fsr = Some((r.attachment, r.layout, texel));
+                        }
+                    }
+                }
+                match fsr {
+                    Some((a, layout, texel)) => {
+                        check_pass_attachment(profile, i, a, layout, texel, attachments_in);
+                        per_subpass.push(Some((a, texel)));
+                        record_subpasses.push(json!({"shading_rate": {
+                            "attachment": a,
+                            "layout": layout.as_raw(),
+                            "texel": pair(texel),
+                        }}));
+                    }
+                    None => {
+                        per_subpass.push(None);
+                        record_subpasses.push(json!({"shading_rate": null}));
+                    }
+                }
+                let stripped = match chain::strip(
+                    s.p_next,
+                    &[vk::StructureType::FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR],
+                ) {
+                    Ok(st) => st,
+                    Err(st) => {
+                        error(format!("vkCreateRenderPass2: cannot copy a {st:?}"));
+                        return vk::Result::ERROR_UNKNOWN;
+                    }
+                };
+                c.p_next = stripped.head;
+                chains.push(stripped);
+                c.p_input_attachments =
+                    fix_refs(&mut refs, s.p_input_attachments, s.input_attachment_count);
+                c.p_color_attachments =
+                    fix_refs(&mut refs, s.p_color_attachments, s.color_attachment_count);
+                c.p_resolve_attachments =
+                    fix_refs(&mut refs, s.p_resolve_attachments, s.color_attachment_count);
+                c.p_depth_stencil_attachment = fix_refs(&mut refs, s.p_depth_stencil_attachment, 1);
+                subpasses.push(c);
+            }
+            let dependencies: Vec<vk::SubpassDependency2<'_>> =
+                slice(ci.p_dependencies, ci.dependency_count)
+                    .iter()
+                    .map(|dep| {
+                        let mut dep = *dep;
+                        dep.src_stage_mask = fix_stage(dep.src_stage_mask);
+                        dep.dst_stage_mask = fix_stage(dep.dst_stage_mask);
+                        dep.src_access_mask = fix_access(dep.src_access_mask);
+                        dep.dst_access_mask = fix_access(dep.dst_access_mask);
+                        dep
+                    })
+                    .collect();
+            let mut copy = *ci;
+            copy.p_attachments = attachments.as_ptr();
+            copy.p_subpasses = subpasses.as_ptr();
+            copy.p_dependencies = dependencies.as_ptr();
+            let r = (d.fns.fp_v1_2().create_render_pass2)(device, &copy, alloc, out);
+            if r == vk::Result::SUCCESS {
+                let pass = (*out).as_raw();
+                lock(&d.state).passes.insert(pass, per_subpass);
+                event(json!({
+                    "kind": "render_pass",
+                    "render_pass": pass,
+                    "attachments": attachments_in.iter().map(|a| json!({
+                        "format": a.format.as_raw(),
+                        "load_op": a.load_op.as_raw(),
+                        "samples": a.samples.as_raw(),
+                    })).collect::<Vec<_>>(),
+                    "subpasses": record_subpasses,
+                }));
+            }
+            r
+        }
+    })
+}
+
+/// Copies `n` attachment references into `refs` with the shading-rate layout made GENERAL; null
+/// stays null.
+///
+/// # Safety
+/// `p` must be null or valid for `n` elements.
+unsafe fn fix_refs<'a>(
+    refs: &mut Vec<Vec<vk::AttachmentReference2<'a>>>,
+    p: *const vk::AttachmentReference2<'a>,
+    n: u32,
+) -> *const vk::AttachmentReference2<'a> {
+    if p.is_null() {
+        return p;
+    }
+    // SAFETY: the caller's promise.
+    let v: Vec<_> = unsafe { slice(p, n) }
+        .iter()
+        .map(|r| {
+            let mut r = *r;
+            r.layout = fix_layout(r.layout);
+            r
+        })
+        .collect();
+    let ptr = v.as_ptr();
+    refs.push(v);
+    ptr
+}
+
+/// What a driver with shading-rate attachments refuses in a subpass's attachment: a texel size the
+/// device does not have (VUID-VkFragmentShadingRateAttachmentInfoKHR-pFragmentShadingRateAttachment-04525..04532),
+/// a format without the feature (VUID-VkRenderPassCreateInfo2-pAttachments-04586), a cleared load
+/// (VUID-VkRenderPassCreateInfo2-pAttachments-09387), more than one sample, a wrong layout (04524).
+fn check_pass_attachment(
+    profile: Profile,
+    subpass: usize,
+    index: u32,
+    layout: vk::ImageLayout,
+    texel: vk::Extent2D,
+    attachments: &[vk::AttachmentDescription2<'_>],
+) {
+    let t = profile.texel();
+    if texel != t {
+        error(format!(
+            "vkCreateRenderPass2: subpass {subpass}: shading-rate texel {}x{} is not the device's {}x{}",
+            texel.width, texel.height, t.width, t.height
+        ));
+    }
+    if layout != FSR_LAYOUT && layout != vk::ImageLayout::GENERAL {
+        error(format!(
+            "vkCreateRenderPass2: subpass {subpass}: shading-rate attachment layout {layout:?}"
+        ));
+    }
+    let Some(a) = attachments.get(index as usize) else {
+        error(format!(
+            "vkCreateRenderPass2: subpass {subpass}: shading-rate attachment {index} does not exist"
+        ));
+        return;
+    };
+    if a.format != FSR_FORMAT {
+        error(format!(
+            "vkCreateRenderPass2: attachment {index}: shading-rate attachment format {:?}",
+            a.format
+        ));
+    }
+    if a.load_op == vk::AttachmentLoadOp::CLEAR {
+        error(format!(
+            "vkCreateRenderPass2: attachment {index}: shading-rate attachment with loadOp CLEAR"
+        ));
+    }
+    if a.samples != vk::SampleCountFlags::TYPE_1 {
+        error(format!(
+            "vkCreateRenderPass2: attachment {index}: shading-rate attachment with {:?} samples",
+            a.samples
+        ));
+    }
+}
+
+/// Whether the attachment's image covers `extent` at `texel` per texel
+/// (VUID-VkFramebufferCreateInfo-flags-04539/04540, VUID-VkRenderingInfo-pNext-06119/06121).
+fn check_covers(what: &str, image: ImageInfo, extent: vk::Extent2D, texel: vk::Extent2D) {
+    let need_w = extent.width.div_ceil(texel.width.max(1));
+    let need_h = extent.height.div_ceil(texel.height.max(1));
+    if image.extent.width < need_w || image.extent.height < need_h {
+        error(format!(
+            "{what}: shading-rate image {}x{} does not cover {}x{} at {}x{} texels",
+            image.extent.width,
+            image.extent.height,
+            extent.width,
+            extent.height,
+            texel.width,
+            texel.height
+        ));
+    }
+}
+
+unsafe extern "system" fn create_framebuffer(
+    device: vk::Device,
+    info: *const vk::FramebufferCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Framebuffer,
+) -> vk::Result {
+    guard("vkCreateFramebuffer", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(device.as_raw());
+            let r = (d.fns.fp_v1_0().create_framebuffer)(device, info, alloc, out);
+            if r != vk::Result::SUCCESS {
+                return r;
+            }
+            let ci = &*info;
+            let views: Vec<u64> = if ci.flags.contains(vk::FramebufferCreateFlags::IMAGELESS) {
+                Vec::new()
+            } else {
+                slice(ci.p_attachments, ci.attachment_count)
+                    .iter()
+                    .map(|v| v.as_raw())
+                    .collect()
+            };
+            let mut st = lock(&d.state);
+            let pass = ci.render_pass.as_raw();
+            let extent = vk::Extent2D {
+                width: ci.width,
+                height: ci.height,
+            };
+            for (a, texel) in st.passes.get(&pass).into_iter().flatten().flatten() {
+                let image = views
+                    .get(*a as usize)
+                    .and_then(|v| st.views.get(v))
+                    .and_then(|i| st.images.get(i));
+                if let Some(image) = image {
+                    check_covers("vkCreateFramebuffer", *image, extent, *texel);
+                }
+            }
+            st.framebuffers.insert((*out).as_raw(), views.clone());
+            event(json!({
+                "kind": "framebuffer",
+                "framebuffer": (*out).as_raw(),
+                "render_pass": pass,
+                "attachments": views,
+                "extent": [ci.width, ci.height],
+                "layers": ci.layers,
+            }));
+            r
+        }
+    })
+}
+
+unsafe extern "system" fn create_graphics_pipelines(
+    device: vk::Device,
+    cache: vk::PipelineCache,
+    count: u32,
+    infos: *const vk::GraphicsPipelineCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Pipeline,
+) -> vk::Result {
+    guard(
+        "vkCreateGraphicsPipelines",
+        vk::Result::ERROR_UNKNOWN,
+        || {
+            // SAFETY: the caller's create infos are read; lavapipe gets copies that live across the
+            // call; `out` has `count` elements.
+            unsafe {
+                let d = device_of(device.as_raw());
+                let max = d.instance.profile.max_fragment();
+                let flag = vk::PipelineCreateFlags::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
+                let mut copies = Vec::new();
+                let mut chains = Vec::new();
+                let mut dynamic_lists: Vec<Vec<vk::DynamicState>> = Vec::new();
+                let mut dynamic_infos: Vec<Box<vk::PipelineDynamicStateCreateInfo<'_>>> =
+                    Vec::new();
+                let mut records = Vec::new();
+                for ci in slice(infos, count) {
+                    let mut c = *ci;
+                    let state =
+                        find::<vk::PipelineFragmentShadingRateStateCreateInfoKHR>(ci.p_next)
+                            .map(|s| *s);
+                    if let Some(s) = &state {
+                        if s.fragment_size.width > max || s.fragment_size.height > max {
+                            error(format!(
+                            "vkCreateGraphicsPipelines: fragment size {}x{} above the device's {max}x{max}",
+                            s.fragment_size.width, s.fragment_size.height
+                        ));
+                        }
+                    }
+                    let stripped = match chain::strip(
+                        ci.p_next,
+                        &[vk::StructureType::PIPELINE_FRAGMENT_SHADING_RATE_STATE_CREATE_INFO_KHR],
+                    ) {
+                        Ok(s) => s,
+                        Err(s) => {
+                            error(format!("vkCreateGraphicsPipelines: cannot copy a {s:?}"));
+                            return vk::Result::ERROR_UNKNOWN;
+                        }
+                    };
+                    c.p_next = stripped.head;
+                    chains.push(stripped);
+                    c.flags &= !flag;
+                    let mut dynamic_rate = false;
+                    if let Some(ds) = ci.p_dynamic_state.as_ref() {
+                        let list = slice(ds.p_dynamic_states, ds.dynamic_state_count);
+                        dynamic_rate = list.contains(&vk::DynamicState::FRAGMENT_SHADING_RATE_KHR);
+                        if dynamic_rate {
+                            let kept: Vec<vk::DynamicState> = list
+                                .iter()
+                                .copied()
+                                .filter(|&s| s != vk::DynamicState::FRAGMENT_SHADING_RATE_KHR)
+                                .collect();
+                            let mut dc = Box::new(*ds);
+                            dc.dynamic_state_count = kept.len() as u32;
+                            dc.p_dynamic_states = kept.as_ptr();
+                            c.p_dynamic_state = &*dc;
+                            dynamic_lists.push(kept);
+                            dynamic_infos.push(dc);
+                        }
+                    }
+                    records.push(json!({
+                    "kind": "pipeline",
+                    "render_pass": ci.render_pass.as_raw(),
+                    "subpass": ci.subpass,
+                    "shading_rate_state": state.map(|s| json!({
+                        "fragment_size": pair(s.fragment_size),
+                        "combiner_ops": [s.combiner_ops[0].as_raw(), s.combiner_ops[1].as_raw()],
+                    })),
+                    "rendering_attachment_flag": ci.flags.contains(flag),
+                    "dynamic_rate": dynamic_rate,
+                }));
+                    copies.push(c);
+                }
+                let r = (d.fns.fp_v1_0().create_graphics_pipelines)(
+                    device,
+                    cache,
+                    count,
+                    copies.as_ptr(),
+                    alloc,
+                    out,
+                );
+                for (i, mut rec) in records.into_iter().enumerate() {
+                    let p = *out.add(i);
+                    if p != vk::Pipeline::null() {
+                        rec["pipeline"] = json!(p.as_raw());
+                        event(rec);
+                    }
+                }
+                r
+            }
+        },
+    )
+}
+
+unsafe extern "system" fn begin_command_buffer(
+    cb: vk::CommandBuffer,
+    info: *const vk::CommandBufferBeginInfo<'_>,
+) -> vk::Result {
+    guard("vkBeginCommandBuffer", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            lock(&d.state).commands.insert(cb.as_raw(), Vec::new());
+            (d.fns.fp_v1_0().begin_command_buffer)(cb, info)
+        }
+    })
+}
+
+/// Records a render-pass begin and notes the shading-rate images its subpasses read.
+///
+/// # Safety
+/// `info` must be a valid begin info.
+unsafe fn note_begin_render_pass(
+    d: &DeviceData,
+    cb: vk::CommandBuffer,
+    info: &vk::RenderPassBeginInfo<'_>,
+) {
+    let mut st = lock(&d.state);
+    let pass = info.render_pass.as_raw();
+    let fb = info.framebuffer.as_raw();
+    // Imageless framebuffers name their views at begin.
+    // SAFETY: the begin info's chain is valid (the caller's promise).
+    let views: Vec<u64> = match unsafe { find::<vk::RenderPassAttachmentBeginInfo>(info.p_next) } {
+        // SAFETY: as above.
+        Some(b) => unsafe { slice((*b).p_attachments, (*b).attachment_count) }
+            .iter()
+            .map(|v| v.as_raw())
+            .collect(),
+        None => st.framebuffers.get(&fb).cloned().unwrap_or_default(),
+    };
+    let mut used = Vec::new();
+    for (a, _) in st.passes.get(&pass).into_iter().flatten().flatten() {
+        if let Some(&v) = views.get(*a as usize) {
+            used.push(v);
+        }
+    }
+    let images: Vec<u64> = used
+        .iter()
+        .filter_map(|v| st.views.get(v).copied())
+        .collect();
+    let list = st.commands.entry(cb.as_raw()).or_default();
+    for i in images {
+        if !list.contains(&i) {
+            list.push(i);
+        }
+    }
+    used.dedup();
+    event(json!({
+        "kind": "begin_render_pass",
+        "command_buffer": cb.as_raw(),
+        "render_pass": pass,
+        "framebuffer": fb,
+        "shading_rate_views": used,
+    }));
+}
+
+unsafe extern "system" fn cmd_begin_render_pass(
+    cb: vk::CommandBuffer,
+    info: *const vk::RenderPassBeginInfo<'_>,
+    contents: vk::SubpassContents,
+) {
+    guard("vkCmdBeginRenderPass", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            note_begin_render_pass(&d, cb, &*info);
+            (d.fns.fp_v1_0().cmd_begin_render_pass)(cb, info, contents);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_begin_render_pass2(
+    cb: vk::CommandBuffer,
+    info: *const vk::RenderPassBeginInfo<'_>,
+    subpass: *const vk::SubpassBeginInfo<'_>,
+) {
+    guard("vkCmdBeginRenderPass2", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            note_begin_render_pass(&d, cb, &*info);
+            (d.fns.fp_v1_2().cmd_begin_render_pass2)(cb, info, subpass);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_begin_rendering(
+    cb: vk::CommandBuffer,
+    info: *const vk::RenderingInfo<'_>,
+) {
+    guard("vkCmdBeginRendering", (), || {
+        // SAFETY: the caller's rendering info is read; lavapipe gets a copy that lives across
+        // the call.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            let ri = &*info;
+            let fsr = find::<vk::RenderingFragmentShadingRateAttachmentInfoKHR>(ri.p_next)
+                .map(|f| *f)
+                .filter(|f| f.image_view != vk::ImageView::null());
+            let rec = match &fsr {
+                Some(f) => {
+                    let t = d.instance.profile.texel();
+                    let texel = f.shading_rate_attachment_texel_size;
+                    if texel != t {
+                        error(format!(
+                            "vkCmdBeginRendering: shading-rate texel {}x{} is not the device's {}x{}",
+                            texel.width, texel.height, t.width, t.height
+                        ));
+                    }
+                    if f.image_layout != FSR_LAYOUT && f.image_layout != vk::ImageLayout::GENERAL {
+                        error(format!(
+                            "vkCmdBeginRendering: shading-rate attachment layout {:?}",
+                            f.image_layout
+                        ));
+                    }
+                    let mut st = lock(&d.state);
+                    let view = f.image_view.as_raw();
+                    let image = st.views.get(&view).copied();
+                    if let Some(image) = image {
+                        if let Some(info) = st.images.get(&image) {
+                            let a = ri.render_area;
+                            let extent = vk::Extent2D {
+                                width: (a.offset.x.max(0) as u32) + a.extent.width,
+                                height: (a.offset.y.max(0) as u32) + a.extent.height,
+                            };
+                            check_covers("vkCmdBeginRendering", *info, extent, texel);
+                        }
+                        let list = st.commands.entry(cb.as_raw()).or_default();
+                        if !list.contains(&image) {
+                            list.push(image);
+                        }
+                    } else {
+                        error("vkCmdBeginRendering: shading-rate view of an image without the shading-rate usage".into());
+                    }
+                    json!({
+                        "view": view,
+                        "layout": f.image_layout.as_raw(),
+                        "texel": pair(texel),
+                    })
+                }
+                None => Value::Null,
+            };
+            event(json!({
+                "kind": "begin_rendering",
+                "command_buffer": cb.as_raw(),
+                "shading_rate": rec,
+            }));
+            let stripped = match chain::strip(
+                ri.p_next,
+                &[vk::StructureType::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR],
+            ) {
+                Ok(s) => s,
+                Err(s) => {
+                    error(format!("vkCmdBeginRendering: cannot copy a {s:?}"));
+                    return;
+                }
+            };
+            let mut copy = *ri;
+            copy.p_next = stripped.head;
+            (d.fns.fp_v1_3().cmd_begin_rendering)(cb, &copy);
+        }
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+unsafe extern "system" fn cmd_pipeline_barrier(
+    cb: vk::CommandBuffer,
+    src: vk::PipelineStageFlags,
+    dst: vk::PipelineStageFlags,
+    flags: vk::DependencyFlags,
+    memory_count: u32,
+    memory: *const vk::MemoryBarrier<'_>,
+    buffer_count: u32,
+    buffers: *const vk::BufferMemoryBarrier<'_>,
+    image_count: u32,
+    images: *const vk::ImageMemoryBarrier<'_>,
+) {
+    guard("vkCmdPipelineBarrier", (), || {
+        // SAFETY: the caller's arrays are read; lavapipe gets copies that live across the call.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            let m: Vec<_> = slice(memory, memory_count)
+                .iter()
+                .map(|b| {
+                    let mut b = *b;
+                    b.src_access_mask = fix_access(b.src_access_mask);
+                    b.dst_access_mask = fix_access(b.dst_access_mask);
+                    b
+                })
+                .collect();
+            let bu: Vec<_> = slice(buffers, buffer_count)
+                .iter()
+                .map(|b| {
+                    let mut b = *b;
+                    b.src_access_mask = fix_access(b.src_access_mask);
+                    b.dst_access_mask = fix_access(b.dst_access_mask);
+                    b
+                })
+                .collect();
+            let im: Vec<_> = slice(images, image_count)
+                .iter()
+                .map(|b| {
+                    let mut b = *b;
+                    b.src_access_mask = fix_access(b.src_access_mask);
+                    b.dst_access_mask = fix_access(b.dst_access_mask);
+                    b.old_layout = fix_layout(b.old_layout);
+                    b.new_layout = fix_layout(b.new_layout);
+                    b
+                })
+                .collect();
+            (d.fns.fp_v1_0().cmd_pipeline_barrier)(
+                cb,
+                fix_stage(src),
+                fix_stage(dst),
+                flags,
+                memory_count,
+                m.as_ptr(),
+                buffer_count,
+                bu.as_ptr(),
+                image_count,
+                im.as_ptr(),
+            );
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_pipeline_barrier2(
+    cb: vk::CommandBuffer,
+    info: *const vk::DependencyInfo<'_>,
+) {
+    guard("vkCmdPipelineBarrier2", (), || {
+        // SAFETY: the caller's dependency info is read; lavapipe gets copies that live across
+        // the call.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            let di = &*info;
+            let m: Vec<_> = slice(di.p_memory_barriers, di.memory_barrier_count)
+                .iter()
+                .map(|b| {
+                    let mut b = *b;
+                    b.src_stage_mask = fix_stage2(b.src_stage_mask);
+                    b.dst_stage_mask = fix_stage2(b.dst_stage_mask);
+                    b.src_access_mask = fix_access2(b.src_access_mask);
+                    b.dst_access_mask = fix_access2(b.dst_access_mask);
+                    b
+                })
+                .collect();
+            let bu: Vec<_> = slice(di.p_buffer_memory_barriers, di.buffer_memory_barrier_count)
+                .iter()
+                .map(|b| {
+                    let mut b = *b;
+                    b.src_stage_mask = fix_stage2(b.src_stage_mask);
+                    b.dst_stage_mask = fix_stage2(b.dst_stage_mask);
+                    b.src_access_mask = fix_access2(b.src_access_mask);
+                    b.dst_access_mask = fix_access2(b.dst_access_mask);
+                    b
+                })
+                .collect();
+            let im: Vec<_> = slice(di.p_image_memory_barriers, di.image_memory_barrier_count)
+                .iter()
+                .map(|b| {
+                    let mut b = *b;
+                    b.src_stage_mask = fix_stage2(b.src_stage_mask);
+                    b.dst_stage_mask = fix_stage2(b.dst_stage_mask);
+                    b.src_access_mask = fix_access2(b.src_access_mask);
+                    b.dst_access_mask = fix_access2(b.dst_access_mask);
+                    b.old_layout = fix_layout(b.old_layout);
+                    b.new_layout = fix_layout(b.new_layout);
+                    b
+                })
+                .collect();
+            let mut copy = *di;
+            copy.p_memory_barriers = m.as_ptr();
+            copy.p_buffer_memory_barriers = bu.as_ptr();
+            copy.p_image_memory_barriers = im.as_ptr();
+            (d.fns.fp_v1_3().cmd_pipeline_barrier2)(cb, &copy);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_set_fragment_shading_rate(
+    cb: vk::CommandBuffer,
+    size: *const vk::Extent2D,
+    ops: *const [vk::FragmentShadingRateCombinerOpKHR; 2],
+) {
+    guard("vkCmdSetFragmentShadingRateKHR", (), || {
+        // SAFETY: the caller's arguments; nothing reaches lavapipe, which lacks the command.
+        unsafe {
+            let (s, o) = (*size, *ops);
+            event(json!({
+                "kind": "set_fragment_shading_rate",
+                "command_buffer": cb.as_raw(),
+                "fragment_size": pair(s),
+                "combiner_ops": [o[0].as_raw(), o[1].as_raw()],
+            }));
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_execute_commands(
+    cb: vk::CommandBuffer,
+    count: u32,
+    secondaries: *const vk::CommandBuffer,
+) {
+    guard("vkCmdExecuteCommands", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            {
+                // A secondary's shading-rate images are read when its primary is submitted.
+                let mut st = lock(&d.state);
+                let mut images: Vec<u64> = Vec::new();
+                for s in slice(secondaries, count) {
+                    images.extend(st.commands.get(&s.as_raw()).into_iter().flatten());
+                }
+                let list = st.commands.entry(cb.as_raw()).or_default();
+                for i in images {
+                    if !list.contains(&i) {
+                        list.push(i);
+                    }
+                }
+            }
+            (d.fns.fp_v1_0().cmd_execute_commands)(cb, count, secondaries);
+        }
+    })
+}
+
+/// After a submit that read shading-rate images: waits for the queue and copies each image to the
+/// host with the layer's own command buffer, so tests see the rate codes the GPU would have used.
+///
+/// # Safety
+/// `queue` must belong to `d` and be externally synchronised by the current call.
+unsafe fn read_back(d: &DeviceData, queue: vk::Queue, images: &[u64]) -> Value {
+    let mut out = Vec::new();
+    for &image in images {
+        let info = lock(&d.state).images.get(&image).copied();
+        let Some(info) = info else { continue };
+        // SAFETY: the caller's promise; every object below is the layer's own and freed here.
+        let codes = unsafe { copy_image(d, queue, image, info) };
+        out.push(match codes {
+            Ok(c) => json!({
+                "image": image,
+                "extent": [info.extent.width, info.extent.height],
+                "layers": info.layers,
+                "codes": c,
+            }),
+            Err(e) => {
+                error(format!("read-back of shading-rate image failed: {e:?}"));
+                json!({"image": image, "codes": null})
+            }
+        });
+    }
+    Value::Array(out)
+}
+
+/// # Safety
+/// As [`read_back`].
+unsafe fn copy_image(
+    d: &DeviceData,
+    queue: vk::Queue,
+    image: u64,
+    info: ImageInfo,
+) -> Result<Vec<u8>, vk::Result> {
+    let f = &d.fns;
+    let family = lock(&d.state)
+        .queues
+        .get(&queue.as_raw())
+        .copied()
+        .unwrap_or(0);
+    // SAFETY: the caller's promise; these are plain Vulkan calls on the layer's own objects.
+    unsafe {
+        f.queue_wait_idle(queue)?;
+        let pool = {
+            let existing = lock(&d.state).pools.get(&family).copied();
+            match existing {
+                Some(p) => p,
+                None => {
+                    let p = f.create_command_pool(
+                        &vk::CommandPoolCreateInfo::default()
+                            .queue_family_index(family)
+                            .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                        None,
+                    )?;
+                    lock(&d.state).pools.insert(family, p);
+                    p
+                }
+            }
+        };
+        let size = info.extent.width as u64 * info.extent.height as u64 * info.layers as u64;
+        let buffer = f.create_buffer(
+            &vk::BufferCreateInfo::default()
+                .size(size)
+                .usage(vk::BufferUsageFlags::TRANSFER_DST),
+            None,
+        )?;
+        let req = f.get_buffer_memory_requirements(buffer);
+        let props = d
+            .instance
+            .fns
+            .get_physical_device_memory_properties(d.physical);
+        let want = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+        let Some(ty) = (0..props.memory_type_count).find(|&i| {
+            req.memory_type_bits & (1 << i) != 0
+                && props.memory_types[i as usize].property_flags.contains(want)
+        }) else {
+            f.destroy_buffer(buffer, None);
+            return Err(vk::Result::ERROR_FEATURE_NOT_PRESENT);
+        };
+        let memory = f.allocate_memory(
+            &vk::MemoryAllocateInfo::default()
+                .allocation_size(req.size)
+                .memory_type_index(ty),
+            None,
+        )?;
+        f.bind_buffer_memory(buffer, memory, 0)?;
+        let cbs = f.allocate_command_buffers(
+            &vk::CommandBufferAllocateInfo::default()
+                .command_pool(pool)
+                .level(vk::CommandBufferLevel::PRIMARY)
+                .command_buffer_count(1),
+        )?;
+        let cb = cbs[0];
+        if let Some(set) = d.set_loader_data {
+            set(d.handle, cb.as_raw() as usize as *mut c_void).result()?;
+        }
+        f.begin_command_buffer(
+            cb,
+            &vk::CommandBufferBeginInfo::default()
+                .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+        )?;
+        // lavapipe ignores layouts; the application's own layout tracking (above the double) is
+        // untouched, since these commands never pass the validation layer.
+        f.cmd_copy_image_to_buffer(
+            cb,
+            vk::Image::from_raw(image),
+            vk::ImageLayout::GENERAL,
+            buffer,
+            &[vk::BufferImageCopy::default()
+                .image_subresource(vk::ImageSubresourceLayers {
+                    aspect_mask: vk::ImageAspectFlags::COLOR,
+                    mip_level: 0,
+                    base_array_layer: 0,
+                    layer_count: info.layers,
+                })
+                .image_extent(vk::Extent3D {
+                    width: info.extent.width,
+                    height: info.extent.height,
+                    depth: 1,
+                })],
+        );
+        f.end_command_buffer(cb)?;
+        f.queue_submit(
+            queue,
+            &[vk::SubmitInfo::default().command_buffers(&cbs)],
+            vk::Fence::null(),
+        )?;
+        f.queue_wait_idle(queue)?;
+        let p = f.map_memory(memory, 0, size, vk::MemoryMapFlags::empty())?;
+        let codes = std::slice::from_raw_parts(p as *const u8, size as usize).to_vec();
+        f.unmap_memory(memory);
+        f.free_command_buffers(pool, &cbs);
+        f.destroy_buffer(buffer, None);
+        f.free_memory(memory, None);
+        Ok(codes)
+    }
+}
+
+/// Records a submit and, where it read shading-rate images, their contents.
+///
+/// # Safety
+/// As [`read_back`].
+unsafe fn note_submit(d: &DeviceData, queue: vk::Queue, cbs: Vec<u64>) {
+    let mut images = Vec::new();
+    {
+        let st = lock(&d.state);
+        for cb in &cbs {
+            for i in st.commands.get(cb).into_iter().flatten() {
+                if !images.contains(i) {
+                    images.push(*i);
+                }
+            }
+        }
+    }
+    let read = if images.is_empty() {
+        Value::Array(Vec::new())
+    } else {
+        // SAFETY: the caller's promise.
+        unsafe { read_back(d, queue, &images) }
+    };
+    event(json!({
+        "kind": "submit",
+        "command_buffers": cbs,
+        "shading_rate_images": read,
+    }));
+}
+
+unsafe extern "system" fn queue_submit(
+    queue: vk::Queue,
+    count: u32,
+    submits: *const vk::SubmitInfo<'_>,
+    fence: vk::Fence,
+) -> vk::Result {
+    guard("vkQueueSubmit", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's submits are read; wait-stage masks are rewritten in copies that
+        // live across the call.
+        unsafe {
+            let d = device_of(queue.as_raw());
+            let subs = slice(submits, count);
+            let masks: Vec<Vec<vk::PipelineStageFlags>> = subs
+                .iter()
+                .map(|s| {
+                    slice(s.p_wait_dst_stage_mask, s.wait_semaphore_count)
+                        .iter()
+                        .map(|&m| fix_stage(m))
+                        .collect()
+                })
+                .collect();
+            let copies: Vec<vk::SubmitInfo<'_>> = subs
+                .iter()
+                .zip(&masks)
+                .map(|(s, m)| {
+                    let mut c = *s;
+                    if !s.p_wait_dst_stage_mask.is_null() {
+                        c.p_wait_dst_stage_mask = m.as_ptr();
+                    }
+                    c
+                })
+                .collect();
+            let r = (d.fns.fp_v1_0().queue_submit)(queue, count, copies.as_ptr(), fence);
+            if r == vk::Result::SUCCESS {
+                let cbs = subs
+                    .iter()
+                    .flat_map(|s| slice(s.p_command_buffers, s.command_buffer_count))
+                    .map(|c| c.as_raw())
+                    .collect();
+                note_submit(&d, queue, cbs);
+            }
+            r
+        }
+    })
+}
+
+/// Copies semaphore infos with shading-rate stage bits made fragment-shader bits.
+///
+/// # Safety
+/// `p` must be null or valid for `n` elements.
+unsafe fn fix_semaphores<'a>(
+    p: *const vk::SemaphoreSubmitInfo<'a>,
+    n: u32,
+) -> Vec<vk::SemaphoreSubmitInfo<'a>> {
+    // SAFETY: the caller's promise.
+    unsafe { slice(p, n) }
+        .iter()
+        .map(|i| {
+            let mut i = *i;
+            i.stage_mask = fix_stage2(i.stage_mask);
+            i
+        })
+        .collect()
+}
+
+unsafe extern "system" fn queue_submit2(
+    queue: vk::Queue,
+    count: u32,
+    submits: *const vk::SubmitInfo2<'_>,
+    fence: vk::Fence,
+) -> vk::Result {
+    guard("vkQueueSubmit2", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's submits are read; semaphore stage masks are rewritten in copies
+        // that live across the call.
+        unsafe {
+            let d = device_of(queue.as_raw());
+            let subs = slice(submits, count);
+            let waits: Vec<_> = subs
+                .iter()
+                .map(|s| fix_semaphores(s.p_wait_semaphore_infos, s.wait_semaphore_info_count))
+                .collect();
+            let signals: Vec<_> = subs
+                .iter()
+                .map(|s| fix_semaphores(s.p_signal_semaphore_infos, s.signal_semaphore_info_count))
+                .collect();
+            let copies: Vec<vk::SubmitInfo2<'_>> = subs
+                .iter()
+                .zip(waits.iter().zip(&signals))
+                .map(|(s, (w, g))| {
+                    let mut c = *s;
+                    c.p_wait_semaphore_infos = w.as_ptr();
+                    c.p_signal_semaphore_infos = g.as_ptr();
+                    c
+                })
+                .collect();
+            let r = (d.fns.fp_v1_3().queue_submit2)(queue, count, copies.as_ptr(), fence);
+            if r == vk::Result::SUCCESS {
+                let cbs = slice(submits, count)
+                    .iter()
+                    .flat_map(|s| slice(s.p_command_buffer_infos, s.command_buffer_info_count))
+                    .map(|c| c.command_buffer.as_raw())
+                    .collect();
+                note_submit(&d, queue, cbs);
+            }
+            r
+        }
+    })
+}

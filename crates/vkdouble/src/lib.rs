@@ -1,0 +1,243 @@
+//! `VK_LAYER_FOVEA_shading_rate_double`: a test-only Vulkan layer that makes a device without
+//! `VK_KHR_fragment_shading_rate` (Mesa's lavapipe) look like a desktop GPU with shading-rate
+//! attachments, and records what it was asked to do.
+//!
+//! Why: fovea's Vulkan layer rewrites fragment-density-map calls into shading-rate-attachment
+//! calls. CI has no GPU with that feature, but it has lavapipe and the Khronos validation layer.
+//! With the double *below* validation, validation checks every call against a device that has the
+//! feature, lavapipe renders real pixels (at 1×1, since the double strips the shading-rate parts
+//! before lavapipe sees them), and tests read back what a real driver would have been told:
+//! which attachment, which texel size, which pipeline state, which rate codes.
+//!
+//! Stack in tests: application → (fovea) → `VK_LAYER_KHRONOS_validation` → this double → lavapipe.
+//! The first layer named in `ppEnabledLayerNames` or `VK_INSTANCE_LAYERS` sits closest to the
+//! application (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderApplicationInterface.md>).
+//!
+//! The loader dlopens the manifest's `library_path` ([`LIBRARY_FILE`]); a test binary that links
+//! this crate as an rlib has its own, separate copy of the statics. So the records are read
+//! through the loaded copy: [`Loaded`] dlopens the same file (the dynamic linker hands back the
+//! same instance) and calls its exported `fovea_vkdouble_*` functions.
+//!
+//! Handles in the records are the ones the double sees. The validation layer wraps non-dispatchable
+//! handles by default, so a test that compares them with its own disables that with
+//! `VkValidationFeaturesEXT { VK_VALIDATION_FEATURE_DISABLE_UNIQUE_HANDLES_EXT }`
+//! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkValidationFeatureDisableEXT.html>);
+//! dispatchable handles (command buffers) are never wrapped.
+//!
+//! Records (`kind` and fields): `instance` {profile}; `device` {extension, features}; `image`
+//! {image, format, extent, layers} and `image_view` {view, image, base_layer, layers} for
+//! shading-rate images only; `render_pass` {render_pass, attachments, subpasses[{shading_rate:
+//! null | {attachment, layout, texel}}]}; `framebuffer` {framebuffer, render_pass, attachments,
+//! extent, layers}; `pipeline` {pipeline, render_pass, subpass, shading_rate_state: null |
+//! {fragment_size, combiner_ops}, rendering_attachment_flag, dynamic_rate};
+//! `begin_render_pass` {command_buffer, render_pass, framebuffer, shading_rate_views};
+//! `begin_rendering` {command_buffer, shading_rate: null | {view, layout, texel}};
+//! `set_fragment_shading_rate` {command_buffer, fragment_size, combiner_ops}; `submit`
+//! {command_buffers, shading_rate_images[{image, extent, layers, codes}]}, the codes read back
+//! after the submit completed. With the `none` profile nothing but `instance` is recorded.
+
+#![deny(unsafe_op_in_unsafe_fn)]
+
+mod chain;
+mod ffi;
+mod layer;
+mod profile;
+mod record;
+
+use std::ffi::{c_char, CStr};
+use std::path::{Path, PathBuf};
+
+pub use profile::Profile;
+use serde_json::Value;
+
+/// The layer's name, as in its manifest.
+pub const LAYER_NAME: &CStr = c"VK_LAYER_FOVEA_shading_rate_double";
+/// The shared library the manifest points at (`target/<profile>/libfovea_vkdouble.so`).
+pub const LIBRARY_FILE: &str = "libfovea_vkdouble.so";
+/// The environment variable that picks the profile: `nvidia` (default), `amd` or `none`.
+pub const PROFILE_ENV: &str = "FOVEA_VKDOUBLE_PROFILE";
+
+/// Copies the records (`{"events": [...], "errors": [...]}` as UTF-8 JSON, no terminator) into
+/// `buf`, at most `len` bytes, and returns the full length, so a caller can size its buffer.
+///
+/// # Safety
+/// `buf` must be null or valid for `len` bytes.
+#[no_mangle]
+pub unsafe extern "C" fn fovea_vkdouble_records_json(buf: *mut u8, len: usize) -> usize {
+    let text = std::panic::catch_unwind(|| record::snapshot().to_string()).unwrap_or_default();
+    if !buf.is_null() {
+        let n = len.min(text.len());
+        // SAFETY: the caller promised `len` writable bytes at `buf`; `n` ≤ `len`.
+        unsafe { std::ptr::copy_nonoverlapping(text.as_ptr(), buf, n) };
+    }
+    text.len()
+}
+
+/// Forgets every record.
+#[no_mangle]
+pub extern "C" fn fovea_vkdouble_clear() {
+    let _ = std::panic::catch_unwind(record::clear);
+}
+
+/// Sets the profile the next VkInstance gets (`nvidia`, `amd`, `none`), overriding
+/// [`PROFILE_ENV`]; null lifts the override. Returns 0, or -1 for an unknown name.
+///
+/// # Safety
+/// `name` must be null or a NUL-terminated string.
+#[no_mangle]
+pub unsafe extern "C" fn fovea_vkdouble_set_profile(name: *const c_char) -> i32 {
+    if name.is_null() {
+        record::set_profile(None);
+        return 0;
+    }
+    // SAFETY: the caller promised a NUL-terminated string.
+    let name = unsafe { CStr::from_ptr(name) }.to_string_lossy();
+    match Profile::parse(&name) {
+        Some(p) => {
+            record::set_profile(Some(p));
+            0
+        }
+        None => -1,
+    }
+}
+
+/// The layer manifest for the library at `library` (an absolute path). It lists
+/// `VK_KHR_fragment_shading_rate` under `device_extensions`: the loader refuses device extensions
+/// that neither the driver nor an enabled layer's manifest names
+/// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
+/// "Layer Manifest File Format").
+pub fn manifest_json(library: &Path) -> String {
+    serde_json::json!({
+        "file_format_version": "1.1.2",
+        "layer": {
+            "name": LAYER_NAME.to_str().unwrap_or_default(),
+            "type": "GLOBAL",
+            "library_path": library.to_string_lossy(),
+            "api_version": "1.3.239",
+            "implementation_version": "1",
+            "description": "fovea test double: shading-rate attachments on a device without them",
+            "device_extensions": [{
+                "name": "VK_KHR_fragment_shading_rate",
+                "spec_version": "2",
+                "entrypoints": ["vkCmdSetFragmentShadingRateKHR"]
+            }]
+        }
+    })
+    .to_string()
+}
+
+/// Writes `VkLayer_fovea_shading_rate_double.json` for `library` into `dir`, for `VK_LAYER_PATH`.
+pub fn write_manifest(dir: &Path, library: &Path) -> std::io::Result<PathBuf> {
+    std::fs::create_dir_all(dir)?;
+    let path = dir.join("VkLayer_fovea_shading_rate_double.json");
+    std::fs::write(&path, manifest_json(library))?;
+    Ok(path)
+}
+
+/// This build's library, searched from the running executable's folder upwards to `target`.
+/// `cargo test` builds the cdylib into `target/<profile>/deps` beside the rlib it links (it does
+/// not copy it up to `target/<profile>`), so a test binary finds the library built with it first.
+pub fn find_library() -> Result<PathBuf, String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let mut dir = exe.parent();
+    while let Some(d) = dir {
+        let c = d.join(LIBRARY_FILE);
+        if c.exists() {
+            return c.canonicalize().map_err(|e| e.to_string());
+        }
+        if d.file_name().is_some_and(|n| n == "target") {
+            break;
+        }
+        dir = d.parent();
+    }
+    Err(format!(
+        "{LIBRARY_FILE} not found next to {} (cargo build -p fovea-vkdouble)",
+        exe.display()
+    ))
+}
+
+/// The double's library as the loader loads it, for reading its records in-process.
+pub struct Loaded {
+    lib: libloading::Library,
+}
+
+impl Loaded {
+    /// Opens the library at `path`. Open it by the same file the manifest names: the dynamic
+    /// linker then returns the instance the loader uses (or will use). Open it before the first
+    /// VkInstance and keep it: the loader closes the layer's library at vkDestroyInstance, and
+    /// with the last reference gone the records would be unloaded with it.
+    pub fn open(path: &Path) -> Result<Loaded, String> {
+        // SAFETY: loading the double runs no initialisers beyond Rust's own.
+        let lib = unsafe { libloading::Library::new(path) }
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(Loaded { lib })
+    }
+
+    /// Everything recorded so far: `{"events": [...], "errors": [...]}`.
+    pub fn records(&self) -> Value {
+        // SAFETY: the symbol has this signature (defined above, exported by the library).
+        let f = unsafe {
+            self.lib
+                .get::<unsafe extern "C" fn(*mut u8, usize) -> usize>(
+                    b"fovea_vkdouble_records_json\0",
+                )
+                .expect("fovea_vkdouble_records_json")
+        };
+        let mut buf = Vec::new();
+        loop {
+            // SAFETY: `buf` is valid for its length.
+            let n = unsafe { f(buf.as_mut_ptr(), buf.len()) };
+            if n <= buf.len() {
+                buf.truncate(n);
+                break;
+            }
+            buf.resize(n, 0);
+        }
+        serde_json::from_slice(&buf).expect("records are JSON")
+    }
+
+    /// The events of one kind, in order.
+    pub fn events(&self, kind: &str) -> Vec<Value> {
+        self.records()["events"]
+            .as_array()
+            .map(|a| a.iter().filter(|e| e["kind"] == kind).cloned().collect())
+            .unwrap_or_default()
+    }
+
+    /// The misuses recorded so far.
+    pub fn errors(&self) -> Vec<String> {
+        self.records()["errors"]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .map(|e| e.as_str().unwrap_or_default().to_owned())
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    /// Forgets every record.
+    pub fn clear(&self) {
+        // SAFETY: the symbol has this signature.
+        unsafe {
+            let f = self
+                .lib
+                .get::<extern "C" fn()>(b"fovea_vkdouble_clear\0")
+                .expect("fovea_vkdouble_clear");
+            f()
+        }
+    }
+
+    /// Picks the profile for the next VkInstance; `None` goes back to [`PROFILE_ENV`].
+    pub fn set_profile(&self, profile: Option<Profile>) {
+        let name = profile.map(|p| std::ffi::CString::new(p.name()).expect("no NUL"));
+        // SAFETY: the symbol has this signature; the name lives across the call.
+        unsafe {
+            let f = self
+                .lib
+                .get::<unsafe extern "C" fn(*const c_char) -> i32>(b"fovea_vkdouble_set_profile\0")
+                .expect("fovea_vkdouble_set_profile");
+            assert_eq!(f(name.as_ref().map_or(std::ptr::null(), |n| n.as_ptr())), 0);
+        }
+    }
+}
