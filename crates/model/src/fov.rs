@@ -48,7 +48,8 @@ impl Fov {
     /// Where the straight-ahead direction lands in normalised device coordinates (y up): the
     /// projection centre, where fovea puts the fovea.
     ///
-    /// The asymmetric-FOV FAQ computes it as `ProjectionMatrix × (0, 0, −near, 1)`; for an
+    /// Oculus' asymmetric FOV FAQ (docs/density-model.md#fovea-placement) computes it as
+    /// `ProjectionMatrix × (0, 0, −near, 1)`; for an
     /// off-centre frustum with signed tangents `l, r, d, u` that is `(−(r+l)/(r−l), −(u+d)/(u−d))`
     /// after the divide by w (checked against a projection matrix in [`crate::projection`]'s
     /// tests). For Quest 3's left eye (54° left, 40° right) it is at x ≈ +0.24: right of the image

@@ -77,8 +77,8 @@ pub fn projection(fov: Fov, clip: ClipSpace, depth: Depth) -> Mat4 {
     )
 }
 
-/// The projection centre in the matrix's NDC: `P × (0, 0, −near, 1)` divided by w (asymmetric-FOV
-/// FAQ). For OpenGL and Direct3D it equals [`Fov::projection_center_ndc`]; Vulkan's y is flipped.
+/// The projection centre in the matrix's NDC: `P × (0, 0, −near, 1)` divided by w (Oculus'
+/// asymmetric FOV FAQ, docs/density-model.md#fovea-placement). For OpenGL and Direct3D it equals [`Fov::projection_center_ndc`]; Vulkan's y is flipped.
 pub fn projection_center_ndc(m: &Mat4, near: f32) -> [f32; 2] {
     let c = *m * Vec4::new(0.0, 0.0, -near, 1.0);
     [c.x / c.w, c.y / c.w]
