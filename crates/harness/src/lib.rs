@@ -3,9 +3,9 @@
 //! It loads API layer libraries the way the Khronos loader does (`dlopen` with
 //! `RTLD_LAZY | RTLD_LOCAL`, `xrNegotiateLoaderApiLayerInterface` with the loader's own version
 //! ranges, one `XrApiLayerNextInfo` per layer, the topmost `xrGetInstanceProcAddr` for everything
-//! after creation; openxr-layer-facts.md §2) and ends in the simulated runtime, linked in-process,
-//! so a test can drive a layer and read exactly what reached the runtime through
-//! [`fovea_sim::control`].
+//! after creation; docs/openxr-layer.md#loader-negotiation, #creating-the-instance) and ends in the
+//! simulated runtime, linked in-process, so a test can drive a layer and read exactly what reached
+//! the runtime through [`fovea_sim::control`].
 //!
 //! Differences from the real loader, on purpose: several instances may live at once (tests run in
 //! parallel), and layers are named by path rather than discovered from manifests (the system-loader
@@ -313,8 +313,8 @@ impl Chain {
         self.layers.first().map_or(runtime_gipa(), |l| l.gipa)
     }
 
-    /// What the loader checks before any layer runs (openxr-layer-facts.md §2.8): every enabled
-    /// extension must come from the runtime or an enabled layer.
+    /// What the loader checks before any layer runs (docs/openxr-layer.md#enumerating-extensions):
+    /// every enabled extension must come from the runtime or an enabled layer.
     pub fn available_extensions(&self) -> Vec<String> {
         let mut names = Vec::new();
         // SAFETY: the enumerate functions are called with valid buffers.

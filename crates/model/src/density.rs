@@ -8,22 +8,23 @@
 //! * **Angles, not pixels.** A planar (pinhole) projection puts a ray at tangent `(x, y)` from the
 //!   optical axis, so relative to the view centre its pixels per radian are, per axis,
 //!   `Dx = (1+x²+y²)/sqrt(1+y²)` horizontally and `Dy = (1+x²+y²)/sqrt(1+x²)` vertically
-//!   (headsets-and-numbers.md §5; the fixed-foveated-rendering seed's "a 20° arc at the edge takes up
-//!   much more of the screen"). A level is a *floor* `F(θ)` on that relative angular resolution as a
-//!   function of the angle `θ` from the fovea, so a level means the same foveal size in degrees on
-//!   every headset and at every resolution. A fragment of `s` pixels along an axis divides the
+//!   (docs/density-model.md#planar-projection: a degree at the edge of a wide view covers far more
+//!   of the screen than one at the centre). A level is a *floor* `F(θ)` on that relative angular
+//!   resolution as a function of the angle `θ` from the fovea, so a level means the same foveal size
+//!   in degrees on every headset and at every resolution. A fragment of `s` pixels along an axis divides the
 //!   resolution by `s`, so the map spends the projection's peripheral surplus first: LOW (floor 1)
 //!   only takes back that surplus.
 //! * **The fovea** is the straight-ahead direction, i.e. the projection centre, which an off-centre
-//!   (asymmetric) projection does not put at the image centre (asymmetric-FOV FAQ). `verticalOffset`
-//!   turns it up (positive) or down by that many degrees (XrFoveationLevelProfileCreateInfoFB). Both
-//!   are defined per view by its FOV, so a mirrored FOV gets the mirrored map.
+//!   (asymmetric) projection does not put at the image centre
+//!   (docs/density-model.md#fovea-placement). `verticalOffset` turns it up (positive) or down by
+//!   that many degrees (XrFoveationLevelProfileCreateInfoFB). Both are defined per view by its FOV,
+//!   so a mirrored FOV gets the mirrored map.
 //! * **Cheapest map meeting the floor.** Per texel and axis the fragment size is the largest power of
 //!   two (up to `Grid::max_fragment`) for which the floor holds at *every* point of the texel, not
 //!   just its centre. Per-axis densities are independent, so this also minimises the shaded area.
-//! * **Encoding** follows the Vulkan rule (openxr-layer-facts.md §4): fragment area = 1/density per
-//!   axis, rounded down to a supported size; 128/255 would give 1.99, so 2× needs ≤127, 4× ≤63.
-//!   Density 0 is undefined, so regions nobody sees get the *lowest* density, never 0.
+//! * **Encoding** follows the Vulkan rule (docs/openxr-layer.md#fdm-encoding): fragment area =
+//!   1/density per axis, rounded down to a supported size; 128/255 would give 1.99, so 2× needs
+//!   ≤127, 4× ≤63. Density 0 is undefined, so regions nobody sees get the *lowest* density, never 0.
 //!
 //! # Evaluating a texel
 //!
@@ -63,7 +64,7 @@ impl TanBox {
 }
 
 /// Foveation levels, numbered as `XrFoveationLevelFB` and Quest's `debug.oculus.foveation.level`
-/// (fixed-foveated-rendering seed; headsets-and-numbers.md §3.1).
+/// (docs/density-model.md#floors, docs/users.md#quest-debug-properties).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Level {
     None = 0,
@@ -138,7 +139,7 @@ impl FromStr for Level {
 ///
 /// Meta describes High Top as "High foveation setting with more detail toward the bottom of the view
 /// and more foveation near the top" and says OpenXR apps get it from `verticalOffset` on HIGH, but
-/// publishes no number (headsets-and-numbers.md §3.1 and §6). We use −10°: the eyes' resting line of
+/// publishes no number (docs/density-model.md#high-top). We use −10°: the eyes' resting line of
 /// sight (the "normal line of sight" of display ergonomics) lies about 10–15° below the horizontal,
 /// and on Quest 3 the image centre is already 5.5° below the projection centre (44° up, 55° down),
 /// so 10° puts the fovea where content below eye level is looked at without leaving HIGH's 15°
@@ -190,8 +191,8 @@ pub struct View {
     pub fov: Fov,
     /// Where it was rendered.
     pub rect: Rect,
-    /// The true FOV when narrower (Quest's symmetric-FOV mode, fixed-foveated-rendering seed): pixels
-    /// outside it are never shown and get the lowest density.
+    /// The true FOV when narrower (Quest's symmetric-FOV mode, docs/headsets.md#symmetric-fov):
+    /// pixels outside it are never shown and get the lowest density.
     pub visible: Option<Fov>,
 }
 
@@ -217,7 +218,7 @@ impl Grid {
         }
     }
 
-    /// Map size in texels: `ceil(extent / texel)` (openxr-layer-facts.md §4).
+    /// Map size in texels: `ceil(extent / texel)` (docs/openxr-layer.md#fdm-texel-size).
     pub fn map_extent(&self) -> [u32; 2] {
         [
             self.extent[0].div_ceil(self.texel[0].max(1)),
@@ -249,7 +250,7 @@ pub fn encode(fragment: u32) -> u8 {
 }
 
 /// The fragment size the Vulkan rule gives for a byte: `1/density = 255/byte`, rounded down to a
-/// power of two. 0 means undefined (density 0 is invalid, openxr-layer-facts.md §4).
+/// power of two. 0 means undefined (density 0 is invalid, docs/openxr-layer.md#fdm-encoding).
 pub fn decode(byte: u8) -> u32 {
     if byte == 0 {
         return 0;

@@ -6,7 +6,8 @@
 //! period over half-second windows of display time: when at least a tenth of a window's frames miss,
 //! the level goes up one step; when no frame has missed for a calm period, it comes down one step.
 //!
-//! Level jumps are visible (the fixed-foveated-rendering seed warns about them), so:
+//! Level jumps are visible (Meta advises against frequent changes within a scene,
+//! docs/density-model.md#level-changes), so:
 //! - no two changes within [`DWELL_NS`] (1 s) of display time;
 //! - hysteresis: going up needs misses now, coming down needs a calm period (2 s at first) without
 //!   any, and a step down that brings misses back within 2 s doubles the calm period needed next

@@ -48,8 +48,9 @@ impl Fov {
     /// Where the straight-ahead direction lands in normalised device coordinates (y up): the
     /// projection centre, where fovea puts the fovea.
     ///
-    /// The asymmetric-FOV FAQ computes it as `ProjectionMatrix × (0, 0, −near, 1)`; for an
-    /// off-centre frustum with positive tangents `l, r, u, d` that is `((l−r)/(l+r), (d−u)/(d+u))`
+    /// Oculus' asymmetric FOV FAQ (docs/density-model.md#fovea-placement) computes it as
+    /// `ProjectionMatrix × (0, 0, −near, 1)`; for an off-centre frustum with positive tangents
+    /// `l, r, u, d` that is `((l−r)/(l+r), (d−u)/(d+u))`
     /// after the divide by w (checked against a projection matrix in [`crate::projection`]'s
     /// tests). For Quest 3's left eye (54° left, 40° right) it is at x ≈ +0.24: right of the image
     /// centre. This is the only place fovea computes it.

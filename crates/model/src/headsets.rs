@@ -1,10 +1,10 @@
 //! Headset presets and eye-buffer sizing.
 //!
-//! Numbers come from `shared/docs/headsets-and-numbers.md` (§1.1, §2.1, §2.3): per-eye FOV tangents as
-//! the runtimes report them (LibOVR `DefaultEyeFov`, OpenVR `GetProjectionRaw`) and pixels per unit
+//! Numbers come from public runtime records (docs/headsets.md#presets): per-eye FOV tangents as the
+//! runtimes report them (LibOVR `DefaultEyeFov`, OpenVR `GetProjectionRaw`) and pixels per unit
 //! tangent at the centre. The sizing rule `alignUp16(round(ppt × (tanA + tanB)))` reproduces every
-//! Oculus PC runtime record in that document exactly (§1.2), so the simulated runtime and the layer's
-//! tools both use it.
+//! Oculus PC runtime record exactly (docs/headsets.md#records), so the simulated runtime and the
+//! layer's tools both use it.
 //!
 //! Pure data and arithmetic: no OpenXR, no Vulkan.
 
@@ -151,7 +151,7 @@ fn align_up_16(v: u32) -> u32 {
 }
 
 /// The recommended eye-buffer size for one eye: pixels per tangent times the tangent span, rounded to
-/// nearest, then up to a multiple of 16 (headsets-and-numbers.md §1.2).
+/// nearest, then up to a multiple of 16 (docs/headsets.md#sizing-rule).
 fn recommended_size(t: Tangents, pixels_per_tangent: [f64; 2]) -> [u32; 2] {
     let w = (pixels_per_tangent[0] * (t.left + t.right)).round() as u32;
     let h = (pixels_per_tangent[1] * (t.up + t.down)).round() as u32;
@@ -159,8 +159,8 @@ fn recommended_size(t: Tangents, pixels_per_tangent: [f64; 2]) -> [u32; 2] {
 }
 
 /// One symmetric FOV that contains every given eye's FOV: the largest half-angle on each axis,
-/// mirrored. This is Quest's "symmetric FOV" mode (fixed-foveated-rendering seed) and Oculus'
-/// "symmetric" rendering (asymmetric-FOV FAQ).
+/// mirrored. This is Quest's "symmetric FOV" mode and Oculus' "symmetric" rendering
+/// (docs/headsets.md#symmetric-fov).
 fn symmetric(eyes: &[Tangents]) -> Tangents {
     let h = eyes.iter().fold(0.0f64, |m, t| m.max(t.left).max(t.right));
     let v = eyes.iter().fold(0.0f64, |m, t| m.max(t.up).max(t.down));
@@ -203,8 +203,9 @@ impl Headset {
 mod tests {
     use super::*;
 
-    /// The six Oculus PC runtime records that the sizing rule must reproduce (§1.2), of which the
-    /// presets carry four, plus the symmetric CV1 size of the asymmetric FOV FAQ (§1.3).
+    /// The six Oculus PC runtime records that the sizing rule must reproduce
+    /// (docs/headsets.md#records), of which the presets carry four, plus the symmetric CV1 size of
+    /// Oculus' asymmetric FOV FAQ (docs/headsets.md#symmetric-fov).
     #[test]
     fn sizing_reproduces_runtime_records() {
         let expect = [

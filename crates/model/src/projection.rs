@@ -1,15 +1,18 @@
 //! Off-centre projection matrices and the projection centre.
 //!
 //! An asymmetric FOV needs an off-centre frustum: four independent tangents instead of a vertical FOV
-//! and an aspect ratio (asymmetric-FOV FAQ). The straight-ahead direction then lands off the image
-//! centre, at `ProjectionMatrix × (0, 0, −near, 1)` (same FAQ, OpenGL form), which is where the
-//! density model puts the fovea ([`crate::Fov::projection_center_ndc`]).
+//! and an aspect ratio (Oculus' asymmetric FOV FAQ,
+//! <https://developer.oculus.com/documentation/unity/latest/concepts/unity-asymmetric-fov-faq/>). The
+//! straight-ahead direction then lands off the image centre, at `ProjectionMatrix × (0, 0, −near, 1)`
+//! (same FAQ, OpenGL form), which is where the density model puts the fovea
+//! ([`crate::Fov::projection_center_ndc`]; docs/density-model.md#fovea-placement).
 //!
 //! Depth: the third row must map the near plane to the start of the depth range and the far plane to
 //! its end (−1 and 1 in OpenGL, 0 and 1 in Direct3D/Vulkan). The Rift SDK documentation's matrix had
 //! `f/(n−f)` and `fn/(n−f)` there, which puts the nominal near plane at 0 instead of −1 in OpenGL,
 //! wasting half the depth range and clipping at the wrong distance; the correction is
-//! `(n+f)/(n−f)` and `2fn/(n−f)` (projection-matrix seed). The tests pin every convention below.
+//! `(n+f)/(n−f)` and `2fn/(n−f)` (Oliver Kreylos, "Small Correction to Rift's Projection Matrix",
+//! <http://doc-ok.org/?p=804>). The tests pin every convention below.
 //!
 //! View space is right-handed, looking down −z, y up (OpenXR).
 
@@ -74,8 +77,8 @@ pub fn projection(fov: Fov, clip: ClipSpace, depth: Depth) -> Mat4 {
     )
 }
 
-/// The projection centre in the matrix's NDC: `P × (0, 0, −near, 1)` divided by w (asymmetric-FOV
-/// FAQ). For OpenGL and Direct3D it equals [`Fov::projection_center_ndc`]; Vulkan's y is flipped.
+/// The projection centre in the matrix's NDC: `P × (0, 0, −near, 1)` divided by w (Oculus'
+/// asymmetric FOV FAQ, docs/density-model.md#fovea-placement). For OpenGL and Direct3D it equals [`Fov::projection_center_ndc`]; Vulkan's y is flipped.
 pub fn projection_center_ndc(m: &Mat4, near: f32) -> [f32; 2] {
     let c = *m * Vec4::new(0.0, 0.0, -near, 1.0);
     [c.x / c.w, c.y / c.w]
@@ -88,7 +91,7 @@ pub fn ndc_depth(m: &Mat4, dist: f32) -> f32 {
 }
 
 /// One symmetric FOV containing every given FOV: the largest half-angle on each axis, mirrored.
-/// Quest's symmetric-FOV mode renders both eyes with it (fixed-foveated-rendering seed); the pixels
+/// Quest's symmetric-FOV mode renders both eyes with it (docs/headsets.md#symmetric-fov); the pixels
 /// outside an eye's own FOV are never shown. `None` for no FOVs.
 pub fn symmetric_fov(fovs: &[Fov]) -> Option<Fov> {
     let h = fovs
@@ -105,7 +108,7 @@ pub fn symmetric_fov(fovs: &[Fov]) -> Option<Fov> {
 }
 
 /// The image size that keeps `size`'s pixels per tangent when the FOV grows from `from` to `to`:
-/// rounded to nearest, then up to a multiple of 16 (the sizing rule, headsets-and-numbers.md).
+/// rounded to nearest, then up to a multiple of 16 (the sizing rule, docs/headsets.md#sizing-rule).
 pub fn rescaled_size(size: [u32; 2], from: Fov, to: Fov) -> [u32; 2] {
     let span = |a: f32, b: f32| f64::from(b).tan() - f64::from(a).tan();
     let scale = |px: u32, old: f64, new: f64| {
@@ -190,10 +193,10 @@ mod tests {
         }
     }
 
-    /// The Rift SDK documentation's third row (projection-matrix seed) puts the near plane at 0 in
-    /// OpenGL's −1..1; the corrected one puts it at −1.
+    /// The Rift SDK documentation's third row (<http://doc-ok.org/?p=804>) puts the near plane at 0
+    /// in OpenGL's −1..1; the corrected one puts it at −1.
     #[test]
-    fn seed_correction_differs_from_the_documented_row() {
+    fn corrected_third_row_differs_from_the_documented_one() {
         let (n, f) = (0.1f32, 10.0f32);
         let documented = |z: f32| ((f / (n - f)) * z + (f * n / (n - f))) / -z;
         assert!(close(documented(-n), 0.0, 1e-6));
