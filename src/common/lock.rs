@@ -1,7 +1,7 @@
-//! The layer's locks, with the lock order of [`crate::xr::registry`] checked in debug builds.
+//! The layer's locks, with their order (docs/ARCHITECTURE.md#lock-order) checked in debug builds.
 //!
 //! A layer runs on the application's threads, and a deadlock in it hangs the application. The order
-//! that rules it out is written down in `state.rs`; here it is enforced: every lock has a [`Rank`],
+//! that rules it out is written down in docs/ARCHITECTURE.md#lock-order; here it is enforced: every lock has a [`Rank`],
 //! and a debug build keeps, per thread, the ranks it holds and panics (which the hook's guard turns
 //! into XR_ERROR_RUNTIME_FAILURE and an error line, and the tests into a failure) as soon as a
 //! thread takes a lock out of order, whether or not another thread is there to deadlock with. A

@@ -38,10 +38,19 @@ use fovea_model::density::Grid;
 use fovea_model::maps::{fill_layers, Inputs, DEFAULT_TEXEL};
 
 use crate::bridge::MapKey;
-use crate::xr::registry::VulkanBinding;
 
 /// The density image format: the one Vulkan makes mandatory for FDM (fragmentdensitymapops.adoc).
 pub const FORMAT: vk::Format = vk::Format::R8G8_UNORM;
+
+/// `XrGraphicsBindingVulkanKHR`'s handles, as raw values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VulkanBinding {
+    pub instance: u64,
+    pub physical_device: u64,
+    pub device: u64,
+    pub queue_family_index: u32,
+    pub queue_index: u32,
+}
 
 /// A failed Vulkan step, for the log.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -30,7 +30,7 @@ use xr::Handle;
 
 use crate::bridge::{effective, FoveationState, ProfileParams, Submitted, ViewFovs};
 use crate::common::settings::Overrides;
-use crate::gpu::density_images::{DensityImages, SessionGpu};
+use crate::gpu::density_images::{DensityImages, SessionGpu, VulkanBinding};
 use crate::xr::dispatch::Next;
 use crate::xr::extensions::Extensions;
 use fovea_model::density::Pattern;
@@ -195,16 +195,6 @@ pub struct FrameLoop {
     pub missed: u32,
     /// When `xrBeginFrame` returned for the frame being rendered.
     pub begin_at: Option<Instant>,
-}
-
-/// `XrGraphicsBindingVulkanKHR`'s handles, as raw values.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct VulkanBinding {
-    pub instance: u64,
-    pub physical_device: u64,
-    pub device: u64,
-    pub queue_family_index: u32,
-    pub queue_index: u32,
 }
 
 /// What fovea keeps of `XrSwapchainCreateInfo`.

@@ -10,7 +10,8 @@ use crate::common::ffi::{self, guard};
 use crate::gpu::density_images::SessionGpu;
 use crate::xr::dispatch;
 use crate::xr::extensions::Ext;
-use crate::xr::registry::{registry, Instance, Session, VulkanBinding};
+use crate::gpu::density_images::VulkanBinding;
+use crate::xr::registry::{registry, Instance, Session};
 use fovea_model::projection::rescaled_size;
 use fovea_model::Fov;
 
