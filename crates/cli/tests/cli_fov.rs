@@ -42,5 +42,9 @@ fn fov_names_the_accepted_headsets_on_a_bad_name() {
         "{err}"
     );
     let (ok, _, err) = fovea(&["fov"]);
-    assert!(!ok && err.contains("--headset is required"), "{err}");
+    assert!(
+        !ok && err
+            .contains("the following required arguments were not provided:\n  --headset <NAME>"),
+        "{err}"
+    );
 }
