@@ -66,7 +66,7 @@ impl Command {
 pub enum Via {
     /// examples/foveated_vulkan through the system's Khronos loader
     Loader,
-    /// A headless frame loop through fovea's fake loader harness
+    /// a headless frame loop through fovea's fake loader harness
     Harness,
 }
 
