@@ -43,6 +43,8 @@ struct CustomJson {
     size: [u32; 2],
     /// `"--size"`, or `"fov"` when sized from the FOV.
     size_from: &'static str,
+    /// The pixels per unit tangent a size from the FOV used.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pixels_per_tangent: Option<f64>,
 }
 
