@@ -2,142 +2,20 @@
 //! implicit layer manifests, which layers it enables and in which order) and the misconfigurations
 //! that keep fovea from loading or load it twice.
 //!
-//! The model follows the loader's `manifest_file.cpp` and `api_layer_interface.cpp` (1.1.x;
-//! openxr-layer-facts.md §2.6–2.8). [`discover`] and [`problems`] take the environment and the
-//! filesystem root as arguments, so tests drive them without the real home directory or `/etc`.
+//! Where the loader looks is [`crate::discovery`], shared with `fovea install`; what it makes of
+//! each file and in which order it loads layers follows its `api_layer_interface.cpp` (1.1.x;
+//! <https://registry.khronos.org/OpenXR/specs/1.0/loader.html>). [`discover`] and [`problems`]
+//! take the environment and the filesystem root as arguments, so tests drive them without the real
+//! home directory or `/etc`.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::args::Args;
-
-/// fovea's manifest file name, as `fovea install` writes it.
-pub const MANIFEST_FILE: &str = "XR_APILAYER_FOVEA_foveation.json";
-
-/// Explicit layers load only when named (`XR_ENABLE_API_LAYERS` or the application); implicit ones
-/// load for every application unless their `disable_environment` variable is set.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kind {
-    Explicit,
-    Implicit,
-}
-
-impl Kind {
-    /// The directory under each base directory: `openxr/1/api_layers/{explicit,implicit}.d`.
-    pub fn relative_dir(self) -> &'static str {
-        match self {
-            Kind::Explicit => "openxr/1/api_layers/explicit.d",
-            Kind::Implicit => "openxr/1/api_layers/implicit.d",
-        }
-    }
-}
-
-/// What the loader reads: the process environment, and where the fixed directories are.
-pub struct Environment<'a> {
-    pub vars: &'a BTreeMap<String, String>,
-    /// Prefix of the loader's built-in directories (`/etc/xdg`, `/etc`, `/usr/local/share`,
-    /// `/usr/share`): `/` for the real system. Directories named by variables are taken as they are.
-    pub root: &'a Path,
-}
-
-impl Environment<'_> {
-    /// A variable's value; the loader treats an empty one as unset.
-    fn get(&self, name: &str) -> Option<&str> {
-        self.vars
-            .get(name)
-            .map(String::as_str)
-            .filter(|v| !v.is_empty())
-    }
-
-    /// Whether a variable is present, even empty: the test for `disable_environment`.
-    fn is_set(&self, name: &str) -> bool {
-        self.vars.contains_key(name)
-    }
-
-    fn fixed(&self, path: &str) -> PathBuf {
-        self.root.join(path.trim_start_matches('/'))
-    }
-
-    /// A ':'-separated list of directories, or the built-in default when unset.
-    fn dirs(&self, name: &str, default: &[&str]) -> Vec<PathBuf> {
-        match self.get(name) {
-            Some(v) => v
-                .split(':')
-                .filter(|d| !d.is_empty())
-                .map(PathBuf::from)
-                .collect(),
-            None => default.iter().map(|d| self.fixed(d)).collect(),
-        }
-    }
-}
-
-/// `$XDG_DATA_HOME`, else `$HOME/.local/share`: where per-user layer manifests go.
-pub fn data_home(get: impl Fn(&str) -> Option<String>) -> Option<PathBuf> {
-    let get = |k: &str| get(k).filter(|v| !v.is_empty());
-    get("XDG_DATA_HOME")
-        .map(PathBuf::from)
-        .or_else(|| get("HOME").map(|h| Path::new(&h).join(".local/share")))
-}
-
-/// The directories the loader reads layer manifests of one kind from, in its order, and whether
-/// `XR_API_LAYER_PATH` replaced them (explicit layers only).
-pub fn layer_dirs(env: &Environment, kind: Kind) -> (Vec<PathBuf>, bool) {
-    if kind == Kind::Explicit {
-        if let Some(p) = env.get("XR_API_LAYER_PATH") {
-            let dirs = p.split(':').filter(|d| !d.is_empty()).map(PathBuf::from);
-            return (dirs.collect(), true);
-        }
-    }
-    let mut bases = env.dirs("XDG_CONFIG_DIRS", &["/etc/xdg"]);
-    // SYSCONFDIR, compiled in: /etc in Debian's loader.
-    bases.push(env.fixed("/etc"));
-    bases.extend(env.dirs("XDG_DATA_DIRS", &["/usr/local/share", "/usr/share"]));
-    bases.extend(data_home(|k| env.get(k).map(String::from)));
-    let rel = kind.relative_dir();
-    (bases.iter().map(|b| b.join(rel)).collect(), false)
-}
-
-/// `XR_ARCH_ABI` as the loader spells it, for `active_runtime.<abi>.json`.
-fn arch_abi() -> &'static str {
-    match std::env::consts::ARCH {
-        "x86" => "i686",
-        "arm" => "armv7a-vfp",
-        other => other,
-    }
-}
-
-/// The runtime manifest paths the loader tries, in order, and what chose them; the first that
-/// exists wins. Newer loaders try `active_runtime.<abi>.json` before `active_runtime.json`.
-pub fn runtime_candidates(env: &Environment) -> Vec<(PathBuf, &'static str)> {
-    if let Some(p) = env.get("XR_RUNTIME_JSON") {
-        return vec![(PathBuf::from(p), "XR_RUNTIME_JSON")];
-    }
-    let mut bases = Vec::new();
-    let config_home = env
-        .get("XDG_CONFIG_HOME")
-        .map(PathBuf::from)
-        .or_else(|| env.get("HOME").map(|h| Path::new(h).join(".config")));
-    bases.extend(config_home.map(|d| (d, "XDG_CONFIG_HOME")));
-    bases.extend(
-        env.dirs("XDG_CONFIG_DIRS", &["/etc/xdg"])
-            .into_iter()
-            .map(|d| (d, "XDG_CONFIG_DIRS")),
-    );
-    bases.push((env.fixed("/etc"), "the loader's SYSCONFDIR"));
-    let decorated = format!("active_runtime.{}.json", arch_abi());
-    bases
-        .into_iter()
-        .flat_map(|(b, why)| {
-            let dir = b.join("openxr/1");
-            [
-                (dir.join(&decorated), why),
-                (dir.join("active_runtime.json"), why),
-            ]
-        })
-        .collect()
-}
+use crate::discovery::{
+    layer_dirs, process_vars, runtime_candidates, Environment, Kind, MANIFEST_FILE,
+    RUNTIME_JSON_VAR,
+};
 
 /// The active runtime, as far as the loader's discovery goes.
 #[derive(Debug)]
@@ -180,7 +58,7 @@ fn resolve_library(manifest: &Path, library: &str) -> PathBuf {
 fn find_runtime(env: &Environment) -> Option<Runtime> {
     let (manifest, source) = runtime_candidates(env).into_iter().find(|(p, why)| {
         // XR_RUNTIME_JSON is used whether or not the file exists.
-        *why == "XR_RUNTIME_JSON" || p.exists()
+        *why == RUNTIME_JSON_VAR || p.exists()
     })?;
     let read = read_json(&manifest).and_then(|v| {
         let rt = &v["runtime"];
@@ -660,15 +538,8 @@ pub fn render(d: &Discovery, problems: &[String]) -> String {
     out
 }
 
-pub fn run(_args: &Args) -> Result<(), String> {
-    let vars: BTreeMap<String, String> = std::env::vars_os()
-        .map(|(k, v)| {
-            (
-                k.to_string_lossy().into_owned(),
-                v.to_string_lossy().into_owned(),
-            )
-        })
-        .collect();
+pub fn run() -> Result<(), String> {
+    let vars = process_vars();
     let env = Environment {
         vars: &vars,
         root: Path::new("/"),
@@ -685,7 +556,10 @@ pub fn run(_args: &Args) -> Result<(), String> {
 
 #[cfg(test)]
 mod tests {
+    use std::collections::BTreeMap;
+
     use super::*;
+    use crate::discovery::arch_abi;
 
     /// A scratch directory standing in for `/`.
     fn root(name: &str) -> PathBuf {
@@ -716,43 +590,6 @@ mod tests {
             ),
         )
         .unwrap();
-    }
-
-    #[test]
-    fn search_order_follows_the_loader() {
-        let r = root("order");
-        let v = vars(&[("HOME", "/home/u")]);
-        let env = Environment { vars: &v, root: &r };
-        let (dirs, over) = layer_dirs(&env, Kind::Implicit);
-        assert!(!over);
-        let rel = "openxr/1/api_layers/implicit.d";
-        assert_eq!(
-            dirs,
-            [
-                r.join("etc/xdg").join(rel),
-                r.join("etc").join(rel),
-                r.join("usr/local/share").join(rel),
-                r.join("usr/share").join(rel),
-                PathBuf::from("/home/u/.local/share").join(rel),
-            ]
-        );
-        // XR_API_LAYER_PATH replaces the explicit search and leaves the implicit one alone; an
-        // empty variable counts as unset.
-        let v = vars(&[
-            ("XR_API_LAYER_PATH", "/a::/b"),
-            ("XDG_DATA_DIRS", "/d"),
-            ("XDG_DATA_HOME", ""),
-            ("HOME", "/h"),
-        ]);
-        let env = Environment { vars: &v, root: &r };
-        assert_eq!(
-            layer_dirs(&env, Kind::Explicit),
-            (vec![PathBuf::from("/a"), PathBuf::from("/b")], true)
-        );
-        let (dirs, _) = layer_dirs(&env, Kind::Implicit);
-        assert_eq!(dirs[2], Path::new("/d").join(rel));
-        assert_eq!(dirs[3], Path::new("/h/.local/share").join(rel));
-        assert_eq!(dirs.len(), 4);
     }
 
     #[test]

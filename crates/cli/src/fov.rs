@@ -1,24 +1,54 @@
 //! `fovea fov --headset NAME [--json]`: each eye's FOV and projection centre, and the recommended
 //! eye-buffer size with the asymmetric FOVs against one shared symmetric FOV (asymmetric FOV FAQ).
 
-use fovea_model::density::{Grid, Rect, View};
-use fovea_model::headsets::{by_id, ids, Headset};
+use serde::Serialize;
 
-use crate::args::Args;
+use crate::args::FovArgs;
+use crate::json::Fixed;
 
-/// Resolves `--headset`, naming the accepted values when it is wrong.
-pub fn headset(args: &Args) -> Result<&'static Headset, String> {
-    let id = args.required("headset")?;
-    by_id(id).ok_or_else(|| {
-        format!(
-            "unknown headset '{id}'; accepted: {}",
-            ids().collect::<Vec<_>>().join(", ")
-        )
-    })
+/// One eye's FOV in degrees, as the JSON outputs name the sides.
+#[derive(Serialize)]
+pub struct FovDeg {
+    left: Fixed<4>,
+    right: Fixed<4>,
+    up: Fixed<4>,
+    down: Fixed<4>,
 }
 
-pub fn run(args: &Args) -> Result<(), String> {
-    let h = headset(args)?;
+impl FovDeg {
+    pub fn new([l, r, u, d]: [f64; 4]) -> FovDeg {
+        FovDeg {
+            left: Fixed(l),
+            right: Fixed(r),
+            up: Fixed(u),
+            down: Fixed(d),
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct EyeJson {
+    eye: &'static str,
+    fov_deg: FovDeg,
+    projection_center_ndc: [Fixed<6>; 2],
+}
+
+#[derive(Serialize)]
+struct Recommended {
+    asymmetric: [u32; 2],
+    symmetric: [u32; 2],
+}
+
+#[derive(Serialize)]
+struct FovJson {
+    headset: &'static str,
+    eyes: Vec<EyeJson>,
+    recommended: Recommended,
+    symmetric_pixel_saving: Fixed<6>,
+}
+
+pub fn run(args: &FovArgs) -> Result<(), String> {
+    let h = args.headset;
     let [aw, ah] = h.recommended_size();
     let [sw, sh] = h.symmetric_size();
     let saving = h.symmetric_pixel_saving();
@@ -27,21 +57,26 @@ pub fn run(args: &Args) -> Result<(), String> {
         .zip(h.fovs())
         .map(|(name, f)| (*name, f.degrees(), f.projection_center_ndc()))
         .collect();
-    if args.switch("json") {
-        let eyes_json: Vec<String> = eyes
-            .iter()
-            .map(|(name, [l, r, u, d], [x, y])| {
-                format!(
-                    "{{\"eye\":\"{name}\",\"fov_deg\":{{\"left\":{l:.4},\"right\":{r:.4},\"up\":{u:.4},\"down\":{d:.4}}},\
-                     \"projection_center_ndc\":[{x:.6},{y:.6}]}}"
-                )
-            })
-            .collect();
+    if args.json {
+        let json = FovJson {
+            headset: h.id,
+            eyes: eyes
+                .iter()
+                .map(|&(eye, deg, [x, y])| EyeJson {
+                    eye,
+                    fov_deg: FovDeg::new(deg),
+                    projection_center_ndc: [Fixed(f64::from(x)), Fixed(f64::from(y))],
+                })
+                .collect(),
+            recommended: Recommended {
+                asymmetric: [aw, ah],
+                symmetric: [sw, sh],
+            },
+            symmetric_pixel_saving: Fixed(saving),
+        };
         println!(
-            "{{\"headset\":\"{}\",\"eyes\":[{}],\"recommended\":{{\"asymmetric\":[{aw},{ah}],\"symmetric\":[{sw},{sh}]}},\
-             \"symmetric_pixel_saving\":{saving:.6}}}",
-            h.id,
-            eyes_json.join(",")
+            "{}",
+            serde_json::to_string(&json).map_err(|e| e.to_string())?
         );
         return Ok(());
     }
@@ -55,29 +90,4 @@ pub fn run(args: &Args) -> Result<(), String> {
     }
     println!("recommended per eye: asymmetric {aw}x{ah}, symmetric {sw}x{sh}, asymmetric saves {:.1}% of pixels", saving * 100.0);
     Ok(())
-}
-
-/// One eye of a preset at its recommended size, as the density model sees it.
-pub fn eye_view(h: &Headset, eye: usize, texel: u32) -> (Grid, View) {
-    let [w, hh] = h.recommended_size();
-    let view = View {
-        fov: h.fovs()[eye],
-        rect: Rect {
-            x: 0,
-            y: 0,
-            width: w,
-            height: hh,
-        },
-        visible: None,
-    };
-    (Grid::new([w, hh], [texel, texel]), view)
-}
-
-/// Resolves `--texel` (default 32): the density map texel size in pixels.
-pub fn texel(args: &Args) -> Result<u32, String> {
-    let t: u32 = args.parsed_or("texel", 32)?;
-    if !(1..=1024).contains(&t) {
-        return Err(format!("--texel {t}: expected 1..1024 pixels"));
-    }
-    Ok(t)
 }

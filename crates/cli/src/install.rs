@@ -1,14 +1,19 @@
 //! `fovea install [--implicit] [--system]` / `fovea uninstall [--implicit] [--system]`: write or
-//! remove a layer manifest where the loader looks (openxr-layer-facts.md §2.7), pointing at this
-//! build's `libfovea.so` by absolute path, so the manifest works from any directory.
+//! remove a layer manifest where the loader looks ([`crate::discovery`]), pointing at this build's
+//! `libfovea.so` by absolute path, so the manifest works from any directory.
 //!
 //! The manifest is the checked-in one with `library_path` replaced, so the extension list has one
 //! source (tests/manifests.rs checks it against the layer's table).
 
 use std::path::{Path, PathBuf};
 
-use crate::args::Args;
-use crate::doctor::{data_home, Kind, MANIFEST_FILE};
+use serde_json::Value;
+
+use crate::args::InstallArgs;
+use crate::discovery::{
+    install_path, layer_dirs, process_vars, standard_layer_dirs, Environment, Kind, LAYER_PATH_VAR,
+    SYSTEM_DATA_DIR,
+};
 
 const EXPLICIT_MANIFEST: &str = include_str!("../../../manifest/XR_APILAYER_FOVEA_foveation.json");
 const IMPLICIT_MANIFEST: &str =
@@ -18,31 +23,12 @@ const IMPLICIT_MANIFEST: &str =
 /// `libfovea.so` beside it that is guaranteed fresh, and packagers may install the two apart.
 pub const LIBRARY_ENV: &str = "FOVEA_LIBRARY";
 
-/// `--system` writes here: `/usr/local/share` is in the loader's default `XDG_DATA_DIRS`, and it is
-/// the place for files no package manager owns.
-const SYSTEM_DATA_DIR: &str = "/usr/local/share";
-
-fn kind(args: &Args) -> Kind {
-    if args.switch("implicit") {
+fn kind(args: &InstallArgs) -> Kind {
+    if args.implicit {
         Kind::Implicit
     } else {
         Kind::Explicit
     }
-}
-
-/// Where the manifest goes: `$XDG_DATA_HOME` (default `~/.local/share`), or `/usr/local/share`
-/// with `--system`, then `openxr/1/api_layers/{explicit,implicit}.d/XR_APILAYER_FOVEA_foveation.json`.
-pub fn manifest_path(
-    kind: Kind,
-    system: bool,
-    get: impl Fn(&str) -> Option<String>,
-) -> Result<PathBuf, String> {
-    let base = if system {
-        PathBuf::from(SYSTEM_DATA_DIR)
-    } else {
-        data_home(get).ok_or("neither XDG_DATA_HOME nor HOME is set")?
-    };
-    Ok(base.join(kind.relative_dir()).join(MANIFEST_FILE))
 }
 
 /// The layer library: `$FOVEA_LIBRARY`, else `libfovea.so` next to the running `fovea`; absolute
@@ -70,41 +56,21 @@ fn library() -> Result<PathBuf, String> {
     }
 }
 
-/// `template` with its `"library_path"` string replaced by `library`, JSON-escaped. Textual, so the
-/// file keeps the checked-in layout.
+/// `template` with `api_layer.library_path` set to `library`. Edited as a JSON value, so escaping
+/// is serde_json's; written with the template's key order and two-space indent, so the installed
+/// file reads like the checked-in one.
 pub fn with_library_path(template: &str, library: &str) -> Result<String, String> {
-    const KEY: &str = "\"library_path\"";
-    let at = template
-        .find(KEY)
-        .ok_or("no library_path in the manifest")?;
-    if template[at + KEY.len()..].contains(KEY) {
-        return Err("library_path appears twice in the manifest".into());
-    }
-    let after_key = at + KEY.len();
-    let open = after_key
-        + template[after_key..]
-            .find('"')
-            .ok_or("library_path has no string value")?;
-    // The checked-in value is a plain path, but skip escapes anyway.
-    let mut close = None;
-    let mut escaped = false;
-    for (i, c) in template[open + 1..].char_indices() {
-        match (escaped, c) {
-            (false, '\\') => escaped = true,
-            (false, '"') => {
-                close = Some(open + 1 + i);
-                break;
-            }
-            _ => escaped = false,
-        }
-    }
-    let close = close.ok_or("library_path's string is not closed")?;
-    let value = serde_json::to_string(library).map_err(|e| e.to_string())?;
-    Ok(format!(
-        "{}{value}{}",
-        &template[..open],
-        &template[close + 1..]
-    ))
+    let mut v: Value =
+        serde_json::from_str(template).map_err(|e| format!("the manifest is not JSON: {e}"))?;
+    let slot = v
+        .get_mut("api_layer")
+        .and_then(|l| l.get_mut("library_path"))
+        .filter(|p| p.is_string())
+        .ok_or("no api_layer.library_path string in the manifest")?;
+    *slot = Value::from(library);
+    let mut text = serde_json::to_string_pretty(&v).map_err(|e| e.to_string())?;
+    text.push('\n');
+    Ok(text)
 }
 
 /// The manifest text for `kind` with `library` as its absolute library path.
@@ -120,10 +86,6 @@ pub fn manifest_text(kind: Kind, library: &Path) -> Result<String, String> {
     with_library_path(template, library)
 }
 
-fn env(k: &str) -> Option<String> {
-    std::env::var(k).ok()
-}
-
 fn io_error(what: &str, path: &Path, e: std::io::Error) -> String {
     let hint = if e.kind() == std::io::ErrorKind::PermissionDenied {
         " (--system needs root)"
@@ -133,10 +95,14 @@ fn io_error(what: &str, path: &Path, e: std::io::Error) -> String {
     format!("{what} {}: {e}{hint}", path.display())
 }
 
-pub fn install(args: &Args) -> Result<(), String> {
+pub fn install(args: &InstallArgs) -> Result<(), String> {
     let kind = kind(args);
-    let system = args.switch("system");
-    let path = manifest_path(kind, system, env)?;
+    let vars = process_vars();
+    let env = Environment {
+        vars: &vars,
+        root: Path::new("/"),
+    };
+    let path = install_path(&env, kind, args.system)?;
     let library = library()?;
     let text = manifest_text(kind, &library)?;
     let dir = path.parent().expect("manifest path has a directory");
@@ -150,37 +116,18 @@ pub fn install(args: &Args) -> Result<(), String> {
     );
     println!("  library_path: {}", library.display());
     match kind {
-        Kind::Explicit => {
-            println!(
-                "  explicit layer: enable it with XR_ENABLE_API_LAYERS={}",
-                fovea_abi::LAYER_NAME
-            );
-            // The override hides the standard directories this file went to.
-            if env("XR_API_LAYER_PATH").is_some_and(|v| !v.is_empty()) {
-                println!(
-                    "note: XR_API_LAYER_PATH is set, so the loader will not look here while it is"
-                );
-            }
-        }
+        Kind::Explicit => println!(
+            "  explicit layer: enable it with XR_ENABLE_API_LAYERS={}",
+            fovea_abi::LAYER_NAME
+        ),
         Kind::Implicit => println!(
             "  implicit layer: every OpenXR application loads it; FOVEA_DISABLE=1 switches it off"
         ),
     }
-    if system {
-        if let Some(dirs) = env("XDG_DATA_DIRS").filter(|v| !v.is_empty()) {
-            if !dirs
-                .split(':')
-                .any(|d| Path::new(d) == Path::new(SYSTEM_DATA_DIR))
-            {
-                println!("note: XDG_DATA_DIRS is set without {SYSTEM_DATA_DIR}, so the loader will not look here while it is");
-            }
-        }
+    for note in search_notes(&env, kind, &path) {
+        println!("note: {note}");
     }
-    let other = match kind {
-        Kind::Explicit => Kind::Implicit,
-        Kind::Implicit => Kind::Explicit,
-    };
-    let other_path = manifest_path(other, system, env)?;
+    let other_path = install_path(&env, kind.other(), args.system)?;
     if other_path.exists() {
         println!(
             "note: {} is installed too; `fovea doctor` shows whether fovea would load twice",
@@ -190,8 +137,34 @@ pub fn install(args: &Args) -> Result<(), String> {
     Ok(())
 }
 
-pub fn uninstall(args: &Args) -> Result<(), String> {
-    let path = manifest_path(kind(args), args.switch("system"), env)?;
+/// Why the loader, in this environment, would not look where `path` is: the search model says
+/// whether it is among the directories searched, and these name the variable that moved them.
+fn search_notes(env: &Environment, kind: Kind, path: &Path) -> Vec<String> {
+    let mut notes = Vec::new();
+    // The override hides the standard directories this file went to.
+    if layer_dirs(env, kind).1 {
+        notes.push(format!(
+            "{LAYER_PATH_VAR} is set, so the loader will not look here while it is"
+        ));
+    }
+    let searched = standard_layer_dirs(env, kind)
+        .iter()
+        .any(|d| Some(d.as_path()) == path.parent());
+    if !searched {
+        notes.push(format!(
+            "XDG_DATA_DIRS is set without {SYSTEM_DATA_DIR}, so the loader will not look here while it is"
+        ));
+    }
+    notes
+}
+
+pub fn uninstall(args: &InstallArgs) -> Result<(), String> {
+    let vars = process_vars();
+    let env = Environment {
+        vars: &vars,
+        root: Path::new("/"),
+    };
+    let path = install_path(&env, kind(args), args.system)?;
     match std::fs::remove_file(&path) {
         Ok(()) => {
             println!("removed {}", path.display());
@@ -208,33 +181,6 @@ pub fn uninstall(args: &Args) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn paths_per_kind_and_location() {
-        let home = |k: &str| (k == "HOME").then(|| "/home/u".to_owned());
-        assert_eq!(
-            manifest_path(Kind::Explicit, false, home).unwrap(),
-            Path::new(
-                "/home/u/.local/share/openxr/1/api_layers/explicit.d/XR_APILAYER_FOVEA_foveation.json"
-            )
-        );
-        let xdg = |k: &str| match k {
-            "HOME" => Some("/home/u".to_owned()),
-            "XDG_DATA_HOME" => Some("/data".to_owned()),
-            _ => None,
-        };
-        assert_eq!(
-            manifest_path(Kind::Implicit, false, xdg).unwrap(),
-            Path::new("/data/openxr/1/api_layers/implicit.d/XR_APILAYER_FOVEA_foveation.json")
-        );
-        assert_eq!(
-            manifest_path(Kind::Implicit, true, xdg).unwrap(),
-            Path::new(
-                "/usr/local/share/openxr/1/api_layers/implicit.d/XR_APILAYER_FOVEA_foveation.json"
-            )
-        );
-        assert!(manifest_path(Kind::Explicit, false, |_| None).is_err());
-    }
 
     #[test]
     fn library_path_is_replaced_and_escaped() {
@@ -256,7 +202,67 @@ mod tests {
                 (kind == Kind::Implicit).then_some("FOVEA_DISABLE")
             );
         }
-        assert!(with_library_path(r#"{"name": "x"}"#, "/l").is_err());
-        assert!(with_library_path(r#"{"library_path": "a", "library_path": "b"}"#, "/l").is_err());
+        assert!(with_library_path(r#"{"api_layer": {"name": "x"}}"#, "/l").is_err());
+        // Only the layer's own library_path, never a key of that name elsewhere.
+        assert!(with_library_path(r#"{"library_path": "a"}"#, "/l").is_err());
+        assert!(with_library_path("not json", "/l").is_err());
+    }
+
+    #[test]
+    fn notes_say_when_the_loader_would_not_look_there() {
+        let vars = |pairs: &[(&str, &str)]| -> std::collections::BTreeMap<String, String> {
+            pairs
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect()
+        };
+        let notes = |pairs: &[(&str, &str)], kind, system| {
+            let v = vars(pairs);
+            let env = Environment {
+                vars: &v,
+                root: Path::new("/"),
+            };
+            let path = install_path(&env, kind, system).unwrap();
+            search_notes(&env, kind, &path)
+        };
+        let home = ("HOME", "/home/u");
+        assert!(notes(&[home], Kind::Explicit, false).is_empty());
+        assert!(notes(&[home], Kind::Implicit, true).is_empty());
+        let layer_path = [home, ("XR_API_LAYER_PATH", "/x")];
+        assert_eq!(
+            notes(&layer_path, Kind::Explicit, false),
+            ["XR_API_LAYER_PATH is set, so the loader will not look here while it is"]
+        );
+        assert!(notes(&layer_path, Kind::Implicit, false).is_empty());
+        let data_dirs = [home, ("XDG_DATA_DIRS", "/usr/share")];
+        assert!(notes(&data_dirs, Kind::Explicit, false).is_empty());
+        assert_eq!(
+            notes(&data_dirs, Kind::Implicit, true),
+            ["XDG_DATA_DIRS is set without /usr/local/share, so the loader will not look here while it is"]
+        );
+        let with_it = [home, ("XDG_DATA_DIRS", "/usr/share:/usr/local/share/")];
+        assert!(notes(&with_it, Kind::Implicit, true).is_empty());
+    }
+
+    #[test]
+    fn the_installed_file_keeps_the_checked_in_layout() {
+        // Only the library path differs from the checked-in file, line for line.
+        let text = manifest_text(Kind::Explicit, Path::new("/opt/libfovea.so")).unwrap();
+        let old: Vec<&str> = EXPLICIT_MANIFEST.lines().collect();
+        let new: Vec<&str> = text.lines().collect();
+        assert_eq!(old.len(), new.len(), "{text}");
+        let differing: Vec<(&str, &str)> = old
+            .iter()
+            .zip(&new)
+            .filter(|(a, b)| a != b)
+            .map(|(a, b)| (*a, *b))
+            .collect();
+        assert_eq!(
+            differing,
+            [(
+                r#"    "library_path": "../target/release/libfovea.so","#,
+                r#"    "library_path": "/opt/libfovea.so","#
+            )]
+        );
     }
 }

@@ -1,16 +1,16 @@
 //! `fovea maps`: PNGs of the resolution multiplier maps, coloured as Meta draws them.
 //!
-//! Each pixel of the eye buffer (the headset's recommended size) gets the colour of the fraction of
+//! Each pixel of the eye buffer (the headset's recommended size, or `--size`) gets the colour of the fraction of
 //! pixels its density-map texel shades: white full rate, red 1/2, green 1/4, blue 1/8, magenta 1/16,
 //! black not shown (the Quest fixed foveated rendering page's images). A black cross marks the fovea
 //! (the projection centre, moved by verticalOffset) and a legend strip runs along the bottom.
 
 use std::path::Path;
 
-use fovea_model::density::{decode, fill, Level, Pattern};
+use fovea_model::density::{decode, fill, Pattern};
 
-use crate::args::Args;
-use crate::fov::{eye_view, headset, texel};
+use crate::args::{Eye, MapsArgs};
+use crate::target::Target;
 
 /// Colour per shaded fraction `1/area`; `None` for areas the legend does not name.
 fn colour(area: u32) -> [u8; 3] {
@@ -93,13 +93,8 @@ impl Image {
 }
 
 /// Renders one eye's map at full eye-buffer size with the legend below.
-pub(crate) fn render(
-    h: &fovea_model::headsets::Headset,
-    eye: usize,
-    texel: u32,
-    pattern: Pattern,
-) -> Image {
-    let (grid, view) = eye_view(h, eye, texel);
+pub(crate) fn render(target: &Target, eye: usize, texel: u32, pattern: Pattern) -> Image {
+    let (grid, view) = target.eye_view(eye, texel);
     let [mw, mh] = grid.map_extent().map(|v| v as usize);
     let mut map = vec![0; mw * mh * 2];
     fill(&grid, &[view], pattern, &mut map);
@@ -119,7 +114,7 @@ pub(crate) fn render(
         }
     }
     // The fovea: straight ahead, turned by the pattern's vertical offset.
-    let [left, right, up, down] = h.fovs()[eye].tangents();
+    let [left, right, up, down] = target.fovs[eye].tangents();
     let t0 = f64::from(pattern.effective_offset_deg()).to_radians().tan();
     let fx = left / (left + right) * w as f64;
     let fy = (up - t0) / (up + down) * hh as f64;
@@ -158,29 +153,26 @@ pub(crate) fn render(
     img
 }
 
-pub fn run(args: &Args) -> Result<(), String> {
-    let h = headset(args)?;
-    let level: Level = args.required("level")?.parse()?;
-    let offset: f32 = args.parsed_or("vertical-offset", 0.0)?;
-    if !offset.is_finite() {
-        return Err("--vertical-offset: expected a finite number of degrees".into());
-    }
-    let texel = texel(args)?;
-    let eyes: &[(usize, &str)] = match args.value("eye").unwrap_or("both") {
-        "left" => &[(0, "left")],
-        "right" => &[(1, "right")],
-        "both" => &[(0, "left"), (1, "right")],
-        other => return Err(format!("--eye {other}: expected left, right or both")),
+pub fn run(args: &MapsArgs) -> Result<(), String> {
+    let target = Target::from_args(&args.target);
+    let texel = args.texel.value;
+    let eyes: &[(usize, &str)] = match args.eye {
+        Eye::Left => &[(0, "left")],
+        Eye::Right => &[(1, "right")],
+        Eye::Both => &[(0, "left"), (1, "right")],
     };
-    let out = Path::new(args.required("out")?);
+    let out = args.out.as_path();
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
     let pattern = Pattern {
-        level,
-        vertical_offset_deg: offset,
+        level: args.level,
+        vertical_offset_deg: args.vertical_offset,
     };
+    if let Some(note) = target.sizing_note() {
+        println!("note: {}: {note}", target.name);
+    }
     for &(eye, name) in eyes {
-        let path = out.join(format!("{}_{}_{name}.png", h.id, level.name()));
-        render(h, eye, texel, pattern).write_png(&path)?;
+        let path = out.join(format!("{}_{}_{name}.png", target.id, args.level.name()));
+        render(&target, eye, texel, pattern).write_png(&path)?;
         println!("{}", path.display());
     }
     Ok(())

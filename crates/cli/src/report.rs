@@ -1,19 +1,23 @@
-//! `fovea report --headset NAME [--texel N] [--json]`: what each level costs and keeps, both eyes.
+//! `fovea report (--headset NAME | --fov L,R,U,D [--fov-right L,R,U,D] [--size WxH]) [--texel N]
+//! [--json]`: what each level costs and keeps, both eyes.
 
 use fovea_model::density::{analyze, fill, Analysis, Level, Pattern};
+use serde::Serialize;
 
-use crate::args::Args;
-use crate::fov::{eye_view, headset, texel};
+use crate::args::ReportArgs;
+use crate::fov::FovDeg;
+use crate::json::Fixed;
+use crate::target::{Sizing, Target};
 
-/// Both eyes of `h` at `texel` for one level, analysed together.
-pub fn level_analysis(h: &fovea_model::headsets::Headset, texel: u32, level: Level) -> Analysis {
+/// Both eyes of `target` at `texel` for one level, analysed together.
+pub fn level_analysis(target: &Target, texel: u32, level: Level) -> Analysis {
     let pattern = Pattern {
         level,
         vertical_offset_deg: 0.0,
     };
     let parts: Vec<Analysis> = (0..2)
         .map(|eye| {
-            let (grid, view) = eye_view(h, eye, texel);
+            let (grid, view) = target.eye_view(eye, texel);
             let [w, hh] = grid.map_extent();
             let mut map = vec![0; w as usize * hh as usize * 2];
             fill(&grid, &[view], pattern, &mut map);
@@ -23,42 +27,82 @@ pub fn level_analysis(h: &fovea_model::headsets::Headset, texel: u32, level: Lev
     Analysis::combine(&parts)
 }
 
-pub fn run(args: &Args) -> Result<(), String> {
-    let h = headset(args)?;
-    let texel = texel(args)?;
+#[derive(Serialize)]
+struct LevelJson {
+    level: &'static str,
+    shaded_fraction: Fixed<6>,
+    full_rate_radius_deg: Option<Fixed<3>>,
+    min_relative_ppd: Fixed<6>,
+    min_relative_ppd_within_15deg: Fixed<6>,
+}
+
+/// A command-line headset: what it was given as, so the JSON stands on its own.
+#[derive(Serialize)]
+struct CustomJson {
+    fov_deg: [FovDeg; 2],
+    size: [u32; 2],
+    /// `"--size"`, or `"fov"` when sized from the FOV.
+    size_from: &'static str,
+    /// The pixels per unit tangent a size from the FOV used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pixels_per_tangent: Option<f64>,
+}
+
+#[derive(Serialize)]
+struct ReportJson {
+    headset: &'static str,
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    custom: Option<CustomJson>,
+    texel: u32,
+    levels: Vec<LevelJson>,
+}
+
+pub fn run(args: &ReportArgs) -> Result<(), String> {
+    let target = Target::from_args(&args.target);
+    let texel = args.texel.value;
     let rows: Vec<(Level, Analysis)> = Level::ALL
         .iter()
-        .map(|&l| (l, level_analysis(h, texel, l)))
+        .map(|&l| (l, level_analysis(&target, texel, l)))
         .collect();
-    if args.switch("json") {
-        let levels: Vec<String> = rows
-            .iter()
-            .map(|(l, a)| {
-                let radius = a
-                    .full_rate_radius_deg
-                    .map_or("null".to_string(), |r| format!("{r:.3}"));
-                format!(
-                    "{{\"level\":\"{}\",\"shaded_fraction\":{:.6},\"full_rate_radius_deg\":{radius},\
-                     \"min_relative_ppd\":{:.6},\"min_relative_ppd_within_15deg\":{:.6}}}",
-                    l.name(),
-                    a.shaded_fraction,
-                    a.min_relative_ppd,
-                    a.min_relative_ppd_within_15deg
-                )
-            })
-            .collect();
+    if args.json {
+        let json = ReportJson {
+            headset: target.id,
+            custom: target.custom.map(|sizing| CustomJson {
+                fov_deg: target.fovs.map(|f| FovDeg::new(f.degrees())),
+                size: target.size,
+                size_from: match sizing {
+                    Sizing::Given => "--size",
+                    Sizing::FromFov => "fov",
+                },
+                pixels_per_tangent: (sizing == Sizing::FromFov)
+                    .then_some(crate::target::DEFAULT_PIXELS_PER_TANGENT),
+            }),
+            texel,
+            levels: rows
+                .iter()
+                .map(|(l, a)| LevelJson {
+                    level: l.name(),
+                    shaded_fraction: Fixed(a.shaded_fraction),
+                    full_rate_radius_deg: a.full_rate_radius_deg.map(Fixed),
+                    min_relative_ppd: Fixed(a.min_relative_ppd),
+                    min_relative_ppd_within_15deg: Fixed(a.min_relative_ppd_within_15deg),
+                })
+                .collect(),
+        };
         println!(
-            "{{\"headset\":\"{}\",\"texel\":{texel},\"levels\":[{}]}}",
-            h.id,
-            levels.join(",")
+            "{}",
+            serde_json::to_string(&json).map_err(|e| e.to_string())?
         );
         return Ok(());
     }
-    let [w, hh] = h.recommended_size();
+    let [w, hh] = target.size;
     println!(
         "{}: {w}x{hh} per eye, texel {texel}, fragments up to 4x4, both eyes",
-        h.name
+        target.name
     );
+    if let Some(note) = target.sizing_note() {
+        println!("{note}");
+    }
     println!(
         "{:<9} {:>8} {:>16} {:>17} {:>22}",
         "level", "shaded", "full-rate radius", "min relative ppd", "min rel. ppd within 15°"

@@ -13,6 +13,7 @@ use fovea_model::density::{Level, Pattern};
 
 use super::{cargo_build, load_description, Setup, LOAD};
 use crate::maps::render;
+use crate::target::Target;
 
 pub fn run(setup: &Setup) -> Result<(), String> {
     let (seconds, out, props) = (setup.seconds_or(20), &setup.out, &setup.props);
@@ -84,7 +85,7 @@ pub fn run(setup: &Setup) -> Result<(), String> {
         };
         for (eye, side) in [(0, "left"), (1, "right")] {
             let path = out.join(format!("map_{}_{side}.png", level.name()));
-            render(setup.headset, eye, 32, pattern).write_png(&path)?;
+            render(&Target::preset(setup.headset), eye, 32, pattern).write_png(&path)?;
             println!("map, {name}, {side} eye: {}", path.display());
         }
     }

@@ -14,7 +14,7 @@ use std::process::{Command, Stdio};
 use ash::vk;
 
 use super::{build_dir, cargo_build, load_description, Setup, LOAD};
-use crate::doctor::Kind;
+use crate::discovery::Kind;
 use crate::install::manifest_text;
 
 const LOADER: &str = "libopenxr_loader.so.1";

@@ -16,7 +16,7 @@ use std::path::PathBuf;
 
 use fovea_model::headsets::Headset;
 
-use crate::args::Args;
+use crate::args::{DemoArgs, Via};
 
 /// The load script, in frames at 90 Hz: light, then past the 11.1 ms budget, then light again.
 const LOAD: [(u64, f32); 3] = [(0, 6.0), (270, 14.0), (630, 6.0)];
@@ -38,37 +38,27 @@ pub struct Setup {
 }
 
 impl Setup {
-    fn new(args: &Args) -> Result<Setup, String> {
-        let seconds: Option<u64> = args
-            .value("seconds")
-            .map(str::parse)
-            .transpose()
-            .map_err(|_| "--seconds takes a whole number of seconds".to_owned())?;
-        if seconds == Some(0) {
-            return Err("--seconds must be at least 1".into());
-        }
-        let out = PathBuf::from(args.value("out").unwrap_or("target/demo"));
-        std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
-        let out = std::fs::canonicalize(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+    fn new(args: &DemoArgs) -> Result<Setup, String> {
+        let out = &args.out;
+        std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+        let out = std::fs::canonicalize(out).map_err(|e| format!("{}: {e}", out.display()))?;
         let props = out.join("foveation.props");
         std::fs::write(
             &props,
             "# Quest debug properties, re-read while the app runs\n",
         )
         .map_err(|e| format!("{}: {e}", props.display()))?;
-        let id = args.value("headset");
-        let headset = fovea_model::headsets::by_id(id.unwrap_or("quest3")).ok_or_else(|| {
-            let ids: Vec<_> = fovea_model::headsets::ids().collect();
-            format!("--headset {id:?}: accepted: {}", ids.join(", "))
-        })?;
+        let headset = args.headset.unwrap_or_else(|| {
+            fovea_model::headsets::by_id("quest3").expect("quest3 preset exists")
+        });
         Ok(Setup {
-            seconds,
+            seconds: args.seconds,
             out,
             props,
             log: std::env::var("FOVEA_LOG")
                 .unwrap_or_else(|_| format!("warn,{}=info", fovea_abi::log_target::STATS)),
             headset,
-            headset_given: id.is_some(),
+            headset_given: args.headset.is_some(),
         })
     }
 
@@ -88,12 +78,11 @@ impl Setup {
     }
 }
 
-pub fn run(args: &Args) -> Result<(), String> {
+pub fn run(args: &DemoArgs) -> Result<(), String> {
     let setup = Setup::new(args)?;
-    match args.value("via") {
-        Some("harness") => harness::run(&setup),
-        Some("loader") => loader::run(&setup, loader::System::find()?),
-        Some(other) => Err(format!("--via {other}: expected loader or harness")),
+    match args.via {
+        Some(Via::Harness) => harness::run(&setup),
+        Some(Via::Loader) => loader::run(&setup, loader::System::find()?),
         None => match loader::System::find() {
             Ok(system) => loader::run(&setup, system),
             Err(why) => {

@@ -7,20 +7,16 @@
 //! holds no OpenXR manifests (the binary's unit tests cover it under a scratch root).
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use fovea_abi::EXTENSIONS;
 use serde_json::Value;
 
+use crate::support::{command, run, Run};
+
 const FOVEA: &str = "XR_APILAYER_FOVEA_foveation";
 const FILE: &str = "XR_APILAYER_FOVEA_foveation.json";
 
-struct Run {
-    code: i32,
-    out: String,
-    err: String,
-}
-
+/// `fovea doctor`'s problem lines.
 impl Run {
     fn problems(&self) -> Vec<&str> {
         self.out
@@ -54,7 +50,7 @@ struct Sandbox {
 impl Sandbox {
     fn new(name: &str) -> Sandbox {
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-            .join("cli_install")
+            .join("cli-install")
             .join(name);
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(dir.join("lib")).unwrap();
@@ -100,7 +96,7 @@ impl Sandbox {
 
     fn run(&self, args: &[&str], env: &[(&str, &str)]) -> Run {
         let s = |p: PathBuf| p.to_str().unwrap().to_owned();
-        let out = Command::new(env!("CARGO_BIN_EXE_fovea"))
+        run(command()
             .args(args)
             .env_clear()
             .env("HOME", s(self.dir.join("home")))
@@ -108,14 +104,7 @@ impl Sandbox {
             .env("XDG_CONFIG_HOME", s(self.dir.join("config")))
             .env("XDG_DATA_DIRS", s(self.dir.join("sysdata")))
             .env("XDG_CONFIG_DIRS", s(self.dir.join("sysconfig")))
-            .envs(env.iter().copied())
-            .output()
-            .expect("run fovea");
-        Run {
-            code: out.status.code().expect("exit status"),
-            out: String::from_utf8_lossy(&out.stdout).into_owned(),
-            err: String::from_utf8_lossy(&out.stderr).into_owned(),
-        }
+            .envs(env.iter().copied()))
     }
 
     fn install(&self, args: &[&str]) -> Run {

@@ -1,16 +1,16 @@
-//! `fovea demo` both ways (issue #7): through the system loader it runs the example app on the
+//! `fovea demo` both ways: through the system loader it runs the example app on the
 //! simulated headset and writes the maps and frames it read back from the GPU; through the harness
 //! it runs headless. Both show the dynamic level climbing under load and the override taking hold.
 
-use std::process::Command;
-
 use fovea_harness::skip;
+
+use crate::support::{command, run};
 
 /// Runs `fovea demo` with `args` into a fresh folder; returns (stdout + stderr, folder).
 fn demo(args: &[&str], name: &str) -> (String, std::path::PathBuf) {
     let out = std::env::temp_dir().join(format!("fovea-demo-{name}-{}", std::process::id()));
     std::fs::remove_dir_all(&out).ok();
-    let run = Command::new(env!("CARGO_BIN_EXE_fovea"))
+    let r = run(command()
         .arg("demo")
         .args(args)
         .arg("--out")
@@ -18,15 +18,9 @@ fn demo(args: &[&str], name: &str) -> (String, std::path::PathBuf) {
         // The demo builds the example and libraries it runs with the profile of this `fovea`.
         .env("CARGO", env!("CARGO"))
         .env_remove("FOVEA_LOG")
-        .env_remove("FOVEA_PROPS")
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&run.stdout),
-        String::from_utf8_lossy(&run.stderr)
-    );
-    assert!(run.status.success(), "fovea demo {args:?} failed:\n{text}");
+        .env_remove("FOVEA_PROPS"));
+    let text = r.text();
+    assert!(r.ok(), "fovea demo {args:?} failed:\n{text}");
     (text, out)
 }
 

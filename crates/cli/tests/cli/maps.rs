@@ -1,25 +1,13 @@
-//! `fovea report` and `fovea maps` from the built binary: the JSON the issue names, the PNGs' size,
-//! colours and legend, and clear errors.
+//! `fovea report` and `fovea maps` for the presets: the JSON figures, the PNGs' size, colours and
+//! legend, and clear errors.
 
-use std::process::Command;
-
-fn fovea(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_fovea"))
-        .args(args)
-        .output()
-        .expect("run fovea");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use crate::support::fovea;
 
 #[test]
 fn report_json_lists_every_level_with_its_figures() {
-    let (ok, out, err) = fovea(&["report", "--headset", "quest3", "--texel", "32", "--json"]);
-    assert!(ok, "{err}");
-    let v: serde_json::Value = serde_json::from_str(&out).expect("report --json is JSON");
+    let r = fovea(&["report", "--headset", "quest3", "--texel", "32", "--json"]);
+    assert!(r.ok(), "{}", r.err);
+    let v: serde_json::Value = serde_json::from_str(&r.out).expect("report --json is JSON");
     assert_eq!(v["headset"], "quest3");
     assert_eq!(v["texel"], 32);
     let levels = v["levels"].as_array().expect("levels");
@@ -34,7 +22,7 @@ fn report_json_lists_every_level_with_its_figures() {
         .collect();
     assert_eq!(shaded[0], 1.0);
     assert!(shaded[0] > shaded[1] && shaded[1] > shaded[2] && shaded[2] > shaded[3]);
-    // The issue's reference figures for Quest 3 at texel 32.
+    // The reference figures for Quest 3 at texel 32.
     for (i, want) in [(1, 0.83), (2, 0.28), (3, 0.14)] {
         assert!(
             (shaded[i] - want).abs() < 0.03,
@@ -52,7 +40,7 @@ fn report_json_lists_every_level_with_its_figures() {
     }
 }
 
-fn read_png(path: &std::path::Path) -> (u32, u32, Vec<u8>) {
+pub fn read_png(path: &std::path::Path) -> (u32, u32, Vec<u8>) {
     let decoder = png::Decoder::new(std::fs::File::open(path).expect("png written"));
     let mut reader = decoder.read_info().expect("png header");
     let mut buf = vec![0; reader.output_buffer_size()];
@@ -73,7 +61,7 @@ fn maps_draw_each_level_in_metas_colours() {
         ("medium", [255, 255, 255], [220, 40, 220]),
         ("high", [255, 255, 255], [220, 40, 220]),
     ] {
-        let (ok, stdout, err) = fovea(&[
+        let r = fovea(&[
             "maps",
             "--headset",
             "quest3",
@@ -84,8 +72,8 @@ fn maps_draw_each_level_in_metas_colours() {
             "--out",
             out,
         ]);
-        assert!(ok, "{err}");
-        assert_eq!(stdout.lines().count(), 2, "{stdout}");
+        assert!(r.ok(), "{}", r.err);
+        assert_eq!(r.out.lines().count(), 2, "{}", r.out);
         for eye in ["left", "right"] {
             let (w, h, rgb) = read_png(&dir.join(format!("quest3_{level}_{eye}.png")));
             assert_eq!(w, 2064, "recommended width");
@@ -127,7 +115,7 @@ fn maps_and_report_reject_bad_arguments_clearly() {
                 "--out",
                 "/tmp/x",
             ][..],
-            "unknown foveation level 'ultra'",
+            "invalid value 'ultra' for '--level <LEVEL>'\n  [possible values: none, low, medium, high, high-top]",
         ),
         (
             &[
@@ -141,17 +129,24 @@ fn maps_and_report_reject_bad_arguments_clearly() {
                 "--out",
                 "/tmp/x",
             ],
-            "--eye middle",
+            "invalid value 'middle' for '--eye <EYE>'\n  [possible values: left, right, both]",
         ),
-        (&["maps", "--headset", "quest3", "--level", "low"], "out"),
+        (
+            &["maps", "--headset", "quest3", "--level", "low"],
+            "not provided:\n  --out <DIR>",
+        ),
         (
             &["report", "--headset", "quest3", "--texel", "0"],
-            "--texel 0",
+            "invalid value '0' for '--texel <N>': 0 is not in 1..=1024",
         ),
-        (&["report", "--headset", "vive"], "accepted: quest2"),
+        (
+            &["report", "--headset", "vive"],
+            "[possible values: quest2, quest3, quest-pro, rift-cv1, rift-s, index, pico4]",
+        ),
     ] {
-        let (ok, _, err) = fovea(args);
-        assert!(!ok, "{args:?} succeeded");
-        assert!(err.contains(needle), "{args:?}: {err}");
+        let r = fovea(args);
+        assert_eq!(r.code, 2, "{args:?}: a usage error\n{}", r.text());
+        assert!(r.out.is_empty(), "{args:?}: {}", r.out);
+        assert!(r.err.contains(needle), "{args:?}: {}", r.err);
     }
 }
