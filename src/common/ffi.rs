@@ -106,7 +106,9 @@ pub fn known_struct_size(ty: xr::StructureType) -> Option<usize> {
         xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB => {
             size_of::<xr::SwapchainCreateInfoFoveationFB>()
         }
-        TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META => size_of::<VulkanSwapchainCreateInfoMETA>(),
+        xr::StructureType::VULKAN_SWAPCHAIN_CREATE_INFO_META => {
+            size_of::<VulkanSwapchainCreateInfoMETA>()
+        }
         xr::StructureType::VULKAN_SWAPCHAIN_FORMAT_LIST_CREATE_INFO_KHR => {
             size_of::<xr::VulkanSwapchainFormatListCreateInfoKHR>()
         }
@@ -209,21 +211,19 @@ impl ChainCopy {
     }
 }
 
-/// `XR_TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META` (extension 228; openxr-layer-facts.md §1.1).
-pub const TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META: xr::StructureType =
-    // SAFETY: StructureType is a #[repr(transparent)] i32; openxr-sys's constructor is not const.
-    unsafe { std::mem::transmute::<i32, xr::StructureType>(1000227000) };
-
-/// `XrVulkanSwapchainCreateInfoMETA` as C lays it out: Vulkan's `VkFlags` are 32-bit, so the struct is
-/// 24 bytes with `additionalUsageFlags` at offset 20. openxr-sys 0.14 declares both flags as `u64`
-/// (openxr-layer-facts.md §1.5) and must not be used to read it.
+/// `XrVulkanSwapchainCreateInfoMETA` as C lays it out: its members are `VkImageCreateFlags` and
+/// `VkImageUsageFlags`, and Vulkan's `VkFlags` are 32-bit, so the struct is 24 bytes with
+/// `additionalUsageFlags` at offset 20
+/// (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrVulkanSwapchainCreateInfoMETA.html).
+/// openxr-sys 0.14 declares both members as `u64`, so its struct must not be used to read it; ash's
+/// flag types are `#[repr(transparent)]` over the 32-bit `VkFlags` and give the members their names.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct VulkanSwapchainCreateInfoMETA {
     pub ty: xr::StructureType,
     pub next: *const c_void,
-    pub additional_create_flags: u32,
-    pub additional_usage_flags: u32,
+    pub additional_create_flags: ash::vk::ImageCreateFlags,
+    pub additional_usage_flags: ash::vk::ImageUsageFlags,
 }
 
 /// A NUL-terminated string from the application, if the pointer is non-NULL.
@@ -285,6 +285,8 @@ pub unsafe fn two_call<T: Copy>(
 mod tests {
     use super::*;
 
+    const META: xr::StructureType = xr::StructureType::VULKAN_SWAPCHAIN_CREATE_INFO_META;
+
     fn fov_info(next: *const c_void) -> xr::SwapchainCreateInfoFoveationFB {
         xr::SwapchainCreateInfoFoveationFB {
             ty: xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
@@ -295,10 +297,10 @@ mod tests {
 
     fn meta(next: *const c_void) -> VulkanSwapchainCreateInfoMETA {
         VulkanSwapchainCreateInfoMETA {
-            ty: TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META,
+            ty: xr::StructureType::VULKAN_SWAPCHAIN_CREATE_INFO_META,
             next,
-            additional_create_flags: 0x4000,
-            additional_usage_flags: 0x200,
+            additional_create_flags: ash::vk::ImageCreateFlags::SUBSAMPLED_EXT,
+            additional_usage_flags: ash::vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
         }
     }
 
@@ -324,9 +326,7 @@ mod tests {
         let m = meta(&unknown_tail as *const _ as *const c_void);
         let f = fov_info(&m as *const _ as *const c_void);
         let head = &f as *const _ as *const c_void;
-        let copy =
-            unsafe { ChainCopy::without(head, |t| t == TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META) }
-                .unwrap();
+        let copy = unsafe { ChainCopy::without(head, |t| t == META) }.unwrap();
         let types = unsafe { chain_types(copy.head()) }.unwrap();
         assert_eq!(
             types,
@@ -335,7 +335,7 @@ mod tests {
                 xr::StructureType::from_raw(42)
             ]
         );
-        assert_eq!(copy.removed(), [TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META]);
+        assert_eq!(copy.removed(), [META]);
         // The app's structs are untouched and the unknown tail is shared, not copied.
         assert_eq!(f.next as *const c_void, &m as *const _ as *const c_void);
         let copied = copy.head() as *const xr::SwapchainCreateInfoFoveationFB;
@@ -355,9 +355,7 @@ mod tests {
             next: &m as *const _ as *const xr::BaseInStructure,
         };
         let head = &unknown as *const _ as *const c_void;
-        let copy =
-            unsafe { ChainCopy::without(head, |t| t == TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META) }
-                .unwrap();
+        let copy = unsafe { ChainCopy::without(head, |t| t == META) }.unwrap();
         assert_eq!(copy.head(), head);
         assert!(copy.removed().is_empty());
     }

@@ -23,7 +23,7 @@ const INTERFACE_VERSION: u32 = 1;
 /// The API versions fovea supports: every 1.x. The Debian loader (1.0.20) offers 1.0.0 to 1.1023.4095
 /// and only logs what the layer answers (openxr-layer-facts.md §2.2).
 const MIN_API: xr::Version = xr::Version::new(1, 0, 0);
-const MAX_API: xr::Version = xr::Version::new(1, 0x3ff, 0xfff);
+const MAX_API: xr::Version = xr::Version::new(1, 1023, 4095);
 
 /// `xrNegotiateLoaderApiLayerInterface`: the only symbol the loader looks up.
 ///

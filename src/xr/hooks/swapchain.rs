@@ -3,6 +3,7 @@
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
+use ash::vk;
 use openxr_sys as xr;
 use xr::Handle;
 
@@ -15,18 +16,15 @@ use crate::gpu::density_images::{DensityImages, Refreshed};
 use crate::xr::extensions::Ext;
 use crate::xr::registry::{registry, Session, Swapchain, SwapchainInfo};
 
-/// VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT (VK_EXT_fragment_density_map).
-const VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT: u32 = 0x4000;
-
 /// What the foveation structs in a swapchain create info ask for.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FoveationRequest {
     /// `XrSwapchainCreateInfoFoveationFB` was chained.
     pub foveation: bool,
-    /// Its flags (SCALED_BIN 0x1, FRAGMENT_DENSITY_MAP 0x2).
-    pub flags: u64,
+    /// Its flags.
+    pub flags: xr::SwapchainCreateFoveationFlagsFB,
     /// `XrVulkanSwapchainCreateInfoMETA`'s flags, when chained.
-    pub meta: Option<(u32, u32)>,
+    pub meta: Option<(vk::ImageCreateFlags, vk::ImageUsageFlags)>,
 }
 
 /// What becomes of VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT for a swapchain.
@@ -50,24 +48,25 @@ pub enum Subsampled {
 /// SUBSAMPLED, which Quest's runtime also drops when unsupported (fixed-foveated-rendering seed) and
 /// which `debug.oculus.foveation.subsampled` forces on or off.
 pub fn check_request(req: FoveationRequest, forced: Option<bool>) -> HookResult<Subsampled> {
-    if req.flags & !0x3 != 0 {
+    use xr::SwapchainCreateFoveationFlagsFB as F;
+    if !(F::SCALED_BIN | F::FRAGMENT_DENSITY_MAP).contains(req.flags) {
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     }
-    if req.flags & 0x1 != 0 {
+    if req.flags.contains(F::SCALED_BIN) {
         tracing::warn!("XR_SWAPCHAIN_CREATE_FOVEATION_SCALED_BIN_BIT_FB needs OpenGL ES; this is not a GLES session");
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     }
     let mut asked = false;
     if let Some((create, usage)) = req.meta {
-        if usage != 0 || create & !VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT != 0 {
+        if !usage.is_empty() || !vk::ImageCreateFlags::SUBSAMPLED_EXT.contains(create) {
             tracing::warn!(
-                create,
-                usage,
+                ?create,
+                ?usage,
                 "additional Vulkan swapchain flags the runtime cannot honour"
             );
             return Err(xr::Result::ERROR_FEATURE_UNSUPPORTED);
         }
-        asked = create != 0;
+        asked = !create.is_empty();
     }
     Ok(match (asked, forced) {
         (true, Some(false)) => Subsampled::Off,
@@ -107,13 +106,13 @@ pub unsafe extern "system" fn create_swapchain(
                 .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
                 if let Some(fov) = fov {
                     req.foveation = true;
-                    req.flags = (*fov).flags.into_raw();
+                    req.flags = (*fov).flags;
                 }
             }
             if provided_meta {
                 let meta = ffi::find_in_chain::<ffi::VulkanSwapchainCreateInfoMETA>(
                     i.next,
-                    ffi::TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META,
+                    xr::StructureType::VULKAN_SWAPCHAIN_CREATE_INFO_META,
                 )
                 .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
                 req.meta =
@@ -136,7 +135,7 @@ pub unsafe extern "system" fn create_swapchain(
             // Structs of extensions fovea provides are unknown below: take them out of a copy.
             let chain = ffi::ChainCopy::without(i.next, |t| {
                 (provided_fov && t == xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB)
-                    || (provided_meta && t == ffi::TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META)
+                    || (provided_meta && t == xr::StructureType::VULKAN_SWAPCHAIN_CREATE_INFO_META)
             })
             .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
             if !chain.removed().is_empty() {
@@ -146,7 +145,9 @@ pub unsafe extern "system" fn create_swapchain(
             down.next = chain.head();
             let r = observed(&state, f(sess, &down, out));
             if succeeded(r) {
-                let density = if req.flags & FRAGMENT_DENSITY_MAP_BIT != 0
+                let density = if req
+                    .flags
+                    .contains(xr::SwapchainCreateFoveationFlagsFB::FRAGMENT_DENSITY_MAP)
                     && exts.provided(Ext::FoveationVulkan)
                 {
                     density_images(&state, *out, i)
@@ -331,9 +332,6 @@ unsafe fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32
     }
 }
 
-/// `XR_SWAPCHAIN_CREATE_FOVEATION_FRAGMENT_DENSITY_MAP_BIT_FB`.
-const FRAGMENT_DENSITY_MAP_BIT: u64 = 0x2;
-
 /// The density images for a new FRAGMENT_DENSITY_MAP swapchain on a session with fovea's Vulkan
 /// objects, one per swapchain image (the runtime is asked for the count). `None`, with a warning,
 /// where they cannot be made: the swapchain then works without them.
@@ -415,31 +413,40 @@ mod tests {
             meta,
         };
         let ok = |flags, meta| check_request(req(flags, meta), None);
-        let sub = Some((VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT, 0));
-        assert_eq!(ok(0x2, None), Ok(Subsampled::No));
-        assert_eq!(ok(0x0, sub), Ok(Subsampled::Dropped));
+        use vk::{ImageCreateFlags as C, ImageUsageFlags as U};
+        use xr::SwapchainCreateFoveationFlagsFB as F;
+        let fdm = F::FRAGMENT_DENSITY_MAP;
+        let sub = Some((C::SUBSAMPLED_EXT, U::empty()));
+        assert_eq!(ok(fdm, None), Ok(Subsampled::No));
+        assert_eq!(ok(F::EMPTY, sub), Ok(Subsampled::Dropped));
         assert_eq!(
-            check_request(req(0x2, sub), Some(false)),
+            check_request(req(fdm, sub), Some(false)),
             Ok(Subsampled::Off)
         );
         assert_eq!(
-            check_request(req(0x2, sub), Some(true)),
+            check_request(req(fdm, sub), Some(true)),
             Ok(Subsampled::Dropped)
         );
         assert_eq!(
-            check_request(req(0x2, None), Some(true)),
+            check_request(req(fdm, None), Some(true)),
             Ok(Subsampled::CannotForce)
         );
         let plain = FoveationRequest::default();
         assert_eq!(check_request(plain, Some(true)), Ok(Subsampled::No));
-        assert_eq!(ok(0x1, None), Err(xr::Result::ERROR_VALIDATION_FAILURE));
-        assert_eq!(ok(0x4, None), Err(xr::Result::ERROR_VALIDATION_FAILURE));
         assert_eq!(
-            ok(0x2, Some((0, 0x200))),
+            ok(F::SCALED_BIN, None),
+            Err(xr::Result::ERROR_VALIDATION_FAILURE)
+        );
+        assert_eq!(
+            ok(F::from_raw(1 << 2), None),
+            Err(xr::Result::ERROR_VALIDATION_FAILURE)
+        );
+        assert_eq!(
+            ok(fdm, Some((C::empty(), U::FRAGMENT_DENSITY_MAP_EXT))),
             Err(xr::Result::ERROR_FEATURE_UNSUPPORTED)
         );
         assert_eq!(
-            ok(0x2, Some((0x1, 0))),
+            ok(fdm, Some((C::SPARSE_BINDING, U::empty()))),
             Err(xr::Result::ERROR_FEATURE_UNSUPPORTED)
         );
     }
