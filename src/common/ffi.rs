@@ -509,14 +509,16 @@ pub unsafe fn chain_types(next: *const c_void) -> Result<Vec<xr::StructureType>,
         if types.len() == MAX_CHAIN_LENGTH {
             return Err(ChainError::TooLong);
         }
-        types.push((*node).ty);
-        node = (*node).next;
+        // SAFETY: a non-NULL node of a valid chain (the caller's contract) starts with type/next.
+        let n = unsafe { &*node };
+        types.push(n.ty);
+        node = n.next;
     }
     Ok(types)
 }
 
-/// The first struct of type `ty` in a next chain (fundamentals.adoc, "Next Chain Structure
-/// Uniqueness": when a type repeats, only the first counts).
+/// The first struct of type `ty` in a next chain (when a type repeats, only the first counts:
+/// https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#valid-usage-for-structure-pointer-chains).
 ///
 /// # Safety
 /// As [`chain_types`]; the struct found must really be a `T`.
@@ -530,11 +532,13 @@ pub unsafe fn find_in_chain<T>(
         if seen == MAX_CHAIN_LENGTH {
             return Err(ChainError::TooLong);
         }
-        if (*node).ty == ty {
+        // SAFETY: a non-NULL node of a valid chain (the caller's contract) starts with type/next.
+        let n = unsafe { &*node };
+        if n.ty == ty {
             return Ok(Some(node as *const T));
         }
         seen += 1;
-        node = (*node).next;
+        node = n.next;
     }
     Ok(None)
 }
@@ -597,7 +601,8 @@ impl ChainCopy {
                 return Err(ChainError::TooLong);
             }
             nodes.push(node);
-            node = (*node).next;
+            // SAFETY: a non-NULL node of a valid chain (the caller's contract).
+            node = unsafe { (*node).next };
         }
         // Walk backwards: `tail` is the head of the already-built rest of the chain, and `shared`
         // says whether it is still the app's own tail (so an untouched node can be reused as is).
@@ -606,7 +611,8 @@ impl ChainCopy {
         let mut owned = Vec::new();
         let mut removed = Vec::new();
         for &node in nodes.iter().rev() {
-            let ty = (*node).ty;
+            // SAFETY: as above.
+            let ty = unsafe { (*node).ty };
             if remove(ty) && known_struct_size(ty).is_some() {
                 removed.push(ty);
                 shared = false;
@@ -619,13 +625,14 @@ impl ChainCopy {
             match known_struct_size(ty) {
                 Some(size) => {
                     let mut storage = vec![0u64; size.div_ceil(8)].into_boxed_slice();
-                    std::ptr::copy_nonoverlapping(
-                        node as *const u8,
-                        storage.as_mut_ptr() as *mut u8,
-                        size,
-                    );
                     let copy = storage.as_mut_ptr() as *mut xr::BaseInStructure;
-                    (*copy).next = tail;
+                    // SAFETY: a node of a known type is `size` bytes long (the chain is valid);
+                    // `storage` holds at least `size` bytes, 8-aligned like any OpenXR struct, and
+                    // is fovea's own, so its `next` may be written.
+                    unsafe {
+                        std::ptr::copy_nonoverlapping(node as *const u8, copy as *mut u8, size);
+                        (*copy).next = tail;
+                    }
                     tail = copy;
                     owned.push(storage);
                 }
@@ -768,7 +775,9 @@ mod tests {
         let m = meta(&unknown_tail as *const _ as *const c_void);
         let f = fov_info(&m as *const _ as *const c_void);
         let head = &f as *const _ as *const c_void;
+        // SAFETY: a chain of live locals.
         let copy = unsafe { ChainCopy::without(head, |t| t == META) }.unwrap();
+        // SAFETY: the copy's chain: its own nodes and the shared live tail.
         let types = unsafe { chain_types(copy.head()) }.unwrap();
         assert_eq!(
             types,
@@ -782,9 +791,11 @@ mod tests {
         assert_eq!(f.next as *const c_void, &m as *const _ as *const c_void);
         let copied = copy.head() as *const xr::SwapchainCreateInfoFoveationFB;
         assert_ne!(copied, &f as *const _);
-        assert_eq!(unsafe { (*copied).flags }, f.flags);
+        // SAFETY: the copy's first node is a copied XrSwapchainCreateInfoFoveationFB.
+        let copied = unsafe { *copied };
+        assert_eq!(copied.flags, f.flags);
         assert_eq!(
-            unsafe { (*copied).next } as *const c_void,
+            copied.next as *const c_void,
             &unknown_tail as *const _ as *const c_void
         );
     }
@@ -797,6 +808,7 @@ mod tests {
             next: &m as *const _ as *const xr::BaseInStructure,
         };
         let head = &unknown as *const _ as *const c_void;
+        // SAFETY: a chain of live locals.
         let copy = unsafe { ChainCopy::without(head, |t| t == META) }.unwrap();
         assert_eq!(copy.head(), head);
         assert!(copy.removed().is_empty());
@@ -814,16 +826,16 @@ mod tests {
         };
         a.next = &b;
         let head = &a as *const _ as *const c_void;
+        // SAFETY: (all four) a looping chain of live locals: every walk is bounded.
         assert_eq!(unsafe { chain_types(head) }, Err(ChainError::TooLong));
-        assert_eq!(
-            unsafe { find_in_chain::<u8>(head, xr::StructureType::from_raw(3)) },
-            Err(ChainError::TooLong)
-        );
+        // SAFETY: as above.
+        let found = unsafe { find_in_chain::<u8>(head, xr::StructureType::from_raw(3)) };
+        assert_eq!(found, Err(ChainError::TooLong));
+        // SAFETY: as above.
         assert!(unsafe { ChainCopy::without(head, |_| false) }.is_err());
-        assert_eq!(
-            unsafe { find_in_chain::<u8>(head, xr::StructureType::from_raw(2)) }.unwrap(),
-            Some(&b as *const _ as *const u8)
-        );
+        // SAFETY: as above.
+        let found = unsafe { find_in_chain::<u8>(head, xr::StructureType::from_raw(2)) };
+        assert_eq!(found.unwrap(), Some(&b as *const _ as *const u8));
     }
 
     #[test]

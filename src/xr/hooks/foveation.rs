@@ -127,9 +127,9 @@ fn pass_down_update(
 ) -> HookResult<xr::Result> {
     let exts = &sc.session.instance.extensions;
     match sc.session.instance.next.update_swapchain {
-        // SAFETY: the runtime's own xrUpdateSwapchainFB, with the application's arguments as it
-        // passed them.
         Some(f) if exts.native.contains(Ext::SwapchainUpdateState) => {
+            // SAFETY: the runtime's own xrUpdateSwapchainFB, with the application's arguments as
+            // it passed them.
             Ok(unsafe { f(handle, state.raw()) })
         }
         _ => Err(xr::Result::ERROR_VALIDATION_FAILURE),
@@ -151,9 +151,9 @@ pub fn get_swapchain_state(
     if base.ty != xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB {
         let exts = &sc.session.instance.extensions;
         return match sc.session.instance.next.get_swapchain_state {
-            // SAFETY: the runtime's own xrGetSwapchainStateFB, with the application's arguments
-            // as it passed them.
             Some(f) if exts.native.contains(Ext::SwapchainUpdateState) => {
+                // SAFETY: the runtime's own xrGetSwapchainStateFB, with the application's
+                // arguments as it passed them.
                 Ok(unsafe { f(handle, state.raw()) })
             }
             _ => Err(xr::Result::ERROR_VALIDATION_FAILURE),
