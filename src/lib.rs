@@ -11,6 +11,12 @@
 //! - [`common`]: plumbing: the FFI guard and chain walking, locks, logging, settings.
 //!
 //! The pure model (density, projection, dynamic levels, stats) is the `fovea-model` crate.
+//!
+//! Every unsafe operation sits in its own `unsafe` block with a `SAFETY:` comment saying why it is
+//! sound, also inside `unsafe fn`s, whose `# Safety` sections say what their callers promise.
+
+#![deny(unsafe_op_in_unsafe_fn)]
+#![warn(clippy::undocumented_unsafe_blocks)]
 
 mod bridge;
 mod common;

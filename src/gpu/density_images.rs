@@ -74,6 +74,8 @@ fn step(step: &'static str) -> impl Fn(vk::Result) -> VkError {
 pub fn entry() -> Option<&'static ash::Entry> {
     static ENTRY: OnceLock<Option<ash::Entry>> = OnceLock::new();
     ENTRY
+        // SAFETY: loading the system Vulkan loader runs no application code; it is kept for the
+        // process's lifetime, so no function pointer from it outlives it.
         .get_or_init(|| match unsafe { ash::Entry::load() } {
             Ok(e) => Some(e),
             Err(e) => {
@@ -89,7 +91,8 @@ pub fn entry() -> Option<&'static ash::Entry> {
 /// # Safety
 /// `instance` must be a live VkInstance of the system loader.
 pub unsafe fn instance_fns(entry: &ash::Entry, instance: u64) -> ash::Instance {
-    ash::Instance::load(entry.static_fn(), vk::Instance::from_raw(instance))
+    // SAFETY: the caller's contract: a live VkInstance of this loader.
+    unsafe { ash::Instance::load(entry.static_fn(), vk::Instance::from_raw(instance)) }
 }
 
 /// What a physical device offers of VK_EXT_fragment_density_map(2).
@@ -121,13 +124,17 @@ impl FdmSupport {
 
 /// Looks an instance-level command up, `None` where the loader has none (a 1.1 command on a 1.0
 /// loader, say), so ash's panicking placeholder is never called.
+///
+/// # Safety
+/// `instance` must be a live instance of `entry`'s loader.
 unsafe fn instance_proc(
     entry: &ash::Entry,
     instance: &ash::Instance,
     names: &[&CStr],
 ) -> Option<vk::PFN_vkVoidFunction> {
     names.iter().find_map(|n| {
-        let f = entry.get_instance_proc_addr(instance.handle(), n.as_ptr());
+        // SAFETY: the caller's contract; the name is NUL-terminated.
+        let f = unsafe { entry.get_instance_proc_addr(instance.handle(), n.as_ptr()) };
         f.is_some().then_some(f)
     })
 }
@@ -146,7 +153,9 @@ pub unsafe fn query_support(
     physical_device: vk::PhysicalDevice,
 ) -> FdmSupport {
     let mut s = FdmSupport::default();
-    let Ok(exts) = instance.enumerate_device_extension_properties(physical_device) else {
+    // SAFETY: the caller's contract: a live instance and one of its physical devices.
+    let Ok(exts) = (unsafe { instance.enumerate_device_extension_properties(physical_device) })
+    else {
         return s;
     };
     let has = |name: &CStr| exts.iter().any(|e| e.extension_name_as_c_str() == Ok(name));
@@ -155,32 +164,36 @@ pub unsafe fn query_support(
     if !s.extension {
         return s;
     }
-    if let Some(f) = instance_proc(
-        entry,
-        instance,
-        &[
-            c"vkGetPhysicalDeviceFeatures2",
-            c"vkGetPhysicalDeviceFeatures2KHR",
-        ],
-    ) {
-        let f: vk::PFN_vkGetPhysicalDeviceFeatures2 = std::mem::transmute(f);
+    let names = [
+        c"vkGetPhysicalDeviceFeatures2",
+        c"vkGetPhysicalDeviceFeatures2KHR",
+    ];
+    // SAFETY: the caller's contract.
+    if let Some(f) = unsafe { instance_proc(entry, instance, &names) } {
+        // SAFETY: the loader's pointer for that name has that signature (the KHR alias too).
+        let f = unsafe {
+            std::mem::transmute::<vk::PFN_vkVoidFunction, vk::PFN_vkGetPhysicalDeviceFeatures2>(f)
+        };
         let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default();
         let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut fdm);
-        f(physical_device, &mut features);
+        // SAFETY: a physical device of the live instance; the output chain is made of locals.
+        unsafe { f(physical_device, &mut features) };
         s.feature = fdm.fragment_density_map == vk::TRUE;
     }
-    if let Some(f) = instance_proc(
-        entry,
-        instance,
-        &[
-            c"vkGetPhysicalDeviceProperties2",
-            c"vkGetPhysicalDeviceProperties2KHR",
-        ],
-    ) {
-        let f: vk::PFN_vkGetPhysicalDeviceProperties2 = std::mem::transmute(f);
+    let names = [
+        c"vkGetPhysicalDeviceProperties2",
+        c"vkGetPhysicalDeviceProperties2KHR",
+    ];
+    // SAFETY: the caller's contract.
+    if let Some(f) = unsafe { instance_proc(entry, instance, &names) } {
+        // SAFETY: the loader's pointer for that name has that signature (the KHR alias too).
+        let f = unsafe {
+            std::mem::transmute::<vk::PFN_vkVoidFunction, vk::PFN_vkGetPhysicalDeviceProperties2>(f)
+        };
         let mut fdm = vk::PhysicalDeviceFragmentDensityMapPropertiesEXT::default();
         let mut props = vk::PhysicalDeviceProperties2::default().push_next(&mut fdm);
-        f(physical_device, &mut props);
+        // SAFETY: as above.
+        unsafe { f(physical_device, &mut props) };
         let e = |x: vk::Extent2D| [x.width, x.height];
         s.min_texel = e(fdm.min_fragment_density_texel_size);
         s.max_texel = e(fdm.max_fragment_density_texel_size);
@@ -298,13 +311,19 @@ impl SessionGpu {
             result: vk::Result::ERROR_INITIALIZATION_FAILED,
         };
         let entry = entry().ok_or(no_loader)?;
-        let instance = instance_fns(entry, binding.instance);
         let physical_device = vk::PhysicalDevice::from_raw(binding.physical_device);
-        let support = query_support(entry, &instance, physical_device);
-        let props = instance.get_physical_device_properties(physical_device);
-        let features = instance
-            .get_physical_device_format_properties(physical_device, FORMAT)
-            .optimal_tiling_features;
+        // SAFETY: the caller's contract: the binding's VkInstance and VkPhysicalDevice are live
+        // objects of the system loader; these are queries only.
+        let (instance, support, props, features, memory) = unsafe {
+            let instance = instance_fns(entry, binding.instance);
+            let support = query_support(entry, &instance, physical_device);
+            let props = instance.get_physical_device_properties(physical_device);
+            let features = instance
+                .get_physical_device_format_properties(physical_device, FORMAT)
+                .optimal_tiling_features;
+            let memory = instance.get_physical_device_memory_properties(physical_device);
+            (instance, support, props, features, memory)
+        };
         let fdm = fdm_enabled && support.extension;
         let usage = usage_for(features, fdm, props.api_version);
         if !usage.contains(vk::ImageUsageFlags::TRANSFER_DST) {
@@ -313,22 +332,29 @@ impl SessionGpu {
                 result: vk::Result::ERROR_FORMAT_NOT_SUPPORTED,
             });
         }
-        let device = ash::Device::load(instance.fp_v1_0(), vk::Device::from_raw(binding.device));
-        let queue = device.get_device_queue(binding.queue_family_index, binding.queue_index);
-        let pool = device
-            .create_command_pool(
-                &vk::CommandPoolCreateInfo::default()
-                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                    .queue_family_index(binding.queue_family_index),
-                None,
-            )
-            .map_err(step("vkCreateCommandPool"))?;
-        let fence = match device.create_fence(&vk::FenceCreateInfo::default(), None) {
-            Ok(f) => f,
-            Err(e) => {
-                device.destroy_command_pool(pool, None);
-                return Err(step("vkCreateFence")(e));
-            }
+        // SAFETY: the caller's contract: the binding's VkDevice is live and its queue family and
+        // index name a queue it was created with (XrGraphicsBindingVulkanKHR's valid usage). The
+        // pool and fence are fovea's own; the pool is destroyed if the fence cannot be made.
+        let (device, queue, pool, fence) = unsafe {
+            let device =
+                ash::Device::load(instance.fp_v1_0(), vk::Device::from_raw(binding.device));
+            let queue = device.get_device_queue(binding.queue_family_index, binding.queue_index);
+            let pool = device
+                .create_command_pool(
+                    &vk::CommandPoolCreateInfo::default()
+                        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
+                        .queue_family_index(binding.queue_family_index),
+                    None,
+                )
+                .map_err(step("vkCreateCommandPool"))?;
+            let fence = match device.create_fence(&vk::FenceCreateInfo::default(), None) {
+                Ok(f) => f,
+                Err(e) => {
+                    device.destroy_command_pool(pool, None);
+                    return Err(step("vkCreateFence")(e));
+                }
+            };
+            (device, queue, pool, fence)
         };
         tracing::info!(
             texel = ?support.texel(),
@@ -339,7 +365,7 @@ impl SessionGpu {
             "density images for this session"
         );
         Ok(SessionGpu {
-            memory: instance.get_physical_device_memory_properties(physical_device),
+            memory,
             instance,
             device,
             texel: support.texel(),
@@ -418,151 +444,157 @@ impl DensityImages {
         layers: u32,
         count: u32,
     ) -> Result<DensityImages, VkError> {
-        let grid = Grid::new(extent, gpu.texel);
-        let [mw, mh] = grid.map_extent();
-        let layers = layers.max(1);
-        let d = &gpu.device;
-        let props = gpu
-            .instance
-            .get_physical_device_image_format_properties(
-                gpu.physical_device,
-                FORMAT,
-                vk::ImageType::TYPE_2D,
-                vk::ImageTiling::OPTIMAL,
-                gpu.usage,
-                vk::ImageCreateFlags::empty(),
-            )
-            .map_err(step("vkGetPhysicalDeviceImageFormatProperties"))?;
-        if props.max_extent.width < mw
-            || props.max_extent.height < mh
-            || props.max_array_layers < layers
-            || mw == 0
-            || mh == 0
-        {
-            return Err(VkError {
-                step: "density image size",
-                result: vk::Result::ERROR_FORMAT_NOT_SUPPORTED,
-            });
-        }
-        let size = u64::from(mw) * u64::from(mh) * 2 * u64::from(layers);
-        let mut out = DensityImages {
-            gpu: gpu.clone(),
-            extent: [mw, mh],
-            layers,
-            grid,
-            images: Vec::new(),
-            staging: (vk::Buffer::null(), vk::DeviceMemory::null()),
-            command_buffers: Vec::new(),
-            fill: Mutex::ranked(
-                Rank::DensityFill,
-                "density fill",
-                Fill {
-                    filled: vec![None; count as usize],
-                    cached: None,
-                    bytes: vec![0; size as usize],
-                    mapped: Mapped(std::ptr::null_mut()),
-                },
-            ),
-        };
-        // From here on, an early return drops `out`, which destroys what exists so far.
-        for _ in 0..count {
-            let create = vk::ImageCreateInfo::default()
-                .image_type(vk::ImageType::TYPE_2D)
-                .format(FORMAT)
-                .extent(vk::Extent3D {
-                    width: mw,
-                    height: mh,
-                    depth: 1,
-                })
-                .mip_levels(1)
-                .array_layers(layers)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .tiling(vk::ImageTiling::OPTIMAL)
-                .usage(gpu.usage)
-                .sharing_mode(vk::SharingMode::EXCLUSIVE)
-                .initial_layout(vk::ImageLayout::UNDEFINED);
-            let image = d
-                .create_image(&create, None)
-                .map_err(step("vkCreateImage"))?;
-            let req = d.get_image_memory_requirements(image);
-            let memory = memory_type(
-                &gpu.memory,
-                req.memory_type_bits,
-                vk::MemoryPropertyFlags::DEVICE_LOCAL,
-                true,
-            )
-            .ok_or(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY)
-            .and_then(|i| {
-                d.allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(i),
+        // SAFETY: the caller's contract: the session's device (and its instance and physical device)
+        // are live. Every object made here is fovea's own and recorded in `out` as soon as it exists, so
+        // an early return destroys exactly what was made (Drop); the memory is mapped once, for the
+        // record's lifetime; the command buffers come from the session's pool under its mutex.
+        unsafe {
+            let grid = Grid::new(extent, gpu.texel);
+            let [mw, mh] = grid.map_extent();
+            let layers = layers.max(1);
+            let d = &gpu.device;
+            let props = gpu
+                .instance
+                .get_physical_device_image_format_properties(
+                    gpu.physical_device,
+                    FORMAT,
+                    vk::ImageType::TYPE_2D,
+                    vk::ImageTiling::OPTIMAL,
+                    gpu.usage,
+                    vk::ImageCreateFlags::empty(),
+                )
+                .map_err(step("vkGetPhysicalDeviceImageFormatProperties"))?;
+            if props.max_extent.width < mw
+                || props.max_extent.height < mh
+                || props.max_array_layers < layers
+                || mw == 0
+                || mh == 0
+            {
+                return Err(VkError {
+                    step: "density image size",
+                    result: vk::Result::ERROR_FORMAT_NOT_SUPPORTED,
+                });
+            }
+            let size = u64::from(mw) * u64::from(mh) * 2 * u64::from(layers);
+            let mut out = DensityImages {
+                gpu: gpu.clone(),
+                extent: [mw, mh],
+                layers,
+                grid,
+                images: Vec::new(),
+                staging: (vk::Buffer::null(), vk::DeviceMemory::null()),
+                command_buffers: Vec::new(),
+                fill: Mutex::ranked(
+                    Rank::DensityFill,
+                    "density fill",
+                    Fill {
+                        filled: vec![None; count as usize],
+                        cached: None,
+                        bytes: vec![0; size as usize],
+                        mapped: Mapped(std::ptr::null_mut()),
+                    },
+                ),
+            };
+            // From here on, an early return drops `out`, which destroys what exists so far.
+            for _ in 0..count {
+                let create = vk::ImageCreateInfo::default()
+                    .image_type(vk::ImageType::TYPE_2D)
+                    .format(FORMAT)
+                    .extent(vk::Extent3D {
+                        width: mw,
+                        height: mh,
+                        depth: 1,
+                    })
+                    .mip_levels(1)
+                    .array_layers(layers)
+                    .samples(vk::SampleCountFlags::TYPE_1)
+                    .tiling(vk::ImageTiling::OPTIMAL)
+                    .usage(gpu.usage)
+                    .sharing_mode(vk::SharingMode::EXCLUSIVE)
+                    .initial_layout(vk::ImageLayout::UNDEFINED);
+                let image = d
+                    .create_image(&create, None)
+                    .map_err(step("vkCreateImage"))?;
+                let req = d.get_image_memory_requirements(image);
+                let memory = memory_type(
+                    &gpu.memory,
+                    req.memory_type_bits,
+                    vk::MemoryPropertyFlags::DEVICE_LOCAL,
+                    true,
+                )
+                .ok_or(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY)
+                .and_then(|i| {
+                    d.allocate_memory(
+                        &vk::MemoryAllocateInfo::default()
+                            .allocation_size(req.size)
+                            .memory_type_index(i),
+                        None,
+                    )
+                });
+                let memory = match memory {
+                    Ok(m) => m,
+                    Err(e) => {
+                        d.destroy_image(image, None);
+                        return Err(step("vkAllocateMemory (image)")(e));
+                    }
+                };
+                out.images.push((image, memory));
+                d.bind_image_memory(image, memory, 0)
+                    .map_err(step("vkBindImageMemory"))?;
+            }
+            let buffer = d
+                .create_buffer(
+                    &vk::BufferCreateInfo::default()
+                        .size(size)
+                        .usage(vk::BufferUsageFlags::TRANSFER_SRC)
+                        .sharing_mode(vk::SharingMode::EXCLUSIVE),
                     None,
                 )
-            });
-            let memory = match memory {
-                Ok(m) => m,
-                Err(e) => {
-                    d.destroy_image(image, None);
-                    return Err(step("vkAllocateMemory (image)")(e));
-                }
-            };
-            out.images.push((image, memory));
-            d.bind_image_memory(image, memory, 0)
-                .map_err(step("vkBindImageMemory"))?;
+                .map_err(step("vkCreateBuffer"))?;
+            out.staging.0 = buffer;
+            let req = d.get_buffer_memory_requirements(buffer);
+            // Vulkan guarantees a HOST_VISIBLE | HOST_COHERENT type for buffers ("Memory Types").
+            let index = memory_type(
+                &gpu.memory,
+                req.memory_type_bits,
+                vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
+                false,
+            )
+            .ok_or(VkError {
+                step: "a host-coherent memory type",
+                result: vk::Result::ERROR_OUT_OF_HOST_MEMORY,
+            })?;
+            out.staging.1 = d
+                .allocate_memory(
+                    &vk::MemoryAllocateInfo::default()
+                        .allocation_size(req.size)
+                        .memory_type_index(index),
+                    None,
+                )
+                .map_err(step("vkAllocateMemory (staging)"))?;
+            d.bind_buffer_memory(buffer, out.staging.1, 0)
+                .map_err(step("vkBindBufferMemory"))?;
+            let mapped = d
+                .map_memory(
+                    out.staging.1,
+                    0,
+                    vk::WHOLE_SIZE,
+                    vk::MemoryMapFlags::empty(),
+                )
+                .map_err(step("vkMapMemory"))?;
+            out.fill.get_mut().mapped = Mapped(mapped as *mut u8);
+            let s = gpu.submit.lock();
+            out.command_buffers = d
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(s.pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(count),
+                )
+                .map_err(step("vkAllocateCommandBuffers"))?;
+            drop(s);
+            Ok(out)
         }
-        let buffer = d
-            .create_buffer(
-                &vk::BufferCreateInfo::default()
-                    .size(size)
-                    .usage(vk::BufferUsageFlags::TRANSFER_SRC)
-                    .sharing_mode(vk::SharingMode::EXCLUSIVE),
-                None,
-            )
-            .map_err(step("vkCreateBuffer"))?;
-        out.staging.0 = buffer;
-        let req = d.get_buffer_memory_requirements(buffer);
-        // Vulkan guarantees a HOST_VISIBLE | HOST_COHERENT type for buffers ("Memory Types").
-        let index = memory_type(
-            &gpu.memory,
-            req.memory_type_bits,
-            vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
-            false,
-        )
-        .ok_or(VkError {
-            step: "a host-coherent memory type",
-            result: vk::Result::ERROR_OUT_OF_HOST_MEMORY,
-        })?;
-        out.staging.1 = d
-            .allocate_memory(
-                &vk::MemoryAllocateInfo::default()
-                    .allocation_size(req.size)
-                    .memory_type_index(index),
-                None,
-            )
-            .map_err(step("vkAllocateMemory (staging)"))?;
-        d.bind_buffer_memory(buffer, out.staging.1, 0)
-            .map_err(step("vkBindBufferMemory"))?;
-        let mapped = d
-            .map_memory(
-                out.staging.1,
-                0,
-                vk::WHOLE_SIZE,
-                vk::MemoryMapFlags::empty(),
-            )
-            .map_err(step("vkMapMemory"))?;
-        out.fill.get_mut().mapped = Mapped(mapped as *mut u8);
-        let s = gpu.submit.lock();
-        out.command_buffers = d
-            .allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(s.pool)
-                    .level(vk::CommandBufferLevel::PRIMARY)
-                    .command_buffer_count(count),
-            )
-            .map_err(step("vkAllocateCommandBuffers"))?;
-        drop(s);
-        Ok(out)
     }
 
     /// The VkImage of swapchain image `i`, as XrSwapchainImageFoveationVulkanFB wants it.
@@ -599,17 +631,24 @@ impl DensityImages {
             done = Refreshed::Built;
             let f = &mut *fill;
             fill_layers(&self.grid, &inputs, &mut f.bytes);
-            std::ptr::copy_nonoverlapping(f.bytes.as_ptr(), f.mapped.0, f.bytes.len());
+            // SAFETY: the staging memory is mapped for the record's lifetime and is as large as
+            // `bytes` (both sized from the map extent and layers); the fill lock serialises writes,
+            // and the GPU last read it in an upload that was waited for.
+            unsafe { std::ptr::copy_nonoverlapping(f.bytes.as_ptr(), f.mapped.0, f.bytes.len()) };
             f.cached = Some(inputs);
         }
         // Until the upload succeeds the image counts as undefined.
         fill.filled[i] = None;
-        self.upload(i)?;
+        // SAFETY: the caller's contract: the binding's queue may be used here.
+        unsafe { self.upload(i)? };
         fill.filled[i] = Some(key);
         Ok(done)
     }
 
     /// Records and submits the staging buffer's copy into image `i` and waits for it.
+    ///
+    /// # Safety
+    /// As [`DensityImages::refresh`]; `i` is within the images.
     unsafe fn upload(&self, i: usize) -> Result<(), VkError> {
         let d = &self.gpu.device;
         let cb = self.command_buffers[i];
@@ -657,52 +696,58 @@ impl DensityImages {
                 depth: 1,
             },
         };
-        let s = self.gpu.submit.lock();
-        d.begin_command_buffer(
-            cb,
-            &vk::CommandBufferBeginInfo::default()
-                .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
-        )
-        .map_err(step("vkBeginCommandBuffer"))?;
-        d.cmd_pipeline_barrier(
-            cb,
-            vk::PipelineStageFlags::ALL_COMMANDS,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &[to_transfer],
-        );
-        d.cmd_copy_buffer_to_image(
-            cb,
-            self.staging.0,
-            image,
-            vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-            &[region],
-        );
-        d.cmd_pipeline_barrier(
-            cb,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::PipelineStageFlags::ALL_COMMANDS,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &[to_final],
-        );
-        d.end_command_buffer(cb)
-            .map_err(step("vkEndCommandBuffer"))?;
-        let cbs = [cb];
-        d.queue_submit(
-            s.queue,
-            &[vk::SubmitInfo::default().command_buffers(&cbs)],
-            s.fence,
-        )
-        .map_err(step("vkQueueSubmit"))?;
-        let waited = d.wait_for_fences(&[s.fence], true, u64::MAX);
-        let reset = d.reset_fences(&[s.fence]);
-        waited.map_err(step("vkWaitForFences"))?;
-        reset.map_err(step("vkResetFences"))?;
-        Ok(())
+        // SAFETY: the caller's contract: the application synchronises the queue for the runtime here.
+        // The command buffer is this image's own, not in flight (every submission is waited for before
+        // returning), and recorded and submitted under the session's submit lock, which guards the
+        // queue, pool and fence (Vulkan "Threading Behavior").
+        unsafe {
+            let s = self.gpu.submit.lock();
+            d.begin_command_buffer(
+                cb,
+                &vk::CommandBufferBeginInfo::default()
+                    .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+            )
+            .map_err(step("vkBeginCommandBuffer"))?;
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[to_transfer],
+            );
+            d.cmd_copy_buffer_to_image(
+                cb,
+                self.staging.0,
+                image,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &[region],
+            );
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[to_final],
+            );
+            d.end_command_buffer(cb)
+                .map_err(step("vkEndCommandBuffer"))?;
+            let cbs = [cb];
+            d.queue_submit(
+                s.queue,
+                &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                s.fence,
+            )
+            .map_err(step("vkQueueSubmit"))?;
+            let waited = d.wait_for_fences(&[s.fence], true, u64::MAX);
+            let reset = d.reset_fences(&[s.fence]);
+            waited.map_err(step("vkWaitForFences"))?;
+            reset.map_err(step("vkResetFences"))?;
+            Ok(())
+        }
     }
 }
 

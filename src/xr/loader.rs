@@ -10,7 +10,7 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::common::ffi::{self, guard};
+use crate::common::ffi::{self, shim, HookResult, In, Out, OutArray};
 use crate::common::settings;
 use crate::xr::dispatch::{self, Next, Owner};
 use crate::xr::extensions::{self, Ext, Extensions, EXTENSIONS};
@@ -23,59 +23,58 @@ const INTERFACE_VERSION: u32 = 1;
 /// The API versions fovea supports: every 1.x. The Debian loader (1.0.20) offers 1.0.0 to 1.1023.4095
 /// and only logs what the layer answers (openxr-layer-facts.md §2.2).
 const MIN_API: xr::Version = xr::Version::new(1, 0, 0);
-const MAX_API: xr::Version = xr::Version::new(1, 0x3ff, 0xfff);
+const MAX_API: xr::Version = xr::Version::new(1, 1023, 4095);
 
-/// `xrNegotiateLoaderApiLayerInterface`: the only symbol the loader looks up.
-///
-/// # Safety
-/// Called by the loader with pointers it owns; every one is checked before use.
-#[no_mangle]
-pub unsafe extern "system" fn xrNegotiateLoaderApiLayerInterface(
-    loader_info: *const xr::NegotiateLoaderInfo,
-    layer_name: *const c_char,
-    request: *mut xr::NegotiateApiLayerRequest,
-) -> xr::Result {
-    guard("xrNegotiateLoaderApiLayerInterface", || {
-        negotiate(loader_info, layer_name, request)
-    })
+shim! {
+    /// `xrNegotiateLoaderApiLayerInterface`: the only symbol the loader looks up
+    /// (https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#api-layer-interface-negotiation).
+    #[no_mangle]
+    pub fn xrNegotiateLoaderApiLayerInterface = c"xrNegotiateLoaderApiLayerInterface" => negotiate,
+    (
+        loader_info: in xr::NegotiateLoaderInfo,
+        layer_name: (string) c_char,
+        request: out xr::NegotiateApiLayerRequest,
+    )
 }
 
-unsafe fn negotiate(
-    info: *const xr::NegotiateLoaderInfo,
-    layer_name: *const c_char,
-    request: *mut xr::NegotiateApiLayerRequest,
-) -> xr::Result {
+fn negotiate(
+    info: In<xr::NegotiateLoaderInfo>,
+    layer_name: Option<&CStr>,
+    request: Out<xr::NegotiateApiLayerRequest>,
+) -> HookResult<xr::Result> {
     crate::common::log::init();
     let failed = |why: &str| {
         tracing::error!(why, "negotiation refused");
         xr::Result::ERROR_INITIALIZATION_FAILED
     };
-    if info.is_null() || request.is_null() {
-        return failed("NULL loader info or request");
-    }
-    let info = &*info;
+    let (Some(info), Some(req)) = (info.get_untyped(), request.into_mut()) else {
+        return Ok(failed("NULL loader info or request"));
+    };
     if info.struct_type != xr::NegotiateLoaderInfo::TYPE
         || info.struct_version != xr::NegotiateLoaderInfo::VERSION
         || info.struct_size != std::mem::size_of::<xr::NegotiateLoaderInfo>()
     {
-        return failed("XrNegotiateLoaderInfo has the wrong type, version or size");
+        return Ok(failed(
+            "XrNegotiateLoaderInfo has the wrong type, version or size",
+        ));
     }
-    let req = &mut *request;
     if req.struct_type != xr::NegotiateApiLayerRequest::TYPE
         || req.struct_version != xr::NegotiateApiLayerRequest::VERSION
         || req.struct_size != std::mem::size_of::<xr::NegotiateApiLayerRequest>()
     {
-        return failed("XrNegotiateApiLayerRequest has the wrong type, version or size");
+        return Ok(failed(
+            "XrNegotiateApiLayerRequest has the wrong type, version or size",
+        ));
     }
     if !(info.min_interface_version..=info.max_interface_version).contains(&INTERFACE_VERSION) {
-        return failed("no common loader interface version");
+        return Ok(failed("no common loader interface version"));
     }
     // "Ignoring patch": compare major.minor only.
     let mm = |v: xr::Version| (v.major(), v.minor());
     if mm(info.max_api_version) < mm(MIN_API) || mm(info.min_api_version) > mm(MAX_API) {
-        return failed("no common API version");
+        return Ok(failed("no common API version"));
     }
-    if let Some(name) = ffi::cstr(layer_name) {
+    if let Some(name) = layer_name {
         if name.to_bytes() != LAYER_NAME.as_bytes() {
             tracing::warn!(
                 ?name,
@@ -91,37 +90,40 @@ unsafe fn negotiate(
     };
     req.get_instance_proc_addr = Some(get_instance_proc_addr);
     req.create_api_layer_instance = Some(create_api_layer_instance);
-    xr::Result::SUCCESS
+    Ok(xr::Result::SUCCESS)
 }
 
-/// The layer's `xrCreateApiLayerInstance` (api_initialization.adoc; openxr-layer-facts.md §2.3, §3).
-///
-/// # Safety
-/// Called by the loader or the layer above with its own pointers; every one is checked.
-pub unsafe extern "system" fn create_api_layer_instance(
-    info: *const xr::InstanceCreateInfo,
-    layer_info: *const xr::ApiLayerCreateInfo,
-    instance: *mut xr::Instance,
-) -> xr::Result {
-    guard("xrCreateApiLayerInstance", || {
-        create_instance(info, layer_info, instance)
-    })
+shim! {
+    /// The layer's `xrCreateApiLayerInstance`
+    /// (https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#api-layer-create-instance-process).
+    pub fn create_api_layer_instance = c"xrCreateApiLayerInstance" => create_instance,
+    (
+        info: in xr::InstanceCreateInfo,
+        layer_info: in xr::ApiLayerCreateInfo,
+        instance: out xr::Instance,
+    )
 }
 
-unsafe fn create_instance(
-    info: *const xr::InstanceCreateInfo,
-    layer_info: *const xr::ApiLayerCreateInfo,
-    instance: *mut xr::Instance,
+fn create_instance(
+    info: In<xr::InstanceCreateInfo>,
+    layer_info: In<xr::ApiLayerCreateInfo>,
+    instance: Out<xr::Instance>,
+) -> HookResult<xr::Result> {
+    Ok(create_instance_inner(info, layer_info, instance))
+}
+
+fn create_instance_inner(
+    info: In<xr::InstanceCreateInfo>,
+    layer_info: In<xr::ApiLayerCreateInfo>,
+    instance: Out<xr::Instance>,
 ) -> xr::Result {
     crate::common::log::init();
-    if info.is_null() || instance.is_null() || (*info).ty != xr::StructureType::INSTANCE_CREATE_INFO
-    {
+    let (Some(app), false) = (info.get(), instance.is_null()) else {
         return xr::Result::ERROR_VALIDATION_FAILURE;
-    }
-    if layer_info.is_null() {
+    };
+    let Some(li) = layer_info.get_untyped() else {
         return xr::Result::ERROR_INITIALIZATION_FAILED;
-    }
-    let li = &*layer_info;
+    };
     if li.struct_type != xr::ApiLayerCreateInfo::TYPE
         || li.struct_version != xr::ApiLayerCreateInfo::VERSION
         || li.struct_size != std::mem::size_of::<xr::ApiLayerCreateInfo>()
@@ -130,7 +132,10 @@ unsafe fn create_instance(
         tracing::error!("XrApiLayerCreateInfo is malformed");
         return xr::Result::ERROR_INITIALIZATION_FAILED;
     }
-    let next_info = &*li.next_info;
+    // SAFETY: checked non-NULL above; the loader's XrApiLayerCreateInfo points to its list of
+    // next-layer entries, valid through the call
+    // (https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#api-layer-create-instance-process).
+    let next_info = unsafe { &*li.next_info };
     if next_info.struct_type != xr::ApiLayerNextInfo::TYPE
         || next_info.struct_version != xr::ApiLayerNextInfo::VERSION
         || next_info.struct_size != std::mem::size_of::<xr::ApiLayerNextInfo>()
@@ -153,19 +158,21 @@ unsafe fn create_instance(
         return xr::Result::ERROR_INITIALIZATION_FAILED;
     };
 
-    let app = &*info;
     if app.enabled_extension_count > 0 && app.enabled_extension_names.is_null() {
         return xr::Result::ERROR_VALIDATION_FAILURE;
     }
     let names: Vec<&CStr> = (0..app.enabled_extension_count as usize)
-        .map(|i| *app.enabled_extension_names.add(i))
-        .map(|p| ffi::cstr(p))
+        // SAFETY: a valid XrInstanceCreateInfo (`In`) has `enabledExtensionCount` names, each NULL
+        // or NUL-terminated
+        // (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrInstanceCreateInfo.html).
+        .map(|i| unsafe { ffi::cstr(*app.enabled_extension_names.add(i)) })
         .collect::<Option<_>>()
         .unwrap_or_default();
     if names.len() != app.enabled_extension_count as usize {
         return xr::Result::ERROR_VALIDATION_FAILURE;
     }
-    let below = extensions_below(enumeration_gipa(next_gipa, next_info));
+    // SAFETY: the next-info entry is fovea's own, validated above; its pointers are the loader's.
+    let below = unsafe { extensions_below(enumeration_gipa(next_gipa, next_info)) };
     let mut exts = Extensions::default();
     for n in &names {
         if let Some(e) = Ext::by_name(n) {
@@ -201,17 +208,21 @@ unsafe fn create_instance(
     };
     let mut next_layer_info = *li;
     next_layer_info.next_info = next_info.next;
-    let result = next_create(&down, &next_layer_info, instance);
+    // SAFETY: the next layer's xrCreateApiLayerInstance, with copies of the application's and the
+    // loader's structs whose pointers outlive the call, and the application's output pointer.
+    let result = unsafe { next_create(&down, &next_layer_info, instance.raw()) };
     if result.into_raw() < 0 {
         return result;
     }
-
-    let handle = *instance;
+    let Some(handle) = instance.read() else {
+        return result;
+    };
     let settings = settings::Settings::from_env();
     let state = Instance {
         handle,
         next_gipa,
-        next: Next::load(next_gipa, handle),
+        // SAFETY: the next layer's xrGetInstanceProcAddr and the instance it just created.
+        next: unsafe { Next::load(next_gipa, handle) },
         extensions: exts,
         symmetric_fov: settings.symmetric_fov,
         overrides: settings::Overrides::from_env(),
@@ -249,15 +260,19 @@ unsafe fn enumeration_gipa(
 ) -> xr::pfn::GetInstanceProcAddr {
     let mut gipa = next_gipa;
     let mut below = ours.next;
-    while !below.is_null()
-        && (*below).struct_type == xr::ApiLayerNextInfo::TYPE
-        && NO_NULL_INSTANCE_LOOKUP.contains(&ffi::read_fixed(&(*below).layer_name).as_ref())
-    {
-        match (*below).next_get_instance_proc_addr {
+    // SAFETY: the loader's list of next-layer entries is NULL-terminated and valid through
+    // xrCreateApiLayerInstance (the caller's contract).
+    while let Some(entry) = unsafe { below.as_ref() } {
+        if entry.struct_type != xr::ApiLayerNextInfo::TYPE
+            || !NO_NULL_INSTANCE_LOOKUP.contains(&ffi::read_fixed(&entry.layer_name).as_ref())
+        {
+            break;
+        }
+        match entry.next_get_instance_proc_addr {
             Some(g) => gipa = g,
             None => break,
         }
-        below = (*below).next;
+        below = entry.next;
     }
     gipa
 }
@@ -266,18 +281,31 @@ unsafe fn enumeration_gipa(
 /// `xrGetInstanceProcAddr` with XR_NULL_HANDLE (openxr-layer-facts.md §3). Empty where that fails:
 /// fovea then provides every extension the app enabled, which is the safe assumption for a runtime
 /// that cannot even list them.
+///
+/// # Safety
+/// `next_gipa` must be a next layer's (or the runtime's) `xrGetInstanceProcAddr`.
 unsafe fn extensions_below(next_gipa: xr::pfn::GetInstanceProcAddr) -> Vec<CString> {
-    let Some(f) = dispatch::load(
-        next_gipa,
-        xr::Instance::NULL,
-        c"xrEnumerateInstanceExtensionProperties",
-    ) else {
+    // SAFETY: the caller's contract; XR_NULL_HANDLE is how the spec asks for this function.
+    let f = unsafe {
+        dispatch::load(
+            next_gipa,
+            xr::Instance::NULL,
+            c"xrEnumerateInstanceExtensionProperties",
+        )
+    };
+    let Some(f) = f else {
         tracing::warn!("the next layer does not offer xrEnumerateInstanceExtensionProperties");
         return Vec::new();
     };
-    let enumerate: xr::pfn::EnumerateInstanceExtensionProperties = std::mem::transmute(f);
+    // SAFETY: the pointer the next layer handed out for that name has its signature.
+    let enumerate = unsafe {
+        std::mem::transmute::<xr::pfn::VoidFunction, xr::pfn::EnumerateInstanceExtensionProperties>(
+            f,
+        )
+    };
     let mut count = 0;
-    if enumerate(std::ptr::null(), 0, &mut count, std::ptr::null_mut()).into_raw() < 0 {
+    // SAFETY: capacity 0 writes only the count, into a local.
+    if unsafe { enumerate(std::ptr::null(), 0, &mut count, std::ptr::null_mut()) }.into_raw() < 0 {
         return Vec::new();
     }
     let empty = xr::ExtensionProperties {
@@ -287,7 +315,9 @@ unsafe fn extensions_below(next_gipa: xr::pfn::GetInstanceProcAddr) -> Vec<CStri
         extension_version: 0,
     };
     let mut props = vec![empty; count as usize];
-    if enumerate(std::ptr::null(), count, &mut count, props.as_mut_ptr()).into_raw() < 0 {
+    // SAFETY: `props` holds the `count` elements the capacity says.
+    if unsafe { enumerate(std::ptr::null(), count, &mut count, props.as_mut_ptr()) }.into_raw() < 0
+    {
         return Vec::new();
     }
     props.truncate(count as usize);
@@ -297,60 +327,70 @@ unsafe fn extensions_below(next_gipa: xr::pfn::GetInstanceProcAddr) -> Vec<CStri
         .collect()
 }
 
-/// The layer's `xrGetInstanceProcAddr`, following the spec's table (api_initialization.adoc):
-/// never `XR_SUCCESS` with a NULL pointer, which modern loaders treat as a broken layer.
-///
-/// # Safety
-/// `name` NUL-terminated or NULL; `function` writable or NULL.
-pub unsafe extern "system" fn get_instance_proc_addr(
-    instance: xr::Instance,
-    name: *const c_char,
-    function: *mut Option<xr::pfn::VoidFunction>,
-) -> xr::Result {
-    guard("xrGetInstanceProcAddr", || {
-        if function.is_null() {
-            return xr::Result::ERROR_VALIDATION_FAILURE;
-        }
-        *function = None;
-        let Some(name) = dispatch::name(name) else {
-            return xr::Result::ERROR_VALIDATION_FAILURE;
-        };
-        resolve(instance, name, &mut *function)
-    })
+shim! {
+    /// The layer's `xrGetInstanceProcAddr`, following the spec's table
+    /// (https://registry.khronos.org/OpenXR/specs/1.0/man/html/xrGetInstanceProcAddr.html): never
+    /// `XR_SUCCESS` with a NULL pointer, which modern loaders treat as a broken layer.
+    pub fn get_instance_proc_addr = c"xrGetInstanceProcAddr" => instance_proc_addr,
+    (
+        instance: val xr::Instance,
+        name: (string) c_char,
+        function: (required_out) Option<xr::pfn::VoidFunction>,
+    )
 }
 
-unsafe fn resolve(
+fn instance_proc_addr(
+    instance: xr::Instance,
+    name: Option<&CStr>,
+    function: &mut Option<xr::pfn::VoidFunction>,
+) -> HookResult<xr::Result> {
+    *function = None;
+    let Some(name) = name else {
+        return Ok(xr::Result::ERROR_VALIDATION_FAILURE);
+    };
+    let r = resolve(instance, name, function);
+    if r == xr::Result::SUCCESS && function.is_none() {
+        // Cannot happen by construction; the rule matters enough to hold it here too.
+        return Ok(xr::Result::ERROR_FUNCTION_UNSUPPORTED);
+    }
+    Ok(r)
+}
+
+/// A function pointer of any signature as the `PFN_xrVoidFunction` `xrGetInstanceProcAddr` hands
+/// out; the caller casts it back to the signature the name implies.
+macro_rules! void_fn {
+    ($pfn:ident, $f:expr) => {
+        // SAFETY: function pointers of any signature have the same representation; `as` checks
+        // `$f` against openxr-sys's type for the name it is handed out under.
+        Some(unsafe {
+            std::mem::transmute::<xr::pfn::$pfn, xr::pfn::VoidFunction>($f as xr::pfn::$pfn)
+        })
+    };
+}
+
+fn resolve(
     instance: xr::Instance,
     name: &CStr,
     out: &mut Option<xr::pfn::VoidFunction>,
 ) -> xr::Result {
     if name == c"xrGetInstanceProcAddr" {
-        *out = Some(std::mem::transmute::<
-            xr::pfn::GetInstanceProcAddr,
-            xr::pfn::VoidFunction,
-        >(get_instance_proc_addr));
+        *out = void_fn!(GetInstanceProcAddr, get_instance_proc_addr);
         return xr::Result::SUCCESS;
     }
     if instance == xr::Instance::NULL {
         // Without an instance there is no next layer to ask: fovea answers the three functions the
         // table requires, and nothing else.
         return if name == c"xrEnumerateInstanceExtensionProperties" {
-            *out = Some(std::mem::transmute::<
-                xr::pfn::EnumerateInstanceExtensionProperties,
-                xr::pfn::VoidFunction,
-            >(enumerate_instance_extension_properties));
+            *out = void_fn!(
+                EnumerateInstanceExtensionProperties,
+                enumerate_instance_extension_properties
+            );
             xr::Result::SUCCESS
         } else if name == c"xrEnumerateApiLayerProperties" {
-            *out = Some(std::mem::transmute::<
-                xr::pfn::EnumerateApiLayerProperties,
-                xr::pfn::VoidFunction,
-            >(enumerate_api_layer_properties));
+            *out = void_fn!(EnumerateApiLayerProperties, enumerate_api_layer_properties);
             xr::Result::SUCCESS
         } else if name == c"xrCreateInstance" {
-            *out = Some(std::mem::transmute::<
-                xr::pfn::CreateInstance,
-                xr::pfn::VoidFunction,
-            >(create_instance_direct));
+            *out = void_fn!(CreateInstance, create_instance_direct);
             xr::Result::SUCCESS
         } else {
             xr::Result::ERROR_HANDLE_INVALID
@@ -360,10 +400,10 @@ unsafe fn resolve(
         return xr::Result::ERROR_HANDLE_INVALID;
     };
     if name == c"xrEnumerateInstanceExtensionProperties" {
-        *out = Some(std::mem::transmute::<
-            xr::pfn::EnumerateInstanceExtensionProperties,
-            xr::pfn::VoidFunction,
-        >(enumerate_instance_extension_properties));
+        *out = void_fn!(
+            EnumerateInstanceExtensionProperties,
+            enumerate_instance_extension_properties
+        );
         return xr::Result::SUCCESS;
     }
     let exts = &state.extensions;
@@ -375,17 +415,19 @@ unsafe fn resolve(
             // The runtime has XR_FB_swapchain_update_state but not XR_FB_foveation: fovea handles the
             // foveation state type and passes every other one down.
             Owner::Layer(Ext::SwapchainUpdateState) if exts.provided(Ext::Foveation) => {
-                (dispatch::hook(name).unwrap().offered_below)(&state.next)
+                (h.offered_below)(&state.next)
             }
             Owner::Layer(ext) if exts.enabled.contains(ext) => false,
             Owner::Layer(_) => return xr::Result::ERROR_FUNCTION_UNSUPPORTED,
         },
     };
-    if ours {
-        *out = Some(dispatch::hook(name).unwrap().function);
+    if let (true, Some(h)) = (ours, dispatch::hook(name)) {
+        *out = Some(h.function);
         return xr::Result::SUCCESS;
     }
-    let r = (state.next_gipa)(instance, name.as_ptr(), out);
+    // SAFETY: the next layer's xrGetInstanceProcAddr with its own instance, a NUL-terminated name
+    // and a writable output.
+    let r = unsafe { (state.next_gipa)(instance, name.as_ptr(), out) };
     if r == xr::Result::SUCCESS && out.is_none() {
         tracing::warn!(
             ?name,
@@ -396,16 +438,22 @@ unsafe fn resolve(
     r
 }
 
-/// Layers are created through `xrCreateApiLayerInstance`; the spec's table still wants a pointer for
-/// `xrCreateInstance` with a NULL instance, so this one explains instead of crashing.
-unsafe extern "system" fn create_instance_direct(
-    _info: *const xr::InstanceCreateInfo,
-    _instance: *mut xr::Instance,
-) -> xr::Result {
+shim! {
+    /// Layers are created through `xrCreateApiLayerInstance`; the spec's table still wants a
+    /// pointer for `xrCreateInstance` with a NULL instance, so this one explains instead of
+    /// crashing.
+    fn create_instance_direct = c"xrCreateInstance" => refuse_create_instance,
+    (info: in xr::InstanceCreateInfo, instance: out xr::Instance)
+}
+
+fn refuse_create_instance(
+    _info: In<xr::InstanceCreateInfo>,
+    _instance: Out<xr::Instance>,
+) -> HookResult<xr::Result> {
     tracing::error!(
         "xrCreateInstance called on the layer directly; layers are created by the loader"
     );
-    xr::Result::ERROR_INITIALIZATION_FAILED
+    Ok(xr::Result::ERROR_INITIALIZATION_FAILED)
 }
 
 /// The layer's own extension list, as `XrExtensionProperties`.
@@ -425,60 +473,80 @@ fn own_extensions() -> Vec<xr::ExtensionProperties> {
         .collect()
 }
 
-/// `xrEnumerateInstanceExtensionProperties` as a layer answers it (api_layer.adoc): with its own name,
-/// its own extensions; with NULL, its own too, since a layer above may resolve this function through
-/// fovea instead of the loader (prior-art.md, OpenXR-Layer-Template 71c35a1); with another name,
-/// XR_ERROR_API_LAYER_NOT_PRESENT.
-unsafe extern "system" fn enumerate_instance_extension_properties(
-    layer_name: *const c_char,
-    capacity: u32,
-    count_out: *mut u32,
-    properties: *mut xr::ExtensionProperties,
-) -> xr::Result {
-    guard("xrEnumerateInstanceExtensionProperties", || {
-        if let Some(n) = ffi::cstr(layer_name) {
-            if n.to_bytes() != LAYER_NAME.as_bytes() {
-                return xr::Result::ERROR_API_LAYER_NOT_PRESENT;
-            }
-        }
-        let own = own_extensions();
-        if capacity > 0 && !properties.is_null() {
-            for i in 0..(capacity as usize).min(own.len()) {
-                if (*properties.add(i)).ty != xr::StructureType::EXTENSION_PROPERTIES {
-                    return xr::Result::ERROR_VALIDATION_FAILURE;
-                }
-            }
-        }
-        ffi::two_call(&own, capacity, count_out, properties)
-    })
+shim! {
+    /// `xrEnumerateInstanceExtensionProperties` as a layer answers it
+    /// (https://registry.khronos.org/OpenXR/specs/1.0/man/html/xrEnumerateInstanceExtensionProperties.html):
+    /// with its own name, its own extensions; with NULL, its own too, since a layer above may
+    /// resolve this function through fovea instead of the loader; with another name,
+    /// XR_ERROR_API_LAYER_NOT_PRESENT.
+    fn enumerate_instance_extension_properties =
+        c"xrEnumerateInstanceExtensionProperties" => instance_extension_properties,
+    (
+        layer_name: (string) c_char,
+        capacity: val u32,
+        count_out: out u32,
+        properties: (array capacity) xr::ExtensionProperties,
+    )
 }
 
-/// `xrEnumerateApiLayerProperties` as a layer answers it: the layer itself.
-unsafe extern "system" fn enumerate_api_layer_properties(
+fn instance_extension_properties(
+    layer_name: Option<&CStr>,
     capacity: u32,
-    count_out: *mut u32,
-    properties: *mut xr::ApiLayerProperties,
-) -> xr::Result {
-    guard("xrEnumerateApiLayerProperties", || {
-        let mut p = xr::ApiLayerProperties {
-            ty: xr::StructureType::API_LAYER_PROPERTIES,
-            next: std::ptr::null_mut(),
-            layer_name: [0; xr::MAX_API_LAYER_NAME_SIZE],
-            spec_version: xr::Version::new(1, 0, 0),
-            layer_version: 1,
-            description: [0; xr::MAX_API_LAYER_DESCRIPTION_SIZE],
-        };
-        ffi::write_fixed(&mut p.layer_name, LAYER_NAME);
-        ffi::write_fixed(
-            &mut p.description,
-            "fovea: fixed foveated rendering (XR_FB_foveation) for Vulkan",
-        );
-        if capacity > 0
-            && !properties.is_null()
-            && (*properties).ty != xr::StructureType::API_LAYER_PROPERTIES
-        {
-            return xr::Result::ERROR_VALIDATION_FAILURE;
+    count_out: Out<u32>,
+    properties: OutArray<xr::ExtensionProperties>,
+) -> HookResult<xr::Result> {
+    if let Some(n) = layer_name {
+        if n.to_bytes() != LAYER_NAME.as_bytes() {
+            return Ok(xr::Result::ERROR_API_LAYER_NOT_PRESENT);
         }
-        ffi::two_call(&[p], capacity, count_out, properties)
-    })
+    }
+    let own = own_extensions();
+    for i in 0..(capacity as usize).min(own.len()) {
+        if properties
+            .read(i)
+            .is_some_and(|p| p.ty != xr::StructureType::EXTENSION_PROPERTIES)
+        {
+            return Ok(xr::Result::ERROR_VALIDATION_FAILURE);
+        }
+    }
+    Ok(ffi::two_call(&own, count_out, properties))
+}
+
+shim! {
+    /// `xrEnumerateApiLayerProperties` as a layer answers it: the layer itself.
+    fn enumerate_api_layer_properties =
+        c"xrEnumerateApiLayerProperties" => api_layer_properties,
+    (
+        capacity: val u32,
+        count_out: out u32,
+        properties: (array capacity) xr::ApiLayerProperties,
+    )
+}
+
+fn api_layer_properties(
+    capacity: u32,
+    count_out: Out<u32>,
+    properties: OutArray<xr::ApiLayerProperties>,
+) -> HookResult<xr::Result> {
+    let mut p = xr::ApiLayerProperties {
+        ty: xr::StructureType::API_LAYER_PROPERTIES,
+        next: std::ptr::null_mut(),
+        layer_name: [0; xr::MAX_API_LAYER_NAME_SIZE],
+        spec_version: xr::Version::new(1, 0, 0),
+        layer_version: 1,
+        description: [0; xr::MAX_API_LAYER_DESCRIPTION_SIZE],
+    };
+    ffi::write_fixed(&mut p.layer_name, LAYER_NAME);
+    ffi::write_fixed(
+        &mut p.description,
+        "fovea: fixed foveated rendering (XR_FB_foveation) for Vulkan",
+    );
+    if capacity > 0
+        && properties
+            .read(0)
+            .is_some_and(|p| p.ty != xr::StructureType::API_LAYER_PROPERTIES)
+    {
+        return Ok(xr::Result::ERROR_VALIDATION_FAILURE);
+    }
+    Ok(ffi::two_call(&[p], count_out, properties))
 }

@@ -7,8 +7,8 @@ use std::time::Instant;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{finish, fov_from_xr, fov_to_xr, next, observed, session, succeeded};
-use crate::common::ffi::guard;
+use super::{fov_from_xr, fov_to_xr, next, observed, session, succeeded, HookResult};
+use crate::common::ffi::{In, Out, OutArray};
 use crate::xr::registry::{registry, Instance, Session};
 use fovea_model::density::Rect;
 use fovea_model::dynamic::LADDER;
@@ -17,98 +17,84 @@ use fovea_model::stats::{Line, Window};
 
 /// `xrWaitFrame`: the predicted display time and period tell how many display periods the previous
 /// frame missed, the dynamic controller's and the stats' input.
-pub unsafe extern "system" fn wait_frame(
+pub fn wait_frame(
     sess: xr::Session,
-    info: *const xr::FrameWaitInfo,
-    state: *mut xr::FrameState,
-) -> xr::Result {
-    guard("xrWaitFrame", || {
-        finish((|| {
-            let s = session(sess)?;
-            let r = observed(&s, next(s.instance.next.wait_frame)?(sess, info, state));
-            if succeeded(r) && !state.is_null() {
-                let display = (*state).predicted_display_time.as_nanos();
-                let period = (*state).predicted_display_period.as_nanos();
-                let mut f = s.frame.lock();
-                if let (Some(last), true) = (f.display, period > 0) {
-                    let interval = display - last;
-                    f.missed = u32::try_from(((interval + period / 2) / period - 1).max(0))
-                        .unwrap_or(u32::MAX);
-                    let missed = f.missed;
-                    f.stats.waited(interval, missed);
-                }
-                f.display = Some(display);
-                f.period = period;
-            }
-            Ok(r)
-        })())
-    })
+    info: In<xr::FrameWaitInfo>,
+    state: Out<xr::FrameState>,
+) -> HookResult<xr::Result> {
+    let s = session(sess)?;
+    let f = next(s.instance.next.wait_frame)?;
+    // SAFETY: the next layer's xrWaitFrame, with the application's arguments as it passed them.
+    let r = observed(&s, unsafe { f(sess, info.raw(), state.raw()) });
+    if let (true, Some(state)) = (succeeded(r), state.read()) {
+        let display = state.predicted_display_time.as_nanos();
+        let period = state.predicted_display_period.as_nanos();
+        let mut f = s.frame.lock();
+        if let (Some(last), true) = (f.display, period > 0) {
+            let interval = display - last;
+            f.missed =
+                u32::try_from(((interval + period / 2) / period - 1).max(0)).unwrap_or(u32::MAX);
+            let missed = f.missed;
+            f.stats.waited(interval, missed);
+        }
+        f.display = Some(display);
+        f.period = period;
+    }
+    Ok(r)
 }
 
 /// `xrBeginFrame`: starts the application's frame time.
-pub unsafe extern "system" fn begin_frame(
-    sess: xr::Session,
-    info: *const xr::FrameBeginInfo,
-) -> xr::Result {
-    guard("xrBeginFrame", || {
-        finish((|| {
-            let s = session(sess)?;
-            let r = observed(&s, next(s.instance.next.begin_frame)?(sess, info));
-            if succeeded(r) {
-                s.frame.lock().begin_at = Some(Instant::now());
-            }
-            Ok(r)
-        })())
-    })
+pub fn begin_frame(sess: xr::Session, info: In<xr::FrameBeginInfo>) -> HookResult<xr::Result> {
+    let s = session(sess)?;
+    let f = next(s.instance.next.begin_frame)?;
+    // SAFETY: the next layer's xrBeginFrame, with the application's arguments as it passed them.
+    let r = observed(&s, unsafe { f(sess, info.raw()) });
+    if succeeded(r) {
+        s.frame.lock().begin_at = Some(Instant::now());
+    }
+    Ok(r)
 }
 
 /// `xrEndFrame`: runs the dynamic controller, checks the debug property file when due, and once a
 /// second of display time writes the stats line; then passes the frame on untouched.
-pub unsafe extern "system" fn end_frame(
-    sess: xr::Session,
-    info: *const xr::FrameEndInfo,
-) -> xr::Result {
-    guard("xrEndFrame", || {
-        finish((|| {
-            let s = session(sess)?;
-            let entered = Instant::now();
-            if s.gpu.is_some() {
-                learn_submitted(&s, info);
-            }
-            let overrides_changed = {
-                let mut f = s.frame.lock();
-                let display = if !info.is_null() && (*info).ty == xr::StructureType::FRAME_END_INFO
-                {
-                    (*info).display_time.as_nanos()
-                } else {
-                    f.display.unwrap_or(0)
-                };
-                let app_ns = f.begin_at.take().map(|b| (entered - b).as_nanos() as u64);
-                let max = s.dynamic_max.load(Ordering::Relaxed);
-                let missed = f.missed;
-                if f.controller.frame(display, missed, max) {
-                    let step = f.controller.step();
-                    s.dynamic_step.store(step, Ordering::Relaxed);
-                    s.pattern_generation.fetch_add(1, Ordering::Relaxed);
-                    tracing::info!(step, level = ?LADDER[step], "dynamic foveation");
-                }
-                let changed = s.instance.overrides.poll(display);
-                let own = (Instant::now() - entered).as_nanos() as u64;
-                let window = f.stats.ended(display, app_ns, own);
-                let period = f.period;
-                drop(f);
-                if let Some(w) = window {
-                    report(&s, w, period);
-                }
-                changed
-            };
-            if overrides_changed {
-                s.pattern_generation.fetch_add(1, Ordering::Relaxed);
-                s.refresh_dynamic_max();
-            }
-            Ok(observed(&s, next(s.instance.next.end_frame)?(sess, info)))
-        })())
-    })
+pub fn end_frame(sess: xr::Session, info: In<xr::FrameEndInfo>) -> HookResult<xr::Result> {
+    let s = session(sess)?;
+    let entered = Instant::now();
+    if s.gpu.is_some() {
+        learn_submitted(&s, info);
+    }
+    let overrides_changed = {
+        let mut f = s.frame.lock();
+        let display = match info.get() {
+            Some(i) => i.display_time.as_nanos(),
+            None => f.display.unwrap_or(0),
+        };
+        let app_ns = f.begin_at.take().map(|b| (entered - b).as_nanos() as u64);
+        let max = s.dynamic_max.load(Ordering::Relaxed);
+        let missed = f.missed;
+        if f.controller.frame(display, missed, max) {
+            let step = f.controller.step();
+            s.dynamic_step.store(step, Ordering::Relaxed);
+            s.pattern_generation.fetch_add(1, Ordering::Relaxed);
+            tracing::info!(step, level = ?LADDER[step], "dynamic foveation");
+        }
+        let changed = s.instance.overrides.poll(display);
+        let own = (Instant::now() - entered).as_nanos() as u64;
+        let window = f.stats.ended(display, app_ns, own);
+        let period = f.period;
+        drop(f);
+        if let Some(w) = window {
+            report(&s, w, period);
+        }
+        changed
+    };
+    if overrides_changed {
+        s.pattern_generation.fetch_add(1, Ordering::Relaxed);
+        s.refresh_dynamic_max();
+    }
+    let f = next(s.instance.next.end_frame)?;
+    // SAFETY: the next layer's xrEndFrame, with the application's arguments as it passed them.
+    Ok(observed(&s, unsafe { f(sess, info.raw()) }))
 }
 
 /// Most composition layers read per frame when learning views.
@@ -119,24 +105,34 @@ const MAX_LAYERS: usize = 16;
 /// rendered into it (multiview arrays, double-wide images, one swapchain per eye alike). A change
 /// bumps the swapchain's generation, rebuilding its maps once. Read-only on the application's
 /// structs, no allocation; other layer types and chained structs are not looked at.
-unsafe fn learn_submitted(s: &Session, info: *const xr::FrameEndInfo) {
-    if info.is_null() || (*info).ty != xr::StructureType::FRAME_END_INFO || (*info).layers.is_null()
-    {
+fn learn_submitted(s: &Session, info: In<xr::FrameEndInfo>) {
+    let Some(info) = info.get() else {
+        return;
+    };
+    if info.layers.is_null() {
         return;
     }
-    let count = ((*info).layer_count as usize).min(MAX_LAYERS);
-    let layers = std::slice::from_raw_parts((*info).layers, count);
+    let count = (info.layer_count as usize).min(MAX_LAYERS);
+    // SAFETY: a valid XrFrameEndInfo (`In`) has `layers` pointing to `layerCount` layer pointers
+    // (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrFrameEndInfo.html); fovea reads at
+    // most that many.
+    let layers = unsafe { std::slice::from_raw_parts(info.layers, count) };
     let mut found = [(xr::Swapchain::NULL, [None; MAX_VIEWS]); MAX_VIEWS];
     for &layer in layers {
-        if layer.is_null() || (*layer).ty != xr::StructureType::COMPOSITION_LAYER_PROJECTION {
+        // SAFETY: each element is a valid layer pointer (as above) for the call, so `In`'s
+        // contract holds for it.
+        let layer = unsafe { In::new(layer) };
+        let Some(p) = layer.cast::<xr::CompositionLayerProjection>() else {
+            continue;
+        };
+        if p.views.is_null() {
             continue;
         }
-        let p = layer.cast::<xr::CompositionLayerProjection>();
-        if (*p).views.is_null() {
-            continue;
-        }
-        let n = ((*p).view_count as usize).min(MAX_VIEWS);
-        for (eye, v) in std::slice::from_raw_parts((*p).views, n).iter().enumerate() {
+        let n = (p.view_count as usize).min(MAX_VIEWS);
+        // SAFETY: a valid XrCompositionLayerProjection has `views` pointing to `viewCount` views
+        // (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrCompositionLayerProjection.html).
+        let views = unsafe { std::slice::from_raw_parts(p.views, n) };
+        for (eye, v) in views.iter().enumerate() {
             let (offset, extent) = (v.sub_image.image_rect.offset, v.sub_image.image_rect.extent);
             if v.ty != xr::StructureType::COMPOSITION_LAYER_PROJECTION_VIEW
                 || extent.width <= 0
@@ -207,66 +203,67 @@ fn report(s: &Session, window: Window, period_ns: i64) {
     tracing::info!(target: fovea_abi::log_target::STATS, "{line}");
 }
 
-/// `xrLocateViews`: passed on.
 /// `xrLocateViews`: the FOVs the application gets are recorded, since the density maps
 /// of its swapchains are computed for the FOVs it renders with. No allocation: this runs every frame.
-pub unsafe extern "system" fn locate_views(
+pub fn locate_views(
     sess: xr::Session,
-    info: *const xr::ViewLocateInfo,
-    view_state: *mut xr::ViewState,
+    info: In<xr::ViewLocateInfo>,
+    view_state: Out<xr::ViewState>,
     capacity: u32,
-    count: *mut u32,
-    views: *mut xr::View,
-) -> xr::Result {
-    guard("xrLocateViews", || {
-        finish((|| {
-            let s = session(sess)?;
-            let locate = next(s.instance.next.locate_views)?;
-            let r = observed(&s, locate(sess, info, view_state, capacity, count, views));
-            if succeeded(r) {
-                learn_stereo_views(&s.instance, info, capacity, count, views);
-            }
-            if succeeded(r)
-                && s.gpu.is_some()
-                && capacity > 0
-                && !views.is_null()
-                && !count.is_null()
-            {
-                let n = (*count).min(capacity) as usize;
-                let located = std::slice::from_raw_parts(views, n);
-                if located.iter().any(|v| v.ty != xr::StructureType::VIEW) {
-                    return Ok(r);
-                }
-                s.views
-                    .lock()
-                    .record(located.iter().map(|v| fov_from_xr(v.fov)));
-            }
-            Ok(r)
-        })())
-    })
+    count: Out<u32>,
+    views: OutArray<xr::View>,
+) -> HookResult<xr::Result> {
+    let s = session(sess)?;
+    let locate = next(s.instance.next.locate_views)?;
+    // SAFETY: the next layer's xrLocateViews, with the application's arguments as it passed them.
+    let r = unsafe {
+        locate(
+            sess,
+            info.raw(),
+            view_state.raw(),
+            capacity,
+            count.raw(),
+            views.raw(),
+        )
+    };
+    let r = observed(&s, r);
+    if !succeeded(r) {
+        return Ok(r);
+    }
+    let Some(n) = count.read() else {
+        return Ok(r);
+    };
+    let Some(located) = views.into_slice(n.min(capacity) as usize) else {
+        return Ok(r);
+    };
+    learn_stereo_views(&s.instance, info, n, located);
+    if s.gpu.is_some() && capacity > 0 {
+        if located.iter().any(|v| v.ty != xr::StructureType::VIEW) {
+            return Ok(r);
+        }
+        s.views
+            .lock()
+            .record(located.iter().map(|v| fov_from_xr(v.fov)));
+    }
+    Ok(r)
 }
 
 /// After a successful `xrLocateViews` of the primary stereo views: remembers the runtime's FOVs and,
 /// in symmetric-FOV mode, hands the application the shared symmetric FOV instead (the output array
-/// is the application's to receive; its input structs are untouched).
-unsafe fn learn_stereo_views(
+/// is the application's to receive; its input structs are untouched). `views` holds the located
+/// views that fit the application's array (`min(count, capacity)`).
+fn learn_stereo_views(
     instance: &Instance,
-    info: *const xr::ViewLocateInfo,
-    capacity: u32,
-    count: *const u32,
-    views: *mut xr::View,
+    info: In<xr::ViewLocateInfo>,
+    count: u32,
+    views: &mut [xr::View],
 ) {
-    if info.is_null()
-        || (*info).ty != xr::StructureType::VIEW_LOCATE_INFO
-        || (*info).view_configuration_type != xr::ViewConfigurationType::PRIMARY_STEREO
-        || views.is_null()
-        || count.is_null()
-        || *count != 2
-        || capacity < 2
-    {
+    let stereo = info
+        .get()
+        .is_some_and(|i| i.view_configuration_type == xr::ViewConfigurationType::PRIMARY_STEREO);
+    if !stereo || count != 2 || views.len() != 2 {
         return;
     }
-    let views = std::slice::from_raw_parts_mut(views, 2);
     if views.iter().any(|v| v.ty != xr::StructureType::VIEW) {
         return;
     }

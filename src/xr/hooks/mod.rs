@@ -1,7 +1,13 @@
-//! The intercepted OpenXR functions: thin adapters that validate what the application passed,
-//! translate it to plain Rust values, call into the layer's model, and pass the call on.
+//! The intercepted OpenXR functions: ordinary Rust functions on typed values that validate what the
+//! application passed, translate it to plain Rust values, call into the layer's model, and pass the
+//! call on.
 //!
-//! Each hook runs inside [`crate::common::ffi::guard`], so a panic becomes `XR_ERROR_RUNTIME_FAILURE`.
+//! Their exported entry points are generated from the table in [`crate::xr::dispatch`]: each runs
+//! its hook inside [`crate::common::ffi::guard`], so a panic becomes `XR_ERROR_RUNTIME_FAILURE`, and
+//! hands it the application's pointers as [`In`](crate::common::ffi::In),
+//! [`Out`](crate::common::ffi::Out) and [`OutArray`](crate::common::ffi::OutArray). The only
+//! `unsafe` left in a hook is the call down to the next layer and reads of pointer members the
+//! spec's valid usage vouches for, each commented.
 //! Where the layer cannot do its own work, the application's call still goes down (fail open) and
 //! the log says why.
 
@@ -19,13 +25,7 @@ use openxr_sys as xr;
 use crate::xr::registry::{registry, Instance, Session, Swapchain};
 use fovea_model::Fov;
 
-/// A hook body's outcome: `Err` carries the XrResult to return without calling down.
-pub type HookResult<T> = Result<T, xr::Result>;
-
-/// Flattens a hook body into the XrResult the application sees.
-pub fn finish(r: HookResult<xr::Result>) -> xr::Result {
-    r.unwrap_or_else(|e| e)
-}
+pub use crate::common::ffi::HookResult;
 
 /// The record for an instance handle, or XR_ERROR_HANDLE_INVALID.
 pub fn instance(h: xr::Instance) -> HookResult<Arc<Instance>> {

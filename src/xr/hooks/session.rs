@@ -5,8 +5,8 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{finish, fov_from_xr, instance, next, observed_instance, session, succeeded};
-use crate::common::ffi::{self, guard};
+use super::{fov_from_xr, instance, next, observed_instance, session, succeeded, HookResult};
+use crate::common::ffi::{In, Out, OutArray};
 use crate::gpu::density_images::SessionGpu;
 use crate::xr::dispatch;
 use crate::xr::extensions::Ext;
@@ -22,9 +22,9 @@ use fovea_model::Fov;
 /// created (xrCreateVulkanDeviceKHR, enable2) or told the application to enable it
 /// (xrGetVulkanDeviceExtensionsKHR, enable); the application's own vkCreateDevice cannot be seen.
 ///
-/// # Safety
-/// The binding's handles must be live (the runtime accepted the session).
-unsafe fn session_gpu(instance: &Instance, binding: &VulkanBinding) -> Option<Arc<SessionGpu>> {
+/// The binding's handles are live: the runtime accepted the session, and the application must keep
+/// its Vulkan objects alive while the session exists.
+fn session_gpu(instance: &Instance, binding: &VulkanBinding) -> Option<Arc<SessionGpu>> {
     let recorded = registry()
         .vulkan_devices
         .lock()
@@ -36,7 +36,9 @@ unsafe fn session_gpu(instance: &Instance, binding: &VulkanBinding) -> Option<Ar
             .lock()
             .fdm_listed_for(binding.physical_device)
     });
-    match SessionGpu::new(binding, fdm_enabled) {
+    // SAFETY: the handles of an accepted session's binding are live (see above), and they are
+    // objects of the system Vulkan loader, as XR_KHR_vulkan_enable requires of the application.
+    match unsafe { SessionGpu::new(binding, fdm_enabled) } {
         Ok(gpu) => Some(Arc::new(gpu)),
         Err(e) => {
             tracing::warn!(error = %e, "no density images for this session");
@@ -47,52 +49,44 @@ unsafe fn session_gpu(instance: &Instance, binding: &VulkanBinding) -> Option<Ar
 
 /// `xrCreateSession`: records the Vulkan binding (XrGraphicsBindingVulkanKHR; the enable2 type is an
 /// alias with the same value) so density images can be made on the application's device.
-pub unsafe extern "system" fn create_session(
+pub fn create_session(
     inst: xr::Instance,
-    info: *const xr::SessionCreateInfo,
-    out: *mut xr::Session,
-) -> xr::Result {
-    guard("xrCreateSession", || {
-        finish((|| {
-            let state = instance(inst)?;
-            let f = next(state.next.create_session)?;
-            if info.is_null()
-                || out.is_null()
-                || (*info).ty != xr::StructureType::SESSION_CREATE_INFO
-            {
-                return Ok(observed_instance(&state, f(inst, info, out)));
-            }
-            let binding = match ffi::find_in_chain::<xr::GraphicsBindingVulkanKHR>(
-                (*info).next,
-                xr::StructureType::GRAPHICS_BINDING_VULKAN_KHR,
-            ) {
-                Ok(b) => b.map(|b| {
-                    let b = &*b;
-                    VulkanBinding {
-                        instance: b.instance as u64,
-                        physical_device: b.physical_device as u64,
-                        device: b.device as u64,
-                        queue_family_index: b.queue_family_index,
-                        queue_index: b.queue_index,
-                    }
-                }),
-                Err(_) => return Err(xr::Result::ERROR_VALIDATION_FAILURE),
-            };
-            let r = observed_instance(&state, f(inst, info, out));
-            if succeeded(r) {
-                let handle = *out;
-                let gpu = binding
-                    .filter(|_| state.extensions.provided(Ext::FoveationVulkan))
-                    .and_then(|b| session_gpu(&state, &b));
-                let record = Session::new(handle, state, binding, gpu);
-                registry()
-                    .sessions
-                    .write()
-                    .insert(handle.into_raw(), Arc::new(record));
-            }
-            Ok(r)
-        })())
-    })
+    info: In<xr::SessionCreateInfo>,
+    out: Out<xr::Session>,
+) -> HookResult<xr::Result> {
+    let state = instance(inst)?;
+    let f = next(state.next.create_session)?;
+    // SAFETY: for both calls below: the next layer's xrCreateSession, with the application's
+    // arguments as it passed them.
+    let down = || unsafe { f(inst, info.raw(), out.raw()) };
+    if info.get().is_none() || out.is_null() {
+        return Ok(observed_instance(&state, down()));
+    }
+    let binding = match info.chained::<xr::GraphicsBindingVulkanKHR>() {
+        Ok(b) => b.map(|b| VulkanBinding {
+            instance: b.instance as u64,
+            physical_device: b.physical_device as u64,
+            device: b.device as u64,
+            queue_family_index: b.queue_family_index,
+            queue_index: b.queue_index,
+        }),
+        Err(_) => return Err(xr::Result::ERROR_VALIDATION_FAILURE),
+    };
+    let r = observed_instance(&state, down());
+    if succeeded(r) {
+        let Some(handle) = out.read() else {
+            return Ok(r);
+        };
+        let gpu = binding
+            .filter(|_| state.extensions.provided(Ext::FoveationVulkan))
+            .and_then(|b| session_gpu(&state, &b));
+        let record = Session::new(handle, state, binding, gpu);
+        registry()
+            .sessions
+            .write()
+            .insert(handle.into_raw(), Arc::new(record));
+    }
+    Ok(r)
 }
 
 /// `xrDestroySession`: the session's swapchains and profiles die with it (xr.xml parents). Their
@@ -100,54 +94,50 @@ pub unsafe extern "system" fn create_session(
 /// destroyed the session, still before the call returns and so while the application's device
 /// exists (it must outlive the session). Where the runtime refuses, the session is still alive and
 /// the records go back: a retry, or any other call on it, finds them.
-pub unsafe extern "system" fn destroy_session(handle: xr::Session) -> xr::Result {
-    guard("xrDestroySession", || {
-        finish((|| {
-            let state = session(handle)?;
-            let f = next(state.instance.next.destroy_session)?;
-            let instance = state.instance.clone();
-            drop(state);
-            let detached = registry().detach_session(handle);
-            let r = observed_instance(&instance, f(handle));
-            if !succeeded(r) {
-                tracing::warn!(
-                    ?r,
-                    "the runtime refused xrDestroySession; the session lives on"
-                );
-                registry().restore(detached);
-            }
-            Ok(r)
-        })())
-    })
+pub fn destroy_session(handle: xr::Session) -> HookResult<xr::Result> {
+    let state = session(handle)?;
+    let f = next(state.instance.next.destroy_session)?;
+    let instance = state.instance.clone();
+    drop(state);
+    let detached = registry().detach_session(handle);
+    // SAFETY: the next layer's xrDestroySession, with the application's handle.
+    let r = observed_instance(&instance, unsafe { f(handle) });
+    if !succeeded(r) {
+        tracing::warn!(
+            ?r,
+            "the runtime refused xrDestroySession; the session lives on"
+        );
+        registry().restore(detached);
+    }
+    Ok(r)
 }
 
-/// `xrEnumerateViewConfigurationViews`: passed on.
-pub unsafe extern "system" fn enumerate_view_configuration_views(
+/// `xrEnumerateViewConfigurationViews`: passed on; in symmetric-FOV mode the recommended sizes of
+/// the primary stereo views grow (see [`enlarge_for_symmetric_fov`]).
+pub fn enumerate_view_configuration_views(
     inst: xr::Instance,
     system: xr::SystemId,
     config: xr::ViewConfigurationType,
     capacity: u32,
-    count: *mut u32,
-    views: *mut xr::ViewConfigurationView,
-) -> xr::Result {
-    guard("xrEnumerateViewConfigurationViews", || {
-        finish((|| {
-            let state = instance(inst)?;
-            let f = next(state.next.enumerate_view_configuration_views)?;
-            let r = observed_instance(&state, f(inst, system, config, capacity, count, views));
-            if succeeded(r)
-                && state.symmetric_fov
-                && config == xr::ViewConfigurationType::PRIMARY_STEREO
-                && !views.is_null()
-                && !count.is_null()
-                && *count == 2
-                && capacity >= 2
-            {
-                enlarge_for_symmetric_fov(&state, std::slice::from_raw_parts_mut(views, 2));
-            }
-            Ok(r)
-        })())
-    })
+    count: Out<u32>,
+    views: OutArray<xr::ViewConfigurationView>,
+) -> HookResult<xr::Result> {
+    let state = instance(inst)?;
+    let f = next(state.next.enumerate_view_configuration_views)?;
+    // SAFETY: the next layer's function, with the application's arguments as it passed them.
+    let r = unsafe { f(inst, system, config, capacity, count.raw(), views.raw()) };
+    let r = observed_instance(&state, r);
+    if succeeded(r)
+        && state.symmetric_fov
+        && config == xr::ViewConfigurationType::PRIMARY_STEREO
+        && count.read() == Some(2)
+        && capacity >= 2
+    {
+        if let Some(views) = views.into_slice(2) {
+            enlarge_for_symmetric_fov(&state, views);
+        }
+    }
+    Ok(r)
 }
 
 /// Symmetric-FOV mode: the shared FOV is wider than each eye's own, so the recommended sizes grow to
@@ -156,7 +146,7 @@ pub unsafe extern "system" fn enumerate_view_configuration_views(
 /// from `xrLocateViews`, or asked for through a live session when the application sizes its
 /// swapchains before its first frame (the usual order). Without a session the sizes stay as the
 /// runtime gave them, and the log says so.
-unsafe fn enlarge_for_symmetric_fov(state: &Instance, views: &mut [xr::ViewConfigurationView]) {
+fn enlarge_for_symmetric_fov(state: &Instance, views: &mut [xr::ViewConfigurationView]) {
     if views
         .iter()
         .any(|v| v.ty != xr::StructureType::VIEW_CONFIGURATION_VIEW)
@@ -195,18 +185,18 @@ unsafe fn enlarge_for_symmetric_fov(state: &Instance, views: &mut [xr::ViewConfi
 /// Locates the primary stereo views once, through a throwaway VIEW space of one of the instance's
 /// sessions, at the session's last predicted display time (or the earliest valid time before its
 /// first frame: the FOVs do not depend on it).
-unsafe fn probe_stereo_fovs(state: &Instance) -> Option<[Fov; 2]> {
+fn probe_stereo_fovs(state: &Instance) -> Option<[Fov; 2]> {
     let s = registry().any_session_of(state.handle)?;
-    let create: xr::pfn::CreateReferenceSpace = std::mem::transmute(dispatch::load(
-        state.next_gipa,
-        state.handle,
-        c"xrCreateReferenceSpace",
-    )?);
-    let destroy: xr::pfn::DestroySpace = std::mem::transmute(dispatch::load(
-        state.next_gipa,
-        state.handle,
-        c"xrDestroySpace",
-    )?);
+    // SAFETY: the instance's own next-layer `xrGetInstanceProcAddr` and handle; a pointer the next
+    // layer hands out for a name has the signature the spec gives that name.
+    let (create, destroy) = unsafe {
+        let create = dispatch::load(state.next_gipa, state.handle, c"xrCreateReferenceSpace")?;
+        let destroy = dispatch::load(state.next_gipa, state.handle, c"xrDestroySpace")?;
+        (
+            std::mem::transmute::<xr::pfn::VoidFunction, xr::pfn::CreateReferenceSpace>(create),
+            std::mem::transmute::<xr::pfn::VoidFunction, xr::pfn::DestroySpace>(destroy),
+        )
+    };
     let locate = state.next.locate_views?;
     let identity = xr::Posef {
         orientation: xr::Quaternionf {
@@ -224,7 +214,8 @@ unsafe fn probe_stereo_fovs(state: &Instance) -> Option<[Fov; 2]> {
         pose_in_reference_space: identity,
     };
     let mut space = xr::Space::NULL;
-    if !succeeded(create(s.handle, &info, &mut space)) {
+    // SAFETY: the next layer's function on a live session, with fovea's own valid structs.
+    if !succeeded(unsafe { create(s.handle, &info, &mut space) }) {
         return None;
     }
     let locate_info = xr::ViewLocateInfo {
@@ -247,15 +238,19 @@ unsafe fn probe_stereo_fovs(state: &Instance) -> Option<[Fov; 2]> {
     };
     let mut views = [blank; 2];
     let mut n = 0;
-    let r = locate(
-        s.handle,
-        &locate_info,
-        &mut view_state,
-        2,
-        &mut n,
-        views.as_mut_ptr(),
-    );
-    destroy(space);
+    // SAFETY: as above; `views` holds the 2 elements the capacity says.
+    let r = unsafe {
+        locate(
+            s.handle,
+            &locate_info,
+            &mut view_state,
+            2,
+            &mut n,
+            views.as_mut_ptr(),
+        )
+    };
+    // SAFETY: the space fovea created above, destroyed once.
+    unsafe { destroy(space) };
     if !succeeded(r) || n != 2 {
         tracing::debug!(?r, "symmetric FOV: could not locate the views to size them");
         return None;

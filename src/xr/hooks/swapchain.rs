@@ -3,30 +3,28 @@
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
+use ash::vk;
 use openxr_sys as xr;
 use xr::Handle;
 
 use crate::common::lock::Mutex;
 
-use super::{finish, next, observed, session, succeeded, swapchain, HookResult};
+use super::{next, observed, session, succeeded, swapchain, HookResult};
 use crate::bridge::{FoveationState, MapSources};
-use crate::common::ffi::{self, guard};
+use crate::common::ffi::{self, In, Out, OutArray};
 use crate::gpu::density_images::{DensityImages, Refreshed};
 use crate::xr::extensions::Ext;
 use crate::xr::registry::{registry, Session, Swapchain, SwapchainInfo};
-
-/// VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT (VK_EXT_fragment_density_map).
-const VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT: u32 = 0x4000;
 
 /// What the foveation structs in a swapchain create info ask for.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FoveationRequest {
     /// `XrSwapchainCreateInfoFoveationFB` was chained.
     pub foveation: bool,
-    /// Its flags (SCALED_BIN 0x1, FRAGMENT_DENSITY_MAP 0x2).
-    pub flags: u64,
+    /// Its flags.
+    pub flags: xr::SwapchainCreateFoveationFlagsFB,
     /// `XrVulkanSwapchainCreateInfoMETA`'s flags, when chained.
-    pub meta: Option<(u32, u32)>,
+    pub meta: Option<(vk::ImageCreateFlags, vk::ImageUsageFlags)>,
 }
 
 /// What becomes of VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT for a swapchain.
@@ -50,24 +48,25 @@ pub enum Subsampled {
 /// SUBSAMPLED, which Quest's runtime also drops when unsupported (fixed-foveated-rendering seed) and
 /// which `debug.oculus.foveation.subsampled` forces on or off.
 pub fn check_request(req: FoveationRequest, forced: Option<bool>) -> HookResult<Subsampled> {
-    if req.flags & !0x3 != 0 {
+    use xr::SwapchainCreateFoveationFlagsFB as F;
+    if !(F::SCALED_BIN | F::FRAGMENT_DENSITY_MAP).contains(req.flags) {
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     }
-    if req.flags & 0x1 != 0 {
+    if req.flags.contains(F::SCALED_BIN) {
         tracing::warn!("XR_SWAPCHAIN_CREATE_FOVEATION_SCALED_BIN_BIT_FB needs OpenGL ES; this is not a GLES session");
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     }
     let mut asked = false;
     if let Some((create, usage)) = req.meta {
-        if usage != 0 || create & !VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT != 0 {
+        if !usage.is_empty() || !vk::ImageCreateFlags::SUBSAMPLED_EXT.contains(create) {
             tracing::warn!(
-                create,
-                usage,
+                ?create,
+                ?usage,
                 "additional Vulkan swapchain flags the runtime cannot honour"
             );
             return Err(xr::Result::ERROR_FEATURE_UNSUPPORTED);
         }
-        asked = create != 0;
+        asked = !create.is_empty();
     }
     Ok(match (asked, forced) {
         (true, Some(false)) => Subsampled::Off,
@@ -79,212 +78,215 @@ pub fn check_request(req: FoveationRequest, forced: Option<bool>) -> HookResult<
 
 /// `xrCreateSwapchain`: takes the foveation structs fovea provides out of a copied chain, checks
 /// them, and records the swapchain's layout and foveation state.
-pub unsafe extern "system" fn create_swapchain(
+pub fn create_swapchain(
     sess: xr::Session,
-    info: *const xr::SwapchainCreateInfo,
-    out: *mut xr::Swapchain,
-) -> xr::Result {
-    guard("xrCreateSwapchain", || {
-        finish((|| {
-            let state = session(sess)?;
-            let f = next(state.instance.next.create_swapchain)?;
-            if info.is_null()
-                || out.is_null()
-                || (*info).ty != xr::StructureType::SWAPCHAIN_CREATE_INFO
-            {
-                return Ok(observed(&state, f(sess, info, out)));
-            }
-            let exts = state.instance.extensions;
-            let i = &*info;
-            let provided_fov = exts.provided(Ext::Foveation);
-            let provided_meta = exts.provided(Ext::MetaVulkanSwapchainCreateInfo);
-            let mut req = FoveationRequest::default();
-            if provided_fov {
-                let fov = ffi::find_in_chain::<xr::SwapchainCreateInfoFoveationFB>(
-                    i.next,
-                    xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
-                )
-                .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
-                if let Some(fov) = fov {
-                    req.foveation = true;
-                    req.flags = (*fov).flags.into_raw();
-                }
-            }
-            if provided_meta {
-                let meta = ffi::find_in_chain::<ffi::VulkanSwapchainCreateInfoMETA>(
-                    i.next,
-                    ffi::TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META,
-                )
-                .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
-                req.meta =
-                    meta.map(|m| ((*m).additional_create_flags, (*m).additional_usage_flags));
-            }
-            match check_request(req, state.instance.overrides.current().subsampled)? {
-                Subsampled::Dropped => tracing::warn!(
-                    "VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT dropped: the runtime allocates the images \
-                     and cannot make them subsampled"
-                ),
-                Subsampled::Off => tracing::info!(
-                    "VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT off: debug.oculus.foveation.subsampled=0"
-                ),
-                Subsampled::CannotForce => tracing::warn!(
-                    "debug.oculus.foveation.subsampled=1 cannot be honoured: the runtime \
-                     allocates the images"
-                ),
-                Subsampled::No => {}
-            }
-            // Structs of extensions fovea provides are unknown below: take them out of a copy.
-            let chain = ffi::ChainCopy::without(i.next, |t| {
-                (provided_fov && t == xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB)
-                    || (provided_meta && t == ffi::TYPE_VULKAN_SWAPCHAIN_CREATE_INFO_META)
-            })
-            .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
-            if !chain.removed().is_empty() {
-                tracing::debug!(removed = ?chain.removed(), "provided extensions' structs kept from the runtime");
-            }
-            let mut down = *i;
-            down.next = chain.head();
-            let r = observed(&state, f(sess, &down, out));
-            if succeeded(r) {
-                let density = if req.flags & FRAGMENT_DENSITY_MAP_BIT != 0
-                    && exts.provided(Ext::FoveationVulkan)
-                {
-                    density_images(&state, *out, i)
-                } else {
-                    None
-                };
-                let record = Swapchain {
-                    handle: *out,
-                    session: state,
-                    info: SwapchainInfo {
-                        usage: i.usage_flags.into_raw(),
-                        format: i.format,
-                        sample_count: i.sample_count,
-                        width: i.width,
-                        height: i.height,
-                        face_count: i.face_count,
-                        array_size: i.array_size,
-                        mip_count: i.mip_count,
-                    },
-                    foveation: req.foveation.then(|| Mutex::new(FoveationState::default())),
-                    density,
-                    submitted: Mutex::default(),
-                };
-                registry()
-                    .swapchains
-                    .write()
-                    .insert((*out).into_raw(), Arc::new(record));
-            }
-            Ok(r)
-        })())
-    })
+    info: In<xr::SwapchainCreateInfo>,
+    out: Out<xr::Swapchain>,
+) -> HookResult<xr::Result> {
+    let state = session(sess)?;
+    let f = next(state.instance.next.create_swapchain)?;
+    let (Some(i), false) = (info.get(), out.is_null()) else {
+        // SAFETY: the next layer's xrCreateSwapchain, with the application's arguments as it
+        // passed them.
+        return Ok(observed(&state, unsafe { f(sess, info.raw(), out.raw()) }));
+    };
+    let exts = state.instance.extensions;
+    let provided_fov = exts.provided(Ext::Foveation);
+    let provided_meta = exts.provided(Ext::MetaVulkanSwapchainCreateInfo);
+    let invalid = |_| xr::Result::ERROR_VALIDATION_FAILURE;
+    let mut req = FoveationRequest::default();
+    if provided_fov {
+        if let Some(fov) = info
+            .chained::<xr::SwapchainCreateInfoFoveationFB>()
+            .map_err(invalid)?
+        {
+            req.foveation = true;
+            req.flags = fov.flags;
+        }
+    }
+    if provided_meta {
+        let meta = info
+            .chained::<ffi::VulkanSwapchainCreateInfoMETA>()
+            .map_err(invalid)?;
+        req.meta = meta.map(|m| (m.additional_create_flags, m.additional_usage_flags));
+    }
+    match check_request(req, state.instance.overrides.current().subsampled)? {
+        Subsampled::Dropped => tracing::warn!(
+            "VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT dropped: the runtime allocates the images \
+             and cannot make them subsampled"
+        ),
+        Subsampled::Off => tracing::info!(
+            "VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT off: debug.oculus.foveation.subsampled=0"
+        ),
+        Subsampled::CannotForce => tracing::warn!(
+            "debug.oculus.foveation.subsampled=1 cannot be honoured: the runtime \
+             allocates the images"
+        ),
+        Subsampled::No => {}
+    }
+    // Structs of extensions fovea provides are unknown below: take them out of a copy.
+    let chain = info
+        .chain_without(|t| {
+            (provided_fov && t == xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB)
+                || (provided_meta && t == xr::StructureType::VULKAN_SWAPCHAIN_CREATE_INFO_META)
+        })
+        .map_err(invalid)?;
+    if !chain.removed().is_empty() {
+        tracing::debug!(removed = ?chain.removed(), "provided extensions' structs kept from the runtime");
+    }
+    let mut down = *i;
+    down.next = chain.head();
+    // SAFETY: the next layer's xrCreateSwapchain, with a copy of the application's create info
+    // whose chain `chain` keeps alive, and the application's output pointer.
+    let r = observed(&state, unsafe { f(sess, &down, out.raw()) });
+    let Some(handle) = out.read().filter(|_| succeeded(r)) else {
+        return Ok(r);
+    };
+    let density = if req
+        .flags
+        .contains(xr::SwapchainCreateFoveationFlagsFB::FRAGMENT_DENSITY_MAP)
+        && exts.provided(Ext::FoveationVulkan)
+    {
+        density_images(&state, handle, i)
+    } else {
+        None
+    };
+    let record = Swapchain {
+        handle,
+        session: state,
+        info: SwapchainInfo {
+            usage: i.usage_flags.into_raw(),
+            format: i.format,
+            sample_count: i.sample_count,
+            width: i.width,
+            height: i.height,
+            face_count: i.face_count,
+            array_size: i.array_size,
+            mip_count: i.mip_count,
+        },
+        foveation: req.foveation.then(|| Mutex::new(FoveationState::default())),
+        density,
+        submitted: Mutex::default(),
+    };
+    registry()
+        .swapchains
+        .write()
+        .insert(handle.into_raw(), Arc::new(record));
+    Ok(r)
 }
 
 /// `xrDestroySwapchain`: forgets the swapchain; its density images and their Vulkan objects are
 /// destroyed with the record, after the runtime destroyed its images. The record leaves the registry
 /// before the call goes down (a handle value the runtime reuses at once cannot meet it) and goes
 /// back where the runtime refuses, since the swapchain then still lives.
-pub unsafe extern "system" fn destroy_swapchain(handle: xr::Swapchain) -> xr::Result {
-    guard("xrDestroySwapchain", || {
-        finish((|| {
-            let state = swapchain(handle)?;
-            let f = next(state.session.instance.next.destroy_swapchain)?;
-            let Some(record) = registry().swapchains.write().remove(&handle.into_raw()) else {
-                // Another thread destroyed it meanwhile (the application broke external
-                // synchronisation): the handle is gone.
-                return Err(xr::Result::ERROR_HANDLE_INVALID);
-            };
-            let r = observed(&state.session, f(handle));
-            if succeeded(r) {
-                if state.foveation.is_some() {
-                    state.session.refresh_dynamic_max();
-                }
-            } else {
-                registry()
-                    .swapchains
-                    .write()
-                    .insert(handle.into_raw(), record);
-            }
-            Ok(r)
-        })())
-    })
+pub fn destroy_swapchain(handle: xr::Swapchain) -> HookResult<xr::Result> {
+    let state = swapchain(handle)?;
+    let f = next(state.session.instance.next.destroy_swapchain)?;
+    let Some(record) = registry().swapchains.write().remove(&handle.into_raw()) else {
+        // Another thread destroyed it meanwhile (the application broke external
+        // synchronisation): the handle is gone.
+        return Err(xr::Result::ERROR_HANDLE_INVALID);
+    };
+    // SAFETY: the next layer's xrDestroySwapchain, with the application's handle.
+    let r = observed(&state.session, unsafe { f(handle) });
+    if succeeded(r) {
+        if state.foveation.is_some() {
+            state.session.refresh_dynamic_max();
+        }
+    } else {
+        registry()
+            .swapchains
+            .write()
+            .insert(handle.into_raw(), record);
+    }
+    Ok(r)
 }
 
 /// `xrEnumerateSwapchainImages`: the runtime fills the images; then, on a swapchain with density
 /// images, every XrSwapchainImageFoveationVulkanFB chained on an XrSwapchainImageVulkanKHR element
-/// gets the density image of that index and its size (fb_foveation_vulkan.adoc). Those are output
-/// structs, the only ones fovea writes. Capacity 0 (the count query of the two-call idiom) writes
-/// nothing.
-pub unsafe extern "system" fn enumerate_swapchain_images(
+/// gets the density image of that index and its size
+/// (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrSwapchainImageFoveationVulkanFB.html).
+/// Those are output structs, the only ones fovea writes. Capacity 0 (the count query of the
+/// two-call idiom) writes nothing.
+pub fn enumerate_swapchain_images(
     handle: xr::Swapchain,
     capacity: u32,
-    count: *mut u32,
-    images: *mut xr::SwapchainImageBaseHeader,
-) -> xr::Result {
-    guard("xrEnumerateSwapchainImages", || {
-        finish((|| {
-            let state = swapchain(handle)?;
-            let f = next(state.session.instance.next.enumerate_swapchain_images)?;
-            let r = observed(&state.session, f(handle, capacity, count, images));
-            let Some(density) = &state.density else {
-                return Ok(r);
-            };
-            if !succeeded(r) || capacity == 0 || images.is_null() || count.is_null() {
-                return Ok(r);
+    count: Out<u32>,
+    images: OutArray<xr::SwapchainImageBaseHeader>,
+) -> HookResult<xr::Result> {
+    let state = swapchain(handle)?;
+    let f = next(state.session.instance.next.enumerate_swapchain_images)?;
+    // SAFETY: the next layer's function, with the application's arguments as it passed them.
+    let r = unsafe { f(handle, capacity, count.raw(), images.raw()) };
+    let r = observed(&state.session, r);
+    let Some(density) = &state.density else {
+        return Ok(r);
+    };
+    if !succeeded(r) || capacity == 0 {
+        return Ok(r);
+    }
+    let Some(n) = count.read() else {
+        return Ok(r);
+    };
+    let n = n.min(capacity) as usize;
+    let Some(elements) = images.cast_slice::<xr::SwapchainImageVulkanKHR>(n) else {
+        return Ok(r);
+    };
+    for (i, element) in elements.iter().enumerate().take(density.count()) {
+        // SAFETY: the element's chain is the application's output chain, valid for the call
+        // (the array's contract, `OutArray`); a node of the foveation type is that struct.
+        let found = unsafe {
+            ffi::find_in_chain::<xr::SwapchainImageFoveationVulkanFB>(
+                element.next,
+                xr::StructureType::SWAPCHAIN_IMAGE_FOVEATION_VULKAN_FB,
+            )
+        }
+        .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
+        if let (Some(out), Some(image)) = (found, density.image(i)) {
+            let out = out as *mut xr::SwapchainImageFoveationVulkanFB;
+            // SAFETY: an output struct of the application's, writable for the call; only its
+            // output members are written.
+            unsafe {
+                (*out).image = image;
+                (*out).width = density.extent[0];
+                (*out).height = density.extent[1];
             }
-            if (*images).ty != xr::StructureType::SWAPCHAIN_IMAGE_VULKAN_KHR {
-                return Ok(r);
-            }
-            let n = (*count).min(capacity) as usize;
-            let elements = images as *mut xr::SwapchainImageVulkanKHR;
-            for i in 0..n.min(density.count()) {
-                let element = &*elements.add(i);
-                let found = ffi::find_in_chain::<xr::SwapchainImageFoveationVulkanFB>(
-                    element.next,
-                    xr::StructureType::SWAPCHAIN_IMAGE_FOVEATION_VULKAN_FB,
-                )
-                .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
-                if let (Some(out), Some(image)) = (found, density.image(i)) {
-                    let out = out as *mut xr::SwapchainImageFoveationVulkanFB;
-                    (*out).image = image;
-                    (*out).width = density.extent[0];
-                    (*out).height = density.extent[1];
-                }
-            }
-            Ok(r)
-        })())
-    })
+        }
+    }
+    Ok(r)
 }
 
 /// `xrAcquireSwapchainImage`: once the runtime has handed out the index, that index's density image
 /// is refreshed if the swapchain's foveation state or the located FOVs changed since it was filled.
 /// xrAcquireSwapchainImage is one of the calls where the application synchronises its queue for the
-/// runtime (XR_KHR_vulkan_enable, "Concurrency"), and the upload is finished before the call returns,
-/// because by default the map is read when the application records its render pass
-/// (openxr-layer-facts.md §4). With nothing changed this costs four uncontended locks and a key compare.
-pub unsafe extern "system" fn acquire_swapchain_image(
+/// runtime (https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#XR_KHR_vulkan_enable,
+/// "Concurrency"), and the upload is finished before the call returns, because by default the map is
+/// read when the application records its render pass
+/// (without VK_IMAGE_VIEW_CREATE_FRAGMENT_DENSITY_MAP_DYNAMIC_BIT_EXT, the host reads it during
+/// vkCmdBeginRenderPass:
+/// https://registry.khronos.org/vulkan/specs/latest/man/html/VkImageViewCreateFlagBits.html). With nothing changed this costs four uncontended locks and a key
+/// compare.
+pub fn acquire_swapchain_image(
     handle: xr::Swapchain,
-    info: *const xr::SwapchainImageAcquireInfo,
-    index: *mut u32,
-) -> xr::Result {
-    guard("xrAcquireSwapchainImage", || {
-        finish((|| {
-            let state = swapchain(handle)?;
-            let f = next(state.session.instance.next.acquire_swapchain_image)?;
-            let r = observed(&state.session, f(handle, info, index));
-            if let (Some(density), true) = (&state.density, succeeded(r) && !index.is_null()) {
-                refresh_density(&state, density, *index);
-            }
-            Ok(r)
-        })())
-    })
+    info: In<xr::SwapchainImageAcquireInfo>,
+    index: Out<u32>,
+) -> HookResult<xr::Result> {
+    let state = swapchain(handle)?;
+    let f = next(state.session.instance.next.acquire_swapchain_image)?;
+    // SAFETY: the next layer's function, with the application's arguments as it passed them.
+    let r = unsafe { f(handle, info.raw(), index.raw()) };
+    let r = observed(&state.session, r);
+    if let (Some(density), true, Some(index)) = (&state.density, succeeded(r), index.read()) {
+        refresh_density(&state, density, index);
+    }
+    Ok(r)
 }
 
 /// Refreshes one density image; a failure is logged and the acquire still succeeds (fail open).
 /// The map holds the swapchain's effective pattern (its state under the debug overrides and the
 /// dynamic step) for the FOVs the application renders with; in symmetric-FOV mode each eye's own
 /// FOV is what is shown.
-unsafe fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32) {
+fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32) {
     let session = &state.session;
     let foveation = state
         .foveation
@@ -318,7 +320,9 @@ unsafe fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32
             visible,
         )
     };
-    match density.refresh(index, key, inputs) {
+    // SAFETY: called from xrAcquireSwapchainImage, where the application synchronises the
+    // binding's queue for the runtime (`DensityImages::refresh`'s contract).
+    match unsafe { density.refresh(index, key, inputs) } {
         Ok(Refreshed::Nothing) => {}
         Ok(done) => {
             if done == Refreshed::Built {
@@ -331,16 +335,12 @@ unsafe fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32
     }
 }
 
-/// `XR_SWAPCHAIN_CREATE_FOVEATION_FRAGMENT_DENSITY_MAP_BIT_FB`.
-const FRAGMENT_DENSITY_MAP_BIT: u64 = 0x2;
-
 /// The density images for a new FRAGMENT_DENSITY_MAP swapchain on a session with fovea's Vulkan
 /// objects, one per swapchain image (the runtime is asked for the count). `None`, with a warning,
 /// where they cannot be made: the swapchain then works without them.
 ///
-/// # Safety
-/// `handle` must be the swapchain the runtime just created from `info`.
-unsafe fn density_images(
+/// `handle` is the swapchain the runtime just created from `info`.
+fn density_images(
     session: &Session,
     handle: xr::Swapchain,
     info: &xr::SwapchainCreateInfo,
@@ -353,12 +353,15 @@ unsafe fn density_images(
     };
     let enumerate = session.instance.next.enumerate_swapchain_images?;
     let mut count = 0;
-    let r = enumerate(handle, 0, &mut count, std::ptr::null_mut());
+    // SAFETY: the next layer's function on a swapchain it just created; capacity 0 writes only
+    // the count, into a local.
+    let r = unsafe { enumerate(handle, 0, &mut count, std::ptr::null_mut()) };
     if !succeeded(r) || count == 0 {
         tracing::warn!(?r, "cannot count the swapchain's images; no density images");
         return None;
     }
-    match DensityImages::new(gpu, [info.width, info.height], info.array_size, count) {
+    // SAFETY: the session's device outlives it (the application must keep it alive).
+    match unsafe { DensityImages::new(gpu, [info.width, info.height], info.array_size, count) } {
         Ok(d) => {
             tracing::info!(
                 count,
@@ -376,31 +379,25 @@ unsafe fn density_images(
 }
 
 /// `xrWaitSwapchainImage`: passed on.
-pub unsafe extern "system" fn wait_swapchain_image(
+pub fn wait_swapchain_image(
     handle: xr::Swapchain,
-    info: *const xr::SwapchainImageWaitInfo,
-) -> xr::Result {
-    guard("xrWaitSwapchainImage", || {
-        finish((|| {
-            let state = swapchain(handle)?;
-            let f = next(state.session.instance.next.wait_swapchain_image)?;
-            Ok(observed(&state.session, f(handle, info)))
-        })())
-    })
+    info: In<xr::SwapchainImageWaitInfo>,
+) -> HookResult<xr::Result> {
+    let state = swapchain(handle)?;
+    let f = next(state.session.instance.next.wait_swapchain_image)?;
+    // SAFETY: the next layer's function, with the application's arguments as it passed them.
+    Ok(observed(&state.session, unsafe { f(handle, info.raw()) }))
 }
 
 /// `xrReleaseSwapchainImage`: passed on.
-pub unsafe extern "system" fn release_swapchain_image(
+pub fn release_swapchain_image(
     handle: xr::Swapchain,
-    info: *const xr::SwapchainImageReleaseInfo,
-) -> xr::Result {
-    guard("xrReleaseSwapchainImage", || {
-        finish((|| {
-            let state = swapchain(handle)?;
-            let f = next(state.session.instance.next.release_swapchain_image)?;
-            Ok(observed(&state.session, f(handle, info)))
-        })())
-    })
+    info: In<xr::SwapchainImageReleaseInfo>,
+) -> HookResult<xr::Result> {
+    let state = swapchain(handle)?;
+    let f = next(state.session.instance.next.release_swapchain_image)?;
+    // SAFETY: the next layer's function, with the application's arguments as it passed them.
+    Ok(observed(&state.session, unsafe { f(handle, info.raw()) }))
 }
 
 #[cfg(test)]
@@ -415,31 +412,40 @@ mod tests {
             meta,
         };
         let ok = |flags, meta| check_request(req(flags, meta), None);
-        let sub = Some((VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT, 0));
-        assert_eq!(ok(0x2, None), Ok(Subsampled::No));
-        assert_eq!(ok(0x0, sub), Ok(Subsampled::Dropped));
+        use vk::{ImageCreateFlags as C, ImageUsageFlags as U};
+        use xr::SwapchainCreateFoveationFlagsFB as F;
+        let fdm = F::FRAGMENT_DENSITY_MAP;
+        let sub = Some((C::SUBSAMPLED_EXT, U::empty()));
+        assert_eq!(ok(fdm, None), Ok(Subsampled::No));
+        assert_eq!(ok(F::EMPTY, sub), Ok(Subsampled::Dropped));
         assert_eq!(
-            check_request(req(0x2, sub), Some(false)),
+            check_request(req(fdm, sub), Some(false)),
             Ok(Subsampled::Off)
         );
         assert_eq!(
-            check_request(req(0x2, sub), Some(true)),
+            check_request(req(fdm, sub), Some(true)),
             Ok(Subsampled::Dropped)
         );
         assert_eq!(
-            check_request(req(0x2, None), Some(true)),
+            check_request(req(fdm, None), Some(true)),
             Ok(Subsampled::CannotForce)
         );
         let plain = FoveationRequest::default();
         assert_eq!(check_request(plain, Some(true)), Ok(Subsampled::No));
-        assert_eq!(ok(0x1, None), Err(xr::Result::ERROR_VALIDATION_FAILURE));
-        assert_eq!(ok(0x4, None), Err(xr::Result::ERROR_VALIDATION_FAILURE));
         assert_eq!(
-            ok(0x2, Some((0, 0x200))),
+            ok(F::SCALED_BIN, None),
+            Err(xr::Result::ERROR_VALIDATION_FAILURE)
+        );
+        assert_eq!(
+            ok(F::from_raw(1 << 2), None),
+            Err(xr::Result::ERROR_VALIDATION_FAILURE)
+        );
+        assert_eq!(
+            ok(fdm, Some((C::empty(), U::FRAGMENT_DENSITY_MAP_EXT))),
             Err(xr::Result::ERROR_FEATURE_UNSUPPORTED)
         );
         assert_eq!(
-            ok(0x2, Some((0x1, 0))),
+            ok(fdm, Some((C::SPARSE_BINDING, U::empty()))),
             Err(xr::Result::ERROR_FEATURE_UNSUPPORTED)
         );
     }
