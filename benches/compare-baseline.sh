@@ -17,8 +17,9 @@
 # `fovea` (this tree's layer). The last two lines printed are the interleaved summary: added ns per
 # frame and the ratio against the bare loop for each layer, heap allocations per frame, and the new
 # added cost as a fraction of the baseline's. Run it three times for three figures (after the first,
-# `FOVEA_BENCH_BASELINE=target/libfovea-base.so cargo bench --bench frame_loop -- ...` alone will do).
-# cargo bench builds this tree's libfovea.so itself.
+# `cargo build --release -p fovea && FOVEA_BENCH_BASELINE=target/libfovea-base.so cargo bench --bench
+# frame_loop -- ...` will do). cargo bench does not build the layer's cdylib, so this tree's
+# libfovea.so is built first.
 #
 # FOVEA_BENCH_BASELINE may also be set by hand to any built libfovea.so.
 set -euo pipefail
@@ -34,4 +35,5 @@ git -C "$root" archive "$commit" | tar -x -C "$src"
 (cd "$src" && CARGO_TARGET_DIR="$target/fovea-baseline" cargo build --release -p fovea)
 cp "$target/fovea-baseline/release/libfovea.so" "$target/libfovea-base.so"
 cd "$root"
+cargo build --release -p fovea
 FOVEA_BENCH_BASELINE="$target/libfovea-base.so" cargo bench --bench frame_loop -- "${args[@]}"

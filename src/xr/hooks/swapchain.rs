@@ -8,7 +8,10 @@ use xr::Handle;
 
 use crate::common::lock::Mutex;
 
-use super::{finish, next, observed, session, succeeded, swapchain, HookResult};
+use super::{
+    finish, next, observed, observed_swapchain, session, succeeded, swapchain, swapchain_next,
+    HookResult,
+};
 use crate::bridge::{FoveationState, MapSources};
 use crate::common::ffi::{self, guard};
 use crate::gpu::density_images::{DensityImages, Refreshed};
@@ -269,11 +272,17 @@ pub unsafe extern "system" fn acquire_swapchain_image(
 ) -> xr::Result {
     guard("xrAcquireSwapchainImage", || {
         finish((|| {
-            let state = swapchain(handle)?;
-            let f = next(state.session.instance.next.acquire_swapchain_image)?;
-            let r = observed(&state.session, f(handle, info, index));
-            if let (Some(density), true) = (&state.density, succeeded(r) && !index.is_null()) {
-                refresh_density(&state, density, *index);
+            let (f, state) = swapchain_next(
+                handle,
+                |n| n.acquire_swapchain_image,
+                |sc| sc.density.is_some(),
+            )?;
+            let r = observed_swapchain(handle, f(handle, info, index));
+            let density = state
+                .as_deref()
+                .and_then(|s| Some((s, s.density.as_ref()?)));
+            if let (Some((state, density)), true) = (density, succeeded(r) && !index.is_null()) {
+                refresh_density(state, density, *index);
             }
             Ok(r)
         })())
@@ -382,9 +391,8 @@ pub unsafe extern "system" fn wait_swapchain_image(
 ) -> xr::Result {
     guard("xrWaitSwapchainImage", || {
         finish((|| {
-            let state = swapchain(handle)?;
-            let f = next(state.session.instance.next.wait_swapchain_image)?;
-            Ok(observed(&state.session, f(handle, info)))
+            let (f, _) = swapchain_next(handle, |n| n.wait_swapchain_image, |_| false)?;
+            Ok(observed_swapchain(handle, f(handle, info)))
         })())
     })
 }
@@ -396,9 +404,8 @@ pub unsafe extern "system" fn release_swapchain_image(
 ) -> xr::Result {
     guard("xrReleaseSwapchainImage", || {
         finish((|| {
-            let state = swapchain(handle)?;
-            let f = next(state.session.instance.next.release_swapchain_image)?;
-            Ok(observed(&state.session, f(handle, info)))
+            let (f, _) = swapchain_next(handle, |n| n.release_swapchain_image, |_| false)?;
+            Ok(observed_swapchain(handle, f(handle, info)))
         })())
     })
 }
