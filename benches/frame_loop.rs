@@ -11,6 +11,12 @@
 //!
 //! Besides criterion's own report, the run ends with a summary line: ns per frame for both loops from
 //! interleaved timing rounds in the same run, the difference, the ratio, and allocations per frame.
+//!
+//! `FOVEA_BENCH_BASELINE=/path/to/libfovea.so` adds a third loop, `baseline`, through that library (an
+//! older build of the layer, loaded beside this workspace's own: `dlopen` keeps the two apart), to both
+//! criterion's report and the interleaved summary, so that a change is compared with the code it
+//! replaces in the same run on the same machine state. `benches/compare-baseline.sh` builds the
+//! baseline from a commit and runs this.
 
 use std::ffi::c_void;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -19,7 +25,7 @@ use std::time::Instant;
 use criterion::{criterion_group, Criterion};
 use fovea_harness::app::API_1_0;
 use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
-use fovea_harness::{sim, App, Chain};
+use fovea_harness::{sim, App, Chain, LayerSpec, FOVEA_LAYER};
 use openxr_sys as xr;
 use xr::Handle;
 
@@ -107,10 +113,27 @@ fn running_loop(chain: Chain) -> HeadlessLoop {
     lp
 }
 
+/// The environment variable naming a baseline build of the layer to compare with.
+const BASELINE_ENV: &str = "FOVEA_BENCH_BASELINE";
+
+/// The baseline layer named by [`BASELINE_ENV`], loaded as the loader would load fovea.
+fn baseline_chain() -> Option<Chain> {
+    let path = std::env::var_os(BASELINE_ENV)?;
+    let spec = LayerSpec {
+        path: path.into(),
+        name: FOVEA_LAYER.to_owned(),
+    };
+    Some(Chain::new(vec![spec]).expect("the baseline layer loads"))
+}
+
 fn bench_frames(c: &mut Criterion) {
     let mut group = c.benchmark_group("frame");
     let mut bare = running_loop(Chain::bare());
     group.bench_function("bare", |b| b.iter(|| bare.frame().unwrap()));
+    if let Some(chain) = baseline_chain() {
+        let mut baseline = running_loop(chain);
+        group.bench_function("baseline", |b| b.iter(|| baseline.frame().unwrap()));
+    }
     let mut fovea = running_loop(Chain::fovea().expect("libfovea.so is built"));
     group.bench_function("fovea", |b| b.iter(|| fovea.frame().unwrap()));
     group.finish();
@@ -151,13 +174,18 @@ fn check_counter_sees_the_layer() {
     );
 }
 
-/// Interleaved rounds of both loops in the same run; the median round of each.
+/// Interleaved rounds of the loops in the same run (bare, the baseline when named, fovea); the median
+/// round of each.
 fn summary() {
     let mut bare = running_loop(Chain::bare());
+    let mut baseline = baseline_chain().map(running_loop);
     let mut fovea = running_loop(Chain::fovea().expect("libfovea.so is built"));
-    let (mut b, mut f) = (Vec::new(), Vec::new());
+    let (mut b, mut o, mut f) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..15 {
         b.push(timed(&mut bare, 20_000));
+        if let Some(lp) = &mut baseline {
+            o.push(timed(lp, 20_000));
+        }
         f.push(timed(&mut fovea, 20_000));
     }
     let median = |v: &mut Vec<(f64, f64)>| {
@@ -173,6 +201,17 @@ fn summary() {
         fovea_ns / bare_ns,
         fovea_allocs - bare_allocs,
     );
+    if !o.is_empty() {
+        let (base_ns, base_allocs) = median(&mut o);
+        println!(
+            "baseline: bare {bare_ns:.0} ns/frame, baseline {base_ns:.0} ns/frame, added {:.0} ns/frame, ratio {:.3}, \
+             allocations added {:.2}; fovea's added cost is {:.2} of the baseline's",
+            base_ns - bare_ns,
+            base_ns / bare_ns,
+            base_allocs - bare_allocs,
+            (fovea_ns - bare_ns) / (base_ns - bare_ns),
+        );
+    }
 }
 
 criterion_group!(benches, bench_frames);

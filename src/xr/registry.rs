@@ -2,9 +2,14 @@
 //!
 //! Handles are the runtime's own (fovea wraps none of them, so calls it does not intercept need no
 //! translation); profiles are the one handle type fovea mints itself. Each kind lives in a map behind
-//! a `parking_lot` reader-writer lock; records are `Arc`s so a hook can drop the map lock before
-//! calling down. Children hold their parent's `Arc`, which is how a hook on a swapchain reaches the
-//! instance's next-layer table.
+//! a [`MapLock`]; records are `Arc`s so a hook can drop the map lock before calling down. Children
+//! hold their parent's `Arc`, which is how a hook on a swapchain reaches the instance's next-layer
+//! table.
+//!
+//! Per frame, a look-up is the layer's main cost (one atomic read-modify-write to take the map lock,
+//! one to release it, and two more for an `Arc` clone and its drop). A hook that needs nothing of its
+//! record once the call has gone down copies what it needs under the map lock instead
+//! ([`Registry::with_swapchain`]) and takes no `Arc`: half the atomics.
 //!
 //! Lock order ([`crate::common::lock::Rank`], outermost first; checked in debug builds by [`crate::common::lock`]):
 //! 1. a map lock (the handle maps, the Vulkan device list) is held alone: never while another lock
@@ -302,6 +307,11 @@ fn get<T>(map: &HandleMap<T>, raw: u64) -> Option<Arc<T>> {
     map.read().get(&raw).cloned()
 }
 
+/// Runs `f` on the record of `raw` while the map lock is held, taking no reference to the record.
+fn with<T, R>(map: &HandleMap<T>, raw: u64, f: impl FnOnce(&Arc<T>) -> R) -> Option<R> {
+    map.read().get(&raw).map(f)
+}
+
 impl Registry {
     pub fn instance(&self, h: xr::Instance) -> Option<Arc<Instance>> {
         get(&self.instances, h.into_raw())
@@ -332,6 +342,18 @@ impl Registry {
 
     pub fn swapchain(&self, h: xr::Swapchain) -> Option<Arc<Swapchain>> {
         get(&self.swapchains, h.into_raw())
+    }
+
+    /// Runs `f` on a swapchain's record under the swapchains' map lock, without cloning its `Arc`:
+    /// for copying out what a hook needs (a next-layer pointer, whether it has density images), or
+    /// an atomic store. `f` runs under a map lock, which is held alone ([`Rank::Map`]): it must take
+    /// no lock (debug builds check) and never call into the next layer.
+    pub fn with_swapchain<R>(
+        &self,
+        h: xr::Swapchain,
+        f: impl FnOnce(&Arc<Swapchain>) -> R,
+    ) -> Option<R> {
+        with(&self.swapchains, h.into_raw(), f)
     }
 
     pub fn profile(&self, h: xr::FoveationProfileFB) -> Option<Arc<Profile>> {

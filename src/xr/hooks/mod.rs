@@ -22,6 +22,7 @@ use std::sync::Arc;
 
 use openxr_sys as xr;
 
+use crate::xr::dispatch::Next;
 use crate::xr::registry::{registry, Instance, Session, Swapchain};
 use fovea_model::Fov;
 
@@ -46,6 +47,42 @@ pub fn swapchain(h: xr::Swapchain) -> HookResult<Arc<Swapchain>> {
     registry()
         .swapchain(h)
         .ok_or(xr::Result::ERROR_HANDLE_INVALID)
+}
+
+/// A swapchain hook's next-layer pointer, copied out of the record under the map lock, and the record
+/// itself only where `keep` says the hook has work to do with it once the call has come back; or
+/// XR_ERROR_HANDLE_INVALID. A hook that keeps no record reports a loss through
+/// [`observed_swapchain`]. Per frame this saves the `Arc` clone and drop of [`swapchain`] (two of the
+/// look-up's four atomic read-modify-writes) on xrWaitSwapchainImage, xrReleaseSwapchainImage and,
+/// without density images, xrAcquireSwapchainImage.
+pub fn swapchain_next<F>(
+    h: xr::Swapchain,
+    pick: impl FnOnce(&Next) -> Option<F>,
+    keep: impl FnOnce(&Swapchain) -> bool,
+) -> HookResult<(F, Option<Arc<Swapchain>>)> {
+    // Under the map lock: copies and a clone only, no lock taken, nothing called.
+    let (f, kept) = registry()
+        .with_swapchain(h, |sc| {
+            (
+                pick(&sc.session.instance.next),
+                keep(sc).then(|| Arc::clone(sc)),
+            )
+        })
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)?;
+    Ok((next(f)?, kept))
+}
+
+/// [`observed`] for a call made on a swapchain whose record the hook did not keep
+/// ([`swapchain_next`]): only a loss, which is rare and final, looks the record up again. Where the
+/// application destroyed the swapchain meanwhile on another thread (breaking the external
+/// synchronisation the spec requires of xrDestroySwapchain), the loss is noted at the session's next
+/// call instead.
+pub fn observed_swapchain(h: xr::Swapchain, r: xr::Result) -> xr::Result {
+    if r == xr::Result::ERROR_SESSION_LOST || r == xr::Result::ERROR_INSTANCE_LOST {
+        // Atomic stores only, under the map lock.
+        registry().with_swapchain(h, |sc| observed(&sc.session, r));
+    }
+    r
 }
 
 /// The next layer's pointer. A hook is only handed out where the next layer offers the function
