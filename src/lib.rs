@@ -15,4 +15,5 @@
 mod bridge;
 mod common;
 mod gpu;
+mod vk;
 mod xr;

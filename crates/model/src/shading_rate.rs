@@ -30,7 +30,7 @@ pub fn axis_size(byte: u8, max_edge: u32) -> u32 {
 
 /// The shading-rate code of a `w × h` fragment (`w`, `h` powers of two ≤ 4).
 pub fn code(size: [u32; 2]) -> u8 {
-    let log2 = |v: u32| (31 - v.max(1).min(MAX_EDGE).leading_zeros()) as u8;
+    let log2 = |v: u32| (31 - v.clamp(1, MAX_EDGE).leading_zeros()) as u8;
     (log2(size[0]) << 2) | log2(size[1])
 }
 
