@@ -528,3 +528,97 @@ fn nothing_offered_without_shading_rates() {
     drop(vk);
     assert_no_messages();
 }
+
+/// `vkGetDeviceProcAddr` hands out fovea's hook only where it is needed: on an emulating device
+/// for `vkCreateImage`; everywhere else, and for every command the layer does not intercept, the
+/// pointer is the next layer's own (the one an instance without fovea gets), so those commands
+/// cost nothing extra.
+#[test]
+fn unintercepted_commands_go_straight_to_the_next_layer() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(plain) = Vk::new(env, Profile::Nvidia, false) else {
+        return;
+    };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+        .fragment_density_map(true)
+        .fragment_density_map_non_subsampled_images(true);
+    let emulating = vk.device(&[FDM], Some(&mut fdm)).expect("emulating device");
+    let untouched = vk.device(&[], None).expect("untouched device");
+    let reference = plain.device(&[], None).expect("device without fovea");
+    let gdpa = |i: &ash::Instance, d: &ash::Device, name: &CStr| {
+        // SAFETY: a live device of that instance and a NUL-terminated name.
+        unsafe { (i.fp_v1_0().get_device_proc_addr)(d.handle(), name.as_ptr()) }
+            .map(|f| f as usize)
+            .expect("a pointer")
+    };
+    for name in [c"vkCmdDraw", c"vkQueueSubmit", c"vkCreateBuffer"] {
+        let below = gdpa(&plain.instance, &reference, name);
+        assert_eq!(gdpa(&vk.instance, &emulating, name), below, "{name:?}");
+        assert_eq!(gdpa(&vk.instance, &untouched, name), below, "{name:?}");
+    }
+    let below = gdpa(&plain.instance, &reference, c"vkCreateImage");
+    assert_eq!(gdpa(&vk.instance, &untouched, c"vkCreateImage"), below);
+    assert_ne!(
+        gdpa(&vk.instance, &emulating, c"vkCreateImage"),
+        below,
+        "the emulating device's vkCreateImage is fovea's"
+    );
+    // SAFETY: destroyed once each, nothing made from them.
+    unsafe {
+        emulating.destroy_device(None);
+        untouched.destroy_device(None);
+        reference.destroy_device(None);
+    }
+    drop(vk);
+    drop(plain);
+    assert_no_messages();
+}
+
+/// The checked-in manifest names the layer as fovea_abi does, points at the release build the way
+/// the OpenXR manifest does (relative to the manifest's folder), and lists the device extension
+/// the layer provides, which the Vulkan loader requires of a layer that offers one
+/// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
+/// "Layer Manifest File Format").
+#[test]
+fn checked_in_manifest() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let path = root.join("manifest/vulkan/VK_LAYER_FOVEA_fragment_density_map.json");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("manifest")).expect("JSON");
+    let l = &m["layer"];
+    assert_eq!(l["name"], fovea_abi::VK_LAYER_NAME);
+    assert_eq!(l["type"], "GLOBAL");
+    for key in [
+        "name",
+        "library_path",
+        "api_version",
+        "implementation_version",
+        "description",
+    ] {
+        assert!(l[key].is_string(), "{key} must be a string");
+    }
+    let library = path
+        .parent()
+        .expect("folder")
+        .join(l["library_path"].as_str().expect("string"));
+    assert_eq!(
+        library.components().collect::<Vec<_>>(),
+        root.join("manifest/vulkan/../../target/release/libfovea.so")
+            .components()
+            .collect::<Vec<_>>()
+    );
+    assert!(!l
+        .as_object()
+        .expect("object")
+        .contains_key("disable_environment"));
+    assert_eq!(
+        l["device_extensions"],
+        json!([{
+            "name": fovea_abi::VK_FDM_EXTENSION,
+            "spec_version": fovea_abi::VK_FDM_SPEC_VERSION.to_string()
+        }])
+    );
+}
