@@ -77,7 +77,7 @@ pub unsafe extern "system" fn vkNegotiateLoaderLayerInterfaceVersion(
 
 /// The layer's own commands, answered whatever the instance.
 fn lifecycle(name: &CStr) -> vk::PFN_vkVoidFunction {
-    // SAFETY (all three): function pointers share one representation; the caller casts back to
+    // SAFETY: function pointers share one representation; the caller casts back to
     // the type the name implies, which the `as` checks here.
     let f = match name.to_bytes() {
         b"vkGetInstanceProcAddr" => unsafe {
@@ -85,11 +85,13 @@ fn lifecycle(name: &CStr) -> vk::PFN_vkVoidFunction {
                 vkGetInstanceProcAddr as vk::PFN_vkGetInstanceProcAddr,
             )
         },
+        // SAFETY: as above.
         b"vkGetDeviceProcAddr" => unsafe {
             std::mem::transmute::<vk::PFN_vkGetDeviceProcAddr, unsafe extern "system" fn()>(
                 vkGetDeviceProcAddr as vk::PFN_vkGetDeviceProcAddr,
             )
         },
+        // SAFETY: as above.
         b"vkCreateInstance" => unsafe {
             std::mem::transmute::<vk::PFN_vkCreateInstance, unsafe extern "system" fn()>(
                 create_instance as vk::PFN_vkCreateInstance,
