@@ -21,4 +21,5 @@
 mod bridge;
 mod common;
 mod gpu;
+mod vk;
 mod xr;

@@ -143,6 +143,50 @@ pub struct FoveationState {
     pub generation: u64,
 }
 
+/// How one `VkDevice` runs fragment density maps on shading-rate attachments, as the Vulkan side
+/// decided at `vkCreateDevice`. fovea's own density images size their texels from it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[allow(
+    dead_code,
+    reason = "density images read it once they follow the device's texel"
+)]
+pub struct FdmEmulation {
+    /// The shading-rate attachment texel, which is also the density-map texel the device reports
+    /// (`minFragmentDensityTexelSize` = `maxFragmentDensityTexelSize`).
+    pub texel: [u32; 2],
+    /// `layeredShadingRateAttachments`: one rate layer per view, else one merged layer.
+    pub layered: bool,
+    /// `maxFragmentSize`.
+    pub max_fragment: [u32; 2],
+    /// The fragment sizes `vkGetPhysicalDeviceFragmentShadingRatesKHR` lists for one sample.
+    pub rates: Vec<[u32; 2]>,
+}
+
+/// Emulating devices, by `VkDevice` handle.
+static DEVICE_FDM: crate::common::lock::MapLock<std::collections::BTreeMap<u64, FdmEmulation>> =
+    crate::common::lock::MapLock::new("bridge device FDM", std::collections::BTreeMap::new());
+
+/// Records (or, with `None`, forgets) how `device` emulates fragment density maps.
+pub fn set_device_fdm(device: ash::vk::Device, fdm: Option<FdmEmulation>) {
+    use ash::vk::Handle as _;
+    let mut map = DEVICE_FDM.write();
+    match fdm {
+        Some(f) => map.insert(device.as_raw(), f),
+        None => map.remove(&device.as_raw()),
+    };
+}
+
+/// How `device` emulates fragment density maps; `None` where it does not (native, unavailable,
+/// or a device the Vulkan layer did not see).
+#[allow(
+    dead_code,
+    reason = "density images read it once they follow the device's texel"
+)]
+pub fn device_fdm(device: ash::vk::Device) -> Option<FdmEmulation> {
+    use ash::vk::Handle as _;
+    DEVICE_FDM.read().get(&device.as_raw()).cloned()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,6 +10,16 @@ use std::ffi::CStr;
 /// The OpenXR API layer's name, as in its manifests and `XR_ENABLE_API_LAYERS`.
 pub const LAYER_NAME: &str = "XR_APILAYER_FOVEA_foveation";
 
+/// The Vulkan layer's name, as in its manifests, `VK_INSTANCE_LAYERS` and `ppEnabledLayerNames`. It
+/// lives in the same library as the OpenXR layer.
+pub const VK_LAYER_NAME: &str = "VK_LAYER_FOVEA_fragment_density_map";
+
+/// The device extension the Vulkan layer provides where it emulates it, and the version it
+/// reports (the version its manifest's `device_extensions` lists).
+pub const VK_FDM_EXTENSION: &str = "VK_EXT_fragment_density_map";
+/// See [`VK_FDM_EXTENSION`].
+pub const VK_FDM_SPEC_VERSION: u32 = 3;
+
 /// One of the five extensions the layer can provide.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Ext {

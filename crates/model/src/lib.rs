@@ -8,7 +8,8 @@
 //! - [`dynamic`]: the dynamic-level controller;
 //! - [`stats`]: the once-a-second stats window and its line;
 //! - [`maps`]: what each layer of a density map holds, and filling it;
-//! - [`headsets`]: headset presets as runtimes report them, and eye-buffer sizing.
+//! - [`headsets`]: headset presets as runtimes report them, and eye-buffer sizing;
+//! - [`shading_rate`]: density-map bytes to shading-rate attachment codes.
 #![forbid(unsafe_code)]
 
 pub mod density;
@@ -17,6 +18,7 @@ pub mod fov;
 pub mod headsets;
 pub mod maps;
 pub mod projection;
+pub mod shading_rate;
 pub mod stats;
 
 pub use fov::Fov;

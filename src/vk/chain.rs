@@ -1,0 +1,344 @@
+//! Vulkan `pNext` chains: finding a struct, and editing a copy without writing the application's
+//! structs (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkBaseInStructure.html>).
+
+use std::ffi::c_void;
+use std::mem::size_of;
+
+use ash::vk;
+
+use crate::vk::link;
+
+/// The longest chain the layer follows; a longer one is taken for a loop, which the spec forbids
+/// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-validusage-pNext>).
+pub const MAX_CHAIN_LENGTH: usize = fovea_abi::MAX_CHAIN_LENGTH;
+
+/// Why a chain could not be handled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChainError {
+    /// More than [`MAX_CHAIN_LENGTH`] structs.
+    TooLong,
+    /// A struct of unknown size sits before one to remove, so its link cannot be rewritten in a copy.
+    Unknown(vk::StructureType),
+}
+
+/// The first struct of type `ty` in an input chain.
+///
+/// # Safety
+/// `next` must be NULL or a valid chain of Vulkan structs; the struct found must really be a `T`.
+pub unsafe fn find<T>(
+    next: *const c_void,
+    ty: vk::StructureType,
+) -> Result<Option<*const T>, ChainError> {
+    let mut node = next as *const vk::BaseInStructure<'static>;
+    for _ in 0..MAX_CHAIN_LENGTH {
+        if node.is_null() {
+            return Ok(None);
+        }
+        // SAFETY: the caller promised a valid chain; every node starts with sType/pNext.
+        let n = unsafe { &*node };
+        if n.s_type == ty {
+            return Ok(Some(node as *const T));
+        }
+        node = n.p_next;
+    }
+    if node.is_null() {
+        Ok(None)
+    } else {
+        Err(ChainError::TooLong)
+    }
+}
+
+/// The first struct of type `ty` in an output chain (one the application hands in to be filled).
+///
+/// # Safety
+/// As [`find`], and the chain must be writable.
+pub unsafe fn find_out<T>(next: *mut c_void, ty: vk::StructureType) -> Option<*mut T> {
+    // SAFETY: as the caller promised.
+    unsafe { find::<T>(next, ty) }
+        .ok()
+        .flatten()
+        .map(|p| p as *mut T)
+}
+
+/// Byte sizes of the structs that may precede one the layer removes from a `VkDeviceCreateInfo`
+/// chain. A struct not listed cannot be copied; see [`ChainCopy::without`].
+fn known_size(ty: vk::StructureType) -> Option<usize> {
+    macro_rules! sizes {
+        ($($t:ident),* $(,)?) => {
+            [$((<vk::$t<'static> as vk::TaggedStructure>::STRUCTURE_TYPE, size_of::<vk::$t<'static>>())),*]
+        };
+    }
+    static SIZES: &[(vk::StructureType, usize)] = &sizes![
+        DeviceGroupDeviceCreateInfo,
+        DevicePrivateDataCreateInfo,
+        DeviceMemoryOverallocationCreateInfoAMD,
+        DeviceDiagnosticsConfigCreateInfoNV,
+        PhysicalDeviceFeatures2,
+        PhysicalDeviceVulkan11Features,
+        PhysicalDeviceVulkan12Features,
+        PhysicalDeviceVulkan13Features,
+        PhysicalDeviceMultiviewFeatures,
+        PhysicalDevice16BitStorageFeatures,
+        PhysicalDevice8BitStorageFeatures,
+        PhysicalDeviceShaderFloat16Int8Features,
+        PhysicalDeviceVariablePointersFeatures,
+        PhysicalDeviceProtectedMemoryFeatures,
+        PhysicalDeviceSamplerYcbcrConversionFeatures,
+        PhysicalDeviceShaderDrawParametersFeatures,
+        PhysicalDeviceDescriptorIndexingFeatures,
+        PhysicalDeviceTimelineSemaphoreFeatures,
+        PhysicalDeviceBufferDeviceAddressFeatures,
+        PhysicalDeviceImagelessFramebufferFeatures,
+        PhysicalDeviceSeparateDepthStencilLayoutsFeatures,
+        PhysicalDeviceScalarBlockLayoutFeatures,
+        PhysicalDeviceUniformBufferStandardLayoutFeatures,
+        PhysicalDeviceHostQueryResetFeatures,
+        PhysicalDeviceVulkanMemoryModelFeatures,
+        PhysicalDeviceShaderAtomicInt64Features,
+        PhysicalDeviceShaderSubgroupExtendedTypesFeatures,
+        PhysicalDeviceDynamicRenderingFeatures,
+        PhysicalDeviceSynchronization2Features,
+        PhysicalDeviceMaintenance4Features,
+        PhysicalDeviceInlineUniformBlockFeatures,
+        PhysicalDeviceImageRobustnessFeatures,
+        PhysicalDevicePipelineCreationCacheControlFeatures,
+        PhysicalDevicePrivateDataFeatures,
+        PhysicalDeviceShaderDemoteToHelperInvocationFeatures,
+        PhysicalDeviceShaderIntegerDotProductFeatures,
+        PhysicalDeviceShaderTerminateInvocationFeatures,
+        PhysicalDeviceSubgroupSizeControlFeatures,
+        PhysicalDeviceTextureCompressionASTCHDRFeatures,
+        PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures,
+        PhysicalDeviceExtendedDynamicStateFeaturesEXT,
+        PhysicalDeviceExtendedDynamicState2FeaturesEXT,
+        PhysicalDeviceExtendedDynamicState3FeaturesEXT,
+        PhysicalDeviceVertexInputDynamicStateFeaturesEXT,
+        PhysicalDeviceRobustness2FeaturesEXT,
+        PhysicalDeviceCustomBorderColorFeaturesEXT,
+        PhysicalDeviceTransformFeedbackFeaturesEXT,
+        PhysicalDeviceMultiDrawFeaturesEXT,
+        PhysicalDeviceIndexTypeUint8FeaturesKHR,
+        PhysicalDeviceLineRasterizationFeaturesKHR,
+        PhysicalDeviceVertexAttributeDivisorFeaturesKHR,
+        PhysicalDeviceFragmentShaderInterlockFeaturesEXT,
+        PhysicalDeviceDepthClipEnableFeaturesEXT,
+        PhysicalDeviceMemoryPriorityFeaturesEXT,
+        PhysicalDeviceShaderObjectFeaturesEXT,
+        PhysicalDeviceGraphicsPipelineLibraryFeaturesEXT,
+        PhysicalDeviceMaintenance5FeaturesKHR,
+        PhysicalDeviceMutableDescriptorTypeFeaturesEXT,
+        PhysicalDeviceDescriptorBufferFeaturesEXT,
+        PhysicalDeviceMeshShaderFeaturesEXT,
+        PhysicalDeviceRayTracingPipelineFeaturesKHR,
+        PhysicalDeviceAccelerationStructureFeaturesKHR,
+        PhysicalDeviceRayQueryFeaturesKHR,
+        PhysicalDeviceColorWriteEnableFeaturesEXT,
+        PhysicalDevicePrimitiveTopologyListRestartFeaturesEXT,
+        PhysicalDeviceYcbcrImageArraysFeaturesEXT,
+        PhysicalDevice4444FormatsFeaturesEXT,
+        PhysicalDeviceShaderImageAtomicInt64FeaturesEXT,
+        PhysicalDeviceShaderAtomicFloatFeaturesEXT,
+        PhysicalDeviceConditionalRenderingFeaturesEXT,
+        PhysicalDeviceProvokingVertexFeaturesEXT,
+        PhysicalDeviceBorderColorSwizzleFeaturesEXT,
+        PhysicalDeviceShaderClockFeaturesKHR,
+        PhysicalDevicePipelineExecutablePropertiesFeaturesKHR,
+        PhysicalDevicePresentIdFeaturesKHR,
+        PhysicalDevicePresentWaitFeaturesKHR,
+        PhysicalDeviceDynamicRenderingUnusedAttachmentsFeaturesEXT,
+        PhysicalDeviceMultisampledRenderToSingleSampledFeaturesEXT,
+        PhysicalDeviceImage2DViewOf3DFeaturesEXT,
+        PhysicalDeviceNonSeamlessCubeMapFeaturesEXT,
+        PhysicalDeviceHostImageCopyFeaturesEXT,
+        PhysicalDeviceFragmentDensityMapFeaturesEXT,
+        PhysicalDeviceFragmentDensityMap2FeaturesEXT,
+        PhysicalDeviceFragmentShadingRateFeaturesKHR,
+        PhysicalDeviceShadingRateImageFeaturesNV,
+    ];
+    if ty == vk::StructureType::LOADER_DEVICE_CREATE_INFO {
+        return Some(size_of::<link::LayerDeviceCreateInfo>());
+    }
+    SIZES.iter().find(|(t, _)| *t == ty).map(|&(_, size)| size)
+}
+
+/// An edited copy of an input chain, owning the nodes it copied.
+///
+/// Removing `B` from `A → B → C` means `A` must point at `C`; the application's `A` is never
+/// written, so `A` is copied and the copy relinked. Nodes after the last removed one are shared.
+pub struct ChainCopy {
+    head: *const c_void,
+    /// 8-byte aligned storage of copied nodes; a box does not move when the vector grows.
+    _nodes: Vec<Box<[u64]>>,
+    removed: usize,
+}
+
+impl ChainCopy {
+    /// The head of the edited chain.
+    pub fn head(&self) -> *const c_void {
+        self.head
+    }
+
+    /// How many structs were left out.
+    pub fn removed(&self) -> usize {
+        self.removed
+    }
+
+    /// Copies `next` without every struct `remove` selects. Unlike the OpenXR side, a struct of
+    /// unknown size before a removed one is an error: the removed structs here are ones the driver
+    /// must not see (they would make the device creation invalid), so keeping them is no option.
+    ///
+    /// # Safety
+    /// `next` must be NULL or a valid chain of Vulkan structs.
+    pub unsafe fn without(
+        next: *const c_void,
+        remove: impl Fn(vk::StructureType) -> bool,
+    ) -> Result<ChainCopy, ChainError> {
+        let mut nodes: Vec<*const vk::BaseInStructure<'static>> = Vec::new();
+        let mut node = next as *const vk::BaseInStructure<'static>;
+        while !node.is_null() {
+            if nodes.len() == MAX_CHAIN_LENGTH {
+                return Err(ChainError::TooLong);
+            }
+            nodes.push(node);
+            // SAFETY: a valid chain, as the caller promised.
+            node = unsafe { (*node).p_next };
+        }
+        let mut tail: *const vk::BaseInStructure<'static> = std::ptr::null();
+        let mut shared = true;
+        let mut owned = Vec::new();
+        let mut removed = 0;
+        for &node in nodes.iter().rev() {
+            // SAFETY: as above.
+            let ty = unsafe { (*node).s_type };
+            if remove(ty) {
+                removed += 1;
+                shared = false;
+                continue;
+            }
+            if shared {
+                tail = node;
+                continue;
+            }
+            let size = known_size(ty).ok_or(ChainError::Unknown(ty))?;
+            let mut storage = vec![0u64; size.div_ceil(8)].into_boxed_slice();
+            // SAFETY: `node` is a `size`-byte struct of type `ty` (known_size); the storage holds
+            // at least `size` bytes, 8-aligned, and is ours to write.
+            unsafe {
+                std::ptr::copy_nonoverlapping(
+                    node as *const u8,
+                    storage.as_mut_ptr() as *mut u8,
+                    size,
+                );
+                let copy = storage.as_mut_ptr() as *mut vk::BaseInStructure<'static>;
+                (*copy).p_next = tail;
+                tail = copy;
+            }
+            owned.push(storage);
+        }
+        Ok(ChainCopy {
+            head: tail as *const c_void,
+            _nodes: owned,
+            removed,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn types(head: *const c_void) -> Vec<vk::StructureType> {
+        let mut out = Vec::new();
+        let mut node = head as *const vk::BaseInStructure<'static>;
+        while !node.is_null() {
+            // SAFETY: test chains built below.
+            unsafe {
+                out.push((*node).s_type);
+                node = (*node).p_next;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn removes_on_a_copy_and_shares_the_tail() {
+        let tail = vk::BaseInStructure {
+            s_type: vk::StructureType::from_raw(12345),
+            ..Default::default()
+        };
+        let fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT {
+            p_next: &tail as *const _ as *mut c_void,
+            ..Default::default()
+        };
+        let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true);
+        v13.p_next = &fdm as *const _ as *mut c_void;
+        let head = &v13 as *const _ as *const c_void;
+        let ty = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT;
+        // SAFETY: a valid chain on the stack.
+        let copy = unsafe { ChainCopy::without(head, |t| t == ty) }.unwrap();
+        assert_eq!(copy.removed(), 1);
+        assert_eq!(
+            types(copy.head()),
+            [
+                vk::StructureType::PHYSICAL_DEVICE_VULKAN_1_3_FEATURES,
+                vk::StructureType::from_raw(12345)
+            ]
+        );
+        assert_ne!(copy.head(), head, "the application's struct is copied");
+        assert_eq!(
+            v13.p_next, &fdm as *const _ as *mut c_void,
+            "and not written"
+        );
+        // SAFETY: the copy is a Vulkan13Features.
+        let c = unsafe { &*(copy.head() as *const vk::PhysicalDeviceVulkan13Features) };
+        assert_eq!(c.dynamic_rendering, vk::TRUE);
+        assert_eq!(
+            c.p_next as *const c_void,
+            &tail as *const _ as *const c_void
+        );
+        // SAFETY: as above.
+        let found = unsafe { find::<u8>(head, ty) }.unwrap();
+        assert_eq!(found, Some(&fdm as *const _ as *const u8));
+    }
+
+    #[test]
+    fn unknown_struct_before_a_removed_one_is_an_error() {
+        let fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default();
+        let unknown = vk::BaseInStructure {
+            s_type: vk::StructureType::from_raw(777),
+            p_next: &fdm as *const _ as *const vk::BaseInStructure<'static>,
+            ..Default::default()
+        };
+        let head = &unknown as *const _ as *const c_void;
+        let ty = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT;
+        // SAFETY: a valid chain on the stack.
+        let r = unsafe { ChainCopy::without(head, |t| t == ty) };
+        assert_eq!(
+            r.err(),
+            Some(ChainError::Unknown(vk::StructureType::from_raw(777)))
+        );
+        // Nothing to remove: the chain is shared as is, unknown structs and all.
+        // SAFETY: as above.
+        let same = unsafe { ChainCopy::without(head, |_| false) }.unwrap();
+        assert_eq!(same.head(), head);
+    }
+
+    #[test]
+    fn loops_are_refused() {
+        let mut a = vk::BaseInStructure::default();
+        let b = vk::BaseInStructure {
+            p_next: &a,
+            ..Default::default()
+        };
+        a.p_next = &b;
+        let head = &a as *const _ as *const c_void;
+        // SAFETY: a (looping) chain of valid nodes.
+        unsafe {
+            assert_eq!(
+                find::<u8>(head, vk::StructureType::from_raw(9)),
+                Err(ChainError::TooLong)
+            );
+            assert!(ChainCopy::without(head, |_| false).is_err());
+        }
+    }
+}

@@ -1,0 +1,366 @@
+//! Device creation and the device commands.
+//!
+//! On an emulated physical device, a `vkCreateDevice` that enables `VK_EXT_fragment_density_map`
+//! reaches the driver as one that enables `VK_KHR_fragment_shading_rate` with only
+//! `attachmentFragmentShadingRate`: the density-map name and feature struct are left out of a copy
+//! of the application's create info. The spec makes the two exclusive
+//! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkDeviceCreateInfo.html>,
+//! VUID-VkDeviceCreateInfo-fragmentDensityMap-04481), so the layer owns shading rates on such a
+//! device outright; an application that enables shading rates itself (or NV shading-rate images)
+//! is left alone.
+
+use std::ffi::{c_char, CStr};
+
+use ash::vk;
+
+use crate::bridge::FdmEmulation;
+use crate::vk::chain::{self, ChainCopy};
+use crate::vk::dispatch::DeviceNext;
+use crate::vk::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
+use crate::vk::loader::{guard, name};
+use crate::vk::physical::{self, needs_translation, translate_image};
+use crate::vk::registry::{self, raw, Decision, Instance};
+
+/// The loader's `VK_LAYER_LINK_INFO` struct in a device create info.
+///
+/// # Safety
+/// `ci.p_next` must be a valid chain.
+unsafe fn device_link(ci: &vk::DeviceCreateInfo<'_>) -> Option<*mut LayerDeviceCreateInfo> {
+    let mut next = ci.p_next;
+    for _ in 0..chain::MAX_CHAIN_LENGTH {
+        // SAFETY: as the caller promised.
+        let found = unsafe {
+            chain::find::<LayerDeviceCreateInfo>(next, vk::StructureType::LOADER_DEVICE_CREATE_INFO)
+        }
+        .ok()
+        .flatten()?;
+        // SAFETY: found in a valid chain, of the type its sType names.
+        let f = unsafe { &*found };
+        if f.function == link::LAYER_LINK_INFO {
+            return Some(found as *mut _);
+        }
+        next = f.p_next;
+    }
+    None
+}
+
+/// A rewritten device create info and what it points at.
+struct Rewrite {
+    /// Owns the copied nodes `fsr` points into.
+    _chain: ChainCopy,
+    names: Vec<*const c_char>,
+    fsr: Box<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'static>>,
+}
+
+/// What to do with one `vkCreateDevice`.
+enum Plan {
+    /// Pass the application's create info down untouched; `Some(why)` is logged.
+    Untouched(Option<String>),
+    Emulate(FdmEmulation, Rewrite),
+}
+
+/// Decides and, for emulation, builds the rewritten create info.
+///
+/// # Safety
+/// `ci` must be a valid create info; `physical` must belong to `inst`.
+unsafe fn plan(
+    inst: &Instance,
+    physical: vk::PhysicalDevice,
+    ci: &vk::DeviceCreateInfo<'_>,
+) -> Plan {
+    let decision = physical::decision(inst, physical);
+    let Decision::Emulate { fdm, api_version } = &*decision else {
+        return Plan::Untouched(None);
+    };
+    let names: &[*const c_char] = if ci.pp_enabled_extension_names.is_null() {
+        &[]
+    } else {
+        // SAFETY: as the caller promised.
+        unsafe {
+            std::slice::from_raw_parts(
+                ci.pp_enabled_extension_names,
+                ci.enabled_extension_count as usize,
+            )
+        }
+    };
+    // SAFETY: the application's names, NUL-terminated.
+    let enabled = |want: &CStr| names.iter().any(|&n| unsafe { name(n) } == Some(want));
+    if !enabled(ash::ext::fragment_density_map::NAME) {
+        return Plan::Untouched(None);
+    }
+    // SAFETY: as the caller promised.
+    let in_chain = |ty| matches!(unsafe { chain::find::<u8>(ci.p_next, ty) }, Ok(Some(_)));
+    if enabled(ash::khr::fragment_shading_rate::NAME)
+        || enabled(ash::nv::shading_rate_image::NAME)
+        || in_chain(vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR)
+        || in_chain(vk::StructureType::PHYSICAL_DEVICE_SHADING_RATE_IMAGE_FEATURES_NV)
+    {
+        return Plan::Untouched(Some(
+            "the application enables shading rates itself; VK_EXT_fragment_density_map is not \
+             emulated on this device"
+                .into(),
+        ));
+    }
+    let fdm_features = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT;
+    // SAFETY: as the caller promised.
+    if let Ok(Some(f)) = unsafe {
+        chain::find::<vk::PhysicalDeviceFragmentDensityMapFeaturesEXT>(ci.p_next, fdm_features)
+    } {
+        // SAFETY: found by its sType.
+        if unsafe { (*f).fragment_density_map_dynamic } == vk::TRUE {
+            tracing::warn!(
+                "the application enables fragmentDensityMapDynamic, which the layer does not \
+                 offer; density maps are emulated as static ones"
+            );
+        }
+    }
+    // SAFETY: as the caller promised.
+    let chain = match unsafe { ChainCopy::without(ci.p_next, |t| t == fdm_features) } {
+        Ok(c) => c,
+        Err(e) => {
+            return Plan::Untouched(Some(format!(
+                "cannot rewrite the device create info's pNext chain ({e:?}); passing it through"
+            )))
+        }
+    };
+    tracing::debug!(
+        feature_structs_removed = chain.removed(),
+        "density maps stripped from the device create info"
+    );
+    let fdm_name = ash::ext::fragment_density_map::NAME;
+    // SAFETY: the application's names, NUL-terminated.
+    let mut new_names: Vec<*const c_char> = names
+        .iter()
+        .copied()
+        .filter(|&n| unsafe { name(n) } != Some(fdm_name))
+        .collect();
+    new_names.push(ash::khr::fragment_shading_rate::NAME.as_ptr());
+    // Shading rates need render pass 2 (core in 1.2) and, through it, multiview and maintenance2
+    // (core in 1.1).
+    let version = inst.api_version.min(*api_version);
+    if version < vk::API_VERSION_1_2 {
+        for dep in [
+            ash::khr::create_renderpass2::NAME,
+            ash::khr::multiview::NAME,
+            ash::khr::maintenance2::NAME,
+        ] {
+            if !enabled(dep) {
+                new_names.push(dep.as_ptr());
+            }
+        }
+    }
+    let mut fsr = Box::new(
+        vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
+            .attachment_fragment_shading_rate(true),
+    );
+    fsr.p_next = chain.head() as *mut _;
+    Plan::Emulate(
+        fdm.clone(),
+        Rewrite {
+            _chain: chain,
+            names: new_names,
+            fsr,
+        },
+    )
+}
+
+/// `vkCreateDevice`: finds the next layer in the loader's link info, creates the device there
+/// (rewritten where the layer emulates density maps) and records it.
+///
+/// # Safety
+/// Called by the loader with valid arguments and link info.
+pub unsafe extern "system" fn create_device(
+    physical: vk::PhysicalDevice,
+    info: *const vk::DeviceCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Device,
+) -> vk::Result {
+    guard(
+        "vkCreateDevice",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        // SAFETY: the caller's arguments, checked and passed on.
+        || unsafe { create_device_impl(physical, info, alloc, out) },
+    )
+}
+
+unsafe fn create_device_impl(
+    physical: vk::PhysicalDevice,
+    info: *const vk::DeviceCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Device,
+) -> vk::Result {
+    if info.is_null() || out.is_null() {
+        return vk::Result::ERROR_INITIALIZATION_FAILED;
+    }
+    // SAFETY: a physical device dispatched by the loader.
+    let Some(inst) = (unsafe { registry::instance(physical) }) else {
+        tracing::error!("vkCreateDevice on a physical device the layer does not know");
+        return vk::Result::ERROR_INITIALIZATION_FAILED;
+    };
+    // SAFETY: the loader's create info.
+    let ci = unsafe { &*info };
+    // SAFETY: the chain is valid.
+    let Some(link_info) = (unsafe { device_link(ci) }) else {
+        tracing::error!("vkCreateDevice without the loader's link info");
+        return vk::Result::ERROR_INITIALIZATION_FAILED;
+    };
+    // SAFETY: the loader's list of layers below. The protocol has each layer advance `pLayerInfo`
+    // in the loader's struct before calling down; it is the loader's struct, not the app's.
+    let (layer, gipa, gdpa) = unsafe {
+        let layer = (*link_info).u as *mut LayerDeviceLink;
+        if layer.is_null() {
+            return vk::Result::ERROR_INITIALIZATION_FAILED;
+        }
+        (*link_info).u = (*layer).p_next as *mut _;
+        (
+            layer,
+            (*layer).pfn_next_get_instance_proc_addr,
+            (*layer).pfn_next_get_device_proc_addr,
+        )
+    };
+    // SAFETY: the next layer's vkCreateDevice, asked of it with the instance (not NULL, which
+    // would reach the wrong layer), of the type its name implies.
+    let create = unsafe {
+        let Some(f) = gipa(inst.handle, c"vkCreateDevice".as_ptr()) else {
+            return vk::Result::ERROR_INITIALIZATION_FAILED;
+        };
+        std::mem::transmute::<unsafe extern "system" fn(), vk::PFN_vkCreateDevice>(f)
+    };
+    // SAFETY: as the caller promised.
+    let plan = unsafe { plan(&inst, physical, ci) };
+    let (r, fdm) = match plan {
+        Plan::Untouched(why) => {
+            if let Some(why) = why {
+                tracing::warn!(
+                    physical = raw(physical),
+                    why = why.as_str(),
+                    "vkCreateDevice"
+                );
+            }
+            // SAFETY: the next layer's function, with the caller's arguments.
+            (unsafe { create(physical, info, alloc, out) }, None)
+        }
+        Plan::Emulate(fdm, rewrite) => {
+            let mut copy = *ci;
+            copy.p_next = &*rewrite.fsr as *const _ as *const _;
+            copy.enabled_extension_count = rewrite.names.len() as u32;
+            copy.pp_enabled_extension_names = rewrite.names.as_ptr();
+            // SAFETY: the copy and everything it points at live across the call.
+            let r = unsafe { create(physical, &copy, alloc, out) };
+            drop(rewrite);
+            if r == vk::Result::SUCCESS {
+                (r, Some(fdm))
+            } else {
+                // Fail open: the application's own request, as it was, gets its answer.
+                tracing::warn!(
+                    physical = raw(physical),
+                    result = ?r,
+                    "creating the device with emulated density maps failed; retrying untouched"
+                );
+                // SAFETY: the loader's struct gets its link back for the retry.
+                unsafe { (*link_info).u = (*layer).p_next as *mut _ };
+                // SAFETY: the next layer's function, with the caller's arguments.
+                (unsafe { create(physical, info, alloc, out) }, None)
+            }
+        }
+    };
+    if r != vk::Result::SUCCESS {
+        return r;
+    }
+    // SAFETY: the device was just created.
+    unsafe {
+        let handle = *out;
+        let next = DeviceNext::load(gdpa, handle);
+        if fdm.is_some() {
+            tracing::info!(
+                device = raw(handle),
+                "device emulates fragment density maps"
+            );
+        }
+        registry::add_device(registry::Device {
+            handle,
+            gdpa,
+            next,
+            fdm,
+        });
+    }
+    r
+}
+
+/// `vkDestroyDevice`: forgets the device and destroys it below.
+///
+/// # Safety
+/// `device` must be NULL or a device created through the layer.
+pub unsafe extern "system" fn destroy_device(
+    device: vk::Device,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyDevice", (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::remove_device(device) }) else {
+            return;
+        };
+        if let Some(destroy) = dev.next.destroy_device {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            unsafe { destroy(device, alloc) };
+        }
+    })
+}
+
+/// `vkCreateImage` on an emulating device: a density map reaches the driver without the
+/// density-map usage and subsampled flag it does not know (on a copy of the create info).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_image(
+    device: vk::Device,
+    info: *const vk::ImageCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Image,
+) -> vk::Result {
+    guard(
+        "vkCreateImage",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let Some(dev) = (unsafe { registry::device(device) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = dev.next.create_image else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            if info.is_null() || dev.fdm.is_none() {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { next(device, info, alloc, out) };
+            }
+            // SAFETY: the caller's create info, read only.
+            let mut copy = unsafe { *info };
+            if !needs_translation(copy.usage, copy.flags) {
+                // SAFETY: as above.
+                return unsafe { next(device, info, alloc, out) };
+            }
+            match translate_image(
+                copy.format,
+                copy.image_type,
+                copy.tiling,
+                copy.usage,
+                copy.flags,
+            ) {
+                Some((usage, flags)) => {
+                    copy.usage = usage;
+                    copy.flags = flags;
+                }
+                None => {
+                    tracing::warn!(
+                        format = ?copy.format,
+                        "a density-map image that is not 2D, optimal R8G8_UNORM; passed on as is"
+                    );
+                    // SAFETY: as above.
+                    return unsafe { next(device, info, alloc, out) };
+                }
+            }
+            // SAFETY: the translated copy lives across the call.
+            unsafe { next(device, &copy, alloc, out) }
+        },
+    )
+}

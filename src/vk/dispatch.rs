@@ -1,0 +1,184 @@
+//! Dispatch: the one list of Vulkan commands the layer intercepts.
+//!
+//! Each line names the command, the field that holds the next layer's pointer, its ash `PFN_` type
+//! and the hook; device commands also say when the hook is needed. From that list the macro derives
+//! the next-layer tables ([`InstanceNext`], [`DeviceNext`]) and the hook tables that
+//! `vkGetInstanceProcAddr` and `vkGetDeviceProcAddr` answer from, so a command is declared once and
+//! the compiler checks each hook against the command's signature. A command not listed here is
+//! never intercepted: `vkGetDeviceProcAddr` hands out the next layer's own pointer for it
+//! (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
+//! "Layer Conventions and Rules").
+
+use std::ffi::CStr;
+
+use ash::vk;
+
+use crate::vk::{device, loader, physical};
+
+/// When a device command's hook is handed out by `vkGetDeviceProcAddr`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum When {
+    /// On every device (the layer must see it, e.g. to forget the device).
+    Always,
+    /// Only on devices that emulate fragment density maps; others get the next layer's pointer.
+    Emulated,
+}
+
+/// An intercepted instance or physical-device command.
+pub struct InstanceHook {
+    pub name: &'static CStr,
+    pub function: unsafe extern "system" fn(),
+    /// Whether the next layer offers the command (the layer hooks only what exists below it).
+    pub offered: fn(&InstanceNext) -> bool,
+}
+
+/// An intercepted device command.
+pub struct DeviceHook {
+    pub name: &'static CStr,
+    pub function: unsafe extern "system" fn(),
+    pub when: When,
+    pub offered: fn(&DeviceNext) -> bool,
+}
+
+macro_rules! hooks {
+    (
+        instance { $($iname:literal => $ifield:ident: $ipfn:ident = $ihook:path;)* }
+        device { $($dname:literal => $dfield:ident: $dpfn:ident = $dhook:path, $when:expr;)* }
+    ) => {
+        /// The next layer's pointer for every intercepted instance command (`None` where it has
+        /// none), loaded once at `vkCreateInstance`.
+        #[derive(Clone, Copy, Default)]
+        pub struct InstanceNext {
+            $(pub $ifield: Option<vk::$ipfn>,)*
+        }
+
+        impl InstanceNext {
+            /// Asks the next layer for every intercepted instance command.
+            ///
+            /// # Safety
+            /// `gipa` must be the next layer's `vkGetInstanceProcAddr`, `instance` its instance.
+            pub unsafe fn load(gipa: vk::PFN_vkGetInstanceProcAddr, instance: vk::Instance) -> Self {
+                InstanceNext {
+                    // SAFETY: the next layer returns a pointer of the type the name implies.
+                    $($ifield: unsafe { gipa(instance, $iname.as_ptr()) }
+                        .map(|f| unsafe { std::mem::transmute::<unsafe extern "system" fn(), vk::$ipfn>(f) }),)*
+                }
+            }
+        }
+
+        /// The next layer's pointer for every intercepted device command, loaded at
+        /// `vkCreateDevice`.
+        #[derive(Clone, Copy, Default)]
+        pub struct DeviceNext {
+            $(pub $dfield: Option<vk::$dpfn>,)*
+        }
+
+        impl DeviceNext {
+            /// Asks the next layer for every intercepted device command.
+            ///
+            /// # Safety
+            /// `gdpa` must be the next layer's `vkGetDeviceProcAddr`, `device` its device.
+            pub unsafe fn load(gdpa: vk::PFN_vkGetDeviceProcAddr, device: vk::Device) -> Self {
+                DeviceNext {
+                    // SAFETY: as in InstanceNext::load.
+                    $($dfield: unsafe { gdpa(device, $dname.as_ptr()) }
+                        .map(|f| unsafe { std::mem::transmute::<unsafe extern "system" fn(), vk::$dpfn>(f) }),)*
+                }
+            }
+        }
+
+        /// Every intercepted instance and physical-device command.
+        pub static INSTANCE_HOOKS: &[InstanceHook] = &[
+            $(InstanceHook {
+                name: $iname,
+                // SAFETY: function pointers share one representation; the caller casts it back to
+                // the type the name implies, which the `as` checks here.
+                function: unsafe {
+                    std::mem::transmute::<vk::$ipfn, unsafe extern "system" fn()>($ihook as vk::$ipfn)
+                },
+                offered: |n: &InstanceNext| n.$ifield.is_some(),
+            },)*
+        ];
+
+        /// Every intercepted device command.
+        pub static DEVICE_HOOKS: &[DeviceHook] = &[
+            $(DeviceHook {
+                name: $dname,
+                // SAFETY: as for INSTANCE_HOOKS.
+                function: unsafe {
+                    std::mem::transmute::<vk::$dpfn, unsafe extern "system" fn()>($dhook as vk::$dpfn)
+                },
+                when: $when,
+                offered: |n: &DeviceNext| n.$dfield.is_some(),
+            },)*
+        ];
+    };
+}
+
+hooks! {
+    instance {
+        c"vkDestroyInstance" => destroy_instance: PFN_vkDestroyInstance = loader::destroy_instance;
+        c"vkCreateDevice" => create_device: PFN_vkCreateDevice = device::create_device;
+        c"vkEnumerateDeviceExtensionProperties" => enumerate_device_extension_properties:
+            PFN_vkEnumerateDeviceExtensionProperties = physical::enumerate_device_extension_properties;
+        c"vkGetPhysicalDeviceFeatures2" => get_features2: PFN_vkGetPhysicalDeviceFeatures2 =
+            physical::get_features2;
+        c"vkGetPhysicalDeviceFeatures2KHR" => get_features2_khr: PFN_vkGetPhysicalDeviceFeatures2 =
+            physical::get_features2_khr;
+        c"vkGetPhysicalDeviceProperties2" => get_properties2: PFN_vkGetPhysicalDeviceProperties2 =
+            physical::get_properties2;
+        c"vkGetPhysicalDeviceProperties2KHR" => get_properties2_khr: PFN_vkGetPhysicalDeviceProperties2 =
+            physical::get_properties2_khr;
+        c"vkGetPhysicalDeviceFormatProperties" => get_format_properties:
+            PFN_vkGetPhysicalDeviceFormatProperties = physical::get_format_properties;
+        c"vkGetPhysicalDeviceFormatProperties2" => get_format_properties2:
+            PFN_vkGetPhysicalDeviceFormatProperties2 = physical::get_format_properties2;
+        c"vkGetPhysicalDeviceFormatProperties2KHR" => get_format_properties2_khr:
+            PFN_vkGetPhysicalDeviceFormatProperties2 = physical::get_format_properties2_khr;
+        c"vkGetPhysicalDeviceImageFormatProperties" => get_image_format_properties:
+            PFN_vkGetPhysicalDeviceImageFormatProperties = physical::get_image_format_properties;
+        c"vkGetPhysicalDeviceImageFormatProperties2" => get_image_format_properties2:
+            PFN_vkGetPhysicalDeviceImageFormatProperties2 = physical::get_image_format_properties2;
+        c"vkGetPhysicalDeviceImageFormatProperties2KHR" => get_image_format_properties2_khr:
+            PFN_vkGetPhysicalDeviceImageFormatProperties2 = physical::get_image_format_properties2_khr;
+    }
+    device {
+        c"vkDestroyDevice" => destroy_device: PFN_vkDestroyDevice = device::destroy_device, When::Always;
+        c"vkCreateImage" => create_image: PFN_vkCreateImage = device::create_image, When::Emulated;
+    }
+}
+
+/// The instance hook for `name`, if the layer intercepts it.
+pub fn instance_hook(name: &CStr) -> Option<&'static InstanceHook> {
+    INSTANCE_HOOKS.iter().find(|h| h.name == name)
+}
+
+/// The device hook for `name`, if the layer intercepts it.
+pub fn device_hook(name: &CStr) -> Option<&'static DeviceHook> {
+    DEVICE_HOOKS.iter().find(|h| h.name == name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_are_unique_and_resolvable() {
+        let names: Vec<&CStr> = INSTANCE_HOOKS
+            .iter()
+            .map(|h| h.name)
+            .chain(DEVICE_HOOKS.iter().map(|h| h.name))
+            .collect();
+        for (i, n) in names.iter().enumerate() {
+            assert!(!names[..i].contains(n), "{n:?} twice");
+        }
+        for h in INSTANCE_HOOKS {
+            assert!(std::ptr::eq(instance_hook(h.name).unwrap(), h));
+            assert!(!(h.offered)(&InstanceNext::default()));
+        }
+        for h in DEVICE_HOOKS {
+            assert!(std::ptr::eq(device_hook(h.name).unwrap(), h));
+        }
+        assert!(device_hook(c"vkCmdDraw").is_none());
+    }
+}

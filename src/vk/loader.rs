@@ -1,0 +1,373 @@
+//! The loader interface: `vkNegotiateLoaderLayerInterfaceVersion` (interface version 2),
+//! `vkGetInstanceProcAddr`, `vkGetDeviceProcAddr`, and instance creation and destruction, following
+//! <https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>.
+
+use std::ffi::{c_char, CStr};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use ash::vk;
+
+use crate::vk::dispatch::{self, InstanceNext, When};
+use crate::vk::link::{self, LayerInstanceCreateInfo, LayerInstanceLink, NegotiateLayerInterface};
+use crate::vk::{chain, registry};
+
+/// Runs an entry point's body so that a panic never unwinds into the application: it becomes
+/// `fail` and one error line naming the command.
+pub fn guard<R>(function: &'static str, fail: R, body: impl FnOnce() -> R) -> R {
+    match catch_unwind(AssertUnwindSafe(body)) {
+        Ok(r) => r,
+        Err(payload) => {
+            let message = payload
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_owned())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "non-string panic payload".to_owned());
+            tracing::error!(function, %message, "panic inside the Vulkan layer");
+            fail
+        }
+    }
+}
+
+/// A NUL-terminated name from the caller.
+///
+/// # Safety
+/// `p` must be NULL or NUL-terminated.
+pub unsafe fn name<'a>(p: *const c_char) -> Option<&'a CStr> {
+    // SAFETY: as the caller promised.
+    (!p.is_null()).then(|| unsafe { CStr::from_ptr(p) })
+}
+
+/// The loader's entry point into the layer: agrees on interface version 2 and hands over the
+/// layer's `vkGetInstanceProcAddr` and `vkGetDeviceProcAddr`
+/// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md#layer-version-negotiation>).
+///
+/// # Safety
+/// `p` must be NULL or point at the loader's `VkNegotiateLayerInterface`.
+#[no_mangle]
+pub unsafe extern "system" fn vkNegotiateLoaderLayerInterfaceVersion(
+    p: *mut NegotiateLayerInterface,
+) -> vk::Result {
+    guard(
+        "vkNegotiateLoaderLayerInterfaceVersion",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            crate::common::log::init();
+            if p.is_null() {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            }
+            // SAFETY: the loader passes its own struct for the layer to fill.
+            let n = unsafe { &mut *p };
+            if n.s_type != link::NEGOTIATE_INTERFACE_STRUCT
+                || n.loader_layer_interface_version < link::INTERFACE_VERSION
+            {
+                tracing::warn!(
+                    version = n.loader_layer_interface_version,
+                    "the Vulkan loader is too old for the layer interface version 2"
+                );
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            }
+            n.loader_layer_interface_version = link::INTERFACE_VERSION;
+            n.pfn_get_instance_proc_addr = Some(vkGetInstanceProcAddr);
+            n.pfn_get_device_proc_addr = Some(vkGetDeviceProcAddr);
+            n.pfn_get_physical_device_proc_addr = None;
+            vk::Result::SUCCESS
+        },
+    )
+}
+
+/// The layer's own commands, answered whatever the instance.
+fn lifecycle(name: &CStr) -> vk::PFN_vkVoidFunction {
+    // SAFETY: function pointers share one representation; the caller casts back to
+    // the type the name implies, which the `as` checks here.
+    let f = match name.to_bytes() {
+        b"vkGetInstanceProcAddr" => unsafe {
+            std::mem::transmute::<vk::PFN_vkGetInstanceProcAddr, unsafe extern "system" fn()>(
+                vkGetInstanceProcAddr as vk::PFN_vkGetInstanceProcAddr,
+            )
+        },
+        // SAFETY: as above.
+        b"vkGetDeviceProcAddr" => unsafe {
+            std::mem::transmute::<vk::PFN_vkGetDeviceProcAddr, unsafe extern "system" fn()>(
+                vkGetDeviceProcAddr as vk::PFN_vkGetDeviceProcAddr,
+            )
+        },
+        // SAFETY: as above.
+        b"vkCreateInstance" => unsafe {
+            std::mem::transmute::<vk::PFN_vkCreateInstance, unsafe extern "system" fn()>(
+                create_instance as vk::PFN_vkCreateInstance,
+            )
+        },
+        _ => return None,
+    };
+    Some(f)
+}
+
+/// `vkGetInstanceProcAddr`: the layer's hooks where it intercepts a command the next layer offers,
+/// the next layer's pointer otherwise.
+///
+/// # Safety
+/// `instance` must be NULL or an instance created through the layer; `name` NULL or NUL-terminated.
+#[no_mangle]
+pub unsafe extern "system" fn vkGetInstanceProcAddr(
+    instance: vk::Instance,
+    p_name: *const c_char,
+) -> vk::PFN_vkVoidFunction {
+    guard("vkGetInstanceProcAddr", None, || {
+        // SAFETY: as the caller promised.
+        let name = unsafe { name(p_name) }?;
+        if let Some(f) = lifecycle(name) {
+            return Some(f);
+        }
+        // SAFETY: as the caller promised.
+        let inst = unsafe { registry::instance(instance) }?;
+        if let Some(h) = dispatch::instance_hook(name) {
+            if (h.offered)(&inst.next) {
+                return Some(h.function);
+            }
+        }
+        // SAFETY: the next layer's function, with the caller's arguments.
+        let below = unsafe { (inst.gipa)(instance, p_name) };
+        if below.is_some() {
+            if let Some(h) = dispatch::device_hook(name) {
+                // The device the command will be called on is not known yet: the hook looks it up
+                // and forwards where the device does not emulate.
+                return Some(h.function);
+            }
+        }
+        below
+    })
+}
+
+/// `vkGetDeviceProcAddr`: the layer's hook where it intercepts the command on this device, the
+/// next layer's own pointer otherwise (no added cost).
+///
+/// # Safety
+/// `device` must be NULL or a device created through the layer; `name` NULL or NUL-terminated.
+#[no_mangle]
+pub unsafe extern "system" fn vkGetDeviceProcAddr(
+    device: vk::Device,
+    p_name: *const c_char,
+) -> vk::PFN_vkVoidFunction {
+    guard("vkGetDeviceProcAddr", None, || {
+        // SAFETY: as the caller promised.
+        let name = unsafe { name(p_name) }?;
+        if name == c"vkGetDeviceProcAddr" {
+            return lifecycle(name);
+        }
+        // SAFETY: as the caller promised.
+        let dev = unsafe { registry::device(device) }?;
+        if let Some(h) = dispatch::device_hook(name) {
+            if (h.offered)(&dev.next) && (h.when == When::Always || dev.fdm.is_some()) {
+                return Some(h.function);
+            }
+        }
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { (dev.gdpa)(device, p_name) }
+    })
+}
+
+/// `vkCreateInstance`: finds the next layer in the loader's link info, advances the link for the
+/// layers below, creates the instance there and records it.
+///
+/// # Safety
+/// Called by the loader (or the layer above) with a valid create info carrying link info.
+unsafe extern "system" fn create_instance(
+    info: *const vk::InstanceCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Instance,
+) -> vk::Result {
+    guard(
+        "vkCreateInstance",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            crate::common::log::init();
+            if info.is_null() || out.is_null() {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            }
+            // SAFETY: a valid create info from the loader.
+            let ci = unsafe { &*info };
+            // SAFETY: the chain is valid; link infos are `VkLayerInstanceCreateInfo`.
+            let Some(link_info) = (unsafe { instance_link(ci) }) else {
+                tracing::error!("vkCreateInstance without the loader's link info");
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // SAFETY: the loader's list of layers below; the protocol has each layer advance
+            // `pLayerInfo` in the loader's struct before calling down (the struct is the loader's,
+            // not the application's).
+            let gipa = unsafe {
+                let layer = (*link_info).u[0] as *const LayerInstanceLink;
+                if layer.is_null() {
+                    return vk::Result::ERROR_INITIALIZATION_FAILED;
+                }
+                (*link_info).u[0] = (*layer).p_next as *mut _;
+                (*layer).pfn_next_get_instance_proc_addr
+            };
+            // SAFETY: the next layer's vkCreateInstance, of the type its name implies, called
+            // with the caller's arguments.
+            let r = unsafe {
+                let Some(create) = gipa(vk::Instance::null(), c"vkCreateInstance".as_ptr()) else {
+                    return vk::Result::ERROR_INITIALIZATION_FAILED;
+                };
+                let create = std::mem::transmute::<
+                    unsafe extern "system" fn(),
+                    vk::PFN_vkCreateInstance,
+                >(create);
+                create(info, alloc, out)
+            };
+            if r != vk::Result::SUCCESS {
+                return r;
+            }
+            // SAFETY: the instance was just created; the create info is valid.
+            unsafe {
+                let handle = *out;
+                let api_version = if ci.p_application_info.is_null()
+                    || (*ci.p_application_info).api_version == 0
+                {
+                    vk::API_VERSION_1_0
+                } else {
+                    (*ci.p_application_info).api_version
+                };
+                let properties2_ext = extension_enabled(
+                    ci.pp_enabled_extension_names,
+                    ci.enabled_extension_count,
+                    ash::khr::get_physical_device_properties2::NAME,
+                );
+                let next = InstanceNext::load(gipa, handle);
+                registry::add_instance(registry::Instance::new(
+                    handle,
+                    gipa,
+                    next,
+                    api_version,
+                    properties2_ext,
+                ));
+            }
+            r
+        },
+    )
+}
+
+/// The loader's `VK_LAYER_LINK_INFO` struct in an instance create info.
+///
+/// # Safety
+/// `ci.p_next` must be a valid chain.
+unsafe fn instance_link(ci: &vk::InstanceCreateInfo<'_>) -> Option<*mut LayerInstanceCreateInfo> {
+    let mut next = ci.p_next;
+    for _ in 0..chain::MAX_CHAIN_LENGTH {
+        // SAFETY: as the caller promised.
+        let found = unsafe {
+            chain::find::<LayerInstanceCreateInfo>(
+                next,
+                vk::StructureType::LOADER_INSTANCE_CREATE_INFO,
+            )
+        }
+        .ok()
+        .flatten()?;
+        // SAFETY: found in a valid chain, of the type its sType names.
+        let f = unsafe { &*found };
+        if f.function == link::LAYER_LINK_INFO {
+            return Some(found as *mut _);
+        }
+        next = f.p_next;
+    }
+    None
+}
+
+/// Whether `want` is among `count` extension names.
+///
+/// # Safety
+/// `names` must be NULL or hold `count` NUL-terminated strings.
+pub unsafe fn extension_enabled(names: *const *const c_char, count: u32, want: &CStr) -> bool {
+    if names.is_null() {
+        return false;
+    }
+    // SAFETY: as the caller promised.
+    unsafe { std::slice::from_raw_parts(names, count as usize) }
+        .iter()
+        // SAFETY: as the caller promised.
+        .any(|&n| unsafe { name(n) } == Some(want))
+}
+
+/// `vkDestroyInstance`: forgets the instance and destroys it below.
+///
+/// # Safety
+/// `instance` must be NULL or an instance created through the layer.
+pub unsafe extern "system" fn destroy_instance(
+    instance: vk::Instance,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyInstance", (), || {
+        // SAFETY: as the caller promised.
+        let Some(inst) = (unsafe { registry::remove_instance(instance) }) else {
+            return;
+        };
+        if let Some(destroy) = inst.next.destroy_instance {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            unsafe { destroy(instance, alloc) };
+        }
+    })
+}
+
+/// The Vulkan two-call idiom: NULL `out` asks for the count; otherwise as many as fit are written
+/// and `VK_INCOMPLETE` says some were left out
+/// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-returncodes>).
+///
+/// # Safety
+/// `count` must be valid for reads and writes; `out` NULL or valid for `*count` writes.
+pub unsafe fn two_call<T: Copy>(items: &[T], count: *mut u32, out: *mut T) -> vk::Result {
+    if count.is_null() {
+        return vk::Result::ERROR_INITIALIZATION_FAILED;
+    }
+    // SAFETY: as the caller promised.
+    unsafe {
+        if out.is_null() {
+            *count = items.len() as u32;
+            return vk::Result::SUCCESS;
+        }
+        let n = (*count as usize).min(items.len());
+        std::ptr::copy_nonoverlapping(items.as_ptr(), out, n);
+        *count = n as u32;
+        if n < items.len() {
+            vk::Result::INCOMPLETE
+        } else {
+            vk::Result::SUCCESS
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn two_call_idiom() {
+        let items = [1u32, 2, 3];
+        let mut count = 0;
+        let mut out = [0u32; 3];
+        // SAFETY: valid pointers on the stack.
+        unsafe {
+            assert_eq!(
+                two_call(&items, &mut count, std::ptr::null_mut()),
+                vk::Result::SUCCESS
+            );
+            assert_eq!(count, 3);
+            count = 2;
+            assert_eq!(
+                two_call(&items, &mut count, out.as_mut_ptr()),
+                vk::Result::INCOMPLETE
+            );
+            assert_eq!((count, out), (2, [1, 2, 0]));
+            count = 3;
+            assert_eq!(
+                two_call(&items, &mut count, out.as_mut_ptr()),
+                vk::Result::SUCCESS
+            );
+        }
+        assert_eq!(out, items);
+    }
+
+    #[test]
+    fn guard_turns_panics_into_the_failure_value() {
+        assert_eq!(guard("t", 1, || panic!("boom")), 1);
+        assert_eq!(guard("t", 1, || 2), 2);
+    }
+}

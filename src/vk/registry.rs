@@ -1,0 +1,186 @@
+//! The layer's per-instance and per-device state, keyed by the loader's dispatch pointer.
+//!
+//! Every dispatchable handle (instance, physical device, device, queue, command buffer) points at
+//! an object whose first word is the loader's dispatch table pointer; a physical device shares its
+//! instance's, and queues and command buffers share their device's
+//! (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
+//! "Dispatchable Object Creation"). That word is the key.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use ash::vk;
+
+use crate::bridge::FdmEmulation;
+use crate::common::lock::{MapLock, Mutex, Rank};
+use crate::vk::dispatch::{DeviceNext, InstanceNext};
+
+/// The loader's dispatch pointer of a dispatchable handle.
+pub type Key = usize;
+
+/// The key of a dispatchable handle; `None` for a null handle.
+///
+/// # Safety
+/// `handle` must be null or a live dispatchable handle made by the loader.
+pub unsafe fn key(handle: impl vk::Handle) -> Option<Key> {
+    let raw = handle.as_raw() as usize;
+    // SAFETY: a live dispatchable handle points at an object starting with the dispatch pointer.
+    (raw != 0).then(|| unsafe { *(raw as *const usize) })
+}
+
+/// What the layer does for one physical device, decided once from what the driver offers.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Decision {
+    /// The driver has `VK_EXT_fragment_density_map`: everything passes through.
+    Native,
+    /// Shading-rate attachments and no native density maps: the layer offers them.
+    Emulate {
+        fdm: FdmEmulation,
+        /// The physical device's `apiVersion`.
+        api_version: u32,
+    },
+    /// Nothing to emulate with (or a query failed): everything passes through.
+    PassThrough(String),
+}
+
+/// One `VkInstance` created through the layer.
+pub struct Instance {
+    pub handle: vk::Instance,
+    /// The next layer's `vkGetInstanceProcAddr`.
+    pub gipa: vk::PFN_vkGetInstanceProcAddr,
+    pub next: InstanceNext,
+    /// Queried, not intercepted.
+    pub get_fragment_shading_rates: Option<vk::PFN_vkGetPhysicalDeviceFragmentShadingRatesKHR>,
+    /// `VkApplicationInfo::apiVersion` (1.0 where absent).
+    pub api_version: u32,
+    /// Whether `VK_KHR_get_physical_device_properties2` is enabled.
+    pub properties2_ext: bool,
+    /// Decisions by physical device handle.
+    pub decisions: Mutex<BTreeMap<u64, Arc<Decision>>>,
+}
+
+impl Instance {
+    /// A new record with no decisions yet.
+    ///
+    /// # Safety
+    /// `gipa` must be the next layer's `vkGetInstanceProcAddr` and `handle` its live instance.
+    pub unsafe fn new(
+        handle: vk::Instance,
+        gipa: vk::PFN_vkGetInstanceProcAddr,
+        next: InstanceNext,
+        api_version: u32,
+        properties2_ext: bool,
+    ) -> Instance {
+        // SAFETY: the next layer returns pointers of the types the names imply.
+        let get_fragment_shading_rates = unsafe {
+            gipa(
+                handle,
+                c"vkGetPhysicalDeviceFragmentShadingRatesKHR".as_ptr(),
+            )
+        }
+        .map(
+            // SAFETY: as above.
+            |f| unsafe {
+                std::mem::transmute::<
+                    unsafe extern "system" fn(),
+                    vk::PFN_vkGetPhysicalDeviceFragmentShadingRatesKHR,
+                >(f)
+            },
+        );
+        Instance {
+            handle,
+            gipa,
+            next,
+            get_fragment_shading_rates,
+            api_version,
+            properties2_ext,
+            decisions: Mutex::ranked(Rank::Record, "vk instance decisions", BTreeMap::new()),
+        }
+    }
+}
+
+/// One `VkDevice` created through the layer.
+pub struct Device {
+    pub handle: vk::Device,
+    /// The next layer's `vkGetDeviceProcAddr`.
+    pub gdpa: vk::PFN_vkGetDeviceProcAddr,
+    pub next: DeviceNext,
+    /// `Some` where the device emulates fragment density maps.
+    pub fdm: Option<FdmEmulation>,
+}
+
+static INSTANCES: MapLock<BTreeMap<Key, Arc<Instance>>> =
+    MapLock::new("vk instances", BTreeMap::new());
+static DEVICES: MapLock<BTreeMap<Key, Arc<Device>>> = MapLock::new("vk devices", BTreeMap::new());
+
+/// The instance of an instance or physical-device handle.
+///
+/// # Safety
+/// As [`key`].
+pub unsafe fn instance(handle: impl vk::Handle) -> Option<Arc<Instance>> {
+    // SAFETY: as the caller promised.
+    let k = unsafe { key(handle) }?;
+    INSTANCES.read().get(&k).cloned()
+}
+
+/// The device of a device (or queue, or command buffer) handle.
+///
+/// # Safety
+/// As [`key`].
+pub unsafe fn device(handle: impl vk::Handle) -> Option<Arc<Device>> {
+    // SAFETY: as the caller promised.
+    let k = unsafe { key(handle) }?;
+    DEVICES.read().get(&k).cloned()
+}
+
+/// Records a new instance.
+///
+/// # Safety
+/// `data.handle` must be the live instance just created.
+pub unsafe fn add_instance(data: Instance) {
+    // SAFETY: as the caller promised.
+    if let Some(k) = unsafe { key(data.handle) } {
+        INSTANCES.write().insert(k, Arc::new(data));
+    }
+}
+
+/// Forgets an instance, returning its record.
+///
+/// # Safety
+/// As [`key`].
+pub unsafe fn remove_instance(handle: vk::Instance) -> Option<Arc<Instance>> {
+    // SAFETY: as the caller promised.
+    let k = unsafe { key(handle) }?;
+    INSTANCES.write().remove(&k)
+}
+
+/// Records a new device and tells the bridge how it emulates density maps.
+///
+/// # Safety
+/// `data.handle` must be the live device just created.
+pub unsafe fn add_device(data: Device) {
+    crate::bridge::set_device_fdm(data.handle, data.fdm.clone());
+    // SAFETY: as the caller promised.
+    if let Some(k) = unsafe { key(data.handle) } {
+        DEVICES.write().insert(k, Arc::new(data));
+    }
+}
+
+/// Forgets a device, returning its record.
+///
+/// # Safety
+/// As [`key`].
+pub unsafe fn remove_device(handle: vk::Device) -> Option<Arc<Device>> {
+    // SAFETY: as the caller promised.
+    let k = unsafe { key(handle) }?;
+    let d = DEVICES.write().remove(&k);
+    if d.is_some() {
+        crate::bridge::set_device_fdm(handle, None);
+    }
+    d
+}
+
+/// The raw handle, for log lines.
+pub fn raw(handle: impl vk::Handle) -> u64 {
+    handle.as_raw()
+}

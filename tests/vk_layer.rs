@@ -1,0 +1,624 @@
+//! fovea's Vulkan layer, `VK_LAYER_FOVEA_fragment_density_map`, on lavapipe: the device level.
+//!
+//! Stack: this test → fovea's layer → VK_LAYER_KHRONOS_validation → VK_LAYER_FOVEA_shading_rate_double
+//! → lavapipe. The double makes lavapipe look like a desktop GPU with shading-rate attachments
+//! (profiles `nvidia`: 16×16 texels, `amd`: 8×8; `none`: lavapipe as it is) and records what reaches
+//! it; validation checks every call fovea passes down against that device, and must stay silent.
+//! Both manifests are written to a temporary folder named by `VK_ADD_LAYER_PATH`; the layers are
+//! enabled through `ppEnabledLayerNames` (first = closest to the application). Tests share the
+//! process environment, the validation messages and the double's records, so they run one at a
+//! time.
+//!
+//! Missing system pieces (loader, lavapipe, validation layer, the built libraries) skip, or fail
+//! under `FOVEA_REQUIRE_SYSTEM=1`.
+
+use std::ffi::{c_void, CStr, CString};
+use std::sync::{Mutex, MutexGuard, OnceLock};
+
+use ash::vk;
+use fovea_harness::skip;
+use fovea_vkdouble::{Loaded, Profile};
+use serde_json::json;
+
+const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
+const FDM: &CStr = c"VK_EXT_fragment_density_map";
+const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
+
+static SERIAL: Mutex<()> = Mutex::new(());
+static MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
+
+fn fovea_layer() -> CString {
+    CString::new(fovea_abi::VK_LAYER_NAME).expect("no NUL")
+}
+
+unsafe extern "system" fn on_message(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    _types: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    _user: *mut c_void,
+) -> vk::Bool32 {
+    // SAFETY: the layer passes valid callback data with a NUL-terminated message.
+    let text = unsafe { CStr::from_ptr((*data).p_message) }.to_string_lossy();
+    if let Ok(mut m) = MESSAGES.lock() {
+        m.push(format!("{severity:?}: {text}"));
+    }
+    vk::FALSE
+}
+
+fn take_messages() -> Vec<String> {
+    std::mem::take(&mut *MESSAGES.lock().unwrap_or_else(|e| e.into_inner()))
+}
+
+fn assert_no_messages() {
+    let m = take_messages();
+    assert!(
+        m.is_empty(),
+        "validation reported {} message(s):\n{}",
+        m.len(),
+        m.join("\n")
+    );
+}
+
+struct Env {
+    entry: ash::Entry,
+    double: Loaded,
+}
+
+/// Both manifests, `VK_ADD_LAYER_PATH`, the loader and the double's loaded copy; once per process.
+fn env() -> Option<(MutexGuard<'static, ()>, &'static Env)> {
+    let guard = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    static ENV: OnceLock<Result<Env, String>> = OnceLock::new();
+    let env = ENV.get_or_init(|| {
+        let double_lib = fovea_vkdouble::find_library()?;
+        let fovea_lib = fovea_harness::artifact("libfovea.so")?
+            .canonicalize()
+            .map_err(|e| e.to_string())?;
+        let dir = std::env::temp_dir().join(format!("fovea-vklayer-{}", std::process::id()));
+        fovea_vkdouble::write_manifest(&dir, &double_lib).map_err(|e| e.to_string())?;
+        // The checked-in manifest, pointed at this build's library.
+        let checked_in = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("manifest/vulkan/VK_LAYER_FOVEA_fragment_density_map.json");
+        let mut manifest: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&checked_in).map_err(|e| e.to_string())?)
+                .map_err(|e| e.to_string())?;
+        manifest["layer"]["library_path"] = json!(fovea_lib.to_string_lossy());
+        std::fs::write(
+            dir.join("VK_LAYER_FOVEA_fragment_density_map.json"),
+            manifest.to_string(),
+        )
+        .map_err(|e| e.to_string())?;
+        // Set before the loader first reads the environment, every test serialised behind SERIAL.
+        std::env::set_var("VK_ADD_LAYER_PATH", &dir);
+        // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
+        let entry = unsafe { ash::Entry::load() }.map_err(|e| format!("no Vulkan loader ({e})"))?;
+        // SAFETY: a plain query.
+        let layers = unsafe { entry.enumerate_instance_layer_properties() }
+            .map_err(|e| format!("vkEnumerateInstanceLayerProperties: {e}"))?;
+        let ours = fovea_layer();
+        for want in [VALIDATION, fovea_vkdouble::LAYER_NAME, ours.as_c_str()] {
+            if !layers.iter().any(|l| l.layer_name_as_c_str() == Ok(want)) {
+                return Err(format!("{want:?} is not available"));
+            }
+        }
+        let double = Loaded::open(&double_lib)?;
+        Ok(Env { entry, double })
+    });
+    match env {
+        Ok(e) => Some((guard, e)),
+        Err(e) => {
+            skip(e);
+            None
+        }
+    }
+}
+
+/// An instance with the stack above (fovea's layer optional) and lavapipe's physical device.
+struct Vk {
+    instance: ash::Instance,
+    debug_utils: ash::ext::debug_utils::Instance,
+    messenger: vk::DebugUtilsMessengerEXT,
+    physical: vk::PhysicalDevice,
+}
+
+impl Vk {
+    fn new(env: &Env, profile: Profile, with_fovea: bool) -> Option<Vk> {
+        env.double.set_profile(Some(profile));
+        env.double.clear();
+        take_messages();
+        let ours = fovea_layer();
+        let mut layers = vec![VALIDATION.as_ptr(), fovea_vkdouble::LAYER_NAME.as_ptr()];
+        if with_fovea {
+            layers.insert(0, ours.as_ptr());
+        }
+        let exts = [
+            ash::ext::debug_utils::NAME.as_ptr(),
+            ash::ext::validation_features::NAME.as_ptr(),
+        ];
+        let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
+        let mut features =
+            vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
+        let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
+        let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+            .message_severity(
+                vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                    | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+            )
+            .message_type(
+                vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                    | vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                    | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+            )
+            .pfn_user_callback(Some(on_message));
+        let info = vk::InstanceCreateInfo::default()
+            .application_info(&app)
+            .enabled_layer_names(&layers)
+            .enabled_extension_names(&exts)
+            .push_next(&mut messenger_info)
+            .push_next(&mut features);
+        // SAFETY: every struct lives across the calls; handles are used while alive.
+        unsafe {
+            let instance = env
+                .entry
+                .create_instance(&info, None)
+                .expect("vkCreateInstance");
+            let debug_utils = ash::ext::debug_utils::Instance::new(&env.entry, &instance);
+            let messenger = debug_utils
+                .create_debug_utils_messenger(&messenger_info, None)
+                .expect("messenger");
+            let physical = instance
+                .enumerate_physical_devices()
+                .unwrap_or_default()
+                .into_iter()
+                .find(|&p| {
+                    instance
+                        .get_physical_device_properties(p)
+                        .device_name_as_c_str()
+                        .is_ok_and(|n| n.to_string_lossy().contains("llvmpipe"))
+                });
+            let vk = Vk {
+                instance,
+                debug_utils,
+                messenger,
+                physical: physical.unwrap_or_default(),
+            };
+            if physical.is_none() {
+                skip("lavapipe (llvmpipe) is not installed");
+                return None;
+            }
+            Some(vk)
+        }
+    }
+
+    fn extensions(&self) -> Vec<(CString, u32)> {
+        // SAFETY: a plain query.
+        unsafe {
+            self.instance
+                .enumerate_device_extension_properties(self.physical)
+                .expect("extensions")
+        }
+        .iter()
+        .map(|e| {
+            (
+                e.extension_name_as_c_str().expect("NUL").to_owned(),
+                e.spec_version,
+            )
+        })
+        .collect()
+    }
+
+    fn fdm_features(&self) -> [vk::Bool32; 3] {
+        let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default();
+        let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut fdm);
+        // SAFETY: structs live across the call.
+        unsafe {
+            self.instance
+                .get_physical_device_features2(self.physical, &mut f2)
+        };
+        [
+            fdm.fragment_density_map,
+            fdm.fragment_density_map_dynamic,
+            fdm.fragment_density_map_non_subsampled_images,
+        ]
+    }
+
+    fn fdm_properties(&self) -> vk::PhysicalDeviceFragmentDensityMapPropertiesEXT<'static> {
+        let mut fdm = vk::PhysicalDeviceFragmentDensityMapPropertiesEXT::default();
+        let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut fdm);
+        // SAFETY: structs live across the call.
+        unsafe {
+            self.instance
+                .get_physical_device_properties2(self.physical, &mut p2)
+        };
+        fdm.p_next = std::ptr::null_mut();
+        fdm
+    }
+
+    /// R8G8_UNORM's optimal-tiling features: from vkGetPhysicalDeviceFormatProperties, from
+    /// …Properties2, and from a chained VkFormatProperties3.
+    fn rg8_features(
+        &self,
+    ) -> (
+        vk::FormatFeatureFlags,
+        vk::FormatFeatureFlags,
+        vk::FormatFeatureFlags2,
+    ) {
+        // SAFETY: plain queries with structs that live across the calls.
+        unsafe {
+            let v1 = self
+                .instance
+                .get_physical_device_format_properties(self.physical, vk::Format::R8G8_UNORM);
+            let mut p3 = vk::FormatProperties3::default();
+            let mut p2 = vk::FormatProperties2::default().push_next(&mut p3);
+            self.instance.get_physical_device_format_properties2(
+                self.physical,
+                vk::Format::R8G8_UNORM,
+                &mut p2,
+            );
+            (
+                v1.optimal_tiling_features,
+                p2.format_properties.optimal_tiling_features,
+                p3.optimal_tiling_features,
+            )
+        }
+    }
+
+    /// vkGetPhysicalDeviceImageFormatProperties2 for a 2D optimal image.
+    fn image_format(&self, format: vk::Format, usage: vk::ImageUsageFlags) -> vk::Result {
+        let info = vk::PhysicalDeviceImageFormatInfo2::default()
+            .format(format)
+            .ty(vk::ImageType::TYPE_2D)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(usage);
+        let mut out = vk::ImageFormatProperties2::default();
+        // SAFETY: structs live across the call.
+        match unsafe {
+            self.instance.get_physical_device_image_format_properties2(
+                self.physical,
+                &info,
+                &mut out,
+            )
+        } {
+            Ok(()) => vk::Result::SUCCESS,
+            Err(e) => e,
+        }
+    }
+
+    /// A device with one queue and `exts`, the Vulkan 1.3 features fovea's users enable, and the
+    /// given extra feature struct.
+    fn device(
+        &self,
+        exts: &[&CStr],
+        extra: Option<&mut dyn vk::ExtendsDeviceCreateInfo>,
+    ) -> Result<ash::Device, vk::Result> {
+        let prio = [1.0];
+        let queues = [vk::DeviceQueueCreateInfo::default()
+            .queue_family_index(0)
+            .queue_priorities(&prio)];
+        let names: Vec<_> = exts.iter().map(|e| e.as_ptr()).collect();
+        let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
+            .dynamic_rendering(true)
+            .synchronization2(true);
+        let mut info = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queues)
+            .enabled_extension_names(&names);
+        if let Some(extra) = extra {
+            info = info.push_next(extra);
+        }
+        // Vulkan 1.3 features last in the chain, after the one the layer removes: the copy must
+        // keep the application's tail.
+        info = info.push_next(&mut v13);
+        // SAFETY: every struct lives across the call.
+        unsafe { self.instance.create_device(self.physical, &info, None) }
+    }
+}
+
+impl Drop for Vk {
+    fn drop(&mut self) {
+        // SAFETY: nothing made from the instance outlives it.
+        unsafe {
+            self.debug_utils
+                .destroy_debug_utils_messenger(self.messenger, None);
+            self.instance.destroy_instance(None);
+        }
+    }
+}
+
+fn fdm_image_info() -> vk::ImageCreateInfo<'static> {
+    vk::ImageCreateInfo::default()
+        .image_type(vk::ImageType::TYPE_2D)
+        .format(vk::Format::R8G8_UNORM)
+        .extent(vk::Extent3D {
+            width: 8,
+            height: 8,
+            depth: 1,
+        })
+        .mip_levels(1)
+        .array_layers(2)
+        .samples(vk::SampleCountFlags::TYPE_1)
+        .tiling(vk::ImageTiling::OPTIMAL)
+        .usage(vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT | vk::ImageUsageFlags::TRANSFER_DST)
+}
+
+/// On the NVIDIA-like and AMD-like profiles the application sees density maps with the driver's
+/// shading-rate texel, creates a device with them (which reaches the driver as a shading-rate
+/// device) and a density-map image; validation says nothing.
+#[test]
+fn emulated_density_maps_on_shading_rate_devices() {
+    let Some((_serial, env)) = env() else { return };
+    for (profile, texel) in [(Profile::Nvidia, 16), (Profile::Amd, 8)] {
+        let Some(vk) = Vk::new(env, profile, true) else {
+            return;
+        };
+        let exts = vk.extensions();
+        assert!(
+            exts.contains(&(FDM.to_owned(), 3)),
+            "{profile:?}: {FDM:?} spec 3 offered"
+        );
+        assert!(exts.iter().any(|(n, _)| n.as_c_str() == FSR));
+        // The layer's own extensions, asked by name.
+        let ours = fovea_layer();
+        // SAFETY: the two-call idiom with a buffer of the reported size.
+        let own = unsafe {
+            let f = vk.instance.fp_v1_0().enumerate_device_extension_properties;
+            let mut n = 0;
+            assert_eq!(
+                f(vk.physical, ours.as_ptr(), &mut n, std::ptr::null_mut()),
+                vk::Result::SUCCESS
+            );
+            let mut v = vec![vk::ExtensionProperties::default(); n as usize];
+            assert_eq!(
+                f(vk.physical, ours.as_ptr(), &mut n, v.as_mut_ptr()),
+                vk::Result::SUCCESS
+            );
+            v
+        };
+        assert_eq!(own.len(), 1);
+        assert_eq!(own[0].extension_name_as_c_str(), Ok(FDM));
+        // VK_INCOMPLETE where the buffer is one short.
+        // SAFETY: as above.
+        unsafe {
+            let f = vk.instance.fp_v1_0().enumerate_device_extension_properties;
+            let mut n = 0;
+            assert_eq!(
+                f(vk.physical, std::ptr::null(), &mut n, std::ptr::null_mut()),
+                vk::Result::SUCCESS
+            );
+            assert_eq!(n as usize, exts.len());
+            let mut v = vec![vk::ExtensionProperties::default(); n as usize];
+            n -= 1;
+            assert_eq!(
+                f(vk.physical, std::ptr::null(), &mut n, v.as_mut_ptr()),
+                vk::Result::INCOMPLETE
+            );
+            assert_eq!(n as usize, exts.len() - 1);
+        }
+
+        assert_eq!(vk.fdm_features(), [vk::TRUE, vk::FALSE, vk::TRUE]);
+        let props = vk.fdm_properties();
+        let t = vk::Extent2D {
+            width: texel,
+            height: texel,
+        };
+        assert_eq!(props.min_fragment_density_texel_size, t, "{profile:?}");
+        assert_eq!(props.max_fragment_density_texel_size, t, "{profile:?}");
+        assert_eq!(props.fragment_density_invocations, vk::FALSE);
+
+        let (v1, v2, v3) = vk.rg8_features();
+        assert!(v1.contains(vk::FormatFeatureFlags::FRAGMENT_DENSITY_MAP_EXT));
+        assert!(v2.contains(vk::FormatFeatureFlags::FRAGMENT_DENSITY_MAP_EXT));
+        assert!(v3.contains(vk::FormatFeatureFlags2::FRAGMENT_DENSITY_MAP_EXT));
+        assert!(
+            v1.contains(vk::FormatFeatureFlags::SAMPLED_IMAGE),
+            "the driver's bits stay"
+        );
+
+        assert_eq!(
+            vk.image_format(
+                vk::Format::R8G8_UNORM,
+                vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT
+            ),
+            vk::Result::SUCCESS
+        );
+        assert_eq!(
+            vk.image_format(
+                vk::Format::R8G8B8A8_UNORM,
+                vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT
+            ),
+            vk::Result::ERROR_FORMAT_NOT_SUPPORTED
+        );
+
+        let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+            .fragment_density_map(true)
+            .fragment_density_map_non_subsampled_images(true);
+        let device = vk.device(&[FDM], Some(&mut fdm)).unwrap_or_else(|e| {
+            panic!(
+                "{profile:?}: vkCreateDevice with density maps: {e}; {:?}",
+                take_messages()
+            )
+        });
+        // lavapipe would refuse the density-map extension name: the device's success says it never
+        // got there. The double saw the shading-rate extension with the attachment feature only.
+        let devices = env.double.events("device");
+        assert_eq!(devices.len(), 1, "{devices:?}");
+        assert_eq!(devices[0]["extension"], true);
+        assert_eq!(
+            devices[0]["features"],
+            json!({"pipeline": false, "primitive": false, "attachment": true})
+        );
+        // SAFETY: the image is destroyed before its device.
+        unsafe {
+            let image = device
+                .create_image(&fdm_image_info(), None)
+                .expect("an image with FRAGMENT_DENSITY_MAP usage");
+            device.destroy_image(image, None);
+            device.destroy_device(None);
+        }
+        assert_eq!(env.double.errors(), Vec::<String>::new());
+        drop(vk);
+        assert_no_messages();
+    }
+}
+
+/// A device created without density maps on an emulating physical device is passed through:
+/// the driver gets exactly what the application asked for.
+#[test]
+fn device_without_density_maps_is_untouched() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let device = vk.device(&[], None).expect("vkCreateDevice");
+    let devices = env.double.events("device");
+    assert_eq!(devices[0]["extension"], false);
+    assert_eq!(devices[0]["features"], json!(null));
+    // SAFETY: destroyed once, nothing made from it.
+    unsafe { device.destroy_device(None) };
+    drop(vk);
+    assert_no_messages();
+}
+
+/// An application that enables shading rates itself keeps them: nothing is rewritten.
+#[test]
+fn application_using_shading_rates_is_not_touched() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let mut fsr = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
+        .pipeline_fragment_shading_rate(true)
+        .attachment_fragment_shading_rate(true);
+    let device = vk.device(&[FSR], Some(&mut fsr)).expect("vkCreateDevice");
+    let devices = env.double.events("device");
+    assert_eq!(devices[0]["extension"], true);
+    assert_eq!(
+        devices[0]["features"],
+        json!({"pipeline": true, "primitive": false, "attachment": true})
+    );
+    // SAFETY: destroyed once, nothing made from it.
+    unsafe { device.destroy_device(None) };
+    drop(vk);
+    assert_no_messages();
+}
+
+/// On lavapipe as it is (no shading rates), nothing is offered and every answer is the driver's:
+/// the same with and without fovea's layer.
+#[test]
+fn nothing_offered_without_shading_rates() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(without) = Vk::new(env, Profile::None, false) else {
+        return;
+    };
+    let expected = (
+        without.extensions(),
+        without.fdm_features(),
+        without.rg8_features(),
+    );
+    drop(without);
+    assert_no_messages();
+    let Some(vk) = Vk::new(env, Profile::None, true) else {
+        return;
+    };
+    let exts = vk.extensions();
+    assert!(!exts.iter().any(|(n, _)| n.as_c_str() == FDM));
+    assert_eq!((exts, vk.fdm_features(), vk.rg8_features()), expected);
+    assert_eq!(vk.fdm_features(), [vk::FALSE; 3]);
+    let device = vk.device(&[], None).expect("vkCreateDevice");
+    // SAFETY: destroyed once, nothing made from it.
+    unsafe { device.destroy_device(None) };
+    drop(vk);
+    assert_no_messages();
+}
+
+/// `vkGetDeviceProcAddr` hands out fovea's hook only where it is needed: on an emulating device
+/// for `vkCreateImage`; everywhere else, and for every command the layer does not intercept, the
+/// pointer is the next layer's own (the one an instance without fovea gets), so those commands
+/// cost nothing extra.
+#[test]
+fn unintercepted_commands_go_straight_to_the_next_layer() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(plain) = Vk::new(env, Profile::Nvidia, false) else {
+        return;
+    };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+        .fragment_density_map(true)
+        .fragment_density_map_non_subsampled_images(true);
+    let emulating = vk.device(&[FDM], Some(&mut fdm)).expect("emulating device");
+    let untouched = vk.device(&[], None).expect("untouched device");
+    let reference = plain.device(&[], None).expect("device without fovea");
+    let gdpa = |i: &ash::Instance, d: &ash::Device, name: &CStr| {
+        // SAFETY: a live device of that instance and a NUL-terminated name.
+        unsafe { (i.fp_v1_0().get_device_proc_addr)(d.handle(), name.as_ptr()) }
+            .map(|f| f as usize)
+            .expect("a pointer")
+    };
+    for name in [c"vkCmdDraw", c"vkQueueSubmit", c"vkCreateBuffer"] {
+        let below = gdpa(&plain.instance, &reference, name);
+        assert_eq!(gdpa(&vk.instance, &emulating, name), below, "{name:?}");
+        assert_eq!(gdpa(&vk.instance, &untouched, name), below, "{name:?}");
+    }
+    let below = gdpa(&plain.instance, &reference, c"vkCreateImage");
+    assert_eq!(gdpa(&vk.instance, &untouched, c"vkCreateImage"), below);
+    assert_ne!(
+        gdpa(&vk.instance, &emulating, c"vkCreateImage"),
+        below,
+        "the emulating device's vkCreateImage is fovea's"
+    );
+    // SAFETY: destroyed once each, nothing made from them.
+    unsafe {
+        emulating.destroy_device(None);
+        untouched.destroy_device(None);
+        reference.destroy_device(None);
+    }
+    drop(vk);
+    drop(plain);
+    assert_no_messages();
+}
+
+/// The checked-in manifest names the layer as fovea_abi does, points at the release build the way
+/// the OpenXR manifest does (relative to the manifest's folder), and lists the device extension
+/// the layer provides, which the Vulkan loader requires of a layer that offers one
+/// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
+/// "Layer Manifest File Format").
+#[test]
+fn checked_in_manifest() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let path = root.join("manifest/vulkan/VK_LAYER_FOVEA_fragment_density_map.json");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("manifest")).expect("JSON");
+    let l = &m["layer"];
+    assert_eq!(l["name"], fovea_abi::VK_LAYER_NAME);
+    assert_eq!(l["type"], "GLOBAL");
+    for key in [
+        "name",
+        "library_path",
+        "api_version",
+        "implementation_version",
+        "description",
+    ] {
+        assert!(l[key].is_string(), "{key} must be a string");
+    }
+    let library = path
+        .parent()
+        .expect("folder")
+        .join(l["library_path"].as_str().expect("string"));
+    assert_eq!(
+        library.components().collect::<Vec<_>>(),
+        root.join("manifest/vulkan/../../target/release/libfovea.so")
+            .components()
+            .collect::<Vec<_>>()
+    );
+    assert!(!l
+        .as_object()
+        .expect("object")
+        .contains_key("disable_environment"));
+    assert_eq!(
+        l["device_extensions"],
+        json!([{
+            "name": fovea_abi::VK_FDM_EXTENSION,
+            "spec_version": fovea_abi::VK_FDM_SPEC_VERSION.to_string()
+        }])
+    );
+}
