@@ -61,7 +61,11 @@ macro_rules! hooks {
                 InstanceNext {
                     // SAFETY: the next layer returns a pointer of the type the name implies.
                     $($ifield: unsafe { gipa(instance, $iname.as_ptr()) }
-                        .map(|f| unsafe { std::mem::transmute::<unsafe extern "system" fn(), vk::$ipfn>(f) }),)*
+                        .map(|f| {
+                            // SAFETY: function pointers share one representation; the name
+                            // implies this type.
+                            unsafe { std::mem::transmute::<unsafe extern "system" fn(), vk::$ipfn>(f) }
+                        }),)*
                 }
             }
         }
@@ -82,7 +86,11 @@ macro_rules! hooks {
                 DeviceNext {
                     // SAFETY: as in InstanceNext::load.
                     $($dfield: unsafe { gdpa(device, $dname.as_ptr()) }
-                        .map(|f| unsafe { std::mem::transmute::<unsafe extern "system" fn(), vk::$dpfn>(f) }),)*
+                        .map(|f| {
+                            // SAFETY: function pointers share one representation; the name
+                            // implies this type.
+                            unsafe { std::mem::transmute::<unsafe extern "system" fn(), vk::$dpfn>(f) }
+                        }),)*
                 }
             }
         }

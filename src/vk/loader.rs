@@ -77,9 +77,9 @@ pub unsafe extern "system" fn vkNegotiateLoaderLayerInterfaceVersion(
 
 /// The layer's own commands, answered whatever the instance.
 fn lifecycle(name: &CStr) -> vk::PFN_vkVoidFunction {
-    // SAFETY: function pointers share one representation; the caller casts back to
-    // the type the name implies, which the `as` checks here.
     let f = match name.to_bytes() {
+        // SAFETY: function pointers share one representation; the caller casts back to
+        // the type the name implies, which the `as` checks here.
         b"vkGetInstanceProcAddr" => unsafe {
             std::mem::transmute::<vk::PFN_vkGetInstanceProcAddr, unsafe extern "system" fn()>(
                 vkGetInstanceProcAddr as vk::PFN_vkGetInstanceProcAddr,
