@@ -22,6 +22,9 @@ pub struct Call {
     pub next_types: Vec<xr::StructureType>,
     /// Call-specific facts: enabled extensions, frame timing, submitted views, injected faults.
     pub detail: String,
+    /// The runtime refused the call by its own rules (an error that is not an injected fault): the
+    /// caller did something a conformant runtime may refuse.
+    pub refused: bool,
 }
 
 /// One projection view as xrEndFrame received it.
@@ -72,6 +75,24 @@ pub fn end_frame_views(instance: xr::Instance) -> Vec<Vec<SubmittedView>> {
     world()
         .record(instance.into_raw())
         .map(|r| r.end_frames.clone())
+        .unwrap_or_default()
+}
+
+/// Calls that returned an error code, by command name; still available after the instance is
+/// destroyed, and counted whether or not the journal is kept.
+pub fn errors(instance: xr::Instance) -> Vec<(&'static str, u64)> {
+    world()
+        .record(instance.into_raw())
+        .map(|r| r.errors.iter().map(|(f, n)| (*f, *n)).collect())
+        .unwrap_or_default()
+}
+
+/// The errors the runtime chose by its own rules (everything in [`errors`] that was not an injected
+/// fault), by command name: empty when no call the simulated runtime refuses reached it.
+pub fn refusals(instance: xr::Instance) -> Vec<(&'static str, u64)> {
+    world()
+        .record(instance.into_raw())
+        .map(|r| r.refusals.iter().map(|(f, n)| (*f, *n)).collect())
         .unwrap_or_default()
 }
 

@@ -10,6 +10,12 @@
 //!   and calls [`xrNegotiateLoaderRuntimeInterface`];
 //! - the in-process fake loader links this crate and calls [`get_instance_proc_addr`] directly.
 //!
+//! It is at least as strict as real runtimes (Monado) where the spec lets a runtime refuse a call:
+//! xrLocateViews only while the session runs and for the view configuration it began with, the
+//! frame-loop and swapchain call orders, the session state machine. Every refusal is counted apart
+//! from injected faults ([`control::refusals`], the `refused=` field of the summary line), so a
+//! test can assert that nothing a strict runtime refuses reached this one.
+//!
 //! Time is virtual and deterministic (see [`frame`](crate::frame) docs), every call is journaled, and
 //! faults and GPU load can be injected through [`control`].
 
