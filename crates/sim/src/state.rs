@@ -104,6 +104,16 @@ pub(crate) fn entry(name: &'static str, body: impl FnOnce(&mut Ctx) -> XrResult)
         let _ = catch_unwind(AssertUnwindSafe(|| {
             let mut w = world();
             let keep = w.instances.get(&id).is_none_or(|i| i.config.journal);
+            if refused && w.instances.get(&id).is_some_and(|i| i.config.log_refusals) {
+                eprintln!(
+                    "fovea-sim: refused {name}: XR_{result:?} ({})",
+                    if call.detail.is_empty() {
+                        "no detail"
+                    } else {
+                        &call.detail
+                    }
+                );
+            }
             if let Some(record) = w.record_mut(id) {
                 if result.into_raw() < 0 {
                     *record.errors.entry(name).or_default() += 1;
