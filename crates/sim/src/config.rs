@@ -19,6 +19,11 @@ pub struct SimConfig {
     /// Offer XR_FB_swapchain_update_state (v3) without any state types of its own, so the layer's
     /// pass-through path for non-foveation states can be tested.
     pub native_swapchain_update_state: bool,
+    /// Offer XR_FB_foveation (v1) and XR_FB_foveation_configuration (v1), with
+    /// XR_FB_swapchain_update_state, natively, as a headset runtime does: profiles are created and
+    /// applied with the spec's checks and recorded per swapchain (nothing renders differently). A
+    /// layer above must pass them through, not shadow them.
+    pub native_foveation: bool,
     /// xrWaitFrame also sleeps in real time until the frame should start (demo, real apps).
     pub realtime: bool,
     /// The runtime requests exit by itself after this many xrEndFrame calls.
@@ -84,6 +89,7 @@ impl Default for SimConfig {
             headset,
             refresh_hz: headset.refresh_hz,
             native_swapchain_update_state: false,
+            native_foveation: false,
             realtime: false,
             exit_after_frames: None,
             faults: Vec::new(),
@@ -106,6 +112,7 @@ impl SimConfig {
     }
 
     /// Reads `FOVEA_SIM_HEADSET`, `FOVEA_SIM_REFRESH_HZ`, `FOVEA_SIM_NATIVE_UPDATE_STATE`,
+    /// `FOVEA_SIM_NATIVE_FOVEATION`,
     /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_JOURNAL`, `FOVEA_SIM_SUMMARY`, `FOVEA_SIM_LOG_REFUSALS`,
     /// `FOVEA_SIM_EXIT_AFTER_FRAMES`,
     /// `FOVEA_SIM_FAULT` and `FOVEA_SIM_LOAD`.
@@ -138,6 +145,7 @@ impl SimConfig {
                 })?;
         }
         cfg.native_swapchain_update_state = flag(&var, "FOVEA_SIM_NATIVE_UPDATE_STATE")?;
+        cfg.native_foveation = flag(&var, "FOVEA_SIM_NATIVE_FOVEATION")?;
         cfg.realtime = flag(&var, "FOVEA_SIM_REALTIME")?;
         cfg.summary = flag(&var, "FOVEA_SIM_SUMMARY")?;
         cfg.log_refusals = flag(&var, "FOVEA_SIM_LOG_REFUSALS")?;
@@ -272,6 +280,7 @@ mod tests {
             ("FOVEA_SIM_HEADSET", "rift-s"),
             ("FOVEA_SIM_REFRESH_HZ", "120"),
             ("FOVEA_SIM_NATIVE_UPDATE_STATE", "1"),
+            ("FOVEA_SIM_NATIVE_FOVEATION", "1"),
             ("FOVEA_SIM_REALTIME", "1"),
             ("FOVEA_SIM_SUMMARY", "1"),
             ("FOVEA_SIM_LOG_REFUSALS", "1"),
@@ -283,7 +292,7 @@ mod tests {
         assert_eq!(cfg.headset.id, "rift-s");
         assert_eq!(cfg.refresh_hz, 120.0);
         assert!(cfg.native_swapchain_update_state && cfg.realtime && cfg.summary);
-        assert!(cfg.log_refusals);
+        assert!(cfg.log_refusals && cfg.native_foveation);
         assert_eq!(cfg.exit_after_frames, Some(30));
         assert_eq!(
             cfg.faults,

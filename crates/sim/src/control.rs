@@ -7,6 +7,7 @@ use openxr_sys as xr;
 use openxr_sys::Handle;
 
 pub use crate::config::{set_thread_config, Fault, Load, SimConfig};
+pub use crate::foveation::FoveationParams;
 use crate::state::world;
 
 /// One call that reached the runtime (xrGetInstanceProcAddr lookups are not journaled: the loader
@@ -94,6 +95,16 @@ pub fn refusals(instance: xr::Instance) -> Vec<(&'static str, u64)> {
         .record(instance.into_raw())
         .map(|r| r.refusals.iter().map(|(f, n)| (*f, *n)).collect())
         .unwrap_or_default()
+}
+
+/// With native foveation ([`SimConfig::native_foveation`]), what xrUpdateSwapchainFB last applied
+/// to `swapchain`; `None` before any (or for an unknown swapchain).
+pub fn swapchain_foveation(swapchain: xr::Swapchain) -> Option<FoveationParams> {
+    world()
+        .swapchains
+        .get(&swapchain.into_raw())
+        .and_then(|s| s.foveation)
+        .map(|a| a.params)
 }
 
 /// Instances, sessions, swapchains and spaces alive across all instances (leak checks).

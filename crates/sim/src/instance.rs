@@ -19,6 +19,8 @@ pub(crate) const KHR_VULKAN_ENABLE: &str = "XR_KHR_vulkan_enable";
 pub(crate) const KHR_VULKAN_ENABLE2: &str = "XR_KHR_vulkan_enable2";
 pub(crate) const MND_HEADLESS: &str = "XR_MND_headless";
 pub(crate) const FB_SWAPCHAIN_UPDATE_STATE: &str = "XR_FB_swapchain_update_state";
+pub(crate) const FB_FOVEATION: &str = "XR_FB_foveation";
+pub(crate) const FB_FOVEATION_CONFIGURATION: &str = "XR_FB_foveation_configuration";
 
 /// Virtual time starts here (1000 s) so that "zero" and small times stay recognisably invalid.
 pub(crate) const CLOCK_START_NS: i64 = 1_000_000_000_000;
@@ -30,8 +32,14 @@ pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
         (KHR_VULKAN_ENABLE2, 2),
         (MND_HEADLESS, 2),
     ];
-    if cfg.native_swapchain_update_state {
+    // XR_FB_foveation depends on XR_FB_swapchain_update_state (its xrUpdateSwapchainFB applies
+    // profiles), so native foveation brings it along.
+    if cfg.native_swapchain_update_state || cfg.native_foveation {
         list.push((FB_SWAPCHAIN_UPDATE_STATE, 3));
+    }
+    if cfg.native_foveation {
+        list.push((FB_FOVEATION, 1));
+        list.push((FB_FOVEATION_CONFIGURATION, 1));
     }
     list
 }

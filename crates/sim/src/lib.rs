@@ -3,7 +3,8 @@
 //! It plays a *desktop* runtime: Vulkan (XR_KHR_vulkan_enable, XR_KHR_vulkan_enable2), headless
 //! sessions (XR_MND_headless) and none of the foveation extensions. Optionally it offers
 //! XR_FB_swapchain_update_state with no state types of its own, so the layer's pass-through path can
-//! be exercised.
+//! be exercised, or (`native_foveation`) XR_FB_foveation and XR_FB_foveation_configuration
+//! natively, as a headset runtime does, so a test can check that a layer passes them through.
 //!
 //! Two ways in:
 //! - the Khronos loader loads `libfovea_sim.so` through `manifest/runtime/fovea_sim_runtime.json`
@@ -24,6 +25,7 @@ mod config;
 pub mod control;
 mod dispatch;
 mod ffi;
+mod foveation;
 mod frame;
 mod instance;
 mod negotiate;

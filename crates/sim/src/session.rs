@@ -153,6 +153,7 @@ pub(crate) unsafe extern "system" fn create_session(
 pub(crate) fn destroy_session_objects(w: &mut World, session: u64) {
     w.swapchains.retain(|_, s| s.session != session);
     w.spaces.retain(|_, s| s.session != session);
+    w.profiles.retain(|_, p| p.session != session);
     let instance = w.sessions[&session].instance;
     if let Some(inst) = w.instances.get_mut(&instance) {
         inst.events.retain(

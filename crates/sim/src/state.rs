@@ -47,6 +47,7 @@ pub(crate) struct World {
     pub spaces: HashMap<u64, Space>,
     pub action_sets: HashMap<u64, ActionSet>,
     pub actions: HashMap<u64, Action>,
+    pub profiles: HashMap<u64, crate::foveation::Profile>,
     /// Records of destroyed instances, so tests can read the journal after teardown.
     pub retired: HashMap<u64, Record>,
 }
