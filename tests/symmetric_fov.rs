@@ -45,6 +45,19 @@ fn views(app: &App) -> [[u32; 4]; 2] {
     })
 }
 
+/// xrBeginSession with the stereo configuration: views exist only in a running session (a runtime
+/// may refuse xrLocateViews before, as Monado does;
+/// https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#xrLocateViews).
+fn begin(app: &App, session: xr::Session) {
+    let begin: xr::pfn::BeginSession = unsafe { app.func(c"xrBeginSession") };
+    let info = xr::SessionBeginInfo {
+        ty: xr::StructureType::SESSION_BEGIN_INFO,
+        next: std::ptr::null(),
+        primary_view_configuration_type: xr::ViewConfigurationType::PRIMARY_STEREO,
+    };
+    assert_eq!(unsafe { begin(session, &info) }, xr::Result::SUCCESS);
+}
+
 fn locate(app: &App, session: xr::Session) -> [Fov; 2] {
     unsafe {
         let create: xr::pfn::CreateReferenceSpace = app.func(c"xrCreateReferenceSpace");
@@ -95,6 +108,7 @@ fn run(symmetric: bool) -> ([[u32; 4]; 2], [[u32; 4]; 2], [Fov; 2]) {
     let before_session = views(&app);
     let session = app.headless_session().unwrap();
     let with_session = views(&app);
+    begin(&app, session);
     let fovs = locate(&app, session);
     (before_session, with_session, fovs)
 }

@@ -63,7 +63,7 @@ pub(crate) unsafe extern "system" fn get_system_properties(
     })
 }
 
-fn check_view_configuration(ty: xr::ViewConfigurationType) -> Result<(), xr::Result> {
+pub(crate) fn check_view_configuration(ty: xr::ViewConfigurationType) -> Result<(), xr::Result> {
     match ty {
         xr::ViewConfigurationType::PRIMARY_STEREO => Ok(()),
         _ => Err(xr::Result::ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED),
