@@ -24,6 +24,11 @@ pub struct SimConfig {
     /// applied with the spec's checks and recorded per swapchain (nothing renders differently). A
     /// layer above must pass them through, not shadow them.
     pub native_foveation: bool,
+    /// Offer XR_EPIC_view_configuration_fov (v2), as Monado does: xrEnumerateViewConfigurationViews
+    /// fills an `XrViewConfigurationViewFovEPIC` chained to each view with the headset's FOVs,
+    /// without a session, where the instance enabled the extension
+    /// (https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#XR_EPIC_view_configuration_fov).
+    pub view_configuration_fov: bool,
     /// xrWaitFrame also sleeps in real time until the frame should start (demo, real apps).
     pub realtime: bool,
     /// The runtime requests exit by itself after this many xrEndFrame calls.
@@ -90,6 +95,7 @@ impl Default for SimConfig {
             refresh_hz: headset.refresh_hz,
             native_swapchain_update_state: false,
             native_foveation: false,
+            view_configuration_fov: false,
             realtime: false,
             exit_after_frames: None,
             faults: Vec::new(),
@@ -112,7 +118,7 @@ impl SimConfig {
     }
 
     /// Reads `FOVEA_SIM_HEADSET`, `FOVEA_SIM_REFRESH_HZ`, `FOVEA_SIM_NATIVE_UPDATE_STATE`,
-    /// `FOVEA_SIM_NATIVE_FOVEATION`,
+    /// `FOVEA_SIM_NATIVE_FOVEATION`, `FOVEA_SIM_VIEW_CONFIGURATION_FOV`,
     /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_JOURNAL`, `FOVEA_SIM_SUMMARY`, `FOVEA_SIM_LOG_REFUSALS`,
     /// `FOVEA_SIM_EXIT_AFTER_FRAMES`,
     /// `FOVEA_SIM_FAULT` and `FOVEA_SIM_LOAD`.
@@ -148,6 +154,7 @@ impl SimConfig {
         }
         cfg.native_swapchain_update_state = flag(&var, "FOVEA_SIM_NATIVE_UPDATE_STATE")?;
         cfg.native_foveation = flag(&var, "FOVEA_SIM_NATIVE_FOVEATION")?;
+        cfg.view_configuration_fov = flag(&var, "FOVEA_SIM_VIEW_CONFIGURATION_FOV")?;
         cfg.realtime = flag(&var, "FOVEA_SIM_REALTIME")?;
         cfg.summary = flag(&var, "FOVEA_SIM_SUMMARY")?;
         cfg.log_refusals = flag(&var, "FOVEA_SIM_LOG_REFUSALS")?;

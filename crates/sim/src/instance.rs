@@ -21,6 +21,7 @@ pub(crate) const MND_HEADLESS: &str = "XR_MND_headless";
 pub(crate) const FB_SWAPCHAIN_UPDATE_STATE: &str = "XR_FB_swapchain_update_state";
 pub(crate) const FB_FOVEATION: &str = "XR_FB_foveation";
 pub(crate) const FB_FOVEATION_CONFIGURATION: &str = "XR_FB_foveation_configuration";
+pub(crate) const EPIC_VIEW_CONFIGURATION_FOV: &str = "XR_EPIC_view_configuration_fov";
 
 /// Virtual time starts here (1000 s) so that "zero" and small times stay recognisably invalid.
 pub(crate) const CLOCK_START_NS: i64 = 1_000_000_000_000;
@@ -40,6 +41,9 @@ pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
     if cfg.native_foveation {
         list.push((FB_FOVEATION, 1));
         list.push((FB_FOVEATION_CONFIGURATION, 1));
+    }
+    if cfg.view_configuration_fov {
+        list.push((EPIC_VIEW_CONFIGURATION_FOV, 2));
     }
     list
 }
