@@ -74,6 +74,8 @@ hooks! {
     c"xrDestroyInstance" => destroy_instance: DestroyInstance = hooks::instance::destroy_instance, Owner::Below;
     c"xrCreateSession" => create_session: CreateSession = hooks::session::create_session, Owner::Below;
     c"xrDestroySession" => destroy_session: DestroySession = hooks::session::destroy_session, Owner::Below;
+    c"xrBeginSession" => begin_session: BeginSession = hooks::session::begin_session, Owner::Below;
+    c"xrEndSession" => end_session: EndSession = hooks::session::end_session, Owner::Below;
     c"xrEnumerateViewConfigurationViews" => enumerate_view_configuration_views: EnumerateViewConfigurationViews =
         hooks::session::enumerate_view_configuration_views, Owner::Below;
     c"xrLocateViews" => locate_views: LocateViews = hooks::frame::locate_views, Owner::Below;

@@ -15,6 +15,7 @@ use crate::common::settings;
 use crate::xr::dispatch::{self, Next, Owner};
 use crate::xr::extensions::{self, Ext, Extensions, EXTENSIONS};
 use crate::xr::registry::{registry, Instance};
+use crate::xr::symmetric;
 use fovea_abi::LAYER_NAME;
 
 /// The interface version fovea speaks (the only one that exists).
@@ -186,12 +187,15 @@ unsafe fn create_instance(
         }
     }
 
-    // Down goes a copy of the create info without the extensions fovea provides itself.
-    let kept: Vec<*const c_char> = names
+    // Down goes a copy of the create info without the extensions fovea provides itself (and, in
+    // symmetric-FOV mode, with the one that reports the FOVs where the runtime offers it).
+    let mut kept: Vec<*const c_char> = names
         .iter()
         .filter(|n| Ext::by_name(n).is_none_or(|e| !exts.provided(e)))
         .map(|n| n.as_ptr())
         .collect();
+    let settings = settings::Settings::from_env();
+    let epic = symmetric::enable_epic(settings.symmetric_fov, &names, &below, &mut kept);
     let mut down = *app;
     down.enabled_extension_count = kept.len() as u32;
     down.enabled_extension_names = if kept.is_empty() {
@@ -207,7 +211,6 @@ unsafe fn create_instance(
     }
 
     let handle = *instance;
-    let settings = settings::Settings::from_env();
     let state = Instance {
         handle,
         next_gipa,
@@ -216,6 +219,7 @@ unsafe fn create_instance(
         symmetric_fov: settings.symmetric_fov,
         overrides: settings::Overrides::from_env(),
         stereo_fovs: crate::common::lock::Mutex::new(None),
+        fovs: symmetric::InstanceFovs::new(epic),
         vulkan: Default::default(),
         lost: Default::default(),
     };

@@ -224,7 +224,8 @@ pub unsafe extern "system" fn locate_views(
             let locate = next(s.instance.next.locate_views)?;
             let r = observed(&s, locate(sess, info, view_state, capacity, count, views));
             if succeeded(r) {
-                learn_stereo_views(&s.instance, info, capacity, count, views);
+                let symmetric = crate::xr::symmetric::active(&s);
+                learn_stereo_views(&s.instance, symmetric, info, capacity, count, views);
             }
             if succeeded(r)
                 && s.gpu.is_some()
@@ -251,6 +252,7 @@ pub unsafe extern "system" fn locate_views(
 /// is the application's to receive; its input structs are untouched).
 unsafe fn learn_stereo_views(
     instance: &Instance,
+    symmetric: bool,
     info: *const xr::ViewLocateInfo,
     capacity: u32,
     count: *const u32,
@@ -272,7 +274,7 @@ unsafe fn learn_stereo_views(
     }
     let fovs = [0, 1].map(|i| fov_from_xr(views[i].fov));
     *instance.stereo_fovs.lock() = Some(fovs);
-    if instance.symmetric_fov {
+    if symmetric {
         for (v, f) in views.iter_mut().zip(instance.render_fovs(fovs)) {
             v.fov = fov_to_xr(f);
         }
