@@ -4,7 +4,7 @@
 //! Follows the normative "API Layer Interface Negotiation" of api_initialization.adoc and the
 //! loader's api_layer.adoc (openxr-layer-facts.md §2).
 
-use std::ffi::{c_char, CStr, CString};
+use std::ffi::{c_char, CStr};
 use std::sync::Arc;
 
 use openxr_sys as xr;
@@ -12,6 +12,7 @@ use xr::Handle;
 
 use crate::common::ffi::{self, guard};
 use crate::common::settings;
+use crate::xr::below;
 use crate::xr::dispatch::{self, Next, Owner};
 use crate::xr::extensions::{self, Ext, Extensions, EXTENSIONS};
 use crate::xr::registry::{registry, Instance};
@@ -166,7 +167,7 @@ unsafe fn create_instance(
     if names.len() != app.enabled_extension_count as usize {
         return xr::Result::ERROR_VALIDATION_FAILURE;
     }
-    let below = extensions_below(enumeration_gipa(next_gipa, next_info));
+    let below = below::extensions_below(next_gipa, next_info, next_create, app, li);
     let mut exts = Extensions::default();
     for n in &names {
         if let Some(e) = Ext::by_name(n) {
@@ -233,72 +234,6 @@ unsafe fn create_instance(
         .write()
         .insert(handle.into_raw(), Arc::new(state));
     result
-}
-
-/// Layers known to mishandle an `xrGetInstanceProcAddr` with XR_NULL_HANDLE and to provide no
-/// instance extensions: Debian's core validation layer (1.0.20) prints "INTERNAL VALIDATION LAYER
-/// ERROR: Null handle passed to HandleInfoBase::get()" and answers nothing. fovea asks the layer
-/// below it instead, so a stack with core validation under fovea stays silent and still learns what
-/// the runtime offers natively.
-const NO_NULL_INSTANCE_LOOKUP: [&str; 1] = ["XR_APILAYER_LUNARG_core_validation"];
-
-/// The `xrGetInstanceProcAddr` to ask for the extensions below: the next layer's, or, past layers in
-/// [`NO_NULL_INSTANCE_LOOKUP`], the first one below them (the runtime's at the end of the chain).
-///
-/// # Safety
-/// `ours` must be fovea's own, validated next-info entry.
-unsafe fn enumeration_gipa(
-    next_gipa: xr::pfn::GetInstanceProcAddr,
-    ours: &xr::ApiLayerNextInfo,
-) -> xr::pfn::GetInstanceProcAddr {
-    let mut gipa = next_gipa;
-    let mut below = ours.next;
-    while !below.is_null()
-        && (*below).struct_type == xr::ApiLayerNextInfo::TYPE
-        && NO_NULL_INSTANCE_LOOKUP.contains(&ffi::read_fixed(&(*below).layer_name).as_ref())
-    {
-        match (*below).next_get_instance_proc_addr {
-            Some(g) => gipa = g,
-            None => break,
-        }
-        below = (*below).next;
-    }
-    gipa
-}
-
-/// The extension names the layers and runtime below offer, asked through the next layer's
-/// `xrGetInstanceProcAddr` with XR_NULL_HANDLE (openxr-layer-facts.md §3). Empty where that fails:
-/// fovea then provides every extension the app enabled, which is the safe assumption for a runtime
-/// that cannot even list them.
-unsafe fn extensions_below(next_gipa: xr::pfn::GetInstanceProcAddr) -> Vec<CString> {
-    let Some(f) = dispatch::load(
-        next_gipa,
-        xr::Instance::NULL,
-        c"xrEnumerateInstanceExtensionProperties",
-    ) else {
-        tracing::warn!("the next layer does not offer xrEnumerateInstanceExtensionProperties");
-        return Vec::new();
-    };
-    let enumerate: xr::pfn::EnumerateInstanceExtensionProperties = std::mem::transmute(f);
-    let mut count = 0;
-    if enumerate(std::ptr::null(), 0, &mut count, std::ptr::null_mut()).into_raw() < 0 {
-        return Vec::new();
-    }
-    let empty = xr::ExtensionProperties {
-        ty: xr::StructureType::EXTENSION_PROPERTIES,
-        next: std::ptr::null_mut(),
-        extension_name: [0; xr::MAX_EXTENSION_NAME_SIZE],
-        extension_version: 0,
-    };
-    let mut props = vec![empty; count as usize];
-    if enumerate(std::ptr::null(), count, &mut count, props.as_mut_ptr()).into_raw() < 0 {
-        return Vec::new();
-    }
-    props.truncate(count as usize);
-    props
-        .iter()
-        .filter_map(|p| CString::new(ffi::read_fixed(&p.extension_name)).ok())
-        .collect()
 }
 
 /// The layer's `xrGetInstanceProcAddr`, following the spec's table (api_initialization.adoc):

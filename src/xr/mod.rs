@@ -3,6 +3,7 @@
 //! ([`extensions`]) and the hooks, one module per function group ([`hooks`]); how symmetric-FOV mode learns the FOVs
 //! ([`symmetric`]).
 
+pub mod below;
 pub mod dispatch;
 pub mod extensions;
 pub mod hooks;

@@ -7,7 +7,9 @@
 //!    through it to the runtime, and the loader never asks it a NULL-instance lookup (the loader
 //!    answers those itself).
 //! 2. fovea above it (fovea → refuser → runtime): whatever NULL-instance lookup a layer above makes
-//!    is refused, and the instance still works.
+//!    is refused, the instance still works, and fovea still learns what the runtime offers (through
+//!    an instance of its own): the runtime's native XR_FB_swapchain_update_state passes through, no
+//!    per-instance warning, one line for the process.
 
 use std::ffi::{c_char, CStr, CString};
 use std::ptr::{null, null_mut};
@@ -33,12 +35,19 @@ impl Loader {
         std::mem::transmute_copy(&f.unwrap())
     }
 
-    /// xrCreateInstance with these API layers enabled and XR_MND_headless.
-    unsafe fn create_instance(&self, layers: &[&str]) -> Result<xr::Instance, xr::Result> {
+    /// xrCreateInstance with these API layers enabled, XR_MND_headless and `extra` extensions.
+    unsafe fn create_instance(
+        &self,
+        layers: &[&str],
+        extra: &[&CStr],
+    ) -> Result<xr::Instance, xr::Result> {
         let create: xr::pfn::CreateInstance = self.load(xr::Instance::NULL, "xrCreateInstance");
         let names: Vec<CString> = layers.iter().map(|l| CString::new(*l).unwrap()).collect();
         let layer_ptrs: Vec<*const c_char> = names.iter().map(|n| n.as_ptr()).collect();
-        let exts = [c"XR_MND_headless".as_ptr()];
+        let exts: Vec<*const c_char> = std::iter::once(c"XR_MND_headless")
+            .chain(extra.iter().copied())
+            .map(CStr::as_ptr)
+            .collect();
         let mut app = xr::ApplicationInfo {
             application_name: [0; xr::MAX_APPLICATION_NAME_SIZE],
             application_version: 1,
@@ -57,7 +66,7 @@ impl Loader {
             application_info: app,
             enabled_api_layer_count: layer_ptrs.len() as u32,
             enabled_api_layer_names: layer_ptrs.as_ptr(),
-            enabled_extension_count: 1,
+            enabled_extension_count: exts.len() as u32,
             enabled_extension_names: exts.as_ptr(),
         };
         let mut instance = xr::Instance::NULL;
@@ -187,6 +196,13 @@ fn the_refusing_layer_through_the_khronos_loader() {
     .unwrap();
     std::env::set_var("XR_RUNTIME_JSON", &runtime_json);
     std::env::set_var("XR_API_LAYER_PATH", &layers);
+    // fovea's log, read at the end (fovea is loaded by the loader, after these are set).
+    let log = dir.join("fovea.log");
+    std::env::set_var(
+        "FOVEA_LOG",
+        "warn,fovea::xr::below=info,fovea::xr::loader=info",
+    );
+    std::env::set_var("FOVEA_LOG_FILE", &log);
     // A runtime with native FB support below the refuser: what it hides from a layer above.
     std::env::set_var("FOVEA_SIM_NATIVE_UPDATE_STATE", "1");
     // Holds the refuser loaded across the loader's dlclose at xrDestroyInstance, so its counters
@@ -203,7 +219,7 @@ fn the_refusing_layer_through_the_khronos_loader() {
     unsafe {
         // 1. The refuser alone.
         let before = refuser_stats(&refuser.path).unwrap();
-        let instance = loader.create_instance(&[&refuser.name]).unwrap();
+        let instance = loader.create_instance(&[&refuser.name], &[]).unwrap();
         loader.exercise(instance);
         let destroy: xr::pfn::DestroyInstance = loader.load(instance, "xrDestroyInstance");
         assert_eq!(destroy(instance), xr::Result::SUCCESS);
@@ -220,17 +236,53 @@ fn the_refusing_layer_through_the_khronos_loader() {
         // 2. fovea above the refuser: every NULL-instance lookup fovea makes is refused, and the
         // instance works regardless.
         let instance = loader
-            .create_instance(&[&fovea.name, &refuser.name])
+            .create_instance(
+                &[&fovea.name, &refuser.name],
+                &[c"XR_FB_swapchain_update_state"],
+            )
             .unwrap();
         let stacked = refuser_stats(&refuser.path).unwrap();
         let asked = stacked.null_lookups - alone.null_lookups;
         let refused = stacked.null_lookups_refused - alone.null_lookups_refused;
         eprintln!("fovea asked the refuser {asked} NULL-instance lookups; {refused} refused");
         assert_eq!(asked, refused);
-        assert_eq!(stacked.instances_created - alone.instances_created, 1);
+        // fovea asks what lies below through an instance of its own, destroyed before the
+        // application's is created.
+        assert_eq!(stacked.instances_created - alone.instances_created, 2);
+        assert_eq!(stacked.instances_destroyed - alone.instances_destroyed, 1);
         loader.exercise(instance);
         let destroy: xr::pfn::DestroyInstance = loader.load(instance, "xrDestroyInstance");
         assert_eq!(destroy(instance), xr::Result::SUCCESS);
+        // A second instance: the same, and still no warning.
+        let instance = loader
+            .create_instance(
+                &[&fovea.name, &refuser.name],
+                &[c"XR_FB_swapchain_update_state"],
+            )
+            .unwrap();
+        loader.exercise(instance);
+        let destroy: xr::pfn::DestroyInstance = loader.load(instance, "xrDestroyInstance");
+        assert_eq!(destroy(instance), xr::Result::SUCCESS);
+    }
+    // fovea learned that the runtime offers XR_FB_swapchain_update_state natively and passed it
+    // through (its "instance created" line lists it as native), said how once, and never warned.
+    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    assert!(
+        !text.contains("does not offer xrEnumerateInstanceExtensionProperties"),
+        "{text}"
+    );
+    assert_eq!(
+        text.matches("refuses lookups without an instance").count(),
+        1,
+        "{text}"
+    );
+    let created: Vec<&str> = text
+        .lines()
+        .filter(|l| l.contains("instance created"))
+        .collect();
+    assert_eq!(created.len(), 2, "{text}");
+    for line in created {
+        assert!(line.contains("native=[SwapchainUpdateState]"), "{line}");
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
