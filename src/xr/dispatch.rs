@@ -99,6 +99,12 @@ hooks! {
     c"xrDestroySession" => destroy_session: DestroySession =
         hooks::session::destroy_session, Owner::Below,
         (session: val xr::Session);
+    c"xrBeginSession" => begin_session: BeginSession =
+        hooks::session::begin_session, Owner::Below,
+        (session: val xr::Session, info: in xr::SessionBeginInfo);
+    c"xrEndSession" => end_session: EndSession =
+        hooks::session::end_session, Owner::Below,
+        (session: val xr::Session);
     c"xrEnumerateViewConfigurationViews" => enumerate_view_configuration_views: EnumerateViewConfigurationViews =
         hooks::session::enumerate_view_configuration_views, Owner::Below,
         (instance: val xr::Instance, system: val xr::SystemId, config: val xr::ViewConfigurationType,

@@ -4,7 +4,7 @@
 //! Follows the normative "API Layer Interface Negotiation" of api_initialization.adoc and the
 //! loader's api_layer.adoc (openxr-layer-facts.md §2).
 
-use std::ffi::{c_char, CStr, CString};
+use std::ffi::{c_char, CStr};
 use std::sync::Arc;
 
 use openxr_sys as xr;
@@ -12,9 +12,11 @@ use xr::Handle;
 
 use crate::common::ffi::{self, shim, HookResult, In, Out, OutArray};
 use crate::common::settings;
+use crate::xr::below;
 use crate::xr::dispatch::{self, Next, Owner};
 use crate::xr::extensions::{self, Ext, Extensions, EXTENSIONS};
 use crate::xr::registry::{registry, Instance};
+use crate::xr::symmetric;
 use fovea_abi::LAYER_NAME;
 
 /// The interface version fovea speaks (the only one that exists).
@@ -171,8 +173,9 @@ fn create_instance_inner(
     if names.len() != app.enabled_extension_count as usize {
         return xr::Result::ERROR_VALIDATION_FAILURE;
     }
-    // SAFETY: the next-info entry is fovea's own, validated above; its pointers are the loader's.
-    let below = unsafe { extensions_below(enumeration_gipa(next_gipa, next_info)) };
+    // SAFETY: the next-info entry is fovea's own, validated above; its pointers are the loader's,
+    // and `app`/`li` are the validated arguments of this call.
+    let below = unsafe { below::extensions_below(next_gipa, next_info, next_create, app, li) };
     let mut exts = Extensions::default();
     for n in &names {
         if let Some(e) = Ext::by_name(n) {
@@ -193,12 +196,15 @@ fn create_instance_inner(
         }
     }
 
-    // Down goes a copy of the create info without the extensions fovea provides itself.
-    let kept: Vec<*const c_char> = names
+    // Down goes a copy of the create info without the extensions fovea provides itself (and, in
+    // symmetric-FOV mode, with the one that reports the FOVs where the runtime offers it).
+    let mut kept: Vec<*const c_char> = names
         .iter()
         .filter(|n| Ext::by_name(n).is_none_or(|e| !exts.provided(e)))
         .map(|n| n.as_ptr())
         .collect();
+    let settings = settings::Settings::from_env();
+    let epic = symmetric::enable_epic(settings.symmetric_fov, &names, &below, &mut kept);
     let mut down = *app;
     down.enabled_extension_count = kept.len() as u32;
     down.enabled_extension_names = if kept.is_empty() {
@@ -217,7 +223,6 @@ fn create_instance_inner(
     let Some(handle) = instance.read() else {
         return result;
     };
-    let settings = settings::Settings::from_env();
     let state = Instance {
         handle,
         next_gipa,
@@ -227,6 +232,7 @@ fn create_instance_inner(
         symmetric_fov: settings.symmetric_fov,
         overrides: settings::Overrides::from_env(),
         stereo_fovs: crate::common::lock::Mutex::new(None),
+        fovs: symmetric::InstanceFovs::new(epic),
         vulkan: Default::default(),
         lost: Default::default(),
     };
@@ -240,91 +246,6 @@ fn create_instance_inner(
         .write()
         .insert(handle.into_raw(), Arc::new(state));
     result
-}
-
-/// Layers known to mishandle an `xrGetInstanceProcAddr` with XR_NULL_HANDLE and to provide no
-/// instance extensions: Debian's core validation layer (1.0.20) prints "INTERNAL VALIDATION LAYER
-/// ERROR: Null handle passed to HandleInfoBase::get()" and answers nothing. fovea asks the layer
-/// below it instead, so a stack with core validation under fovea stays silent and still learns what
-/// the runtime offers natively.
-const NO_NULL_INSTANCE_LOOKUP: [&str; 1] = ["XR_APILAYER_LUNARG_core_validation"];
-
-/// The `xrGetInstanceProcAddr` to ask for the extensions below: the next layer's, or, past layers in
-/// [`NO_NULL_INSTANCE_LOOKUP`], the first one below them (the runtime's at the end of the chain).
-///
-/// # Safety
-/// `ours` must be fovea's own, validated next-info entry.
-unsafe fn enumeration_gipa(
-    next_gipa: xr::pfn::GetInstanceProcAddr,
-    ours: &xr::ApiLayerNextInfo,
-) -> xr::pfn::GetInstanceProcAddr {
-    let mut gipa = next_gipa;
-    let mut below = ours.next;
-    // SAFETY: the loader's list of next-layer entries is NULL-terminated and valid through
-    // xrCreateApiLayerInstance (the caller's contract).
-    while let Some(entry) = unsafe { below.as_ref() } {
-        if entry.struct_type != xr::ApiLayerNextInfo::TYPE
-            || !NO_NULL_INSTANCE_LOOKUP.contains(&ffi::read_fixed(&entry.layer_name).as_ref())
-        {
-            break;
-        }
-        match entry.next_get_instance_proc_addr {
-            Some(g) => gipa = g,
-            None => break,
-        }
-        below = entry.next;
-    }
-    gipa
-}
-
-/// The extension names the layers and runtime below offer, asked through the next layer's
-/// `xrGetInstanceProcAddr` with XR_NULL_HANDLE (openxr-layer-facts.md §3). Empty where that fails:
-/// fovea then provides every extension the app enabled, which is the safe assumption for a runtime
-/// that cannot even list them.
-///
-/// # Safety
-/// `next_gipa` must be a next layer's (or the runtime's) `xrGetInstanceProcAddr`.
-unsafe fn extensions_below(next_gipa: xr::pfn::GetInstanceProcAddr) -> Vec<CString> {
-    // SAFETY: the caller's contract; XR_NULL_HANDLE is how the spec asks for this function.
-    let f = unsafe {
-        dispatch::load(
-            next_gipa,
-            xr::Instance::NULL,
-            c"xrEnumerateInstanceExtensionProperties",
-        )
-    };
-    let Some(f) = f else {
-        tracing::warn!("the next layer does not offer xrEnumerateInstanceExtensionProperties");
-        return Vec::new();
-    };
-    // SAFETY: the pointer the next layer handed out for that name has its signature.
-    let enumerate = unsafe {
-        std::mem::transmute::<xr::pfn::VoidFunction, xr::pfn::EnumerateInstanceExtensionProperties>(
-            f,
-        )
-    };
-    let mut count = 0;
-    // SAFETY: capacity 0 writes only the count, into a local.
-    if unsafe { enumerate(std::ptr::null(), 0, &mut count, std::ptr::null_mut()) }.into_raw() < 0 {
-        return Vec::new();
-    }
-    let empty = xr::ExtensionProperties {
-        ty: xr::StructureType::EXTENSION_PROPERTIES,
-        next: std::ptr::null_mut(),
-        extension_name: [0; xr::MAX_EXTENSION_NAME_SIZE],
-        extension_version: 0,
-    };
-    let mut props = vec![empty; count as usize];
-    // SAFETY: `props` holds the `count` elements the capacity says.
-    if unsafe { enumerate(std::ptr::null(), count, &mut count, props.as_mut_ptr()) }.into_raw() < 0
-    {
-        return Vec::new();
-    }
-    props.truncate(count as usize);
-    props
-        .iter()
-        .filter_map(|p| CString::new(ffi::read_fixed(&p.extension_name)).ok())
-        .collect()
 }
 
 shim! {

@@ -59,6 +59,8 @@ pub struct Instance {
     /// The primary stereo views' FOVs as the runtime reports them (not the symmetric ones fovea
     /// may hand on), learned from `xrLocateViews`.
     pub stereo_fovs: Mutex<Option<[Fov; 2]>>,
+    /// How symmetric-FOV mode learns the FOVs ([`crate::xr::symmetric`]).
+    pub fovs: crate::xr::symmetric::InstanceFovs,
     /// What the application told the runtime about its Vulkan objects.
     pub vulkan: Mutex<VulkanSetup>,
     /// The runtime returned XR_ERROR_INSTANCE_LOST through a call fovea passed on.
@@ -135,6 +137,9 @@ pub struct Session {
     pub views: Mutex<ViewFovs>,
     /// The runtime returned XR_ERROR_SESSION_LOST through a call fovea passed on.
     pub lost: AtomicBool,
+    /// Whether the session runs, and whether symmetric-FOV mode is off for it
+    /// ([`crate::xr::symmetric`]).
+    pub fovs: crate::xr::symmetric::SessionFovs,
 }
 
 impl Session {
@@ -157,6 +162,7 @@ impl Session {
             maps_built: AtomicU64::new(0),
             maps_uploaded: AtomicU64::new(0),
             lost: AtomicBool::new(false),
+            fovs: Default::default(),
         }
     }
 
@@ -331,13 +337,12 @@ impl Registry {
             .collect()
     }
 
-    /// Some live session of `instance`.
-    pub fn any_session_of(&self, instance: xr::Instance) -> Option<Arc<Session>> {
-        self.sessions
+    /// Whether any swapchain of `session` is alive.
+    pub fn has_swapchains(&self, session: xr::Session) -> bool {
+        self.swapchains
             .read()
             .values()
-            .find(|s| s.instance.handle == instance)
-            .cloned()
+            .any(|sc| sc.session.handle == session)
     }
 
     pub fn swapchain(&self, h: xr::Swapchain) -> Option<Arc<Swapchain>> {

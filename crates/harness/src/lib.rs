@@ -60,6 +60,84 @@ impl LayerSpec {
     }
 }
 
+/// The test layer that refuses every `xrGetInstanceProcAddr(XR_NULL_HANDLE, ...)`, as the CTS
+/// conformance layer does (crates/refuser).
+pub const REFUSE_NULL_LOOKUPS_LAYER: &str = "XR_APILAYER_FOVEA_test_refuse_null_lookups";
+/// The test layer that reports no instance extensions below it (crates/refuser).
+pub const HIDE_EXTENSIONS_LAYER: &str = "XR_APILAYER_FOVEA_test_hide_extensions";
+
+impl LayerSpec {
+    /// crates/refuser's `libfovea_refuser.so` under [`REFUSE_NULL_LOOKUPS_LAYER`]: passes everything
+    /// through except that every NULL-instance lookup is XR_ERROR_HANDLE_INVALID.
+    pub fn refuse_null_lookups() -> Result<LayerSpec, String> {
+        Ok(LayerSpec {
+            path: artifact("libfovea_refuser.so")?,
+            name: REFUSE_NULL_LOOKUPS_LAYER.to_owned(),
+        })
+    }
+
+    /// The same library under [`HIDE_EXTENSIONS_LAYER`]: a NULL-instance
+    /// `xrEnumerateInstanceExtensionProperties` lists nothing below it.
+    pub fn hide_extensions() -> Result<LayerSpec, String> {
+        Ok(LayerSpec {
+            path: artifact("libfovea_refuser.so")?,
+            name: HIDE_EXTENSIONS_LAYER.to_owned(),
+        })
+    }
+
+    /// Writes an explicit-layer manifest for this layer into `dir` (file format 1.0.0; the keys the
+    /// Khronos loader requires, see https://registry.khronos.org/OpenXR/specs/1.0/loader.html) and
+    /// returns its path. Point `XR_API_LAYER_PATH` at `dir` and enable the layer by name.
+    pub fn write_manifest(&self, dir: &Path) -> Result<PathBuf, String> {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let path = dir.join(format!("{}.json", self.name));
+        let json = format!(
+            r#"{{
+  "file_format_version": "1.0.0",
+  "api_layer": {{
+    "name": "{}",
+    "library_path": "{}",
+    "api_version": "1.0",
+    "implementation_version": "1",
+    "description": "written by a fovea test"
+  }}
+}}
+"#,
+            self.name,
+            self.path.display()
+        );
+        std::fs::write(&path, json).map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(path)
+    }
+}
+
+/// What crates/refuser's layer saw in this process (its `fovea_refuser_stats`, same layout).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RefuserStats {
+    pub null_lookups: u64,
+    pub null_lookups_refused: u64,
+    pub hidden_enumerations: u64,
+    pub forwarded_lookups: u64,
+    pub instances_created: u64,
+    pub instances_destroyed: u64,
+}
+
+/// Reads the counters of the refuser library at `path` as loaded in this process (opening it again
+/// returns the copy a loader already holds; a fresh copy reads all zeros).
+pub fn refuser_stats(path: &Path) -> Result<RefuserStats, String> {
+    let lib = open_library(path)?;
+    // SAFETY: the symbol has this type in crates/refuser; the struct layouts are the same.
+    unsafe {
+        let f = lib
+            .get::<unsafe extern "C" fn(*mut RefuserStats)>(b"fovea_refuser_stats\0")
+            .map_err(|e| format!("no fovea_refuser_stats in {}: {e}", path.display()))?;
+        let mut stats = RefuserStats::default();
+        f(&mut stats);
+        Ok(stats)
+    }
+}
+
 /// A build artifact of this workspace, found next to the running executable: a test binary sits in
 /// `target/<profile>/deps`, the `fovea` binary in `target/<profile>`.
 ///
@@ -95,6 +173,7 @@ fn sources_of(file: &str) -> Vec<PathBuf> {
             root.join("crates/sim/src"),
             root.join("crates/headsets/src"),
         ],
+        "libfovea_refuser.so" => vec![root.join("crates/refuser/src")],
         _ => Vec::new(),
     }
 }

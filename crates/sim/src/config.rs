@@ -19,6 +19,16 @@ pub struct SimConfig {
     /// Offer XR_FB_swapchain_update_state (v3) without any state types of its own, so the layer's
     /// pass-through path for non-foveation states can be tested.
     pub native_swapchain_update_state: bool,
+    /// Offer XR_FB_foveation (v1) and XR_FB_foveation_configuration (v1), with
+    /// XR_FB_swapchain_update_state, natively, as a headset runtime does: profiles are created and
+    /// applied with the spec's checks and recorded per swapchain (nothing renders differently). A
+    /// layer above must pass them through, not shadow them.
+    pub native_foveation: bool,
+    /// Offer XR_EPIC_view_configuration_fov (v2), as Monado does: xrEnumerateViewConfigurationViews
+    /// fills an `XrViewConfigurationViewFovEPIC` chained to each view with the headset's FOVs,
+    /// without a session, where the instance enabled the extension
+    /// (https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#XR_EPIC_view_configuration_fov).
+    pub view_configuration_fov: bool,
     /// xrWaitFrame also sleeps in real time until the frame should start (demo, real apps).
     pub realtime: bool,
     /// The runtime requests exit by itself after this many xrEndFrame calls.
@@ -34,6 +44,11 @@ pub struct SimConfig {
     /// destroyed (`FOVEA_SIM_SUMMARY=1`): an application run as a child process (hello_xr) has no
     /// other way to tell a test how many frames reached the runtime and which calls failed.
     pub summary: bool,
+    /// Print one `fovea-sim: refused xrFoo: XR_ERROR_... (why)` line to stderr for every call the
+    /// runtime refuses by its own rules (`FOVEA_SIM_LOG_REFUSALS=1`), as a real runtime such as
+    /// Monado prints an error line: it shows, in any test's output, which component made a call a
+    /// strict runtime refuses.
+    pub log_refusals: bool,
 }
 
 /// A call that fails on purpose: `function` returns `result` without doing anything.
@@ -79,12 +94,15 @@ impl Default for SimConfig {
             headset,
             refresh_hz: headset.refresh_hz,
             native_swapchain_update_state: false,
+            native_foveation: false,
+            view_configuration_fov: false,
             realtime: false,
             exit_after_frames: None,
             faults: Vec::new(),
             load: Load::default(),
             journal: true,
             summary: false,
+            log_refusals: false,
         }
     }
 }
@@ -100,7 +118,9 @@ impl SimConfig {
     }
 
     /// Reads `FOVEA_SIM_HEADSET`, `FOVEA_SIM_REFRESH_HZ`, `FOVEA_SIM_NATIVE_UPDATE_STATE`,
-    /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_JOURNAL`, `FOVEA_SIM_SUMMARY`, `FOVEA_SIM_EXIT_AFTER_FRAMES`,
+    /// `FOVEA_SIM_NATIVE_FOVEATION`, `FOVEA_SIM_VIEW_CONFIGURATION_FOV`,
+    /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_JOURNAL`, `FOVEA_SIM_SUMMARY`, `FOVEA_SIM_LOG_REFUSALS`,
+    /// `FOVEA_SIM_EXIT_AFTER_FRAMES`,
     /// `FOVEA_SIM_FAULT` and `FOVEA_SIM_LOAD`.
     /// The error names the variable and what it accepts.
     pub fn from_env() -> Result<SimConfig, String> {
@@ -133,8 +153,11 @@ impl SimConfig {
                 })?;
         }
         cfg.native_swapchain_update_state = flag(&var, "FOVEA_SIM_NATIVE_UPDATE_STATE")?;
+        cfg.native_foveation = flag(&var, "FOVEA_SIM_NATIVE_FOVEATION")?;
+        cfg.view_configuration_fov = flag(&var, "FOVEA_SIM_VIEW_CONFIGURATION_FOV")?;
         cfg.realtime = flag(&var, "FOVEA_SIM_REALTIME")?;
         cfg.summary = flag(&var, "FOVEA_SIM_SUMMARY")?;
+        cfg.log_refusals = flag(&var, "FOVEA_SIM_LOG_REFUSALS")?;
         if var("FOVEA_SIM_JOURNAL").is_some() {
             cfg.journal = flag(&var, "FOVEA_SIM_JOURNAL")?;
         }
@@ -227,7 +250,10 @@ pub fn set_thread_config(cfg: Option<SimConfig>) {
 /// The configuration in force on this thread. A bad environment is reported on stderr and replaced
 /// by the defaults: a runtime has no other channel before an instance exists.
 pub(crate) fn current() -> SimConfig {
-    if let Some(cfg) = THREAD_CONFIG.with(|c| c.borrow().clone()) {
+    if let Some(mut cfg) = THREAD_CONFIG.with(|c| c.borrow().clone()) {
+        // A diagnostic, not a property of the headset: the environment turns it on for tests
+        // that pick their configuration in code too.
+        cfg.log_refusals |= std::env::var("FOVEA_SIM_LOG_REFUSALS").is_ok_and(|v| v.trim() == "1");
         return cfg;
     }
     SimConfig::from_env().unwrap_or_else(|e| {
@@ -263,8 +289,10 @@ mod tests {
             ("FOVEA_SIM_HEADSET", "rift-s"),
             ("FOVEA_SIM_REFRESH_HZ", "120"),
             ("FOVEA_SIM_NATIVE_UPDATE_STATE", "1"),
+            ("FOVEA_SIM_NATIVE_FOVEATION", "1"),
             ("FOVEA_SIM_REALTIME", "1"),
             ("FOVEA_SIM_SUMMARY", "1"),
+            ("FOVEA_SIM_LOG_REFUSALS", "1"),
             ("FOVEA_SIM_EXIT_AFTER_FRAMES", "30"),
             ("FOVEA_SIM_FAULT", "xrCreateSwapchain:-2@2, xrEndFrame:-17"),
             ("FOVEA_SIM_LOAD", "8@0,14@100"),
@@ -273,6 +301,7 @@ mod tests {
         assert_eq!(cfg.headset.id, "rift-s");
         assert_eq!(cfg.refresh_hz, 120.0);
         assert!(cfg.native_swapchain_update_state && cfg.realtime && cfg.summary);
+        assert!(cfg.log_refusals && cfg.native_foveation);
         assert_eq!(cfg.exit_after_frames, Some(30));
         assert_eq!(
             cfg.faults,

@@ -7,6 +7,7 @@ use openxr_sys as xr;
 use openxr_sys::Handle;
 
 pub use crate::config::{set_thread_config, Fault, Load, SimConfig};
+pub use crate::foveation::FoveationParams;
 use crate::state::world;
 
 /// One call that reached the runtime (xrGetInstanceProcAddr lookups are not journaled: the loader
@@ -22,6 +23,9 @@ pub struct Call {
     pub next_types: Vec<xr::StructureType>,
     /// Call-specific facts: enabled extensions, frame timing, submitted views, injected faults.
     pub detail: String,
+    /// The runtime refused the call by its own rules (an error that is not an injected fault): the
+    /// caller did something a conformant runtime may refuse.
+    pub refused: bool,
 }
 
 /// One projection view as xrEndFrame received it.
@@ -73,6 +77,34 @@ pub fn end_frame_views(instance: xr::Instance) -> Vec<Vec<SubmittedView>> {
         .record(instance.into_raw())
         .map(|r| r.end_frames.clone())
         .unwrap_or_default()
+}
+
+/// Calls that returned an error code, by command name; still available after the instance is
+/// destroyed, and counted whether or not the journal is kept.
+pub fn errors(instance: xr::Instance) -> Vec<(&'static str, u64)> {
+    world()
+        .record(instance.into_raw())
+        .map(|r| r.errors.iter().map(|(f, n)| (*f, *n)).collect())
+        .unwrap_or_default()
+}
+
+/// The errors the runtime chose by its own rules (everything in [`errors`] that was not an injected
+/// fault), by command name: empty when no call the simulated runtime refuses reached it.
+pub fn refusals(instance: xr::Instance) -> Vec<(&'static str, u64)> {
+    world()
+        .record(instance.into_raw())
+        .map(|r| r.refusals.iter().map(|(f, n)| (*f, *n)).collect())
+        .unwrap_or_default()
+}
+
+/// With native foveation ([`SimConfig::native_foveation`]), what xrUpdateSwapchainFB last applied
+/// to `swapchain`; `None` before any (or for an unknown swapchain).
+pub fn swapchain_foveation(swapchain: xr::Swapchain) -> Option<FoveationParams> {
+    world()
+        .swapchains
+        .get(&swapchain.into_raw())
+        .and_then(|s| s.foveation)
+        .map(|a| a.params)
 }
 
 /// Instances, sessions, swapchains and spaces alive across all instances (leak checks).

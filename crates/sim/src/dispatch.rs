@@ -15,9 +15,11 @@ use openxr_sys as xr;
 use openxr_sys::pfn;
 use openxr_sys::Handle;
 
-use crate::instance::{FB_SWAPCHAIN_UPDATE_STATE, KHR_VULKAN_ENABLE, KHR_VULKAN_ENABLE2};
+use crate::instance::{
+    FB_FOVEATION, FB_SWAPCHAIN_UPDATE_STATE, KHR_VULKAN_ENABLE, KHR_VULKAN_ENABLE2,
+};
 use crate::state::world;
-use crate::{actions, frame, instance, session, space, swapchain, system, vulkan};
+use crate::{actions, foveation, frame, instance, session, space, swapchain, system, vulkan};
 
 struct Command {
     name: &'static str,
@@ -54,6 +56,7 @@ fn commands() -> &'static [Command] {
         let vk1 = Some(KHR_VULKAN_ENABLE);
         let vk2 = Some(KHR_VULKAN_ENABLE2);
         let fb = Some(FB_SWAPCHAIN_UPDATE_STATE);
+        let fov = Some(FB_FOVEATION);
         vec![
             command!(
                 "xrGetInstanceProcAddr",
@@ -340,6 +343,16 @@ fn commands() -> &'static [Command] {
                 "xrGetSwapchainStateFB",
                 fb,
                 swapchain::get_swapchain_state_fb as GetSwapchainStateFB
+            ),
+            command!(
+                "xrCreateFoveationProfileFB",
+                fov,
+                foveation::create_foveation_profile_fb as CreateFoveationProfileFB
+            ),
+            command!(
+                "xrDestroyFoveationProfileFB",
+                fov,
+                foveation::destroy_foveation_profile_fb as DestroyFoveationProfileFB
             ),
         ]
     })

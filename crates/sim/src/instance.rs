@@ -19,6 +19,9 @@ pub(crate) const KHR_VULKAN_ENABLE: &str = "XR_KHR_vulkan_enable";
 pub(crate) const KHR_VULKAN_ENABLE2: &str = "XR_KHR_vulkan_enable2";
 pub(crate) const MND_HEADLESS: &str = "XR_MND_headless";
 pub(crate) const FB_SWAPCHAIN_UPDATE_STATE: &str = "XR_FB_swapchain_update_state";
+pub(crate) const FB_FOVEATION: &str = "XR_FB_foveation";
+pub(crate) const FB_FOVEATION_CONFIGURATION: &str = "XR_FB_foveation_configuration";
+pub(crate) const EPIC_VIEW_CONFIGURATION_FOV: &str = "XR_EPIC_view_configuration_fov";
 
 /// Virtual time starts here (1000 s) so that "zero" and small times stay recognisably invalid.
 pub(crate) const CLOCK_START_NS: i64 = 1_000_000_000_000;
@@ -30,8 +33,17 @@ pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
         (KHR_VULKAN_ENABLE2, 2),
         (MND_HEADLESS, 2),
     ];
-    if cfg.native_swapchain_update_state {
+    // XR_FB_foveation depends on XR_FB_swapchain_update_state (its xrUpdateSwapchainFB applies
+    // profiles), so native foveation brings it along.
+    if cfg.native_swapchain_update_state || cfg.native_foveation {
         list.push((FB_SWAPCHAIN_UPDATE_STATE, 3));
+    }
+    if cfg.native_foveation {
+        list.push((FB_FOVEATION, 1));
+        list.push((FB_FOVEATION_CONFIGURATION, 1));
+    }
+    if cfg.view_configuration_fov {
+        list.push((EPIC_VIEW_CONFIGURATION_FOV, 2));
     }
     list
 }
@@ -61,9 +73,6 @@ pub(crate) struct InstanceState {
     pub vulkan: VulkanInstanceState,
     /// Successful xrEndFrame calls over all the instance's sessions, for the summary line.
     pub frames: u64,
-    /// Calls that returned an error code, by command, for the summary line (kept whether or not
-    /// the journal is).
-    pub errors: BTreeMap<&'static str, u64>,
 }
 
 impl InstanceState {
@@ -182,7 +191,6 @@ pub(crate) unsafe extern "system" fn create_instance(
             graphics_requirements_queried: false,
             vulkan: VulkanInstanceState::default(),
             frames: 0,
-            errors: BTreeMap::new(),
         };
         w.instances.insert(id, state);
         *instance = xr::Instance::from_raw(id);
@@ -198,20 +206,30 @@ pub(crate) unsafe extern "system" fn destroy_instance(instance: xr::Instance) ->
         destroy_instance_objects(&mut w, id);
         let state = w.instances.remove(&id).expect("entered instance exists");
         if state.config.summary {
-            eprintln!("{}", summary_line(state.frames, &state.errors));
+            eprintln!(
+                "{}",
+                summary_line(state.frames, &state.record.errors, &state.record.refusals)
+            );
         }
         w.retired.insert(id, state.record);
         Ok(xr::Result::SUCCESS)
     })
 }
 
-/// `fovea-sim: summary frames=N errors=M [xrFoo:2 xrBar:1]`: what a test driving an application as
-/// a child process reads back (see [`SimConfig::summary`]).
-fn summary_line(frames: u64, errors: &BTreeMap<&'static str, u64>) -> String {
+/// `fovea-sim: summary frames=N errors=M refused=K [xrFoo:2 xrBar:1]`: what a test driving an
+/// application as a child process reads back (see [`SimConfig::summary`]). `errors` counts every
+/// error code returned, the bracket lists them by command, and `refused` is the part of `errors`
+/// the runtime chose by its own rules rather than by an injected fault.
+fn summary_line(
+    frames: u64,
+    errors: &BTreeMap<&'static str, u64>,
+    refusals: &BTreeMap<&'static str, u64>,
+) -> String {
     let total: u64 = errors.values().sum();
+    let refused: u64 = refusals.values().sum();
     let each: Vec<String> = errors.iter().map(|(f, n)| format!("{f}:{n}")).collect();
     format!(
-        "fovea-sim: summary frames={frames} errors={total} [{}]",
+        "fovea-sim: summary frames={frames} errors={total} refused={refused} [{}]",
         each.join(" ")
     )
 }
@@ -412,13 +430,14 @@ mod tests {
     #[test]
     fn summary_line_counts_frames_and_errors_by_command() {
         assert_eq!(
-            summary_line(300, &BTreeMap::new()),
-            "fovea-sim: summary frames=300 errors=0 []"
+            summary_line(300, &BTreeMap::new(), &BTreeMap::new()),
+            "fovea-sim: summary frames=300 errors=0 refused=0 []"
         );
         let errors = BTreeMap::from([("xrEndFrame", 1), ("xrCreateSwapchain", 2)]);
+        let refusals = BTreeMap::from([("xrEndFrame", 1)]);
         assert_eq!(
-            summary_line(7, &errors),
-            "fovea-sim: summary frames=7 errors=3 [xrCreateSwapchain:2 xrEndFrame:1]"
+            summary_line(7, &errors, &refusals),
+            "fovea-sim: summary frames=7 errors=3 refused=1 [xrCreateSwapchain:2 xrEndFrame:1]"
         );
     }
 

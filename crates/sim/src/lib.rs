@@ -3,12 +3,19 @@
 //! It plays a *desktop* runtime: Vulkan (XR_KHR_vulkan_enable, XR_KHR_vulkan_enable2), headless
 //! sessions (XR_MND_headless) and none of the foveation extensions. Optionally it offers
 //! XR_FB_swapchain_update_state with no state types of its own, so the layer's pass-through path can
-//! be exercised.
+//! be exercised, or (`native_foveation`) XR_FB_foveation and XR_FB_foveation_configuration
+//! natively, as a headset runtime does, so a test can check that a layer passes them through.
 //!
 //! Two ways in:
 //! - the Khronos loader loads `libfovea_sim.so` through `manifest/runtime/fovea_sim_runtime.json`
 //!   and calls [`xrNegotiateLoaderRuntimeInterface`];
 //! - the in-process fake loader links this crate and calls [`get_instance_proc_addr`] directly.
+//!
+//! It is at least as strict as real runtimes (Monado) where the spec lets a runtime refuse a call:
+//! xrLocateViews only while the session runs and for the view configuration it began with, the
+//! frame-loop and swapchain call orders, the session state machine. Every refusal is counted apart
+//! from injected faults ([`control::refusals`], the `refused=` field of the summary line), so a
+//! test can assert that nothing a strict runtime refuses reached this one.
 //!
 //! Time is virtual and deterministic (see [`frame`](crate::frame) docs), every call is journaled, and
 //! faults and GPU load can be injected through [`control`].
@@ -18,6 +25,7 @@ mod config;
 pub mod control;
 mod dispatch;
 mod ffi;
+mod foveation;
 mod frame;
 mod instance;
 mod negotiate;

@@ -28,6 +28,10 @@ pub(crate) struct Session {
     pub state: xr::SessionState,
     /// Between a successful xrBeginSession and xrEndSession.
     pub running: bool,
+    /// The primary view configuration xrBeginSession was given; `None` while not running. A real
+    /// runtime sets up its views only here, so xrLocateViews is refused outside a running session
+    /// and for any other configuration (see `space::locate_views`).
+    pub view_configuration: Option<xr::ViewConfigurationType>,
     pub exit_requested: bool,
     pub lost: bool,
     pub graphics: Graphics,
@@ -129,6 +133,7 @@ pub(crate) unsafe extern "system" fn create_session(
                 instance: inst_id,
                 state: xr::SessionState::UNKNOWN,
                 running: false,
+                view_configuration: None,
                 exit_requested: false,
                 lost: false,
                 graphics,
@@ -148,6 +153,7 @@ pub(crate) unsafe extern "system" fn create_session(
 pub(crate) fn destroy_session_objects(w: &mut World, session: u64) {
     w.swapchains.retain(|_, s| s.session != session);
     w.spaces.retain(|_, s| s.session != session);
+    w.profiles.retain(|_, p| p.session != session);
     let instance = w.sessions[&session].instance;
     if let Some(inst) = w.instances.get_mut(&instance) {
         inst.events.retain(
@@ -187,6 +193,7 @@ pub(crate) unsafe extern "system" fn begin_session(
             return Err(xr::Result::ERROR_SESSION_NOT_READY);
         }
         s.running = true;
+        s.view_configuration = Some(info.primary_view_configuration_type);
         s.frame = FrameClock::default();
         Ok(xr::Result::SUCCESS)
     })
@@ -204,6 +211,7 @@ pub(crate) unsafe extern "system" fn end_session(session: xr::Session) -> xr::Re
             return Err(xr::Result::ERROR_SESSION_NOT_STOPPING);
         }
         s.running = false;
+        s.view_configuration = None;
         s.frame = FrameClock::default();
         let exiting = s.exit_requested;
         set_state(&mut w, id, xr::SessionState::IDLE);

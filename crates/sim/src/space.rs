@@ -306,8 +306,23 @@ pub(crate) unsafe extern "system" fn locate_views(
         let info = ffi::input(view_locate_info, xr::StructureType::VIEW_LOCATE_INFO)?;
         ctx.next_types = ffi::chain_types(info.next);
         let view_state = ffi::output(view_state, xr::StructureType::VIEW_STATE)?;
-        if info.view_configuration_type != xr::ViewConfigurationType::PRIMARY_STEREO {
-            return Err(xr::Result::ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED);
+        crate::system::check_view_configuration(info.view_configuration_type)?;
+        // Views exist only while the session runs, for the configuration it began with (a real
+        // runtime such as Monado sets its view configuration up in xrBeginSession). The spec's
+        // return codes for xrLocateViews do not include XR_ERROR_SESSION_NOT_RUNNING, so outside a
+        // running session the answer is XR_ERROR_VALIDATION_FAILURE, as Monado gives; a supported
+        // configuration other than the session's is XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED
+        // (https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#xrLocateViews).
+        match w.sessions[&session].view_configuration {
+            None => {
+                ctx.detail = "refused: the session is not running".into();
+                return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+            }
+            Some(begun) if begun != info.view_configuration_type => {
+                ctx.detail = format!("refused: the session began with {begun:?}");
+                return Err(xr::Result::ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED);
+            }
+            Some(_) => {}
         }
         check_time(info.display_time)?;
         let space = w

@@ -6,7 +6,7 @@
 //! objects the runtime owns; calls through application-provided function pointers
 //! (xrCreateVulkanInstanceKHR/DeviceKHR) and real-time sleeps happen with the lock released.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::LazyLock;
 
@@ -31,6 +31,11 @@ pub(crate) struct Record {
     pub journal: Vec<Call>,
     pub enabled_extensions: Vec<String>,
     pub end_frames: Vec<Vec<SubmittedView>>,
+    /// Calls that returned an error code, by command (kept whether or not the journal is).
+    pub errors: BTreeMap<&'static str, u64>,
+    /// The subset of `errors` the runtime chose itself because the caller broke a rule (every error
+    /// that is not an injected fault): what a strict runtime such as Monado would also refuse.
+    pub refusals: BTreeMap<&'static str, u64>,
 }
 
 #[derive(Default)]
@@ -42,6 +47,7 @@ pub(crate) struct World {
     pub spaces: HashMap<u64, Space>,
     pub action_sets: HashMap<u64, ActionSet>,
     pub actions: HashMap<u64, Action>,
+    pub profiles: HashMap<u64, crate::foveation::Profile>,
     /// Records of destroyed instances, so tests can read the journal after teardown.
     pub retired: HashMap<u64, Record>,
 }
@@ -61,6 +67,8 @@ pub(crate) struct Ctx {
     pub allow_lost: bool,
     pub next_types: Vec<xr::StructureType>,
     pub detail: String,
+    /// The result comes from an injected fault, not from the runtime's own checks.
+    injected: bool,
 }
 
 impl Ctx {
@@ -79,28 +87,44 @@ pub(crate) fn entry(name: &'static str, body: impl FnOnce(&mut Ctx) -> XrResult)
         allow_lost: false,
         next_types: Vec::new(),
         detail: String::new(),
+        injected: false,
     };
     let result = match catch_unwind(AssertUnwindSafe(|| body(&mut ctx))) {
         Ok(Ok(r) | Err(r)) => r,
         Err(_) => xr::Result::ERROR_RUNTIME_FAILURE,
     };
     if let Some(id) = ctx.instance {
+        let refused = result.into_raw() < 0 && !ctx.injected;
         let call = Call {
             function: name,
             result,
             next_types: ctx.next_types,
             detail: ctx.detail,
+            refused,
         };
         let _ = catch_unwind(AssertUnwindSafe(|| {
             let mut w = world();
-            if result.into_raw() < 0 {
-                if let Some(inst) = w.instances.get_mut(&id) {
-                    *inst.errors.entry(name).or_default() += 1;
-                }
-            }
             let keep = w.instances.get(&id).is_none_or(|i| i.config.journal);
-            if let Some(record) = w.record_mut(id).filter(|_| keep) {
-                record.journal.push(call);
+            if refused && w.instances.get(&id).is_some_and(|i| i.config.log_refusals) {
+                eprintln!(
+                    "fovea-sim: refused {name}: XR_{result:?} ({})",
+                    if call.detail.is_empty() {
+                        "no detail"
+                    } else {
+                        &call.detail
+                    }
+                );
+            }
+            if let Some(record) = w.record_mut(id) {
+                if result.into_raw() < 0 {
+                    *record.errors.entry(name).or_default() += 1;
+                }
+                if refused {
+                    *record.refusals.entry(name).or_default() += 1;
+                }
+                if keep {
+                    record.journal.push(call);
+                }
             }
         }));
     }
@@ -242,6 +266,7 @@ impl World {
             return Ok(());
         };
         ctx.detail = format!("injected fault {result:?} on call {count}");
+        ctx.injected = true;
         // A real runtime that reports a lost object keeps reporting it (spec: "Session Lost",
         // "Instance Lost"), so the fault sticks.
         if result == xr::Result::ERROR_INSTANCE_LOST {

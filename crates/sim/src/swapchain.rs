@@ -13,6 +13,8 @@ use openxr_sys as xr;
 use openxr_sys::Handle;
 
 use crate::ffi;
+use crate::foveation::Applied;
+use crate::instance::FB_FOVEATION;
 use crate::session::Graphics;
 use crate::state::{entry, world};
 use crate::system::MAX_IMAGE_SIZE;
@@ -50,6 +52,11 @@ pub(crate) struct Swapchain {
     pub ever_released: bool,
     /// Real images for Vulkan sessions; destroyed with the swapchain.
     images: Option<SwapchainImages>,
+    /// Created with XrSwapchainCreateInfoFoveationFB while XR_FB_foveation was enabled: profiles
+    /// may be applied (native foveation only).
+    pub foveation_supported: bool,
+    /// The foveation xrUpdateSwapchainFB last applied.
+    pub foveation: Option<Applied>,
 }
 
 pub(crate) unsafe extern "system" fn enumerate_swapchain_formats(
@@ -127,6 +134,19 @@ pub(crate) unsafe extern "system" fn create_swapchain(
         if info.mip_count > max_mips || !matches!(info.sample_count, 1 | 2 | 4) {
             return Err(xr::Result::ERROR_VALIDATION_FAILURE);
         }
+        let instance = w.sessions[&session].instance;
+        let foveation = ffi::find_in_chain(
+            info.next,
+            xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
+        )
+        .filter(|_| w.instances[&instance].has_extension(FB_FOVEATION))
+        .map(|p| &*(p as *const xr::SwapchainCreateInfoFoveationFB));
+        if let Some(f) = foveation {
+            // SCALED_BIN (0x1) and FRAGMENT_DENSITY_MAP (0x2) are the only bits.
+            if f.flags.into_raw() & !0x3 != 0 {
+                return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+            }
+        }
         let format = i32::try_from(info.format)
             .map(ash::vk::Format::from_raw)
             .ok();
@@ -166,6 +186,8 @@ pub(crate) unsafe extern "system" fn create_swapchain(
                 acquisitions: 0,
                 ever_released: false,
                 images,
+                foveation_supported: foveation.is_some(),
+                foveation: None,
             },
         );
         *swapchain = xr::Swapchain::from_raw(id);
@@ -294,20 +316,60 @@ pub(crate) unsafe extern "system" fn release_swapchain_image(
     })
 }
 
-/// XR_FB_swapchain_update_state without any state types: this runtime implements none of the
-/// extensions that define them (foveation, samplers, Android surfaces), so every state struct is
-/// invalid usage. It exists so that a layer's pass-through of foreign states can be observed.
+/// XR_FB_swapchain_update_state: the only state type this runtime implements is
+/// XrSwapchainStateFoveationFB, and only while XR_FB_foveation is enabled (native foveation). Every
+/// other state struct is invalid usage (XR_ERROR_VALIDATION_FAILURE), which lets a layer's
+/// pass-through of foreign states be observed.
 unsafe fn swapchain_state_call(
     ctx: &mut crate::state::Ctx,
     swapchain: xr::Swapchain,
-    state: *const xr::SwapchainStateBaseHeaderFB,
+    state: *mut xr::SwapchainStateBaseHeaderFB,
+    update: bool,
 ) -> crate::state::XrResult {
     let mut w = world();
-    w.enter_swapchain(ctx, swapchain)?;
+    let id = w.enter_swapchain(ctx, swapchain)?;
     ffi::non_null(state)?;
     ctx.next_types = ffi::chain_types((*state).next);
     ctx.detail = format!("state type {:?}", (*state).ty);
-    Err(xr::Result::ERROR_VALIDATION_FAILURE)
+    let session = w.swapchains[&id].session;
+    let instance = w.sessions[&session].instance;
+    if (*state).ty != xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB
+        || !w.instances[&instance].has_extension(FB_FOVEATION)
+    {
+        return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+    }
+    let state = state as *mut xr::SwapchainStateFoveationFB;
+    // The spec gives no code for a swapchain created without foveation support; like the
+    // Monado-derived runtimes, treat it as invalid usage.
+    if !w.swapchains[&id].foveation_supported {
+        return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+    }
+    if !update {
+        let applied = w.swapchains[&id].foveation;
+        // A destroyed profile reads back as XR_NULL_HANDLE.
+        let profile = applied
+            .map(|a| a.profile)
+            .filter(|p| w.profiles.contains_key(p))
+            .unwrap_or(0);
+        (*state).flags = xr::SwapchainStateFoveationFlagsFB::EMPTY;
+        (*state).profile = xr::FoveationProfileFB::from_raw(profile);
+        return Ok(xr::Result::SUCCESS);
+    }
+    // Valid usage: flags must be 0, profile a valid handle (of this session).
+    if (*state).flags != xr::SwapchainStateFoveationFlagsFB::EMPTY {
+        return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+    }
+    let profile = (*state).profile.into_raw();
+    let params = match w.profiles.get(&profile) {
+        Some(p) if p.session == session => p.params,
+        _ => return Err(xr::Result::ERROR_HANDLE_INVALID),
+    };
+    ctx.detail = format!("applied {params:?}");
+    w.swapchains
+        .get_mut(&id)
+        .expect("entered swapchain exists")
+        .foveation = Some(Applied { profile, params });
+    Ok(xr::Result::SUCCESS)
 }
 
 pub(crate) unsafe extern "system" fn update_swapchain_fb(
@@ -315,7 +377,7 @@ pub(crate) unsafe extern "system" fn update_swapchain_fb(
     state: *const xr::SwapchainStateBaseHeaderFB,
 ) -> xr::Result {
     entry("xrUpdateSwapchainFB", |ctx| {
-        swapchain_state_call(ctx, swapchain, state)
+        swapchain_state_call(ctx, swapchain, state as *mut _, true)
     })
 }
 
@@ -324,6 +386,6 @@ pub(crate) unsafe extern "system" fn get_swapchain_state_fb(
     state: *mut xr::SwapchainStateBaseHeaderFB,
 ) -> xr::Result {
     entry("xrGetSwapchainStateFB", |ctx| {
-        swapchain_state_call(ctx, swapchain, state)
+        swapchain_state_call(ctx, swapchain, state, false)
     })
 }

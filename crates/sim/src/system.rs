@@ -4,7 +4,7 @@
 use openxr_sys as xr;
 
 use crate::ffi;
-use crate::instance::check_system;
+use crate::instance::{check_system, EPIC_VIEW_CONFIGURATION_FOV};
 use crate::state::{entry, world};
 
 pub(crate) const SYSTEM_ID: u64 = 0x5157_0001;
@@ -63,7 +63,7 @@ pub(crate) unsafe extern "system" fn get_system_properties(
     })
 }
 
-fn check_view_configuration(ty: xr::ViewConfigurationType) -> Result<(), xr::Result> {
+pub(crate) fn check_view_configuration(ty: xr::ViewConfigurationType) -> Result<(), xr::Result> {
     match ty {
         xr::ViewConfigurationType::PRIMARY_STEREO => Ok(()),
         _ => Err(xr::Result::ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED),
@@ -141,9 +141,17 @@ pub(crate) unsafe extern "system" fn enumerate_view_configuration_views(
         let id = w.enter_instance(ctx, instance)?;
         check_system(system_id)?;
         check_view_configuration(view_configuration_type)?;
-        let [width, height] = w.instances[&id].config.headset.recommended_size();
-        ffi::two_call(capacity, count_out, views, VIEW_COUNT, |_, p| {
+        let inst = &w.instances[&id];
+        let [width, height] = inst.config.headset.recommended_size();
+        let fovs = inst.config.headset.fovs();
+        // A struct of an extension the instance did not enable is not recognised, and runtimes
+        // ignore structs they do not recognise: it is left as it came.
+        let epic = inst.has_extension(EPIC_VIEW_CONFIGURATION_FOV);
+        ffi::two_call(capacity, count_out, views, VIEW_COUNT, |i, p| {
             let p = ffi::output(p, xr::StructureType::VIEW_CONFIGURATION_VIEW)?;
+            if epic {
+                fill_view_fov_epic((*p).next, fovs[i]);
+            }
             (*p).recommended_image_rect_width = width;
             (*p).max_image_rect_width = MAX_IMAGE_SIZE;
             (*p).recommended_image_rect_height = height;
@@ -154,4 +162,32 @@ pub(crate) unsafe extern "system" fn enumerate_view_configuration_views(
         })?;
         Ok(xr::Result::SUCCESS)
     })
+}
+
+/// XR_EPIC_view_configuration_fov: the first `XrViewConfigurationViewFovEPIC` in a view's `next`
+/// chain receives the eye's FOV as recommended and as the widest allowed (the simulated headset's
+/// FOVs are fixed; https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#XrViewConfigurationViewFovEPIC).
+///
+/// # Safety
+/// `next` must be NULL or a valid, writable chain.
+unsafe fn fill_view_fov_epic(next: *mut std::ffi::c_void, fov: fovea_model::Fov) {
+    let mut p = next as *mut xr::BaseOutStructure;
+    let mut hops = 0;
+    // A bound guards against cyclic chains from broken callers.
+    while !p.is_null() && hops < 64 {
+        if (*p).ty == xr::StructureType::VIEW_CONFIGURATION_VIEW_FOV_EPIC {
+            let e = p.cast::<xr::ViewConfigurationViewFovEPIC>();
+            let f = xr::Fovf {
+                angle_left: fov.left,
+                angle_right: fov.right,
+                angle_up: fov.up,
+                angle_down: fov.down,
+            };
+            (*e).recommended_fov = f;
+            (*e).max_mutable_fov = f;
+            return;
+        }
+        p = (*p).next;
+        hops += 1;
+    }
 }

@@ -236,7 +236,8 @@ pub fn locate_views(
     let Some(located) = views.into_slice(n.min(capacity) as usize) else {
         return Ok(r);
     };
-    learn_stereo_views(&s.instance, info, n, located);
+    let symmetric = crate::xr::symmetric::active(&s);
+    learn_stereo_views(&s.instance, symmetric, info, n, located);
     if s.gpu.is_some() && capacity > 0 {
         if located.iter().any(|v| v.ty != xr::StructureType::VIEW) {
             return Ok(r);
@@ -254,6 +255,7 @@ pub fn locate_views(
 /// views that fit the application's array (`min(count, capacity)`).
 fn learn_stereo_views(
     instance: &Instance,
+    symmetric: bool,
     info: In<xr::ViewLocateInfo>,
     count: u32,
     views: &mut [xr::View],
@@ -269,7 +271,7 @@ fn learn_stereo_views(
     }
     let fovs = [0, 1].map(|i| fov_from_xr(views[i].fov));
     *instance.stereo_fovs.lock() = Some(fovs);
-    if instance.symmetric_fov {
+    if symmetric {
         for (v, f) in views.iter_mut().zip(instance.render_fovs(fovs)) {
             v.fov = fov_to_xr(f);
         }

@@ -5,15 +5,13 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{fov_from_xr, instance, next, observed_instance, session, succeeded, HookResult};
+use super::{instance, next, observed, observed_instance, session, succeeded, HookResult};
 use crate::common::ffi::{In, Out, OutArray};
 use crate::gpu::density_images::SessionGpu;
 use crate::gpu::density_images::VulkanBinding;
-use crate::xr::dispatch;
 use crate::xr::extensions::Ext;
 use crate::xr::registry::{registry, Instance, Session};
-use fovea_model::projection::rescaled_size;
-use fovea_model::Fov;
+use crate::xr::symmetric;
 
 /// fovea's Vulkan objects for a new session on `binding`'s device, or `None` (logged) where they
 /// cannot be made: the session then works without density images (fail open).
@@ -112,8 +110,37 @@ pub fn destroy_session(handle: xr::Session) -> HookResult<xr::Result> {
     Ok(r)
 }
 
-/// `xrEnumerateViewConfigurationViews`: passed on; in symmetric-FOV mode the recommended sizes of
-/// the primary stereo views grow (see [`enlarge_for_symmetric_fov`]).
+/// `xrBeginSession`: once the runtime has begun the session, views can be located; symmetric-FOV
+/// mode learns the FOVs there if it has not yet ([`crate::xr::symmetric`]).
+pub fn begin_session(
+    handle: xr::Session,
+    info: In<xr::SessionBeginInfo>,
+) -> HookResult<xr::Result> {
+    let s = session(handle)?;
+    let f = next(s.instance.next.begin_session)?;
+    // SAFETY: the next layer's function, with the application's arguments as it passed them.
+    let r = observed(&s, unsafe { f(handle, info.raw()) });
+    if succeeded(r) {
+        // SAFETY: the application's XrSessionBeginInfo, which the runtime just accepted.
+        unsafe { symmetric::session_began(&s, info.raw()) };
+    }
+    Ok(r)
+}
+
+/// `xrEndSession`: once the runtime has ended the session, its views can no longer be located.
+pub fn end_session(handle: xr::Session) -> HookResult<xr::Result> {
+    let s = session(handle)?;
+    let f = next(s.instance.next.end_session)?;
+    // SAFETY: the next layer's function, with the application's argument.
+    let r = observed(&s, unsafe { f(handle) });
+    if succeeded(r) {
+        symmetric::session_ended(&s);
+    }
+    Ok(r)
+}
+
+/// `xrEnumerateViewConfigurationViews`: passed on; in symmetric-FOV mode the stereo sizes are
+/// enlarged for the shared FOV once the FOVs are known ([`crate::xr::symmetric`]).
 pub fn enumerate_view_configuration_views(
     inst: xr::Instance,
     system: xr::SystemId,
@@ -124,136 +151,17 @@ pub fn enumerate_view_configuration_views(
 ) -> HookResult<xr::Result> {
     let state = instance(inst)?;
     let f = next(state.next.enumerate_view_configuration_views)?;
-    // SAFETY: the next layer's function, with the application's arguments as it passed them.
-    let r = unsafe { f(inst, system, config, capacity, count.raw(), views.raw()) };
-    let r = observed_instance(&state, r);
-    if succeeded(r)
-        && state.symmetric_fov
-        && config == xr::ViewConfigurationType::PRIMARY_STEREO
-        && count.read() == Some(2)
-        && capacity >= 2
-    {
-        if let Some(views) = views.into_slice(2) {
-            enlarge_for_symmetric_fov(&state, views);
-        }
-    }
-    Ok(r)
-}
-
-/// Symmetric-FOV mode: the shared FOV is wider than each eye's own, so the recommended sizes grow to
-/// keep the runtime's pixels per tangent (the fixed-foveated-rendering seed: the mode costs pixels,
-/// which foveation then wins back outside each eye's real FOV). Needs the runtime's FOVs: learned
-/// from `xrLocateViews`, or asked for through a live session when the application sizes its
-/// swapchains before its first frame (the usual order). Without a session the sizes stay as the
-/// runtime gave them, and the log says so.
-fn enlarge_for_symmetric_fov(state: &Instance, views: &mut [xr::ViewConfigurationView]) {
-    if views
-        .iter()
-        .any(|v| v.ty != xr::StructureType::VIEW_CONFIGURATION_VIEW)
-    {
-        return;
-    }
-    let fovs = state.stereo_fovs().or_else(|| {
-        let probed = probe_stereo_fovs(state)?;
-        *state.stereo_fovs.lock() = Some(probed);
-        Some(probed)
-    });
-    let Some(fovs) = fovs else {
-        tracing::info!(
-            "symmetric FOV: recommended sizes left as the runtime reports them until a session \
-             exists (create the session before enumerating view configuration views)"
-        );
-        return;
-    };
-    let shared = state.render_fovs(fovs)[0];
-    for (v, fov) in views.iter_mut().zip(fovs) {
-        let [w, h] = rescaled_size(
-            [
-                v.recommended_image_rect_width,
-                v.recommended_image_rect_height,
-            ],
-            fov,
-            shared,
-        );
-        v.recommended_image_rect_width = w;
-        v.recommended_image_rect_height = h;
-        v.max_image_rect_width = v.max_image_rect_width.max(w);
-        v.max_image_rect_height = v.max_image_rect_height.max(h);
-    }
-}
-
-/// Locates the primary stereo views once, through a throwaway VIEW space of one of the instance's
-/// sessions, at the session's last predicted display time (or the earliest valid time before its
-/// first frame: the FOVs do not depend on it).
-fn probe_stereo_fovs(state: &Instance) -> Option<[Fov; 2]> {
-    let s = registry().any_session_of(state.handle)?;
-    // SAFETY: the instance's own next-layer `xrGetInstanceProcAddr` and handle; a pointer the next
-    // layer hands out for a name has the signature the spec gives that name.
-    let (create, destroy) = unsafe {
-        let create = dispatch::load(state.next_gipa, state.handle, c"xrCreateReferenceSpace")?;
-        let destroy = dispatch::load(state.next_gipa, state.handle, c"xrDestroySpace")?;
-        (
-            std::mem::transmute::<xr::pfn::VoidFunction, xr::pfn::CreateReferenceSpace>(create),
-            std::mem::transmute::<xr::pfn::VoidFunction, xr::pfn::DestroySpace>(destroy),
-        )
-    };
-    let locate = state.next.locate_views?;
-    let identity = xr::Posef {
-        orientation: xr::Quaternionf {
-            x: 0.0,
-            y: 0.0,
-            z: 0.0,
-            w: 1.0,
-        },
-        position: xr::Vector3f::default(),
-    };
-    let info = xr::ReferenceSpaceCreateInfo {
-        ty: xr::StructureType::REFERENCE_SPACE_CREATE_INFO,
-        next: std::ptr::null(),
-        reference_space_type: xr::ReferenceSpaceType::VIEW,
-        pose_in_reference_space: identity,
-    };
-    let mut space = xr::Space::NULL;
-    // SAFETY: the next layer's function on a live session, with fovea's own valid structs.
-    if !succeeded(unsafe { create(s.handle, &info, &mut space) }) {
-        return None;
-    }
-    let locate_info = xr::ViewLocateInfo {
-        ty: xr::StructureType::VIEW_LOCATE_INFO,
-        next: std::ptr::null(),
-        view_configuration_type: xr::ViewConfigurationType::PRIMARY_STEREO,
-        display_time: xr::Time::from_nanos(s.frame.lock().display.unwrap_or(0).max(1)),
-        space,
-    };
-    let mut view_state = xr::ViewState {
-        ty: xr::StructureType::VIEW_STATE,
-        next: std::ptr::null_mut(),
-        view_state_flags: xr::ViewStateFlags::EMPTY,
-    };
-    let blank = xr::View {
-        ty: xr::StructureType::VIEW,
-        next: std::ptr::null_mut(),
-        pose: identity,
-        fov: xr::Fovf::default(),
-    };
-    let mut views = [blank; 2];
-    let mut n = 0;
-    // SAFETY: as above; `views` holds the 2 elements the capacity says.
+    // SAFETY: the next layer's function and the application's output pointers as it passed them.
     let r = unsafe {
-        locate(
-            s.handle,
-            &locate_info,
-            &mut view_state,
-            2,
-            &mut n,
-            views.as_mut_ptr(),
+        symmetric::enumerate_views(
+            &state,
+            f,
+            system,
+            config,
+            capacity,
+            count.raw(),
+            views.raw(),
         )
     };
-    // SAFETY: the space fovea created above, destroyed once.
-    unsafe { destroy(space) };
-    if !succeeded(r) || n != 2 {
-        tracing::debug!(?r, "symmetric FOV: could not locate the views to size them");
-        return None;
-    }
-    Some(views.map(|v| fov_from_xr(v.fov)))
+    Ok(observed_instance(&state, r))
 }

@@ -312,9 +312,7 @@ fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32) {
     let key = sources.key();
     // Read before the fill lock is taken: the FOVs sit behind a record lock, which ranks outside
     // it (crate::common::lock::Rank).
-    let visible = session
-        .instance
-        .symmetric_fov
+    let visible = crate::xr::symmetric::active(session)
         .then(|| session.instance.stereo_fovs())
         .flatten();
     let inputs = || {
