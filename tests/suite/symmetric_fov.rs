@@ -1,6 +1,7 @@
 //! Symmetric-FOV mode (`FOVEA_SYMMETRIC_FOV=1`) through the harness on the simulated Quest 3: one
 //! shared symmetric FOV from xrLocateViews, recommended sizes enlarged to keep pixels per tangent,
-//! and nothing changed without the switch. One test function: the switch is process-wide.
+//! and nothing changed without the switch. One test function, in a process of its own: the switch
+//! is process-wide.
 
 use fovea_harness::app::API_1_0;
 use fovea_harness::{sim, App, Chain};
@@ -8,6 +9,8 @@ use fovea_model::projection::symmetric_fov;
 use fovea_model::Fov;
 use openxr_sys as xr;
 use xr::Handle;
+
+use crate::support::in_own_process;
 
 fn views(app: &App) -> [[u32; 4]; 2] {
     let f: xr::pfn::EnumerateViewConfigurationViews =
@@ -101,6 +104,14 @@ fn run(symmetric: bool) -> ([[u32; 4]; 2], [[u32; 4]; 2], [Fov; 2]) {
 
 #[test]
 fn symmetric_mode_shares_one_fov_and_enlarges_the_sizes() {
+    in_own_process(
+        module_path!(),
+        "symmetric_mode_shares_one_fov_and_enlarges_the_sizes",
+        symmetric_mode_shares_one_fov_and_enlarges_the_sizes_here,
+    );
+}
+
+fn symmetric_mode_shares_one_fov_and_enlarges_the_sizes_here() {
     let q3 = fovea_model::headsets::by_id("quest3").unwrap();
     let true_fovs = q3.fovs();
     let [rw, rh] = q3.recommended_size();
