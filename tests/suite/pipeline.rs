@@ -70,8 +70,9 @@ fn dynamic_level_stats_and_live_overrides_here() {
     std::env::set_var(
         "FOVEA_LOG",
         format!(
-            "warn,{}=info,fovea::xr::hooks::frame=info",
-            fovea_abi::log_target::STATS
+            "warn,{}=info,{}=info",
+            fovea_abi::log_target::STATS,
+            fovea_abi::log_target::DYNAMIC
         ),
     );
     std::env::set_var("FOVEA_LOG_FILE", &log);

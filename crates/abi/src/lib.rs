@@ -104,4 +104,6 @@ pub const MAX_CHAIN_LENGTH: usize = 64;
 pub mod log_target {
     /// The once-a-second stats line.
     pub const STATS: &str = "fovea::stats";
+    /// A step of the dynamic foveation level (one line per change).
+    pub const DYNAMIC: &str = "fovea::dynamic";
 }
