@@ -21,3 +21,4 @@ mod manifests;
 mod pipeline;
 mod symmetric_fov;
 mod threads;
+mod tidy;
