@@ -1,7 +1,9 @@
 //! A panic inside a hook becomes XR_ERROR_RUNTIME_FAILURE and a log line; the application goes on.
 //!
 //! `FOVEA_INJECT_PANIC` is read once per process, so this file holds a single test and sets it before
-//! the layer is first called.
+//! the layer is first called. A test binary of its own, not a module of the suite (tests/suite): the
+//! suite's process calls the layer in its other tests, so the variable would be read too late there
+//! (and would make their xrCreateSession fail).
 
 use fovea_harness::app::API_1_0;
 use fovea_harness::{sim, App, Chain};

@@ -1,7 +1,10 @@
 //! The loader unloads layers when the last instance is destroyed and loads them again for the next
 //! one. libfovea.so is linked with `-z nodelete` (build.rs) so that a cycle loses nothing: its
-//! statics (the handle registry, the log subscriber) have no destructors to run at unload. This file
-//! holds one test, so no other test keeps the library open.
+//! statics (the handle registry, the log subscriber) have no destructors to run at unload.
+//!
+//! A test binary of its own, not a module of the suite (tests/suite): the test needs a process in
+//! which libfovea.so was never loaded and no other test holds it open, and the suite's process loads
+//! it for its other tests.
 
 use fovea_harness::app::API_1_0;
 use fovea_harness::{open_library, App, Chain, LayerSpec};

@@ -419,9 +419,10 @@ impl<'a, T> OutArray<'a, T> {
     where
         T: Copy,
     {
-        // SAFETY: non-NULL and within the capacity, so valid for reads ([`OutArray::new`]).
-        (!self.ptr.is_null() && i < self.capacity as usize)
-            .then(|| unsafe { self.ptr.add(i).read() })
+        (!self.ptr.is_null() && i < self.capacity as usize).then(|| {
+            // SAFETY: non-NULL and within the capacity, so valid for reads ([`OutArray::new`]).
+            unsafe { self.ptr.add(i).read() }
+        })
     }
 
     /// The first `n` elements, where the array holds that many.

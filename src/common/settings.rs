@@ -12,10 +12,10 @@ use crate::common::lock::{Mutex, Rank};
 use fovea_model::density::Level;
 
 /// `FOVEA_SYMMETRIC_FOV=1`: report one shared symmetric FOV for both eyes (Quest's recommended mode,
-/// fixed-foveated-rendering seed) and give pixels outside each eye's true FOV the lowest density.
+/// docs/headsets.md#symmetric-fov) and give pixels outside each eye's true FOV the lowest density.
 pub const SYMMETRIC_FOV_ENV: &str = "FOVEA_SYMMETRIC_FOV";
 
-/// One of Quest's `debug.oculus.foveation.*` properties (fixed-foveated-rendering seed: set with
+/// One of Quest's `debug.oculus.foveation.*` properties (docs/users.md#quest-debug-properties: set with
 /// `adb shell setprop` on Quest); fovea reads it from an environment variable and from the
 /// `FOVEA_PROPS` file.
 #[derive(Debug)]

@@ -8,7 +8,7 @@
 //! session's XrGraphicsBindingVulkanKHR:
 //!
 //! * one image per swapchain image, `VK_FORMAT_R8G8_UNORM` (the one format Vulkan requires to
-//!   support FDM, openxr-layer-facts.md §4), 2D, `arrayLayers` = the swapchain's `arraySize` (with
+//!   support FDM, docs/openxr-layer.md#fdm-image), 2D, `arrayLayers` = the swapchain's `arraySize` (with
 //!   multiview, layer = view index), extent = `ceil(swapchain extent / texel size)`;
 //! * usage FRAGMENT_DENSITY_MAP where the device has VK_EXT_fragment_density_map enabled, plus
 //!   SAMPLED, STORAGE, TRANSFER_SRC and TRANSFER_DST where the format supports them: engines wrap
@@ -18,7 +18,7 @@
 //!   runtime use the application's queue, XR_KHR_vulkan_enable "Concurrency"), through a persistent
 //!   staging buffer and one command buffer per image, and finished (fence) before the acquire
 //!   returns: by default the map is read by the host when the application *records* its render pass
-//!   (openxr-layer-facts.md §4, "When the map is read").
+//!   (docs/openxr-layer.md#fdm-read-timing).
 //!
 //! Entry points come from the system Vulkan loader (`ash::Entry::load`), as with
 //! XR_KHR_vulkan_enable (v1) a runtime must do too: the binding carries no `vkGetInstanceProcAddr`.

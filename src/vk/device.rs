@@ -128,11 +128,13 @@ unsafe fn plan(
         "density maps stripped from the device create info"
     );
     let fdm_name = ash::ext::fragment_density_map::NAME;
-    // SAFETY: the application's names, NUL-terminated.
     let mut new_names: Vec<*const c_char> = names
         .iter()
         .copied()
-        .filter(|&n| unsafe { name(n) } != Some(fdm_name))
+        .filter(|&n| {
+            // SAFETY: the application's names, NUL-terminated.
+            unsafe { name(n) != Some(fdm_name) }
+        })
         .collect();
     new_names.push(ash::khr::fragment_shading_rate::NAME.as_ptr());
     // Shading rates need render pass 2 (core in 1.2) and, through it, multiview and maintenance2

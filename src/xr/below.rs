@@ -65,6 +65,7 @@ pub unsafe fn extensions_below(
             Some(list) => {
                 if !SAID.swap(true, Ordering::Relaxed) {
                     tracing::info!(
+                        target: fovea_abi::log_target::BELOW,
                         "a layer below fovea refuses lookups without an instance; fovea learns what \
                          the runtime offers through an instance of its own (said once for this process)"
                     );
@@ -74,6 +75,7 @@ pub unsafe fn extensions_below(
             None => {
                 if !SAID.swap(true, Ordering::Relaxed) {
                     tracing::warn!(
+                        target: fovea_abi::log_target::BELOW,
                         "fovea cannot learn which extensions the runtime offers (the layers below \
                          refuse to list them, with and without an instance); it provides every \
                          extension of its own the application enables (said once for this process)"
@@ -163,6 +165,7 @@ unsafe fn probe(
             }
             None => {
                 tracing::warn!(
+                        target: fovea_abi::log_target::BELOW,
                     "the instance fovea created to ask what lies below cannot be destroyed"
                 )
             }

@@ -1,7 +1,7 @@
 //! The extensions fovea implements, their dependencies, and which of them the layer provides for a
 //! given instance (the app enabled it and nothing below implements it natively).
 //!
-//! Versions and dependencies are the registry's (openxr-layer-facts.md §1.1).
+//! Versions and dependencies are the registry's (docs/openxr-layer.md#extensions).
 
 use std::ffi::CStr;
 

@@ -2,7 +2,7 @@
 //! layer's own `xrEnumerateInstanceExtensionProperties`.
 //!
 //! Follows the normative "API Layer Interface Negotiation" of api_initialization.adoc and the
-//! loader's api_layer.adoc (openxr-layer-facts.md §2).
+//! loader's api_layer.adoc (docs/openxr-layer.md#loader-negotiation).
 
 use std::ffi::{c_char, CStr};
 use std::sync::Arc;
@@ -23,7 +23,7 @@ use fovea_abi::LAYER_NAME;
 const INTERFACE_VERSION: u32 = 1;
 
 /// The API versions fovea supports: every 1.x. The Debian loader (1.0.20) offers 1.0.0 to 1.1023.4095
-/// and only logs what the layer answers (openxr-layer-facts.md §2.2).
+/// and only logs what the layer answers (docs/openxr-layer.md#loader-negotiation).
 const MIN_API: xr::Version = xr::Version::new(1, 0, 0);
 const MAX_API: xr::Version = xr::Version::new(1, 1023, 4095);
 
@@ -237,6 +237,7 @@ fn create_instance_inner(
         lost: Default::default(),
     };
     tracing::info!(
+        target: fovea_abi::log_target::INSTANCE,
         provided = ?exts.enabled.iter().filter(|e| exts.provided(*e)).collect::<Vec<_>>(),
         native = ?exts.native.iter().collect::<Vec<_>>(),
         "instance created"

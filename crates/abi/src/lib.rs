@@ -114,4 +114,10 @@ pub const MAX_CHAIN_LENGTH: usize = 64;
 pub mod log_target {
     /// The once-a-second stats line.
     pub const STATS: &str = "fovea::stats";
+    /// A step of the dynamic foveation level (one line per change).
+    pub const DYNAMIC: &str = "fovea::dynamic";
+    /// How fovea learned what the runtime below offers (one line per process).
+    pub const BELOW: &str = "fovea::below";
+    /// One line per instance: what fovea provides and what is native below.
+    pub const INSTANCE: &str = "fovea::instance";
 }

@@ -200,7 +200,11 @@ fn the_refusing_layer_through_the_khronos_loader() {
     let log = dir.join("fovea.log");
     std::env::set_var(
         "FOVEA_LOG",
-        "warn,fovea::xr::below=info,fovea::xr::loader=info",
+        format!(
+            "warn,{}=info,{}=info",
+            fovea_abi::log_target::BELOW,
+            fovea_abi::log_target::INSTANCE
+        ),
     );
     std::env::set_var("FOVEA_LOG_FILE", &log);
     // A runtime with native FB support below the refuser: what it hides from a layer above.

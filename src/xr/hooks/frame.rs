@@ -76,7 +76,12 @@ pub fn end_frame(sess: xr::Session, info: In<xr::FrameEndInfo>) -> HookResult<xr
             let step = f.controller.step();
             s.dynamic_step.store(step, Ordering::Relaxed);
             s.pattern_generation.fetch_add(1, Ordering::Relaxed);
-            tracing::info!(step, level = ?LADDER[step], "dynamic foveation");
+            tracing::info!(
+                target: fovea_abi::log_target::DYNAMIC,
+                step,
+                level = ?LADDER[step],
+                "dynamic foveation"
+            );
         }
         let changed = s.instance.overrides.poll(display);
         let own = (Instant::now() - entered).as_nanos() as u64;

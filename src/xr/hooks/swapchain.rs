@@ -47,7 +47,7 @@ pub enum Subsampled {
 /// Checks a request against what fovea can honour without runtime support for the structs:
 /// SCALED_BIN is a GLES flag (QCOM_texture_foveated) and a Vulkan or headless session cannot use it;
 /// the runtime allocates the images, so additional Vulkan flags cannot be honoured, except
-/// SUBSAMPLED, which Quest's runtime also drops when unsupported (fixed-foveated-rendering seed) and
+/// SUBSAMPLED, which Quest's runtime also drops when unsupported (docs/openxr-layer.md#subsampled-images) and
 /// which `debug.oculus.foveation.subsampled` forces on or off.
 pub fn check_request(req: FoveationRequest, forced: Option<bool>) -> HookResult<Subsampled> {
     use xr::SwapchainCreateFoveationFlagsFB as F;

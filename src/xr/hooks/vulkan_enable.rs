@@ -310,8 +310,8 @@ pub fn create_vulkan_device(
         return Ok(down());
     };
     // SAFETY: `app_vk` is the application's valid VkDeviceCreateInfo (above).
-    let (add_extension, add_feature, fdm_enabled) =
-        device_plan(support, unsafe { app_request(app_vk) });
+    let request = unsafe { app_request(app_vk) };
+    let (add_extension, add_feature, fdm_enabled) = device_plan(support, request);
     let mut names: Vec<*const c_char> = if app_vk.pp_enabled_extension_names.is_null() {
         Vec::new()
     } else {

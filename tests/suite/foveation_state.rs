@@ -7,6 +7,8 @@ use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 use xr::Handle;
 
+use crate::support::{foveation_state, level_info};
+
 struct Fns {
     create: xr::pfn::CreateFoveationProfileFB,
     destroy: xr::pfn::DestroyFoveationProfileFB,
@@ -36,16 +38,6 @@ fn running(foveation: bool) -> (HeadlessLoop, Fns) {
     (lp, fns)
 }
 
-fn level_info(level: i32, dynamic: i32, offset: f32) -> xr::FoveationLevelProfileCreateInfoFB {
-    xr::FoveationLevelProfileCreateInfoFB {
-        ty: xr::StructureType::FOVEATION_LEVEL_PROFILE_CREATE_INFO_FB,
-        next: std::ptr::null_mut(),
-        level: xr::FoveationLevelFB::from_raw(level),
-        vertical_offset: offset,
-        dynamic: xr::FoveationDynamicFB::from_raw(dynamic),
-    }
-}
-
 fn create(
     f: &Fns,
     session: xr::Session,
@@ -62,21 +54,12 @@ fn create(
     }
 }
 
-fn state(profile: xr::FoveationProfileFB, flags: u64) -> xr::SwapchainStateFoveationFB {
-    xr::SwapchainStateFoveationFB {
-        ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
-        next: std::ptr::null_mut(),
-        flags: xr::SwapchainStateFoveationFlagsFB::from_raw(flags),
-        profile,
-    }
-}
-
 fn update(f: &Fns, sc: xr::Swapchain, st: &xr::SwapchainStateFoveationFB) -> xr::Result {
     unsafe { (f.update)(sc, st as *const _ as *const _) }
 }
 
 fn get(f: &Fns, sc: xr::Swapchain) -> Result<xr::SwapchainStateFoveationFB, xr::Result> {
-    let mut st = state(xr::FoveationProfileFB::from_raw(0x1234), 7);
+    let mut st = foveation_state(xr::FoveationProfileFB::from_raw(0x1234), 7);
     match unsafe { (f.get)(sc, &mut st as *mut _ as *mut _) } {
         xr::Result::SUCCESS => Ok(st),
         r => Err(r),
@@ -121,7 +104,10 @@ fn update_copies_the_profile_and_survives_its_destruction() {
         xr::FoveationProfileFB::NULL,
         "no profile before the first update"
     );
-    assert_eq!(update(&f, lp.swapchain, &state(p, 0)), xr::Result::SUCCESS);
+    assert_eq!(
+        update(&f, lp.swapchain, &foveation_state(p, 0)),
+        xr::Result::SUCCESS
+    );
     let st = get(&f, lp.swapchain).unwrap();
     assert_eq!((st.profile, st.flags.into_raw()), (p, 0));
     assert_eq!(st.ty, xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB);
@@ -132,7 +118,7 @@ fn update_copies_the_profile_and_survives_its_destruction() {
         xr::FoveationProfileFB::NULL
     );
     assert_eq!(
-        update(&f, lp.swapchain, &state(p, 0)),
+        update(&f, lp.swapchain, &foveation_state(p, 0)),
         xr::Result::ERROR_HANDLE_INVALID
     );
     assert_eq!(unsafe { (f.destroy)(p) }, xr::Result::ERROR_HANDLE_INVALID);
@@ -143,11 +129,11 @@ fn update_rejects_bad_states() {
     let (lp, f) = running(true);
     let p = create(&f, lp.session, Some(&level_info(1, 0, 0.0))).unwrap();
     assert_eq!(
-        update(&f, lp.swapchain, &state(p, 1)),
+        update(&f, lp.swapchain, &foveation_state(p, 1)),
         xr::Result::ERROR_VALIDATION_FAILURE,
         "flags must be 0"
     );
-    let mut wrong = state(p, 0);
+    let mut wrong = foveation_state(p, 0);
     wrong.ty = xr::StructureType::SWAPCHAIN_CREATE_INFO;
     assert_eq!(
         update(&f, lp.swapchain, &wrong),
@@ -159,14 +145,14 @@ fn update_rejects_bad_states() {
         xr::Result::ERROR_VALIDATION_FAILURE
     );
     assert_eq!(
-        update(&f, xr::Swapchain::from_raw(0xbad), &state(p, 0)),
+        update(&f, xr::Swapchain::from_raw(0xbad), &foveation_state(p, 0)),
         xr::Result::ERROR_HANDLE_INVALID
     );
     assert_eq!(
         update(
             &f,
             lp.swapchain,
-            &state(xr::FoveationProfileFB::from_raw(0xbad), 0)
+            &foveation_state(xr::FoveationProfileFB::from_raw(0xbad), 0)
         ),
         xr::Result::ERROR_HANDLE_INVALID
     );
@@ -177,7 +163,7 @@ fn a_swapchain_without_foveation_refuses_profiles() {
     let (lp, f) = running(false);
     let p = create(&f, lp.session, Some(&level_info(3, 0, 0.0))).unwrap();
     assert_eq!(
-        update(&f, lp.swapchain, &state(p, 0)),
+        update(&f, lp.swapchain, &foveation_state(p, 0)),
         xr::Result::ERROR_VALIDATION_FAILURE
     );
     assert_eq!(
@@ -192,7 +178,7 @@ fn a_profile_of_another_session_is_an_invalid_handle() {
     let (b, _) = running(true);
     let foreign = create(&fa, a.session, Some(&level_info(3, 0, 0.0))).unwrap();
     let update_b: xr::pfn::UpdateSwapchainFB = unsafe { b.func(c"xrUpdateSwapchainFB") };
-    let st = state(foreign, 0);
+    let st = foveation_state(foreign, 0);
     assert_eq!(
         unsafe { update_b(b.swapchain, &st as *const _ as *const _) },
         xr::Result::ERROR_HANDLE_INVALID

@@ -8,7 +8,8 @@
 //! run's handles. The Vulkan test does the same around density images on lavapipe under the Khronos
 //! validation layer, which reports every Vulkan object still alive when the device is destroyed.
 //!
-//! The runtime's object count is process-wide, so the tests of this file run one at a time.
+//! The runtime's object count is process-wide, so each test of this module runs in a process of its
+//! own.
 
 use std::ffi::c_void;
 use std::ptr::{null, null_mut};
@@ -20,12 +21,9 @@ use fovea_harness::sim::control::{self, Fault, SimConfig};
 use fovea_harness::vulkan::{pick_lavapipe, take_messages, validated_entry, Vulkan};
 use fovea_harness::{skip, Chain};
 use openxr_sys as xr;
-use parking_lot::Mutex;
 use xr::Handle;
 
-/// Serialises the tests of this file (the runtime's object count and the validation messages are
-/// process-wide).
-static SERIAL: Mutex<()> = Mutex::new(());
+use crate::support::{foveation_state, in_own_process, level_info};
 
 /// The handles a run made, to tear down and to probe afterwards.
 #[derive(Default)]
@@ -75,25 +73,6 @@ impl Run {
         assert!(injected, "{name} failed with {r:?} ({:?})", self.fault);
         self.retried += 1;
         assert_eq!(f(), xr::Result::SUCCESS, "{name} retried after {r:?}");
-    }
-}
-
-fn level_info(level: i32) -> xr::FoveationLevelProfileCreateInfoFB {
-    xr::FoveationLevelProfileCreateInfoFB {
-        ty: xr::StructureType::FOVEATION_LEVEL_PROFILE_CREATE_INFO_FB,
-        next: null_mut(),
-        level: xr::FoveationLevelFB::from_raw(level),
-        vertical_offset: 0.0,
-        dynamic: xr::FoveationDynamicFB::DISABLED,
-    }
-}
-
-fn foveation_state(profile: xr::FoveationProfileFB) -> xr::SwapchainStateFoveationFB {
-    xr::SwapchainStateFoveationFB {
-        ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
-        next: null_mut(),
-        flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
-        profile,
     }
 }
 
@@ -315,7 +294,7 @@ unsafe fn session_flow(
         "xrEnumerateSwapchainImages",
         (f.enumerate_images)(h.swapchain, 0, &mut count, null_mut()),
     )?;
-    let level = level_info(3);
+    let level = level_info(3, 0, 0.0);
     let profile_info = xr::FoveationProfileCreateInfoFB {
         ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
         next: &level as *const _ as *mut c_void,
@@ -324,7 +303,7 @@ unsafe fn session_flow(
         "xrCreateFoveationProfileFB",
         (f.create_profile)(h.session, &profile_info, &mut h.profile),
     )?;
-    let st = foveation_state(h.profile);
+    let st = foveation_state(h.profile, 0);
     run.call(
         "xrUpdateSwapchainFB",
         (f.update)(h.swapchain, &st as *const _ as *const _),
@@ -376,7 +355,7 @@ unsafe fn check_layer_state(f: &Fns, h: &Handles, lost: Option<xr::Result>) {
     if h.swapchain == xr::Swapchain::NULL {
         return;
     }
-    let mut st = foveation_state(xr::FoveationProfileFB::from_raw(0x77));
+    let mut st = foveation_state(xr::FoveationProfileFB::from_raw(0x77), 0);
     if let Some(loss) = lost {
         assert_eq!(
             (f.get_state)(h.swapchain, &mut st as *mut _ as *mut _),
@@ -388,7 +367,7 @@ unsafe fn check_layer_state(f: &Fns, h: &Handles, lost: Option<xr::Result>) {
         };
         let mut p = xr::FoveationProfileFB::NULL;
         assert_eq!((f.create_profile)(h.session, &info, &mut p), loss);
-        let st = foveation_state(h.applied);
+        let st = foveation_state(h.applied, 0);
         assert_eq!((f.update)(h.swapchain, &st as *const _ as *const _), loss);
         return;
     }
@@ -406,7 +385,7 @@ unsafe fn check_layer_state(f: &Fns, h: &Handles, lost: Option<xr::Result>) {
         (f.create_profile)(h.session, &info, &mut p),
         xr::Result::SUCCESS
     );
-    let st = foveation_state(p);
+    let st = foveation_state(p, 0);
     assert_eq!(
         (f.update)(h.swapchain, &st as *const _ as *const _),
         xr::Result::SUCCESS
@@ -452,7 +431,7 @@ unsafe fn assert_forgotten(f: &Fns, h: &Handles) {
         );
     }
     if h.swapchain != xr::Swapchain::NULL {
-        let mut st = foveation_state(xr::FoveationProfileFB::NULL);
+        let mut st = foveation_state(xr::FoveationProfileFB::NULL, 0);
         assert_eq!(
             (f.get_state)(h.swapchain, &mut st as *mut _ as *mut _),
             xr::Result::ERROR_HANDLE_INVALID,
@@ -532,7 +511,14 @@ fn faults_for(seen: &[&'static str]) -> Vec<Fault> {
 
 #[test]
 fn every_runtime_call_of_a_headless_session_failing_in_turn() {
-    let _serial = SERIAL.lock();
+    in_own_process(
+        module_path!(),
+        "every_runtime_call_of_a_headless_session_failing_in_turn",
+        every_runtime_call_of_a_headless_session_failing_in_turn_here,
+    );
+}
+
+fn every_runtime_call_of_a_headless_session_failing_in_turn_here() {
     let chain = Chain::fovea().unwrap();
     let (clean, seen) = headless_run(&chain, None);
     assert_eq!(clean.first_error, None);
@@ -653,7 +639,14 @@ fn vulkan_run(chain: &Chain, entry: &ash::Entry, fault: Option<Fault>) -> Result
 
 #[test]
 fn faults_around_density_images_leave_no_vulkan_object_behind() {
-    let _serial = SERIAL.lock();
+    in_own_process(
+        module_path!(),
+        "faults_around_density_images_leave_no_vulkan_object_behind",
+        faults_around_density_images_leave_no_vulkan_object_behind_here,
+    );
+}
+
+fn faults_around_density_images_leave_no_vulkan_object_behind_here() {
     pick_lavapipe();
     let Ok(entry) = validated_entry().map_err(|why| skip(&why)) else {
         return;

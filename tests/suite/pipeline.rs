@@ -1,8 +1,8 @@
 //! The frame pipeline through the harness on the simulated Quest 3 with scripted GPU load: the
 //! dynamic level rises under overload and falls back with headroom, the stats line comes once a
 //! second of display time, and a FOVEA_PROPS override takes effect while the app runs. The layer's
-//! log goes to a file (FOVEA_LOG_FILE), which is what the test reads; one test function, since the
-//! log is set up once per process.
+//! log goes to a file (FOVEA_LOG_FILE), which is what the test reads; one test function, in a
+//! process of its own, since the log is set up once per process from the environment it sets.
 
 use std::path::Path;
 
@@ -10,6 +10,8 @@ use fovea_harness::app::API_1_0;
 use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
+
+use crate::support::in_own_process;
 
 fn running(load: &[(u64, f32)]) -> HeadlessLoop {
     let mut cfg =
@@ -52,6 +54,14 @@ fn fov_values(lines: &[String]) -> Vec<String> {
 
 #[test]
 fn dynamic_level_stats_and_live_overrides() {
+    in_own_process(
+        module_path!(),
+        "dynamic_level_stats_and_live_overrides",
+        dynamic_level_stats_and_live_overrides_here,
+    );
+}
+
+fn dynamic_level_stats_and_live_overrides_here() {
     let dir = std::env::temp_dir().join(format!("fovea-pipeline-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let log = dir.join("fovea.log");
@@ -60,8 +70,9 @@ fn dynamic_level_stats_and_live_overrides() {
     std::env::set_var(
         "FOVEA_LOG",
         format!(
-            "warn,{}=info,fovea::xr::hooks::frame=info",
-            fovea_abi::log_target::STATS
+            "warn,{}=info,{}=info",
+            fovea_abi::log_target::STATS,
+            fovea_abi::log_target::DYNAMIC
         ),
     );
     std::env::set_var("FOVEA_LOG_FILE", &log);

@@ -21,6 +21,8 @@ use openxr_sys as xr;
 use parking_lot::Mutex;
 use xr::Handle;
 
+use crate::support::level_info;
+
 /// Held by each test that creates a validated device, so the messages are that test's own.
 static VALIDATED: Mutex<()> = Mutex::new(());
 
@@ -311,16 +313,6 @@ impl Readback {
             v.device.free_memory(self.memory, None);
             v.device.destroy_command_pool(self.pool, None);
         }
-    }
-}
-
-fn level_info(level: i32, offset: f32) -> xr::FoveationLevelProfileCreateInfoFB {
-    xr::FoveationLevelProfileCreateInfoFB {
-        ty: xr::StructureType::FOVEATION_LEVEL_PROFILE_CREATE_INFO_FB,
-        next: null_mut(),
-        level: xr::FoveationLevelFB::from_raw(level),
-        vertical_offset: offset,
-        dynamic: xr::FoveationDynamicFB::DISABLED,
     }
 }
 
@@ -705,7 +697,7 @@ fn density_images_on_lavapipe_hold_the_model_and_leave_nothing_behind() {
     let mut live_profile = xr::FoveationProfileFB::NULL;
     for level in 0..=3 {
         let offset = if level == 3 { -7.5 } else { 0.0 };
-        let li = level_info(level, offset);
+        let li = level_info(level, 0, offset);
         let info = xr::FoveationProfileCreateInfoFB {
             ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
             next: &li as *const _ as *mut c_void,
@@ -1047,7 +1039,7 @@ fn submitted_views_decide_what_each_layer_holds() {
     let create_profile: xr::pfn::CreateFoveationProfileFB =
         func(&app, "xrCreateFoveationProfileFB");
     let update: xr::pfn::UpdateSwapchainFB = func(&app, "xrUpdateSwapchainFB");
-    let level = level_info(3, 0.0);
+    let level = level_info(3, 0, 0.0);
     let profile_info = xr::FoveationProfileCreateInfoFB {
         ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
         next: &level as *const _ as *mut c_void,

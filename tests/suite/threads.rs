@@ -3,7 +3,7 @@
 //!
 //! - No deadlock: a watchdog ends the process with a failure if the run takes longer than
 //!   [`DEADLINE`]. Debug builds of the layer also check the lock order on every lock taken
-//!   (`src/lock.rs`), so an inversion fails at once even when no other thread is there to deadlock
+//!   (`src/common/lock.rs`), so an inversion fails at once even when no other thread is there to deadlock
 //!   with: it would surface here as XR_ERROR_RUNTIME_FAILURE.
 //! - No lost or mixed-up update: each worker owns a swapchain that only it updates, and reads back
 //!   after every update exactly the profile it applied; at the end each swapchain holds the last
@@ -26,6 +26,8 @@ use openxr_sys as xr;
 // parking_lot rather than std: ThreadSanitizer sees its atomics (std is not instrumented).
 use parking_lot::Mutex;
 use xr::Handle;
+
+use crate::support::{foveation_state, level_info};
 
 const WORKERS: usize = 4;
 /// The whole run must end within this (debug build, two shared cores, or valgrind).
@@ -50,13 +52,7 @@ struct Fns {
 }
 
 fn profile(f: &Fns, session: xr::Session, level: i32) -> xr::FoveationProfileFB {
-    let level = xr::FoveationLevelProfileCreateInfoFB {
-        ty: xr::StructureType::FOVEATION_LEVEL_PROFILE_CREATE_INFO_FB,
-        next: null_mut(),
-        level: xr::FoveationLevelFB::from_raw(level),
-        vertical_offset: 0.0,
-        dynamic: xr::FoveationDynamicFB::from_raw(level & 1),
-    };
+    let level = level_info(level, level & 1, 0.0);
     let info = xr::FoveationProfileCreateInfoFB {
         ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
         next: &level as *const _ as *mut _,
@@ -70,12 +66,7 @@ fn profile(f: &Fns, session: xr::Session, level: i32) -> xr::FoveationProfileFB 
 }
 
 fn update(f: &Fns, sc: xr::Swapchain, p: xr::FoveationProfileFB) {
-    let st = xr::SwapchainStateFoveationFB {
-        ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
-        next: null_mut(),
-        flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
-        profile: p,
-    };
+    let st = foveation_state(p, 0);
     assert_eq!(
         unsafe { (f.update)(sc, &st as *const _ as *const _) },
         xr::Result::SUCCESS
@@ -83,12 +74,7 @@ fn update(f: &Fns, sc: xr::Swapchain, p: xr::FoveationProfileFB) {
 }
 
 fn state(f: &Fns, sc: xr::Swapchain) -> xr::FoveationProfileFB {
-    let mut st = xr::SwapchainStateFoveationFB {
-        ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
-        next: null_mut(),
-        flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
-        profile: xr::FoveationProfileFB::from_raw(0x77),
-    };
+    let mut st = foveation_state(xr::FoveationProfileFB::from_raw(0x77), 0);
     assert_eq!(
         unsafe { (f.get_state)(sc, &mut st as *mut _ as *mut _) },
         xr::Result::SUCCESS

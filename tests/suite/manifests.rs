@@ -1,4 +1,4 @@
-//! The checked-in manifests follow the loader's rules (openxr-layer-facts.md §2.6, §2.7) and list
+//! The checked-in manifests follow the loader's rules (docs/openxr-layer.md#manifests, docs/openxr-layer.md#discovery) and list
 //! exactly the extensions the layer implements, at the versions it reports.
 
 use std::path::{Path, PathBuf};
@@ -6,9 +6,7 @@ use std::path::{Path, PathBuf};
 use fovea_abi::EXTENSIONS;
 use serde_json::Value;
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use crate::support::root;
 
 fn read(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap())

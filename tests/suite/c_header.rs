@@ -13,9 +13,7 @@ use std::process::Command;
 use fovea_abi::EXTENSIONS;
 use fovea_harness::{artifact, skip};
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use crate::support::{root, rust_files};
 
 fn header() -> String {
     std::fs::read_to_string(root().join("include/fovea.h")).unwrap()
@@ -42,24 +40,12 @@ fn unquote(v: &str) -> &str {
         .unwrap_or_else(|| panic!("{v} is not a string literal"))
 }
 
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for e in std::fs::read_dir(dir).unwrap() {
-        let p = e.unwrap().path();
-        if p.is_dir() {
-            rust_files(&p, out);
-        } else if p.extension().is_some_and(|x| x == "rs") {
-            out.push(p);
-        }
-    }
-}
-
 /// The environment variables the layer reads: every all-caps `"NAME_WITH_UNDERSCORES"` string
 /// literal in the layer's sources (src/, not the CLI in src/bin), which is how settings.rs, log.rs
 /// and ffi.rs name them, plus the implicit manifest's `disable_environment`, which the loader reads.
 /// `c"..."`/`b"..."` literals and `XR_`/`VK_` names are API identifiers, not variables.
 fn layer_env_vars() -> BTreeSet<String> {
-    let mut files = Vec::new();
-    rust_files(&root().join("src"), &mut files);
+    let files = rust_files(&root().join("src"));
     let mut vars = BTreeSet::new();
     for f in files
         .iter()
@@ -228,7 +214,7 @@ int main(int argc, char **argv) {
 
 #if defined(XR_LOADER_VERSION_1_0)
     {
-        /* What the loader sends (openxr-layer-facts.md 2.2). */
+        /* What the loader sends (docs/openxr-layer.md#loader-negotiation). */
         XrNegotiateLoaderInfo info;
         XrNegotiateApiLayerRequest request;
         XrResult r;

@@ -4,7 +4,7 @@
 //! XR_EPIC_view_configuration_fov the sizes are enlarged whenever the app asks; without it, only once
 //! a session runs, and an app that sized before keeps each eye's own FOV (one log line says so). No
 //! call the runtime refuses reaches it in any mode. One test function: the switch and the log are
-//! process-wide.
+//! process-wide, so it runs in a process of its own.
 
 use fovea_harness::app::API_1_0;
 use fovea_harness::{sim, App, Chain};
@@ -12,6 +12,8 @@ use fovea_model::projection::symmetric_fov;
 use fovea_model::Fov;
 use openxr_sys as xr;
 use xr::Handle;
+
+use crate::support::in_own_process;
 
 fn views(app: &App) -> [[u32; 4]; 2] {
     let f: xr::pfn::EnumerateViewConfigurationViews =
@@ -164,6 +166,14 @@ const FALLBACK_LINE: &str = "symmetric FOV is off for this session";
 
 #[test]
 fn symmetric_mode_shares_one_fov_and_enlarges_the_sizes() {
+    in_own_process(
+        module_path!(),
+        "symmetric_mode_shares_one_fov_and_enlarges_the_sizes",
+        symmetric_mode_shares_one_fov_and_enlarges_the_sizes_here,
+    );
+}
+
+fn symmetric_mode_shares_one_fov_and_enlarges_the_sizes_here() {
     let dir = std::env::temp_dir().join(format!("fovea-symmetric-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let log = dir.join("fovea.log");

@@ -9,6 +9,8 @@ use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSION
 use fovea_harness::{open_library, sim, App, Chain, LayerSpec};
 use openxr_sys as xr;
 
+use crate::support::in_own_process;
+
 fn run(native: bool) -> (Vec<String>, bool, Vec<(&'static str, u64)>) {
     let config = sim::control::SimConfig {
         native_foveation: native,
@@ -44,11 +46,23 @@ fn run(native: bool) -> (Vec<String>, bool, Vec<(&'static str, u64)>) {
 
 #[test]
 fn fovea_learns_what_lies_below_a_layer_refusing_null_instance_lookups() {
+    in_own_process(
+        module_path!(),
+        "fovea_learns_what_lies_below_a_layer_refusing_null_instance_lookups",
+        fovea_learns_what_lies_below_here,
+    );
+}
+
+/// Runs in a process of its own: it sets the log filter and counts a once-per-process line.
+fn fovea_learns_what_lies_below_here() {
     let dir = std::env::temp_dir().join(format!("fovea-below-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let log = dir.join("fovea.log");
     let _ = std::fs::remove_file(&log);
-    std::env::set_var("FOVEA_LOG", "warn,fovea::xr::below=info");
+    std::env::set_var(
+        "FOVEA_LOG",
+        format!("warn,{}=info", fovea_abi::log_target::BELOW),
+    );
     std::env::set_var("FOVEA_LOG_FILE", &log);
     // Keeps the refuser loaded across chains.
     let _keep = open_library(&LayerSpec::refuse_null_lookups().unwrap().path).unwrap();

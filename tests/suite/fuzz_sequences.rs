@@ -15,8 +15,9 @@
 //! invalid in the layer (so no record leaked in fovea's registry, which lives in the loaded
 //! libfovea.so and is not reachable from here) and the runtime must hold no object.
 //!
-//! `FOVEA_FUZZ_CASES=N` runs N cases instead of 64 (README, "Hardening"). This file holds a single
-//! test: the runtime's object count is process-wide.
+//! `FOVEA_FUZZ_CASES=N` runs N cases instead of 64 (README, "Hardening"). This module holds a single
+//! test, in a process of its own: the runtime's object count is process-wide, and it sets the
+//! layer's log filter.
 
 use std::collections::BTreeMap;
 use std::ffi::c_void;
@@ -32,6 +33,8 @@ use fovea_harness::{lookup, sim, Chain};
 use openxr_sys as xr;
 use proptest::prelude::*;
 use xr::Handle;
+
+use crate::support::in_own_process;
 
 /// Calls made into the layer, over all cases.
 static CALLS: AtomicU64 = AtomicU64::new(0);
@@ -1296,6 +1299,14 @@ fn cases() -> u32 {
 
 #[test]
 fn random_call_sequences_match_the_reference_model() {
+    in_own_process(
+        module_path!(),
+        "random_call_sequences_match_the_reference_model",
+        random_call_sequences_match_the_reference_model_here,
+    );
+}
+
+fn random_call_sequences_match_the_reference_model_here() {
     // Most sequences make fovea warn about what it refuses; only errors are worth reading here.
     if std::env::var_os("FOVEA_LOG").is_none() {
         std::env::set_var("FOVEA_LOG", "error");

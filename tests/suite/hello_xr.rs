@@ -1,7 +1,7 @@
 //! Khronos `hello_xr` (Debian's libopenxr-utils) through the real Khronos loader, fovea and the
 //! simulated headset on Mesa's lavapipe: an application nobody here wrote, with both Vulkan paths
 //! (`-g Vulkan2` = XR_KHR_vulkan_enable2, `-g Vulkan` = XR_KHR_vulkan_enable), alone and under the
-//! Khronos core validation layer (issue #7).
+//! Khronos core validation layer.
 //!
 //! Each run is a child process, so the loader's one-instance-per-process rule and its environment
 //! stay out of the test process. The simulated runtime requests exit after
@@ -20,15 +20,15 @@ use std::process::{Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use fovea_harness::{artifact, skip, CORE_VALIDATION_LAYER, FOVEA_LAYER};
+use fovea_harness::{skip, CORE_VALIDATION_LAYER, FOVEA_LAYER};
+
+use crate::support::{Manifests, CORE_VALIDATION_MANIFEST, DEBIAN_LAYERS};
 
 /// Frames the runtime asks for before it requests exit (the issue's "at least 300 frames").
 const FRAMES: u64 = 300;
 /// A run takes 5-15 s on two shared cores with a debug build; hello_xr stuck in a loop that never
 /// sees the exit request must fail the test, not hang CI.
 const TIMEOUT: Duration = Duration::from_secs(240);
-const DEBIAN_LAYERS: &str = "/usr/share/openxr/1/api_layers/explicit.d";
-const CORE_VALIDATION_MANIFEST: &str = "XrApiLayer_core_validation.x86_64-linux-gnu.json";
 /// Where Mesa installs lavapipe's ICD manifest on Debian (x86-64), and the generic search folders.
 const ICD_DIRS: [&str; 2] = ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"];
 
@@ -67,49 +67,6 @@ fn find_system() -> Result<System, String> {
     })
 }
 
-/// A temporary folder with the checked-in layer manifest pointed at this build's libfovea.so and a
-/// runtime manifest for this build's libfovea_sim.so (the checked-in ones name target/release by a
-/// relative path).
-struct Manifests {
-    dir: PathBuf,
-}
-
-impl Manifests {
-    fn write(label: &str) -> Manifests {
-        let layer = artifact("libfovea.so").expect("libfovea.so: run `cargo build --workspace`");
-        let runtime =
-            artifact("libfovea_sim.so").expect("libfovea_sim.so: run `cargo build --workspace`");
-        let dir =
-            std::env::temp_dir().join(format!("fovea-hello-xr-{label}-{}", std::process::id()));
-        std::fs::create_dir_all(dir.join("layers")).unwrap();
-        let checked_in = std::fs::read_to_string(
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("manifest/XR_APILAYER_FOVEA_foveation.json"),
-        )
-        .unwrap();
-        let manifest = checked_in.replace("../target/release/libfovea.so", layer.to_str().unwrap());
-        assert_ne!(
-            manifest, checked_in,
-            "the checked-in manifest's library_path moved"
-        );
-        std::fs::write(dir.join("layers/fovea.json"), manifest).unwrap();
-        std::fs::write(
-            dir.join("runtime.json"),
-            format!(
-                r#"{{"file_format_version": "1.0.0", "runtime": {{"name": "fovea simulated headset", "library_path": "{}"}}}}"#,
-                runtime.display()
-            ),
-        )
-        .unwrap();
-        Manifests { dir }
-    }
-}
-
-impl Drop for Manifests {
-    fn drop(&mut self) {
-        std::fs::remove_dir_all(&self.dir).ok();
-    }
-}
-
 /// What one hello_xr run left behind.
 struct Run {
     code: Option<i32>,
@@ -129,7 +86,7 @@ impl Run {
 /// Runs hello_xr with `-g graphics -v` and `layers` enabled (first = closest to the app).
 fn run_hello_xr(system: &System, graphics: &str, layers: &[&str]) -> Run {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let manifests = Manifests::write(graphics);
+    let manifests = Manifests::write(&format!("hello-xr-{graphics}"));
     let mut cmd = Command::new(&system.hello_xr);
     cmd.args(["-g", graphics, "-v"]);
     // Nothing from the caller's environment may change what the loader, Vulkan, the layer or the

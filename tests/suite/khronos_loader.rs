@@ -3,36 +3,17 @@
 //! selected by `XR_RUNTIME_JSON`, alone and with the Khronos core validation layer above and below.
 //!
 //! The loader allows one live instance per process and reads the environment, so everything runs in
-//! one test, in order.
+//! one test, in order, in a process of its own (the suite's other tests load the layer themselves).
 
 use std::ffi::{c_char, CStr};
 use std::path::Path;
 
 use fovea_harness::app::{with_create_info, API_1_0};
-use fovea_harness::{artifact, enumerate_extensions, skip, CORE_VALIDATION_LAYER};
+use fovea_harness::{enumerate_extensions, skip, CORE_VALIDATION_LAYER};
 use openxr_sys as xr;
 use xr::Handle;
 
-const DEBIAN_LAYERS: &str = "/usr/share/openxr/1/api_layers/explicit.d";
-
-fn write_manifests(dir: &Path) {
-    let layer = artifact("libfovea.so").expect("libfovea.so");
-    let runtime = artifact("libfovea_sim.so").expect("libfovea_sim.so");
-    std::fs::create_dir_all(dir.join("layers")).unwrap();
-    let checked_in = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("manifest/XR_APILAYER_FOVEA_foveation.json"),
-    )
-    .unwrap();
-    // The checked-in manifest, pointed at this build's library.
-    let manifest = checked_in.replace("../target/release/libfovea.so", layer.to_str().unwrap());
-    assert_ne!(manifest, checked_in);
-    std::fs::write(dir.join("layers/fovea.json"), manifest).unwrap();
-    std::fs::write(
-        dir.join("runtime.json"),
-        format!(r#"{{"file_format_version": "1.0.0", "runtime": {{"name": "fovea simulated headset", "library_path": "{}"}}}}"#, runtime.display()),
-    )
-    .unwrap();
-}
+use crate::support::{in_own_process, Manifests, CORE_VALIDATION_MANIFEST, DEBIAN_LAYERS};
 
 type Gipa = xr::pfn::GetInstanceProcAddr;
 
@@ -96,33 +77,20 @@ unsafe fn instance_and_session(gipa: Gipa, label: &str) {
     assert_eq!(destroy(instance), xr::Result::SUCCESS, "{label}");
 }
 
-/// Set in the child process that runs the loader scenario.
-const CHILD: &str = "FOVEA_KHRONOS_LOADER_CHILD";
-
 /// The scenario runs in a child process whose standard output the parent reads: the core
 /// validation layer prints its findings with `printf`, which the test harness does not capture.
 /// Zero validation messages is part of the result.
 #[test]
 fn discovered_by_manifest_and_stacked_with_core_validation() {
-    if std::env::var_os(CHILD).is_some() {
-        scenario();
+    let Some(out) = in_own_process(
+        module_path!(),
+        "discovered_by_manifest_and_stacked_with_core_validation",
+        scenario,
+    ) else {
         return;
-    }
-    let out = std::process::Command::new(std::env::current_exe().unwrap())
-        .args([
-            "--exact",
-            "discovered_by_manifest_and_stacked_with_core_validation",
-            "--nocapture",
-            "--test-threads=1",
-        ])
-        .env(CHILD, "1")
-        .output()
-        .expect("run the scenario");
+    };
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "scenario failed:\n{stdout}\n{stderr}");
-    print!("{stdout}");
-    eprint!("{stderr}");
     let findings: Vec<&str> = stdout
         .lines()
         .chain(stderr.lines())
@@ -154,8 +122,8 @@ fn scenario() {
             return;
         }
     };
-    let dir = std::env::temp_dir().join(format!("fovea-khronos-loader-{}", std::process::id()));
-    write_manifests(&dir);
+    let manifests = Manifests::write("khronos-loader");
+    let dir = &manifests.dir;
     std::env::set_var("XR_RUNTIME_JSON", dir.join("runtime.json"));
     std::env::set_var(
         "XR_API_LAYER_PATH",
@@ -185,7 +153,7 @@ fn scenario() {
     unsafe { instance_and_session(gipa, "fovea alone") };
 
     if !Path::new(DEBIAN_LAYERS)
-        .join("XrApiLayer_core_validation.x86_64-linux-gnu.json")
+        .join(CORE_VALIDATION_MANIFEST)
         .exists()
     {
         skip("openxr-layer-corevalidation is not installed");
@@ -198,5 +166,4 @@ fn scenario() {
         std::env::set_var("XR_ENABLE_API_LAYERS", &order);
         unsafe { instance_and_session(gipa, &order) };
     }
-    std::fs::remove_dir_all(&dir).ok();
 }

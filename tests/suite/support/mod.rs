@@ -1,0 +1,148 @@
+//! What several of the suite's modules share: the repository's root and its Rust files, running a
+//! test in a process of its own, manifests pointed at this build, the system's OpenXR layer folder,
+//! and the foveation structs most tests fill in.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use fovea_harness::artifact;
+use openxr_sys as xr;
+
+/// The repository's root (the layer package's folder).
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Every `*.rs` file under `dir`, in a stable order (none when `dir` does not exist).
+pub fn rust_files(dir: &Path) -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return;
+        };
+        for e in entries {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                out.push(p);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, &mut out);
+    out.sort();
+    out
+}
+
+/// Set in a child process of the suite: the one test it runs.
+const CHILD: &str = "FOVEA_SUITE_CHILD";
+
+/// Runs a test that needs a process of its own: one that sets environment variables the layer or a
+/// loader reads (the layer reads some once per process, and changing the environment while other
+/// tests' threads read it is a data race in C's `getenv`), or that asserts on the simulated
+/// runtime's process-wide object count, which the suite's other tests change at the same time.
+///
+/// In the test process this runs the test `name` of module `module` (pass `module_path!()`) again
+/// in a child process of this binary and returns the child's output once it passed; in that child,
+/// it runs `body` and returns `None`.
+pub fn in_own_process(module: &str, name: &str, body: impl FnOnce()) -> Option<Output> {
+    // `module_path!()` starts with the crate's name, which test names leave out.
+    let test = match module.split_once("::") {
+        Some((_, path)) => format!("{path}::{name}"),
+        None => name.to_owned(),
+    };
+    if std::env::var_os(CHILD).is_some_and(|v| v == test.as_str()) {
+        body();
+        return None;
+    }
+    let out = Command::new(std::env::current_exe().unwrap())
+        .args([&test, "--exact", "--nocapture", "--test-threads=1"])
+        .env(CHILD, &test)
+        .output()
+        .expect("run the test in a child process");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "{test} failed in its own process ({}):\n{stdout}\n{stderr}",
+        out.status
+    );
+    // A misspelt name would run nothing and pass.
+    assert!(
+        stdout.contains("test result: ok. 1 passed"),
+        "{test} did not run in its own process:\n{stdout}\n{stderr}"
+    );
+    print!("{stdout}");
+    eprint!("{stderr}");
+    Some(out)
+}
+
+/// Where Debian installs explicit OpenXR API layers (the Khronos core validation layer).
+pub const DEBIAN_LAYERS: &str = "/usr/share/openxr/1/api_layers/explicit.d";
+/// The Khronos core validation layer's manifest in [`DEBIAN_LAYERS`].
+pub const CORE_VALIDATION_MANIFEST: &str = "XrApiLayer_core_validation.x86_64-linux-gnu.json";
+
+/// A temporary folder with the checked-in layer manifest pointed at this build's libfovea.so
+/// (`layers/fovea.json`) and a runtime manifest for this build's libfovea_sim.so (`runtime.json`);
+/// the checked-in ones name target/release by a relative path. Removed when dropped.
+pub struct Manifests {
+    pub dir: PathBuf,
+}
+
+impl Manifests {
+    pub fn write(label: &str) -> Manifests {
+        let layer = artifact("libfovea.so").expect("libfovea.so: run `cargo build --workspace`");
+        let runtime =
+            artifact("libfovea_sim.so").expect("libfovea_sim.so: run `cargo build --workspace`");
+        let dir = std::env::temp_dir().join(format!("fovea-{label}-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("layers")).unwrap();
+        let checked_in =
+            std::fs::read_to_string(root().join("manifest/XR_APILAYER_FOVEA_foveation.json"))
+                .unwrap();
+        let manifest = checked_in.replace("../target/release/libfovea.so", layer.to_str().unwrap());
+        assert_ne!(
+            manifest, checked_in,
+            "the checked-in manifest's library_path moved"
+        );
+        std::fs::write(dir.join("layers/fovea.json"), manifest).unwrap();
+        std::fs::write(
+            dir.join("runtime.json"),
+            format!(
+                r#"{{"file_format_version": "1.0.0", "runtime": {{"name": "fovea simulated headset", "library_path": "{}"}}}}"#,
+                runtime.display()
+            ),
+        )
+        .unwrap();
+        Manifests { dir }
+    }
+}
+
+impl Drop for Manifests {
+    fn drop(&mut self) {
+        std::fs::remove_dir_all(&self.dir).ok();
+    }
+}
+
+/// An `XrFoveationLevelProfileCreateInfoFB` with raw values (tests pass invalid ones too).
+pub fn level_info(level: i32, dynamic: i32, offset: f32) -> xr::FoveationLevelProfileCreateInfoFB {
+    xr::FoveationLevelProfileCreateInfoFB {
+        ty: xr::StructureType::FOVEATION_LEVEL_PROFILE_CREATE_INFO_FB,
+        next: std::ptr::null_mut(),
+        level: xr::FoveationLevelFB::from_raw(level),
+        vertical_offset: offset,
+        dynamic: xr::FoveationDynamicFB::from_raw(dynamic),
+    }
+}
+
+/// An `XrSwapchainStateFoveationFB` naming `profile`, with raw `flags`.
+pub fn foveation_state(
+    profile: xr::FoveationProfileFB,
+    flags: u64,
+) -> xr::SwapchainStateFoveationFB {
+    xr::SwapchainStateFoveationFB {
+        ty: xr::StructureType::SWAPCHAIN_STATE_FOVEATION_FB,
+        next: std::ptr::null_mut(),
+        flags: xr::SwapchainStateFoveationFlagsFB::from_raw(flags),
+        profile,
+    }
+}
