@@ -142,7 +142,12 @@ unsafe fn rewrite(
     f: Facts,
 ) -> Result<(vk::GraphicsPipelineCreateInfo<'static>, Owned), chain::ChainError> {
     // SAFETY: lives as long as the caller's create info, across the call down.
-    let mut copy: vk::GraphicsPipelineCreateInfo<'static> = unsafe { std::mem::transmute(*ci) };
+    let mut copy = unsafe {
+        std::mem::transmute::<
+            vk::GraphicsPipelineCreateInfo<'_>,
+            vk::GraphicsPipelineCreateInfo<'static>,
+        >(*ci)
+    };
     let mut owned = Owned::default();
     if f.flag {
         copy.flags = (copy.flags & !FDM_FLAG) | FSR_FLAG;
@@ -160,9 +165,14 @@ unsafe fn rewrite(
         };
         // SAFETY: as the caller promised.
         let rest = unsafe { ChainCopy::without(head, |t| t == ty) }?;
-        let mut mine: Box<vk::PipelineCreateFlags2CreateInfoKHR<'static>> =
-            // SAFETY: a plain copy whose pNext is set below.
-            Box::new(unsafe { std::mem::transmute(mine) });
+        // SAFETY: a plain copy whose pNext is set below.
+        let mine: vk::PipelineCreateFlags2CreateInfoKHR<'static> = unsafe {
+            std::mem::transmute::<
+                vk::PipelineCreateFlags2CreateInfoKHR<'_>,
+                vk::PipelineCreateFlags2CreateInfoKHR<'static>,
+            >(mine)
+        };
+        let mut mine = Box::new(mine);
         mine.flags = (mine.flags & !FDM_FLAG2) | FSR_FLAG2;
         mine.p_next = rest.head() as *mut c_void;
         head = &*mine as *const _ as *const c_void;
@@ -363,11 +373,10 @@ pub unsafe extern "system" fn create_sampler(
             let Some(next) = dev.next.create_sampler else {
                 return vk::Result::ERROR_INITIALIZATION_FAILED;
             };
-            // SAFETY: the caller's create info, read only.
-            if dev.fdm.is_none()
-                || info.is_null()
-                || !unsafe { (*info).flags }.intersects(SUBSAMPLED)
-            {
+            let subsampled = !info.is_null()
+                // SAFETY: the caller's create info, read only.
+                && unsafe { (*info).flags }.intersects(SUBSAMPLED);
+            if dev.fdm.is_none() || !subsampled {
                 // SAFETY: the next layer's function, with the caller's arguments.
                 return unsafe { next(device, info, alloc, out) };
             }
@@ -500,7 +509,7 @@ mod tests {
         };
         assert_eq!(copy.flags, FSR_FLAG);
         assert_eq!(ci.flags, FDM_FLAG, "the application's struct is kept");
-        assert_eq!(f2.flags.contains(FDM_FLAG2), true);
+        assert!(f2.flags.contains(FDM_FLAG2));
         // SAFETY: the copy's chain, alive with `owned`.
         unsafe {
             let state = copy.p_next as *const vk::PipelineFragmentShadingRateStateCreateInfoKHR;
