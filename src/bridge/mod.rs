@@ -187,6 +187,47 @@ pub fn device_fdm(device: ash::vk::Device) -> Option<FdmEmulation> {
     DEVICE_FDM.read().get(&device.as_raw()).cloned()
 }
 
+/// The layer-owned shading-rate twin (`R8_UINT`, usage FRAGMENT_SHADING_RATE_ATTACHMENT) of one
+/// density image on an emulating device (docs/vulkan-fdm-on-fsr.md#mapping).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shadow {
+    /// The shadow image.
+    pub image: ash::vk::Image,
+    /// Its extent in texels: the density image's.
+    pub extent: [u32; 2],
+    /// Its array layers: the density image's where the device has layered shading-rate
+    /// attachments, else 1 (both views merged, the finer rate of the two).
+    pub layers: u32,
+}
+
+/// Shadows by density image handle. A leaf lock, not one of [`crate::common::lock::Rank`]'s: it is
+/// taken for a look-up and a copy only, nothing is called while it is held, so it may be taken under
+/// any other lock (fovea's own uploads record their barriers under their fill and submit locks,
+/// and those barriers pass through the Vulkan layer, which asks here).
+static SHADOWS: parking_lot::RwLock<std::collections::BTreeMap<u64, Shadow>> =
+    parking_lot::RwLock::new(std::collections::BTreeMap::new());
+
+/// Records (or, with `None`, forgets) the shadow of density image `image`; the Vulkan side calls it
+/// where it creates and destroys shadows.
+#[allow(
+    dead_code,
+    reason = "the Vulkan side's shadow images record themselves here"
+)]
+pub fn set_shadow(image: ash::vk::Image, shadow: Option<Shadow>) {
+    use ash::vk::Handle as _;
+    let mut map = SHADOWS.write();
+    match shadow {
+        Some(s) => map.insert(image.as_raw(), s),
+        None => map.remove(&image.as_raw()),
+    };
+}
+
+/// The shadow of density image `image`, where the Vulkan side made one.
+pub fn shadow_of(image: ash::vk::Image) -> Option<Shadow> {
+    use ash::vk::Handle as _;
+    SHADOWS.read().get(&image.as_raw()).copied()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -61,7 +61,7 @@ pub unsafe fn find_out<T>(next: *mut c_void, ty: vk::StructureType) -> Option<*m
 }
 
 /// Byte sizes of the structs that may precede one the layer removes from a `VkDeviceCreateInfo`
-/// chain. A struct not listed cannot be copied; see [`ChainCopy::without`].
+/// or a `VkGraphicsPipelineCreateInfo` chain. A struct not listed cannot be copied; see [`ChainCopy::without`].
 fn known_size(ty: vk::StructureType) -> Option<usize> {
     macro_rules! sizes {
         ($($t:ident),* $(,)?) => {
@@ -154,6 +154,20 @@ fn known_size(ty: vk::StructureType) -> Option<usize> {
         PhysicalDeviceFragmentDensityMap2FeaturesEXT,
         PhysicalDeviceFragmentShadingRateFeaturesKHR,
         PhysicalDeviceShadingRateImageFeaturesNV,
+        // VkGraphicsPipelineCreateInfo chains.
+        PipelineRenderingCreateInfo,
+        GraphicsPipelineLibraryCreateInfoEXT,
+        PipelineLibraryCreateInfoKHR,
+        PipelineCreationFeedbackCreateInfo,
+        PipelineRobustnessCreateInfoEXT,
+        PipelineFragmentShadingRateStateCreateInfoKHR,
+        PipelineCreateFlags2CreateInfoKHR,
+        PipelineDiscardRectangleStateCreateInfoEXT,
+        PipelineCompilerControlCreateInfoAMD,
+        AttachmentSampleCountInfoAMD,
+        MultiviewPerViewAttributesInfoNVX,
+        RenderingAttachmentLocationInfoKHR,
+        RenderingInputAttachmentIndexInfoKHR,
     ];
     if ty == vk::StructureType::LOADER_DEVICE_CREATE_INFO {
         return Some(size_of::<link::LayerDeviceCreateInfo>());

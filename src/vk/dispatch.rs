@@ -13,7 +13,7 @@ use std::ffi::CStr;
 
 use ash::vk;
 
-use crate::vk::{device, loader, physical};
+use crate::vk::{barrier, device, loader, physical, pipeline};
 
 /// When a device command's hook is handed out by `vkGetDeviceProcAddr`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -153,6 +153,26 @@ hooks! {
     device {
         c"vkDestroyDevice" => destroy_device: PFN_vkDestroyDevice = device::destroy_device, When::Always;
         c"vkCreateImage" => create_image: PFN_vkCreateImage = device::create_image, When::Emulated;
+        c"vkCreateGraphicsPipelines" => create_graphics_pipelines: PFN_vkCreateGraphicsPipelines =
+            pipeline::create_graphics_pipelines, When::Emulated;
+        c"vkCreateShaderModule" => create_shader_module: PFN_vkCreateShaderModule =
+            pipeline::create_shader_module, When::Emulated;
+        c"vkCreateSampler" => create_sampler: PFN_vkCreateSampler = pipeline::create_sampler,
+            When::Emulated;
+        c"vkCreateImageView" => create_image_view: PFN_vkCreateImageView =
+            pipeline::create_image_view, When::Emulated;
+        c"vkCmdPipelineBarrier" => cmd_pipeline_barrier: PFN_vkCmdPipelineBarrier =
+            barrier::cmd_pipeline_barrier, When::Emulated;
+        c"vkCmdPipelineBarrier2" => cmd_pipeline_barrier2: PFN_vkCmdPipelineBarrier2 =
+            barrier::cmd_pipeline_barrier2, When::Emulated;
+        c"vkCmdPipelineBarrier2KHR" => cmd_pipeline_barrier2_khr: PFN_vkCmdPipelineBarrier2 =
+            barrier::cmd_pipeline_barrier2_khr, When::Emulated;
+        c"vkCmdWaitEvents" => cmd_wait_events: PFN_vkCmdWaitEvents = barrier::cmd_wait_events,
+            When::Emulated;
+        c"vkCmdWaitEvents2" => cmd_wait_events2: PFN_vkCmdWaitEvents2 = barrier::cmd_wait_events2,
+            When::Emulated;
+        c"vkCmdWaitEvents2KHR" => cmd_wait_events2_khr: PFN_vkCmdWaitEvents2 =
+            barrier::cmd_wait_events2_khr, When::Emulated;
     }
 }
 

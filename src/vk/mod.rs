@@ -12,6 +12,9 @@
 //! - [`physical`]: the per-physical-device decision and what the application sees of a device;
 //! - [`device`]: device creation (density maps stripped, shading-rate attachments enabled) and the
 //!   device commands;
+//! - [`pipeline`]: graphics pipelines get the shading-rate state, shader modules that read the
+//!   fragment size are detected, subsampled sampler and dynamic view flags are left out;
+//! - [`barrier`]: barriers and event waits without the density-map layout, stage and access bits;
 //! - [`chain`], [`link`]: `pNext` chains and the loader's link structs.
 //!
 //! Per physical device: native density maps → everything passes through untouched;
@@ -21,10 +24,12 @@
 
 #![deny(unsafe_op_in_unsafe_fn)]
 
+mod barrier;
 mod chain;
 mod device;
 mod dispatch;
 mod link;
 mod loader;
 mod physical;
+mod pipeline;
 mod registry;

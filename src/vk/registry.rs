@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use ash::vk;
+use ash::vk::Handle as _;
 
 use crate::bridge::FdmEmulation;
 use crate::common::lock::{MapLock, Mutex, Rank};
@@ -162,6 +163,7 @@ pub unsafe fn add_device(data: Device) {
     crate::bridge::set_device_fdm(data.handle, data.fdm.clone());
     // SAFETY: as the caller promised.
     if let Some(k) = unsafe { key(data.handle) } {
+        set_recording(k, Some(Recording::of(&data)));
         DEVICES.write().insert(k, Arc::new(data));
     }
 }
@@ -174,6 +176,7 @@ pub unsafe fn remove_device(handle: vk::Device) -> Option<Arc<Device>> {
     // SAFETY: as the caller promised.
     let k = unsafe { key(handle) }?;
     let d = DEVICES.write().remove(&k);
+    set_recording(k, None);
     if d.is_some() {
         crate::bridge::set_device_fdm(handle, None);
     }
@@ -183,4 +186,74 @@ pub unsafe fn remove_device(handle: vk::Device) -> Option<Arc<Device>> {
 /// The raw handle, for log lines.
 pub fn raw(handle: impl vk::Handle) -> u64 {
     handle.as_raw()
+}
+
+/// Render passes with a density-map attachment, by handle. The render-pass translation records
+/// them here; pipeline creation asks [`pass_uses_fdm`].
+static FDM_PASSES: MapLock<std::collections::BTreeSet<u64>> =
+    MapLock::new("vk FDM render passes", std::collections::BTreeSet::new());
+
+/// Records (`true`) or forgets (`false`) that `pass` has a density-map attachment.
+#[allow(
+    dead_code,
+    reason = "the render-pass translation records its passes here"
+)]
+pub fn set_pass_uses_fdm(pass: vk::RenderPass, uses: bool) {
+    let mut set = FDM_PASSES.write();
+    if uses {
+        set.insert(pass.as_raw());
+    } else {
+        set.remove(&pass.as_raw());
+    }
+}
+
+/// Whether `pass` has a density-map attachment (so its pipelines get the shading-rate state).
+pub fn pass_uses_fdm(pass: vk::RenderPass) -> bool {
+    pass != vk::RenderPass::null() && FDM_PASSES.read().contains(&pass.as_raw())
+}
+
+/// What a command-recording hook needs of its device: whether it emulates density maps, and the
+/// next layer's pointers. Copied out of [`RECORDING`] by value, so no `Arc` is counted per command.
+#[derive(Clone, Copy)]
+pub struct Recording {
+    pub emulated: bool,
+    pub next: DeviceNext,
+}
+
+impl Recording {
+    fn of(d: &Device) -> Recording {
+        Recording {
+            emulated: d.fdm.is_some(),
+            next: d.next,
+        }
+    }
+}
+
+/// Devices by key, for the hooks of recorded commands. A leaf lock outside the [`Rank`] order:
+/// held for a scan and a copy only, nothing called under it, so commands recorded under fovea's own
+/// locks (its density-image uploads) may pass through the layer. A short vector: a process has few
+/// devices, and a scan of it is cheaper than a tree walk.
+static RECORDING: parking_lot::RwLock<Vec<(Key, Recording)>> = parking_lot::RwLock::new(Vec::new());
+
+fn set_recording(k: Key, r: Option<Recording>) {
+    let mut v = RECORDING.write();
+    v.retain(|(key, _)| *key != k);
+    if let Some(r) = r {
+        v.push((k, r));
+    }
+}
+
+/// The recording state of a command buffer's device.
+///
+/// # Safety
+/// `cb` must be NULL or a live command buffer made by the loader.
+#[inline]
+pub unsafe fn recording(cb: vk::CommandBuffer) -> Option<Recording> {
+    // SAFETY: as the caller promised.
+    let k = unsafe { key(cb) }?;
+    RECORDING
+        .read()
+        .iter()
+        .find(|(key, _)| *key == k)
+        .map(|(_, r)| *r)
 }

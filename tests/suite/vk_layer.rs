@@ -21,7 +21,7 @@ use fovea_vkdouble::{Loaded, Profile};
 use serde_json::json;
 
 const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
-const FDM: &CStr = c"VK_EXT_fragment_density_map";
+pub(crate) const FDM: &CStr = c"VK_EXT_fragment_density_map";
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
 
 static SERIAL: Mutex<()> = Mutex::new(());
@@ -45,11 +45,11 @@ unsafe extern "system" fn on_message(
     vk::FALSE
 }
 
-fn take_messages() -> Vec<String> {
+pub(crate) fn take_messages() -> Vec<String> {
     std::mem::take(&mut *MESSAGES.lock().unwrap_or_else(|e| e.into_inner()))
 }
 
-fn assert_no_messages() {
+pub(crate) fn assert_no_messages() {
     let m = take_messages();
     assert!(
         m.is_empty(),
@@ -59,13 +59,13 @@ fn assert_no_messages() {
     );
 }
 
-struct Env {
-    entry: ash::Entry,
-    double: Loaded,
+pub(crate) struct Env {
+    pub(crate) entry: ash::Entry,
+    pub(crate) double: Loaded,
 }
 
 /// Both manifests, `VK_ADD_LAYER_PATH`, the loader and the double's loaded copy; once per process.
-fn env() -> Option<(MutexGuard<'static, ()>, &'static Env)> {
+pub(crate) fn env() -> Option<(MutexGuard<'static, ()>, &'static Env)> {
     let guard = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     static ENV: OnceLock<Result<Env, String>> = OnceLock::new();
     let env = ENV.get_or_init(|| {
@@ -113,15 +113,15 @@ fn env() -> Option<(MutexGuard<'static, ()>, &'static Env)> {
 }
 
 /// An instance with the stack above (fovea's layer optional) and lavapipe's physical device.
-struct Vk {
-    instance: ash::Instance,
+pub(crate) struct Vk {
+    pub(crate) instance: ash::Instance,
     debug_utils: ash::ext::debug_utils::Instance,
     messenger: vk::DebugUtilsMessengerEXT,
-    physical: vk::PhysicalDevice,
+    pub(crate) physical: vk::PhysicalDevice,
 }
 
 impl Vk {
-    fn new(env: &Env, profile: Profile, with_fovea: bool) -> Option<Vk> {
+    pub(crate) fn new(env: &Env, profile: Profile, with_fovea: bool) -> Option<Vk> {
         env.double.set_profile(Some(profile));
         env.double.clear();
         take_messages();
@@ -285,7 +285,7 @@ impl Vk {
 
     /// A device with one queue and `exts`, the Vulkan 1.3 features fovea's users enable, and the
     /// given extra feature struct.
-    fn device(
+    pub(crate) fn device(
         &self,
         exts: &[&CStr],
         extra: Option<&mut dyn vk::ExtendsDeviceCreateInfo>,
@@ -323,7 +323,7 @@ impl Drop for Vk {
     }
 }
 
-fn fdm_image_info() -> vk::ImageCreateInfo<'static> {
+pub(crate) fn fdm_image_info() -> vk::ImageCreateInfo<'static> {
     vk::ImageCreateInfo::default()
         .image_type(vk::ImageType::TYPE_2D)
         .format(vk::Format::R8G8_UNORM)

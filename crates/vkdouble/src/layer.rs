@@ -1612,6 +1612,18 @@ unsafe extern "system" fn cmd_pipeline_barrier(
                     b
                 })
                 .collect();
+            event(json!({
+                "kind": "barrier",
+                "command_buffer": cb.as_raw(),
+                "stages": [src.as_raw(), dst.as_raw()],
+                "access": m.iter().map(|b| [b.src_access_mask.as_raw(), b.dst_access_mask.as_raw()])
+                    .chain(slice(images, image_count).iter()
+                        .map(|b| [b.src_access_mask.as_raw(), b.dst_access_mask.as_raw()]))
+                    .collect::<Vec<_>>(),
+                "images": slice(images, image_count).iter()
+                    .map(|b| json!({"image": b.image.as_raw(), "layouts": [b.old_layout.as_raw(), b.new_layout.as_raw()]}))
+                    .collect::<Vec<_>>(),
+            }));
             (d.fns.fp_v1_0().cmd_pipeline_barrier)(
                 cb,
                 fix_stage(src),
@@ -1673,6 +1685,22 @@ unsafe extern "system" fn cmd_pipeline_barrier2(
                     b
                 })
                 .collect();
+            let given = slice(di.p_image_memory_barriers, di.image_memory_barrier_count);
+            event(json!({
+                "kind": "barrier",
+                "command_buffer": cb.as_raw(),
+                "stages": slice(di.p_memory_barriers, di.memory_barrier_count).iter()
+                    .map(|b| [b.src_stage_mask.as_raw(), b.dst_stage_mask.as_raw()])
+                    .chain(given.iter().map(|b| [b.src_stage_mask.as_raw(), b.dst_stage_mask.as_raw()]))
+                    .collect::<Vec<_>>(),
+                "access": slice(di.p_memory_barriers, di.memory_barrier_count).iter()
+                    .map(|b| [b.src_access_mask.as_raw(), b.dst_access_mask.as_raw()])
+                    .chain(given.iter().map(|b| [b.src_access_mask.as_raw(), b.dst_access_mask.as_raw()]))
+                    .collect::<Vec<_>>(),
+                "images": given.iter()
+                    .map(|b| json!({"image": b.image.as_raw(), "layouts": [b.old_layout.as_raw(), b.new_layout.as_raw()]}))
+                    .collect::<Vec<_>>(),
+            }));
             let mut copy = *di;
             copy.p_memory_barriers = m.as_ptr();
             copy.p_buffer_memory_barriers = bu.as_ptr();

@@ -32,7 +32,9 @@
 //! {fragment_size, combiner_ops}, rendering_attachment_flag, dynamic_rate};
 //! `begin_render_pass` {command_buffer, render_pass, framebuffer, shading_rate_views};
 //! `begin_rendering` {command_buffer, shading_rate: null | {view, layout, texel}};
-//! `set_fragment_shading_rate` {command_buffer, fragment_size, combiner_ops}; `submit`
+//! `set_fragment_shading_rate` {command_buffer, fragment_size, combiner_ops}; `barrier`
+//! {command_buffer, stages, access, images[{image, layouts}]} as given, raw values (version 1: the
+//! two stage masks; version 2: per memory and image barrier); `submit`
 //! {command_buffers, shading_rate_images[{image, extent, layers, codes}]}, the codes read back
 //! after the submit completed. With the `none` profile nothing but `instance` is recorded.
 
