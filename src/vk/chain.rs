@@ -60,8 +60,8 @@ pub unsafe fn find_out<T>(next: *mut c_void, ty: vk::StructureType) -> Option<*m
         .map(|p| p as *mut T)
 }
 
-/// Byte sizes of the structs that may precede one the layer removes from a `VkDeviceCreateInfo`
-/// chain. A struct not listed cannot be copied; see [`ChainCopy::without`].
+/// Byte sizes of the structs that may precede one the layer removes from a chain (device create
+/// infos; render pass, framebuffer and rendering infos). A struct not listed cannot be copied; see [`ChainCopy::without`].
 fn known_size(ty: vk::StructureType) -> Option<usize> {
     macro_rules! sizes {
         ($($t:ident),* $(,)?) => {
@@ -154,6 +154,24 @@ fn known_size(ty: vk::StructureType) -> Option<usize> {
         PhysicalDeviceFragmentDensityMap2FeaturesEXT,
         PhysicalDeviceFragmentShadingRateFeaturesKHR,
         PhysicalDeviceShadingRateImageFeaturesNV,
+        // Render pass, framebuffer and rendering chains (src/vk/pass.rs).
+        RenderPassMultiviewCreateInfo,
+        RenderPassInputAttachmentAspectCreateInfo,
+        RenderPassFragmentDensityMapCreateInfoEXT,
+        RenderPassCreationControlEXT,
+        RenderPassCreationFeedbackCreateInfoEXT,
+        RenderPassSampleLocationsBeginInfoEXT,
+        RenderPassAttachmentBeginInfo,
+        RenderPassTransformBeginInfoQCOM,
+        DeviceGroupRenderPassBeginInfo,
+        FramebufferAttachmentsCreateInfo,
+        MultisampledRenderToSingleSampledInfoEXT,
+        MultiviewPerViewAttributesInfoNVX,
+        MultiviewPerViewRenderAreasRenderPassBeginInfoQCOM,
+        RenderingFragmentDensityMapAttachmentInfoEXT,
+        RenderingFragmentShadingRateAttachmentInfoKHR,
+        RenderingAttachmentLocationInfoKHR,
+        RenderingInputAttachmentIndexInfoKHR,
     ];
     if ty == vk::StructureType::LOADER_DEVICE_CREATE_INFO {
         return Some(size_of::<link::LayerDeviceCreateInfo>());

@@ -13,7 +13,7 @@ use std::ffi::CStr;
 
 use ash::vk;
 
-use crate::vk::{device, loader, physical};
+use crate::vk::{device, image, loader, pass, physical};
 
 /// When a device command's hook is handed out by `vkGetDeviceProcAddr`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -153,6 +153,32 @@ hooks! {
     device {
         c"vkDestroyDevice" => destroy_device: PFN_vkDestroyDevice = device::destroy_device, When::Always;
         c"vkCreateImage" => create_image: PFN_vkCreateImage = device::create_image, When::Emulated;
+        // The attachment path: shadows, render passes, framebuffers, dynamic rendering.
+        c"vkDestroyImage" => destroy_image: PFN_vkDestroyImage = image::destroy_image, When::Emulated;
+        c"vkCreateImageView" => create_image_view: PFN_vkCreateImageView =
+            image::create_image_view, When::Emulated;
+        c"vkDestroyImageView" => destroy_image_view: PFN_vkDestroyImageView =
+            image::destroy_image_view, When::Emulated;
+        c"vkCreateRenderPass" => create_render_pass: PFN_vkCreateRenderPass =
+            pass::create_render_pass, When::Emulated;
+        c"vkCreateRenderPass2" => create_render_pass2: PFN_vkCreateRenderPass2 =
+            pass::create_render_pass2, When::Emulated;
+        c"vkCreateRenderPass2KHR" => create_render_pass2_khr: PFN_vkCreateRenderPass2 =
+            pass::create_render_pass2_khr, When::Emulated;
+        c"vkDestroyRenderPass" => destroy_render_pass: PFN_vkDestroyRenderPass =
+            pass::destroy_render_pass, When::Emulated;
+        c"vkCreateFramebuffer" => create_framebuffer: PFN_vkCreateFramebuffer =
+            pass::create_framebuffer, When::Emulated;
+        c"vkCmdBeginRenderPass" => cmd_begin_render_pass: PFN_vkCmdBeginRenderPass =
+            pass::cmd_begin_render_pass, When::Emulated;
+        c"vkCmdBeginRenderPass2" => cmd_begin_render_pass2: PFN_vkCmdBeginRenderPass2 =
+            pass::cmd_begin_render_pass2, When::Emulated;
+        c"vkCmdBeginRenderPass2KHR" => cmd_begin_render_pass2_khr: PFN_vkCmdBeginRenderPass2 =
+            pass::cmd_begin_render_pass2_khr, When::Emulated;
+        c"vkCmdBeginRendering" => cmd_begin_rendering: PFN_vkCmdBeginRendering =
+            pass::cmd_begin_rendering, When::Emulated;
+        c"vkCmdBeginRenderingKHR" => cmd_begin_rendering_khr: PFN_vkCmdBeginRendering =
+            pass::cmd_begin_rendering_khr, When::Emulated;
     }
 }
 

@@ -12,6 +12,8 @@
 //! - [`physical`]: the per-physical-device decision and what the application sees of a device;
 //! - [`device`]: device creation (density maps stripped, shading-rate attachments enabled) and the
 //!   device commands;
+//! - [`image`]: the layer-owned shading-rate shadows of density-map images and views;
+//! - [`pass`]: render passes, framebuffers and dynamic rendering, rewritten to name the shadows;
 //! - [`chain`], [`link`]: `pNext` chains and the loader's link structs.
 //!
 //! Per physical device: native density maps → everything passes through untouched;
@@ -24,7 +26,9 @@
 mod chain;
 mod device;
 mod dispatch;
+mod image;
 mod link;
 mod loader;
+mod pass;
 mod physical;
 mod registry;
