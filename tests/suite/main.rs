@@ -24,3 +24,4 @@ mod symmetric_fov;
 mod threads;
 mod tidy;
 mod vk_layer;
+mod vk_passes;

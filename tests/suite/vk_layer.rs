@@ -21,7 +21,7 @@ use fovea_vkdouble::{Loaded, Profile};
 use serde_json::json;
 
 const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
-const FDM: &CStr = c"VK_EXT_fragment_density_map";
+pub(crate) const FDM: &CStr = c"VK_EXT_fragment_density_map";
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
 
 static SERIAL: Mutex<()> = Mutex::new(());
@@ -45,11 +45,11 @@ unsafe extern "system" fn on_message(
     vk::FALSE
 }
 
-fn take_messages() -> Vec<String> {
+pub(crate) fn take_messages() -> Vec<String> {
     std::mem::take(&mut *MESSAGES.lock().unwrap_or_else(|e| e.into_inner()))
 }
 
-fn assert_no_messages() {
+pub(crate) fn assert_no_messages() {
     let m = take_messages();
     assert!(
         m.is_empty(),
@@ -59,13 +59,13 @@ fn assert_no_messages() {
     );
 }
 
-struct Env {
+pub(crate) struct Env {
     entry: ash::Entry,
-    double: Loaded,
+    pub(crate) double: Loaded,
 }
 
 /// Both manifests, `VK_ADD_LAYER_PATH`, the loader and the double's loaded copy; once per process.
-fn env() -> Option<(MutexGuard<'static, ()>, &'static Env)> {
+pub(crate) fn env() -> Option<(MutexGuard<'static, ()>, &'static Env)> {
     let guard = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     static ENV: OnceLock<Result<Env, String>> = OnceLock::new();
     let env = ENV.get_or_init(|| {
@@ -113,15 +113,15 @@ fn env() -> Option<(MutexGuard<'static, ()>, &'static Env)> {
 }
 
 /// An instance with the stack above (fovea's layer optional) and lavapipe's physical device.
-struct Vk {
-    instance: ash::Instance,
+pub(crate) struct Vk {
+    pub(crate) instance: ash::Instance,
     debug_utils: ash::ext::debug_utils::Instance,
     messenger: vk::DebugUtilsMessengerEXT,
-    physical: vk::PhysicalDevice,
+    pub(crate) physical: vk::PhysicalDevice,
 }
 
 impl Vk {
-    fn new(env: &Env, profile: Profile, with_fovea: bool) -> Option<Vk> {
+    pub(crate) fn new(env: &Env, profile: Profile, with_fovea: bool) -> Option<Vk> {
         env.double.set_profile(Some(profile));
         env.double.clear();
         take_messages();
@@ -221,7 +221,9 @@ impl Vk {
         ]
     }
 
-    fn fdm_properties(&self) -> vk::PhysicalDeviceFragmentDensityMapPropertiesEXT<'static> {
+    pub(crate) fn fdm_properties(
+        &self,
+    ) -> vk::PhysicalDeviceFragmentDensityMapPropertiesEXT<'static> {
         let mut fdm = vk::PhysicalDeviceFragmentDensityMapPropertiesEXT::default();
         let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut fdm);
         // SAFETY: structs live across the call.
