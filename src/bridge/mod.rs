@@ -188,7 +188,7 @@ pub fn device_fdm(device: ash::vk::Device) -> Option<FdmEmulation> {
 }
 
 /// A layer-owned shading-rate image that stands in for an application's density-map image on an
-/// emulating device (see docs/vulkan-fdm-on-fsr.md#mapping). Render passes, framebuffers and
+/// emulating device (see docs/vulkan-fdm-on-fsr.md#shadows). Render passes, framebuffers and
 /// dynamic rendering read the shadow, never the application's image; whoever converts density into
 /// rates writes it.
 ///

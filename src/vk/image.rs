@@ -4,7 +4,7 @@
 //! A density map is `R8G8_UNORM` with the `FRAGMENT_DENSITY_MAP` usage; a shading-rate attachment
 //! is an integer image (`R8_UINT`) with the `FRAGMENT_SHADING_RATE_ATTACHMENT` usage
 //! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkFragmentShadingRateAttachmentInfoKHR.html>,
-//! docs/vulkan-fdm-on-fsr.md#mapping). The application keeps its own image, which the driver gets
+//! docs/vulkan-fdm-on-fsr.md#mapping, #shadows). The application keeps its own image, which the driver gets
 //! without the density usage ([`crate::vk::device::create_image`]); beside it the layer makes a
 //! shadow of the same extent, 2D, one sample, optimal tiling, in device-local memory it owns, and
 //! destroys it with the image. Render passes, framebuffers and dynamic rendering name the shadow
