@@ -187,45 +187,56 @@ pub fn device_fdm(device: ash::vk::Device) -> Option<FdmEmulation> {
     DEVICE_FDM.read().get(&device.as_raw()).cloned()
 }
 
-/// The layer-owned shading-rate twin (`R8_UINT`, usage FRAGMENT_SHADING_RATE_ATTACHMENT) of one
-/// density image on an emulating device (docs/vulkan-fdm-on-fsr.md#mapping).
+/// A layer-owned shading-rate image that stands in for an application's density-map image on an
+/// emulating device (see docs/vulkan-fdm-on-fsr.md#shadows). Render passes, framebuffers and
+/// dynamic rendering read the shadow, never the application's image; whoever converts density into
+/// rates writes it.
+///
+/// Format `R8_UINT` (one rate code per texel, width `2^((v >> 2) & 3)`, height `2^(v & 3)`, see
+/// docs/vulkan-fdm-on-fsr.md#rate-encoding), usage shading-rate attachment and transfer
+/// destination, one mip level, optimal tiling, device-local memory. Made with rate code 0 (1×1,
+/// full rate) everywhere, and kept in `VK_IMAGE_LAYOUT_FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR`
+/// between uses: a writer transitions it from and back to that layout, since every rewritten pass
+/// names that layout as its initial and final one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Shadow {
-    /// The shadow image.
+    /// The device both images belong to.
+    pub device: ash::vk::Device,
     pub image: ash::vk::Image,
-    /// Its extent in texels: the density image's.
-    pub extent: [u32; 2],
-    /// Its array layers: the density image's where the device has layered shading-rate
-    /// attachments, else 1 (both views merged, the finer rate of the two).
+    /// Array layers: the application image's where the device has
+    /// `layeredShadingRateAttachments`; otherwise 1, and that one layer must hold, per texel, the
+    /// finer rate of all the application image's layers (both eyes share it; see
+    /// docs/vulkan-fdm-on-fsr.md#multiview).
     pub layers: u32,
+    /// The application image's array layers (more than `layers` where the layers are merged).
+    pub app_layers: u32,
+    /// Width and height in texels, the application image's.
+    pub extent: [u32; 2],
 }
 
-/// Shadows by density image handle. A leaf lock, not one of [`crate::common::lock::Rank`]'s: it is
-/// taken for a look-up and a copy only, nothing is called while it is held, so it may be taken under
-/// any other lock (fovea's own uploads record their barriers under their fill and submit locks,
-/// and those barriers pass through the Vulkan layer, which asks here).
+/// Shadows by the application's `VkImage` handle. A leaf lock, not one of
+/// [`crate::common::lock::Rank`]'s: it is taken for a look-up and a copy only, nothing is called while
+/// it is held, so it may be taken under any other lock (fovea's own uploads record their barriers
+/// under their fill and submit locks, and those barriers pass through the Vulkan layer, which asks
+/// here).
 static SHADOWS: parking_lot::RwLock<std::collections::BTreeMap<u64, Shadow>> =
     parking_lot::RwLock::new(std::collections::BTreeMap::new());
 
-/// Records (or, with `None`, forgets) the shadow of density image `image`; the Vulkan side calls it
-/// where it creates and destroys shadows.
-#[allow(
-    dead_code,
-    reason = "the Vulkan side's shadow images record themselves here"
-)]
-pub fn set_shadow(image: ash::vk::Image, shadow: Option<Shadow>) {
+/// Records (or, with `None`, forgets) the shadow of the application's density-map image `app`.
+pub fn set_shadow(app: ash::vk::Image, shadow: Option<Shadow>) {
     use ash::vk::Handle as _;
     let mut map = SHADOWS.write();
     match shadow {
-        Some(s) => map.insert(image.as_raw(), s),
-        None => map.remove(&image.as_raw()),
+        Some(s) => map.insert(app.as_raw(), s),
+        None => map.remove(&app.as_raw()),
     };
 }
 
-/// The shadow of density image `image`, where the Vulkan side made one.
-pub fn shadow_of(image: ash::vk::Image) -> Option<Shadow> {
+/// The shadow of the application's density-map image `app`; `None` where it has none (not a
+/// density map, not on an emulating device, or the shadow could not be made).
+pub fn shadow_of(app: ash::vk::Image) -> Option<Shadow> {
     use ash::vk::Handle as _;
-    SHADOWS.read().get(&image.as_raw()).copied()
+    SHADOWS.read().get(&app.as_raw()).copied()
 }
 
 #[cfg(test)]

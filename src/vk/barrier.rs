@@ -722,9 +722,11 @@ mod tests {
     fn an_image_moved_into_the_density_layout_orders_its_shadow_too() {
         let image = vk::Image::from_raw(7);
         let shadow = Shadow {
+            device: vk::Device::from_raw(3),
             image: vk::Image::from_raw(9),
             extent: [4, 4],
             layers: 1,
+            app_layers: 2,
         };
         let lookup = |i: vk::Image| (i == image).then_some(shadow);
         let b = vk::ImageMemoryBarrier::default()

@@ -60,8 +60,9 @@ pub unsafe fn find_out<T>(next: *mut c_void, ty: vk::StructureType) -> Option<*m
         .map(|p| p as *mut T)
 }
 
-/// Byte sizes of the structs that may precede one the layer removes from a `VkDeviceCreateInfo`
-/// or a `VkGraphicsPipelineCreateInfo` chain. A struct not listed cannot be copied; see [`ChainCopy::without`].
+/// Byte sizes of the structs that may precede one the layer removes from a chain (device create
+/// infos; graphics pipeline infos; render pass, framebuffer and rendering infos). A struct not
+/// listed cannot be copied; see [`ChainCopy::without`].
 fn known_size(ty: vk::StructureType) -> Option<usize> {
     macro_rules! sizes {
         ($($t:ident),* $(,)?) => {
@@ -166,6 +167,21 @@ fn known_size(ty: vk::StructureType) -> Option<usize> {
         PipelineCompilerControlCreateInfoAMD,
         AttachmentSampleCountInfoAMD,
         MultiviewPerViewAttributesInfoNVX,
+        // Render pass, framebuffer and rendering chains (src/vk/pass.rs).
+        RenderPassMultiviewCreateInfo,
+        RenderPassInputAttachmentAspectCreateInfo,
+        RenderPassFragmentDensityMapCreateInfoEXT,
+        RenderPassCreationControlEXT,
+        RenderPassCreationFeedbackCreateInfoEXT,
+        RenderPassSampleLocationsBeginInfoEXT,
+        RenderPassAttachmentBeginInfo,
+        RenderPassTransformBeginInfoQCOM,
+        DeviceGroupRenderPassBeginInfo,
+        FramebufferAttachmentsCreateInfo,
+        MultisampledRenderToSingleSampledInfoEXT,
+        MultiviewPerViewRenderAreasRenderPassBeginInfoQCOM,
+        RenderingFragmentDensityMapAttachmentInfoEXT,
+        RenderingFragmentShadingRateAttachmentInfoKHR,
         RenderingAttachmentLocationInfoKHR,
         RenderingInputAttachmentIndexInfoKHR,
     ];

@@ -16,6 +16,7 @@ use ash::vk;
 use crate::bridge::FdmEmulation;
 use crate::vk::chain::{self, ChainCopy};
 use crate::vk::dispatch::DeviceNext;
+use crate::vk::image;
 use crate::vk::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
 use crate::vk::loader::{guard, name};
 use crate::vk::physical::{self, needs_translation, translate_image};
@@ -273,17 +274,28 @@ unsafe fn create_device_impl(
     unsafe {
         let handle = *out;
         let next = DeviceNext::load(gdpa, handle);
+        let mut own = None;
         if fdm.is_some() {
             tracing::info!(
                 device = raw(handle),
                 "device emulates fragment density maps"
             );
+            match image::Own::new(&inst, physical, ci, handle, gdpa) {
+                Ok(o) => own = Some(o),
+                Err(why) => tracing::warn!(
+                    device = raw(handle),
+                    why = why.as_str(),
+                    "density maps on this device get no shading-rate shadows: they render at \
+                     full rate"
+                ),
+            }
         }
         registry::add_device(registry::Device {
             handle,
             gdpa,
             next,
             fdm,
+            attachments: registry::Attachments::new(own),
         });
     }
     r
@@ -302,6 +314,8 @@ pub unsafe extern "system" fn destroy_device(
         let Some(dev) = (unsafe { registry::remove_device(device) }) else {
             return;
         };
+        // SAFETY: the device is live; the application has finished with it.
+        unsafe { image::destroy_all(&dev) };
         if let Some(destroy) = dev.next.destroy_device {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { destroy(device, alloc) };
@@ -310,7 +324,8 @@ pub unsafe extern "system" fn destroy_device(
 }
 
 /// `vkCreateImage` on an emulating device: a density map reaches the driver without the
-/// density-map usage and subsampled flag it does not know (on a copy of the create info).
+/// density-map usage and subsampled flag it does not know (on a copy of the create info), and
+/// gets a shading-rate shadow ([`image::image_created`]).
 ///
 /// # Safety
 /// The caller's arguments, valid as the command requires.
@@ -362,7 +377,18 @@ pub unsafe extern "system" fn create_image(
                 }
             }
             // SAFETY: the translated copy lives across the call.
-            unsafe { next(device, &copy, alloc, out) }
+            let r = unsafe { next(device, &copy, alloc, out) };
+            // SAFETY: the caller's create info, read only.
+            let app = unsafe { &*info };
+            if r == vk::Result::SUCCESS
+                && app
+                    .usage
+                    .contains(vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT)
+            {
+                // SAFETY: the image was just created from `app`.
+                unsafe { image::image_created(&dev, *out, app) };
+            }
+            r
         },
     )
 }

@@ -13,7 +13,7 @@ use std::ffi::CStr;
 
 use ash::vk;
 
-use crate::vk::{barrier, device, loader, physical, pipeline};
+use crate::vk::{barrier, device, image, loader, pass, physical, pipeline};
 
 /// When a device command's hook is handed out by `vkGetDeviceProcAddr`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -159,8 +159,6 @@ hooks! {
             pipeline::create_shader_module, When::Emulated;
         c"vkCreateSampler" => create_sampler: PFN_vkCreateSampler = pipeline::create_sampler,
             When::Emulated;
-        c"vkCreateImageView" => create_image_view: PFN_vkCreateImageView =
-            pipeline::create_image_view, When::Emulated;
         c"vkCmdPipelineBarrier" => cmd_pipeline_barrier: PFN_vkCmdPipelineBarrier =
             barrier::cmd_pipeline_barrier, When::Emulated;
         c"vkCmdPipelineBarrier2" => cmd_pipeline_barrier2: PFN_vkCmdPipelineBarrier2 =
@@ -173,6 +171,32 @@ hooks! {
             When::Emulated;
         c"vkCmdWaitEvents2KHR" => cmd_wait_events2_khr: PFN_vkCmdWaitEvents2 =
             barrier::cmd_wait_events2_khr, When::Emulated;
+        // The attachment path: shadows, render passes, framebuffers, dynamic rendering.
+        c"vkDestroyImage" => destroy_image: PFN_vkDestroyImage = image::destroy_image, When::Emulated;
+        c"vkCreateImageView" => create_image_view: PFN_vkCreateImageView =
+            image::create_image_view, When::Emulated;
+        c"vkDestroyImageView" => destroy_image_view: PFN_vkDestroyImageView =
+            image::destroy_image_view, When::Emulated;
+        c"vkCreateRenderPass" => create_render_pass: PFN_vkCreateRenderPass =
+            pass::create_render_pass, When::Emulated;
+        c"vkCreateRenderPass2" => create_render_pass2: PFN_vkCreateRenderPass2 =
+            pass::create_render_pass2, When::Emulated;
+        c"vkCreateRenderPass2KHR" => create_render_pass2_khr: PFN_vkCreateRenderPass2 =
+            pass::create_render_pass2_khr, When::Emulated;
+        c"vkDestroyRenderPass" => destroy_render_pass: PFN_vkDestroyRenderPass =
+            pass::destroy_render_pass, When::Emulated;
+        c"vkCreateFramebuffer" => create_framebuffer: PFN_vkCreateFramebuffer =
+            pass::create_framebuffer, When::Emulated;
+        c"vkCmdBeginRenderPass" => cmd_begin_render_pass: PFN_vkCmdBeginRenderPass =
+            pass::cmd_begin_render_pass, When::Emulated;
+        c"vkCmdBeginRenderPass2" => cmd_begin_render_pass2: PFN_vkCmdBeginRenderPass2 =
+            pass::cmd_begin_render_pass2, When::Emulated;
+        c"vkCmdBeginRenderPass2KHR" => cmd_begin_render_pass2_khr: PFN_vkCmdBeginRenderPass2 =
+            pass::cmd_begin_render_pass2_khr, When::Emulated;
+        c"vkCmdBeginRendering" => cmd_begin_rendering: PFN_vkCmdBeginRendering =
+            pass::cmd_begin_rendering, When::Emulated;
+        c"vkCmdBeginRenderingKHR" => cmd_begin_rendering_khr: PFN_vkCmdBeginRendering =
+            pass::cmd_begin_rendering_khr, When::Emulated;
     }
 }
 

@@ -15,6 +15,8 @@
 //! - [`pipeline`]: graphics pipelines get the shading-rate state, shader modules that read the
 //!   fragment size are detected, subsampled sampler and dynamic view flags are left out;
 //! - [`barrier`]: barriers and event waits without the density-map layout, stage and access bits;
+//! - [`image`]: the layer-owned shading-rate shadows of density-map images and views;
+//! - [`pass`]: render passes, framebuffers and dynamic rendering, rewritten to name the shadows;
 //! - [`chain`], [`link`]: `pNext` chains and the loader's link structs.
 //!
 //! Per physical device: native density maps → everything passes through untouched;
@@ -28,8 +30,10 @@ mod barrier;
 mod chain;
 mod device;
 mod dispatch;
+mod image;
 mod link;
 mod loader;
+mod pass;
 mod physical;
 mod pipeline;
 mod registry;

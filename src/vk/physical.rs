@@ -501,8 +501,10 @@ pub unsafe extern "system" fn get_format_properties2_khr(
 }
 
 /// How an image's usage and flags reach the driver on an emulated device: without the
-/// density-map usage (the driver does not know it; SAMPLED stands in where nothing else would be
-/// left, since usage may not be empty and the layer reads density maps by sampling) and without
+/// density-map usage (the driver does not know it; SAMPLED stands in, since usage may not be
+/// empty, the application's views of the image need a usage that admits views
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkImageViewCreateInfo.html>,
+/// VUID-VkImageViewCreateInfo-image-04441), and the layer reads density maps by sampling) and without
 /// `SUBSAMPLED` (emulated passes are never subsampled). `None` where the image is not a density map
 /// the layer accepts: not R8G8_UNORM, optimal, 2D.
 pub fn translate_image(
@@ -521,8 +523,8 @@ pub fn translate_image(
         return None;
     }
     let mut usage = usage & !vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT;
-    if usage.is_empty() {
-        usage = vk::ImageUsageFlags::SAMPLED;
+    if fdm || usage.is_empty() {
+        usage |= vk::ImageUsageFlags::SAMPLED;
     }
     Some((usage, flags & !vk::ImageCreateFlags::SUBSAMPLED_EXT))
 }
@@ -677,7 +679,7 @@ mod tests {
                 U::FRAGMENT_DENSITY_MAP_EXT | U::TRANSFER_DST,
                 F::empty()
             ),
-            Some((U::TRANSFER_DST, F::empty()))
+            Some((U::TRANSFER_DST | U::SAMPLED, F::empty()))
         );
         assert_eq!(
             translate_image(

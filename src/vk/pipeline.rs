@@ -414,46 +414,6 @@ pub fn view_flags(flags: vk::ImageViewCreateFlags) -> Option<vk::ImageViewCreate
     Some(flags & !VIEW_FLAGS)
 }
 
-/// `vkCreateImageView` on an emulating device: [`view_flags`] on a copy.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_image_view(
-    device: vk::Device,
-    info: *const vk::ImageViewCreateInfo<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::ImageView,
-) -> vk::Result {
-    guard(
-        "vkCreateImageView",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let Some(dev) = (unsafe { registry::device(device) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = dev.next.create_image_view else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            if dev.fdm.is_none() || info.is_null() {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(device, info, alloc, out) };
-            }
-            // SAFETY: the caller's create info, read only.
-            let Some(flags) = view_flags(unsafe { (*info).flags }) else {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(device, info, alloc, out) };
-            };
-            // SAFETY: a copy of the caller's create info, alive across the call.
-            unsafe {
-                let mut copy = *info;
-                copy.flags = flags;
-                next(device, &copy, alloc, out)
-            }
-        },
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

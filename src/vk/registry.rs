@@ -6,7 +6,7 @@
 //! (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
 //! "Dispatchable Object Creation"). That word is the key.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
 use ash::vk;
@@ -108,6 +108,61 @@ pub struct Device {
     pub next: DeviceNext,
     /// `Some` where the device emulates fragment density maps.
     pub fdm: Option<FdmEmulation>,
+    /// The attachment path's state: shadows and rewritten passes (empty where not emulating).
+    pub attachments: Attachments,
+}
+
+/// A layer-owned shading-rate image standing in for an application's density-map image
+/// ([`crate::vk::image`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ShadowImage {
+    pub image: vk::Image,
+    pub memory: vk::DeviceMemory,
+    pub extent: vk::Extent2D,
+    /// The shadow's array layers: the application image's, or 1 where the device lacks
+    /// `layeredShadingRateAttachments` (one merged layer).
+    pub layers: u32,
+    /// The application image's array layers.
+    pub app_layers: u32,
+}
+
+/// A layer-owned view of a shadow, standing in for a view of a density-map image.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadowView {
+    pub view: vk::ImageView,
+}
+
+/// Per device: application handles → the layer's shadows, and the render passes the layer
+/// rewrote (by handle → the index of the density attachment, now a shading-rate attachment).
+pub struct Attachments {
+    /// The layer's own device-level calls (creating, clearing and destroying shadows); `None`
+    /// where the device does not emulate, or the layer could not set them up (no shadows then).
+    pub own: Option<crate::vk::image::Own>,
+    pub images: Mutex<HashMap<u64, ShadowImage>>,
+    pub views: Mutex<HashMap<u64, ShadowView>>,
+    pub passes: Mutex<HashMap<u64, u32>>,
+}
+
+impl Attachments {
+    /// No shadows yet.
+    pub fn new(own: Option<crate::vk::image::Own>) -> Attachments {
+        Attachments {
+            own,
+            images: Mutex::ranked(Rank::Record, "vk shadow images", HashMap::new()),
+            views: Mutex::ranked(Rank::Record, "vk shadow views", HashMap::new()),
+            passes: Mutex::ranked(Rank::Record, "vk rewritten passes", HashMap::new()),
+        }
+    }
+
+    /// The shadow view standing in for an application view.
+    pub fn shadow_view(&self, view: vk::ImageView) -> Option<vk::ImageView> {
+        self.views.lock().get(&view.as_raw()).map(|s| s.view)
+    }
+
+    /// The density attachment of a render pass the layer rewrote.
+    pub fn density_attachment(&self, pass: vk::RenderPass) -> Option<u32> {
+        self.passes.lock().get(&pass.as_raw()).copied()
+    }
 }
 
 static INSTANCES: MapLock<BTreeMap<Key, Arc<Instance>>> =

@@ -24,4 +24,5 @@ mod symmetric_fov;
 mod threads;
 mod tidy;
 mod vk_layer;
+mod vk_passes;
 mod vk_pipelines;

@@ -221,7 +221,9 @@ impl Vk {
         ]
     }
 
-    fn fdm_properties(&self) -> vk::PhysicalDeviceFragmentDensityMapPropertiesEXT<'static> {
+    pub(crate) fn fdm_properties(
+        &self,
+    ) -> vk::PhysicalDeviceFragmentDensityMapPropertiesEXT<'static> {
         let mut fdm = vk::PhysicalDeviceFragmentDensityMapPropertiesEXT::default();
         let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut fdm);
         // SAFETY: structs live across the call.

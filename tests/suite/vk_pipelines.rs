@@ -545,7 +545,13 @@ fn barriers_lose_the_density_map_bits() {
             .expect("submit");
             d.queue_wait_idle(queue).expect("wait");
 
-            let barriers = env.double.events("barrier");
+            // The app's own command buffer: the layer's one-time shadow clear records barriers too.
+            let barriers: Vec<_> = env
+                .double
+                .events("barrier")
+                .into_iter()
+                .filter(|e| e["command_buffer"] == json!(cb.as_raw()))
+                .collect();
             let general = vk::ImageLayout::GENERAL.as_raw();
             let fsr_stage = vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR.as_raw();
             let fsr_read = vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR.as_raw();
@@ -554,13 +560,22 @@ fn barriers_lose_the_density_map_bits() {
                 barriers[1]["stages"],
                 json!([vk::PipelineStageFlags::TRANSFER.as_raw(), fsr_stage])
             );
+            // The app's image stays GENERAL; a second barrier orders its shading-rate shadow, which
+            // stays in the shading-rate layout on both sides.
+            let read_after_write = json!([vk::AccessFlags::TRANSFER_WRITE.as_raw(), fsr_read]);
             assert_eq!(
                 barriers[1]["access"],
-                json!([[vk::AccessFlags::TRANSFER_WRITE.as_raw(), fsr_read]])
+                json!([read_after_write.clone(), read_after_write])
             );
             assert_eq!(
-                barriers[1]["images"],
-                json!([{"image": image.as_raw(), "layouts": [vk::ImageLayout::TRANSFER_DST_OPTIMAL.as_raw(), general]}])
+                barriers[1]["images"][0],
+                json!({"image": image.as_raw(), "layouts": [vk::ImageLayout::TRANSFER_DST_OPTIMAL.as_raw(), general]})
+            );
+            let fsr_layout = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR.as_raw();
+            assert_ne!(barriers[1]["images"][1]["image"], json!(image.as_raw()));
+            assert_eq!(
+                barriers[1]["images"][1]["layouts"],
+                json!([fsr_layout, fsr_layout])
             );
             let fsr_stage2 = vk::PipelineStageFlags2::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR.as_raw();
             assert_eq!(barriers[2]["stages"][0][0], fsr_stage2);

@@ -1,0 +1,718 @@
+//! Shadows: the layer-owned shading-rate images and views that stand in for an application's
+//! density-map images and views on an emulating device.
+//!
+//! A density map is `R8G8_UNORM` with the `FRAGMENT_DENSITY_MAP` usage; a shading-rate attachment
+//! is an integer image (`R8_UINT`) with the `FRAGMENT_SHADING_RATE_ATTACHMENT` usage
+//! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkFragmentShadingRateAttachmentInfoKHR.html>,
+//! docs/vulkan-fdm-on-fsr.md#mapping, #shadows). The application keeps its own image, which the driver gets
+//! without the density usage ([`crate::vk::device::create_image`]); beside it the layer makes a
+//! shadow of the same extent, 2D, one sample, optimal tiling, in device-local memory it owns, and
+//! destroys it with the image. Render passes, framebuffers and dynamic rendering name the shadow
+//! ([`crate::vk::pass`]); the bridge ([`crate::bridge::shadow_of`]) tells fovea's own density
+//! images where to upload their rates.
+//!
+//! Layers: one per application layer where the driver has `layeredShadingRateAttachments`;
+//! otherwise one, which both eyes share, so whoever fills it writes per texel the finer rate of all
+//! the application's layers (docs/vulkan-fdm-on-fsr.md#multiview).
+//!
+//! Content: rate code 0 (1×1, full rate) at creation, cleared once with a layer-owned command
+//! buffer on a graphics queue the application created (index 0 of the first graphics family it
+//! asked for), waited for with a fence, so a density map nobody converts renders correctly, at full
+//! rate. The shadow then lives in `FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR`. The layer takes
+//! that queue for the clear only; Vulkan makes queue use externally synchronised
+//! (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkQueueSubmit.html>), so an
+//! application that creates density maps on one thread while it submits to that queue on another
+//! races with the layer: density maps are created at start-up in practice, and this is the
+//! documented limit. Command buffers the layer allocates get the loader's dispatch pointer through
+//! `vkSetDeviceLoaderData`
+//! (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
+//! "Creating New Dispatchable Objects").
+//!
+//! Fail open: where a shadow cannot be made, the image (or view) is the application's alone, the
+//! passes that would have used it run at full rate, and one log line says so.
+
+use std::ffi::c_void;
+
+use ash::vk;
+use ash::vk::Handle as _;
+
+use crate::bridge::{self, FdmEmulation, Shadow};
+use crate::common::lock::{Mutex, Rank};
+use crate::vk::chain;
+use crate::vk::link::LayerDeviceCreateInfo;
+use crate::vk::loader::guard;
+use crate::vk::pipeline;
+use crate::vk::registry::{self, raw, Device, Instance, ShadowImage, ShadowView};
+
+/// `PFN_vkSetDeviceLoaderData`.
+type SetDeviceLoaderData = unsafe extern "system" fn(vk::Device, *mut c_void) -> vk::Result;
+
+/// `VK_LOADER_DATA_CALLBACK`: the `VkLayerDeviceCreateInfo` that carries `pfnSetDeviceLoaderData`.
+const LOADER_DATA_CALLBACK: u32 = 1;
+
+/// The usage every shadow has.
+pub const SHADOW_USAGE: vk::ImageUsageFlags = vk::ImageUsageFlags::from_raw(
+    vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR.as_raw()
+        | vk::ImageUsageFlags::TRANSFER_DST.as_raw(),
+);
+/// The format every shadow has.
+pub const SHADOW_FORMAT: vk::Format = vk::Format::R8_UINT;
+/// The layout a shadow lives in between uses.
+pub const SHADOW_LAYOUT: vk::ImageLayout =
+    vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
+
+/// What the layer needs to make, clear and destroy shadows on one device.
+pub struct Own {
+    /// The next layer's device commands.
+    pub fns: ash::Device,
+    memory: vk::PhysicalDeviceMemoryProperties,
+    family: u32,
+    queue: vk::Queue,
+    set_loader_data: SetDeviceLoaderData,
+    /// Serialises the layer's own use of `queue`.
+    submit: Mutex<()>,
+}
+
+impl Own {
+    /// Sets up the layer's own calls on a device just created.
+    ///
+    /// # Safety
+    /// `ci` must be the application's valid create info of `device`, made on `physical` of `inst`;
+    /// `gdpa` the next layer's `vkGetDeviceProcAddr`.
+    pub unsafe fn new(
+        inst: &Instance,
+        physical: vk::PhysicalDevice,
+        ci: &vk::DeviceCreateInfo<'_>,
+        device: vk::Device,
+        gdpa: vk::PFN_vkGetDeviceProcAddr,
+    ) -> Result<Own, String> {
+        // SAFETY: a valid chain, as the caller promised.
+        let set_loader_data = unsafe { loader_data_callback(ci) }
+            .ok_or("the loader passed no vkSetDeviceLoaderData")?;
+        // SAFETY: the next layer's instance commands, of the types their names imply.
+        let (families, memory) = unsafe {
+            let gipa = inst.gipa;
+            let f = gipa(
+                inst.handle,
+                c"vkGetPhysicalDeviceQueueFamilyProperties".as_ptr(),
+            )
+            .ok_or("no vkGetPhysicalDeviceQueueFamilyProperties")?;
+            let f = std::mem::transmute::<
+                unsafe extern "system" fn(),
+                vk::PFN_vkGetPhysicalDeviceQueueFamilyProperties,
+            >(f);
+            let mut n = 0;
+            f(physical, &mut n, std::ptr::null_mut());
+            let mut families = vec![vk::QueueFamilyProperties::default(); n as usize];
+            f(physical, &mut n, families.as_mut_ptr());
+            families.truncate(n as usize);
+            let m = gipa(inst.handle, c"vkGetPhysicalDeviceMemoryProperties".as_ptr())
+                .ok_or("no vkGetPhysicalDeviceMemoryProperties")?;
+            let m = std::mem::transmute::<
+                unsafe extern "system" fn(),
+                vk::PFN_vkGetPhysicalDeviceMemoryProperties,
+            >(m);
+            let mut memory = vk::PhysicalDeviceMemoryProperties::default();
+            m(physical, &mut memory);
+            (families, memory)
+        };
+        let queues = if ci.p_queue_create_infos.is_null() {
+            &[][..]
+        } else {
+            // SAFETY: as the caller promised.
+            unsafe {
+                std::slice::from_raw_parts(
+                    ci.p_queue_create_infos,
+                    ci.queue_create_info_count as usize,
+                )
+            }
+        };
+        let family = queues
+            .iter()
+            .find(|q| {
+                q.flags.is_empty()
+                    && q.queue_count > 0
+                    && families
+                        .get(q.queue_family_index as usize)
+                        .is_some_and(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
+            })
+            .map(|q| q.queue_family_index)
+            .ok_or("the device has no graphics queue the layer could clear shadows on")?;
+        // SAFETY: the next layer's commands for the live device, of the types their names imply.
+        let fns = unsafe {
+            ash::Device::load_with(
+                |name| gdpa(device, name.as_ptr()).map_or(std::ptr::null(), |f| f as *const c_void),
+                device,
+            )
+        };
+        // SAFETY: a queue the application created; the loader's dispatch pointer is set on it
+        // (as the loader's own vkGetDeviceQueue would) before the layers below see it.
+        let queue = unsafe {
+            let queue = fns.get_device_queue(family, 0);
+            set_loader_data(device, queue.as_raw() as *mut c_void)
+                .result()
+                .map_err(|e| format!("vkSetDeviceLoaderData: {e}"))?;
+            queue
+        };
+        Ok(Own {
+            fns,
+            memory,
+            family,
+            queue,
+            set_loader_data,
+            submit: Mutex::ranked(Rank::GpuSubmit, "vk shadow clear", ()),
+        })
+    }
+
+    /// Clears every layer of `image` to rate code 0 and leaves it in [`SHADOW_LAYOUT`].
+    ///
+    /// # Safety
+    /// `image` must be a live shadow of this device with `layers` layers, not in use.
+    unsafe fn clear(&self, image: vk::Image, layers: u32) -> Result<(), vk::Result> {
+        let d = &self.fns;
+        let range = vk::ImageSubresourceRange {
+            aspect_mask: vk::ImageAspectFlags::COLOR,
+            base_mip_level: 0,
+            level_count: 1,
+            base_array_layer: 0,
+            layer_count: layers,
+        };
+        let _queue = self.submit.lock();
+        // SAFETY: plain Vulkan calls on the layer's own objects, each destroyed before returning.
+        unsafe {
+            let pool = d.create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .queue_family_index(self.family)
+                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                None,
+            )?;
+            let run = || -> Result<(), vk::Result> {
+                let cb = d.allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )?[0];
+                (self.set_loader_data)(d.handle(), cb.as_raw() as *mut c_void).result()?;
+                d.begin_command_buffer(
+                    cb,
+                    &vk::CommandBufferBeginInfo::default()
+                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                )?;
+                let to_dst = vk::ImageMemoryBarrier::default()
+                    .image(image)
+                    .subresource_range(range)
+                    .old_layout(vk::ImageLayout::UNDEFINED)
+                    .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                    .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED);
+                d.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[to_dst],
+                );
+                d.cmd_clear_color_image(
+                    cb,
+                    image,
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    &vk::ClearColorValue { uint32: [0; 4] },
+                    &[range],
+                );
+                let to_rate = vk::ImageMemoryBarrier::default()
+                    .image(image)
+                    .subresource_range(range)
+                    .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                    .new_layout(SHADOW_LAYOUT)
+                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                    .dst_access_mask(vk::AccessFlags::MEMORY_READ)
+                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED);
+                // ALL_COMMANDS covers the shading-rate stage: some validation-layer releases
+                // take that stage's bit for NVIDIA's shading-rate-image stage, which shares it,
+                // and refuse it without that feature.
+                d.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::ALL_COMMANDS,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[to_rate],
+                );
+                d.end_command_buffer(cb)?;
+                let fence = d.create_fence(&vk::FenceCreateInfo::default(), None)?;
+                let cbs = [cb];
+                let r = d
+                    .queue_submit(
+                        self.queue,
+                        &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                        fence,
+                    )
+                    .and_then(|()| d.wait_for_fences(&[fence], true, u64::MAX));
+                d.destroy_fence(fence, None);
+                r
+            };
+            let r = run();
+            d.destroy_command_pool(pool, None);
+            r
+        }
+    }
+
+    /// A device-local memory type among `bits` (any allowed one where none is device-local).
+    fn memory_type(&self, bits: u32) -> Option<u32> {
+        let allowed = |i: u32| bits & (1 << i) != 0;
+        let types = &self.memory.memory_types[..self.memory.memory_type_count as usize];
+        (0..types.len() as u32)
+            .find(|&i| {
+                allowed(i)
+                    && types[i as usize]
+                        .property_flags
+                        .contains(vk::MemoryPropertyFlags::DEVICE_LOCAL)
+            })
+            .or_else(|| (0..types.len() as u32).find(|&i| allowed(i)))
+    }
+}
+
+/// The loader's `vkSetDeviceLoaderData` from a device create info.
+///
+/// # Safety
+/// `ci.p_next` must be a valid chain.
+unsafe fn loader_data_callback(ci: &vk::DeviceCreateInfo<'_>) -> Option<SetDeviceLoaderData> {
+    let mut next = ci.p_next;
+    for _ in 0..chain::MAX_CHAIN_LENGTH {
+        // SAFETY: as the caller promised.
+        let found = unsafe {
+            chain::find::<LayerDeviceCreateInfo>(next, vk::StructureType::LOADER_DEVICE_CREATE_INFO)
+        }
+        .ok()
+        .flatten()?;
+        // SAFETY: found in a valid chain, of the type its sType names.
+        let f = unsafe { &*found };
+        if f.function == LOADER_DATA_CALLBACK && !f.u.is_null() {
+            // SAFETY: with this function value the union holds `pfnSetDeviceLoaderData`.
+            return Some(unsafe { std::mem::transmute::<*mut c_void, SetDeviceLoaderData>(f.u) });
+        }
+        next = f.p_next;
+    }
+    None
+}
+
+/// How many layers a shadow of an image with `app_layers` layers has on `fdm`'s device.
+pub fn shadow_layers(fdm: &FdmEmulation, app_layers: u32) -> u32 {
+    if fdm.layered {
+        app_layers.max(1)
+    } else {
+        1
+    }
+}
+
+/// Makes the shadow of a density-map image the application just created (`ci` as the
+/// application gave it), or logs why not.
+///
+/// # Safety
+/// `app` must be the live image just created on `dev` from `ci`.
+pub unsafe fn image_created(dev: &Device, app: vk::Image, ci: &vk::ImageCreateInfo<'_>) {
+    let (Some(fdm), Some(own)) = (&dev.fdm, &dev.attachments.own) else {
+        if dev.fdm.is_some() {
+            tracing::warn!(
+                image = raw(app),
+                "no shadow for a density map: the layer could not set up its own calls on this \
+                 device; passes with it render at full rate"
+            );
+        }
+        return;
+    };
+    // SAFETY: as the caller promised.
+    match unsafe { make_shadow(own, fdm, ci) } {
+        Ok(s) => {
+            dev.attachments.images.lock().insert(app.as_raw(), s);
+            bridge::set_shadow(
+                app,
+                Some(Shadow {
+                    device: dev.handle,
+                    image: s.image,
+                    layers: s.layers,
+                    app_layers: s.app_layers,
+                    extent: [s.extent.width, s.extent.height],
+                }),
+            );
+            tracing::debug!(
+                image = raw(app),
+                shadow = raw(s.image),
+                layers = s.layers,
+                "density map shadowed"
+            );
+        }
+        Err(e) => tracing::warn!(
+            image = raw(app),
+            result = ?e,
+            "no shadow for a density map; passes with it render at full rate"
+        ),
+    }
+}
+
+/// Creates, binds and clears one shadow.
+///
+/// # Safety
+/// `own` must belong to a live device.
+unsafe fn make_shadow(
+    own: &Own,
+    fdm: &FdmEmulation,
+    ci: &vk::ImageCreateInfo<'_>,
+) -> Result<ShadowImage, vk::Result> {
+    let d = &own.fns;
+    let layers = shadow_layers(fdm, ci.array_layers);
+    let info = vk::ImageCreateInfo::default()
+        .image_type(vk::ImageType::TYPE_2D)
+        .format(SHADOW_FORMAT)
+        .extent(vk::Extent3D {
+            width: ci.extent.width,
+            height: ci.extent.height,
+            depth: 1,
+        })
+        .mip_levels(1)
+        .array_layers(layers)
+        .samples(vk::SampleCountFlags::TYPE_1)
+        .tiling(vk::ImageTiling::OPTIMAL)
+        .usage(SHADOW_USAGE)
+        .sharing_mode(vk::SharingMode::EXCLUSIVE)
+        .initial_layout(vk::ImageLayout::UNDEFINED);
+    // SAFETY: the layer's own objects on a live device; each is destroyed on failure.
+    unsafe {
+        let image = d.create_image(&info, None)?;
+        let req = d.get_image_memory_requirements(image);
+        let Some(ty) = own.memory_type(req.memory_type_bits) else {
+            d.destroy_image(image, None);
+            return Err(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY);
+        };
+        let memory = match d.allocate_memory(
+            &vk::MemoryAllocateInfo::default()
+                .allocation_size(req.size)
+                .memory_type_index(ty),
+            None,
+        ) {
+            Ok(m) => m,
+            Err(e) => {
+                d.destroy_image(image, None);
+                return Err(e);
+            }
+        };
+        let done = d
+            .bind_image_memory(image, memory, 0)
+            .and_then(|()| own.clear(image, layers));
+        if let Err(e) = done {
+            d.destroy_image(image, None);
+            d.free_memory(memory, None);
+            return Err(e);
+        }
+        Ok(ShadowImage {
+            image,
+            memory,
+            extent: vk::Extent2D {
+                width: ci.extent.width,
+                height: ci.extent.height,
+            },
+            layers,
+            app_layers: ci.array_layers,
+        })
+    }
+}
+
+/// The shadow view's create info for an application view `ci` of an image shadowed by `s`: the
+/// application's layers where the shadow has them, else its one merged layer; 2D or 2D-array, as
+/// shading-rate views must be, identity swizzle.
+pub fn shadow_view_info(
+    s: &ShadowImage,
+    ci: &vk::ImageViewCreateInfo<'_>,
+) -> vk::ImageViewCreateInfo<'static> {
+    let r = ci.subresource_range;
+    let (base, count) = if s.layers == 1 {
+        (0, 1)
+    } else {
+        let count = if r.layer_count == vk::REMAINING_ARRAY_LAYERS {
+            s.layers.saturating_sub(r.base_array_layer)
+        } else {
+            r.layer_count
+        };
+        (r.base_array_layer, count)
+    };
+    let view_type = if ci.view_type == vk::ImageViewType::TYPE_2D_ARRAY || count > 1 {
+        vk::ImageViewType::TYPE_2D_ARRAY
+    } else {
+        vk::ImageViewType::TYPE_2D
+    };
+    vk::ImageViewCreateInfo::default()
+        .image(s.image)
+        .view_type(view_type)
+        .format(SHADOW_FORMAT)
+        .components(vk::ComponentMapping::default())
+        .subresource_range(vk::ImageSubresourceRange {
+            aspect_mask: vk::ImageAspectFlags::COLOR,
+            base_mip_level: 0,
+            level_count: 1,
+            base_array_layer: base,
+            layer_count: count,
+        })
+}
+
+/// `vkCreateImageView`: a view of a shadowed image gets a shadow view beside it.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_image_view(
+    device: vk::Device,
+    info: *const vk::ImageViewCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::ImageView,
+) -> vk::Result {
+    guard(
+        "vkCreateImageView",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let Some(dev) = (unsafe { registry::device(device) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = dev.next.create_image_view else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // Dynamic and deferred density-map views cannot be emulated: those flags are left out
+            // of a copy ([`pipeline::view_flags`]).
+            let copy = (!info.is_null())
+                // SAFETY: the caller's create info, read only.
+                .then(|| unsafe { *info })
+                .and_then(|c| {
+                    Some(vk::ImageViewCreateInfo {
+                        flags: pipeline::view_flags(c.flags)?,
+                        ..c
+                    })
+                });
+            let down = copy.as_ref().map_or(info, |c| c as *const _);
+            // SAFETY: the next layer's function, with the caller's arguments (or a copy of its
+            // create info).
+            let r = unsafe { next(device, down, alloc, out) };
+            if r != vk::Result::SUCCESS || info.is_null() || out.is_null() {
+                return r;
+            }
+            // SAFETY: the caller's create info, read only.
+            let ci = unsafe { &*info };
+            let shadow = dev
+                .attachments
+                .images
+                .lock()
+                .get(&ci.image.as_raw())
+                .copied();
+            let (Some(s), Some(own)) = (shadow, &dev.attachments.own) else {
+                return r;
+            };
+            // SAFETY: the view was just created.
+            let app_view = unsafe { *out };
+            // SAFETY: the layer's own view of its own live image.
+            match unsafe { own.fns.create_image_view(&shadow_view_info(&s, ci), None) } {
+                Ok(view) => {
+                    dev.attachments
+                        .views
+                        .lock()
+                        .insert(app_view.as_raw(), ShadowView { view });
+                }
+                Err(e) => tracing::warn!(
+                    view = raw(app_view),
+                    result = ?e,
+                    "no shadow view for a density-map view; passes with it render at full rate"
+                ),
+            }
+            r
+        },
+    )
+}
+
+/// `vkDestroyImageView`: the shadow view goes with the application's.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn destroy_image_view(
+    device: vk::Device,
+    view: vk::ImageView,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyImageView", (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(device) }) else {
+            return;
+        };
+        if let Some(next) = dev.next.destroy_image_view {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            unsafe { next(device, view, alloc) };
+        }
+        let shadow = dev.attachments.views.lock().remove(&view.as_raw());
+        if let (Some(s), Some(own)) = (shadow, &dev.attachments.own) {
+            // SAFETY: the layer's own view; the application's use of it ended with its view's.
+            unsafe { own.fns.destroy_image_view(s.view, None) };
+        }
+    })
+}
+
+/// `vkDestroyImage`: the shadow and its memory go with the application's image.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn destroy_image(
+    device: vk::Device,
+    image: vk::Image,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyImage", (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(device) }) else {
+            return;
+        };
+        if let Some(next) = dev.next.destroy_image {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            unsafe { next(device, image, alloc) };
+        }
+        let shadow = dev.attachments.images.lock().remove(&image.as_raw());
+        if let Some(s) = shadow {
+            bridge::set_shadow(image, None);
+            if let Some(own) = &dev.attachments.own {
+                // SAFETY: the layer's own image and memory, no longer in use (the application's
+                // image, which every use of the shadow stood in for, is being destroyed).
+                unsafe {
+                    own.fns.destroy_image(s.image, None);
+                    own.fns.free_memory(s.memory, None);
+                }
+            }
+        }
+    })
+}
+
+/// Destroys every shadow left on a device about to be destroyed.
+///
+/// # Safety
+/// `dev` must be live, with nothing in flight.
+pub unsafe fn destroy_all(dev: &Device) {
+    let Some(own) = &dev.attachments.own else {
+        return;
+    };
+    let views: Vec<ShadowView> = dev
+        .attachments
+        .views
+        .lock()
+        .drain()
+        .map(|(_, v)| v)
+        .collect();
+    let images: Vec<(u64, ShadowImage)> = dev.attachments.images.lock().drain().collect();
+    // SAFETY: the layer's own objects on a live, idle device.
+    unsafe {
+        for v in views {
+            own.fns.destroy_image_view(v.view, None);
+        }
+        for (app, s) in images {
+            bridge::set_shadow(vk::Image::from_raw(app), None);
+            own.fns.destroy_image(s.image, None);
+            own.fns.free_memory(s.memory, None);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shadow(layers: u32, app_layers: u32) -> ShadowImage {
+        ShadowImage {
+            image: vk::Image::from_raw(7),
+            memory: vk::DeviceMemory::null(),
+            extent: vk::Extent2D {
+                width: 8,
+                height: 8,
+            },
+            layers,
+            app_layers,
+        }
+    }
+
+    fn app_view(ty: vk::ImageViewType, base: u32, count: u32) -> vk::ImageViewCreateInfo<'static> {
+        vk::ImageViewCreateInfo::default()
+            .view_type(ty)
+            .format(vk::Format::R8G8_UNORM)
+            .components(vk::ComponentMapping {
+                r: vk::ComponentSwizzle::G,
+                ..Default::default()
+            })
+            .subresource_range(vk::ImageSubresourceRange {
+                aspect_mask: vk::ImageAspectFlags::COLOR,
+                base_mip_level: 0,
+                level_count: 1,
+                base_array_layer: base,
+                layer_count: count,
+            })
+    }
+
+    #[test]
+    fn layered_shadow_views_follow_the_applications_layers() {
+        let s = shadow(2, 2);
+        let v = shadow_view_info(&s, &app_view(vk::ImageViewType::TYPE_2D_ARRAY, 0, 2));
+        assert_eq!(v.view_type, vk::ImageViewType::TYPE_2D_ARRAY);
+        assert_eq!(v.format, vk::Format::R8_UINT);
+        assert_eq!(
+            v.components.r,
+            vk::ComponentSwizzle::IDENTITY,
+            "identity swizzle"
+        );
+        assert_eq!(
+            (
+                v.subresource_range.base_array_layer,
+                v.subresource_range.layer_count
+            ),
+            (0, 2)
+        );
+        let eye = shadow_view_info(&s, &app_view(vk::ImageViewType::TYPE_2D, 1, 1));
+        assert_eq!(eye.view_type, vk::ImageViewType::TYPE_2D);
+        assert_eq!(eye.subresource_range.base_array_layer, 1);
+        let rest = shadow_view_info(
+            &s,
+            &app_view(
+                vk::ImageViewType::TYPE_2D_ARRAY,
+                1,
+                vk::REMAINING_ARRAY_LAYERS,
+            ),
+        );
+        assert_eq!(rest.subresource_range.layer_count, 1);
+    }
+
+    #[test]
+    fn merged_shadow_views_have_one_layer() {
+        let s = shadow(1, 2);
+        for (ty, base, count) in [
+            (vk::ImageViewType::TYPE_2D_ARRAY, 0, 2),
+            (vk::ImageViewType::TYPE_2D, 1, 1),
+        ] {
+            let v = shadow_view_info(&s, &app_view(ty, base, count));
+            assert_eq!(
+                (
+                    v.subresource_range.base_array_layer,
+                    v.subresource_range.layer_count
+                ),
+                (0, 1)
+            );
+        }
+    }
+
+    #[test]
+    fn shadow_layers_follow_the_device() {
+        let mut fdm = FdmEmulation {
+            texel: [16, 16],
+            layered: true,
+            max_fragment: [4, 4],
+            rates: Vec::new(),
+        };
+        assert_eq!(shadow_layers(&fdm, 2), 2);
+        fdm.layered = false;
+        assert_eq!(shadow_layers(&fdm, 2), 1);
+    }
+}

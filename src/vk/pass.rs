@@ -1,0 +1,1212 @@
+//! Render passes, framebuffers and dynamic rendering: the density-map attachment becomes a
+//! shading-rate attachment that names the layer's shadow ([`crate::vk::image`]).
+//!
+//! - `vkCreateRenderPass` with a
+//!   [`VkRenderPassFragmentDensityMapCreateInfoEXT`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderPassFragmentDensityMapCreateInfoEXT.html)
+//!   is upgraded to `vkCreateRenderPass2` ([`v1_to_v2`]): shading-rate attachments exist only on
+//!   [`VkSubpassDescription2`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkSubpassDescription2.html).
+//!   `VkRenderPassMultiviewCreateInfo` folds into the subpasses' view masks, the dependencies' view
+//!   offsets and the correlated masks; `VkRenderPassInputAttachmentAspectCreateInfo` into the input
+//!   references' aspect masks (docs/vulkan-fdm-on-fsr.md#render-passes).
+//! - `vkCreateRenderPass2(KHR)` with the density-map struct: the struct is dropped, every subpass
+//!   gets a [`VkFragmentShadingRateAttachmentInfoKHR`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkFragmentShadingRateAttachmentInfoKHR.html)
+//!   naming the density attachment with the device's texel, and that attachment's description
+//!   becomes `R8_UINT`, loaded (never cleared), not stored (as density maps require too), in
+//!   `FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR` before and after ([`add_shading_rate`]).
+//!   Dependencies' density stage and access bits become the shading-rate ones.
+//! - `vkCreateFramebuffer`: the density view is replaced by its shadow view; for an imageless
+//!   framebuffer the density attachment's
+//!   [`VkFramebufferAttachmentImageInfo`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkFramebufferAttachmentImageInfo.html)
+//!   describes the shadow (format, usage, flags, layers), and `vkCmdBeginRenderPass(2)` swaps the
+//!   view in `VkRenderPassAttachmentBeginInfo`. The shadow has the density image's extent, and
+//!   both extensions ask the same of it: at least `ceil(framebuffer size / texel)` texels, with
+//!   the density texel fixed to the shading-rate one (docs/vulkan-fdm-on-fsr.md#texel-size).
+//! - `vkCmdBeginRendering(KHR)` with
+//!   [`VkRenderingFragmentDensityMapAttachmentInfoEXT`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentDensityMapAttachmentInfoEXT.html)
+//!   gets a [`VkRenderingFragmentShadingRateAttachmentInfoKHR`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentShadingRateAttachmentInfoKHR.html)
+//!   with the shadow view instead.
+//!
+//! Everything is rewritten in copies; the application's structs are never written. Passes without
+//! the density-map struct, and begin infos without views to swap, go down untouched (a begin with
+//! an empty `pNext` costs one null test). Fail open: where a copy cannot be made (a struct of
+//! unknown size before the one to drop) the call goes down as it came; where a view has no shadow
+//! the pass renders at full rate; one log line says so.
+
+use std::ffi::c_void;
+
+use ash::vk;
+use ash::vk::Handle as _;
+
+use crate::vk::chain::{self, ChainCopy};
+use crate::vk::image::{SHADOW_FORMAT, SHADOW_LAYOUT, SHADOW_USAGE};
+use crate::vk::loader::guard;
+use crate::vk::registry::{self, raw, Device};
+
+/// # Safety
+/// `p` must be NULL or valid for `n` elements that outlive the slice.
+unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
+    if p.is_null() || n == 0 {
+        &[]
+    } else {
+        // SAFETY: as the caller promised.
+        unsafe { std::slice::from_raw_parts(p, n as usize) }
+    }
+}
+
+/// A version-2 render pass the layer builds, owning every array its pointers reach (apart from
+/// what it shares with the application's create info: preserve lists and `pNext` chains).
+pub struct Pass2 {
+    pub attachments: Vec<vk::AttachmentDescription2<'static>>,
+    pub subpasses: Vec<vk::SubpassDescription2<'static>>,
+    pub dependencies: Vec<vk::SubpassDependency2<'static>>,
+    pub correlated: Vec<u32>,
+    /// Reference arrays of converted subpasses, kept alive for the pointers into them; each inner
+    /// vector is final once pointed at.
+    _refs: Vec<Vec<vk::AttachmentReference2<'static>>>,
+    /// The shading-rate reference and one info per subpass ([`add_shading_rate`]).
+    rate_ref: Box<vk::AttachmentReference2<'static>>,
+    rate_infos: Vec<vk::FragmentShadingRateAttachmentInfoKHR<'static>>,
+}
+
+impl Pass2 {
+    /// The create info for this pass, with `flags` and `p_next` (which must outlive its use).
+    pub fn info(
+        &self,
+        flags: vk::RenderPassCreateFlags,
+        p_next: *const c_void,
+    ) -> vk::RenderPassCreateInfo2<'_> {
+        vk::RenderPassCreateInfo2 {
+            p_next,
+            flags,
+            attachment_count: self.attachments.len() as u32,
+            p_attachments: self.attachments.as_ptr(),
+            subpass_count: self.subpasses.len() as u32,
+            p_subpasses: self.subpasses.as_ptr(),
+            dependency_count: self.dependencies.len() as u32,
+            p_dependencies: self.dependencies.as_ptr(),
+            correlated_view_mask_count: self.correlated.len() as u32,
+            p_correlated_view_masks: self.correlated.as_ptr(),
+            ..Default::default()
+        }
+    }
+
+    /// A copy of a version-2 create info's arrays (the subpasses shallow).
+    ///
+    /// # Safety
+    /// `ci` must be a valid create info whose arrays outlive the result.
+    pub unsafe fn from_v2(ci: &vk::RenderPassCreateInfo2<'_>) -> Pass2 {
+        // SAFETY: as the caller promised; the copies keep pointing at the application's arrays.
+        unsafe {
+            let cast = |a: &[vk::AttachmentDescription2<'_>]| {
+                a.iter()
+                    .map(|x| std::mem::transmute::<_, vk::AttachmentDescription2<'static>>(*x))
+                    .collect()
+            };
+            Pass2 {
+                attachments: cast(slice(ci.p_attachments, ci.attachment_count)),
+                subpasses: slice(ci.p_subpasses, ci.subpass_count)
+                    .iter()
+                    .map(|x| std::mem::transmute::<_, vk::SubpassDescription2<'static>>(*x))
+                    .collect(),
+                dependencies: slice(ci.p_dependencies, ci.dependency_count)
+                    .iter()
+                    .map(|x| std::mem::transmute::<_, vk::SubpassDependency2<'static>>(*x))
+                    .collect(),
+                correlated: slice(ci.p_correlated_view_masks, ci.correlated_view_mask_count)
+                    .to_vec(),
+                _refs: Vec::new(),
+                rate_ref: Box::default(),
+                rate_infos: Vec::new(),
+            }
+        }
+    }
+}
+
+/// The aspects an input attachment of `format` reads where version 1 names none: all of the
+/// format's (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderPassInputAttachmentAspectCreateInfo.html>).
+fn format_aspects(format: vk::Format) -> vk::ImageAspectFlags {
+    use vk::Format as F;
+    match format {
+        F::D16_UNORM | F::X8_D24_UNORM_PACK32 | F::D32_SFLOAT => vk::ImageAspectFlags::DEPTH,
+        F::S8_UINT => vk::ImageAspectFlags::STENCIL,
+        F::D16_UNORM_S8_UINT | F::D24_UNORM_S8_UINT | F::D32_SFLOAT_S8_UINT => {
+            vk::ImageAspectFlags::DEPTH | vk::ImageAspectFlags::STENCIL
+        }
+        _ => vk::ImageAspectFlags::COLOR,
+    }
+}
+
+/// Converts a version-1 render pass to version 2, folding in its multiview and input-aspect
+/// structs. The result's `pNext` chains are the caller's to choose (the subpasses' and
+/// dependencies' are NULL; version 1 has none).
+///
+/// # Safety
+/// `ci` and the structs must be valid; their arrays must outlive the result.
+pub unsafe fn v1_to_v2(
+    ci: &vk::RenderPassCreateInfo<'_>,
+    multiview: Option<&vk::RenderPassMultiviewCreateInfo<'_>>,
+    aspects: Option<&vk::RenderPassInputAttachmentAspectCreateInfo<'_>>,
+) -> Pass2 {
+    // SAFETY: as the caller promised.
+    let (attachments_in, subpasses_in, deps_in) = unsafe {
+        (
+            slice(ci.p_attachments, ci.attachment_count),
+            slice(ci.p_subpasses, ci.subpass_count),
+            slice(ci.p_dependencies, ci.dependency_count),
+        )
+    };
+    // SAFETY: as the caller promised.
+    let (view_masks, view_offsets, correlated, aspect_refs) = unsafe {
+        (
+            multiview.map_or(&[][..], |m| slice(m.p_view_masks, m.subpass_count)),
+            multiview.map_or(&[][..], |m| slice(m.p_view_offsets, m.dependency_count)),
+            multiview.map_or(&[][..], |m| {
+                slice(m.p_correlation_masks, m.correlation_mask_count)
+            }),
+            aspects.map_or(&[][..], |a| {
+                slice(a.p_aspect_references, a.aspect_reference_count)
+            }),
+        )
+    };
+    let attachments: Vec<vk::AttachmentDescription2<'static>> = attachments_in
+        .iter()
+        .map(|a| {
+            vk::AttachmentDescription2::default()
+                .flags(a.flags)
+                .format(a.format)
+                .samples(a.samples)
+                .load_op(a.load_op)
+                .store_op(a.store_op)
+                .stencil_load_op(a.stencil_load_op)
+                .stencil_store_op(a.stencil_store_op)
+                .initial_layout(a.initial_layout)
+                .final_layout(a.final_layout)
+        })
+        .collect();
+    let mut refs: Vec<Vec<vk::AttachmentReference2<'static>>> = Vec::new();
+    let mut subpasses = Vec::with_capacity(subpasses_in.len());
+    for (i, s) in subpasses_in.iter().enumerate() {
+        let mut convert = |p: *const vk::AttachmentReference, n: u32, input: bool| {
+            if p.is_null() {
+                return std::ptr::null();
+            }
+            // SAFETY: as the caller promised.
+            let v: Vec<vk::AttachmentReference2<'static>> = unsafe { slice(p, n) }
+                .iter()
+                .enumerate()
+                .map(|(j, r)| {
+                    let aspect = if !input || r.attachment == vk::ATTACHMENT_UNUSED {
+                        vk::ImageAspectFlags::empty()
+                    } else {
+                        aspect_refs
+                            .iter()
+                            .find(|a| {
+                                a.subpass as usize == i && a.input_attachment_index as usize == j
+                            })
+                            .map(|a| a.aspect_mask)
+                            .unwrap_or_else(|| {
+                                attachments
+                                    .get(r.attachment as usize)
+                                    .map_or(vk::ImageAspectFlags::COLOR, |a| {
+                                        format_aspects(a.format)
+                                    })
+                            })
+                    };
+                    vk::AttachmentReference2::default()
+                        .attachment(r.attachment)
+                        .layout(r.layout)
+                        .aspect_mask(aspect)
+                })
+                .collect();
+            let ptr = v.as_ptr();
+            refs.push(v);
+            ptr
+        };
+        subpasses.push(vk::SubpassDescription2 {
+            flags: s.flags,
+            pipeline_bind_point: s.pipeline_bind_point,
+            view_mask: view_masks.get(i).copied().unwrap_or(0),
+            input_attachment_count: s.input_attachment_count,
+            p_input_attachments: convert(s.p_input_attachments, s.input_attachment_count, true),
+            color_attachment_count: s.color_attachment_count,
+            p_color_attachments: convert(s.p_color_attachments, s.color_attachment_count, false),
+            p_resolve_attachments: convert(
+                s.p_resolve_attachments,
+                s.color_attachment_count,
+                false,
+            ),
+            p_depth_stencil_attachment: convert(s.p_depth_stencil_attachment, 1, false),
+            preserve_attachment_count: s.preserve_attachment_count,
+            p_preserve_attachments: s.p_preserve_attachments,
+            ..Default::default()
+        });
+    }
+    let dependencies = deps_in
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            vk::SubpassDependency2::default()
+                .src_subpass(d.src_subpass)
+                .dst_subpass(d.dst_subpass)
+                .src_stage_mask(d.src_stage_mask)
+                .dst_stage_mask(d.dst_stage_mask)
+                .src_access_mask(d.src_access_mask)
+                .dst_access_mask(d.dst_access_mask)
+                .dependency_flags(d.dependency_flags)
+                .view_offset(view_offsets.get(i).copied().unwrap_or(0))
+        })
+        .collect();
+    Pass2 {
+        attachments,
+        subpasses,
+        dependencies,
+        correlated: correlated.to_vec(),
+        _refs: refs,
+        rate_ref: Box::default(),
+        rate_infos: Vec::new(),
+    }
+}
+
+/// Density-map stage and access bits → the shading-rate ones (docs/vulkan-fdm-on-fsr.md#mapping).
+fn rate_stages(s: vk::PipelineStageFlags) -> vk::PipelineStageFlags {
+    if s.contains(vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT) {
+        (s & !vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT)
+            | vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+    } else {
+        s
+    }
+}
+
+fn rate_access(a: vk::AccessFlags) -> vk::AccessFlags {
+    if a.contains(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT) {
+        (a & !vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT)
+            | vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR
+    } else {
+        a
+    }
+}
+
+/// Makes attachment `density` the shading-rate attachment of every subpass, at `texel`.
+pub fn add_shading_rate(pass: &mut Pass2, density: u32, texel: vk::Extent2D) {
+    if let Some(a) = pass.attachments.get_mut(density as usize) {
+        a.format = SHADOW_FORMAT;
+        a.samples = vk::SampleCountFlags::TYPE_1;
+        // The shadow's content is the point: loaded, never cleared
+        // (VUID-VkRenderPassCreateInfo2-pAttachments-09387); the pass does not write it.
+        a.load_op = vk::AttachmentLoadOp::LOAD;
+        a.store_op = vk::AttachmentStoreOp::DONT_CARE;
+        a.stencil_load_op = vk::AttachmentLoadOp::DONT_CARE;
+        a.stencil_store_op = vk::AttachmentStoreOp::DONT_CARE;
+        a.initial_layout = SHADOW_LAYOUT;
+        a.final_layout = SHADOW_LAYOUT;
+    }
+    *pass.rate_ref = vk::AttachmentReference2::default()
+        .attachment(density)
+        .layout(SHADOW_LAYOUT);
+    let rate_ref: *const vk::AttachmentReference2<'static> = &*pass.rate_ref;
+    pass.rate_infos = pass
+        .subpasses
+        .iter()
+        .map(|s| {
+            let mut f = vk::FragmentShadingRateAttachmentInfoKHR::default()
+                .shading_rate_attachment_texel_size(texel);
+            f.p_fragment_shading_rate_attachment = rate_ref;
+            f.p_next = s.p_next;
+            f
+        })
+        .collect();
+    for (s, f) in pass.subpasses.iter_mut().zip(&pass.rate_infos) {
+        s.p_next = f as *const _ as *const c_void;
+    }
+    for d in &mut pass.dependencies {
+        d.src_stage_mask = rate_stages(d.src_stage_mask);
+        d.dst_stage_mask = rate_stages(d.dst_stage_mask);
+        d.src_access_mask = rate_access(d.src_access_mask);
+        d.dst_access_mask = rate_access(d.dst_access_mask);
+    }
+}
+
+fn texel_of(dev: &Device) -> Option<vk::Extent2D> {
+    dev.fdm.as_ref().map(|f| vk::Extent2D {
+        width: f.texel[0],
+        height: f.texel[1],
+    })
+}
+
+/// The density attachment of a create info's chain, if it has the density-map struct.
+///
+/// # Safety
+/// `p_next` must be a valid chain.
+unsafe fn density_attachment(p_next: *const c_void) -> Option<u32> {
+    // SAFETY: as the caller promised.
+    let f = unsafe {
+        chain::find::<vk::RenderPassFragmentDensityMapCreateInfoEXT>(
+            p_next,
+            vk::StructureType::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT,
+        )
+    }
+    .ok()
+    .flatten()?;
+    // SAFETY: found by its sType.
+    Some(unsafe { (*f).fragment_density_map_attachment.attachment })
+}
+
+/// Creates `pass` below, with the shading-rate attachment where `density` names one; on success
+/// records the pass as rewritten.
+///
+/// # Safety
+/// `pass` and `p_next` must be valid and outlive the call; the rest are the caller's arguments.
+#[allow(clippy::too_many_arguments)]
+unsafe fn create_rewritten(
+    dev: &Device,
+    create2: vk::PFN_vkCreateRenderPass2,
+    mut pass: Pass2,
+    flags: vk::RenderPassCreateFlags,
+    p_next: *const c_void,
+    density: u32,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    let texel = texel_of(dev);
+    if let (Some(texel), true) = (texel, density != vk::ATTACHMENT_UNUSED) {
+        add_shading_rate(&mut pass, density, texel);
+    }
+    let info = pass.info(flags, p_next);
+    // SAFETY: the copy and everything it points at live across the call.
+    let r = unsafe { create2(dev.handle, &info, alloc, out) };
+    if r == vk::Result::SUCCESS && density != vk::ATTACHMENT_UNUSED && texel.is_some() {
+        // SAFETY: just created.
+        let handle = unsafe { *out };
+        dev.attachments
+            .passes
+            .lock()
+            .insert(handle.as_raw(), density);
+        tracing::debug!(
+            render_pass = raw(handle),
+            density,
+            "render pass: density map → shading-rate attachment"
+        );
+    }
+    r
+}
+
+/// `vkCreateRenderPass`: with the density-map struct, upgraded to `vkCreateRenderPass2` and
+/// rewritten; otherwise untouched.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_render_pass(
+    device: vk::Device,
+    info: *const vk::RenderPassCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    guard(
+        "vkCreateRenderPass",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let Some(dev) = (unsafe { registry::device(device) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = dev.next.create_render_pass else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // SAFETY: the caller's create info, read only.
+            let density = match unsafe { info.as_ref() } {
+                // SAFETY: the caller's valid chain.
+                Some(ci) if dev.fdm.is_some() => unsafe { density_attachment(ci.p_next) },
+                _ => None,
+            };
+            let Some(density) = density else {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { next(device, info, alloc, out) };
+            };
+            let create2 = dev
+                .next
+                .create_render_pass2
+                .or(dev.next.create_render_pass2_khr);
+            // SAFETY: as above.
+            let ci = unsafe { &*info };
+            use vk::StructureType as S;
+            let folded = |t| {
+                t == S::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT
+                    || t == S::RENDER_PASS_MULTIVIEW_CREATE_INFO
+                    || t == S::RENDER_PASS_INPUT_ATTACHMENT_ASPECT_CREATE_INFO
+            };
+            // SAFETY: the caller's chain, read only.
+            let (chain, multiview, aspects) = unsafe {
+                (
+                    ChainCopy::without(ci.p_next, folded),
+                    chain::find::<vk::RenderPassMultiviewCreateInfo>(
+                        ci.p_next,
+                        S::RENDER_PASS_MULTIVIEW_CREATE_INFO,
+                    ),
+                    chain::find::<vk::RenderPassInputAttachmentAspectCreateInfo>(
+                        ci.p_next,
+                        S::RENDER_PASS_INPUT_ATTACHMENT_ASPECT_CREATE_INFO,
+                    ),
+                )
+            };
+            let (Some(create2), Ok(chain), Ok(multiview), Ok(aspects)) =
+                (create2, chain, multiview, aspects)
+            else {
+                tracing::warn!(
+                    "vkCreateRenderPass: cannot upgrade a density-map render pass to version 2 \
+                     (no vkCreateRenderPass2 below, or a pNext chain the layer cannot copy); \
+                     passed on as is, at full rate"
+                );
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { next(device, info, alloc, out) };
+            };
+            // SAFETY: the structs were found by their sTypes in the caller's valid chain.
+            let pass = unsafe { v1_to_v2(ci, multiview.map(|m| &*m), aspects.map(|a| &*a)) };
+            // SAFETY: the converted pass and the chain copy live across the call.
+            unsafe {
+                create_rewritten(
+                    &dev,
+                    create2,
+                    pass,
+                    ci.flags,
+                    chain.head(),
+                    density,
+                    alloc,
+                    out,
+                )
+            }
+        },
+    )
+}
+
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn create_render_pass2_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkCreateRenderPass2>,
+    device: vk::Device,
+    info: *const vk::RenderPassCreateInfo2<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    guard(which, vk::Result::ERROR_INITIALIZATION_FAILED, || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(device) }) else {
+            return vk::Result::ERROR_INITIALIZATION_FAILED;
+        };
+        let Some(create2) = next(&dev) else {
+            return vk::Result::ERROR_INITIALIZATION_FAILED;
+        };
+        // SAFETY: the caller's create info, read only.
+        let density = match unsafe { info.as_ref() } {
+            // SAFETY: the caller's valid chain.
+            Some(ci) if dev.fdm.is_some() => unsafe { density_attachment(ci.p_next) },
+            _ => None,
+        };
+        let Some(density) = density else {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { create2(device, info, alloc, out) };
+        };
+        // SAFETY: as above.
+        let ci = unsafe { &*info };
+        let fdm = vk::StructureType::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT;
+        // SAFETY: the caller's chain, read only.
+        let Ok(chain) = (unsafe { ChainCopy::without(ci.p_next, |t| t == fdm) }) else {
+            tracing::warn!(
+                "{which}: a pNext chain the layer cannot copy; the density-map render pass is \
+                 passed on as is, at full rate"
+            );
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { create2(device, info, alloc, out) };
+        };
+        // SAFETY: the caller's arrays outlive the call.
+        let pass = unsafe { Pass2::from_v2(ci) };
+        // SAFETY: the copied pass and chain live across the call.
+        unsafe {
+            create_rewritten(
+                &dev,
+                create2,
+                pass,
+                ci.flags,
+                chain.head(),
+                density,
+                alloc,
+                out,
+            )
+        }
+    })
+}
+
+/// `vkCreateRenderPass2`: see the module documentation.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_render_pass2(
+    device: vk::Device,
+    info: *const vk::RenderPassCreateInfo2<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    // SAFETY: the caller's arguments.
+    unsafe {
+        create_render_pass2_with(
+            "vkCreateRenderPass2",
+            |d| d.next.create_render_pass2,
+            device,
+            info,
+            alloc,
+            out,
+        )
+    }
+}
+
+/// `vkCreateRenderPass2KHR`: as [`create_render_pass2`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_render_pass2_khr(
+    device: vk::Device,
+    info: *const vk::RenderPassCreateInfo2<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    // SAFETY: the caller's arguments.
+    unsafe {
+        create_render_pass2_with(
+            "vkCreateRenderPass2KHR",
+            |d| d.next.create_render_pass2_khr,
+            device,
+            info,
+            alloc,
+            out,
+        )
+    }
+}
+
+/// `vkDestroyRenderPass`: forgets a rewritten pass.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn destroy_render_pass(
+    device: vk::Device,
+    pass: vk::RenderPass,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyRenderPass", (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(device) }) else {
+            return;
+        };
+        dev.attachments.passes.lock().remove(&pass.as_raw());
+        if let Some(next) = dev.next.destroy_render_pass {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            unsafe { next(device, pass, alloc) };
+        }
+    })
+}
+
+/// The imageless framebuffer's description of the density attachment, made the shadow's.
+fn shadow_attachment_info(
+    a: &vk::FramebufferAttachmentImageInfo<'_>,
+    layered: bool,
+    formats: &[vk::Format; 1],
+) -> vk::FramebufferAttachmentImageInfo<'static> {
+    vk::FramebufferAttachmentImageInfo {
+        p_next: a.p_next,
+        flags: vk::ImageCreateFlags::empty(),
+        usage: SHADOW_USAGE,
+        width: a.width,
+        height: a.height,
+        layer_count: if layered { a.layer_count } else { 1 },
+        view_format_count: 1,
+        p_view_formats: formats.as_ptr(),
+        ..Default::default()
+    }
+}
+
+/// `vkCreateFramebuffer`: a rewritten pass's density view becomes its shadow view; an imageless
+/// framebuffer describes the shadow instead.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_framebuffer(
+    device: vk::Device,
+    info: *const vk::FramebufferCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Framebuffer,
+) -> vk::Result {
+    guard(
+        "vkCreateFramebuffer",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let Some(dev) = (unsafe { registry::device(device) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = dev.next.create_framebuffer else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // SAFETY: the caller's create info, read only.
+            let Some(ci) = (unsafe { info.as_ref() }) else {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { next(device, info, alloc, out) };
+            };
+            let Some(density) = dev.attachments.density_attachment(ci.render_pass) else {
+                // SAFETY: as above.
+                return unsafe { next(device, info, alloc, out) };
+            };
+            let mut copy = *ci;
+            if ci.flags.contains(vk::FramebufferCreateFlags::IMAGELESS) {
+                let ty = vk::StructureType::FRAMEBUFFER_ATTACHMENTS_CREATE_INFO;
+                let found =
+                    // SAFETY: the caller's chain, read only.
+                    unsafe { chain::find::<vk::FramebufferAttachmentsCreateInfo>(ci.p_next, ty) };
+                // SAFETY: as above.
+                let rest = unsafe { ChainCopy::without(ci.p_next, |t| t == ty) };
+                let (Ok(Some(found)), Ok(rest)) = (found, rest) else {
+                    tracing::warn!(
+                        "vkCreateFramebuffer: an imageless framebuffer the layer cannot rewrite; \
+                         passed on as is"
+                    );
+                    // SAFETY: as above.
+                    return unsafe { next(device, info, alloc, out) };
+                };
+                // SAFETY: found by its sType in a valid chain.
+                let found = unsafe { &*found };
+                // SAFETY: the caller's array.
+                let mut infos: Vec<vk::FramebufferAttachmentImageInfo<'_>> = unsafe {
+                    slice(
+                        found.p_attachment_image_infos,
+                        found.attachment_image_info_count,
+                    )
+                }
+                .to_vec();
+                let formats = [SHADOW_FORMAT];
+                let layered = dev.fdm.as_ref().is_some_and(|f| f.layered);
+                if let Some(a) = infos.get_mut(density as usize) {
+                    *a = shadow_attachment_info(a, layered, &formats);
+                }
+                let mut attachments = *found;
+                attachments.p_next = rest.head();
+                attachments.attachment_image_info_count = infos.len() as u32;
+                attachments.p_attachment_image_infos = infos.as_ptr();
+                copy.p_next = &attachments as *const _ as *const c_void;
+                // SAFETY: the copies live across the call.
+                return unsafe { next(device, &copy, alloc, out) };
+            }
+            let mut views: Vec<vk::ImageView> =
+                // SAFETY: the caller's array.
+                unsafe { slice(ci.p_attachments, ci.attachment_count) }.to_vec();
+            if let Some(v) = views.get_mut(density as usize) {
+                match dev.attachments.shadow_view(*v) {
+                    Some(s) => *v = s,
+                    None => tracing::warn!(
+                        view = raw(*v),
+                        "vkCreateFramebuffer: the density view has no shadow; passed on as is"
+                    ),
+                }
+            }
+            copy.p_attachments = views.as_ptr();
+            // SAFETY: the copy and the views live across the call.
+            unsafe { next(device, &copy, alloc, out) }
+        },
+    )
+}
+
+/// For a begin of a rewritten pass with an imageless framebuffer: a copy of `begin` whose
+/// `VkRenderPassAttachmentBeginInfo` names the shadow view; `f` runs with it (or with `begin`
+/// where nothing is swapped).
+///
+/// # Safety
+/// `begin` must be NULL or valid.
+unsafe fn with_swapped_begin(
+    dev: &Device,
+    begin: *const vk::RenderPassBeginInfo<'_>,
+    f: impl FnOnce(*const vk::RenderPassBeginInfo<'_>),
+) {
+    // SAFETY: as the caller promised.
+    let Some(b) = (unsafe { begin.as_ref() }) else {
+        return f(begin);
+    };
+    if b.p_next.is_null() {
+        return f(begin);
+    }
+    let ty = vk::StructureType::RENDER_PASS_ATTACHMENT_BEGIN_INFO;
+    let Ok(Some(found)) =
+        // SAFETY: the caller's chain, read only.
+        (unsafe { chain::find::<vk::RenderPassAttachmentBeginInfo>(b.p_next, ty) })
+    else {
+        return f(begin);
+    };
+    let Some(density) = dev.attachments.density_attachment(b.render_pass) else {
+        return f(begin);
+    };
+    // SAFETY: found by its sType in a valid chain.
+    let found = unsafe { &*found };
+    let mut views: Vec<vk::ImageView> =
+        // SAFETY: the caller's array.
+        unsafe { slice(found.p_attachments, found.attachment_count) }.to_vec();
+    let Some(shadow) = views
+        .get(density as usize)
+        .and_then(|v| dev.attachments.shadow_view(*v))
+    else {
+        return f(begin);
+    };
+    views[density as usize] = shadow;
+    // SAFETY: as above.
+    let Ok(rest) = (unsafe { ChainCopy::without(b.p_next, |t| t == ty) }) else {
+        tracing::warn!(
+            "vkCmdBeginRenderPass: a pNext chain the layer cannot copy; passed on as is"
+        );
+        return f(begin);
+    };
+    let mut attachments = *found;
+    attachments.p_next = rest.head();
+    attachments.p_attachments = views.as_ptr();
+    let mut copy = *b;
+    copy.p_next = &attachments as *const _ as *const c_void;
+    f(&copy)
+}
+
+/// `vkCmdBeginRenderPass`: see [`with_swapped_begin`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_begin_render_pass(
+    cb: vk::CommandBuffer,
+    begin: *const vk::RenderPassBeginInfo<'_>,
+    contents: vk::SubpassContents,
+) {
+    guard("vkCmdBeginRenderPass", (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(cb) }) else {
+            return;
+        };
+        let Some(next) = dev.next.cmd_begin_render_pass else {
+            return;
+        };
+        // SAFETY: the next layer's function, with the caller's arguments or a copy that lives
+        // across the call.
+        unsafe { with_swapped_begin(&dev, begin, |b| next(cb, b, contents)) }
+    })
+}
+
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn cmd_begin_render_pass2_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkCmdBeginRenderPass2>,
+    cb: vk::CommandBuffer,
+    begin: *const vk::RenderPassBeginInfo<'_>,
+    subpass: *const vk::SubpassBeginInfo<'_>,
+) {
+    guard(which, (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(cb) }) else {
+            return;
+        };
+        let Some(next) = next(&dev) else {
+            return;
+        };
+        // SAFETY: as in cmd_begin_render_pass.
+        unsafe { with_swapped_begin(&dev, begin, |b| next(cb, b, subpass)) }
+    })
+}
+
+/// `vkCmdBeginRenderPass2`: see [`with_swapped_begin`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_begin_render_pass2(
+    cb: vk::CommandBuffer,
+    begin: *const vk::RenderPassBeginInfo<'_>,
+    subpass: *const vk::SubpassBeginInfo<'_>,
+) {
+    // SAFETY: the caller's arguments.
+    unsafe {
+        cmd_begin_render_pass2_with(
+            "vkCmdBeginRenderPass2",
+            |d| d.next.cmd_begin_render_pass2,
+            cb,
+            begin,
+            subpass,
+        )
+    }
+}
+
+/// `vkCmdBeginRenderPass2KHR`: see [`with_swapped_begin`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_begin_render_pass2_khr(
+    cb: vk::CommandBuffer,
+    begin: *const vk::RenderPassBeginInfo<'_>,
+    subpass: *const vk::SubpassBeginInfo<'_>,
+) {
+    // SAFETY: the caller's arguments.
+    unsafe {
+        cmd_begin_render_pass2_with(
+            "vkCmdBeginRenderPass2KHR",
+            |d| d.next.cmd_begin_render_pass2_khr,
+            cb,
+            begin,
+            subpass,
+        )
+    }
+}
+
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn cmd_begin_rendering_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkCmdBeginRendering>,
+    cb: vk::CommandBuffer,
+    info: *const vk::RenderingInfo<'_>,
+) {
+    guard(which, (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(cb) }) else {
+            return;
+        };
+        let Some(next) = next(&dev) else {
+            return;
+        };
+        // SAFETY: the caller's rendering info, read only.
+        let ri = match unsafe { info.as_ref() } {
+            Some(ri) if !ri.p_next.is_null() => ri,
+            // SAFETY: the next layer's function, with the caller's arguments.
+            _ => return unsafe { next(cb, info) },
+        };
+        let ty = vk::StructureType::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_INFO_EXT;
+        // SAFETY: the caller's chain, read only.
+        let found = unsafe {
+            chain::find::<vk::RenderingFragmentDensityMapAttachmentInfoEXT>(ri.p_next, ty)
+        };
+        let (Ok(Some(found)), Some(texel)) = (found, texel_of(&dev)) else {
+            // SAFETY: as above.
+            return unsafe { next(cb, info) };
+        };
+        // SAFETY: found by its sType; the caller's chain, read only.
+        let (view, rest) = unsafe {
+            (
+                (*found).image_view,
+                ChainCopy::without(ri.p_next, |t| t == ty),
+            )
+        };
+        let Ok(rest) = rest else {
+            tracing::warn!("{which}: a pNext chain the layer cannot copy; passed on as is");
+            // SAFETY: as above.
+            return unsafe { next(cb, info) };
+        };
+        let shadow = (view != vk::ImageView::null())
+            .then(|| dev.attachments.shadow_view(view))
+            .flatten();
+        let mut rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
+            .image_layout(SHADOW_LAYOUT)
+            .shading_rate_attachment_texel_size(texel);
+        rate.p_next = rest.head();
+        let mut copy = *ri;
+        match shadow {
+            Some(s) => {
+                rate.image_view = s;
+                copy.p_next = &rate as *const _ as *const c_void;
+            }
+            None => {
+                if view != vk::ImageView::null() {
+                    tracing::debug!(
+                        view = raw(view),
+                        "{which}: the density view has no shadow; rendering at full rate"
+                    );
+                }
+                copy.p_next = rest.head();
+            }
+        }
+        // SAFETY: the copy and everything it points at live across the call.
+        unsafe { next(cb, &copy) }
+    })
+}
+
+/// `vkCmdBeginRendering`: the density-map attachment becomes a shading-rate attachment.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_begin_rendering(
+    cb: vk::CommandBuffer,
+    info: *const vk::RenderingInfo<'_>,
+) {
+    // SAFETY: the caller's arguments.
+    unsafe {
+        cmd_begin_rendering_with(
+            "vkCmdBeginRendering",
+            |d| d.next.cmd_begin_rendering,
+            cb,
+            info,
+        )
+    }
+}
+
+/// `vkCmdBeginRenderingKHR`: as [`cmd_begin_rendering`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_begin_rendering_khr(
+    cb: vk::CommandBuffer,
+    info: *const vk::RenderingInfo<'_>,
+) {
+    // SAFETY: the caller's arguments.
+    unsafe {
+        cmd_begin_rendering_with(
+            "vkCmdBeginRenderingKHR",
+            |d| d.next.cmd_begin_rendering_khr,
+            cb,
+            info,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn att(format: vk::Format) -> vk::AttachmentDescription {
+        vk::AttachmentDescription::default()
+            .format(format)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .initial_layout(vk::ImageLayout::UNDEFINED)
+            .final_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
+    }
+
+    /// Colour, depth, density; one subpass reading an input attachment, multiview over two views.
+    #[test]
+    fn v1_converts_with_multiview_and_input_aspects() {
+        let atts = [
+            att(vk::Format::R8G8B8A8_UNORM),
+            att(vk::Format::D24_UNORM_S8_UINT),
+            att(vk::Format::R8G8_UNORM)
+                .load_op(vk::AttachmentLoadOp::DONT_CARE)
+                .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                .initial_layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT)
+                .final_layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT),
+        ];
+        let color = [vk::AttachmentReference {
+            attachment: 0,
+            layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+        }];
+        let depth = vk::AttachmentReference {
+            attachment: 1,
+            layout: vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
+        };
+        let inputs = [
+            vk::AttachmentReference {
+                attachment: 1,
+                layout: vk::ImageLayout::DEPTH_STENCIL_READ_ONLY_OPTIMAL,
+            },
+            vk::AttachmentReference {
+                attachment: 0,
+                layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+            },
+        ];
+        let preserve = [2u32];
+        let subpasses = [
+            vk::SubpassDescription::default()
+                .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+                .color_attachments(&color)
+                .depth_stencil_attachment(&depth),
+            vk::SubpassDescription::default()
+                .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+                .input_attachments(&inputs)
+                .color_attachments(&color)
+                .preserve_attachments(&preserve),
+        ];
+        let deps = [vk::SubpassDependency {
+            src_subpass: 0,
+            dst_subpass: 1,
+            src_stage_mask: vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+            dst_stage_mask: vk::PipelineStageFlags::FRAGMENT_SHADER
+                | vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT,
+            src_access_mask: vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
+            dst_access_mask: vk::AccessFlags::INPUT_ATTACHMENT_READ
+                | vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT,
+            dependency_flags: vk::DependencyFlags::BY_REGION | vk::DependencyFlags::VIEW_LOCAL,
+        }];
+        let masks = [0b11, 0b11];
+        let offsets = [0];
+        let correlation = [0b11];
+        let multiview = vk::RenderPassMultiviewCreateInfo::default()
+            .view_masks(&masks)
+            .view_offsets(&offsets)
+            .correlation_masks(&correlation);
+        let aspect_refs = [vk::InputAttachmentAspectReference {
+            subpass: 1,
+            input_attachment_index: 0,
+            aspect_mask: vk::ImageAspectFlags::DEPTH,
+        }];
+        let aspects = vk::RenderPassInputAttachmentAspectCreateInfo::default()
+            .aspect_references(&aspect_refs);
+        let ci = vk::RenderPassCreateInfo::default()
+            .attachments(&atts)
+            .subpasses(&subpasses)
+            .dependencies(&deps);
+        // SAFETY: every array lives to the end of the test.
+        let mut pass = unsafe { v1_to_v2(&ci, Some(&multiview), Some(&aspects)) };
+        assert_eq!(pass.attachments.len(), 3);
+        assert_eq!(pass.attachments[1].format, vk::Format::D24_UNORM_S8_UINT);
+        assert_eq!(
+            pass.attachments[0].final_layout,
+            vk::ImageLayout::TRANSFER_SRC_OPTIMAL
+        );
+        assert_eq!(pass.subpasses.len(), 2);
+        assert_eq!(pass.subpasses[0].view_mask, 0b11);
+        assert_eq!(pass.subpasses[1].view_mask, 0b11);
+        // SAFETY: pointers into `pass`.
+        unsafe {
+            let s0 = &pass.subpasses[0];
+            assert_eq!((*s0.p_depth_stencil_attachment).attachment, 1);
+            assert!(s0.p_input_attachments.is_null());
+            assert!(s0.p_resolve_attachments.is_null());
+            let s1 = &pass.subpasses[1];
+            let ins = slice(s1.p_input_attachments, s1.input_attachment_count);
+            assert_eq!(ins[0].aspect_mask, vk::ImageAspectFlags::DEPTH, "named");
+            assert_eq!(
+                ins[1].aspect_mask,
+                vk::ImageAspectFlags::COLOR,
+                "the format's"
+            );
+            assert_eq!(ins[1].layout, vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL);
+            let cs = slice(s1.p_color_attachments, s1.color_attachment_count);
+            assert_eq!(cs[0].aspect_mask, vk::ImageAspectFlags::empty());
+            assert_eq!(
+                slice(s1.p_preserve_attachments, s1.preserve_attachment_count),
+                [2]
+            );
+        }
+        assert_eq!(pass.dependencies[0].view_offset, 0);
+        assert_eq!(
+            pass.dependencies[0].dependency_flags,
+            vk::DependencyFlags::BY_REGION | vk::DependencyFlags::VIEW_LOCAL
+        );
+        assert_eq!(pass.correlated, [0b11]);
+
+        let texel = vk::Extent2D {
+            width: 16,
+            height: 16,
+        };
+        add_shading_rate(&mut pass, 2, texel);
+        let d = &pass.attachments[2];
+        assert_eq!(d.format, vk::Format::R8_UINT);
+        assert_eq!(d.load_op, vk::AttachmentLoadOp::LOAD);
+        assert_eq!(d.store_op, vk::AttachmentStoreOp::DONT_CARE);
+        assert_eq!(d.initial_layout, SHADOW_LAYOUT);
+        assert_eq!(d.final_layout, SHADOW_LAYOUT);
+        assert_eq!(
+            pass.attachments[0].load_op,
+            vk::AttachmentLoadOp::CLEAR,
+            "others untouched"
+        );
+        for s in &pass.subpasses {
+            // SAFETY: pointers into `pass`.
+            unsafe {
+                let f = &*(s.p_next as *const vk::FragmentShadingRateAttachmentInfoKHR);
+                assert_eq!(
+                    f.s_type,
+                    vk::StructureType::FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR
+                );
+                assert!(f.p_next.is_null());
+                assert_eq!(f.shading_rate_attachment_texel_size, texel);
+                let r = &*f.p_fragment_shading_rate_attachment;
+                assert_eq!((r.attachment, r.layout), (2, SHADOW_LAYOUT));
+            }
+        }
+        let dep = &pass.dependencies[0];
+        assert_eq!(
+            dep.dst_stage_mask,
+            vk::PipelineStageFlags::FRAGMENT_SHADER
+                | vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+        );
+        assert_eq!(
+            dep.dst_access_mask,
+            vk::AccessFlags::INPUT_ATTACHMENT_READ
+                | vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR
+        );
+        let info = pass.info(vk::RenderPassCreateFlags::empty(), std::ptr::null());
+        assert_eq!(info.subpass_count, 2);
+        assert_eq!(info.correlated_view_mask_count, 1);
+    }
+
+    #[test]
+    fn v1_without_multiview_has_no_view_masks() {
+        let atts = [att(vk::Format::R8G8B8A8_UNORM)];
+        let color = [vk::AttachmentReference {
+            attachment: 0,
+            layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+        }];
+        let subpasses = [vk::SubpassDescription::default().color_attachments(&color)];
+        let ci = vk::RenderPassCreateInfo::default()
+            .attachments(&atts)
+            .subpasses(&subpasses);
+        // SAFETY: every array lives to the end of the test.
+        let pass = unsafe { v1_to_v2(&ci, None, None) };
+        assert_eq!(pass.subpasses[0].view_mask, 0);
+        assert!(pass.dependencies.is_empty());
+        assert!(pass.correlated.is_empty());
+    }
+
+    #[test]
+    fn v2_keeps_the_subpass_chain_behind_the_rate_info() {
+        let tail = vk::BaseInStructure {
+            s_type: vk::StructureType::from_raw(4242),
+            ..Default::default()
+        };
+        let color = [vk::AttachmentReference2::default().attachment(0)];
+        let mut sub = vk::SubpassDescription2::default().color_attachments(&color);
+        sub.p_next = &tail as *const _ as *const c_void;
+        let subs = [sub];
+        let atts = [
+            vk::AttachmentDescription2::default().format(vk::Format::R8G8B8A8_UNORM),
+            vk::AttachmentDescription2::default().format(vk::Format::R8G8_UNORM),
+        ];
+        let ci = vk::RenderPassCreateInfo2::default()
+            .attachments(&atts)
+            .subpasses(&subs);
+        // SAFETY: every array lives to the end of the test.
+        let mut pass = unsafe { Pass2::from_v2(&ci) };
+        add_shading_rate(
+            &mut pass,
+            1,
+            vk::Extent2D {
+                width: 8,
+                height: 8,
+            },
+        );
+        // SAFETY: pointers into `pass`.
+        let f = unsafe {
+            &*(pass.subpasses[0].p_next as *const vk::FragmentShadingRateAttachmentInfoKHR)
+        };
+        assert_eq!(f.p_next, &tail as *const _ as *const c_void);
+        assert_eq!(
+            subs[0].p_next, &tail as *const _ as *const c_void,
+            "not written"
+        );
+        assert_eq!(atts[1].format, vk::Format::R8G8_UNORM, "not written");
+        assert_eq!(pass.attachments[1].format, vk::Format::R8_UINT);
+    }
+
+    #[test]
+    fn imageless_info_describes_the_shadow() {
+        let formats = [SHADOW_FORMAT];
+        let app_formats = [vk::Format::R8G8_UNORM];
+        let app = vk::FramebufferAttachmentImageInfo::default()
+            .usage(vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT)
+            .width(8)
+            .height(8)
+            .layer_count(2)
+            .view_formats(&app_formats);
+        let s = shadow_attachment_info(&app, true, &formats);
+        assert_eq!(s.usage, SHADOW_USAGE);
+        assert_eq!((s.width, s.height, s.layer_count), (8, 8, 2));
+        // SAFETY: points at `formats`.
+        assert_eq!(unsafe { *s.p_view_formats }, vk::Format::R8_UINT);
+        assert_eq!(shadow_attachment_info(&app, false, &formats).layer_count, 1);
+    }
+}
