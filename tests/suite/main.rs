@@ -23,4 +23,5 @@ mod pipeline;
 mod symmetric_fov;
 mod threads;
 mod tidy;
+mod vk_enable;
 mod vk_layer;
