@@ -148,11 +148,11 @@ pub fn create_vulkan_instance(
     let Some(names) = (unsafe { app_layers(app_vk) }) else {
         return Ok(down());
     };
-    // SAFETY: each name of a valid VkInstanceCreateInfo is NUL-terminated (above).
-    if names
-        .iter()
-        .any(|&n| unsafe { ffi::cstr(n) } == Some(LAYER))
-    {
+    let is_ours = |&n: &*const c_char| {
+        // SAFETY: each name of a valid VkInstanceCreateInfo is NUL-terminated (above).
+        (unsafe { ffi::cstr(n) }) == Some(LAYER)
+    };
+    if names.iter().any(is_ours) {
         return Ok(down());
     }
     // SAFETY: the application's vkGetInstanceProcAddr, which the runtime calls the same way.
