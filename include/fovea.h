@@ -3,9 +3,9 @@
  *
  * Applications need no header to use fovea: they enable the layer (XR_ENABLE_API_LAYERS, an
  * implicit manifest, or XrInstanceCreateInfo::enabledApiLayerNames) and its extensions through
- * the OpenXR headers. This header names the layer, the environment variables it reads and the
- * extensions it provides, and declares the one symbol libfovea.so exports, for code that
- * configures, checks or loads the layer itself.
+ * the OpenXR headers. This header names the layer (and the Vulkan layer in the same library), the
+ * environment variables they read and the extensions the OpenXR layer provides, and declares its
+ * negotiation symbol, for code that configures, checks or loads the layer itself.
  *
  * It needs no OpenXR headers. When <openxr/openxr_loader_negotiation.h> is available it is
  * included and the declaration uses its types; define FOVEA_NO_OPENXR_HEADERS to keep it out.
