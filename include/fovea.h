@@ -3,9 +3,9 @@
  *
  * Applications need no header to use fovea: they enable the layer (XR_ENABLE_API_LAYERS, an
  * implicit manifest, or XrInstanceCreateInfo::enabledApiLayerNames) and its extensions through
- * the OpenXR headers. This header names the layer, the environment variables it reads and the
- * extensions it provides, and declares the one symbol libfovea.so exports, for code that
- * configures, checks or loads the layer itself.
+ * the OpenXR headers. This header names the layer (and the Vulkan layer in the same library), the
+ * environment variables they read and the extensions the OpenXR layer provides, and declares its
+ * negotiation symbol, for code that configures, checks or loads the layer itself.
  *
  * It needs no OpenXR headers. When <openxr/openxr_loader_negotiation.h> is available it is
  * included and the declaration uses its types; define FOVEA_NO_OPENXR_HEADERS to keep it out.
@@ -19,6 +19,13 @@
 #define FOVEA_LAYER_NAME "XR_APILAYER_FOVEA_foveation"
 
 /*
+ * The Vulkan layer in the same library (README, "Vulkan layer"): VK_EXT_fragment_density_map on
+ * devices with VK_KHR_fragment_shading_rate attachments. Its name, as in its manifests,
+ * VK_INSTANCE_LAYERS and ppEnabledLayerNames.
+ */
+#define FOVEA_VK_LAYER_NAME "VK_LAYER_FOVEA_fragment_density_map"
+
+/*
  * Environment variables fovea reads (README, "Settings"). FOVEA_DISABLE is read by the OpenXR
  * loader: it is the implicit manifest's disable_environment.
  */
@@ -28,6 +35,9 @@
 #define FOVEA_ENV_SYMMETRIC_FOV "FOVEA_SYMMETRIC_FOV" /* 0/1: one shared symmetric FOV for both eyes */
 #define FOVEA_ENV_INJECT_PANIC "FOVEA_INJECT_PANIC" /* testing aid: that hook panics */
 #define FOVEA_ENV_PROPS "FOVEA_PROPS"               /* a file of debug.oculus.foveation.*=value lines, re-read live */
+/* Read by the Vulkan loader for the implicit Vulkan layer manifest `fovea install` writes. */
+#define FOVEA_ENV_VK_LAYER "FOVEA_VK_LAYER" /* 1: load the Vulkan layer (fovea sets it for XR Vulkan apps) */
+#define FOVEA_ENV_DISABLE_FOVEA_VK_LAYER "DISABLE_FOVEA_VK_LAYER" /* set: never load it */
 /* Quest's debug.oculus.foveation.* properties: level 0-4, dynamic 0/1, subsampled 0/1. */
 #define FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL "DEBUG_OCULUS_FOVEATION_LEVEL"
 #define FOVEA_ENV_DEBUG_OCULUS_FOVEATION_DYNAMIC "DEBUG_OCULUS_FOVEATION_DYNAMIC"
@@ -41,6 +51,8 @@
     X(FOVEA_ENV_SYMMETRIC_FOV)                   \
     X(FOVEA_ENV_INJECT_PANIC)                    \
     X(FOVEA_ENV_PROPS)                           \
+    X(FOVEA_ENV_VK_LAYER)                        \
+    X(FOVEA_ENV_DISABLE_FOVEA_VK_LAYER)          \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL)    \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_DYNAMIC)  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_SUBSAMPLED)

@@ -185,6 +185,7 @@ typed!(
     xr::ViewState,
     xr::VulkanDeviceCreateInfoKHR,
     xr::VulkanGraphicsDeviceGetInfoKHR,
+    xr::VulkanInstanceCreateInfoKHR,
 );
 
 // SAFETY: the base headers are `#[repr(C)]` with `ty` and `next` first; they have no type of their

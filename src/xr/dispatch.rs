@@ -141,6 +141,10 @@ hooks! {
     c"xrReleaseSwapchainImage" => release_swapchain_image: ReleaseSwapchainImage =
         hooks::swapchain::release_swapchain_image, Owner::Below,
         (swapchain: val xr::Swapchain, info: in xr::SwapchainImageReleaseInfo);
+    c"xrCreateVulkanInstanceKHR" => create_vulkan_instance: CreateVulkanInstanceKHR =
+        hooks::vulkan_layer::create_vulkan_instance, Owner::Below,
+        (instance: val xr::Instance, info: in xr::VulkanInstanceCreateInfoKHR,
+         vk_instance: out xr::platform::VkInstance, vk_result: out xr::platform::VkResult);
     c"xrGetVulkanDeviceExtensionsKHR" => get_vulkan_device_extensions: GetVulkanDeviceExtensionsKHR =
         hooks::vulkan_enable::get_vulkan_device_extensions, Owner::Below,
         (instance: val xr::Instance, system: val xr::SystemId, capacity: val u32, count: out u32,

@@ -212,6 +212,8 @@ fn create_instance_inner(
     } else {
         kept.as_ptr()
     };
+    // Before the runtime below exists and starts threads: see the function's reasoning.
+    crate::xr::hooks::vulkan_layer::request_for_process(exts.vulkan_enable || exts.vulkan_enable2);
     let mut next_layer_info = *li;
     next_layer_info.next_info = next_info.next;
     // SAFETY: the next layer's xrCreateApiLayerInstance, with copies of the application's and the

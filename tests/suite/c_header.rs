@@ -1,7 +1,7 @@
 //! include/fovea.h: compiles as C99 and C++ with `-Wall -Wextra -Werror`, with and without the
 //! OpenXR SDK headers; a program built against it dlopen()s this build's libfovea.so and finds the
-//! symbol it declares (and, with the SDK's types, negotiates); and its layer name, extension list and
-//! environment variables are the ones in the Rust sources, so the header cannot drift.
+//! symbol it declares (and, with the SDK's types, negotiates); and its layer names, extension list
+//! and environment variables are the ones in the Rust sources, so the header cannot drift.
 //!
 //! Needs `cc` (gcc) and, for the C++ half, `c++`; without them the test prints `SKIPPED` (fails under
 //! `FOVEA_REQUIRE_SYSTEM=1`).
@@ -79,6 +79,10 @@ fn layer_env_vars() -> BTreeSet<String> {
             .unwrap(),
     )
     .unwrap();
+    // The implicit Vulkan manifest's enable and disable variables, which the Vulkan loader reads
+    // (and the OpenXR side sets the first).
+    vars.insert(fovea_abi::env::VK_LAYER.to_owned());
+    vars.insert(fovea_abi::env::DISABLE_VK_LAYER.to_owned());
     vars.insert(
         implicit["api_layer"]["disable_environment"]
             .as_str()
@@ -96,6 +100,14 @@ fn header_matches_the_rust_sources() {
         [(
             "FOVEA_LAYER_NAME".to_owned(),
             format!("\"{}\"", fovea_abi::LAYER_NAME)
+        )]
+    );
+
+    assert_eq!(
+        defines(&h, "FOVEA_VK_LAYER_NAME"),
+        [(
+            "FOVEA_VK_LAYER_NAME".to_owned(),
+            format!("\"{}\"", fovea_abi::VK_LAYER_NAME)
         )]
     );
 
@@ -194,6 +206,7 @@ int main(int argc, char **argv) {
         printf("env %s\n", env_names[i]);
     }
     printf("layer %s\n", FOVEA_LAYER_NAME);
+    printf("vulkan layer %s\n", FOVEA_VK_LAYER_NAME);
 
     /* The declaration and the pointer type agree: comparing distinct function pointer types is an
        error here (-Werror in C, always in C++). Unevaluated, so nothing is linked. */
@@ -365,6 +378,10 @@ fn a_c_and_a_cpp_program_compile_against_the_header_and_find_the_symbol() {
         assert_eq!(printed, expected, "{out}");
         assert!(
             out.contains(&format!("layer {}\n", fovea_abi::LAYER_NAME)),
+            "{out}"
+        );
+        assert!(
+            out.contains(&format!("vulkan layer {}\n", fovea_abi::VK_LAYER_NAME)),
             "{out}"
         );
         assert!(out.contains("symbol found\n"), "{out}");

@@ -23,6 +23,7 @@ mod pipeline;
 mod symmetric_fov;
 mod threads;
 mod tidy;
+mod vk_enable;
 mod vk_layer;
 mod vk_passes;
 mod vk_pipelines;

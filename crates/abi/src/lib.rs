@@ -90,7 +90,8 @@ impl Ext {
     }
 }
 
-/// Environment variables the layer reads (the README's settings table lists each with its meaning).
+/// Environment variables the layer reads, and the two the Vulkan loader reads for its Vulkan layer
+/// (the README's settings table lists each with its meaning).
 pub mod env {
     /// `FOVEA_SYMMETRIC_FOV=1`: report one shared symmetric FOV for both eyes.
     pub const SYMMETRIC_FOV: &str = "FOVEA_SYMMETRIC_FOV";
@@ -102,6 +103,15 @@ pub mod env {
     pub const LOG_FILE: &str = "FOVEA_LOG_FILE";
     /// Names a hook that panics on purpose, to prove panics never cross the FFI boundary.
     pub const INJECT_PANIC: &str = "FOVEA_INJECT_PANIC";
+    /// `FOVEA_VK_LAYER=1`: the `enable_environment` of the implicit Vulkan layer manifest that
+    /// `fovea install` writes, so the Vulkan loader loads the Vulkan layer only into processes that
+    /// set it. The OpenXR layer sets it (once, when an instance enables XR_KHR_vulkan_enable or
+    /// XR_KHR_vulkan_enable2) where it is not set already; `FOVEA_VK_LAYER=0` keeps it out.
+    pub const VK_LAYER: &str = "FOVEA_VK_LAYER";
+    /// `DISABLE_FOVEA_VK_LAYER=1`: the implicit Vulkan layer manifest's `disable_environment`, read
+    /// by the Vulkan loader; it wins over [`VK_LAYER`]
+    /// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>).
+    pub const DISABLE_VK_LAYER: &str = "DISABLE_FOVEA_VK_LAYER";
 }
 
 /// The longest `next` chain the layer follows. The spec puts no bound on chains, but real ones

@@ -199,6 +199,85 @@ pub fn install_path(env: &Environment, kind: Kind, system: bool) -> Result<PathB
     Ok(base.join(kind.relative_dir()).join(MANIFEST_FILE))
 }
 
+/// The Vulkan layer's implicit manifest file name, as `fovea install` writes it.
+pub const VK_MANIFEST_FILE: &str = "VK_LAYER_FOVEA_fragment_density_map.json";
+
+/// The Vulkan loader's folder for implicit layer manifests under each base directory.
+pub const VK_IMPLICIT_DIR: &str = "vulkan/implicit_layer.d";
+/// The Vulkan loader's folder for explicit layer manifests under each base directory.
+pub const VK_EXPLICIT_DIR: &str = "vulkan/explicit_layer.d";
+
+/// The base directories the Vulkan loader reads layer manifests from on Linux, in its order; each
+/// is followed by [`VK_IMPLICIT_DIR`] or [`VK_EXPLICIT_DIR`]
+/// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>, "Linux
+/// Layer Discovery"). Debian's loader has `/etc` as both its SYSCONFDIR and EXTRASYSCONFDIR.
+pub const VK_LAYER_SEARCH: &[Base] = &[
+    Base::User {
+        var: "XDG_CONFIG_HOME",
+        home: ".config",
+    },
+    Base::List {
+        var: "XDG_CONFIG_DIRS",
+        default: &["/etc/xdg"],
+    },
+    Base::Fixed("/etc"),
+    USER_DATA,
+    Base::List {
+        var: "XDG_DATA_DIRS",
+        default: &["/usr/local/share", "/usr/share"],
+    },
+];
+
+/// Variables that name folders of Vulkan layer manifests: the explicit ones add to
+/// (`VK_ADD_LAYER_PATH`) or replace (`VK_LAYER_PATH`) the explicit search, the implicit ones the
+/// implicit search (loaders 1.3.234 and later).
+pub const VK_ADD_LAYER_PATH: &str = "VK_ADD_LAYER_PATH";
+pub const VK_LAYER_PATH: &str = "VK_LAYER_PATH";
+pub const VK_ADD_IMPLICIT_LAYER_PATH: &str = "VK_ADD_IMPLICIT_LAYER_PATH";
+pub const VK_IMPLICIT_LAYER_PATH: &str = "VK_IMPLICIT_LAYER_PATH";
+
+/// The folders the Vulkan loader reads layer manifests of one kind from, in its order.
+pub fn vk_layer_dirs(env: &Environment, kind: Kind) -> Vec<PathBuf> {
+    let (add, replace, rel) = match kind {
+        Kind::Explicit => (VK_ADD_LAYER_PATH, VK_LAYER_PATH, VK_EXPLICIT_DIR),
+        Kind::Implicit => (
+            VK_ADD_IMPLICIT_LAYER_PATH,
+            VK_IMPLICIT_LAYER_PATH,
+            VK_IMPLICIT_DIR,
+        ),
+    };
+    let split = |v: &str| -> Vec<PathBuf> {
+        v.split(':')
+            .filter(|d| !d.is_empty())
+            .map(PathBuf::from)
+            .collect()
+    };
+    if let Some(p) = env.get(replace) {
+        return split(p);
+    }
+    let mut dirs = env.get(add).map(split).unwrap_or_default();
+    dirs.extend(
+        VK_LAYER_SEARCH
+            .iter()
+            .flat_map(|&b| env.bases(b))
+            .map(|b| b.join(rel)),
+    );
+    dirs
+}
+
+/// Where `fovea install` puts the Vulkan layer's implicit manifest: the user's data home, or
+/// [`SYSTEM_DATA_DIR`] with `--system`, then [`VK_IMPLICIT_DIR`].
+pub fn vk_install_path(env: &Environment, system: bool) -> Result<PathBuf, String> {
+    let base = if system {
+        PathBuf::from(SYSTEM_DATA_DIR)
+    } else {
+        env.bases(USER_DATA)
+            .pop()
+            .ok_or("neither XDG_DATA_HOME nor HOME is set")?
+    };
+    Ok(base.join(VK_IMPLICIT_DIR).join(VK_MANIFEST_FILE))
+}
+
 /// `XR_ARCH_ABI` as the loader spells it, for `active_runtime.<abi>.json`.
 pub fn arch_abi() -> &'static str {
     match std::env::consts::ARCH {
@@ -330,6 +409,37 @@ mod tests {
             root: r,
         };
         assert!(install_path(&env, Kind::Explicit, false).is_err());
+    }
+
+    #[test]
+    fn vulkan_layer_search_and_install_paths() {
+        let r = Path::new("/root");
+        let v = vars(&[("HOME", "/h"), ("XDG_DATA_HOME", "/data")]);
+        let env = Environment { vars: &v, root: r };
+        let dirs = vk_layer_dirs(&env, Kind::Implicit);
+        assert_eq!(dirs[0], Path::new("/h/.config/vulkan/implicit_layer.d"));
+        assert_eq!(dirs[3], Path::new("/data/vulkan/implicit_layer.d"));
+        assert_eq!(dirs.len(), 6);
+        let user = vk_install_path(&env, false).unwrap();
+        assert_eq!(
+            user,
+            Path::new("/data/vulkan/implicit_layer.d/VK_LAYER_FOVEA_fragment_density_map.json")
+        );
+        assert!(dirs.iter().any(|d| Some(d.as_path()) == user.parent()));
+        let system = vk_install_path(&env, true).unwrap();
+        assert!(dirs.contains(&r.join("usr/local/share").join(VK_IMPLICIT_DIR)));
+        assert_eq!(
+            system.parent().unwrap(),
+            Path::new("/usr/local/share/vulkan/implicit_layer.d")
+        );
+        let v = vars(&[("HOME", "/h"), ("VK_ADD_LAYER_PATH", "/a:/b")]);
+        let env = Environment { vars: &v, root: r };
+        let dirs = vk_layer_dirs(&env, Kind::Explicit);
+        assert_eq!(dirs[..2], [PathBuf::from("/a"), PathBuf::from("/b")]);
+        assert_eq!(dirs.len(), 8);
+        let v = vars(&[("VK_ADD_LAYER_PATH", "/a"), ("VK_LAYER_PATH", "/c")]);
+        let env = Environment { vars: &v, root: r };
+        assert_eq!(vk_layer_dirs(&env, Kind::Explicit), [PathBuf::from("/c")]);
     }
 
     #[test]

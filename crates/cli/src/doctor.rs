@@ -1,6 +1,7 @@
 //! `fovea doctor`: what the Khronos loader would find on Linux (the active runtime, the explicit and
 //! implicit layer manifests, which layers it enables and in which order) and the misconfigurations
-//! that keep fovea from loading or load it twice.
+//! that keep fovea from loading or load it twice; then what [`crate::vk_doctor`] finds of the
+//! Vulkan layer and each GPU.
 //!
 //! Where the loader looks is [`crate::discovery`], shared with `fovea install`; what it makes of
 //! each file and in which order it loads layers follows its `api_layer_interface.cpp` (1.1.x;
@@ -16,6 +17,7 @@ use crate::discovery::{
     layer_dirs, process_vars, runtime_candidates, Environment, Kind, MANIFEST_FILE,
     RUNTIME_JSON_VAR,
 };
+use crate::vk_doctor;
 
 /// The active runtime, as far as the loader's discovery goes.
 #[derive(Debug)]
@@ -447,8 +449,8 @@ fn join(dirs: &[PathBuf]) -> String {
     s.join(", ")
 }
 
-/// The report, problems last.
-pub fn render(d: &Discovery, problems: &[String]) -> String {
+/// The report, `extra` lines before the problems, problems last.
+pub fn render(d: &Discovery, extra: &[String], problems: &[String]) -> String {
     let mut out = String::new();
     let mut line = |s: String| {
         out.push_str(&s);
@@ -532,6 +534,9 @@ pub fn render(d: &Discovery, problems: &[String]) -> String {
     } else {
         "fovea: no manifest found (`fovea install` writes one)".into()
     });
+    for l in extra {
+        line(l.clone());
+    }
     for p in problems {
         line(format!("problem: {p}"));
     }
@@ -545,8 +550,17 @@ pub fn run() -> Result<(), String> {
         root: Path::new("/"),
     };
     let d = discover(&env);
-    let found = problems(&d);
-    print!("{}", render(&d, &found));
+    let mut found = problems(&d);
+    let mut vk = vk_doctor::Report::default();
+    vk.lines
+        .push(format!("Vulkan layer {}:", fovea_abi::VK_LAYER_NAME));
+    let openxr_found = d.implicit.iter().chain(&d.explicit).any(Manifest::is_fovea);
+    let usable = vk_doctor::layer_report(&env, openxr_found, &mut vk);
+    // The user's environment is read above; from here on the GPUs are asked without the layer.
+    vk_doctor::keep_layer_out();
+    vk_doctor::gpu_report(usable, &mut vk);
+    found.extend(vk.problems);
+    print!("{}", render(&d, &vk.lines, &found));
     match found.len() {
         0 => Ok(()),
         1 => Err("1 problem".into()),
@@ -667,7 +681,7 @@ mod tests {
         // Only the missing runtime.
         assert_eq!(p.len(), 1, "{p:?}");
         assert!(p[0].starts_with("no active runtime"), "{p:?}");
-        let text = render(&d, &p);
+        let text = render(&d, &[], &p);
         assert!(text.contains("fovea: enabled, layer 3 of 3"), "{text}");
     }
 

@@ -2,7 +2,12 @@
 //! remove a layer manifest where the loader looks ([`crate::discovery`]), pointing at this build's
 //! `libfovea.so` by absolute path, so the manifest works from any directory.
 //!
-//! The manifest is the checked-in one with `library_path` replaced, so the extension list has one
+//! Install writes the Vulkan layer's manifest too, always implicit, into the Vulkan loader's folder
+//! (`$XDG_DATA_HOME/vulkan/implicit_layer.d`, or `/usr/local/share/vulkan/implicit_layer.d` with
+//! `--system`), with the same library path: it loads only where `FOVEA_VK_LAYER=1`, which fovea's
+//! OpenXR layer sets for OpenXR applications that use Vulkan (README, "Vulkan layer").
+//!
+//! Each manifest is the checked-in one with `library_path` replaced, so the extension list has one
 //! source (tests/manifests.rs checks it against the layer's table).
 
 use std::path::{Path, PathBuf};
@@ -11,13 +16,15 @@ use serde_json::Value;
 
 use crate::args::InstallArgs;
 use crate::discovery::{
-    install_path, layer_dirs, process_vars, standard_layer_dirs, Environment, Kind, LAYER_PATH_VAR,
-    SYSTEM_DATA_DIR,
+    install_path, layer_dirs, process_vars, standard_layer_dirs, vk_install_path, vk_layer_dirs,
+    Environment, Kind, LAYER_PATH_VAR, SYSTEM_DATA_DIR,
 };
 
 const EXPLICIT_MANIFEST: &str = include_str!("../../../manifest/XR_APILAYER_FOVEA_foveation.json");
 const IMPLICIT_MANIFEST: &str =
     include_str!("../../../manifest/implicit/XR_APILAYER_FOVEA_foveation.json");
+const VK_IMPLICIT_MANIFEST: &str =
+    include_str!("../../../manifest/vulkan/implicit/VK_LAYER_FOVEA_fragment_density_map.json");
 
 /// Overrides where the library is looked for: `cargo test` runs a `fovea` binary with no
 /// `libfovea.so` beside it that is guaranteed fresh, and packagers may install the two apart.
@@ -56,17 +63,18 @@ fn library() -> Result<PathBuf, String> {
     }
 }
 
-/// `template` with `api_layer.library_path` set to `library`. Edited as a JSON value, so escaping
-/// is serde_json's; written with the template's key order and two-space indent, so the installed
-/// file reads like the checked-in one.
-pub fn with_library_path(template: &str, library: &str) -> Result<String, String> {
+/// `template` with `<layer>.library_path` set to `library` (`layer`: `api_layer` in OpenXR
+/// manifests, `layer` in Vulkan ones). Edited as a JSON value, so escaping is serde_json's; written
+/// with the template's key order and two-space indent, so the installed file reads like the
+/// checked-in one.
+pub fn with_library_path(template: &str, layer: &str, library: &str) -> Result<String, String> {
     let mut v: Value =
         serde_json::from_str(template).map_err(|e| format!("the manifest is not JSON: {e}"))?;
     let slot = v
-        .get_mut("api_layer")
+        .get_mut(layer)
         .and_then(|l| l.get_mut("library_path"))
         .filter(|p| p.is_string())
-        .ok_or("no api_layer.library_path string in the manifest")?;
+        .ok_or_else(|| format!("no {layer}.library_path string in the manifest"))?;
     *slot = Value::from(library);
     let mut text = serde_json::to_string_pretty(&v).map_err(|e| e.to_string())?;
     text.push('\n');
@@ -79,11 +87,36 @@ pub fn manifest_text(kind: Kind, library: &Path) -> Result<String, String> {
         Kind::Explicit => EXPLICIT_MANIFEST,
         Kind::Implicit => IMPLICIT_MANIFEST,
     };
-    // JSON strings are Unicode; a path that is not cannot be written into one.
-    let library = library
+    with_library_path(template, "api_layer", utf8(library)?)
+}
+
+/// JSON strings are Unicode; a path that is not cannot be written into one.
+fn utf8(library: &Path) -> Result<&str, String> {
+    library
         .to_str()
-        .ok_or_else(|| format!("{} is not valid UTF-8", library.display()))?;
-    with_library_path(template, library)
+        .ok_or_else(|| format!("{} is not valid UTF-8", library.display()))
+}
+
+/// The Vulkan layer's implicit manifest with `library` as its absolute library path.
+pub fn vk_manifest_text(library: &Path) -> Result<String, String> {
+    with_library_path(VK_IMPLICIT_MANIFEST, "layer", utf8(library)?)
+}
+
+/// Writes `text` to `path`, creating its folder; whether a file was replaced.
+fn write_file(path: &Path, text: &str) -> Result<bool, String> {
+    let dir = path.parent().expect("manifest path has a directory");
+    std::fs::create_dir_all(dir).map_err(|e| io_error("cannot create", dir, e))?;
+    let replaced = path.exists();
+    std::fs::write(path, text).map_err(|e| io_error("cannot write", path, e))?;
+    Ok(replaced)
+}
+
+fn wrote(replaced: bool, path: &Path) {
+    println!(
+        "{} {}",
+        if replaced { "replaced" } else { "wrote" },
+        path.display()
+    );
 }
 
 fn io_error(what: &str, path: &Path, e: std::io::Error) -> String {
@@ -105,15 +138,9 @@ pub fn install(args: &InstallArgs) -> Result<(), String> {
     let path = install_path(&env, kind, args.system)?;
     let library = library()?;
     let text = manifest_text(kind, &library)?;
-    let dir = path.parent().expect("manifest path has a directory");
-    std::fs::create_dir_all(dir).map_err(|e| io_error("cannot create", dir, e))?;
-    let replaced = path.exists();
-    std::fs::write(&path, text).map_err(|e| io_error("cannot write", &path, e))?;
-    println!(
-        "{} {}",
-        if replaced { "replaced" } else { "wrote" },
-        path.display()
-    );
+    let vk_path = vk_install_path(&env, args.system)?;
+    let vk_text = vk_manifest_text(&library)?;
+    wrote(write_file(&path, &text)?, &path);
     println!("  library_path: {}", library.display());
     match kind {
         Kind::Explicit => println!(
@@ -126,6 +153,23 @@ pub fn install(args: &InstallArgs) -> Result<(), String> {
     }
     for note in search_notes(&env, kind, &path) {
         println!("note: {note}");
+    }
+    wrote(write_file(&vk_path, &vk_text)?, &vk_path);
+    println!(
+        "  Vulkan layer {}, implicit: loads where {}=1, which fovea sets for OpenXR applications \
+         that use Vulkan; {}=1 switches it off",
+        fovea_abi::VK_LAYER_NAME,
+        fovea_abi::env::VK_LAYER,
+        fovea_abi::env::DISABLE_VK_LAYER
+    );
+    if !vk_layer_dirs(&env, Kind::Implicit)
+        .iter()
+        .any(|d| Some(d.as_path()) == vk_path.parent())
+    {
+        println!(
+            "note: VK_IMPLICIT_LAYER_PATH or XDG_DATA_DIRS is set so that the Vulkan loader will not \
+             look there while it is"
+        );
     }
     let other_path = install_path(&env, kind.other(), args.system)?;
     if other_path.exists() {
@@ -164,8 +208,32 @@ pub fn uninstall(args: &InstallArgs) -> Result<(), String> {
         vars: &vars,
         root: Path::new("/"),
     };
-    let path = install_path(&env, kind(args), args.system)?;
-    match std::fs::remove_file(&path) {
+    let kind = kind(args);
+    let path = install_path(&env, kind, args.system)?;
+    remove(&path)?;
+    // The Vulkan manifest serves both OpenXR manifests of this scope: it goes with the last.
+    let other = install_path(&env, kind.other(), args.system)?;
+    let vk_path = vk_install_path(&env, args.system)?;
+    if other.exists() {
+        if vk_path.exists() {
+            println!(
+                "kept {} for {}; `fovea uninstall{}` removes both",
+                vk_path.display(),
+                other.display(),
+                if kind == Kind::Explicit {
+                    " --implicit"
+                } else {
+                    ""
+                }
+            );
+        }
+        return Ok(());
+    }
+    remove(&vk_path)
+}
+
+fn remove(path: &Path) -> Result<(), String> {
+    match std::fs::remove_file(path) {
         Ok(()) => {
             println!("removed {}", path.display());
             Ok(())
@@ -174,7 +242,7 @@ pub fn uninstall(args: &InstallArgs) -> Result<(), String> {
             println!("nothing to remove: {} does not exist", path.display());
             Ok(())
         }
-        Err(e) => Err(io_error("cannot remove", &path, e)),
+        Err(e) => Err(io_error("cannot remove", path, e)),
     }
 }
 
@@ -202,10 +270,27 @@ mod tests {
                 (kind == Kind::Implicit).then_some("FOVEA_DISABLE")
             );
         }
-        assert!(with_library_path(r#"{"api_layer": {"name": "x"}}"#, "/l").is_err());
+        let l = "api_layer";
+        assert!(with_library_path(r#"{"api_layer": {"name": "x"}}"#, l, "/l").is_err());
         // Only the layer's own library_path, never a key of that name elsewhere.
-        assert!(with_library_path(r#"{"library_path": "a"}"#, "/l").is_err());
-        assert!(with_library_path("not json", "/l").is_err());
+        assert!(with_library_path(r#"{"library_path": "a"}"#, l, "/l").is_err());
+        assert!(with_library_path("not json", l, "/l").is_err());
+        let vk: serde_json::Value =
+            serde_json::from_str(&vk_manifest_text(Path::new(odd)).unwrap()).unwrap();
+        assert_eq!(vk["layer"]["library_path"], odd);
+        assert_eq!(vk["layer"]["name"], fovea_abi::VK_LAYER_NAME);
+        assert_eq!(
+            vk["layer"]["enable_environment"][fovea_abi::env::VK_LAYER],
+            "1"
+        );
+        assert_eq!(
+            vk["layer"]["disable_environment"][fovea_abi::env::DISABLE_VK_LAYER],
+            "1"
+        );
+        assert_eq!(
+            vk["layer"]["device_extensions"][0]["name"],
+            fovea_abi::VK_FDM_EXTENSION
+        );
     }
 
     #[test]

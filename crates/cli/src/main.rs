@@ -14,6 +14,7 @@ mod json;
 mod maps;
 mod report;
 mod target;
+mod vk_doctor;
 
 use clap::Parser;
 

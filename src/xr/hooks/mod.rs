@@ -17,6 +17,7 @@ pub mod instance;
 pub mod session;
 pub mod swapchain;
 pub mod vulkan_enable;
+pub mod vulkan_layer;
 
 use std::sync::Arc;
 

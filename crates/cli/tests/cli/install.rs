@@ -15,6 +15,7 @@ use crate::support::{command, run, Run};
 
 const FOVEA: &str = "XR_APILAYER_FOVEA_foveation";
 const FILE: &str = "XR_APILAYER_FOVEA_foveation.json";
+const VK_FILE: &str = "VK_LAYER_FOVEA_fragment_density_map.json";
 
 /// `fovea doctor`'s problem lines.
 impl Run {
@@ -54,8 +55,13 @@ impl Sandbox {
             .join(name);
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(dir.join("lib")).unwrap();
-        // A stand-in for libfovea.so: install and doctor only check that it is a file.
-        std::fs::write(dir.join("lib/libfovea.so"), "").unwrap();
+        // This build's libfovea.so under the sandbox's own name (a hard link, so the manifests
+        // name the sandbox path): doctor loads it to find the Vulkan layer's entry point.
+        let lib = dir.join("lib/libfovea.so");
+        let real = fovea_harness::artifact("libfovea.so").expect("libfovea.so: cargo build");
+        if std::fs::hard_link(&real, &lib).is_err() {
+            std::fs::copy(&real, &lib).unwrap();
+        }
         let dir = std::fs::canonicalize(dir).unwrap();
         Sandbox { dir }
     }
@@ -92,6 +98,13 @@ impl Sandbox {
         )
         .unwrap();
         path.to_str().unwrap().to_owned()
+    }
+
+    /// Where install writes the Vulkan layer's manifest: `$XDG_DATA_HOME/vulkan/implicit_layer.d`.
+    fn vk_manifest(&self) -> PathBuf {
+        self.data_home()
+            .join("vulkan/implicit_layer.d")
+            .join(VK_FILE)
     }
 
     fn run(&self, args: &[&str], env: &[(&str, &str)]) -> Run {
@@ -233,8 +246,14 @@ fn uninstall_removes_exactly_that_file_and_twice_is_harmless() {
 
     let r = sb.run(&["uninstall", "--implicit"], &[]);
     assert_eq!(r.code, 0, "{}{}", r.out, r.err);
-    assert_eq!(r.out.trim(), format!("removed {}", implicit.display()));
+    assert_eq!(
+        r.out.lines().next().unwrap(),
+        format!("removed {}", implicit.display())
+    );
     assert!(!implicit.exists() && neighbour.exists() && explicit.exists());
+    // The Vulkan manifest stays while the explicit OpenXR manifest uses it.
+    assert!(sb.vk_manifest().exists(), "{}", r.out);
+    assert!(r.out.contains("kept "), "{}", r.out);
 
     let r = sb.run(&["uninstall", "--implicit"], &[]);
     assert_eq!(r.code, 0, "{}{}", r.out, r.err);
@@ -243,6 +262,13 @@ fn uninstall_removes_exactly_that_file_and_twice_is_harmless() {
     let r = sb.run(&["uninstall"], &[]);
     assert_eq!(r.code, 0);
     assert!(!explicit.exists());
+    assert!(!sb.vk_manifest().exists(), "{}", r.out);
+    assert!(
+        r.out
+            .contains(&format!("removed {}", sb.vk_manifest().display())),
+        "{}",
+        r.out
+    );
 }
 
 #[test]
@@ -377,7 +403,11 @@ fn doctor_names_a_missing_library_and_a_library_that_is_not_a_file() {
     std::fs::write(&runtime, rt).unwrap();
     let r = sb.doctor(&[("XR_RUNTIME_JSON", &runtime)]);
     assert_eq!(r.code, 1, "{}", r.out);
-    assert_eq!(r.problems().len(), 1, "{}", r.out);
+    // The OpenXR manifest's, and the Vulkan manifest's (same library).
+    assert_eq!(r.problems().len(), 2, "{}", r.out);
+    assert!(r
+        .problem(VK_FILE)
+        .contains("is not a file, so the loader cannot load the Vulkan layer"));
     let p = r.problem("does not exist");
     assert!(
         p.starts_with(&format!(
@@ -387,14 +417,14 @@ fn doctor_names_a_missing_library_and_a_library_that_is_not_a_file() {
         )),
         "{p}"
     );
-    assert_eq!(r.err.trim(), "fovea doctor: 1 problem");
+    assert_eq!(r.err.trim(), "fovea doctor: 2 problems");
 
     // A directory where the library should be: the loader accepts the manifest, dlopen fails.
     std::fs::create_dir(sb.library()).unwrap();
     let r = sb.doctor(&[("XR_RUNTIME_JSON", &runtime)]);
     assert_eq!(r.code, 1);
     assert!(r
-        .problem("library_path")
+        .problem("fovea's library_path")
         .ends_with("is not a file: loading the layer fails"));
 }
 
@@ -542,4 +572,264 @@ fn doctor_names_fovea_requested_but_not_found() {
     assert!(r
         .problem("no active runtime")
         .contains("XR_ERROR_RUNTIME_UNAVAILABLE"));
+}
+
+/// The lines of doctor's Vulkan layer section.
+fn vk_section(r: &Run) -> String {
+    let start = r
+        .out
+        .find("Vulkan layer VK_LAYER_FOVEA_fragment_density_map:\n")
+        .unwrap_or_else(|| panic!("no Vulkan layer section:\n{}", r.out));
+    let rest = &r.out[start..];
+    rest[..rest.find("GPUs").unwrap_or(rest.len())].to_owned()
+}
+
+#[test]
+fn install_writes_the_implicit_vulkan_manifest_and_the_last_uninstall_removes_it() {
+    let sb = Sandbox::new("vulkan-install");
+    let r = sb.install(&["install"]);
+    let path = sb.vk_manifest();
+    assert!(
+        r.out.contains(&format!("wrote {}", path.display())),
+        "{}",
+        r.out
+    );
+    let v = read(&path);
+    let l = &v["layer"];
+    assert_eq!(l["name"], fovea_abi::VK_LAYER_NAME);
+    // The OpenXR manifest's library: both layers in one loaded library.
+    assert_eq!(Path::new(l["library_path"].as_str().unwrap()), sb.library());
+    assert_eq!(
+        l["enable_environment"],
+        serde_json::json!({ fovea_abi::env::VK_LAYER: "1" })
+    );
+    assert_eq!(
+        l["disable_environment"],
+        serde_json::json!({ fovea_abi::env::DISABLE_VK_LAYER: "1" })
+    );
+    assert_eq!(
+        l["device_extensions"],
+        serde_json::json!([{
+            "name": fovea_abi::VK_FDM_EXTENSION,
+            "spec_version": fovea_abi::VK_FDM_SPEC_VERSION.to_string()
+        }])
+    );
+    // The checked-in implicit manifest, library path replaced.
+    let mut expected = read(
+        &Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../manifest/vulkan/implicit")
+            .join(VK_FILE),
+    );
+    expected["layer"]["library_path"] = sb.library().to_str().unwrap().into();
+    assert_eq!(v, expected);
+    // --implicit writes the same file again; uninstalling one kind keeps it for the other.
+    let r = sb.install(&["install", "--implicit"]);
+    assert!(
+        r.out.contains(&format!("replaced {}", path.display())),
+        "{}",
+        r.out
+    );
+    let r = sb.run(&["uninstall"], &[]);
+    assert!(path.exists(), "{}", r.out);
+    let r = sb.run(&["uninstall", "--implicit"], &[]);
+    assert_eq!(r.code, 0, "{}{}", r.out, r.err);
+    assert!(!path.exists(), "{}", r.out);
+}
+
+#[test]
+fn doctor_says_the_vulkan_layer_is_installed_and_would_load() {
+    let sb = Sandbox::new("vulkan-installed");
+    let runtime = sb.runtime();
+    sb.install(&["install"]);
+    let r = sb.doctor(&[("XR_RUNTIME_JSON", &runtime)]);
+    assert_eq!(r.code, 0, "{}{}", r.out, r.err);
+    assert!(r.problems().is_empty(), "{}", r.out);
+    let section = vk_section(&r);
+    assert!(
+        section.contains(&format!(
+            "  {}, library {}: implicit; loads into processes with FOVEA_VK_LAYER=1",
+            sb.vk_manifest().display(),
+            sb.library().display()
+        )),
+        "{section}"
+    );
+
+    // Switched off by the user: named, with the fix.
+    let r = sb.doctor(&[
+        ("XR_RUNTIME_JSON", &runtime),
+        ("DISABLE_FOVEA_VK_LAYER", "1"),
+    ]);
+    assert_eq!(r.code, 1, "{}", r.out);
+    assert_eq!(r.problems().len(), 1, "{}", r.out);
+    assert!(r
+        .problem(VK_FILE)
+        .contains("disabled because DISABLE_FOVEA_VK_LAYER is set; unset it"));
+    let r = sb.doctor(&[("XR_RUNTIME_JSON", &runtime), ("FOVEA_VK_LAYER", "0")]);
+    assert_eq!(r.problems().len(), 1, "{}", r.out);
+    assert!(r
+        .problem(VK_FILE)
+        .contains("FOVEA_VK_LAYER=0 keeps the implicit Vulkan layer out"));
+}
+
+#[test]
+fn doctor_names_a_missing_vulkan_layer() {
+    let sb = Sandbox::new("vulkan-missing");
+    let runtime = sb.runtime();
+    sb.install(&["install"]);
+    std::fs::remove_file(sb.vk_manifest()).unwrap();
+    let r = sb.doctor(&[("XR_RUNTIME_JSON", &runtime)]);
+    assert_eq!(r.code, 1, "{}", r.out);
+    assert_eq!(r.problems().len(), 1, "{}", r.out);
+    assert!(r
+        .problem("is not installed")
+        .ends_with("`fovea install` writes its manifest"));
+    assert!(
+        vk_section(&r).contains("  (no manifest found)"),
+        "{}",
+        r.out
+    );
+    // Found through VK_ADD_LAYER_PATH (the checked-in explicit manifest's folder, pointed at a
+    // build): explicit, and fine.
+    let dir = sb.dir.join("vklayers");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut m = read(
+        &Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../manifest/vulkan")
+            .join(VK_FILE),
+    );
+    m["layer"]["library_path"] = sb.library().to_str().unwrap().into();
+    std::fs::write(dir.join(VK_FILE), m.to_string()).unwrap();
+    let r = sb.doctor(&[
+        ("XR_RUNTIME_JSON", &runtime),
+        ("VK_ADD_LAYER_PATH", dir.to_str().unwrap()),
+    ]);
+    assert_eq!(r.code, 0, "{}", r.out);
+    assert!(
+        vk_section(&r).contains(": explicit; fovea adds it"),
+        "{}",
+        r.out
+    );
+}
+
+#[test]
+fn doctor_names_a_vulkan_layer_with_a_broken_library_path() {
+    let sb = Sandbox::new("vulkan-broken");
+    let runtime = sb.runtime();
+    sb.install(&["install"]);
+    let mut v = read(&sb.vk_manifest());
+    let gone = sb.dir.join("lib/gone.so");
+    v["layer"]["library_path"] = gone.to_str().unwrap().into();
+    std::fs::write(sb.vk_manifest(), v.to_string()).unwrap();
+    let r = sb.doctor(&[("XR_RUNTIME_JSON", &runtime)]);
+    assert_eq!(r.code, 1, "{}", r.out);
+    assert_eq!(r.problems().len(), 1, "{}", r.out);
+    assert!(r.problem(VK_FILE).contains(&format!(
+        "its library_path {} is not a file, so the loader cannot load the Vulkan layer",
+        gone.display()
+    )));
+    // A file that is no layer library: named too.
+    std::fs::write(&gone, "not a library").unwrap();
+    let r = sb.doctor(&[("XR_RUNTIME_JSON", &runtime)]);
+    assert_eq!(r.problems().len(), 1, "{}", r.out);
+    assert!(r
+        .problem(VK_FILE)
+        .contains("cannot serve as the Vulkan layer"));
+    // Without disable_environment the loader rejects an implicit manifest.
+    v["layer"]["library_path"] = sb.library().to_str().unwrap().into();
+    v["layer"]
+        .as_object_mut()
+        .unwrap()
+        .remove("disable_environment");
+    std::fs::write(sb.vk_manifest(), v.to_string()).unwrap();
+    let r = sb.doctor(&[("XR_RUNTIME_JSON", &runtime)]);
+    assert_eq!(r.problems().len(), 1, "{}", r.out);
+    assert!(r
+        .problem(VK_FILE)
+        .contains("without disable_environment: the loader rejects it"));
+}
+
+/// Lavapipe's ICD manifest, for `VK_ICD_FILENAMES` (the sandbox hides the system's data folders).
+fn lavapipe_icd() -> Option<PathBuf> {
+    let found = std::fs::read_dir("/usr/share/vulkan/icd.d")
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| {
+            p.file_name()
+                .is_some_and(|n| n.to_string_lossy().starts_with("lvp_icd"))
+        });
+    if found.is_none() {
+        fovea_harness::skip("lavapipe (mesa-vulkan-drivers) is not installed");
+    }
+    found
+}
+
+#[test]
+fn doctor_says_lavapipe_has_no_density_maps() {
+    let Some(icd) = lavapipe_icd() else { return };
+    let sb = Sandbox::new("vulkan-lavapipe");
+    let runtime = sb.runtime();
+    sb.install(&["install"]);
+    let r = sb.doctor(&[
+        ("XR_RUNTIME_JSON", &runtime),
+        ("VK_ICD_FILENAMES", icd.to_str().unwrap()),
+    ]);
+    assert_eq!(r.code, 0, "{}{}", r.out, r.err);
+    let gpu = r
+        .out
+        .lines()
+        .find(|l| l.contains("llvmpipe"))
+        .unwrap_or_else(|| panic!("no lavapipe line:\n{}", r.out));
+    assert!(gpu.contains("fragment density maps unavailable"), "{gpu}");
+}
+
+#[test]
+fn doctor_says_a_shading_rate_gpu_gets_them_emulated() {
+    let Some(icd) = lavapipe_icd() else { return };
+    let double = match fovea_vkdouble::find_library()
+        .or_else(|_| fovea_harness::artifact(fovea_vkdouble::LIBRARY_FILE))
+    {
+        Ok(l) => l,
+        Err(e) => {
+            fovea_harness::skip(&e);
+            return;
+        }
+    };
+    let sb = Sandbox::new("vulkan-double");
+    let runtime = sb.runtime();
+    sb.install(&["install"]);
+    let dir = sb.dir.join("double");
+    fovea_vkdouble::write_manifest(&dir, &double).unwrap();
+    let double_name = fovea_vkdouble::LAYER_NAME.to_str().unwrap();
+    let env = |profile| {
+        sb.doctor(&[
+            ("XR_RUNTIME_JSON", &runtime),
+            ("VK_ICD_FILENAMES", icd.to_str().unwrap()),
+            ("VK_ADD_LAYER_PATH", dir.to_str().unwrap()),
+            ("VK_INSTANCE_LAYERS", double_name),
+            (fovea_vkdouble::PROFILE_ENV, profile),
+        ])
+    };
+    let r = env("nvidia");
+    assert_eq!(r.code, 0, "{}{}", r.out, r.err);
+    let gpu = r.out.lines().find(|l| l.contains("llvmpipe")).unwrap();
+    assert!(
+        gpu.ends_with("emulated by VK_LAYER_FOVEA_fragment_density_map on shading-rate attachments: texel 16×16, layered, up to 4×4"),
+        "{gpu}"
+    );
+    let r = env("amd");
+    let gpu = r.out.lines().find(|l| l.contains("llvmpipe")).unwrap();
+    assert!(
+        gpu.ends_with("texel 8×8, one layer for both eyes, up to 2×2"),
+        "{gpu}"
+    );
+    // The layer missing where a GPU needs it: a problem with the fix.
+    std::fs::remove_file(sb.vk_manifest()).unwrap();
+    let r = env("nvidia");
+    assert_eq!(r.code, 1, "{}", r.out);
+    assert_eq!(r.problems().len(), 2, "{}", r.out);
+    assert!(r
+        .problem("needs fovea's Vulkan layer")
+        .starts_with("llvmpipe"));
 }
