@@ -28,6 +28,11 @@
 #define FOVEA_ENV_SYMMETRIC_FOV "FOVEA_SYMMETRIC_FOV" /* 0/1: one shared symmetric FOV for both eyes */
 #define FOVEA_ENV_INJECT_PANIC "FOVEA_INJECT_PANIC" /* testing aid: that hook panics */
 #define FOVEA_ENV_PROPS "FOVEA_PROPS"               /* a file of debug.oculus.foveation.*=value lines, re-read live */
+#define FOVEA_ENV_CONFIG "FOVEA_CONFIG"             /* the fovea.toml to read instead of $XDG_CONFIG_HOME's; "" none */
+#define FOVEA_ENV_MAX_FRAGMENT "FOVEA_MAX_FRAGMENT" /* 1, 2 or 4: the largest fragment a map asks for */
+/* Where fovea.toml (XDG_CONFIG_HOME/fovea) and the log (XDG_STATE_HOME/fovea) are by default. */
+#define FOVEA_ENV_XDG_CONFIG_HOME "XDG_CONFIG_HOME"
+#define FOVEA_ENV_XDG_STATE_HOME "XDG_STATE_HOME"
 /* Quest's debug.oculus.foveation.* properties: level 0-4, dynamic 0/1, subsampled 0/1. */
 #define FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL "DEBUG_OCULUS_FOVEATION_LEVEL"
 #define FOVEA_ENV_DEBUG_OCULUS_FOVEATION_DYNAMIC "DEBUG_OCULUS_FOVEATION_DYNAMIC"
@@ -41,6 +46,10 @@
     X(FOVEA_ENV_SYMMETRIC_FOV)                   \
     X(FOVEA_ENV_INJECT_PANIC)                    \
     X(FOVEA_ENV_PROPS)                           \
+    X(FOVEA_ENV_CONFIG)                          \
+    X(FOVEA_ENV_MAX_FRAGMENT)                    \
+    X(FOVEA_ENV_XDG_CONFIG_HOME)                 \
+    X(FOVEA_ENV_XDG_STATE_HOME)                  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL)    \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_DYNAMIC)  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_SUBSAMPLED)
