@@ -437,6 +437,7 @@ impl Config {
         sections.sort_by_key(|s| s.line);
         global.entries.sort_by_key(|e| e.line);
         out.problems.extend(problems);
+        out.problems.sort_by_key(|p| p.line);
         out.sections.push(global);
         out.sections.extend(sections);
         out
