@@ -251,7 +251,7 @@ fn create_instance_inner(
     crate::common::log::header(&format!(
         "fovea {} instance: app={:?} exe={:?} engine={:?} runtime={runtime:?} provided={provided:?} \
          native={native:?} symmetric_fov={} config={config:?} pid={}",
-        env!("CARGO_PKG_VERSION"),
+        fovea_abi::VERSION,
         opt(&id.app),
         opt(&id.exe),
         opt(&id.engine),
@@ -295,9 +295,9 @@ unsafe fn runtime_name(gipa: xr::pfn::GetInstanceProcAddr, instance: xr::Instanc
     let Some(f) = (unsafe { dispatch::load(gipa, instance, c"xrGetInstanceProperties") }) else {
         return "unknown".into();
     };
-    // SAFETY: the next layer answered for xrGetInstanceProperties, so the pointer has the
-    // signature the spec gives that name, which is openxr-sys's.
-    let f =
+    let f: xr::pfn::GetInstanceProperties =
+        // SAFETY: the next layer answered for xrGetInstanceProperties, so the pointer has the
+        // signature the spec gives that name, which is openxr-sys's.
         unsafe { std::mem::transmute::<xr::pfn::VoidFunction, xr::pfn::GetInstanceProperties>(f) };
     let mut props = xr::InstanceProperties {
         ty: xr::InstanceProperties::TYPE,

@@ -7,6 +7,9 @@
 
 use std::ffi::CStr;
 
+/// fovea's version, as its log header gives it.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
 /// The OpenXR API layer's name, as in its manifests and `XR_ENABLE_API_LAYERS`.
 pub const LAYER_NAME: &str = "XR_APILAYER_FOVEA_foveation";
 
