@@ -38,6 +38,11 @@
 /* Read by the Vulkan loader for the implicit Vulkan layer manifest `fovea install` writes. */
 #define FOVEA_ENV_VK_LAYER "FOVEA_VK_LAYER" /* 1: load the Vulkan layer (fovea sets it for XR Vulkan apps) */
 #define FOVEA_ENV_DISABLE_FOVEA_VK_LAYER "DISABLE_FOVEA_VK_LAYER" /* set: never load it */
+#define FOVEA_ENV_CONFIG "FOVEA_CONFIG"             /* the fovea.toml to read instead of $XDG_CONFIG_HOME's; "" none */
+#define FOVEA_ENV_MAX_FRAGMENT "FOVEA_MAX_FRAGMENT" /* 1, 2 or 4: the largest fragment a map asks for */
+/* Where fovea.toml (XDG_CONFIG_HOME/fovea) and the log (XDG_STATE_HOME/fovea) are by default. */
+#define FOVEA_ENV_XDG_CONFIG_HOME "XDG_CONFIG_HOME"
+#define FOVEA_ENV_XDG_STATE_HOME "XDG_STATE_HOME"
 /* Quest's debug.oculus.foveation.* properties: level 0-4, dynamic 0/1, subsampled 0/1. */
 #define FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL "DEBUG_OCULUS_FOVEATION_LEVEL"
 #define FOVEA_ENV_DEBUG_OCULUS_FOVEATION_DYNAMIC "DEBUG_OCULUS_FOVEATION_DYNAMIC"
@@ -53,6 +58,10 @@
     X(FOVEA_ENV_PROPS)                           \
     X(FOVEA_ENV_VK_LAYER)                        \
     X(FOVEA_ENV_DISABLE_FOVEA_VK_LAYER)          \
+    X(FOVEA_ENV_CONFIG)                          \
+    X(FOVEA_ENV_MAX_FRAGMENT)                    \
+    X(FOVEA_ENV_XDG_CONFIG_HOME)                 \
+    X(FOVEA_ENV_XDG_STATE_HOME)                  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL)    \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_DYNAMIC)  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_SUBSAMPLED)

@@ -10,6 +10,9 @@ use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 use xr::Handle;
 
+// The layer reads no fovea.toml and writes no log file in the user's home during tests.
+fovea_harness::private_home!();
+
 #[test]
 fn a_panicking_hook_returns_runtime_failure_and_the_app_goes_on() {
     std::env::set_var("FOVEA_INJECT_PANIC", "xrCreateSession");

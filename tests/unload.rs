@@ -9,6 +9,9 @@
 use fovea_harness::app::API_1_0;
 use fovea_harness::{open_library, App, Chain, LayerSpec};
 
+// The layer reads no fovea.toml and writes no log file in the user's home during tests.
+fovea_harness::private_home!();
+
 #[test]
 fn the_layer_stays_loaded_once_the_loader_lets_go() {
     use libloading::os::unix::{Library, RTLD_LAZY};

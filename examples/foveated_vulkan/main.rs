@@ -954,6 +954,8 @@ mod tests {
             ),
         )
         .unwrap();
+        // The layer reads no fovea.toml and writes no log file in the user's home during tests.
+        fovea_harness::use_private_home();
         std::env::set_var("XR_RUNTIME_JSON", dir.join("runtime.json"));
         std::env::set_var("XR_API_LAYER_PATH", dir.join("layers"));
         std::env::set_var("XR_ENABLE_API_LAYERS", FOVEA_LAYER);
@@ -1036,6 +1038,7 @@ mod tests {
                         level: Level::from_index(level as u32).unwrap(),
                         vertical_offset_deg: 0.0,
                     },
+                    max_fragment: fovea_model::maps::DEFAULT_MAX_FRAGMENT,
                     layers: views.clone(),
                 };
                 let [mw, mh] = grid.map_extent();

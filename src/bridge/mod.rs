@@ -84,7 +84,9 @@ pub fn effective(params: ProfileParams, over: DebugProperties, step: usize) -> (
     (
         Pattern {
             level,
-            vertical_offset_deg: params.vertical_offset_deg,
+            vertical_offset_deg: over
+                .vertical_offset_deg
+                .unwrap_or(params.vertical_offset_deg),
         },
         dynamic,
     )

@@ -1,9 +1,11 @@
-//! Settings read from the environment.
+//! Settings read from the environment and the configuration file.
 //!
-//! Every variable the layer reads is listed here (and in the README's settings table and
-//! include/fovea.h), so there is one place to look.
+//! Every variable the layer reads is listed here or in `fovea_config` (and in the README's settings
+//! section and include/fovea.h), so there is one place to look. The file, `fovea.toml`, is
+//! `fovea_config`'s; its values sit below the environment's and Quest's debug properties and above
+//! the application's own profile (README, "Settings").
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::time::SystemTime;
 
@@ -42,17 +44,24 @@ pub const SUBSAMPLED: Property = Property {
 };
 pub const PROPERTIES: [&Property; 3] = [&LEVEL, &DYNAMIC, &SUBSAMPLED];
 
+/// `FOVEA_MAX_FRAGMENT`: the largest fragment any density map asks for (1, 2 or 4).
+pub const MAX_FRAGMENT_ENV: &str = "FOVEA_MAX_FRAGMENT";
+
 /// `FOVEA_PROPS`: a file of `debug.oculus.foveation.*=value` lines, re-read while the app runs.
 pub const PROPS_ENV: &str = "FOVEA_PROPS";
 
-/// The debug overrides in force. As on Quest: with dynamic on, the level is the maximum; with
-/// dynamic off, it is the level; either applies to every foveated swapchain, above what the
-/// application asked for.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// The overrides in force: Quest's debug properties over the configuration file's values. As on
+/// Quest: with dynamic on, the level is the maximum; with dynamic off, it is the level; either
+/// applies to every foveated swapchain, above what the application asked for.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct DebugProperties {
     pub level: Option<Level>,
     pub dynamic: Option<bool>,
     pub subsampled: Option<bool>,
+    /// `vertical_offset` (file only): replaces the application's `verticalOffset`.
+    pub vertical_offset_deg: Option<f32>,
+    /// `max_fragment` (file or `FOVEA_MAX_FRAGMENT`): 1, 2 or 4.
+    pub max_fragment: Option<u32>,
 }
 
 impl DebugProperties {
@@ -64,7 +73,37 @@ impl DebugProperties {
                 p.set(prop, &v, prop.env);
             }
         }
+        if let Some(v) = get(MAX_FRAGMENT_ENV) {
+            match fovea_config::parse_env(fovea_config::Key::MaxFragment, &v) {
+                Some(fovea_config::Value::Fragment(n)) => p.max_fragment = Some(n),
+                _ => tracing::warn!(
+                    variable = MAX_FRAGMENT_ENV,
+                    value = v.trim(),
+                    accepted = fovea_config::Key::MaxFragment.accepted(),
+                    "bad value; ignored"
+                ),
+            }
+        }
         p
+    }
+
+    /// The file's values for the application `id`: the sections of `config` that match it.
+    pub fn from_config(config: &fovea_config::Config, id: &fovea_config::Identity) -> Self {
+        use fovea_config::Key;
+        let (r, _) = fovea_config::resolve(Some(config), id, |_| None);
+        DebugProperties {
+            level: r.level(Key::Level),
+            dynamic: r.flag(Key::Dynamic),
+            subsampled: None,
+            vertical_offset_deg: r.vertical_offset_deg(),
+            max_fragment: r.get(Key::MaxFragment).is_some().then(|| r.max_fragment()),
+        }
+    }
+
+    /// The largest fragment maps may ask for now.
+    pub fn max_fragment(&self) -> u32 {
+        self.max_fragment
+            .unwrap_or(fovea_config::DEFAULT_MAX_FRAGMENT)
     }
 
     /// From a property file's text: `name=value` lines; blank lines and `#` comments are skipped, a
@@ -118,6 +157,8 @@ impl DebugProperties {
             level: over.level.or(self.level),
             dynamic: over.dynamic.or(self.dynamic),
             subsampled: over.subsampled.or(self.subsampled),
+            vertical_offset_deg: over.vertical_offset_deg.or(self.vertical_offset_deg),
+            max_fragment: over.max_fragment.or(self.max_fragment),
         }
     }
 }
@@ -133,36 +174,64 @@ fn bool01(v: &str) -> Option<bool> {
 /// How often, in display time, the property file's modification stamp is checked.
 pub const PROPS_POLL_NS: i64 = 250_000_000;
 
-/// The debug properties of a running instance: the environment's, overlaid by the `FOVEA_PROPS`
-/// file's, which is re-read when its modification time or size changes, so a property takes effect
-/// without restarting the app (the desktop counterpart of `adb shell setprop`).
+/// The overrides of a running instance: the configuration file's sections for the application,
+/// overlaid by the environment's debug properties, overlaid by the `FOVEA_PROPS` file's. Both files
+/// are re-read when their modification time or size changes, so a change takes effect without
+/// restarting the app (the desktop counterpart of `adb shell setprop`).
 #[derive(Debug)]
 pub struct Overrides {
     env: DebugProperties,
     file: Option<PathBuf>,
+    config: Option<(PathBuf, fovea_config::Identity)>,
     state: Mutex<FileState>,
     next_poll_ns: AtomicI64,
 }
 
+/// A file's modification time and size: what tells a re-read is due.
+type Stamp = Option<(SystemTime, u64)>;
+
 #[derive(Debug, Default)]
 struct FileState {
-    stamp: Option<(SystemTime, u64)>,
+    /// `None` until first read.
+    stamp: Option<Stamp>,
+    from_props: DebugProperties,
+    config_stamp: Option<Stamp>,
+    from_config: DebugProperties,
     current: DebugProperties,
 }
 
+fn stamp_of(path: &Path) -> Stamp {
+    std::fs::metadata(path)
+        .ok()
+        .map(|m| (m.modified().unwrap_or(SystemTime::UNIX_EPOCH), m.len()))
+}
+
 impl Overrides {
-    pub fn from_env() -> Overrides {
+    /// For the application `id`: the environment, `FOVEA_PROPS` and the configuration file.
+    pub fn from_env(config: Option<PathBuf>, id: fovea_config::Identity) -> Overrides {
         let get = |k: &str| std::env::var(k).ok();
-        Overrides::new(
+        Overrides::with_config(
             DebugProperties::from_lookup(get),
             std::env::var_os(PROPS_ENV).map(PathBuf::from),
+            config.map(|c| (c, id)),
         )
     }
 
+    #[cfg(test)]
     pub fn new(env: DebugProperties, file: Option<PathBuf>) -> Overrides {
+        Overrides::with_config(env, file, None)
+    }
+
+    /// With a configuration file and the application its sections are matched against.
+    pub fn with_config(
+        env: DebugProperties,
+        file: Option<PathBuf>,
+        config: Option<(PathBuf, fovea_config::Identity)>,
+    ) -> Overrides {
         let o = Overrides {
             env,
             file,
+            config,
             state: Mutex::ranked(
                 Rank::Settings,
                 "debug properties",
@@ -187,7 +256,9 @@ impl Overrides {
     /// otherwise.
     pub fn poll(&self, display_ns: i64) -> bool {
         // Lock-free on the frames in between: this runs in every xrEndFrame.
-        if self.file.is_none() || display_ns < self.next_poll_ns.load(Ordering::Relaxed) {
+        if (self.file.is_none() && self.config.is_none())
+            || display_ns < self.next_poll_ns.load(Ordering::Relaxed)
+        {
             return false;
         }
         self.next_poll_ns
@@ -196,28 +267,51 @@ impl Overrides {
     }
 
     fn reload(&self) -> bool {
-        let Some(path) = &self.file else {
-            return false;
-        };
-        let stamp = std::fs::metadata(path)
-            .ok()
-            .map(|m| (m.modified().unwrap_or(SystemTime::UNIX_EPOCH), m.len()));
+        let props_stamp = self.file.as_deref().map(stamp_of);
+        let config_stamp = self.config.as_ref().map(|(p, _)| stamp_of(p));
         let mut s = self.state.lock();
-        if stamp == s.stamp {
+        let mut read = false;
+        if let (Some(path), Some(stamp)) = (&self.file, props_stamp) {
+            if Some(stamp) != s.stamp {
+                s.stamp = Some(stamp);
+                s.from_props = match stamp.and_then(|_| std::fs::read_to_string(path).ok()) {
+                    Some(text) => DebugProperties::parse(&text, &path.display().to_string()),
+                    None => DebugProperties::default(),
+                };
+                read = true;
+            }
+        }
+        if let (Some((path, id)), Some(stamp)) = (&self.config, config_stamp) {
+            if Some(stamp) != s.config_stamp {
+                s.config_stamp = Some(stamp);
+                s.from_config = match stamp.and_then(|_| fovea_config::Config::load(path).ok()) {
+                    Some(c) => {
+                        warn_problems(&c);
+                        DebugProperties::from_config(&c, id)
+                    }
+                    None => DebugProperties::default(),
+                };
+                read = true;
+            }
+        }
+        if !read {
             return false;
         }
-        s.stamp = stamp;
-        let from_file = match stamp.and_then(|_| std::fs::read_to_string(path).ok()) {
-            Some(text) => DebugProperties::parse(&text, &path.display().to_string()),
-            None => DebugProperties::default(),
-        };
-        let next = self.env.overlaid(from_file);
+        let next = s.from_config.overlaid(self.env).overlaid(s.from_props);
         let changed = next != s.current;
         if changed {
-            tracing::info!(file = %path.display(), properties = ?next, "debug properties changed");
+            tracing::info!(properties = ?next, "overrides changed");
         }
         s.current = next;
         changed
+    }
+}
+
+/// One warning per problem of a configuration file, each naming the file, line, key and the
+/// accepted values.
+pub fn warn_problems(c: &fovea_config::Config) {
+    for p in &c.problems {
+        tracing::warn!("configuration: {p}");
     }
 }
 
@@ -225,17 +319,66 @@ impl Overrides {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Settings {
     pub symmetric_fov: bool,
+    /// `inject` and `inject_level`: for the coming injection mode; parsed and validated, not yet
+    /// acted on.
+    pub inject: bool,
+    pub inject_level: Option<Level>,
+    /// The `log` filter from the file (`FOVEA_LOG` wins; the log is set up before the instance).
+    pub log: Option<String>,
+    /// The `log_file` from the file or `FOVEA_LOG_FILE`: `Some("")` turns the file off; `None`
+    /// keeps the default.
+    pub log_file: Option<String>,
+    /// Who is running, as the file's sections are matched.
+    pub identity: fovea_config::Identity,
+    /// The configuration file, when there is one to watch.
+    pub config: Option<PathBuf>,
 }
 
 impl Settings {
-    pub fn from_env() -> Settings {
-        Settings::from_lookup(|k| std::env::var(k).ok())
+    /// For the application `id`: the environment over the configuration file's matching sections.
+    pub fn from_env(id: fovea_config::Identity) -> Settings {
+        let config = fovea_config::config_path(fovea_config::process_env);
+        let file = config
+            .as_deref()
+            .and_then(|p| fovea_config::Config::load(p).ok());
+        let mut s = Settings::resolve(file.as_ref(), &id, |k| std::env::var(k).ok());
+        s.identity = id;
+        s.config = config;
+        s
     }
 
     /// From any key-value source, so tests need not touch the process environment.
+    #[cfg(test)]
     pub fn from_lookup(get: impl Fn(&str) -> Option<String>) -> Settings {
+        Settings::resolve(None, &fovea_config::Identity::default(), get)
+    }
+
+    fn resolve(
+        file: Option<&fovea_config::Config>,
+        id: &fovea_config::Identity,
+        get: impl Fn(&str) -> Option<String>,
+    ) -> Settings {
+        use fovea_config::Key;
+        // The symmetric-FOV switch keeps its own warning; the file's problems are warned about
+        // once, by [`Overrides`].
+        let env_symmetric = get(SYMMETRIC_FOV_ENV);
+        let (r, _) = fovea_config::resolve(file, id, |k| {
+            (k != SYMMETRIC_FOV_ENV && k != MAX_FRAGMENT_ENV)
+                .then(|| get(k))
+                .flatten()
+        });
+        let symmetric_fov = match env_symmetric {
+            Some(v) => flag(Some(&v), SYMMETRIC_FOV_ENV),
+            None => r.flag(Key::SymmetricFov).unwrap_or(false),
+        };
         Settings {
-            symmetric_fov: flag(get(SYMMETRIC_FOV_ENV).as_deref(), SYMMETRIC_FOV_ENV),
+            symmetric_fov,
+            inject: r.flag(Key::Inject).unwrap_or(false),
+            inject_level: r.level(Key::InjectLevel),
+            log: r.text(Key::Log).map(String::from),
+            log_file: r.text(Key::LogFile).map(String::from),
+            identity: id.clone(),
+            config: None,
         }
     }
 }

@@ -203,7 +203,9 @@ fn create_instance_inner(
         .filter(|n| Ext::by_name(n).is_none_or(|e| !exts.provided(e)))
         .map(|n| n.as_ptr())
         .collect();
-    let settings = settings::Settings::from_env();
+    let id = identity(&app.application_info);
+    let settings = settings::Settings::from_env(id.clone());
+    crate::common::log::configure(settings.log.as_deref(), settings.log_file.as_deref());
     let epic = symmetric::enable_epic(settings.symmetric_fov, &names, &below, &mut kept);
     let mut down = *app;
     down.enabled_extension_count = kept.len() as u32;
@@ -232,16 +234,39 @@ fn create_instance_inner(
         next: unsafe { Next::load(next_gipa, handle) },
         extensions: exts,
         symmetric_fov: settings.symmetric_fov,
-        overrides: settings::Overrides::from_env(),
+        overrides: settings::Overrides::from_env(settings.config.clone(), id.clone()),
         stereo_fovs: crate::common::lock::Mutex::new(None),
         fovs: symmetric::InstanceFovs::new(epic),
         vulkan: Default::default(),
         lost: Default::default(),
     };
+    let provided: Vec<Ext> = exts.enabled.iter().filter(|e| exts.provided(*e)).collect();
+    let native: Vec<Ext> = exts.native.iter().collect();
+    // SAFETY: the next layer's xrGetInstanceProcAddr and the instance it just created.
+    let runtime = unsafe { runtime_name(next_gipa, handle) };
+    let config = settings
+        .config
+        .as_deref()
+        .map_or("none".into(), |p| p.display().to_string());
+    let opt = |s: &Option<String>| s.clone().unwrap_or_default();
+    // The instance header: one line per run in the log file whatever the filter.
+    crate::common::log::header(&format!(
+        "fovea {} instance: app={:?} exe={:?} engine={:?} runtime={runtime:?} provided={provided:?} \
+         native={native:?} symmetric_fov={} config={config:?} pid={}",
+        fovea_abi::VERSION,
+        opt(&id.app),
+        opt(&id.exe),
+        opt(&id.engine),
+        settings.symmetric_fov,
+        std::process::id(),
+    ));
     tracing::info!(
         target: fovea_abi::log_target::INSTANCE,
-        provided = ?exts.enabled.iter().filter(|e| exts.provided(*e)).collect::<Vec<_>>(),
-        native = ?exts.native.iter().collect::<Vec<_>>(),
+        app = opt(&id.app),
+        engine = opt(&id.engine),
+        runtime,
+        ?provided,
+        ?native,
         "instance created"
     );
     registry()
@@ -249,6 +274,51 @@ fn create_instance_inner(
         .write()
         .insert(handle.into_raw(), Arc::new(state));
     result
+}
+
+/// Who is running, as the configuration file's sections are matched: the application and engine
+/// names from `XrApplicationInfo`, and the executable's file name.
+fn identity(info: &xr::ApplicationInfo) -> fovea_config::Identity {
+    let name = |s: String| (!s.is_empty()).then_some(s);
+    fovea_config::Identity {
+        app: name(ffi::read_fixed(&info.application_name)),
+        exe: fovea_config::Identity::current_exe(),
+        engine: name(ffi::read_fixed(&info.engine_name)),
+    }
+}
+
+/// The runtime's name and version from `xrGetInstanceProperties` through the next layer, for the
+/// instance header; `unknown` when the call fails.
+///
+/// # Safety
+/// `gipa` must be the next layer's `xrGetInstanceProcAddr` and `instance` its live instance.
+unsafe fn runtime_name(gipa: xr::pfn::GetInstanceProcAddr, instance: xr::Instance) -> String {
+    // SAFETY: the caller's contract.
+    let Some(f) = (unsafe { dispatch::load(gipa, instance, c"xrGetInstanceProperties") }) else {
+        return "unknown".into();
+    };
+    let f: xr::pfn::GetInstanceProperties =
+        // SAFETY: the next layer answered for xrGetInstanceProperties, so the pointer has the
+        // signature the spec gives that name, which is openxr-sys's.
+        unsafe { std::mem::transmute::<xr::pfn::VoidFunction, xr::pfn::GetInstanceProperties>(f) };
+    let mut props = xr::InstanceProperties {
+        ty: xr::InstanceProperties::TYPE,
+        next: std::ptr::null_mut(),
+        runtime_version: xr::Version::new(0, 0, 0),
+        runtime_name: [0; xr::MAX_RUNTIME_NAME_SIZE],
+    };
+    // SAFETY: a live instance and a properly typed output struct with a NULL `next`.
+    if unsafe { f(instance, &mut props) }.into_raw() < 0 {
+        return "unknown".into();
+    }
+    let v = props.runtime_version;
+    format!(
+        "{} {}.{}.{}",
+        ffi::read_fixed(&props.runtime_name),
+        v.major(),
+        v.minor(),
+        v.patch()
+    )
 }
 
 shim! {

@@ -45,7 +45,9 @@ fn unquote(v: &str) -> &str {
 /// and ffi.rs name them, plus the implicit manifest's `disable_environment`, which the loader reads.
 /// `c"..."`/`b"..."` literals and `XR_`/`VK_` names are API identifiers, not variables.
 fn layer_env_vars() -> BTreeSet<String> {
-    let files = rust_files(&root().join("src"));
+    // The layer and the configuration crate it reads its file and variables through.
+    let mut files = rust_files(&root().join("src"));
+    files.extend(rust_files(&root().join("crates/config/src")));
     let mut vars = BTreeSet::new();
     for f in files
         .iter()

@@ -527,6 +527,21 @@ fn every_runtime_call_of_a_headless_session_failing_in_turn_here() {
     let mut retried = 0;
     for fault in &faults {
         let (run, _) = headless_run(&chain, Some(fault.clone()));
+        if fault.function == "xrGetInstanceProperties" && fault.nth == 1 {
+            // fovea's own call, for the runtime's name in its log header: a failure costs the
+            // header its runtime name and nothing else, but a lost instance stays lost and the
+            // application's next call says so.
+            let lost = fault.result == xr::Result::ERROR_INSTANCE_LOST
+                && run
+                    .first_error
+                    .is_some_and(|(_, r)| r == xr::Result::ERROR_INSTANCE_LOST);
+            assert!(
+                run.first_error.is_none() || lost,
+                "{fault:?}: {:?}",
+                run.first_error
+            );
+            continue;
+        }
         // The application saw exactly the runtime's error, from the call that failed.
         assert_eq!(
             run.first_error.map(|(f, r)| (f.to_string(), r)),

@@ -9,6 +9,9 @@
 
 mod support;
 
+// The layer reads no fovea.toml and writes no log file in the user's home during tests.
+fovea_harness::private_home!();
+
 mod below;
 mod c_header;
 mod fault_injection;
@@ -20,6 +23,7 @@ mod khronos_loader;
 mod layer_core;
 mod manifests;
 mod pipeline;
+mod settings_file;
 mod symmetric_fov;
 mod threads;
 mod tidy;

@@ -455,7 +455,7 @@ fn module_graph() -> BTreeMap<String, BTreeMap<String, String>> {
 
 #[test]
 fn the_model_and_abi_crates_have_no_unsafe() {
-    for krate in ["crates/model", "crates/abi"] {
+    for krate in ["crates/model", "crates/abi", "crates/config"] {
         let dir = root().join(krate);
         check(&rust_files(&dir), unsafe_uses);
         check(&[dir.join("src/lib.rs")], missing_forbid_unsafe);

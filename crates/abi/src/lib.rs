@@ -7,6 +7,9 @@
 
 use std::ffi::CStr;
 
+/// fovea's version, as its log header gives it.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
 /// The OpenXR API layer's name, as in its manifests and `XR_ENABLE_API_LAYERS`.
 pub const LAYER_NAME: &str = "XR_APILAYER_FOVEA_foveation";
 
@@ -99,8 +102,12 @@ pub mod env {
     pub const PROPS: &str = "FOVEA_PROPS";
     /// The log filter (a `tracing_subscriber::EnvFilter` string; default: warnings).
     pub const LOG: &str = "FOVEA_LOG";
-    /// A file that receives a copy of every log line.
+    /// The log file (default `$XDG_STATE_HOME/fovea/fovea.log`); empty: no log file.
     pub const LOG_FILE: &str = "FOVEA_LOG_FILE";
+    /// The configuration file (default `$XDG_CONFIG_HOME/fovea/fovea.toml`); empty: none.
+    pub const CONFIG: &str = "FOVEA_CONFIG";
+    /// The largest fragment any density map asks for: 1, 2 or 4 pixels per axis (default 4).
+    pub const MAX_FRAGMENT: &str = "FOVEA_MAX_FRAGMENT";
     /// Names a hook that panics on purpose, to prove panics never cross the FFI boundary.
     pub const INJECT_PANIC: &str = "FOVEA_INJECT_PANIC";
     /// `FOVEA_VK_LAYER=1`: the `enable_environment` of the implicit Vulkan layer manifest that

@@ -43,7 +43,33 @@ pub enum Command {
     Uninstall(InstallArgs),
     /// Show what the OpenXR loader would find and name misconfigurations (exit status 1 when
     /// there are any)
-    Doctor,
+    Doctor(DoctorArgs),
+    /// Show the settings in force for an application and where each comes from; --check
+    /// validates fovea.toml (exit status 1 on problems)
+    Config(ConfigArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct DoctorArgs {
+    /// Also say which sections of fovea.toml match this application or executable name
+    #[arg(long, value_name = "NAME")]
+    pub app: Option<String>,
+}
+
+#[derive(Debug, Args)]
+pub struct ConfigArgs {
+    /// XrApplicationInfo::applicationName to resolve for
+    #[arg(long, value_name = "NAME")]
+    pub app: Option<String>,
+    /// The executable's file name to resolve for
+    #[arg(long, value_name = "NAME")]
+    pub exe: Option<String>,
+    /// XrApplicationInfo::engineName to resolve for
+    #[arg(long, value_name = "NAME")]
+    pub engine: Option<String>,
+    /// Validate the file: one `problem:` line per error, exit status 1 when there are any
+    #[arg(long, conflicts_with_all = ["app", "exe", "engine"])]
+    pub check: bool,
 }
 
 impl Command {
@@ -56,7 +82,8 @@ impl Command {
             Command::Fov(_) => "fov",
             Command::Install(_) => "install",
             Command::Uninstall(_) => "uninstall",
-            Command::Doctor => "doctor",
+            Command::Doctor(_) => "doctor",
+            Command::Config(_) => "config",
         }
     }
 }

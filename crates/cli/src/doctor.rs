@@ -543,7 +543,7 @@ pub fn render(d: &Discovery, extra: &[String], problems: &[String]) -> String {
     out
 }
 
-pub fn run() -> Result<(), String> {
+pub fn run(args: &crate::args::DoctorArgs) -> Result<(), String> {
     let vars = process_vars();
     let env = Environment {
         vars: &vars,
@@ -551,6 +551,20 @@ pub fn run() -> Result<(), String> {
     };
     let d = discover(&env);
     let mut found = problems(&d);
+    // Steam's container, the other layers, the configuration file (doctor_settings.rs).
+    let (order, order_problems) = crate::doctor_settings::order_findings(&d);
+    let (config, config_problems) =
+        crate::doctor_settings::config_findings(&env, args.app.as_deref());
+    let (container, container_problems) = crate::doctor_settings::container_findings(&d, &env);
+    found.extend(container_problems);
+    found.extend(order_problems);
+    found.extend(config_problems);
+    for l in order.iter().chain(&config) {
+        println!("{l}");
+    }
+    for n in &container {
+        println!("note: {n}");
+    }
     let mut vk = vk_doctor::Report::default();
     vk.lines
         .push(format!("Vulkan layer {}:", fovea_abi::VK_LAYER_NAME));

@@ -5,9 +5,11 @@
 //! command that ran with status 1.
 
 mod args;
+mod config;
 mod demo;
 mod discovery;
 mod doctor;
+mod doctor_settings;
 mod fov;
 mod install;
 mod json;
@@ -29,7 +31,8 @@ fn main() {
         Command::Fov(a) => fov::run(a),
         Command::Install(a) => install::install(a),
         Command::Uninstall(a) => install::uninstall(a),
-        Command::Doctor => doctor::run(),
+        Command::Doctor(a) => doctor::run(a),
+        Command::Config(a) => config::run(a),
     };
     if let Err(e) = result {
         eprintln!("fovea {}: {e}", cli.command.name());

@@ -519,3 +519,38 @@ pub mod fns;
 pub mod frame_loop;
 pub mod vulkan;
 pub use app::App;
+
+/// Where a test process's `$XDG_CONFIG_HOME` and `$XDG_STATE_HOME` point ([`private_home!`]):
+/// `fovea-test-home/` under the system's temporary folder, so tests never read the user's
+/// `fovea.toml` nor append to their `fovea.log`.
+pub fn private_home() -> PathBuf {
+    std::env::temp_dir().join("fovea-test-home")
+}
+
+/// Sets `XDG_CONFIG_HOME` and `XDG_STATE_HOME` to [`private_home`]'s folders; what
+/// [`private_home!`] runs before `main`.
+pub fn use_private_home() {
+    let home = private_home();
+    std::env::set_var("XDG_CONFIG_HOME", home.join("config"));
+    std::env::set_var("XDG_STATE_HOME", home.join("state"));
+}
+
+/// In a test binary that loads the layer: points the XDG folders the layer reads at
+/// [`private_home`] before `main` runs, while the process has one thread (so setting the
+/// environment races with nothing), and for every child the tests start. Tests that need other
+/// folders set them in a process of their own.
+#[macro_export]
+macro_rules! private_home {
+    () => {
+        // Run by the dynamic loader with the other constructors of the executable, before `main`
+        // (https://refspecs.linuxfoundation.org/LSB_5.0.0/LSB-Core-generic/LSB-Core-generic/specialsections.html).
+        #[used]
+        #[link_section = ".init_array"]
+        static FOVEA_PRIVATE_HOME: extern "C" fn() = {
+            extern "C" fn set() {
+                $crate::use_private_home();
+            }
+            set
+        };
+    };
+}

@@ -218,6 +218,15 @@ impl Grid {
         }
     }
 
+    /// The same grid with its largest fragment capped at `max` per axis (the `max_fragment` setting:
+    /// 1, 2 or 4). A cap never raises the grid's own largest fragment.
+    pub fn capped(self, max: u32) -> Grid {
+        Grid {
+            max_fragment: self.max_fragment.map(|m| m.min(max.max(1))),
+            ..self
+        }
+    }
+
     /// Map size in texels: `ceil(extent / texel)` (docs/openxr-layer.md#fdm-texel-size).
     pub fn map_extent(&self) -> [u32; 2] {
         [

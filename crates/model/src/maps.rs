@@ -28,6 +28,9 @@ pub const FALLBACK_FOV: Fov = Fov {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Inputs {
     pub pattern: Pattern,
+    /// The largest fragment the map may ask for, per axis (`max_fragment`: 1, 2 or 4; the grid's
+    /// own limit applies too).
+    pub max_fragment: u32,
     /// Per array layer, the views rendered into it (none: the layer is not shown).
     pub layers: Vec<Vec<View>>,
 }
@@ -86,10 +89,22 @@ impl Inputs {
         }
         Inputs {
             pattern,
+            max_fragment: DEFAULT_MAX_FRAGMENT,
             layers: out,
         }
     }
+
+    /// The same inputs under a `max_fragment` cap.
+    pub fn capped(self, max_fragment: u32) -> Inputs {
+        Inputs {
+            max_fragment,
+            ..self
+        }
+    }
 }
+
+/// The largest fragment a map asks for unless capped lower: 4×4, as on Quest.
+pub const DEFAULT_MAX_FRAGMENT: u32 = 4;
 
 /// Fills every layer of a density image with its views' maps. A layer whose views mirror layer
 /// 0's (headsets' eyes do) is [`density::mirror_into`]'s copy.
@@ -97,6 +112,7 @@ impl Inputs {
 /// # Panics
 /// If `out` is not `layers × map_extent` texels of two bytes.
 pub fn fill_layers(grid: &Grid, inputs: &Inputs, out: &mut [u8]) {
+    let grid = &grid.capped(inputs.max_fragment);
     let layers = inputs.layers.len();
     if layers == 0 {
         return;
@@ -178,6 +194,49 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `max_fragment` caps every texel of every layer; under the default cap the map is the
+    /// uncapped model's.
+    #[test]
+    fn max_fragment_caps_every_texel() {
+        let (l, r) = quest_like_fovs();
+        let grid = Grid::new([640, 500], [32, 32]);
+        let [mw, mh] = grid.map_extent();
+        let high = Pattern {
+            level: Level::High,
+            vertical_offset_deg: 0.0,
+        };
+        let inputs = Inputs::new(
+            high,
+            [640, 500],
+            2,
+            &[None; MAX_VIEWS],
+            &[Some(l), Some(r), None, None],
+            None,
+        );
+        let fill = |inputs: &Inputs| {
+            let mut out = vec![0u8; (mw * mh * 4) as usize];
+            fill_layers(&grid, inputs, &mut out);
+            out
+        };
+        let largest = |map: &[u8]| map.iter().map(|&b| density::decode(b)).max().unwrap();
+        let default = fill(&inputs);
+        assert_eq!(inputs.max_fragment, DEFAULT_MAX_FRAGMENT);
+        assert_eq!(largest(&default), 4, "HIGH reaches 4x4 uncapped");
+        assert_eq!(default, fill(&inputs.clone().capped(4)));
+        let two = fill(&inputs.clone().capped(2));
+        assert_eq!(largest(&two), 2);
+        for (a, b) in default.iter().zip(&two) {
+            let want = density::decode(*a).min(2);
+            assert_eq!(
+                density::decode(*b),
+                want,
+                "a cap only lowers what is above it"
+            );
+        }
+        let one = fill(&inputs.capped(1));
+        assert!(one.iter().all(|&b| density::decode(b) == 1), "1: full rate");
     }
 
     #[test]

@@ -14,6 +14,9 @@
 use std::ffi::{c_char, CStr, CString};
 use std::ptr::{null, null_mut};
 
+// The layer reads no fovea.toml and writes no log file in the user's home during tests.
+fovea_harness::private_home!();
+
 use fovea_harness::{artifact, open_library, refuser_stats, skip, LayerSpec};
 use openxr_sys as xr;
 use openxr_sys::Handle;

@@ -318,12 +318,15 @@ fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32) {
     let inputs = || {
         // Only when the image is stale: the debug properties rank below the fill lock.
         let (pattern, _) = session.pattern_for(&sources.foveation);
-        sources.inputs(
-            pattern,
-            [state.info.width, state.info.height],
-            density.layers,
-            visible,
-        )
+        let cap = session.instance.overrides.current().max_fragment();
+        sources
+            .inputs(
+                pattern,
+                [state.info.width, state.info.height],
+                density.layers,
+                visible,
+            )
+            .capped(cap)
     };
     // SAFETY: called from xrAcquireSwapchainImage, where the application synchronises the
     // binding's queue for the runtime (`DensityImages::refresh`'s contract).

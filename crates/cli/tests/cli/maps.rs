@@ -150,3 +150,42 @@ fn maps_and_report_reject_bad_arguments_clearly() {
         assert!(r.err.contains(needle), "{args:?}: {}", r.err);
     }
 }
+
+/// What each level shades under each `max_fragment` cap on Quest 3 at texel 32 (the README's
+/// table): 4 is the default and gives the figures above, 2 is Quest 3's own palette (full rate and
+/// 2×2), 1 turns foveation off.
+#[test]
+fn report_pins_what_each_level_shades_under_each_max_fragment() {
+    let r = fovea(&["report", "--headset", "quest3", "--texel", "32", "--json"]);
+    assert!(r.ok(), "{}", r.err);
+    let v: serde_json::Value = serde_json::from_str(&r.out).unwrap();
+    let got: Vec<[f64; 3]> = v["levels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| ["4", "2", "1"].map(|c| l["shaded_by_max_fragment"][c].as_f64().unwrap()))
+        .collect();
+    let want = [
+        [1.0, 1.0, 1.0],
+        [0.826, 0.826, 1.0],
+        [0.273, 0.316, 1.0],
+        [0.140, 0.287, 1.0],
+        [0.144, 0.289, 1.0],
+    ];
+    for (g, w) in got.iter().zip(want) {
+        for (a, b) in g.iter().zip(w) {
+            assert!((a - b).abs() < 0.0005, "{got:?}");
+        }
+    }
+    let text = fovea(&["report", "--headset", "quest3"]);
+    assert!(
+        text.out.contains("shaded under each max_fragment cap"),
+        "{}",
+        text.out
+    );
+    assert!(
+        text.out.contains("high         0.140    0.287    1.000"),
+        "{}",
+        text.out
+    );
+}

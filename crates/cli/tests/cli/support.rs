@@ -22,9 +22,15 @@ impl Run {
     }
 }
 
-/// A `fovea` command to add arguments and environment to.
+/// A `fovea` command to add arguments and environment to. Its XDG configuration and state folders
+/// are a private folder, so no test reads the user's `fovea.toml` or writes to their log.
 pub fn command() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_fovea"))
+    let home = fovea_harness::private_home();
+    let mut c = Command::new(env!("CARGO_BIN_EXE_fovea"));
+    c.env("XDG_CONFIG_HOME", home.join("config"))
+        .env("XDG_STATE_HOME", home.join("state"))
+        .env_remove("FOVEA_CONFIG");
+    c
 }
 
 /// Runs a prepared command.

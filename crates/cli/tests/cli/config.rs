@@ -1,0 +1,85 @@
+//! `fovea config`: the settings in force for an application and where each comes from, and
+//! `--check`, which names each bad line of the file and exits with status 1.
+
+use crate::support::{command, run};
+
+fn with_file(name: &str, text: &str) -> (std::path::PathBuf, std::process::Command) {
+    let dir = std::env::temp_dir().join(format!("fovea-cli-config-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let file = dir.join("fovea/fovea.toml");
+    std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+    std::fs::write(&file, text).unwrap();
+    let mut c = command();
+    c.env("XDG_CONFIG_HOME", &dir)
+        .env_remove("DEBUG_OCULUS_FOVEATION_LEVEL")
+        .env_remove("FOVEA_MAX_FRAGMENT")
+        .env_remove("FOVEA_LOG");
+    (file, c)
+}
+
+#[test]
+fn config_shows_each_value_and_its_source() {
+    let (file, mut c) = with_file(
+        "show",
+        "level = \"low\"\n[engine.\"Unity\"]\nmax_fragment = 2\n[app.\"hello_xr\"]\nlevel = \"high\"\n",
+    );
+    let r = run(c
+        .args(["config", "--app", "hello_xr", "--engine", "Unity"])
+        .env("FOVEA_LOG", "info"));
+    assert!(r.ok(), "{}", r.text());
+    let f = file.display().to_string();
+    let line = |key: &str| {
+        r.out
+            .lines()
+            .find(|l| l.starts_with(&format!("{key} ")))
+            .unwrap_or_else(|| panic!("{key} in {}", r.out))
+            .to_string()
+    };
+    assert!(
+        line("level").contains("high")
+            && line("level").contains(&format!("{f}:5 ([app.\"hello_xr\"])")),
+        "{}",
+        r.out
+    );
+    assert!(
+        line("max_fragment").contains("2x2") && line("max_fragment").contains("[engine.\"Unity\"]")
+    );
+    assert!(line("log").contains("environment FOVEA_LOG"));
+    assert!(line("symmetric_fov").contains("default"));
+    assert!(r.out.contains("matching sections, least specific first: global, [engine.\"Unity\"], [app.\"hello_xr\"]"), "{}", r.out);
+    // Another application gets the global section only.
+    let (_, mut c) = with_file("other", "level = \"low\"\n[app.\"hello_xr\"]\nlevel = 3\n");
+    let r = run(c.args(["config", "--app", "other"]));
+    assert!(
+        r.out
+            .lines()
+            .any(|l| l.starts_with("level ") && l.contains("low")),
+        "{}",
+        r.out
+    );
+}
+
+#[test]
+fn config_check_names_file_line_key_and_accepted_values() {
+    let (file, mut c) = with_file(
+        "check",
+        "level = 2\nmax_fragment = 3\nvertical_offset = 0,5\n",
+    );
+    let r = run(c.args(["config", "--check"]));
+    assert_eq!(r.code, 1, "{}", r.text());
+    let problems: Vec<&str> = r
+        .out
+        .lines()
+        .filter(|l| l.starts_with("problem: "))
+        .collect();
+    assert_eq!(problems.len(), 2, "{}", r.out);
+    let f = file.display().to_string();
+    assert!(
+        problems[0].contains(&format!("{f}:2: max_fragment")) && problems[0].contains("1, 2 or 4")
+    );
+    assert!(problems[1].contains(&format!("{f}:3: -: not TOML")));
+    let (_, mut c) = with_file("good", "level = 2\n");
+    let r = run(c.args(["config", "--check"]));
+    assert!(r.ok(), "{}", r.text());
+    assert!(r.out.contains("ok"));
+}
