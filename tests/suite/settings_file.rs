@@ -120,3 +120,66 @@ fn per_app_sections_here() {
     drop(lp);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Numbers in fovea.toml read the same inside an application whose C locale writes decimals with a
+/// comma (German): after `setlocale(LC_ALL, "de_DE.UTF-8")`, as a C or C++ application may call, the
+/// C library's decimal point is "," and fovea still reads `vertical_offset = 2.5` as two and a half
+/// and refuses `2,5`. In a process of its own: the C locale is process-wide.
+#[test]
+fn numbers_read_the_same_under_a_decimal_comma_locale() {
+    in_own_process(
+        module_path!(),
+        "numbers_read_the_same_under_a_decimal_comma_locale",
+        decimal_comma_here,
+    );
+}
+
+/// glibc's `LC_ALL` category (locale.h).
+const LC_ALL: std::ffi::c_int = 6;
+
+extern "C" {
+    fn setlocale(
+        category: std::ffi::c_int,
+        locale: *const std::ffi::c_char,
+    ) -> *mut std::ffi::c_char;
+    fn localeconv() -> *const LConv;
+}
+
+/// The head of C's `struct lconv`: `decimal_point` is its first member (locale.h).
+#[repr(C)]
+struct LConv {
+    decimal_point: *const std::ffi::c_char,
+}
+
+fn decimal_comma_here() {
+    // SAFETY: a NUL-terminated locale name; this child process runs this one test, on one thread.
+    let set = unsafe { setlocale(LC_ALL, c"de_DE.UTF-8".as_ptr()) };
+    if set.is_null() {
+        fovea_harness::skip("the de_DE.UTF-8 locale is not generated (locales; localedef)");
+        return;
+    }
+    // SAFETY: localeconv returns the C library's static struct, valid until the next setlocale.
+    let point = unsafe { std::ffi::CStr::from_ptr((*localeconv()).decimal_point) };
+    assert_eq!(
+        point.to_bytes(),
+        b",",
+        "the C locale writes decimals with a comma"
+    );
+
+    let path = std::path::Path::new("fovea.toml");
+    let id = fovea_config::Identity::default();
+    let good = fovea_config::Config::parse("vertical_offset = 2.5\n", path);
+    assert!(good.problems.is_empty(), "{:?}", good.problems);
+    let (resolved, _) = fovea_config::resolve(Some(&good), &id, |_| None);
+    assert_eq!(resolved.vertical_offset_deg(), Some(2.5));
+    let comma = fovea_config::Config::parse("vertical_offset = 2,5\nlevel = \"low\"\n", path);
+    assert_eq!(comma.problems.len(), 1, "{:?}", comma.problems);
+    assert_eq!(comma.problems[0].line, 1);
+    let (resolved, _) = fovea_config::resolve(Some(&comma), &id, |_| None);
+    assert_eq!(resolved.vertical_offset_deg(), None);
+    assert_eq!(
+        resolved.level(fovea_config::Key::Level),
+        Some(fovea_model::density::Level::Low),
+        "the rest of the file applies"
+    );
+}
