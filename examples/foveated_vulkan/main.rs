@@ -22,7 +22,8 @@
 //! none,low,medium,high`, `--dynamic` (profiles with XR_FOVEATION_DYNAMIC_LEVEL_ENABLED_FB),
 //! `--dump DIR` (read back each new density map and the frames where a level starts, and the last
 //! frame, as PNGs), `--validate` (the Vulkan validation layer with a messenger; the run fails on
-//! any message).
+//! any message), `--vk-layer NAME` (one more Vulkan layer for the VkInstance, after validation;
+//! repeatable).
 //!
 //! `fovea demo` runs it against the simulated headset through the system loader where that is
 //! installed. By hand (the checked-in manifests point at target/release):
@@ -43,7 +44,7 @@ use std::ffi::{c_void, CStr};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::ptr;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
 
 use ash::vk::{self, Handle as _};
 use openxr as xr;
@@ -81,6 +82,8 @@ struct Options {
     /// Write the captures there as PNGs.
     dump: Option<PathBuf>,
     validate: bool,
+    /// More Vulkan layers for the VkInstance, after the validation layer (`--vk-layer NAME`).
+    vk_layers: Vec<std::ffi::CString>,
 }
 
 impl Options {
@@ -93,6 +96,7 @@ impl Options {
             capture: false,
             dump: None,
             validate: false,
+            vk_layers: Vec::new(),
         };
         let mut frames = None;
         let mut it = args.iter();
@@ -126,6 +130,10 @@ impl Options {
                     o.capture = true;
                 }
                 "--validate" => o.validate = true,
+                "--vk-layer" => o.vk_layers.push(
+                    std::ffi::CString::new(value()?.as_str())
+                        .map_err(|_| format!("{arg}: a layer name has no NUL"))?,
+                ),
                 other => return Err(format!("unknown option {other:?}")),
             }
         }
@@ -166,7 +174,7 @@ struct Outcome {
     fovs: Vec<xr::Fovf>,
     captures: Vec<Capture>,
     /// Messages from the Vulkan validation layer (`--validate`).
-    vk_messages: u64,
+    vk_messages: Vec<String>,
 }
 
 fn main() {
@@ -216,10 +224,10 @@ fn main() {
                     Mode::None => "not used (the device can neither render with nor sample them)",
                 },
             );
-            if o.vk_messages > 0 {
+            if !o.vk_messages.is_empty() {
                 eprintln!(
                     "foveated_vulkan: {} Vulkan validation messages",
-                    o.vk_messages
+                    o.vk_messages.len()
                 );
                 std::process::exit(1);
             }
@@ -300,9 +308,9 @@ fn run(options: &Options) -> Result<Outcome, String> {
 }
 
 /// Validation messages seen by [`on_vulkan_message`].
-static VK_MESSAGES: AtomicU64 = AtomicU64::new(0);
+static VK_MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
 
-/// The debug messenger's callback (`--validate`): prints and counts warnings and errors.
+/// The debug messenger's callback (`--validate`): prints and keeps warnings and errors.
 unsafe extern "system" fn on_vulkan_message(
     severity: vk::DebugUtilsMessageSeverityFlagsEXT,
     _types: vk::DebugUtilsMessageTypeFlagsEXT,
@@ -319,7 +327,9 @@ unsafe extern "system" fn on_vulkan_message(
         std::io::stderr(),
         "foveated_vulkan: Vulkan {severity:?}: {message}"
     );
-    VK_MESSAGES.fetch_add(1, Ordering::Relaxed);
+    if let Ok(mut m) = VK_MESSAGES.lock() {
+        m.push(message.into_owned());
+    }
     vk::FALSE
 }
 
@@ -336,7 +346,11 @@ unsafe fn run_vulkan(
     let vk_entry = ash::Entry::load().map_err(|e| format!("Vulkan loader: {e}"))?;
     let gipa = vk_entry.static_fn().get_instance_proc_addr;
     let app_info = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_1);
-    let layers = [c"VK_LAYER_KHRONOS_validation".as_ptr()];
+    let mut layers = Vec::new();
+    if options.validate {
+        layers.push(c"VK_LAYER_KHRONOS_validation".as_ptr());
+    }
+    layers.extend(options.vk_layers.iter().map(|l| l.as_ptr()));
     let instance_extensions = [ash::ext::debug_utils::NAME.as_ptr()];
     let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
         .message_severity(
@@ -349,11 +363,12 @@ unsafe fn run_vulkan(
                 | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
         )
         .pfn_user_callback(Some(on_vulkan_message));
-    let mut instance_info = vk::InstanceCreateInfo::default().application_info(&app_info);
+    let mut instance_info = vk::InstanceCreateInfo::default()
+        .application_info(&app_info)
+        .enabled_layer_names(&layers);
     if options.validate {
         // Chained, the messenger also sees vkCreateInstance and vkDestroyInstance.
         instance_info = instance_info
-            .enabled_layer_names(&layers)
             .enabled_extension_names(&instance_extensions)
             .push_next(&mut messenger_info);
     }
@@ -393,7 +408,10 @@ unsafe fn run_vulkan(
     }
     vk_instance.destroy_instance(None);
     result.map(|mut o| {
-        o.vk_messages = VK_MESSAGES.load(Ordering::Relaxed);
+        o.vk_messages = VK_MESSAGES
+            .lock()
+            .map(|mut m| std::mem::take(&mut *m))
+            .unwrap_or_default();
         o
     })
 }
@@ -846,7 +864,7 @@ unsafe fn session_loop(
         mode,
         fovs,
         captures,
-        vk_messages: 0,
+        vk_messages: Vec::new(),
     })
 }
 
@@ -905,7 +923,7 @@ mod tests {
     //! enabled by the environment, the Vulkan validation layer watching. One run: the loader allows
     //! one instance per process and reads the environment.
 
-    use std::path::Path;
+    use std::path::{Path, PathBuf};
 
     use fovea_harness::{artifact, skip, FOVEA_LAYER};
     use fovea_model::density::{Grid, Level, Pattern, Rect, View};
@@ -919,23 +937,27 @@ mod tests {
     /// fovea's density texel without VK_EXT_fragment_density_map (lavapipe).
     const TEXEL: u32 = 32;
 
-    #[test]
-    fn draws_with_fovea_s_density_maps_through_the_system_loader() {
+    /// The environment for one run of the example through the system loaders: the simulated
+    /// headset as the runtime, fovea as the OpenXR layer, lavapipe as the Vulkan driver, in a fresh
+    /// temporary folder (returned). `None` where a system component is missing (skipped).
+    fn set_up(label: &str) -> Option<PathBuf> {
         if let Err(e) = unsafe { libloading::Library::new("libopenxr_loader.so.1") } {
             skip(&format!("the Khronos OpenXR loader is not installed: {e}"));
-            return;
+            return None;
         }
         if !Path::new(LAVAPIPE).exists() {
             skip("Mesa's lavapipe Vulkan driver is not installed (mesa-vulkan-drivers)");
-            return;
+            return None;
         }
         if !Path::new(VALIDATION).exists() {
             skip("the Vulkan validation layer is not installed (vulkan-validationlayers)");
-            return;
+            return None;
         }
         let layer = artifact("libfovea.so").expect("run `cargo build --workspace`");
         let runtime = artifact("libfovea_sim.so").expect("run `cargo build --workspace`");
-        let dir = std::env::temp_dir().join(format!("fovea-example-{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("fovea-example-{label}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(dir.join("layers")).unwrap();
         let checked_in = std::fs::read_to_string(
             Path::new(env!("CARGO_MANIFEST_DIR")).join("manifest/XR_APILAYER_FOVEA_foveation.json"),
@@ -972,42 +994,14 @@ mod tests {
         }
         // A small headset keeps lavapipe quick.
         std::env::set_var("FOVEA_SIM_HEADSET", "rift-cv1");
+        Some(dir)
+    }
 
-        let options = Options {
-            frames: LEVELS.len() as u64 * FRAMES_PER_LEVEL,
-            capture: true,
-            validate: true,
-            ..Options::parse(&[]).unwrap()
-        };
-        let o = run(&options).unwrap_or_else(|e| panic!("{e}"));
-        std::fs::remove_dir_all(&dir).ok();
-        let summary = format!(
-            "{} frames, {:?}, {:?}, {} captures",
-            o.frames,
-            o.levels_applied,
-            o.mode,
-            o.captures.len()
-        );
-        // The runtime may take a frame or two to stop after xrRequestExitSession.
-        assert!(o.frames >= options.frames, "{summary}");
-        assert_eq!(o.levels_applied, LEVELS, "{summary}");
-        assert_eq!(o.vk_messages, 0, "Vulkan validation messages (stderr)");
-        // lavapipe has no fragment density maps: they are sampled into the overlay.
-        assert!(!o.fdm_enabled, "{summary}");
-        assert_eq!(o.mode, Mode::Overlay, "{summary}");
-
+    /// fovea's density model for the views the example rendered, per level (both layers, R8G8),
+    /// with `texel`-pixel texels.
+    fn expected_maps(o: &Outcome, texel: u32, summary: &str) -> Vec<Vec<u8>> {
         let (w, h) = o.swapchain_size;
-        let distinct: std::collections::HashSet<u64> =
-            o.density_images.iter().map(|d| d.0).collect();
-        assert_eq!(distinct.len(), o.density_images.len(), "one per image");
-        for &(image, dw, dh) in &o.density_images {
-            assert!(image != 0, "{summary}");
-            assert_eq!((dw, dh), (w.div_ceil(TEXEL), h.div_ceil(TEXEL)));
-        }
-
-        // What fovea's model gives for the views the example rendered: every map read back is
-        // that of the level the app had applied.
-        let grid = Grid::new([w, h], [TEXEL, TEXEL]);
+        let grid = Grid::new([w, h], [texel, texel]);
         let rect = Rect {
             x: 0,
             y: 0,
@@ -1050,6 +1044,34 @@ mod tests {
         for (a, b) in [(0, 1), (1, 2), (2, 3)] {
             assert_ne!(expected[a], expected[b], "levels {a} and {b} give one map");
         }
+        expected
+    }
+
+    /// What every run shows: all levels applied, one density image per swapchain image of the
+    /// density texel `texel`, every map read back the applied level's, the frames drawn as the
+    /// shaders say. Returns fovea's model maps per level.
+    fn check_run(o: &Outcome, options: &Options, texel: u32) -> Vec<Vec<u8>> {
+        let summary = format!(
+            "{} frames, {:?}, {:?}, {} captures",
+            o.frames,
+            o.levels_applied,
+            o.mode,
+            o.captures.len()
+        );
+        // The runtime may take a frame or two to stop after xrRequestExitSession.
+        assert!(o.frames >= options.frames, "{summary}");
+        assert_eq!(o.levels_applied, LEVELS, "{summary}");
+        let (w, h) = o.swapchain_size;
+        let distinct: std::collections::HashSet<u64> =
+            o.density_images.iter().map(|d| d.0).collect();
+        assert_eq!(distinct.len(), o.density_images.len(), "one per image");
+        for &(image, dw, dh) in &o.density_images {
+            assert!(image != 0, "{summary}");
+            assert_eq!((dw, dh), (w.div_ceil(texel), h.div_ceil(texel)));
+        }
+        // What fovea's model gives for the views the example rendered: every map read back is
+        // that of the level the app had applied.
+        let expected = expected_maps(o, texel, &summary);
         for c in &o.captures {
             assert!(
                 c.density == expected[c.level],
@@ -1069,8 +1091,260 @@ mod tests {
             "frames read back: {drawn:?}"
         );
         for c in o.captures.iter().filter(|c| c.eyes.is_some()) {
-            check_frame(&o, c);
+            check_frame(o, c);
         }
+        expected
+    }
+
+    #[test]
+    fn draws_with_fovea_s_density_maps_through_the_system_loader() {
+        let Some(dir) = set_up("lavapipe") else {
+            return;
+        };
+        let options = Options {
+            frames: LEVELS.len() as u64 * FRAMES_PER_LEVEL,
+            capture: true,
+            validate: true,
+            ..Options::parse(&[]).unwrap()
+        };
+        let o = run(&options).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::remove_dir_all(&dir).ok();
+        assert_eq!(
+            o.vk_messages,
+            Vec::<String>::new(),
+            "Vulkan validation messages"
+        );
+        // lavapipe has no fragment density maps: they are sampled into the overlay.
+        assert!(!o.fdm_enabled, "{:?}", o.mode);
+        assert_eq!(o.mode, Mode::Overlay);
+        check_run(&o, &options, TEXEL);
+    }
+
+    /// The variable that makes [`through_the_vulkan_layer_and_the_double`] run, naming the
+    /// double's profile.
+    const DOUBLE_CHILD: &str = "FOVEA_EXAMPLE_DOUBLE_PROFILE";
+
+    /// The example's density-map path on desktop-like GPUs: fovea's Vulkan layer over the
+    /// validation layer over the test double (`nvidia`: 16×16 texels, layered, up to 4×4; `amd`:
+    /// 8×8, one merged layer, up to 2×2) over lavapipe. Each profile in a process of its own (the
+    /// loaders read the environment once).
+    #[test]
+    fn density_maps_become_shading_rates_on_desktop_like_gpus() {
+        for profile in ["nvidia", "amd"] {
+            let test = "tests::through_the_vulkan_layer_and_the_double";
+            let out = std::process::Command::new(std::env::current_exe().unwrap())
+                .args([
+                    test,
+                    "--exact",
+                    "--ignored",
+                    "--nocapture",
+                    "--test-threads=1",
+                ])
+                .env(DOUBLE_CHILD, profile)
+                .output()
+                .expect("run the example in a child process");
+            let stdout = String::from_utf8_lossy(&out.stdout);
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert!(
+                out.status.success() && stdout.contains("test result: ok. 1 passed"),
+                "{profile}: {}\n{stdout}\n{stderr}",
+                out.status
+            );
+            print!("{stdout}");
+            eprint!("{stderr}");
+        }
+    }
+
+    /// One profile of [`density_maps_become_shading_rates_on_desktop_like_gpus`]: every eye pass
+    /// reaches the driver with a shading-rate attachment of the device's texel, the rate codes in
+    /// it at each submit are fovea's density model for that frame's level, texel for texel
+    /// (layered on `nvidia`, the finer rate of both eyes on `amd`), validation says nothing but
+    /// its known false positive, and the frames are drawn as before (lavapipe renders at 1×1).
+    #[test]
+    #[ignore = "run in a child process by density_maps_become_shading_rates_on_desktop_like_gpus"]
+    fn through_the_vulkan_layer_and_the_double() {
+        use fovea_model::shading_rate::{finer, fsr_code};
+        use fovea_vkdouble::Profile;
+
+        let Some(profile) = std::env::var(DOUBLE_CHILD)
+            .ok()
+            .and_then(|p| Profile::parse(&p))
+        else {
+            return;
+        };
+        let Some(dir) = set_up(profile.name()) else {
+            return;
+        };
+        let double_lib = match fovea_vkdouble::find_library() {
+            Ok(l) => l,
+            Err(e) => {
+                skip(&e);
+                return;
+            }
+        };
+        let fovea = artifact("libfovea.so").unwrap().canonicalize().unwrap();
+        let vk_layers = dir.join("vklayers");
+        fovea_vkdouble::write_manifest(&vk_layers, &double_lib).unwrap();
+        let manifest = "VK_LAYER_FOVEA_fragment_density_map.json";
+        let checked_in = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("manifest/vulkan")
+                .join(manifest),
+        )
+        .unwrap();
+        let mut m: serde_json::Value = serde_json::from_str(&checked_in).unwrap();
+        m["layer"]["library_path"] = fovea.to_str().unwrap().into();
+        std::fs::write(vk_layers.join(manifest), m.to_string()).unwrap();
+        std::env::set_var("VK_ADD_LAYER_PATH", &vk_layers);
+        std::env::set_var(fovea_vkdouble::PROFILE_ENV, profile.name());
+        // No implicit layer from the user's own install.
+        std::env::set_var("XDG_DATA_HOME", dir.join("data"));
+        std::env::set_var("XDG_CONFIG_HOME", dir.join("config"));
+        std::env::set_var("FOVEA_LOG", "info");
+        std::env::set_var("FOVEA_LOG_FILE", dir.join("fovea.log"));
+        // Opened before the first VkInstance, kept to the end (see `Loaded::open`).
+        let double = fovea_vkdouble::Loaded::open(&double_lib).unwrap();
+
+        let per_level = 4;
+        let options = Options {
+            frames: LEVELS.len() as u64 * per_level,
+            frames_per_level: per_level,
+            capture: true,
+            validate: true,
+            // Below validation, which so checks what fovea's layer (which fovea's
+            // xrCreateVulkanInstanceKHR puts first, closest to the application) hands down.
+            vk_layers: vec![fovea_vkdouble::LAYER_NAME.to_owned()],
+            ..Options::parse(&[]).unwrap()
+        };
+        let o = run(&options).unwrap_or_else(|e| panic!("{e}"));
+        let log = std::fs::read_to_string(dir.join("fovea.log")).unwrap_or_default();
+        std::fs::remove_dir_all(&dir).ok();
+
+        // Validation 1.3.239 checks the shading-rate attachment stage against the NVIDIA
+        // shading-rate-image feature alone (VUID-vkCmdPipelineBarrier-dstStageMask-07318); later
+        // versions accept attachmentFragmentShadingRate. Nothing else may be said.
+        let others: Vec<&String> = o
+            .vk_messages
+            .iter()
+            .filter(|m| !m.contains("when the device does not have shadingRate feature enabled"))
+            .collect();
+        assert!(others.is_empty(), "validation reported: {others:#?}");
+        assert!(
+            o.fdm_enabled,
+            "the layer offers VK_EXT_fragment_density_map"
+        );
+        assert_eq!(o.mode, Mode::Attachment, "{log}");
+        let texel = profile.texel().width;
+        let expected = check_run(&o, &options, texel);
+        assert!(
+            log.contains("density images carry their shading rates"),
+            "{log}"
+        );
+        assert!(
+            !log.contains("creates and writes density maps itself"),
+            "fovea's own maps are not the application's: {log}"
+        );
+
+        // The rate codes fovea's model gives, per level, as the shadow holds them.
+        let supported: Vec<[u32; 2]> = profile
+            .rates()
+            .iter()
+            .filter(|(_, samples)| samples.contains(vk::SampleCountFlags::TYPE_1))
+            .map(|(e, _)| [e.width, e.height])
+            .collect();
+        let max = [profile.max_fragment(); 2];
+        let (dw, dh) = (o.density_images[0].1, o.density_images[0].2);
+        let texels = (dw * dh) as usize;
+        let codes: Vec<Vec<u8>> = expected
+            .iter()
+            .map(|map| {
+                let layer = |l: usize| -> Vec<u8> {
+                    map[l * texels * 2..][..texels * 2]
+                        .chunks_exact(2)
+                        .map(|t| fsr_code([t[0], t[1]], max, &supported))
+                        .collect()
+                };
+                let (left, right) = (layer(0), layer(1));
+                if profile.layered() {
+                    [left, right].concat()
+                } else {
+                    left.iter()
+                        .zip(&right)
+                        .map(|(&a, &b)| finer(a, b, &supported))
+                        .collect()
+                }
+            })
+            .collect();
+        assert_ne!(codes[0], codes[3], "the levels shade differently");
+        assert!(codes[0].iter().all(|&c| c == 0), "level none: full rate");
+
+        let records = double.records();
+        assert_eq!(
+            records["errors"],
+            serde_json::json!([]),
+            "the double saw misuse"
+        );
+        let events = records["events"].as_array().unwrap();
+        let of = |kind: &'static str| events.iter().filter(move |e| e["kind"] == kind);
+        let passes: std::collections::HashMap<String, &serde_json::Value> = of("render_pass")
+            .map(|e| (e["render_pass"].to_string(), e))
+            .collect();
+        let begins: Vec<_> = of("begin_render_pass").collect();
+        assert!(
+            begins.len() as u64 >= 2 * o.frames,
+            "{} passes",
+            begins.len()
+        );
+        for b in &begins {
+            let pass = passes[&b["render_pass"].to_string()];
+            for sub in pass["subpasses"].as_array().unwrap() {
+                assert_eq!(
+                    sub["shading_rate"]["texel"],
+                    serde_json::json!([texel, texel]),
+                    "every eye pass carries a shading-rate attachment: {pass}"
+                );
+            }
+            assert_eq!(
+                b["shading_rate_views"].as_array().map(Vec::len),
+                Some(1),
+                "{b}"
+            );
+        }
+        let frames: Vec<_> = of("submit")
+            .filter(|s| {
+                s["shading_rate_images"]
+                    .as_array()
+                    .is_some_and(|a| !a.is_empty())
+            })
+            .collect();
+        assert_eq!(frames.len() as u64, o.frames, "one frame submit per frame");
+        let layers = if profile.layered() { 2 } else { 1 };
+        for (i, submit) in frames.iter().enumerate() {
+            // Levels change every `per_level` frames and stay at the last after the exit request.
+            let level = (i as u64 / per_level).min(LEVELS.len() as u64 - 1) as usize;
+            let images = submit["shading_rate_images"].as_array().unwrap();
+            assert_eq!(
+                images.len(),
+                1,
+                "both eyes read one shadow: {}",
+                images.len()
+            );
+            let image = &images[0];
+            assert_eq!(image["extent"], serde_json::json!([dw, dh]));
+            assert_eq!(image["layers"], serde_json::json!(layers));
+            let got: Vec<u8> = serde_json::from_value(image["codes"].clone()).unwrap();
+            assert!(
+                got == codes[level],
+                "frame {i} ({:?}): {} of {} codes differ from fovea's model",
+                LEVELS[level],
+                got.iter()
+                    .zip(&codes[level])
+                    .filter(|(a, b)| a != b)
+                    .count(),
+                codes[level].len()
+            );
+        }
+        drop(double);
     }
 
     /// The frame as the shaders drew it: outside the overlay the level's tinted stripes, inside it
@@ -1107,7 +1381,7 @@ mod tests {
                 for x in 0..w {
                     let px = &image[(y * w + x) * 4..][..3];
                     let at = format!("frame {}, layer {layer}, pixel ({x}, {y})", c.frame);
-                    if x < w / 2 && y >= h / 2 {
+                    if o.mode == Mode::Overlay && x < w / 2 && y >= h / 2 {
                         // Sampled at uv * 2 (x) and uv * 2 - 1 (y) over the lower-left quarter.
                         let (Some(i), Some(j)) = (texel(x, w, dw, 0), texel(y, h, dh, h)) else {
                             continue;
@@ -1124,7 +1398,11 @@ mod tests {
                 }
             }
         }
-        assert!(overlay > w * h / 3 && stripe > w * h, "{overlay} {stripe}");
+        if o.mode == Mode::Overlay {
+            assert!(overlay > w * h / 3 && stripe > w * h, "{overlay} {stripe}");
+        } else {
+            assert_eq!((overlay, stripe), (0, 2 * w * h));
+        }
     }
 
     /// Linear to sRGB-encoded 8-bit, as the sRGB attachment stores it.

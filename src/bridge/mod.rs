@@ -148,10 +148,6 @@ pub struct FoveationState {
 /// How one `VkDevice` runs fragment density maps on shading-rate attachments, as the Vulkan side
 /// decided at `vkCreateDevice`. fovea's own density images size their texels from it.
 #[derive(Clone, Debug, PartialEq, Eq)]
-#[allow(
-    dead_code,
-    reason = "density images read it once they follow the device's texel"
-)]
 pub struct FdmEmulation {
     /// The shading-rate attachment texel, which is also the density-map texel the device reports
     /// (`minFragmentDensityTexelSize` = `maxFragmentDensityTexelSize`).
@@ -180,10 +176,6 @@ pub fn set_device_fdm(device: ash::vk::Device, fdm: Option<FdmEmulation>) {
 
 /// How `device` emulates fragment density maps; `None` where it does not (native, unavailable,
 /// or a device the Vulkan layer did not see).
-#[allow(
-    dead_code,
-    reason = "density images read it once they follow the device's texel"
-)]
 pub fn device_fdm(device: ash::vk::Device) -> Option<FdmEmulation> {
     use ash::vk::Handle as _;
     DEVICE_FDM.read().get(&device.as_raw()).cloned()
@@ -239,6 +231,31 @@ pub fn set_shadow(app: ash::vk::Image, shadow: Option<Shadow>) {
 pub fn shadow_of(app: ash::vk::Image) -> Option<Shadow> {
     use ash::vk::Handle as _;
     SHADOWS.read().get(&app.as_raw()).copied()
+}
+
+thread_local! {
+    /// Set while fovea creates its own density images on this thread.
+    static OWN_DENSITY_IMAGES: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f` (fovea creating its own density images through the application's device) so that the
+/// Vulkan layer, which sees those `vkCreateImage` calls like any other, can tell them from density
+/// images the application creates and writes itself ([`creating_own_density_images`]).
+pub fn own_density_images<R>(f: impl FnOnce() -> R) -> R {
+    struct Reset(bool);
+    impl Drop for Reset {
+        fn drop(&mut self) {
+            OWN_DENSITY_IMAGES.with(|c| c.set(self.0));
+        }
+    }
+    let _reset = Reset(OWN_DENSITY_IMAGES.with(|c| c.replace(true)));
+    f()
+}
+
+/// Whether this thread is inside [`own_density_images`]: the image being created is fovea's own,
+/// and fovea writes its shading rates.
+pub fn creating_own_density_images() -> bool {
+    OWN_DENSITY_IMAGES.with(|c| c.get())
 }
 
 #[cfg(test)]

@@ -36,6 +36,7 @@ use ash::vk::Handle as _;
 
 use fovea_model::density::Grid;
 use fovea_model::maps::{fill_layers, Inputs, DEFAULT_TEXEL};
+use fovea_model::shading_rate;
 
 use crate::bridge::MapKey;
 
@@ -415,7 +416,42 @@ struct Fill {
     /// The last computed map, all layers: the cache, so images with unchanged inputs are only
     /// re-uploaded. Allocated once.
     bytes: Vec<u8>,
+    /// The shading-rate codes of `bytes` for the images' shadows (empty where there are none),
+    /// computed with the map. Allocated once.
+    codes: Vec<u8>,
     mapped: Mapped,
+}
+
+/// How fovea's density maps become shading-rate codes on a device that emulates fragment density
+/// maps on shading-rate attachments (docs/vulkan-fdm-on-fsr.md#rate-encoding).
+#[derive(Clone, Debug)]
+struct Rates {
+    /// The shadows' layers: the density images', or 1 where the device merges all views into one
+    /// layer holding the finer rate (docs/vulkan-fdm-on-fsr.md#multiview).
+    layers: u32,
+    max_fragment: [u32; 2],
+    /// The fragment sizes the device lists.
+    supported: Vec<[u32; 2]>,
+    /// Where the codes start in the staging buffer (after the density bytes, 4-aligned).
+    offset: u64,
+}
+
+impl Rates {
+    /// The rates for shadows of `layers`-layer images of `extent` texels on `fdm`'s device.
+    fn new(fdm: &crate::bridge::FdmEmulation, layers: u32, density_bytes: u64) -> Rates {
+        Rates {
+            layers: if fdm.layered { layers } else { 1 },
+            max_fragment: fdm.max_fragment,
+            supported: fdm.rates.clone(),
+            offset: density_bytes.next_multiple_of(4),
+        }
+    }
+
+    /// Whether `shadow` is one these rates can fill: the density image's extent, the expected
+    /// layers.
+    fn fits(&self, shadow: &crate::bridge::Shadow, extent: [u32; 2]) -> bool {
+        shadow.extent == extent && shadow.layers == self.layers
+    }
 }
 
 /// One swapchain's density images, their staging buffer and command buffers.
@@ -426,6 +462,11 @@ pub struct DensityImages {
     pub layers: u32,
     pub grid: Grid,
     images: Vec<(vk::Image, vk::DeviceMemory)>,
+    /// Per image, its shading-rate shadow where the application's device emulates fragment
+    /// density maps (docs/vulkan-fdm-on-fsr.md#shadows): uploads write the rate codes into it.
+    shadows: Vec<Option<vk::Image>>,
+    /// How the shadows' codes are computed, where any image has a shadow.
+    rates: Option<Rates>,
     staging: (vk::Buffer, vk::DeviceMemory),
     command_buffers: Vec<vk::CommandBuffer>,
     fill: Mutex<Fill>,
@@ -475,13 +516,21 @@ impl DensityImages {
                     result: vk::Result::ERROR_FORMAT_NOT_SUPPORTED,
                 });
             }
-            let size = u64::from(mw) * u64::from(mh) * 2 * u64::from(layers);
+            let density_bytes = u64::from(mw) * u64::from(mh) * 2 * u64::from(layers);
+            let rates = crate::bridge::device_fdm(d.handle())
+                .map(|fdm| Rates::new(&fdm, layers, density_bytes));
+            let size = match &rates {
+                Some(r) => r.offset + u64::from(mw) * u64::from(mh) * u64::from(r.layers),
+                None => density_bytes,
+            };
             let mut out = DensityImages {
                 gpu: gpu.clone(),
                 extent: [mw, mh],
                 layers,
                 grid,
                 images: Vec::new(),
+                shadows: Vec::new(),
+                rates,
                 staging: (vk::Buffer::null(), vk::DeviceMemory::null()),
                 command_buffers: Vec::new(),
                 fill: Mutex::ranked(
@@ -490,7 +539,8 @@ impl DensityImages {
                     Fill {
                         filled: vec![None; count as usize],
                         cached: None,
-                        bytes: vec![0; size as usize],
+                        bytes: vec![0; density_bytes as usize],
+                        codes: Vec::new(),
                         mapped: Mapped(std::ptr::null_mut()),
                     },
                 ),
@@ -512,8 +562,9 @@ impl DensityImages {
                     .usage(gpu.usage)
                     .sharing_mode(vk::SharingMode::EXCLUSIVE)
                     .initial_layout(vk::ImageLayout::UNDEFINED);
-                let image = d
-                    .create_image(&create, None)
+                // Through the application's device: on a device that emulates density maps the
+                // Vulkan layer gives the image its shadow, and learns that fovea writes its rates.
+                let image = crate::bridge::own_density_images(|| d.create_image(&create, None))
                     .map_err(step("vkCreateImage"))?;
                 let req = d.get_image_memory_requirements(image);
                 let memory = memory_type(
@@ -541,6 +592,30 @@ impl DensityImages {
                 out.images.push((image, memory));
                 d.bind_image_memory(image, memory, 0)
                     .map_err(step("vkBindImageMemory"))?;
+                let shadow = crate::bridge::shadow_of(image);
+                out.shadows.push(
+                    shadow
+                        .filter(|s| out.rates.as_ref().is_some_and(|r| r.fits(s, [mw, mh])))
+                        .map(|s| s.image),
+                );
+                if shadow.is_some() && out.shadows.last() == Some(&None) {
+                    tracing::warn!(
+                        ?shadow,
+                        "a density image's shading-rate shadow does not match it; that image \
+                         renders at full rate"
+                    );
+                }
+            }
+            if out.shadows.iter().all(Option::is_none) {
+                out.rates = None;
+            }
+            if let Some(r) = &out.rates {
+                out.fill.get_mut().codes = vec![0; (mw * mh * r.layers) as usize];
+                tracing::info!(
+                    layers = r.layers,
+                    max_fragment = ?r.max_fragment,
+                    "density images carry their shading rates"
+                );
             }
             let buffer = d
                 .create_buffer(
@@ -635,6 +710,27 @@ impl DensityImages {
             // `bytes` (both sized from the map extent and layers); the fill lock serialises writes,
             // and the GPU last read it in an upload that was waited for.
             unsafe { std::ptr::copy_nonoverlapping(f.bytes.as_ptr(), f.mapped.0, f.bytes.len()) };
+            if let Some(r) = &self.rates {
+                let texels = (self.extent[0] * self.extent[1]) as usize;
+                let merged = r.layers < self.layers;
+                shading_rate::fill_codes(
+                    &f.bytes,
+                    texels,
+                    merged,
+                    r.max_fragment,
+                    &r.supported,
+                    &mut f.codes,
+                );
+                // SAFETY: as above; the staging buffer was sized for the codes at `offset`, after
+                // the density bytes (`codes` holds texels × the shadows' layers).
+                unsafe {
+                    std::ptr::copy_nonoverlapping(
+                        f.codes.as_ptr(),
+                        f.mapped.0.add(r.offset as usize),
+                        f.codes.len(),
+                    )
+                };
+            }
             f.cached = Some(inputs);
         }
         // Until the upload succeeds the image counts as undefined.
@@ -696,6 +792,41 @@ impl DensityImages {
                 depth: 1,
             },
         };
+        // The shadow, where there is one, gets the codes from the same staging buffer. It lives
+        // in the shading-rate layout (docs/vulkan-fdm-on-fsr.md#shadows) and goes back there
+        // before the density image's own final barrier, to which the Vulkan layer adds an
+        // ordering barrier on the shadow in that layout.
+        let shadow = self.shadows[i].zip(self.rates.as_ref()).map(|(shadow, r)| {
+            let fsr = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
+            let to_transfer = to_transfer.old_layout(fsr).image(shadow).subresource_range(
+                vk::ImageSubresourceRange {
+                    layer_count: r.layers,
+                    ..range
+                },
+            );
+            let back = to_transfer
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR)
+                .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .new_layout(fsr);
+            let region = vk::BufferImageCopy {
+                buffer_offset: r.offset,
+                image_subresource: vk::ImageSubresourceLayers {
+                    layer_count: r.layers,
+                    ..region.image_subresource
+                },
+                ..region
+            };
+            (shadow, to_transfer, back, region)
+        });
+        let mut first = [to_transfer; 2];
+        let first: &[vk::ImageMemoryBarrier<'_>] = match &shadow {
+            Some((_, b, ..)) => {
+                first[1] = *b;
+                &first
+            }
+            None => &first[..1],
+        };
         // SAFETY: the caller's contract: the application synchronises the queue for the runtime here.
         // The command buffer is this image's own, not in flight (every submission is waited for before
         // returning), and recorded and submitted under the session's submit lock, which guards the
@@ -715,7 +846,7 @@ impl DensityImages {
                 vk::DependencyFlags::empty(),
                 &[],
                 &[],
-                &[to_transfer],
+                first,
             );
             d.cmd_copy_buffer_to_image(
                 cb,
@@ -724,6 +855,24 @@ impl DensityImages {
                 vk::ImageLayout::TRANSFER_DST_OPTIMAL,
                 &[region],
             );
+            if let Some((shadow, _, back, region)) = shadow {
+                d.cmd_copy_buffer_to_image(
+                    cb,
+                    self.staging.0,
+                    shadow,
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    &[region],
+                );
+                d.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::ALL_COMMANDS,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[back],
+                );
+            }
             d.cmd_pipeline_barrier(
                 cb,
                 vk::PipelineStageFlags::TRANSFER,

@@ -274,6 +274,10 @@ unsafe fn create_device_impl(
     unsafe {
         let handle = *out;
         let next = DeviceNext::load(gdpa, handle);
+        let api_version = match &*physical::decision(&inst, physical) {
+            registry::Decision::Emulate { api_version, .. } => inst.api_version.min(*api_version),
+            _ => inst.api_version,
+        };
         let mut own = None;
         if fdm.is_some() {
             tracing::info!(
@@ -295,6 +299,7 @@ unsafe fn create_device_impl(
             gdpa,
             next,
             fdm,
+            api_version,
             attachments: registry::Attachments::new(own),
         });
     }

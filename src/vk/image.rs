@@ -347,6 +347,19 @@ pub unsafe fn image_created(dev: &Device, app: vk::Image, ci: &vk::ImageCreateIn
                 layers = s.layers,
                 "density map shadowed"
             );
+            // fovea's own density images get their rates with every upload
+            // (`gpu::density_images`); an application's own maps are not converted yet.
+            let logged = &dev.attachments.app_maps_logged;
+            if !bridge::creating_own_density_images()
+                && !logged.swap(true, std::sync::atomic::Ordering::Relaxed)
+            {
+                tracing::warn!(
+                    image = raw(app),
+                    "this application creates and writes density maps itself: they render at \
+                     full rate on this device until their contents are converted into shading \
+                     rates (fovea's own density maps carry their rates)"
+                );
+            }
         }
         Err(e) => tracing::warn!(
             image = raw(app),

@@ -422,10 +422,17 @@ pub unsafe extern "system" fn create_render_pass(
                 // SAFETY: the next layer's function, with the caller's arguments.
                 return unsafe { next(device, info, alloc, out) };
             };
-            let create2 = dev
-                .next
-                .create_render_pass2
-                .or(dev.next.create_render_pass2_khr);
+            // Below Vulkan 1.2 the core name may not be called (drivers return no pointer for
+            // it); the extension's, which the layer enabled, is the one.
+            let (first, second) = (
+                dev.next.create_render_pass2,
+                dev.next.create_render_pass2_khr,
+            );
+            let create2 = if dev.api_version < vk::API_VERSION_1_2 {
+                second.or(first)
+            } else {
+                first.or(second)
+            };
             // SAFETY: as above.
             let ci = unsafe { &*info };
             use vk::StructureType as S;

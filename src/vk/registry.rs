@@ -108,6 +108,10 @@ pub struct Device {
     pub next: DeviceNext,
     /// `Some` where the device emulates fragment density maps.
     pub fdm: Option<FdmEmulation>,
+    /// The device's Vulkan version (the instance's and the physical device's lower one): below
+    /// 1.2 render pass 2 is `VK_KHR_create_renderpass2`'s, which the layer enables for emulation,
+    /// and the core names may not be called.
+    pub api_version: u32,
     /// The attachment path's state: shadows and rewritten passes (empty where not emulating).
     pub attachments: Attachments,
 }
@@ -141,6 +145,9 @@ pub struct Attachments {
     pub images: Mutex<HashMap<u64, ShadowImage>>,
     pub views: Mutex<HashMap<u64, ShadowView>>,
     pub passes: Mutex<HashMap<u64, u32>>,
+    /// Set once the log has said that density maps the application writes itself render at full
+    /// rate (their shadows keep code 0 until their contents are converted).
+    pub app_maps_logged: std::sync::atomic::AtomicBool,
 }
 
 impl Attachments {
@@ -151,6 +158,7 @@ impl Attachments {
             images: Mutex::ranked(Rank::Record, "vk shadow images", HashMap::new()),
             views: Mutex::ranked(Rank::Record, "vk shadow views", HashMap::new()),
             passes: Mutex::ranked(Rank::Record, "vk rewritten passes", HashMap::new()),
+            app_maps_logged: std::sync::atomic::AtomicBool::new(false),
         }
     }
 

@@ -67,6 +67,45 @@ pub fn fsr_code(density: [u8; 2], max_fragment: [u32; 2], supported: &[[u32; 2]]
     code(clamp(want, supported))
 }
 
+/// The finer of two shading-rate codes, as one merged shading-rate layer shared by several views
+/// needs it (docs/vulkan-fdm-on-fsr.md#multiview): per axis the smaller fragment edge, clamped
+/// to a size in `supported`.
+pub fn finer(a: u8, b: u8, supported: &[[u32; 2]]) -> u8 {
+    let (a, b) = (decode(a), decode(b));
+    code(clamp([a[0].min(b[0]), a[1].min(b[1])], supported))
+}
+
+/// Converts a whole density map into shading-rate codes: `density` holds `layers` layers of
+/// `texels` R8G8 texels each; `out` gets `texels` codes per output layer, one layer per density
+/// layer, or (with `merged`) one layer holding per texel the [`finer`] code of all density layers.
+/// Texels missing from either slice are left alone.
+pub fn fill_codes(
+    density: &[u8],
+    texels: usize,
+    merged: bool,
+    max_fragment: [u32; 2],
+    supported: &[[u32; 2]],
+    out: &mut [u8],
+) {
+    if texels == 0 {
+        return;
+    }
+    for (layer, map) in density.chunks_exact(texels * 2).enumerate() {
+        let at = if merged { 0 } else { layer * texels };
+        let Some(dst) = out.get_mut(at..at + texels) else {
+            return;
+        };
+        for (c, t) in dst.iter_mut().zip(map.chunks_exact(2)) {
+            let new = fsr_code([t[0], t[1]], max_fragment, supported);
+            *c = if merged && layer > 0 {
+                finer(*c, new, supported)
+            } else {
+                new
+            };
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -160,5 +199,21 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn merged_layers_keep_the_finer_rate() {
+        let r = rates(2);
+        assert_eq!(finer(code([2, 2]), code([2, 1]), &r), code([2, 1]));
+        assert_eq!(finer(code([2, 1]), code([1, 2]), &r), code([1, 1]));
+        assert_eq!(finer(code([4, 4]), code([4, 2]), &rates(4)), code([4, 2]));
+        // Two layers of two texels: left eye coarse then fine, right eye fine then coarse.
+        let density = [10, 10, 255, 255, 255, 100, 10, 10];
+        let mut out = [0xff; 4];
+        fill_codes(&density, 2, false, [2, 2], &r, &mut out);
+        assert_eq!(out, [code([2, 2]), 0, code([1, 2]), code([2, 2])]);
+        let mut merged = [0xff; 2];
+        fill_codes(&density, 2, true, [2, 2], &r, &mut merged);
+        assert_eq!(merged, [code([1, 2]), 0]);
     }
 }

@@ -545,8 +545,17 @@ unsafe extern "system" fn create_device(
                     return r;
                 }
                 let handle = *out;
+                // A core command the device's version lacks (render pass 2 below Vulkan 1.2,
+                // say) falls back to its KHR alias, which an application (or fovea) enables.
                 let fns = ash::Device::load_with(
-                    |n| std::mem::transmute(gdpa(handle, n.as_ptr())),
+                    |n| {
+                        let f = gdpa(handle, n.as_ptr()).or_else(|| {
+                            let mut khr = n.to_bytes().to_vec();
+                            khr.extend_from_slice(b"KHR\0");
+                            gdpa(handle, khr.as_ptr() as *const c_char)
+                        });
+                        std::mem::transmute(f)
+                    },
                     handle,
                 );
                 lock(&DEVICES).insert(

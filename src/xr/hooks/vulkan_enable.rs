@@ -301,7 +301,10 @@ pub fn create_vulkan_device(
         return Ok(down());
     }
     let pd = app_info.vulkan_physical_device as u64;
-    let support = match s.vulkan.lock().graphics_device {
+    // Copied out first: a guard in the match scrutinee would live through `support_of`, whose
+    // Vulkan calls pass through fovea's own Vulkan layer and its registry (lock order).
+    let graphics_device = s.vulkan.lock().graphics_device;
+    let support = match graphics_device {
         Some((vk_instance, recorded)) if recorded == pd => support_of(vk_instance, pd),
         // Not the device the runtime picked: the runtime answers that call.
         _ => None,
