@@ -227,13 +227,16 @@ impl ChainCopy {
         let mut node = next as *const vk::BaseInStructure<'static>;
         while !node.is_null() {
             if nodes.len() == MAX_CHAIN_LENGTH {
-                return Err(ChainError::TooLong);
+                // The layer looks at the first MAX_CHAIN_LENGTH structs only ([`find`] too); the
+                // rest stays as it is, shared. Refusing the whole chain instead would pass the
+                // structs this copy exists to remove down to a driver that does not know them.
+                break;
             }
             nodes.push(node);
             // SAFETY: a valid chain, as the caller promised.
             node = unsafe { (*node).p_next };
         }
-        let mut tail: *const vk::BaseInStructure<'static> = std::ptr::null();
+        let mut tail: *const vk::BaseInStructure<'static> = node;
         let mut shared = true;
         let mut owned = Vec::new();
         let mut removed = 0;
@@ -368,7 +371,9 @@ mod tests {
                 find::<u8>(head, vk::StructureType::from_raw(9)),
                 Err(ChainError::TooLong)
             );
-            assert!(ChainCopy::without(head, |_| false).is_err());
+            // Past the walk's end the chain is shared as it is: nothing to remove, nothing copied.
+            let copy = ChainCopy::without(head, |_| false).expect("shared");
+            assert_eq!(copy.head(), head);
         }
     }
 }

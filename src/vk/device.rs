@@ -253,6 +253,16 @@ unsafe fn create_device_impl(
             drop(rewrite);
             if r == vk::Result::SUCCESS {
                 (r, Some(fdm))
+            } else if matches!(
+                r,
+                vk::Result::ERROR_OUT_OF_HOST_MEMORY
+                    | vk::Result::ERROR_OUT_OF_DEVICE_MEMORY
+                    | vk::Result::ERROR_DEVICE_LOST
+            ) {
+                // Not the rewrite's doing: the driver's answer, unchanged. A retry without the
+                // rewrite would ask for the density-map extension the driver lacks and answer
+                // with that instead.
+                (r, None)
             } else {
                 // Fail open: the application's own request, as it was, gets its answer.
                 tracing::warn!(
@@ -330,7 +340,8 @@ pub unsafe extern "system" fn destroy_device(
 
 /// `vkCreateImage` on an emulating device: a density map reaches the driver without the
 /// density-map usage and subsampled flag it does not know (on a copy of the create info), and
-/// gets a shading-rate shadow ([`image::image_created`]).
+/// gets a shading-rate shadow ([`image::image_created`]); where the shadow cannot be made, the call
+/// fails with the shadow's result.
 ///
 /// # Safety
 /// The caller's arguments, valid as the command requires.
@@ -390,8 +401,17 @@ pub unsafe extern "system" fn create_image(
                     .usage
                     .contains(vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT)
             {
-                // SAFETY: the image was just created from `app`.
-                unsafe { image::image_created(&dev, *out, app) };
+                // SAFETY: the image was just created from `app`; where its shadow cannot be
+                // made it is destroyed again, before the application ever sees it.
+                unsafe {
+                    if let Err(e) = image::image_created(&dev, *out, app) {
+                        if let Some(destroy) = dev.next.destroy_image {
+                            destroy(device, *out, alloc);
+                        }
+                        *out = vk::Image::null();
+                        return e;
+                    }
+                }
             }
             r
         },

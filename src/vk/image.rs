@@ -254,6 +254,13 @@ impl Own {
                         fence,
                     )
                     .and_then(|()| d.wait_for_fences(&[fence], true, u64::MAX));
+                if r.is_err() {
+                    // A failed wait leaves the submission possibly pending, and the fence and the
+                    // command buffer must not be destroyed while it is
+                    // (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkDestroyFence.html>):
+                    // drain the queue (the layer holds it) first, whatever that answers.
+                    let _ = d.queue_wait_idle(self.queue);
+                }
                 d.destroy_fence(fence, None);
                 r
             };
@@ -314,9 +321,21 @@ pub fn shadow_layers(fdm: &FdmEmulation, app_layers: u32) -> u32 {
 /// Makes the shadow of a density-map image the application just created (`ci` as the
 /// application gave it), or logs why not.
 ///
+/// A shadow that cannot be made (the driver is out of memory) is the application's image failing:
+/// the error is returned for `vkCreateImage` to give the application, which must not get a density
+/// map without a shadow. A pass translated for shading rates needs the shadow's view in its
+/// framebuffer; the density view itself there is invalid usage
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkFramebufferCreateInfo.html>,
+/// VUID-VkFramebufferCreateInfo-flags-04548), and `VK_ERROR_OUT_OF_DEVICE_MEMORY` is a result
+/// `vkCreateImage` may return.
+///
 /// # Safety
 /// `app` must be the live image just created on `dev` from `ci`.
-pub unsafe fn image_created(dev: &Device, app: vk::Image, ci: &vk::ImageCreateInfo<'_>) {
+pub unsafe fn image_created(
+    dev: &Device,
+    app: vk::Image,
+    ci: &vk::ImageCreateInfo<'_>,
+) -> Result<(), vk::Result> {
     let (Some(fdm), Some(own)) = (&dev.fdm, &dev.attachments.own) else {
         if dev.fdm.is_some() {
             tracing::warn!(
@@ -325,7 +344,7 @@ pub unsafe fn image_created(dev: &Device, app: vk::Image, ci: &vk::ImageCreateIn
                  device; passes with it render at full rate"
             );
         }
-        return;
+        return Ok(());
     };
     // SAFETY: as the caller promised.
     match unsafe { make_shadow(own, fdm, ci) } {
@@ -360,12 +379,16 @@ pub unsafe fn image_created(dev: &Device, app: vk::Image, ci: &vk::ImageCreateIn
                      rates (fovea's own density maps carry their rates)"
                 );
             }
+            Ok(())
         }
-        Err(e) => tracing::warn!(
-            image = raw(app),
-            result = ?e,
-            "no shadow for a density map; passes with it render at full rate"
-        ),
+        Err(e) => {
+            tracing::warn!(
+                image = raw(app),
+                result = ?e,
+                "no shadow for a density map: vkCreateImage fails with the shadow's result"
+            );
+            Err(e)
+        }
     }
 }
 
@@ -533,11 +556,24 @@ pub unsafe extern "system" fn create_image_view(
                         .lock()
                         .insert(app_view.as_raw(), ShadowView { view });
                 }
-                Err(e) => tracing::warn!(
-                    view = raw(app_view),
-                    result = ?e,
-                    "no shadow view for a density-map view; passes with it render at full rate"
-                ),
+                Err(e) => {
+                    // As for the shadow image ([`image_created`]): a density view without its
+                    // shadow view could not be used in a translated pass, so the call fails.
+                    tracing::warn!(
+                        view = raw(app_view),
+                        result = ?e,
+                        "no shadow view for a density-map view: vkCreateImageView fails with its \
+                         result"
+                    );
+                    if let Some(destroy) = dev.next.destroy_image_view {
+                        // SAFETY: the view was just made, and the application never saw it.
+                        unsafe {
+                            destroy(device, app_view, alloc);
+                            *out = vk::ImageView::null();
+                        }
+                    }
+                    return e;
+                }
             }
             r
         },

@@ -28,6 +28,8 @@ mod symmetric_fov;
 mod threads;
 mod tidy;
 mod vk_enable;
+mod vk_faults;
+mod vk_fuzz;
 mod vk_layer;
 mod vk_passes;
 mod vk_pipelines;

@@ -340,6 +340,9 @@ unsafe extern "system" fn get_instance_proc_addr(
                 return Some(f);
             }
         }
+        if let Some(f) = faultable_commands(n) {
+            return Some(f);
+        }
         // SAFETY: the next layer's function, with the caller's arguments.
         unsafe { (data.gipa)(instance, name) }
     })
@@ -362,6 +365,9 @@ unsafe extern "system" fn get_device_proc_addr(
             if let Some(f) = device_commands(n) {
                 return Some(f);
             }
+        }
+        if let Some(f) = faultable_commands(n) {
+            return Some(f);
         }
         // SAFETY: the next layer's function, with the caller's arguments.
         unsafe { (data.gdpa)(device, name) }
@@ -457,6 +463,9 @@ unsafe extern "system" fn create_device(
         "vkCreateDevice",
         vk::Result::ERROR_INITIALIZATION_FAILED,
         || {
+            if let Some(r) = record::fault("vkCreateDevice") {
+                return r;
+            }
             // SAFETY: as in create_instance: the loader's link info is advanced in place; the
             // application's create info is read only, its rewrite is a copy that lives across the
             // call.
@@ -964,6 +973,9 @@ unsafe extern "system" fn create_image(
     out: *mut vk::Image,
 ) -> vk::Result {
     guard("vkCreateImage", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkCreateImage") {
+            return r;
+        }
         // SAFETY: the caller's create info is read; lavapipe gets a copy.
         unsafe {
             let d = device_of(device.as_raw());
@@ -1017,6 +1029,9 @@ unsafe extern "system" fn create_image_view(
     out: *mut vk::ImageView,
 ) -> vk::Result {
     guard("vkCreateImageView", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkCreateImageView") {
+            return r;
+        }
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(device.as_raw());
@@ -1052,6 +1067,9 @@ unsafe extern "system" fn create_render_pass2(
     out: *mut vk::RenderPass,
 ) -> vk::Result {
     guard("vkCreateRenderPass2", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkCreateRenderPass2") {
+            return r;
+        }
         // SAFETY: the caller's create info is read; lavapipe gets copies that live across the
         // call.
         unsafe {
@@ -1258,6 +1276,9 @@ unsafe extern "system" fn create_framebuffer(
     out: *mut vk::Framebuffer,
 ) -> vk::Result {
     guard("vkCreateFramebuffer", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkCreateFramebuffer") {
+            return r;
+        }
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(device.as_raw());
@@ -1315,6 +1336,11 @@ unsafe extern "system" fn create_graphics_pipelines(
         "vkCreateGraphicsPipelines",
         vk::Result::ERROR_UNKNOWN,
         || {
+            if let Some(r) = record::fault("vkCreateGraphicsPipelines") {
+                // SAFETY: `out` has `count` elements.
+                unsafe { null_outputs(out, count) };
+                return r;
+            }
             // SAFETY: the caller's create infos are read; lavapipe gets copies that live across the
             // call; `out` has `count` elements.
             unsafe {
@@ -1410,6 +1436,9 @@ unsafe extern "system" fn begin_command_buffer(
     info: *const vk::CommandBufferBeginInfo<'_>,
 ) -> vk::Result {
     guard("vkBeginCommandBuffer", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkBeginCommandBuffer") {
+            return r;
+        }
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(cb.as_raw());
@@ -1942,6 +1971,9 @@ unsafe extern "system" fn queue_submit(
     fence: vk::Fence,
 ) -> vk::Result {
     guard("vkQueueSubmit", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkQueueSubmit") {
+            return r;
+        }
         // SAFETY: the caller's submits are read; wait-stage masks are rewritten in copies that
         // live across the call.
         unsafe {
@@ -2007,6 +2039,9 @@ unsafe extern "system" fn queue_submit2(
     fence: vk::Fence,
 ) -> vk::Result {
     guard("vkQueueSubmit2", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkQueueSubmit2") {
+            return r;
+        }
         // SAFETY: the caller's submits are read; semaphore stage masks are rewritten in copies
         // that live across the call.
         unsafe {
@@ -2042,4 +2077,149 @@ unsafe extern "system" fn queue_submit2(
             r
         }
     })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Fault injection: commands that can be made to fail (`fovea_vkdouble_fail`), intercepted whatever
+// the profile. Each counts its calls and, at the armed one, returns the armed result without
+// calling lavapipe; outputs a failed command must leave null
+// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-errorcodes>)
+// are nulled. The commands the profile path rewrites check for their fault themselves.
+
+macro_rules! faultable {
+    ($($name:literal => $f:ident as $pfn:ident = $table:ident . $field:ident
+        ($first:ident: $ft:ty $(, $a:ident: $t:ty)*) $(, on_fault $clear:expr)?;)*) => {
+        $(
+            unsafe extern "system" fn $f($first: $ft $(, $a: $t)*) -> vk::Result {
+                guard($name, vk::Result::ERROR_UNKNOWN, || {
+                    if let Some(r) = record::fault($name) {
+                        $(
+                            // SAFETY: the caller's output array, valid for the counts it gave.
+                            unsafe { $clear };
+                        )?
+                        return r;
+                    }
+                    // SAFETY: the caller's arguments, forwarded unchanged to the next layer.
+                    unsafe {
+                        let d = device_of($first.as_raw());
+                        (d.fns.$table().$field)($first $(, $a)*)
+                    }
+                })
+            }
+        )*
+
+        /// The fault-injection wrapper for `name`.
+        fn faultable_commands(name: &[u8]) -> vk::PFN_vkVoidFunction {
+            $(
+                if name == $name.as_bytes() {
+                    let f: vk::$pfn = $f;
+                    // SAFETY: the loader's generic function pointer type; the caller casts it back
+                    // to the type its name implies, which is `$pfn`.
+                    return Some(unsafe {
+                        std::mem::transmute::<vk::$pfn, unsafe extern "system" fn()>(f)
+                    });
+                }
+            )*
+            None
+        }
+
+        /// Every command that can be made to fail (besides `vkCreateDevice`).
+        pub const FAULTABLE: &[&str] = &[$($name),*];
+    };
+}
+
+faultable! {
+    "vkCreateImage" => fault_create_image as PFN_vkCreateImage = fp_v1_0.create_image
+        (device: vk::Device, info: *const vk::ImageCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::Image);
+    "vkCreateBuffer" => fault_create_buffer as PFN_vkCreateBuffer = fp_v1_0.create_buffer
+        (device: vk::Device, info: *const vk::BufferCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::Buffer);
+    "vkAllocateMemory" => fault_allocate_memory as PFN_vkAllocateMemory = fp_v1_0.allocate_memory
+        (device: vk::Device, info: *const vk::MemoryAllocateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::DeviceMemory);
+    "vkBindImageMemory" => fault_bind_image_memory as PFN_vkBindImageMemory =
+        fp_v1_0.bind_image_memory
+        (device: vk::Device, image: vk::Image, memory: vk::DeviceMemory, offset: vk::DeviceSize);
+    "vkBindBufferMemory" => fault_bind_buffer_memory as PFN_vkBindBufferMemory =
+        fp_v1_0.bind_buffer_memory
+        (device: vk::Device, buffer: vk::Buffer, memory: vk::DeviceMemory, offset: vk::DeviceSize);
+    "vkMapMemory" => fault_map_memory as PFN_vkMapMemory = fp_v1_0.map_memory
+        (device: vk::Device, memory: vk::DeviceMemory, offset: vk::DeviceSize,
+         size: vk::DeviceSize, flags: vk::MemoryMapFlags, out: *mut *mut c_void);
+    "vkCreateImageView" => fault_create_image_view as PFN_vkCreateImageView =
+        fp_v1_0.create_image_view
+        (device: vk::Device, info: *const vk::ImageViewCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::ImageView);
+    "vkCreateRenderPass" => fault_create_render_pass as PFN_vkCreateRenderPass =
+        fp_v1_0.create_render_pass
+        (device: vk::Device, info: *const vk::RenderPassCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::RenderPass);
+    "vkCreateRenderPass2" => fault_create_render_pass2 as PFN_vkCreateRenderPass2 =
+        fp_v1_2.create_render_pass2
+        (device: vk::Device, info: *const vk::RenderPassCreateInfo2<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::RenderPass);
+    "vkCreateFramebuffer" => fault_create_framebuffer as PFN_vkCreateFramebuffer =
+        fp_v1_0.create_framebuffer
+        (device: vk::Device, info: *const vk::FramebufferCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::Framebuffer);
+    "vkCreatePipelineLayout" => fault_create_pipeline_layout as PFN_vkCreatePipelineLayout =
+        fp_v1_0.create_pipeline_layout
+        (device: vk::Device, info: *const vk::PipelineLayoutCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::PipelineLayout);
+    "vkCreateGraphicsPipelines" => fault_create_graphics_pipelines
+        as PFN_vkCreateGraphicsPipelines = fp_v1_0.create_graphics_pipelines
+        (device: vk::Device, cache: vk::PipelineCache, count: u32,
+         infos: *const vk::GraphicsPipelineCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::Pipeline),
+        on_fault null_outputs(out, count);
+    "vkCreateShaderModule" => fault_create_shader_module as PFN_vkCreateShaderModule =
+        fp_v1_0.create_shader_module
+        (device: vk::Device, info: *const vk::ShaderModuleCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::ShaderModule);
+    "vkCreateSampler" => fault_create_sampler as PFN_vkCreateSampler = fp_v1_0.create_sampler
+        (device: vk::Device, info: *const vk::SamplerCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::Sampler);
+    "vkCreateCommandPool" => fault_create_command_pool as PFN_vkCreateCommandPool =
+        fp_v1_0.create_command_pool
+        (device: vk::Device, info: *const vk::CommandPoolCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::CommandPool);
+    "vkAllocateCommandBuffers" => fault_allocate_command_buffers
+        as PFN_vkAllocateCommandBuffers = fp_v1_0.allocate_command_buffers
+        (device: vk::Device, info: *const vk::CommandBufferAllocateInfo<'_>,
+         out: *mut vk::CommandBuffer),
+        on_fault null_outputs(out, (*info).command_buffer_count);
+    "vkBeginCommandBuffer" => fault_begin_command_buffer as PFN_vkBeginCommandBuffer =
+        fp_v1_0.begin_command_buffer
+        (cb: vk::CommandBuffer, info: *const vk::CommandBufferBeginInfo<'_>);
+    "vkEndCommandBuffer" => fault_end_command_buffer as PFN_vkEndCommandBuffer =
+        fp_v1_0.end_command_buffer (cb: vk::CommandBuffer);
+    "vkQueueSubmit" => fault_queue_submit as PFN_vkQueueSubmit = fp_v1_0.queue_submit
+        (queue: vk::Queue, count: u32, submits: *const vk::SubmitInfo<'_>, fence: vk::Fence);
+    "vkQueueSubmit2" => fault_queue_submit2 as PFN_vkQueueSubmit2 = fp_v1_3.queue_submit2
+        (queue: vk::Queue, count: u32, submits: *const vk::SubmitInfo2<'_>, fence: vk::Fence);
+    "vkQueueWaitIdle" => fault_queue_wait_idle as PFN_vkQueueWaitIdle =
+        fp_v1_0.queue_wait_idle (queue: vk::Queue);
+    "vkCreateFence" => fault_create_fence as PFN_vkCreateFence = fp_v1_0.create_fence
+        (device: vk::Device, info: *const vk::FenceCreateInfo<'_>,
+         alloc: *const vk::AllocationCallbacks<'_>, out: *mut vk::Fence);
+    "vkWaitForFences" => fault_wait_for_fences as PFN_vkWaitForFences = fp_v1_0.wait_for_fences
+        (device: vk::Device, count: u32, fences: *const vk::Fence, all: vk::Bool32,
+         timeout: u64);
+    "vkResetFences" => fault_reset_fences as PFN_vkResetFences = fp_v1_0.reset_fences
+        (device: vk::Device, count: u32, fences: *const vk::Fence);
+}
+
+/// Nulls `n` output handles.
+///
+/// # Safety
+/// `out` must be null or valid for `n` writes.
+unsafe fn null_outputs<T: vk::Handle>(out: *mut T, n: u32) {
+    if out.is_null() {
+        return;
+    }
+    for i in 0..n as usize {
+        // SAFETY: as the caller promised.
+        unsafe { out.add(i).write(T::from_raw(0)) };
+    }
 }

@@ -37,6 +37,10 @@
 //! two stage masks; version 2: per memory and image barrier); `submit`
 //! {command_buffers, shading_rate_images[{image, extent, layers, codes}]}, the codes read back
 //! after the submit completed. With the `none` profile nothing but `instance` is recorded.
+//!
+//! Fault injection ([`fovea_vkdouble_fail`], [`Loaded::fail`]): any of [`FAULTABLE`] (and
+//! `vkCreateDevice`) can be made to fail at its n-th call, whatever the profile; since the double
+//! sits below validation, the calls fovea makes for itself (its shadows) are counted and failed too.
 
 #![deny(unsafe_op_in_unsafe_fn)]
 
@@ -49,6 +53,7 @@ mod record;
 use std::ffi::{c_char, CStr};
 use std::path::{Path, PathBuf};
 
+pub use layer::FAULTABLE;
 pub use profile::Profile;
 use serde_json::Value;
 
@@ -79,6 +84,42 @@ pub unsafe extern "C" fn fovea_vkdouble_records_json(buf: *mut u8, len: usize) -
 #[no_mangle]
 pub extern "C" fn fovea_vkdouble_clear() {
     let _ = std::panic::catch_unwind(record::clear);
+}
+
+/// Fault injection: makes the call number `nth` (0-based, counted since the last
+/// [`fovea_vkdouble_clear`]) of the command `name` return `result` (a `VkResult`, e.g.
+/// `VK_ERROR_OUT_OF_DEVICE_MEMORY` = -2) without reaching lavapipe; the fault fires once. `name` is
+/// `vkCreateDevice` or one of [`FAULTABLE`]. Returns 0, or -1 for a null or unknown name.
+///
+/// # Safety
+/// `name` must be null or a NUL-terminated string.
+#[no_mangle]
+pub unsafe extern "C" fn fovea_vkdouble_fail(name: *const c_char, nth: u64, result: i32) -> i32 {
+    if name.is_null() {
+        return -1;
+    }
+    // SAFETY: the caller promised a NUL-terminated string.
+    let name = unsafe { CStr::from_ptr(name) }.to_string_lossy();
+    if name != "vkCreateDevice" && !FAULTABLE.contains(&&*name) {
+        return -1;
+    }
+    let _ = std::panic::catch_unwind(|| record::arm(&name, nth, result));
+    0
+}
+
+/// How often the command `name` reached the double since the last [`fovea_vkdouble_clear`]
+/// (counted for `vkCreateDevice` and [`FAULTABLE`] only).
+///
+/// # Safety
+/// `name` must be null or a NUL-terminated string.
+#[no_mangle]
+pub unsafe extern "C" fn fovea_vkdouble_calls(name: *const c_char) -> u64 {
+    if name.is_null() {
+        return 0;
+    }
+    // SAFETY: the caller promised a NUL-terminated string.
+    let name = unsafe { CStr::from_ptr(name) }.to_string_lossy();
+    std::panic::catch_unwind(|| record::calls(&name)).unwrap_or(0)
 }
 
 /// Sets the profile the next VkInstance gets (`nvidia`, `amd`, `none`), overriding
@@ -227,6 +268,39 @@ impl Loaded {
                 .get::<extern "C" fn()>(b"fovea_vkdouble_clear\0")
                 .expect("fovea_vkdouble_clear");
             f()
+        }
+    }
+
+    /// Makes call number `nth` of `name` (counted since [`Loaded::clear`]) return `result`; see
+    /// [`fovea_vkdouble_fail`].
+    pub fn fail(&self, name: &str, nth: u64, result: ash::vk::Result) {
+        let name = std::ffi::CString::new(name).expect("no NUL");
+        // SAFETY: the symbol has this signature; the name lives across the call.
+        unsafe {
+            let f = self
+                .lib
+                .get::<unsafe extern "C" fn(*const c_char, u64, i32) -> i32>(
+                    b"fovea_vkdouble_fail\0",
+                )
+                .expect("fovea_vkdouble_fail");
+            assert_eq!(
+                f(name.as_ptr(), nth, result.as_raw()),
+                0,
+                "{name:?} cannot fail"
+            );
+        }
+    }
+
+    /// How often `name` reached the double since [`Loaded::clear`].
+    pub fn calls(&self, name: &str) -> u64 {
+        let name = std::ffi::CString::new(name).expect("no NUL");
+        // SAFETY: the symbol has this signature; the name lives across the call.
+        unsafe {
+            let f = self
+                .lib
+                .get::<unsafe extern "C" fn(*const c_char) -> u64>(b"fovea_vkdouble_calls\0")
+                .expect("fovea_vkdouble_calls");
+            f(name.as_ptr())
         }
     }
 

@@ -44,6 +44,8 @@ pub fn clear() {
     let mut r = records();
     r.events.clear();
     r.errors.clear();
+    drop(r);
+    clear_faults();
 }
 
 /// Sets (or, with `None`, lifts) the profile override.
@@ -66,4 +68,53 @@ pub fn profile() -> Profile {
         }),
         Err(_) => Profile::Nvidia,
     }
+}
+
+/// Fault injection: how often each intercepted command was called since [`clear`], and the one
+/// armed failure per command (the call index at which it fails, and the result it returns).
+struct Faults {
+    calls: std::collections::BTreeMap<String, u64>,
+    armed: std::collections::BTreeMap<String, (u64, i32)>,
+}
+
+static FAULTS: Mutex<Faults> = Mutex::new(Faults {
+    calls: std::collections::BTreeMap::new(),
+    armed: std::collections::BTreeMap::new(),
+});
+
+fn faults() -> std::sync::MutexGuard<'static, Faults> {
+    FAULTS.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Counts one call of `name`; the armed result where this is the call it was armed for (the fault
+/// fires once, then disarms).
+pub fn fault(name: &str) -> Option<ash::vk::Result> {
+    let mut f = faults();
+    let calls = f.calls.entry(name.to_owned()).or_insert(0);
+    let index = *calls;
+    *calls += 1;
+    match f.armed.get(name) {
+        Some(&(nth, result)) if nth == index => {
+            f.armed.remove(name);
+            Some(ash::vk::Result::from_raw(result))
+        }
+        _ => None,
+    }
+}
+
+/// Arms `name` to return `result` at its call number `nth` (0-based, counted since [`clear`]).
+pub fn arm(name: &str, nth: u64, result: i32) {
+    faults().armed.insert(name.to_owned(), (nth, result));
+}
+
+/// How often `name` was called since [`clear`].
+pub fn calls(name: &str) -> u64 {
+    faults().calls.get(name).copied().unwrap_or(0)
+}
+
+/// Forgets the counts and disarms every fault.
+pub fn clear_faults() {
+    let mut f = faults();
+    f.calls.clear();
+    f.armed.clear();
 }

@@ -1,0 +1,670 @@
+//! Fuzzed calls through fovea's Vulkan layer: structs it does not know in every chain it edits,
+//! null handles where the specification allows them, and handles of a device it never saw.
+//!
+//! Stack as in `vk_layer`. Each case attaches a random chain of structs with sTypes no extension
+//! has yet (a valid `VkBaseInStructure` header and a zeroed body) to one struct fovea rewrites:
+//! device, image and image-view create infos, render pass v1 and v2 create infos, framebuffer
+//! create info, render-pass begin info, rendering info, pipeline create info, image barriers and
+//! dependency infos. Chains run up to past the layer's longest walk. The call must not crash,
+//! must succeed as it does without the chain, and where the double records it, reach the driver
+//! translated as without the chain. Validation's only complaints may be about those sTypes
+//! (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-validusage-pNext>).
+//!
+//! `FOVEA_FUZZ_CASES=N` runs N cases instead of 64.
+
+use std::ffi::c_void;
+
+use ash::vk;
+use fovea_vkdouble::Profile;
+use proptest::prelude::*;
+
+use crate::vk_layer::{env, take_real_messages, Vk, FDM};
+
+const SIZE: u32 = 64;
+const COLOR: vk::Format = vk::Format::R8G8B8A8_UNORM;
+const DENSITY: vk::Format = vk::Format::R8G8_UNORM;
+const FDM_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+
+/// A struct fovea cannot know: a header and a body nobody reads.
+#[repr(C)]
+struct Unknown {
+    s_type: vk::StructureType,
+    p_next: *const c_void,
+    body: [u64; 8],
+}
+
+/// A chain of unknown structs, linked in order, `tail` at its end (the vector is never grown
+/// after linking, so the links stay valid while it lives).
+fn chain(types: &[i32], tail: *const c_void) -> Vec<Unknown> {
+    let mut v: Vec<Unknown> = types
+        .iter()
+        .map(|&t| Unknown {
+            s_type: vk::StructureType::from_raw(t),
+            p_next: std::ptr::null(),
+            body: [0; 8],
+        })
+        .collect();
+    let mut next = tail;
+    for s in v.iter_mut().rev() {
+        s.p_next = next;
+        next = s as *const Unknown as *const c_void;
+    }
+    v
+}
+
+fn chain_length(mut p: *const c_void) -> usize {
+    let mut n = 0;
+    while !p.is_null() {
+        n += 1;
+        // SAFETY: a chain made by [`chain`].
+        p = unsafe { (*(p as *const Unknown)).p_next };
+    }
+    n
+}
+
+fn head(c: &[Unknown], tail: *const c_void) -> *const c_void {
+    c.first()
+        .map_or(tail, |s| s as *const Unknown as *const c_void)
+}
+
+/// Which struct the chain goes on.
+#[derive(Clone, Copy, Debug)]
+enum Target {
+    Device,
+    Image,
+    ImageView,
+    RenderPass1,
+    RenderPass2,
+    Framebuffer,
+    BeginRenderPass,
+    Rendering,
+    Pipeline,
+    Barrier1,
+    Barrier2,
+}
+
+const TARGETS: [Target; 11] = [
+    Target::Device,
+    Target::Image,
+    Target::ImageView,
+    Target::RenderPass1,
+    Target::RenderPass2,
+    Target::Framebuffer,
+    Target::BeginRenderPass,
+    Target::Rendering,
+    Target::Pipeline,
+    Target::Barrier1,
+    Target::Barrier2,
+];
+
+fn cases() -> u32 {
+    std::env::var("FOVEA_FUZZ_CASES")
+        .ok()
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or(64)
+}
+
+/// sTypes of extension numbers 801–1000, which no extension has yet: never a struct fovea, the
+/// validation layer or the driver reads.
+fn unknown_stype() -> impl Strategy<Value = i32> {
+    1_000_800_000i32..1_001_000_000
+}
+
+fn device(vk: &Vk, extra: *const c_void) -> Result<ash::Device, vk::Result> {
+    let prio = [1.0];
+    let queues = [vk::DeviceQueueCreateInfo::default()
+        .queue_family_index(0)
+        .queue_priorities(&prio)];
+    let names = [FDM.as_ptr()];
+    let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
+        .dynamic_rendering(true)
+        .synchronization2(true);
+    v13.p_next = extra as *mut c_void;
+    let mut density = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+        .fragment_density_map(true)
+        .fragment_density_map_non_subsampled_images(true);
+    density.p_next = &mut v13 as *mut _ as *mut c_void;
+    let mut info = vk::DeviceCreateInfo::default()
+        .queue_create_infos(&queues)
+        .enabled_extension_names(&names);
+    info.p_next = &density as *const _ as *const c_void;
+    // SAFETY: every struct lives across the call.
+    unsafe { vk.instance.create_device(vk.physical, &info, None) }
+}
+
+fn range() -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        base_mip_level: 0,
+        level_count: 1,
+        base_array_layer: 0,
+        layer_count: 1,
+    }
+}
+
+/// The objects every case uses, on one FDM device.
+struct Fixture {
+    d: ash::Device,
+    memory: vk::PhysicalDeviceMemoryProperties,
+    images: Vec<(vk::Image, vk::DeviceMemory)>,
+    color_view: vk::ImageView,
+    density_view: vk::ImageView,
+    pass: vk::RenderPass,
+    layout: vk::PipelineLayout,
+    modules: [vk::ShaderModule; 2],
+    pool: vk::CommandPool,
+}
+
+impl Fixture {
+    /// # Safety
+    /// `vk` must outlive the fixture.
+    unsafe fn new(vk: &Vk) -> Fixture {
+        let d = device(vk, std::ptr::null()).expect("vkCreateDevice");
+        // SAFETY: plain creations on the live device.
+        unsafe {
+            let memory = vk
+                .instance
+                .get_physical_device_memory_properties(vk.physical);
+            let mut f = Fixture {
+                d,
+                memory,
+                images: Vec::new(),
+                color_view: vk::ImageView::null(),
+                density_view: vk::ImageView::null(),
+                pass: vk::RenderPass::null(),
+                layout: vk::PipelineLayout::null(),
+                modules: [vk::ShaderModule::null(); 2],
+                pool: vk::CommandPool::null(),
+            };
+            let color = f
+                .image(
+                    COLOR,
+                    SIZE,
+                    vk::ImageUsageFlags::COLOR_ATTACHMENT,
+                    std::ptr::null(),
+                )
+                .unwrap();
+            let density = f
+                .image(
+                    DENSITY,
+                    SIZE / 16,
+                    vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
+                    std::ptr::null(),
+                )
+                .unwrap();
+            f.color_view = f.view(color, COLOR, std::ptr::null()).unwrap();
+            f.density_view = f.view(density, DENSITY, std::ptr::null()).unwrap();
+            f.pass = f.render_pass2(std::ptr::null()).unwrap();
+            f.layout =
+                f.d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
+                    .unwrap();
+            for (i, bytes) in [
+                &include_bytes!("../../crates/vkdouble/tests/shaders/fullscreen.vert.spv")[..],
+                &include_bytes!("../../crates/vkdouble/tests/shaders/solid.frag.spv")[..],
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let words = ash::util::read_spv(&mut std::io::Cursor::new(bytes)).unwrap();
+                f.modules[i] = f
+                    .d
+                    .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+                    .unwrap();
+            }
+            f.pool =
+                f.d.create_command_pool(
+                    &vk::CommandPoolCreateInfo::default().queue_family_index(0),
+                    None,
+                )
+                .unwrap();
+            f
+        }
+    }
+
+    /// # Safety
+    /// `next` must be a valid chain.
+    unsafe fn image(
+        &mut self,
+        format: vk::Format,
+        size: u32,
+        usage: vk::ImageUsageFlags,
+        next: *const c_void,
+    ) -> Result<vk::Image, vk::Result> {
+        let mut info = vk::ImageCreateInfo::default()
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(format)
+            .extent(vk::Extent3D {
+                width: size,
+                height: size,
+                depth: 1,
+            })
+            .mip_levels(1)
+            .array_layers(1)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(usage);
+        info.p_next = next;
+        // SAFETY: as the caller promised; the image gets memory before any use.
+        unsafe {
+            let image = self.d.create_image(&info, None)?;
+            let req = self.d.get_image_memory_requirements(image);
+            let ty = (0..self.memory.memory_type_count)
+                .find(|&i| req.memory_type_bits & (1 << i) != 0)
+                .unwrap();
+            let mem = self
+                .d
+                .allocate_memory(
+                    &vk::MemoryAllocateInfo::default()
+                        .allocation_size(req.size)
+                        .memory_type_index(ty),
+                    None,
+                )
+                .unwrap();
+            self.d.bind_image_memory(image, mem, 0).unwrap();
+            self.images.push((image, mem));
+            Ok(image)
+        }
+    }
+
+    /// # Safety
+    /// `next` must be a valid chain.
+    unsafe fn view(
+        &self,
+        image: vk::Image,
+        format: vk::Format,
+        next: *const c_void,
+    ) -> Result<vk::ImageView, vk::Result> {
+        let mut info = vk::ImageViewCreateInfo::default()
+            .image(image)
+            .view_type(vk::ImageViewType::TYPE_2D)
+            .format(format)
+            .subresource_range(range());
+        info.p_next = next;
+        // SAFETY: as the caller promised.
+        unsafe { self.d.create_image_view(&info, None) }
+    }
+
+    /// A colour + density pass, v2; `next` on the create info, after the density-map info.
+    ///
+    /// # Safety
+    /// `next` must be a valid chain.
+    unsafe fn render_pass2(&self, next: *const c_void) -> Result<vk::RenderPass, vk::Result> {
+        let atts = [
+            vk::AttachmentDescription2::default()
+                .format(COLOR)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .final_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL),
+            vk::AttachmentDescription2::default()
+                .format(DENSITY)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(vk::AttachmentLoadOp::DONT_CARE)
+                .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                .initial_layout(FDM_LAYOUT)
+                .final_layout(FDM_LAYOUT),
+        ];
+        let color = [vk::AttachmentReference2::default()
+            .attachment(0)
+            .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
+        let subpass = [vk::SubpassDescription2::default()
+            .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+            .color_attachments(&color)];
+        let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
+            .fragment_density_map_attachment(vk::AttachmentReference {
+                attachment: 1,
+                layout: FDM_LAYOUT,
+            });
+        fdm.p_next = next;
+        let mut info = vk::RenderPassCreateInfo2::default()
+            .attachments(&atts)
+            .subpasses(&subpass);
+        info.p_next = &fdm as *const _ as *const c_void;
+        // SAFETY: as the caller promised; the structs live across the call.
+        unsafe { self.d.create_render_pass2(&info, None) }
+    }
+
+    /// # Safety
+    /// `next` must be a valid chain.
+    unsafe fn render_pass1(&self, next: *const c_void) -> Result<vk::RenderPass, vk::Result> {
+        let atts = [
+            vk::AttachmentDescription::default()
+                .format(COLOR)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .final_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL),
+            vk::AttachmentDescription::default()
+                .format(DENSITY)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(vk::AttachmentLoadOp::DONT_CARE)
+                .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                .initial_layout(FDM_LAYOUT)
+                .final_layout(FDM_LAYOUT),
+        ];
+        let color = [vk::AttachmentReference {
+            attachment: 0,
+            layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+        }];
+        let subpass = [vk::SubpassDescription::default()
+            .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+            .color_attachments(&color)];
+        let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
+            .fragment_density_map_attachment(vk::AttachmentReference {
+                attachment: 1,
+                layout: FDM_LAYOUT,
+            });
+        // The unknown structs first, the density-map info after them.
+        let mut info = vk::RenderPassCreateInfo::default()
+            .attachments(&atts)
+            .subpasses(&subpass);
+        fdm.p_next = std::ptr::null();
+        info.p_next = next;
+        let tail = &fdm as *const _ as *const c_void;
+        let mut last = next as *mut Unknown;
+        if last.is_null() {
+            info.p_next = tail;
+        } else {
+            // SAFETY: the chain is made of `Unknown`s (see `chain`).
+            unsafe {
+                while !(*last).p_next.is_null() {
+                    last = (*last).p_next as *mut Unknown;
+                }
+                (*last).p_next = tail;
+            }
+        }
+        // SAFETY: as the caller promised; the structs live across the call.
+        let r = unsafe { self.d.create_render_pass(&info, None) };
+        if !last.is_null() {
+            // SAFETY: as above; the chain is unlinked from the local struct again.
+            unsafe { (*last).p_next = std::ptr::null() };
+        }
+        r
+    }
+
+    /// One command buffer, `f` recording into it between begin and end; freed afterwards.
+    ///
+    /// # Safety
+    /// What `f` records must be valid.
+    unsafe fn record(&self, f: impl FnOnce(vk::CommandBuffer)) {
+        // SAFETY: the pool is this fixture's; the buffer is never submitted.
+        unsafe {
+            let cb = self
+                .d
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(self.pool)
+                        .command_buffer_count(1),
+                )
+                .unwrap()[0];
+            self.d
+                .begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+                .unwrap();
+            f(cb);
+            self.d.end_command_buffer(cb).unwrap();
+            self.d.free_command_buffers(self.pool, &[cb]);
+        }
+    }
+
+    /// # Safety
+    /// Nothing made from the fixture may be in use.
+    unsafe fn destroy(self) {
+        // SAFETY: as the caller promised.
+        unsafe {
+            let d = &self.d;
+            d.destroy_command_pool(self.pool, None);
+            for m in self.modules {
+                d.destroy_shader_module(m, None);
+            }
+            d.destroy_pipeline_layout(self.layout, None);
+            d.destroy_render_pass(self.pass, None);
+            d.destroy_image_view(self.color_view, None);
+            d.destroy_image_view(self.density_view, None);
+            for (i, m) in self.images {
+                d.destroy_image(i, None);
+                d.free_memory(m, None);
+            }
+            d.destroy_device(None);
+        }
+    }
+}
+
+/// Runs one case: `target` gets the chain; every object made is destroyed again.
+///
+/// # Safety
+/// `f` and `vk` must be alive.
+unsafe fn run(vk: &Vk, f: &mut Fixture, target: Target, next: *const c_void) {
+    let d = f.d.clone();
+    let area = vk::Rect2D {
+        offset: vk::Offset2D { x: 0, y: 0 },
+        extent: vk::Extent2D {
+            width: SIZE,
+            height: SIZE,
+        },
+    };
+    // SAFETY: as the caller promised; every struct lives across its call.
+    unsafe {
+        match target {
+            Target::Device => match device(vk, next) {
+                Ok(dev) => dev.destroy_device(None),
+                // Past the longest chain fovea walks it passes the create info through as it
+                // is, density maps included, and the driver answers that it has none.
+                Err(
+                    vk::Result::ERROR_FEATURE_NOT_PRESENT | vk::Result::ERROR_EXTENSION_NOT_PRESENT,
+                ) if chain_length(next) + 2 > fovea_abi::MAX_CHAIN_LENGTH => {}
+                Err(e) => panic!("vkCreateDevice with unknown structs: {e}"),
+            },
+            Target::Image => {
+                let n = f.images.len();
+                f.image(
+                    DENSITY,
+                    4,
+                    vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
+                    next,
+                )
+                .expect("vkCreateImage");
+                let (i, m) = f.images.remove(n);
+                d.destroy_image(i, None);
+                d.free_memory(m, None);
+            }
+            Target::ImageView => {
+                let image = f.images[1].0;
+                let v = f.view(image, DENSITY, next).expect("vkCreateImageView");
+                d.destroy_image_view(v, None);
+            }
+            Target::RenderPass1 => {
+                let p = f.render_pass1(next).expect("vkCreateRenderPass");
+                d.destroy_render_pass(p, None);
+            }
+            Target::RenderPass2 => {
+                let p = f.render_pass2(next).expect("vkCreateRenderPass2");
+                d.destroy_render_pass(p, None);
+            }
+            Target::Framebuffer | Target::BeginRenderPass => {
+                let list = [f.color_view, f.density_view];
+                let mut info = vk::FramebufferCreateInfo::default()
+                    .render_pass(f.pass)
+                    .attachments(&list)
+                    .width(SIZE)
+                    .height(SIZE)
+                    .layers(1);
+                if matches!(target, Target::Framebuffer) {
+                    info.p_next = next;
+                }
+                let fb = d
+                    .create_framebuffer(&info, None)
+                    .expect("vkCreateFramebuffer");
+                if matches!(target, Target::BeginRenderPass) {
+                    let clear = [vk::ClearValue::default()];
+                    let mut begin = vk::RenderPassBeginInfo::default()
+                        .render_pass(f.pass)
+                        .framebuffer(fb)
+                        .render_area(area)
+                        .clear_values(&clear);
+                    begin.p_next = next;
+                    f.record(|cb| {
+                        d.cmd_begin_render_pass2(
+                            cb,
+                            &begin,
+                            &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+                        );
+                        d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
+                    });
+                }
+                d.destroy_framebuffer(fb, None);
+            }
+            Target::Rendering => {
+                let color = [vk::RenderingAttachmentInfo::default()
+                    .image_view(f.color_view)
+                    .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                    .load_op(vk::AttachmentLoadOp::CLEAR)
+                    .store_op(vk::AttachmentStoreOp::STORE)];
+                let mut density = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
+                    .image_view(f.density_view)
+                    .image_layout(FDM_LAYOUT);
+                density.p_next = next;
+                let mut info = vk::RenderingInfo::default()
+                    .render_area(area)
+                    .layer_count(1)
+                    .color_attachments(&color);
+                info.p_next = &density as *const _ as *const c_void;
+                f.record(|cb| {
+                    d.cmd_begin_rendering(cb, &info);
+                    d.cmd_end_rendering(cb);
+                });
+            }
+            Target::Pipeline => {
+                let stages = [
+                    vk::PipelineShaderStageCreateInfo::default()
+                        .stage(vk::ShaderStageFlags::VERTEX)
+                        .module(f.modules[0])
+                        .name(c"main"),
+                    vk::PipelineShaderStageCreateInfo::default()
+                        .stage(vk::ShaderStageFlags::FRAGMENT)
+                        .module(f.modules[1])
+                        .name(c"main"),
+                ];
+                let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
+                let assembly = vk::PipelineInputAssemblyStateCreateInfo::default()
+                    .topology(vk::PrimitiveTopology::TRIANGLE_LIST);
+                let viewport = vk::PipelineViewportStateCreateInfo::default()
+                    .viewport_count(1)
+                    .scissor_count(1);
+                let raster = vk::PipelineRasterizationStateCreateInfo::default()
+                    .polygon_mode(vk::PolygonMode::FILL)
+                    .line_width(1.0);
+                let multisample = vk::PipelineMultisampleStateCreateInfo::default()
+                    .rasterization_samples(vk::SampleCountFlags::TYPE_1);
+                let blend_att = [vk::PipelineColorBlendAttachmentState::default()
+                    .color_write_mask(vk::ColorComponentFlags::RGBA)];
+                let blend =
+                    vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_att);
+                let states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
+                let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&states);
+                let mut info = vk::GraphicsPipelineCreateInfo::default()
+                    .stages(&stages)
+                    .vertex_input_state(&vertex_input)
+                    .input_assembly_state(&assembly)
+                    .viewport_state(&viewport)
+                    .rasterization_state(&raster)
+                    .multisample_state(&multisample)
+                    .color_blend_state(&blend)
+                    .dynamic_state(&dynamic)
+                    .layout(f.layout)
+                    .render_pass(f.pass)
+                    .subpass(0);
+                info.p_next = next;
+                let p = d
+                    .create_graphics_pipelines(vk::PipelineCache::null(), &[info], None)
+                    .map_err(|e| e.1)
+                    .expect("vkCreateGraphicsPipelines")[0];
+                d.destroy_pipeline(p, None);
+            }
+            Target::Barrier1 => {
+                let mut b = vk::ImageMemoryBarrier::default()
+                    .image(f.images[1].0)
+                    .subresource_range(range())
+                    .old_layout(vk::ImageLayout::UNDEFINED)
+                    .new_layout(FDM_LAYOUT)
+                    .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT);
+                b.p_next = next;
+                f.record(|cb| {
+                    d.cmd_pipeline_barrier(
+                        cb,
+                        vk::PipelineStageFlags::TOP_OF_PIPE,
+                        vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT,
+                        vk::DependencyFlags::empty(),
+                        &[],
+                        &[],
+                        &[b],
+                    )
+                });
+            }
+            Target::Barrier2 => {
+                let mut b = [vk::ImageMemoryBarrier2::default()
+                    .image(f.images[1].0)
+                    .subresource_range(range())
+                    .old_layout(vk::ImageLayout::UNDEFINED)
+                    .new_layout(FDM_LAYOUT)
+                    .dst_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
+                    .dst_access_mask(vk::AccessFlags2::FRAGMENT_DENSITY_MAP_READ_EXT)];
+                b[0].p_next = next;
+                let mut info = vk::DependencyInfo::default().image_memory_barriers(&b);
+                info.p_next = next;
+                f.record(|cb| d.cmd_pipeline_barrier2(cb, &info));
+            }
+        }
+    }
+}
+
+/// Random chains of unknown structs on every struct fovea edits: no crash, the call succeeds, and
+/// validation complains about nothing but the unknown structs.
+#[test]
+fn unknown_structs_in_every_edited_chain() {
+    let Some((_serial, env)) = env() else { return };
+    let vk = Vk::new(env, Profile::Nvidia, true).expect("an instance");
+    // SAFETY: the instance outlives the fixture.
+    let f = std::cell::RefCell::new(unsafe { Fixture::new(&vk) });
+    let mut runner = proptest::test_runner::TestRunner::new(ProptestConfig {
+        cases: cases(),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    });
+    let strategy = (
+        0..TARGETS.len(),
+        prop_oneof![
+            proptest::collection::vec(unknown_stype(), 0..4),
+            proptest::collection::vec(unknown_stype(), 60..70),
+        ],
+    );
+    let n = std::cell::Cell::new(0);
+    runner
+        .run(&strategy, |(target, types)| {
+            let target = TARGETS[target];
+            let c = chain(&types, std::ptr::null());
+            // SAFETY: the chain lives across the case.
+            unsafe { run(&vk, &mut f.borrow_mut(), target, head(&c, std::ptr::null())) };
+            let others: Vec<String> = take_real_messages()
+                .into_iter()
+                .filter(|m| !m.contains("pNext") && !m.contains("sType"))
+                .collect();
+            prop_assert!(
+                others.is_empty(),
+                "{target:?} with {} unknown structs: {others:#?}",
+                types.len()
+            );
+            prop_assert!(env.double.errors().is_empty(), "{:?}", env.double.errors());
+            n.set(n.get() + 1);
+            Ok(())
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+    // SAFETY: nothing made from the fixture is in use.
+    unsafe { f.into_inner().destroy() };
+    drop(vk);
+    let leaks: Vec<String> = take_real_messages()
+        .into_iter()
+        .filter(|m| !m.contains("pNext") && !m.contains("sType"))
+        .collect();
+    assert!(leaks.is_empty(), "at teardown: {leaks:#?}");
+    eprintln!("vk_fuzz: {} cases", n.get());
+}
