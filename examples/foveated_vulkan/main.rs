@@ -81,6 +81,8 @@ struct Options {
     /// Write the captures there as PNGs.
     dump: Option<PathBuf>,
     validate: bool,
+    /// The fill-bound fragment shader: a loop of arithmetic per fragment.
+    heavy: bool,
 }
 
 impl Options {
@@ -93,6 +95,7 @@ impl Options {
             capture: false,
             dump: None,
             validate: false,
+            heavy: false,
         };
         let mut frames = None;
         let mut it = args.iter();
@@ -126,6 +129,7 @@ impl Options {
                     o.capture = true;
                 }
                 "--validate" => o.validate = true,
+                "--heavy" => o.heavy = true,
                 other => return Err(format!("unknown option {other:?}")),
             }
         }
@@ -167,6 +171,9 @@ struct Outcome {
     captures: Vec<Capture>,
     /// Messages from the Vulkan validation layer (`--validate`).
     vk_messages: u64,
+    /// GPU milliseconds of each eye pass, by level (an index into [`LEVELS`]); empty where the
+    /// queue has no timestamps.
+    eye_ms: [Vec<f64>; 4],
 }
 
 fn main() {
@@ -216,6 +223,16 @@ fn main() {
                     Mode::None => "not used (the device can neither render with nor sample them)",
                 },
             );
+            // One line per level, for scripts (scripts/gpu-proof.sh reads them).
+            for (name, ms) in ["none", "low", "medium", "high"].iter().zip(&o.eye_ms) {
+                if !ms.is_empty() {
+                    println!(
+                        "foveated_vulkan: eye-pass GPU ms level={name} mean={:.4} passes={}",
+                        ms.iter().sum::<f64>() / ms.len() as f64,
+                        ms.len()
+                    );
+                }
+            }
             if o.vk_messages > 0 {
                 eprintln!(
                     "foveated_vulkan: {} Vulkan validation messages",
@@ -694,6 +711,7 @@ unsafe fn session_loop(
         },
         mode,
         options.capture,
+        options.heavy,
     )?;
 
     let mut event_storage = xr::EventDataBuffer::new();
@@ -703,6 +721,7 @@ unsafe fn session_loop(
     let mut exit_requested = false;
     let mut fovs = Vec::new();
     let mut captures: Vec<Capture> = Vec::new();
+    let mut eye_ms: [Vec<f64>; 4] = Default::default();
     // The first frame drawn at each level is read back (frames the runtime says not to render
     // draw nothing).
     let mut read_eyes = false;
@@ -776,7 +795,7 @@ unsafe fn session_loop(
             eyes: read_eyes || (options.capture && frames + 1 == options.frames),
             density: options.capture,
         };
-        renderer.draw(index, TINTS[level], read)?;
+        eye_ms[level].extend(renderer.draw(index, TINTS[level], read)?);
         read_eyes = false;
         if options.capture {
             let map = renderer.density(index).unwrap_or_default();
@@ -847,6 +866,7 @@ unsafe fn session_loop(
         fovs,
         captures,
         vk_messages: 0,
+        eye_ms,
     })
 }
 
@@ -978,7 +998,22 @@ mod tests {
             ..Options::parse(&[]).unwrap()
         };
         let o = run(&options).unwrap_or_else(|e| panic!("{e}"));
+        // The fill-bound shader (`--heavy`), briefly: validation-clean, and its passes timed.
+        let heavy = Options {
+            frames: 2,
+            frames_per_level: 2,
+            levels: vec![3],
+            validate: true,
+            heavy: true,
+            ..Options::parse(&[]).unwrap()
+        };
+        let h = run(&heavy).unwrap_or_else(|e| panic!("--heavy: {e}"));
         std::fs::remove_dir_all(&dir).ok();
+        assert_eq!(
+            h.vk_messages, 0,
+            "--heavy: Vulkan validation messages (stderr)"
+        );
+        assert!(!h.eye_ms[3].is_empty(), "--heavy: no eye pass timed");
         let summary = format!(
             "{} frames, {:?}, {:?}, {} captures",
             o.frames,
@@ -990,6 +1025,11 @@ mod tests {
         assert!(o.frames >= options.frames, "{summary}");
         assert_eq!(o.levels_applied, LEVELS, "{summary}");
         assert_eq!(o.vk_messages, 0, "Vulkan validation messages (stderr)");
+        // Every eye pass of every level is timed (lavapipe writes timestamps), two per frame.
+        for (level, ms) in o.eye_ms.iter().enumerate() {
+            assert!(ms.len() >= 2, "level {level}: {} passes timed", ms.len());
+            assert!(ms.iter().all(|t| t.is_finite() && *t >= 0.0), "{ms:?}");
+        }
         // lavapipe has no fragment density maps: they are sampled into the overlay.
         assert!(!o.fdm_enabled, "{summary}");
         assert_eq!(o.mode, Mode::Overlay, "{summary}");
@@ -1147,9 +1187,15 @@ mod tests {
         let out = std::env::temp_dir().join(format!("fovea-shaders-{}", std::process::id()));
         std::fs::create_dir_all(&out).unwrap();
         for (source, define, built) in [
-            ("fullscreen.vert", None, render::VERTEX),
-            ("pattern.frag", None, render::PATTERN),
-            ("pattern.frag", Some("-DOVERLAY"), render::OVERLAY),
+            ("fullscreen.vert", &[][..], render::VERTEX),
+            ("pattern.frag", &[], render::PATTERN),
+            ("pattern.frag", &["-DOVERLAY"], render::OVERLAY),
+            ("pattern.frag", &["-DHEAVY"], render::HEAVY),
+            (
+                "pattern.frag",
+                &["-DHEAVY", "-DOVERLAY"],
+                render::HEAVY_OVERLAY,
+            ),
         ] {
             let spv = out.join("out.spv");
             let run = std::process::Command::new("glslangValidator")
