@@ -30,7 +30,7 @@ fi
 
 echo "== 1. What the driver offers"
 # doctor asks the driver with fovea's layer kept out.
-"$REL/fovea" doctor 2>&1 | sed -n '/^GPUs/,/^[^ ]/p' || true
+"$REL/fovea" doctor 2>&1 | sed -n '/^GPUs/,/^[^ ]/p' | grep -v '^problem' || true
 if command -v vulkaninfo >/dev/null 2>&1; then
     vulkaninfo --summary 2>/dev/null | sed -n '/^Devices:/,$p' || true
     vulkaninfo 2>/dev/null | grep -E 'fragmentDensityMap|attachmentFragmentShadingRate|ShadingRateAttachmentTexelSize|layeredShadingRateAttachments|maxFragmentSize ' | sort -u || true
