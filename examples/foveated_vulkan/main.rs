@@ -84,6 +84,8 @@ struct Options {
     validate: bool,
     /// More Vulkan layers for the VkInstance, after the validation layer (`--vk-layer NAME`).
     vk_layers: Vec<std::ffi::CString>,
+    /// The fill-bound fragment shader: a loop of arithmetic per fragment.
+    heavy: bool,
 }
 
 impl Options {
@@ -97,6 +99,7 @@ impl Options {
             dump: None,
             validate: false,
             vk_layers: Vec::new(),
+            heavy: false,
         };
         let mut frames = None;
         let mut it = args.iter();
@@ -134,6 +137,7 @@ impl Options {
                     std::ffi::CString::new(value()?.as_str())
                         .map_err(|_| format!("{arg}: a layer name has no NUL"))?,
                 ),
+                "--heavy" => o.heavy = true,
                 other => return Err(format!("unknown option {other:?}")),
             }
         }
@@ -175,6 +179,9 @@ struct Outcome {
     captures: Vec<Capture>,
     /// Messages from the Vulkan validation layer (`--validate`).
     vk_messages: Vec<String>,
+    /// GPU milliseconds of each eye pass, by level (an index into [`LEVELS`]); empty where the
+    /// queue has no timestamps.
+    eye_ms: [Vec<f64>; 4],
 }
 
 fn main() {
@@ -224,6 +231,16 @@ fn main() {
                     Mode::None => "not used (the device can neither render with nor sample them)",
                 },
             );
+            // One line per level, for scripts (scripts/gpu-proof.sh reads them).
+            for (name, ms) in ["none", "low", "medium", "high"].iter().zip(&o.eye_ms) {
+                if !ms.is_empty() {
+                    println!(
+                        "foveated_vulkan: eye-pass GPU ms level={name} mean={:.4} passes={}",
+                        ms.iter().sum::<f64>() / ms.len() as f64,
+                        ms.len()
+                    );
+                }
+            }
             if !o.vk_messages.is_empty() {
                 eprintln!(
                     "foveated_vulkan: {} Vulkan validation messages",
@@ -712,6 +729,7 @@ unsafe fn session_loop(
         },
         mode,
         options.capture,
+        options.heavy,
     )?;
 
     let mut event_storage = xr::EventDataBuffer::new();
@@ -721,6 +739,7 @@ unsafe fn session_loop(
     let mut exit_requested = false;
     let mut fovs = Vec::new();
     let mut captures: Vec<Capture> = Vec::new();
+    let mut eye_ms: [Vec<f64>; 4] = Default::default();
     // The first frame drawn at each level is read back (frames the runtime says not to render
     // draw nothing).
     let mut read_eyes = false;
@@ -794,7 +813,7 @@ unsafe fn session_loop(
             eyes: read_eyes || (options.capture && frames + 1 == options.frames),
             density: options.capture,
         };
-        renderer.draw(index, TINTS[level], read)?;
+        eye_ms[level].extend(renderer.draw(index, TINTS[level], read)?);
         read_eyes = false;
         if options.capture {
             let map = renderer.density(index).unwrap_or_default();
@@ -865,6 +884,7 @@ unsafe fn session_loop(
         fovs,
         captures,
         vk_messages: Vec::new(),
+        eye_ms,
     })
 }
 
@@ -1108,12 +1128,33 @@ mod tests {
             ..Options::parse(&[]).unwrap()
         };
         let o = run(&options).unwrap_or_else(|e| panic!("{e}"));
+        // The fill-bound shader (`--heavy`), briefly: validation-clean, and its passes timed.
+        let heavy = Options {
+            frames: 2,
+            frames_per_level: 2,
+            levels: vec![3],
+            validate: true,
+            heavy: true,
+            ..Options::parse(&[]).unwrap()
+        };
+        let h = run(&heavy).unwrap_or_else(|e| panic!("--heavy: {e}"));
         std::fs::remove_dir_all(&dir).ok();
+        assert_eq!(
+            h.vk_messages,
+            Vec::<String>::new(),
+            "--heavy: Vulkan validation messages"
+        );
+        assert!(!h.eye_ms[3].is_empty(), "--heavy: no eye pass timed");
         assert_eq!(
             o.vk_messages,
             Vec::<String>::new(),
             "Vulkan validation messages"
         );
+        // Every eye pass of every level is timed (lavapipe writes timestamps), two per frame.
+        for (level, ms) in o.eye_ms.iter().enumerate() {
+            assert!(ms.len() >= 2, "level {level}: {} passes timed", ms.len());
+            assert!(ms.iter().all(|t| t.is_finite() && *t >= 0.0), "{ms:?}");
+        }
         // lavapipe has no fragment density maps: they are sampled into the overlay.
         assert!(!o.fdm_enabled, "{:?}", o.mode);
         assert_eq!(o.mode, Mode::Overlay);
@@ -1428,9 +1469,15 @@ mod tests {
         let out = std::env::temp_dir().join(format!("fovea-shaders-{}", std::process::id()));
         std::fs::create_dir_all(&out).unwrap();
         for (source, define, built) in [
-            ("fullscreen.vert", None, render::VERTEX),
-            ("pattern.frag", None, render::PATTERN),
-            ("pattern.frag", Some("-DOVERLAY"), render::OVERLAY),
+            ("fullscreen.vert", &[][..], render::VERTEX),
+            ("pattern.frag", &[], render::PATTERN),
+            ("pattern.frag", &["-DOVERLAY"], render::OVERLAY),
+            ("pattern.frag", &["-DHEAVY"], render::HEAVY),
+            (
+                "pattern.frag",
+                &["-DHEAVY", "-DOVERLAY"],
+                render::HEAVY_OVERLAY,
+            ),
         ] {
             let spv = out.join("out.spv");
             let run = std::process::Command::new("glslangValidator")

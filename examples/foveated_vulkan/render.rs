@@ -17,6 +17,14 @@ use ash::vk;
 pub(crate) const VERTEX: &[u8] = include_bytes!("shaders/fullscreen.vert.spv");
 pub(crate) const PATTERN: &[u8] = include_bytes!("shaders/pattern.frag.spv");
 pub(crate) const OVERLAY: &[u8] = include_bytes!("shaders/overlay.frag.spv");
+pub(crate) const HEAVY: &[u8] = include_bytes!("shaders/heavy.frag.spv");
+pub(crate) const HEAVY_OVERLAY: &[u8] = include_bytes!("shaders/heavy_overlay.frag.spv");
+
+/// GPU timestamps around each eye pass: a query pool of two per eye, and nanoseconds per tick.
+struct Timer {
+    pool: vk::QueryPool,
+    period_ns: f64,
+}
 
 /// Eye `i` renders into array layer `i` of the swapchain image and reads layer `i` of the map.
 const LAYERS: u32 = 2;
@@ -113,6 +121,10 @@ pub struct Renderer<'d> {
     pipeline: vk::Pipeline,
     images: Vec<PerImage>,
     readback: Option<Readback>,
+    /// The fill-bound fragment shader (`--heavy`).
+    heavy: bool,
+    /// `None` where the queue cannot write timestamps.
+    timer: Option<Timer>,
 }
 
 fn e(what: &'static str) -> impl Fn(vk::Result) -> String {
@@ -133,6 +145,7 @@ impl<'d> Renderer<'d> {
         targets: &Targets,
         mode: Mode,
         readback: bool,
+        heavy: bool,
     ) -> Result<Renderer<'d>, String> {
         let mut r = Renderer {
             device,
@@ -150,6 +163,8 @@ impl<'d> Renderer<'d> {
             pipeline: vk::Pipeline::null(),
             images: Vec::new(),
             readback: None,
+            heavy,
+            timer: None,
         };
         // On failure part way, what was made is destroyed by `destroy` (null handles are ignored).
         match r.build(instance, physical_device, queue_family, targets, readback) {
@@ -241,7 +256,38 @@ impl<'d> Renderer<'d> {
                 None,
             )
             .map_err(e("vkCreatePipelineLayout"))?;
-        self.pipeline = self.create_pipeline(if overlay { OVERLAY } else { PATTERN })?;
+        self.pipeline = self.create_pipeline(match (overlay, self.heavy) {
+            (false, false) => PATTERN,
+            (true, false) => OVERLAY,
+            (false, true) => HEAVY,
+            (true, true) => HEAVY_OVERLAY,
+        })?;
+        // Timestamps where the queue family writes them (timestampValidBits) and the device says
+        // how long a tick is (timestampPeriod):
+        // <https://registry.khronos.org/vulkan/specs/1.3-extensions/html/vkspec.html#queries-timestamps>.
+        let families = instance.get_physical_device_queue_family_properties(physical_device);
+        let period = instance
+            .get_physical_device_properties(physical_device)
+            .limits
+            .timestamp_period;
+        if families
+            .get(queue_family as usize)
+            .is_some_and(|f| f.timestamp_valid_bits > 0)
+            && period > 0.0
+        {
+            let pool = device
+                .create_query_pool(
+                    &vk::QueryPoolCreateInfo::default()
+                        .query_type(vk::QueryType::TIMESTAMP)
+                        .query_count(2 * LAYERS),
+                    None,
+                )
+                .map_err(e("vkCreateQueryPool"))?;
+            self.timer = Some(Timer {
+                pool,
+                period_ns: f64::from(period),
+            });
+        }
 
         for (&image, &(density_image, dw, dh)) in targets.images.iter().zip(targets.density) {
             let per = PerImage {
@@ -408,7 +454,14 @@ impl<'d> Renderer<'d> {
     ///
     /// # Safety
     /// `index` is the acquired and waited image.
-    pub unsafe fn draw(&self, index: usize, tint: [f32; 4], read: Read) -> Result<(), String> {
+    /// Returns the GPU milliseconds of each eye pass (begin to end of its render pass, from
+    /// timestamps), empty where the queue has no timestamps.
+    pub unsafe fn draw(
+        &self,
+        index: usize,
+        tint: [f32; 4],
+        read: Read,
+    ) -> Result<Vec<f64>, String> {
         let device = self.device;
         let per = &self.images[index];
         let cmd = self.cmd;
@@ -429,7 +482,18 @@ impl<'d> Renderer<'d> {
         for (dst, c) in tint_bytes.chunks_exact_mut(4).zip(tint) {
             dst.copy_from_slice(&c.to_ne_bytes());
         }
-        for eye in &per.eyes {
+        if let Some(t) = &self.timer {
+            device.cmd_reset_query_pool(cmd, t.pool, 0, 2 * LAYERS);
+        }
+        for (i, eye) in per.eyes.iter().enumerate() {
+            if let Some(t) = &self.timer {
+                device.cmd_write_timestamp(
+                    cmd,
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    t.pool,
+                    2 * i as u32,
+                );
+            }
             device.cmd_begin_render_pass(
                 cmd,
                 &vk::RenderPassBeginInfo::default()
@@ -462,6 +526,14 @@ impl<'d> Renderer<'d> {
             );
             device.cmd_draw(cmd, 3, 1, 0, 0);
             device.cmd_end_render_pass(cmd);
+            if let Some(t) = &self.timer {
+                device.cmd_write_timestamp(
+                    cmd,
+                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                    t.pool,
+                    2 * i as u32 + 1,
+                );
+            }
         }
         if let Some(rb) = &self.readback {
             if read.eyes {
@@ -518,7 +590,22 @@ impl<'d> Renderer<'d> {
         device
             .reset_fences(&[self.fence])
             .map_err(e("vkResetFences"))?;
-        Ok(())
+        let Some(t) = &self.timer else {
+            return Ok(Vec::new());
+        };
+        let mut ticks = [0u64; 2 * LAYERS as usize];
+        device
+            .get_query_pool_results(
+                t.pool,
+                0,
+                &mut ticks,
+                vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+            )
+            .map_err(e("vkGetQueryPoolResults"))?;
+        Ok(ticks
+            .chunks_exact(2)
+            .map(|p| p[1].saturating_sub(p[0]) as f64 * t.period_ns / 1e6)
+            .collect())
     }
 
     /// Records a copy of both layers of `image` (in `layout`, last used at `stage` with `access`)
@@ -636,6 +723,9 @@ impl<'d> Renderer<'d> {
         device.destroy_render_pass(self.render_pass, None);
         device.destroy_fence(self.fence, None);
         device.destroy_command_pool(self.pool, None);
+        if let Some(t) = self.timer.take() {
+            device.destroy_query_pool(t.pool, None);
+        }
         self.pipeline = vk::Pipeline::null();
         self.layout = vk::PipelineLayout::null();
         self.sampler = vk::Sampler::null();

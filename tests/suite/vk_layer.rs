@@ -575,7 +575,15 @@ fn unintercepted_commands_go_straight_to_the_next_layer() {
             .map(|f| f as usize)
             .expect("a pointer")
     };
-    for name in [c"vkCmdDraw", c"vkQueueSubmit", c"vkCreateBuffer"] {
+    // Among them the ends of passes, recorded as often as the begins the layer does intercept.
+    for name in [
+        c"vkCmdDraw",
+        c"vkQueueSubmit",
+        c"vkCreateBuffer",
+        c"vkCmdEndRenderPass",
+        c"vkCmdEndRendering",
+        c"vkCmdBindPipeline",
+    ] {
         let below = gdpa(&plain.instance, &reference, name);
         assert_eq!(gdpa(&vk.instance, &emulating, name), below, "{name:?}");
         assert_eq!(gdpa(&vk.instance, &untouched, name), below, "{name:?}");

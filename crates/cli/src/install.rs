@@ -23,6 +23,8 @@ use crate::discovery::{
 const EXPLICIT_MANIFEST: &str = include_str!("../../../manifest/XR_APILAYER_FOVEA_foveation.json");
 const IMPLICIT_MANIFEST: &str =
     include_str!("../../../manifest/implicit/XR_APILAYER_FOVEA_foveation.json");
+const VK_EXPLICIT_MANIFEST: &str =
+    include_str!("../../../manifest/vulkan/VK_LAYER_FOVEA_fragment_density_map.json");
 const VK_IMPLICIT_MANIFEST: &str =
     include_str!("../../../manifest/vulkan/implicit/VK_LAYER_FOVEA_fragment_density_map.json");
 
@@ -100,6 +102,12 @@ fn utf8(library: &Path) -> Result<&str, String> {
 /// The Vulkan layer's implicit manifest with `library` as its absolute library path.
 pub fn vk_manifest_text(library: &Path) -> Result<String, String> {
     with_library_path(VK_IMPLICIT_MANIFEST, "layer", utf8(library)?)
+}
+
+/// The Vulkan layer's explicit manifest (the checked-in one) with `library` as its absolute library
+/// path, for a folder named by `VK_ADD_LAYER_PATH`.
+pub fn vk_explicit_manifest_text(library: &Path) -> Result<String, String> {
+    with_library_path(VK_EXPLICIT_MANIFEST, "layer", utf8(library)?)
 }
 
 /// Writes `text` to `path`, creating its folder; whether a file was replaced.

@@ -264,7 +264,7 @@ unsafe fn rates(
 ///
 /// # Safety
 /// `entry` must be a loaded Vulkan loader.
-unsafe fn gpus(entry: &ash::Entry) -> Result<Vec<(String, Fdm)>, String> {
+pub unsafe fn gpus(entry: &ash::Entry) -> Result<Vec<(String, Fdm)>, String> {
     let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_1);
     let info = vk::InstanceCreateInfo::default().application_info(&app);
     // SAFETY: the caller's contract; the create info lives across the call.

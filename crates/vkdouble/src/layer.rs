@@ -50,6 +50,8 @@ struct DeviceData {
     gdpa: vk::PFN_vkGetDeviceProcAddr,
     fns: ash::Device,
     set_loader_data: Option<ffi::PfnSetDeviceLoaderData>,
+    /// [`crate::NULL_COMMANDS_ENV`] was set when the device was created.
+    null_commands: bool,
     state: Mutex<DeviceState>,
 }
 
@@ -291,6 +293,64 @@ table! { device_commands:
     b"vkQueueSubmit2KHR" => queue_submit2 as PFN_vkQueueSubmit2,
 }
 
+// With `NULL_COMMANDS_ENV` set at device creation: recording commands that do nothing.
+table! { null_commands:
+    b"vkCmdPipelineBarrier" => null_pipeline_barrier as PFN_vkCmdPipelineBarrier,
+    b"vkCmdPipelineBarrier2" => null_pipeline_barrier2 as PFN_vkCmdPipelineBarrier2,
+    b"vkCmdPipelineBarrier2KHR" => null_pipeline_barrier2 as PFN_vkCmdPipelineBarrier2,
+    b"vkCmdBeginRenderPass" => null_begin_render_pass as PFN_vkCmdBeginRenderPass,
+    b"vkCmdBeginRenderPass2" => null_begin_render_pass2 as PFN_vkCmdBeginRenderPass2,
+    b"vkCmdBeginRenderPass2KHR" => null_begin_render_pass2 as PFN_vkCmdBeginRenderPass2,
+    b"vkCmdEndRenderPass" => null_end as PFN_vkCmdEndRenderPass,
+    b"vkCmdBeginRendering" => null_begin_rendering as PFN_vkCmdBeginRendering,
+    b"vkCmdBeginRenderingKHR" => null_begin_rendering as PFN_vkCmdBeginRendering,
+    b"vkCmdEndRendering" => null_end as PFN_vkCmdEndRendering,
+    b"vkCmdEndRenderingKHR" => null_end as PFN_vkCmdEndRendering,
+}
+
+#[allow(clippy::too_many_arguments)]
+unsafe extern "system" fn null_pipeline_barrier(
+    _: vk::CommandBuffer,
+    _: vk::PipelineStageFlags,
+    _: vk::PipelineStageFlags,
+    _: vk::DependencyFlags,
+    _: u32,
+    _: *const vk::MemoryBarrier<'_>,
+    _: u32,
+    _: *const vk::BufferMemoryBarrier<'_>,
+    _: u32,
+    _: *const vk::ImageMemoryBarrier<'_>,
+) {
+}
+
+unsafe extern "system" fn null_pipeline_barrier2(
+    _: vk::CommandBuffer,
+    _: *const vk::DependencyInfo<'_>,
+) {
+}
+
+unsafe extern "system" fn null_begin_render_pass(
+    _: vk::CommandBuffer,
+    _: *const vk::RenderPassBeginInfo<'_>,
+    _: vk::SubpassContents,
+) {
+}
+
+unsafe extern "system" fn null_begin_render_pass2(
+    _: vk::CommandBuffer,
+    _: *const vk::RenderPassBeginInfo<'_>,
+    _: *const vk::SubpassBeginInfo<'_>,
+) {
+}
+
+unsafe extern "system" fn null_begin_rendering(
+    _: vk::CommandBuffer,
+    _: *const vk::RenderingInfo<'_>,
+) {
+}
+
+unsafe extern "system" fn null_end(_: vk::CommandBuffer) {}
+
 /// The loader's entry: agree on interface version 2, which hands over both proc-addr functions.
 ///
 /// # Safety
@@ -360,6 +420,11 @@ unsafe extern "system" fn get_device_proc_addr(
         let (n, data) = unsafe { (CStr::from_ptr(name).to_bytes(), device_of(device.as_raw())) };
         if n == b"vkGetDeviceProcAddr" || n == b"vkDestroyDevice" {
             return lifecycle(n);
+        }
+        if data.null_commands {
+            if let Some(f) = null_commands(n) {
+                return Some(f);
+            }
         }
         if data.instance.profile.offers_fsr() {
             if let Some(f) = device_commands(n) {
@@ -576,6 +641,7 @@ unsafe extern "system" fn create_device(
                         gdpa,
                         fns,
                         set_loader_data,
+                        null_commands: std::env::var_os(crate::NULL_COMMANDS_ENV).is_some(),
                         state: Mutex::new(DeviceState::default()),
                     }),
                 );

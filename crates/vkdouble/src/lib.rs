@@ -63,6 +63,11 @@ pub const LAYER_NAME: &CStr = c"VK_LAYER_FOVEA_shading_rate_double";
 pub const LIBRARY_FILE: &str = "libfovea_vkdouble.so";
 /// The environment variable that picks the profile: `nvidia` (default), `amd` or `none`.
 pub const PROFILE_ENV: &str = "FOVEA_VKDOUBLE_PROFILE";
+/// Set (to anything) when a device is created, the environment variable that makes that device's
+/// barrier, render-pass and dynamic-rendering recording commands do nothing: the double hands out
+/// empty functions for them instead of going down to the driver. A benchmark of the layers above
+/// then measures their own cost per command, not the driver's (`benches/vk_commands.rs`).
+pub const NULL_COMMANDS_ENV: &str = "FOVEA_VKDOUBLE_NULL_COMMANDS";
 
 /// Copies the records (`{"events": [...], "errors": [...]}` as UTF-8 JSON, no terminator) into
 /// `buf`, at most `len` bytes, and returns the full length, so a caller can size its buffer.

@@ -6,3 +6,5 @@ cd "$(dirname "$0")"
 glslangValidator -V --target-env vulkan1.1 -o fullscreen.vert.spv fullscreen.vert
 glslangValidator -V --target-env vulkan1.1 -o pattern.frag.spv pattern.frag
 glslangValidator -V --target-env vulkan1.1 -DOVERLAY -o overlay.frag.spv pattern.frag
+glslangValidator -V --target-env vulkan1.1 -DHEAVY -o heavy.frag.spv pattern.frag
+glslangValidator -V --target-env vulkan1.1 -DHEAVY -DOVERLAY -o heavy_overlay.frag.spv pattern.frag

@@ -3,6 +3,13 @@
 //! runtime as the active runtime, both named by manifests written into the output folder. It renders
 //! on the machine's Vulkan device (lavapipe where there is no GPU) and reads back what it drew.
 //!
+//! Where the device has shading-rate attachments and no density maps of its own (a desktop GPU),
+//! the example gets fovea's Vulkan layer too ([`vk_layer_env`]): its explicit manifest in the output
+//! folder, named by `VK_ADD_LAYER_PATH`, which fovea's `xrCreateVulkanInstanceKHR` then adds to the
+//! example's instance; the device offers `VK_EXT_fragment_density_map`, and the example renders its
+//! eye passes foveated instead of sampling the maps into its debug overlay. Elsewhere (lavapipe, or
+//! a GPU with native density maps) nothing about Vulkan is set.
+//!
 //! The display clock is not paced: it advances one frame period per frame however long the device
 //! takes to draw, so the GPU load script (simulated GPU time added to each frame) tells the same
 //! story on a CPU renderer as on a GPU, and the stats lines count display seconds.
@@ -14,8 +21,10 @@ use std::process::{Command, Stdio};
 use ash::vk;
 
 use super::{build_dir, cargo_build, load_description, Setup, LOAD};
-use crate::discovery::Kind;
-use crate::install::manifest_text;
+use crate::discovery::{Kind, VK_ADD_LAYER_PATH};
+use crate::install::{manifest_text, vk_explicit_manifest_text};
+use crate::vk_doctor::Fdm;
+use fovea_abi::env::DISABLE_VK_LAYER;
 
 const LOADER: &str = "libopenxr_loader.so.1";
 const EXAMPLE: &str = "foveated_vulkan";
@@ -25,6 +34,8 @@ pub struct System {
     /// The Vulkan device the simulated runtime will pick, and whether it renders on the CPU.
     device: String,
     cpu: bool,
+    /// What the device's driver offers for density maps.
+    fdm: Fdm,
     dir: PathBuf,
 }
 
@@ -36,6 +47,7 @@ impl System {
         unsafe { libloading::Library::new(LOADER) }
             .map_err(|e| format!("the Khronos OpenXR loader is not installed ({e})"))?;
         let (device, cpu) = vulkan_device()?;
+        let fdm = driver_fdm(&device);
         // Errors other than "not started by cargo" are real build failures and are reported.
         if let Err(e) = cargo_build(&[
             "-p",
@@ -65,7 +77,12 @@ impl System {
                 dir.display()
             ));
         }
-        Ok(System { device, cpu, dir })
+        Ok(System {
+            device,
+            cpu,
+            fdm,
+            dir,
+        })
     }
 }
 
@@ -99,6 +116,43 @@ fn vulkan_device() -> Result<(String, bool), String> {
         instance.destroy_instance(None);
         found.ok_or_else(|| "Vulkan has no device to render with".into())
     }
+}
+
+/// What the driver of the device named `device` offers for density maps (unavailable where it
+/// cannot be asked).
+fn driver_fdm(device: &str) -> Fdm {
+    // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
+    let Ok(entry) = (unsafe { ash::Entry::load() }) else {
+        return Fdm::Unavailable;
+    };
+    // SAFETY: a loaded loader.
+    unsafe { crate::vk_doctor::gpus(&entry) }
+        .unwrap_or_default()
+        .into_iter()
+        .find(|(name, _)| name == device)
+        .map_or(Fdm::Unavailable, |(_, fdm)| fdm)
+}
+
+/// The environment the example gets so that fovea's Vulkan layer translates its density maps, for a
+/// device whose driver offers `fdm`: where it emulates them, `VK_ADD_LAYER_PATH` with `vulkan_dir`
+/// (holding the layer's explicit manifest) before any folders already named (`existing`), and
+/// `DISABLE_FOVEA_VK_LAYER=1`, which keeps an installed implicit copy of the same layer from
+/// loading beside it (`disable_environment` applies to implicit layers only,
+/// <https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>). Nothing
+/// where the driver has density maps itself or has no shading-rate attachments: the layer would
+/// pass everything through.
+pub fn vk_layer_env(
+    fdm: &Fdm,
+    vulkan_dir: &std::path::Path,
+    existing: Option<std::ffi::OsString>,
+) -> Vec<(&'static str, std::ffi::OsString)> {
+    if !matches!(fdm, Fdm::Emulated { .. }) {
+        return Vec::new();
+    }
+    let mut paths = vec![vulkan_dir.to_path_buf()];
+    paths.extend(existing.iter().flat_map(std::env::split_paths));
+    let joined = std::env::join_paths(paths).unwrap_or_else(|_| vulkan_dir.as_os_str().into());
+    vec![(VK_ADD_LAYER_PATH, joined), (DISABLE_VK_LAYER, "1".into())]
 }
 
 pub fn run(setup: &Setup, system: System) -> Result<(), String> {
@@ -135,6 +189,20 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
         })
         .to_string(),
     )?;
+    let vulkan_dir = manifests.join("vulkan");
+    let vk_env = vk_layer_env(
+        &system.fdm,
+        &vulkan_dir,
+        std::env::var_os(VK_ADD_LAYER_PATH),
+    );
+    if !vk_env.is_empty() {
+        std::fs::create_dir_all(&vulkan_dir)
+            .map_err(|e| format!("{}: {e}", vulkan_dir.display()))?;
+        write(
+            vulkan_dir.join(format!("{}.json", fovea_abi::VK_LAYER_NAME)),
+            vk_explicit_manifest_text(&system.dir.join("libfovea.so"))?,
+        )?;
+    }
     let frames_dir = setup.out.join("frames");
     // Captures from an earlier run would be mistaken for this one's.
     std::fs::remove_dir_all(&frames_dir).ok();
@@ -157,7 +225,25 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
         headset.refresh_hz,
         load_description()
     );
+    println!(
+        "{}: {}",
+        system.device,
+        if vk_env.is_empty() {
+            format!(
+                "{}; the example samples the density maps into its debug overlay",
+                system.fdm.describe()
+            )
+        } else {
+            format!(
+                "{}; fovea's Vulkan layer is enabled for the example (VK_ADD_LAYER_PATH={}), so \
+                 its eye passes are shaded at the maps' rates",
+                system.fdm.describe(),
+                vulkan_dir.display()
+            )
+        }
+    );
     let mut child = Command::new(system.dir.join("examples").join(EXAMPLE))
+        .envs(vk_env.iter().map(|(k, v)| (k, v)))
         .args(["--levels", "high", "--dynamic", "--dump"])
         .arg(&frames_dir)
         .args(["--frames", &frames.to_string()])
@@ -211,4 +297,43 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
         frames_dir.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_vulkan_layer_is_enabled_only_where_it_emulates() {
+        let dir = std::path::Path::new("/out/manifests/vulkan");
+        let emulated = Fdm::Emulated {
+            texel: [16, 16],
+            layered: true,
+            largest: [4, 4],
+        };
+        let env = vk_layer_env(&emulated, dir, None);
+        assert_eq!(
+            env,
+            vec![
+                (VK_ADD_LAYER_PATH, dir.as_os_str().to_owned()),
+                (DISABLE_VK_LAYER, "1".into()),
+            ]
+        );
+        // Folders the user named stay, after the demo's own.
+        let env = vk_layer_env(&emulated, dir, Some("/a:/b".into()));
+        assert_eq!(env[0].1, "/out/manifests/vulkan:/a:/b");
+        // lavapipe (no shading-rate attachments) and native density maps: as before.
+        assert!(vk_layer_env(&Fdm::Unavailable, dir, Some("/a".into())).is_empty());
+        assert!(vk_layer_env(&Fdm::Native, dir, None).is_empty());
+    }
+
+    #[test]
+    fn the_explicit_vulkan_manifest_names_the_built_library() {
+        let text = vk_explicit_manifest_text(std::path::Path::new("/t/release/libfovea.so"))
+            .expect("manifest");
+        let v: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+        assert_eq!(v["layer"]["name"], fovea_abi::VK_LAYER_NAME);
+        assert_eq!(v["layer"]["library_path"], "/t/release/libfovea.so");
+        assert!(v["layer"].get("enable_environment").is_none(), "explicit");
+    }
 }

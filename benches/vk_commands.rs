@@ -1,0 +1,720 @@
+//! Recording cost of each command fovea's Vulkan layer intercepts, with and without the layer, in
+//! the same run, and the heap allocations the layer adds per command.
+//!
+//! Two instances live side by side in this process, both on lavapipe made to look like an
+//! NVIDIA-like GPU with shading-rate attachments by the test double (`crates/vkdouble`): `bare`
+//! enables the double only; `fovea` enables `VK_LAYER_FOVEA_fragment_density_map` above it and
+//! creates its device with `VK_EXT_fragment_density_map`, so the layer emulates density maps and
+//! its command hooks are the ones the application calls. The validation layer is left out: its cost
+//! would dominate. Commands are recorded into a primary command buffer that is never submitted; it
+//! is reset between rounds (outside the timed part).
+//!
+//! Cases on the common path (no density image involved): `vkCmdPipelineBarrier` and
+//! `vkCmdPipelineBarrier2` with one image barrier, `vkCmdBeginRenderPass` + `vkCmdEndRenderPass` on
+//! a pass without a density map, `vkCmdBeginRendering` + `vkCmdEndRendering` without one. For
+//! information, the density-map variants (`fovea` only: the bare device has no density maps):
+//! a barrier into `FRAGMENT_DENSITY_MAP_OPTIMAL_EXT`, a render pass and a dynamic rendering with a
+//! density-map attachment.
+//!
+//! Allocations are counted by interposing `malloc` and friends in this executable, as
+//! `benches/frame_loop.rs` does (the layer and the driver are dlopened libraries; ELF symbol
+//! interposition routes their `malloc` calls through these). lavapipe allocates as it records
+//! (its command queue), so the figure that matters is the difference between the two devices.
+//!
+//! Each pair runs twice: once on lavapipe (the driver records the commands: a real driver's cost,
+//! microseconds per command on a CPU rasteriser, so the layer's share drowns in its noise), and
+//! once with the double dropping the commands ([`fovea_vkdouble::NULL_COMMANDS_ENV`]): the bare
+//! device then costs a call into an empty function, and the difference is the layer's own cost.
+//!
+//! Besides criterion's report, the run ends with a table from interleaved rounds: ns per command
+//! for both, the difference, the ratio, and allocations per command for both.
+//!
+//! Run: `cargo bench --bench vk_commands` (needs the Vulkan loader and lavapipe; skips otherwise).
+
+use std::ffi::{c_void, CStr};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use ash::vk;
+use criterion::Criterion;
+
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+extern "C" {
+    fn __libc_malloc(size: usize) -> *mut c_void;
+    fn __libc_calloc(n: usize, size: usize) -> *mut c_void;
+    fn __libc_realloc(p: *mut c_void, size: usize) -> *mut c_void;
+    fn __libc_memalign(align: usize, size: usize) -> *mut c_void;
+}
+
+/// # Safety
+/// The C `malloc` contract.
+#[no_mangle]
+pub unsafe extern "C" fn malloc(size: usize) -> *mut c_void {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    // SAFETY: glibc's own allocator, with the caller's arguments.
+    unsafe { __libc_malloc(size) }
+}
+
+/// # Safety
+/// The C `calloc` contract.
+#[no_mangle]
+pub unsafe extern "C" fn calloc(n: usize, size: usize) -> *mut c_void {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    // SAFETY: as in malloc.
+    unsafe { __libc_calloc(n, size) }
+}
+
+/// # Safety
+/// The C `realloc` contract.
+#[no_mangle]
+pub unsafe extern "C" fn realloc(p: *mut c_void, size: usize) -> *mut c_void {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    // SAFETY: as in malloc.
+    unsafe { __libc_realloc(p, size) }
+}
+
+/// # Safety
+/// The C `posix_memalign` contract.
+#[no_mangle]
+pub unsafe extern "C" fn posix_memalign(out: *mut *mut c_void, align: usize, size: usize) -> i32 {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    // SAFETY: as in malloc.
+    let p = unsafe { __libc_memalign(align, size) };
+    if p.is_null() {
+        return 12; // ENOMEM
+    }
+    // SAFETY: the caller's out pointer.
+    unsafe { *out = p };
+    0
+}
+
+/// # Safety
+/// The C `aligned_alloc` contract.
+#[no_mangle]
+pub unsafe extern "C" fn aligned_alloc(align: usize, size: usize) -> *mut c_void {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    // SAFETY: as in malloc.
+    unsafe { __libc_memalign(align, size) }
+}
+
+const FOVEA: &CStr = c"VK_LAYER_FOVEA_fragment_density_map";
+const FDM_EXT: &CStr = c"VK_EXT_fragment_density_map";
+/// The colour target's size; the density map's is this over the NVIDIA-like texel (16).
+const SIZE: u32 = 64;
+const DENSITY: u32 = SIZE / 16;
+/// Commands per round (the command buffer is reset between rounds).
+const ROUND: usize = 256;
+
+/// One image with memory and a view.
+struct Target {
+    image: vk::Image,
+    memory: vk::DeviceMemory,
+    view: vk::ImageView,
+}
+
+/// One instance, device and command buffer, with what the cases record.
+struct Side {
+    instance: ash::Instance,
+    device: ash::Device,
+    pool: vk::CommandPool,
+    cb: vk::CommandBuffer,
+    color: Target,
+    pass: vk::RenderPass,
+    framebuffer: vk::Framebuffer,
+    /// Where the layer emulates density maps: the density image and its pass and framebuffer.
+    fdm: Option<(Target, vk::RenderPass, vk::Framebuffer)>,
+}
+
+fn memory_type(instance: &ash::Instance, physical: vk::PhysicalDevice, bits: u32) -> u32 {
+    // SAFETY: a plain query on a live physical device.
+    let props = unsafe { instance.get_physical_device_memory_properties(physical) };
+    (0..props.memory_type_count)
+        .find(|i| bits & (1 << i) != 0)
+        .expect("a memory type")
+}
+
+/// # Safety
+/// `device` must be live and made from `physical`.
+unsafe fn target(
+    instance: &ash::Instance,
+    physical: vk::PhysicalDevice,
+    device: &ash::Device,
+    format: vk::Format,
+    extent: u32,
+    usage: vk::ImageUsageFlags,
+) -> Target {
+    let info = vk::ImageCreateInfo::default()
+        .image_type(vk::ImageType::TYPE_2D)
+        .format(format)
+        .extent(vk::Extent3D {
+            width: extent,
+            height: extent,
+            depth: 1,
+        })
+        .mip_levels(1)
+        .array_layers(1)
+        .samples(vk::SampleCountFlags::TYPE_1)
+        .tiling(vk::ImageTiling::OPTIMAL)
+        .usage(usage);
+    // SAFETY: as the caller promised; every struct lives across its call.
+    unsafe {
+        let image = device.create_image(&info, None).expect("vkCreateImage");
+        let req = device.get_image_memory_requirements(image);
+        let alloc = vk::MemoryAllocateInfo::default()
+            .allocation_size(req.size)
+            .memory_type_index(memory_type(instance, physical, req.memory_type_bits));
+        let memory = device.allocate_memory(&alloc, None).expect("memory");
+        device
+            .bind_image_memory(image, memory, 0)
+            .expect("vkBindImageMemory");
+        let view = device
+            .create_image_view(
+                &vk::ImageViewCreateInfo::default()
+                    .image(image)
+                    .view_type(vk::ImageViewType::TYPE_2D)
+                    .format(format)
+                    .subresource_range(range()),
+                None,
+            )
+            .expect("vkCreateImageView");
+        Target {
+            image,
+            memory,
+            view,
+        }
+    }
+}
+
+fn range() -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange::default()
+        .aspect_mask(vk::ImageAspectFlags::COLOR)
+        .level_count(1)
+        .layer_count(1)
+}
+
+/// # Safety
+/// `device` must be live; the views must be its own.
+unsafe fn pass_and_framebuffer(
+    device: &ash::Device,
+    color: vk::ImageView,
+    density: Option<vk::ImageView>,
+) -> (vk::RenderPass, vk::Framebuffer) {
+    let mut attachments = vec![vk::AttachmentDescription::default()
+        .format(vk::Format::R8G8B8A8_UNORM)
+        .samples(vk::SampleCountFlags::TYPE_1)
+        .load_op(vk::AttachmentLoadOp::DONT_CARE)
+        .store_op(vk::AttachmentStoreOp::STORE)
+        .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
+        .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
+        .initial_layout(vk::ImageLayout::UNDEFINED)
+        .final_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
+    if density.is_some() {
+        attachments.push(
+            vk::AttachmentDescription::default()
+                .format(vk::Format::R8G8_UNORM)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(vk::AttachmentLoadOp::LOAD)
+                .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
+                .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
+                .initial_layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT)
+                .final_layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT),
+        );
+    }
+    let refs = [vk::AttachmentReference::default()
+        .attachment(0)
+        .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
+    let subpasses = [vk::SubpassDescription::default()
+        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+        .color_attachments(&refs)];
+    let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
+        .fragment_density_map_attachment(
+            vk::AttachmentReference::default()
+                .attachment(1)
+                .layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT),
+        );
+    let mut info = vk::RenderPassCreateInfo::default()
+        .attachments(&attachments)
+        .subpasses(&subpasses);
+    if density.is_some() {
+        info = info.push_next(&mut fdm);
+    }
+    let views: Vec<vk::ImageView> = std::iter::once(color).chain(density).collect();
+    // SAFETY: as the caller promised; every struct lives across its call.
+    unsafe {
+        let pass = device
+            .create_render_pass(&info, None)
+            .expect("vkCreateRenderPass");
+        let framebuffer = device
+            .create_framebuffer(
+                &vk::FramebufferCreateInfo::default()
+                    .render_pass(pass)
+                    .attachments(&views)
+                    .width(SIZE)
+                    .height(SIZE)
+                    .layers(1),
+                None,
+            )
+            .expect("vkCreateFramebuffer");
+        (pass, framebuffer)
+    }
+}
+
+impl Side {
+    fn new(entry: &ash::Entry, with_fovea: bool) -> Result<Side, String> {
+        let mut layers = vec![fovea_vkdouble::LAYER_NAME.as_ptr()];
+        if with_fovea {
+            layers.insert(0, FOVEA.as_ptr());
+        }
+        let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
+        let info = vk::InstanceCreateInfo::default()
+            .application_info(&app)
+            .enabled_layer_names(&layers);
+        // SAFETY: every struct lives across the calls; handles are used while alive.
+        unsafe {
+            let instance = entry
+                .create_instance(&info, None)
+                .map_err(|e| format!("vkCreateInstance: {e}"))?;
+            let physical = instance
+                .enumerate_physical_devices()
+                .unwrap_or_default()
+                .into_iter()
+                .find(|&p| {
+                    instance
+                        .get_physical_device_properties(p)
+                        .device_name_as_c_str()
+                        .is_ok_and(|n| n.to_string_lossy().contains("llvmpipe"))
+                })
+                .ok_or("lavapipe (llvmpipe) is not installed")?;
+            let prio = [1.0];
+            let queues = [vk::DeviceQueueCreateInfo::default()
+                .queue_family_index(0)
+                .queue_priorities(&prio)];
+            let exts = [FDM_EXT.as_ptr()];
+            let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+                .fragment_density_map(true)
+                .fragment_density_map_non_subsampled_images(true);
+            let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
+                .dynamic_rendering(true)
+                .synchronization2(true);
+            let mut dinfo = vk::DeviceCreateInfo::default()
+                .queue_create_infos(&queues)
+                .push_next(&mut v13);
+            if with_fovea {
+                dinfo = dinfo.enabled_extension_names(&exts).push_next(&mut fdm);
+            }
+            let device = instance
+                .create_device(physical, &dinfo, None)
+                .map_err(|e| format!("vkCreateDevice: {e}"))?;
+            let pool = device
+                .create_command_pool(
+                    &vk::CommandPoolCreateInfo::default()
+                        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
+                        .queue_family_index(0),
+                    None,
+                )
+                .expect("vkCreateCommandPool");
+            let cb = device
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
+                .expect("vkAllocateCommandBuffers")[0];
+            let color = target(
+                &instance,
+                physical,
+                &device,
+                vk::Format::R8G8B8A8_UNORM,
+                SIZE,
+                vk::ImageUsageFlags::COLOR_ATTACHMENT,
+            );
+            let (pass, framebuffer) = pass_and_framebuffer(&device, color.view, None);
+            let fdm = with_fovea.then(|| {
+                let density = target(
+                    &instance,
+                    physical,
+                    &device,
+                    vk::Format::R8G8_UNORM,
+                    DENSITY,
+                    vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
+                );
+                let (p, f) = pass_and_framebuffer(&device, color.view, Some(density.view));
+                (density, p, f)
+            });
+            Ok(Side {
+                instance,
+                device,
+                pool,
+                cb,
+                color,
+                pass,
+                framebuffer,
+                fdm,
+            })
+        }
+    }
+
+    fn begin(&self) {
+        // SAFETY: the side's own command buffer, not recording.
+        unsafe {
+            self.device
+                .begin_command_buffer(self.cb, &vk::CommandBufferBeginInfo::default())
+                .expect("vkBeginCommandBuffer");
+        }
+    }
+
+    fn end_and_reset(&self) {
+        // SAFETY: the side's own command buffer, recording and never submitted.
+        unsafe {
+            self.device
+                .end_command_buffer(self.cb)
+                .expect("vkEndCommandBuffer");
+            self.device
+                .reset_command_buffer(self.cb, vk::CommandBufferResetFlags::RELEASE_RESOURCES)
+                .expect("vkResetCommandBuffer");
+        }
+    }
+
+    /// Records `case` once; `false` where this side cannot (density-map cases without fovea).
+    fn record(&self, case: Case) -> bool {
+        let d = &self.device;
+        let cb = self.cb;
+        let whole = vk::Rect2D {
+            offset: vk::Offset2D::default(),
+            extent: vk::Extent2D {
+                width: SIZE,
+                height: SIZE,
+            },
+        };
+        let (image, layout) = match (case, &self.fdm) {
+            (Case::BarrierFdm, Some((density, _, _))) => (
+                density.image,
+                vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT,
+            ),
+            (Case::BarrierFdm | Case::RenderPassFdm | Case::RenderingFdm, None) => return false,
+            _ => (self.color.image, vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL),
+        };
+        // SAFETY: the side's own command buffer, recording; every struct lives across its call.
+        unsafe {
+            match case {
+                Case::Barrier | Case::BarrierFdm => {
+                    let barrier = [vk::ImageMemoryBarrier::default()
+                        .src_access_mask(vk::AccessFlags::SHADER_READ)
+                        .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
+                        .old_layout(vk::ImageLayout::UNDEFINED)
+                        .new_layout(layout)
+                        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                        .image(image)
+                        .subresource_range(range())];
+                    d.cmd_pipeline_barrier(
+                        cb,
+                        vk::PipelineStageFlags::FRAGMENT_SHADER,
+                        vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+                        vk::DependencyFlags::empty(),
+                        &[],
+                        &[],
+                        &barrier,
+                    );
+                }
+                Case::Barrier2 => {
+                    let barrier = [vk::ImageMemoryBarrier2::default()
+                        .src_stage_mask(vk::PipelineStageFlags2::FRAGMENT_SHADER)
+                        .src_access_mask(vk::AccessFlags2::SHADER_READ)
+                        .dst_stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)
+                        .dst_access_mask(vk::AccessFlags2::COLOR_ATTACHMENT_WRITE)
+                        .old_layout(vk::ImageLayout::UNDEFINED)
+                        .new_layout(layout)
+                        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                        .image(image)
+                        .subresource_range(range())];
+                    d.cmd_pipeline_barrier2(
+                        cb,
+                        &vk::DependencyInfo::default().image_memory_barriers(&barrier),
+                    );
+                }
+                Case::RenderPass | Case::RenderPassFdm => {
+                    let (pass, framebuffer) = match (case, &self.fdm) {
+                        (Case::RenderPassFdm, Some((_, p, f))) => (*p, *f),
+                        _ => (self.pass, self.framebuffer),
+                    };
+                    let begin = vk::RenderPassBeginInfo::default()
+                        .render_pass(pass)
+                        .framebuffer(framebuffer)
+                        .render_area(whole);
+                    d.cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE);
+                    d.cmd_end_render_pass(cb);
+                }
+                Case::Rendering | Case::RenderingFdm => {
+                    let colors = [vk::RenderingAttachmentInfo::default()
+                        .image_view(self.color.view)
+                        .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                        .load_op(vk::AttachmentLoadOp::DONT_CARE)
+                        .store_op(vk::AttachmentStoreOp::STORE)];
+                    let mut fdm = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
+                        .image_layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT);
+                    let mut info = vk::RenderingInfo::default()
+                        .render_area(whole)
+                        .layer_count(1)
+                        .color_attachments(&colors);
+                    if let (Case::RenderingFdm, Some((density, _, _))) = (case, &self.fdm) {
+                        fdm.image_view = density.view;
+                        info = info.push_next(&mut fdm);
+                    }
+                    d.cmd_begin_rendering(cb, &info);
+                    d.cmd_end_rendering(cb);
+                }
+            }
+        }
+        true
+    }
+
+    /// Records `n` commands of `case` into a fresh command buffer: the time the `n` took, and the
+    /// allocations made meanwhile.
+    fn round(&self, case: Case, n: usize) -> Option<(Duration, u64)> {
+        self.begin();
+        let a = ALLOCATIONS.load(Ordering::Relaxed);
+        let t = Instant::now();
+        for _ in 0..n {
+            if !self.record(case) {
+                self.end_and_reset();
+                return None;
+            }
+        }
+        let elapsed = t.elapsed();
+        let allocations = ALLOCATIONS.load(Ordering::Relaxed) - a;
+        self.end_and_reset();
+        Some((elapsed, allocations))
+    }
+}
+
+impl Drop for Side {
+    fn drop(&mut self) {
+        // SAFETY: nothing made from these handles outlives them; each is destroyed once.
+        unsafe {
+            let d = &self.device;
+            if let Some((density, p, f)) = self.fdm.take() {
+                d.destroy_framebuffer(f, None);
+                d.destroy_render_pass(p, None);
+                d.destroy_image_view(density.view, None);
+                d.destroy_image(density.image, None);
+                d.free_memory(density.memory, None);
+            }
+            d.destroy_framebuffer(self.framebuffer, None);
+            d.destroy_render_pass(self.pass, None);
+            d.destroy_image_view(self.color.view, None);
+            d.destroy_image(self.color.image, None);
+            d.free_memory(self.color.memory, None);
+            d.destroy_command_pool(self.pool, None);
+            d.destroy_device(None);
+            self.instance.destroy_instance(None);
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Case {
+    Barrier,
+    Barrier2,
+    RenderPass,
+    Rendering,
+    BarrierFdm,
+    RenderPassFdm,
+    RenderingFdm,
+}
+
+impl Case {
+    const ALL: [Case; 7] = [
+        Case::Barrier,
+        Case::Barrier2,
+        Case::RenderPass,
+        Case::Rendering,
+        Case::BarrierFdm,
+        Case::RenderPassFdm,
+        Case::RenderingFdm,
+    ];
+
+    fn name(self) -> &'static str {
+        match self {
+            Case::Barrier => "vkCmdPipelineBarrier",
+            Case::Barrier2 => "vkCmdPipelineBarrier2",
+            Case::RenderPass => "vkCmdBeginRenderPass+End",
+            Case::Rendering => "vkCmdBeginRendering+End",
+            Case::BarrierFdm => "vkCmdPipelineBarrier (density image)",
+            Case::RenderPassFdm => "vkCmdBeginRenderPass+End (FDM pass)",
+            Case::RenderingFdm => "vkCmdBeginRendering+End (FDM attachment)",
+        }
+    }
+
+    /// The case the bare device records in its place (it has no density maps).
+    fn bare(self) -> Case {
+        match self {
+            Case::BarrierFdm => Case::Barrier,
+            Case::RenderPassFdm => Case::RenderPass,
+            Case::RenderingFdm => Case::Rendering,
+            c => c,
+        }
+    }
+}
+
+/// What the commands reach below the layers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Bottom {
+    /// lavapipe records them (the driver's cost, microseconds, dominates).
+    Lavapipe,
+    /// The double drops them ([`fovea_vkdouble::NULL_COMMANDS_ENV`]): what remains is the
+    /// layers' own cost.
+    Null,
+}
+
+impl Bottom {
+    fn name(self) -> &'static str {
+        match self {
+            Bottom::Lavapipe => "lavapipe",
+            Bottom::Null => "null",
+        }
+    }
+}
+
+/// Both sides on both bottoms, or why not.
+fn sides() -> Result<Vec<(Bottom, Side, Side)>, String> {
+    let fovea_lib = fovea_harness::artifact("libfovea.so")?
+        .canonicalize()
+        .map_err(|e| e.to_string())?;
+    let double_lib = fovea_vkdouble::find_library()?;
+    let dir = std::env::temp_dir().join(format!("fovea-vkbench-{}", std::process::id()));
+    fovea_vkdouble::write_manifest(&dir, &double_lib).map_err(|e| e.to_string())?;
+    let checked_in = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("manifest/vulkan/VK_LAYER_FOVEA_fragment_density_map.json");
+    let mut manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&checked_in).map_err(|e| e.to_string())?)
+            .map_err(|e| e.to_string())?;
+    manifest["layer"]["library_path"] = serde_json::json!(fovea_lib.to_string_lossy());
+    std::fs::write(
+        dir.join("VK_LAYER_FOVEA_fragment_density_map.json"),
+        manifest.to_string(),
+    )
+    .map_err(|e| e.to_string())?;
+    // Set before the loader first reads the environment, while nothing else runs.
+    std::env::set_var("VK_ADD_LAYER_PATH", &dir);
+    std::env::set_var(fovea_vkdouble::PROFILE_ENV, "nvidia");
+    std::env::remove_var(fovea_vkdouble::NULL_COMMANDS_ENV);
+    // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
+    let entry = unsafe { ash::Entry::load() }.map_err(|e| format!("no Vulkan loader ({e})"))?;
+    let mut all = Vec::new();
+    for bottom in [Bottom::Lavapipe, Bottom::Null] {
+        if bottom == Bottom::Null {
+            // Read by the double at vkCreateDevice.
+            std::env::set_var(fovea_vkdouble::NULL_COMMANDS_ENV, "1");
+        }
+        let bare = Side::new(&entry, false)?;
+        let fovea = Side::new(&entry, true)?;
+        all.push((bottom, bare, fovea));
+    }
+    std::env::remove_var(fovea_vkdouble::NULL_COMMANDS_ENV);
+    // The entry (the loader library) must outlive every instance: keep it for the process.
+    std::mem::forget(entry);
+    Ok(all)
+}
+
+fn bench(c: &mut Criterion, bottom: Bottom, bare: &Side, fovea: &Side) {
+    let mut g = c.benchmark_group(format!("vk_commands/{}", bottom.name()));
+    for case in Case::ALL {
+        for (label, side, recorded) in [("bare", bare, case.bare()), ("fovea", fovea, case)] {
+            g.bench_function(format!("{}/{label}", case.name()), |b| {
+                b.iter_custom(|iters| {
+                    let mut total = Duration::ZERO;
+                    let mut left = iters as usize;
+                    while left > 0 {
+                        let n = left.min(ROUND);
+                        total += side.round(recorded, n).expect("recordable").0;
+                        left -= n;
+                    }
+                    total
+                })
+            });
+        }
+    }
+    g.finish();
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Interleaved rounds of both sides, case by case: the summary table.
+fn summary(bottom: Bottom, bare: &Side, fovea: &Side) {
+    const ROUNDS: usize = 200;
+    println!(
+        "\nvk_commands summary, {} below the layers: median ns per command over {ROUNDS} \
+         interleaved rounds of {ROUND}; allocations per command (fewest in a round)",
+        bottom.name()
+    );
+    println!(
+        "{:<42} {:>9} {:>9} {:>9} {:>7} {:>11} {:>11}",
+        "command", "bare ns", "fovea ns", "added ns", "ratio", "bare alloc", "fovea alloc"
+    );
+    for case in Case::ALL {
+        let (mut tb, mut tf) = (Vec::new(), Vec::new());
+        let (mut ab, mut af) = (u64::MAX, u64::MAX);
+        for _ in 0..ROUNDS {
+            let (t, a) = bare.round(case.bare(), ROUND).expect("recordable");
+            tb.push(t.as_nanos() as f64 / ROUND as f64);
+            ab = ab.min(a);
+            let (t, a) = fovea.round(case, ROUND).expect("recordable");
+            tf.push(t.as_nanos() as f64 / ROUND as f64);
+            af = af.min(a);
+        }
+        let (b, f) = (median(tb), median(tf));
+        println!(
+            "{:<42} {:>9.1} {:>9.1} {:>9.1} {:>7.3} {:>11.2} {:>11.2}",
+            case.name(),
+            b,
+            f,
+            f - b,
+            f / b,
+            ab as f64 / ROUND as f64,
+            af as f64 / ROUND as f64,
+        );
+    }
+}
+
+fn benches() {
+    let all = match sides() {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("vk_commands: skipped: {e}");
+            return;
+        }
+    };
+    // Warm up (lavapipe's command pools grow to their steady size; the layer's scratch too).
+    for (_, bare, fovea) in &all {
+        for case in Case::ALL {
+            for _ in 0..4 {
+                bare.round(case.bare(), ROUND);
+                fovea.round(case, ROUND);
+            }
+        }
+    }
+    let mut c = Criterion::default()
+        .sample_size(20)
+        .warm_up_time(Duration::from_millis(300))
+        .measurement_time(Duration::from_secs(1))
+        .configure_from_args();
+    for (bottom, bare, fovea) in &all {
+        bench(&mut c, *bottom, bare, fovea);
+    }
+    c.final_summary();
+    for (bottom, bare, fovea) in &all {
+        summary(*bottom, bare, fovea);
+    }
+}
+
+fn main() {
+    benches();
+}
