@@ -23,7 +23,7 @@
 //! `--dump DIR` (read back each new density map and the frames where a level starts, and the last
 //! frame, as PNGs), `--validate` (the Vulkan validation layer with a messenger; the run fails on
 //! any message), `--vk-layer NAME` (one more Vulkan layer for the VkInstance, after validation;
-//! repeatable).
+//! repeatable), `--heavy` (a fill-bound fragment shader, for timing eye passes), `--help`.
 //!
 //! `fovea demo` runs it against the simulated headset through the system loader where that is
 //! installed. By hand (the checked-in manifests point at target/release):
@@ -138,7 +138,7 @@ impl Options {
                         .map_err(|_| format!("{arg}: a layer name has no NUL"))?,
                 ),
                 "--heavy" => o.heavy = true,
-                other => return Err(format!("unknown option {other:?}")),
+                other => return Err(format!("unknown option {other:?} (--help lists them)")),
             }
         }
         o.frames = frames.unwrap_or(o.levels.len() as u64 * o.frames_per_level * 2);
@@ -184,8 +184,28 @@ struct Outcome {
     eye_ms: [Vec<f64>; 4],
 }
 
+/// What `--help` prints: every option [`Options::parse`] accepts.
+const USAGE: &str = "\
+usage: foveated_vulkan [options]   (run through an OpenXR runtime; see the file's header)
+
+  --frames N              frames to run (default: each level's frames twice)
+  --frames-per-level N    frames before the next level's profile is applied (default 30)
+  --levels LIST           comma-separated levels to cycle: none,low,medium,high (default all)
+  --dynamic               profiles with XR_FOVEATION_DYNAMIC_LEVEL_ENABLED_FB
+  --dump DIR              write each new density map, the frames where a level starts and the
+                          last frame, read back from the GPU, as PNGs
+  --validate              the Vulkan validation layer with a messenger; any message fails the run
+  --vk-layer NAME         one more Vulkan layer for the VkInstance, after validation (repeatable)
+  --heavy                 a fill-bound fragment shader (a loop of arithmetic per fragment), for
+                          timing eye passes on a real GPU
+  -h, --help              this text";
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.iter().any(|a| a == "--help" || a == "-h") {
+        println!("{USAGE}");
+        return;
+    }
     let options = match Options::parse(&args) {
         Ok(o) => o,
         Err(e) => {
@@ -951,6 +971,34 @@ mod tests {
     use fovea_model::Fov;
 
     use super::*;
+
+    /// `--help` names every option the parser takes, and each is accepted as written there.
+    #[test]
+    fn help_lists_every_option() {
+        let taken = [
+            vec!["--frames", "3"],
+            vec!["--frames-per-level", "2"],
+            vec!["--levels", "none,high"],
+            vec!["--dynamic"],
+            vec!["--dump", "/tmp/x"],
+            vec!["--validate"],
+            vec!["--vk-layer", "VK_LAYER_X"],
+            vec!["--heavy"],
+        ];
+        for args in &taken {
+            assert!(USAGE.contains(args[0]), "{} missing from --help", args[0]);
+            let owned: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+            assert!(Options::parse(&owned).is_ok(), "{args:?}");
+        }
+        let listed = USAGE.matches("\n  --").count();
+        assert_eq!(
+            listed,
+            taken.len(),
+            "an option in --help the test does not know"
+        );
+        let err = Options::parse(&["--nope".to_string()]).unwrap_err();
+        assert!(err.contains("--help"), "{err}");
+    }
 
     const LAVAPIPE: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
     const VALIDATION: &str = "/usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json";
