@@ -478,7 +478,7 @@ pub fn guard(function: &'static str, body: impl FnOnce() -> xr::Result) -> xr::R
 
 /// `FOVEA_INJECT_PANIC=<function name>` makes that hook panic, to prove the guard holds in a real
 /// process (tests/panic_containment.rs). Read once per process.
-pub const INJECT_PANIC_ENV: &str = "FOVEA_INJECT_PANIC";
+pub const INJECT_PANIC_ENV: &str = fovea_abi::env::INJECT_PANIC;
 
 fn injected_panic() -> Option<&'static str> {
     static TARGET: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
@@ -487,10 +487,8 @@ fn injected_panic() -> Option<&'static str> {
         .as_deref()
 }
 
-/// The longest next chain the layer follows. The spec puts no bound on chains, but a real chain holds
-/// a handful of structs; a longer one is almost certainly a loop (fundamentals.adoc forbids those),
-/// and following it would hang the application.
-pub const MAX_CHAIN_LENGTH: usize = 64;
+/// The longest next chain the layer follows ([`fovea_abi::MAX_CHAIN_LENGTH`] says why).
+pub use fovea_abi::MAX_CHAIN_LENGTH;
 
 /// Why a next chain was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -22,9 +22,9 @@ use tracing_subscriber::EnvFilter;
 pub use fovea_config::LOG_ROTATE_BYTES;
 
 /// Environment variable holding the log filter.
-pub const LOG_ENV: &str = "FOVEA_LOG";
+pub const LOG_ENV: &str = fovea_abi::env::LOG;
 /// Environment variable naming the log file; empty: no log file.
-pub const LOG_FILE_ENV: &str = "FOVEA_LOG_FILE";
+pub const LOG_FILE_ENV: &str = fovea_abi::env::LOG_FILE;
 
 /// An open log file, rotated at a size.
 pub struct LogFile {

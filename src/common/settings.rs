@@ -15,7 +15,7 @@ use fovea_model::density::Level;
 
 /// `FOVEA_SYMMETRIC_FOV=1`: report one shared symmetric FOV for both eyes (Quest's recommended mode,
 /// docs/headsets.md#symmetric-fov) and give pixels outside each eye's true FOV the lowest density.
-pub const SYMMETRIC_FOV_ENV: &str = "FOVEA_SYMMETRIC_FOV";
+pub const SYMMETRIC_FOV_ENV: &str = fovea_abi::env::SYMMETRIC_FOV;
 
 /// One of Quest's `debug.oculus.foveation.*` properties (docs/users.md#quest-debug-properties: set with
 /// `adb shell setprop` on Quest); fovea reads it from an environment variable and from the
@@ -45,10 +45,10 @@ pub const SUBSAMPLED: Property = Property {
 pub const PROPERTIES: [&Property; 3] = [&LEVEL, &DYNAMIC, &SUBSAMPLED];
 
 /// `FOVEA_MAX_FRAGMENT`: the largest fragment any density map asks for (1, 2 or 4).
-pub const MAX_FRAGMENT_ENV: &str = "FOVEA_MAX_FRAGMENT";
+pub const MAX_FRAGMENT_ENV: &str = fovea_abi::env::MAX_FRAGMENT;
 
 /// `FOVEA_PROPS`: a file of `debug.oculus.foveation.*=value` lines, re-read while the app runs.
-pub const PROPS_ENV: &str = "FOVEA_PROPS";
+pub const PROPS_ENV: &str = fovea_abi::env::PROPS;
 
 /// The overrides in force: Quest's debug properties over the configuration file's values. As on
 /// Quest: with dynamic on, the level is the maximum; with dynamic off, it is the level; either
