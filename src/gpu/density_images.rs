@@ -365,6 +365,22 @@ impl SessionGpu {
             fdm_enabled,
             "density images for this session"
         );
+        // The log file's session line (after the instance header): which GPU, and how its density
+        // maps reach the rasterizer.
+        let gpu = props
+            .device_name_as_c_str()
+            .map_or_else(|_| "unknown".into(), |n| n.to_string_lossy().into_owned());
+        let maps = if crate::bridge::device_fdm(vk::Device::from_raw(binding.device)).is_some() {
+            "emulated on shading-rate attachments"
+        } else if fdm {
+            "native VK_EXT_fragment_density_map"
+        } else {
+            "not attached by this device (density images only)"
+        };
+        crate::common::log::header(&format!(
+            "fovea session: gpu={gpu:?} density_maps={maps:?} texel={:?}",
+            support.texel()
+        ));
         Ok(SessionGpu {
             memory,
             instance,

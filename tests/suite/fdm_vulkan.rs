@@ -610,6 +610,18 @@ fn density_images_on_lavapipe_hold_the_model_and_leave_nothing_behind() {
     };
 
     let (session, space) = running_session(&app, sys, &v);
+    // The log file (the suite's private XDG_STATE_HOME) says which GPU the session's density
+    // images are on and how they reach the rasterizer.
+    let log = std::path::Path::new(&std::env::var_os("XDG_STATE_HOME").expect("private home"))
+        .join("fovea/fovea.log");
+    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    assert!(
+        text.lines()
+            .any(|l| l.contains("fovea session: gpu=\"llvmpipe")
+                && l.contains("density_maps=\"not attached by this device")),
+        "no session line for lavapipe in {}:\n{text}",
+        log.display()
+    );
 
     // A foveated swapchain with the FRAGMENT_DENSITY_MAP flag, and one without the flag.
     let create_swapchain: xr::pfn::CreateSwapchain = func(&app, "xrCreateSwapchain");
