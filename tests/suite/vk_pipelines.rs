@@ -12,6 +12,7 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
+use crate::support::vulkan::{range, spv, stages, Fixed, COLOR};
 use crate::vk_layer::{
     assert_no_messages, assert_only_stage_false_positives, env, fdm_image_info, take_messages, Vk,
     FDM,
@@ -19,11 +20,6 @@ use crate::vk_layer::{
 
 const FDM_FLAG: vk::PipelineCreateFlags =
     vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT;
-const COLOR: vk::Format = vk::Format::R8G8B8A8_UNORM;
-
-fn spv(bytes: &[u8]) -> Vec<u32> {
-    ash::util::read_spv(&mut std::io::Cursor::new(bytes)).expect("SPIR-V")
-}
 
 /// The shading-rate state fovea gives pipelines used with a density map: 1×1, {KEEP, REPLACE}.
 fn injected() -> Value {
@@ -83,43 +79,6 @@ impl Objects {
     }
 }
 
-/// The fixed-function state of a one-colour-attachment pipeline.
-struct Fixed {
-    vertex: vk::PipelineVertexInputStateCreateInfo<'static>,
-    assembly: vk::PipelineInputAssemblyStateCreateInfo<'static>,
-    viewport: vk::PipelineViewportStateCreateInfo<'static>,
-    raster: vk::PipelineRasterizationStateCreateInfo<'static>,
-    multisample: vk::PipelineMultisampleStateCreateInfo<'static>,
-    depth: vk::PipelineDepthStencilStateCreateInfo<'static>,
-    blend_attachment: [vk::PipelineColorBlendAttachmentState; 1],
-    dynamic_list: [vk::DynamicState; 2],
-    formats: [vk::Format; 1],
-}
-
-impl Fixed {
-    fn new() -> Box<Fixed> {
-        Box::new(Fixed {
-            vertex: vk::PipelineVertexInputStateCreateInfo::default(),
-            assembly: vk::PipelineInputAssemblyStateCreateInfo::default()
-                .topology(vk::PrimitiveTopology::TRIANGLE_LIST),
-            viewport: vk::PipelineViewportStateCreateInfo::default()
-                .viewport_count(1)
-                .scissor_count(1),
-            raster: vk::PipelineRasterizationStateCreateInfo::default()
-                .polygon_mode(vk::PolygonMode::FILL)
-                .cull_mode(vk::CullModeFlags::NONE)
-                .line_width(1.0),
-            multisample: vk::PipelineMultisampleStateCreateInfo::default()
-                .rasterization_samples(vk::SampleCountFlags::TYPE_1),
-            depth: vk::PipelineDepthStencilStateCreateInfo::default(),
-            blend_attachment: [vk::PipelineColorBlendAttachmentState::default()
-                .color_write_mask(vk::ColorComponentFlags::RGBA)],
-            dynamic_list: [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR],
-            formats: [COLOR],
-        })
-    }
-}
-
 /// Creates one graphics pipeline from `info` (whose pointers `fixed` and the caller keep alive).
 fn create(d: &ash::Device, info: &vk::GraphicsPipelineCreateInfo<'_>) -> vk::Pipeline {
     // SAFETY: everything the create info points at lives across the call.
@@ -154,32 +113,11 @@ fn pipelines_used_with_density_maps_let_the_attachment_decide() {
         let d = fdm_device(&vk, false);
         let o = Objects::new(&d);
         let f = Fixed::new();
-        let stages = [
-            vk::PipelineShaderStageCreateInfo::default()
-                .stage(vk::ShaderStageFlags::VERTEX)
-                .module(o.vert)
-                .name(c"main"),
-            vk::PipelineShaderStageCreateInfo::default()
-                .stage(vk::ShaderStageFlags::FRAGMENT)
-                .module(o.frag)
-                .name(c"main"),
-        ];
-        let blend =
-            vk::PipelineColorBlendStateCreateInfo::default().attachments(&f.blend_attachment);
-        let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&f.dynamic_list);
-        let base = vk::GraphicsPipelineCreateInfo::default()
-            .stages(&stages)
-            .vertex_input_state(&f.vertex)
-            .input_assembly_state(&f.assembly)
-            .viewport_state(&f.viewport)
-            .rasterization_state(&f.raster)
-            .multisample_state(&f.multisample)
-            .color_blend_state(&blend)
-            .dynamic_state(&dynamic)
-            .layout(o.layout);
+        let stages = stages([o.vert, o.frag]);
+        let base = f.info(&stages, o.layout);
 
         let mut rendering =
-            vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&f.formats);
+            vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&[COLOR]);
         let with_flag = base.flags(FDM_FLAG).push_next(&mut rendering);
         let p_flag = create(&d, &with_flag);
 
@@ -247,17 +185,7 @@ fn pipeline_libraries_agree_on_the_shading_rate_state() {
         let d = fdm_device(&vk, true);
         let o = Objects::new(&d);
         let f = Fixed::new();
-        let blend =
-            vk::PipelineColorBlendStateCreateInfo::default().attachments(&f.blend_attachment);
-        let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&f.dynamic_list);
-        let vert = [vk::PipelineShaderStageCreateInfo::default()
-            .stage(vk::ShaderStageFlags::VERTEX)
-            .module(o.vert)
-            .name(c"main")];
-        let frag = [vk::PipelineShaderStageCreateInfo::default()
-            .stage(vk::ShaderStageFlags::FRAGMENT)
-            .module(o.frag)
-            .name(c"main")];
+        let [vert, frag] = stages([o.vert, o.frag]);
         let flags = FDM_FLAG | vk::PipelineCreateFlags::LIBRARY_KHR;
         type L = vk::GraphicsPipelineLibraryFlagsEXT;
         let library = |part: L, info: vk::GraphicsPipelineCreateInfo<'_>| {
@@ -267,7 +195,7 @@ fn pipeline_libraries_agree_on_the_shading_rate_state() {
             let formats: &[vk::Format] = if part == L::PRE_RASTERIZATION_SHADERS {
                 &[]
             } else {
-                &f.formats
+                &[COLOR]
             };
             let mut rendering =
                 vk::PipelineRenderingCreateInfo::default().color_attachment_formats(formats);
@@ -275,7 +203,7 @@ fn pipeline_libraries_agree_on_the_shading_rate_state() {
                 &d,
                 &info
                     .flags(flags)
-                    .color_blend_state(&blend)
+                    .color_blend_state(&f.blend)
                     .push_next(&mut gpl)
                     .push_next(&mut rendering),
             );
@@ -289,24 +217,24 @@ fn pipeline_libraries_agree_on_the_shading_rate_state() {
         );
         let pre_raster = library(
             L::PRE_RASTERIZATION_SHADERS,
-            base.stages(&vert)
+            base.stages(std::slice::from_ref(&vert))
                 .viewport_state(&f.viewport)
                 .rasterization_state(&f.raster)
-                .dynamic_state(&dynamic)
+                .dynamic_state(&f.dynamic)
                 .layout(o.layout),
         );
         let fragment = library(
             L::FRAGMENT_SHADER,
-            base.stages(&frag)
+            base.stages(std::slice::from_ref(&frag))
                 .multisample_state(&f.multisample)
                 .depth_stencil_state(&f.depth)
-                .dynamic_state(&dynamic)
+                .dynamic_state(&f.dynamic)
                 .layout(o.layout),
         );
         let output = library(
             L::FRAGMENT_OUTPUT_INTERFACE,
             base.multisample_state(&f.multisample)
-                .color_blend_state(&blend),
+                .color_blend_state(&f.blend),
         );
         let libraries = [vertex_input, pre_raster, fragment, output];
         for (p, state) in [
@@ -381,13 +309,7 @@ fn subsampled_samplers_dynamic_views_and_frag_size_shaders() {
                         .image(image)
                         .view_type(vk::ImageViewType::TYPE_2D_ARRAY)
                         .format(vk::Format::R8G8_UNORM)
-                        .subresource_range(vk::ImageSubresourceRange {
-                            aspect_mask: vk::ImageAspectFlags::COLOR,
-                            base_mip_level: 0,
-                            level_count: 1,
-                            base_array_layer: 0,
-                            layer_count: 2,
-                        }),
+                        .subresource_range(range(0, 2)),
                     None,
                 )
                 .expect("a dynamic density-map view");
@@ -433,13 +355,7 @@ fn barriers_lose_the_density_map_bits() {
             return;
         };
         let d = fdm_device(&vk, false);
-        let range = vk::ImageSubresourceRange {
-            aspect_mask: vk::ImageAspectFlags::COLOR,
-            base_mip_level: 0,
-            level_count: 1,
-            base_array_layer: 0,
-            layer_count: 2,
-        };
+        let range = range(0, 2);
         // SAFETY: create infos live across the calls; the submit is waited for before anything
         // it uses is destroyed.
         unsafe {
