@@ -14,8 +14,8 @@ use serde_json::{json, Value};
 
 use crate::support::vulkan::{range, spv, stages, Fixed, COLOR};
 use crate::vk_layer::{
-    assert_no_messages, assert_only_stage_false_positives, env, fdm_image_info, take_messages, Vk,
-    FDM,
+    assert_no_messages, assert_only_stage_false_positives, env, fdm_image_info, take_messages, Env,
+    Vk, FDM,
 };
 
 const FDM_FLAG: vk::PipelineCreateFlags =
@@ -90,7 +90,7 @@ fn create(d: &ash::Device, info: &vk::GraphicsPipelineCreateInfo<'_>) -> vk::Pip
 }
 
 /// The double's record of `pipeline`.
-fn record(env: &crate::vk_layer::Env, pipeline: vk::Pipeline) -> Value {
+fn record(env: &Env, pipeline: vk::Pipeline) -> Value {
     use ash::vk::Handle as _;
     env.double
         .events("pipeline")
@@ -99,19 +99,36 @@ fn record(env: &crate::vk_layer::Env, pipeline: vk::Pipeline) -> Value {
         .unwrap_or_else(|| panic!("no record of {pipeline:?}"))
 }
 
+/// Runs `body` on each shading-rate profile with a density-map device (with graphics pipeline
+/// libraries where `gpl`) and [`Objects`] on it, then destroys those and checks that neither the
+/// double nor validation complained. `body` destroys what it made.
+fn on_each_profile(gpl: bool, body: impl Fn(&Env, Profile, &ash::Device, &Objects)) {
+    let Some((_serial, env)) = env() else { return };
+    for profile in [Profile::Nvidia, Profile::Amd] {
+        let Some(vk) = Vk::new(env, profile, true) else {
+            return;
+        };
+        let d = fdm_device(&vk, gpl);
+        let o = Objects::new(&d);
+        body(env, profile, &d, &o);
+        // SAFETY: nothing made from them is left.
+        unsafe {
+            o.destroy(&d);
+            d.destroy_device(None);
+        }
+        assert_eq!(env.double.errors(), Vec::<String>::new());
+        drop(vk);
+        assert_no_messages();
+    }
+}
+
 /// A pipeline for dynamic rendering with a density map reaches the driver with the shading-rate flag and
 /// the state that lets the attachment decide; a pipeline for a render pass without a density map
 /// is untouched. (The 64-bit flags in `VkPipelineCreateFlags2CreateInfoKHR` are unit-tested only:
 /// the validation layer here, 1.3.239, predates that struct and reports it as unknown.)
 #[test]
 fn pipelines_used_with_density_maps_let_the_attachment_decide() {
-    let Some((_serial, env)) = env() else { return };
-    for profile in [Profile::Nvidia, Profile::Amd] {
-        let Some(vk) = Vk::new(env, profile, true) else {
-            return;
-        };
-        let d = fdm_device(&vk, false);
-        let o = Objects::new(&d);
+    on_each_profile(false, |env, profile, d, o| {
         let f = Fixed::new();
         let stages = stages([o.vert, o.frag]);
         let base = f.info(&stages, o.layout);
@@ -119,7 +136,7 @@ fn pipelines_used_with_density_maps_let_the_attachment_decide() {
         let mut rendering =
             vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&[COLOR]);
         let with_flag = base.flags(FDM_FLAG).push_next(&mut rendering);
-        let p_flag = create(&d, &with_flag);
+        let p_flag = create(d, &with_flag);
 
         let attachment = [vk::AttachmentDescription::default()
             .format(COLOR)
@@ -142,7 +159,7 @@ fn pipelines_used_with_density_maps_let_the_attachment_decide() {
             )
         }
         .expect("render pass");
-        let p_plain = create(&d, &base.render_pass(pass));
+        let p_plain = create(d, &base.render_pass(pass));
 
         let r = record(env, p_flag);
         assert_eq!(r["shading_rate_state"], injected(), "{profile:?}: {r}");
@@ -161,13 +178,8 @@ fn pipelines_used_with_density_maps_let_the_attachment_decide() {
                 d.destroy_pipeline(p, None);
             }
             d.destroy_render_pass(pass, None);
-            o.destroy(&d);
-            d.destroy_device(None);
         }
-        assert_eq!(env.double.errors(), Vec::<String>::new());
-        drop(vk);
-        assert_no_messages();
-    }
+    });
 }
 
 /// Graphics pipeline libraries (lavapipe 22.3 offers VK_EXT_graphics_pipeline_library): the
@@ -177,13 +189,7 @@ fn pipelines_used_with_density_maps_let_the_attachment_decide() {
 /// the link of dynamic-rendering libraries whatever fovea does.)
 #[test]
 fn pipeline_libraries_agree_on_the_shading_rate_state() {
-    let Some((_serial, env)) = env() else { return };
-    for profile in [Profile::Nvidia, Profile::Amd] {
-        let Some(vk) = Vk::new(env, profile, true) else {
-            return;
-        };
-        let d = fdm_device(&vk, true);
-        let o = Objects::new(&d);
+    on_each_profile(true, |env, profile, d, o| {
         let f = Fixed::new();
         let [vert, frag] = stages([o.vert, o.frag]);
         let flags = FDM_FLAG | vk::PipelineCreateFlags::LIBRARY_KHR;
@@ -200,7 +206,7 @@ fn pipeline_libraries_agree_on_the_shading_rate_state() {
             let mut rendering =
                 vk::PipelineRenderingCreateInfo::default().color_attachment_formats(formats);
             let p = create(
-                &d,
+                d,
                 &info
                     .flags(flags)
                     .color_blend_state(&f.blend)
@@ -252,13 +258,8 @@ fn pipeline_libraries_agree_on_the_shading_rate_state() {
             for p in libraries {
                 d.destroy_pipeline(p, None);
             }
-            o.destroy(&d);
-            d.destroy_device(None);
         }
-        assert_eq!(env.double.errors(), Vec::<String>::new());
-        drop(vk);
-        assert_no_messages();
-    }
+    });
 }
 
 /// Samplers with the subsampled flags and density-map views with the dynamic flag are created
