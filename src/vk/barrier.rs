@@ -469,9 +469,9 @@ pub unsafe extern "system" fn cmd_pipeline_barrier(
 /// The caller's arguments, valid as the command requires.
 unsafe fn pipeline_barrier2(
     what: &'static str,
+    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdPipelineBarrier2>,
     cb: vk::CommandBuffer,
     info: *const vk::DependencyInfo<'_>,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdPipelineBarrier2>,
 ) {
     guard(what, (), || {
         // SAFETY: a command buffer dispatched by the loader.
@@ -494,36 +494,10 @@ unsafe fn pipeline_barrier2(
     })
 }
 
-/// `vkCmdPipelineBarrier2`.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_pipeline_barrier2(
-    cb: vk::CommandBuffer,
-    info: *const vk::DependencyInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        pipeline_barrier2("vkCmdPipelineBarrier2", cb, info, |r| {
-            r.next.cmd_pipeline_barrier2
-        })
-    }
-}
-
-/// `vkCmdPipelineBarrier2KHR`.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_pipeline_barrier2_khr(
-    cb: vk::CommandBuffer,
-    info: *const vk::DependencyInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        pipeline_barrier2("vkCmdPipelineBarrier2KHR", cb, info, |r| {
-            r.next.cmd_pipeline_barrier2_khr
-        })
-    }
+hook_and_khr_alias! {
+    /// `vkCmdPipelineBarrier2`.
+    cmd_pipeline_barrier2, cmd_pipeline_barrier2_khr = pipeline_barrier2("vkCmdPipelineBarrier2")
+    (cb: vk::CommandBuffer, info: *const vk::DependencyInfo<'_>)
 }
 
 /// `vkCmdWaitEvents`.
@@ -607,11 +581,11 @@ pub unsafe extern "system" fn cmd_wait_events(
 /// The caller's arguments, valid as the command requires.
 unsafe fn wait_events2(
     what: &'static str,
+    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdWaitEvents2>,
     cb: vk::CommandBuffer,
     count: u32,
     events: *const vk::Event,
     infos: *const vk::DependencyInfo<'_>,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdWaitEvents2>,
 ) {
     guard(what, (), || {
         // SAFETY: a command buffer dispatched by the loader.
@@ -635,40 +609,15 @@ unsafe fn wait_events2(
     })
 }
 
-/// `vkCmdWaitEvents2`.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_wait_events2(
-    cb: vk::CommandBuffer,
-    count: u32,
-    events: *const vk::Event,
-    infos: *const vk::DependencyInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        wait_events2("vkCmdWaitEvents2", cb, count, events, infos, |r| {
-            r.next.cmd_wait_events2
-        })
-    }
-}
-
-/// `vkCmdWaitEvents2KHR`.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_wait_events2_khr(
-    cb: vk::CommandBuffer,
-    count: u32,
-    events: *const vk::Event,
-    infos: *const vk::DependencyInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        wait_events2("vkCmdWaitEvents2KHR", cb, count, events, infos, |r| {
-            r.next.cmd_wait_events2_khr
-        })
-    }
+hook_and_khr_alias! {
+    /// `vkCmdWaitEvents2`.
+    cmd_wait_events2, cmd_wait_events2_khr = wait_events2("vkCmdWaitEvents2")
+    (
+        cb: vk::CommandBuffer,
+        count: u32,
+        events: *const vk::Event,
+        infos: *const vk::DependencyInfo<'_>,
+    )
 }
 
 #[cfg(test)]
