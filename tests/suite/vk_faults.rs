@@ -25,8 +25,8 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 
 use crate::support::vulkan::{
-    attachments2, image_info, memory_type, range, spv, stages, Fixed, COLOR, DENSITY, FDM_LAYOUT,
-    FRAGMENT, SIZE, VERTEX,
+    attachments2, draw_fullscreen, image_info, memory_type, range, spv, stages, Fixed, AREA, CLEAR,
+    COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk_layer::{assert_only_stage_false_positives, env, take_real_messages, Env, Vk, FDM};
 
@@ -387,18 +387,6 @@ unsafe fn record(
         .new_layout(FDM_LAYOUT)
         .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
         .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT);
-    let area = vk::Rect2D {
-        offset: vk::Offset2D { x: 0, y: 0 },
-        extent: vk::Extent2D {
-            width: SIZE,
-            height: SIZE,
-        },
-    };
-    let clear = [vk::ClearValue {
-        color: vk::ClearColorValue {
-            float32: [0.0, 0.0, 1.0, 1.0],
-        },
-    }];
     // SAFETY: as the caller promised; structs live across the calls.
     unsafe {
         d.cmd_pipeline_barrier(
@@ -442,25 +430,11 @@ unsafe fn record(
             &vk::RenderPassBeginInfo::default()
                 .render_pass(pass)
                 .framebuffer(framebuffer)
-                .render_area(area)
-                .clear_values(&clear),
+                .render_area(AREA)
+                .clear_values(&CLEAR),
             &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
         );
-        d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
-        d.cmd_set_viewport(
-            cb,
-            0,
-            &[vk::Viewport {
-                x: 0.0,
-                y: 0.0,
-                width: SIZE as f32,
-                height: SIZE as f32,
-                min_depth: 0.0,
-                max_depth: 1.0,
-            }],
-        );
-        d.cmd_set_scissor(cb, 0, &[area]);
-        d.cmd_draw(cb, 3, 1, 0, 0);
+        draw_fullscreen(d, cb, pipeline);
         d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
     }
 }

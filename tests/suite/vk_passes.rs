@@ -20,8 +20,8 @@ use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
 use crate::support::vulkan::{
-    attachments, attachments2, image_info, memory_type, range, spv, stages, Fixed, COLOR, DENSITY,
-    FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+    attachments, attachments2, draw_fullscreen, image_info, memory_type, range, spv, stages, Fixed,
+    AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk_layer::{assert_no_messages, env, take_messages, Env, Vk, FDM};
 
@@ -447,34 +447,8 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
             .unwrap()[0];
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .unwrap();
-        let area = vk::Rect2D {
-            offset: vk::Offset2D { x: 0, y: 0 },
-            extent: vk::Extent2D {
-                width: SIZE,
-                height: SIZE,
-            },
-        };
-        let clear = [vk::ClearValue {
-            color: vk::ClearColorValue {
-                float32: [0.0, 0.0, 1.0, 1.0],
-            },
-        }];
         let draw_it = || {
-            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipe);
-            d.cmd_set_viewport(
-                cb,
-                0,
-                &[vk::Viewport {
-                    x: 0.0,
-                    y: 0.0,
-                    width: SIZE as f32,
-                    height: SIZE as f32,
-                    min_depth: 0.0,
-                    max_depth: 1.0,
-                }],
-            );
-            d.cmd_set_scissor(cb, 0, &[area]);
-            d.cmd_draw(cb, 3, 1, 0, 0);
+            draw_fullscreen(d, cb, pipe);
         };
         match pass {
             None => {
@@ -506,12 +480,12 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
                     .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                     .load_op(vk::AttachmentLoadOp::CLEAR)
                     .store_op(vk::AttachmentStoreOp::STORE)
-                    .clear_value(clear[0])];
+                    .clear_value(CLEAR[0])];
                 let mut density_att = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
                     .image_view(views[0].1.unwrap_or_default())
                     .image_layout(FDM_LAYOUT);
                 let mut info = vk::RenderingInfo::default()
-                    .render_area(area)
+                    .render_area(AREA)
                     .layer_count(1)
                     .color_attachments(&color_att);
                 if fdm {
@@ -544,8 +518,8 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
                     let mut begin = vk::RenderPassBeginInfo::default()
                         .render_pass(pass)
                         .framebuffer(*fb)
-                        .render_area(area)
-                        .clear_values(&clear);
+                        .render_area(AREA)
+                        .clear_values(&CLEAR);
                     if case == Case::Imageless {
                         begin = begin.push_next(&mut begin_views);
                     }

@@ -89,6 +89,27 @@ fn create(d: &ash::Device, info: &vk::GraphicsPipelineCreateInfo<'_>) -> vk::Pip
     .unwrap_or_else(|(_, e)| panic!("vkCreateGraphicsPipelines: {e}; {:?}", take_messages()))
 }
 
+/// Memory of the first type `image` allows, bound to it.
+///
+/// # Safety
+/// `image` must be alive on `d` and without memory.
+unsafe fn bound_memory(d: &ash::Device, image: vk::Image) -> vk::DeviceMemory {
+    // SAFETY: the caller's promise; the struct lives across the call.
+    unsafe {
+        let req = d.get_image_memory_requirements(image);
+        let memory = d
+            .allocate_memory(
+                &vk::MemoryAllocateInfo::default()
+                    .allocation_size(req.size)
+                    .memory_type_index(req.memory_type_bits.trailing_zeros()),
+                None,
+            )
+            .expect("memory");
+        d.bind_image_memory(image, memory, 0).expect("bind");
+        memory
+    }
+}
+
 /// The double's record of `pipeline`.
 fn record(env: &Env, pipeline: vk::Pipeline) -> Value {
     use ash::vk::Handle as _;
@@ -293,16 +314,7 @@ fn subsampled_samplers_dynamic_views_and_frag_size_shaders() {
                     None,
                 )
                 .expect("density image");
-            let req = d.get_image_memory_requirements(image);
-            let memory = d
-                .allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(req.memory_type_bits.trailing_zeros()),
-                    None,
-                )
-                .expect("memory");
-            d.bind_image_memory(image, memory, 0).expect("bind");
+            let memory = bound_memory(&d, image);
             let view = d
                 .create_image_view(
                     &vk::ImageViewCreateInfo::default()
@@ -363,16 +375,7 @@ fn barriers_lose_the_density_map_bits() {
             let image = d
                 .create_image(&fdm_image_info(), None)
                 .expect("density image");
-            let req = d.get_image_memory_requirements(image);
-            let memory = d
-                .allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(req.memory_type_bits.trailing_zeros()),
-                    None,
-                )
-                .expect("memory");
-            d.bind_image_memory(image, memory, 0).expect("bind");
+            let memory = bound_memory(&d, image);
             let pool = d
                 .create_command_pool(&vk::CommandPoolCreateInfo::default(), None)
                 .expect("pool");

@@ -180,3 +180,44 @@ impl Fixed {
             .layout(layout)
     }
 }
+
+/// The whole `SIZE`×`SIZE` colour image.
+pub const AREA: vk::Rect2D = vk::Rect2D {
+    offset: vk::Offset2D { x: 0, y: 0 },
+    extent: vk::Extent2D {
+        width: SIZE,
+        height: SIZE,
+    },
+};
+
+/// What the colour attachment is cleared to: opaque blue.
+pub const CLEAR: [vk::ClearValue; 1] = [vk::ClearValue {
+    color: vk::ClearColorValue {
+        float32: [0.0, 0.0, 1.0, 1.0],
+    },
+}];
+
+/// Records a draw of one full-screen triangle with `pipeline` over [`AREA`].
+///
+/// # Safety
+/// `cb` must be recording on `d` inside a pass or rendering that `pipeline` fits.
+pub unsafe fn draw_fullscreen(d: &ash::Device, cb: vk::CommandBuffer, pipeline: vk::Pipeline) {
+    // SAFETY: the caller's promise.
+    unsafe {
+        d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
+        d.cmd_set_viewport(
+            cb,
+            0,
+            &[vk::Viewport {
+                x: 0.0,
+                y: 0.0,
+                width: SIZE as f32,
+                height: SIZE as f32,
+                min_depth: 0.0,
+                max_depth: 1.0,
+            }],
+        );
+        d.cmd_set_scissor(cb, 0, &[AREA]);
+        d.cmd_draw(cb, 3, 1, 0, 0);
+    }
+}
