@@ -25,8 +25,8 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 
 use crate::support::vulkan::{
-    attachments2, draw_fullscreen, image_info, memory_type, range, spv, stages, Fixed, AREA, CLEAR,
-    COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+    allocate_info, attachments2, draw_fullscreen, image_info, range, spv, stages, Fixed, AREA,
+    CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk_layer::{assert_only_stage_false_positives, env, take_real_messages, Env, Vk, FDM};
 
@@ -104,13 +104,7 @@ impl Flow {
                 let mem = check(
                     "vkAllocateMemory",
                     d.allocate_memory(
-                        &vk::MemoryAllocateInfo::default()
-                            .allocation_size(req.size)
-                            .memory_type_index(memory_type(
-                                &memory,
-                                req.memory_type_bits,
-                                vk::MemoryPropertyFlags::DEVICE_LOCAL,
-                            )),
+                        &allocate_info(&memory, req, vk::MemoryPropertyFlags::DEVICE_LOCAL),
                         None,
                     ),
                 )?;
@@ -144,14 +138,12 @@ impl Flow {
             let buffer_mem = check(
                 "vkAllocateMemory",
                 d.allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(memory_type(
-                            &memory,
-                            req.memory_type_bits,
-                            vk::MemoryPropertyFlags::HOST_VISIBLE
-                                | vk::MemoryPropertyFlags::HOST_COHERENT,
-                        )),
+                    &allocate_info(
+                        &memory,
+                        req,
+                        vk::MemoryPropertyFlags::HOST_VISIBLE
+                            | vk::MemoryPropertyFlags::HOST_COHERENT,
+                    ),
                     None,
                 ),
             )?;

@@ -19,8 +19,8 @@ use fovea_vkdouble::Profile;
 use proptest::prelude::*;
 
 use crate::support::vulkan::{
-    attachments, attachments2, image_info, memory_type, range, spv, stages, Fixed, COLOR, DENSITY,
-    FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+    allocate_info, attachments, attachments2, image_info, range, spv, stages, Fixed, COLOR,
+    DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk_layer::{env, take_real_messages, Vk, FDM};
 
@@ -219,19 +219,10 @@ impl Fixture {
         unsafe {
             let image = self.d.create_image(&info, None)?;
             let req = self.d.get_image_memory_requirements(image);
-            let ty = memory_type(
-                &self.memory,
-                req.memory_type_bits,
-                vk::MemoryPropertyFlags::empty(),
-            );
+            let any = vk::MemoryPropertyFlags::empty();
             let mem = self
                 .d
-                .allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(ty),
-                    None,
-                )
+                .allocate_memory(&allocate_info(&self.memory, req, any), None)
                 .unwrap();
             self.d.bind_image_memory(image, mem, 0).unwrap();
             self.images.push((image, mem));

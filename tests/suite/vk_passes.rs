@@ -20,8 +20,8 @@ use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
 use crate::support::vulkan::{
-    attachments, attachments2, draw_fullscreen, image_info, memory_type, range, spv, stages, Fixed,
-    AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+    allocate_info, attachments, attachments2, draw_fullscreen, image_info, range, spv, stages,
+    Fixed, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk_layer::{assert_no_messages, env, take_messages, Env, Vk, FDM};
 
@@ -114,15 +114,10 @@ unsafe fn memory_for(
     req: vk::MemoryRequirements,
     want: vk::MemoryPropertyFlags,
 ) -> vk::DeviceMemory {
-    let ty = memory_type(&dev.memory, req.memory_type_bits, want);
     // SAFETY: the caller's promise.
     unsafe {
-        dev.device.allocate_memory(
-            &vk::MemoryAllocateInfo::default()
-                .allocation_size(req.size)
-                .memory_type_index(ty),
-            None,
-        )
+        dev.device
+            .allocate_memory(&allocate_info(&dev.memory, req, want), None)
     }
     .expect("vkAllocateMemory")
 }

@@ -67,6 +67,17 @@ pub fn memory_type(
         .expect("a memory type")
 }
 
+/// An allocation of `req`'s size in the first memory type it allows that has every flag in `want`.
+pub fn allocate_info(
+    memory: &vk::PhysicalDeviceMemoryProperties,
+    req: vk::MemoryRequirements,
+    want: vk::MemoryPropertyFlags,
+) -> vk::MemoryAllocateInfo<'static> {
+    vk::MemoryAllocateInfo::default()
+        .allocation_size(req.size)
+        .memory_type_index(memory_type(memory, req.memory_type_bits, want))
+}
+
 /// The colour attachment (cleared, stored, ending in `color_final`) and the density map
 /// attachment of a pass, as v1 or v2 descriptions (both have the same setters).
 macro_rules! color_and_density {
