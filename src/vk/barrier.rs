@@ -296,6 +296,39 @@ unsafe fn forever<T: Copy, U: Copy>(t: T) -> U {
     unsafe { std::mem::transmute_copy::<T, U>(&t) }
 }
 
+/// Translates the barriers of a v1 command into `s.memory`, `s.buffers` and `s.images`.
+///
+/// # Safety
+/// The copies must not outlive the caller's barriers (they live across the call down only).
+unsafe fn translate1(
+    s: &mut Scratch,
+    memory: &[vk::MemoryBarrier<'_>],
+    buffers: &[vk::BufferMemoryBarrier<'_>],
+    images: &[vk::ImageMemoryBarrier<'_>],
+) {
+    for b in memory {
+        // SAFETY: as the caller promised.
+        let mut c: vk::MemoryBarrier<'static> = unsafe { forever(*b) };
+        c.src_access_mask = access(c.src_access_mask);
+        c.dst_access_mask = access(c.dst_access_mask);
+        s.memory.push(c);
+    }
+    for b in buffers {
+        // SAFETY: as above.
+        let mut c: vk::BufferMemoryBarrier<'static> = unsafe { forever(*b) };
+        c.src_access_mask = access(c.src_access_mask);
+        c.dst_access_mask = access(c.dst_access_mask);
+        s.buffers.push(c);
+    }
+    for b in images {
+        // SAFETY: as above.
+        let b: vk::ImageMemoryBarrier<'static> = unsafe { forever(*b) };
+        let (c, shadow) = image_barrier(&b, crate::bridge::shadow_of);
+        s.images.push(c);
+        s.images.extend(shadow);
+    }
+}
+
 /// Translates dependency infos into `s` (one copy each) and returns them.
 ///
 /// # Safety
@@ -410,29 +443,9 @@ pub unsafe extern "system" fn cmd_pipeline_barrier(
             };
         }
         with_scratch(|s| {
-            for b in m {
-                // SAFETY: lives across the call down only.
-                let mut c: vk::MemoryBarrier<'static> = unsafe { forever(*b) };
-                c.src_access_mask = access(c.src_access_mask);
-                c.dst_access_mask = access(c.dst_access_mask);
-                s.memory.push(c);
-            }
-            for b in b {
-                // SAFETY: as above.
-                let mut c: vk::BufferMemoryBarrier<'static> = unsafe { forever(*b) };
-                c.src_access_mask = access(c.src_access_mask);
-                c.dst_access_mask = access(c.dst_access_mask);
-                s.buffers.push(c);
-            }
-            for b in i {
-                // SAFETY: as above.
-                let b: vk::ImageMemoryBarrier<'static> = unsafe { forever(*b) };
-                let (c, shadow) = image_barrier(&b, crate::bridge::shadow_of);
-                s.images.push(c);
-                s.images.extend(shadow);
-            }
             // SAFETY: the next layer's function; the copies live across the call.
             unsafe {
+                translate1(s, m, b, i);
                 next(
                     cb,
                     stage(src),
@@ -456,9 +469,9 @@ pub unsafe extern "system" fn cmd_pipeline_barrier(
 /// The caller's arguments, valid as the command requires.
 unsafe fn pipeline_barrier2(
     what: &'static str,
+    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdPipelineBarrier2>,
     cb: vk::CommandBuffer,
     info: *const vk::DependencyInfo<'_>,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdPipelineBarrier2>,
 ) {
     guard(what, (), || {
         // SAFETY: a command buffer dispatched by the loader.
@@ -481,36 +494,10 @@ unsafe fn pipeline_barrier2(
     })
 }
 
-/// `vkCmdPipelineBarrier2`.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_pipeline_barrier2(
-    cb: vk::CommandBuffer,
-    info: *const vk::DependencyInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        pipeline_barrier2("vkCmdPipelineBarrier2", cb, info, |r| {
-            r.next.cmd_pipeline_barrier2
-        })
-    }
-}
-
-/// `vkCmdPipelineBarrier2KHR`.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_pipeline_barrier2_khr(
-    cb: vk::CommandBuffer,
-    info: *const vk::DependencyInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        pipeline_barrier2("vkCmdPipelineBarrier2KHR", cb, info, |r| {
-            r.next.cmd_pipeline_barrier2_khr
-        })
-    }
+hook_and_khr_alias! {
+    /// `vkCmdPipelineBarrier2`.
+    cmd_pipeline_barrier2, cmd_pipeline_barrier2_khr = pipeline_barrier2("vkCmdPipelineBarrier2")
+    (cb: vk::CommandBuffer, info: *const vk::DependencyInfo<'_>)
 }
 
 /// `vkCmdWaitEvents`.
@@ -567,29 +554,9 @@ pub unsafe extern "system" fn cmd_wait_events(
             };
         }
         with_scratch(|s| {
-            for b in m {
-                // SAFETY: lives across the call down only.
-                let mut c: vk::MemoryBarrier<'static> = unsafe { forever(*b) };
-                c.src_access_mask = access(c.src_access_mask);
-                c.dst_access_mask = access(c.dst_access_mask);
-                s.memory.push(c);
-            }
-            for b in b {
-                // SAFETY: as above.
-                let mut c: vk::BufferMemoryBarrier<'static> = unsafe { forever(*b) };
-                c.src_access_mask = access(c.src_access_mask);
-                c.dst_access_mask = access(c.dst_access_mask);
-                s.buffers.push(c);
-            }
-            for b in i {
-                // SAFETY: as above.
-                let b: vk::ImageMemoryBarrier<'static> = unsafe { forever(*b) };
-                let (c, shadow) = image_barrier(&b, crate::bridge::shadow_of);
-                s.images.push(c);
-                s.images.extend(shadow);
-            }
             // SAFETY: the next layer's function; the copies live across the call.
             unsafe {
+                translate1(s, m, b, i);
                 next(
                     cb,
                     event_count,
@@ -614,11 +581,11 @@ pub unsafe extern "system" fn cmd_wait_events(
 /// The caller's arguments, valid as the command requires.
 unsafe fn wait_events2(
     what: &'static str,
+    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdWaitEvents2>,
     cb: vk::CommandBuffer,
     count: u32,
     events: *const vk::Event,
     infos: *const vk::DependencyInfo<'_>,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdWaitEvents2>,
 ) {
     guard(what, (), || {
         // SAFETY: a command buffer dispatched by the loader.
@@ -642,40 +609,15 @@ unsafe fn wait_events2(
     })
 }
 
-/// `vkCmdWaitEvents2`.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_wait_events2(
-    cb: vk::CommandBuffer,
-    count: u32,
-    events: *const vk::Event,
-    infos: *const vk::DependencyInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        wait_events2("vkCmdWaitEvents2", cb, count, events, infos, |r| {
-            r.next.cmd_wait_events2
-        })
-    }
-}
-
-/// `vkCmdWaitEvents2KHR`.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_wait_events2_khr(
-    cb: vk::CommandBuffer,
-    count: u32,
-    events: *const vk::Event,
-    infos: *const vk::DependencyInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        wait_events2("vkCmdWaitEvents2KHR", cb, count, events, infos, |r| {
-            r.next.cmd_wait_events2_khr
-        })
-    }
+hook_and_khr_alias! {
+    /// `vkCmdWaitEvents2`.
+    cmd_wait_events2, cmd_wait_events2_khr = wait_events2("vkCmdWaitEvents2")
+    (
+        cb: vk::CommandBuffer,
+        count: u32,
+        events: *const vk::Event,
+        infos: *const vk::DependencyInfo<'_>,
+    )
 }
 
 #[cfg(test)]

@@ -26,6 +26,35 @@
 
 #![deny(unsafe_op_in_unsafe_fn)]
 
+/// A command's hook and its KHR alias's: two `extern "system"` functions that hand their arguments
+/// to one shared body, `$shared(name, pick, arguments…)`, where `pick` takes the next layer's
+/// function of the hook's own name from the device (or recording) state.
+macro_rules! hook_and_khr_alias {
+    (
+        $(#[$doc:meta])*
+        $hook:ident, $khr:ident = $shared:ident($name:literal)
+        ($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?
+    ) => {
+        $(#[$doc])*
+        ///
+        /// # Safety
+        /// The caller's arguments, valid as the command requires.
+        pub unsafe extern "system" fn $hook($($arg: $ty),*) $(-> $ret)? {
+            // SAFETY: the caller's arguments.
+            unsafe { $shared($name, |d| d.next.$hook, $($arg),*) }
+        }
+
+        #[doc = concat!("`", $name, "KHR`: as [`", stringify!($hook), "`].")]
+        ///
+        /// # Safety
+        /// The caller's arguments, valid as the command requires.
+        pub unsafe extern "system" fn $khr($($arg: $ty),*) $(-> $ret)? {
+            // SAFETY: the caller's arguments.
+            unsafe { $shared(concat!($name, "KHR"), |d| d.next.$khr, $($arg),*) }
+        }
+    };
+}
+
 mod barrier;
 mod chain;
 mod device;

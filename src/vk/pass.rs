@@ -543,50 +543,15 @@ unsafe fn create_render_pass2_with(
     })
 }
 
-/// `vkCreateRenderPass2`: see the module documentation.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_render_pass2(
-    device: vk::Device,
-    info: *const vk::RenderPassCreateInfo2<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::RenderPass,
-) -> vk::Result {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        create_render_pass2_with(
-            "vkCreateRenderPass2",
-            |d| d.next.create_render_pass2,
-            device,
-            info,
-            alloc,
-            out,
-        )
-    }
-}
-
-/// `vkCreateRenderPass2KHR`: as [`create_render_pass2`].
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_render_pass2_khr(
-    device: vk::Device,
-    info: *const vk::RenderPassCreateInfo2<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::RenderPass,
-) -> vk::Result {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        create_render_pass2_with(
-            "vkCreateRenderPass2KHR",
-            |d| d.next.create_render_pass2_khr,
-            device,
-            info,
-            alloc,
-            out,
-        )
-    }
+hook_and_khr_alias! {
+    /// `vkCreateRenderPass2`: see the module documentation.
+    create_render_pass2, create_render_pass2_khr = create_render_pass2_with("vkCreateRenderPass2")
+    (
+        device: vk::Device,
+        info: *const vk::RenderPassCreateInfo2<'_>,
+        alloc: *const vk::AllocationCallbacks<'_>,
+        out: *mut vk::RenderPass,
+    ) -> vk::Result
 }
 
 /// `vkDestroyRenderPass`: forgets a rewritten pass.
@@ -819,46 +784,15 @@ unsafe fn cmd_begin_render_pass2_with(
     })
 }
 
-/// `vkCmdBeginRenderPass2`: see [`with_swapped_begin`].
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_begin_render_pass2(
-    cb: vk::CommandBuffer,
-    begin: *const vk::RenderPassBeginInfo<'_>,
-    subpass: *const vk::SubpassBeginInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        cmd_begin_render_pass2_with(
-            "vkCmdBeginRenderPass2",
-            |d| d.next.cmd_begin_render_pass2,
-            cb,
-            begin,
-            subpass,
-        )
-    }
-}
-
-/// `vkCmdBeginRenderPass2KHR`: see [`with_swapped_begin`].
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_begin_render_pass2_khr(
-    cb: vk::CommandBuffer,
-    begin: *const vk::RenderPassBeginInfo<'_>,
-    subpass: *const vk::SubpassBeginInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        cmd_begin_render_pass2_with(
-            "vkCmdBeginRenderPass2KHR",
-            |d| d.next.cmd_begin_render_pass2_khr,
-            cb,
-            begin,
-            subpass,
-        )
-    }
+hook_and_khr_alias! {
+    /// `vkCmdBeginRenderPass2`: see [`with_swapped_begin`].
+    cmd_begin_render_pass2, cmd_begin_render_pass2_khr =
+        cmd_begin_render_pass2_with("vkCmdBeginRenderPass2")
+    (
+        cb: vk::CommandBuffer,
+        begin: *const vk::RenderPassBeginInfo<'_>,
+        subpass: *const vk::SubpassBeginInfo<'_>,
+    )
 }
 
 /// # Safety
@@ -932,42 +866,10 @@ unsafe fn cmd_begin_rendering_with(
     })
 }
 
-/// `vkCmdBeginRendering`: the density-map attachment becomes a shading-rate attachment.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_begin_rendering(
-    cb: vk::CommandBuffer,
-    info: *const vk::RenderingInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        cmd_begin_rendering_with(
-            "vkCmdBeginRendering",
-            |d| d.next.cmd_begin_rendering,
-            cb,
-            info,
-        )
-    }
-}
-
-/// `vkCmdBeginRenderingKHR`: as [`cmd_begin_rendering`].
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_begin_rendering_khr(
-    cb: vk::CommandBuffer,
-    info: *const vk::RenderingInfo<'_>,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        cmd_begin_rendering_with(
-            "vkCmdBeginRenderingKHR",
-            |d| d.next.cmd_begin_rendering_khr,
-            cb,
-            info,
-        )
-    }
+hook_and_khr_alias! {
+    /// `vkCmdBeginRendering`: the density-map attachment becomes a shading-rate attachment.
+    cmd_begin_rendering, cmd_begin_rendering_khr = cmd_begin_rendering_with("vkCmdBeginRendering")
+    (cb: vk::CommandBuffer, info: *const vk::RenderingInfo<'_>)
 }
 
 #[cfg(test)]

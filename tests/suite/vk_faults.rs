@@ -24,14 +24,11 @@ use std::collections::BTreeMap;
 use ash::vk;
 use fovea_vkdouble::Profile;
 
+use crate::support::vulkan::{
+    allocate_info, attachments2, draw_fullscreen, image_info, range, spv, stages, Fixed, AREA,
+    CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+};
 use crate::vk_layer::{assert_only_stage_false_positives, env, take_real_messages, Env, Vk, FDM};
-
-const SIZE: u32 = 64;
-const COLOR: vk::Format = vk::Format::R8G8B8A8_UNORM;
-const DENSITY: vk::Format = vk::Format::R8G8_UNORM;
-const FDM_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
-const VERTEX: &[u8] = include_bytes!("../../crates/vkdouble/tests/shaders/fullscreen.vert.spv");
-const FRAGMENT: &[u8] = include_bytes!("../../crates/vkdouble/tests/shaders/solid.frag.spv");
 
 /// The first call that failed: which, and with what.
 pub(crate) type Failure = (&'static str, vk::Result);
@@ -56,16 +53,6 @@ struct Flow {
 
 fn check<T>(what: &'static str, r: Result<T, vk::Result>) -> Result<T, Failure> {
     r.map_err(|e| (what, e))
-}
-
-fn range(layers: u32) -> vk::ImageSubresourceRange {
-    vk::ImageSubresourceRange {
-        aspect_mask: vk::ImageAspectFlags::COLOR,
-        base_mip_level: 0,
-        level_count: 1,
-        base_array_layer: 0,
-        layer_count: layers,
-    }
 }
 
 impl Flow {
@@ -101,16 +88,6 @@ impl Flow {
             let memory = vk
                 .instance
                 .get_physical_device_memory_properties(vk.physical);
-            let memory_type = |bits: u32, want: vk::MemoryPropertyFlags| {
-                (0..memory.memory_type_count)
-                    .find(|&i| {
-                        bits & (1 << i) != 0
-                            && memory.memory_types[i as usize]
-                                .property_flags
-                                .contains(want)
-                    })
-                    .expect("a memory type")
-            };
             let texel = vk
                 .fdm_properties()
                 .max_fragment_density_texel_size
@@ -120,34 +97,14 @@ impl Flow {
             let mut image = |format, size, usage| -> Result<vk::Image, Failure> {
                 let image = check(
                     "vkCreateImage",
-                    d.create_image(
-                        &vk::ImageCreateInfo::default()
-                            .image_type(vk::ImageType::TYPE_2D)
-                            .format(format)
-                            .extent(vk::Extent3D {
-                                width: size,
-                                height: size,
-                                depth: 1,
-                            })
-                            .mip_levels(1)
-                            .array_layers(1)
-                            .samples(vk::SampleCountFlags::TYPE_1)
-                            .tiling(vk::ImageTiling::OPTIMAL)
-                            .usage(usage),
-                        None,
-                    ),
+                    d.create_image(&image_info(format, size, 1, usage), None),
                 )?;
                 self.images.push(image);
                 let req = d.get_image_memory_requirements(image);
                 let mem = check(
                     "vkAllocateMemory",
                     d.allocate_memory(
-                        &vk::MemoryAllocateInfo::default()
-                            .allocation_size(req.size)
-                            .memory_type_index(memory_type(
-                                req.memory_type_bits,
-                                vk::MemoryPropertyFlags::DEVICE_LOCAL,
-                            )),
+                        &allocate_info(&memory, req, vk::MemoryPropertyFlags::DEVICE_LOCAL),
                         None,
                     ),
                 )?;
@@ -181,13 +138,12 @@ impl Flow {
             let buffer_mem = check(
                 "vkAllocateMemory",
                 d.allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(memory_type(
-                            req.memory_type_bits,
-                            vk::MemoryPropertyFlags::HOST_VISIBLE
-                                | vk::MemoryPropertyFlags::HOST_COHERENT,
-                        )),
+                    &allocate_info(
+                        &memory,
+                        req,
+                        vk::MemoryPropertyFlags::HOST_VISIBLE
+                            | vk::MemoryPropertyFlags::HOST_COHERENT,
+                    ),
                     None,
                 ),
             )?;
@@ -216,7 +172,7 @@ impl Flow {
                             .image(image)
                             .view_type(vk::ImageViewType::TYPE_2D)
                             .format(format)
-                            .subresource_range(range(1)),
+                            .subresource_range(range(0, 1)),
                         None,
                     ),
                 )?;
@@ -226,22 +182,7 @@ impl Flow {
             let color_view = view(color, COLOR)?;
             let density_view = view(density, DENSITY)?;
 
-            let atts = [
-                vk::AttachmentDescription2::default()
-                    .format(COLOR)
-                    .samples(vk::SampleCountFlags::TYPE_1)
-                    .load_op(vk::AttachmentLoadOp::CLEAR)
-                    .store_op(vk::AttachmentStoreOp::STORE)
-                    .initial_layout(vk::ImageLayout::UNDEFINED)
-                    .final_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL),
-                vk::AttachmentDescription2::default()
-                    .format(DENSITY)
-                    .samples(vk::SampleCountFlags::TYPE_1)
-                    .load_op(vk::AttachmentLoadOp::DONT_CARE)
-                    .store_op(vk::AttachmentStoreOp::DONT_CARE)
-                    .initial_layout(FDM_LAYOUT)
-                    .final_layout(FDM_LAYOUT),
-            ];
+            let atts = attachments2(vk::ImageLayout::TRANSFER_SRC_OPTIMAL);
             let color_ref = [vk::AttachmentReference2::default()
                 .attachment(0)
                 .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
@@ -280,7 +221,7 @@ impl Flow {
             self.framebuffer = Some(framebuffer);
 
             for bytes in [VERTEX, FRAGMENT] {
-                let words = ash::util::read_spv(&mut std::io::Cursor::new(bytes)).unwrap();
+                let words = spv(bytes);
                 let m = check(
                     "vkCreateShaderModule",
                     d.create_shader_module(
@@ -300,45 +241,9 @@ impl Flow {
                 d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None),
             )?;
             self.layout = Some(layout);
-            let stages = [
-                vk::PipelineShaderStageCreateInfo::default()
-                    .stage(vk::ShaderStageFlags::VERTEX)
-                    .module(self.modules[0])
-                    .name(c"main"),
-                vk::PipelineShaderStageCreateInfo::default()
-                    .stage(vk::ShaderStageFlags::FRAGMENT)
-                    .module(self.modules[1])
-                    .name(c"main"),
-            ];
-            let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
-            let assembly = vk::PipelineInputAssemblyStateCreateInfo::default()
-                .topology(vk::PrimitiveTopology::TRIANGLE_LIST);
-            let viewport = vk::PipelineViewportStateCreateInfo::default()
-                .viewport_count(1)
-                .scissor_count(1);
-            let raster = vk::PipelineRasterizationStateCreateInfo::default()
-                .polygon_mode(vk::PolygonMode::FILL)
-                .cull_mode(vk::CullModeFlags::NONE)
-                .line_width(1.0);
-            let multisample = vk::PipelineMultisampleStateCreateInfo::default()
-                .rasterization_samples(vk::SampleCountFlags::TYPE_1);
-            let blend_att = [vk::PipelineColorBlendAttachmentState::default()
-                .color_write_mask(vk::ColorComponentFlags::RGBA)];
-            let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_att);
-            let states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
-            let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&states);
-            let info = vk::GraphicsPipelineCreateInfo::default()
-                .stages(&stages)
-                .vertex_input_state(&vertex_input)
-                .input_assembly_state(&assembly)
-                .viewport_state(&viewport)
-                .rasterization_state(&raster)
-                .multisample_state(&multisample)
-                .color_blend_state(&blend)
-                .dynamic_state(&dynamic)
-                .layout(layout)
-                .render_pass(pass)
-                .subpass(0);
+            let stages = stages([self.modules[0], self.modules[1]]);
+            let fixed = Fixed::new();
+            let info = fixed.info(&stages, layout).render_pass(pass).subpass(0);
             let pipeline = d
                 .create_graphics_pipelines(vk::PipelineCache::null(), &[info], None)
                 .map_err(|(made, e)| {
@@ -463,29 +368,17 @@ unsafe fn record(
 ) {
     let to_transfer = vk::ImageMemoryBarrier::default()
         .image(density)
-        .subresource_range(range(1))
+        .subresource_range(range(0, 1))
         .old_layout(vk::ImageLayout::UNDEFINED)
         .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
         .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE);
     let to_density = vk::ImageMemoryBarrier::default()
         .image(density)
-        .subresource_range(range(1))
+        .subresource_range(range(0, 1))
         .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
         .new_layout(FDM_LAYOUT)
         .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
         .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT);
-    let area = vk::Rect2D {
-        offset: vk::Offset2D { x: 0, y: 0 },
-        extent: vk::Extent2D {
-            width: SIZE,
-            height: SIZE,
-        },
-    };
-    let clear = [vk::ClearValue {
-        color: vk::ClearColorValue {
-            float32: [0.0, 0.0, 1.0, 1.0],
-        },
-    }];
     // SAFETY: as the caller promised; structs live across the calls.
     unsafe {
         d.cmd_pipeline_barrier(
@@ -529,25 +422,11 @@ unsafe fn record(
             &vk::RenderPassBeginInfo::default()
                 .render_pass(pass)
                 .framebuffer(framebuffer)
-                .render_area(area)
-                .clear_values(&clear),
+                .render_area(AREA)
+                .clear_values(&CLEAR),
             &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
         );
-        d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
-        d.cmd_set_viewport(
-            cb,
-            0,
-            &[vk::Viewport {
-                x: 0.0,
-                y: 0.0,
-                width: SIZE as f32,
-                height: SIZE as f32,
-                min_depth: 0.0,
-                max_depth: 1.0,
-            }],
-        );
-        d.cmd_set_scissor(cb, 0, &[area]);
-        d.cmd_draw(cb, 3, 1, 0, 0);
+        draw_fullscreen(d, cb, pipeline);
         d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
     }
 }

@@ -18,12 +18,11 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use proptest::prelude::*;
 
+use crate::support::vulkan::{
+    allocate_info, attachments, attachments2, image_info, range, spv, stages, Fixed, COLOR,
+    DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+};
 use crate::vk_layer::{env, take_real_messages, Vk, FDM};
-
-const SIZE: u32 = 64;
-const COLOR: vk::Format = vk::Format::R8G8B8A8_UNORM;
-const DENSITY: vk::Format = vk::Format::R8G8_UNORM;
-const FDM_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
 
 /// A struct fovea cannot know: a header and a body nobody reads.
 #[repr(C)]
@@ -132,16 +131,6 @@ fn device(vk: &Vk, extra: *const c_void) -> Result<ash::Device, vk::Result> {
     unsafe { vk.instance.create_device(vk.physical, &info, None) }
 }
 
-fn range() -> vk::ImageSubresourceRange {
-    vk::ImageSubresourceRange {
-        aspect_mask: vk::ImageAspectFlags::COLOR,
-        base_mip_level: 0,
-        level_count: 1,
-        base_array_layer: 0,
-        layer_count: 1,
-    }
-}
-
 /// The objects every case uses, on one FDM device.
 struct Fixture {
     d: ash::Device,
@@ -198,14 +187,8 @@ impl Fixture {
             f.layout =
                 f.d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
                     .unwrap();
-            for (i, bytes) in [
-                &include_bytes!("../../crates/vkdouble/tests/shaders/fullscreen.vert.spv")[..],
-                &include_bytes!("../../crates/vkdouble/tests/shaders/solid.frag.spv")[..],
-            ]
-            .into_iter()
-            .enumerate()
-            {
-                let words = ash::util::read_spv(&mut std::io::Cursor::new(bytes)).unwrap();
+            for (i, bytes) in [VERTEX, FRAGMENT].into_iter().enumerate() {
+                let words = spv(bytes);
                 f.modules[i] = f
                     .d
                     .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
@@ -230,35 +213,16 @@ impl Fixture {
         usage: vk::ImageUsageFlags,
         next: *const c_void,
     ) -> Result<vk::Image, vk::Result> {
-        let mut info = vk::ImageCreateInfo::default()
-            .image_type(vk::ImageType::TYPE_2D)
-            .format(format)
-            .extent(vk::Extent3D {
-                width: size,
-                height: size,
-                depth: 1,
-            })
-            .mip_levels(1)
-            .array_layers(1)
-            .samples(vk::SampleCountFlags::TYPE_1)
-            .tiling(vk::ImageTiling::OPTIMAL)
-            .usage(usage);
+        let mut info = image_info(format, size, 1, usage);
         info.p_next = next;
         // SAFETY: as the caller promised; the image gets memory before any use.
         unsafe {
             let image = self.d.create_image(&info, None)?;
             let req = self.d.get_image_memory_requirements(image);
-            let ty = (0..self.memory.memory_type_count)
-                .find(|&i| req.memory_type_bits & (1 << i) != 0)
-                .unwrap();
+            let any = vk::MemoryPropertyFlags::empty();
             let mem = self
                 .d
-                .allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(ty),
-                    None,
-                )
+                .allocate_memory(&allocate_info(&self.memory, req, any), None)
                 .unwrap();
             self.d.bind_image_memory(image, mem, 0).unwrap();
             self.images.push((image, mem));
@@ -278,7 +242,7 @@ impl Fixture {
             .image(image)
             .view_type(vk::ImageViewType::TYPE_2D)
             .format(format)
-            .subresource_range(range());
+            .subresource_range(range(0, 1));
         info.p_next = next;
         // SAFETY: as the caller promised.
         unsafe { self.d.create_image_view(&info, None) }
@@ -289,21 +253,7 @@ impl Fixture {
     /// # Safety
     /// `next` must be a valid chain.
     unsafe fn render_pass2(&self, next: *const c_void) -> Result<vk::RenderPass, vk::Result> {
-        let atts = [
-            vk::AttachmentDescription2::default()
-                .format(COLOR)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .final_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL),
-            vk::AttachmentDescription2::default()
-                .format(DENSITY)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .load_op(vk::AttachmentLoadOp::DONT_CARE)
-                .store_op(vk::AttachmentStoreOp::DONT_CARE)
-                .initial_layout(FDM_LAYOUT)
-                .final_layout(FDM_LAYOUT),
-        ];
+        let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
         let color = [vk::AttachmentReference2::default()
             .attachment(0)
             .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
@@ -327,21 +277,7 @@ impl Fixture {
     /// # Safety
     /// `next` must be a valid chain.
     unsafe fn render_pass1(&self, next: *const c_void) -> Result<vk::RenderPass, vk::Result> {
-        let atts = [
-            vk::AttachmentDescription::default()
-                .format(COLOR)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .final_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL),
-            vk::AttachmentDescription::default()
-                .format(DENSITY)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .load_op(vk::AttachmentLoadOp::DONT_CARE)
-                .store_op(vk::AttachmentStoreOp::DONT_CARE)
-                .initial_layout(FDM_LAYOUT)
-                .final_layout(FDM_LAYOUT),
-        ];
+        let atts = attachments(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
         let color = [vk::AttachmentReference {
             attachment: 0,
             layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
@@ -534,45 +470,9 @@ unsafe fn run(vk: &Vk, f: &mut Fixture, target: Target, next: *const c_void) {
                 });
             }
             Target::Pipeline => {
-                let stages = [
-                    vk::PipelineShaderStageCreateInfo::default()
-                        .stage(vk::ShaderStageFlags::VERTEX)
-                        .module(f.modules[0])
-                        .name(c"main"),
-                    vk::PipelineShaderStageCreateInfo::default()
-                        .stage(vk::ShaderStageFlags::FRAGMENT)
-                        .module(f.modules[1])
-                        .name(c"main"),
-                ];
-                let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
-                let assembly = vk::PipelineInputAssemblyStateCreateInfo::default()
-                    .topology(vk::PrimitiveTopology::TRIANGLE_LIST);
-                let viewport = vk::PipelineViewportStateCreateInfo::default()
-                    .viewport_count(1)
-                    .scissor_count(1);
-                let raster = vk::PipelineRasterizationStateCreateInfo::default()
-                    .polygon_mode(vk::PolygonMode::FILL)
-                    .line_width(1.0);
-                let multisample = vk::PipelineMultisampleStateCreateInfo::default()
-                    .rasterization_samples(vk::SampleCountFlags::TYPE_1);
-                let blend_att = [vk::PipelineColorBlendAttachmentState::default()
-                    .color_write_mask(vk::ColorComponentFlags::RGBA)];
-                let blend =
-                    vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_att);
-                let states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
-                let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&states);
-                let mut info = vk::GraphicsPipelineCreateInfo::default()
-                    .stages(&stages)
-                    .vertex_input_state(&vertex_input)
-                    .input_assembly_state(&assembly)
-                    .viewport_state(&viewport)
-                    .rasterization_state(&raster)
-                    .multisample_state(&multisample)
-                    .color_blend_state(&blend)
-                    .dynamic_state(&dynamic)
-                    .layout(f.layout)
-                    .render_pass(f.pass)
-                    .subpass(0);
+                let stages = stages(f.modules);
+                let fixed = Fixed::new();
+                let mut info = fixed.info(&stages, f.layout).render_pass(f.pass).subpass(0);
                 info.p_next = next;
                 let p = d
                     .create_graphics_pipelines(vk::PipelineCache::null(), &[info], None)
@@ -583,7 +483,7 @@ unsafe fn run(vk: &Vk, f: &mut Fixture, target: Target, next: *const c_void) {
             Target::Barrier1 => {
                 let mut b = vk::ImageMemoryBarrier::default()
                     .image(f.images[1].0)
-                    .subresource_range(range())
+                    .subresource_range(range(0, 1))
                     .old_layout(vk::ImageLayout::UNDEFINED)
                     .new_layout(FDM_LAYOUT)
                     .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT);
@@ -603,7 +503,7 @@ unsafe fn run(vk: &Vk, f: &mut Fixture, target: Target, next: *const c_void) {
             Target::Barrier2 => {
                 let mut b = [vk::ImageMemoryBarrier2::default()
                     .image(f.images[1].0)
-                    .subresource_range(range())
+                    .subresource_range(range(0, 1))
                     .old_layout(vk::ImageLayout::UNDEFINED)
                     .new_layout(FDM_LAYOUT)
                     .dst_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)

@@ -20,6 +20,8 @@ use fovea_harness::skip;
 use fovea_vkdouble::{Loaded, Profile};
 use serde_json::json;
 
+use crate::support::vulkan::image_info;
+
 const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
 pub(crate) const FDM: &CStr = c"VK_EXT_fragment_density_map";
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
@@ -345,19 +347,12 @@ impl Drop for Vk {
 }
 
 pub(crate) fn fdm_image_info() -> vk::ImageCreateInfo<'static> {
-    vk::ImageCreateInfo::default()
-        .image_type(vk::ImageType::TYPE_2D)
-        .format(vk::Format::R8G8_UNORM)
-        .extent(vk::Extent3D {
-            width: 8,
-            height: 8,
-            depth: 1,
-        })
-        .mip_levels(1)
-        .array_layers(2)
-        .samples(vk::SampleCountFlags::TYPE_1)
-        .tiling(vk::ImageTiling::OPTIMAL)
-        .usage(vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT | vk::ImageUsageFlags::TRANSFER_DST)
+    image_info(
+        vk::Format::R8G8_UNORM,
+        8,
+        2,
+        vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT | vk::ImageUsageFlags::TRANSFER_DST,
+    )
 }
 
 /// On the NVIDIA-like and AMD-like profiles the application sees density maps with the driver's

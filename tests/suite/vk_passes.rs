@@ -19,15 +19,14 @@ use ash::vk::Handle as _;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
+use crate::support::vulkan::{
+    allocate_info, attachments, attachments2, draw_fullscreen, image_info, range, spv, stages,
+    Fixed, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+};
 use crate::vk_layer::{assert_no_messages, env, take_messages, Env, Vk, FDM};
 
 /// The colour attachment's width and height.
-const SIZE: u32 = 64;
-const COLOR: vk::Format = vk::Format::R8G8B8A8_UNORM;
-const FDM_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
 const FSR_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
-const VERTEX: &[u8] = include_bytes!("../../crates/vkdouble/tests/shaders/fullscreen.vert.spv");
-const FRAGMENT: &[u8] = include_bytes!("../../crates/vkdouble/tests/shaders/solid.frag.spv");
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Case {
@@ -115,22 +114,10 @@ unsafe fn memory_for(
     req: vk::MemoryRequirements,
     want: vk::MemoryPropertyFlags,
 ) -> vk::DeviceMemory {
-    let ty = (0..dev.memory.memory_type_count)
-        .find(|&i| {
-            req.memory_type_bits & (1 << i) != 0
-                && dev.memory.memory_types[i as usize]
-                    .property_flags
-                    .contains(want)
-        })
-        .expect("a memory type");
     // SAFETY: the caller's promise.
     unsafe {
-        dev.device.allocate_memory(
-            &vk::MemoryAllocateInfo::default()
-                .allocation_size(req.size)
-                .memory_type_index(ty),
-            None,
-        )
+        dev.device
+            .allocate_memory(&allocate_info(&dev.memory, req, want), None)
     }
     .expect("vkAllocateMemory")
 }
@@ -148,22 +135,7 @@ unsafe fn image(
     unsafe {
         let image = dev
             .device
-            .create_image(
-                &vk::ImageCreateInfo::default()
-                    .image_type(vk::ImageType::TYPE_2D)
-                    .format(format)
-                    .extent(vk::Extent3D {
-                        width: size,
-                        height: size,
-                        depth: 1,
-                    })
-                    .mip_levels(1)
-                    .array_layers(layers)
-                    .samples(vk::SampleCountFlags::TYPE_1)
-                    .tiling(vk::ImageTiling::OPTIMAL)
-                    .usage(usage),
-                None,
-            )
+            .create_image(&image_info(format, size, layers, usage), None)
             .expect("vkCreateImage");
         let req = dev.device.get_image_memory_requirements(image);
         let memory = memory_for(dev, req, vk::MemoryPropertyFlags::DEVICE_LOCAL);
@@ -200,18 +172,8 @@ fn view(
     .expect("vkCreateImageView")
 }
 
-fn range(base: u32, layers: u32) -> vk::ImageSubresourceRange {
-    vk::ImageSubresourceRange {
-        aspect_mask: vk::ImageAspectFlags::COLOR,
-        base_mip_level: 0,
-        level_count: 1,
-        base_array_layer: base,
-        layer_count: layers,
-    }
-}
-
 fn shader(dev: &Dev, bytes: &[u8]) -> vk::ShaderModule {
-    let words = ash::util::read_spv(&mut std::io::Cursor::new(bytes)).unwrap();
+    let words = spv(bytes);
     // SAFETY: the words live across the call.
     unsafe {
         dev.device
@@ -234,22 +196,7 @@ fn render_pass(dev: &Dev, case: Case, fdm: bool) -> vk::RenderPass {
     // SAFETY: every struct lives across the calls.
     unsafe {
         if matches!(case, Case::V1 | Case::V1Multiview) {
-            let atts = [
-                vk::AttachmentDescription::default()
-                    .format(COLOR)
-                    .samples(vk::SampleCountFlags::TYPE_1)
-                    .load_op(vk::AttachmentLoadOp::CLEAR)
-                    .store_op(vk::AttachmentStoreOp::STORE)
-                    .initial_layout(vk::ImageLayout::UNDEFINED)
-                    .final_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL),
-                vk::AttachmentDescription::default()
-                    .format(vk::Format::R8G8_UNORM)
-                    .samples(vk::SampleCountFlags::TYPE_1)
-                    .load_op(vk::AttachmentLoadOp::DONT_CARE)
-                    .store_op(vk::AttachmentStoreOp::DONT_CARE)
-                    .initial_layout(FDM_LAYOUT)
-                    .final_layout(FDM_LAYOUT),
-            ];
+            let atts = attachments(vk::ImageLayout::TRANSFER_SRC_OPTIMAL);
             let color = [vk::AttachmentReference {
                 attachment: 0,
                 layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
@@ -281,22 +228,7 @@ fn render_pass(dev: &Dev, case: Case, fdm: bool) -> vk::RenderPass {
             }
             d.create_render_pass(&info, None)
         } else {
-            let atts = [
-                vk::AttachmentDescription2::default()
-                    .format(COLOR)
-                    .samples(vk::SampleCountFlags::TYPE_1)
-                    .load_op(vk::AttachmentLoadOp::CLEAR)
-                    .store_op(vk::AttachmentStoreOp::STORE)
-                    .initial_layout(vk::ImageLayout::UNDEFINED)
-                    .final_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL),
-                vk::AttachmentDescription2::default()
-                    .format(vk::Format::R8G8_UNORM)
-                    .samples(vk::SampleCountFlags::TYPE_1)
-                    .load_op(vk::AttachmentLoadOp::DONT_CARE)
-                    .store_op(vk::AttachmentStoreOp::DONT_CARE)
-                    .initial_layout(FDM_LAYOUT)
-                    .final_layout(FDM_LAYOUT),
-            ];
+            let atts = attachments2(vk::ImageLayout::TRANSFER_SRC_OPTIMAL);
             let color = [vk::AttachmentReference2::default()
                 .attachment(0)
                 .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
@@ -336,46 +268,12 @@ fn pipeline(
     layout: vk::PipelineLayout,
     modules: [vk::ShaderModule; 2],
 ) -> vk::Pipeline {
-    let stages = [
-        vk::PipelineShaderStageCreateInfo::default()
-            .stage(vk::ShaderStageFlags::VERTEX)
-            .module(modules[0])
-            .name(c"main"),
-        vk::PipelineShaderStageCreateInfo::default()
-            .stage(vk::ShaderStageFlags::FRAGMENT)
-            .module(modules[1])
-            .name(c"main"),
-    ];
-    let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
-    let assembly = vk::PipelineInputAssemblyStateCreateInfo::default()
-        .topology(vk::PrimitiveTopology::TRIANGLE_LIST);
-    let viewport = vk::PipelineViewportStateCreateInfo::default()
-        .viewport_count(1)
-        .scissor_count(1);
-    let raster = vk::PipelineRasterizationStateCreateInfo::default()
-        .polygon_mode(vk::PolygonMode::FILL)
-        .cull_mode(vk::CullModeFlags::NONE)
-        .line_width(1.0);
-    let multisample = vk::PipelineMultisampleStateCreateInfo::default()
-        .rasterization_samples(vk::SampleCountFlags::TYPE_1);
-    let blend_att = [vk::PipelineColorBlendAttachmentState::default()
-        .color_write_mask(vk::ColorComponentFlags::RGBA)];
-    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_att);
-    let states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
-    let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&states);
+    let stages = stages(modules);
+    let fixed = Fixed::new();
     let formats = [COLOR];
     let mut rendering =
         vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&formats);
-    let mut info = vk::GraphicsPipelineCreateInfo::default()
-        .stages(&stages)
-        .vertex_input_state(&vertex_input)
-        .input_assembly_state(&assembly)
-        .viewport_state(&viewport)
-        .rasterization_state(&raster)
-        .multisample_state(&multisample)
-        .color_blend_state(&blend)
-        .dynamic_state(&dynamic)
-        .layout(layout);
+    let mut info = fixed.info(&stages, layout);
     if case == Case::Dynamic {
         info = info.push_next(&mut rendering);
         if fdm {
@@ -443,7 +341,7 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
         let n = SIZE.div_ceil(texel);
         let density_usage =
             vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT | vk::ImageUsageFlags::TRANSFER_DST;
-        let density = fdm.then(|| image(&dev, vk::Format::R8G8_UNORM, n, 2, density_usage));
+        let density = fdm.then(|| image(&dev, DENSITY, n, 2, density_usage));
         // Per pass: the colour view and the density view.
         let views: Vec<(vk::ImageView, Option<vk::ImageView>)> = (0..case.passes())
             .map(|eye| {
@@ -454,9 +352,7 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
                 };
                 (
                     view(&dev, color, COLOR, base, count, array),
-                    density.map(|(img, _)| {
-                        view(&dev, img, vk::Format::R8G8_UNORM, base, count, array)
-                    }),
+                    density.map(|(img, _)| view(&dev, img, DENSITY, base, count, array)),
                 )
             })
             .collect();
@@ -465,7 +361,7 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
             None => Vec::new(),
             Some(pass) if case == Case::Imageless => {
                 let color_formats = [COLOR];
-                let density_formats = [vk::Format::R8G8_UNORM];
+                let density_formats = [DENSITY];
                 let infos = [
                     vk::FramebufferAttachmentImageInfo::default()
                         .usage(
@@ -546,34 +442,8 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
             .unwrap()[0];
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .unwrap();
-        let area = vk::Rect2D {
-            offset: vk::Offset2D { x: 0, y: 0 },
-            extent: vk::Extent2D {
-                width: SIZE,
-                height: SIZE,
-            },
-        };
-        let clear = [vk::ClearValue {
-            color: vk::ClearColorValue {
-                float32: [0.0, 0.0, 1.0, 1.0],
-            },
-        }];
         let draw_it = || {
-            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipe);
-            d.cmd_set_viewport(
-                cb,
-                0,
-                &[vk::Viewport {
-                    x: 0.0,
-                    y: 0.0,
-                    width: SIZE as f32,
-                    height: SIZE as f32,
-                    min_depth: 0.0,
-                    max_depth: 1.0,
-                }],
-            );
-            d.cmd_set_scissor(cb, 0, &[area]);
-            d.cmd_draw(cb, 3, 1, 0, 0);
+            draw_fullscreen(d, cb, pipe);
         };
         match pass {
             None => {
@@ -605,12 +475,12 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
                     .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                     .load_op(vk::AttachmentLoadOp::CLEAR)
                     .store_op(vk::AttachmentStoreOp::STORE)
-                    .clear_value(clear[0])];
+                    .clear_value(CLEAR[0])];
                 let mut density_att = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
                     .image_view(views[0].1.unwrap_or_default())
                     .image_layout(FDM_LAYOUT);
                 let mut info = vk::RenderingInfo::default()
-                    .render_area(area)
+                    .render_area(AREA)
                     .layer_count(1)
                     .color_attachments(&color_att);
                 if fdm {
@@ -643,8 +513,8 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
                     let mut begin = vk::RenderPassBeginInfo::default()
                         .render_pass(pass)
                         .framebuffer(*fb)
-                        .render_area(area)
-                        .clear_values(&clear);
+                        .render_area(AREA)
+                        .clear_values(&CLEAR);
                     if case == Case::Imageless {
                         begin = begin.push_next(&mut begin_views);
                     }

@@ -12,18 +12,14 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
+use crate::support::vulkan::{range, spv, stages, Fixed, COLOR};
 use crate::vk_layer::{
-    assert_no_messages, assert_only_stage_false_positives, env, fdm_image_info, take_messages, Vk,
-    FDM,
+    assert_no_messages, assert_only_stage_false_positives, env, fdm_image_info, take_messages, Env,
+    Vk, FDM,
 };
 
 const FDM_FLAG: vk::PipelineCreateFlags =
     vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT;
-const COLOR: vk::Format = vk::Format::R8G8B8A8_UNORM;
-
-fn spv(bytes: &[u8]) -> Vec<u32> {
-    ash::util::read_spv(&mut std::io::Cursor::new(bytes)).expect("SPIR-V")
-}
 
 /// The shading-rate state fovea gives pipelines used with a density map: 1×1, {KEEP, REPLACE}.
 fn injected() -> Value {
@@ -83,43 +79,6 @@ impl Objects {
     }
 }
 
-/// The fixed-function state of a one-colour-attachment pipeline.
-struct Fixed {
-    vertex: vk::PipelineVertexInputStateCreateInfo<'static>,
-    assembly: vk::PipelineInputAssemblyStateCreateInfo<'static>,
-    viewport: vk::PipelineViewportStateCreateInfo<'static>,
-    raster: vk::PipelineRasterizationStateCreateInfo<'static>,
-    multisample: vk::PipelineMultisampleStateCreateInfo<'static>,
-    depth: vk::PipelineDepthStencilStateCreateInfo<'static>,
-    blend_attachment: [vk::PipelineColorBlendAttachmentState; 1],
-    dynamic_list: [vk::DynamicState; 2],
-    formats: [vk::Format; 1],
-}
-
-impl Fixed {
-    fn new() -> Box<Fixed> {
-        Box::new(Fixed {
-            vertex: vk::PipelineVertexInputStateCreateInfo::default(),
-            assembly: vk::PipelineInputAssemblyStateCreateInfo::default()
-                .topology(vk::PrimitiveTopology::TRIANGLE_LIST),
-            viewport: vk::PipelineViewportStateCreateInfo::default()
-                .viewport_count(1)
-                .scissor_count(1),
-            raster: vk::PipelineRasterizationStateCreateInfo::default()
-                .polygon_mode(vk::PolygonMode::FILL)
-                .cull_mode(vk::CullModeFlags::NONE)
-                .line_width(1.0),
-            multisample: vk::PipelineMultisampleStateCreateInfo::default()
-                .rasterization_samples(vk::SampleCountFlags::TYPE_1),
-            depth: vk::PipelineDepthStencilStateCreateInfo::default(),
-            blend_attachment: [vk::PipelineColorBlendAttachmentState::default()
-                .color_write_mask(vk::ColorComponentFlags::RGBA)],
-            dynamic_list: [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR],
-            formats: [COLOR],
-        })
-    }
-}
-
 /// Creates one graphics pipeline from `info` (whose pointers `fixed` and the caller keep alive).
 fn create(d: &ash::Device, info: &vk::GraphicsPipelineCreateInfo<'_>) -> vk::Pipeline {
     // SAFETY: everything the create info points at lives across the call.
@@ -130,8 +89,29 @@ fn create(d: &ash::Device, info: &vk::GraphicsPipelineCreateInfo<'_>) -> vk::Pip
     .unwrap_or_else(|(_, e)| panic!("vkCreateGraphicsPipelines: {e}; {:?}", take_messages()))
 }
 
+/// Memory of the first type `image` allows, bound to it.
+///
+/// # Safety
+/// `image` must be alive on `d` and without memory.
+unsafe fn bound_memory(d: &ash::Device, image: vk::Image) -> vk::DeviceMemory {
+    // SAFETY: the caller's promise; the struct lives across the call.
+    unsafe {
+        let req = d.get_image_memory_requirements(image);
+        let memory = d
+            .allocate_memory(
+                &vk::MemoryAllocateInfo::default()
+                    .allocation_size(req.size)
+                    .memory_type_index(req.memory_type_bits.trailing_zeros()),
+                None,
+            )
+            .expect("memory");
+        d.bind_image_memory(image, memory, 0).expect("bind");
+        memory
+    }
+}
+
 /// The double's record of `pipeline`.
-fn record(env: &crate::vk_layer::Env, pipeline: vk::Pipeline) -> Value {
+fn record(env: &Env, pipeline: vk::Pipeline) -> Value {
     use ash::vk::Handle as _;
     env.double
         .events("pipeline")
@@ -140,48 +120,44 @@ fn record(env: &crate::vk_layer::Env, pipeline: vk::Pipeline) -> Value {
         .unwrap_or_else(|| panic!("no record of {pipeline:?}"))
 }
 
+/// Runs `body` on each shading-rate profile with a density-map device (with graphics pipeline
+/// libraries where `gpl`) and [`Objects`] on it, then destroys those and checks that neither the
+/// double nor validation complained. `body` destroys what it made.
+fn on_each_profile(gpl: bool, body: impl Fn(&Env, Profile, &ash::Device, &Objects)) {
+    let Some((_serial, env)) = env() else { return };
+    for profile in [Profile::Nvidia, Profile::Amd] {
+        let Some(vk) = Vk::new(env, profile, true) else {
+            return;
+        };
+        let d = fdm_device(&vk, gpl);
+        let o = Objects::new(&d);
+        body(env, profile, &d, &o);
+        // SAFETY: nothing made from them is left.
+        unsafe {
+            o.destroy(&d);
+            d.destroy_device(None);
+        }
+        assert_eq!(env.double.errors(), Vec::<String>::new());
+        drop(vk);
+        assert_no_messages();
+    }
+}
+
 /// A pipeline for dynamic rendering with a density map reaches the driver with the shading-rate flag and
 /// the state that lets the attachment decide; a pipeline for a render pass without a density map
 /// is untouched. (The 64-bit flags in `VkPipelineCreateFlags2CreateInfoKHR` are unit-tested only:
 /// the validation layer here, 1.3.239, predates that struct and reports it as unknown.)
 #[test]
 fn pipelines_used_with_density_maps_let_the_attachment_decide() {
-    let Some((_serial, env)) = env() else { return };
-    for profile in [Profile::Nvidia, Profile::Amd] {
-        let Some(vk) = Vk::new(env, profile, true) else {
-            return;
-        };
-        let d = fdm_device(&vk, false);
-        let o = Objects::new(&d);
+    on_each_profile(false, |env, profile, d, o| {
         let f = Fixed::new();
-        let stages = [
-            vk::PipelineShaderStageCreateInfo::default()
-                .stage(vk::ShaderStageFlags::VERTEX)
-                .module(o.vert)
-                .name(c"main"),
-            vk::PipelineShaderStageCreateInfo::default()
-                .stage(vk::ShaderStageFlags::FRAGMENT)
-                .module(o.frag)
-                .name(c"main"),
-        ];
-        let blend =
-            vk::PipelineColorBlendStateCreateInfo::default().attachments(&f.blend_attachment);
-        let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&f.dynamic_list);
-        let base = vk::GraphicsPipelineCreateInfo::default()
-            .stages(&stages)
-            .vertex_input_state(&f.vertex)
-            .input_assembly_state(&f.assembly)
-            .viewport_state(&f.viewport)
-            .rasterization_state(&f.raster)
-            .multisample_state(&f.multisample)
-            .color_blend_state(&blend)
-            .dynamic_state(&dynamic)
-            .layout(o.layout);
+        let stages = stages([o.vert, o.frag]);
+        let base = f.info(&stages, o.layout);
 
         let mut rendering =
-            vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&f.formats);
+            vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&[COLOR]);
         let with_flag = base.flags(FDM_FLAG).push_next(&mut rendering);
-        let p_flag = create(&d, &with_flag);
+        let p_flag = create(d, &with_flag);
 
         let attachment = [vk::AttachmentDescription::default()
             .format(COLOR)
@@ -204,7 +180,7 @@ fn pipelines_used_with_density_maps_let_the_attachment_decide() {
             )
         }
         .expect("render pass");
-        let p_plain = create(&d, &base.render_pass(pass));
+        let p_plain = create(d, &base.render_pass(pass));
 
         let r = record(env, p_flag);
         assert_eq!(r["shading_rate_state"], injected(), "{profile:?}: {r}");
@@ -223,13 +199,8 @@ fn pipelines_used_with_density_maps_let_the_attachment_decide() {
                 d.destroy_pipeline(p, None);
             }
             d.destroy_render_pass(pass, None);
-            o.destroy(&d);
-            d.destroy_device(None);
         }
-        assert_eq!(env.double.errors(), Vec::<String>::new());
-        drop(vk);
-        assert_no_messages();
-    }
+    });
 }
 
 /// Graphics pipeline libraries (lavapipe 22.3 offers VK_EXT_graphics_pipeline_library): the
@@ -239,25 +210,9 @@ fn pipelines_used_with_density_maps_let_the_attachment_decide() {
 /// the link of dynamic-rendering libraries whatever fovea does.)
 #[test]
 fn pipeline_libraries_agree_on_the_shading_rate_state() {
-    let Some((_serial, env)) = env() else { return };
-    for profile in [Profile::Nvidia, Profile::Amd] {
-        let Some(vk) = Vk::new(env, profile, true) else {
-            return;
-        };
-        let d = fdm_device(&vk, true);
-        let o = Objects::new(&d);
+    on_each_profile(true, |env, profile, d, o| {
         let f = Fixed::new();
-        let blend =
-            vk::PipelineColorBlendStateCreateInfo::default().attachments(&f.blend_attachment);
-        let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&f.dynamic_list);
-        let vert = [vk::PipelineShaderStageCreateInfo::default()
-            .stage(vk::ShaderStageFlags::VERTEX)
-            .module(o.vert)
-            .name(c"main")];
-        let frag = [vk::PipelineShaderStageCreateInfo::default()
-            .stage(vk::ShaderStageFlags::FRAGMENT)
-            .module(o.frag)
-            .name(c"main")];
+        let [vert, frag] = stages([o.vert, o.frag]);
         let flags = FDM_FLAG | vk::PipelineCreateFlags::LIBRARY_KHR;
         type L = vk::GraphicsPipelineLibraryFlagsEXT;
         let library = |part: L, info: vk::GraphicsPipelineCreateInfo<'_>| {
@@ -267,15 +222,15 @@ fn pipeline_libraries_agree_on_the_shading_rate_state() {
             let formats: &[vk::Format] = if part == L::PRE_RASTERIZATION_SHADERS {
                 &[]
             } else {
-                &f.formats
+                &[COLOR]
             };
             let mut rendering =
                 vk::PipelineRenderingCreateInfo::default().color_attachment_formats(formats);
             let p = create(
-                &d,
+                d,
                 &info
                     .flags(flags)
-                    .color_blend_state(&blend)
+                    .color_blend_state(&f.blend)
                     .push_next(&mut gpl)
                     .push_next(&mut rendering),
             );
@@ -289,24 +244,24 @@ fn pipeline_libraries_agree_on_the_shading_rate_state() {
         );
         let pre_raster = library(
             L::PRE_RASTERIZATION_SHADERS,
-            base.stages(&vert)
+            base.stages(std::slice::from_ref(&vert))
                 .viewport_state(&f.viewport)
                 .rasterization_state(&f.raster)
-                .dynamic_state(&dynamic)
+                .dynamic_state(&f.dynamic)
                 .layout(o.layout),
         );
         let fragment = library(
             L::FRAGMENT_SHADER,
-            base.stages(&frag)
+            base.stages(std::slice::from_ref(&frag))
                 .multisample_state(&f.multisample)
                 .depth_stencil_state(&f.depth)
-                .dynamic_state(&dynamic)
+                .dynamic_state(&f.dynamic)
                 .layout(o.layout),
         );
         let output = library(
             L::FRAGMENT_OUTPUT_INTERFACE,
             base.multisample_state(&f.multisample)
-                .color_blend_state(&blend),
+                .color_blend_state(&f.blend),
         );
         let libraries = [vertex_input, pre_raster, fragment, output];
         for (p, state) in [
@@ -324,13 +279,8 @@ fn pipeline_libraries_agree_on_the_shading_rate_state() {
             for p in libraries {
                 d.destroy_pipeline(p, None);
             }
-            o.destroy(&d);
-            d.destroy_device(None);
         }
-        assert_eq!(env.double.errors(), Vec::<String>::new());
-        drop(vk);
-        assert_no_messages();
-    }
+    });
 }
 
 /// Samplers with the subsampled flags and density-map views with the dynamic flag are created
@@ -364,16 +314,7 @@ fn subsampled_samplers_dynamic_views_and_frag_size_shaders() {
                     None,
                 )
                 .expect("density image");
-            let req = d.get_image_memory_requirements(image);
-            let memory = d
-                .allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(req.memory_type_bits.trailing_zeros()),
-                    None,
-                )
-                .expect("memory");
-            d.bind_image_memory(image, memory, 0).expect("bind");
+            let memory = bound_memory(&d, image);
             let view = d
                 .create_image_view(
                     &vk::ImageViewCreateInfo::default()
@@ -381,13 +322,7 @@ fn subsampled_samplers_dynamic_views_and_frag_size_shaders() {
                         .image(image)
                         .view_type(vk::ImageViewType::TYPE_2D_ARRAY)
                         .format(vk::Format::R8G8_UNORM)
-                        .subresource_range(vk::ImageSubresourceRange {
-                            aspect_mask: vk::ImageAspectFlags::COLOR,
-                            base_mip_level: 0,
-                            level_count: 1,
-                            base_array_layer: 0,
-                            layer_count: 2,
-                        }),
+                        .subresource_range(range(0, 2)),
                     None,
                 )
                 .expect("a dynamic density-map view");
@@ -433,29 +368,14 @@ fn barriers_lose_the_density_map_bits() {
             return;
         };
         let d = fdm_device(&vk, false);
-        let range = vk::ImageSubresourceRange {
-            aspect_mask: vk::ImageAspectFlags::COLOR,
-            base_mip_level: 0,
-            level_count: 1,
-            base_array_layer: 0,
-            layer_count: 2,
-        };
+        let range = range(0, 2);
         // SAFETY: create infos live across the calls; the submit is waited for before anything
         // it uses is destroyed.
         unsafe {
             let image = d
                 .create_image(&fdm_image_info(), None)
                 .expect("density image");
-            let req = d.get_image_memory_requirements(image);
-            let memory = d
-                .allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(req.memory_type_bits.trailing_zeros()),
-                    None,
-                )
-                .expect("memory");
-            d.bind_image_memory(image, memory, 0).expect("bind");
+            let memory = bound_memory(&d, image);
             let pool = d
                 .create_command_pool(&vk::CommandPoolCreateInfo::default(), None)
                 .expect("pool");

@@ -443,6 +443,7 @@ fn advertises_per_profile() {
                     &dev,
                     vk::Format::R8_UINT,
                     4,
+                    1,
                     vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR,
                 );
                 let images = env.double.events("image");
@@ -467,7 +468,7 @@ fn drop_ok(env: &Env, profile: Profile) {
     assert_eq!(inst.last().unwrap()["profile"], profile.name());
 }
 
-/// An image with its own memory.
+/// A square image of `layers` layers with its own memory.
 ///
 /// # Safety
 /// `dev` must be alive.
@@ -475,6 +476,7 @@ unsafe fn make_image(
     dev: &Dev,
     format: vk::Format,
     size: u32,
+    layers: u32,
     usage: vk::ImageUsageFlags,
 ) -> (vk::Image, vk::DeviceMemory) {
     // SAFETY: the caller's promise; the struct lives across the call.
@@ -491,7 +493,7 @@ unsafe fn make_image(
                         depth: 1,
                     })
                     .mip_levels(1)
-                    .array_layers(1)
+                    .array_layers(layers)
                     .samples(vk::SampleCountFlags::TYPE_1)
                     .tiling(vk::ImageTiling::OPTIMAL)
                     .usage(usage),
@@ -588,6 +590,47 @@ fn color_range() -> vk::ImageSubresourceRange {
     }
 }
 
+/// Records one v1 image barrier from `src` to `dst` stages.
+///
+/// # Safety
+/// `cb` must be recording on `d`.
+unsafe fn image_barrier(
+    d: &ash::Device,
+    cb: vk::CommandBuffer,
+    src: vk::PipelineStageFlags,
+    dst: vk::PipelineStageFlags,
+    barrier: vk::ImageMemoryBarrier,
+) {
+    // SAFETY: the caller's promise.
+    unsafe {
+        d.cmd_pipeline_barrier(
+            cb,
+            src,
+            dst,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &[barrier],
+        )
+    }
+}
+
+/// A copy of the first colour layer of a `size`×`size` image.
+fn whole_layer(size: u32) -> vk::BufferImageCopy {
+    vk::BufferImageCopy::default()
+        .image_subresource(vk::ImageSubresourceLayers {
+            aspect_mask: vk::ImageAspectFlags::COLOR,
+            mip_level: 0,
+            base_array_layer: 0,
+            layer_count: 1,
+        })
+        .image_extent(vk::Extent3D {
+            width: size,
+            height: size,
+            depth: 1,
+        })
+}
+
 fn shader(dev: &Dev, bytes: &[u8]) -> vk::ShaderModule {
     let words = ash::util::read_spv(&mut std::io::Cursor::new(bytes)).unwrap();
     // SAFETY: the words live across the call.
@@ -643,6 +686,7 @@ fn draw(
             dev,
             color_format,
             SIZE,
+            1,
             vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
         );
         let color_view = view(dev, color, color_format);
@@ -651,6 +695,7 @@ fn draw(
                 dev,
                 vk::Format::R8_UINT,
                 n,
+                1,
                 vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
                     | vk::ImageUsageFlags::TRANSFER_DST,
             );
@@ -836,32 +881,19 @@ fn draw(
                 .old_layout(vk::ImageLayout::UNDEFINED)
                 .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
                 .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE);
-            d.cmd_pipeline_barrier(
+            image_barrier(
+                d,
                 cb,
                 vk::PipelineStageFlags::TOP_OF_PIPE,
                 vk::PipelineStageFlags::TRANSFER,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[],
-                &[to_dst],
+                to_dst,
             );
             d.cmd_copy_buffer_to_image(
                 cb,
                 staging,
                 img,
                 vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                &[vk::BufferImageCopy::default()
-                    .image_subresource(vk::ImageSubresourceLayers {
-                        aspect_mask: vk::ImageAspectFlags::COLOR,
-                        mip_level: 0,
-                        base_array_layer: 0,
-                        layer_count: 1,
-                    })
-                    .image_extent(vk::Extent3D {
-                        width: n,
-                        height: n,
-                        depth: 1,
-                    })],
+                &[whole_layer(n)],
             );
             // sync2, so both barrier paths of the double are crossed.
             let to_fsr = [vk::ImageMemoryBarrier2::default()
@@ -907,14 +939,12 @@ fn draw(
                     .old_layout(vk::ImageLayout::UNDEFINED)
                     .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                     .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE);
-                d.cmd_pipeline_barrier(
+                image_barrier(
+                    d,
                     cb,
                     vk::PipelineStageFlags::TOP_OF_PIPE,
                     vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-                    vk::DependencyFlags::empty(),
-                    &[],
-                    &[],
-                    &[to_color],
+                    to_color,
                 );
                 let color_att = [vk::RenderingAttachmentInfo::default()
                     .image_view(color_view)
@@ -978,14 +1008,12 @@ fn draw(
                     .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
                     .src_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
                     .dst_access_mask(vk::AccessFlags::TRANSFER_READ);
-                d.cmd_pipeline_barrier(
+                image_barrier(
+                    d,
                     cb,
                     vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
                     vk::PipelineStageFlags::TRANSFER,
-                    vk::DependencyFlags::empty(),
-                    &[],
-                    &[],
-                    &[to_src],
+                    to_src,
                 );
             }
         }
@@ -994,18 +1022,7 @@ fn draw(
             color,
             vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
             readback,
-            &[vk::BufferImageCopy::default()
-                .image_subresource(vk::ImageSubresourceLayers {
-                    aspect_mask: vk::ImageAspectFlags::COLOR,
-                    mip_level: 0,
-                    base_array_layer: 0,
-                    layer_count: 1,
-                })
-                .image_extent(vk::Extent3D {
-                    width: SIZE,
-                    height: SIZE,
-                    depth: 1,
-                })],
+            &[whole_layer(SIZE)],
         );
         let host = vk::BufferMemoryBarrier::default()
             .buffer(readback)
@@ -1397,30 +1414,13 @@ fn multi_layer_views_need_layered_attachments() {
             // SAFETY: every struct lives across its call; objects are destroyed before the device.
             unsafe {
                 let d = &dev.device;
-                let image = d
-                    .create_image(
-                        &vk::ImageCreateInfo::default()
-                            .image_type(vk::ImageType::TYPE_2D)
-                            .format(vk::Format::R8_UINT)
-                            .extent(vk::Extent3D {
-                                width: 4,
-                                height: 4,
-                                depth: 1,
-                            })
-                            .mip_levels(1)
-                            .array_layers(2)
-                            .samples(vk::SampleCountFlags::TYPE_1)
-                            .tiling(vk::ImageTiling::OPTIMAL)
-                            .usage(vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR),
-                        None,
-                    )
-                    .unwrap();
-                let memory = allocate(
+                let (image, memory) = make_image(
                     &dev,
-                    d.get_image_memory_requirements(image),
-                    vk::MemoryPropertyFlags::DEVICE_LOCAL,
+                    vk::Format::R8_UINT,
+                    4,
+                    2,
+                    vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR,
                 );
-                d.bind_image_memory(image, memory, 0).unwrap();
                 let view = d
                     .create_image_view(
                         &vk::ImageViewCreateInfo::default()

@@ -8,6 +8,8 @@ use std::process::{Command, Output};
 use fovea_harness::artifact;
 use openxr_sys as xr;
 
+pub mod vulkan;
+
 /// The repository's root (the layer package's folder).
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -1,0 +1,234 @@
+//! Vulkan set-up the `vk_*` modules share: the formats and shaders they draw with, the colour +
+//! density attachments of their render passes, images and their memory, and a graphics
+//! pipeline's fixed state.
+
+use ash::vk;
+
+/// The side of the colour images the modules draw into.
+pub const SIZE: u32 = 64;
+pub const COLOR: vk::Format = vk::Format::R8G8B8A8_UNORM;
+pub const DENSITY: vk::Format = vk::Format::R8G8_UNORM;
+pub const FDM_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+pub const VERTEX: &[u8] =
+    include_bytes!("../../../crates/vkdouble/tests/shaders/fullscreen.vert.spv");
+pub const FRAGMENT: &[u8] = include_bytes!("../../../crates/vkdouble/tests/shaders/solid.frag.spv");
+
+/// SPIR-V bytes as the words a shader module takes.
+pub fn spv(bytes: &[u8]) -> Vec<u32> {
+    ash::util::read_spv(&mut std::io::Cursor::new(bytes)).expect("SPIR-V")
+}
+
+/// `layers` colour layers from `base`, one mip level.
+pub fn range(base: u32, layers: u32) -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        base_mip_level: 0,
+        level_count: 1,
+        base_array_layer: base,
+        layer_count: layers,
+    }
+}
+
+/// A square, optimally tiled 2D image of `layers` layers, one mip level and one sample.
+pub fn image_info(
+    format: vk::Format,
+    size: u32,
+    layers: u32,
+    usage: vk::ImageUsageFlags,
+) -> vk::ImageCreateInfo<'static> {
+    vk::ImageCreateInfo::default()
+        .image_type(vk::ImageType::TYPE_2D)
+        .format(format)
+        .extent(vk::Extent3D {
+            width: size,
+            height: size,
+            depth: 1,
+        })
+        .mip_levels(1)
+        .array_layers(layers)
+        .samples(vk::SampleCountFlags::TYPE_1)
+        .tiling(vk::ImageTiling::OPTIMAL)
+        .usage(usage)
+}
+
+/// The first memory type `bits` allows that has every flag in `want`.
+pub fn memory_type(
+    memory: &vk::PhysicalDeviceMemoryProperties,
+    bits: u32,
+    want: vk::MemoryPropertyFlags,
+) -> u32 {
+    (0..memory.memory_type_count)
+        .find(|&i| {
+            bits & (1 << i) != 0
+                && memory.memory_types[i as usize]
+                    .property_flags
+                    .contains(want)
+        })
+        .expect("a memory type")
+}
+
+/// An allocation of `req`'s size in the first memory type it allows that has every flag in `want`.
+pub fn allocate_info(
+    memory: &vk::PhysicalDeviceMemoryProperties,
+    req: vk::MemoryRequirements,
+    want: vk::MemoryPropertyFlags,
+) -> vk::MemoryAllocateInfo<'static> {
+    vk::MemoryAllocateInfo::default()
+        .allocation_size(req.size)
+        .memory_type_index(memory_type(memory, req.memory_type_bits, want))
+}
+
+/// The colour attachment (cleared, stored, ending in `color_final`) and the density map
+/// attachment of a pass, as v1 or v2 descriptions (both have the same setters).
+macro_rules! color_and_density {
+    ($ty:ty, $color_final:expr) => {
+        [
+            <$ty>::default()
+                .format(COLOR)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .initial_layout(vk::ImageLayout::UNDEFINED)
+                .final_layout($color_final),
+            <$ty>::default()
+                .format(DENSITY)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(vk::AttachmentLoadOp::DONT_CARE)
+                .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                .initial_layout(FDM_LAYOUT)
+                .final_layout(FDM_LAYOUT),
+        ]
+    };
+}
+
+/// [`color_and_density!`] for `vkCreateRenderPass`.
+pub fn attachments(color_final: vk::ImageLayout) -> [vk::AttachmentDescription; 2] {
+    color_and_density!(vk::AttachmentDescription, color_final)
+}
+
+/// [`color_and_density!`] for `vkCreateRenderPass2`.
+pub fn attachments2(color_final: vk::ImageLayout) -> [vk::AttachmentDescription2<'static>; 2] {
+    color_and_density!(vk::AttachmentDescription2, color_final)
+}
+
+/// The vertex and fragment stages of `modules`, each entered at `main`.
+pub fn stages(modules: [vk::ShaderModule; 2]) -> [vk::PipelineShaderStageCreateInfo<'static>; 2] {
+    [
+        vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::VERTEX)
+            .module(modules[0])
+            .name(c"main"),
+        vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::FRAGMENT)
+            .module(modules[1])
+            .name(c"main"),
+    ]
+}
+
+static BLEND_ATTACHMENT: [vk::PipelineColorBlendAttachmentState; 1] =
+    [vk::PipelineColorBlendAttachmentState {
+        blend_enable: vk::FALSE,
+        src_color_blend_factor: vk::BlendFactor::ZERO,
+        dst_color_blend_factor: vk::BlendFactor::ZERO,
+        color_blend_op: vk::BlendOp::ADD,
+        src_alpha_blend_factor: vk::BlendFactor::ZERO,
+        dst_alpha_blend_factor: vk::BlendFactor::ZERO,
+        alpha_blend_op: vk::BlendOp::ADD,
+        color_write_mask: vk::ColorComponentFlags::RGBA,
+    }];
+static DYNAMIC_STATES: [vk::DynamicState; 2] =
+    [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
+
+/// A graphics pipeline's fixed state: no vertex input, a triangle list, dynamic viewport and
+/// scissor, filled and not culled, one sample, one RGBA colour output without blending.
+pub struct Fixed {
+    pub vertex: vk::PipelineVertexInputStateCreateInfo<'static>,
+    pub assembly: vk::PipelineInputAssemblyStateCreateInfo<'static>,
+    pub viewport: vk::PipelineViewportStateCreateInfo<'static>,
+    pub raster: vk::PipelineRasterizationStateCreateInfo<'static>,
+    pub multisample: vk::PipelineMultisampleStateCreateInfo<'static>,
+    pub depth: vk::PipelineDepthStencilStateCreateInfo<'static>,
+    pub blend: vk::PipelineColorBlendStateCreateInfo<'static>,
+    pub dynamic: vk::PipelineDynamicStateCreateInfo<'static>,
+}
+
+impl Fixed {
+    pub fn new() -> Fixed {
+        Fixed {
+            vertex: vk::PipelineVertexInputStateCreateInfo::default(),
+            assembly: vk::PipelineInputAssemblyStateCreateInfo::default()
+                .topology(vk::PrimitiveTopology::TRIANGLE_LIST),
+            viewport: vk::PipelineViewportStateCreateInfo::default()
+                .viewport_count(1)
+                .scissor_count(1),
+            raster: vk::PipelineRasterizationStateCreateInfo::default()
+                .polygon_mode(vk::PolygonMode::FILL)
+                .cull_mode(vk::CullModeFlags::NONE)
+                .line_width(1.0),
+            multisample: vk::PipelineMultisampleStateCreateInfo::default()
+                .rasterization_samples(vk::SampleCountFlags::TYPE_1),
+            depth: vk::PipelineDepthStencilStateCreateInfo::default(),
+            blend: vk::PipelineColorBlendStateCreateInfo::default().attachments(&BLEND_ATTACHMENT),
+            dynamic: vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&DYNAMIC_STATES),
+        }
+    }
+
+    /// A whole pipeline's create info: `stages`, this state (no depth) and `layout`.
+    pub fn info<'a>(
+        &'a self,
+        stages: &'a [vk::PipelineShaderStageCreateInfo<'a>],
+        layout: vk::PipelineLayout,
+    ) -> vk::GraphicsPipelineCreateInfo<'a> {
+        vk::GraphicsPipelineCreateInfo::default()
+            .stages(stages)
+            .vertex_input_state(&self.vertex)
+            .input_assembly_state(&self.assembly)
+            .viewport_state(&self.viewport)
+            .rasterization_state(&self.raster)
+            .multisample_state(&self.multisample)
+            .color_blend_state(&self.blend)
+            .dynamic_state(&self.dynamic)
+            .layout(layout)
+    }
+}
+
+/// The whole `SIZE`×`SIZE` colour image.
+pub const AREA: vk::Rect2D = vk::Rect2D {
+    offset: vk::Offset2D { x: 0, y: 0 },
+    extent: vk::Extent2D {
+        width: SIZE,
+        height: SIZE,
+    },
+};
+
+/// What the colour attachment is cleared to: opaque blue.
+pub const CLEAR: [vk::ClearValue; 1] = [vk::ClearValue {
+    color: vk::ClearColorValue {
+        float32: [0.0, 0.0, 1.0, 1.0],
+    },
+}];
+
+/// Records a draw of one full-screen triangle with `pipeline` over [`AREA`].
+///
+/// # Safety
+/// `cb` must be recording on `d` inside a pass or rendering that `pipeline` fits.
+pub unsafe fn draw_fullscreen(d: &ash::Device, cb: vk::CommandBuffer, pipeline: vk::Pipeline) {
+    // SAFETY: the caller's promise.
+    unsafe {
+        d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
+        d.cmd_set_viewport(
+            cb,
+            0,
+            &[vk::Viewport {
+                x: 0.0,
+                y: 0.0,
+                width: SIZE as f32,
+                height: SIZE as f32,
+                min_depth: 0.0,
+                max_depth: 1.0,
+            }],
+        );
+        d.cmd_set_scissor(cb, 0, &[AREA]);
+        d.cmd_draw(cb, 3, 1, 0, 0);
+    }
+}
