@@ -45,9 +45,11 @@ fn unquote(v: &str) -> &str {
 /// and ffi.rs name them, plus the implicit manifest's `disable_environment`, which the loader reads.
 /// `c"..."`/`b"..."` literals and `XR_`/`VK_` names are API identifiers, not variables.
 fn layer_env_vars() -> BTreeSet<String> {
-    // The layer and the configuration crate it reads its file and variables through.
+    // The layer, the configuration crate it reads its file and variables through, and the ABI crate
+    // that names them.
     let mut files = rust_files(&root().join("src"));
     files.extend(rust_files(&root().join("crates/config/src")));
+    files.extend(rust_files(&root().join("crates/abi/src")));
     let mut vars = BTreeSet::new();
     for f in files
         .iter()
@@ -71,6 +73,7 @@ fn layer_env_vars() -> BTreeSet<String> {
                 && token.starts_with(|c: char| c.is_ascii_uppercase())
                 && !token.starts_with("XR_")
                 && !token.starts_with("VK_")
+                && !token.starts_with("CARGO_")
             {
                 vars.insert(token);
             }
