@@ -33,3 +33,4 @@ mod vk_fuzz;
 mod vk_layer;
 mod vk_passes;
 mod vk_pipelines;
+mod vk_threads;

@@ -1,0 +1,474 @@
+//! fovea's Vulkan layer on lavapipe, from several threads at once: [`WORKERS`] threads record
+//! command buffers through the layer concurrently, each from its own command pool, while another
+//! thread creates and destroys density-map images and views in a loop.
+//!
+//! Stack as in [`crate::vk_layer`], on the `nvidia` profile. Each iteration of a worker records, in
+//! one command buffer: an image barrier with density-map bits (`vkCmdPipelineBarrier`), a render
+//! pass v2 with a density attachment on a framebuffer holding the density view, dynamic rendering
+//! with `VkRenderingFragmentDensityMapAttachmentInfoEXT`, and a synchronization2 barrier with
+//! density-map bits. At the end each worker submits its last command buffer (serially, under a
+//! mutex: a `VkQueue` needs external synchronisation) and waits for it.
+//!
+//! The layer clears a new density map's shadow on the application's first graphics queue, inside
+//! `vkCreateImage` (`src/vk/image.rs`, its documented limit): creating a density map is therefore
+//! externally synchronised with that queue, like a submit, and both threads here create them under
+//! the queue's mutex. Without it, validation's thread checks report `vkQueueSubmit` on one queue
+//! from two threads at once.
+//!
+//! - No deadlock: a watchdog ends the process with a failure after [`DEADLINE`].
+//! - No crash, the double records no misuse, and validation reports nothing but validation
+//!   1.3.239's stage false positives ([`crate::vk_layer::assert_only_stage_false_positives`]).
+//! - Every pass and rendering reached the driver with a shading-rate attachment.
+//!
+//! `FOVEA_THREADS_ITERATIONS` sets the iterations per worker (default 200), e.g. for a run under
+//! valgrind (`.ci/valgrind`).
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use ash::vk;
+use fovea_vkdouble::Profile;
+
+use crate::vk_layer::{
+    assert_only_stage_false_positives, env, fdm_image_info, take_messages, Vk, FDM,
+};
+
+const WORKERS: usize = 4;
+/// The whole run must end within this (debug build, two shared cores, or valgrind).
+const DEADLINE: Duration = Duration::from_secs(300);
+/// The colour attachment's width and height; the density map has one texel per 16×16.
+const SIZE: u32 = 64;
+const COLOR: vk::Format = vk::Format::R8G8B8A8_UNORM;
+const DENSITY: vk::Format = vk::Format::R8G8_UNORM;
+const FDM_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+const COLOR_LAYOUT: vk::ImageLayout = vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL;
+
+fn iterations() -> u64 {
+    std::env::var("FOVEA_THREADS_ITERATIONS")
+        .ok()
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or(200)
+}
+
+fn range() -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        base_mip_level: 0,
+        level_count: 1,
+        base_array_layer: 0,
+        layer_count: 1,
+    }
+}
+
+/// An image with memory bound, and a 2D view of its first layer.
+struct Image {
+    image: vk::Image,
+    memory: vk::DeviceMemory,
+    view: vk::ImageView,
+}
+
+impl Image {
+    /// # Safety
+    /// `d` must be alive; `memory` its physical device's.
+    unsafe fn new(
+        d: &ash::Device,
+        memory: &vk::PhysicalDeviceMemoryProperties,
+        info: &vk::ImageCreateInfo<'_>,
+    ) -> Image {
+        // SAFETY: the caller's promise; the structs live across the calls.
+        unsafe {
+            let image = d.create_image(info, None).expect("vkCreateImage");
+            let req = d.get_image_memory_requirements(image);
+            let ty = (0..memory.memory_type_count)
+                .find(|&i| req.memory_type_bits & (1 << i) != 0)
+                .expect("a memory type");
+            let memory = d
+                .allocate_memory(
+                    &vk::MemoryAllocateInfo::default()
+                        .allocation_size(req.size)
+                        .memory_type_index(ty),
+                    None,
+                )
+                .expect("vkAllocateMemory");
+            d.bind_image_memory(image, memory, 0)
+                .expect("vkBindImageMemory");
+            let view = d
+                .create_image_view(
+                    &vk::ImageViewCreateInfo::default()
+                        .image(image)
+                        .view_type(vk::ImageViewType::TYPE_2D)
+                        .format(info.format)
+                        .subresource_range(range()),
+                    None,
+                )
+                .expect("vkCreateImageView");
+            Image {
+                image,
+                memory,
+                view,
+            }
+        }
+    }
+
+    /// # Safety
+    /// Nothing may use the image any more.
+    unsafe fn destroy(self, d: &ash::Device) {
+        // SAFETY: the caller's promise.
+        unsafe {
+            d.destroy_image_view(self.view, None);
+            d.destroy_image(self.image, None);
+            d.free_memory(self.memory, None);
+        }
+    }
+}
+
+fn image_info(
+    format: vk::Format,
+    size: u32,
+    usage: vk::ImageUsageFlags,
+) -> vk::ImageCreateInfo<'static> {
+    vk::ImageCreateInfo::default()
+        .image_type(vk::ImageType::TYPE_2D)
+        .format(format)
+        .extent(vk::Extent3D {
+            width: size,
+            height: size,
+            depth: 1,
+        })
+        .mip_levels(1)
+        .array_layers(1)
+        .samples(vk::SampleCountFlags::TYPE_1)
+        .tiling(vk::ImageTiling::OPTIMAL)
+        .usage(usage)
+}
+
+/// A colour + density pass, version 2; the colour attachment ends in `COLOR_LAYOUT` for the
+/// dynamic rendering that follows it.
+///
+/// # Safety
+/// `d` must be alive.
+unsafe fn render_pass(d: &ash::Device) -> vk::RenderPass {
+    let atts = [
+        vk::AttachmentDescription2::default()
+            .format(COLOR)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .initial_layout(vk::ImageLayout::UNDEFINED)
+            .final_layout(COLOR_LAYOUT),
+        vk::AttachmentDescription2::default()
+            .format(DENSITY)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .load_op(vk::AttachmentLoadOp::DONT_CARE)
+            .store_op(vk::AttachmentStoreOp::DONT_CARE)
+            .initial_layout(FDM_LAYOUT)
+            .final_layout(FDM_LAYOUT),
+    ];
+    let color = [vk::AttachmentReference2::default()
+        .attachment(0)
+        .layout(COLOR_LAYOUT)];
+    let subpass = [vk::SubpassDescription2::default()
+        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+        .color_attachments(&color)];
+    let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
+        .fragment_density_map_attachment(vk::AttachmentReference {
+            attachment: 1,
+            layout: FDM_LAYOUT,
+        });
+    let info = vk::RenderPassCreateInfo2::default()
+        .attachments(&atts)
+        .subpasses(&subpass)
+        .push_next(&mut fdm);
+    // SAFETY: the caller's promise; the structs live across the call.
+    unsafe { d.create_render_pass2(&info, None) }
+        .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()))
+}
+
+/// One worker's objects: its images, pass, framebuffer and command pool.
+struct Worker {
+    color: Image,
+    density: Image,
+    pass: vk::RenderPass,
+    framebuffer: vk::Framebuffer,
+    pool: vk::CommandPool,
+}
+
+impl Worker {
+    /// # Safety
+    /// `d` must be alive; `memory` its physical device's.
+    /// `queue` is held while the density map is made (see the module's documentation).
+    unsafe fn new(
+        d: &ash::Device,
+        memory: &vk::PhysicalDeviceMemoryProperties,
+        queue: &Mutex<vk::Queue>,
+    ) -> Worker {
+        // SAFETY: the caller's promise; the structs live across the calls.
+        unsafe {
+            let color = Image::new(
+                d,
+                memory,
+                &image_info(COLOR, SIZE, vk::ImageUsageFlags::COLOR_ATTACHMENT),
+            );
+            let density = {
+                let _queue = queue.lock().unwrap_or_else(|e| e.into_inner());
+                Image::new(
+                    d,
+                    memory,
+                    &image_info(
+                        DENSITY,
+                        SIZE / 16,
+                        vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
+                    ),
+                )
+            };
+            let pass = render_pass(d);
+            let views = [color.view, density.view];
+            let framebuffer = d
+                .create_framebuffer(
+                    &vk::FramebufferCreateInfo::default()
+                        .render_pass(pass)
+                        .attachments(&views)
+                        .width(SIZE)
+                        .height(SIZE)
+                        .layers(1),
+                    None,
+                )
+                .expect("vkCreateFramebuffer");
+            let pool = d
+                .create_command_pool(
+                    &vk::CommandPoolCreateInfo::default().queue_family_index(0),
+                    None,
+                )
+                .expect("vkCreateCommandPool");
+            Worker {
+                color,
+                density,
+                pass,
+                framebuffer,
+                pool,
+            }
+        }
+    }
+
+    /// One iteration's command buffer, recorded and ended.
+    ///
+    /// # Safety
+    /// `d` must be alive; only this thread uses the worker's pool.
+    unsafe fn record(&self, d: &ash::Device) -> vk::CommandBuffer {
+        let area = vk::Rect2D {
+            offset: vk::Offset2D { x: 0, y: 0 },
+            extent: vk::Extent2D {
+                width: SIZE,
+                height: SIZE,
+            },
+        };
+        // SAFETY: the caller's promise; every struct lives across its call.
+        unsafe {
+            let cb = d
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(self.pool)
+                        .command_buffer_count(1),
+                )
+                .expect("vkAllocateCommandBuffers")[0];
+            d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+                .expect("vkBeginCommandBuffer");
+            // The density map into its layout, for the pass: density-map stage and access.
+            let to_fdm = vk::ImageMemoryBarrier::default()
+                .image(self.density.image)
+                .subresource_range(range())
+                .old_layout(vk::ImageLayout::UNDEFINED)
+                .new_layout(FDM_LAYOUT)
+                .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT);
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[to_fdm],
+            );
+            let clear = [vk::ClearValue::default(), vk::ClearValue::default()];
+            d.cmd_begin_render_pass2(
+                cb,
+                &vk::RenderPassBeginInfo::default()
+                    .render_pass(self.pass)
+                    .framebuffer(self.framebuffer)
+                    .render_area(area)
+                    .clear_values(&clear),
+                &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+            );
+            d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
+            let color = [vk::RenderingAttachmentInfo::default()
+                .image_view(self.color.view)
+                .image_layout(COLOR_LAYOUT)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)];
+            let mut density = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
+                .image_view(self.density.view)
+                .image_layout(FDM_LAYOUT);
+            d.cmd_begin_rendering(
+                cb,
+                &vk::RenderingInfo::default()
+                    .render_area(area)
+                    .layer_count(1)
+                    .color_attachments(&color)
+                    .push_next(&mut density),
+            );
+            d.cmd_end_rendering(cb);
+            // Synchronization2: the density map read by the next frame's density processing.
+            let again = [vk::ImageMemoryBarrier2::default()
+                .image(self.density.image)
+                .subresource_range(range())
+                .old_layout(FDM_LAYOUT)
+                .new_layout(FDM_LAYOUT)
+                .src_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
+                .src_access_mask(vk::AccessFlags2::FRAGMENT_DENSITY_MAP_READ_EXT)
+                .dst_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
+                .dst_access_mask(vk::AccessFlags2::FRAGMENT_DENSITY_MAP_READ_EXT)];
+            d.cmd_pipeline_barrier2(
+                cb,
+                &vk::DependencyInfo::default().image_memory_barriers(&again),
+            );
+            d.end_command_buffer(cb).expect("vkEndCommandBuffer");
+            cb
+        }
+    }
+
+    /// # Safety
+    /// Nothing made from the worker may be in use.
+    unsafe fn destroy(self, d: &ash::Device) {
+        // SAFETY: the caller's promise.
+        unsafe {
+            d.destroy_command_pool(self.pool, None);
+            d.destroy_framebuffer(self.framebuffer, None);
+            d.destroy_render_pass(self.pass, None);
+            self.color.destroy(d);
+            self.density.destroy(d);
+        }
+    }
+}
+
+/// Recording on four threads, each with its own pool, and density images made and destroyed on a
+/// fifth: no deadlock, no crash, no misuse seen by the double, and validation silent but for its
+/// known false positive.
+#[test]
+fn recording_on_four_threads_while_density_images_come_and_go() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let mut features = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+        .fragment_density_map(true)
+        .fragment_density_map_non_subsampled_images(true);
+    let d = vk
+        .device(&[FDM], Some(&mut features))
+        .unwrap_or_else(|e| panic!("vkCreateDevice: {e}; {:?}", take_messages()));
+    // SAFETY: plain queries on live objects.
+    let (memory, queue) = unsafe {
+        (
+            vk.instance
+                .get_physical_device_memory_properties(vk.physical),
+            d.get_device_queue(0, 0),
+        )
+    };
+    let iterations = iterations();
+    let queue = Mutex::new(queue);
+    let done = AtomicBool::new(false);
+    let made = AtomicU64::new(0);
+    let start = Instant::now();
+    std::thread::scope(|s| {
+        let (d, memory, queue, done, made) = (&d, &memory, &queue, &done, &made);
+        // The watchdog: a deadlock ends the process with a failure instead of hanging the suite.
+        let watchdog = s.spawn(move || {
+            while start.elapsed() < DEADLINE {
+                if done.load(Ordering::Acquire) {
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            eprintln!("vk_threads: not finished after {DEADLINE:?}: deadlock");
+            std::process::exit(101);
+        });
+        // Density images and views made and destroyed until the workers are done.
+        let churn = s.spawn(move || {
+            while !done.load(Ordering::Acquire) {
+                // SAFETY: the device is alive; the image is this thread's alone, and the queue is
+                // held while it is made (see the module's documentation).
+                unsafe {
+                    let image = {
+                        let _queue = queue.lock().unwrap_or_else(|e| e.into_inner());
+                        Image::new(d, memory, &fdm_image_info())
+                    };
+                    image.destroy(d);
+                }
+                made.fetch_add(1, Ordering::Relaxed);
+            }
+        });
+        let workers: Vec<_> = (0..WORKERS)
+            .map(|_| {
+                s.spawn(move || {
+                    // SAFETY: the device is alive; the worker's objects are this thread's alone,
+                    // its pool used by no other thread; the command buffer is submitted under the
+                    // queue's mutex and waited for before anything is destroyed.
+                    unsafe {
+                        let w = Worker::new(d, memory, queue);
+                        let mut last = vk::CommandBuffer::null();
+                        for _ in 0..iterations {
+                            if last != vk::CommandBuffer::null() {
+                                d.free_command_buffers(w.pool, &[last]);
+                            }
+                            last = w.record(d);
+                        }
+                        {
+                            let queue = queue.lock().unwrap_or_else(|e| e.into_inner());
+                            let cbs = [last];
+                            d.queue_submit(
+                                *queue,
+                                &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                                vk::Fence::null(),
+                            )
+                            .expect("vkQueueSubmit");
+                            d.queue_wait_idle(*queue).expect("vkQueueWaitIdle");
+                        }
+                        w.destroy(d);
+                    }
+                })
+            })
+            .collect();
+        let panics = workers
+            .into_iter()
+            .map(|w| w.join())
+            .filter(Result::is_err)
+            .count();
+        done.store(true, Ordering::Release);
+        let churned = churn.join().is_ok();
+        watchdog.join().expect("watchdog");
+        assert_eq!(panics, 0, "workers panicked");
+        assert!(churned, "the image thread panicked");
+    });
+    eprintln!(
+        "vk_threads: {WORKERS} threads × {iterations} iterations, {} density images made meanwhile, in {:?}",
+        made.load(Ordering::Relaxed),
+        start.elapsed()
+    );
+    // SAFETY: every object made from the device is destroyed; the queue is idle.
+    unsafe { d.destroy_device(None) };
+    assert_eq!(env.double.errors(), Vec::<String>::new());
+    // Every pass and every rendering reached the driver with a shading-rate attachment.
+    let passes = env.double.events("begin_render_pass");
+    assert_eq!(passes.len() as u64, WORKERS as u64 * iterations);
+    for p in &passes {
+        let v = p["shading_rate_views"].as_array().expect("views");
+        assert_eq!(v.len(), 1, "{p}");
+    }
+    let renderings = env.double.events("begin_rendering");
+    assert_eq!(renderings.len() as u64, WORKERS as u64 * iterations);
+    for r in &renderings {
+        assert!(!r["shading_rate"].is_null(), "{r}");
+    }
+    drop(vk);
+    assert_only_stage_false_positives();
+}
