@@ -67,8 +67,8 @@ pub unsafe extern "system" fn vkNegotiateLoaderLayerInterfaceVersion(
                 return vk::Result::ERROR_INITIALIZATION_FAILED;
             }
             n.loader_layer_interface_version = link::INTERFACE_VERSION;
-            n.pfn_get_instance_proc_addr = Some(vkGetInstanceProcAddr);
-            n.pfn_get_device_proc_addr = Some(vkGetDeviceProcAddr);
+            n.pfn_get_instance_proc_addr = Some(get_instance_proc_addr);
+            n.pfn_get_device_proc_addr = Some(get_device_proc_addr);
             n.pfn_get_physical_device_proc_addr = None;
             vk::Result::SUCCESS
         },
@@ -82,13 +82,13 @@ fn lifecycle(name: &CStr) -> vk::PFN_vkVoidFunction {
         // the type the name implies, which the `as` checks here.
         b"vkGetInstanceProcAddr" => unsafe {
             std::mem::transmute::<vk::PFN_vkGetInstanceProcAddr, unsafe extern "system" fn()>(
-                vkGetInstanceProcAddr as vk::PFN_vkGetInstanceProcAddr,
+                get_instance_proc_addr as vk::PFN_vkGetInstanceProcAddr,
             )
         },
         // SAFETY: as above.
         b"vkGetDeviceProcAddr" => unsafe {
             std::mem::transmute::<vk::PFN_vkGetDeviceProcAddr, unsafe extern "system" fn()>(
-                vkGetDeviceProcAddr as vk::PFN_vkGetDeviceProcAddr,
+                get_device_proc_addr as vk::PFN_vkGetDeviceProcAddr,
             )
         },
         // SAFETY: as above.
@@ -109,6 +109,21 @@ fn lifecycle(name: &CStr) -> vk::PFN_vkVoidFunction {
 /// `instance` must be NULL or an instance created through the layer; `name` NULL or NUL-terminated.
 #[no_mangle]
 pub unsafe extern "system" fn vkGetInstanceProcAddr(
+    instance: vk::Instance,
+    p_name: *const c_char,
+) -> vk::PFN_vkVoidFunction {
+    // SAFETY: as the caller promised.
+    unsafe { get_instance_proc_addr(instance, p_name) }
+}
+
+/// [`vkGetInstanceProcAddr`] under a name the library does not export: the pointer the layer hands
+/// out. The exported symbol's address may resolve to another library's `vkGetInstanceProcAddr` —
+/// the Vulkan loader's, where the application links libvulkan — and the loader's trampoline in
+/// the layer chain calls back into the loader, which deadlocks on its own lock.
+///
+/// # Safety
+/// As [`vkGetInstanceProcAddr`].
+unsafe extern "system" fn get_instance_proc_addr(
     instance: vk::Instance,
     p_name: *const c_char,
 ) -> vk::PFN_vkVoidFunction {
@@ -145,6 +160,19 @@ pub unsafe extern "system" fn vkGetInstanceProcAddr(
 /// `device` must be NULL or a device created through the layer; `name` NULL or NUL-terminated.
 #[no_mangle]
 pub unsafe extern "system" fn vkGetDeviceProcAddr(
+    device: vk::Device,
+    p_name: *const c_char,
+) -> vk::PFN_vkVoidFunction {
+    // SAFETY: as the caller promised.
+    unsafe { get_device_proc_addr(device, p_name) }
+}
+
+/// [`vkGetDeviceProcAddr`] under a name the library does not export (see
+/// [`get_instance_proc_addr`]).
+///
+/// # Safety
+/// As [`vkGetDeviceProcAddr`].
+unsafe extern "system" fn get_device_proc_addr(
     device: vk::Device,
     p_name: *const c_char,
 ) -> vk::PFN_vkVoidFunction {
@@ -240,6 +268,16 @@ unsafe extern "system" fn create_instance(
                     api_version,
                     properties2_ext,
                 ));
+                tracing::info!(
+                    target: fovea_abi::log_target::VK_INSTANCE,
+                    instance = registry::raw(handle),
+                    api_version = format_args!(
+                        "{}.{}",
+                        vk::api_version_major(api_version),
+                        vk::api_version_minor(api_version)
+                    ),
+                    "the Vulkan layer is in this VkInstance"
+                );
             }
             r
         },

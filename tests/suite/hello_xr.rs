@@ -13,16 +13,24 @@
 //! no errors, hello_xr went through FOCUSED to EXITING, and nothing on stdout or stderr is a
 //! validation message (OpenXR core validation, the Vulkan validation layer that hello_xr enables
 //! where it is installed, fovea's own warnings).
+//!
+//! The same runs with fovea's Vulkan layer where the Vulkan loader finds it (an explicit manifest on
+//! `VK_ADD_LAYER_PATH` for `-g Vulkan2`, the implicit manifest in the per-user folder for
+//! `-g Vulkan`) show that the layer is loaded into hello_xr's VkInstance, decides to pass lavapipe
+//! through (no shading-rate attachments to emulate density maps on), and changes nothing: the
+//! same frames, exit and silence.
 
+use std::ffi::OsString;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
+use fovea_abi::log_target;
 use fovea_harness::{skip, CORE_VALIDATION_LAYER, FOVEA_LAYER};
 
-use crate::support::{Manifests, CORE_VALIDATION_MANIFEST, DEBIAN_LAYERS};
+use crate::support::{root, Manifests, CORE_VALIDATION_MANIFEST, DEBIAN_LAYERS};
 
 /// Frames the runtime asks for before it requests exit (the issue's "at least 300 frames").
 const FRAMES: u64 = 300;
@@ -83,8 +91,9 @@ impl Run {
     }
 }
 
-/// Runs hello_xr with `-g graphics -v` and `layers` enabled (first = closest to the app).
-fn run_hello_xr(system: &System, graphics: &str, layers: &[&str]) -> Run {
+/// Runs hello_xr with `-g graphics -v`, `layers` enabled (first = closest to the app) and `env` set
+/// on top of the test's own environment.
+fn run_hello_xr(system: &System, graphics: &str, layers: &[&str], env: &[(&str, OsString)]) -> Run {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let manifests = Manifests::write(&format!("hello-xr-{graphics}"));
     let mut cmd = Command::new(&system.hello_xr);
@@ -107,6 +116,7 @@ fn run_hello_xr(system: &System, graphics: &str, layers: &[&str]) -> Run {
         .env("VK_DRIVER_FILES", &system.lavapipe_icd)
         .env("FOVEA_SIM_EXIT_AFTER_FRAMES", FRAMES.to_string())
         .env("FOVEA_SIM_SUMMARY", "1")
+        .envs(env.iter().map(|(k, v)| (k, v)))
         // hello_xr quits when a key is pressed, and a closed stdin reads as one: keep a pipe open
         // until it has exited.
         .stdin(Stdio::piped())
@@ -161,6 +171,14 @@ fn summary(stderr: &str) -> Option<(u64, u64)> {
     Some((field("frames=")?, field("errors=")?))
 }
 
+/// fovea's log lines below warning level on stderr (`<time>  INFO fovea::…: …`): what the runs with
+/// `FOVEA_LOG=…=info` read, not complaints.
+fn is_fovea_info(line: &str) -> bool {
+    let mut words = line.split_whitespace().take(3);
+    let level = words.find(|w| ["INFO", "DEBUG", "TRACE"].contains(w));
+    level.is_some() && words.next().is_some_and(|t| t.starts_with("fovea"))
+}
+
 /// hello_xr's own log lines start with `[HH:MM:SS.mmm][Level  ]`.
 fn is_hello_xr_log(line: &str) -> bool {
     let b = line.as_bytes();
@@ -174,7 +192,8 @@ fn is_hello_xr_log(line: &str) -> bool {
 ///   depending on the build) is not a message;
 /// - hello_xr log lines of level Error or Warning, and the Vulkan validation layer's messages that
 ///   hello_xr's debug callback forwards (logged at Info as `ERROR:`, `WARNING:`, `PERF:`);
-/// - on stderr, any line other than the runtime's summary (fovea logs warnings and errors there).
+/// - on stderr, any line other than the runtime's summary and fovea's info lines (fovea logs
+///   warnings and errors there).
 fn messages(run: &Run) -> Vec<String> {
     let banner = |l: &str| l.starts_with("Core Validation output type:");
     let stdout = run.stdout.lines().filter(|l| {
@@ -192,20 +211,27 @@ fn messages(run: &Run) -> Vec<String> {
                 .iter()
                 .any(|m| l.contains(m))
     });
-    let stderr = run
-        .stderr
-        .lines()
-        .filter(|l| !l.trim().is_empty() && !banner(l) && !l.contains("fovea-sim: summary "));
+    let stderr = run.stderr.lines().filter(|l| {
+        !l.trim().is_empty()
+            && !banner(l)
+            && !l.contains("fovea-sim: summary ")
+            && !is_fovea_info(l)
+    });
     stdout.chain(stderr).map(str::to_owned).collect()
 }
 
 /// The whole check for one configuration; skips where the system lacks hello_xr or lavapipe.
 fn hello_xr_passes(graphics: &str, layers: &[&str]) {
+    hello_xr_passes_with(graphics, layers, &[]);
+}
+
+/// [`hello_xr_passes`] with `env` added; the run, `None` where it skipped.
+fn hello_xr_passes_with(graphics: &str, layers: &[&str], env: &[(&str, OsString)]) -> Option<Run> {
     let system = match find_system() {
         Ok(s) => s,
         Err(reason) => {
             skip(&reason);
-            return;
+            return None;
         }
     };
     if layers.contains(&CORE_VALIDATION_LAYER)
@@ -214,9 +240,9 @@ fn hello_xr_passes(graphics: &str, layers: &[&str]) {
             .exists()
     {
         skip("the Khronos core validation layer is not installed (openxr-layer-corevalidation)");
-        return;
+        return None;
     }
-    let run = run_hello_xr(&system, graphics, layers);
+    let run = run_hello_xr(&system, graphics, layers, env);
     let label = format!("hello_xr -g {graphics} with {layers:?}");
     assert_eq!(run.code, Some(0), "{label}\n{}", run.transcript());
     let (frames, errors) = summary(&run.stderr)
@@ -251,6 +277,84 @@ fn hello_xr_passes(graphics: &str, layers: &[&str]) {
         messages.join("\n"),
         run.transcript()
     );
+    Some(run)
+}
+
+const VK_MANIFEST: &str = "VK_LAYER_FOVEA_fragment_density_map.json";
+/// fovea's line on creating a VkInstance (target [`log_target::VK_INSTANCE`]).
+const VK_INSTANCE_LINE: &str = "the Vulkan layer is in this VkInstance";
+/// The end of fovea's line on a physical device it does not emulate on: "not emulating …" where the
+/// driver lacks shading-rate attachments (lavapipe, explicit manifest), "native …" where the
+/// extension is listed below the layer. With the implicit manifest the Vulkan loader lists the
+/// manifest's own `device_extensions` below the layer, so the layer reads lavapipe as native.
+const PASS_THROUGH_LINE: &str = "fragment density maps: passing through";
+
+/// hello_xr with fovea's Vulkan layer findable: `implicit` puts the implicit manifest (switched on
+/// by the variable fovea's OpenXR layer sets) in the loader's per-user folder, otherwise the
+/// explicit manifest goes on `VK_ADD_LAYER_PATH`. Both point at this build's libfovea.so. Asserts
+/// everything [`hello_xr_passes`] does, and that the layer was in the VkInstance and passed
+/// lavapipe through.
+fn hello_xr_passes_through_the_vulkan_layer(graphics: &str, implicit: bool) {
+    if let Err(reason) = find_system() {
+        skip(&reason);
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!(
+        "fovea-hello-xr-vk-{graphics}-{}",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    let data = dir.join("data");
+    let explicit = dir.join("explicit");
+    let (manifest_dir, checked_in) = if implicit {
+        (
+            data.join("vulkan/implicit_layer.d"),
+            root().join("manifest/vulkan/implicit").join(VK_MANIFEST),
+        )
+    } else {
+        (
+            explicit.clone(),
+            root().join("manifest/vulkan").join(VK_MANIFEST),
+        )
+    };
+    std::fs::create_dir_all(&manifest_dir).unwrap();
+    std::fs::create_dir_all(&explicit).unwrap();
+    let lib = fovea_harness::artifact("libfovea.so").expect("libfovea.so: cargo build");
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(checked_in).unwrap()).unwrap();
+    m["layer"]["library_path"] = lib.canonicalize().unwrap().to_str().unwrap().into();
+    std::fs::write(manifest_dir.join(VK_MANIFEST), m.to_string()).unwrap();
+    let filter = format!("warn,fovea::vk=info,{}=info", log_target::VK_INSTANCE);
+    let env = [
+        // The per-user folders are the test's own: no implicit layer from the user's install.
+        ("XDG_DATA_HOME", data.into_os_string()),
+        ("XDG_CONFIG_HOME", dir.join("config").into_os_string()),
+        ("VK_ADD_LAYER_PATH", explicit.into_os_string()),
+        (fovea_abi::env::LOG, filter.into()),
+        (fovea_abi::env::LOG_FILE, OsString::new()),
+    ];
+    let run = hello_xr_passes_with(graphics, &[FOVEA_LAYER], &env);
+    std::fs::remove_dir_all(&dir).ok();
+    let Some(run) = run else { return };
+    let label = format!("hello_xr -g {graphics} with fovea's Vulkan layer");
+    assert!(
+        run.stderr.contains(VK_INSTANCE_LINE),
+        "{label}: the Vulkan layer was not loaded\n{}",
+        run.transcript()
+    );
+    assert!(
+        run.stderr.contains(PASS_THROUGH_LINE),
+        "{label}: no pass-through decision for lavapipe\n{}",
+        run.transcript()
+    );
+    assert!(
+        !run.stderr.lines().any(|l| {
+            l.contains("emulates fragment density maps")
+                || l.contains("emulating VK_EXT_fragment_density_map")
+        }),
+        "{label}: the layer emulates on lavapipe\n{}",
+        run.transcript()
+    );
 }
 
 #[test]
@@ -278,6 +382,16 @@ fn vulkan_under_core_validation_has_no_messages() {
 }
 
 #[test]
+fn vulkan2_with_the_explicit_vulkan_layer_passes_through_unchanged() {
+    hello_xr_passes_through_the_vulkan_layer("Vulkan2", false);
+}
+
+#[test]
+fn vulkan_with_the_implicit_vulkan_layer_passes_through_unchanged() {
+    hello_xr_passes_through_the_vulkan_layer("Vulkan", true);
+}
+
+#[test]
 fn summary_and_message_filters() {
     assert_eq!(
         summary("x\nfovea-sim: summary frames=301 errors=2 [xrFoo:2]\n"),
@@ -297,7 +411,8 @@ fn summary_and_message_filters() {
         ]
         .join("\n"),
         stderr: "Core Validation output type: text, first time = true\n\
-                 fovea-sim: summary frames=300 errors=0 []\nWARN fovea::loader: x\n"
+                 fovea-sim: summary frames=300 errors=0 []\nWARN fovea::loader: x\n\
+                 2026-11-23T19:41:57.123456Z  INFO fovea::vk_instance: the Vulkan layer\n"
             .into(),
     };
     let m = messages(&run);

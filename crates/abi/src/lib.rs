@@ -137,4 +137,6 @@ pub mod log_target {
     pub const BELOW: &str = "fovea::below";
     /// One line per instance: what fovea provides and what is native below.
     pub const INSTANCE: &str = "fovea::instance";
+    /// One line per VkInstance created through the Vulkan layer: the layer is loaded there.
+    pub const VK_INSTANCE: &str = "fovea::vk_instance";
 }
