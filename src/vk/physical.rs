@@ -126,6 +126,25 @@ fn queries2(
     None
 }
 
+/// Whether the driver below implements fragment density maps: its `fragmentDensityMap` feature is
+/// TRUE. Where the feature cannot be asked for (no `vkGetPhysicalDeviceFeatures2` usable on the
+/// instance), a listed extension is taken at its word: passing through is the choice that cannot
+/// break a native implementation.
+///
+/// # Safety
+/// `physical` must belong to `inst`.
+unsafe fn native_fdm(inst: &Instance, physical: vk::PhysicalDevice) -> bool {
+    let Some((features2, _)) = queries2(inst) else {
+        return true;
+    };
+    let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default();
+    let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut fdm);
+    // SAFETY: the next layer's function with structs that live across the call; `physical` is the
+    // caller's.
+    unsafe { features2(physical, &mut f2) };
+    fdm.fragment_density_map == vk::TRUE
+}
+
 /// Decides from what the driver offers.
 ///
 /// # Safety
@@ -137,7 +156,14 @@ unsafe fn decide(inst: &Instance, physical: vk::PhysicalDevice) -> Decision {
         Ok(e) => e,
         Err(r) => return pass(&format!("vkEnumerateDeviceExtensionProperties failed: {r}")),
     };
-    if has(&exts, ash::ext::fragment_density_map::NAME) {
+    // The extension in the list is not proof of a native implementation: where this layer is
+    // installed implicitly, the Vulkan loader adds the `device_extensions` of implicit layers'
+    // manifests to what it lists below them, this layer's own VK_EXT_fragment_density_map included
+    // (https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md,
+    // "Layer Manifest File Format", `device_extensions`). Only a driver that implements it fills
+    // its feature struct, so the feature decides.
+    // SAFETY: as the caller promised.
+    if has(&exts, ash::ext::fragment_density_map::NAME) && unsafe { native_fdm(inst, physical) } {
         return Decision::Native;
     }
     if !has(&exts, ash::khr::fragment_shading_rate::NAME) {

@@ -283,11 +283,12 @@ fn hello_xr_passes_with(graphics: &str, layers: &[&str], env: &[(&str, OsString)
 const VK_MANIFEST: &str = "VK_LAYER_FOVEA_fragment_density_map.json";
 /// fovea's line on creating a VkInstance (target [`log_target::VK_INSTANCE`]).
 const VK_INSTANCE_LINE: &str = "the Vulkan layer is in this VkInstance";
-/// The end of fovea's line on a physical device it does not emulate on: "not emulating …" where the
-/// driver lacks shading-rate attachments (lavapipe, explicit manifest), "native …" where the
-/// extension is listed below the layer. With the implicit manifest the Vulkan loader lists the
-/// manifest's own `device_extensions` below the layer, so the layer reads lavapipe as native.
+/// The end of fovea's line on a physical device it does not emulate on.
 const PASS_THROUGH_LINE: &str = "fragment density maps: passing through";
+/// Why lavapipe is passed through: no shading-rate attachments. With the implicit manifest the
+/// Vulkan loader lists the manifest's own `device_extensions` below the layer; the layer must not
+/// take that for a native implementation (it asks for the feature).
+const PASS_THROUGH_WHY: &str = "the driver offers no VK_KHR_fragment_shading_rate";
 
 /// hello_xr with fovea's Vulkan layer findable: `implicit` puts the implicit manifest (switched on
 /// by the variable fovea's OpenXR layer sets) in the loader's per-user folder, otherwise the
@@ -343,8 +344,10 @@ fn hello_xr_passes_through_the_vulkan_layer(graphics: &str, implicit: bool) {
         run.transcript()
     );
     assert!(
-        run.stderr.contains(PASS_THROUGH_LINE),
-        "{label}: no pass-through decision for lavapipe\n{}",
+        run.stderr
+            .lines()
+            .any(|l| l.contains(PASS_THROUGH_LINE) && l.contains(PASS_THROUGH_WHY)),
+        "{label}: no pass-through decision for lavapipe, for want of shading-rate attachments\n{}",
         run.transcript()
     );
     assert!(
