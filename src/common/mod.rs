@@ -1,7 +1,8 @@
 //! Plumbing every side of the layer uses: the FFI edge (panic guard, next chains, the two-call
-//! idiom), ranked locks, logging and settings. Imports nothing else of the crate.
+//! idiom), ranked locks, handle maps, logging and settings. Imports nothing else of the crate.
 
 pub mod ffi;
 pub mod lock;
 pub mod log;
+pub mod records;
 pub mod settings;

@@ -235,7 +235,7 @@ fn create_instance_inner(
         extensions: exts,
         symmetric_fov: settings.symmetric_fov,
         overrides: settings::Overrides::from_env(settings.config.clone(), id.clone()),
-        stereo_fovs: crate::common::lock::Mutex::new(None),
+        stereo_fovs: Default::default(),
         fovs: symmetric::InstanceFovs::new(epic),
         vulkan: Default::default(),
         lost: Default::default(),

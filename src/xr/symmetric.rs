@@ -143,10 +143,7 @@ pub unsafe fn enumerate_views(
         }
         let app = &mut app[..2];
         if let Some(fovs) = epic_fovs {
-            let mut known = state.stereo_fovs.lock();
-            if known.is_none() {
-                *known = Some(fovs);
-            }
+            state.stereo_fovs.set_if_unknown(fovs);
         }
         let fovs = state.stereo_fovs().or_else(|| probe_running(state));
         match fovs {
@@ -293,7 +290,7 @@ unsafe fn probe_running(state: &Instance) -> Option<[Fov; 2]> {
             .into_iter()
             .find(|s| s.fovs.running_stereo.load(Ordering::Relaxed))?;
         let fovs = probe(&s)?;
-        *state.stereo_fovs.lock() = Some(fovs);
+        state.stereo_fovs.set(fovs);
         Some(fovs)
     }
 }
@@ -318,7 +315,7 @@ pub unsafe fn session_began(s: &Session, info: *const xr::SessionBeginInfo) {
         }
         if stereo && instance.stereo_fovs().is_none() {
             if let Some(fovs) = probe(s) {
-                *instance.stereo_fovs.lock() = Some(fovs);
+                instance.stereo_fovs.set(fovs);
             }
         }
         if instance.fovs.handed_unenlarged.load(Ordering::Relaxed) {
@@ -386,7 +383,7 @@ unsafe fn probe(s: &Session) -> Option<[Fov; 2]> {
         if !succeeded(create(s.handle, &info, &mut space)) {
             return None;
         }
-        let display = s.frame.lock().display.unwrap_or(0).max(1);
+        let display = s.waits.display().unwrap_or(0).max(1);
         let locate_info = xr::ViewLocateInfo {
             ty: xr::StructureType::VIEW_LOCATE_INFO,
             next: std::ptr::null(),

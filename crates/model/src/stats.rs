@@ -33,6 +33,7 @@ pub struct Stats {
     intervals: u32,
     missed: u32,
     own_ns: u64,
+    own_frames: u32,
 }
 
 /// A finished window's figures, without the session-wide fields the line adds.
@@ -46,17 +47,24 @@ pub struct Window {
 }
 
 impl Stats {
-    /// An `xrWaitFrame`: the interval since the previous predicted display time, and the periods it
-    /// skipped.
-    pub fn waited(&mut self, interval_ns: i64, missed: u32) {
+    /// `intervals` `xrWaitFrame` calls: the sum of the intervals between their predicted display
+    /// times and the periods they skipped.
+    pub fn waited(&mut self, interval_ns: i64, intervals: u32, missed: u32) {
         self.interval_ns += interval_ns;
-        self.intervals += 1;
+        self.intervals += intervals;
         self.missed += missed;
     }
 
     /// An `xrEndFrame` for the frame displayed at `display_ns`, `app_ns` after its `xrBeginFrame`,
     /// with `own_ns` spent in the layer. Returns the window when a second of display time is full.
-    pub fn ended(&mut self, display_ns: i64, app_ns: Option<u64>, own_ns: u64) -> Option<Window> {
+    /// Either time is `None` for a frame that was not timed (the layer reads the clock only while
+    /// the line is logged); the means are over the frames that were.
+    pub fn ended(
+        &mut self,
+        display_ns: i64,
+        app_ns: Option<u64>,
+        own_ns: Option<u64>,
+    ) -> Option<Window> {
         let start = *self.window_start.get_or_insert(display_ns);
         let mut finished = None;
         if display_ns - start >= WINDOW_NS - SLACK_NS {
@@ -67,7 +75,7 @@ impl Stats {
                 app_ms: mean(self.app_ns as f64, self.app_frames) / 1e6,
                 interval_ms: mean(self.interval_ns as f64, self.intervals) / 1e6,
                 missed: self.missed,
-                cpu_us: mean(self.own_ns as f64, self.frames) / 1e3,
+                cpu_us: mean(self.own_ns as f64, self.own_frames) / 1e3,
             });
             *self = Stats {
                 window_start: Some(display_ns),
@@ -79,7 +87,10 @@ impl Stats {
             self.app_ns += a;
             self.app_frames += 1;
         }
-        self.own_ns += own_ns;
+        if let Some(o) = own_ns {
+            self.own_ns += o;
+            self.own_frames += 1;
+        }
         finished
     }
 }
@@ -130,8 +141,8 @@ mod tests {
         for i in 0..200 {
             let missed = u32::from(i % 2 == 0);
             t += period * (1 + i64::from(missed));
-            s.waited(period * (1 + i64::from(missed)), missed);
-            if let Some(w) = s.ended(t, Some(6_000_000), 400) {
+            s.waited(period * (1 + i64::from(missed)), 1, missed);
+            if let Some(w) = s.ended(t, Some(6_000_000), Some(400)) {
                 windows.push(w);
             }
         }
@@ -140,7 +151,7 @@ mod tests {
         assert!((60..=61).contains(&w.frames), "{w:?}");
         let mut steady = Stats::default();
         let full: Vec<Window> = (1..=300)
-            .filter_map(|i| steady.ended(i * period, None, 0))
+            .filter_map(|i| steady.ended(i * period, None, None))
             .collect();
         assert!(
             full.iter().all(|w| w.frames == 90),
@@ -150,6 +161,18 @@ mod tests {
         assert!((w.interval_ms - 16.67).abs() < 0.2, "{w:?}");
         assert!(w.missed.abs_diff(w.frames / 2) <= 1);
         assert!((w.cpu_us - 0.4).abs() < 1e-9);
+        assert!(full.iter().all(|w| w.app_ms == 0.0 && w.cpu_us == 0.0));
+        // Timing switched on mid-window: the means are over the timed frames only.
+        let mut half = Stats::default();
+        let some = (1..=200)
+            .filter_map(|i| {
+                let timed = (i % 90 > 45).then_some(1_000);
+                half.ended(i * period, timed.map(|t| t * 2), timed)
+            })
+            .next()
+            .unwrap();
+        assert!((some.cpu_us - 1.0).abs() < 1e-9, "{some:?}");
+        assert!((some.app_ms - 0.002).abs() < 1e-9, "{some:?}");
         let line = Line {
             window: w,
             refresh_hz: 90,

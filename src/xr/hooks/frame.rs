@@ -7,7 +7,7 @@ use std::time::Instant;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{fov_from_xr, fov_to_xr, next, observed, session, succeeded, HookResult};
+use super::{fov_from_xr, fov_to_xr, next, observed, session_for_call, succeeded, HookResult};
 use crate::common::ffi::{In, Out, OutArray};
 use crate::xr::registry::{registry, Instance, Session};
 use fovea_model::density::Rect;
@@ -22,34 +22,34 @@ pub fn wait_frame(
     info: In<xr::FrameWaitInfo>,
     state: Out<xr::FrameState>,
 ) -> HookResult<xr::Result> {
-    let s = session(sess)?;
+    let s = session_for_call(sess)?;
     let f = next(s.instance.next.wait_frame)?;
     // SAFETY: the next layer's xrWaitFrame, with the application's arguments as it passed them.
     let r = observed(&s, unsafe { f(sess, info.raw(), state.raw()) });
     if let (true, Some(state)) = (succeeded(r), state.read()) {
-        let display = state.predicted_display_time.as_nanos();
-        let period = state.predicted_display_period.as_nanos();
-        let mut f = s.frame.lock();
-        if let (Some(last), true) = (f.display, period > 0) {
-            let interval = display - last;
-            f.missed =
-                u32::try_from(((interval + period / 2) / period - 1).max(0)).unwrap_or(u32::MAX);
-            let missed = f.missed;
-            f.stats.waited(interval, missed);
-        }
-        f.display = Some(display);
-        f.period = period;
+        s.waits.waited(
+            state.predicted_display_time.as_nanos(),
+            state.predicted_display_period.as_nanos(),
+        );
     }
     Ok(r)
 }
 
-/// `xrBeginFrame`: starts the application's frame time.
+/// Whether the stats line is logged: only then are the application's frame time and the layer's own
+/// time measured, since reading the clock is a third of the layer's cost per frame
+/// (docs/ARCHITECTURE.md#per-frame-cost). The filter's answer is cached per call site by `tracing`
+/// and renewed when the filter is reloaded, so asking costs a load.
+fn stats_logged() -> bool {
+    tracing::enabled!(target: fovea_abi::log_target::STATS, tracing::Level::INFO)
+}
+
+/// `xrBeginFrame`: starts the application's frame time, while the stats line is logged.
 pub fn begin_frame(sess: xr::Session, info: In<xr::FrameBeginInfo>) -> HookResult<xr::Result> {
-    let s = session(sess)?;
+    let s = session_for_call(sess)?;
     let f = next(s.instance.next.begin_frame)?;
     // SAFETY: the next layer's xrBeginFrame, with the application's arguments as it passed them.
     let r = observed(&s, unsafe { f(sess, info.raw()) });
-    if succeeded(r) {
+    if succeeded(r) && stats_logged() {
         s.frame.lock().begin_at = Some(Instant::now());
     }
     Ok(r)
@@ -58,8 +58,8 @@ pub fn begin_frame(sess: xr::Session, info: In<xr::FrameBeginInfo>) -> HookResul
 /// `xrEndFrame`: runs the dynamic controller, checks the debug property file when due, and once a
 /// second of display time writes the stats line; then passes the frame on untouched.
 pub fn end_frame(sess: xr::Session, info: In<xr::FrameEndInfo>) -> HookResult<xr::Result> {
-    let s = session(sess)?;
-    let entered = Instant::now();
+    let s = session_for_call(sess)?;
+    let entered = stats_logged().then(Instant::now);
     if s.gpu.is_some() {
         learn_submitted(&s, info);
     }
@@ -67,11 +67,19 @@ pub fn end_frame(sess: xr::Session, info: In<xr::FrameEndInfo>) -> HookResult<xr
         let mut f = s.frame.lock();
         let display = match info.get() {
             Some(i) => i.display_time.as_nanos(),
-            None => f.display.unwrap_or(0),
+            None => s.waits.display().unwrap_or(0),
         };
-        let app_ns = f.begin_at.take().map(|b| (entered - b).as_nanos() as u64);
+        let sums = s.waits.sums();
+        let new = sums.since(f.waits_counted);
+        f.waits_counted = sums;
+        f.stats.waited(new.interval_ns, new.intervals, new.missed);
+        let app_ns = f
+            .begin_at
+            .take()
+            .zip(entered)
+            .map(|(b, e)| (e - b).as_nanos() as u64);
         let max = s.dynamic_max.load(Ordering::Relaxed);
-        let missed = f.missed;
+        let missed = s.waits.missed();
         if f.controller.frame(display, missed, max) {
             let step = f.controller.step();
             s.dynamic_step.store(step, Ordering::Relaxed);
@@ -84,10 +92,10 @@ pub fn end_frame(sess: xr::Session, info: In<xr::FrameEndInfo>) -> HookResult<xr
             );
         }
         let changed = s.instance.overrides.poll(display);
-        let own = (Instant::now() - entered).as_nanos() as u64;
+        let own = entered.map(|e| (Instant::now() - e).as_nanos() as u64);
         let window = f.stats.ended(display, app_ns, own);
-        let period = f.period;
         drop(f);
+        let period = s.waits.period();
         if let Some(w) = window {
             report(&s, w, period);
         }
@@ -169,7 +177,7 @@ fn learn_submitted(s: &Session, info: In<xr::FrameEndInfo>) {
         }
     }
     for (sc, views) in found.iter().take_while(|f| f.0 != xr::Swapchain::NULL) {
-        let Some(record) = registry().swapchain(*sc) else {
+        let Some(record) = registry().swapchain_for_call(*sc) else {
             continue;
         };
         if record.density.is_none() || record.session.handle != s.handle {
@@ -185,7 +193,7 @@ fn learn_submitted(s: &Session, info: In<xr::FrameEndInfo>) {
 
 /// Writes the stats line for a finished window, when `fovea::stats` is enabled.
 fn report(s: &Session, window: Window, period_ns: i64) {
-    if !tracing::enabled!(target: fovea_abi::log_target::STATS, tracing::Level::INFO) {
+    if !stats_logged() {
         return;
     }
     let level = registry()
@@ -218,7 +226,7 @@ pub fn locate_views(
     count: Out<u32>,
     views: OutArray<xr::View>,
 ) -> HookResult<xr::Result> {
-    let s = session(sess)?;
+    let s = session_for_call(sess)?;
     let locate = next(s.instance.next.locate_views)?;
     // SAFETY: the next layer's xrLocateViews, with the application's arguments as it passed them.
     let r = unsafe {
@@ -275,7 +283,7 @@ fn learn_stereo_views(
         return;
     }
     let fovs = [0, 1].map(|i| fov_from_xr(views[i].fov));
-    *instance.stereo_fovs.lock() = Some(fovs);
+    instance.stereo_fovs.set(fovs);
     if symmetric {
         for (v, f) in views.iter_mut().zip(instance.render_fovs(fovs)) {
             v.fov = fov_to_xr(f);

@@ -23,7 +23,7 @@ use std::sync::Arc;
 
 use openxr_sys as xr;
 
-use crate::xr::dispatch::Next;
+use crate::common::records::Borrowed;
 use crate::xr::registry::{registry, Instance, Session, Swapchain};
 use fovea_model::Fov;
 
@@ -50,40 +50,21 @@ pub fn swapchain(h: xr::Swapchain) -> HookResult<Arc<Swapchain>> {
         .ok_or(xr::Result::ERROR_HANDLE_INVALID)
 }
 
-/// A swapchain hook's next-layer pointer, copied out of the record under the map lock, and the record
-/// itself only where `keep` says the hook has work to do with it once the call has come back; or
-/// XR_ERROR_HANDLE_INVALID. A hook that keeps no record reports a loss through
-/// [`observed_swapchain`]. Per frame this saves the `Arc` clone and drop of [`swapchain`] (two of the
-/// look-up's four atomic read-modify-writes) on xrWaitSwapchainImage, xrReleaseSwapchainImage and,
-/// without density images, xrAcquireSwapchainImage.
-pub fn swapchain_next<F>(
-    h: xr::Swapchain,
-    pick: impl FnOnce(&Next) -> Option<F>,
-    keep: impl FnOnce(&Swapchain) -> bool,
-) -> HookResult<(F, Option<Arc<Swapchain>>)> {
-    // Under the map lock: copies and a clone only, no lock taken, nothing called.
-    let (f, kept) = registry()
-        .with_swapchain(h, |sc| {
-            (
-                pick(&sc.session.instance.next),
-                keep(sc).then(|| Arc::clone(sc)),
-            )
-        })
-        .ok_or(xr::Result::ERROR_HANDLE_INVALID)?;
-    Ok((next(f)?, kept))
+/// A session's record for the length of the calling hook, or XR_ERROR_HANDLE_INVALID: for the frame
+/// loop's hooks, which neither keep it nor destroy the session. No atomic read-modify-write where
+/// this thread resolved the handle before ([`crate::common::records`]).
+pub fn session_for_call(h: xr::Session) -> HookResult<Borrowed<'static, Session>> {
+    registry()
+        .session_for_call(h)
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)
 }
 
-/// [`observed`] for a call made on a swapchain whose record the hook did not keep
-/// ([`swapchain_next`]): only a loss, which is rare and final, looks the record up again. Where the
-/// application destroyed the swapchain meanwhile on another thread (breaking the external
-/// synchronisation the spec requires of xrDestroySwapchain), the loss is noted at the session's next
-/// call instead.
-pub fn observed_swapchain(h: xr::Swapchain, r: xr::Result) -> xr::Result {
-    if r == xr::Result::ERROR_SESSION_LOST || r == xr::Result::ERROR_INSTANCE_LOST {
-        // Atomic stores only, under the map lock.
-        registry().with_swapchain(h, |sc| observed(&sc.session, r));
-    }
-    r
+/// A swapchain's record for the length of the calling hook, or XR_ERROR_HANDLE_INVALID (see
+/// [`session_for_call`]).
+pub fn swapchain_for_call(h: xr::Swapchain) -> HookResult<Borrowed<'static, Swapchain>> {
+    registry()
+        .swapchain_for_call(h)
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)
 }
 
 /// The next layer's pointer. A hook is only handed out where the next layer offers the function

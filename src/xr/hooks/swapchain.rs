@@ -9,9 +9,7 @@ use xr::Handle;
 
 use crate::common::lock::Mutex;
 
-use super::{
-    next, observed, observed_swapchain, session, succeeded, swapchain, swapchain_next, HookResult,
-};
+use super::{next, observed, session, succeeded, swapchain, swapchain_for_call, HookResult};
 use crate::bridge::{FoveationState, MapSources};
 use crate::common::ffi::{self, In, Out, OutArray};
 use crate::gpu::density_images::{DensityImages, Refreshed};
@@ -273,18 +271,14 @@ pub fn acquire_swapchain_image(
     info: In<xr::SwapchainImageAcquireInfo>,
     index: Out<u32>,
 ) -> HookResult<xr::Result> {
-    let (f, state) = swapchain_next(
-        handle,
-        |n| n.acquire_swapchain_image,
-        |sc| sc.density.is_some(),
-    )?;
+    let state = swapchain_for_call(handle)?;
+    let f = next(state.session.instance.next.acquire_swapchain_image)?;
     // SAFETY: the next layer's function, with the application's arguments as it passed them.
-    let r = observed_swapchain(handle, unsafe { f(handle, info.raw(), index.raw()) });
-    let density = state
-        .as_deref()
-        .and_then(|s| Some((s, s.density.as_ref()?)));
-    if let (Some((state, density)), true, Some(index)) = (density, succeeded(r), index.read()) {
-        refresh_density(state, density, index);
+    let r = observed(&state.session, unsafe {
+        f(handle, info.raw(), index.raw())
+    });
+    if let (Some(density), true, Some(index)) = (&state.density, succeeded(r), index.read()) {
+        refresh_density(&state, density, index);
     }
     Ok(r)
 }
@@ -391,9 +385,10 @@ pub fn wait_swapchain_image(
     handle: xr::Swapchain,
     info: In<xr::SwapchainImageWaitInfo>,
 ) -> HookResult<xr::Result> {
-    let (f, _) = swapchain_next(handle, |n| n.wait_swapchain_image, |_| false)?;
+    let state = swapchain_for_call(handle)?;
+    let f = next(state.session.instance.next.wait_swapchain_image)?;
     // SAFETY: the next layer's function, with the application's arguments as it passed them.
-    Ok(observed_swapchain(handle, unsafe { f(handle, info.raw()) }))
+    Ok(observed(&state.session, unsafe { f(handle, info.raw()) }))
 }
 
 /// `xrReleaseSwapchainImage`: passed on.
@@ -401,9 +396,10 @@ pub fn release_swapchain_image(
     handle: xr::Swapchain,
     info: In<xr::SwapchainImageReleaseInfo>,
 ) -> HookResult<xr::Result> {
-    let (f, _) = swapchain_next(handle, |n| n.release_swapchain_image, |_| false)?;
+    let state = swapchain_for_call(handle)?;
+    let f = next(state.session.instance.next.release_swapchain_image)?;
     // SAFETY: the next layer's function, with the application's arguments as it passed them.
-    Ok(observed_swapchain(handle, unsafe { f(handle, info.raw()) }))
+    Ok(observed(&state.session, unsafe { f(handle, info.raw()) }))
 }
 
 #[cfg(test)]
