@@ -669,7 +669,14 @@ pub unsafe extern "system" fn create_framebuffer(
                 // SAFETY: the caller's array.
                 unsafe { slice(ci.p_attachments, ci.attachment_count) }.to_vec();
             if let Some(v) = views.get_mut(density as usize) {
-                match dev.attachments.shadow_view(*v) {
+                // A density view without a shadow (it could not be made) gets the device's
+                // full-rate stand-in ([`crate::vk::image::Own::full_rate_view`]).
+                let shadow = dev.attachments.shadow_view(*v).or_else(|| {
+                    let (own, fdm) = (dev.attachments.own.as_ref()?, dev.fdm.as_ref()?);
+                    // SAFETY: the device is live and emulates as `fdm` says.
+                    unsafe { own.full_rate_view(fdm, ci.width, ci.height) }
+                });
+                match shadow {
                     Some(s) => *v = s,
                     None => tracing::warn!(
                         view = raw(*v),
