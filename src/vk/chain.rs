@@ -437,8 +437,10 @@ mod tests {
             p_next: &tail as *const _ as *const c_void,
             ..Default::default()
         };
-        let mut first = vk::RenderingAttachmentLocationInfoKHR::default();
-        first.p_next = &fdm as *const _ as *const c_void;
+        let first = vk::RenderingAttachmentLocationInfoKHR {
+            p_next: &fdm as *const _ as *const c_void,
+            ..Default::default()
+        };
         let head = &first as *const _ as *const c_void;
         let ty = vk::StructureType::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_INFO_EXT;
         let check = |h: Result<*const c_void, ChainError>| {
