@@ -846,7 +846,11 @@ fn null_and_foreign_handles_go_down_for_validation_to_judge() {
     // SAFETY: the semaphore is destroyed at the end, when the queue is idle.
     let semaphore = unsafe { d.create_semaphore(&vk::SemaphoreCreateInfo::default(), None) }
         .expect("vkCreateSemaphore");
-    type DeviceCase<'a> = (&'static str, Expect, Box<dyn Fn() -> Option<vk::Result> + 'a>);
+    type DeviceCase<'a> = (
+        &'static str,
+        Expect,
+        Box<dyn Fn() -> Option<vk::Result> + 'a>,
+    );
     let device_cases: Vec<DeviceCase<'_>> = vec![
         (
             "framebuffer with a foreign density view: the full-rate stand-in",
