@@ -808,18 +808,21 @@ impl DensityImages {
                 depth: 1,
             },
         };
-        // The shadow, where there is one, gets the codes from the same staging buffer. It lives
-        // in the shading-rate layout (docs/vulkan-fdm-on-fsr.md#shadows) and goes back there
-        // before the density image's own final barrier, to which the Vulkan layer adds an
-        // ordering barrier on the shadow in that layout.
+        // The shadow, where there is one, gets the codes from the same staging buffer. Every
+        // layer is overwritten, so it too starts from UNDEFINED: the Vulkan layer gives the
+        // shadows of fovea's own density images no clear of their own (`src/vk/submit.rs`), and
+        // the first upload is what makes them valid. It ends in the shading-rate layout
+        // (docs/vulkan-fdm-on-fsr.md#shadows) before the density image's own final barrier, to
+        // which the Vulkan layer adds an ordering barrier on the shadow in that layout.
         let shadow = self.shadows[i].zip(self.rates.as_ref()).map(|(shadow, r)| {
             let fsr = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
-            let to_transfer = to_transfer.old_layout(fsr).image(shadow).subresource_range(
-                vk::ImageSubresourceRange {
-                    layer_count: r.layers,
-                    ..range
-                },
-            );
+            let to_transfer =
+                to_transfer
+                    .image(shadow)
+                    .subresource_range(vk::ImageSubresourceRange {
+                        layer_count: r.layers,
+                        ..range
+                    });
             let back = to_transfer
                 .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
                 .dst_access_mask(vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR)

@@ -1,5 +1,5 @@
-//! Barriers on an emulating device: the density-map layout, stage and access bits become what the
-//! driver knows (docs/vulkan-fdm-on-fsr.md#mapping), on copies of the application's arrays.
+//! Barriers (and event sets and waits) on an emulating device: the density-map layout, stage and
+//! access bits become what the driver knows (docs/vulkan-fdm-on-fsr.md#mapping), on copies of the application's arrays.
 //!
 //! - stage `FRAGMENT_DENSITY_PROCESS_EXT` → `FRAGMENT_SHADING_RATE_ATTACHMENT_KHR`, access
 //!   `FRAGMENT_DENSITY_MAP_READ_EXT` → `FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR`: the FDM bits
@@ -498,6 +498,48 @@ hook_and_khr_alias! {
     /// `vkCmdPipelineBarrier2`.
     cmd_pipeline_barrier2, cmd_pipeline_barrier2_khr = pipeline_barrier2("vkCmdPipelineBarrier2")
     (cb: vk::CommandBuffer, info: *const vk::DependencyInfo<'_>)
+}
+
+/// The shared body of `vkCmdSetEvent2` and its KHR alias: the dependency info is translated as a
+/// barrier's, so it stays identical to the one `vkCmdWaitEvents2` gets for the same event, as the
+/// spec requires
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdWaitEvents2.html>,
+/// VUID-vkCmdWaitEvents2-pEvents-03837).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn set_event2(
+    what: &'static str,
+    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdSetEvent2>,
+    cb: vk::CommandBuffer,
+    event: vk::Event,
+    info: *const vk::DependencyInfo<'_>,
+) {
+    guard(what, (), || {
+        // SAFETY: a command buffer dispatched by the loader.
+        let Some(rec) = (unsafe { registry::recording(cb) }) else {
+            return;
+        };
+        let Some(next) = pick(&rec) else { return };
+        // SAFETY: the caller's dependency info, read only.
+        if !rec.emulated || info.is_null() || !needs2(unsafe { &*info }) {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { next(cb, event, info) };
+        }
+        with_scratch(|s| {
+            // SAFETY: the caller's dependency info; the copies live across the call down.
+            unsafe {
+                let infos = translate2(s, std::slice::from_ref(&*info));
+                next(cb, event, infos.as_ptr())
+            }
+        })
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdSetEvent2`.
+    cmd_set_event2, cmd_set_event2_khr = set_event2("vkCmdSetEvent2")
+    (cb: vk::CommandBuffer, event: vk::Event, info: *const vk::DependencyInfo<'_>)
 }
 
 /// `vkCmdWaitEvents`.

@@ -276,6 +276,99 @@ impl ChainCopy {
     }
 }
 
+/// Per-thread storage for [`with_removed`], reused from call to call so that a command recorded
+/// with an edited chain allocates nothing in steady state.
+#[derive(Default)]
+struct Scratch {
+    nodes: Vec<*const vk::BaseInStructure<'static>>,
+    /// 8-byte aligned storage of the copied nodes; sized once per call before any node is copied,
+    /// so the pointers into it stay valid.
+    words: Vec<u64>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
+}
+
+/// [`ChainCopy::without`] for a chain that lives across one call only: `f` gets the head of the
+/// edited chain (or why there is none), built in this thread's scratch storage (a fresh one where
+/// that is busy, e.g. re-entered). The copy must not outlive `f`.
+///
+/// # Safety
+/// `next` must be NULL or a valid chain of Vulkan structs.
+pub unsafe fn with_removed<R>(
+    next: *const c_void,
+    remove: impl Fn(vk::StructureType) -> bool,
+    f: impl FnOnce(Result<*const c_void, ChainError>) -> R,
+) -> R {
+    let mut f = Some(f);
+    let mut run = |s: &mut Scratch| {
+        // SAFETY: as the caller promised.
+        let head = unsafe { removed_into(s, next, &remove) };
+        (f.take().expect("called once"))(head)
+    };
+    let r = SCRATCH.try_with(|s| s.try_borrow_mut().ok().map(|mut s| run(&mut s)));
+    match r {
+        Ok(Some(r)) => r,
+        _ => run(&mut Scratch::default()),
+    }
+}
+
+/// The work of [`with_removed`], in `s`.
+///
+/// # Safety
+/// As [`with_removed`].
+unsafe fn removed_into(
+    s: &mut Scratch,
+    next: *const c_void,
+    remove: &impl Fn(vk::StructureType) -> bool,
+) -> Result<*const c_void, ChainError> {
+    s.nodes.clear();
+    let mut node = next as *const vk::BaseInStructure<'static>;
+    while !node.is_null() && s.nodes.len() < MAX_CHAIN_LENGTH {
+        s.nodes.push(node);
+        // SAFETY: a valid chain, as the caller promised.
+        node = unsafe { (*node).p_next };
+    }
+    // SAFETY: as above.
+    let ty = |n: *const vk::BaseInStructure<'static>| unsafe { (*n).s_type };
+    // Nodes after the last removed one are shared; those before it (kept) are copied.
+    let Some(last) = s.nodes.iter().rposition(|&n| remove(ty(n))) else {
+        return Ok(next);
+    };
+    let mut words = 0;
+    for &n in &s.nodes[..last] {
+        if !remove(ty(n)) {
+            words += known_size(ty(n))
+                .ok_or(ChainError::Unknown(ty(n)))?
+                .div_ceil(8);
+        }
+    }
+    s.words.clear();
+    s.words.resize(words, 0);
+    let mut tail: *const vk::BaseInStructure<'static> =
+        s.nodes.get(last + 1).copied().unwrap_or(node);
+    let mut end = words;
+    for &n in s.nodes[..last].iter().rev() {
+        if remove(ty(n)) {
+            continue;
+        }
+        let size = known_size(ty(n)).ok_or(ChainError::Unknown(ty(n)))?;
+        let start = end - size.div_ceil(8);
+        let dst = s.words[start..end].as_mut_ptr();
+        // SAFETY: `n` is a `size`-byte struct of its type (known_size); `dst` holds at least `size`
+        // bytes, 8-aligned, and is ours to write; `words` is not resized until the next call.
+        unsafe {
+            std::ptr::copy_nonoverlapping(n as *const u8, dst as *mut u8, size);
+            let copy = dst as *mut vk::BaseInStructure<'static>;
+            (*copy).p_next = tail;
+            tail = copy;
+        }
+        end = start;
+    }
+    Ok(tail as *const c_void)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -332,6 +425,58 @@ mod tests {
         // SAFETY: as above.
         let found = unsafe { find::<u8>(head, ty) }.unwrap();
         assert_eq!(found, Some(&fdm as *const _ as *const u8));
+    }
+
+    #[test]
+    fn scratch_copies_relink_like_chain_copy_and_keep_their_storage() {
+        let tail = vk::BaseInStructure {
+            s_type: vk::StructureType::from_raw(12345),
+            ..Default::default()
+        };
+        let fdm = vk::RenderingFragmentDensityMapAttachmentInfoEXT {
+            p_next: &tail as *const _ as *const c_void,
+            ..Default::default()
+        };
+        let first = vk::RenderingAttachmentLocationInfoKHR {
+            p_next: &fdm as *const _ as *const c_void,
+            ..Default::default()
+        };
+        let head = &first as *const _ as *const c_void;
+        let ty = vk::StructureType::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_INFO_EXT;
+        let check = |h: Result<*const c_void, ChainError>| {
+            let h = h.expect("copied");
+            assert_ne!(h, head, "the application's struct is copied");
+            assert_eq!(
+                types(h),
+                [
+                    vk::StructureType::RENDERING_ATTACHMENT_LOCATION_INFO_KHR,
+                    vk::StructureType::from_raw(12345)
+                ]
+            );
+            h
+        };
+        // SAFETY: a valid chain on the stack.
+        let a = unsafe { with_removed(head, |t| t == ty, check) };
+        // SAFETY: as above.
+        let b = unsafe { with_removed(head, |t| t == ty, check) };
+        assert_eq!(a, b, "the same storage, reused");
+        assert_eq!(
+            first.p_next, &fdm as *const _ as *const c_void,
+            "not written"
+        );
+        // The struct to remove at the head: nothing copied, the rest shared.
+        // SAFETY: as above.
+        let rest = unsafe { with_removed(&fdm as *const _ as *const c_void, |t| t == ty, |h| h) };
+        assert_eq!(rest, Ok(&tail as *const _ as *const c_void));
+        // Re-entered (the scratch is busy): a fresh one does the same.
+        // SAFETY: as above.
+        unsafe {
+            with_removed(
+                head,
+                |t| t == ty,
+                |_| with_removed(head, |t| t == ty, check),
+            )
+        };
     }
 
     #[test]

@@ -295,7 +295,7 @@ unsafe fn create_device_impl(
                 "device emulates fragment density maps"
             );
             match image::Own::new(&inst, physical, ci, handle, gdpa) {
-                Ok(o) => own = Some(o),
+                Ok(o) => own = Some(std::sync::Arc::new(o)),
                 Err(why) => tracing::warn!(
                     device = raw(handle),
                     why = why.as_str(),
@@ -340,8 +340,8 @@ pub unsafe extern "system" fn destroy_device(
 
 /// `vkCreateImage` on an emulating device: a density map reaches the driver without the
 /// density-map usage and subsampled flag it does not know (on a copy of the create info), and
-/// gets a shading-rate shadow ([`image::image_created`]); where the shadow cannot be made, the call
-/// fails with the shadow's result.
+/// gets a shading-rate shadow ([`image::image_created`]); where the shadow cannot be made, the
+/// application's image is returned all the same (fail open: its passes render at full rate).
 ///
 /// # Safety
 /// The caller's arguments, valid as the command requires.
@@ -397,21 +397,13 @@ pub unsafe extern "system" fn create_image(
             // SAFETY: the caller's create info, read only.
             let app = unsafe { &*info };
             if r == vk::Result::SUCCESS
+                && !out.is_null()
                 && app
                     .usage
                     .contains(vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT)
             {
-                // SAFETY: the image was just created from `app`; where its shadow cannot be
-                // made it is destroyed again, before the application ever sees it.
-                unsafe {
-                    if let Err(e) = image::image_created(&dev, *out, app) {
-                        if let Some(destroy) = dev.next.destroy_image {
-                            destroy(device, *out, alloc);
-                        }
-                        *out = vk::Image::null();
-                        return e;
-                    }
-                }
+                // SAFETY: the image was just created from `app`.
+                unsafe { image::image_created(&dev, *out, app) };
             }
             r
         },

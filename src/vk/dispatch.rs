@@ -13,7 +13,7 @@ use std::ffi::CStr;
 
 use ash::vk;
 
-use crate::vk::{barrier, device, image, loader, pass, physical, pipeline};
+use crate::vk::{barrier, device, image, loader, pass, physical, pipeline, submit};
 
 /// When a device command's hook is handed out by `vkGetDeviceProcAddr`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -171,6 +171,16 @@ hooks! {
             When::Emulated;
         c"vkCmdWaitEvents2KHR" => cmd_wait_events2_khr: PFN_vkCmdWaitEvents2 =
             barrier::cmd_wait_events2_khr, When::Emulated;
+        c"vkCmdSetEvent2" => cmd_set_event2: PFN_vkCmdSetEvent2 = barrier::cmd_set_event2,
+            When::Emulated;
+        c"vkCmdSetEvent2KHR" => cmd_set_event2_khr: PFN_vkCmdSetEvent2 =
+            barrier::cmd_set_event2_khr, When::Emulated;
+        // Shadow clears go ahead of the application's submits; wait stages are translated.
+        c"vkQueueSubmit" => queue_submit: PFN_vkQueueSubmit = submit::queue_submit, When::Emulated;
+        c"vkQueueSubmit2" => queue_submit2: PFN_vkQueueSubmit2 = submit::queue_submit2,
+            When::Emulated;
+        c"vkQueueSubmit2KHR" => queue_submit2_khr: PFN_vkQueueSubmit2 = submit::queue_submit2_khr,
+            When::Emulated;
         // The attachment path: shadows, render passes, framebuffers, dynamic rendering.
         c"vkDestroyImage" => destroy_image: PFN_vkDestroyImage = image::destroy_image, When::Emulated;
         c"vkCreateImageView" => create_image_view: PFN_vkCreateImageView =

@@ -15,21 +15,19 @@
 //! otherwise one, which both eyes share, so whoever fills it writes per texel the finer rate of all
 //! the application's layers (docs/vulkan-fdm-on-fsr.md#multiview).
 //!
-//! Content: rate code 0 (1×1, full rate) at creation, cleared once with a layer-owned command
-//! buffer on a graphics queue the application created (index 0 of the first graphics family it
-//! asked for), waited for with a fence, so a density map nobody converts renders correctly, at full
-//! rate. The shadow then lives in `FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR`. The layer takes
-//! that queue for the clear only; Vulkan makes queue use externally synchronised
-//! (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkQueueSubmit.html>), so an
-//! application that creates density maps on one thread while it submits to that queue on another
-//! races with the layer: density maps are created at start-up in practice, and this is the
-//! documented limit. Command buffers the layer allocates get the loader's dispatch pointer through
-//! `vkSetDeviceLoaderData`
+//! Content: rate code 0 (1×1, full rate) before first use, so a density map nobody converts renders
+//! correctly, at full rate; the shadow then lives in `FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR`.
+//! The clear never takes a queue on its own: it waits, pending, for the application's next submit
+//! on one of its graphics queues and runs in front of it ([`crate::vk::submit`]), since Vulkan makes
+//! queue use externally synchronised by the application
+//! (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkQueueSubmit.html>). Command
+//! buffers the layer allocates get the loader's dispatch pointer through `vkSetDeviceLoaderData`
 //! (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
 //! "Creating New Dispatchable Objects").
 //!
 //! Fail open: where a shadow cannot be made, the image (or view) is the application's alone, the
-//! passes that would have used it run at full rate, and one log line says so.
+//! passes that would have used it run at full rate (a framebuffer gets a full-rate stand-in,
+//! [`Own::full_rate_view`]), and one log line says so.
 
 use std::ffi::c_void;
 
@@ -37,12 +35,15 @@ use ash::vk;
 use ash::vk::Handle as _;
 
 use crate::bridge::{self, FdmEmulation, Shadow};
+use std::sync::Arc;
+
 use crate::common::lock::{Mutex, Rank};
 use crate::vk::chain;
 use crate::vk::link::LayerDeviceCreateInfo;
 use crate::vk::loader::guard;
 use crate::vk::pipeline;
-use crate::vk::registry::{self, raw, Device, Instance, ShadowImage, ShadowView};
+use crate::vk::registry::{self, raw, Device, Instance, Key, ShadowImage, ShadowView};
+use crate::vk::submit::Clears;
 
 /// `PFN_vkSetDeviceLoaderData`.
 type SetDeviceLoaderData = unsafe extern "system" fn(vk::Device, *mut c_void) -> vk::Result;
@@ -66,11 +67,12 @@ pub struct Own {
     /// The next layer's device commands.
     pub fns: ash::Device,
     memory: vk::PhysicalDeviceMemoryProperties,
-    family: u32,
-    queue: vk::Queue,
     set_loader_data: SetDeviceLoaderData,
-    /// Serialises the layer's own use of `queue`.
-    submit: Mutex<()>,
+    /// The shadows' clears, run ahead of the application's submits ([`crate::vk::submit`]).
+    pub clears: Clears,
+    /// Full-rate stand-ins for density views without a shadow ([`Own::full_rate_view`]): one
+    /// layer each, kept until the device is destroyed.
+    fallbacks: Mutex<Vec<(ShadowImage, vk::ImageView)>>,
 }
 
 impl Own {
@@ -116,7 +118,7 @@ impl Own {
             m(physical, &mut memory);
             (families, memory)
         };
-        let queues = if ci.p_queue_create_infos.is_null() {
+        let infos = if ci.p_queue_create_infos.is_null() {
             &[][..]
         } else {
             // SAFETY: as the caller promised.
@@ -127,17 +129,6 @@ impl Own {
                 )
             }
         };
-        let family = queues
-            .iter()
-            .find(|q| {
-                q.flags.is_empty()
-                    && q.queue_count > 0
-                    && families
-                        .get(q.queue_family_index as usize)
-                        .is_some_and(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
-            })
-            .map(|q| q.queue_family_index)
-            .ok_or("the device has no graphics queue the layer could clear shadows on")?;
         // SAFETY: the next layer's commands for the live device, of the types their names imply.
         let fns = unsafe {
             ash::Device::load_with(
@@ -145,128 +136,122 @@ impl Own {
                 device,
             )
         };
-        // SAFETY: a queue the application created; the loader's dispatch pointer is set on it
-        // (as the loader's own vkGetDeviceQueue would) before the layers below see it.
-        let queue = unsafe {
-            let queue = fns.get_device_queue(family, 0);
-            set_loader_data(device, queue.as_raw() as *mut c_void)
-                .result()
-                .map_err(|e| format!("vkSetDeviceLoaderData: {e}"))?;
-            queue
-        };
+        // The application's queues of graphics families, where the passes that read shadows run
+        // and so where their clears go. Protected-capable queues (created with flags) are left out:
+        // they need vkGetDeviceQueue2, and a clear never needs one.
+        let mut queues = Vec::new();
+        for q in infos.iter().filter(|q| {
+            q.flags.is_empty()
+                && families
+                    .get(q.queue_family_index as usize)
+                    .is_some_and(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
+        }) {
+            for i in 0..q.queue_count {
+                // SAFETY: a queue the application created; only its handle is kept.
+                let queue = unsafe { fns.get_device_queue(q.queue_family_index, i) };
+                queues.push((queue.as_raw(), q.queue_family_index));
+            }
+        }
+        if queues.is_empty() {
+            return Err("the device has no graphics queue the layer could clear shadows on".into());
+        }
         Ok(Own {
             fns,
             memory,
-            family,
-            queue,
             set_loader_data,
-            submit: Mutex::ranked(Rank::GpuSubmit, "vk shadow clear", ()),
+            clears: Clears::new(queues),
+            fallbacks: Mutex::ranked(Rank::Record, "vk full-rate shadows", Vec::new()),
         })
     }
 
-    /// Clears every layer of `image` to rate code 0 and leaves it in [`SHADOW_LAYOUT`].
+    /// Gives a command buffer the layer allocated the loader's dispatch pointer
+    /// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
+    /// "Creating New Dispatchable Objects").
     ///
     /// # Safety
-    /// `image` must be a live shadow of this device with `layers` layers, not in use.
-    unsafe fn clear(&self, image: vk::Image, layers: u32) -> Result<(), vk::Result> {
-        let d = &self.fns;
-        let range = vk::ImageSubresourceRange {
-            aspect_mask: vk::ImageAspectFlags::COLOR,
-            base_mip_level: 0,
-            level_count: 1,
-            base_array_layer: 0,
-            layer_count: layers,
+    /// `cb` must be a command buffer the layer just allocated on this device.
+    pub unsafe fn set_loader_data(&self, cb: vk::CommandBuffer) -> Result<(), vk::Result> {
+        // SAFETY: as the caller promised.
+        unsafe { (self.set_loader_data)(self.fns.handle(), cb.as_raw() as *mut c_void) }.result()
+    }
+
+    /// A full-rate shading-rate view (rate code 0 everywhere, one layer) that covers a framebuffer
+    /// of `width`×`height` pixels: the stand-in for a density view whose shadow could not be made,
+    /// in a framebuffer of a pass translated for shading rates, where the density view itself is
+    /// invalid usage
+    /// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkFramebufferCreateInfo.html>,
+    /// VUID-VkFramebufferCreateInfo-flags-04548). One layer is valid with any framebuffer layer count
+    /// and view mask (a shading-rate attachment's layer count "must be either 1, or greater than"
+    /// them, same page). Made at framebuffer
+    /// creation, shared by every framebuffer it covers; `None` (logged) where it cannot be made.
+    ///
+    /// # Safety
+    /// `self` must belong to a live device emulating as `fdm` says.
+    pub unsafe fn full_rate_view(
+        &self,
+        fdm: &FdmEmulation,
+        width: u32,
+        height: u32,
+    ) -> Option<vk::ImageView> {
+        let need = vk::Extent2D {
+            width: width.div_ceil(fdm.texel[0].max(1)).max(1),
+            height: height.div_ceil(fdm.texel[1].max(1)).max(1),
         };
-        let _queue = self.submit.lock();
-        // SAFETY: plain Vulkan calls on the layer's own objects, each destroyed before returning.
-        unsafe {
-            let pool = d.create_command_pool(
-                &vk::CommandPoolCreateInfo::default()
-                    .queue_family_index(self.family)
-                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
-                None,
-            )?;
-            let run = || -> Result<(), vk::Result> {
-                let cb = d.allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )?[0];
-                (self.set_loader_data)(d.handle(), cb.as_raw() as *mut c_void).result()?;
-                d.begin_command_buffer(
-                    cb,
-                    &vk::CommandBufferBeginInfo::default()
-                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
-                )?;
-                let to_dst = vk::ImageMemoryBarrier::default()
-                    .image(image)
-                    .subresource_range(range)
-                    .old_layout(vk::ImageLayout::UNDEFINED)
-                    .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                    .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED);
-                d.cmd_pipeline_barrier(
-                    cb,
-                    vk::PipelineStageFlags::TOP_OF_PIPE,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::DependencyFlags::empty(),
-                    &[],
-                    &[],
-                    &[to_dst],
-                );
-                d.cmd_clear_color_image(
-                    cb,
-                    image,
-                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                    &vk::ClearColorValue { uint32: [0; 4] },
-                    &[range],
-                );
-                let to_rate = vk::ImageMemoryBarrier::default()
-                    .image(image)
-                    .subresource_range(range)
-                    .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                    .new_layout(SHADOW_LAYOUT)
-                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .dst_access_mask(vk::AccessFlags::MEMORY_READ)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED);
-                // ALL_COMMANDS covers the shading-rate stage: some validation-layer releases
-                // take that stage's bit for NVIDIA's shading-rate-image stage, which shares it,
-                // and refuse it without that feature.
-                d.cmd_pipeline_barrier(
-                    cb,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::ALL_COMMANDS,
-                    vk::DependencyFlags::empty(),
-                    &[],
-                    &[],
-                    &[to_rate],
-                );
-                d.end_command_buffer(cb)?;
-                let fence = d.create_fence(&vk::FenceCreateInfo::default(), None)?;
-                let cbs = [cb];
-                let r = d
-                    .queue_submit(
-                        self.queue,
-                        &[vk::SubmitInfo::default().command_buffers(&cbs)],
-                        fence,
-                    )
-                    .and_then(|()| d.wait_for_fences(&[fence], true, u64::MAX));
-                if r.is_err() {
-                    // A failed wait leaves the submission possibly pending, and the fence and the
-                    // command buffer must not be destroyed while it is
-                    // (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkDestroyFence.html>):
-                    // drain the queue (the layer holds it) first, whatever that answers.
-                    let _ = d.queue_wait_idle(self.queue);
+        let mut list = self.fallbacks.lock();
+        if let Some((_, v)) = list
+            .iter()
+            .find(|(s, _)| s.extent.width >= need.width && s.extent.height >= need.height)
+        {
+            return Some(*v);
+        }
+        let extent = vk::Extent3D {
+            width: need.width,
+            height: need.height,
+            depth: 1,
+        };
+        // SAFETY: the layer's own image and view on a live device; the image is destroyed again
+        // where its view cannot be made (its clear, still pending, is dropped first).
+        let made = unsafe {
+            make_shadow(self, fdm, extent, 1, true).and_then(|s| {
+                let info = vk::ImageViewCreateInfo::default()
+                    .image(s.image)
+                    .view_type(vk::ImageViewType::TYPE_2D)
+                    .format(SHADOW_FORMAT)
+                    .subresource_range(vk::ImageSubresourceRange {
+                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                        base_mip_level: 0,
+                        level_count: 1,
+                        base_array_layer: 0,
+                        layer_count: 1,
+                    });
+                match self.fns.create_image_view(&info, None) {
+                    Ok(v) => Ok((s, v)),
+                    Err(e) => {
+                        self.clears.forget(&self.fns, &s);
+                        Err(e)
+                    }
                 }
-                d.destroy_fence(fence, None);
-                r
-            };
-            let r = run();
-            d.destroy_command_pool(pool, None);
-            r
+            })
+        };
+        match made {
+            Ok((s, v)) => {
+                tracing::info!(
+                    width = need.width,
+                    height = need.height,
+                    "a full-rate shading-rate attachment stands in for density views without a \
+                     shadow"
+                );
+                list.push((s, v));
+                Some(v)
+            }
+            Err(e) => {
+                tracing::warn!(
+                    result = ?e,
+                    "no full-rate stand-in for a density view without a shadow either; the \
+                     framebuffer is passed on as the application made it"
+                );
+                None
+            }
         }
     }
 
@@ -309,6 +294,34 @@ unsafe fn loader_data_callback(ci: &vk::DeviceCreateInfo<'_>) -> Option<SetDevic
     None
 }
 
+/// Each emulating device's [`Own`] by the loader's dispatch key, for the submit hooks. A leaf lock
+/// outside [`crate::common::lock::Rank`]'s order, like the recording table
+/// ([`registry::recording`]): held for a scan and an `Arc` clone only, so it may be taken under
+/// fovea's own upload locks, whose submits pass through the layer.
+static OWNS: parking_lot::RwLock<Vec<(Key, Arc<Own>)>> = parking_lot::RwLock::new(Vec::new());
+
+/// Records (or, with `None`, forgets) the device `k`'s own calls.
+pub fn set_own(k: Key, own: Option<Arc<Own>>) {
+    let mut v = OWNS.write();
+    v.retain(|(key, _)| *key != k);
+    if let Some(o) = own {
+        v.push((k, o));
+    }
+}
+
+/// The own calls of a queue's (or any dispatchable handle's) device.
+///
+/// # Safety
+/// `handle` must be NULL or a live dispatchable handle made by the loader.
+pub unsafe fn own_of(handle: impl vk::Handle) -> Option<Arc<Own>> {
+    // SAFETY: as the caller promised.
+    let k = unsafe { registry::key(handle) }?;
+    OWNS.read()
+        .iter()
+        .find(|(key, _)| *key == k)
+        .map(|(_, o)| Arc::clone(o))
+}
+
 /// How many layers a shadow of an image with `app_layers` layers has on `fdm`'s device.
 pub fn shadow_layers(fdm: &FdmEmulation, app_layers: u32) -> u32 {
     if fdm.layered {
@@ -321,21 +334,17 @@ pub fn shadow_layers(fdm: &FdmEmulation, app_layers: u32) -> u32 {
 /// Makes the shadow of a density-map image the application just created (`ci` as the
 /// application gave it), or logs why not.
 ///
-/// A shadow that cannot be made (the driver is out of memory) is the application's image failing:
-/// the error is returned for `vkCreateImage` to give the application, which must not get a density
-/// map without a shadow. A pass translated for shading rates needs the shadow's view in its
-/// framebuffer; the density view itself there is invalid usage
-/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkFramebufferCreateInfo.html>,
-/// VUID-VkFramebufferCreateInfo-flags-04548), and `VK_ERROR_OUT_OF_DEVICE_MEMORY` is a result
-/// `vkCreateImage` may return.
+/// Fail open: a shadow that cannot be made (the driver is out of memory) leaves the application's
+/// image as the driver made it, without a shadow; its views get none either, dynamic rendering with
+/// it goes down without a shading-rate attachment, and a framebuffer with it gets the device's
+/// full-rate stand-in ([`Own::full_rate_view`]), so its passes render at full rate. One log line
+/// says why. The shadow's clear is left pending for the application's next submit
+/// ([`crate::vk::submit`]), except for fovea's own density images, whose uploads write the whole
+/// shadow before first use.
 ///
 /// # Safety
 /// `app` must be the live image just created on `dev` from `ci`.
-pub unsafe fn image_created(
-    dev: &Device,
-    app: vk::Image,
-    ci: &vk::ImageCreateInfo<'_>,
-) -> Result<(), vk::Result> {
+pub unsafe fn image_created(dev: &Device, app: vk::Image, ci: &vk::ImageCreateInfo<'_>) {
     let (Some(fdm), Some(own)) = (&dev.fdm, &dev.attachments.own) else {
         if dev.fdm.is_some() {
             tracing::warn!(
@@ -344,10 +353,11 @@ pub unsafe fn image_created(
                  device; passes with it render at full rate"
             );
         }
-        return Ok(());
+        return;
     };
+    let own_image = bridge::creating_own_density_images();
     // SAFETY: as the caller promised.
-    match unsafe { make_shadow(own, fdm, ci) } {
+    match unsafe { make_shadow(own, fdm, ci.extent, ci.array_layers, !own_image) } {
         Ok(s) => {
             dev.attachments.images.lock().insert(app.as_raw(), s);
             bridge::set_shadow(
@@ -369,9 +379,7 @@ pub unsafe fn image_created(
             // fovea's own density images get their rates with every upload
             // (`gpu::density_images`); an application's own maps are not converted yet.
             let logged = &dev.attachments.app_maps_logged;
-            if !bridge::creating_own_density_images()
-                && !logged.swap(true, std::sync::atomic::Ordering::Relaxed)
-            {
+            if !own_image && !logged.swap(true, std::sync::atomic::Ordering::Relaxed) {
                 tracing::warn!(
                     image = raw(app),
                     "this application creates and writes density maps itself: they render at \
@@ -379,36 +387,36 @@ pub unsafe fn image_created(
                      rates (fovea's own density maps carry their rates)"
                 );
             }
-            Ok(())
         }
-        Err(e) => {
-            tracing::warn!(
-                image = raw(app),
-                result = ?e,
-                "no shadow for a density map: vkCreateImage fails with the shadow's result"
-            );
-            Err(e)
-        }
+        Err(e) => tracing::warn!(
+            image = raw(app),
+            result = ?e,
+            "no shadow for a density map: the image is the application's alone, and passes with \
+             it render at full rate"
+        ),
     }
 }
 
-/// Creates, binds and clears one shadow.
+/// Creates and binds one shadow of `extent` for an image of `app_layers` layers; with `clear`, its
+/// clear to rate code 0 is left pending for the next submit.
 ///
 /// # Safety
 /// `own` must belong to a live device.
 unsafe fn make_shadow(
     own: &Own,
     fdm: &FdmEmulation,
-    ci: &vk::ImageCreateInfo<'_>,
+    extent: vk::Extent3D,
+    app_layers: u32,
+    clear: bool,
 ) -> Result<ShadowImage, vk::Result> {
     let d = &own.fns;
-    let layers = shadow_layers(fdm, ci.array_layers);
+    let layers = shadow_layers(fdm, app_layers);
     let info = vk::ImageCreateInfo::default()
         .image_type(vk::ImageType::TYPE_2D)
         .format(SHADOW_FORMAT)
         .extent(vk::Extent3D {
-            width: ci.extent.width,
-            height: ci.extent.height,
+            width: extent.width,
+            height: extent.height,
             depth: 1,
         })
         .mip_levels(1)
@@ -438,23 +446,23 @@ unsafe fn make_shadow(
                 return Err(e);
             }
         };
-        let done = d
-            .bind_image_memory(image, memory, 0)
-            .and_then(|()| own.clear(image, layers));
-        if let Err(e) = done {
+        if let Err(e) = d.bind_image_memory(image, memory, 0) {
             d.destroy_image(image, None);
             d.free_memory(memory, None);
             return Err(e);
+        }
+        if clear {
+            own.clears.add(image, layers);
         }
         Ok(ShadowImage {
             image,
             memory,
             extent: vk::Extent2D {
-                width: ci.extent.width,
-                height: ci.extent.height,
+                width: extent.width,
+                height: extent.height,
             },
             layers,
-            app_layers: ci.array_layers,
+            app_layers,
         })
     }
 }
@@ -556,24 +564,13 @@ pub unsafe extern "system" fn create_image_view(
                         .lock()
                         .insert(app_view.as_raw(), ShadowView { view });
                 }
-                Err(e) => {
-                    // As for the shadow image ([`image_created`]): a density view without its
-                    // shadow view could not be used in a translated pass, so the call fails.
-                    tracing::warn!(
-                        view = raw(app_view),
-                        result = ?e,
-                        "no shadow view for a density-map view: vkCreateImageView fails with its \
-                         result"
-                    );
-                    if let Some(destroy) = dev.next.destroy_image_view {
-                        // SAFETY: the view was just made, and the application never saw it.
-                        unsafe {
-                            destroy(device, app_view, alloc);
-                            *out = vk::ImageView::null();
-                        }
-                    }
-                    return e;
-                }
+                // Fail open, as for the shadow image ([`image_created`]): the view is the
+                // application's alone, and framebuffers with it get the full-rate stand-in.
+                Err(e) => tracing::warn!(
+                    view = raw(app_view),
+                    result = ?e,
+                    "no shadow view for a density-map view: passes with it render at full rate"
+                ),
             }
             r
         },
@@ -628,12 +625,10 @@ pub unsafe extern "system" fn destroy_image(
         if let Some(s) = shadow {
             bridge::set_shadow(image, None);
             if let Some(own) = &dev.attachments.own {
-                // SAFETY: the layer's own image and memory, no longer in use (the application's
-                // image, which every use of the shadow stood in for, is being destroyed).
-                unsafe {
-                    own.fns.destroy_image(s.image, None);
-                    own.fns.free_memory(s.memory, None);
-                }
+                // SAFETY: the layer's own image and memory, no longer used by the application
+                // (its image, which every use of the shadow stood in for, is being destroyed);
+                // a pending clear is dropped, one in flight is waited for.
+                unsafe { own.clears.forget(&own.fns, &s) };
             }
         }
     })
@@ -655,10 +650,17 @@ pub unsafe fn destroy_all(dev: &Device) {
         .map(|(_, v)| v)
         .collect();
     let images: Vec<(u64, ShadowImage)> = dev.attachments.images.lock().drain().collect();
+    let fallbacks: Vec<(ShadowImage, vk::ImageView)> = own.fallbacks.lock().drain(..).collect();
     // SAFETY: the layer's own objects on a live, idle device.
     unsafe {
+        own.clears.destroy(&own.fns);
         for v in views {
             own.fns.destroy_image_view(v.view, None);
+        }
+        for (s, v) in fallbacks {
+            own.fns.destroy_image_view(v, None);
+            own.fns.destroy_image(s.image, None);
+            own.fns.free_memory(s.memory, None);
         }
         for (app, s) in images {
             bridge::set_shadow(vk::Image::from_raw(app), None);

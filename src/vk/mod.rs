@@ -14,9 +14,11 @@
 //!   device commands;
 //! - [`pipeline`]: graphics pipelines get the shading-rate state, shader modules that read the
 //!   fragment size are detected, subsampled sampler and dynamic view flags are left out;
-//! - [`barrier`]: barriers and event waits without the density-map layout, stage and access bits;
+//! - [`barrier`]: barriers, event sets and waits without the density-map layout, stage and access bits;
 //! - [`image`]: the layer-owned shading-rate shadows of density-map images and views;
 //! - [`pass`]: render passes, framebuffers and dynamic rendering, rewritten to name the shadows;
+//! - [`submit`]: new shadows' clears ahead of the application's next submit, and semaphore wait
+//!   stages without the density-map stage;
 //! - [`chain`], [`link`]: `pNext` chains and the loader's link structs.
 //!
 //! Per physical device: native density maps → everything passes through untouched;
@@ -66,3 +68,4 @@ mod pass;
 mod physical;
 mod pipeline;
 mod registry;
+mod submit;

@@ -669,7 +669,14 @@ pub unsafe extern "system" fn create_framebuffer(
                 // SAFETY: the caller's array.
                 unsafe { slice(ci.p_attachments, ci.attachment_count) }.to_vec();
             if let Some(v) = views.get_mut(density as usize) {
-                match dev.attachments.shadow_view(*v) {
+                // A density view without a shadow (it could not be made) gets the device's
+                // full-rate stand-in ([`crate::vk::image::Own::full_rate_view`]).
+                let shadow = dev.attachments.shadow_view(*v).or_else(|| {
+                    let (own, fdm) = (dev.attachments.own.as_ref()?, dev.fdm.as_ref()?);
+                    // SAFETY: the device is live and emulates as `fdm` says.
+                    unsafe { own.full_rate_view(fdm, ci.width, ci.height) }
+                });
+                match shadow {
                     Some(s) => *v = s,
                     None => tracing::warn!(
                         view = raw(*v),
@@ -826,43 +833,51 @@ unsafe fn cmd_begin_rendering_with(
             // SAFETY: as above.
             return unsafe { next(cb, info) };
         };
-        // SAFETY: found by its sType; the caller's chain, read only.
-        let (view, rest) = unsafe {
-            (
-                (*found).image_view,
-                ChainCopy::without(ri.p_next, |t| t == ty),
-            )
-        };
-        let Ok(rest) = rest else {
-            tracing::warn!("{which}: a pNext chain the layer cannot copy; passed on as is");
-            // SAFETY: as above.
-            return unsafe { next(cb, info) };
-        };
+        // SAFETY: found by its sType.
+        let view = unsafe { (*found).image_view };
         let shadow = (view != vk::ImageView::null())
             .then(|| dev.attachments.shadow_view(view))
             .flatten();
-        let mut rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
-            .image_layout(SHADOW_LAYOUT)
-            .shading_rate_attachment_texel_size(texel);
-        rate.p_next = rest.head();
-        let mut copy = *ri;
-        match shadow {
-            Some(s) => {
-                rate.image_view = s;
-                copy.p_next = &rate as *const _ as *const c_void;
-            }
-            None => {
-                if view != vk::ImageView::null() {
-                    tracing::debug!(
-                        view = raw(view),
-                        "{which}: the density view has no shadow; rendering at full rate"
-                    );
-                }
-                copy.p_next = rest.head();
-            }
+        // The edited chain is built in per-thread scratch storage: no heap allocation per
+        // command (docs/ARCHITECTURE.md, "Nothing per frame that can be done at creation").
+        // SAFETY: the caller's chain, read only.
+        unsafe {
+            chain::with_removed(
+                ri.p_next,
+                |t| t == ty,
+                |rest| {
+                    let Ok(rest) = rest else {
+                        tracing::warn!(
+                            "{which}: a pNext chain the layer cannot copy; passed on as is"
+                        );
+                        return next(cb, info);
+                    };
+                    let mut rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
+                        .image_layout(SHADOW_LAYOUT)
+                        .shading_rate_attachment_texel_size(texel);
+                    rate.p_next = rest;
+                    let mut copy = *ri;
+                    match shadow {
+                        Some(s) => {
+                            rate.image_view = s;
+                            copy.p_next = &rate as *const _ as *const c_void;
+                        }
+                        None => {
+                            if view != vk::ImageView::null() {
+                                tracing::debug!(
+                                    view = raw(view),
+                                    "{which}: the density view has no shadow; rendering at full \
+                                     rate"
+                                );
+                            }
+                            copy.p_next = rest;
+                        }
+                    }
+                    // The copy and everything it points at live across the call.
+                    next(cb, &copy)
+                },
+            )
         }
-        // SAFETY: the copy and everything it points at live across the call.
-        unsafe { next(cb, &copy) }
     })
 }
 

@@ -141,7 +141,7 @@ pub struct ShadowView {
 pub struct Attachments {
     /// The layer's own device-level calls (creating, clearing and destroying shadows); `None`
     /// where the device does not emulate, or the layer could not set them up (no shadows then).
-    pub own: Option<crate::vk::image::Own>,
+    pub own: Option<Arc<crate::vk::image::Own>>,
     pub images: Mutex<HashMap<u64, ShadowImage>>,
     pub views: Mutex<HashMap<u64, ShadowView>>,
     pub passes: Mutex<HashMap<u64, u32>>,
@@ -152,7 +152,7 @@ pub struct Attachments {
 
 impl Attachments {
     /// No shadows yet.
-    pub fn new(own: Option<crate::vk::image::Own>) -> Attachments {
+    pub fn new(own: Option<Arc<crate::vk::image::Own>>) -> Attachments {
         Attachments {
             own,
             images: Mutex::ranked(Rank::Record, "vk shadow images", HashMap::new()),
@@ -227,6 +227,7 @@ pub unsafe fn add_device(data: Device) {
     // SAFETY: as the caller promised.
     if let Some(k) = unsafe { key(data.handle) } {
         set_recording(k, Some(Recording::of(&data)));
+        crate::vk::image::set_own(k, data.attachments.own.clone());
         DEVICES.write().insert(k, Arc::new(data));
     }
 }
@@ -240,6 +241,7 @@ pub unsafe fn remove_device(handle: vk::Device) -> Option<Arc<Device>> {
     let k = unsafe { key(handle) }?;
     let d = DEVICES.write().remove(&k);
     set_recording(k, None);
+    crate::vk::image::set_own(k, None);
     if d.is_some() {
         crate::bridge::set_device_fdm(handle, None);
     }
@@ -306,14 +308,14 @@ fn set_recording(k: Key, r: Option<Recording>) {
     }
 }
 
-/// The recording state of a command buffer's device.
+/// The recording state of a command buffer's (or queue's) device.
 ///
 /// # Safety
-/// `cb` must be NULL or a live command buffer made by the loader.
+/// `handle` must be NULL or a live command buffer or queue made by the loader.
 #[inline]
-pub unsafe fn recording(cb: vk::CommandBuffer) -> Option<Recording> {
+pub unsafe fn recording(handle: impl vk::Handle) -> Option<Recording> {
     // SAFETY: as the caller promised.
-    let k = unsafe { key(cb) }?;
+    let k = unsafe { key(handle) }?;
     RECORDING
         .read()
         .iter()

@@ -27,6 +27,7 @@ mod settings_file;
 mod symmetric_fov;
 mod threads;
 mod tidy;
+mod vk_clears;
 mod vk_enable;
 mod vk_faults;
 mod vk_fuzz;

@@ -10,6 +10,11 @@
 //! translated as without the chain. Validation's only complaints may be about those sTypes
 //! (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-validusage-pNext>).
 //!
+//! A second test hands the intercepted commands null handles and handles fovea never saw (made on
+//! another device), and unknown structs on the chains of the submit and event-set commands: fovea
+//! must not crash and must pass the call down for validation to judge (it reports the bad handle,
+//! or nothing where a null handle is allowed).
+//!
 //! `FOVEA_FUZZ_CASES=N` runs N cases instead of 64.
 
 use std::ffi::c_void;
@@ -23,6 +28,19 @@ use crate::support::vulkan::{
     DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk_layer::{env, take_real_messages, Vk, FDM};
+
+/// What validation must say of a call with a bad handle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Expect {
+    /// fovea passed the call down: validation reported the handle, or the call reached the double
+    /// below it (validation does not tell every other device's handle from this device's).
+    Down,
+    /// A null handle the specification allows there: nothing to report.
+    Silent,
+    /// A null dispatchable handle: there is no next layer to pass it to; fovea must only not
+    /// crash.
+    Dropped,
+}
 
 /// A struct fovea cannot know: a header and a body nobody reads.
 #[repr(C)]
@@ -567,4 +585,387 @@ fn unknown_structs_in_every_edited_chain() {
         .collect();
     assert!(leaks.is_empty(), "at teardown: {leaks:#?}");
     eprintln!("vk_fuzz: {} cases", n.get());
+}
+
+/// Null and foreign handles (made on a second device, never seen by fovea's maps) in every kind of
+/// command fovea intercepts, and unknown structs on the submit and event-set chains: no crash, and
+/// each call reaches validation, which reports the bad handle (or nothing where the specification
+/// allows a null handle).
+#[test]
+fn null_and_foreign_handles_go_down_for_validation_to_judge() {
+    let Some((_serial, env)) = env() else { return };
+    let vk = Vk::new(env, Profile::Nvidia, true).expect("an instance");
+    // SAFETY: the instance outlives the fixture and the other device.
+    let f = unsafe { Fixture::new(&vk) };
+    let other = vk.device(&[], None).expect("a second device");
+    let d = &f.d;
+    // SAFETY: objects of the second device, destroyed at the end.
+    let (foreign_image, foreign_memory, foreign_view, foreign_event, foreign_cb, other_pool) = unsafe {
+        let image = other
+            .create_image(
+                &image_info(DENSITY, 4, 1, vk::ImageUsageFlags::SAMPLED),
+                None,
+            )
+            .unwrap();
+        let req = other.get_image_memory_requirements(image);
+        let memory = other
+            .allocate_memory(
+                &allocate_info(&f.memory, req, vk::MemoryPropertyFlags::DEVICE_LOCAL),
+                None,
+            )
+            .unwrap();
+        other.bind_image_memory(image, memory, 0).unwrap();
+        let view = other
+            .create_image_view(
+                &vk::ImageViewCreateInfo::default()
+                    .image(image)
+                    .view_type(vk::ImageViewType::TYPE_2D)
+                    .format(DENSITY)
+                    .subresource_range(range(0, 1)),
+                None,
+            )
+            .unwrap();
+        let event = other
+            .create_event(&vk::EventCreateInfo::default(), None)
+            .unwrap();
+        let pool = other
+            .create_command_pool(
+                &vk::CommandPoolCreateInfo::default().queue_family_index(0),
+                None,
+            )
+            .unwrap();
+        let cb = other
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(pool)
+                    .command_buffer_count(1),
+            )
+            .unwrap()[0];
+        other
+            .begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+            .unwrap();
+        (image, memory, view, event, cb, pool)
+    };
+    // SAFETY: a queue of the fixture's device.
+    let queue = unsafe { d.get_device_queue(0, 0) };
+    let barrier = |image| {
+        vk::ImageMemoryBarrier::default()
+            .image(image)
+            .subresource_range(range(0, 1))
+            .old_layout(vk::ImageLayout::UNDEFINED)
+            .new_layout(FDM_LAYOUT)
+            .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT)
+    };
+    let barrier2 = |image| {
+        [vk::ImageMemoryBarrier2::default()
+            .image(image)
+            .subresource_range(range(0, 1))
+            .old_layout(vk::ImageLayout::UNDEFINED)
+            .new_layout(FDM_LAYOUT)
+            .dst_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
+            .dst_access_mask(vk::AccessFlags2::FRAGMENT_DENSITY_MAP_READ_EXT)]
+    };
+    let unknown = chain(&[1_000_900_001, 1_000_900_002], std::ptr::null());
+    let unknown = head(&unknown, std::ptr::null());
+    let null_image = vk::Image::null();
+    let rendering = |cb, view| {
+        let mut density = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
+            .image_view(view)
+            .image_layout(FDM_LAYOUT);
+        let info = vk::RenderingInfo::default()
+            .render_area(vk::Rect2D {
+                offset: vk::Offset2D::default(),
+                extent: vk::Extent2D {
+                    width: SIZE,
+                    height: SIZE,
+                },
+            })
+            .layer_count(1)
+            .push_next(&mut density);
+        // SAFETY: `cb` is recording (or null / foreign, on purpose).
+        unsafe {
+            d.cmd_begin_rendering(cb, &info);
+            // Not intercepted: it would go straight to validation, which takes NULL badly.
+            if cb != vk::CommandBuffer::null() {
+                d.cmd_end_rendering(cb);
+            }
+        }
+    };
+    type Case<'a> = (&'static str, Expect, Box<dyn Fn(vk::CommandBuffer) + 'a>);
+    // SAFETY (every case): the calls are invalid on purpose where they must be; validation, below
+    // fovea, reports and stops them before the driver.
+    let cases: Vec<Case<'_>> = vec![
+        (
+            "barrier, null image",
+            Expect::Down,
+            Box::new(|cb| unsafe {
+                d.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[barrier(null_image)],
+                );
+            }),
+        ),
+        (
+            "barrier, foreign image",
+            Expect::Down,
+            Box::new(|cb| unsafe {
+                d.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[barrier(foreign_image)],
+                );
+            }),
+        ),
+        (
+            "barrier2, foreign image",
+            Expect::Down,
+            Box::new(|cb| unsafe {
+                let b = barrier2(foreign_image);
+                d.cmd_pipeline_barrier2(
+                    cb,
+                    &vk::DependencyInfo::default().image_memory_barriers(&b),
+                );
+            }),
+        ),
+        (
+            "set event2, null event",
+            Expect::Down,
+            Box::new(|cb| unsafe {
+                let b = barrier2(f.images[1].0);
+                d.cmd_set_event2(
+                    cb,
+                    vk::Event::null(),
+                    &vk::DependencyInfo::default().image_memory_barriers(&b),
+                );
+            }),
+        ),
+        (
+            "set event2, foreign event, unknown chain",
+            Expect::Down,
+            Box::new(|cb| unsafe {
+                let b = barrier2(f.images[1].0);
+                let mut info = vk::DependencyInfo::default().image_memory_barriers(&b);
+                info.p_next = unknown;
+                d.cmd_set_event2(cb, foreign_event, &info);
+            }),
+        ),
+        (
+            "wait events, foreign event",
+            Expect::Down,
+            Box::new(|cb| unsafe {
+                d.cmd_wait_events(
+                    cb,
+                    &[foreign_event],
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT,
+                    &[],
+                    &[],
+                    &[barrier(f.images[1].0)],
+                );
+            }),
+        ),
+        (
+            "rendering, null density view",
+            Expect::Silent,
+            Box::new(|cb| rendering(cb, vk::ImageView::null())),
+        ),
+        (
+            "rendering, foreign density view",
+            Expect::Silent,
+            Box::new(|cb| rendering(cb, foreign_view)),
+        ),
+        (
+            "barrier, null command buffer",
+            Expect::Dropped,
+            Box::new(|_| unsafe {
+                d.cmd_pipeline_barrier(
+                    vk::CommandBuffer::null(),
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[barrier(f.images[1].0)],
+                );
+            }),
+        ),
+        (
+            "rendering, null command buffer",
+            Expect::Dropped,
+            Box::new(|_| rendering(vk::CommandBuffer::null(), f.density_view)),
+        ),
+        // A command buffer of the other device through this device's pointer: fovea finds the
+        // device by the handle, and the other device's next layer gets it.
+        (
+            "barrier2, the other device's command buffer",
+            Expect::Silent,
+            Box::new(|_| unsafe {
+                d.cmd_pipeline_barrier2(foreign_cb, &vk::DependencyInfo::default());
+            }),
+        ),
+    ];
+    let events = || {
+        env.double.records()["events"]
+            .as_array()
+            .map_or(0, Vec::len)
+    };
+    let mut ran = 0;
+    for (what, expect, case) in &cases {
+        take_real_messages();
+        let before = events();
+        // SAFETY: see above; the command buffer is the fixture's, recording.
+        unsafe { f.record(case) };
+        let reached = events() > before;
+        let messages: Vec<String> = take_real_messages()
+            .into_iter()
+            .filter(|m| !m.contains("pNext") && !m.contains("sType"))
+            .collect();
+        match expect {
+            Expect::Down => assert!(
+                !messages.is_empty() || reached,
+                "{what}: neither validation nor the double saw it"
+            ),
+            Expect::Silent | Expect::Dropped => {
+                assert!(messages.is_empty(), "{what}: {messages:#?}")
+            }
+        }
+        ran += 1;
+    }
+    // Device-level calls. Only ones the stack below survives: validation 1.3.239 lets some null
+    // handles through to lavapipe, which does not survive them (a null image in a view's create
+    // info, a null framebuffer at a pass's begin).
+    // SAFETY: the semaphore is destroyed at the end, when the queue is idle.
+    let semaphore = unsafe { d.create_semaphore(&vk::SemaphoreCreateInfo::default(), None) }
+        .expect("vkCreateSemaphore");
+    type DeviceCase<'a> = (
+        &'static str,
+        Expect,
+        Box<dyn Fn() -> Option<vk::Result> + 'a>,
+    );
+    let device_cases: Vec<DeviceCase<'_>> = vec![
+        (
+            "framebuffer with a foreign density view: the full-rate stand-in",
+            Expect::Silent,
+            Box::new(|| unsafe {
+                let views = [f.color_view, foreign_view];
+                let r = d.create_framebuffer(
+                    &vk::FramebufferCreateInfo::default()
+                        .render_pass(f.pass)
+                        .attachments(&views)
+                        .width(SIZE)
+                        .height(SIZE)
+                        .layers(1),
+                    None,
+                );
+                r.map(|fb| d.destroy_framebuffer(fb, None)).err()
+            }),
+        ),
+        (
+            "destroy null image, view and pass",
+            Expect::Silent,
+            Box::new(|| unsafe {
+                d.destroy_image(null_image, None);
+                d.destroy_image_view(vk::ImageView::null(), None);
+                d.destroy_render_pass(vk::RenderPass::null(), None);
+                None
+            }),
+        ),
+        (
+            "submit nothing, null fence, unknown chain",
+            Expect::Silent,
+            Box::new(|| unsafe {
+                let s = vk::SubmitInfo {
+                    p_next: unknown,
+                    ..Default::default()
+                };
+                d.queue_submit(queue, &[s], vk::Fence::null()).err()
+            }),
+        ),
+        (
+            "submit2 signalling at the density stage, unknown chains",
+            Expect::Silent,
+            Box::new(|| unsafe {
+                let mut g = vk::SemaphoreSubmitInfo::default()
+                    .semaphore(semaphore)
+                    .stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT);
+                g.p_next = unknown;
+                let signals = [g];
+                let mut s = vk::SubmitInfo2::default().signal_semaphore_infos(&signals);
+                s.p_next = unknown;
+                let r = d.queue_submit2(queue, &[s], vk::Fence::null()).err();
+                // Unsignal it again for the next use.
+                let waits = [vk::SemaphoreSubmitInfo::default()
+                    .semaphore(semaphore)
+                    .stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)];
+                d.queue_submit2(
+                    queue,
+                    &[vk::SubmitInfo2::default().wait_semaphore_infos(&waits)],
+                    vk::Fence::null(),
+                )
+                .expect("wait");
+                r
+            }),
+        ),
+        (
+            "submit on a null queue",
+            Expect::Dropped,
+            Box::new(|| unsafe {
+                d.queue_submit(vk::Queue::null(), &[], vk::Fence::null())
+                    .err()
+            }),
+        ),
+    ];
+    for (what, expect, case) in &device_cases {
+        take_real_messages();
+        let before = events();
+        let r = case();
+        let reached = events() > before;
+        // SAFETY: the queue is idle after it.
+        unsafe { d.queue_wait_idle(queue).unwrap() };
+        let messages: Vec<String> = take_real_messages()
+            .into_iter()
+            .filter(|m| !m.contains("pNext") && !m.contains("sType"))
+            .collect();
+        match expect {
+            Expect::Down => assert!(
+                !messages.is_empty() || reached,
+                "{what}: neither validation nor the double saw it ({r:?})"
+            ),
+            Expect::Silent => {
+                assert!(
+                    messages.is_empty() && r.is_none(),
+                    "{what}: {r:?} {messages:#?}"
+                )
+            }
+            Expect::Dropped => assert!(r.is_some(), "{what}: no next layer, yet success"),
+        }
+        ran += 1;
+    }
+    assert!(env.double.errors().is_empty(), "{:?}", env.double.errors());
+    drop(cases);
+    drop(device_cases);
+    // SAFETY: nothing made from the fixture or the other device is in use.
+    unsafe {
+        d.destroy_semaphore(semaphore, None);
+        other.end_command_buffer(foreign_cb).unwrap();
+        other.destroy_command_pool(other_pool, None);
+        other.destroy_event(foreign_event, None);
+        other.destroy_image_view(foreign_view, None);
+        other.destroy_image(foreign_image, None);
+        other.free_memory(foreign_memory, None);
+        other.destroy_device(None);
+        f.destroy();
+    }
+    drop(vk);
+    take_real_messages();
+    eprintln!("vk_fuzz: {ran} calls with null or foreign handles");
 }
