@@ -40,6 +40,8 @@
 #define FOVEA_ENV_DISABLE_FOVEA_VK_LAYER "DISABLE_FOVEA_VK_LAYER" /* set: never load it */
 #define FOVEA_ENV_CONFIG "FOVEA_CONFIG"             /* the fovea.toml to read instead of $XDG_CONFIG_HOME's; "" none */
 #define FOVEA_ENV_MAX_FRAGMENT "FOVEA_MAX_FRAGMENT" /* 1, 2 or 4: the largest fragment a map asks for */
+#define FOVEA_ENV_INJECT "FOVEA_INJECT"             /* 0/1: foveate apps that never ask (shading rates in eye passes) */
+#define FOVEA_ENV_INJECT_LEVEL "FOVEA_INJECT_LEVEL" /* 0-4 or a level name: the level injection uses */
 /* Where fovea.toml (XDG_CONFIG_HOME/fovea) and the log (XDG_STATE_HOME/fovea) are by default. */
 #define FOVEA_ENV_XDG_CONFIG_HOME "XDG_CONFIG_HOME"
 #define FOVEA_ENV_XDG_STATE_HOME "XDG_STATE_HOME"
@@ -60,6 +62,8 @@
     X(FOVEA_ENV_DISABLE_FOVEA_VK_LAYER)          \
     X(FOVEA_ENV_CONFIG)                          \
     X(FOVEA_ENV_MAX_FRAGMENT)                    \
+    X(FOVEA_ENV_INJECT)                          \
+    X(FOVEA_ENV_INJECT_LEVEL)                    \
     X(FOVEA_ENV_XDG_CONFIG_HOME)                 \
     X(FOVEA_ENV_XDG_STATE_HOME)                  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL)    \

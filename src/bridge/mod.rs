@@ -10,6 +10,8 @@
 //! Both API sides meet here: the OpenXR side records what the application asked for and rendered,
 //! the GPU side fills images from [`MapInputs`]. Neither imports the other.
 
+pub mod inject;
+
 use fovea_model::density::{Level, Pattern};
 use fovea_model::dynamic::level_at;
 use fovea_model::maps::{Inputs, SubmittedView, MAX_VIEWS};

@@ -319,9 +319,11 @@ pub fn warn_problems(c: &fovea_config::Config) {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Settings {
     pub symmetric_fov: bool,
-    /// `inject` and `inject_level`: for the coming injection mode; parsed and validated, not yet
-    /// acted on.
+    /// `inject` (or `FOVEA_INJECT`): foveate an application that never asks, by adding
+    /// shading-rate attachments to its eye passes (docs/injection.md).
     pub inject: bool,
+    /// `inject_level` (or `FOVEA_INJECT_LEVEL`): the level injection uses before Quest's debug
+    /// properties apply on top; [`DEFAULT_INJECT_LEVEL`] when not given.
     pub inject_level: Option<Level>,
     /// The `log` filter from the file (`FOVEA_LOG` wins; the log is set up before the instance).
     pub log: Option<String>,
@@ -334,7 +336,34 @@ pub struct Settings {
     pub config: Option<PathBuf>,
 }
 
+/// The level injection uses when `inject` is on and `inject_level` is not given: medium, a level
+/// whose full-rate centre covers what the eye resolves sharply (docs/density-model.md#floors), so
+/// switching injection on alone changes something visible without being drastic.
+pub const DEFAULT_INJECT_LEVEL: Level = Level::Medium;
+
+/// Whether an instance's eye passes get injected shading rates (docs/injection.md#switching-it-on).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Injection {
+    /// `inject` is off.
+    Off,
+    /// `inject` is on, but the application uses the FB foveation API itself: its own maps count,
+    /// and fovea never adds a second source of shading rates.
+    AppFoveates,
+    /// On, at this level (before the debug properties and the dynamic controller apply).
+    On(Level),
+}
+
 impl Settings {
+    /// Whether injection applies to an application that enabled (`uses_fb`) or did not enable
+    /// any of the FB foveation extensions.
+    pub fn injection(&self, uses_fb: bool) -> Injection {
+        match (self.inject, uses_fb) {
+            (false, _) => Injection::Off,
+            (true, true) => Injection::AppFoveates,
+            (true, false) => Injection::On(self.inject_level.unwrap_or(DEFAULT_INJECT_LEVEL)),
+        }
+    }
+
     /// For the application `id`: the environment over the configuration file's matching sections.
     pub fn from_env(id: fovea_config::Identity) -> Settings {
         let config = fovea_config::config_path(fovea_config::process_env);
@@ -417,6 +446,48 @@ mod tests {
         assert!(!s(Some("0")).symmetric_fov);
         assert!(!s(Some("yes")).symmetric_fov);
         assert!(!s(None).symmetric_fov);
+    }
+
+    #[test]
+    fn injection_is_off_by_default_and_never_for_fb_apps() {
+        let s = |pairs: &'static [(&'static str, &'static str)]| {
+            Settings::from_lookup(move |k| pairs.iter().find(|p| p.0 == k).map(|p| p.1.to_string()))
+        };
+        assert_eq!(s(&[]).injection(false), Injection::Off);
+        assert_eq!(
+            s(&[("FOVEA_INJECT_LEVEL", "3")]).injection(false),
+            Injection::Off,
+            "a level alone does not switch it on"
+        );
+        let on = s(&[("FOVEA_INJECT", "1")]);
+        assert_eq!(on.injection(false), Injection::On(DEFAULT_INJECT_LEVEL));
+        assert_eq!(on.injection(true), Injection::AppFoveates);
+        let high = s(&[("FOVEA_INJECT", "1"), ("FOVEA_INJECT_LEVEL", "high")]);
+        assert_eq!(high.injection(false), Injection::On(Level::High));
+        assert_eq!(
+            s(&[("FOVEA_INJECT", "0"), ("FOVEA_INJECT_LEVEL", "2")]).injection(false),
+            Injection::Off
+        );
+    }
+
+    #[test]
+    fn injection_comes_from_the_apps_section_of_the_file() {
+        let file = fovea_config::Config::parse(
+            "inject = false\n[app.\"game\"]\ninject = true\ninject_level = \"low\"\n",
+            std::path::Path::new("fovea.toml"),
+        );
+        let id = |app: &str| fovea_config::Identity {
+            app: Some(app.into()),
+            ..Default::default()
+        };
+        let game = Settings::resolve(Some(&file), &id("game"), |_| None);
+        assert_eq!(game.injection(false), Injection::On(Level::Low));
+        let other = Settings::resolve(Some(&file), &id("other"), |_| None);
+        assert_eq!(other.injection(false), Injection::Off);
+        let env_wins = Settings::resolve(Some(&file), &id("game"), |k| {
+            (k == "FOVEA_INJECT_LEVEL").then(|| "4".to_string())
+        });
+        assert_eq!(env_wins.injection(false), Injection::On(Level::HighTop));
     }
 
     #[test]

@@ -58,6 +58,10 @@ enum Plan {
     /// Pass the application's create info down untouched; `Some(why)` is logged.
     Untouched(Option<String>),
     Emulate(FdmEmulation, Rewrite),
+    /// Injection is on (docs/injection.md#how-the-attachment-gets-in) and the device has
+    /// shading-rate attachments: the create info gains `VK_KHR_fragment_shading_rate` and its
+    /// attachment feature; the device's facts are those the injected maps are made for.
+    Inject(FdmEmulation, Rewrite),
 }
 
 /// Decides and, for emulation, builds the rewritten create info.
@@ -86,16 +90,39 @@ unsafe fn plan(
     };
     // SAFETY: the application's names, NUL-terminated.
     let enabled = |want: &CStr| names.iter().any(|&n| unsafe { name(n) } == Some(want));
-    if !enabled(ash::ext::fragment_density_map::NAME) {
-        return Plan::Untouched(None);
-    }
     // SAFETY: as the caller promised.
     let in_chain = |ty| matches!(unsafe { chain::find::<u8>(ci.p_next, ty) }, Ok(Some(_)));
-    if enabled(ash::khr::fragment_shading_rate::NAME)
+    let own_rates = enabled(ash::khr::fragment_shading_rate::NAME)
         || enabled(ash::nv::shading_rate_image::NAME)
         || in_chain(vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR)
-        || in_chain(vk::StructureType::PHYSICAL_DEVICE_SHADING_RATE_IMAGE_FEATURES_NV)
-    {
+        || in_chain(vk::StructureType::PHYSICAL_DEVICE_SHADING_RATE_IMAGE_FEATURES_NV);
+    if !enabled(ash::ext::fragment_density_map::NAME) {
+        if !crate::bridge::inject::wanted() {
+            return Plan::Untouched(None);
+        }
+        if own_rates {
+            return Plan::Untouched(Some(
+                "the application uses shading rates itself; nothing is injected on this device"
+                    .into(),
+            ));
+        }
+        // SAFETY: as the caller promised; nothing is removed, so the copy shares the chain.
+        let chain = match unsafe { ChainCopy::without(ci.p_next, |_| false) } {
+            Ok(c) => c,
+            Err(e) => {
+                return Plan::Untouched(Some(format!(
+                    "cannot extend the device create info's pNext chain ({e:?}); nothing is \
+                     injected on this device"
+                )))
+            }
+        };
+        let version = inst.api_version.min(*api_version);
+        return Plan::Inject(
+            fdm.clone(),
+            with_shading_rates(names, &enabled, chain, version),
+        );
+    }
+    if own_rates {
         return Plan::Untouched(Some(
             "the application enables shading rates itself; VK_EXT_fragment_density_map is not \
              emulated on this device"
@@ -129,7 +156,7 @@ unsafe fn plan(
         "density maps stripped from the device create info"
     );
     let fdm_name = ash::ext::fragment_density_map::NAME;
-    let mut new_names: Vec<*const c_char> = names
+    let kept: Vec<*const c_char> = names
         .iter()
         .copied()
         .filter(|&n| {
@@ -137,10 +164,27 @@ unsafe fn plan(
             unsafe { name(n) != Some(fdm_name) }
         })
         .collect();
+    let version = inst.api_version.min(*api_version);
+    Plan::Emulate(
+        fdm.clone(),
+        with_shading_rates(&kept, &enabled, chain, version),
+    )
+}
+
+/// The create info's extensions (`names`) with `VK_KHR_fragment_shading_rate` and what it needs,
+/// and a `VkPhysicalDeviceFragmentShadingRateFeaturesKHR` enabling only the attachment feature in
+/// front of `chain`: the other two features would oblige every draw to set a rate
+/// (docs/vulkan-fdm-on-fsr.md#other-pipeline-paths).
+fn with_shading_rates(
+    names: &[*const c_char],
+    enabled: &dyn Fn(&CStr) -> bool,
+    chain: ChainCopy,
+    version: u32,
+) -> Rewrite {
+    let mut new_names = names.to_vec();
     new_names.push(ash::khr::fragment_shading_rate::NAME.as_ptr());
     // Shading rates need render pass 2 (core in 1.2) and, through it, multiview and maintenance2
     // (core in 1.1).
-    let version = inst.api_version.min(*api_version);
     if version < vk::API_VERSION_1_2 {
         for dep in [
             ash::khr::create_renderpass2::NAME,
@@ -157,14 +201,11 @@ unsafe fn plan(
             .attachment_fragment_shading_rate(true),
     );
     fsr.p_next = chain.head() as *mut _;
-    Plan::Emulate(
-        fdm.clone(),
-        Rewrite {
-            _chain: chain,
-            names: new_names,
-            fsr,
-        },
-    )
+    Rewrite {
+        _chain: chain,
+        names: new_names,
+        fsr,
+    }
 }
 
 /// `vkCreateDevice`: finds the next layer in the loader's link info, creates the device there
@@ -231,6 +272,7 @@ unsafe fn create_device_impl(
     };
     // SAFETY: as the caller promised.
     let plan = unsafe { plan(&inst, physical, ci) };
+    let inject = matches!(plan, Plan::Inject(..));
     let (r, fdm) = match plan {
         Plan::Untouched(why) => {
             if let Some(why) = why {
@@ -243,7 +285,7 @@ unsafe fn create_device_impl(
             // SAFETY: the next layer's function, with the caller's arguments.
             (unsafe { create(physical, info, alloc, out) }, None)
         }
-        Plan::Emulate(fdm, rewrite) => {
+        Plan::Emulate(fdm, rewrite) | Plan::Inject(fdm, rewrite) => {
             let mut copy = *ci;
             copy.p_next = &*rewrite.fsr as *const _ as *const _;
             copy.enabled_extension_count = rewrite.names.len() as u32;
@@ -268,7 +310,8 @@ unsafe fn create_device_impl(
                 tracing::warn!(
                     physical = raw(physical),
                     result = ?r,
-                    "creating the device with emulated density maps failed; retrying untouched"
+                    inject,
+                    "creating the device with shading-rate attachments failed; retrying untouched"
                 );
                 // SAFETY: the loader's struct gets its link back for the retry.
                 unsafe { (*link_info).u = (*layer).p_next as *mut _ };
@@ -280,6 +323,8 @@ unsafe fn create_device_impl(
     if r != vk::Result::SUCCESS {
         return r;
     }
+    // Injection uses the device's shading-rate facts, but emulates nothing.
+    let (fdm, inject) = if inject { (None, fdm) } else { (fdm, None) };
     // SAFETY: the device was just created.
     unsafe {
         let handle = *out;
@@ -304,11 +349,18 @@ unsafe fn create_device_impl(
                 ),
             }
         }
+        if inject.is_some() {
+            tracing::info!(
+                device = raw(handle),
+                "device has shading-rate attachments for injection"
+            );
+        }
         registry::add_device(registry::Device {
             handle,
             gdpa,
             next,
             fdm,
+            inject,
             api_version,
             attachments: registry::Attachments::new(own),
         });

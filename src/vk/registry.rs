@@ -108,6 +108,13 @@ pub struct Device {
     pub next: DeviceNext,
     /// `Some` where the device emulates fragment density maps.
     pub fdm: Option<FdmEmulation>,
+    /// Where injection is on (docs/injection.md) and the device got shading-rate attachments at
+    /// `vkCreateDevice`: its attachment facts, which injected maps are made for.
+    #[expect(
+        dead_code,
+        reason = "read by pass injection (docs/injection.md), which is not written yet"
+    )]
+    pub inject: Option<FdmEmulation>,
     /// The device's Vulkan version (the instance's and the physical device's lower one): below
     /// 1.2 render pass 2 is `VK_KHR_create_renderpass2`'s, which the layer enables for emulation,
     /// and the core names may not be called.

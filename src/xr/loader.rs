@@ -239,6 +239,7 @@ fn create_instance_inner(
         fovs: symmetric::InstanceFovs::new(epic),
         vulkan: Default::default(),
         lost: Default::default(),
+        inject: injection(&settings, exts),
     };
     let provided: Vec<Ext> = exts.enabled.iter().filter(|e| exts.provided(*e)).collect();
     let native: Vec<Ext> = exts.native.iter().collect();
@@ -543,4 +544,37 @@ fn api_layer_properties(
         return Ok(xr::Result::ERROR_VALIDATION_FAILURE);
     }
     Ok(ffi::two_call(&[p], count_out, properties))
+}
+
+/// Whether injection applies to a new instance (docs/injection.md#switching-it-on), and if so,
+/// publishes it for the Vulkan side before the application creates its `VkDevice`. An application
+/// that enabled an FB foveation extension foveates itself and is never injected into.
+fn injection(
+    settings: &settings::Settings,
+    exts: Extensions,
+) -> Option<fovea_model::density::Level> {
+    let uses_fb = [
+        Ext::Foveation,
+        Ext::FoveationConfiguration,
+        Ext::FoveationVulkan,
+    ]
+    .into_iter()
+    .any(|e| exts.enabled.contains(e));
+    match settings.injection(uses_fb) {
+        settings::Injection::Off => None,
+        settings::Injection::AppFoveates => {
+            tracing::info!(
+                "inject is on, but the application uses XR_FB_foveation itself: not injecting"
+            );
+            None
+        }
+        settings::Injection::On(level) => {
+            tracing::info!(
+                level = level.name(),
+                "injecting shading rates into eye passes"
+            );
+            crate::bridge::inject::start(level);
+            Some(level)
+        }
+    }
 }

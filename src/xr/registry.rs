@@ -65,6 +65,9 @@ pub struct Instance {
     pub vulkan: Mutex<VulkanSetup>,
     /// The runtime returned XR_ERROR_INSTANCE_LOST through a call fovea passed on.
     pub lost: AtomicBool,
+    /// The level injected into the application's eye passes, where injection applies to it
+    /// (docs/injection.md); the Vulkan side reads the published state ([`crate::bridge::inject`]).
+    pub inject: Option<fovea_model::density::Level>,
 }
 
 impl Instance {
@@ -252,6 +255,9 @@ impl Session {
     /// Recomputes [`Session::dynamic_max`] after a swapchain's state or the overrides changed.
     pub fn refresh_dynamic_max(&self) {
         let over = self.instance.overrides.current();
+        let injected = self
+            .injected_pattern_at(usize::MAX)
+            .and_then(|(p, dynamic)| dynamic.then_some(step_of(p.level)));
         let max = registry()
             .foveated_swapchains_of(self.handle)
             .iter()
@@ -260,9 +266,34 @@ impl Session {
                     effective(sc.foveation.as_ref()?.lock().params, over, usize::MAX);
                 dynamic.then_some(step_of(p.level))
             })
+            .chain(injected)
             .max()
             .unwrap_or(0);
         self.dynamic_max.store(max, Ordering::Relaxed);
+    }
+
+    /// The injected pattern at dynamic step `step`, and whether it is dynamic: the injected level
+    /// as if an application had asked for it, under the debug overrides with Quest's meaning
+    /// ([`effective`]). `None` where injection does not apply to this instance.
+    pub fn injected_pattern_at(&self, step: usize) -> Option<(Pattern, bool)> {
+        let level = self.instance.inject?;
+        let params = ProfileParams {
+            level: level as u32,
+            vertical_offset_deg: 0.0,
+            dynamic: false,
+        };
+        Some(effective(params, self.instance.overrides.current(), step))
+    }
+
+    /// Publishes the injected pattern in force now for the Vulkan side (a comparison when it did
+    /// not change).
+    pub fn publish_injected_pattern(&self) {
+        if let Some((pattern, dynamic)) =
+            self.injected_pattern_at(self.dynamic_step.load(Ordering::Relaxed))
+        {
+            let max_fragment = self.instance.overrides.current().max_fragment();
+            crate::bridge::inject::set_pattern(pattern, dynamic, max_fragment);
+        }
     }
 }
 

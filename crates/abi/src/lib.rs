@@ -108,6 +108,11 @@ pub mod env {
     pub const CONFIG: &str = "FOVEA_CONFIG";
     /// The largest fragment any density map asks for: 1, 2 or 4 pixels per axis (default 4).
     pub const MAX_FRAGMENT: &str = "FOVEA_MAX_FRAGMENT";
+    /// `FOVEA_INJECT=1`: foveate an application that never asks for it, by adding shading-rate
+    /// attachments to its eye passes (docs/injection.md); above the file's `inject`.
+    pub const INJECT: &str = "FOVEA_INJECT";
+    /// The level injection uses (0-4 or a level name); above the file's `inject_level`.
+    pub const INJECT_LEVEL: &str = "FOVEA_INJECT_LEVEL";
     /// Names a hook that panics on purpose, to prove panics never cross the FFI boundary.
     pub const INJECT_PANIC: &str = "FOVEA_INJECT_PANIC";
     /// `FOVEA_VK_LAYER=1`: the `enable_environment` of the implicit Vulkan layer manifest that

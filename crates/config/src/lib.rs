@@ -38,7 +38,9 @@ use toml::de::{DeTable, DeValue};
 
 /// Environment variables this crate reads.
 pub mod env {
-    pub use fovea_abi::env::{CONFIG, LOG, LOG_FILE, MAX_FRAGMENT, SYMMETRIC_FOV};
+    pub use fovea_abi::env::{
+        CONFIG, INJECT, INJECT_LEVEL, LOG, LOG_FILE, MAX_FRAGMENT, SYMMETRIC_FOV,
+    };
     /// Quest's `debug.oculus.foveation.level` as a variable.
     pub const LEVEL: &str = "DEBUG_OCULUS_FOVEATION_LEVEL";
     /// Quest's `debug.oculus.foveation.dynamic` as a variable.
@@ -125,7 +127,9 @@ impl Key {
             Key::MaxFragment => Some(env::MAX_FRAGMENT),
             Key::Log => Some(env::LOG),
             Key::LogFile => Some(env::LOG_FILE),
-            Key::VerticalOffset | Key::Inject | Key::InjectLevel => None,
+            Key::Inject => Some(env::INJECT),
+            Key::InjectLevel => Some(env::INJECT_LEVEL),
+            Key::VerticalOffset => None,
         }
     }
 

@@ -9,6 +9,7 @@
 //! - [`stats`]: the once-a-second stats window and its line;
 //! - [`maps`]: what each layer of a density map holds, and filling it;
 //! - [`headsets`]: headset presets as runtimes report them, and eye-buffer sizing;
+//! - [`inject`]: which passes of an app that never asked are eye passes, and their rate codes;
 //! - [`shading_rate`]: density-map bytes to shading-rate attachment codes.
 #![forbid(unsafe_code)]
 
@@ -16,6 +17,7 @@ pub mod density;
 pub mod dynamic;
 pub mod fov;
 pub mod headsets;
+pub mod inject;
 pub mod maps;
 pub mod projection;
 pub mod shading_rate;

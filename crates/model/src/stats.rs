@@ -104,6 +104,17 @@ pub struct Line {
     pub level: Option<(Level, bool)>,
     pub maps_built: u64,
     pub maps_uploaded: u64,
+    /// In injection mode (docs/injection.md#stats): the passes per frame that got injected shading
+    /// rates, and all passes begun per frame, as means over the window rounded to whole passes.
+    pub injected: Option<(u64, u64)>,
+}
+
+impl Line {
+    /// The per-frame means of `eye` injected and `all` passes counted over `frames` frames.
+    pub fn per_frame(eye: u64, all: u64, frames: u32) -> (u64, u64) {
+        let f = u64::from(frames.max(1));
+        ((eye + f / 2) / f, (all + f / 2) / f)
+    }
 }
 
 impl fmt::Display for Line {
@@ -119,6 +130,9 @@ impl fmt::Display for Line {
                 write!(f, "{}{}", level as u32, if dynamic { "D" } else { "" })?
             }
             None => write!(f, "-")?,
+        }
+        if let Some((eye, all)) = self.injected {
+            write!(f, " Inj={eye}/{all}")?;
         }
         write!(
             f,
@@ -179,6 +193,7 @@ mod tests {
             level: Some((Level::High, true)),
             maps_built: 2,
             maps_uploaded: 4,
+            injected: None,
         };
         let text = line.to_string();
         assert!(
@@ -192,5 +207,13 @@ mod tests {
         }
         .to_string();
         assert!(none.contains("Fov=- "), "{none}");
+        let injected = Line {
+            level: Some((Level::Medium, false)),
+            injected: Some(Line::per_frame(181, 540, 90)),
+            ..line
+        }
+        .to_string();
+        assert!(injected.contains("Fov=2 Inj=2/6 Maps="), "{injected}");
+        assert_eq!(Line::per_frame(5, 9, 0), (5, 9), "no frames: the counts");
     }
 }

@@ -63,6 +63,9 @@ pub fn end_frame(sess: xr::Session, info: In<xr::FrameEndInfo>) -> HookResult<xr
     if s.gpu.is_some() {
         learn_submitted(&s, info);
     }
+    if s.instance.inject.is_some() {
+        learn_eye_swapchains(info);
+    }
     let overrides_changed = {
         let mut f = s.frame.lock();
         let display = match info.get() {
@@ -105,6 +108,7 @@ pub fn end_frame(sess: xr::Session, info: In<xr::FrameEndInfo>) -> HookResult<xr
         s.pattern_generation.fetch_add(1, Ordering::Relaxed);
         s.refresh_dynamic_max();
     }
+    s.publish_injected_pattern();
     let f = next(s.instance.next.end_frame)?;
     // SAFETY: the next layer's xrEndFrame, with the application's arguments as it passed them.
     Ok(observed(&s, unsafe { f(sess, info.raw()) }))
@@ -191,17 +195,115 @@ fn learn_submitted(s: &Session, info: In<xr::FrameEndInfo>) {
     }
 }
 
+/// Corrects what the published eye swapchains hold from this frame's projection layers
+/// (docs/injection.md#which-passes): a swapchain named by one view is that view's; by views in
+/// several array layers, an array; by two views side by side in one layer, double-wide. Published
+/// swapchains that no projection layer names (UI, quad layers) are dropped once the app submits
+/// projection layers. No allocation unless something changed.
+fn learn_eye_swapchains(info: In<xr::FrameEndInfo>) {
+    use fovea_model::inject::Holds;
+    let Some(info) = info.get() else {
+        return;
+    };
+    if info.layers.is_null() {
+        return;
+    }
+    let Some(published) = crate::bridge::inject::current() else {
+        return;
+    };
+    let count = (info.layer_count as usize).min(MAX_LAYERS);
+    // SAFETY: as in `learn_submitted`: `layers` points to `layerCount` layer pointers
+    // (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrFrameEndInfo.html).
+    let layers = unsafe { std::slice::from_raw_parts(info.layers, count) };
+    // Per published swapchain (at most MAX_SWAPCHAINS): the views named, their layers and x.
+    const N: usize = crate::bridge::inject::MAX_SWAPCHAINS;
+    let mut seen = [(0u32, 0u32, u32::MAX, i32::MAX, i32::MIN); N];
+    let mut first_view = [0u8; N];
+    let mut any_projection = false;
+    for &layer in layers {
+        // SAFETY: each element is a valid layer pointer for the call (as above).
+        let layer = unsafe { In::new(layer) };
+        let Some(p) = layer.cast::<xr::CompositionLayerProjection>() else {
+            continue;
+        };
+        if p.views.is_null() {
+            continue;
+        }
+        any_projection = true;
+        let n = (p.view_count as usize).min(MAX_VIEWS);
+        // SAFETY: `views` points to `viewCount` views
+        // (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrCompositionLayerProjection.html).
+        let views = unsafe { std::slice::from_raw_parts(p.views, n) };
+        for (eye, v) in views.iter().enumerate() {
+            if v.ty != xr::StructureType::COMPOSITION_LAYER_PROJECTION_VIEW {
+                continue;
+            }
+            let raw = v.sub_image.swapchain.into_raw();
+            let Some(i) = published
+                .swapchains
+                .iter()
+                .take(N)
+                .position(|e| e.handle == raw)
+            else {
+                continue;
+            };
+            let s = &mut seen[i];
+            if s.0 == 0 {
+                first_view[i] = eye as u8;
+            }
+            s.0 += 1;
+            let layer = v.sub_image.image_array_index;
+            s.1 = s.1.max(layer + 1);
+            s.2 = s.2.min(layer);
+            s.3 = s.3.min(v.sub_image.image_rect.offset.x);
+            s.4 = s.4.max(v.sub_image.image_rect.offset.x);
+        }
+    }
+    if !any_projection {
+        return;
+    }
+    for (i, e) in published.swapchains.iter().take(N).enumerate() {
+        let (views, top, bottom, min_x, max_x) = seen[i];
+        let holds = match views {
+            0 => None,
+            1 => Some(Holds::View(first_view[i])),
+            _ if top > bottom + 1 || (top == bottom + 1 && bottom > 0) => Some(Holds::Layers),
+            _ if max_x > min_x => Some(Holds::Halves),
+            _ => Some(Holds::Layers),
+        };
+        match holds {
+            Some(h) if h != e.shape.holds => crate::bridge::inject::set_swapchain(
+                e.handle,
+                fovea_model::inject::Swapchain {
+                    holds: h,
+                    ..e.shape
+                },
+            ),
+            Some(_) => {}
+            None => crate::bridge::inject::remove_swapchain(e.handle),
+        }
+    }
+}
+
 /// Writes the stats line for a finished window, when `fovea::stats` is enabled.
 fn report(s: &Session, window: Window, period_ns: i64) {
     if !stats_logged() {
         return;
     }
+    let injected = s
+        .injected_pattern_at(s.dynamic_step.load(Ordering::Relaxed))
+        .map(|(p, dynamic)| (p.level, dynamic));
     let level = registry()
         .foveated_swapchains_of(s.handle)
         .iter()
         .filter_map(|sc| Some(s.pattern_for(&sc.foveation.as_ref()?.lock())))
         .map(|(p, dynamic)| (p.level, dynamic))
+        .chain(injected)
         .max();
+    let passes = injected.map(|_| {
+        let (eye, all) = crate::bridge::inject::take_counts();
+        Line::per_frame(eye, all, window.frames)
+    });
     let line = Line {
         window,
         refresh_hz: if period_ns > 0 {
@@ -212,6 +314,7 @@ fn report(s: &Session, window: Window, period_ns: i64) {
         level,
         maps_built: s.maps_built.load(Ordering::Relaxed),
         maps_uploaded: s.maps_uploaded.load(Ordering::Relaxed),
+        injected: passes,
     };
     tracing::info!(target: fovea_abi::log_target::STATS, "{line}");
 }
@@ -251,6 +354,16 @@ pub fn locate_views(
     };
     let symmetric = crate::xr::symmetric::active(&s);
     learn_stereo_views(&s.instance, symmetric, info, n, located);
+    if s.instance.inject.is_some() && located.iter().all(|v| v.ty == xr::StructureType::VIEW) {
+        // The FOVs the application renders with (after symmetric-FOV mode's change), at most
+        // MAX_VIEWS, in a fixed array: this runs every frame.
+        let mut fovs = [fovea_model::maps::FALLBACK_FOV; MAX_VIEWS];
+        let n = located.len().min(MAX_VIEWS);
+        for (slot, v) in fovs.iter_mut().zip(located.iter()) {
+            *slot = fov_from_xr(v.fov);
+        }
+        crate::bridge::inject::set_fovs(&fovs[..n]);
+    }
     if s.gpu.is_some() && capacity > 0 {
         if located.iter().any(|v| v.ty != xr::StructureType::VIEW) {
             return Ok(r);

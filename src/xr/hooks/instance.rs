@@ -12,6 +12,7 @@ use crate::xr::registry::registry;
 pub fn destroy_instance(handle: xr::Instance) -> HookResult<xr::Result> {
     let state = instance(handle)?;
     let f = next(state.next.destroy_instance)?;
+    let injected = state.inject.is_some();
     drop(state);
     let detached = registry().detach_instance(handle);
     // SAFETY: the next layer's xrDestroyInstance, with the application's handle.
@@ -22,6 +23,8 @@ pub fn destroy_instance(handle: xr::Instance) -> HookResult<xr::Result> {
             "the runtime refused xrDestroyInstance; the instance lives on"
         );
         registry().restore(detached);
+    } else if injected {
+        crate::bridge::inject::stop();
     }
     Ok(r)
 }

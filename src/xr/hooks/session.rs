@@ -78,11 +78,17 @@ pub fn create_session(
         let gpu = binding
             .filter(|_| state.extensions.provided(Ext::FoveationVulkan))
             .and_then(|b| session_gpu(&state, &b));
-        let record = Session::new(handle, state, binding, gpu);
+        let record = Arc::new(Session::new(handle, state, binding, gpu));
         registry()
             .sessions
             .write()
-            .insert(handle.into_raw(), Arc::new(record));
+            .insert(handle.into_raw(), Arc::clone(&record));
+        if record.instance.inject.is_some() {
+            // An injected level made dynamic by the debug properties from the start (no change
+            // to notice later) must still let the controller step up to it.
+            record.refresh_dynamic_max();
+            record.publish_injected_pattern();
+        }
     }
     Ok(r)
 }

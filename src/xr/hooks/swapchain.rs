@@ -168,11 +168,62 @@ pub fn create_swapchain(
         density,
         submitted: Mutex::default(),
     };
+    let injected = record.session.instance.inject.is_some();
+    let info = record.info;
     registry()
         .swapchains
         .write()
         .insert(handle.into_raw(), Arc::new(record));
+    if injected {
+        publish_eye_swapchain(handle, &info);
+    }
     Ok(r)
+}
+
+/// `XR_SWAPCHAIN_USAGE_COLOR_ATTACHMENT_BIT`.
+const COLOR_ATTACHMENT: u64 = 0x1;
+
+/// What a new colour swapchain's images hold, guessed before the application first submits it
+/// (docs/injection.md#which-passes): an array holds one view per layer; an image at least 1.5 times
+/// as wide as high is double-wide (no headset's eye is that wide); otherwise it is the next eye's
+/// of the per-eye swapchains of that size (applications create them in view order). `xrEndFrame`
+/// corrects the guess from what is submitted.
+pub fn guess_holds(
+    info: &SwapchainInfo,
+    earlier: &[fovea_model::inject::Swapchain],
+) -> Option<fovea_model::inject::Holds> {
+    use fovea_model::inject::Holds;
+    if info.usage & COLOR_ATTACHMENT == 0 || info.face_count != 1 || info.height == 0 {
+        return None;
+    }
+    if info.array_size >= 2 {
+        return Some(Holds::Layers);
+    }
+    if f64::from(info.width) >= 1.5 * f64::from(info.height) {
+        return Some(Holds::Halves);
+    }
+    let eye = earlier
+        .iter()
+        .filter(|s| s.extent == [info.width, info.height] && matches!(s.holds, Holds::View(_)))
+        .count();
+    Some(Holds::View(eye.min(usize::from(u8::MAX)) as u8))
+}
+
+/// Publishes a new swapchain for injection where it may hold views.
+fn publish_eye_swapchain(handle: xr::Swapchain, info: &SwapchainInfo) {
+    let earlier: Vec<_> = crate::bridge::inject::current()
+        .map(|s| s.swapchains.iter().map(|e| e.shape).collect())
+        .unwrap_or_default();
+    if let Some(holds) = guess_holds(info, &earlier) {
+        crate::bridge::inject::set_swapchain(
+            handle.into_raw(),
+            fovea_model::inject::Swapchain {
+                extent: [info.width, info.height],
+                layers: info.array_size,
+                holds,
+            },
+        );
+    }
 }
 
 /// `xrDestroySwapchain`: forgets the swapchain; its density images and their Vulkan objects are
@@ -192,6 +243,9 @@ pub fn destroy_swapchain(handle: xr::Swapchain) -> HookResult<xr::Result> {
     if succeeded(r) {
         if state.foveation.is_some() {
             state.session.refresh_dynamic_max();
+        }
+        if state.session.instance.inject.is_some() {
+            crate::bridge::inject::remove_swapchain(handle.into_raw());
         }
     } else {
         registry()
@@ -219,6 +273,9 @@ pub fn enumerate_swapchain_images(
     // SAFETY: the next layer's function, with the application's arguments as it passed them.
     let r = unsafe { f(handle, capacity, count.raw(), images.raw()) };
     let r = observed(&state.session, r);
+    if state.session.instance.inject.is_some() && succeeded(r) && capacity > 0 {
+        publish_images(&state, capacity, &count, &images);
+    }
     let Some(density) = &state.density else {
         return Ok(r);
     };
@@ -254,6 +311,37 @@ pub fn enumerate_swapchain_images(
         }
     }
     Ok(r)
+}
+
+/// Publishes the `VkImage`s a Vulkan swapchain's enumeration returned, so the Vulkan side knows
+/// passes into them (docs/injection.md#which-passes).
+fn publish_images(
+    state: &Swapchain,
+    capacity: u32,
+    count: &Out<u32>,
+    images: &OutArray<xr::SwapchainImageBaseHeader>,
+) {
+    if state.session.vulkan.is_none() {
+        return;
+    }
+    let Some(n) = count.read() else {
+        return;
+    };
+    let n = n.min(capacity) as usize;
+    // SAFETY: the application's array as the caller's `OutArray` holds it (valid for `capacity`
+    // elements for the call); this view of it ends before the caller uses its own again.
+    let images = unsafe { OutArray::new(images.raw(), images.capacity()) };
+    let Some(elements) = images.cast_slice::<xr::SwapchainImageVulkanKHR>(n) else {
+        return;
+    };
+    if elements
+        .iter()
+        .any(|e| e.ty != xr::StructureType::SWAPCHAIN_IMAGE_VULKAN_KHR)
+    {
+        return;
+    }
+    let raw: Vec<u64> = elements.iter().map(|e| e.image).collect();
+    crate::bridge::inject::set_images(state.handle.into_raw(), &raw);
 }
 
 /// `xrAcquireSwapchainImage`: once the runtime has handed out the index, that index's density image
@@ -405,6 +493,51 @@ pub fn release_swapchain_image(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn what_a_new_swapchain_holds_is_guessed_from_its_shape() {
+        use fovea_model::inject::{Holds, Swapchain as Shape};
+        let info = |usage: u64, width: u32, height: u32, array_size: u32| SwapchainInfo {
+            usage,
+            format: 43,
+            sample_count: 1,
+            width,
+            height,
+            face_count: 1,
+            array_size,
+            mip_count: 1,
+        };
+        let eye = info(COLOR_ATTACHMENT, 1440, 1600, 1);
+        assert_eq!(guess_holds(&eye, &[]), Some(Holds::View(0)));
+        let first = Shape {
+            extent: [1440, 1600],
+            layers: 1,
+            holds: Holds::View(0),
+        };
+        assert_eq!(
+            guess_holds(&eye, &[first]),
+            Some(Holds::View(1)),
+            "the second of that size is the second eye"
+        );
+        assert_eq!(
+            guess_holds(&info(COLOR_ATTACHMENT, 1440, 1600, 2), &[]),
+            Some(Holds::Layers)
+        );
+        assert_eq!(
+            guess_holds(&info(COLOR_ATTACHMENT, 2880, 1600, 1), &[]),
+            Some(Holds::Halves)
+        );
+        assert_eq!(
+            guess_holds(&info(0x2, 1440, 1600, 1), &[]),
+            None,
+            "a depth swapchain holds no colour target"
+        );
+        let cube = SwapchainInfo {
+            face_count: 6,
+            ..eye
+        };
+        assert_eq!(guess_holds(&cube, &[]), None);
+    }
 
     #[test]
     fn requests_fovea_can_and_cannot_honour() {

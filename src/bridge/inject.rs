@@ -1,0 +1,350 @@
+//! What the OpenXR side publishes for injection (docs/injection.md), and what the Vulkan side reads
+//! when a pass begins: whether injection is on, the pattern in force, the views' FOVs, and the
+//! swapchains whose images hold views (with their `VkImage`s and what each holds).
+//!
+//! The OpenXR side writes only when something changed (a swapchain created or destroyed, a FOV or
+//! the pattern changed), so per frame a write is a comparison. Each write replaces the published
+//! [`Injection`] with a new `Arc` and bumps [`generation`]: a reader compares one atomic with the
+//! generation it cached and clones the `Arc` only when it moved, and the shading-rate images made
+//! for an older generation are stale ([`Injection::key`]).
+//!
+//! The lock is a leaf, like the shadows' in the parent module: taken for a swap or an `Arc` clone,
+//! nothing is called while it is held, so either side may take it under any of its own locks.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+
+use fovea_model::density::{Level, Pattern};
+use fovea_model::inject::{self, Holds, Pass, Target};
+use fovea_model::maps::MAX_VIEWS;
+use fovea_model::Fov;
+
+/// A swapchain whose images hold views.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EyeSwapchain {
+    /// The `XrSwapchain`'s raw handle.
+    pub handle: u64,
+    /// Its `VkImage`s as raw handles, once the application enumerated them.
+    pub images: Vec<u64>,
+    pub shape: inject::Swapchain,
+}
+
+/// Everything the Vulkan side needs to decide and fill an injected pass.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Injection {
+    /// The level and offset maps use now: the injected level under the debug properties and the
+    /// dynamic step ([`super::effective`]).
+    pub pattern: Pattern,
+    /// Whether the level is dynamic (for the stats line's `D`).
+    pub dynamic: bool,
+    /// The largest fragment a map asks for (`max_fragment`).
+    pub max_fragment: u32,
+    /// The views' FOVs as last located (none before the first `xrLocateViews`).
+    pub fovs: [Option<Fov>; MAX_VIEWS],
+    /// How many views the application renders (2 for stereo).
+    pub views: u8,
+    pub swapchains: Vec<EyeSwapchain>,
+    /// Bumped when the pattern, the FOVs or `max_fragment` change: what a map holds.
+    pub maps: u64,
+}
+
+#[cfg_attr(
+    not(test),
+    expect(
+        dead_code,
+        reason = "read by the Vulkan side's pass injection (docs/injection.md), which is not written yet"
+    )
+)]
+impl Injection {
+    fn new(level: Level) -> Injection {
+        Injection {
+            pattern: Pattern {
+                level,
+                vertical_offset_deg: 0.0,
+            },
+            dynamic: false,
+            max_fragment: fovea_model::maps::DEFAULT_MAX_FRAGMENT,
+            fovs: [None; MAX_VIEWS],
+            views: 2,
+            swapchains: Vec::new(),
+            maps: 0,
+        }
+    }
+
+    /// The generation of what the maps hold: an injected shading-rate image filled for another
+    /// key is stale.
+    pub fn key(&self) -> u64 {
+        self.maps
+    }
+
+    /// The swapchains' shapes, in the order [`Target::swapchain`] indexes them.
+    fn shapes(&self) -> impl Iterator<Item = inject::Swapchain> + '_ {
+        self.swapchains.iter().map(|s| s.shape)
+    }
+
+    /// Which swapchain `image` belongs to, if any.
+    pub fn swapchain_of(&self, image: u64) -> Option<usize> {
+        self.swapchains
+            .iter()
+            .position(|s| s.images.contains(&image))
+    }
+
+    /// What a pass whose colour target is `image` (`extent`, rendering `layers` layers from
+    /// `base_layer` of an image with `image_layers`) is. At most [`MAX_SWAPCHAINS`] swapchains are
+    /// looked at, with no allocation: this may run when a pass begins.
+    pub fn classify(
+        &self,
+        image: u64,
+        extent: [u32; 2],
+        base_layer: u32,
+        layers: u32,
+        image_layers: u32,
+    ) -> Pass {
+        let mut shapes = [inject::Swapchain {
+            extent: [0, 0],
+            layers: 0,
+            holds: Holds::Layers,
+        }; MAX_SWAPCHAINS];
+        let mut n = 0;
+        for (slot, s) in shapes.iter_mut().zip(self.shapes()) {
+            *slot = s;
+            n += 1;
+        }
+        let target = Target {
+            extent,
+            base_layer,
+            layers,
+            image_layers,
+            swapchain: self.swapchain_of(image).filter(|&i| i < n),
+        };
+        inject::classify(&shapes[..n], self.views, &target)
+    }
+}
+
+/// Most eye swapchains looked at (stereo apps have one or two; quad views four).
+pub const MAX_SWAPCHAINS: usize = 8;
+
+/// Set at `xrCreateInstance` when injection applies, before the application creates its
+/// `VkDevice`: the Vulkan side then enables shading-rate attachments on it.
+static WANTED: AtomicBool = AtomicBool::new(false);
+
+/// Bumped by every change to [`STATE`].
+static GENERATION: AtomicU64 = AtomicU64::new(0);
+
+static STATE: parking_lot::RwLock<Option<Arc<Injection>>> = parking_lot::RwLock::new(None);
+
+/// Eye passes injected and all passes begun since the last [`take_counts`], for the stats line.
+static EYE_PASSES: AtomicU64 = AtomicU64::new(0);
+static ALL_PASSES: AtomicU64 = AtomicU64::new(0);
+
+/// Whether injection is on for this process (an instance with injection exists).
+pub fn wanted() -> bool {
+    WANTED.load(Ordering::Acquire)
+}
+
+#[cfg_attr(
+    not(test),
+    expect(
+        dead_code,
+        reason = "read by the Vulkan side's pass injection (docs/injection.md), which is not written yet"
+    )
+)]
+/// The published generation: unchanged means the [`current`] state is the one a reader cached.
+pub fn generation() -> u64 {
+    GENERATION.load(Ordering::Acquire)
+}
+
+/// The published state, `None` where injection is off.
+pub fn current() -> Option<Arc<Injection>> {
+    STATE.read().clone()
+}
+
+/// Applies `f` to a copy of the state and publishes it when it changed; nothing where injection is
+/// off.
+fn update(f: impl FnOnce(&mut Injection)) {
+    let mut guard = STATE.write();
+    let Some(old) = guard.as_ref() else {
+        return;
+    };
+    let mut new = Injection::clone(old);
+    f(&mut new);
+    if new != **old {
+        *guard = Some(Arc::new(new));
+        GENERATION.fetch_add(1, Ordering::AcqRel);
+    }
+}
+
+/// Switches injection on at `level` (at `xrCreateInstance`).
+pub fn start(level: Level) {
+    *STATE.write() = Some(Arc::new(Injection::new(level)));
+    WANTED.store(true, Ordering::Release);
+    GENERATION.fetch_add(1, Ordering::AcqRel);
+}
+
+/// Switches injection off (at `xrDestroyInstance`).
+pub fn stop() {
+    *STATE.write() = None;
+    WANTED.store(false, Ordering::Release);
+    GENERATION.fetch_add(1, Ordering::AcqRel);
+}
+
+/// The pattern in force changed (overrides, dynamic step).
+pub fn set_pattern(pattern: Pattern, dynamic: bool, max_fragment: u32) {
+    // A comparison when unchanged (no copy): this runs every frame.
+    if current()
+        .is_none_or(|s| (s.pattern, s.dynamic, s.max_fragment) == (pattern, dynamic, max_fragment))
+    {
+        return;
+    }
+    update(|s| {
+        if (s.pattern, s.dynamic, s.max_fragment) != (pattern, dynamic, max_fragment) {
+            s.pattern = pattern;
+            s.dynamic = dynamic;
+            s.max_fragment = max_fragment;
+            s.maps += 1;
+        }
+    });
+}
+
+/// The FOVs `xrLocateViews` returned. A comparison when unchanged: it runs every frame.
+pub fn set_fovs(fovs: &[Fov]) {
+    let mut new = [None; MAX_VIEWS];
+    for (slot, f) in new.iter_mut().zip(fovs) {
+        *slot = Some(*f);
+    }
+    if current().is_some_and(|s| s.fovs == new && usize::from(s.views) == fovs.len()) {
+        return;
+    }
+    update(|s| {
+        if s.fovs != new {
+            s.fovs = new;
+            s.maps += 1;
+        }
+        s.views = fovs.len().min(MAX_VIEWS) as u8;
+    });
+}
+
+/// A swapchain that holds views was created (or what it holds was learned anew).
+pub fn set_swapchain(handle: u64, shape: inject::Swapchain) {
+    update(
+        |s| match s.swapchains.iter_mut().find(|e| e.handle == handle) {
+            Some(e) => e.shape = shape,
+            None => s.swapchains.push(EyeSwapchain {
+                handle,
+                images: Vec::new(),
+                shape,
+            }),
+        },
+    );
+}
+
+/// The `VkImage`s of a swapchain published with [`set_swapchain`].
+pub fn set_images(handle: u64, images: &[u64]) {
+    update(|s| {
+        if let Some(e) = s.swapchains.iter_mut().find(|e| e.handle == handle) {
+            e.images = images.to_vec();
+        }
+    });
+}
+
+/// A swapchain was destroyed.
+pub fn remove_swapchain(handle: u64) {
+    update(|s| s.swapchains.retain(|e| e.handle != handle));
+}
+
+#[cfg_attr(
+    not(test),
+    expect(
+        dead_code,
+        reason = "read by the Vulkan side's pass injection counting (docs/injection.md), which is not written yet"
+    )
+)]
+/// Counts a pass begun with injection on; `eye` when it got the attachment.
+pub fn count_pass(eye: bool) {
+    ALL_PASSES.fetch_add(1, Ordering::Relaxed);
+    if eye {
+        EYE_PASSES.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// The passes counted since the last call: `(eye, all)`.
+pub fn take_counts() -> (u64, u64) {
+    (
+        EYE_PASSES.swap(0, Ordering::Relaxed),
+        ALL_PASSES.swap(0, Ordering::Relaxed),
+    )
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use fovea_model::inject::Views;
+
+    /// The published state is process-wide; the tests that change it take this.
+    pub(crate) static STATE_TESTS: parking_lot::Mutex<()> = parking_lot::Mutex::new(());
+
+    #[test]
+    fn publishing_bumps_the_generation_only_on_change() {
+        let _one = STATE_TESTS.lock();
+        stop();
+        let g = generation();
+        set_fovs(&[fovea_model::maps::FALLBACK_FOV]);
+        assert_eq!(generation(), g, "nothing is published while off");
+        assert!(current().is_none() && !wanted());
+
+        start(Level::High);
+        assert!(wanted());
+        let on = generation();
+        assert_eq!(current().unwrap().pattern.level, Level::High);
+        let f = fovea_model::maps::FALLBACK_FOV;
+        set_fovs(&[f, f.mirrored()]);
+        let located = generation();
+        assert!(located > on);
+        let key = current().unwrap().key();
+        set_fovs(&[f, f.mirrored()]);
+        assert_eq!(generation(), located, "the same FOVs again: no change");
+        set_pattern(
+            Pattern {
+                level: Level::Low,
+                vertical_offset_deg: 0.0,
+            },
+            true,
+            4,
+        );
+        assert!(current().unwrap().key() > key, "a new pattern: maps stale");
+        assert!(current().unwrap().dynamic);
+
+        let shape = inject::Swapchain {
+            extent: [1440, 1600],
+            layers: 1,
+            holds: Holds::View(1),
+        };
+        set_swapchain(7, shape);
+        set_images(7, &[70, 71, 72]);
+        let s = current().unwrap();
+        assert_eq!(s.swapchain_of(71), Some(0));
+        assert_eq!(s.swapchain_of(73), None);
+        assert_eq!(
+            s.classify(72, [1440, 1600], 0, 1, 1),
+            Pass::Eye(Views::Layers { first: 1, count: 1 }),
+            "the right eye's swapchain image"
+        );
+        assert_eq!(
+            s.classify(99, [1440, 1600], 0, 1, 1),
+            Pass::Eye(Views::Merged),
+            "an eye-shaped target of its own"
+        );
+        assert_eq!(s.classify(99, [256, 256], 0, 1, 1), Pass::Other);
+        let before = current().unwrap().key();
+        remove_swapchain(7);
+        assert!(current().unwrap().swapchains.is_empty());
+        assert_eq!(current().unwrap().key(), before, "maps do not depend on it");
+
+        count_pass(true);
+        count_pass(false);
+        assert_eq!(take_counts(), (1, 2));
+        assert_eq!(take_counts(), (0, 0));
+        stop();
+        assert!(current().is_none() && !wanted());
+    }
+}
