@@ -8,8 +8,8 @@ use openxr_sys as xr;
 use openxr_sys::Handle;
 
 use crate::config::{self, Fault, SimConfig};
-use crate::ffi;
 use crate::control::SubmittedView;
+use crate::ffi;
 use crate::state::{entry, world, Record, World};
 use crate::vulkan::VulkanInstanceState;
 
