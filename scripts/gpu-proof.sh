@@ -7,11 +7,17 @@
 #   2. the example's fill-bound scene (--heavy) at each level, with and without the Vulkan layer,
 #      eye passes timed with GPU timestamps: a table of GPU ms per eye pass per level, as a ratio
 #      to level NONE, beside the shaded fraction fovea's model predicts (fovea report --json);
-#   3. frames read back from the GPU as PNGs (--dump), where coarse shading shows in the periphery.
+#   3. frames read back from the GPU as PNGs (--dump), where coarse shading shows in the periphery;
+#   4. injection (docs/injection.md): the same fill-bound scene from an app that never asks for
+#      foveation (--no-fb: no XR_FB_foveation, plain passes), with injection off and at each
+#      injected level (FOVEA_INJECT=1 FOVEA_INJECT_LEVEL=low|medium|high), eye passes timed the
+#      same way, and frames read back with offscreen passes (which must stay at full rate), in the
+#      array and the double-wide layout.
 #
 # Usage: scripts/gpu-proof.sh [OUT_DIR]   (default: target/gpu-proof)
 # Variables: HEADSET (default quest3), FRAMES per run (default 120), FOVEA_SIM_VK_DEVICE (pick a
-# GPU by name), NO_BUILD=1 (use what target/release holds).
+# GPU by name), NO_BUILD=1 (use what target/release holds), REL (the build folder, default
+# target/release).
 # Nothing here needs a GPU to run (on lavapipe it says there is nothing to measure), and no test
 # or CI job depends on one.
 set -eu
@@ -20,7 +26,9 @@ ROOT=$(pwd)
 OUT=${1:-target/gpu-proof}
 HEADSET=${HEADSET:-quest3}
 FRAMES=${FRAMES:-120}
-REL=$ROOT/target/release
+# Sections 3 and 4 read back 2 frames; the timed runs of section 4 take as many as section 2's.
+TIMED_FRAMES=$FRAMES
+REL=${REL:-$ROOT/target/release}
 mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
 
@@ -101,3 +109,67 @@ FRAMES=2
 run with high --dump "$FRAMES_DIR" >"$OUT/dump.txt"
 grep 'PNGs' "$OUT/dump.txt" || true
 echo "fNNNNN_high_{left,right}.png: with shading-rate attachments, coarse blocks in the periphery"
+
+FRAMES=$TIMED_FRAMES
+echo
+echo "== 4. Injection: the scene from an app without the FB API (--no-fb), $FRAMES frames per level"
+# run_inject LEVEL [example args]: LEVEL is off or an injected level; fovea's Vulkan layer is in
+# either way (injection needs it), so `off` differs from the others by FOVEA_INJECT alone.
+run_inject() {
+    level=$1
+    shift
+    if [ "$level" = off ]; then
+        inject="FOVEA_INJECT=0"
+    else
+        inject="FOVEA_INJECT=1 FOVEA_INJECT_LEVEL=$level"
+    fi
+    # shellcheck disable=SC2086 # $inject is one or two assignments for env.
+    env VK_ADD_LAYER_PATH="$ROOT/manifest/vulkan${VK_ADD_LAYER_PATH:+:$VK_ADD_LAYER_PATH}" \
+        XR_RUNTIME_JSON="$RUNTIME" XR_API_LAYER_PATH="$ROOT/manifest" \
+        XR_ENABLE_API_LAYERS=XR_APILAYER_FOVEA_foveation DISABLE_FOVEA_VK_LAYER=1 \
+        FOVEA_SIM_HEADSET="$HEADSET" FOVEA_LOG="${FOVEA_LOG:-info}" $inject \
+        "$REL/examples/foveated_vulkan" --no-fb --heavy --frames "$FRAMES" "$@" \
+        2>"$OUT/inject-$level.log"
+}
+for level in off low medium high; do
+    run_inject "$level" >"$OUT/inject-$level.txt" || {
+        echo "the example failed (--no-fb, injection $level): see $OUT/inject-$level.log" >&2
+        exit 1
+    }
+done
+# The eye passes of a --no-fb run are all timed under the app's one level, NONE.
+inject_mean() { sed -n 's/.*eye-pass GPU ms level=none mean=\([0-9.]*\).*/\1/p' "$OUT/inject-$1.txt"; }
+# fovea's stats line counts injected eye passes per frame (`Inj=eye/all`); a build that does not
+# inject prints none.
+injected() { sed -n 's/.*Inj=\([0-9]*\/[0-9]*\).*/\1/p' "$OUT/inject-$1.log" | tail -n 1; }
+case "$(injected high)" in
+"" | 0/*)
+    echo "no eye pass was injected at high (no shading-rate attachments on this device, or a build"
+    echo "of fovea without injection): the timings below are the same scene without foveation"
+    ;;
+esac
+printf '%-7s %9s %12s %8s %10s\n' level model "ms" ratio "Inj="
+i0=$(inject_mean off)
+for level in off low medium high; do
+    f=1
+    [ "$level" = off ] || f=$(fraction "$level")
+    awk -v l="$level" -v f="$f" -v m="$(inject_mean "$level")" -v m0="$i0" -v inj="$(injected "$level")" \
+        'BEGIN { printf "%-7s %9.3f %12.4f %8.3f %10s\n", l, f, m, (m0 > 0 ? m / m0 : 0), (inj == "" ? "-" : inj) }'
+done
+echo "(ratio: GPU time per eye pass over injection off's; Inj=: eye passes injected / passes begun"
+echo " in the last frame, from fovea's stats line; '-' where this build of fovea logged none)"
+
+INJECT_DIR=$OUT/inject-frames
+rm -rf "$INJECT_DIR"
+FRAMES=2
+for layout in array double-wide; do
+    extra=""
+    [ "$layout" = array ] || extra="--double-wide"
+    # shellcheck disable=SC2086 # $extra is empty or one option.
+    run_inject high --offscreen $extra --dump "$INJECT_DIR/$layout" >"$OUT/inject-dump-$layout.txt"
+    grep 'PNGs' "$OUT/inject-dump-$layout.txt" || true
+done
+echo "$INJECT_DIR/{array,double-wide}/fNNNNN_none_{left,right}.png: injected at high, coarse blocks in"
+echo "the periphery of the eyes. The offscreen targets (256x256, 64x36) are not eye passes and render"
+echo "at full rate; their blue stripes in each eye's upper-right corner are coarse only as far as the"
+echo "eye pass that draws them there is"

@@ -25,6 +25,21 @@
 //! any message), `--vk-layer NAME` (one more Vulkan layer for the VkInstance, after validation;
 //! repeatable), `--heavy` (a fill-bound fragment shader, for timing eye passes), `--help`.
 //!
+//! The options below make the example a test subject for fovea's injection (docs/injection.md),
+//! which foveates applications that never ask, by their eye passes:
+//!
+//! - `--no-fb`: none of the above foveation: no XR_FB_foveation* extension, no profile, no
+//!   density map; the swapchain and passes are plain, as hello_xr's are. Only a layer that injects
+//!   shading rates can foveate it.
+//! - `--offscreen`: each frame first renders a 256×256 "shadow map" and a 64×36 target sampled from
+//!   it, which the eye passes sample into their upper-right corner: passes that are not eye passes
+//!   (docs/injection.md#which-passes) and must stay at full rate.
+//! - `--double-wide` (with `--no-fb`): one swapchain image twice a view wide, both eyes drawn in one
+//!   pass with a viewport and scissor per half, submitted as two projection views whose image rects
+//!   are the halves (docs/injection.md#telling-the-views-apart).
+//! - `--dynamic-rendering`: every pass begun with `vkCmdBeginRenderingKHR`
+//!   (`VK_KHR_dynamic_rendering`) instead of a render pass.
+//!
 //! `fovea demo` runs it against the simulated headset through the system loader where that is
 //! installed. By hand (the checked-in manifests point at target/release):
 //!
@@ -50,7 +65,7 @@ use ash::vk::{self, Handle as _};
 use openxr as xr;
 use xr::sys::Handle as _;
 
-use render::{Mode, Read, Renderer, Targets};
+use render::{Layout, Mode, Read, Renderer, Setup, Targets};
 
 const VIEW_TYPE: xr::ViewConfigurationType = xr::ViewConfigurationType::PRIMARY_STEREO;
 const LEVELS: [xr::FoveationLevelFB; 4] = [
@@ -86,6 +101,14 @@ struct Options {
     vk_layers: Vec<std::ffi::CString>,
     /// The fill-bound fragment shader: a loop of arithmetic per fragment.
     heavy: bool,
+    /// No XR_FB_foveation* extension and no density maps (`--no-fb`).
+    no_fb: bool,
+    /// Offscreen passes before the eye passes (`--offscreen`).
+    offscreen: bool,
+    /// How the swapchain holds the views (`--double-wide`).
+    layout: Layout,
+    /// `vkCmdBeginRenderingKHR` instead of render passes (`--dynamic-rendering`).
+    dynamic_rendering: bool,
 }
 
 impl Options {
@@ -100,8 +123,13 @@ impl Options {
             validate: false,
             vk_layers: Vec::new(),
             heavy: false,
+            no_fb: false,
+            offscreen: false,
+            layout: Layout::Array,
+            dynamic_rendering: false,
         };
         let mut frames = None;
+        let mut levels_given = false;
         let mut it = args.iter();
         while let Some(arg) = it.next() {
             let mut value = || it.next().ok_or(format!("{arg} takes a value"));
@@ -115,6 +143,7 @@ impl Options {
                 "--frames" => frames = Some(count(value()?)?),
                 "--frames-per-level" => o.frames_per_level = count(value()?)?,
                 "--levels" => {
+                    levels_given = true;
                     o.levels = value()?
                         .split(',')
                         .map(|name| {
@@ -138,8 +167,25 @@ impl Options {
                         .map_err(|_| format!("{arg}: a layer name has no NUL"))?,
                 ),
                 "--heavy" => o.heavy = true,
+                "--no-fb" => o.no_fb = true,
+                "--offscreen" => o.offscreen = true,
+                "--double-wide" => o.layout = Layout::DoubleWide,
+                "--dynamic-rendering" => o.dynamic_rendering = true,
                 other => return Err(format!("unknown option {other:?} (--help lists them)")),
             }
+        }
+        if o.no_fb {
+            // Levels and profiles are the FB API's; without it the stripes keep level NONE's tint
+            // and every eye pass is timed under it.
+            if levels_given || o.dynamic {
+                return Err(
+                    "--levels and --dynamic choose FB foveation profiles; --no-fb has none".into(),
+                );
+            }
+            o.levels = vec![0];
+        } else if o.layout == Layout::DoubleWide {
+            // The FB path's density maps, overlay and read-back are per layer of an array.
+            return Err("--double-wide renders without the FB API: add --no-fb".into());
         }
         o.frames = frames.unwrap_or(o.levels.len() as u64 * o.frames_per_level * 2);
         Ok(o)
@@ -164,7 +210,10 @@ struct Capture {
 #[derive(Debug)]
 struct Outcome {
     frames: u64,
+    /// The swapchain's images: a view's size, or twice its width when double-wide.
     swapchain_size: (u32, u32),
+    /// One view's size (the recommended image rect).
+    view_size: (u32, u32),
     format: vk::Format,
     /// `(VkImage, width, height)` per swapchain image, from XrSwapchainImageFoveationVulkanFB.
     density_images: Vec<(u64, u32, u32)>,
@@ -182,6 +231,8 @@ struct Outcome {
     /// GPU milliseconds of each eye pass, by level (an index into [`LEVELS`]); empty where the
     /// queue has no timestamps.
     eye_ms: [Vec<f64>; 4],
+    /// The last frame's projection views as submitted: `(image_array_index, image_rect)`.
+    submitted: Vec<(u32, xr::Rect2Di)>,
 }
 
 /// What `--help` prints: every option [`Options::parse`] accepts.
@@ -198,6 +249,13 @@ usage: foveated_vulkan [options]   (run through an OpenXR runtime; see the file'
   --vk-layer NAME         one more Vulkan layer for the VkInstance, after validation (repeatable)
   --heavy                 a fill-bound fragment shader (a loop of arithmetic per fragment), for
                           timing eye passes on a real GPU
+  --no-fb                 no XR_FB_foveation* extension, profile or density map: plain passes, as
+                          an app unaware of foveation renders (levels and --dynamic do not apply)
+  --offscreen             before the eye passes, render a 256x256 and a 64x36 offscreen target
+                          (the second samples the first; the eyes sample the second in a corner)
+  --double-wide           (with --no-fb) one swapchain twice a view wide, one pass with a viewport
+                          per eye, submitted as two views with the halves as image rects
+  --dynamic-rendering     begin passes with vkCmdBeginRenderingKHR instead of render passes
   -h, --help              this text";
 
 fn main() {
@@ -249,7 +307,39 @@ fn main() {
                     Mode::Attachment => "attached to the render pass",
                     Mode::Overlay => "sampled into the debug overlay (lower left of each eye)",
                     Mode::None => "not used (the device can neither render with nor sample them)",
+                    Mode::Absent => "not asked for (--no-fb: no XR_FB_foveation)",
                 },
+            );
+            // What the passes and the submitted views were, for tests and scripts.
+            println!(
+                "foveated_vulkan: {} layout; eye passes begun with {}; offscreen passes {}; \
+                 views submitted {}",
+                match options.layout {
+                    Layout::Array => "array",
+                    Layout::DoubleWide => "double-wide",
+                },
+                if options.dynamic_rendering {
+                    "vkCmdBeginRenderingKHR"
+                } else {
+                    "vkCmdBeginRenderPass"
+                },
+                if options.offscreen {
+                    render::OFFSCREEN
+                        .iter()
+                        .map(|(w, h)| format!("{w}x{h}"))
+                        .collect::<Vec<_>>()
+                        .join(",")
+                } else {
+                    "none".into()
+                },
+                o.submitted
+                    .iter()
+                    .map(|(layer, r)| format!(
+                        "layer={layer}:{},{}+{}x{}",
+                        r.offset.x, r.offset.y, r.extent.width, r.extent.height
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(" "),
             );
             // One line per level, for scripts (scripts/gpu-proof.sh reads them).
             for (name, ms) in ["none", "low", "medium", "high"].iter().zip(&o.eye_ms) {
@@ -291,24 +381,28 @@ fn run(options: &Options) -> Result<Outcome, String> {
     let available = entry
         .enumerate_extensions()
         .map_err(|e| format!("xrEnumerateInstanceExtensionProperties: {e}"))?;
-    if !(available.khr_vulkan_enable2
-        && available.fb_swapchain_update_state
+    if !available.khr_vulkan_enable2 {
+        return Err("the runtime lacks XR_KHR_vulkan_enable2".into());
+    }
+    let fb = available.fb_swapchain_update_state
         && available.fb_foveation
         && available.fb_foveation_configuration
-        && available.fb_foveation_vulkan)
-    {
+        && available.fb_foveation_vulkan;
+    if !fb && !options.no_fb {
         return Err(
-            "the runtime (or a layer) lacks XR_KHR_vulkan_enable2 or the foveation \
-                    extensions: is fovea enabled (XR_ENABLE_API_LAYERS)?"
+            "the runtime (or a layer) lacks the foveation extensions: is fovea enabled \
+             (XR_ENABLE_API_LAYERS)?"
                 .into(),
         );
     }
     let mut extensions = xr::ExtensionSet::default();
     extensions.khr_vulkan_enable2 = true;
-    extensions.fb_swapchain_update_state = true;
-    extensions.fb_foveation = true;
-    extensions.fb_foveation_configuration = true;
-    extensions.fb_foveation_vulkan = true;
+    // With --no-fb, none of them, however many are offered: the app renders as one unaware of
+    // foveation.
+    extensions.fb_swapchain_update_state = !options.no_fb;
+    extensions.fb_foveation = !options.no_fb;
+    extensions.fb_foveation_configuration = !options.no_fb;
+    extensions.fb_foveation_vulkan = !options.no_fb;
     let instance = entry
         .create_instance(
             &xr::ApplicationInfo {
@@ -480,12 +574,17 @@ unsafe fn with_instance(
         .ok_or("the Vulkan device has no graphics queue")? as u32;
 
     // XR_FB_foveation's FRAGMENT_DENSITY_MAP bit makes the app responsible for enabling the
-    // extension and its feature where the GPU has them.
-    let has_fdm = vk_instance
+    // extension and its feature where the GPU has them. An app without the FB API (--no-fb) never
+    // asks.
+    let offered = vk_instance
         .enumerate_device_extension_properties(physical_device)
-        .map_err(|e| format!("vkEnumerateDeviceExtensionProperties: {e}"))?
-        .iter()
-        .any(|e| e.extension_name_as_c_str() == Ok(ash::ext::fragment_density_map::NAME));
+        .map_err(|e| format!("vkEnumerateDeviceExtensionProperties: {e}"))?;
+    let has = |name: &CStr| {
+        offered
+            .iter()
+            .any(|e| e.extension_name_as_c_str() == Ok(name))
+    };
+    let has_fdm = !options.no_fb && has(ash::ext::fragment_density_map::NAME);
     let mut fdm_query = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default();
     if has_fdm {
         let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut fdm_query);
@@ -496,17 +595,37 @@ unsafe fn with_instance(
     let mut fdm_features = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
         .fragment_density_map(true)
         .fragment_density_map_non_subsampled_images(non_subsampled);
-    let device_extensions = [ash::ext::fragment_density_map::NAME.as_ptr()];
+    let mut device_extensions = Vec::new();
     let priorities = [1.0];
     let queues = [vk::DeviceQueueCreateInfo::default()
         .queue_family_index(queue_family)
         .queue_priorities(&priorities)];
     let mut device_info = vk::DeviceCreateInfo::default().queue_create_infos(&queues);
     if fdm_enabled {
-        device_info = device_info
-            .enabled_extension_names(&device_extensions)
-            .push_next(&mut fdm_features);
+        device_extensions.push(ash::ext::fragment_density_map::NAME.as_ptr());
+        device_info = device_info.push_next(&mut fdm_features);
     }
+    // VK_KHR_dynamic_rendering on a Vulkan 1.1 instance, with what it requires there
+    // (VK_KHR_depth_stencil_resolve, which requires VK_KHR_create_renderpass2):
+    // <https://registry.khronos.org/vulkan/specs/1.3-extensions/man/html/VK_KHR_dynamic_rendering.html>.
+    let mut dynamic_rendering =
+        vk::PhysicalDeviceDynamicRenderingFeatures::default().dynamic_rendering(true);
+    if options.dynamic_rendering {
+        let needed = [
+            ash::khr::dynamic_rendering::NAME,
+            ash::khr::depth_stencil_resolve::NAME,
+            ash::khr::create_renderpass2::NAME,
+        ];
+        if let Some(missing) = needed.iter().find(|n| !has(n)) {
+            return Err(format!(
+                "--dynamic-rendering: the device lacks {}",
+                missing.to_string_lossy()
+            ));
+        }
+        device_extensions.extend(needed.iter().map(|n| n.as_ptr()));
+        device_info = device_info.push_next(&mut dynamic_rendering);
+    }
+    device_info = device_info.enabled_extension_names(&device_extensions);
     let raw_device = instance
         .create_vulkan_device(
             system,
@@ -533,6 +652,7 @@ unsafe fn with_instance(
     // fovea leaves the maps in FRAGMENT_DENSITY_MAP_OPTIMAL_EXT on any device with FDM enabled, where
     // they cannot be sampled either.
     let mode = match (fdm_enabled, non_subsampled, sampled) {
+        _ if options.no_fb => Mode::Absent,
         (true, true, _) => Mode::Attachment,
         (false, _, true) => Mode::Overlay,
         _ => Mode::None,
@@ -614,23 +734,36 @@ unsafe fn session_loop(
     if options.capture {
         usage |= xr::SwapchainUsageFlags::TRANSFER_SRC;
     }
+    // An array of two (view i in layer i), or one layer twice a view wide (view i in half i).
+    let (image_width, array_size) = match options.layout {
+        Layout::Array => (width, 2),
+        Layout::DoubleWide => (2 * width, 1),
+    };
     let create_info = xr::sys::SwapchainCreateInfo {
         ty: xr::sys::SwapchainCreateInfo::TYPE,
-        next: &foveation as *const _ as *const c_void,
+        next: if options.no_fb {
+            ptr::null()
+        } else {
+            &foveation as *const _ as *const c_void
+        },
         create_flags: xr::SwapchainCreateFlags::EMPTY,
         usage_flags: usage,
         format: i64::from(format.as_raw()),
         sample_count: 1,
-        width,
+        width: image_width,
         height,
         face_count: 1,
-        array_size: 2,
+        array_size,
         mip_count: 1,
     };
     let mut handle = xr::sys::Swapchain::NULL;
     check(
         (instance.fp().create_swapchain)(session.as_raw(), &create_info, &mut handle),
-        "xrCreateSwapchain with FRAGMENT_DENSITY_MAP",
+        if options.no_fb {
+            "xrCreateSwapchain"
+        } else {
+            "xrCreateSwapchain with FRAGMENT_DENSITY_MAP"
+        },
     )?;
     let mut swapchain = xr::Swapchain::<xr::Vulkan>::from_raw(session.clone(), handle);
 
@@ -654,7 +787,11 @@ unsafe fn session_loop(
         .iter_mut()
         .map(|d| xr::sys::SwapchainImageVulkanKHR {
             ty: xr::sys::SwapchainImageVulkanKHR::TYPE,
-            next: d as *mut _ as *mut c_void,
+            next: if options.no_fb {
+                ptr::null_mut()
+            } else {
+                d as *mut _ as *mut c_void
+            },
             image: 0,
         })
         .collect();
@@ -667,10 +804,14 @@ unsafe fn session_loop(
         ),
         "xrEnumerateSwapchainImages",
     )?;
-    let density_images: Vec<(u64, u32, u32)> = density
-        .iter()
-        .map(|d| (d.image, d.width, d.height))
-        .collect();
+    let density_images: Vec<(u64, u32, u32)> = if options.no_fb {
+        Vec::new()
+    } else {
+        density
+            .iter()
+            .map(|d| (d.image, d.width, d.height))
+            .collect()
+    };
     if let Some(i) = density_images.iter().position(|(image, ..)| *image == 0) {
         return Err(format!("swapchain image {i} came without a density image"));
     }
@@ -685,6 +826,7 @@ unsafe fn session_loop(
     let profiles = options
         .levels
         .iter()
+        .filter(|_| !options.no_fb)
         .map(|&i| {
             session
                 .create_foveation_profile(Some(xr::FoveationLevelProfile {
@@ -695,12 +837,16 @@ unsafe fn session_loop(
                 .map_err(|e| format!("xrCreateFoveationProfileFB({:?}): {e}", LEVELS[i]))
         })
         .collect::<Result<Vec<_>, String>>()?;
-    let update_state = instance
-        .exts()
-        .fb_swapchain_update_state
-        .ok_or("XR_FB_swapchain_update_state was enabled but has no functions")?;
+    let update_state = instance.exts().fb_swapchain_update_state;
+    if update_state.is_none() && !options.no_fb {
+        return Err("XR_FB_swapchain_update_state was enabled but has no functions".into());
+    }
     let mut levels_applied = Vec::new();
     let mut apply = |i: usize| -> Result<(), String> {
+        // Nothing to apply without the FB API (--no-fb).
+        let Some(update_state) = update_state else {
+            return Ok(());
+        };
         let state = xr::sys::SwapchainStateFoveationFB {
             ty: xr::sys::SwapchainStateFoveationFB::TYPE,
             next: ptr::null_mut(),
@@ -744,12 +890,17 @@ unsafe fn session_loop(
         &Targets {
             format,
             extent: (width, height),
+            layout: options.layout,
             images: &vk_images,
             density: &vk_density,
         },
         mode,
-        options.capture,
-        options.heavy,
+        Setup {
+            readback: options.capture,
+            heavy: options.heavy,
+            offscreen: options.offscreen,
+            dynamic_rendering: options.dynamic_rendering,
+        },
     )?;
 
     let mut event_storage = xr::EventDataBuffer::new();
@@ -760,6 +911,7 @@ unsafe fn session_loop(
     let mut fovs = Vec::new();
     let mut captures: Vec<Capture> = Vec::new();
     let mut eye_ms: [Vec<f64>; 4] = Default::default();
+    let mut submitted = Vec::new();
     // The first frame drawn at each level is read back (frames the runtime says not to render
     // draw nothing).
     let mut read_eyes = false;
@@ -852,13 +1004,19 @@ unsafe fn session_loop(
         swapchain
             .release_image()
             .map_err(|e| format!("xrReleaseSwapchainImage: {e}"))?;
-        let rect = xr::Rect2Di {
-            offset: xr::Offset2Di { x: 0, y: 0 },
-            extent: xr::Extent2Di {
+        // View i: layer i of the array, or half i of the double-wide image.
+        let sub_images: [(u32, xr::Rect2Di); 2] = std::array::from_fn(|eye| {
+            let (layer, x) = match options.layout {
+                Layout::Array => (eye as u32, 0),
+                Layout::DoubleWide => (0, eye as i32 * width as i32),
+            };
+            let extent = xr::Extent2Di {
                 width: width as i32,
                 height: height as i32,
-            },
-        };
+            };
+            let offset = xr::Offset2Di { x, y: 0 };
+            (layer, xr::Rect2Di { offset, extent })
+        });
         let projection_views: [_; 2] = std::array::from_fn(|eye| {
             xr::CompositionLayerProjectionView::new()
                 .pose(located[eye].pose)
@@ -866,8 +1024,8 @@ unsafe fn session_loop(
                 .sub_image(
                     xr::SwapchainSubImage::new()
                         .swapchain(&swapchain)
-                        .image_array_index(eye as u32)
-                        .image_rect(rect),
+                        .image_array_index(sub_images[eye].0)
+                        .image_rect(sub_images[eye].1),
                 )
         });
         frame_stream
@@ -882,6 +1040,7 @@ unsafe fn session_loop(
         if fovs.is_empty() {
             fovs = located.iter().map(|v| v.fov).collect();
         }
+        submitted = sub_images.to_vec();
         frames += 1;
     };
     renderer.destroy();
@@ -895,7 +1054,8 @@ unsafe fn session_loop(
     ));
     result.map(|()| Outcome {
         frames,
-        swapchain_size: (width, height),
+        swapchain_size: (image_width, height),
+        view_size: (width, height),
         format,
         density_images,
         levels_applied,
@@ -905,6 +1065,7 @@ unsafe fn session_loop(
         captures,
         vk_messages: Vec::new(),
         eye_ms,
+        submitted,
     })
 }
 
@@ -913,14 +1074,16 @@ unsafe fn session_loop(
 /// per texel) and `fNNNNN_LEVEL_{left,right}.png` (the frame as drawn).
 fn dump(o: &Outcome, dir: &Path) -> Result<(), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let (w, h) = o.swapchain_size;
+    // One view's extent: the swapchain's, or half of it when double-wide.
+    let (w, h) = o.view_size;
     let (dw, dh) = o.density_images.first().map_or((0, 0), |d| (d.1, d.2));
     let mut written = 0;
     for c in &o.captures {
         let level = ["none", "low", "medium", "high"][c.level];
         for (layer, eye) in ["left", "right"].into_iter().enumerate() {
             let texels = (dw * dh) as usize;
-            if let Some(map) = c.density.chunks_exact(texels * 2).nth(layer) {
+            let maps = (texels > 0).then(|| c.density.chunks_exact(texels * 2));
+            if let Some(map) = maps.and_then(|mut m| m.nth(layer)) {
                 let rgb: Vec<u8> = map.chunks_exact(2).flat_map(|t| [t[0], t[1], 0]).collect();
                 let path = dir.join(format!("f{:05}_{level}_density_{eye}.png", c.frame));
                 write_png(&path, (dw, dh), png::ColorType::Rgb, &rgb)?;
@@ -984,6 +1147,10 @@ mod tests {
             vec!["--validate"],
             vec!["--vk-layer", "VK_LAYER_X"],
             vec!["--heavy"],
+            vec!["--no-fb"],
+            vec!["--offscreen"],
+            vec!["--double-wide", "--no-fb"],
+            vec!["--dynamic-rendering"],
         ];
         for args in &taken {
             assert!(USAGE.contains(args[0]), "{} missing from --help", args[0]);
@@ -1068,7 +1235,7 @@ mod tests {
     /// fovea's density model for the views the example rendered, per level (both layers, R8G8),
     /// with `texel`-pixel texels.
     fn expected_maps(o: &Outcome, texel: u32, summary: &str) -> Vec<Vec<u8>> {
-        let (w, h) = o.swapchain_size;
+        let (w, h) = o.view_size;
         let grid = Grid::new([w, h], [texel, texel]);
         let rect = Rect {
             x: 0,
@@ -1129,7 +1296,7 @@ mod tests {
         // The runtime may take a frame or two to stop after xrRequestExitSession.
         assert!(o.frames >= options.frames, "{summary}");
         assert_eq!(o.levels_applied, LEVELS, "{summary}");
-        let (w, h) = o.swapchain_size;
+        let (w, h) = o.view_size;
         let distinct: std::collections::HashSet<u64> =
             o.density_images.iter().map(|d| d.0).collect();
         assert_eq!(distinct.len(), o.density_images.len(), "one per image");
@@ -1439,7 +1606,7 @@ mod tests {
     /// The frame as the shaders drew it: outside the overlay the level's tinted stripes, inside it
     /// each view's own layer of the density map, one texel per (nearest-sampled) pixel.
     fn check_frame(o: &Outcome, c: &Capture) {
-        let (w, h) = (o.swapchain_size.0 as usize, o.swapchain_size.1 as usize);
+        let (w, h) = (o.view_size.0 as usize, o.view_size.1 as usize);
         let (dw, dh) = (
             o.density_images[0].1 as usize,
             o.density_images[0].2 as usize,
@@ -1526,6 +1693,7 @@ mod tests {
                 &["-DHEAVY", "-DOVERLAY"],
                 render::HEAVY_OVERLAY,
             ),
+            ("composite.frag", &[], render::COMPOSITE),
         ] {
             let spv = out.join("out.spv");
             let run = std::process::Command::new("glslangValidator")
@@ -1561,7 +1729,16 @@ mod tests {
             (&[3][..], true, 10)
         );
         assert!(o.capture && o.dump == Some(PathBuf::from("d")));
+        let o = parse("--no-fb --double-wide --offscreen --dynamic-rendering").unwrap();
+        assert!(o.no_fb && o.offscreen && o.dynamic_rendering);
+        assert_eq!(
+            (o.layout, o.levels.as_slice()),
+            (Layout::DoubleWide, &[0][..])
+        );
         for (bad, says) in [
+            ("--double-wide", "add --no-fb"),
+            ("--no-fb --levels high", "--no-fb has none"),
+            ("--no-fb --dynamic", "--no-fb has none"),
             ("--levels ultra", "\"ultra\" is not one of"),
             ("--frames 0", "positive count"),
             ("--frames", "takes a value"),

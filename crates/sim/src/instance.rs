@@ -8,6 +8,7 @@ use openxr_sys as xr;
 use openxr_sys::Handle;
 
 use crate::config::{self, Fault, SimConfig};
+use crate::control::SubmittedView;
 use crate::ffi;
 use crate::state::{entry, world, Record, World};
 use crate::vulkan::VulkanInstanceState;
@@ -206,9 +207,23 @@ pub(crate) unsafe extern "system" fn destroy_instance(instance: xr::Instance) ->
         destroy_instance_objects(&mut w, id);
         let state = w.instances.remove(&id).expect("entered instance exists");
         if state.config.summary {
+            // The last frame that submitted projection views (frames the app was told not to
+            // render submit none).
+            let views = state
+                .record
+                .end_frames
+                .iter()
+                .rev()
+                .find(|v| !v.is_empty())
+                .map_or(&[][..], Vec::as_slice);
             eprintln!(
                 "{}",
-                summary_line(state.frames, &state.record.errors, &state.record.refusals)
+                summary_line(
+                    state.frames,
+                    &state.record.errors,
+                    &state.record.refusals,
+                    views
+                )
             );
         }
         w.retired.insert(id, state.record);
@@ -216,21 +231,43 @@ pub(crate) unsafe extern "system" fn destroy_instance(instance: xr::Instance) ->
     })
 }
 
-/// `fovea-sim: summary frames=N errors=M refused=K [xrFoo:2 xrBar:1]`: what a test driving an
-/// application as a child process reads back (see [`SimConfig::summary`]). `errors` counts every
-/// error code returned, the bracket lists them by command, and `refused` is the part of `errors`
-/// the runtime chose by its own rules rather than by an injected fault.
+/// `fovea-sim: summary frames=N errors=M refused=K [xrFoo:2 xrBar:1] views=V;V`: what a test
+/// driving an application as a child process reads back (see [`SimConfig::summary`]). `errors`
+/// counts every error code returned, the bracket lists them by command, and `refused` is the part
+/// of `errors` the runtime chose by its own rules rather than by an injected fault. `views` are the
+/// projection views of the last frame that submitted any (with the journal on), each
+/// `LAYER:SWAPCHAIN:ARRAY_INDEX:X,Y+WxH`: how the app laid its views out in its swapchains (an
+/// array, a double-wide image's halves, a swapchain per eye), which a layer that tells views apart
+/// must read the same way (docs/injection.md#telling-the-views-apart).
 fn summary_line(
     frames: u64,
     errors: &BTreeMap<&'static str, u64>,
     refusals: &BTreeMap<&'static str, u64>,
+    views: &[SubmittedView],
 ) -> String {
     let total: u64 = errors.values().sum();
     let refused: u64 = refusals.values().sum();
     let each: Vec<String> = errors.iter().map(|(f, n)| format!("{f}:{n}")).collect();
+    let views: Vec<String> = views
+        .iter()
+        .map(|v| {
+            let r = v.image_rect;
+            format!(
+                "{}:{}:{}:{},{}+{}x{}",
+                v.layer,
+                v.swapchain,
+                v.image_array_index,
+                r.offset.x,
+                r.offset.y,
+                r.extent.width,
+                r.extent.height
+            )
+        })
+        .collect();
     format!(
-        "fovea-sim: summary frames={frames} errors={total} refused={refused} [{}]",
-        each.join(" ")
+        "fovea-sim: summary frames={frames} errors={total} refused={refused} [{}] views={}",
+        each.join(" "),
+        views.join(";")
     )
 }
 
@@ -430,14 +467,34 @@ mod tests {
     #[test]
     fn summary_line_counts_frames_and_errors_by_command() {
         assert_eq!(
-            summary_line(300, &BTreeMap::new(), &BTreeMap::new()),
-            "fovea-sim: summary frames=300 errors=0 refused=0 []"
+            summary_line(300, &BTreeMap::new(), &BTreeMap::new(), &[]),
+            "fovea-sim: summary frames=300 errors=0 refused=0 [] views="
         );
         let errors = BTreeMap::from([("xrEndFrame", 1), ("xrCreateSwapchain", 2)]);
         let refusals = BTreeMap::from([("xrEndFrame", 1)]);
+        // A double-wide swapchain's halves.
+        let half = |x| SubmittedView {
+            layer: 0,
+            swapchain: 5,
+            image_rect: xr::Rect2Di {
+                offset: xr::Offset2Di { x, y: 0 },
+                extent: xr::Extent2Di {
+                    width: 640,
+                    height: 480,
+                },
+            },
+            image_array_index: 0,
+            fov: xr::Fovf {
+                angle_left: -0.5,
+                angle_right: 0.5,
+                angle_up: 0.5,
+                angle_down: -0.5,
+            },
+        };
         assert_eq!(
-            summary_line(7, &errors, &refusals),
-            "fovea-sim: summary frames=7 errors=3 refused=1 [xrCreateSwapchain:2 xrEndFrame:1]"
+            summary_line(7, &errors, &refusals, &[half(0), half(640)]),
+            "fovea-sim: summary frames=7 errors=3 refused=1 [xrCreateSwapchain:2 xrEndFrame:1] \
+             views=0:5:0:0,0+640x480;0:5:0:640,0+640x480"
         );
     }
 

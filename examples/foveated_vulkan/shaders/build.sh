@@ -8,3 +8,4 @@ glslangValidator -V --target-env vulkan1.1 -o pattern.frag.spv pattern.frag
 glslangValidator -V --target-env vulkan1.1 -DOVERLAY -o overlay.frag.spv pattern.frag
 glslangValidator -V --target-env vulkan1.1 -DHEAVY -o heavy.frag.spv pattern.frag
 glslangValidator -V --target-env vulkan1.1 -DHEAVY -DOVERLAY -o heavy_overlay.frag.spv pattern.frag
+glslangValidator -V --target-env vulkan1.1 -o composite.frag.spv composite.frag
