@@ -99,11 +99,65 @@ pub fn assert_none_held(why: &str) {
     check::assert_none_held(why);
 }
 
-/// A mutex with a rank.
-pub struct Mutex<T> {
+use parking_lot::lock_api::{self, GuardSend, RawMutex};
+
+/// A mutex with a rank: `parking_lot`'s, or (`R` = [`RawSpin`]) a spin lock.
+pub struct Mutex<T, R: RawMutex = parking_lot::RawMutex> {
     rank: Rank,
     what: &'static str,
-    inner: parking_lot::Mutex<T>,
+    inner: lock_api::Mutex<R, T>,
+}
+
+/// A record lock that spins: for the one lock the frame loop takes every frame
+/// (docs/ARCHITECTURE.md#per-frame-cost).
+pub type SpinMutex<T> = Mutex<T, RawSpin>;
+
+/// A spin lock: taking it is one compare-and-swap, releasing it a plain store, where
+/// `parking_lot`'s release is a second compare-and-swap (it must look for parked threads). Only for
+/// locks that are held for nanoseconds and that correct applications never contend: after a
+/// short spin a waiter yields its time slice.
+pub struct RawSpin(std::sync::atomic::AtomicBool);
+
+// SAFETY: `lock` returns only once this thread turned the flag from false to true with Acquire
+// ordering, and `unlock` (called only by the holder, lock_api's contract) turns it back with
+// Release ordering: one holder at a time, and the holder's writes happen before the next holder's
+// reads.
+unsafe impl RawMutex for RawSpin {
+    const INIT: RawSpin = RawSpin(std::sync::atomic::AtomicBool::new(false));
+    type GuardMarker = GuardSend;
+
+    #[inline]
+    fn lock(&self) {
+        use std::sync::atomic::Ordering::{Acquire, Relaxed};
+        let mut spins = 0u32;
+        while self
+            .0
+            .compare_exchange_weak(false, true, Acquire, Relaxed)
+            .is_err()
+        {
+            while self.0.load(Relaxed) {
+                if spins < 100 {
+                    spins += 1;
+                    std::hint::spin_loop();
+                } else {
+                    std::thread::yield_now();
+                }
+            }
+        }
+    }
+
+    #[inline]
+    fn try_lock(&self) -> bool {
+        use std::sync::atomic::Ordering::{Acquire, Relaxed};
+        self.0
+            .compare_exchange(false, true, Acquire, Relaxed)
+            .is_ok()
+    }
+
+    #[inline]
+    unsafe fn unlock(&self) {
+        self.0.store(false, std::sync::atomic::Ordering::Release);
+    }
 }
 
 impl<T> Mutex<T> {
@@ -114,14 +168,27 @@ impl<T> Mutex<T> {
 
     /// A lock of another rank; `what` names it in violation reports.
     pub const fn ranked(rank: Rank, what: &'static str, value: T) -> Mutex<T> {
+        Mutex::with_raw(rank, what, value)
+    }
+}
+
+impl<T> SpinMutex<T> {
+    /// A record's spin lock ([`Rank::Record`]).
+    pub const fn spin(value: T) -> SpinMutex<T> {
+        Mutex::with_raw(Rank::Record, "record", value)
+    }
+}
+
+impl<T, R: RawMutex> Mutex<T, R> {
+    const fn with_raw(rank: Rank, what: &'static str, value: T) -> Mutex<T, R> {
         Mutex {
             rank,
             what,
-            inner: parking_lot::Mutex::new(value),
+            inner: lock_api::Mutex::const_new(R::INIT, value),
         }
     }
 
-    pub fn lock(&self) -> MutexGuard<'_, T> {
+    pub fn lock(&self) -> MutexGuard<'_, T, R> {
         check::acquire(self.rank, self.what);
         MutexGuard {
             rank: self.rank,
@@ -136,38 +203,38 @@ impl<T> Mutex<T> {
     }
 }
 
-impl<T: Default> Default for Mutex<T> {
-    fn default() -> Mutex<T> {
-        Mutex::new(T::default())
+impl<T: Default, R: RawMutex> Default for Mutex<T, R> {
+    fn default() -> Mutex<T, R> {
+        Mutex::with_raw(Rank::Record, "record", T::default())
     }
 }
 
-impl<T: std::fmt::Debug> std::fmt::Debug for Mutex<T> {
+impl<T: std::fmt::Debug, R: RawMutex> std::fmt::Debug for Mutex<T, R> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         self.inner.fmt(f)
     }
 }
 
-pub struct MutexGuard<'a, T> {
+pub struct MutexGuard<'a, T, R: RawMutex = parking_lot::RawMutex> {
     rank: Rank,
     what: &'static str,
-    inner: parking_lot::MutexGuard<'a, T>,
+    inner: lock_api::MutexGuard<'a, R, T>,
 }
 
-impl<T> Deref for MutexGuard<'_, T> {
+impl<T, R: RawMutex> Deref for MutexGuard<'_, T, R> {
     type Target = T;
     fn deref(&self) -> &T {
         &self.inner
     }
 }
 
-impl<T> DerefMut for MutexGuard<'_, T> {
+impl<T, R: RawMutex> DerefMut for MutexGuard<'_, T, R> {
     fn deref_mut(&mut self) -> &mut T {
         &mut self.inner
     }
 }
 
-impl<T> Drop for MutexGuard<'_, T> {
+impl<T, R: RawMutex> Drop for MutexGuard<'_, T, R> {
     fn drop(&mut self) {
         check::release(self.rank, self.what);
     }
@@ -248,6 +315,34 @@ mod tests {
 
     fn panics(f: impl FnOnce()) -> bool {
         std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).is_err()
+    }
+
+    #[test]
+    fn the_spin_lock_excludes_and_is_ranked() {
+        let counter = std::sync::Arc::new(SpinMutex::spin(0u64));
+        let threads: Vec<_> = (0..4)
+            .map(|_| {
+                let c = std::sync::Arc::clone(&counter);
+                std::thread::spawn(move || {
+                    for _ in 0..20_000 {
+                        // A non-atomic read-modify-write: a lost update shows a broken lock.
+                        let mut g = c.lock();
+                        let v = *g;
+                        std::hint::black_box(&v);
+                        *g = v + 1;
+                    }
+                })
+            })
+            .collect();
+        for t in threads {
+            t.join().unwrap();
+        }
+        assert_eq!(*counter.lock(), 80_000);
+        let other = Mutex::new(0);
+        assert!(panics(|| {
+            let _a = counter.lock();
+            let _b = other.lock();
+        }));
     }
 
     #[test]

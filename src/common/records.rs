@@ -77,19 +77,52 @@ struct Entry {
     record: *const (),
 }
 
-impl Entry {
-    const EMPTY: Entry = Entry {
-        owner: 0,
-        raw: 0,
-        generation: 0,
-        record: std::ptr::null(),
-    };
+/// A cache slot: an [`Entry`] field by field, so a look-up loads only the fields it compares (a
+/// whole-entry copy costs a store-forwarding stall on every hit).
+struct Slot {
+    owner: Cell<usize>,
+    raw: Cell<u64>,
+    generation: Cell<u64>,
+    record: Cell<*const ()>,
+}
+
+impl Slot {
+    const fn empty() -> Slot {
+        Slot {
+            owner: Cell::new(0),
+            raw: Cell::new(0),
+            generation: Cell::new(0),
+            record: Cell::new(std::ptr::null()),
+        }
+    }
+
+    /// The record, where this slot holds `raw` of `owner` as of `generation`.
+    fn hit(&self, owner: usize, raw: u64, generation: u64) -> Option<*const ()> {
+        (self.raw.get() == raw && self.owner.get() == owner && self.generation.get() == generation)
+            .then(|| self.record.get())
+    }
+
+    fn get(&self) -> Entry {
+        Entry {
+            owner: self.owner.get(),
+            raw: self.raw.get(),
+            generation: self.generation.get(),
+            record: self.record.get(),
+        }
+    }
+
+    fn set(&self, e: Entry) {
+        self.owner.set(e.owner);
+        self.raw.set(e.raw);
+        self.generation.set(e.generation);
+        self.record.set(e.record);
+    }
 }
 
 thread_local! {
     /// Per thread, so entries need no synchronisation; `const`-initialised and without a
     /// destructor, so access is a plain thread-local read.
-    static CACHE: [Cell<Entry>; SLOTS] = const { [const { Cell::new(Entry::EMPTY) }; SLOTS] };
+    static CACHE: [Slot; SLOTS] = const { [const { Slot::empty() }; SLOTS] };
 }
 
 /// The first of the two slots where `raw` of `owner` may sit: the cache is two-way set-associative,
@@ -139,16 +172,16 @@ impl<T> Records<T> {
         // Read before the map is: an entry made from this look-up is void if the map changes
         // after it.
         let now = GENERATION.load(Ordering::Acquire);
-        let matches = |e: &Entry| e.owner == owner && e.raw == raw && e.generation == now;
         let cached = CACHE
             .try_with(|c| {
-                let (a, b) = (c[set].get(), c[set + 1].get());
-                [a, b].into_iter().find(matches)
+                c[set]
+                    .hit(owner, raw, now)
+                    .or_else(|| c[set + 1].hit(owner, raw, now))
             })
             .ok()
             .flatten();
-        if let Some(e) = cached {
-            return NonNull::new(e.record.cast_mut().cast::<T>()).map(Borrowed::new);
+        if let Some(record) = cached {
+            return NonNull::new(record.cast_mut().cast::<T>()).map(Borrowed::new);
         }
         let record = NonNull::from(&**self.map.read().get(&raw)?);
         let entry = Entry {
@@ -161,7 +194,8 @@ impl<T> Records<T> {
         // one is void anyway. Ignored where the thread's cache is gone (the thread is exiting):
         // the look-up stands.
         let _ = CACHE.try_with(|c| {
-            let first = c[set].replace(entry);
+            let first = c[set].get();
+            c[set].set(entry);
             if first.generation == now && first.owner != 0 {
                 c[set + 1].set(first);
             }

@@ -28,7 +28,7 @@ use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU32, AtomicU64, AtomicUsize
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
-use crate::common::lock::{Mutex, Rank};
+use crate::common::lock::{Mutex, Rank, SpinMutex};
 use crate::common::records::{Borrowed, Records};
 use openxr_sys as xr;
 use xr::Handle;
@@ -195,7 +195,7 @@ pub struct Session {
     /// What each `xrWaitFrame` learned.
     pub waits: Waits,
     /// The dynamic controller and the stats window, which `xrEndFrame` runs.
-    pub frame: Mutex<FrameLoop>,
+    pub frame: SpinMutex<FrameLoop>,
     /// The dynamic controller's step ([`fovea_model::dynamic::LADDER`]), read when maps are built.
     pub dynamic_step: AtomicUsize,
     /// The highest step any of the session's dynamic swapchains allows (0: none is dynamic).
@@ -232,7 +232,7 @@ impl Session {
             views: Mutex::default(),
             pattern_generation: AtomicU64::new(0),
             waits: Waits::default(),
-            frame: Mutex::new(FrameLoop::default()),
+            frame: SpinMutex::spin(FrameLoop::default()),
             dynamic_step: AtomicUsize::new(0),
             dynamic_max: AtomicUsize::new(0),
             maps_built: AtomicU64::new(0),
