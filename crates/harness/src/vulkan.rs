@@ -185,12 +185,27 @@ impl Vulkan {
                 .chain(options.layers_below.iter().copied())
                 .map(CStr::as_ptr)
                 .collect();
-            let ext_names = [ash::ext::debug_utils::NAME.as_ptr()];
+            let ext_names = [
+                ash::ext::debug_utils::NAME.as_ptr(),
+                ash::ext::validation_features::NAME.as_ptr(),
+            ];
+            // Handle wrapping off, always. The validation layer keeps that switch in one
+            // process-wide variable (`wrap_handles` in its chassis), which an instance created
+            // with the feature disabled turns off for good. Tests whose layers below validation
+            // must see the application's handles disable it; an instance that still wraps while
+            // another test creates such an instance passes its wrapped handles on unwrapped from
+            // then on, and the Vulkan loader dereferences them (a SIGSEGV in
+            // vkDestroyDebugUtilsMessengerEXT). With every validated instance alike, tests in one
+            // process cannot flip it under each other.
+            let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
+            let mut features =
+                vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
             let vk_create = vk::InstanceCreateInfo::default()
                 .application_info(&app_info)
                 .enabled_layer_names(&layer_names)
                 .enabled_extension_names(&ext_names)
-                .push_next(&mut messenger_info);
+                .push_next(&mut messenger_info)
+                .push_next(&mut features);
             let vk_gipa: xr::platform::VkGetInstanceProcAddr =
                 std::mem::transmute(entry.static_fn().get_instance_proc_addr);
             let xr_create = xr::VulkanInstanceCreateInfoKHR {
