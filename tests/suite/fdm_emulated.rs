@@ -7,11 +7,13 @@
 //! VK_LAYER_KHRONOS_validation → the shading-rate double → lavapipe. The double plays `nvidia`
 //! (16×16 texels, one shading-rate layer per view, fragments up to 4×4) and `amd` (8×8, one merged
 //! layer, fragments up to 2×2). The application does what a Quest application does: sets a
-//! foveation profile, acquires, renders one multiview pass with the density image as its
-//! fragment density map, submits. The double reads the shading-rate attachment back after the
-//! submit; those codes must equal, texel for texel, the density model for the located FOVs at the
-//! device's texel, converted by `fovea_model::shading_rate` for the profile's rates. Validation
-//! must say nothing, leaks included (it reports them when the device is destroyed).
+//! foveation profile, acquires, renders one pass with the density image as its fragment density
+//! map, submits, releases and ends the frame with its projection views. Two layouts: one eye per
+//! array layer drawn in one multiview pass, and both eyes side by side in one layer (double-wide).
+//! The double reads the shading-rate attachment back after the submit; those codes must equal,
+//! texel for texel, the density model for the views' FOVs and rectangles at the device's texel,
+//! converted by `fovea_model::shading_rate` for the profile's rates. Validation must say nothing,
+//! leaks included (it reports them when the device is destroyed).
 //!
 //! Why a test of its own: the modules below test the halves apart. `fdm_vulkan` reads the density
 //! images back on lavapipe as it is (no emulation, fovea's default texel), and the `vk_*` modules
@@ -24,7 +26,7 @@
 //! with a reason when a system piece is missing; fails instead under `FOVEA_REQUIRE_SYSTEM=1`.
 
 use std::ffi::c_void;
-use std::ptr::null_mut;
+use std::ptr::{null, null_mut};
 
 use ash::vk;
 use ash::vk::Handle as _;
@@ -48,24 +50,96 @@ use crate::vk_layer::{env, Env};
 const COLOR: vk::Format = vk::Format::R8G8B8A8_SRGB;
 const DENSITY: vk::Format = vk::Format::R8G8_UNORM;
 const FDM_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
-/// Both eyes in one multiview pass.
+/// The multiview layout draws both eyes in one pass.
 const VIEW_MASK: u32 = 0b11;
 
+/// How the application lays its two eyes out in the swapchain.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Layout {
+    /// Two array layers, eye `i` in layer `i` over the whole image, drawn in one multiview pass.
+    Multiview,
+    /// One layer, the left eye in the left half and the right eye in the right half, drawn in
+    /// one pass.
+    DoubleWide,
+}
+
+impl Layout {
+    fn layers(self) -> u32 {
+        match self {
+            Layout::Multiview => 2,
+            Layout::DoubleWide => 1,
+        }
+    }
+
+    /// Where the application draws eye `eye`: its array layer and rectangle.
+    fn place(self, eye: usize) -> (u32, Rect) {
+        let whole = Rect {
+            x: 0,
+            y: 0,
+            width: WIDTH,
+            height: HEIGHT,
+        };
+        match self {
+            Layout::Multiview => (eye as u32, whole),
+            Layout::DoubleWide => (
+                0,
+                Rect {
+                    x: (WIDTH / 2 * eye as u32) as i32,
+                    width: WIDTH / 2,
+                    ..whole
+                },
+            ),
+        }
+    }
+
+    /// Per density-map layer, the views the map of an image acquired now is made for: those the
+    /// application submitted into the swapchain, or before its first submission, view `i` over
+    /// the whole of layer `i` (docs/ARCHITECTURE.md, crates/model/src/maps.rs).
+    fn views(self, fovs: [Fov; 2], submitted: bool) -> Vec<Vec<View>> {
+        let mut out = vec![Vec::new(); self.layers() as usize];
+        for (eye, fov) in fovs.into_iter().enumerate() {
+            let (layer, rect) = if submitted {
+                self.place(eye)
+            } else {
+                Layout::Multiview.place(eye)
+            };
+            if let Some(views) = out.get_mut(layer as usize) {
+                views.push(View {
+                    fov,
+                    rect,
+                    visible: None,
+                });
+            }
+        }
+        out
+    }
+}
+
 #[test]
-fn fb_foveation_reaches_the_shading_rate_attachment_texel_for_texel() {
+fn multiview_foveation_reaches_the_shading_rate_attachment_texel_for_texel() {
+    each_profile(Layout::Multiview);
+}
+
+#[test]
+fn double_wide_foveation_reaches_the_shading_rate_attachment_texel_for_texel() {
+    each_profile(Layout::DoubleWide);
+}
+
+fn each_profile(layout: Layout) {
     let Some((_serial, env)) = env() else { return };
     // The harness collects every validated instance's messages in one place.
     let _validated = VALIDATED.lock();
     pick_lavapipe();
     for profile in [Profile::Nvidia, Profile::Amd] {
-        if !run(env, profile) {
+        if !run(env, profile, layout) {
             return;
         }
     }
 }
 
-/// The application's objects for one swapchain: a multiview pass with the density map, one
-/// framebuffer per swapchain image, a pipeline, and a command buffer with its fence.
+/// The application's objects for one swapchain: a pass with the density map (multiview where the
+/// layout has a layer per eye), one framebuffer per swapchain image, a pipeline, and a command
+/// buffer with its fence.
 struct Renderer {
     pass: vk::RenderPass,
     views: Vec<vk::ImageView>,
@@ -79,18 +153,22 @@ struct Renderer {
     queue: vk::Queue,
 }
 
-/// A view of both layers of `image`.
-fn array_view(d: &ash::Device, image: u64, format: vk::Format) -> vk::ImageView {
+/// A view of every layer of `image` (2D-array for the multiview layout).
+fn whole_view(d: &ash::Device, layout: Layout, image: u64, format: vk::Format) -> vk::ImageView {
+    let ty = match layout {
+        Layout::Multiview => vk::ImageViewType::TYPE_2D_ARRAY,
+        Layout::DoubleWide => vk::ImageViewType::TYPE_2D,
+    };
     let info = vk::ImageViewCreateInfo::default()
         .image(vk::Image::from_raw(image))
-        .view_type(vk::ImageViewType::TYPE_2D_ARRAY)
+        .view_type(ty)
         .format(format)
         .subresource_range(vk::ImageSubresourceRange {
             aspect_mask: vk::ImageAspectFlags::COLOR,
             base_mip_level: 0,
             level_count: 1,
             base_array_layer: 0,
-            layer_count: 2,
+            layer_count: layout.layers(),
         });
     // SAFETY: a live image of the device; the struct lives across the call.
     unsafe { d.create_image_view(&info, None) }.expect("vkCreateImageView")
@@ -98,7 +176,7 @@ fn array_view(d: &ash::Device, image: u64, format: vk::Format) -> vk::ImageView 
 
 impl Renderer {
     /// `color` and `density`: the swapchain's images and their density images, by index.
-    fn new(v: &Vulkan, color: &[u64], density: &[u64]) -> Renderer {
+    fn new(v: &Vulkan, layout: Layout, color: &[u64], density: &[u64]) -> Renderer {
         let d = &v.device;
         let atts = [
             vk::AttachmentDescription::default()
@@ -132,11 +210,13 @@ impl Renderer {
                 attachment: 1,
                 layout: FDM_LAYOUT,
             });
-        let info = vk::RenderPassCreateInfo::default()
+        let mut info = vk::RenderPassCreateInfo::default()
             .attachments(&atts)
             .subpasses(&subpass)
-            .push_next(&mut multiview)
             .push_next(&mut fdm);
+        if layout == Layout::Multiview {
+            info = info.push_next(&mut multiview);
+        }
         // SAFETY: every struct lives across its call; every object is the device's own and is
         // destroyed in `destroy`.
         unsafe {
@@ -146,7 +226,10 @@ impl Renderer {
             let mut views = Vec::new();
             let mut framebuffers = Vec::new();
             for (&c, &f) in color.iter().zip(density) {
-                let pair = [array_view(d, c, COLOR), array_view(d, f, DENSITY)];
+                let pair = [
+                    whole_view(d, layout, c, COLOR),
+                    whole_view(d, layout, f, DENSITY),
+                ];
                 views.extend(pair);
                 framebuffers.push(
                     d.create_framebuffer(
@@ -323,27 +406,22 @@ fn color_images(app: &App, swapchain: xr::Swapchain) -> Vec<u64> {
     }
 }
 
-/// What the density model and the rate conversion give for the located `fovs` (layer = view, the
-/// whole image, as before the application submits views) on `profile`'s device: per shading-rate
-/// layer (both eyes on `nvidia`, one merged layer on `amd`), `texels` codes.
-fn expected_codes(profile: Profile, fovs: [Fov; 2], pattern: Pattern, merged: bool) -> Vec<u8> {
+/// What the density model and the rate conversion give on `profile`'s device for a map whose
+/// layers hold `views`: per shading-rate layer (one per map layer, or with `merged` one layer with
+/// the finer rate of all), the codes of every texel.
+fn expected_codes(
+    profile: Profile,
+    views: &[Vec<View>],
+    pattern: Pattern,
+    merged: bool,
+) -> Vec<u8> {
     let t = profile.texel();
     let grid = Grid::new([WIDTH, HEIGHT], [t.width, t.height]);
     let [mw, mh] = grid.map_extent();
     let texels = (mw * mh) as usize;
-    let mut density_bytes = vec![0u8; texels * 2 * 2];
-    for (fov, out) in fovs.iter().zip(density_bytes.chunks_exact_mut(texels * 2)) {
-        let view = View {
-            fov: *fov,
-            rect: Rect {
-                x: 0,
-                y: 0,
-                width: WIDTH,
-                height: HEIGHT,
-            },
-            visible: None,
-        };
-        density::fill(&grid, &[view], pattern, out);
+    let mut density_bytes = vec![0u8; texels * 2 * views.len()];
+    for (layer, out) in views.iter().zip(density_bytes.chunks_exact_mut(texels * 2)) {
+        density::fill(&grid, layer, pattern, out);
     }
     let rates: Vec<[u32; 2]> = profile
         .rates()
@@ -351,7 +429,7 @@ fn expected_codes(profile: Profile, fovs: [Fov; 2], pattern: Pattern, merged: bo
         .map(|(e, _)| [e.width, e.height])
         .collect();
     let m = profile.max_fragment();
-    let mut codes = vec![0xffu8; if merged { texels } else { texels * 2 }];
+    let mut codes = vec![0xffu8; if merged { texels } else { texels * views.len() }];
     shading_rate::fill_codes(&density_bytes, texels, merged, [m, m], &rates, &mut codes);
     codes
 }
@@ -396,7 +474,7 @@ fn plausible(
     case: &str,
     profile: Profile,
     level: i32,
-    fovs: [Fov; 2],
+    views: &[Vec<View>],
     extent: [u32; 2],
     got: &[u8],
 ) {
@@ -420,20 +498,85 @@ fn plausible(
     assert!(got.iter().any(|&c| c != 0), "{case}: no coarse texel");
     let t = profile.texel();
     let texels = (extent[0] * extent[1]) as usize;
-    let layers = got.len() / texels;
-    for (eye, fov) in fovs.iter().enumerate() {
-        let [x, y] = fov.projection_center_ndc();
-        let col = ((x + 1.0) / 2.0 * WIDTH as f32) as u32 / t.width;
-        let row = ((1.0 - y) / 2.0 * HEIGHT as f32) as u32 / t.height;
-        let at = (row.min(extent[1] - 1) * extent[0] + col.min(extent[0] - 1)) as usize;
-        let layer = eye.min(layers - 1);
-        assert_eq!(got[layer * texels + at], 0, "{case}: eye {eye}'s fovea");
+    let shadow_layers = got.len() / texels;
+    for (layer, views) in views.iter().enumerate() {
+        for view in views {
+            let r = view.rect;
+            let [x, y] = view.fov.projection_center_ndc();
+            let px = r.x as f32 + (x + 1.0) / 2.0 * r.width as f32;
+            let py = r.y as f32 + (1.0 - y) / 2.0 * r.height as f32;
+            let col = (px as u32 / t.width).min(extent[0] - 1);
+            let row = (py as u32 / t.height).min(extent[1] - 1);
+            let at = (layer.min(shadow_layers - 1)) * texels + (row * extent[0] + col) as usize;
+            assert_eq!(got[at], 0, "{case}: the fovea of {view:?}");
+        }
+    }
+}
+
+/// Releases the image and ends the frame with one projection layer: both eyes where `layout`
+/// draws them, with the FOVs they were located with.
+fn release(
+    frame: &Frame,
+    layout: Layout,
+    swapchain: xr::Swapchain,
+    time: xr::Time,
+    fovs: [Fov; 2],
+) {
+    let release: xr::pfn::ReleaseSwapchainImage = func(frame.app, "xrReleaseSwapchainImage");
+    let end_frame: xr::pfn::EndFrame = func(frame.app, "xrEndFrame");
+    let view = |eye: usize| {
+        let (layer, r) = layout.place(eye);
+        xr::CompositionLayerProjectionView {
+            ty: xr::StructureType::COMPOSITION_LAYER_PROJECTION_VIEW,
+            next: null(),
+            pose: xr::Posef::IDENTITY,
+            fov: xr::Fovf {
+                angle_left: fovs[eye].left,
+                angle_right: fovs[eye].right,
+                angle_up: fovs[eye].up,
+                angle_down: fovs[eye].down,
+            },
+            sub_image: xr::SwapchainSubImage {
+                swapchain,
+                image_rect: xr::Rect2Di {
+                    offset: xr::Offset2Di { x: r.x, y: r.y },
+                    extent: xr::Extent2Di {
+                        width: r.width as i32,
+                        height: r.height as i32,
+                    },
+                },
+                image_array_index: layer,
+            },
+        }
+    };
+    let views = [view(0), view(1)];
+    let projection = xr::CompositionLayerProjection {
+        ty: xr::StructureType::COMPOSITION_LAYER_PROJECTION,
+        next: null(),
+        layer_flags: xr::CompositionLayerFlags::EMPTY,
+        space: frame.space,
+        view_count: 2,
+        views: views.as_ptr(),
+    };
+    let layers = [&projection as *const _ as *const xr::CompositionLayerBaseHeader];
+    let end = xr::FrameEndInfo {
+        ty: xr::StructureType::FRAME_END_INFO,
+        next: null(),
+        display_time: time,
+        environment_blend_mode: xr::EnvironmentBlendMode::OPAQUE,
+        layer_count: 1,
+        layers: layers.as_ptr(),
+    };
+    // SAFETY: every struct lives across the calls.
+    unsafe {
+        assert_eq!(release(swapchain, null()), xr::Result::SUCCESS);
+        assert_eq!(end_frame(frame.session, &end), xr::Result::SUCCESS);
     }
 }
 
 /// One profile end to end; false after a skip.
-fn run(env: &Env, profile: Profile) -> bool {
-    let what = profile.name();
+fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
+    let what = format!("{} {layout:?}", profile.name());
     env.double.set_profile(Some(profile));
     env.double.clear();
     take_messages();
@@ -467,7 +610,10 @@ fn run(env: &Env, profile: Profile) -> bool {
         flags: xr::SwapchainCreateFoveationFlagsFB::from_raw(FDM_BIT),
     };
     let mut swapchain = xr::Swapchain::NULL;
-    let info = swapchain_info(&fdm_flag as *const _ as *const c_void);
+    let info = xr::SwapchainCreateInfo {
+        array_size: layout.layers(),
+        ..swapchain_info(&fdm_flag as *const _ as *const c_void)
+    };
     // SAFETY: the create info and the output live across the call.
     let r = unsafe { create_swapchain(session, &info, &mut swapchain) };
     assert_eq!(r, xr::Result::SUCCESS);
@@ -479,9 +625,14 @@ fn run(env: &Env, profile: Profile) -> bool {
     for (i, d) in density_images.iter().enumerate() {
         assert_eq!([d.width, d.height], extent, "{what}: density image {i}");
     }
-    // Each got a shadow when fovea made it, in order: R8_UINT, the density image's extent, both
+    // Each got a shadow when fovea made it, in order: R8_UINT, the density image's extent, its
     // layers where the device has layered attachments, else one.
-    let layers = if profile.layered() { 2 } else { 1 };
+    let layers = if profile.layered() {
+        layout.layers()
+    } else {
+        1
+    };
+    let merged = layers < layout.layers();
     let shadows: Vec<u64> = env
         .double
         .events("image")
@@ -501,7 +652,7 @@ fn run(env: &Env, profile: Profile) -> bool {
 
     let color = color_images(&app, swapchain);
     let density: Vec<u64> = density_images.iter().map(|d| d.image).collect();
-    let renderer = Renderer::new(&v, &color, &density);
+    let renderer = Renderer::new(&v, layout, &color, &density);
     // The pass reached the driver with a shading-rate attachment of the device's texel.
     let passes = env.double.events("render_pass");
     assert_eq!(passes.len(), 1, "{what}: {passes:?}");
@@ -523,6 +674,7 @@ fn run(env: &Env, profile: Profile) -> bool {
     };
     let texels = (extent[0] * extent[1]) as usize;
     let mut high = None;
+    let mut submitted = false;
     // NONE, LOW, MEDIUM, HIGH, then HIGH lowered by 7.5° (XrFoveationLevelProfileCreateInfoFB's
     // verticalOffset).
     for (level, offset) in [(0, 0.0), (1, 0.0), (2, 0.0), (3, 0.0), (3, -7.5)] {
@@ -557,10 +709,12 @@ fn run(env: &Env, profile: Profile) -> bool {
             env.double.clear();
             let (index, fovs, time) = frame.acquire(swapchain);
             renderer.draw(&v.device, index);
-            frame.release(swapchain, time);
+            release(&frame, layout, swapchain, time, fovs);
             seen[index as usize] += 1;
             let got = rates_read(env, &case, shadows[index as usize], layers, texels);
-            let want = expected_codes(profile, fovs, pattern, !profile.layered());
+            let views = layout.views(fovs, submitted);
+            submitted = true;
+            let want = expected_codes(profile, &views, pattern, merged);
             if let Some(at) = got.iter().zip(&want).position(|(g, w)| g != w) {
                 panic!(
                     "{case}: image {index}: code {} at texel {} of layer {} (extent {extent:?}), \
@@ -571,22 +725,26 @@ fn run(env: &Env, profile: Profile) -> bool {
                     want[at]
                 );
             }
-            plausible(&case, profile, level, fovs, extent, &got);
+            plausible(&case, profile, level, &views, extent, &got);
             if n > 0 || level != 3 {
                 continue;
             }
             if offset == 0.0 {
-                // The eyes differ (their FOVs mirror each other): `nvidia` keeps each eye's
-                // own rates, `amd` per texel the finer of the two, which is neither eye's map.
-                let per_eye = expected_codes(profile, fovs, pattern, false);
-                assert_ne!(
-                    per_eye[..texels],
-                    per_eye[texels..],
-                    "{case}: the eyes' maps"
-                );
-                if !profile.layered() {
-                    assert_ne!(got[..], per_eye[..texels], "{case}: merged");
-                    assert_ne!(got[..], per_eye[texels..], "{case}: merged");
+                // What the comparison tells apart. Multiview: the eyes differ (their FOVs mirror
+                // each other); `nvidia` keeps each eye's own rates, `amd` per texel the finer of
+                // the two, which is neither eye's map. Double-wide: the map follows the submitted
+                // halves, not the whole layer as before the first submission.
+                if layout == Layout::Multiview {
+                    let per_eye = expected_codes(profile, &views, pattern, false);
+                    assert_ne!(per_eye[..texels], per_eye[texels..], "{case}: the eyes");
+                    if merged {
+                        assert_ne!(got[..], per_eye[..texels], "{case}: merged");
+                        assert_ne!(got[..], per_eye[texels..], "{case}: merged");
+                    }
+                } else {
+                    let before =
+                        expected_codes(profile, &layout.views(fovs, false), pattern, merged);
+                    assert_ne!(got, before, "{case}: the submitted views");
                 }
                 high = Some(got);
             } else {
