@@ -507,7 +507,7 @@ impl Frame<'_> {
         )
     }
 
-    pub(crate) fn release(&self, swapchain: xr::Swapchain, time: xr::Time) {
+    fn release(&self, swapchain: xr::Swapchain, time: xr::Time) {
         let release: xr::pfn::ReleaseSwapchainImage = func(self.app, "xrReleaseSwapchainImage");
         let end_frame: xr::pfn::EndFrame = func(self.app, "xrEndFrame");
         let end = xr::FrameEndInfo {
