@@ -24,12 +24,12 @@ use xr::Handle;
 use crate::support::level_info;
 
 /// Held by each test that creates a validated device, so the messages are that test's own.
-static VALIDATED: Mutex<()> = Mutex::new(());
+pub(crate) static VALIDATED: Mutex<()> = Mutex::new(());
 
-const FDM_BIT: u64 = 0x2;
+pub(crate) const FDM_BIT: u64 = 0x2;
 const SRGB: i64 = 43; // VK_FORMAT_R8G8B8A8_SRGB
-const WIDTH: u32 = 640;
-const HEIGHT: u32 = 500;
+pub(crate) const WIDTH: u32 = 640;
+pub(crate) const HEIGHT: u32 = 500;
 /// lavapipe has no VK_EXT_fragment_density_map: fovea's documented default texel size.
 const TEXEL: [u32; 2] = fovea_model::maps::DEFAULT_TEXEL;
 
@@ -42,7 +42,7 @@ fn vulkan_through_xr(app: &App, sys: xr::SystemId) -> Option<Vulkan> {
         .ok()
 }
 
-fn func<T: Copy>(app: &App, name: &str) -> T {
+pub(crate) fn func<T: Copy>(app: &App, name: &str) -> T {
     let c = CString::new(name).unwrap();
     unsafe { app.func(&c) }
 }
@@ -54,7 +54,7 @@ const FOVEATION_VULKAN: [&str; 4] = [
     "XR_FB_foveation_vulkan",
 ];
 
-fn app(vulkan_ext: &str, foveation: bool) -> App {
+pub(crate) fn app(vulkan_ext: &str, foveation: bool) -> App {
     fovea_harness::sim::control::set_thread_config(None);
     let mut exts = vec![vulkan_ext];
     if foveation {
@@ -344,7 +344,7 @@ fn model(fov: Fov, pattern: Pattern) -> Vec<u8> {
     out
 }
 
-fn swapchain_info(next: *const c_void) -> xr::SwapchainCreateInfo {
+pub(crate) fn swapchain_info(next: *const c_void) -> xr::SwapchainCreateInfo {
     xr::SwapchainCreateInfo {
         ty: xr::StructureType::SWAPCHAIN_CREATE_INFO,
         next,
@@ -372,7 +372,10 @@ fn foveation_image() -> xr::SwapchainImageFoveationVulkanFB {
 
 /// Enumerates a swapchain's images with an XrSwapchainImageFoveationVulkanFB chained on each element,
 /// through the two-call idiom.
-fn enumerate(app: &App, swapchain: xr::Swapchain) -> Vec<xr::SwapchainImageFoveationVulkanFB> {
+pub(crate) fn enumerate(
+    app: &App,
+    swapchain: xr::Swapchain,
+) -> Vec<xr::SwapchainImageFoveationVulkanFB> {
     let images_fn: xr::pfn::EnumerateSwapchainImages = func(app, "xrEnumerateSwapchainImages");
     let mut count = 0;
     assert_eq!(
@@ -422,15 +425,15 @@ fn enumerate(app: &App, swapchain: xr::Swapchain) -> Vec<xr::SwapchainImageFovea
 }
 
 /// One frame that acquires, checks and releases one image of `swapchain`: returns its index.
-struct Frame<'a> {
-    app: &'a App,
-    session: xr::Session,
-    space: xr::Space,
+pub(crate) struct Frame<'a> {
+    pub(crate) app: &'a App,
+    pub(crate) session: xr::Session,
+    pub(crate) space: xr::Space,
 }
 
 impl Frame<'_> {
     /// Waits and begins a frame, locates the views, acquires an image and returns (index, FOVs).
-    fn acquire(&self, swapchain: xr::Swapchain) -> (u32, [Fov; 2], xr::Time) {
+    pub(crate) fn acquire(&self, swapchain: xr::Swapchain) -> (u32, [Fov; 2], xr::Time) {
         let wait_frame: xr::pfn::WaitFrame = func(self.app, "xrWaitFrame");
         let begin_frame: xr::pfn::BeginFrame = func(self.app, "xrBeginFrame");
         let locate: xr::pfn::LocateViews = func(self.app, "xrLocateViews");
@@ -523,7 +526,11 @@ impl Frame<'_> {
 }
 
 /// A Vulkan session on the application's device, begun, with a LOCAL space.
-fn running_session(app: &App, sys: xr::SystemId, v: &Vulkan) -> (xr::Session, xr::Space) {
+pub(crate) fn running_session(
+    app: &App,
+    sys: xr::SystemId,
+    v: &Vulkan,
+) -> (xr::Session, xr::Space) {
     let binding = v.binding();
     let create_session: xr::pfn::CreateSession = func(app, "xrCreateSession");
     let session_info = xr::SessionCreateInfo {

@@ -16,6 +16,7 @@ mod below;
 mod c_header;
 mod example_modes;
 mod fault_injection;
+mod fdm_emulated;
 mod fdm_vulkan;
 mod foveation_state;
 mod fuzz_sequences;

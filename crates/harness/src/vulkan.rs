@@ -94,6 +94,16 @@ unsafe fn func<F: Copy>(
     lookup(gipa, instance, name).unwrap_or_else(|r| panic!("{name:?}: {r:?}"))
 }
 
+/// What [`Vulkan::through_xr_with`] adds to the application's Vulkan set-up.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Options<'a> {
+    /// Layers enabled after the validation layer, so below it: validation checks what reaches
+    /// them (the first named layer is closest to the application).
+    pub layers_below: &'a [&'a CStr],
+    /// Enables the Vulkan 1.1 `multiview` feature, which render passes with view masks need.
+    pub multiview: bool,
+}
+
 /// The application's Vulkan objects, made through XR_KHR_vulkan_enable2 under the validation layer.
 pub struct Vulkan {
     /// Keeps libvulkan loaded while the instance lives.
@@ -123,6 +133,18 @@ impl Vulkan {
         gipa: xr::pfn::GetInstanceProcAddr,
         instance: xr::Instance,
         sys: xr::SystemId,
+    ) -> Result<Vulkan, String> {
+        Self::through_xr_with(entry, gipa, instance, sys, &Options::default())
+    }
+
+    /// [`Vulkan::through_xr`] with `options`: layers below validation (a test double that dresses
+    /// the driver up as another GPU) and device features.
+    pub fn through_xr_with(
+        entry: &ash::Entry,
+        gipa: xr::pfn::GetInstanceProcAddr,
+        instance: xr::Instance,
+        sys: xr::SystemId,
+        options: &Options,
     ) -> Result<Vulkan, String> {
         // SAFETY: each function is looked up as the type its name implies; every struct passed
         // below lives across its call; handles from the runtime are loaded before use.
@@ -159,13 +181,31 @@ impl Vulkan {
                 )
                 .pfn_user_callback(Some(on_message));
             let app_info = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_1);
-            let layer_names = [VALIDATION_LAYER.as_ptr()];
-            let ext_names = [ash::ext::debug_utils::NAME.as_ptr()];
+            let layer_names: Vec<_> = std::iter::once(VALIDATION_LAYER)
+                .chain(options.layers_below.iter().copied())
+                .map(CStr::as_ptr)
+                .collect();
+            let ext_names = [
+                ash::ext::debug_utils::NAME.as_ptr(),
+                ash::ext::validation_features::NAME.as_ptr(),
+            ];
+            // Handle wrapping off, always. The validation layer keeps that switch in one
+            // process-wide variable (`wrap_handles` in its chassis), which an instance created
+            // with the feature disabled turns off for good. Tests whose layers below validation
+            // must see the application's handles disable it; an instance that still wraps while
+            // another test creates such an instance passes its wrapped handles on unwrapped from
+            // then on, and the Vulkan loader dereferences them (a SIGSEGV in
+            // vkDestroyDebugUtilsMessengerEXT). With every validated instance alike, tests in one
+            // process cannot flip it under each other.
+            let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
+            let mut features =
+                vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
             let vk_create = vk::InstanceCreateInfo::default()
                 .application_info(&app_info)
                 .enabled_layer_names(&layer_names)
                 .enabled_extension_names(&ext_names)
-                .push_next(&mut messenger_info);
+                .push_next(&mut messenger_info)
+                .push_next(&mut features);
             let vk_gipa: xr::platform::VkGetInstanceProcAddr =
                 std::mem::transmute(entry.static_fn().get_instance_proc_addr);
             let xr_create = xr::VulkanInstanceCreateInfoKHR {
@@ -212,7 +252,12 @@ impl Vulkan {
             let queue_info = [vk::DeviceQueueCreateInfo::default()
                 .queue_family_index(family)
                 .queue_priorities(&priorities)];
-            let device_create = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
+            let mut multiview = vk::PhysicalDeviceMultiviewFeatures::default().multiview(true);
+            let mut device_create = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
+            if options.multiview {
+                device_create = device_create.push_next(&mut multiview);
+            }
+            let app_next = device_create.p_next;
             let xr_device = xr::VulkanDeviceCreateInfoKHR {
                 ty: xr::VulkanDeviceCreateInfoKHR::TYPE,
                 next: null(),
@@ -229,7 +274,7 @@ impl Vulkan {
             // The application's create info is untouched: a layer that adds extensions (fovea adds
             // VK_EXT_fragment_density_map) goes down with copies.
             assert_eq!(device_create.enabled_extension_count, 0);
-            assert!(device_create.p_next.is_null());
+            assert_eq!(device_create.p_next, app_next);
             let device = ash::Device::load(
                 vk_instance.fp_v1_0(),
                 vk::Device::from_raw(raw_device as u64),
