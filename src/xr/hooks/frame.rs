@@ -117,38 +117,45 @@ pub fn end_frame(sess: xr::Session, info: In<xr::FrameEndInfo>) -> HookResult<xr
 /// Most composition layers read per frame when learning views.
 const MAX_LAYERS: usize = 16;
 
+/// The views of each projection layer the frame submits (at most [`MAX_LAYERS`] layers of
+/// [`MAX_VIEWS`] views); other layer types, and chained structs, are not looked at. Read-only on
+/// the application's structs, no allocation.
+fn projection_layers<'a>(
+    info: In<'a, xr::FrameEndInfo>,
+) -> impl Iterator<Item = &'a [xr::CompositionLayerProjectionView]> + 'a {
+    let layers: &'a [*const xr::CompositionLayerBaseHeader] = match info.get() {
+        Some(i) if !i.layers.is_null() => {
+            // SAFETY: a valid XrFrameEndInfo (`In`) has `layers` pointing to `layerCount` layer
+            // pointers (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrFrameEndInfo.html);
+            // fovea reads at most that many.
+            unsafe {
+                std::slice::from_raw_parts(i.layers, (i.layer_count as usize).min(MAX_LAYERS))
+            }
+        }
+        _ => &[],
+    };
+    layers.iter().filter_map(|&layer| {
+        // SAFETY: each element is a valid layer pointer (as above) for the call, so `In`'s
+        // contract holds for it.
+        let p = unsafe { In::<'a, _>::new(layer) }.cast::<xr::CompositionLayerProjection>()?;
+        if p.views.is_null() {
+            return None;
+        }
+        let n = (p.view_count as usize).min(MAX_VIEWS);
+        // SAFETY: a valid XrCompositionLayerProjection has `views` pointing to `viewCount` views
+        // (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrCompositionLayerProjection.html).
+        Some(unsafe { std::slice::from_raw_parts(p.views, n) })
+    })
+}
+
 /// Records which views this frame's projection layers put into which rectangle and array layer of
 /// which of the session's swapchains with density images, so each map covers exactly the views
 /// rendered into it (multiview arrays, double-wide images, one swapchain per eye alike). A change
 /// bumps the swapchain's generation, rebuilding its maps once. Read-only on the application's
 /// structs, no allocation; other layer types and chained structs are not looked at.
 fn learn_submitted(s: &Session, info: In<xr::FrameEndInfo>) {
-    let Some(info) = info.get() else {
-        return;
-    };
-    if info.layers.is_null() {
-        return;
-    }
-    let count = (info.layer_count as usize).min(MAX_LAYERS);
-    // SAFETY: a valid XrFrameEndInfo (`In`) has `layers` pointing to `layerCount` layer pointers
-    // (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrFrameEndInfo.html); fovea reads at
-    // most that many.
-    let layers = unsafe { std::slice::from_raw_parts(info.layers, count) };
     let mut found = [(xr::Swapchain::NULL, [None; MAX_VIEWS]); MAX_VIEWS];
-    for &layer in layers {
-        // SAFETY: each element is a valid layer pointer (as above) for the call, so `In`'s
-        // contract holds for it.
-        let layer = unsafe { In::new(layer) };
-        let Some(p) = layer.cast::<xr::CompositionLayerProjection>() else {
-            continue;
-        };
-        if p.views.is_null() {
-            continue;
-        }
-        let n = (p.view_count as usize).min(MAX_VIEWS);
-        // SAFETY: a valid XrCompositionLayerProjection has `views` pointing to `viewCount` views
-        // (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrCompositionLayerProjection.html).
-        let views = unsafe { std::slice::from_raw_parts(p.views, n) };
+    for views in projection_layers(info) {
         for (eye, v) in views.iter().enumerate() {
             let (offset, extent) = (v.sub_image.image_rect.offset, v.sub_image.image_rect.extent);
             if v.ty != xr::StructureType::COMPOSITION_LAYER_PROJECTION_VIEW
@@ -202,38 +209,16 @@ fn learn_submitted(s: &Session, info: In<xr::FrameEndInfo>) {
 /// projection layers. No allocation unless something changed.
 fn learn_eye_swapchains(info: In<xr::FrameEndInfo>) {
     use fovea_model::inject::Holds;
-    let Some(info) = info.get() else {
-        return;
-    };
-    if info.layers.is_null() {
-        return;
-    }
     let Some(published) = crate::bridge::inject::current() else {
         return;
     };
-    let count = (info.layer_count as usize).min(MAX_LAYERS);
-    // SAFETY: as in `learn_submitted`: `layers` points to `layerCount` layer pointers
-    // (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrFrameEndInfo.html).
-    let layers = unsafe { std::slice::from_raw_parts(info.layers, count) };
     // Per published swapchain (at most MAX_SWAPCHAINS): the views named, their layers and x.
     const N: usize = crate::bridge::inject::MAX_SWAPCHAINS;
     let mut seen = [(0u32, 0u32, u32::MAX, i32::MAX, i32::MIN); N];
     let mut first_view = [0u8; N];
     let mut any_projection = false;
-    for &layer in layers {
-        // SAFETY: each element is a valid layer pointer for the call (as above).
-        let layer = unsafe { In::new(layer) };
-        let Some(p) = layer.cast::<xr::CompositionLayerProjection>() else {
-            continue;
-        };
-        if p.views.is_null() {
-            continue;
-        }
+    for views in projection_layers(info) {
         any_projection = true;
-        let n = (p.view_count as usize).min(MAX_VIEWS);
-        // SAFETY: `views` points to `viewCount` views
-        // (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrCompositionLayerProjection.html).
-        let views = unsafe { std::slice::from_raw_parts(p.views, n) };
         for (eye, v) in views.iter().enumerate() {
             if v.ty != xr::StructureType::COMPOSITION_LAYER_PROJECTION_VIEW {
                 continue;
