@@ -13,11 +13,10 @@
 //! back (`--dump`) and in the projection views the runtime received (the summary's `views=`).
 
 use std::ffi::OsString;
-use std::io::Read as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::{Mutex, OnceLock};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use fovea_abi::log_target;
 use fovea_harness::{skip, FOVEA_LAYER};
@@ -245,28 +244,8 @@ fn run_example(label: &str, args: &[&str]) -> Option<Run> {
         .env("FOVEA_SIM_SUMMARY", "1")
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-    let mut child = cmd.spawn().expect("spawn the example");
-    let drain = |mut pipe: Box<dyn std::io::Read + Send>| {
-        std::thread::spawn(move || {
-            let mut bytes = Vec::new();
-            pipe.read_to_end(&mut bytes).ok();
-            String::from_utf8_lossy(&bytes).into_owned()
-        })
-    };
-    let stdout = drain(Box::new(child.stdout.take().unwrap()));
-    let stderr = drain(Box::new(child.stderr.take().unwrap()));
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().expect("wait for the example") {
-            break Some(status);
-        }
-        if started.elapsed() > TIMEOUT {
-            child.kill().ok();
-            child.wait().ok();
-            break None;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let done = crate::support::run_with_timeout(&mut cmd, TIMEOUT);
+    let status = done.status;
     // The frames outlive the manifests' folder (removed when `manifests` drops): moved out first.
     let kept = std::env::temp_dir().join(format!(
         "fovea-example-{label}-frames-{}",
@@ -277,8 +256,8 @@ fn run_example(label: &str, args: &[&str]) -> Option<Run> {
     let run = Run {
         label: format!("foveated_vulkan {args:?}"),
         code: status.and_then(|s| s.code()),
-        stdout: stdout.join().unwrap(),
-        stderr: stderr.join().unwrap(),
+        stdout: done.stdout,
+        stderr: done.stderr,
         frames: kept,
     };
     assert!(

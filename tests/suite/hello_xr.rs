@@ -21,11 +21,10 @@
 //! same frames, exit and silence.
 
 use std::ffi::OsString;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use fovea_abi::log_target;
 use fovea_harness::{skip, CORE_VALIDATION_LAYER, FOVEA_LAYER};
@@ -122,34 +121,12 @@ fn run_hello_xr(system: &System, graphics: &str, layers: &[&str], env: &[(&str, 
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-    let mut child = cmd.spawn().expect("spawn hello_xr");
-    let stdin = child.stdin.take();
-    let drain = |mut pipe: Box<dyn Read + Send>| {
-        std::thread::spawn(move || {
-            let mut bytes = Vec::new();
-            pipe.read_to_end(&mut bytes).ok();
-            String::from_utf8_lossy(&bytes).into_owned()
-        })
-    };
-    let stdout = drain(Box::new(child.stdout.take().unwrap()));
-    let stderr = drain(Box::new(child.stderr.take().unwrap()));
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().expect("wait for hello_xr") {
-            break Some(status);
-        }
-        if started.elapsed() > TIMEOUT {
-            child.kill().ok();
-            child.wait().ok();
-            break None;
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    drop(stdin);
+    let done = crate::support::run_with_timeout(&mut cmd, TIMEOUT);
+    let status = done.status;
     let run = Run {
         code: status.and_then(|s| s.code()),
-        stdout: stdout.join().unwrap(),
-        stderr: stderr.join().unwrap(),
+        stdout: done.stdout,
+        stderr: done.stderr,
     };
     assert!(
         status.is_some(),

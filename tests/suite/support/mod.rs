@@ -148,3 +148,48 @@ pub fn foveation_state(
         profile,
     }
 }
+
+/// What a child process left when it ended or was killed.
+pub struct Finished {
+    /// `None` where it ran past the timeout and was killed.
+    pub status: Option<std::process::ExitStatus>,
+    pub stdout: String,
+    pub stderr: String,
+}
+
+/// Spawns `cmd` (its stdout and stderr piped) and waits at most `timeout` for it, draining both
+/// pipes meanwhile so a chatty child cannot block on a full pipe. A piped stdin is held open until
+/// the child has ended (hello_xr reads a closed stdin as a key press, which quits it).
+pub fn run_with_timeout(cmd: &mut Command, timeout: std::time::Duration) -> Finished {
+    use std::io::Read;
+    let what = format!("{:?}", cmd.get_program());
+    let mut child = cmd.spawn().unwrap_or_else(|e| panic!("spawn {what}: {e}"));
+    let stdin = child.stdin.take();
+    let drain = |mut pipe: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            pipe.read_to_end(&mut bytes).ok();
+            String::from_utf8_lossy(&bytes).into_owned()
+        })
+    };
+    let stdout = drain(Box::new(child.stdout.take().expect("stdout piped")));
+    let stderr = drain(Box::new(child.stderr.take().expect("stderr piped")));
+    let started = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait for the child") {
+            break Some(status);
+        }
+        if started.elapsed() > timeout {
+            child.kill().ok();
+            child.wait().ok();
+            break None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    drop(stdin);
+    Finished {
+        status,
+        stdout: stdout.join().unwrap(),
+        stderr: stderr.join().unwrap(),
+    }
+}
