@@ -7,7 +7,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use ash::vk;
 
-use crate::vk::dispatch::{self, InstanceNext, When};
+use crate::vk::dispatch::{self, InstanceNext};
 use crate::vk::link::{self, LayerInstanceCreateInfo, LayerInstanceLink, NegotiateLayerInterface};
 use crate::vk::{chain, registry};
 
@@ -185,7 +185,7 @@ unsafe extern "system" fn get_device_proc_addr(
         // SAFETY: as the caller promised.
         let dev = unsafe { registry::device(device) }?;
         if let Some(h) = dispatch::device_hook(name) {
-            if (h.offered)(&dev.next) && (h.when == When::Always || dev.fdm.is_some()) {
+            if (h.offered)(&dev.next) && h.when.applies(dev.fdm.is_some(), dev.inject.is_some()) {
                 return Some(h.function);
             }
         }

@@ -818,6 +818,10 @@ unsafe fn cmd_begin_rendering_with(
         let Some(next) = next(&dev) else {
             return;
         };
+        if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+            // SAFETY: the caller's arguments; `own` is the device's.
+            return unsafe { begin_injected(inj, own, next, cb, info) };
+        }
         // SAFETY: the caller's rendering info, read only.
         let ri = match unsafe { info.as_ref() } {
             Some(ri) if !ri.p_next.is_null() => ri,
@@ -879,6 +883,55 @@ unsafe fn cmd_begin_rendering_with(
             )
         }
     })
+}
+
+/// `vkCmdBeginRendering` on an injecting device (docs/injection.md#how-the-attachment-gets-in): where
+/// the first colour attachment's view is an eye target, a copy of the begin info goes down with a
+/// `VkRenderingFragmentShadingRateAttachmentInfoKHR` naming the map for its shape in front of the
+/// application's chain (on the stack: no allocation per command); any other rendering goes down
+/// untouched. Either is counted for the stats line's `Inj=`.
+///
+/// The attachment's layer count is 1 (merged, or one view) or the rendered views', as
+/// <https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentShadingRateAttachmentInfoKHR.html>
+/// asks of a multiview rendering; its extent covers the whole colour target.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires; `own` must be `inj`'s device's.
+unsafe fn begin_injected(
+    inj: &crate::vk::inject::Injector,
+    own: &crate::vk::image::Own,
+    next: vk::PFN_vkCmdBeginRendering,
+    cb: vk::CommandBuffer,
+    info: *const vk::RenderingInfo<'_>,
+) {
+    // SAFETY: the caller's rendering info, read only.
+    let (Some(ri), Some(state)) = (unsafe { info.as_ref() }, crate::bridge::inject::current())
+    else {
+        // SAFETY: the next layer's function, with the caller's arguments.
+        return unsafe { next(cb, info) };
+    };
+    // SAFETY: the caller's colour attachments, `colorAttachmentCount` of them.
+    let colour = unsafe { slice(ri.p_color_attachments, ri.color_attachment_count) }
+        .first()
+        .map(|a| a.image_view)
+        .filter(|v| *v != vk::ImageView::null());
+    let layers = crate::vk::inject::rendered_layers(ri.view_mask, ri.layer_count);
+    // SAFETY: `own` is the device's, as the caller promised.
+    let map = colour.and_then(|v| unsafe { inj.eye_view(own, &state, v, layers) });
+    crate::bridge::inject::count_pass(map.is_some());
+    let Some(map) = map else {
+        // SAFETY: the next layer's function, with the caller's arguments.
+        return unsafe { next(cb, info) };
+    };
+    let mut rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
+        .image_view(map)
+        .image_layout(SHADOW_LAYOUT)
+        .shading_rate_attachment_texel_size(inj.texel());
+    rate.p_next = ri.p_next;
+    let mut copy = *ri;
+    copy.p_next = &rate as *const _ as *const c_void;
+    // SAFETY: the copy and the struct in front of the application's chain live across the call.
+    unsafe { next(cb, &copy) }
 }
 
 hook_and_khr_alias! {
