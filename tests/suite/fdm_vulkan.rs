@@ -42,7 +42,7 @@ fn vulkan_through_xr(app: &App, sys: xr::SystemId) -> Option<Vulkan> {
         .ok()
 }
 
-fn func<T: Copy>(app: &App, name: &str) -> T {
+pub(crate) fn func<T: Copy>(app: &App, name: &str) -> T {
     let c = CString::new(name).unwrap();
     unsafe { app.func(&c) }
 }
@@ -316,7 +316,7 @@ impl Readback {
     }
 }
 
-fn fov_of(v: &xr::View) -> Fov {
+pub(crate) fn fov_of(v: &xr::View) -> Fov {
     Fov {
         left: v.fov.angle_left,
         right: v.fov.angle_right,
@@ -422,15 +422,15 @@ fn enumerate(app: &App, swapchain: xr::Swapchain) -> Vec<xr::SwapchainImageFovea
 }
 
 /// One frame that acquires, checks and releases one image of `swapchain`: returns its index.
-struct Frame<'a> {
-    app: &'a App,
-    session: xr::Session,
-    space: xr::Space,
+pub(crate) struct Frame<'a> {
+    pub(crate) app: &'a App,
+    pub(crate) session: xr::Session,
+    pub(crate) space: xr::Space,
 }
 
 impl Frame<'_> {
     /// Waits and begins a frame, locates the views, acquires an image and returns (index, FOVs).
-    fn acquire(&self, swapchain: xr::Swapchain) -> (u32, [Fov; 2], xr::Time) {
+    pub(crate) fn acquire(&self, swapchain: xr::Swapchain) -> (u32, [Fov; 2], xr::Time) {
         let wait_frame: xr::pfn::WaitFrame = func(self.app, "xrWaitFrame");
         let begin_frame: xr::pfn::BeginFrame = func(self.app, "xrBeginFrame");
         let locate: xr::pfn::LocateViews = func(self.app, "xrLocateViews");
@@ -504,7 +504,7 @@ impl Frame<'_> {
         )
     }
 
-    fn release(&self, swapchain: xr::Swapchain, time: xr::Time) {
+    pub(crate) fn release(&self, swapchain: xr::Swapchain, time: xr::Time) {
         let release: xr::pfn::ReleaseSwapchainImage = func(self.app, "xrReleaseSwapchainImage");
         let end_frame: xr::pfn::EndFrame = func(self.app, "xrEndFrame");
         let end = xr::FrameEndInfo {
@@ -523,7 +523,11 @@ impl Frame<'_> {
 }
 
 /// A Vulkan session on the application's device, begun, with a LOCAL space.
-fn running_session(app: &App, sys: xr::SystemId, v: &Vulkan) -> (xr::Session, xr::Space) {
+pub(crate) fn running_session(
+    app: &App,
+    sys: xr::SystemId,
+    v: &Vulkan,
+) -> (xr::Session, xr::Space) {
     let binding = v.binding();
     let create_session: xr::pfn::CreateSession = func(app, "xrCreateSession");
     let session_info = xr::SessionCreateInfo {

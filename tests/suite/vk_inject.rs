@@ -1,0 +1,642 @@
+//! Injection (docs/injection.md) end to end on lavapipe: an application that never asks for
+//! foveation, its eye passes foveated by fovea all the same.
+//!
+//! Stack: this test as an OpenXR application → fovea's OpenXR layer → the simulated runtime; its
+//! VkInstance and VkDevice made through XR_KHR_vulkan_enable2 with the layers fovea's Vulkan layer →
+//! VK_LAYER_KHRONOS_validation → the shading-rate double (`nvidia`: 16×16 texels, layered; `amd`:
+//! 8×8) → lavapipe, validation's handle wrapping off so the double's records name the test's
+//! handles. Each run is a child process of its own: `FOVEA_INJECT` and `FOVEA_INJECT_LEVEL` are read
+//! from the environment at `xrCreateInstance`.
+//!
+//! One frame: a per-eye swapchain of 640×500 (so the left eye's: fovea guesses view 0 from the
+//! first of its size), the views located, then three dynamic renderings with one pipeline: into the
+//! acquired swapchain image, into a 256×256 image of the application's own, and into an eye-shaped
+//! 640×500 image of its own. What must reach the driver, per profile and level:
+//!
+//! - injection on: the device with `VK_KHR_fragment_shading_rate`'s attachment feature; the pipeline
+//!   with the shading-rate flag and state {1×1, {KEEP, REPLACE}}; the swapchain rendering with a
+//!   shading-rate attachment of the device's texel whose codes at submit are exactly
+//!   `fovea_model::inject::codes` for view 0 at the located FOVs and the level; the small one with
+//!   none; the eye-shaped one with the merged map of both eyes;
+//! - injection off: none of it, the double sees the application's calls as they were;
+//! - an application that enables shading rates itself: none of it either, and the log says so;
+//!
+//! and in every case validation says nothing and the double records no misuse.
+
+use std::ffi::{c_void, CStr};
+use std::path::PathBuf;
+use std::ptr::{null, null_mut};
+
+use ash::vk;
+use ash::vk::Handle as _;
+use fovea_harness::app::API_1_0;
+use fovea_harness::vulkan::{self, pick_lavapipe, Options, Vulkan, VALIDATION_LAYER};
+use fovea_harness::{skip, App, Chain};
+use fovea_model::density::{Level, Pattern};
+use fovea_model::inject::Views;
+use fovea_model::maps::MAX_VIEWS;
+use fovea_model::Fov;
+use fovea_vkdouble::Profile;
+use openxr_sys as xr;
+use serde_json::{json, Value};
+use xr::Handle as _;
+
+use crate::fdm_vulkan::{func, running_session, Frame};
+use crate::support::in_own_process;
+use crate::support::vulkan::{draw_fullscreen, range, spv, stages, Fixed, FRAGMENT, VERTEX};
+
+const WIDTH: u32 = 640;
+const HEIGHT: u32 = 500;
+/// The small target: no eye's shape.
+const SMALL: u32 = 256;
+const FORMAT: vk::Format = vk::Format::R8G8B8A8_SRGB;
+const FSR_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
+const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
+
+/// How the application is set up.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Setup {
+    /// `FOVEA_INJECT=1` at this level.
+    Inject(Level),
+    /// Injection off.
+    Off,
+    /// `FOVEA_INJECT=1`, and the application enables shading-rate attachments itself.
+    AppRates,
+}
+
+/// What one run left behind.
+struct Outcome {
+    events: Vec<Value>,
+    command_buffer: u64,
+    fovs: [Fov; 2],
+    log: String,
+}
+
+/// The folder for the log; sets the environment the run reads. Call first in the child process.
+fn set_up(label: &str, setup: Setup) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fovea-inject-{label}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::env::set_var("FOVEA_LOG", "info");
+    std::env::set_var("FOVEA_LOG_FILE", dir.join("fovea.log"));
+    match setup {
+        Setup::Inject(level) => {
+            std::env::set_var("FOVEA_INJECT", "1");
+            std::env::set_var("FOVEA_INJECT_LEVEL", (level as u8).to_string());
+        }
+        Setup::AppRates => std::env::set_var("FOVEA_INJECT", "1"),
+        Setup::Off => std::env::remove_var("FOVEA_INJECT"),
+    }
+    pick_lavapipe();
+    dir
+}
+
+/// # Safety
+/// `d` must be alive.
+unsafe fn image(
+    d: &ash::Device,
+    memory: &vk::PhysicalDeviceMemoryProperties,
+    extent: [u32; 2],
+) -> (vk::Image, vk::DeviceMemory) {
+    let info = vk::ImageCreateInfo::default()
+        .image_type(vk::ImageType::TYPE_2D)
+        .format(FORMAT)
+        .extent(vk::Extent3D {
+            width: extent[0],
+            height: extent[1],
+            depth: 1,
+        })
+        .mip_levels(1)
+        .array_layers(1)
+        .samples(vk::SampleCountFlags::TYPE_1)
+        .tiling(vk::ImageTiling::OPTIMAL)
+        .usage(vk::ImageUsageFlags::COLOR_ATTACHMENT);
+    // SAFETY: the caller's promise; the structs live across the calls.
+    unsafe {
+        let image = d.create_image(&info, None).unwrap();
+        let req = d.get_image_memory_requirements(image);
+        let mem = d
+            .allocate_memory(
+                &crate::support::vulkan::allocate_info(
+                    memory,
+                    req,
+                    vk::MemoryPropertyFlags::DEVICE_LOCAL,
+                ),
+                None,
+            )
+            .unwrap();
+        d.bind_image_memory(image, mem, 0).unwrap();
+        (image, mem)
+    }
+}
+
+/// # Safety
+/// `d` and `image` must be alive.
+unsafe fn view(d: &ash::Device, image: vk::Image) -> vk::ImageView {
+    // SAFETY: the caller's promise.
+    unsafe {
+        d.create_image_view(
+            &vk::ImageViewCreateInfo::default()
+                .image(image)
+                .view_type(vk::ImageViewType::TYPE_2D)
+                .format(FORMAT)
+                .subresource_range(range(0, 1)),
+            None,
+        )
+    }
+    .unwrap()
+}
+
+/// The swapchain's `VkImage`s.
+fn swapchain_images(app: &App, swapchain: xr::Swapchain) -> Vec<vk::Image> {
+    let images_fn: xr::pfn::EnumerateSwapchainImages = func(app, "xrEnumerateSwapchainImages");
+    let mut count = 0;
+    // SAFETY: the two-call idiom with arrays that live across the calls.
+    unsafe {
+        assert_eq!(
+            images_fn(swapchain, 0, &mut count, null_mut()),
+            xr::Result::SUCCESS
+        );
+        let mut images = vec![
+            xr::SwapchainImageVulkanKHR {
+                ty: xr::StructureType::SWAPCHAIN_IMAGE_VULKAN_KHR,
+                next: null_mut(),
+                image: 0,
+            };
+            count as usize
+        ];
+        assert_eq!(
+            images_fn(
+                swapchain,
+                count,
+                &mut count,
+                images.as_mut_ptr() as *mut xr::SwapchainImageBaseHeader,
+            ),
+            xr::Result::SUCCESS
+        );
+        images
+            .iter()
+            .map(|i| vk::Image::from_raw(i.image))
+            .collect()
+    }
+}
+
+/// One frame as described in the module documentation, on `profile`.
+fn run(profile: Profile, setup: Setup, dir: &std::path::Path) -> Option<Outcome> {
+    let (_serial, env) = crate::vk_layer::env()?;
+    env.double.set_profile(Some(profile));
+    env.double.clear();
+    vulkan::take_messages();
+    let app = App::new(Chain::fovea().unwrap(), &["XR_KHR_vulkan_enable2"], API_1_0).unwrap();
+    let sys = app.system();
+    let ours = std::ffi::CString::new(fovea_abi::VK_LAYER_NAME).unwrap();
+    let layers = [
+        ours.as_c_str(),
+        VALIDATION_LAYER,
+        fovea_vkdouble::LAYER_NAME,
+    ];
+    let mut rates = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
+        .attachment_fragment_shading_rate(true);
+    let app_rates = setup == Setup::AppRates;
+    let exts = [FSR];
+    let options = Options {
+        layers: &layers,
+        api_version: vk::API_VERSION_1_3,
+        raw_handles: true,
+        dynamic_rendering: true,
+        device_extensions: if app_rates { &exts } else { &[] },
+        device_next: if app_rates {
+            &mut rates as *mut _ as *const c_void
+        } else {
+            null()
+        },
+    };
+    let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
+    {
+        Ok(v) => v,
+        Err(why) => {
+            skip(&why);
+            return None;
+        }
+    };
+    let (session, space) = running_session(&app, sys, &v);
+    let create_swapchain: xr::pfn::CreateSwapchain = func(&app, "xrCreateSwapchain");
+    let info = xr::SwapchainCreateInfo {
+        ty: xr::StructureType::SWAPCHAIN_CREATE_INFO,
+        next: null(),
+        create_flags: xr::SwapchainCreateFlags::EMPTY,
+        usage_flags: xr::SwapchainUsageFlags::COLOR_ATTACHMENT,
+        format: FORMAT.as_raw() as i64,
+        sample_count: 1,
+        width: WIDTH,
+        height: HEIGHT,
+        face_count: 1,
+        array_size: 1,
+        mip_count: 1,
+    };
+    let mut swapchain = xr::Swapchain::NULL;
+    // SAFETY: the struct lives across the call.
+    assert_eq!(
+        unsafe { create_swapchain(session, &info, &mut swapchain) },
+        xr::Result::SUCCESS
+    );
+    let images = swapchain_images(&app, swapchain);
+    let frame = Frame {
+        app: &app,
+        session,
+        space,
+    };
+    let (index, fovs, time) = frame.acquire(swapchain);
+
+    let d = &v.device;
+    // SAFETY: the instance and device are alive; every struct lives across its call; every object
+    // made here is destroyed before the device.
+    let cb = unsafe {
+        let memory = v
+            .instance
+            .get_physical_device_memory_properties(v.physical_device);
+        let queue = d.get_device_queue(v.family, 0);
+        let pool = d
+            .create_command_pool(
+                &vk::CommandPoolCreateInfo::default().queue_family_index(v.family),
+                None,
+            )
+            .unwrap();
+        let cb = d
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(pool)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            )
+            .unwrap()[0];
+        let modules = [VERTEX, FRAGMENT].map(|b| {
+            let words = spv(b);
+            d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+                .unwrap()
+        });
+        let layout = d
+            .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
+            .unwrap();
+        let formats = [FORMAT];
+        let mut rendering =
+            vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&formats);
+        let fixed = Fixed::new();
+        let st = stages(modules);
+        let pipeline = d
+            .create_graphics_pipelines(
+                vk::PipelineCache::null(),
+                &[fixed.info(&st, layout).push_next(&mut rendering)],
+                None,
+            )
+            .unwrap()[0];
+        let (small, small_mem) = image(d, &memory, [SMALL, SMALL]);
+        let (own, own_mem) = image(d, &memory, [WIDTH, HEIGHT]);
+        let targets = [
+            (images[index as usize], [WIDTH, HEIGHT]),
+            (small, [SMALL, SMALL]),
+            (own, [WIDTH, HEIGHT]),
+        ];
+        let views = targets.map(|(i, _)| view(d, i));
+        d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+            .unwrap();
+        let to_colour: Vec<_> = targets
+            .iter()
+            .map(|&(i, _)| {
+                vk::ImageMemoryBarrier::default()
+                    .image(i)
+                    .subresource_range(range(0, 1))
+                    .old_layout(vk::ImageLayout::UNDEFINED)
+                    .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                    .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
+                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            })
+            .collect();
+        d.cmd_pipeline_barrier(
+            cb,
+            vk::PipelineStageFlags::TOP_OF_PIPE,
+            vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &to_colour,
+        );
+        for (&(_, extent), &view) in targets.iter().zip(&views) {
+            let colour = [vk::RenderingAttachmentInfo::default()
+                .image_view(view)
+                .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .clear_value(crate::support::vulkan::CLEAR[0])];
+            let ri = vk::RenderingInfo::default()
+                .render_area(vk::Rect2D {
+                    offset: vk::Offset2D::default(),
+                    extent: vk::Extent2D {
+                        width: extent[0],
+                        height: extent[1],
+                    },
+                })
+                .layer_count(1)
+                .color_attachments(&colour);
+            d.cmd_begin_rendering(cb, &ri);
+            draw_fullscreen(d, cb, pipeline);
+            d.cmd_end_rendering(cb);
+        }
+        d.end_command_buffer(cb).unwrap();
+        let fence = d
+            .create_fence(&vk::FenceCreateInfo::default(), None)
+            .unwrap();
+        let cbs = [cb];
+        d.queue_submit(
+            queue,
+            &[vk::SubmitInfo::default().command_buffers(&cbs)],
+            fence,
+        )
+        .unwrap();
+        d.wait_for_fences(&[fence], true, u64::MAX).unwrap();
+        d.destroy_fence(fence, None);
+        for v in views {
+            d.destroy_image_view(v, None);
+        }
+        for (i, m) in [(small, small_mem), (own, own_mem)] {
+            d.destroy_image(i, None);
+            d.free_memory(m, None);
+        }
+        d.destroy_pipeline(pipeline, None);
+        d.destroy_pipeline_layout(layout, None);
+        for m in modules {
+            d.destroy_shader_module(m, None);
+        }
+        d.destroy_command_pool(pool, None);
+        cb.as_raw()
+    };
+    frame.release(swapchain, time);
+    let destroy_swapchain: xr::pfn::DestroySwapchain = func(&app, "xrDestroySwapchain");
+    let destroy_session: xr::pfn::DestroySession = func(&app, "xrDestroySession");
+    // SAFETY: the handles are live and used no more.
+    unsafe {
+        assert_eq!(destroy_swapchain(swapchain), xr::Result::SUCCESS);
+        assert_eq!(destroy_session(session), xr::Result::SUCCESS);
+        v.destroy_device();
+    }
+    assert_eq!(app.destroy(), xr::Result::SUCCESS);
+    // SAFETY: the device is gone.
+    unsafe { v.destroy_instance() };
+    vulkan::assert_no_messages();
+    assert_eq!(
+        env.double.errors(),
+        Vec::<String>::new(),
+        "{profile:?} {setup:?}"
+    );
+    Some(Outcome {
+        events: env.double.records()["events"]
+            .as_array()
+            .cloned()
+            .unwrap_or_default(),
+        command_buffer: cb,
+        fovs,
+        log: std::fs::read_to_string(dir.join("fovea.log")).unwrap_or_default(),
+    })
+}
+
+impl Outcome {
+    fn of(&self, kind: &str) -> Vec<&Value> {
+        self.events.iter().filter(|e| e["kind"] == kind).collect()
+    }
+
+    /// The test's three renderings as the driver got them, in order.
+    fn renderings(&self) -> Vec<&Value> {
+        let r: Vec<&Value> = self
+            .of("begin_rendering")
+            .into_iter()
+            .filter(|b| b["command_buffer"] == json!(self.command_buffer))
+            .collect();
+        assert_eq!(r.len(), 3, "{r:?}");
+        r
+    }
+
+    /// What the submit of the test's command buffer read of `image`: (extent, layers, codes).
+    fn codes_of(&self, image: &Value) -> ([u32; 2], u32, Vec<u8>) {
+        let submits: Vec<&Value> = self
+            .of("submit")
+            .into_iter()
+            .filter(|s| {
+                s["command_buffers"]
+                    .as_array()
+                    .unwrap()
+                    .contains(&json!(self.command_buffer))
+            })
+            .collect();
+        assert_eq!(submits.len(), 1, "{submits:?}");
+        let read = submits[0]["shading_rate_images"].as_array().unwrap();
+        let r = read
+            .iter()
+            .find(|r| &r["image"] == image)
+            .unwrap_or_else(|| panic!("{image} not read at submit: {read:?}"));
+        let e = r["extent"].as_array().unwrap();
+        (
+            [e[0].as_u64().unwrap() as u32, e[1].as_u64().unwrap() as u32],
+            r["layers"].as_u64().unwrap() as u32,
+            r["codes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c.as_u64().unwrap() as u8)
+                .collect(),
+        )
+    }
+
+    /// The shading-rate image a view the double saw made is of.
+    fn image_of(&self, view: &Value) -> Value {
+        self.of("image_view")
+            .into_iter()
+            .find(|v| &v["view"] == view)
+            .unwrap_or_else(|| panic!("no shading-rate view {view}"))["image"]
+            .clone()
+    }
+}
+
+/// What fovea's model gives a map for `views` over a 640×500 target on `profile`.
+fn expected(
+    profile: Profile,
+    views: Views,
+    fovs: [Fov; 2],
+    level: Level,
+) -> ([u32; 2], u32, Vec<u8>) {
+    let device = fovea_model::inject::Device {
+        texel: [profile.texel().width, profile.texel().height],
+        layered: profile.layered(),
+        max_fragment: [profile.max_fragment(); 2],
+        rates: profile
+            .rates()
+            .iter()
+            .filter(|(_, s)| s.contains(vk::SampleCountFlags::TYPE_1))
+            .map(|(e, _)| [e.width, e.height])
+            .collect(),
+    };
+    let mut all = [None; MAX_VIEWS];
+    all[0] = Some(fovs[0]);
+    all[1] = Some(fovs[1]);
+    fovea_model::inject::codes(
+        &device,
+        views,
+        [WIDTH, HEIGHT],
+        &all,
+        Pattern {
+            level,
+            vertical_offset_deg: 0.0,
+        },
+        fovea_model::maps::DEFAULT_MAX_FRAGMENT,
+    )
+}
+
+/// Runs `setup` on both profiles in a child process of its own and checks the outcome.
+fn check(test: &str, setup: Setup, levels: &[Level]) {
+    in_own_process(module_path!(), test, || {
+        for profile in [Profile::Nvidia, Profile::Amd] {
+            let setups: Vec<Setup> = match setup {
+                Setup::Inject(_) => levels.iter().map(|&l| Setup::Inject(l)).collect(),
+                s => vec![s],
+            };
+            for s in setups {
+                let dir = set_up(&format!("{test}-{profile:?}"), s);
+                let Some(out) = run(profile, s, &dir) else {
+                    return;
+                };
+                assert_outcome(profile, s, &out);
+            }
+        }
+    });
+}
+
+fn assert_outcome(profile: Profile, setup: Setup, out: &Outcome) {
+    let what = format!("{profile:?} {setup:?}");
+    let devices = out.of("device");
+    assert_eq!(devices.len(), 1, "{what}: {devices:?}");
+    let pipelines = out.of("pipeline");
+    assert_eq!(pipelines.len(), 1, "{what}: {pipelines:?}");
+    let renderings = out.renderings();
+    let Setup::Inject(level) = setup else {
+        // Nothing of fovea's: no shading rates added to the device, no flag or state on the
+        // pipeline, no attachment in any rendering.
+        let enabled = setup == Setup::AppRates;
+        assert_eq!(
+            devices[0]["features"]["attachment"]
+                .as_bool()
+                .unwrap_or(false),
+            enabled,
+            "{what}: {}",
+            devices[0]
+        );
+        assert_eq!(pipelines[0]["rendering_attachment_flag"], false, "{what}");
+        assert_eq!(pipelines[0]["shading_rate_state"], Value::Null, "{what}");
+        for r in &renderings {
+            assert_eq!(r["shading_rate"], Value::Null, "{what}");
+        }
+        assert!(
+            !out.log.contains("injected shading-rate map"),
+            "{what}: {}",
+            out.log
+        );
+        if setup == Setup::AppRates {
+            assert!(
+                out.log
+                    .contains("the application uses shading rates itself; nothing is injected"),
+                "{what}: {}",
+                out.log
+            );
+        }
+        return;
+    };
+    assert_eq!(
+        devices[0]["features"]["attachment"], true,
+        "{what}: {}",
+        devices[0]
+    );
+    assert_eq!(pipelines[0]["rendering_attachment_flag"], true, "{what}");
+    assert_eq!(
+        pipelines[0]["shading_rate_state"],
+        json!({"fragment_size": [1, 1], "combiner_ops": [
+            vk::FragmentShadingRateCombinerOpKHR::KEEP.as_raw(),
+            vk::FragmentShadingRateCombinerOpKHR::REPLACE.as_raw(),
+        ]}),
+        "{what}"
+    );
+    let texel = profile.texel();
+    // The swapchain image (view 0) and the eye-shaped target of the application's own (both
+    // eyes merged) get maps; the small target none.
+    assert_eq!(
+        renderings[1]["shading_rate"],
+        Value::Null,
+        "{what}: small target"
+    );
+    for (r, views) in [
+        (renderings[0], Views::Layers { first: 0, count: 1 }),
+        (renderings[2], Views::Merged),
+    ] {
+        let rate = &r["shading_rate"];
+        assert_eq!(rate["layout"], FSR_LAYOUT.as_raw(), "{what}: {r}");
+        assert_eq!(rate["texel"], json!([texel.width, texel.height]), "{what}");
+        let image = out.image_of(&rate["view"]);
+        let got = out.codes_of(&image);
+        let want = expected(profile, views, out.fovs, level);
+        assert_eq!(
+            (got.0, got.1),
+            (want.0, want.1),
+            "{what} {views:?}: extent, layers"
+        );
+        assert!(
+            got.2 == want.2,
+            "{what} {views:?}: codes differ from the model"
+        );
+        if level == Level::None {
+            assert!(
+                got.2.iter().all(|&c| c == 0),
+                "{what}: level none is full rate"
+            );
+        } else {
+            assert!(
+                got.2.iter().any(|&c| c != 0),
+                "{what}: {level:?} coarsens somewhere"
+            );
+        }
+    }
+    assert_ne!(
+        renderings[0]["shading_rate"]["view"], renderings[2]["shading_rate"]["view"],
+        "{what}: one map per shape and views"
+    );
+}
+
+#[test]
+fn injected_eye_passes_carry_the_models_codes_at_every_level() {
+    check(
+        "injected_eye_passes_carry_the_models_codes_at_every_level",
+        Setup::Inject(Level::None),
+        &[
+            Level::None,
+            Level::Low,
+            Level::Medium,
+            Level::High,
+            Level::HighTop,
+        ],
+    );
+}
+
+#[test]
+fn without_injection_nothing_reaches_the_driver() {
+    check(
+        "without_injection_nothing_reaches_the_driver",
+        Setup::Off,
+        &[],
+    );
+}
+
+#[test]
+fn an_application_with_its_own_shading_rates_is_left_alone() {
+    check(
+        "an_application_with_its_own_shading_rates_is_left_alone",
+        Setup::AppRates,
+        &[],
+    );
+}
