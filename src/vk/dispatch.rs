@@ -204,21 +204,23 @@ hooks! {
         c"vkDestroyImageView" => destroy_image_view: PFN_vkDestroyImageView =
             image::destroy_image_view, When::Injected;
         c"vkCreateRenderPass" => create_render_pass: PFN_vkCreateRenderPass =
-            pass::create_render_pass, When::Emulated;
+            pass::create_render_pass, When::Injected;
         c"vkCreateRenderPass2" => create_render_pass2: PFN_vkCreateRenderPass2 =
-            pass::create_render_pass2, When::Emulated;
+            pass::create_render_pass2, When::Injected;
         c"vkCreateRenderPass2KHR" => create_render_pass2_khr: PFN_vkCreateRenderPass2 =
-            pass::create_render_pass2_khr, When::Emulated;
+            pass::create_render_pass2_khr, When::Injected;
         c"vkDestroyRenderPass" => destroy_render_pass: PFN_vkDestroyRenderPass =
-            pass::destroy_render_pass, When::Emulated;
+            pass::destroy_render_pass, When::Injected;
         c"vkCreateFramebuffer" => create_framebuffer: PFN_vkCreateFramebuffer =
-            pass::create_framebuffer, When::Emulated;
+            pass::create_framebuffer, When::Injected;
+        c"vkDestroyFramebuffer" => destroy_framebuffer: PFN_vkDestroyFramebuffer =
+            pass::destroy_framebuffer, When::Injected;
         c"vkCmdBeginRenderPass" => cmd_begin_render_pass: PFN_vkCmdBeginRenderPass =
-            pass::cmd_begin_render_pass, When::Emulated;
+            pass::cmd_begin_render_pass, When::Injected;
         c"vkCmdBeginRenderPass2" => cmd_begin_render_pass2: PFN_vkCmdBeginRenderPass2 =
-            pass::cmd_begin_render_pass2, When::Emulated;
+            pass::cmd_begin_render_pass2, When::Injected;
         c"vkCmdBeginRenderPass2KHR" => cmd_begin_render_pass2_khr: PFN_vkCmdBeginRenderPass2 =
-            pass::cmd_begin_render_pass2_khr, When::Emulated;
+            pass::cmd_begin_render_pass2_khr, When::Injected;
         c"vkCmdBeginRendering" => cmd_begin_rendering: PFN_vkCmdBeginRendering =
             pass::cmd_begin_rendering, When::Injected;
         c"vkCmdBeginRenderingKHR" => cmd_begin_rendering_khr: PFN_vkCmdBeginRendering =

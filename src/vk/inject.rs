@@ -73,6 +73,29 @@ struct MapObjects {
     layers: u32,
 }
 
+/// A render pass the layer gave a shading-rate attachment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InjectedPass {
+    /// The index of the added shading-rate attachment (the last one).
+    pub rate: u32,
+    /// The first subpass's first colour attachment, the pass's colour target.
+    pub colour: Option<u32>,
+    /// The first subpass's view mask.
+    pub view_mask: u32,
+}
+
+/// What a framebuffer of an injected pass got.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InjectedFramebuffer {
+    pub pass: InjectedPass,
+    /// Width and height.
+    pub extent: [u32; 2],
+    /// Imageless: the shading-rate view is chosen at each begin.
+    pub imageless: bool,
+    /// The eye map it names (target extent and views), refreshed at each begin.
+    pub eye: Option<([u32; 2], Views)>,
+}
+
 /// One injecting device's state.
 pub struct Injector {
     /// The device's shading-rate attachment facts.
@@ -81,6 +104,10 @@ pub struct Injector {
     images: parking_lot::Mutex<HashMap<u64, ImageFacts>>,
     views: parking_lot::Mutex<HashMap<u64, ViewFacts>>,
     maps: parking_lot::Mutex<Vec<Map>>,
+    /// Full-rate (code 0) maps by exact extent in texels, for passes that are not eye passes.
+    neutral: parking_lot::Mutex<Vec<([u32; 2], Option<MapObjects>)>>,
+    passes: parking_lot::Mutex<HashMap<u64, InjectedPass>>,
+    framebuffers: parking_lot::Mutex<HashMap<u64, InjectedFramebuffer>>,
     /// Set once the log has said that a map could not be made.
     failure_logged: AtomicBool,
 }
@@ -100,6 +127,9 @@ impl Injector {
             images: parking_lot::Mutex::new(HashMap::new()),
             views: parking_lot::Mutex::new(HashMap::new()),
             maps: parking_lot::Mutex::new(Vec::new()),
+            neutral: parking_lot::Mutex::new(Vec::new()),
+            passes: parking_lot::Mutex::new(HashMap::new()),
+            framebuffers: parking_lot::Mutex::new(HashMap::new()),
             failure_logged: AtomicBool::new(false),
         }
     }
@@ -177,6 +207,21 @@ impl Injector {
         view: vk::ImageView,
         layers: Option<u32>,
     ) -> Option<vk::ImageView> {
+        // SAFETY: as the caller promised.
+        unsafe { self.eye_map(own, state, view, layers) }.map(|(v, _, _)| v)
+    }
+
+    /// As [`Injector::eye_view`], with the map's shape: the target extent and the views.
+    ///
+    /// # Safety
+    /// `own` must belong to this injector's live device.
+    pub unsafe fn eye_map(
+        &self,
+        own: &Own,
+        state: &Injection,
+        view: vk::ImageView,
+        layers: Option<u32>,
+    ) -> Option<(vk::ImageView, [u32; 2], Views)> {
         let v = self.view(view)?;
         let layers = layers.unwrap_or(v.layers);
         let Pass::Eye(views) =
@@ -185,7 +230,99 @@ impl Injector {
             return None;
         };
         // SAFETY: as the caller promised.
-        unsafe { self.map(own, state, v.extent, views) }
+        unsafe { self.map(own, state, v.extent, views) }.map(|m| (m, v.extent, views))
+    }
+
+    /// The map's extent in texels and layers, where it exists.
+    pub fn map_size(&self, extent: [u32; 2], views: Views) -> Option<([u32; 2], u32)> {
+        self.maps
+            .lock()
+            .iter()
+            .find(|m| m.extent == extent && m.views == views)
+            .and_then(|m| m.objects)
+            .map(|o| (o.texels, o.layers))
+    }
+
+    /// A full-rate map of exactly `texels` (one layer, rate code 0 everywhere, cleared ahead of the
+    /// next submit), made once per extent: the shading-rate attachment of a pass that is not an
+    /// eye pass (docs/injection.md#how-the-attachment-gets-in).
+    ///
+    /// # Safety
+    /// `own` must belong to this injector's live device.
+    pub unsafe fn neutral(&self, own: &Own, texels: [u32; 2]) -> Option<vk::ImageView> {
+        let mut list = self.neutral.lock();
+        if let Some((_, o)) = list.iter().find(|(t, _)| *t == texels) {
+            return o.map(|o| o.view);
+        }
+        // SAFETY: as the caller promised.
+        let made = match unsafe { make(own, texels, 1) } {
+            Ok(o) => {
+                own.clears.add(o.image, 1);
+                Some(o)
+            }
+            Err(e) => {
+                if !self.failure_logged.swap(true, Ordering::Relaxed) {
+                    tracing::warn!(
+                        result = ?e,
+                        "cannot make a full-rate shading-rate map: framebuffers of passes that \
+                         need one are passed on as the application made them"
+                    );
+                }
+                None
+            }
+        };
+        list.push((texels, made));
+        made.map(|o| o.view)
+    }
+
+    /// The texels a framebuffer of `extent` needs: `ceil(extent / texel)`
+    /// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkFramebufferCreateInfo.html>,
+    /// VUID-VkFramebufferCreateInfo-flags-04539).
+    pub fn texels_for(&self, extent: [u32; 2]) -> [u32; 2] {
+        [
+            extent[0].div_ceil(self.fdm.texel[0].max(1)).max(1),
+            extent[1].div_ceil(self.fdm.texel[1].max(1)).max(1),
+        ]
+    }
+
+    /// Notes a render pass the layer gave a shading-rate attachment.
+    pub fn pass_created(&self, pass: vk::RenderPass, p: InjectedPass) {
+        self.passes.lock().insert(pass.as_raw(), p);
+    }
+
+    /// The injected pass `pass`, if it is one.
+    pub fn pass(&self, pass: vk::RenderPass) -> Option<InjectedPass> {
+        self.passes.lock().get(&pass.as_raw()).copied()
+    }
+
+    /// Forgets a destroyed render pass.
+    pub fn pass_destroyed(&self, pass: vk::RenderPass) {
+        self.passes.lock().remove(&pass.as_raw());
+    }
+
+    /// Notes a framebuffer of an injected pass.
+    pub fn framebuffer_created(&self, fb: vk::Framebuffer, f: InjectedFramebuffer) {
+        self.framebuffers.lock().insert(fb.as_raw(), f);
+    }
+
+    /// The framebuffer `fb` of an injected pass, if it is one.
+    pub fn framebuffer(&self, fb: vk::Framebuffer) -> Option<InjectedFramebuffer> {
+        self.framebuffers.lock().get(&fb.as_raw()).copied()
+    }
+
+    /// Forgets a destroyed framebuffer.
+    pub fn framebuffer_destroyed(&self, fb: vk::Framebuffer) {
+        self.framebuffers.lock().remove(&fb.as_raw());
+    }
+
+    /// The map for a target of `extent` holding `views`, refilled where the published maps moved
+    /// on: at each begin of a framebuffer that names it.
+    ///
+    /// # Safety
+    /// `own` must belong to this injector's live device.
+    pub unsafe fn refresh(&self, own: &Own, state: &Injection, extent: [u32; 2], views: Views) {
+        // SAFETY: as the caller promised.
+        unsafe { self.map(own, state, extent, views) };
     }
 
     /// The view of the map for a target of `extent` holding `views`, made or refilled where it is
@@ -278,7 +415,13 @@ impl Injector {
     /// `own` must belong to this injector's live device, idle, its uploads done or dropped.
     pub unsafe fn destroy(&self, own: &Own) {
         let maps: Vec<Map> = self.maps.lock().drain(..).collect();
-        for o in maps.into_iter().filter_map(|m| m.objects) {
+        let neutral: Vec<MapObjects> = self
+            .neutral
+            .lock()
+            .drain(..)
+            .filter_map(|(_, o)| o)
+            .collect();
+        for o in maps.into_iter().filter_map(|m| m.objects).chain(neutral) {
             // SAFETY: as the caller promised; the layer's own objects.
             unsafe {
                 own.clears.forget_upload(&own.fns, o.image);

@@ -11,8 +11,9 @@
 //!   VUID-VkGraphicsPipelineCreateInfo-flags-06638 and -06639). A pipeline that chains its own
 //!   shading-rate state keeps it.
 //! - On a device that injects maps into eye passes (docs/injection.md#how-the-attachment-gets-in),
-//!   every pipeline for dynamic rendering gets the shading-rate flag and the same state: whether a
-//!   rendering it is used in gets an attachment is decided only when that rendering begins. An
+//!   every pipeline gets the same state (every render pass there has a shading-rate attachment,
+//!   and whether a dynamic rendering gets one is decided only when it begins), and pipelines for
+//!   dynamic rendering the shading-rate flag. An
 //!   application that uses shading rates itself never has an injecting device
 //!   ([`crate::vk::device`]), so no pipeline there carries rate state of its own.
 //! - Shader modules using `FragSizeEXT` or `FragInvocationCountEXT` (capability
@@ -76,9 +77,12 @@ pub struct Facts {
     /// A graphics pipeline library without pre-rasterisation or fragment-shader state (the
     /// shading-rate state is no part of it).
     pub no_rate_state: bool,
-    /// The device injects maps into eye passes and the pipeline is for dynamic rendering, where
-    /// any rendering may get an injected attachment (docs/injection.md#how-the-attachment-gets-in).
+    /// The device injects maps into eye passes (docs/injection.md#how-the-attachment-gets-in):
+    /// every render pass there has a shading-rate attachment, and any dynamic rendering may get
+    /// one.
     pub inject: bool,
+    /// The pipeline is for dynamic rendering (no render pass).
+    pub dynamic: bool,
 }
 
 impl Facts {
@@ -99,12 +103,18 @@ impl Facts {
     /// Whether the shading-rate attachment flag goes into a copy of a chained
     /// `VkPipelineCreateFlags2CreateInfoKHR` (whose flags replace the 32-bit ones).
     fn rewrite_flags2(&self) -> bool {
-        self.flag2 || (self.inject && self.has_flags2)
+        self.flag2 || (self.inject_flag() && self.has_flags2)
+    }
+
+    /// Whether the shading-rate attachment flag is added for injection: pipelines for dynamic
+    /// rendering need it (render passes carry their attachment themselves).
+    fn inject_flag(&self) -> bool {
+        self.inject && self.dynamic
     }
 
     /// Whether anything is rewritten.
     pub fn rewrite(&self) -> bool {
-        self.add_state() || self.flag || self.flag2 || self.inject
+        self.add_state() || self.flag || self.flag2 || self.inject_flag()
     }
 }
 
@@ -137,6 +147,7 @@ pub unsafe fn facts(
             .is_some(),
         no_rate_state: library.is_some_and(|f| !f.intersects(rate_parts)),
         inject: false,
+        dynamic: ci.render_pass == vk::RenderPass::null(),
     }
 }
 
@@ -164,7 +175,7 @@ unsafe fn rewrite(
         >(*ci)
     };
     let mut owned = Owned::default();
-    if f.flag || f.inject {
+    if f.flag || f.inject_flag() {
         // The shading-rate flag is required of every pipeline used in a rendering with a
         // shading-rate attachment
         // (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdDraw.html>,
@@ -241,9 +252,8 @@ pub unsafe extern "system" fn create_graphics_pipelines(
                 .iter()
                 // SAFETY: valid create infos.
                 .map(|ci| unsafe { facts(ci, registry::pass_uses_fdm) })
-                .zip(list)
-                .map(|(f, ci)| Facts {
-                    inject: dev.inject.is_some() && ci.render_pass == vk::RenderPass::null(),
+                .map(|f| Facts {
+                    inject: dev.inject.is_some(),
                     ..f
                 })
                 .collect();
@@ -576,6 +586,22 @@ mod tests {
             );
         }
         assert_eq!(f2.flags, vk::PipelineCreateFlags2KHR::DISABLE_OPTIMIZATION);
+        drop(owned);
+
+        // A pipeline for a render pass gets the state, not the flag (the pass has the attachment).
+        let with_pass =
+            vk::GraphicsPipelineCreateInfo::default().render_pass(vk::RenderPass::from_raw(9));
+        // SAFETY: as above.
+        let read = unsafe { facts(&with_pass, |_| false) };
+        let f = Facts {
+            inject: true,
+            ..read
+        };
+        assert!(f.add_state() && f.rewrite());
+        // SAFETY: as above.
+        let (copy, owned) = unsafe { rewrite(&with_pass, f) }.expect("rewrite");
+        assert_eq!(copy.flags, vk::PipelineCreateFlags::empty());
+        assert!(!copy.p_next.is_null());
         drop(owned);
 
         // A library without pre-rasterisation or fragment state gets the flag, not the state.

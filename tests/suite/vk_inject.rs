@@ -9,15 +9,19 @@
 //! from the environment at `xrCreateInstance`.
 //!
 //! One frame: a per-eye swapchain of 640×500 (so the left eye's: fovea guesses view 0 from the
-//! first of its size), the views located, then three dynamic renderings with one pipeline: into the
-//! acquired swapchain image, into a 256×256 image of the application's own, and into an eye-shaped
-//! 640×500 image of its own. What must reach the driver, per profile and level:
+//! first of its size), the views located, then three passes with one pipeline: into the acquired
+//! swapchain image, into a 256×256 image of the application's own, and into an eye-shaped 640×500
+//! image of its own; as dynamic renderings, as version-1 render passes with a framebuffer each, or
+//! as version-2 passes with imageless framebuffers. What must reach the driver, per profile and
+//! level:
 //!
 //! - injection on: the device with `VK_KHR_fragment_shading_rate`'s attachment feature; the pipeline
-//!   with the shading-rate flag and state {1×1, {KEEP, REPLACE}}; the swapchain rendering with a
-//!   shading-rate attachment of the device's texel whose codes at submit are exactly
-//!   `fovea_model::inject::codes` for view 0 at the located FOVs and the level; the small one with
-//!   none; the eye-shaped one with the merged map of both eyes;
+//!   with the state {1×1, {KEEP, REPLACE}} (and, for dynamic rendering, the shading-rate flag);
+//!   render passes with a shading-rate attachment after the colour one in their subpass; the
+//!   swapchain pass with a shading-rate attachment of the device's texel whose codes at submit are
+//!   exactly `fovea_model::inject::codes` for view 0 at the located FOVs and the level; the
+//!   eye-shaped one with the merged map of both eyes; the small one with none (dynamic rendering)
+//!   or a full-rate map covering it (render passes);
 //! - injection off: none of it, the double sees the application's calls as they were;
 //! - an application that enables shading rates itself: none of it either, and the log says so;
 //!
@@ -52,6 +56,23 @@ const SMALL: u32 = 256;
 const FORMAT: vk::Format = vk::Format::R8G8B8A8_SRGB;
 const FSR_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
+/// The colour targets' usage: what the simulated runtime gives the swapchain's images (an
+/// imageless framebuffer describes it).
+const USAGE: vk::ImageUsageFlags = vk::ImageUsageFlags::from_raw(
+    vk::ImageUsageFlags::COLOR_ATTACHMENT.as_raw() | vk::ImageUsageFlags::SAMPLED.as_raw(),
+);
+
+/// How the application renders.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Api {
+    /// `vkCmdBeginRendering`.
+    Dynamic,
+    /// `vkCreateRenderPass` (version 1) and a framebuffer per target.
+    RenderPass,
+    /// `vkCreateRenderPass2` and an imageless framebuffer per target, the views named at
+    /// `vkCmdBeginRenderPass2`.
+    Imageless,
+}
 
 /// How the application is set up.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -110,7 +131,7 @@ unsafe fn image(
         .array_layers(1)
         .samples(vk::SampleCountFlags::TYPE_1)
         .tiling(vk::ImageTiling::OPTIMAL)
-        .usage(vk::ImageUsageFlags::COLOR_ATTACHMENT);
+        .usage(USAGE);
     // SAFETY: the caller's promise; the structs live across the calls.
     unsafe {
         let image = d.create_image(&info, None).unwrap();
@@ -145,6 +166,94 @@ unsafe fn view(d: &ash::Device, image: vk::Image) -> vk::ImageView {
         )
     }
     .unwrap()
+}
+
+/// The application's render pass: one colour attachment, cleared and stored, already in and left
+/// in `COLOR_ATTACHMENT_OPTIMAL`; version 1, or version 2 for [`Api::Imageless`].
+fn render_pass(d: &ash::Device, api: Api) -> vk::RenderPass {
+    let layout = vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL;
+    // SAFETY: the device is alive; the structs live across the calls.
+    unsafe {
+        if api == Api::Imageless {
+            let atts = [vk::AttachmentDescription2::default()
+                .format(FORMAT)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .initial_layout(layout)
+                .final_layout(layout)];
+            let colour = [vk::AttachmentReference2::default()
+                .attachment(0)
+                .layout(layout)
+                .aspect_mask(vk::ImageAspectFlags::COLOR)];
+            let subpass = [vk::SubpassDescription2::default()
+                .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+                .color_attachments(&colour)];
+            d.create_render_pass2(
+                &vk::RenderPassCreateInfo2::default()
+                    .attachments(&atts)
+                    .subpasses(&subpass),
+                None,
+            )
+        } else {
+            let atts = [vk::AttachmentDescription::default()
+                .format(FORMAT)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .initial_layout(layout)
+                .final_layout(layout)];
+            let colour = [vk::AttachmentReference {
+                attachment: 0,
+                layout,
+            }];
+            let subpass = [vk::SubpassDescription::default()
+                .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+                .color_attachments(&colour)];
+            d.create_render_pass(
+                &vk::RenderPassCreateInfo::default()
+                    .attachments(&atts)
+                    .subpasses(&subpass),
+                None,
+            )
+        }
+    }
+    .unwrap()
+}
+
+/// A framebuffer of `rp` over `view` of `extent`; imageless for [`Api::Imageless`].
+fn framebuffer(
+    d: &ash::Device,
+    rp: vk::RenderPass,
+    api: Api,
+    view: vk::ImageView,
+    extent: [u32; 2],
+) -> vk::Framebuffer {
+    let formats = [FORMAT];
+    let described = [vk::FramebufferAttachmentImageInfo::default()
+        .usage(USAGE)
+        .width(extent[0])
+        .height(extent[1])
+        .layer_count(1)
+        .view_formats(&formats)];
+    let mut imageless =
+        vk::FramebufferAttachmentsCreateInfo::default().attachment_image_infos(&described);
+    let views = [view];
+    let mut info = vk::FramebufferCreateInfo::default()
+        .render_pass(rp)
+        .width(extent[0])
+        .height(extent[1])
+        .layers(1);
+    if api == Api::Imageless {
+        info = info
+            .flags(vk::FramebufferCreateFlags::IMAGELESS)
+            .push_next(&mut imageless);
+        info.attachment_count = 1;
+    } else {
+        info = info.attachments(&views);
+    }
+    // SAFETY: the device and view are alive; the structs live across the call.
+    unsafe { d.create_framebuffer(&info, None) }.unwrap()
 }
 
 /// The swapchain's `VkImage`s.
@@ -182,7 +291,7 @@ fn swapchain_images(app: &App, swapchain: xr::Swapchain) -> Vec<vk::Image> {
 }
 
 /// One frame as described in the module documentation, on `profile`.
-fn run(profile: Profile, setup: Setup, dir: &std::path::Path) -> Option<Outcome> {
+fn run(profile: Profile, setup: Setup, api: Api, dir: &std::path::Path) -> Option<Outcome> {
     let (_serial, env) = crate::vk_layer::env()?;
     env.double.set_profile(Some(profile));
     env.double.clear();
@@ -198,6 +307,10 @@ fn run(profile: Profile, setup: Setup, dir: &std::path::Path) -> Option<Outcome>
     let mut rates = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
         .attachment_fragment_shading_rate(true);
     let app_rates = setup == Setup::AppRates;
+    let mut v12 = vk::PhysicalDeviceVulkan12Features::default().imageless_framebuffer(true);
+    if app_rates {
+        v12.p_next = &mut rates as *mut _ as *mut c_void;
+    }
     let exts = [FSR];
     let options = Options {
         layers: &layers,
@@ -205,11 +318,7 @@ fn run(profile: Profile, setup: Setup, dir: &std::path::Path) -> Option<Outcome>
         raw_handles: true,
         dynamic_rendering: true,
         device_extensions: if app_rates { &exts } else { &[] },
-        device_next: if app_rates {
-            &mut rates as *mut _ as *const c_void
-        } else {
-            null()
-        },
+        device_next: &v12 as *const _ as *const c_void,
     };
     let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
     {
@@ -281,14 +390,15 @@ fn run(profile: Profile, setup: Setup, dir: &std::path::Path) -> Option<Outcome>
         let formats = [FORMAT];
         let mut rendering =
             vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&formats);
+        let render_pass = (api != Api::Dynamic).then(|| render_pass(d, api));
         let fixed = Fixed::new();
         let st = stages(modules);
+        let pipeline_info = match render_pass {
+            Some(rp) => fixed.info(&st, layout).render_pass(rp),
+            None => fixed.info(&st, layout).push_next(&mut rendering),
+        };
         let pipeline = d
-            .create_graphics_pipelines(
-                vk::PipelineCache::null(),
-                &[fixed.info(&st, layout).push_next(&mut rendering)],
-                None,
-            )
+            .create_graphics_pipelines(vk::PipelineCache::null(), &[pipeline_info], None)
             .unwrap()[0];
         let (small, small_mem) = image(d, &memory, [SMALL, SMALL]);
         let (own, own_mem) = image(d, &memory, [WIDTH, HEIGHT]);
@@ -298,6 +408,8 @@ fn run(profile: Profile, setup: Setup, dir: &std::path::Path) -> Option<Outcome>
             (own, [WIDTH, HEIGHT]),
         ];
         let views = targets.map(|(i, _)| view(d, i));
+        let framebuffers = render_pass
+            .map(|rp| [0, 1, 2].map(|i| framebuffer(d, rp, api, views[i], targets[i].1)));
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .unwrap();
         let to_colour: Vec<_> = targets
@@ -322,7 +434,37 @@ fn run(profile: Profile, setup: Setup, dir: &std::path::Path) -> Option<Outcome>
             &[],
             &to_colour,
         );
-        for (&(_, extent), &view) in targets.iter().zip(&views) {
+        for (i, (&(_, extent), &view)) in targets.iter().zip(&views).enumerate() {
+            let area = vk::Rect2D {
+                offset: vk::Offset2D::default(),
+                extent: vk::Extent2D {
+                    width: extent[0],
+                    height: extent[1],
+                },
+            };
+            if let (Some(rp), Some(fbs)) = (render_pass, framebuffers) {
+                let attachments = [view];
+                let mut named =
+                    vk::RenderPassAttachmentBeginInfo::default().attachments(&attachments);
+                let mut begin = vk::RenderPassBeginInfo::default()
+                    .render_pass(rp)
+                    .framebuffer(fbs[i])
+                    .render_area(area)
+                    .clear_values(&crate::support::vulkan::CLEAR);
+                if api == Api::Imageless {
+                    begin = begin.push_next(&mut named);
+                    d.cmd_begin_render_pass2(
+                        cb,
+                        &begin,
+                        &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+                    );
+                } else {
+                    d.cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE);
+                }
+                draw_fullscreen(d, cb, pipeline);
+                d.cmd_end_render_pass(cb);
+                continue;
+            }
             let colour = [vk::RenderingAttachmentInfo::default()
                 .image_view(view)
                 .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
@@ -356,6 +498,12 @@ fn run(profile: Profile, setup: Setup, dir: &std::path::Path) -> Option<Outcome>
         .unwrap();
         d.wait_for_fences(&[fence], true, u64::MAX).unwrap();
         d.destroy_fence(fence, None);
+        for fb in framebuffers.into_iter().flatten() {
+            d.destroy_framebuffer(fb, None);
+        }
+        if let Some(rp) = render_pass {
+            d.destroy_render_pass(rp, None);
+        }
         for v in views {
             d.destroy_image_view(v, None);
         }
@@ -405,12 +553,30 @@ impl Outcome {
         self.events.iter().filter(|e| e["kind"] == kind).collect()
     }
 
-    /// The test's three renderings as the driver got them, in order.
-    fn renderings(&self) -> Vec<&Value> {
-        let r: Vec<&Value> = self
-            .of("begin_rendering")
+    /// The shading-rate view of each of the test's three renderings or passes as the driver got
+    /// them, in order (`Null` for none).
+    fn rates(&self, api: Api) -> Vec<Value> {
+        let kind = if api == Api::Dynamic {
+            "begin_rendering"
+        } else {
+            "begin_render_pass"
+        };
+        let r: Vec<Value> = self
+            .of(kind)
             .into_iter()
             .filter(|b| b["command_buffer"] == json!(self.command_buffer))
+            .map(|b| {
+                if api == Api::Dynamic {
+                    b["shading_rate"].clone()
+                } else {
+                    let v = b["shading_rate_views"]
+                        .as_array()
+                        .cloned()
+                        .unwrap_or_default();
+                    assert!(v.len() <= 1, "{b}");
+                    v.first().cloned().unwrap_or(Value::Null)
+                }
+            })
             .collect();
         assert_eq!(r.len(), 3, "{r:?}");
         r
@@ -491,8 +657,8 @@ fn expected(
     )
 }
 
-/// Runs `setup` on both profiles in a child process of its own and checks the outcome.
-fn check(test: &str, setup: Setup, levels: &[Level]) {
+/// Runs `setup` with `api` on both profiles in a child process of its own and checks the outcome.
+fn check(test: &str, setup: Setup, api: Api, levels: &[Level]) {
     in_own_process(module_path!(), test, || {
         for profile in [Profile::Nvidia, Profile::Amd] {
             let setups: Vec<Setup> = match setup {
@@ -501,25 +667,25 @@ fn check(test: &str, setup: Setup, levels: &[Level]) {
             };
             for s in setups {
                 let dir = set_up(&format!("{test}-{profile:?}"), s);
-                let Some(out) = run(profile, s, &dir) else {
+                let Some(out) = run(profile, s, api, &dir) else {
                     return;
                 };
-                assert_outcome(profile, s, &out);
+                assert_outcome(profile, s, api, &out);
             }
         }
     });
 }
 
-fn assert_outcome(profile: Profile, setup: Setup, out: &Outcome) {
-    let what = format!("{profile:?} {setup:?}");
+fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
+    let what = format!("{profile:?} {setup:?} {api:?}");
     let devices = out.of("device");
     assert_eq!(devices.len(), 1, "{what}: {devices:?}");
     let pipelines = out.of("pipeline");
     assert_eq!(pipelines.len(), 1, "{what}: {pipelines:?}");
-    let renderings = out.renderings();
+    let passes = out.of("render_pass");
     let Setup::Inject(level) = setup else {
         // Nothing of fovea's: no shading rates added to the device, no flag or state on the
-        // pipeline, no attachment in any rendering.
+        // pipeline, no attachment in any pass or rendering.
         let enabled = setup == Setup::AppRates;
         assert_eq!(
             devices[0]["features"]["attachment"]
@@ -531,8 +697,23 @@ fn assert_outcome(profile: Profile, setup: Setup, out: &Outcome) {
         );
         assert_eq!(pipelines[0]["rendering_attachment_flag"], false, "{what}");
         assert_eq!(pipelines[0]["shading_rate_state"], Value::Null, "{what}");
-        for r in &renderings {
-            assert_eq!(r["shading_rate"], Value::Null, "{what}");
+        // (The double records passes and begins only where shading rates are in play.)
+        for p in &passes {
+            assert_eq!(p["attachments"].as_array().unwrap().len(), 1, "{what}: {p}");
+            assert_eq!(
+                p["subpasses"][0]["shading_rate"],
+                Value::Null,
+                "{what}: {p}"
+            );
+        }
+        for b in out.of("begin_rendering") {
+            assert_eq!(b["shading_rate"], Value::Null, "{what}: {b}");
+        }
+        for b in out.of("begin_render_pass") {
+            assert_eq!(b["shading_rate_views"], json!([]), "{what}: {b}");
+        }
+        if api == Api::Dynamic {
+            assert_eq!(out.rates(api), vec![Value::Null; 3], "{what}");
         }
         assert!(
             !out.log.contains("injected shading-rate map"),
@@ -550,11 +731,23 @@ fn assert_outcome(profile: Profile, setup: Setup, out: &Outcome) {
         return;
     };
     assert_eq!(
+        passes.len(),
+        usize::from(api != Api::Dynamic),
+        "{what}: {passes:?}"
+    );
+    let rates = out.rates(api);
+    let texel = profile.texel();
+    assert_eq!(
         devices[0]["features"]["attachment"], true,
         "{what}: {}",
         devices[0]
     );
-    assert_eq!(pipelines[0]["rendering_attachment_flag"], true, "{what}");
+    // The flag is for dynamic rendering; a render pass carries its attachment itself.
+    assert_eq!(
+        pipelines[0]["rendering_attachment_flag"],
+        api == Api::Dynamic,
+        "{what}"
+    );
     assert_eq!(
         pipelines[0]["shading_rate_state"],
         json!({"fragment_size": [1, 1], "combiner_ops": [
@@ -563,22 +756,37 @@ fn assert_outcome(profile: Profile, setup: Setup, out: &Outcome) {
         ]}),
         "{what}"
     );
-    let texel = profile.texel();
+    for p in &passes {
+        let atts = p["attachments"].as_array().unwrap();
+        assert_eq!(atts.len(), 2, "{what}: {p}");
+        assert_eq!(atts[1]["format"], vk::Format::R8_UINT.as_raw(), "{what}");
+        assert_eq!(
+            p["subpasses"][0]["shading_rate"],
+            json!({"attachment": 1, "layout": FSR_LAYOUT.as_raw(),
+                   "texel": [texel.width, texel.height]}),
+            "{what}: {p}"
+        );
+    }
+    if api == Api::Dynamic {
+        for r in [&rates[0], &rates[2]] {
+            assert_eq!(r["layout"], FSR_LAYOUT.as_raw(), "{what}: {r}");
+            assert_eq!(r["texel"], json!([texel.width, texel.height]), "{what}");
+        }
+    }
+    let view_of = |r: &Value| {
+        if api == Api::Dynamic {
+            r["view"].clone()
+        } else {
+            r.clone()
+        }
+    };
     // The swapchain image (view 0) and the eye-shaped target of the application's own (both
-    // eyes merged) get maps; the small target none.
-    assert_eq!(
-        renderings[1]["shading_rate"],
-        Value::Null,
-        "{what}: small target"
-    );
+    // eyes merged) get maps.
     for (r, views) in [
-        (renderings[0], Views::Layers { first: 0, count: 1 }),
-        (renderings[2], Views::Merged),
+        (&rates[0], Views::Layers { first: 0, count: 1 }),
+        (&rates[2], Views::Merged),
     ] {
-        let rate = &r["shading_rate"];
-        assert_eq!(rate["layout"], FSR_LAYOUT.as_raw(), "{what}: {r}");
-        assert_eq!(rate["texel"], json!([texel.width, texel.height]), "{what}");
-        let image = out.image_of(&rate["view"]);
+        let image = out.image_of(&view_of(r));
         let got = out.codes_of(&image);
         let want = expected(profile, views, out.fovs, level);
         assert_eq!(
@@ -603,9 +811,19 @@ fn assert_outcome(profile: Profile, setup: Setup, out: &Outcome) {
         }
     }
     assert_ne!(
-        renderings[0]["shading_rate"]["view"], renderings[2]["shading_rate"]["view"],
+        view_of(&rates[0]),
+        view_of(&rates[2]),
         "{what}: one map per shape and views"
     );
+    // The small target: no attachment in a rendering; a full-rate map covering it in a pass.
+    if api == Api::Dynamic {
+        assert_eq!(rates[1], Value::Null, "{what}: small target");
+    } else {
+        let (extent, layers, codes) = out.codes_of(&out.image_of(&rates[1]));
+        let n = [SMALL.div_ceil(texel.width), SMALL.div_ceil(texel.height)];
+        assert_eq!((extent, layers), (n, 1), "{what}: the full-rate map");
+        assert!(codes.iter().all(|&c| c == 0), "{what}: full rate");
+    }
 }
 
 #[test]
@@ -613,13 +831,28 @@ fn injected_eye_passes_carry_the_models_codes_at_every_level() {
     check(
         "injected_eye_passes_carry_the_models_codes_at_every_level",
         Setup::Inject(Level::None),
-        &[
-            Level::None,
-            Level::Low,
-            Level::Medium,
-            Level::High,
-            Level::HighTop,
-        ],
+        Api::Dynamic,
+        &Level::ALL,
+    );
+}
+
+#[test]
+fn render_pass_eye_passes_get_the_eye_map_and_others_the_full_rate_map() {
+    check(
+        "render_pass_eye_passes_get_the_eye_map_and_others_the_full_rate_map",
+        Setup::Inject(Level::None),
+        Api::RenderPass,
+        &[Level::None, Level::High],
+    );
+}
+
+#[test]
+fn imageless_framebuffers_get_their_map_at_each_begin() {
+    check(
+        "imageless_framebuffers_get_their_map_at_each_begin",
+        Setup::Inject(Level::None),
+        Api::Imageless,
+        &[Level::Medium],
     );
 }
 
@@ -628,6 +861,17 @@ fn without_injection_nothing_reaches_the_driver() {
     check(
         "without_injection_nothing_reaches_the_driver",
         Setup::Off,
+        Api::Dynamic,
+        &[],
+    );
+}
+
+#[test]
+fn without_injection_render_passes_reach_the_driver_unchanged() {
+    check(
+        "without_injection_render_passes_reach_the_driver_unchanged",
+        Setup::Off,
+        Api::RenderPass,
         &[],
     );
 }
@@ -637,6 +881,7 @@ fn an_application_with_its_own_shading_rates_is_left_alone() {
     check(
         "an_application_with_its_own_shading_rates_is_left_alone",
         Setup::AppRates,
+        Api::Dynamic,
         &[],
     );
 }
