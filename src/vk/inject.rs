@@ -349,10 +349,11 @@ impl Injector {
                 if texels == o.texels && layers == o.layers {
                     own.clears.upload(o.image, texels, layers, codes);
                     m.key = key;
-                    tracing::debug!(
+                    tracing::info!(
                         width = extent[0],
                         height = extent[1],
                         ?views,
+                        level = state.pattern.level.name(),
                         "injected shading-rate map refilled"
                     );
                 }

@@ -89,6 +89,8 @@ enum Setup {
 struct Outcome {
     events: Vec<Value>,
     command_buffer: u64,
+    /// With a refresh: the command buffer recorded after the level changed.
+    second: Option<u64>,
     fovs: [Fov; 2],
     log: String,
 }
@@ -100,6 +102,8 @@ fn set_up(label: &str, setup: Setup) -> PathBuf {
     std::fs::create_dir_all(&dir).unwrap();
     std::env::set_var("FOVEA_LOG", "info");
     std::env::set_var("FOVEA_LOG_FILE", dir.join("fovea.log"));
+    // Absent until a test changes the level while the application runs.
+    std::env::set_var("FOVEA_PROPS", dir.join("props"));
     match setup {
         Setup::Inject(level) => {
             std::env::set_var("FOVEA_INJECT", "1");
@@ -292,6 +296,19 @@ fn swapchain_images(app: &App, swapchain: xr::Swapchain) -> Vec<vk::Image> {
 
 /// One frame as described in the module documentation, on `profile`.
 fn run(profile: Profile, setup: Setup, api: Api, dir: &std::path::Path) -> Option<Outcome> {
+    run_with(profile, setup, api, dir, None)
+}
+
+/// [`run`]; with `refresh`, after the first submit the level changes to it through the debug
+/// property file, frames go by until fovea has read it (it looks every 250 ms of display time),
+/// and a second command buffer renders into the swapchain twice more.
+fn run_with(
+    profile: Profile,
+    setup: Setup,
+    api: Api,
+    dir: &std::path::Path,
+    refresh: Option<Level>,
+) -> Option<Outcome> {
     let (_serial, env) = crate::vk_layer::env()?;
     env.double.set_profile(Some(profile));
     env.double.clear();
@@ -355,7 +372,8 @@ fn run(profile: Profile, setup: Setup, api: Api, dir: &std::path::Path) -> Optio
         session,
         space,
     };
-    let (index, fovs, time) = frame.acquire(swapchain);
+    let (index, fovs, mut time) = frame.acquire(swapchain);
+    let mut second = None;
 
     let d = &v.device;
     // SAFETY: the instance and device are alive; every struct lives across its call; every object
@@ -497,6 +515,73 @@ fn run(profile: Profile, setup: Setup, api: Api, dir: &std::path::Path) -> Optio
         )
         .unwrap();
         d.wait_for_fences(&[fence], true, u64::MAX).unwrap();
+        d.reset_fences(&[fence]).unwrap();
+        if let Some(level) = refresh {
+            frame.release(swapchain, time);
+            std::fs::write(
+                dir.join("props"),
+                format!("debug.oculus.foveation.level={}\n", level as u8),
+            )
+            .unwrap();
+            for _ in 0..40 {
+                let (_, _, t) = frame.acquire(swapchain);
+                frame.release(swapchain, t);
+            }
+            let (i, _, t) = frame.acquire(swapchain);
+            time = t;
+            let target = view(d, images[i as usize]);
+            let cb2 = d
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
+                .unwrap()[0];
+            d.begin_command_buffer(cb2, &vk::CommandBufferBeginInfo::default())
+                .unwrap();
+            d.cmd_pipeline_barrier(
+                cb2,
+                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[to_colour[0].image(images[i as usize])],
+            );
+            let colour = [vk::RenderingAttachmentInfo::default()
+                .image_view(target)
+                .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .clear_value(crate::support::vulkan::CLEAR[0])];
+            let ri = vk::RenderingInfo::default()
+                .render_area(vk::Rect2D {
+                    offset: vk::Offset2D::default(),
+                    extent: vk::Extent2D {
+                        width: WIDTH,
+                        height: HEIGHT,
+                    },
+                })
+                .layer_count(1)
+                .color_attachments(&colour);
+            for _ in 0..2 {
+                d.cmd_begin_rendering(cb2, &ri);
+                draw_fullscreen(d, cb2, pipeline);
+                d.cmd_end_rendering(cb2);
+            }
+            d.end_command_buffer(cb2).unwrap();
+            let cbs = [cb2];
+            d.queue_submit(
+                queue,
+                &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                fence,
+            )
+            .unwrap();
+            d.wait_for_fences(&[fence], true, u64::MAX).unwrap();
+            d.destroy_image_view(target, None);
+            second = Some(cb2.as_raw());
+        }
         d.destroy_fence(fence, None);
         for fb in framebuffers.into_iter().flatten() {
             d.destroy_framebuffer(fb, None);
@@ -538,6 +623,7 @@ fn run(profile: Profile, setup: Setup, api: Api, dir: &std::path::Path) -> Optio
         "{profile:?} {setup:?}"
     );
     Some(Outcome {
+        second,
         events: env.double.records()["events"]
             .as_array()
             .cloned()
@@ -584,6 +670,11 @@ impl Outcome {
 
     /// What the submit of the test's command buffer read of `image`: (extent, layers, codes).
     fn codes_of(&self, image: &Value) -> ([u32; 2], u32, Vec<u8>) {
+        self.codes_in(self.command_buffer, image)
+    }
+
+    /// What the submit of command buffer `cb` read of `image`.
+    fn codes_in(&self, cb: u64, image: &Value) -> ([u32; 2], u32, Vec<u8>) {
         let submits: Vec<&Value> = self
             .of("submit")
             .into_iter()
@@ -591,7 +682,7 @@ impl Outcome {
                 s["command_buffers"]
                     .as_array()
                     .unwrap()
-                    .contains(&json!(self.command_buffer))
+                    .contains(&json!(cb))
             })
             .collect();
         assert_eq!(submits.len(), 1, "{submits:?}");
@@ -853,6 +944,58 @@ fn imageless_framebuffers_get_their_map_at_each_begin() {
         Setup::Inject(Level::None),
         Api::Imageless,
         &[Level::Medium],
+    );
+}
+
+/// A map is refilled in place, once, when the published maps' key moves (here the level, through
+/// the debug property file while the application runs), and the passes after it read the new
+/// codes; nothing is refilled per pass.
+#[test]
+fn a_changed_level_refills_the_map_in_place_once() {
+    in_own_process(
+        module_path!(),
+        "a_changed_level_refills_the_map_in_place_once",
+        || {
+            let (first, then) = (Level::Low, Level::High);
+            for profile in [Profile::Nvidia, Profile::Amd] {
+                let setup = Setup::Inject(first);
+                let dir = set_up(&format!("refresh-{profile:?}"), setup);
+                let Some(out) = run_with(profile, setup, Api::Dynamic, &dir, Some(then)) else {
+                    return;
+                };
+                let what = format!("{profile:?}");
+                assert_outcome(profile, setup, Api::Dynamic, &out);
+                let cb2 = out.second.expect("a second command buffer");
+                let before = out.rates(Api::Dynamic)[0]["view"].clone();
+                let after: Vec<&Value> = out
+                    .of("begin_rendering")
+                    .into_iter()
+                    .filter(|b| b["command_buffer"] == json!(cb2))
+                    .collect();
+                assert_eq!(after.len(), 2, "{what}: {after:?}");
+                for b in &after {
+                    assert_eq!(b["shading_rate"]["view"], before, "{what}: the same map");
+                }
+                let image = out.image_of(&before);
+                let views = Views::Layers { first: 0, count: 1 };
+                let old = out.codes_in(out.command_buffer, &image);
+                let new = out.codes_in(cb2, &image);
+                assert!(
+                    old.2 == expected(profile, views, out.fovs, first).2,
+                    "{what}"
+                );
+                assert!(
+                    new.2 == expected(profile, views, out.fovs, then).2,
+                    "{what}"
+                );
+                assert!(old.2 != new.2, "{what}: {first:?} and {then:?} differ");
+                let refills = out
+                    .log
+                    .matches("injected shading-rate map refilled")
+                    .count();
+                assert_eq!(refills, 1, "{what}: one refill\n{}", out.log);
+            }
+        },
     );
 }
 
