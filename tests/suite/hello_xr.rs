@@ -453,6 +453,16 @@ fn headset_views() -> ([u32; 2], [fovea_model::Fov; 2]) {
 /// status 0, the frames, no runtime errors, no validation message, the double saw no misuse) and
 /// returns the double's events; `None` where the system lacks hello_xr or lavapipe.
 fn hello_xr_on_the_double(graphics: &str, level: Option<&str>) -> Option<Vec<serde_json::Value>> {
+    hello_xr_on_the_double_for(graphics, level, INJECTED_FRAMES).map(|(events, _)| events)
+}
+
+/// [`hello_xr_on_the_double`] for `frames` frames, with fovea's stats lines on; also returns
+/// hello_xr's stderr, where fovea logs.
+fn hello_xr_on_the_double_for(
+    graphics: &str,
+    level: Option<&str>,
+    frames: u64,
+) -> Option<(Vec<serde_json::Value>, String)> {
     let system = match find_system() {
         Ok(s) => s,
         Err(reason) => {
@@ -536,13 +546,14 @@ fn hello_xr_on_the_double(graphics: &str, level: Option<&str>) -> Option<Vec<ser
             records.clone().into_os_string(),
         ),
         (fovea_vkdouble::PROFILE_ENV, "nvidia".into()),
-        (
-            "FOVEA_SIM_EXIT_AFTER_FRAMES",
-            INJECTED_FRAMES.to_string().into(),
-        ),
+        ("FOVEA_SIM_EXIT_AFTER_FRAMES", frames.to_string().into()),
         (
             fovea_abi::env::LOG,
-            "warn,fovea::vk=info,fovea::xr::loader=info".into(),
+            format!(
+                "warn,fovea::vk=info,fovea::xr::loader=info,{}=info",
+                log_target::STATS
+            )
+            .into(),
         ),
         (fovea_abi::env::LOG_FILE, OsString::new()),
     ];
@@ -553,9 +564,9 @@ fn hello_xr_on_the_double(graphics: &str, level: Option<&str>) -> Option<Vec<ser
     let run = run_hello_xr(&system, graphics, &[FOVEA_LAYER], &env);
     let label = format!("hello_xr -g {graphics} on the double, injection {level:?}");
     assert_eq!(run.code, Some(0), "{label}\n{}", run.transcript());
-    let (frames, errors) = summary(&run.stderr)
+    let (ran, errors) = summary(&run.stderr)
         .unwrap_or_else(|| panic!("{label}: no runtime summary line\n{}", run.transcript()));
-    assert!(frames >= INJECTED_FRAMES, "{label}: {frames} frames");
+    assert!(ran >= frames, "{label}: {ran} frames");
     assert_eq!(errors, 0, "{label}\n{}", run.transcript());
     let messages = messages(&run);
     assert!(
@@ -576,7 +587,10 @@ fn hello_xr_on_the_double(graphics: &str, level: Option<&str>) -> Option<Vec<ser
             run.transcript()
         );
     }
-    Some(records["events"].as_array().cloned().unwrap_or_default())
+    Some((
+        records["events"].as_array().cloned().unwrap_or_default(),
+        run.stderr,
+    ))
 }
 
 /// hello_xr's eye passes (one swapchain per eye: fovea guesses view 0 and view 1 from the first two
@@ -678,6 +692,16 @@ fn hello_xr_eye_passes_carry_the_injected_maps(graphics: &str) {
             assert_eq!(matched, [true, true], "{level:?}: each eye its own map");
         }
     }
+    // The stats line counts the passes: hello_xr renders each eye once a frame, nothing else.
+    let Some((_, stderr)) = hello_xr_on_the_double_for(graphics, Some("high"), 120) else {
+        return;
+    };
+    let stats: Vec<&str> = stderr.lines().filter(|l| l.contains("Inj=")).collect();
+    assert!(!stats.is_empty(), "no stats line with Inj=:\n{stderr}");
+    assert!(
+        stats.iter().all(|l| l.contains("Fov=3 Inj=2/2")),
+        "{stats:#?}"
+    );
     // Injection off: the device gets no shading rates, and no pass an attachment.
     let Some(events) = hello_xr_on_the_double(graphics, None) else {
         return;
