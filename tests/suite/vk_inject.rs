@@ -12,8 +12,9 @@
 //! first of its size), the views located, then three passes with one pipeline: into the acquired
 //! swapchain image, into a 256×256 image of the application's own, and into an eye-shaped 640×500
 //! image of its own; as dynamic renderings, as version-1 render passes with a framebuffer each, or
-//! as version-2 passes with imageless framebuffers. What must reach the driver, per profile and
-//! level:
+//! as version-2 passes with imageless framebuffers; or, multiview (view mask 0b11), into two-layer
+//! targets with a swapchain that is an array of both views. What must reach the driver, per profile
+//! and level:
 //!
 //! - injection on: the device with `VK_KHR_fragment_shading_rate`'s attachment feature; the pipeline
 //!   with the state {1×1, {KEEP, REPLACE}} (and, for dynamic rendering, the shading-rate flag);
@@ -21,7 +22,9 @@
 //!   swapchain pass with a shading-rate attachment of the device's texel whose codes at submit are
 //!   exactly `fovea_model::inject::codes` for view 0 at the located FOVs and the level; the
 //!   eye-shaped one with the merged map of both eyes; the small one with none (dynamic rendering)
-//!   or a full-rate map covering it (render passes);
+//!   or a full-rate map covering it (render passes); multiview, one map of both views for both
+//!   two-layer targets, two layers on `nvidia` and one merged layer on `amd`; a level changed while
+//!   the application runs refills the map in place, once;
 //! - injection off: none of it, the double sees the application's calls as they were;
 //! - an application that enables shading rates itself: none of it either, and the log says so;
 //!
@@ -72,6 +75,25 @@ enum Api {
     /// `vkCreateRenderPass2` and an imageless framebuffer per target, the views named at
     /// `vkCmdBeginRenderPass2`.
     Imageless,
+    /// `vkCmdBeginRendering` with view mask 0b11 into two-layer targets: the swapchain an array of
+    /// both views.
+    Multiview,
+}
+
+impl Api {
+    /// Whether the passes are dynamic renderings.
+    fn dynamic(self) -> bool {
+        matches!(self, Api::Dynamic | Api::Multiview)
+    }
+
+    /// The colour targets' layers.
+    fn layers(self) -> u32 {
+        if self == Api::Multiview {
+            2
+        } else {
+            1
+        }
+    }
 }
 
 /// How the application is set up.
@@ -122,6 +144,7 @@ unsafe fn image(
     d: &ash::Device,
     memory: &vk::PhysicalDeviceMemoryProperties,
     extent: [u32; 2],
+    layers: u32,
 ) -> (vk::Image, vk::DeviceMemory) {
     let info = vk::ImageCreateInfo::default()
         .image_type(vk::ImageType::TYPE_2D)
@@ -132,7 +155,7 @@ unsafe fn image(
             depth: 1,
         })
         .mip_levels(1)
-        .array_layers(1)
+        .array_layers(layers)
         .samples(vk::SampleCountFlags::TYPE_1)
         .tiling(vk::ImageTiling::OPTIMAL)
         .usage(USAGE);
@@ -157,15 +180,20 @@ unsafe fn image(
 
 /// # Safety
 /// `d` and `image` must be alive.
-unsafe fn view(d: &ash::Device, image: vk::Image) -> vk::ImageView {
+unsafe fn view(d: &ash::Device, image: vk::Image, layers: u32) -> vk::ImageView {
+    let ty = if layers > 1 {
+        vk::ImageViewType::TYPE_2D_ARRAY
+    } else {
+        vk::ImageViewType::TYPE_2D
+    };
     // SAFETY: the caller's promise.
     unsafe {
         d.create_image_view(
             &vk::ImageViewCreateInfo::default()
                 .image(image)
-                .view_type(vk::ImageViewType::TYPE_2D)
+                .view_type(ty)
                 .format(FORMAT)
-                .subresource_range(range(0, 1)),
+                .subresource_range(range(0, layers)),
             None,
         )
     }
@@ -324,10 +352,14 @@ fn run_with(
     let mut rates = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
         .attachment_fragment_shading_rate(true);
     let app_rates = setup == Setup::AppRates;
-    let mut v12 = vk::PhysicalDeviceVulkan12Features::default().imageless_framebuffer(true);
+    let mut v11 = vk::PhysicalDeviceVulkan11Features::default().multiview(true);
     if app_rates {
-        v12.p_next = &mut rates as *mut _ as *mut c_void;
+        v11.p_next = &mut rates as *mut _ as *mut c_void;
     }
+    let mut v12 = vk::PhysicalDeviceVulkan12Features::default().imageless_framebuffer(true);
+    v12.p_next = &mut v11 as *mut _ as *mut c_void;
+    let target_layers = api.layers();
+    let view_mask = if api == Api::Multiview { 0b11 } else { 0 };
     let exts = [FSR];
     let options = Options {
         layers: &layers,
@@ -357,7 +389,7 @@ fn run_with(
         width: WIDTH,
         height: HEIGHT,
         face_count: 1,
-        array_size: 1,
+        array_size: target_layers,
         mip_count: 1,
     };
     let mut swapchain = xr::Swapchain::NULL;
@@ -406,9 +438,10 @@ fn run_with(
             .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
             .unwrap();
         let formats = [FORMAT];
-        let mut rendering =
-            vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&formats);
-        let render_pass = (api != Api::Dynamic).then(|| render_pass(d, api));
+        let mut rendering = vk::PipelineRenderingCreateInfo::default()
+            .color_attachment_formats(&formats)
+            .view_mask(view_mask);
+        let render_pass = (!api.dynamic()).then(|| render_pass(d, api));
         let fixed = Fixed::new();
         let st = stages(modules);
         let pipeline_info = match render_pass {
@@ -418,14 +451,14 @@ fn run_with(
         let pipeline = d
             .create_graphics_pipelines(vk::PipelineCache::null(), &[pipeline_info], None)
             .unwrap()[0];
-        let (small, small_mem) = image(d, &memory, [SMALL, SMALL]);
-        let (own, own_mem) = image(d, &memory, [WIDTH, HEIGHT]);
+        let (small, small_mem) = image(d, &memory, [SMALL, SMALL], target_layers);
+        let (own, own_mem) = image(d, &memory, [WIDTH, HEIGHT], target_layers);
         let targets = [
             (images[index as usize], [WIDTH, HEIGHT]),
             (small, [SMALL, SMALL]),
             (own, [WIDTH, HEIGHT]),
         ];
-        let views = targets.map(|(i, _)| view(d, i));
+        let views = targets.map(|(i, _)| view(d, i, target_layers));
         let framebuffers = render_pass
             .map(|rp| [0, 1, 2].map(|i| framebuffer(d, rp, api, views[i], targets[i].1)));
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
@@ -435,7 +468,7 @@ fn run_with(
             .map(|&(i, _)| {
                 vk::ImageMemoryBarrier::default()
                     .image(i)
-                    .subresource_range(range(0, 1))
+                    .subresource_range(range(0, target_layers))
                     .old_layout(vk::ImageLayout::UNDEFINED)
                     .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                     .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
@@ -498,6 +531,7 @@ fn run_with(
                     },
                 })
                 .layer_count(1)
+                .view_mask(view_mask)
                 .color_attachments(&colour);
             d.cmd_begin_rendering(cb, &ri);
             draw_fullscreen(d, cb, pipeline);
@@ -529,7 +563,7 @@ fn run_with(
             }
             let (i, _, t) = frame.acquire(swapchain);
             time = t;
-            let target = view(d, images[i as usize]);
+            let target = view(d, images[i as usize], target_layers);
             let cb2 = d
                 .allocate_command_buffers(
                     &vk::CommandBufferAllocateInfo::default()
@@ -642,7 +676,7 @@ impl Outcome {
     /// The shading-rate view of each of the test's three renderings or passes as the driver got
     /// them, in order (`Null` for none).
     fn rates(&self, api: Api) -> Vec<Value> {
-        let kind = if api == Api::Dynamic {
+        let kind = if api.dynamic() {
             "begin_rendering"
         } else {
             "begin_render_pass"
@@ -652,7 +686,7 @@ impl Outcome {
             .into_iter()
             .filter(|b| b["command_buffer"] == json!(self.command_buffer))
             .map(|b| {
-                if api == Api::Dynamic {
+                if api.dynamic() {
                     b["shading_rate"].clone()
                 } else {
                     let v = b["shading_rate_views"]
@@ -803,7 +837,7 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
         for b in out.of("begin_render_pass") {
             assert_eq!(b["shading_rate_views"], json!([]), "{what}: {b}");
         }
-        if api == Api::Dynamic {
+        if api.dynamic() {
             assert_eq!(out.rates(api), vec![Value::Null; 3], "{what}");
         }
         assert!(
@@ -823,7 +857,7 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
     };
     assert_eq!(
         passes.len(),
-        usize::from(api != Api::Dynamic),
+        usize::from(!api.dynamic()),
         "{what}: {passes:?}"
     );
     let rates = out.rates(api);
@@ -836,7 +870,7 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
     // The flag is for dynamic rendering; a render pass carries its attachment itself.
     assert_eq!(
         pipelines[0]["rendering_attachment_flag"],
-        api == Api::Dynamic,
+        api.dynamic(),
         "{what}"
     );
     assert_eq!(
@@ -858,25 +892,29 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
             "{what}: {p}"
         );
     }
-    if api == Api::Dynamic {
+    if api.dynamic() {
         for r in [&rates[0], &rates[2]] {
             assert_eq!(r["layout"], FSR_LAYOUT.as_raw(), "{what}: {r}");
             assert_eq!(r["texel"], json!([texel.width, texel.height]), "{what}");
         }
     }
     let view_of = |r: &Value| {
-        if api == Api::Dynamic {
+        if api.dynamic() {
             r["view"].clone()
         } else {
             r.clone()
         }
     };
     // The swapchain image (view 0) and the eye-shaped target of the application's own (both
-    // eyes merged) get maps.
-    for (r, views) in [
-        (&rates[0], Views::Layers { first: 0, count: 1 }),
-        (&rates[2], Views::Merged),
-    ] {
+    // eyes merged) get maps; in a multiview rendering both hold both views, layer by layer (on
+    // `amd`, without layered attachments, merged into one).
+    let (swapchain_views, own_views) = if api == Api::Multiview {
+        let both = Views::Layers { first: 0, count: 2 };
+        (both, both)
+    } else {
+        (Views::Layers { first: 0, count: 1 }, Views::Merged)
+    };
+    for (r, views) in [(&rates[0], swapchain_views), (&rates[2], own_views)] {
         let image = out.image_of(&view_of(r));
         let got = out.codes_of(&image);
         let want = expected(profile, views, out.fovs, level);
@@ -901,13 +939,23 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
             );
         }
     }
-    assert_ne!(
-        view_of(&rates[0]),
-        view_of(&rates[2]),
-        "{what}: one map per shape and views"
-    );
+    if api == Api::Multiview {
+        assert_eq!(
+            view_of(&rates[0]),
+            view_of(&rates[2]),
+            "{what}: one map per shape and views"
+        );
+        let (_, layers, _) = out.codes_of(&out.image_of(&view_of(&rates[0])));
+        assert_eq!(layers, if profile.layered() { 2 } else { 1 }, "{what}");
+    } else {
+        assert_ne!(
+            view_of(&rates[0]),
+            view_of(&rates[2]),
+            "{what}: one map per shape and views"
+        );
+    }
     // The small target: no attachment in a rendering; a full-rate map covering it in a pass.
-    if api == Api::Dynamic {
+    if api.dynamic() {
         assert_eq!(rates[1], Value::Null, "{what}: small target");
     } else {
         let (extent, layers, codes) = out.codes_of(&out.image_of(&rates[1]));
@@ -924,6 +972,16 @@ fn injected_eye_passes_carry_the_models_codes_at_every_level() {
         Setup::Inject(Level::None),
         Api::Dynamic,
         &Level::ALL,
+    );
+}
+
+#[test]
+fn multiview_renderings_into_an_array_of_views_get_a_layered_or_merged_map() {
+    check(
+        "multiview_renderings_into_an_array_of_views_get_a_layered_or_merged_map",
+        Setup::Inject(Level::None),
+        Api::Multiview,
+        &[Level::High],
     );
 }
 
