@@ -345,10 +345,13 @@ impl Injector {
         {
             let o = m.objects?;
             if m.key != key {
+                // Whatever happens below, not again for this key: nothing per command.
+                m.key = key;
                 let (texels, layers, codes) = self.codes(state, extent, views);
+                // A shape's texels and layers follow from its extent, views and the device alone,
+                // so the image always fits; checked all the same, never written past.
                 if texels == o.texels && layers == o.layers {
                     own.clears.upload(o.image, texels, layers, codes);
-                    m.key = key;
                     tracing::info!(
                         width = extent[0],
                         height = extent[1],
