@@ -14,7 +14,11 @@
 //! a pass without a density map, `vkCmdBeginRendering` + `vkCmdEndRendering` without one. For
 //! information, the density-map variants (`fovea` only: the bare device has no density maps):
 //! a barrier into `FRAGMENT_DENSITY_MAP_OPTIMAL_EXT`, a render pass and a dynamic rendering with a
-//! density-map attachment.
+//! density-map attachment. And injection's (docs/injection.md): a third device, made with the
+//! layer after an OpenXR instance with `FOVEA_INJECT=1` (fovea's OpenXR layer on the simulated
+//! runtime) published an eye swapchain, begins a dynamic rendering and a render pass into an
+//! eye-shaped target of its own, which get fovea's map (made in the warm-up rounds; what is timed
+//! is the classification and the attachment chained on).
 //!
 //! Allocations are counted by interposing `malloc` and friends in this executable, as
 //! `benches/frame_loop.rs` does (the layer and the driver are dlopened libraries; ELF symbol
@@ -107,6 +111,19 @@ const SIZE: u32 = 64;
 const DENSITY: u32 = SIZE / 16;
 /// Commands per round (the command buffer is reset between rounds).
 const ROUND: usize = 256;
+/// The eye swapchain's size, and the injected side's colour target's (an eye-shaped target).
+const EYE: [u32; 2] = [640, 500];
+
+/// Which device a side makes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    /// The double alone.
+    Bare,
+    /// fovea above the double, emulating density maps.
+    Fdm,
+    /// fovea above the double, injecting maps into eye passes.
+    Inject,
+}
 
 /// One image with memory and a view.
 struct Target {
@@ -143,15 +160,15 @@ unsafe fn target(
     physical: vk::PhysicalDevice,
     device: &ash::Device,
     format: vk::Format,
-    extent: u32,
+    extent: [u32; 2],
     usage: vk::ImageUsageFlags,
 ) -> Target {
     let info = vk::ImageCreateInfo::default()
         .image_type(vk::ImageType::TYPE_2D)
         .format(format)
         .extent(vk::Extent3D {
-            width: extent,
-            height: extent,
+            width: extent[0],
+            height: extent[1],
             depth: 1,
         })
         .mip_levels(1)
@@ -264,7 +281,8 @@ unsafe fn pass_and_framebuffer(
 }
 
 impl Side {
-    fn new(entry: &ash::Entry, with_fovea: bool) -> Result<Side, String> {
+    fn new(entry: &ash::Entry, kind: Kind) -> Result<Side, String> {
+        let with_fovea = kind != Kind::Bare;
         let mut layers = vec![fovea_vkdouble::LAYER_NAME.as_ptr()];
         if with_fovea {
             layers.insert(0, FOVEA.as_ptr());
@@ -303,7 +321,7 @@ impl Side {
             let mut dinfo = vk::DeviceCreateInfo::default()
                 .queue_create_infos(&queues)
                 .push_next(&mut v13);
-            if with_fovea {
+            if kind == Kind::Fdm {
                 dinfo = dinfo.enabled_extension_names(&exts).push_next(&mut fdm);
             }
             let device = instance
@@ -325,22 +343,27 @@ impl Side {
                         .command_buffer_count(1),
                 )
                 .expect("vkAllocateCommandBuffers")[0];
+            let extent = if kind == Kind::Inject {
+                EYE
+            } else {
+                [SIZE, SIZE]
+            };
             let color = target(
                 &instance,
                 physical,
                 &device,
                 vk::Format::R8G8B8A8_UNORM,
-                SIZE,
+                extent,
                 vk::ImageUsageFlags::COLOR_ATTACHMENT,
             );
             let (pass, framebuffer) = pass_and_framebuffer(&device, color.view, None);
-            let fdm = with_fovea.then(|| {
+            let fdm = (kind == Kind::Fdm).then(|| {
                 let density = target(
                     &instance,
                     physical,
                     &device,
                     vk::Format::R8G8_UNORM,
-                    DENSITY,
+                    [DENSITY, DENSITY],
                     vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
                 );
                 let (p, f) = pass_and_framebuffer(&device, color.view, Some(density.view));
@@ -397,6 +420,9 @@ impl Side {
                 vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT,
             ),
             (Case::BarrierFdm | Case::RenderPassFdm | Case::RenderingFdm, None) => return false,
+            (Case::RenderPassInjected | Case::RenderingInjected, _) if self.fdm.is_some() => {
+                return false
+            }
             _ => (self.color.image, vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL),
         };
         // SAFETY: the side's own command buffer, recording; every struct lives across its call.
@@ -439,7 +465,7 @@ impl Side {
                         &vk::DependencyInfo::default().image_memory_barriers(&barrier),
                     );
                 }
-                Case::RenderPass | Case::RenderPassFdm => {
+                Case::RenderPass | Case::RenderPassFdm | Case::RenderPassInjected => {
                     let (pass, framebuffer) = match (case, &self.fdm) {
                         (Case::RenderPassFdm, Some((_, p, f))) => (*p, *f),
                         _ => (self.pass, self.framebuffer),
@@ -451,7 +477,7 @@ impl Side {
                     d.cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE);
                     d.cmd_end_render_pass(cb);
                 }
-                Case::Rendering | Case::RenderingFdm => {
+                Case::Rendering | Case::RenderingFdm | Case::RenderingInjected => {
                     let colors = [vk::RenderingAttachmentInfo::default()
                         .image_view(self.color.view)
                         .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
@@ -527,10 +553,12 @@ enum Case {
     BarrierFdm,
     RenderPassFdm,
     RenderingFdm,
+    RenderPassInjected,
+    RenderingInjected,
 }
 
 impl Case {
-    const ALL: [Case; 7] = [
+    const ALL: [Case; 9] = [
         Case::Barrier,
         Case::Barrier2,
         Case::RenderPass,
@@ -538,7 +566,14 @@ impl Case {
         Case::BarrierFdm,
         Case::RenderPassFdm,
         Case::RenderingFdm,
+        Case::RenderPassInjected,
+        Case::RenderingInjected,
     ];
+
+    /// Whether the injecting device records it.
+    fn injected(self) -> bool {
+        matches!(self, Case::RenderPassInjected | Case::RenderingInjected)
+    }
 
     fn name(self) -> &'static str {
         match self {
@@ -549,6 +584,8 @@ impl Case {
             Case::BarrierFdm => "vkCmdPipelineBarrier (density image)",
             Case::RenderPassFdm => "vkCmdBeginRenderPass+End (FDM pass)",
             Case::RenderingFdm => "vkCmdBeginRendering+End (FDM attachment)",
+            Case::RenderPassInjected => "vkCmdBeginRenderPass+End (injected eye pass)",
+            Case::RenderingInjected => "vkCmdBeginRendering+End (injected eye pass)",
         }
     }
 
@@ -557,7 +594,8 @@ impl Case {
         match self {
             Case::BarrierFdm => Case::Barrier,
             Case::RenderPassFdm => Case::RenderPass,
-            Case::RenderingFdm => Case::Rendering,
+            Case::RenderingFdm | Case::RenderingInjected => Case::Rendering,
+            Case::RenderPassInjected => Case::RenderPass,
             c => c,
         }
     }
@@ -582,8 +620,102 @@ impl Bottom {
     }
 }
 
-/// Both sides on both bottoms, or why not.
-fn sides() -> Result<Vec<(Bottom, Side, Side)>, String> {
+/// The three sides on one bottom.
+struct Sides {
+    bottom: Bottom,
+    bare: Side,
+    fovea: Side,
+    inject: Side,
+}
+
+impl Sides {
+    /// The side of fovea's that records `case`.
+    fn fovea_for(&self, case: Case) -> &Side {
+        if case.injected() {
+            &self.inject
+        } else {
+            &self.fovea
+        }
+    }
+}
+
+/// What keeps injection on: an OpenXR instance with `FOVEA_INJECT=1` through fovea's OpenXR layer
+/// and the simulated runtime, a session on a Vulkan device of its own, and a 640×500 colour
+/// swapchain, which fovea publishes as the left eye's (docs/injection.md#which-passes). Kept for
+/// the process.
+struct Injecting {
+    _app: fovea_harness::App,
+    _vulkan: fovea_harness::vulkan::Vulkan,
+}
+
+/// Starts injection for the devices made after it, or why not.
+fn injecting(entry: &ash::Entry) -> Result<Injecting, String> {
+    use openxr_sys as xr;
+    use xr::Handle as _;
+    std::env::set_var("FOVEA_INJECT", "1");
+    std::env::set_var("FOVEA_SIM_VK_DEVICE", "llvmpipe");
+    let app = fovea_harness::App::new(
+        fovea_harness::Chain::fovea()?,
+        &["XR_KHR_vulkan_enable2"],
+        fovea_harness::app::API_1_0,
+    )
+    .map_err(|r| format!("xrCreateInstance: {r:?}"))?;
+    let sys = app.system();
+    let options = fovea_harness::vulkan::Options {
+        layers: &[],
+        ..Default::default()
+    };
+    let v = fovea_harness::vulkan::Vulkan::through_xr_with(
+        entry,
+        app.chain.gipa(),
+        app.instance,
+        sys,
+        &options,
+    )?;
+    let binding = v.binding();
+    // SAFETY: each function is looked up as the type its name implies; every struct lives across
+    // its call.
+    unsafe {
+        let create_session: xr::pfn::CreateSession = app.func(c"xrCreateSession");
+        let create_swapchain: xr::pfn::CreateSwapchain = app.func(c"xrCreateSwapchain");
+        let info = xr::SessionCreateInfo {
+            ty: xr::StructureType::SESSION_CREATE_INFO,
+            next: &binding as *const _ as *const c_void,
+            create_flags: xr::SessionCreateFlags::EMPTY,
+            system_id: sys,
+        };
+        let mut session = xr::Session::NULL;
+        let r = create_session(app.instance, &info, &mut session);
+        if r != xr::Result::SUCCESS {
+            return Err(format!("xrCreateSession: {r:?}"));
+        }
+        let info = xr::SwapchainCreateInfo {
+            ty: xr::StructureType::SWAPCHAIN_CREATE_INFO,
+            next: std::ptr::null(),
+            create_flags: xr::SwapchainCreateFlags::EMPTY,
+            usage_flags: xr::SwapchainUsageFlags::COLOR_ATTACHMENT,
+            format: vk::Format::R8G8B8A8_SRGB.as_raw() as i64,
+            sample_count: 1,
+            width: EYE[0],
+            height: EYE[1],
+            face_count: 1,
+            array_size: 1,
+            mip_count: 1,
+        };
+        let mut swapchain = xr::Swapchain::NULL;
+        let r = create_swapchain(session, &info, &mut swapchain);
+        if r != xr::Result::SUCCESS {
+            return Err(format!("xrCreateSwapchain: {r:?}"));
+        }
+    }
+    Ok(Injecting {
+        _app: app,
+        _vulkan: v,
+    })
+}
+
+/// The three sides on both bottoms, and what keeps injection on; or why not.
+fn sides() -> Result<(Vec<Sides>, Injecting), String> {
     let fovea_lib = fovea_harness::artifact("libfovea.so")?
         .canonicalize()
         .map_err(|e| e.to_string())?;
@@ -607,26 +739,33 @@ fn sides() -> Result<Vec<(Bottom, Side, Side)>, String> {
     std::env::remove_var(fovea_vkdouble::NULL_COMMANDS_ENV);
     // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
     let entry = unsafe { ash::Entry::load() }.map_err(|e| format!("no Vulkan loader ({e})"))?;
+    let keep = injecting(&entry)?;
     let mut all = Vec::new();
     for bottom in [Bottom::Lavapipe, Bottom::Null] {
         if bottom == Bottom::Null {
             // Read by the double at vkCreateDevice.
             std::env::set_var(fovea_vkdouble::NULL_COMMANDS_ENV, "1");
         }
-        let bare = Side::new(&entry, false)?;
-        let fovea = Side::new(&entry, true)?;
-        all.push((bottom, bare, fovea));
+        all.push(Sides {
+            bottom,
+            bare: Side::new(&entry, Kind::Bare)?,
+            fovea: Side::new(&entry, Kind::Fdm)?,
+            inject: Side::new(&entry, Kind::Inject)?,
+        });
     }
     std::env::remove_var(fovea_vkdouble::NULL_COMMANDS_ENV);
     // The entry (the loader library) must outlive every instance: keep it for the process.
     std::mem::forget(entry);
-    Ok(all)
+    Ok((all, keep))
 }
 
-fn bench(c: &mut Criterion, bottom: Bottom, bare: &Side, fovea: &Side) {
-    let mut g = c.benchmark_group(format!("vk_commands/{}", bottom.name()));
+fn bench(c: &mut Criterion, sides: &Sides) {
+    let mut g = c.benchmark_group(format!("vk_commands/{}", sides.bottom.name()));
     for case in Case::ALL {
-        for (label, side, recorded) in [("bare", bare, case.bare()), ("fovea", fovea, case)] {
+        for (label, side, recorded) in [
+            ("bare", &sides.bare, case.bare()),
+            ("fovea", sides.fovea_for(case), case),
+        ] {
             g.bench_function(format!("{}/{label}", case.name()), |b| {
                 b.iter_custom(|iters| {
                     let mut total = Duration::ZERO;
@@ -652,7 +791,8 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Interleaved rounds of both sides, case by case: the summary table. Returns the cases where the
 /// layer allocated per command on the null bottom (fewest allocations in a round, fovea's above
 /// the bare device's).
-fn summary(bottom: Bottom, bare: &Side, fovea: &Side) -> Vec<String> {
+fn summary(sides: &Sides) -> Vec<String> {
+    let (bottom, bare) = (sides.bottom, &sides.bare);
     let mut added = Vec::new();
     const ROUNDS: usize = 200;
     println!(
@@ -661,7 +801,7 @@ fn summary(bottom: Bottom, bare: &Side, fovea: &Side) -> Vec<String> {
         bottom.name()
     );
     println!(
-        "{:<42} {:>9} {:>9} {:>9} {:>7} {:>11} {:>11}",
+        "{:<46} {:>9} {:>9} {:>9} {:>7} {:>11} {:>11}",
         "command", "bare ns", "fovea ns", "added ns", "ratio", "bare alloc", "fovea alloc"
     );
     for case in Case::ALL {
@@ -671,13 +811,16 @@ fn summary(bottom: Bottom, bare: &Side, fovea: &Side) -> Vec<String> {
             let (t, a) = bare.round(case.bare(), ROUND).expect("recordable");
             tb.push(t.as_nanos() as f64 / ROUND as f64);
             ab = ab.min(a);
-            let (t, a) = fovea.round(case, ROUND).expect("recordable");
+            let (t, a) = sides
+                .fovea_for(case)
+                .round(case, ROUND)
+                .expect("recordable");
             tf.push(t.as_nanos() as f64 / ROUND as f64);
             af = af.min(a);
         }
         let (b, f) = (median(tb), median(tf));
         println!(
-            "{:<42} {:>9.1} {:>9.1} {:>9.1} {:>7.3} {:>11.2} {:>11.2}",
+            "{:<46} {:>9.1} {:>9.1} {:>9.1} {:>7.3} {:>11.2} {:>11.2}",
             case.name(),
             b,
             f,
@@ -701,19 +844,20 @@ fn summary(bottom: Bottom, bare: &Side, fovea: &Side) -> Vec<String> {
 }
 
 fn benches() {
-    let all = match sides() {
+    let (all, _injecting) = match sides() {
         Ok(s) => s,
         Err(e) => {
             eprintln!("vk_commands: skipped: {e}");
             return;
         }
     };
-    // Warm up (lavapipe's command pools grow to their steady size; the layer's scratch too).
-    for (_, bare, fovea) in &all {
+    // Warm up (lavapipe's command pools grow to their steady size; the layer's scratch too; the
+    // injected map is made at the first injected begin).
+    for sides in &all {
         for case in Case::ALL {
             for _ in 0..4 {
-                bare.round(case.bare(), ROUND);
-                fovea.round(case, ROUND);
+                sides.bare.round(case.bare(), ROUND);
+                sides.fovea_for(case).round(case, ROUND);
             }
         }
     }
@@ -722,13 +866,13 @@ fn benches() {
         .warm_up_time(Duration::from_millis(300))
         .measurement_time(Duration::from_secs(1))
         .configure_from_args();
-    for (bottom, bare, fovea) in &all {
-        bench(&mut c, *bottom, bare, fovea);
+    for sides in &all {
+        bench(&mut c, sides);
     }
     c.final_summary();
     let mut added = Vec::new();
-    for (bottom, bare, fovea) in &all {
-        added.extend(summary(*bottom, bare, fovea));
+    for sides in &all {
+        added.extend(summary(sides));
     }
     // Recording allocates nothing in the layer, density-map commands included: a regression fails
     // the run.

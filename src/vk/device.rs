@@ -349,12 +349,28 @@ unsafe fn create_device_impl(
                 ),
             }
         }
-        if inject.is_some() {
-            tracing::info!(
-                device = raw(handle),
-                "device has shading-rate attachments for injection"
-            );
-        }
+        let inject = inject.and_then(|facts| {
+            match image::Own::new(&inst, physical, ci, handle, gdpa) {
+                Ok(o) => {
+                    own = Some(std::sync::Arc::new(o));
+                    tracing::info!(
+                        device = raw(handle),
+                        "device has shading-rate attachments for injection"
+                    );
+                    Some(crate::vk::inject::Injector::new(facts))
+                }
+                // Fail open: the device keeps the feature, and its passes run unmodified.
+                Err(why) => {
+                    tracing::warn!(
+                        device = raw(handle),
+                        why = why.as_str(),
+                        "nothing is injected on this device: the layer cannot make its \
+                         shading-rate maps there"
+                    );
+                    None
+                }
+            }
+        });
         registry::add_device(registry::Device {
             handle,
             gdpa,
@@ -381,8 +397,14 @@ pub unsafe extern "system" fn destroy_device(
         let Some(dev) = (unsafe { registry::remove_device(device) }) else {
             return;
         };
-        // SAFETY: the device is live; the application has finished with it.
-        unsafe { image::destroy_all(&dev) };
+        // SAFETY: the device is live; the application has finished with it (destroy_all waits
+        // for the layer's clears and uploads in flight before the maps go).
+        unsafe {
+            image::destroy_all(&dev);
+            if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+                inj.destroy(own);
+            }
+        }
         if let Some(destroy) = dev.next.destroy_device {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { destroy(device, alloc) };
@@ -390,6 +412,9 @@ pub unsafe extern "system" fn destroy_device(
     })
 }
 
+/// `vkCreateImage` on an injecting device: the image goes down untouched, and a colour image's
+/// extent and layers are noted for finding eye passes ([`crate::vk::inject`]).
+///
 /// `vkCreateImage` on an emulating device: a density map reaches the driver without the
 /// density-map usage and subsampled flag it does not know (on a copy of the create info), and
 /// gets a shading-rate shadow ([`image::image_created`]); where the shadow cannot be made, the
@@ -414,6 +439,15 @@ pub unsafe extern "system" fn create_image(
             let Some(next) = dev.next.create_image else {
                 return vk::Result::ERROR_INITIALIZATION_FAILED;
             };
+            if let Some(inj) = &dev.inject {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                let r = unsafe { next(device, info, alloc, out) };
+                if r == vk::Result::SUCCESS && !info.is_null() && !out.is_null() {
+                    // SAFETY: the caller's create info, read only; the image just created.
+                    unsafe { inj.image_created(*out, &*info) };
+                }
+                return r;
+            }
             if info.is_null() || dev.fdm.is_none() {
                 // SAFETY: the next layer's function, with the caller's arguments.
                 return unsafe { next(device, info, alloc, out) };

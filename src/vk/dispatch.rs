@@ -22,6 +22,22 @@ pub enum When {
     Always,
     /// Only on devices that emulate fragment density maps; others get the next layer's pointer.
     Emulated,
+    /// On devices that emulate, and on devices that inject shading-rate maps into eye passes
+    /// (docs/injection.md): image and view tracking, pipelines, dynamic rendering, and the submits
+    /// that carry the maps' uploads.
+    Injected,
+}
+
+impl When {
+    /// Whether the hook is handed out on a device that emulates (`emulated`) or injects
+    /// (`injected`).
+    pub fn applies(self, emulated: bool, injected: bool) -> bool {
+        match self {
+            When::Always => true,
+            When::Emulated => emulated,
+            When::Injected => emulated || injected,
+        }
+    }
 }
 
 /// An intercepted instance or physical-device command.
@@ -152,9 +168,9 @@ hooks! {
     }
     device {
         c"vkDestroyDevice" => destroy_device: PFN_vkDestroyDevice = device::destroy_device, When::Always;
-        c"vkCreateImage" => create_image: PFN_vkCreateImage = device::create_image, When::Emulated;
+        c"vkCreateImage" => create_image: PFN_vkCreateImage = device::create_image, When::Injected;
         c"vkCreateGraphicsPipelines" => create_graphics_pipelines: PFN_vkCreateGraphicsPipelines =
-            pipeline::create_graphics_pipelines, When::Emulated;
+            pipeline::create_graphics_pipelines, When::Injected;
         c"vkCreateShaderModule" => create_shader_module: PFN_vkCreateShaderModule =
             pipeline::create_shader_module, When::Emulated;
         c"vkCreateSampler" => create_sampler: PFN_vkCreateSampler = pipeline::create_sampler,
@@ -176,37 +192,39 @@ hooks! {
         c"vkCmdSetEvent2KHR" => cmd_set_event2_khr: PFN_vkCmdSetEvent2 =
             barrier::cmd_set_event2_khr, When::Emulated;
         // Shadow clears go ahead of the application's submits; wait stages are translated.
-        c"vkQueueSubmit" => queue_submit: PFN_vkQueueSubmit = submit::queue_submit, When::Emulated;
+        c"vkQueueSubmit" => queue_submit: PFN_vkQueueSubmit = submit::queue_submit, When::Injected;
         c"vkQueueSubmit2" => queue_submit2: PFN_vkQueueSubmit2 = submit::queue_submit2,
-            When::Emulated;
+            When::Injected;
         c"vkQueueSubmit2KHR" => queue_submit2_khr: PFN_vkQueueSubmit2 = submit::queue_submit2_khr,
-            When::Emulated;
+            When::Injected;
         // The attachment path: shadows, render passes, framebuffers, dynamic rendering.
-        c"vkDestroyImage" => destroy_image: PFN_vkDestroyImage = image::destroy_image, When::Emulated;
+        c"vkDestroyImage" => destroy_image: PFN_vkDestroyImage = image::destroy_image, When::Injected;
         c"vkCreateImageView" => create_image_view: PFN_vkCreateImageView =
-            image::create_image_view, When::Emulated;
+            image::create_image_view, When::Injected;
         c"vkDestroyImageView" => destroy_image_view: PFN_vkDestroyImageView =
-            image::destroy_image_view, When::Emulated;
+            image::destroy_image_view, When::Injected;
         c"vkCreateRenderPass" => create_render_pass: PFN_vkCreateRenderPass =
-            pass::create_render_pass, When::Emulated;
+            pass::create_render_pass, When::Injected;
         c"vkCreateRenderPass2" => create_render_pass2: PFN_vkCreateRenderPass2 =
-            pass::create_render_pass2, When::Emulated;
+            pass::create_render_pass2, When::Injected;
         c"vkCreateRenderPass2KHR" => create_render_pass2_khr: PFN_vkCreateRenderPass2 =
-            pass::create_render_pass2_khr, When::Emulated;
+            pass::create_render_pass2_khr, When::Injected;
         c"vkDestroyRenderPass" => destroy_render_pass: PFN_vkDestroyRenderPass =
-            pass::destroy_render_pass, When::Emulated;
+            pass::destroy_render_pass, When::Injected;
         c"vkCreateFramebuffer" => create_framebuffer: PFN_vkCreateFramebuffer =
-            pass::create_framebuffer, When::Emulated;
+            pass::create_framebuffer, When::Injected;
+        c"vkDestroyFramebuffer" => destroy_framebuffer: PFN_vkDestroyFramebuffer =
+            pass::destroy_framebuffer, When::Injected;
         c"vkCmdBeginRenderPass" => cmd_begin_render_pass: PFN_vkCmdBeginRenderPass =
-            pass::cmd_begin_render_pass, When::Emulated;
+            pass::cmd_begin_render_pass, When::Injected;
         c"vkCmdBeginRenderPass2" => cmd_begin_render_pass2: PFN_vkCmdBeginRenderPass2 =
-            pass::cmd_begin_render_pass2, When::Emulated;
+            pass::cmd_begin_render_pass2, When::Injected;
         c"vkCmdBeginRenderPass2KHR" => cmd_begin_render_pass2_khr: PFN_vkCmdBeginRenderPass2 =
-            pass::cmd_begin_render_pass2_khr, When::Emulated;
+            pass::cmd_begin_render_pass2_khr, When::Injected;
         c"vkCmdBeginRendering" => cmd_begin_rendering: PFN_vkCmdBeginRendering =
-            pass::cmd_begin_rendering, When::Emulated;
+            pass::cmd_begin_rendering, When::Injected;
         c"vkCmdBeginRenderingKHR" => cmd_begin_rendering_khr: PFN_vkCmdBeginRendering =
-            pass::cmd_begin_rendering_khr, When::Emulated;
+            pass::cmd_begin_rendering_khr, When::Injected;
     }
 }
 

@@ -255,8 +255,16 @@ impl Own {
         }
     }
 
+    /// A host-visible, host-coherent memory type among `bits`, for staging uploads.
+    pub fn host_memory_type(&self, bits: u32) -> Option<u32> {
+        let want = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+        let types = &self.memory.memory_types[..self.memory.memory_type_count as usize];
+        (0..types.len() as u32)
+            .find(|&i| bits & (1 << i) != 0 && types[i as usize].property_flags.contains(want))
+    }
+
     /// A device-local memory type among `bits` (any allowed one where none is device-local).
-    fn memory_type(&self, bits: u32) -> Option<u32> {
+    pub fn memory_type(&self, bits: u32) -> Option<u32> {
         let allowed = |i: u32| bits & (1 << i) != 0;
         let types = &self.memory.memory_types[..self.memory.memory_type_count as usize];
         (0..types.len() as u32)
@@ -504,7 +512,8 @@ pub fn shadow_view_info(
         })
 }
 
-/// `vkCreateImageView`: a view of a shadowed image gets a shadow view beside it.
+/// `vkCreateImageView`: a view of a shadowed image gets a shadow view beside it; on an injecting
+/// device a view of a colour image is noted for finding eye passes ([`crate::vk::inject`]).
 ///
 /// # Safety
 /// The caller's arguments, valid as the command requires.
@@ -545,6 +554,11 @@ pub unsafe extern "system" fn create_image_view(
             }
             // SAFETY: the caller's create info, read only.
             let ci = unsafe { &*info };
+            if let Some(inj) = &dev.inject {
+                // SAFETY: the view was just created.
+                inj.view_created(unsafe { *out }, ci);
+                return r;
+            }
             let shadow = dev
                 .attachments
                 .images
@@ -595,6 +609,9 @@ pub unsafe extern "system" fn destroy_image_view(
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, view, alloc) };
         }
+        if let Some(inj) = &dev.inject {
+            inj.view_destroyed(view);
+        }
         let shadow = dev.attachments.views.lock().remove(&view.as_raw());
         if let (Some(s), Some(own)) = (shadow, &dev.attachments.own) {
             // SAFETY: the layer's own view; the application's use of it ended with its view's.
@@ -620,6 +637,9 @@ pub unsafe extern "system" fn destroy_image(
         if let Some(next) = dev.next.destroy_image {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, image, alloc) };
+        }
+        if let Some(inj) = &dev.inject {
+            inj.image_destroyed(image);
         }
         let shadow = dev.attachments.images.lock().remove(&image.as_raw());
         if let Some(s) = shadow {

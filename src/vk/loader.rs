@@ -7,7 +7,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use ash::vk;
 
-use crate::vk::dispatch::{self, InstanceNext, When};
+use crate::vk::dispatch::{self, InstanceNext};
 use crate::vk::link::{self, LayerInstanceCreateInfo, LayerInstanceLink, NegotiateLayerInterface};
 use crate::vk::{chain, registry};
 
@@ -185,7 +185,7 @@ unsafe extern "system" fn get_device_proc_addr(
         // SAFETY: as the caller promised.
         let dev = unsafe { registry::device(device) }?;
         if let Some(h) = dispatch::device_hook(name) {
-            if (h.offered)(&dev.next) && (h.when == When::Always || dev.fdm.is_some()) {
+            if (h.offered)(&dev.next) && h.when.applies(dev.fdm.is_some(), dev.inject.is_some()) {
                 return Some(h.function);
             }
         }
@@ -222,44 +222,89 @@ unsafe extern "system" fn create_instance(
             // SAFETY: the loader's list of layers below; the protocol has each layer advance
             // `pLayerInfo` in the loader's struct before calling down (the struct is the loader's,
             // not the application's).
-            let gipa = unsafe {
+            let (layer, gipa) = unsafe {
                 let layer = (*link_info).u[0] as *const LayerInstanceLink;
                 if layer.is_null() {
                     return vk::Result::ERROR_INITIALIZATION_FAILED;
                 }
                 (*link_info).u[0] = (*layer).p_next as *mut _;
-                (*layer).pfn_next_get_instance_proc_addr
+                (layer, (*layer).pfn_next_get_instance_proc_addr)
             };
-            // SAFETY: the next layer's vkCreateInstance, of the type its name implies, called
-            // with the caller's arguments.
-            let r = unsafe {
+            // SAFETY: the next layer's vkCreateInstance, of the type its name implies.
+            let create = unsafe {
                 let Some(create) = gipa(vk::Instance::null(), c"vkCreateInstance".as_ptr()) else {
                     return vk::Result::ERROR_INITIALIZATION_FAILED;
                 };
-                let create = std::mem::transmute::<
-                    unsafe extern "system" fn(),
-                    vk::PFN_vkCreateInstance,
-                >(create);
-                create(info, alloc, out)
+                std::mem::transmute::<unsafe extern "system" fn(), vk::PFN_vkCreateInstance>(create)
             };
-            if r != vk::Result::SUCCESS {
-                return r;
-            }
-            // SAFETY: the instance was just created; the create info is valid.
-            unsafe {
-                let handle = *out;
-                let api_version = if ci.p_application_info.is_null()
-                    || (*ci.p_application_info).api_version == 0
-                {
+            // SAFETY: a valid create info, as above.
+            let api_version = unsafe {
+                if ci.p_application_info.is_null() || (*ci.p_application_info).api_version == 0 {
                     vk::API_VERSION_1_0
                 } else {
                     (*ci.p_application_info).api_version
-                };
-                let properties2_ext = extension_enabled(
+                }
+            };
+            let properties2 = ash::khr::get_physical_device_properties2::NAME;
+            // SAFETY: the application's names, as the create info promises.
+            let mut properties2_ext = unsafe {
+                extension_enabled(
                     ci.pp_enabled_extension_names,
                     ci.enabled_extension_count,
-                    ash::khr::get_physical_device_properties2::NAME,
-                );
+                    properties2,
+                )
+            };
+            // Injection (docs/injection.md) reads the devices' shading-rate properties and
+            // features, which a Vulkan 1.0 instance (hello_xr's) can ask for only through
+            // VK_KHR_get_physical_device_properties2: the layer enables it on its copy of the
+            // create info. Where the instance cannot be made so, the application's create info
+            // goes down as it came, and its devices are passed through.
+            let mut r = vk::Result::ERROR_EXTENSION_NOT_PRESENT;
+            let mut added = false;
+            if api_version < vk::API_VERSION_1_1
+                && !properties2_ext
+                && crate::bridge::inject::wanted()
+            {
+                let mut names: Vec<*const c_char> = if ci.pp_enabled_extension_names.is_null() {
+                    Vec::new()
+                } else {
+                    // SAFETY: as above.
+                    unsafe {
+                        std::slice::from_raw_parts(
+                            ci.pp_enabled_extension_names,
+                            ci.enabled_extension_count as usize,
+                        )
+                    }
+                    .to_vec()
+                };
+                names.push(properties2.as_ptr());
+                let mut copy = *ci;
+                copy.enabled_extension_count = names.len() as u32;
+                copy.pp_enabled_extension_names = names.as_ptr();
+                // SAFETY: the next layer's function; the copy and its names live across the call.
+                r = unsafe { create(&copy, alloc, out) };
+                added = r == vk::Result::SUCCESS;
+                if !added {
+                    tracing::warn!(
+                        result = ?r,
+                        "cannot enable VK_KHR_get_physical_device_properties2 on a Vulkan 1.0 \
+                         instance; its devices are passed through, nothing is injected"
+                    );
+                    // SAFETY: the loader's struct gets its link back for the retry.
+                    unsafe { (*link_info).u[0] = (*layer).p_next as *mut _ };
+                }
+            }
+            if !added {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                r = unsafe { create(info, alloc, out) };
+            }
+            if r != vk::Result::SUCCESS {
+                return r;
+            }
+            properties2_ext |= added;
+            // SAFETY: the instance was just created; the create info is valid.
+            unsafe {
+                let handle = *out;
                 let next = InstanceNext::load(gipa, handle);
                 registry::add_instance(registry::Instance::new(
                     handle,

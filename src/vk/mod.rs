@@ -16,6 +16,8 @@
 //!   fragment size are detected, subsampled sampler and dynamic view flags are left out;
 //! - [`barrier`]: barriers, event sets and waits without the density-map layout, stage and access bits;
 //! - [`image`]: the layer-owned shading-rate shadows of density-map images and views;
+//! - [`inject`]: injection's own shading-rate maps for eye passes, and the colour images and views
+//!   tracked to find them (docs/injection.md);
 //! - [`pass`]: render passes, framebuffers and dynamic rendering, rewritten to name the shadows;
 //! - [`submit`]: new shadows' clears ahead of the application's next submit, and semaphore wait
 //!   stages without the density-map stage;
@@ -62,6 +64,7 @@ mod chain;
 mod device;
 mod dispatch;
 mod image;
+mod inject;
 mod link;
 mod loader;
 mod pass;

@@ -1,4 +1,4 @@
-//! Pipelines, shader modules, samplers and image views on an emulating device.
+//! Pipelines, shader modules, samplers and image views on an emulating or injecting device.
 //!
 //! - Graphics pipelines used with a density map (their render pass has one, or they carry
 //!   `RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_BIT_EXT` for dynamic rendering, in the 32-bit flags
@@ -10,6 +10,12 @@
 //!   (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkGraphicsPipelineCreateInfo.html>,
 //!   VUID-VkGraphicsPipelineCreateInfo-flags-06638 and -06639). A pipeline that chains its own
 //!   shading-rate state keeps it.
+//! - On a device that injects maps into eye passes (docs/injection.md#how-the-attachment-gets-in),
+//!   every pipeline gets the same state (every render pass there has a shading-rate attachment,
+//!   and whether a dynamic rendering gets one is decided only when it begins), and pipelines for
+//!   dynamic rendering the shading-rate flag. An
+//!   application that uses shading rates itself never has an injecting device
+//!   ([`crate::vk::device`]), so no pipeline there carries rate state of its own.
 //! - Shader modules using `FragSizeEXT` or `FragInvocationCountEXT` (capability
 //!   `FragmentDensityEXT`) cannot be emulated (docs/vulkan-fdm-on-fsr.md#shader-built-ins): said
 //!   once, passed through.
@@ -71,6 +77,12 @@ pub struct Facts {
     /// A graphics pipeline library without pre-rasterisation or fragment-shader state (the
     /// shading-rate state is no part of it).
     pub no_rate_state: bool,
+    /// The device injects maps into eye passes (docs/injection.md#how-the-attachment-gets-in):
+    /// every render pass there has a shading-rate attachment, and any dynamic rendering may get
+    /// one.
+    pub inject: bool,
+    /// The pipeline is for dynamic rendering (no render pass).
+    pub dynamic: bool,
 }
 
 impl Facts {
@@ -85,12 +97,24 @@ impl Facts {
 
     /// Whether the shading-rate state is added.
     pub fn add_state(&self) -> bool {
-        self.fdm() && !self.own_state && !self.no_rate_state
+        (self.fdm() || self.inject) && !self.own_state && !self.no_rate_state
+    }
+
+    /// Whether the shading-rate attachment flag goes into a copy of a chained
+    /// `VkPipelineCreateFlags2CreateInfoKHR` (whose flags replace the 32-bit ones).
+    fn rewrite_flags2(&self) -> bool {
+        self.flag2 || (self.inject_flag() && self.has_flags2)
+    }
+
+    /// Whether the shading-rate attachment flag is added for injection: pipelines for dynamic
+    /// rendering need it (render passes carry their attachment themselves).
+    fn inject_flag(&self) -> bool {
+        self.inject && self.dynamic
     }
 
     /// Whether anything is rewritten.
     pub fn rewrite(&self) -> bool {
-        self.add_state() || self.flag || self.flag2
+        self.add_state() || self.flag || self.flag2 || self.inject_flag()
     }
 }
 
@@ -122,6 +146,8 @@ pub unsafe fn facts(
         own_state: find(vk::StructureType::PIPELINE_FRAGMENT_SHADING_RATE_STATE_CREATE_INFO_KHR)
             .is_some(),
         no_rate_state: library.is_some_and(|f| !f.intersects(rate_parts)),
+        inject: false,
+        dynamic: ci.render_pass == vk::RenderPass::null(),
     }
 }
 
@@ -149,11 +175,15 @@ unsafe fn rewrite(
         >(*ci)
     };
     let mut owned = Owned::default();
-    if f.flag {
+    if f.flag || f.inject_flag() {
+        // The shading-rate flag is required of every pipeline used in a rendering with a
+        // shading-rate attachment
+        // (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdDraw.html>,
+        // VUID-vkCmdDraw-imageView-06183).
         copy.flags = (copy.flags & !FDM_FLAG) | FSR_FLAG;
     }
     let mut head = ci.p_next;
-    if f.flag2 {
+    if f.rewrite_flags2() {
         let ty = vk::StructureType::PIPELINE_CREATE_FLAGS_2_CREATE_INFO_KHR;
         // SAFETY: as the caller promised; found by its sType.
         let mine = unsafe {
@@ -222,8 +252,12 @@ pub unsafe extern "system" fn create_graphics_pipelines(
                 .iter()
                 // SAFETY: valid create infos.
                 .map(|ci| unsafe { facts(ci, registry::pass_uses_fdm) })
+                .map(|f| Facts {
+                    inject: dev.inject.is_some(),
+                    ..f
+                })
                 .collect();
-            if dev.fdm.is_none() || !facts.iter().any(Facts::rewrite) {
+            if (dev.fdm.is_none() && dev.inject.is_none()) || !facts.iter().any(Facts::rewrite) {
                 // SAFETY: the next layer's function, with the caller's arguments.
                 return unsafe { next(device, cache, count, infos, alloc, out) };
             }
@@ -496,6 +530,91 @@ mod tests {
             .is_some());
         }
         drop(owned);
+    }
+
+    #[test]
+    fn injected_dynamic_rendering_pipelines_get_the_flag_and_the_state() {
+        let mut rendering = vk::PipelineRenderingCreateInfo::default();
+        let plain = vk::GraphicsPipelineCreateInfo::default()
+            .flags(vk::PipelineCreateFlags::DISABLE_OPTIMIZATION)
+            .push_next(&mut rendering);
+        // SAFETY: create infos on the stack.
+        let f = unsafe { facts(&plain, |_| false) };
+        assert!(!f.rewrite(), "without injection nothing changes");
+        let f = Facts { inject: true, ..f };
+        assert!(f.rewrite() && f.add_state());
+        // SAFETY: as above.
+        let (copy, owned) = unsafe { rewrite(&plain, f) }.expect("rewrite");
+        assert_eq!(
+            copy.flags,
+            FSR_FLAG | vk::PipelineCreateFlags::DISABLE_OPTIMIZATION
+        );
+        assert_eq!(plain.flags, vk::PipelineCreateFlags::DISABLE_OPTIMIZATION);
+        // SAFETY: the copy's chain, alive with `owned`.
+        unsafe {
+            let state = copy.p_next as *const vk::PipelineFragmentShadingRateStateCreateInfoKHR;
+            assert_eq!((*state).fragment_size, fsr_state().fragment_size);
+            assert_eq!((*state).combiner_ops, fsr_state().combiner_ops);
+            assert_eq!((*state).p_next, plain.p_next);
+        }
+        drop(owned);
+
+        // Flags in a chained VkPipelineCreateFlags2CreateInfoKHR replace the 32-bit ones: the flag
+        // goes into a copy of that struct too.
+        let mut f2 = vk::PipelineCreateFlags2CreateInfoKHR::default()
+            .flags(vk::PipelineCreateFlags2KHR::DISABLE_OPTIMIZATION);
+        let with2 = vk::GraphicsPipelineCreateInfo::default().push_next(&mut f2);
+        // SAFETY: as above.
+        let read = unsafe { facts(&with2, |_| false) };
+        let f = Facts {
+            inject: true,
+            ..read
+        };
+        // SAFETY: as above.
+        let (copy, owned) = unsafe { rewrite(&with2, f) }.expect("rewrite");
+        // SAFETY: the copy's chain, alive with `owned`.
+        unsafe {
+            let flags2 = chain::find::<vk::PipelineCreateFlags2CreateInfoKHR>(
+                copy.p_next,
+                vk::StructureType::PIPELINE_CREATE_FLAGS_2_CREATE_INFO_KHR,
+            )
+            .unwrap()
+            .unwrap();
+            assert_eq!(
+                (*flags2).flags,
+                FSR_FLAG2 | vk::PipelineCreateFlags2KHR::DISABLE_OPTIMIZATION
+            );
+        }
+        assert_eq!(f2.flags, vk::PipelineCreateFlags2KHR::DISABLE_OPTIMIZATION);
+        drop(owned);
+
+        // A pipeline for a render pass gets the state, not the flag (the pass has the attachment).
+        let with_pass =
+            vk::GraphicsPipelineCreateInfo::default().render_pass(vk::RenderPass::from_raw(9));
+        // SAFETY: as above.
+        let read = unsafe { facts(&with_pass, |_| false) };
+        let f = Facts {
+            inject: true,
+            ..read
+        };
+        assert!(f.add_state() && f.rewrite());
+        // SAFETY: as above.
+        let (copy, owned) = unsafe { rewrite(&with_pass, f) }.expect("rewrite");
+        assert_eq!(copy.flags, vk::PipelineCreateFlags::empty());
+        assert!(!copy.p_next.is_null());
+        drop(owned);
+
+        // A library without pre-rasterisation or fragment state gets the flag, not the state.
+        let mut lib = vk::GraphicsPipelineLibraryCreateInfoEXT::default()
+            .flags(vk::GraphicsPipelineLibraryFlagsEXT::VERTEX_INPUT_INTERFACE);
+        let vertex = vk::GraphicsPipelineCreateInfo::default().push_next(&mut lib);
+        // SAFETY: as above.
+        let read = unsafe { facts(&vertex, |_| false) };
+        let f = Facts {
+            inject: true,
+            ..read
+        };
+        assert!(f.rewrite() && !f.add_state());
     }
 
     #[test]

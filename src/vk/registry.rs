@@ -108,13 +108,10 @@ pub struct Device {
     pub next: DeviceNext,
     /// `Some` where the device emulates fragment density maps.
     pub fdm: Option<FdmEmulation>,
-    /// Where injection is on (docs/injection.md) and the device got shading-rate attachments at
-    /// `vkCreateDevice`: its attachment facts, which injected maps are made for.
-    #[expect(
-        dead_code,
-        reason = "read by pass injection (docs/injection.md), which is not written yet"
-    )]
-    pub inject: Option<FdmEmulation>,
+    /// Where injection is on (docs/injection.md), the device got shading-rate attachments at
+    /// `vkCreateDevice` and the layer could set up its own calls on it: its injected maps and what
+    /// it tracks to find eye passes ([`crate::vk::inject`]).
+    pub inject: Option<crate::vk::inject::Injector>,
     /// The device's Vulkan version (the instance's and the physical device's lower one): below
     /// 1.2 render pass 2 is `VK_KHR_create_renderpass2`'s, which the layer enables for emulation,
     /// and the core names may not be called.
@@ -146,8 +143,9 @@ pub struct ShadowView {
 /// Per device: application handles → the layer's shadows, and the render passes the layer
 /// rewrote (by handle → the index of the density attachment, now a shading-rate attachment).
 pub struct Attachments {
-    /// The layer's own device-level calls (creating, clearing and destroying shadows); `None`
-    /// where the device does not emulate, or the layer could not set them up (no shadows then).
+    /// The layer's own device-level calls (creating, clearing and destroying shadows and injected
+    /// maps); `None` where the device neither emulates nor injects, or the layer could not set them
+    /// up (no shadows or maps then).
     pub own: Option<Arc<crate::vk::image::Own>>,
     pub images: Mutex<HashMap<u64, ShadowImage>>,
     pub views: Mutex<HashMap<u64, ShadowView>>,

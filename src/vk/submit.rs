@@ -33,6 +33,14 @@
 //! (`src/gpu/density_images.rs`, docs/ARCHITECTURE.md "Maps are written only on acquire"), so no
 //! clear can land after an upload.
 //!
+//! Uploads. Injected shading-rate maps (docs/injection.md#how-the-attachment-gets-in) are filled
+//! with bytes the layer computed, by the same means and at the same moment: [`Clears::upload`]
+//! stages them, and the next submit on a graphics queue copies them from a host-visible staging
+//! buffer of the layer's own into the image, from `UNDEFINED` (every texel is written) after an
+//! execution dependency on everything earlier on that queue (a pass that still reads the image's
+//! old content), ending in the shading-rate layout. The staging buffer is freed with the command
+//! buffer, once its fence has signalled.
+//!
 //! With nothing pending anywhere (the steady state) a submit costs one atomic load and a scan of
 //! its wait-stage masks before the call down.
 
@@ -62,12 +70,25 @@ struct InFlight {
     shadows: Vec<vk::Image>,
     /// Shadows destroyed by the application meanwhile, destroyed when `fence` has signalled.
     retired: Vec<(vk::Image, vk::DeviceMemory)>,
+    /// The uploads' staging buffer, freed when `fence` has signalled.
+    staging: Option<(vk::Buffer, vk::DeviceMemory)>,
+}
+
+/// Bytes waiting to be copied into a layer-owned shading-rate image: `layers` layers of
+/// `extent` texels, one byte each, layer after layer.
+struct Upload {
+    image: vk::Image,
+    extent: [u32; 2],
+    layers: u32,
+    bytes: Vec<u8>,
 }
 
 #[derive(Default)]
 struct State {
     /// Shadows waiting for their clear, with their layers.
     pending: Vec<(vk::Image, u32)>,
+    /// Images waiting for their upload (at most one per image: the newest bytes).
+    uploads: Vec<Upload>,
     /// A command pool per graphics family the layer submitted on, made at its first clear there.
     pools: Vec<(u32, vk::CommandPool)>,
     in_flight: Vec<InFlight>,
@@ -104,6 +125,40 @@ impl Clears {
     pub fn add(&self, image: vk::Image, layers: u32) {
         self.state.lock().pending.push((image, layers));
         PENDING.fetch_add(1, Ordering::Release);
+    }
+
+    /// Notes that `image` (of `layers` layers of `extent` texels) must hold `bytes` before its next
+    /// use; replaces an upload of the same image still pending, whose bytes are out of date.
+    pub fn upload(&self, image: vk::Image, extent: [u32; 2], layers: u32, bytes: Vec<u8>) {
+        let mut st = self.state.lock();
+        let new = Upload {
+            image,
+            extent,
+            layers,
+            bytes,
+        };
+        match st.uploads.iter_mut().find(|u| u.image == image) {
+            Some(u) => *u = new,
+            None => {
+                st.uploads.push(new);
+                PENDING.fetch_add(1, Ordering::Release);
+            }
+        }
+    }
+
+    /// Drops a pending upload of `image`, which is about to be destroyed; waits for everything in
+    /// flight, which may copy into it.
+    ///
+    /// # Safety
+    /// `d` must be the live device of these uploads.
+    pub unsafe fn forget_upload(&self, d: &ash::Device, image: vk::Image) {
+        let mut st = self.state.lock();
+        if let Some(i) = st.uploads.iter().position(|u| u.image == image) {
+            st.uploads.swap_remove(i);
+            PENDING.fetch_sub(1, Ordering::Release);
+        }
+        // SAFETY: the layer's own objects on a live device.
+        unsafe { reclaim(d, &mut st, true) };
     }
 
     /// Destroys a shadow whose application image is being destroyed: at once where its clear is
@@ -149,34 +204,62 @@ impl Clears {
         let mut st = self.state.lock();
         // SAFETY: the layer's own objects on a live device.
         unsafe { reclaim(d, &mut st, false) };
-        if st.pending.is_empty() {
+        if st.pending.is_empty() && st.uploads.is_empty() {
             return Ok(());
         }
+        // SAFETY: a buffer of the layer's own on a live device, freed again on failure.
+        let staging = unsafe { stage(own, &st.uploads) }?;
+        let free_staging = |d: &ash::Device| {
+            if let Some((b, m)) = staging {
+                // SAFETY: the layer's own buffer, not in use (its copy was never submitted).
+                unsafe {
+                    d.destroy_buffer(b, None);
+                    d.free_memory(m, None);
+                }
+            }
+        };
         let pool = match st.pools.iter().find(|(f, _)| *f == family) {
-            Some(&(_, p)) => p,
+            Some(&(_, p)) => Ok(p),
             None => {
                 // SAFETY: a pool of the layer's own on a live device.
-                let p = unsafe {
+                match unsafe {
                     d.create_command_pool(
                         &vk::CommandPoolCreateInfo::default()
                             .queue_family_index(family)
                             .flags(vk::CommandPoolCreateFlags::TRANSIENT),
                         None,
                     )
-                }?;
-                st.pools.push((family, p));
-                p
+                } {
+                    Ok(p) => {
+                        st.pools.push((family, p));
+                        Ok(p)
+                    }
+                    Err(e) => Err(e),
+                }
+            }
+        };
+        let pool = match pool {
+            Ok(p) => p,
+            Err(e) => {
+                free_staging(d);
+                return Err(e);
             }
         };
         // SAFETY: a command buffer and fence of the layer's own, freed again on failure; the
         // shadows are live (pending ones are removed from the list before they are destroyed).
         unsafe {
-            let cb = d.allocate_command_buffers(
+            let cb = match d.allocate_command_buffers(
                 &vk::CommandBufferAllocateInfo::default()
                     .command_pool(pool)
                     .level(vk::CommandBufferLevel::PRIMARY)
                     .command_buffer_count(1),
-            )?[0];
+            ) {
+                Ok(cbs) => cbs[0],
+                Err(e) => {
+                    free_staging(d);
+                    return Err(e);
+                }
+            };
             let fence = std::cell::Cell::new(vk::Fence::null());
             let submitted = (|| -> Result<(), vk::Result> {
                 own.set_loader_data(cb)?;
@@ -186,6 +269,9 @@ impl Clears {
                         .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
                 )?;
                 record(d, cb, &st.pending);
+                if let Some((buffer, _)) = staging {
+                    record_uploads(d, cb, buffer, &st.uploads);
+                }
                 d.end_command_buffer(cb)?;
                 fence.set(d.create_fence(&vk::FenceCreateInfo::default(), None)?);
                 let cbs = [cb];
@@ -207,14 +293,18 @@ impl Clears {
                 if fence.get() != vk::Fence::null() {
                     d.destroy_fence(fence.get(), None);
                 }
+                free_staging(d);
                 return Err(e);
             }
             let shadows: Vec<vk::Image> = st.pending.drain(..).map(|(i, _)| i).collect();
-            PENDING.fetch_sub(shadows.len(), Ordering::Release);
+            let uploads = st.uploads.len();
+            st.uploads.clear();
+            PENDING.fetch_sub(shadows.len() + uploads, Ordering::Release);
             tracing::debug!(
                 queue = raw(queue),
                 shadows = shadows.len(),
-                "shadow clears submitted ahead of the application's submit"
+                uploads,
+                "shadow clears and shading-rate uploads submitted ahead of the application's submit"
             );
             st.in_flight.push(InFlight {
                 pool,
@@ -222,6 +312,7 @@ impl Clears {
                 fence: fence.get(),
                 shadows,
                 retired: Vec::new(),
+                staging,
             });
         }
         Ok(())
@@ -233,8 +324,9 @@ impl Clears {
     /// The device must be live and about to be destroyed, the application done with it.
     pub unsafe fn destroy(&self, d: &ash::Device) {
         let mut st = self.state.lock();
-        PENDING.fetch_sub(st.pending.len(), Ordering::Release);
+        PENDING.fetch_sub(st.pending.len() + st.uploads.len(), Ordering::Release);
         st.pending.clear();
+        st.uploads.clear();
         // SAFETY: the layer's own objects; the application's work (after the clears on each
         // queue) is done.
         unsafe {
@@ -281,6 +373,10 @@ unsafe fn reclaim(d: &ash::Device, st: &mut State, all: bool) {
             d.destroy_fence(f.fence, None);
             for (image, memory) in f.retired {
                 d.destroy_image(image, None);
+                d.free_memory(memory, None);
+            }
+            if let Some((buffer, memory)) = f.staging {
+                d.destroy_buffer(buffer, None);
                 d.free_memory(memory, None);
             }
         }
@@ -356,6 +452,168 @@ unsafe fn record(d: &ash::Device, cb: vk::CommandBuffer, pending: &[(vk::Image, 
     }
 }
 
+/// A host-visible staging buffer holding every upload's bytes, one after the other (`None` where
+/// there are none).
+///
+/// # Safety
+/// `own` must belong to a live device.
+unsafe fn stage(
+    own: &Own,
+    uploads: &[Upload],
+) -> Result<Option<(vk::Buffer, vk::DeviceMemory)>, vk::Result> {
+    let size: usize = uploads.iter().map(|u| u.bytes.len()).sum();
+    if size == 0 {
+        return Ok(None);
+    }
+    let d = &own.fns;
+    // SAFETY: the layer's own buffer and memory on a live device, each freed again on failure;
+    // the mapping covers `size` bytes.
+    unsafe {
+        let buffer = d.create_buffer(
+            &vk::BufferCreateInfo::default()
+                .size(size as u64)
+                .usage(vk::BufferUsageFlags::TRANSFER_SRC)
+                .sharing_mode(vk::SharingMode::EXCLUSIVE),
+            None,
+        )?;
+        let req = d.get_buffer_memory_requirements(buffer);
+        let filled = (|| -> Result<vk::DeviceMemory, vk::Result> {
+            let ty = own
+                .host_memory_type(req.memory_type_bits)
+                .ok_or(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY)?;
+            let memory = d.allocate_memory(
+                &vk::MemoryAllocateInfo::default()
+                    .allocation_size(req.size)
+                    .memory_type_index(ty),
+                None,
+            )?;
+            let mapped = d.bind_buffer_memory(buffer, memory, 0).and_then(|()| {
+                d.map_memory(memory, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty())
+            });
+            let ptr = match mapped {
+                Ok(p) => p as *mut u8,
+                Err(e) => {
+                    d.free_memory(memory, None);
+                    return Err(e);
+                }
+            };
+            let mut at = 0;
+            for u in uploads {
+                std::ptr::copy_nonoverlapping(u.bytes.as_ptr(), ptr.add(at), u.bytes.len());
+                at += u.bytes.len();
+            }
+            // Host-coherent memory is asked for ([`Own::host_memory_type`]): no flush needed, and
+            // the submit makes host writes visible to the device.
+            d.unmap_memory(memory);
+            Ok(memory)
+        })();
+        match filled {
+            Ok(memory) => Ok(Some((buffer, memory))),
+            Err(e) => {
+                d.destroy_buffer(buffer, None);
+                Err(e)
+            }
+        }
+    }
+}
+
+/// Records the copies of every upload from `buffer` (their bytes one after the other, as
+/// [`stage`] wrote them), each image from `UNDEFINED` to [`SHADOW_LAYOUT`].
+///
+/// # Safety
+/// `cb` must be recording on `d`; the images and `buffer` live.
+unsafe fn record_uploads(
+    d: &ash::Device,
+    cb: vk::CommandBuffer,
+    buffer: vk::Buffer,
+    uploads: &[Upload],
+) {
+    let range = |layers| vk::ImageSubresourceRange {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        base_mip_level: 0,
+        level_count: 1,
+        base_array_layer: 0,
+        layer_count: layers,
+    };
+    let to_dst: Vec<vk::ImageMemoryBarrier<'_>> = uploads
+        .iter()
+        .map(|u| {
+            vk::ImageMemoryBarrier::default()
+                .image(u.image)
+                .subresource_range(range(u.layers))
+                .old_layout(vk::ImageLayout::UNDEFINED)
+                .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        })
+        .collect();
+    let to_rate: Vec<vk::ImageMemoryBarrier<'_>> = to_dst
+        .iter()
+        .map(|b| {
+            b.old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .new_layout(SHADOW_LAYOUT)
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::MEMORY_READ)
+        })
+        .collect();
+    // SAFETY: as the caller promised.
+    unsafe {
+        // ALL_COMMANDS first: passes submitted earlier on this queue may still read the old map
+        // (a write-after-read hazard needs only this execution dependency).
+        d.cmd_pipeline_barrier(
+            cb,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &to_dst,
+        );
+        let mut at = 0u64;
+        for u in uploads {
+            let layer_bytes = u64::from(u.extent[0]) * u64::from(u.extent[1]);
+            let regions: Vec<vk::BufferImageCopy> = (0..u.layers)
+                .map(|l| vk::BufferImageCopy {
+                    buffer_offset: at + u64::from(l) * layer_bytes,
+                    buffer_row_length: 0,
+                    buffer_image_height: 0,
+                    image_subresource: vk::ImageSubresourceLayers {
+                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                        mip_level: 0,
+                        base_array_layer: l,
+                        layer_count: 1,
+                    },
+                    image_offset: vk::Offset3D::default(),
+                    image_extent: vk::Extent3D {
+                        width: u.extent[0],
+                        height: u.extent[1],
+                        depth: 1,
+                    },
+                })
+                .collect();
+            d.cmd_copy_buffer_to_image(
+                cb,
+                buffer,
+                u.image,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &regions,
+            );
+            at += u.bytes.len() as u64;
+        }
+        // ALL_COMMANDS covers the shading-rate stage (see [`record`]).
+        d.cmd_pipeline_barrier(
+            cb,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &to_rate,
+        );
+    }
+}
+
 /// The result an application's submit returns where the layer's clear ahead of it failed: the
 /// failure's own where `vkQueueSubmit` may return it, else out of host memory.
 fn submit_result(e: vk::Result) -> vk::Result {
@@ -385,8 +643,8 @@ unsafe fn before_submit(what: &'static str, queue: vk::Queue) -> Result<(), vk::
         tracing::warn!(
             queue = raw(queue),
             result = ?e,
-            "{what}: the layer could not clear new density maps' shadows ahead of it; the submit \
-             fails with that result and the clears stay pending"
+            "{what}: the layer could not clear new density maps' shadows or upload shading-rate \
+             maps ahead of it; the submit fails with that result and they stay pending"
         );
         submit_result(e)
     })

@@ -582,10 +582,11 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
     take_messages();
     let app = app("XR_KHR_vulkan_enable2", true);
     let sys = app.system();
-    let below = [fovea_vkdouble::LAYER_NAME];
+    let layers = [vulkan::VALIDATION_LAYER, fovea_vkdouble::LAYER_NAME];
     let options = vulkan::Options {
-        layers_below: &below,
+        layers: &layers,
         multiview: true,
+        ..Default::default()
     };
     let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
     {

@@ -316,7 +316,7 @@ impl Readback {
     }
 }
 
-fn fov_of(v: &xr::View) -> Fov {
+pub(crate) fn fov_of(v: &xr::View) -> Fov {
     Fov {
         left: v.fov.angle_left,
         right: v.fov.angle_right,
@@ -507,7 +507,7 @@ impl Frame<'_> {
         )
     }
 
-    fn release(&self, swapchain: xr::Swapchain, time: xr::Time) {
+    pub(crate) fn release(&self, swapchain: xr::Swapchain, time: xr::Time) {
         let release: xr::pfn::ReleaseSwapchainImage = func(self.app, "xrReleaseSwapchainImage");
         let end_frame: xr::pfn::EndFrame = func(self.app, "xrEndFrame");
         let end = xr::FrameEndInfo {

@@ -19,6 +19,13 @@
 //! `-g Vulkan`) show that the layer is loaded into hello_xr's VkInstance, decides to pass lavapipe
 //! through (no shading-rate attachments to emulate density maps on), and changes nothing: the
 //! same frames, exit and silence.
+//!
+//! Injection (docs/injection.md): hello_xr never asks for foveation. With `FOVEA_INJECT=1` at each
+//! level, through fovea's Vulkan layer above the Vulkan validation layer and the shading-rate double
+//! (a meta layer puts the double below the validation layer hello_xr enables itself), each of its
+//! eye passes reaches the driver with a shading-rate attachment whose codes are
+//! `fovea_model::inject::codes` for that eye at the headset's FOVs, with the same clean exit and
+//! silence; with injection off, no pass gets one.
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -398,4 +405,300 @@ fn summary_and_message_filters() {
     let m = messages(&run);
     assert_eq!(m.len(), 4, "{m:?}");
     assert!(m[0].starts_with("VUID-") && m[3].starts_with("WARN fovea"));
+}
+
+/// Frames an injected run asks for: the double keeps every shading-rate image's codes per submit.
+const INJECTED_FRAMES: u64 = 40;
+
+/// The recommended view size and the FOVs the simulated headset gives an application through
+/// fovea, asked in this process (hello_xr gets the same: one runtime, its default configuration).
+fn headset_views() -> ([u32; 2], [fovea_model::Fov; 2]) {
+    use fovea_harness::{app::API_1_0, App, Chain};
+    fovea_harness::sim::control::set_thread_config(None);
+    let app = App::new(Chain::fovea().unwrap(), &["XR_MND_headless"], API_1_0).unwrap();
+    let sizes = crate::symmetric_fov::views(&app);
+    let session = app.headless_session().unwrap();
+    crate::symmetric_fov::begin(&app, session);
+    let fovs = crate::symmetric_fov::locate(&app, session);
+    assert_eq!(app.destroy(), openxr_sys::Result::SUCCESS);
+    ([sizes[0][0], sizes[0][1]], fovs)
+}
+
+/// hello_xr with injection on (`level`) or off through fovea's OpenXR layer and its Vulkan layer,
+/// above the Vulkan validation layer and the shading-rate double (`nvidia` profile), which writes
+/// what reached the driver to a file when hello_xr destroys its VkInstance. Asserts a clean run (exit
+/// status 0, the frames, no runtime errors, no validation message, the double saw no misuse) and
+/// returns the double's events; `None` where the system lacks hello_xr or lavapipe.
+fn hello_xr_on_the_double(graphics: &str, level: Option<&str>) -> Option<Vec<serde_json::Value>> {
+    hello_xr_on_the_double_for(graphics, level, INJECTED_FRAMES).map(|(events, _)| events)
+}
+
+/// [`hello_xr_on_the_double`] for `frames` frames, with fovea's stats lines on; also returns
+/// hello_xr's stderr, where fovea logs.
+fn hello_xr_on_the_double_for(
+    graphics: &str,
+    level: Option<&str>,
+    frames: u64,
+) -> Option<(Vec<serde_json::Value>, String)> {
+    let system = match find_system() {
+        Ok(s) => s,
+        Err(reason) => {
+            skip(&reason);
+            return None;
+        }
+    };
+    let double = match fovea_vkdouble::find_library() {
+        Ok(d) => d,
+        Err(reason) => {
+            skip(&reason);
+            return None;
+        }
+    };
+    let dir = std::env::temp_dir().join(format!(
+        "fovea-hello-xr-inject-{graphics}-{}-{}",
+        level.unwrap_or("off"),
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    let explicit = dir.join("explicit");
+    std::fs::create_dir_all(&explicit).unwrap();
+    fovea_vkdouble::write_manifest(&explicit, &double).unwrap();
+    let lib = fovea_harness::artifact("libfovea.so").expect("libfovea.so: cargo build");
+    let lib = lib.canonicalize().unwrap();
+    // fovea's Vulkan layer: explicit (fovea's OpenXR layer names it in the VkInstance for
+    // XR_KHR_vulkan_enable2) and implicit (switched on by the variable it sets, for
+    // XR_KHR_vulkan_enable, where hello_xr makes the VkInstance itself).
+    let implicit = dir.join("data/vulkan/implicit_layer.d");
+    std::fs::create_dir_all(&implicit).unwrap();
+    let mut manifests = vec![(root().join("manifest/vulkan").join(VK_MANIFEST), &explicit)];
+    if graphics == "Vulkan" {
+        manifests.push((
+            root().join("manifest/vulkan/implicit").join(VK_MANIFEST),
+            &implicit,
+        ));
+    }
+    for (from, to) in manifests {
+        let mut m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(from).unwrap()).unwrap();
+        m["layer"]["library_path"] = lib.to_str().unwrap().into();
+        std::fs::write(to.join(VK_MANIFEST), m.to_string()).unwrap();
+    }
+    // hello_xr enables VK_LAYER_KHRONOS_validation itself, and the loader puts layers named in
+    // the environment above the application's, so the double cannot be named there: it would sit
+    // above fovea. Instead the validation layer hello_xr finds (the only explicit folder is the
+    // test's, `VK_LAYER_PATH`) is a meta layer of the real one, under another name, and the double
+    // below it (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
+    // "Meta-layers").
+    let system_validation =
+        std::path::Path::new("/usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json");
+    let Ok(text) = std::fs::read_to_string(system_validation) else {
+        skip("the Vulkan validation layer is not installed");
+        return None;
+    };
+    let mut real: serde_json::Value = serde_json::from_str(&text).unwrap();
+    real["layer"]["name"] = "VK_LAYER_FOVEA_test_khronos_validation".into();
+    std::fs::write(explicit.join("validation_real.json"), real.to_string()).unwrap();
+    let meta = serde_json::json!({
+        "file_format_version": "1.1.2",
+        "layer": {
+            "name": "VK_LAYER_KHRONOS_validation",
+            "type": "GLOBAL",
+            "api_version": real["layer"]["api_version"],
+            "implementation_version": "1",
+            "description": "the validation layer above the shading-rate double (fovea's tests)",
+            "component_layers": [
+                "VK_LAYER_FOVEA_test_khronos_validation",
+                fovea_vkdouble::LAYER_NAME.to_str().unwrap(),
+            ],
+        }
+    });
+    std::fs::write(explicit.join("validation_meta.json"), meta.to_string()).unwrap();
+    let records = dir.join("records.json");
+    let mut env = vec![
+        ("XDG_DATA_HOME", dir.join("data").into_os_string()),
+        ("XDG_CONFIG_HOME", dir.join("config").into_os_string()),
+        ("VK_LAYER_PATH", explicit.into_os_string()),
+        (
+            fovea_vkdouble::RECORDS_FILE_ENV,
+            records.clone().into_os_string(),
+        ),
+        (fovea_vkdouble::PROFILE_ENV, "nvidia".into()),
+        ("FOVEA_SIM_EXIT_AFTER_FRAMES", frames.to_string().into()),
+        (
+            fovea_abi::env::LOG,
+            format!(
+                "warn,fovea::vk=info,fovea::xr::loader=info,{}=info",
+                log_target::STATS
+            )
+            .into(),
+        ),
+        (fovea_abi::env::LOG_FILE, OsString::new()),
+    ];
+    if let Some(level) = level {
+        env.push(("FOVEA_INJECT", "1".into()));
+        env.push(("FOVEA_INJECT_LEVEL", level.into()));
+    }
+    let run = run_hello_xr(&system, graphics, &[FOVEA_LAYER], &env);
+    let label = format!("hello_xr -g {graphics} on the double, injection {level:?}");
+    assert_eq!(run.code, Some(0), "{label}\n{}", run.transcript());
+    let (ran, errors) = summary(&run.stderr)
+        .unwrap_or_else(|| panic!("{label}: no runtime summary line\n{}", run.transcript()));
+    assert!(ran >= frames, "{label}: {ran} frames");
+    assert_eq!(errors, 0, "{label}\n{}", run.transcript());
+    let messages = messages(&run);
+    assert!(
+        messages.is_empty(),
+        "{label}: {} validation messages:\n{}",
+        messages.len(),
+        messages.join("\n")
+    );
+    let text = std::fs::read_to_string(&records)
+        .unwrap_or_else(|e| panic!("{label}: no records ({e})\n{}", run.transcript()));
+    std::fs::remove_dir_all(&dir).ok();
+    let records: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(records["errors"], serde_json::json!([]), "{label}");
+    if level.is_some() {
+        assert!(
+            run.stderr.contains("injected shading-rate map made"),
+            "{label}\n{}",
+            run.transcript()
+        );
+    }
+    Some((
+        records["events"].as_array().cloned().unwrap_or_default(),
+        run.stderr,
+    ))
+}
+
+/// hello_xr's eye passes (one swapchain per eye: fovea guesses view 0 and view 1 from the first two
+/// of the recommended size) carry the maps of `fovea_model::inject::codes` for the headset's FOVs at
+/// each level; nothing else reaches a shading-rate attachment but full-rate maps.
+fn hello_xr_eye_passes_carry_the_injected_maps(graphics: &str) {
+    use fovea_model::density::{Level, Pattern};
+    use fovea_model::inject::Views;
+    let (extent, fovs) = headset_views();
+    for level in Level::ALL {
+        let Some(events) = hello_xr_on_the_double(graphics, Some(level.name())) else {
+            return;
+        };
+        let of = |kind: &'static str| events.iter().filter(move |e| e["kind"] == kind);
+        let device = of("device").next().expect("a device");
+        assert_eq!(
+            device["features"]["attachment"], true,
+            "{level:?}: {device}"
+        );
+        // Every pass hello_xr begins names a shading-rate view of fovea's.
+        let begins: Vec<&serde_json::Value> = of("begin_render_pass").collect();
+        assert!(
+            begins.len() as u64 >= INJECTED_FRAMES,
+            "{level:?}: {} passes",
+            begins.len()
+        );
+        let image_of = |view: &serde_json::Value| {
+            of("image_view")
+                .find(|v| &v["view"] == view)
+                .map(|v| v["image"].clone())
+                .unwrap_or_else(|| panic!("{level:?}: no shading-rate view {view}"))
+        };
+        let mut images: Vec<serde_json::Value> = begins
+            .iter()
+            .map(|b| {
+                let v = b["shading_rate_views"].as_array().unwrap();
+                assert_eq!(v.len(), 1, "{level:?}: {b}");
+                image_of(&v[0])
+            })
+            .collect();
+        images.sort_by_key(|i| i.as_u64());
+        images.dedup();
+        assert_eq!(images.len(), 2, "{level:?}: one map per eye: {images:?}");
+        // The codes each map held when the last submit read it.
+        let device_model = fovea_model::inject::Device {
+            texel: [16, 16],
+            layered: true,
+            max_fragment: [4, 4],
+            rates: fovea_vkdouble::Profile::Nvidia
+                .rates()
+                .iter()
+                .filter(|(_, s)| s.contains(ash::vk::SampleCountFlags::TYPE_1))
+                .map(|(e, _)| [e.width, e.height])
+                .collect(),
+        };
+        let mut all = [None; fovea_model::maps::MAX_VIEWS];
+        all[0] = Some(fovs[0]);
+        all[1] = Some(fovs[1]);
+        let wants: Vec<Vec<u8>> = (0..2u8)
+            .map(|v| {
+                fovea_model::inject::codes(
+                    &device_model,
+                    Views::Layers { first: v, count: 1 },
+                    extent,
+                    &all,
+                    Pattern {
+                        level,
+                        vertical_offset_deg: 0.0,
+                    },
+                    fovea_model::maps::DEFAULT_MAX_FRAGMENT,
+                )
+                .2
+            })
+            .collect();
+        let mut matched = [false; 2];
+        for image in &images {
+            let read = of("submit")
+                .flat_map(|s| {
+                    s["shading_rate_images"]
+                        .as_array()
+                        .cloned()
+                        .unwrap_or_default()
+                })
+                .rfind(|r| &r["image"] == image)
+                .unwrap_or_else(|| panic!("{level:?}: {image} never read at a submit"));
+            let codes: Vec<u8> = read["codes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c.as_u64().unwrap() as u8)
+                .collect();
+            let eye = wants.iter().position(|w| *w == codes);
+            let Some(eye) = eye else {
+                panic!("{level:?}: map {image} holds neither eye's codes");
+            };
+            matched[eye] = true;
+        }
+        if wants[0] != wants[1] {
+            assert_eq!(matched, [true, true], "{level:?}: each eye its own map");
+        }
+    }
+    // The stats line counts the passes: hello_xr renders each eye once a frame, nothing else.
+    let Some((_, stderr)) = hello_xr_on_the_double_for(graphics, Some("high"), 120) else {
+        return;
+    };
+    let stats: Vec<&str> = stderr.lines().filter(|l| l.contains("Inj=")).collect();
+    assert!(!stats.is_empty(), "no stats line with Inj=:\n{stderr}");
+    assert!(
+        stats.iter().all(|l| l.contains("Fov=3 Inj=2/2")),
+        "{stats:#?}"
+    );
+    // Injection off: the device gets no shading rates, and no pass an attachment.
+    let Some(events) = hello_xr_on_the_double(graphics, None) else {
+        return;
+    };
+    for e in &events {
+        if e["kind"] == "device" {
+            assert_ne!(e["features"]["attachment"], true, "off: {e}");
+        }
+        if e["kind"] == "begin_render_pass" {
+            assert_eq!(e["shading_rate_views"], serde_json::json!([]), "off: {e}");
+        }
+    }
+}
+
+#[test]
+fn vulkan2_eye_passes_carry_the_injected_maps_at_every_level() {
+    hello_xr_eye_passes_carry_the_injected_maps("Vulkan2");
+}
+
+#[test]
+fn vulkan_eye_passes_carry_the_injected_maps_at_every_level() {
+    hello_xr_eye_passes_carry_the_injected_maps("Vulkan");
 }

@@ -33,6 +33,7 @@ mod vk_clears;
 mod vk_enable;
 mod vk_faults;
 mod vk_fuzz;
+mod vk_inject;
 mod vk_layer;
 mod vk_passes;
 mod vk_pipelines;

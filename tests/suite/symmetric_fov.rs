@@ -15,7 +15,7 @@ use xr::Handle;
 
 use crate::support::in_own_process;
 
-fn views(app: &App) -> [[u32; 4]; 2] {
+pub(crate) fn views(app: &App) -> [[u32; 4]; 2] {
     let f: xr::pfn::EnumerateViewConfigurationViews =
         unsafe { app.func(c"xrEnumerateViewConfigurationViews") };
     let blank = xr::ViewConfigurationView {
@@ -54,7 +54,7 @@ fn views(app: &App) -> [[u32; 4]; 2] {
 /// xrBeginSession with the stereo configuration: views exist only in a running session (a runtime
 /// may refuse xrLocateViews before, as Monado does;
 /// https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#xrLocateViews).
-fn begin(app: &App, session: xr::Session) {
+pub(crate) fn begin(app: &App, session: xr::Session) {
     let begin: xr::pfn::BeginSession = unsafe { app.func(c"xrBeginSession") };
     let info = xr::SessionBeginInfo {
         ty: xr::StructureType::SESSION_BEGIN_INFO,
@@ -64,7 +64,7 @@ fn begin(app: &App, session: xr::Session) {
     assert_eq!(unsafe { begin(session, &info) }, xr::Result::SUCCESS);
 }
 
-fn locate(app: &App, session: xr::Session) -> [Fov; 2] {
+pub(crate) fn locate(app: &App, session: xr::Session) -> [Fov; 2] {
     unsafe {
         let create: xr::pfn::CreateReferenceSpace = app.func(c"xrCreateReferenceSpace");
         let locate: xr::pfn::LocateViews = app.func(c"xrLocateViews");

@@ -94,14 +94,39 @@ unsafe fn func<F: Copy>(
     lookup(gipa, instance, name).unwrap_or_else(|r| panic!("{name:?}: {r:?}"))
 }
 
-/// What [`Vulkan::through_xr_with`] adds to the application's Vulkan set-up.
-#[derive(Clone, Copy, Debug, Default)]
+/// How [`Vulkan::through_xr_with`] makes the instance and device.
+#[derive(Clone, Copy, Debug)]
 pub struct Options<'a> {
-    /// Layers enabled after the validation layer, so below it: validation checks what reaches
-    /// them (the first named layer is closest to the application).
-    pub layers_below: &'a [&'a CStr],
-    /// Enables the Vulkan 1.1 `multiview` feature, which render passes with view masks need.
+    /// The instance's layers, first closest to the application; the validation layer must be
+    /// among them for the messages to be collected.
+    pub layers: &'a [&'a CStr],
+    /// `VkApplicationInfo::apiVersion`.
+    pub api_version: u32,
+    /// Enables the Vulkan 1.1 `multiview` feature, which render passes with view masks need
+    /// (ignored with `dynamic_rendering` or `device_next`, whose feature structs the caller owns).
     pub multiview: bool,
+    /// Enables Vulkan 1.3's `dynamicRendering` and `synchronization2` on the device (the
+    /// instance's `api_version` must be 1.3).
+    pub dynamic_rendering: bool,
+    /// Device extensions the application enables itself.
+    pub device_extensions: &'a [&'a CStr],
+    /// Chained in front of the device create info (`NULL` for none): the application's own
+    /// feature structs. Must outlive the call.
+    pub device_next: *const c_void,
+}
+
+impl Default for Options<'_> {
+    /// The validation layer alone, Vulkan 1.1, a device with no extensions or features.
+    fn default() -> Self {
+        Options {
+            layers: &[VALIDATION_LAYER],
+            api_version: vk::API_VERSION_1_1,
+            multiview: false,
+            dynamic_rendering: false,
+            device_extensions: &[],
+            device_next: null(),
+        }
+    }
 }
 
 /// The application's Vulkan objects, made through XR_KHR_vulkan_enable2 under the validation layer.
@@ -134,17 +159,17 @@ impl Vulkan {
         instance: xr::Instance,
         sys: xr::SystemId,
     ) -> Result<Vulkan, String> {
-        Self::through_xr_with(entry, gipa, instance, sys, &Options::default())
+        Vulkan::through_xr_with(entry, gipa, instance, sys, &Options::default())
     }
 
-    /// [`Vulkan::through_xr`] with `options`: layers below validation (a test double that dresses
-    /// the driver up as another GPU) and device features.
+    /// As [`Vulkan::through_xr`], with the instance's layers and version and the device's
+    /// features and extensions as `options` says.
     pub fn through_xr_with(
         entry: &ash::Entry,
         gipa: xr::pfn::GetInstanceProcAddr,
         instance: xr::Instance,
         sys: xr::SystemId,
-        options: &Options,
+        options: &Options<'_>,
     ) -> Result<Vulkan, String> {
         // SAFETY: each function is looked up as the type its name implies; every struct passed
         // below lives across its call; handles from the runtime are loaded before use.
@@ -180,32 +205,31 @@ impl Vulkan {
                         | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
                 )
                 .pfn_user_callback(Some(on_message));
-            let app_info = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_1);
-            let layer_names: Vec<_> = std::iter::once(VALIDATION_LAYER)
-                .chain(options.layers_below.iter().copied())
-                .map(CStr::as_ptr)
-                .collect();
-            let ext_names = [
-                ash::ext::debug_utils::NAME.as_ptr(),
-                ash::ext::validation_features::NAME.as_ptr(),
-            ];
-            // Handle wrapping off, always. The validation layer keeps that switch in one
-            // process-wide variable (`wrap_handles` in its chassis), which an instance created
-            // with the feature disabled turns off for good. Tests whose layers below validation
-            // must see the application's handles disable it; an instance that still wraps while
-            // another test creates such an instance passes its wrapped handles on unwrapped from
-            // then on, and the Vulkan loader dereferences them (a SIGSEGV in
-            // vkDestroyDebugUtilsMessengerEXT). With every validated instance alike, tests in one
+            let app_info = vk::ApplicationInfo::default().api_version(options.api_version);
+            let layer_names: Vec<_> = options.layers.iter().map(|l| l.as_ptr()).collect();
+            let mut ext_names = vec![ash::ext::debug_utils::NAME.as_ptr()];
+            // Handle wrapping off on every validated instance
+            // (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkValidationFeatureDisableEXT.html>),
+            // so the handles a layer below validation records are the application's. The
+            // validation layer keeps that switch in one process-wide variable (`wrap_handles` in its
+            // chassis), which an instance created with the feature disabled turns off for good: an
+            // instance that still wraps while another test creates one without passes its wrapped
+            // handles on unwrapped from then on, and the Vulkan loader dereferences them (a SIGSEGV
+            // in vkDestroyDebugUtilsMessengerEXT). With every validated instance alike, tests in one
             // process cannot flip it under each other.
             let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
             let mut features =
                 vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
-            let vk_create = vk::InstanceCreateInfo::default()
+            let mut vk_create = vk::InstanceCreateInfo::default()
                 .application_info(&app_info)
+                .push_next(&mut messenger_info);
+            if options.layers.contains(&VALIDATION_LAYER) {
+                ext_names.push(ash::ext::validation_features::NAME.as_ptr());
+                vk_create = vk_create.push_next(&mut features);
+            }
+            let vk_create = vk_create
                 .enabled_layer_names(&layer_names)
-                .enabled_extension_names(&ext_names)
-                .push_next(&mut messenger_info)
-                .push_next(&mut features);
+                .enabled_extension_names(&ext_names);
             let vk_gipa: xr::platform::VkGetInstanceProcAddr =
                 std::mem::transmute(entry.static_fn().get_instance_proc_addr);
             let xr_create = xr::VulkanInstanceCreateInfoKHR {
@@ -252,11 +276,26 @@ impl Vulkan {
             let queue_info = [vk::DeviceQueueCreateInfo::default()
                 .queue_family_index(family)
                 .queue_priorities(&priorities)];
-            let mut multiview = vk::PhysicalDeviceMultiviewFeatures::default().multiview(true);
-            let mut device_create = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
-            if options.multiview {
-                device_create = device_create.push_next(&mut multiview);
-            }
+            let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
+                .dynamic_rendering(true)
+                .synchronization2(true);
+            v13.p_next = options.device_next as *mut c_void;
+            let device_exts: Vec<_> = options
+                .device_extensions
+                .iter()
+                .map(|e| e.as_ptr())
+                .collect();
+            let mut device_create = vk::DeviceCreateInfo::default()
+                .queue_create_infos(&queue_info)
+                .enabled_extension_names(&device_exts);
+            let multiview = vk::PhysicalDeviceMultiviewFeatures::default().multiview(true);
+            device_create.p_next = if options.dynamic_rendering {
+                &v13 as *const _ as *const c_void
+            } else if options.device_next.is_null() && options.multiview {
+                &multiview as *const _ as *const c_void
+            } else {
+                options.device_next
+            };
             let app_next = device_create.p_next;
             let xr_device = xr::VulkanDeviceCreateInfoKHR {
                 ty: xr::VulkanDeviceCreateInfoKHR::TYPE,
@@ -273,7 +312,10 @@ impl Vulkan {
             assert_eq!((r, vk_result), (xr::Result::SUCCESS, 0));
             // The application's create info is untouched: a layer that adds extensions (fovea adds
             // VK_EXT_fragment_density_map) goes down with copies.
-            assert_eq!(device_create.enabled_extension_count, 0);
+            assert_eq!(
+                device_create.enabled_extension_count as usize,
+                options.device_extensions.len()
+            );
             assert_eq!(device_create.p_next, app_next);
             let device = ash::Device::load(
                 vk_instance.fp_v1_0(),

@@ -484,6 +484,7 @@ unsafe extern "system" fn create_instance(
                 );
                 let profile = record::profile();
                 event(json!({"kind": "instance", "profile": profile.name()}));
+                write_records_at_exit();
                 lock(&INSTANCES).insert(
                     key(handle.as_raw()),
                     Arc::new(InstanceData {
@@ -515,7 +516,40 @@ unsafe extern "system" fn destroy_instance(
                 (d.fns.fp_v1_0().destroy_instance)(instance, alloc);
             }
         }
+        write_records();
     })
+}
+
+extern "C" {
+    /// C's `atexit`: the handler runs when the process exits, or when this library is unloaded
+    /// (glibc ties a shared library's handlers to it).
+    fn atexit(handler: extern "C" fn()) -> std::ffi::c_int;
+}
+
+extern "C" fn write_records_now() {
+    // No panic may leave a C callback.
+    let _ = std::panic::catch_unwind(write_records);
+}
+
+/// Where [`crate::RECORDS_FILE_ENV`] names a file, makes sure the records reach it at exit too:
+/// applications that exit without destroying their device and instance (hello_xr) are read so.
+fn write_records_at_exit() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    if std::env::var_os(crate::RECORDS_FILE_ENV).is_some() {
+        // SAFETY: registers a plain function that takes and returns nothing.
+        ONCE.call_once(|| unsafe {
+            atexit(write_records_now);
+        });
+    }
+}
+
+/// Writes the records where [`crate::RECORDS_FILE_ENV`] names a file.
+fn write_records() {
+    if let Some(path) = std::env::var_os(crate::RECORDS_FILE_ENV) {
+        if let Err(e) = std::fs::write(&path, crate::record::snapshot().to_string()) {
+            crate::record::error(format!("{}: {e}", crate::RECORDS_FILE_ENV));
+        }
+    }
 }
 
 unsafe extern "system" fn create_device(
@@ -670,6 +704,7 @@ unsafe extern "system" fn destroy_device(
                 (d.fns.fp_v1_0().destroy_device)(device, alloc);
             }
         }
+        write_records();
     })
 }
 

@@ -68,6 +68,10 @@ pub const PROFILE_ENV: &str = "FOVEA_VKDOUBLE_PROFILE";
 /// empty functions for them instead of going down to the driver. A benchmark of the layers above
 /// then measures their own cost per command, not the driver's (`benches/vk_commands.rs`).
 pub const NULL_COMMANDS_ENV: &str = "FOVEA_VKDOUBLE_NULL_COMMANDS";
+/// Where set, the path the double writes its records to (as [`fovea_vkdouble_records_json`]
+/// gives them) each time a device or an instance is destroyed, and at exit: how a test reads what reached the driver in an
+/// application it runs as a child process (`tests/suite/hello_xr.rs`).
+pub const RECORDS_FILE_ENV: &str = "FOVEA_VKDOUBLE_RECORDS_FILE";
 
 /// Copies the records (`{"events": [...], "errors": [...]}` as UTF-8 JSON, no terminator) into
 /// `buf`, at most `len` bytes, and returns the full length, so a caller can size its buffer.
