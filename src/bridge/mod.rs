@@ -160,6 +160,10 @@ pub struct FdmEmulation {
     pub max_fragment: [u32; 2],
     /// The fragment sizes `vkGetPhysicalDeviceFragmentShadingRatesKHR` lists for one sample.
     pub rates: Vec<[u32; 2]>,
+    /// `fragmentShadingRateNonTrivialCombinerOps`: combiners other than `KEEP` and `REPLACE`
+    /// (`MAX` among them) are allowed; how an injected map meets an application's own rates
+    /// (docs/injection.md#how-the-attachment-gets-in).
+    pub non_trivial_combiners: bool,
 }
 
 /// Emulating devices, by `VkDevice` handle.

@@ -92,22 +92,41 @@ unsafe fn plan(
     let enabled = |want: &CStr| names.iter().any(|&n| unsafe { name(n) } == Some(want));
     // SAFETY: as the caller promised.
     let in_chain = |ty| matches!(unsafe { chain::find::<u8>(ci.p_next, ty) }, Ok(Some(_)));
-    let own_rates = enabled(ash::khr::fragment_shading_rate::NAME)
-        || enabled(ash::nv::shading_rate_image::NAME)
-        || in_chain(vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR)
+    let fsr_features = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR;
+    // SAFETY: as the caller promised; found by its sType, read only.
+    let app_fsr = unsafe {
+        chain::find::<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'_>>(ci.p_next, fsr_features)
+    }
+    .ok()
+    .flatten()
+    // SAFETY: as above.
+    .map(|f| unsafe { *f });
+    let nv_rates = enabled(ash::nv::shading_rate_image::NAME)
         || in_chain(vk::StructureType::PHYSICAL_DEVICE_SHADING_RATE_IMAGE_FEATURES_NV);
+    let own_rates = enabled(ash::khr::fragment_shading_rate::NAME) || nv_rates || app_fsr.is_some();
     if !enabled(ash::ext::fragment_density_map::NAME) {
         if !crate::bridge::inject::wanted() {
             return Plan::Untouched(None);
         }
-        if own_rates {
+        // Shading-rate attachments of its own, or NV shading-rate images: the application's maps
+        // are the ones that count (docs/injection.md#switching-it-on).
+        let own_attachments =
+            app_fsr.is_some_and(|f| f.attachment_fragment_shading_rate == vk::TRUE);
+        if nv_rates || own_attachments {
             return Plan::Untouched(Some(
                 "the application uses shading rates itself; nothing is injected on this device"
                     .into(),
             ));
         }
-        // SAFETY: as the caller promised; nothing is removed, so the copy shares the chain.
-        let chain = match unsafe { ChainCopy::without(ci.p_next, |_| false) } {
+        // Pipeline or primitive rates without attachments (vkd3d-proton's every pipeline): the
+        // injected attachment is combined with them (docs/injection.md#apps-that-set-rates).
+        let app_sets_rates = app_fsr.is_some_and(|f| {
+            f.pipeline_fragment_shading_rate == vk::TRUE
+                || f.primitive_fragment_shading_rate == vk::TRUE
+        });
+        // SAFETY: as the caller promised; the application's feature struct, if any, is left out
+        // and stands in the layer's copy in front.
+        let chain = match unsafe { ChainCopy::without(ci.p_next, |t| t == fsr_features) } {
             Ok(c) => c,
             Err(e) => {
                 return Plan::Untouched(Some(format!(
@@ -116,10 +135,17 @@ unsafe fn plan(
                 )))
             }
         };
+        if app_sets_rates {
+            tracing::info!(
+                non_trivial_combiners = fdm.non_trivial_combiners,
+                "the application sets shading rates per pipeline or per draw, without attachments \
+                 of its own: injected maps are combined with its rates"
+            );
+        }
         let version = inst.api_version.min(*api_version);
         return Plan::Inject(
             fdm.clone(),
-            with_shading_rates(names, &enabled, chain, version),
+            with_shading_rates(names, &enabled, chain, version, app_fsr.as_ref()),
         );
     }
     if own_rates {
@@ -167,22 +193,26 @@ unsafe fn plan(
     let version = inst.api_version.min(*api_version);
     Plan::Emulate(
         fdm.clone(),
-        with_shading_rates(&kept, &enabled, chain, version),
+        with_shading_rates(&kept, &enabled, chain, version, None),
     )
 }
 
 /// The create info's extensions (`names`) with `VK_KHR_fragment_shading_rate` and what it needs,
-/// and a `VkPhysicalDeviceFragmentShadingRateFeaturesKHR` enabling only the attachment feature in
-/// front of `chain`: the other two features would oblige every draw to set a rate
-/// (docs/vulkan-fdm-on-fsr.md#other-pipeline-paths).
+/// and a `VkPhysicalDeviceFragmentShadingRateFeaturesKHR` in front of `chain` enabling the
+/// attachment feature and, from `app` (the application's own struct, left out of `chain`), the
+/// features it enabled itself; the layer asks for no other: they would oblige every draw to set
+/// a rate (docs/vulkan-fdm-on-fsr.md#other-pipeline-paths).
 fn with_shading_rates(
     names: &[*const c_char],
     enabled: &dyn Fn(&CStr) -> bool,
     chain: ChainCopy,
     version: u32,
+    app: Option<&vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'_>>,
 ) -> Rewrite {
     let mut new_names = names.to_vec();
-    new_names.push(ash::khr::fragment_shading_rate::NAME.as_ptr());
+    if !enabled(ash::khr::fragment_shading_rate::NAME) {
+        new_names.push(ash::khr::fragment_shading_rate::NAME.as_ptr());
+    }
     // Shading rates need render pass 2 (core in 1.2) and, through it, multiview and maintenance2
     // (core in 1.1).
     if version < vk::API_VERSION_1_2 {
@@ -198,6 +228,12 @@ fn with_shading_rates(
     }
     let mut fsr = Box::new(
         vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
+            .pipeline_fragment_shading_rate(
+                app.is_some_and(|f| f.pipeline_fragment_shading_rate == vk::TRUE),
+            )
+            .primitive_fragment_shading_rate(
+                app.is_some_and(|f| f.primitive_fragment_shading_rate == vk::TRUE),
+            )
             .attachment_fragment_shading_rate(true),
     );
     fsr.p_next = chain.head() as *mut _;

@@ -26,6 +26,9 @@ pub enum When {
     /// (docs/injection.md): image and view tracking, pipelines, dynamic rendering, and the submits
     /// that carry the maps' uploads.
     Injected,
+    /// Only on devices that inject: what concerns an application's own shading rates, which an
+    /// emulating device never has (docs/injection.md#apps-that-set-rates).
+    Injecting,
 }
 
 impl When {
@@ -36,6 +39,7 @@ impl When {
             When::Always => true,
             When::Emulated => emulated,
             When::Injected => emulated || injected,
+            When::Injecting => injected,
         }
     }
 }
@@ -225,6 +229,10 @@ hooks! {
             pass::cmd_begin_rendering, When::Injected;
         c"vkCmdBeginRenderingKHR" => cmd_begin_rendering_khr: PFN_vkCmdBeginRendering =
             pass::cmd_begin_rendering_khr, When::Injected;
+        // The application's own rates meet the injected attachment.
+        c"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate:
+            PFN_vkCmdSetFragmentShadingRateKHR = pipeline::cmd_set_fragment_shading_rate,
+            When::Injecting;
     }
 }
 

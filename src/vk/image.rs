@@ -781,6 +781,7 @@ mod tests {
             layered: true,
             max_fragment: [4, 4],
             rates: Vec::new(),
+            non_trivial_combiners: true,
         };
         assert_eq!(shadow_layers(&fdm, 2), 2);
         fdm.layered = false;

@@ -595,6 +595,7 @@ mod tests {
             layered: true,
             max_fragment: [4, 4],
             rates: Vec::new(),
+            non_trivial_combiners: true,
         });
         let colour = vk::ImageCreateInfo::default()
             .image_type(vk::ImageType::TYPE_2D)

@@ -235,6 +235,7 @@ unsafe fn decide(inst: &Instance, physical: vk::PhysicalDevice) -> Decision {
                 props.max_fragment_size.height,
             ],
             rates,
+            non_trivial_combiners: props.fragment_shading_rate_non_trivial_combiner_ops == vk::TRUE,
         },
         api_version,
     }

@@ -13,9 +13,11 @@
 //! - On a device that injects maps into eye passes (docs/injection.md#how-the-attachment-gets-in),
 //!   every pipeline gets the same state (every render pass there has a shading-rate attachment,
 //!   and whether a dynamic rendering gets one is decided only when it begins), and pipelines for
-//!   dynamic rendering the shading-rate flag. An
-//!   application that uses shading rates itself never has an injecting device
-//!   ([`crate::vk::device`]), so no pipeline there carries rate state of its own.
+//!   dynamic rendering the shading-rate flag. An application with shading-rate attachments of its
+//!   own never has an injecting device ([`crate::vk::device`]); one that sets rates per pipeline
+//!   or per draw without them (vkd3d-proton) may, and its own state keeps its rate with
+//!   `combinerOps[1]` rewritten on a copy ([`attachment_combiner`]), as do its
+//!   `vkCmdSetFragmentShadingRateKHR` calls ([`cmd_set_fragment_shading_rate`]).
 //! - Shader modules using `FragSizeEXT` or `FragInvocationCountEXT` (capability
 //!   `FragmentDensityEXT`) cannot be emulated (docs/vulkan-fdm-on-fsr.md#shader-built-ins): said
 //!   once, passed through.
@@ -61,6 +63,43 @@ pub fn fsr_state() -> vk::PipelineFragmentShadingRateStateCreateInfoKHR<'static>
         ])
 }
 
+type CombinerOp = vk::FragmentShadingRateCombinerOpKHR;
+
+/// The `combinerOps[1]` with which an injected shading-rate attachment applies on top of an
+/// application's own rate (`size` combined with the primitive rate by `ops[0]`), given the
+/// application's `ops` (docs/injection.md#apps-that-set-rates).
+///
+/// `combinerOps[1]` combines the result of `combinerOps[0]` with the attachment's rate
+/// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#primsrast-fragment-shading-rate-combining>);
+/// without an attachment, or with fovea's full-rate map, that rate is 1×1. `MAX` takes the
+/// coarser of the application's rate and the map's per axis: the map's rate where the application
+/// renders at 1×1 (vkd3d-proton's default), the application's own wherever it asked for coarser,
+/// and the application's unchanged outside eye passes. Where the device allows only `KEEP` and
+/// `REPLACE` (`fragmentShadingRateNonTrivialCombinerOps` false), `REPLACE` gives the same result
+/// only where the application's rate is 1×1 and `ops[0]` keeps it so; elsewhere the application's
+/// `KEEP` stays and its own rate wins. An application without the attachment feature has `KEEP`
+/// there (VUID-vkCmdSetFragmentShadingRateKHR-attachmentFragmentShadingRate-04508); any other
+/// combiner is its own and stays.
+pub fn attachment_combiner(
+    non_trivial: bool,
+    size: vk::Extent2D,
+    ops: [CombinerOp; 2],
+) -> CombinerOp {
+    let one = vk::Extent2D {
+        width: 1,
+        height: 1,
+    };
+    if ops[1] != CombinerOp::KEEP {
+        ops[1]
+    } else if non_trivial {
+        CombinerOp::MAX
+    } else if size == one && ops[0] == CombinerOp::KEEP {
+        CombinerOp::REPLACE
+    } else {
+        CombinerOp::KEEP
+    }
+}
+
 /// What one graphics pipeline create info says about density maps.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Facts {
@@ -74,6 +113,8 @@ pub struct Facts {
     pub fdm_pass: bool,
     /// The application chained shading-rate state itself.
     pub own_state: bool,
+    /// That state's fragment size and combiners.
+    pub own_rate: Option<(vk::Extent2D, [CombinerOp; 2])>,
     /// A graphics pipeline library without pre-rasterisation or fragment-shader state (the
     /// shading-rate state is no part of it).
     pub no_rate_state: bool,
@@ -83,6 +124,8 @@ pub struct Facts {
     pub inject: bool,
     /// The pipeline is for dynamic rendering (no render pass).
     pub dynamic: bool,
+    /// The injecting device has `fragmentShadingRateNonTrivialCombinerOps`.
+    pub non_trivial: bool,
 }
 
 impl Facts {
@@ -112,9 +155,21 @@ impl Facts {
         self.inject && self.dynamic
     }
 
+    /// The `combinerOps[1]` the application's own state gets on an injecting device, where that
+    /// differs from its own ([`attachment_combiner`]).
+    pub fn retuned_combiner(&self) -> Option<CombinerOp> {
+        let (size, ops) = self.own_rate?;
+        let op = attachment_combiner(self.non_trivial, size, ops);
+        (self.inject && !self.no_rate_state && op != ops[1]).then_some(op)
+    }
+
     /// Whether anything is rewritten.
     pub fn rewrite(&self) -> bool {
-        self.add_state() || self.flag || self.flag2 || self.inject_flag()
+        self.add_state()
+            || self.flag
+            || self.flag2
+            || self.inject_flag()
+            || self.retuned_combiner().is_some()
     }
 }
 
@@ -138,16 +193,23 @@ pub unsafe fn facts(
         .map(|p| unsafe { (*(p as *const vk::GraphicsPipelineLibraryCreateInfoEXT<'_>)).flags });
     let rate_parts = vk::GraphicsPipelineLibraryFlagsEXT::PRE_RASTERIZATION_SHADERS
         | vk::GraphicsPipelineLibraryFlagsEXT::FRAGMENT_SHADER;
+    let own_state = find(vk::StructureType::PIPELINE_FRAGMENT_SHADING_RATE_STATE_CREATE_INFO_KHR);
     Facts {
         flag: ci.flags.contains(FDM_FLAG),
         flag2: flags2.is_some_and(|f| f.contains(FDM_FLAG2)),
         has_flags2: flags2.is_some(),
         fdm_pass: fdm_pass(ci.render_pass),
-        own_state: find(vk::StructureType::PIPELINE_FRAGMENT_SHADING_RATE_STATE_CREATE_INFO_KHR)
-            .is_some(),
+        own_state: own_state.is_some(),
+        own_rate: own_state.map(|p| {
+            // SAFETY: found by its sType.
+            let s =
+                unsafe { &*(p as *const vk::PipelineFragmentShadingRateStateCreateInfoKHR<'_>) };
+            (s.fragment_size, s.combiner_ops)
+        }),
         no_rate_state: library.is_some_and(|f| !f.intersects(rate_parts)),
         inject: false,
         dynamic: ci.render_pass == vk::RenderPass::null(),
+        non_trivial: false,
     }
 }
 
@@ -183,30 +245,51 @@ unsafe fn rewrite(
         copy.flags = (copy.flags & !FDM_FLAG) | FSR_FLAG;
     }
     let mut head = ci.p_next;
-    if f.rewrite_flags2() {
-        let ty = vk::StructureType::PIPELINE_CREATE_FLAGS_2_CREATE_INFO_KHR;
-        // SAFETY: as the caller promised; found by its sType.
-        let mine = unsafe {
-            let Ok(Some(p)) = chain::find::<vk::PipelineCreateFlags2CreateInfoKHR<'_>>(head, ty)
-            else {
-                return Err(chain::ChainError::Unknown(ty));
-            };
-            *p
+    let flags2_ty = vk::StructureType::PIPELINE_CREATE_FLAGS_2_CREATE_INFO_KHR;
+    let state_ty = vk::StructureType::PIPELINE_FRAGMENT_SHADING_RATE_STATE_CREATE_INFO_KHR;
+    let rewrite_flags2 = f.rewrite_flags2();
+    let retuned = f.retuned_combiner();
+    if rewrite_flags2 || retuned.is_some() {
+        let flags2 = if rewrite_flags2 {
+            // SAFETY: as the caller promised; found by its sType.
+            unsafe {
+                let Ok(Some(p)) =
+                    chain::find::<vk::PipelineCreateFlags2CreateInfoKHR<'_>>(head, flags2_ty)
+                else {
+                    return Err(chain::ChainError::Unknown(flags2_ty));
+                };
+                Some((*p).flags)
+            }
+        } else {
+            None
         };
-        // SAFETY: as the caller promised.
-        let rest = unsafe { ChainCopy::without(head, |t| t == ty) }?;
-        // SAFETY: a plain copy whose pNext is set below.
-        let mine: vk::PipelineCreateFlags2CreateInfoKHR<'static> = unsafe {
-            std::mem::transmute::<
-                vk::PipelineCreateFlags2CreateInfoKHR<'_>,
-                vk::PipelineCreateFlags2CreateInfoKHR<'static>,
-            >(mine)
-        };
-        let mut mine = Box::new(mine);
-        mine.flags = (mine.flags & !FDM_FLAG2) | FSR_FLAG2;
-        mine.p_next = rest.head() as *mut c_void;
-        head = &*mine as *const _ as *const c_void;
-        owned.flags2 = Some(mine);
+        // SAFETY: as the caller promised; the structs left out are replaced by copies below.
+        let rest = unsafe {
+            ChainCopy::without(head, |t| {
+                (rewrite_flags2 && t == flags2_ty) || (retuned.is_some() && t == state_ty)
+            })
+        }?;
+        head = rest.head();
+        if let Some(flags) = flags2 {
+            let mut mine = Box::new(
+                vk::PipelineCreateFlags2CreateInfoKHR::default()
+                    .flags((flags & !FDM_FLAG2) | FSR_FLAG2),
+            );
+            mine.p_next = head as *mut c_void;
+            head = &*mine as *const _ as *const c_void;
+            owned.flags2 = Some(mine);
+        }
+        if let (Some(op), Some((size, ops))) = (retuned, f.own_rate) {
+            // The application's rate and first combiner kept; the attachment applies on top.
+            let mut state = Box::new(
+                vk::PipelineFragmentShadingRateStateCreateInfoKHR::default()
+                    .fragment_size(size)
+                    .combiner_ops([ops[0], op]),
+            );
+            state.p_next = head as *mut c_void;
+            head = &*state as *const _ as *const c_void;
+            owned.state = Some(state);
+        }
         owned._chain = Some(rest);
     }
     if f.add_state() {
@@ -254,6 +337,10 @@ pub unsafe extern "system" fn create_graphics_pipelines(
                 .map(|ci| unsafe { facts(ci, registry::pass_uses_fdm) })
                 .map(|f| Facts {
                     inject: dev.inject.is_some(),
+                    non_trivial: dev
+                        .inject
+                        .as_ref()
+                        .is_some_and(|i| i.fdm.non_trivial_combiners),
                     ..f
                 })
                 .collect();
@@ -302,6 +389,46 @@ pub unsafe extern "system" fn create_graphics_pipelines(
             r
         },
     )
+}
+
+/// `vkCmdSetFragmentShadingRateKHR` on an injecting device: the application's rate and
+/// `combinerOps[0]` go down as given, `combinerOps[1]` as [`attachment_combiner`] makes it, on a
+/// copy of the two combiners on the stack, so an injected map applies to pipelines with the
+/// dynamic shading-rate state too (docs/injection.md#apps-that-set-rates). Whether the device has
+/// non-trivial combiners was read at `vkCreateDevice`; nothing is looked up per call but the
+/// device.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_set_fragment_shading_rate(
+    cb: vk::CommandBuffer,
+    size: *const vk::Extent2D,
+    ops: *const [CombinerOp; 2],
+) {
+    guard("vkCmdSetFragmentShadingRateKHR", (), || {
+        // SAFETY: a command buffer dispatched by the loader.
+        let Some(dev) = (unsafe { registry::device(cb) }) else {
+            return;
+        };
+        let Some(next) = dev.next.cmd_set_fragment_shading_rate else {
+            return;
+        };
+        let retuned = match &dev.inject {
+            Some(inj) if !size.is_null() && !ops.is_null() => {
+                // SAFETY: the caller's arguments, read only.
+                let (s, o) = unsafe { (*size, *ops) };
+                let op = attachment_combiner(inj.fdm.non_trivial_combiners, s, o);
+                (op != o[1]).then_some([o[0], op])
+            }
+            _ => None,
+        };
+        match retuned {
+            // SAFETY: the next layer's function; the copy lives across the call.
+            Some(copy) => unsafe { next(cb, size, &copy) },
+            // SAFETY: the next layer's function, with the caller's arguments.
+            None => unsafe { next(cb, size, ops) },
+        }
+    })
 }
 
 /// SPIR-V's `OpCapability` opcode and the `FragmentDensityEXT` capability
@@ -615,6 +742,109 @@ mod tests {
             ..read
         };
         assert!(f.rewrite() && !f.add_state());
+    }
+
+    #[test]
+    fn the_attachment_applies_on_top_of_the_applications_rate() {
+        use CombinerOp as Op;
+        let one = vk::Extent2D {
+            width: 1,
+            height: 1,
+        };
+        let two = vk::Extent2D {
+            width: 2,
+            height: 2,
+        };
+        let keep = [Op::KEEP, Op::KEEP];
+        assert_eq!(attachment_combiner(true, one, keep), Op::MAX);
+        assert_eq!(
+            attachment_combiner(true, two, keep),
+            Op::MAX,
+            "MAX keeps the application's coarser rate"
+        );
+        assert_eq!(attachment_combiner(true, one, [Op::MIN, Op::KEEP]), Op::MAX);
+        // Only KEEP and REPLACE: REPLACE where the application's rate is 1×1 all the way through,
+        // else its own rate wins.
+        assert_eq!(attachment_combiner(false, one, keep), Op::REPLACE);
+        assert_eq!(attachment_combiner(false, two, keep), Op::KEEP);
+        assert_eq!(
+            attachment_combiner(false, one, [Op::REPLACE, Op::KEEP]),
+            Op::KEEP,
+            "the primitive rate may be coarser"
+        );
+        // A combiner of the application's own stays.
+        assert_eq!(attachment_combiner(true, one, [Op::KEEP, Op::MIN]), Op::MIN);
+        assert_eq!(
+            attachment_combiner(false, one, [Op::KEEP, Op::REPLACE]),
+            Op::REPLACE
+        );
+    }
+
+    #[test]
+    fn an_applications_own_state_gets_the_combiner_on_a_copy() {
+        let size = vk::Extent2D {
+            width: 2,
+            height: 1,
+        };
+        let mut own = vk::PipelineFragmentShadingRateStateCreateInfoKHR::default()
+            .fragment_size(size)
+            .combiner_ops([CombinerOp::KEEP, CombinerOp::KEEP]);
+        let own_ptr: *const vk::PipelineFragmentShadingRateStateCreateInfoKHR = &own;
+        let mut rendering = vk::PipelineRenderingCreateInfo::default();
+        let ci = vk::GraphicsPipelineCreateInfo::default()
+            .push_next(&mut rendering)
+            .push_next(&mut own);
+        // SAFETY: create infos on the stack.
+        let read = unsafe { facts(&ci, |_| false) };
+        assert!(!read.rewrite(), "not on a device that does not inject");
+        for (non_trivial, want) in [(true, Some(CombinerOp::MAX)), (false, None)] {
+            let f = Facts {
+                inject: true,
+                non_trivial,
+                ..read
+            };
+            assert_eq!(f.retuned_combiner(), want, "{non_trivial}");
+            assert!(
+                f.rewrite() && !f.add_state(),
+                "the flag, not a second state"
+            );
+            // SAFETY: as above.
+            let (copy, owned) = unsafe { rewrite(&ci, f) }.expect("rewrite");
+            // SAFETY: the copy's chain, alive with `owned`.
+            unsafe {
+                let state = chain::find::<vk::PipelineFragmentShadingRateStateCreateInfoKHR>(
+                    copy.p_next,
+                    vk::StructureType::PIPELINE_FRAGMENT_SHADING_RATE_STATE_CREATE_INFO_KHR,
+                )
+                .unwrap()
+                .unwrap();
+                assert_eq!((*state).fragment_size, size, "its rate kept");
+                assert_eq!(
+                    (*state).combiner_ops,
+                    [CombinerOp::KEEP, want.unwrap_or(CombinerOp::KEEP)]
+                );
+                assert_eq!(
+                    std::ptr::eq(state, own_ptr),
+                    want.is_none(),
+                    "copied where changed"
+                );
+                assert!(chain::find::<u8>(
+                    copy.p_next,
+                    vk::StructureType::PIPELINE_RENDERING_CREATE_INFO
+                )
+                .unwrap()
+                .is_some());
+            }
+            assert_eq!(copy.flags, FSR_FLAG);
+            drop(owned);
+        }
+        // SAFETY: the application's struct, alive.
+        let kept = unsafe { (*own_ptr).combiner_ops };
+        assert_eq!(
+            kept,
+            [CombinerOp::KEEP, CombinerOp::KEEP],
+            "the application's struct is kept"
+        );
     }
 
     #[test]
