@@ -105,7 +105,42 @@ enum Setup {
     Off,
     /// `FOVEA_INJECT=1`, and the application enables shading-rate attachments itself.
     AppRates,
+    /// As vkd3d-proton: the application enables pipeline shading rates (no attachments), makes its
+    /// pipeline with shading-rate state {2×2, {KEEP, KEEP}} and the dynamic shading-rate state,
+    /// and sets 1×1 with {KEEP, KEEP} before each draw; injection on at this level, or off.
+    SetsRates(Option<Level>),
 }
+
+impl Setup {
+    /// The injected level, where injection is on for an application fovea injects into.
+    fn level(self) -> Option<Level> {
+        match self {
+            Setup::Inject(level) => Some(level),
+            Setup::SetsRates(level) => level,
+            _ => None,
+        }
+    }
+
+    /// The same setup at `level`.
+    fn at(self, level: Level) -> Setup {
+        match self {
+            Setup::SetsRates(_) => Setup::SetsRates(Some(level)),
+            _ => Setup::Inject(level),
+        }
+    }
+}
+
+/// The application's own combiners, as vkd3d-proton passes them for D3D12's defaults.
+const KEEP: [vk::FragmentShadingRateCombinerOpKHR; 2] = [
+    vk::FragmentShadingRateCombinerOpKHR::KEEP,
+    vk::FragmentShadingRateCombinerOpKHR::KEEP,
+];
+/// The dynamic states of a [`Setup::SetsRates`] application's pipeline.
+static RATE_DYNAMIC: [vk::DynamicState; 3] = [
+    vk::DynamicState::VIEWPORT,
+    vk::DynamicState::SCISSOR,
+    vk::DynamicState::FRAGMENT_SHADING_RATE_KHR,
+];
 
 /// What one run left behind.
 struct Outcome {
@@ -131,8 +166,12 @@ fn set_up(label: &str, setup: Setup) -> PathBuf {
             std::env::set_var("FOVEA_INJECT", "1");
             std::env::set_var("FOVEA_INJECT_LEVEL", (level as u8).to_string());
         }
+        Setup::SetsRates(Some(level)) => {
+            std::env::set_var("FOVEA_INJECT", "1");
+            std::env::set_var("FOVEA_INJECT_LEVEL", (level as u8).to_string());
+        }
         Setup::AppRates => std::env::set_var("FOVEA_INJECT", "1"),
-        Setup::Off => std::env::remove_var("FOVEA_INJECT"),
+        Setup::Off | Setup::SetsRates(None) => std::env::remove_var("FOVEA_INJECT"),
     }
     pick_lavapipe();
     dir
@@ -349,9 +388,15 @@ fn run_with(
         VALIDATION_LAYER,
         fovea_vkdouble::LAYER_NAME,
     ];
-    let mut rates = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
-        .attachment_fragment_shading_rate(true);
-    let app_rates = setup == Setup::AppRates;
+    let sets_rates = matches!(setup, Setup::SetsRates(_));
+    let mut rates = if sets_rates {
+        vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
+            .pipeline_fragment_shading_rate(true)
+    } else {
+        vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
+            .attachment_fragment_shading_rate(true)
+    };
+    let app_rates = setup == Setup::AppRates || sets_rates;
     let mut v11 = vk::PhysicalDeviceVulkan11Features::default().multiview(true);
     if app_rates {
         v11.p_next = &mut rates as *mut _ as *mut c_void;
@@ -442,11 +487,29 @@ fn run_with(
             .color_attachment_formats(&formats)
             .view_mask(view_mask);
         let render_pass = (!api.dynamic()).then(|| render_pass(d, api));
-        let fixed = Fixed::new();
+        let mut fixed = Fixed::new();
+        let mut own_state = vk::PipelineFragmentShadingRateStateCreateInfoKHR::default()
+            .fragment_size(vk::Extent2D {
+                width: 2,
+                height: 2,
+            })
+            .combiner_ops(KEEP);
+        if sets_rates {
+            fixed.dynamic =
+                vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&RATE_DYNAMIC);
+        }
         let st = stages(modules);
-        let pipeline_info = match render_pass {
+        let mut pipeline_info = match render_pass {
             Some(rp) => fixed.info(&st, layout).render_pass(rp),
             None => fixed.info(&st, layout).push_next(&mut rendering),
+        };
+        if sets_rates {
+            pipeline_info = pipeline_info.push_next(&mut own_state);
+        }
+        let set_rate = ash::khr::fragment_shading_rate::Device::new(&v.instance, d);
+        let one = vk::Extent2D {
+            width: 1,
+            height: 1,
         };
         let pipeline = d
             .create_graphics_pipelines(vk::PipelineCache::null(), &[pipeline_info], None)
@@ -512,6 +575,9 @@ fn run_with(
                 } else {
                     d.cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE);
                 }
+                if sets_rates {
+                    (set_rate.fp().cmd_set_fragment_shading_rate_khr)(cb, &one, &KEEP);
+                }
                 draw_fullscreen(d, cb, pipeline);
                 d.cmd_end_render_pass(cb);
                 continue;
@@ -534,6 +600,9 @@ fn run_with(
                 .view_mask(view_mask)
                 .color_attachments(&colour);
             d.cmd_begin_rendering(cb, &ri);
+            if sets_rates {
+                (set_rate.fp().cmd_set_fragment_shading_rate_khr)(cb, &one, &KEEP);
+            }
             draw_fullscreen(d, cb, pipeline);
             d.cmd_end_rendering(cb);
         }
@@ -787,7 +856,9 @@ fn check(test: &str, setup: Setup, api: Api, levels: &[Level]) {
     in_own_process(module_path!(), test, || {
         for profile in [Profile::Nvidia, Profile::Amd] {
             let setups: Vec<Setup> = match setup {
-                Setup::Inject(_) => levels.iter().map(|&l| Setup::Inject(l)).collect(),
+                Setup::Inject(_) | Setup::SetsRates(Some(_)) => {
+                    levels.iter().map(|&l| setup.at(l)).collect()
+                }
                 s => vec![s],
             };
             for s in setups {
@@ -808,9 +879,20 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
     let pipelines = out.of("pipeline");
     assert_eq!(pipelines.len(), 1, "{what}: {pipelines:?}");
     let passes = out.of("render_pass");
-    let Setup::Inject(level) = setup else {
+    let sets_rates = matches!(setup, Setup::SetsRates(_));
+    // The application's own rates: the pipeline's dynamic state and, per pass, its 1×1.
+    let sets: Vec<&Value> = out
+        .of("set_fragment_shading_rate")
+        .into_iter()
+        .filter(|s| s["command_buffer"] == json!(out.command_buffer))
+        .collect();
+    assert_eq!(sets.len(), if sets_rates { 3 } else { 0 }, "{what}");
+    assert_eq!(pipelines[0]["dynamic_rate"], sets_rates, "{what}");
+    let ops = |o: [vk::FragmentShadingRateCombinerOpKHR; 2]| json!([o[0].as_raw(), o[1].as_raw()]);
+    let Some(level) = setup.level() else {
         // Nothing of fovea's: no shading rates added to the device, no flag or state on the
-        // pipeline, no attachment in any pass or rendering.
+        // pipeline, no attachment in any pass or rendering; an application's own rates as it set
+        // them.
         let enabled = setup == Setup::AppRates;
         assert_eq!(
             devices[0]["features"]["attachment"]
@@ -820,8 +902,25 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
             "{what}: {}",
             devices[0]
         );
+        assert_eq!(
+            devices[0]["features"]["pipeline"]
+                .as_bool()
+                .unwrap_or(false),
+            sets_rates,
+            "{what}: {}",
+            devices[0]
+        );
         assert_eq!(pipelines[0]["rendering_attachment_flag"], false, "{what}");
-        assert_eq!(pipelines[0]["shading_rate_state"], Value::Null, "{what}");
+        let own = sets_rates.then(|| json!({"fragment_size": [2, 2], "combiner_ops": ops(KEEP)}));
+        assert_eq!(
+            pipelines[0]["shading_rate_state"],
+            own.unwrap_or(Value::Null),
+            "{what}"
+        );
+        for s in &sets {
+            assert_eq!(s["fragment_size"], json!([1, 1]), "{what}: {s}");
+            assert_eq!(s["combiner_ops"], ops(KEEP), "{what}: {s}");
+        }
         // (The double records passes and begins only where shading rates are in play.)
         for p in &passes {
             assert_eq!(p["attachments"].as_array().unwrap().len(), 1, "{what}: {p}");
@@ -862,8 +961,10 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
     );
     let rates = out.rates(api);
     let texel = profile.texel();
+    // The attachment feature added; an application's own features kept.
     assert_eq!(
-        devices[0]["features"]["attachment"], true,
+        devices[0]["features"],
+        json!({"pipeline": sets_rates, "primitive": false, "attachment": true}),
         "{what}: {}",
         devices[0]
     );
@@ -873,14 +974,31 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
         api.dynamic(),
         "{what}"
     );
-    assert_eq!(
-        pipelines[0]["shading_rate_state"],
-        json!({"fragment_size": [1, 1], "combiner_ops": [
-            vk::FragmentShadingRateCombinerOpKHR::KEEP.as_raw(),
-            vk::FragmentShadingRateCombinerOpKHR::REPLACE.as_raw(),
-        ]}),
-        "{what}"
-    );
+    // An application's own rate and first combiner stay, and the attachment applies on top: MAX,
+    // both profiles reporting fragmentShadingRateNonTrivialCombinerOps as the drivers they stand
+    // for do (a device without it is `pipeline::attachment_combiner`'s unit test).
+    let max = vk::FragmentShadingRateCombinerOpKHR::MAX;
+    let state = if sets_rates {
+        json!({"fragment_size": [2, 2], "combiner_ops": ops([KEEP[0], max])})
+    } else {
+        json!({"fragment_size": [1, 1], "combiner_ops": ops([
+            vk::FragmentShadingRateCombinerOpKHR::KEEP,
+            vk::FragmentShadingRateCombinerOpKHR::REPLACE,
+        ])})
+    };
+    assert_eq!(pipelines[0]["shading_rate_state"], state, "{what}");
+    for s in &sets {
+        assert_eq!(s["fragment_size"], json!([1, 1]), "{what}: its rate: {s}");
+        assert_eq!(s["combiner_ops"], ops([KEEP[0], max]), "{what}: {s}");
+    }
+    if sets_rates {
+        assert!(
+            out.log
+                .contains("the application sets shading rates per pipeline or per draw"),
+            "{what}: {}",
+            out.log
+        );
+    }
     for p in &passes {
         let atts = p["attachments"].as_array().unwrap();
         assert_eq!(atts.len(), 2, "{what}: {p}");
@@ -1073,6 +1191,41 @@ fn without_injection_render_passes_reach_the_driver_unchanged() {
         "without_injection_render_passes_reach_the_driver_unchanged",
         Setup::Off,
         Api::RenderPass,
+        &[],
+    );
+}
+
+/// vkd3d-proton's way: pipeline rates enabled without attachments, every pipeline with the dynamic
+/// shading-rate state, 1×1 and {KEEP, KEEP} set before each draw. Its eye passes get the injected
+/// map all the same, and its rates combine with it by MAX, in dynamic renderings and render passes.
+#[test]
+fn an_application_that_sets_rates_without_attachments_is_injected_into() {
+    check(
+        "an_application_that_sets_rates_without_attachments_is_injected_into",
+        Setup::SetsRates(Some(Level::None)),
+        Api::Dynamic,
+        &[Level::High],
+    );
+}
+
+/// As [`an_application_that_sets_rates_without_attachments_is_injected_into`], in render passes:
+/// the full-rate map of the small target's pass leaves its rates as they were (MAX with 1×1).
+#[test]
+fn an_application_that_sets_rates_without_attachments_is_injected_into_passes() {
+    check(
+        "an_application_that_sets_rates_without_attachments_is_injected_into_passes",
+        Setup::SetsRates(Some(Level::None)),
+        Api::RenderPass,
+        &[Level::Medium],
+    );
+}
+
+#[test]
+fn without_injection_an_applications_rates_reach_the_driver_unchanged() {
+    check(
+        "without_injection_an_applications_rates_reach_the_driver_unchanged",
+        Setup::SetsRates(None),
+        Api::Dynamic,
         &[],
     );
 }
