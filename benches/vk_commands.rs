@@ -18,7 +18,10 @@
 //! layer after an OpenXR instance with `FOVEA_INJECT=1` (fovea's OpenXR layer on the simulated
 //! runtime) published an eye swapchain, begins a dynamic rendering and a render pass into an
 //! eye-shaped target of its own, which get fovea's map (made in the warm-up rounds; what is timed
-//! is the classification and the attachment chained on).
+//! is the classification and the attachment chained on). The bare and injecting devices enable
+//! `VK_KHR_fragment_shading_rate`'s pipeline rates (no attachments), as vkd3d-proton does, and
+//! record `vkCmdSetFragmentShadingRateKHR` (1×1, {KEEP, KEEP}), which the injecting device's hook
+//! passes down with `combinerOps[1]` rewritten (docs/injection.md#apps-that-set-rates).
 //!
 //! Allocations are counted by interposing `malloc` and friends in this executable, as
 //! `benches/frame_loop.rs` does (the layer and the driver are dlopened libraries; ELF symbol
@@ -143,6 +146,8 @@ struct Side {
     framebuffer: vk::Framebuffer,
     /// Where the layer emulates density maps: the density image and its pass and framebuffer.
     fdm: Option<(Target, vk::RenderPass, vk::Framebuffer)>,
+    /// Where the device has pipeline shading rates (not on the emulating one).
+    set_rate: Option<ash::khr::fragment_shading_rate::Device>,
 }
 
 fn memory_type(instance: &ash::Instance, physical: vk::PhysicalDevice, bits: u32) -> u32 {
@@ -321,8 +326,15 @@ impl Side {
             let mut dinfo = vk::DeviceCreateInfo::default()
                 .queue_create_infos(&queues)
                 .push_next(&mut v13);
+            let fsr_exts = [ash::khr::fragment_shading_rate::NAME.as_ptr()];
+            let mut rates = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
+                .pipeline_fragment_shading_rate(true);
             if kind == Kind::Fdm {
                 dinfo = dinfo.enabled_extension_names(&exts).push_next(&mut fdm);
+            } else {
+                dinfo = dinfo
+                    .enabled_extension_names(&fsr_exts)
+                    .push_next(&mut rates);
             }
             let device = instance
                 .create_device(physical, &dinfo, None)
@@ -369,7 +381,10 @@ impl Side {
                 let (p, f) = pass_and_framebuffer(&device, color.view, Some(density.view));
                 (density, p, f)
             });
+            let set_rate = (kind != Kind::Fdm)
+                .then(|| ash::khr::fragment_shading_rate::Device::new(&instance, &device));
             Ok(Side {
+                set_rate,
                 instance,
                 device,
                 pool,
@@ -428,6 +443,17 @@ impl Side {
         // SAFETY: the side's own command buffer, recording; every struct lives across its call.
         unsafe {
             match case {
+                Case::SetRate => {
+                    let Some(f) = &self.set_rate else {
+                        return false;
+                    };
+                    let keep = [vk::FragmentShadingRateCombinerOpKHR::KEEP; 2];
+                    let one = vk::Extent2D {
+                        width: 1,
+                        height: 1,
+                    };
+                    (f.fp().cmd_set_fragment_shading_rate_khr)(cb, &one, &keep);
+                }
                 Case::Barrier | Case::BarrierFdm => {
                     let barrier = [vk::ImageMemoryBarrier::default()
                         .src_access_mask(vk::AccessFlags::SHADER_READ)
@@ -555,10 +581,11 @@ enum Case {
     RenderingFdm,
     RenderPassInjected,
     RenderingInjected,
+    SetRate,
 }
 
 impl Case {
-    const ALL: [Case; 9] = [
+    const ALL: [Case; 10] = [
         Case::Barrier,
         Case::Barrier2,
         Case::RenderPass,
@@ -568,11 +595,15 @@ impl Case {
         Case::RenderingFdm,
         Case::RenderPassInjected,
         Case::RenderingInjected,
+        Case::SetRate,
     ];
 
     /// Whether the injecting device records it.
     fn injected(self) -> bool {
-        matches!(self, Case::RenderPassInjected | Case::RenderingInjected)
+        matches!(
+            self,
+            Case::RenderPassInjected | Case::RenderingInjected | Case::SetRate
+        )
     }
 
     fn name(self) -> &'static str {
@@ -586,6 +617,7 @@ impl Case {
             Case::RenderingFdm => "vkCmdBeginRendering+End (FDM attachment)",
             Case::RenderPassInjected => "vkCmdBeginRenderPass+End (injected eye pass)",
             Case::RenderingInjected => "vkCmdBeginRendering+End (injected eye pass)",
+            Case::SetRate => "vkCmdSetFragmentShadingRateKHR (injecting)",
         }
     }
 

@@ -269,4 +269,16 @@ mod tests {
         }
         assert!(device_hook(c"vkCmdDraw").is_none());
     }
+
+    #[test]
+    fn an_applications_own_rates_are_hooked_on_injecting_devices_only() {
+        let h = device_hook(c"vkCmdSetFragmentShadingRateKHR").unwrap();
+        assert_eq!(h.when, When::Injecting);
+        assert!(h.when.applies(false, true));
+        assert!(
+            !h.when.applies(true, false),
+            "an emulating device has no rates of the app's"
+        );
+        assert!(!h.when.applies(false, false));
+    }
 }

@@ -306,6 +306,8 @@ table! { null_commands:
     b"vkCmdBeginRenderingKHR" => null_begin_rendering as PFN_vkCmdBeginRendering,
     b"vkCmdEndRendering" => null_end as PFN_vkCmdEndRendering,
     b"vkCmdEndRenderingKHR" => null_end as PFN_vkCmdEndRendering,
+    b"vkCmdSetFragmentShadingRateKHR" => null_set_fragment_shading_rate
+        as PFN_vkCmdSetFragmentShadingRateKHR,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -350,6 +352,13 @@ unsafe extern "system" fn null_begin_rendering(
 }
 
 unsafe extern "system" fn null_end(_: vk::CommandBuffer) {}
+
+unsafe extern "system" fn null_set_fragment_shading_rate(
+    _: vk::CommandBuffer,
+    _: *const vk::Extent2D,
+    _: *const [vk::FragmentShadingRateCombinerOpKHR; 2],
+) {
+}
 
 /// The loader's entry: agree on interface version 2, which hands over both proc-addr functions.
 ///
