@@ -201,10 +201,9 @@ pub unsafe fn facts(
         fdm_pass: fdm_pass(ci.render_pass),
         own_state: own_state.is_some(),
         own_rate: own_state.map(|p| {
-            // SAFETY: found by its sType.
-            let s =
-                unsafe { &*(p as *const vk::PipelineFragmentShadingRateStateCreateInfoKHR<'_>) };
-            (s.fragment_size, s.combiner_ops)
+            let p = p as *const vk::PipelineFragmentShadingRateStateCreateInfoKHR<'_>;
+            // SAFETY: found by its sType, read only.
+            unsafe { ((*p).fragment_size, (*p).combiner_ops) }
         }),
         no_rate_state: library.is_some_and(|f| !f.intersects(rate_parts)),
         inject: false,
