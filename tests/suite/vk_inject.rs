@@ -976,10 +976,22 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
     );
     // An application's own rate and first combiner stay, and the attachment applies on top: MAX,
     // both profiles reporting fragmentShadingRateNonTrivialCombinerOps as the drivers they stand
-    // for do (a device without it is `pipeline::attachment_combiner`'s unit test).
-    let max = vk::FragmentShadingRateCombinerOpKHR::MAX;
+    // for do. Without it, REPLACE where the application's rate is 1×1 (its calls), and its own
+    // KEEP where it asked for coarser (its pipeline's 2×2).
+    let trivial = std::env::var_os(fovea_vkdouble::TRIVIAL_COMBINERS_ENV).is_some();
+    let (own_op, max) = if trivial {
+        (
+            vk::FragmentShadingRateCombinerOpKHR::KEEP,
+            vk::FragmentShadingRateCombinerOpKHR::REPLACE,
+        )
+    } else {
+        (
+            vk::FragmentShadingRateCombinerOpKHR::MAX,
+            vk::FragmentShadingRateCombinerOpKHR::MAX,
+        )
+    };
     let state = if sets_rates {
-        json!({"fragment_size": [2, 2], "combiner_ops": ops([KEEP[0], max])})
+        json!({"fragment_size": [2, 2], "combiner_ops": ops([KEEP[0], own_op])})
     } else {
         json!({"fragment_size": [1, 1], "combiner_ops": ops([
             vk::FragmentShadingRateCombinerOpKHR::KEEP,
@@ -993,8 +1005,12 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
     }
     if sets_rates {
         assert!(
-            out.log
-                .contains("the application sets shading rates per pipeline or per draw"),
+            out.log.contains(&format!(
+                "the application sets shading rates per pipeline or per draw, without \
+                 attachments of its own: injected maps are combined with its rates \
+                 non_trivial_combiners={}",
+                !trivial
+            )),
             "{what}: {}",
             out.log
         );
@@ -1217,6 +1233,29 @@ fn an_application_that_sets_rates_without_attachments_is_injected_into_passes() 
         Setup::SetsRates(Some(Level::None)),
         Api::RenderPass,
         &[Level::Medium],
+    );
+}
+
+/// On a device with only `KEEP` and `REPLACE` (the double told to report
+/// `fragmentShadingRateNonTrivialCombinerOps` false, which validation then enforces): the
+/// application's 1×1 calls get `REPLACE` (the map's rate, as `MAX` would give), its pipeline's own
+/// 2×2 keeps `KEEP` and so its rate.
+#[test]
+fn without_non_trivial_combiners_replace_stands_in_where_the_rate_is_1x1() {
+    in_own_process(
+        module_path!(),
+        "without_non_trivial_combiners_replace_stands_in_where_the_rate_is_1x1",
+        || {
+            std::env::set_var(fovea_vkdouble::TRIVIAL_COMBINERS_ENV, "1");
+            for profile in [Profile::Nvidia, Profile::Amd] {
+                let setup = Setup::SetsRates(Some(Level::High));
+                let dir = set_up(&format!("trivial-{profile:?}"), setup);
+                let Some(out) = run(profile, setup, Api::Dynamic, &dir) else {
+                    return;
+                };
+                assert_outcome(profile, setup, Api::Dynamic, &out);
+            }
+        },
     );
 }
 

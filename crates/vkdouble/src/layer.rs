@@ -806,6 +806,9 @@ unsafe extern "system" fn get_properties2(
             ) {
                 let p = &mut *(p as *mut vk::PhysicalDeviceFragmentShadingRatePropertiesKHR<'_>);
                 inst.profile.fill_properties(p);
+                if std::env::var_os(crate::TRIVIAL_COMBINERS_ENV).is_some() {
+                    p.fragment_shading_rate_non_trivial_combiner_ops = vk::FALSE;
+                }
             }
         }
     })

@@ -64,10 +64,17 @@ pub const LIBRARY_FILE: &str = "libfovea_vkdouble.so";
 /// The environment variable that picks the profile: `nvidia` (default), `amd` or `none`.
 pub const PROFILE_ENV: &str = "FOVEA_VKDOUBLE_PROFILE";
 /// Set (to anything) when a device is created, the environment variable that makes that device's
-/// barrier, render-pass, dynamic-rendering and shading-rate recording commands do nothing: the double hands out
-/// empty functions for them instead of going down to the driver. A benchmark of the layers above
-/// then measures their own cost per command, not the driver's (`benches/vk_commands.rs`).
+/// barrier, render-pass, dynamic-rendering and shading-rate recording commands do nothing: the
+/// double hands out empty functions for them instead of going down to the driver. A benchmark of
+/// the layers above then measures their own cost per command, not the driver's
+/// (`benches/vk_commands.rs`).
 pub const NULL_COMMANDS_ENV: &str = "FOVEA_VKDOUBLE_NULL_COMMANDS";
+/// Set (to anything) when the shading-rate properties are queried, the environment variable that
+/// makes either profile report `fragmentShadingRateNonTrivialCombinerOps` false: only `KEEP` and
+/// `REPLACE` then, which validation above the double enforces. Both profiles report it true by
+/// default, as NVIDIA's driver and RADV do; this is for testing what a layer above does on a
+/// device without it.
+pub const TRIVIAL_COMBINERS_ENV: &str = "FOVEA_VKDOUBLE_TRIVIAL_COMBINERS";
 /// Where set, the path the double writes its records to (as [`fovea_vkdouble_records_json`]
 /// gives them) each time a device or an instance is destroyed, and at exit: how a test reads what reached the driver in an
 /// application it runs as a child process (`tests/suite/hello_xr.rs`).

@@ -122,6 +122,8 @@ impl Profile {
         // Needs the primitive feature, which the double does not offer.
         p.primitive_fragment_shading_rate_with_multiple_viewports = vk::FALSE;
         p.layered_shading_rate_attachments = self.layered().into();
+        // MAX, MIN and MUL besides KEEP and REPLACE: NVIDIA's driver and RADV both report it
+        // (`crate::TRIVIAL_COMBINERS_ENV` turns it off).
         p.fragment_shading_rate_non_trivial_combiner_ops = vk::TRUE;
         p.max_fragment_size = vk::Extent2D {
             width: m,
