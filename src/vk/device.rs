@@ -364,6 +364,7 @@ unsafe fn create_device_impl(
             api_version,
             attachments: registry::Attachments::new(own),
         });
+        crate::vk::convert::device_created(&inst, physical, ci, handle);
     }
     r
 }
@@ -382,7 +383,10 @@ pub unsafe extern "system" fn destroy_device(
             return;
         };
         // SAFETY: the device is live; the application has finished with it.
-        unsafe { image::destroy_all(&dev) };
+        unsafe {
+            crate::vk::convert::device_destroyed(device);
+            image::destroy_all(&dev);
+        }
         if let Some(destroy) = dev.next.destroy_device {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { destroy(device, alloc) };

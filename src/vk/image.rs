@@ -256,7 +256,7 @@ impl Own {
     }
 
     /// A device-local memory type among `bits` (any allowed one where none is device-local).
-    fn memory_type(&self, bits: u32) -> Option<u32> {
+    pub fn memory_type(&self, bits: u32) -> Option<u32> {
         let allowed = |i: u32| bits & (1 << i) != 0;
         let types = &self.memory.memory_types[..self.memory.memory_type_count as usize];
         (0..types.len() as u32)
@@ -377,15 +377,20 @@ pub unsafe fn image_created(dev: &Device, app: vk::Image, ci: &vk::ImageCreateIn
                 "density map shadowed"
             );
             // fovea's own density images get their rates with every upload
-            // (`gpu::density_images`); an application's own maps are not converted yet.
+            // (`gpu::density_images`); an application's own maps are converted at every pass
+            // begin that reads them ([`crate::vk::convert`]).
             let logged = &dev.attachments.app_maps_logged;
-            if !own_image && !logged.swap(true, std::sync::atomic::Ordering::Relaxed) {
-                tracing::warn!(
-                    image = raw(app),
-                    "this application creates and writes density maps itself: they render at \
-                     full rate on this device until their contents are converted into shading \
-                     rates (fovea's own density maps carry their rates)"
-                );
+            if !own_image {
+                // SAFETY: as the caller promised.
+                unsafe { crate::vk::convert::map_created(dev, app, &s) };
+                if !logged.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                    tracing::info!(
+                        image = raw(app),
+                        "this application creates and writes density maps itself: they are \
+                         converted into shading rates on the GPU at every pass begin that reads \
+                         them (fovea's own density maps carry their rates)"
+                    );
+                }
             }
         }
         Err(e) => tracing::warn!(
@@ -563,6 +568,8 @@ pub unsafe extern "system" fn create_image_view(
                         .views
                         .lock()
                         .insert(app_view.as_raw(), ShadowView { view });
+                    // SAFETY: the device is live.
+                    unsafe { crate::vk::convert::view_changed(&dev, app_view, Some(ci.image)) };
                 }
                 // Fail open, as for the shadow image ([`image_created`]): the view is the
                 // application's alone, and framebuffers with it get the full-rate stand-in.
@@ -596,6 +603,8 @@ pub unsafe extern "system" fn destroy_image_view(
             unsafe { next(device, view, alloc) };
         }
         let shadow = dev.attachments.views.lock().remove(&view.as_raw());
+        // SAFETY: the device is live.
+        unsafe { crate::vk::convert::view_changed(&dev, view, None) };
         if let (Some(s), Some(own)) = (shadow, &dev.attachments.own) {
             // SAFETY: the layer's own view; the application's use of it ended with its view's.
             unsafe { own.fns.destroy_image_view(s.view, None) };
@@ -622,6 +631,8 @@ pub unsafe extern "system" fn destroy_image(
             unsafe { next(device, image, alloc) };
         }
         let shadow = dev.attachments.images.lock().remove(&image.as_raw());
+        // SAFETY: the device is live; the application's uses of the image have ended.
+        unsafe { crate::vk::convert::map_destroyed(&dev, image) };
         if let Some(s) = shadow {
             bridge::set_shadow(image, None);
             if let Some(own) = &dev.attachments.own {

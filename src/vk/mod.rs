@@ -17,6 +17,8 @@
 //! - [`barrier`]: barriers, event sets and waits without the density-map layout, stage and access bits;
 //! - [`image`]: the layer-owned shading-rate shadows of density-map images and views;
 //! - [`pass`]: render passes, framebuffers and dynamic rendering, rewritten to name the shadows;
+//! - [`convert`]: density maps the application writes, converted into their shadows at pass
+//!   begin, with the application's compute bindings given back;
 //! - [`submit`]: new shadows' clears ahead of the application's next submit, and semaphore wait
 //!   stages without the density-map stage;
 //! - [`chain`], [`link`]: `pNext` chains and the loader's link structs.
@@ -59,6 +61,7 @@ macro_rules! hook_and_khr_alias {
 
 mod barrier;
 mod chain;
+mod convert;
 mod device;
 mod dispatch;
 mod image;
