@@ -193,8 +193,6 @@ pub struct Converter {
     maps: parking_lot::Mutex<HashMap<u64, MapEntry>>,
     /// Application view → its image, for views of converted images.
     views: parking_lot::Mutex<HashMap<u64, u64>>,
-    /// Framebuffer → its density view, for framebuffers of rewritten passes.
-    framebuffers: parking_lot::Mutex<HashMap<u64, u64>>,
     /// Rewritten render pass → whether its density attachment's `initialLayout` leaves the map
     /// readable (`GENERAL`, or the density layout, which barriers turn into `GENERAL`).
     passes: parking_lot::Mutex<HashMap<u64, bool>>,
@@ -383,6 +381,11 @@ pub unsafe fn device_destroyed(handle: vk::Device) {
         // SAFETY: as the caller promised.
         unsafe { c.destroy() };
     }
+    FRAMEBUFFERS.write().retain(|_, (key, _)| *key != k);
+    // Command buffers go with their device (and pools) without vkFreeCommandBuffers.
+    for s in &RECORDS {
+        s.lock().retain(|_, b| b.device != k);
+    }
 }
 
 impl Converter {
@@ -464,7 +467,6 @@ impl Converter {
                 pools: parking_lot::Mutex::new(Vec::new()),
                 maps: parking_lot::Mutex::new(HashMap::new()),
                 views: parking_lot::Mutex::new(HashMap::new()),
-                framebuffers: parking_lot::Mutex::new(HashMap::new()),
                 passes: parking_lot::Mutex::new(HashMap::new()),
                 logged_layout: AtomicBool::new(false),
                 logged_state: AtomicBool::new(false),
@@ -751,12 +753,42 @@ pub unsafe fn framebuffer_changed(dev: &Device, fb: vk::Framebuffer, view: Optio
     let Some(c) = (unsafe { converter(dev.handle) }) else {
         return;
     };
-    let mut fbs = c.framebuffers.lock();
+    drop(c);
+    // SAFETY: as the caller promised.
+    let Some(k) = (unsafe { registry::key(dev.handle) }) else {
+        return;
+    };
+    let mut fbs = FRAMEBUFFERS.write();
+    if view.is_some() {
+        let (word, bit) = filter_slot(fb.as_raw());
+        FRAMEBUFFER_FILTER[word].fetch_or(bit, Ordering::Release);
+    }
     match view {
-        Some(v) => fbs.insert(fb.as_raw(), v.as_raw()),
+        Some(v) => fbs.insert(fb.as_raw(), (k, v.as_raw())),
         None => fbs.remove(&fb.as_raw()),
     };
 }
+
+/// A filter in front of [`FRAMEBUFFERS`]: one bit per hash slot, set for every framebuffer ever
+/// entered (never cleared: a stale bit only costs the table look-up). A clear bit proves the
+/// framebuffer is not in the table, so a begin of a pass without a density map costs one atomic
+/// load here.
+const FILTER_WORDS: usize = 64;
+static FRAMEBUFFER_FILTER: [std::sync::atomic::AtomicU64; FILTER_WORDS] =
+    [const { std::sync::atomic::AtomicU64::new(0) }; FILTER_WORDS];
+
+/// The filter word and bit of a framebuffer handle (12 bits of a multiplicative hash).
+fn filter_slot(fb: u64) -> (usize, u64) {
+    let h = ((fb ^ (fb >> 29)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 52) as usize;
+    (h / 64, 1 << (h % 64))
+}
+
+/// Framebuffers of rewritten passes on converting devices → (device key, density view). One
+/// table for all devices, looked up first at every render-pass begin whose framebuffer passes
+/// [`FRAMEBUFFER_FILTER`], before any per-device look-up. A leaf lock.
+static FRAMEBUFFERS: parking_lot::RwLock<
+    HashMap<u64, (Key, u64), BuildHasherDefault<HandleHasher>>,
+> = parking_lot::RwLock::new(HashMap::with_hasher(BuildHasherDefault::new()));
 
 /// The barrier translation's look-up of a shadow for an image the application moves into the
 /// density-map layout (`crate::vk::barrier`): notes, where the image is an application's map, that
@@ -806,13 +838,24 @@ pub unsafe fn before_render_pass(
     begin: *const vk::RenderPassBeginInfo<'_>,
 ) {
     // SAFETY: as the caller promised.
-    let (Some(c), Some(b)) = (unsafe { converter(cb) }, unsafe { begin.as_ref() }) else {
+    let (Some(k), Some(b)) = (unsafe { registry::key(cb) }, unsafe { begin.as_ref() }) else {
+        return;
+    };
+    let (word, bit) = filter_slot(b.framebuffer.as_raw());
+    let known = (FRAMEBUFFER_FILTER[word].load(Ordering::Acquire) & bit != 0)
+        .then(|| FRAMEBUFFERS.read().get(&b.framebuffer.as_raw()).copied())
+        .flatten();
+    let view = known.filter(|(key, _)| *key == k).map(|(_, v)| v);
+    if view.is_none() && b.p_next.is_null() {
+        return;
+    }
+    // SAFETY: as the caller promised.
+    let Some(c) = (unsafe { converter(cb) }) else {
         return;
     };
     let Some(density) = dev.attachments.density_attachment(b.render_pass) else {
         return;
     };
-    let view = c.framebuffers.lock().get(&b.framebuffer.as_raw()).copied();
     let view = view.or_else(|| {
         // An imageless framebuffer: the view is in the begin info.
         let ty = vk::StructureType::RENDER_PASS_ATTACHMENT_BEGIN_INFO;
@@ -845,9 +888,12 @@ pub unsafe fn before_rendering(
     info: *const vk::RenderingInfo<'_>,
 ) {
     // SAFETY: as the caller promised.
-    let (Some(c), Some(ri)) = (unsafe { converter(cb) }, unsafe { info.as_ref() }) else {
+    let Some(ri) = (unsafe { info.as_ref() }) else {
         return;
     };
+    if ri.p_next.is_null() {
+        return;
+    }
     let ty = vk::StructureType::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_INFO_EXT;
     type Info<'a> = vk::RenderingFragmentDensityMapAttachmentInfoEXT<'a>;
     // SAFETY: the caller's chain, read only.
@@ -859,6 +905,10 @@ pub unsafe fn before_rendering(
     if f.image_view == vk::ImageView::null() {
         return;
     }
+    // SAFETY: as the caller promised.
+    let Some(c) = (unsafe { converter(cb) }) else {
+        return;
+    };
     // SAFETY: as the caller promised.
     unsafe { c.convert(cb, f.image_view.as_raw(), readable(f.image_layout)) };
 }
@@ -1073,6 +1123,8 @@ pub struct Bound {
     push_count: u32,
     /// Something was bound that this record cannot give back.
     lost: bool,
+    /// The command buffer's device (its dispatch key), whose destruction drops the record.
+    device: Key,
 }
 
 impl Default for Bound {
@@ -1085,6 +1137,7 @@ impl Default for Bound {
             pushes: [PushRange::default(); PUSHES],
             push_count: 0,
             lost: false,
+            device: 0,
         }
     }
 }
@@ -1256,12 +1309,18 @@ pub unsafe extern "system" fn begin_command_buffer(
             let Some(next) = rec.and_then(|r| r.next.begin_command_buffer) else {
                 return vk::Result::ERROR_INITIALIZATION_FAILED;
             };
+            // SAFETY: as the caller promised.
+            let device = unsafe { registry::key(cb) }.unwrap_or(0);
             {
                 let mut r = shard(cb).lock();
+                let fresh = Bound {
+                    device,
+                    ..Bound::default()
+                };
                 match r.get_mut(&cb.as_raw()) {
-                    Some(b) => **b = Bound::default(),
+                    Some(b) => **b = fresh,
                     None => {
-                        r.insert(cb.as_raw(), Box::default());
+                        r.insert(cb.as_raw(), Box::new(fresh));
                     }
                 }
             }

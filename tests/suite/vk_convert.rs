@@ -81,6 +81,7 @@ struct Dev {
 impl Dev {
     fn new(vk: &Vk) -> Dev {
         let mut v11 = vk::PhysicalDeviceVulkan11Features::default().multiview(true);
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().imageless_framebuffer(true);
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
             .dynamic_rendering(true)
             .synchronization2(true);
@@ -97,6 +98,7 @@ impl Dev {
             .enabled_extension_names(&names)
             .push_next(&mut fdm)
             .push_next(&mut v11)
+            .push_next(&mut v12)
             .push_next(&mut v13);
         // SAFETY: every struct lives across the calls.
         unsafe {
@@ -522,9 +524,11 @@ fn codes_of(read: &[Value], what: &str) -> Vec<u8> {
 
 /// How the pass names the density map.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Pass {
+enum Begin {
     /// `vkCmdBeginRenderPass2` with a framebuffer (one view).
-    RenderPass,
+    Framebuffer,
+    /// `vkCmdBeginRenderPass2` with an imageless framebuffer: the views come with the begin.
+    Imageless,
     /// `vkCmdBeginRendering` with `VkRenderingFragmentDensityMapAttachmentInfoEXT` and a view
     /// mask over every layer.
     Rendering,
@@ -533,7 +537,7 @@ enum Pass {
 /// One application frame: upload `layers` layers of the pattern, bind compute state, render a pass
 /// with the map, dispatch after it. Returns the shadow's codes at the submit, what the model wants,
 /// and what the dispatch after the pass wrote.
-fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Pass, layers: u32) {
+fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32) {
     let what = format!("{profile:?} {pass:?} {layers} layer(s)");
     let dev = Dev::new(vk);
     let texel = profile.texel();
@@ -586,7 +590,7 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Pass, layers: u32) {
                 &[barrier],
             );
             match pass {
-                Pass::RenderPass => {
+                Begin::Framebuffer | Begin::Imageless => {
                     let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
                     let color_ref = [vk::AttachmentReference2::default()
                         .attachment(0)
@@ -609,30 +613,62 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Pass, layers: u32) {
                         )
                         .expect("vkCreateRenderPass2");
                     let views = [color_view, map_view];
+                    let color_formats = [COLOR];
+                    let density_formats = [DENSITY];
+                    let infos = [
+                        vk::FramebufferAttachmentImageInfo::default()
+                            .usage(vk::ImageUsageFlags::COLOR_ATTACHMENT)
+                            .width(SIZE)
+                            .height(SIZE)
+                            .layer_count(1)
+                            .view_formats(&color_formats),
+                        vk::FramebufferAttachmentImageInfo::default()
+                            .usage(
+                                vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT
+                                    | vk::ImageUsageFlags::TRANSFER_DST,
+                            )
+                            .width(side)
+                            .height(side)
+                            .layer_count(1)
+                            .view_formats(&density_formats),
+                    ];
+                    let mut attachments = vk::FramebufferAttachmentsCreateInfo::default()
+                        .attachment_image_infos(&infos);
+                    let mut fb_info = vk::FramebufferCreateInfo::default()
+                        .render_pass(rp)
+                        .width(SIZE)
+                        .height(SIZE)
+                        .layers(1);
+                    if pass == Begin::Imageless {
+                        fb_info = fb_info
+                            .flags(vk::FramebufferCreateFlags::IMAGELESS)
+                            .push_next(&mut attachments);
+                        fb_info.attachment_count = 2;
+                    } else {
+                        fb_info = fb_info.attachments(&views);
+                    }
                     let fb = d
-                        .create_framebuffer(
-                            &vk::FramebufferCreateInfo::default()
-                                .render_pass(rp)
-                                .attachments(&views)
-                                .width(SIZE)
-                                .height(SIZE)
-                                .layers(1),
-                            None,
-                        )
+                        .create_framebuffer(&fb_info, None)
                         .expect("vkCreateFramebuffer");
+                    let mut begin_views =
+                        vk::RenderPassAttachmentBeginInfo::default().attachments(&views);
+                    let mut begin = vk::RenderPassBeginInfo::default()
+                        .render_pass(rp)
+                        .framebuffer(fb)
+                        .render_area(AREA)
+                        .clear_values(&CLEAR);
+                    if pass == Begin::Imageless {
+                        begin = begin.push_next(&mut begin_views);
+                    }
                     d.cmd_begin_render_pass2(
                         cb,
-                        &vk::RenderPassBeginInfo::default()
-                            .render_pass(rp)
-                            .framebuffer(fb)
-                            .render_area(AREA)
-                            .clear_values(&CLEAR),
+                        &begin,
                         &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
                     );
                     d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
                     made = Some((rp, fb));
                 }
-                Pass::Rendering => {
+                Begin::Rendering => {
                     let color_att = [vk::RenderingAttachmentInfo::default()
                         .image_view(color_view)
                         .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
@@ -698,7 +734,8 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Pass, layers: u32) {
     assert_eq!(env.double.errors(), Vec::<String>::new(), "{what}");
 }
 
-/// A one-layer map in a render pass (`nvidia`, 4×4 fragments): the shadow holds the model's codes
+/// A one-layer map in a render pass, with a framebuffer and with an imageless one (`nvidia`, 4×4
+/// fragments): the shadow holds the model's codes
 /// of the application's bytes, frame after frame, and the application's compute bindings survive.
 #[test]
 fn app_written_maps_are_converted_for_render_passes() {
@@ -706,7 +743,8 @@ fn app_written_maps_are_converted_for_render_passes() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    frame(env, &vk, Profile::Nvidia, Pass::RenderPass, 1);
+    frame(env, &vk, Profile::Nvidia, Begin::Framebuffer, 1);
+    frame(env, &vk, Profile::Nvidia, Begin::Imageless, 1);
     drop(vk);
     assert_only_stage_false_positives();
 }
@@ -721,7 +759,7 @@ fn app_written_maps_are_converted_for_dynamic_rendering_layered_and_merged() {
             return;
         };
         for layers in [1, 2] {
-            frame(env, &vk, profile, Pass::Rendering, layers);
+            frame(env, &vk, profile, Begin::Rendering, layers);
         }
         drop(vk);
         assert_only_stage_false_positives();
