@@ -744,7 +744,7 @@ pub unsafe fn view_changed(dev: &Device, view: vk::ImageView, image: Option<vk::
     c.views.lock().insert(view.as_raw(), i.as_raw());
 }
 
-/// Notes a framebuffer of a rewritten pass and its density view (`Some`), or its destruction.
+/// Notes a framebuffer of a rewritten pass and its density view (`Some`; `None` forgets it).
 ///
 /// # Safety
 /// `dev` must be live.
@@ -1349,8 +1349,10 @@ pub unsafe extern "system" fn free_command_buffers(
                 }
             }
         }
+        // The leaf table, not the registry's ranked map: fovea's own uploads free their command
+        // buffers through the layer under their submit lock (`crate::common::lock::Rank`).
         // SAFETY: as the caller promised.
-        let next = unsafe { registry::device(device) }.and_then(|d| d.next.free_command_buffers);
+        let next = unsafe { registry::recording(device) }.and_then(|r| r.next.free_command_buffers);
         if let Some(next) = next {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, pool, count, cbs) };
@@ -1368,16 +1370,19 @@ pub unsafe extern "system" fn destroy_framebuffer(
     alloc: *const vk::AllocationCallbacks<'_>,
 ) {
     guard("vkDestroyFramebuffer", (), || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device(device) }) else {
-            return;
-        };
-        if let Some(next) = dev.next.destroy_framebuffer {
+        // SAFETY: as the caller promised (the leaf table, as in free_command_buffers).
+        let next = unsafe { registry::recording(device) }.and_then(|r| r.next.destroy_framebuffer);
+        if let Some(next) = next {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, fb, alloc) };
         }
-        // SAFETY: the device is live.
-        unsafe { framebuffer_changed(&dev, fb, None) };
+        // SAFETY: as the caller promised.
+        if let Some(k) = unsafe { registry::key(device) } {
+            let mut fbs = FRAMEBUFFERS.write();
+            if fbs.get(&fb.as_raw()).is_some_and(|(key, _)| *key == k) {
+                fbs.remove(&fb.as_raw());
+            }
+        }
     })
 }
 
