@@ -891,7 +891,10 @@ pub unsafe fn before_rendering(
     let Some(ri) = (unsafe { info.as_ref() }) else {
         return;
     };
-    if ri.p_next.is_null() {
+    // A resumed render pass instance was converted where it began, and nothing but the
+    // instance's own commands may come between its suspension and resumption
+    // (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#renderpass-suspension>).
+    if ri.p_next.is_null() || ri.flags.contains(vk::RenderingFlags::RESUMING) {
         return;
     }
     let ty = vk::StructureType::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_INFO_EXT;
