@@ -8,7 +8,9 @@
 //! renders a pass with the map (render pass or dynamic rendering), and after the pass dispatches
 //! with those bindings. Checked: the codes the double reads back from the shadow at the submit are
 //! `fovea_model::shading_rate::fill_codes` of the application's bytes (layered on `nvidia`, one
-//! merged layer on `amd`); the dispatch after the pass wrote the application's push constant
+//! merged layer on `amd`), a second frame with another pattern included (with dynamic rendering,
+//! one instance suspended and resumed, converted once); the dispatch after the pass wrote the
+//! application's push constant
 //! through the application's buffer; validation says nothing (leaks at `vkDestroyDevice`
 //! included) but its 1.3.239 stage false positives.
 
@@ -571,6 +573,7 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32, lose: b
 
     // Two frames: the second with a different pattern, so a conversion that ran only once (or
     // that read a stale map) would show.
+    let mut barrier_counts = Vec::new();
     for round in 0..2u32 {
         let bytes: Vec<u8> = if round == 0 {
             bytes.clone()
@@ -701,14 +704,43 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32, lose: b
                     } else {
                         info = info.color_attachments(&color_att);
                     }
-                    d.cmd_begin_rendering(cb, &info);
-                    d.cmd_end_rendering(cb);
+                    if round == 0 {
+                        d.cmd_begin_rendering(cb, &info);
+                        d.cmd_end_rendering(cb);
+                    } else {
+                        // One render pass instance, suspended and resumed: converted once, in
+                        // front of it; a conversion before the resumption would be invalid.
+                        let flags = info.flags;
+                        info = info.flags(flags | vk::RenderingFlags::SUSPENDING);
+                        d.cmd_begin_rendering(cb, &info);
+                        d.cmd_end_rendering(cb);
+                        info = info.flags(flags | vk::RenderingFlags::RESUMING);
+                        d.cmd_begin_rendering(cb, &info);
+                        d.cmd_end_rendering(cb);
+                    }
                 }
             }
         }
         dev.dispatch(cb);
         dev.submit(cb);
         let got = codes_of(&read_at_submit(env, cb), &what);
+        // Both rounds record the same commands but for the suspended and resumed instance of
+        // round 1: one conversion each, so as many barriers reach the driver.
+        let barriers = {
+            use ash::vk::Handle as _;
+            env.double
+                .events("barrier")
+                .iter()
+                .filter(|b| b["command_buffer"] == json!(cb.as_raw()))
+                .count()
+        };
+        match barrier_counts.first() {
+            Some(&first) => assert_eq!(
+                barriers, first,
+                "{what}, round {round}: not one conversion per render pass instance"
+            ),
+            None => barrier_counts.push(barriers),
+        }
         let model = model_codes(profile, &bytes, texels, layers as usize);
         assert!(
             model.iter().any(|&c| c != 0),
