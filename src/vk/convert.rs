@@ -749,11 +749,11 @@ pub unsafe fn view_changed(dev: &Device, view: vk::ImageView, image: Option<vk::
 /// # Safety
 /// `dev` must be live.
 pub unsafe fn framebuffer_changed(dev: &Device, fb: vk::Framebuffer, view: Option<vk::ImageView>) {
+    // Only converting devices' framebuffers are looked up at begin.
     // SAFETY: as the caller promised.
-    let Some(c) = (unsafe { converter(dev.handle) }) else {
+    if unsafe { converter(dev.handle) }.is_none() {
         return;
-    };
-    drop(c);
+    }
     // SAFETY: as the caller promised.
     let Some(k) = (unsafe { registry::key(dev.handle) }) else {
         return;

@@ -626,13 +626,14 @@ pub unsafe extern "system" fn destroy_image(
         let Some(dev) = (unsafe { registry::device(device) }) else {
             return;
         };
+        // The layer's view of the image goes first.
+        // SAFETY: the device is live; the application's uses of the image have ended.
+        unsafe { crate::vk::convert::map_destroyed(&dev, image) };
         if let Some(next) = dev.next.destroy_image {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, image, alloc) };
         }
         let shadow = dev.attachments.images.lock().remove(&image.as_raw());
-        // SAFETY: the device is live; the application's uses of the image have ended.
-        unsafe { crate::vk::convert::map_destroyed(&dev, image) };
         if let Some(s) = shadow {
             bridge::set_shadow(image, None);
             if let Some(own) = &dev.attachments.own {
