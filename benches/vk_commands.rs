@@ -22,6 +22,10 @@
 //! `VK_KHR_fragment_shading_rate`'s pipeline rates (no attachments), as vkd3d-proton does, and
 //! record `vkCmdSetFragmentShadingRateKHR` (1×1, {KEEP, KEEP}), which the injecting device's hook
 //! passes down with `combinerOps[1]` rewritten (docs/injection.md#apps-that-set-rates).
+//! (The density-map passes, once the density-image barrier case has moved the map into the density
+//! layout, these include the conversion the layer records in front of the pass.) `vkCmdBindPipeline` of a compute pipeline (both devices): the layer
+//! notes the application's compute bindings on emulating devices, to give them back after it
+//! converts a density map the application writes (src/vk/convert.rs).
 //!
 //! Allocations are counted by interposing `malloc` and friends in this executable, as
 //! `benches/frame_loop.rs` does (the layer and the driver are dlopened libraries; ELF symbol
@@ -148,6 +152,64 @@ struct Side {
     fdm: Option<(Target, vk::RenderPass, vk::Framebuffer)>,
     /// Where the device has pipeline shading rates (not on the emulating one).
     set_rate: Option<ash::khr::fragment_shading_rate::Device>,
+    /// A compute pipeline (`tests/suite/shaders/store.comp`) and its layout.
+    compute: (vk::PipelineLayout, vk::Pipeline),
+}
+
+/// A compute pipeline and its layout (one storage buffer, eight bytes of push constants).
+///
+/// # Safety
+/// `device` must be live.
+unsafe fn compute_pipeline(device: &ash::Device) -> (vk::PipelineLayout, vk::Pipeline) {
+    let code = ash::util::read_spv(&mut std::io::Cursor::new(
+        &include_bytes!("../tests/suite/shaders/store.comp.spv")[..],
+    ))
+    .expect("SPIR-V");
+    let bindings = [vk::DescriptorSetLayoutBinding::default()
+        .binding(0)
+        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+        .descriptor_count(1)
+        .stage_flags(vk::ShaderStageFlags::COMPUTE)];
+    let ranges = [vk::PushConstantRange {
+        stage_flags: vk::ShaderStageFlags::COMPUTE,
+        offset: 0,
+        size: 8,
+    }];
+    // SAFETY: as the caller promised; every struct lives across its call.
+    unsafe {
+        let set_layout = device
+            .create_descriptor_set_layout(
+                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
+                None,
+            )
+            .expect("vkCreateDescriptorSetLayout");
+        let set_layouts = [set_layout];
+        let layout = device
+            .create_pipeline_layout(
+                &vk::PipelineLayoutCreateInfo::default()
+                    .set_layouts(&set_layouts)
+                    .push_constant_ranges(&ranges),
+                None,
+            )
+            .expect("vkCreatePipelineLayout");
+        device.destroy_descriptor_set_layout(set_layout, None);
+        let module = device
+            .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None)
+            .expect("vkCreateShaderModule");
+        let info = [vk::ComputePipelineCreateInfo::default()
+            .stage(
+                vk::PipelineShaderStageCreateInfo::default()
+                    .stage(vk::ShaderStageFlags::COMPUTE)
+                    .module(module)
+                    .name(c"main"),
+            )
+            .layout(layout)];
+        let pipeline = device
+            .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
+            .expect("vkCreateComputePipelines")[0];
+        device.destroy_shader_module(module, None);
+        (layout, pipeline)
+    }
 }
 
 fn memory_type(instance: &ash::Instance, physical: vk::PhysicalDevice, bits: u32) -> u32 {
@@ -383,6 +445,7 @@ impl Side {
             });
             let set_rate = (kind != Kind::Fdm)
                 .then(|| ash::khr::fragment_shading_rate::Device::new(&instance, &device));
+            let compute = compute_pipeline(&device);
             Ok(Side {
                 set_rate,
                 instance,
@@ -393,6 +456,7 @@ impl Side {
                 pass,
                 framebuffer,
                 fdm,
+                compute,
             })
         }
     }
@@ -503,6 +567,9 @@ impl Side {
                     d.cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE);
                     d.cmd_end_render_pass(cb);
                 }
+                Case::BindPipeline => {
+                    d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, self.compute.1);
+                }
                 Case::Rendering | Case::RenderingFdm | Case::RenderingInjected => {
                     let colors = [vk::RenderingAttachmentInfo::default()
                         .image_view(self.color.view)
@@ -558,6 +625,8 @@ impl Drop for Side {
                 d.destroy_image(density.image, None);
                 d.free_memory(density.memory, None);
             }
+            d.destroy_pipeline(self.compute.1, None);
+            d.destroy_pipeline_layout(self.compute.0, None);
             d.destroy_framebuffer(self.framebuffer, None);
             d.destroy_render_pass(self.pass, None);
             d.destroy_image_view(self.color.view, None);
@@ -576,6 +645,7 @@ enum Case {
     Barrier2,
     RenderPass,
     Rendering,
+    BindPipeline,
     BarrierFdm,
     RenderPassFdm,
     RenderingFdm,
@@ -585,11 +655,12 @@ enum Case {
 }
 
 impl Case {
-    const ALL: [Case; 10] = [
+    const ALL: [Case; 11] = [
         Case::Barrier,
         Case::Barrier2,
         Case::RenderPass,
         Case::Rendering,
+        Case::BindPipeline,
         Case::BarrierFdm,
         Case::RenderPassFdm,
         Case::RenderingFdm,
@@ -612,6 +683,7 @@ impl Case {
             Case::Barrier2 => "vkCmdPipelineBarrier2",
             Case::RenderPass => "vkCmdBeginRenderPass+End",
             Case::Rendering => "vkCmdBeginRendering+End",
+            Case::BindPipeline => "vkCmdBindPipeline (compute)",
             Case::BarrierFdm => "vkCmdPipelineBarrier (density image)",
             Case::RenderPassFdm => "vkCmdBeginRenderPass+End (FDM pass)",
             Case::RenderingFdm => "vkCmdBeginRendering+End (FDM attachment)",

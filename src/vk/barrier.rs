@@ -323,7 +323,7 @@ unsafe fn translate1(
     for b in images {
         // SAFETY: as above.
         let b: vk::ImageMemoryBarrier<'static> = unsafe { forever(*b) };
-        let (c, shadow) = image_barrier(&b, crate::bridge::shadow_of);
+        let (c, shadow) = image_barrier(&b, crate::vk::convert::shadow_of_transitioned);
         s.images.push(c);
         s.images.extend(shadow);
     }
@@ -369,7 +369,7 @@ unsafe fn translate2<'s>(
         for b in i {
             // SAFETY: as above.
             let b: vk::ImageMemoryBarrier2<'static> = unsafe { forever(*b) };
-            let (c, shadow) = image_barrier2(&b, crate::bridge::shadow_of);
+            let (c, shadow) = image_barrier2(&b, crate::vk::convert::shadow_of_transitioned);
             s.images2.push(c);
             s.images2.extend(shadow);
         }

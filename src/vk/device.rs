@@ -416,6 +416,7 @@ unsafe fn create_device_impl(
             api_version,
             attachments: registry::Attachments::new(own),
         });
+        crate::vk::convert::device_created(&inst, physical, ci, handle);
     }
     r
 }
@@ -436,6 +437,7 @@ pub unsafe extern "system" fn destroy_device(
         // SAFETY: the device is live; the application has finished with it (destroy_all waits
         // for the layer's clears and uploads in flight before the maps go).
         unsafe {
+            crate::vk::convert::device_destroyed(device);
             image::destroy_all(&dev);
             if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
                 inj.destroy(own);

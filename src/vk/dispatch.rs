@@ -13,7 +13,7 @@ use std::ffi::CStr;
 
 use ash::vk;
 
-use crate::vk::{barrier, device, image, loader, pass, physical, pipeline, submit};
+use crate::vk::{barrier, convert, device, image, loader, pass, physical, pipeline, submit};
 
 /// When a device command's hook is handed out by `vkGetDeviceProcAddr`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -233,6 +233,23 @@ hooks! {
         c"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate:
             PFN_vkCmdSetFragmentShadingRateKHR = pipeline::cmd_set_fragment_shading_rate,
             When::Injecting;
+        // Density maps the application writes are converted at pass begin; the application's
+        // compute bindings are recorded so that they can be given back after the conversion.
+        c"vkBeginCommandBuffer" => begin_command_buffer: PFN_vkBeginCommandBuffer =
+            convert::begin_command_buffer, When::Emulated;
+        c"vkFreeCommandBuffers" => free_command_buffers: PFN_vkFreeCommandBuffers =
+            convert::free_command_buffers, When::Emulated;
+        c"vkCmdBindPipeline" => cmd_bind_pipeline: PFN_vkCmdBindPipeline =
+            convert::cmd_bind_pipeline, When::Emulated;
+        c"vkCmdBindDescriptorSets" => cmd_bind_descriptor_sets: PFN_vkCmdBindDescriptorSets =
+            convert::cmd_bind_descriptor_sets, When::Emulated;
+        c"vkCmdPushConstants" => cmd_push_constants: PFN_vkCmdPushConstants =
+            convert::cmd_push_constants, When::Emulated;
+        c"vkCmdPushDescriptorSetKHR" => cmd_push_descriptor_set_khr: PFN_vkCmdPushDescriptorSetKHR =
+            convert::cmd_push_descriptor_set_khr, When::Emulated;
+        c"vkCmdPushDescriptorSetWithTemplateKHR" => cmd_push_descriptor_set_with_template_khr:
+            PFN_vkCmdPushDescriptorSetWithTemplateKHR =
+            convert::cmd_push_descriptor_set_with_template_khr, When::Emulated;
     }
 }
 

@@ -385,15 +385,20 @@ pub unsafe fn image_created(dev: &Device, app: vk::Image, ci: &vk::ImageCreateIn
                 "density map shadowed"
             );
             // fovea's own density images get their rates with every upload
-            // (`gpu::density_images`); an application's own maps are not converted yet.
+            // (`gpu::density_images`); an application's own maps are converted at every pass
+            // begin that reads them ([`crate::vk::convert`]).
             let logged = &dev.attachments.app_maps_logged;
-            if !own_image && !logged.swap(true, std::sync::atomic::Ordering::Relaxed) {
-                tracing::warn!(
-                    image = raw(app),
-                    "this application creates and writes density maps itself: they render at \
-                     full rate on this device until their contents are converted into shading \
-                     rates (fovea's own density maps carry their rates)"
-                );
+            if !own_image {
+                // SAFETY: as the caller promised.
+                unsafe { crate::vk::convert::map_created(dev, app, &s) };
+                if !logged.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                    tracing::info!(
+                        image = raw(app),
+                        "this application creates and writes density maps itself: they are \
+                         converted into shading rates on the GPU at every pass begin that reads \
+                         them (fovea's own density maps carry their rates)"
+                    );
+                }
             }
         }
         Err(e) => tracing::warn!(
@@ -577,6 +582,8 @@ pub unsafe extern "system" fn create_image_view(
                         .views
                         .lock()
                         .insert(app_view.as_raw(), ShadowView { view });
+                    // SAFETY: the device is live.
+                    unsafe { crate::vk::convert::view_changed(&dev, app_view, Some(ci.image)) };
                 }
                 // Fail open, as for the shadow image ([`image_created`]): the view is the
                 // application's alone, and framebuffers with it get the full-rate stand-in.
@@ -613,6 +620,8 @@ pub unsafe extern "system" fn destroy_image_view(
             inj.view_destroyed(view);
         }
         let shadow = dev.attachments.views.lock().remove(&view.as_raw());
+        // SAFETY: the device is live.
+        unsafe { crate::vk::convert::view_changed(&dev, view, None) };
         if let (Some(s), Some(own)) = (shadow, &dev.attachments.own) {
             // SAFETY: the layer's own view; the application's use of it ended with its view's.
             unsafe { own.fns.destroy_image_view(s.view, None) };
@@ -634,6 +643,9 @@ pub unsafe extern "system" fn destroy_image(
         let Some(dev) = (unsafe { registry::device(device) }) else {
             return;
         };
+        // The layer's view of the image goes first.
+        // SAFETY: the device is live; the application's uses of the image have ended.
+        unsafe { crate::vk::convert::map_destroyed(&dev, image) };
         if let Some(next) = dev.next.destroy_image {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, image, alloc) };

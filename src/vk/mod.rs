@@ -19,6 +19,8 @@
 //! - [`inject`]: injection's own shading-rate maps for eye passes, and the colour images and views
 //!   tracked to find them (docs/injection.md);
 //! - [`pass`]: render passes, framebuffers and dynamic rendering, rewritten to name the shadows;
+//! - [`convert`]: density maps the application writes, converted into their shadows at pass
+//!   begin, with the application's compute bindings given back;
 //! - [`submit`]: new shadows' clears ahead of the application's next submit, and semaphore wait
 //!   stages without the density-map stage;
 //! - [`chain`], [`link`]: `pNext` chains and the loader's link structs.
@@ -61,6 +63,7 @@ macro_rules! hook_and_khr_alias {
 
 mod barrier;
 mod chain;
+mod convert;
 mod device;
 mod dispatch;
 mod image;

@@ -372,6 +372,10 @@ unsafe fn create_rewritten(
         return unsafe { create_injected(dev, inj, create2, pass, flags, p_next, alloc, out) };
     }
     let texel = texel_of(dev);
+    let initial = pass
+        .attachments
+        .get(density as usize)
+        .map(|a| a.initial_layout);
     if let (Some(texel), true) = (texel, density != vk::ATTACHMENT_UNUSED) {
         add_shading_rate(&mut pass, density, texel);
     }
@@ -385,6 +389,8 @@ unsafe fn create_rewritten(
             .passes
             .lock()
             .insert(handle.as_raw(), density);
+        // SAFETY: the device is live.
+        unsafe { crate::vk::convert::pass_changed(dev, handle, initial) };
         tracing::debug!(
             render_pass = raw(handle),
             density,
@@ -657,6 +663,8 @@ pub unsafe extern "system" fn destroy_render_pass(
         if let Some(inj) = &dev.inject {
             inj.pass_destroyed(pass);
         }
+        // SAFETY: the device is live.
+        unsafe { crate::vk::convert::pass_changed(&dev, pass, None) };
         if let Some(next) = dev.next.destroy_render_pass {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, pass, alloc) };
@@ -766,6 +774,7 @@ pub unsafe extern "system" fn create_framebuffer(
             let mut views: Vec<vk::ImageView> =
                 // SAFETY: the caller's array.
                 unsafe { slice(ci.p_attachments, ci.attachment_count) }.to_vec();
+            let app_view = views.get(density as usize).copied();
             if let Some(v) = views.get_mut(density as usize) {
                 // A density view without a shadow (it could not be made) gets the device's
                 // full-rate stand-in ([`crate::vk::image::Own::full_rate_view`]).
@@ -784,7 +793,12 @@ pub unsafe extern "system" fn create_framebuffer(
             }
             copy.p_attachments = views.as_ptr();
             // SAFETY: the copy and the views live across the call.
-            unsafe { next(device, &copy, alloc, out) }
+            let r = unsafe { next(device, &copy, alloc, out) };
+            if r == vk::Result::SUCCESS && !out.is_null() {
+                // SAFETY: the framebuffer was just created on the live device.
+                unsafe { crate::vk::convert::framebuffer_changed(&dev, *out, app_view) };
+            }
+            r
         },
     )
 }
@@ -933,6 +947,8 @@ pub unsafe extern "system" fn destroy_framebuffer(
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, fb, alloc) };
         }
+        // SAFETY: as the caller promised.
+        unsafe { crate::vk::convert::framebuffer_destroyed(device, fb) };
     })
 }
 
@@ -1111,6 +1127,8 @@ pub unsafe extern "system" fn cmd_begin_render_pass(
         let Some(next) = dev.next.cmd_begin_render_pass else {
             return;
         };
+        // SAFETY: as the caller promised; recorded before the pass begins.
+        unsafe { crate::vk::convert::before_render_pass(&dev, cb, begin) };
         // SAFETY: the next layer's function, with the caller's arguments or a copy that lives
         // across the call.
         unsafe { with_swapped_begin(&dev, begin, |b| next(cb, b, contents)) }
@@ -1134,6 +1152,8 @@ unsafe fn cmd_begin_render_pass2_with(
         let Some(next) = next(&dev) else {
             return;
         };
+        // SAFETY: as the caller promised; recorded before the pass begins.
+        unsafe { crate::vk::convert::before_render_pass(&dev, cb, begin) };
         // SAFETY: as in cmd_begin_render_pass.
         unsafe { with_swapped_begin(&dev, begin, |b| next(cb, b, subpass)) }
     })
@@ -1166,6 +1186,8 @@ unsafe fn cmd_begin_rendering_with(
         let Some(next) = next(&dev) else {
             return;
         };
+        // SAFETY: as the caller promised; recorded before rendering begins.
+        unsafe { crate::vk::convert::before_rendering(&dev, cb, info) };
         if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
             // SAFETY: the caller's arguments; `own` is the device's.
             return unsafe { begin_injected(inj, own, next, cb, info) };

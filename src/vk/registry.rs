@@ -150,8 +150,8 @@ pub struct Attachments {
     pub images: Mutex<HashMap<u64, ShadowImage>>,
     pub views: Mutex<HashMap<u64, ShadowView>>,
     pub passes: Mutex<HashMap<u64, u32>>,
-    /// Set once the log has said that density maps the application writes itself render at full
-    /// rate (their shadows keep code 0 until their contents are converted).
+    /// Set once the log has said that the application writes density maps itself (converted at
+    /// pass begin, [`crate::vk::convert`]).
     pub app_maps_logged: std::sync::atomic::AtomicBool,
 }
 

@@ -30,6 +30,7 @@ mod symmetric_fov;
 mod threads;
 mod tidy;
 mod vk_clears;
+mod vk_convert;
 mod vk_enable;
 mod vk_faults;
 mod vk_fuzz;

@@ -308,6 +308,11 @@ table! { null_commands:
     b"vkCmdEndRenderingKHR" => null_end as PFN_vkCmdEndRendering,
     b"vkCmdSetFragmentShadingRateKHR" => null_set_fragment_shading_rate
         as PFN_vkCmdSetFragmentShadingRateKHR,
+    b"vkCmdBindPipeline" => null_bind_pipeline as PFN_vkCmdBindPipeline,
+    b"vkCmdBindDescriptorSets" => null_bind_descriptor_sets as PFN_vkCmdBindDescriptorSets,
+    b"vkCmdPushConstants" => null_push_constants as PFN_vkCmdPushConstants,
+    b"vkCmdDispatch" => null_dispatch as PFN_vkCmdDispatch,
+    b"vkCmdCopyBufferToImage" => null_copy_buffer_to_image as PFN_vkCmdCopyBufferToImage,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -357,6 +362,48 @@ unsafe extern "system" fn null_set_fragment_shading_rate(
     _: vk::CommandBuffer,
     _: *const vk::Extent2D,
     _: *const [vk::FragmentShadingRateCombinerOpKHR; 2],
+) {
+}
+
+unsafe extern "system" fn null_bind_pipeline(
+    _: vk::CommandBuffer,
+    _: vk::PipelineBindPoint,
+    _: vk::Pipeline,
+) {
+}
+
+#[allow(clippy::too_many_arguments)]
+unsafe extern "system" fn null_bind_descriptor_sets(
+    _: vk::CommandBuffer,
+    _: vk::PipelineBindPoint,
+    _: vk::PipelineLayout,
+    _: u32,
+    _: u32,
+    _: *const vk::DescriptorSet,
+    _: u32,
+    _: *const u32,
+) {
+}
+
+unsafe extern "system" fn null_push_constants(
+    _: vk::CommandBuffer,
+    _: vk::PipelineLayout,
+    _: vk::ShaderStageFlags,
+    _: u32,
+    _: u32,
+    _: *const std::ffi::c_void,
+) {
+}
+
+unsafe extern "system" fn null_dispatch(_: vk::CommandBuffer, _: u32, _: u32, _: u32) {}
+
+unsafe extern "system" fn null_copy_buffer_to_image(
+    _: vk::CommandBuffer,
+    _: vk::Buffer,
+    _: vk::Image,
+    _: vk::ImageLayout,
+    _: u32,
+    _: *const vk::BufferImageCopy,
 ) {
 }
 
