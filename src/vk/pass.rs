@@ -1657,6 +1657,70 @@ mod tests {
         assert_eq!(pass.attachments[1].format, vk::Format::R8_UINT);
     }
 
+    /// A subpass naming an attachment of the application's own makes the pass the application's;
+    /// one whose shading-rate info names `VK_ATTACHMENT_UNUSED` (or no reference) does not, and
+    /// that info is left out of the rewritten subpass's chain, the one in front the only one.
+    #[test]
+    fn an_applications_rate_info_decides_whose_pass_it_is() {
+        let tail = vk::BaseInStructure {
+            s_type: vk::StructureType::from_raw(4242),
+            ..Default::default()
+        };
+        let texel = vk::Extent2D {
+            width: 16,
+            height: 16,
+        };
+        let color = [vk::AttachmentReference2::default().attachment(0)];
+        let atts = [vk::AttachmentDescription2::default().format(vk::Format::R8G8B8A8_UNORM)];
+        let ty = vk::StructureType::FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR;
+        for (attachment, apps) in [
+            (Some(1), true),
+            (Some(vk::ATTACHMENT_UNUSED), false),
+            (None, false),
+        ] {
+            let reference = vk::AttachmentReference2::default().attachment(attachment.unwrap_or(0));
+            let mut info = vk::FragmentShadingRateAttachmentInfoKHR::default()
+                .shading_rate_attachment_texel_size(texel);
+            if attachment.is_some() {
+                info.p_fragment_shading_rate_attachment = &reference;
+            }
+            info.p_next = &tail as *const _ as *const c_void;
+            let mut sub = vk::SubpassDescription2::default().color_attachments(&color);
+            sub.p_next = &info as *const _ as *const c_void;
+            let subs = [sub];
+            let ci = vk::RenderPassCreateInfo2::default()
+                .attachments(&atts)
+                .subpasses(&subs);
+            // SAFETY: every array and chain lives to the end of the iteration.
+            let found = unsafe { apps_rate_attachment(&ci) };
+            assert_eq!(found, Ok(apps), "{attachment:?}");
+            if apps {
+                continue;
+            }
+            // SAFETY: as above.
+            let mut pass = unsafe { Pass2::from_v2(&ci) };
+            // SAFETY: as above.
+            unsafe { pass.without_apps_rate_infos() }.unwrap();
+            add_shading_rate(&mut pass, 1, texel);
+            let mut found = 0;
+            let mut node = pass.subpasses[0].p_next as *const vk::BaseInStructure<'_>;
+            while !node.is_null() {
+                // SAFETY: the rewritten chain, alive in `pass` and the test.
+                let n = unsafe { &*node };
+                found += usize::from(n.s_type == ty);
+                if n.s_type == tail.s_type {
+                    assert_eq!(node, &tail as *const _, "the rest shared");
+                }
+                node = n.p_next;
+            }
+            assert_eq!(found, 1, "{attachment:?}");
+            assert_eq!(
+                subs[0].p_next, &info as *const _ as *const c_void,
+                "not written"
+            );
+        }
+    }
+
     #[test]
     fn imageless_info_describes_the_shadow() {
         let formats = [SHADOW_FORMAT];

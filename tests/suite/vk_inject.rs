@@ -310,29 +310,49 @@ unsafe fn view(d: &ash::Device, image: vk::Image, layers: u32) -> vk::ImageView 
 }
 
 /// The application's render pass: one colour attachment, cleared and stored, already in and left
-/// in `COLOR_ATTACHMENT_OPTIMAL`; version 1, or version 2 for [`Api::Imageless`].
-fn render_pass(d: &ash::Device, api: Api) -> vk::RenderPass {
+/// in `COLOR_ATTACHMENT_OPTIMAL`; version 1, or version 2 for [`Api::Imageless`], then with
+/// `own`, a shading-rate attachment of the application's own of that texel after it.
+fn render_pass(d: &ash::Device, api: Api, own: Option<vk::Extent2D>) -> vk::RenderPass {
     let layout = vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL;
     // SAFETY: the device is alive; the structs live across the calls.
     unsafe {
         if api == Api::Imageless {
-            let atts = [vk::AttachmentDescription2::default()
-                .format(FORMAT)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .initial_layout(layout)
-                .final_layout(layout)];
+            let atts = [
+                vk::AttachmentDescription2::default()
+                    .format(FORMAT)
+                    .samples(vk::SampleCountFlags::TYPE_1)
+                    .load_op(vk::AttachmentLoadOp::CLEAR)
+                    .store_op(vk::AttachmentStoreOp::STORE)
+                    .initial_layout(layout)
+                    .final_layout(layout),
+                vk::AttachmentDescription2::default()
+                    .format(vk::Format::R8_UINT)
+                    .samples(vk::SampleCountFlags::TYPE_1)
+                    .load_op(vk::AttachmentLoadOp::LOAD)
+                    .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                    .initial_layout(FSR_LAYOUT)
+                    .final_layout(FSR_LAYOUT),
+            ];
             let colour = [vk::AttachmentReference2::default()
                 .attachment(0)
                 .layout(layout)
                 .aspect_mask(vk::ImageAspectFlags::COLOR)];
-            let subpass = [vk::SubpassDescription2::default()
+            let rate_ref = vk::AttachmentReference2::default()
+                .attachment(1)
+                .layout(FSR_LAYOUT);
+            let mut rate = vk::FragmentShadingRateAttachmentInfoKHR::default()
+                .fragment_shading_rate_attachment(&rate_ref)
+                .shading_rate_attachment_texel_size(own.unwrap_or_default());
+            let mut subpass = vk::SubpassDescription2::default()
                 .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-                .color_attachments(&colour)];
+                .color_attachments(&colour);
+            if own.is_some() {
+                subpass = subpass.push_next(&mut rate);
+            }
+            let subpass = [subpass];
             d.create_render_pass2(
                 &vk::RenderPassCreateInfo2::default()
-                    .attachments(&atts)
+                    .attachments(&atts[..1 + usize::from(own.is_some())])
                     .subpasses(&subpass),
                 None,
             )
@@ -362,23 +382,38 @@ fn render_pass(d: &ash::Device, api: Api) -> vk::RenderPass {
     .unwrap()
 }
 
-/// A framebuffer of `rp` over `view` of `extent`; imageless for [`Api::Imageless`].
+/// A framebuffer of `rp` over `view` of `extent`; imageless for [`Api::Imageless`], there with
+/// `rate` (the extent of the application's own shading-rate image) a second attachment of it.
 fn framebuffer(
     d: &ash::Device,
     rp: vk::RenderPass,
     api: Api,
     view: vk::ImageView,
     extent: [u32; 2],
+    rate: Option<[u32; 2]>,
 ) -> vk::Framebuffer {
     let formats = [FORMAT];
-    let described = [vk::FramebufferAttachmentImageInfo::default()
-        .usage(USAGE)
-        .width(extent[0])
-        .height(extent[1])
-        .layer_count(1)
-        .view_formats(&formats)];
-    let mut imageless =
-        vk::FramebufferAttachmentsCreateInfo::default().attachment_image_infos(&described);
+    let rate_formats = [vk::Format::R8_UINT];
+    let rate_extent = rate.unwrap_or_default();
+    let described = [
+        vk::FramebufferAttachmentImageInfo::default()
+            .usage(USAGE)
+            .width(extent[0])
+            .height(extent[1])
+            .layer_count(1)
+            .view_formats(&formats),
+        vk::FramebufferAttachmentImageInfo::default()
+            .usage(
+                vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+                    | vk::ImageUsageFlags::TRANSFER_DST,
+            )
+            .width(rate_extent[0])
+            .height(rate_extent[1])
+            .layer_count(1)
+            .view_formats(&rate_formats),
+    ];
+    let mut imageless = vk::FramebufferAttachmentsCreateInfo::default()
+        .attachment_image_infos(&described[..1 + usize::from(rate.is_some())]);
     let views = [view];
     let mut info = vk::FramebufferCreateInfo::default()
         .render_pass(rp)
@@ -389,7 +424,7 @@ fn framebuffer(
         info = info
             .flags(vk::FramebufferCreateFlags::IMAGELESS)
             .push_next(&mut imageless);
-        info.attachment_count = 1;
+        info.attachment_count = 1 + u32::from(rate.is_some());
     } else {
         info = info.attachments(&views);
     }
@@ -559,7 +594,11 @@ fn run_with(
         let mut rendering = vk::PipelineRenderingCreateInfo::default()
             .color_attachment_formats(&formats)
             .view_mask(view_mask);
-        let render_pass = (!api.dynamic()).then(|| render_pass(d, api));
+        let texel = profile.texel();
+        let rate_extent = [WIDTH.div_ceil(texel.width), HEIGHT.div_ceil(texel.height)];
+        // An application with rates of its own names its shading-rate image in its render pass.
+        let apps_pass = setup == Setup::AppRates && api == Api::Imageless;
+        let render_pass = (!api.dynamic()).then(|| render_pass(d, api, apps_pass.then_some(texel)));
         let mut fixed = Fixed::new();
         let mut own_state = vk::PipelineFragmentShadingRateStateCreateInfoKHR::default()
             .fragment_size(vk::Extent2D {
@@ -587,7 +626,7 @@ fn run_with(
             ]);
         if sets_rates {
             pipeline_info = pipeline_info.push_next(&mut own_state);
-        } else if setup == Setup::AppRates {
+        } else if setup == Setup::AppRates && api.dynamic() {
             pipeline_info = pipeline_info.push_next(&mut attaching_state);
         }
         if api.dynamic() && (vkd3d || setup == Setup::AppRates) {
@@ -614,16 +653,20 @@ fn run_with(
         let views = targets.map(|(i, _)| view(d, i, target_layers));
         // The application's own shading-rate image: vkd3d-proton's, never attached; an
         // application with rates of its own, for the swapchain's rendering.
-        let texel = profile.texel();
-        let own_rate = (vkd3d || setup == Setup::AppRates).then(|| {
-            rate_image(
-                d,
-                &memory,
-                [WIDTH.div_ceil(texel.width), HEIGHT.div_ceil(texel.height)],
-            )
+        let own_rate =
+            (vkd3d || setup == Setup::AppRates).then(|| rate_image(d, &memory, rate_extent));
+        let framebuffers = render_pass.map(|rp| {
+            [0, 1, 2].map(|i| {
+                framebuffer(
+                    d,
+                    rp,
+                    api,
+                    views[i],
+                    targets[i].1,
+                    apps_pass.then_some(rate_extent),
+                )
+            })
         });
-        let framebuffers = render_pass
-            .map(|rp| [0, 1, 2].map(|i| framebuffer(d, rp, api, views[i], targets[i].1)));
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .unwrap();
         let to_colour: Vec<_> = targets
@@ -677,9 +720,9 @@ fn run_with(
                 },
             };
             if let (Some(rp), Some(fbs)) = (render_pass, framebuffers) {
-                let attachments = [view];
-                let mut named =
-                    vk::RenderPassAttachmentBeginInfo::default().attachments(&attachments);
+                let attachments = [view, own_rate.map(|r| r.2).unwrap_or_default()];
+                let mut named = vk::RenderPassAttachmentBeginInfo::default()
+                    .attachments(&attachments[..1 + usize::from(apps_pass)]);
                 let mut begin = vk::RenderPassBeginInfo::default()
                     .render_pass(rp)
                     .framebuffer(fbs[i])
@@ -1273,6 +1316,42 @@ fn assert_apps_own(profile: Profile, api: Api, out: &Outcome, level: Level) {
         devices[0]
     );
     let pipelines = out.of("pipeline");
+    let apps = json!(out.apps_view.expect("the application's view"));
+    let once = || {
+        assert_eq!(
+            out.log
+                .matches("the application uses a shading-rate attachment of its own")
+                .count(),
+            1,
+            "{what}: {}",
+            out.log
+        )
+    };
+    if api == Api::Imageless {
+        // The application's render pass names its own attachment: the pass, its framebuffers'
+        // attachments and its pipeline (no shading-rate state: the application's attachment is
+        // not applied, as it chose) as it made them.
+        let passes = out.of("render_pass");
+        assert_eq!(passes.len(), 1, "{what}: {passes:?}");
+        let texel = profile.texel();
+        assert_eq!(
+            passes[0]["attachments"].as_array().unwrap().len(),
+            2,
+            "{what}: {}",
+            passes[0]
+        );
+        assert_eq!(
+            passes[0]["subpasses"][0]["shading_rate"],
+            json!({"attachment": 1, "layout": FSR_LAYOUT.as_raw(),
+                   "texel": [texel.width, texel.height]}),
+            "{what}: {}",
+            passes[0]
+        );
+        assert_eq!(pipelines[0]["rendering_attachment_flag"], false, "{what}");
+        assert_eq!(pipelines[0]["shading_rate_state"], Value::Null, "{what}");
+        assert_eq!(out.rates(api), vec![apps.clone(); 3], "{what}");
+        return once();
+    }
     assert_eq!(pipelines[0]["rendering_attachment_flag"], true, "{what}");
     // The application's own state, which lets its attachment decide: kept.
     assert_eq!(
@@ -1284,7 +1363,6 @@ fn assert_apps_own(profile: Profile, api: Api, out: &Outcome, level: Level) {
         "{what}"
     );
     let rates = out.rates(api);
-    let apps = json!(out.apps_view.expect("the application's view"));
     assert_eq!(rates[0]["view"], apps, "{what}: the application's own view");
     assert_eq!(rates[1], Value::Null, "{what}: small target");
     assert_ne!(rates[2]["view"], apps, "{what}");
@@ -1295,14 +1373,7 @@ fn assert_apps_own(profile: Profile, api: Api, out: &Outcome, level: Level) {
         "{what}: the eye-shaped target gets fovea's map"
     );
     assert_eq!(out.rate_structs(), vec![1, 0, 1], "{what}");
-    assert_eq!(
-        out.log
-            .matches("the application uses a shading-rate attachment of its own")
-            .count(),
-        1,
-        "{what}: {}",
-        out.log
-    );
+    once();
 }
 
 #[test]
@@ -1483,6 +1554,18 @@ fn an_applications_own_shading_rate_attachment_is_left_alone() {
         "an_applications_own_shading_rate_attachment_is_left_alone",
         Setup::AppRates,
         Api::Dynamic,
+        &[],
+    );
+}
+
+/// An application whose render pass references a shading-rate attachment of its own: the pass,
+/// its framebuffers and its pipeline reach the driver as it made them, its view in every begin.
+#[test]
+fn an_applications_render_pass_with_its_own_attachment_is_left_alone() {
+    check(
+        "an_applications_render_pass_with_its_own_attachment_is_left_alone",
+        Setup::AppRates,
+        Api::Imageless,
         &[],
     );
 }
