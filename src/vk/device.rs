@@ -7,7 +7,9 @@
 //! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkDeviceCreateInfo.html>,
 //! VUID-VkDeviceCreateInfo-fragmentDensityMap-04481), so the layer owns shading rates on such a
 //! device outright; an application that enables shading rates itself (or NV shading-rate images)
-//! is left alone.
+//! is left alone there. With injection on (docs/injection.md#switching-it-on), an application that
+//! enables shading rates, attachments included, is injected into; its own attachments win per
+//! pass.
 
 use std::ffi::{c_char, CStr};
 
@@ -62,7 +64,8 @@ enum Plan {
     Emulate(FdmEmulation, Rewrite),
     /// Injection is on (docs/injection.md#how-the-attachment-gets-in) and the device has
     /// shading-rate attachments: the create info gains `VK_KHR_fragment_shading_rate` and its
-    /// attachment feature; the device's facts are those the injected maps are made for.
+    /// attachment feature (the application's own feature struct kept where it enables it); the
+    /// device's facts are those the injected maps are made for.
     Inject(FdmEmulation, Rewrite),
 }
 

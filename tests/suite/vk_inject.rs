@@ -26,7 +26,12 @@
 //!   two-layer targets, two layers on `nvidia` and one merged layer on `amd`; a level changed while
 //!   the application runs refills the map in place, once;
 //! - injection off: none of it, the double sees the application's calls as they were;
-//! - an application that enables shading rates itself: none of it either, and the log says so;
+//! - an application that names a shading-rate view of its own in the swapchain's rendering: that
+//!   view reaches the driver there, fovea's map in the eye-shaped target's; one whose render pass
+//!   references its own attachment: the pass, its framebuffers and pipeline as it made them; the
+//!   log says so once;
+//! - a vkd3d-like application (the attachment feature enabled, a null-view shading-rate struct in
+//!   every rendering): its eye renderings with fovea's map in place of that struct, one in the chain;
 //!
 //! and in every case validation says nothing and the double records no misuse.
 
