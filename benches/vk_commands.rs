@@ -499,9 +499,10 @@ impl Side {
                 vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT,
             ),
             (Case::BarrierFdm | Case::RenderPassFdm | Case::RenderingFdm, None) => return false,
-            (Case::RenderPassInjected | Case::RenderingInjected, _) if self.fdm.is_some() => {
-                return false
-            }
+            (
+                Case::RenderPassInjected | Case::RenderingInjected | Case::RenderingInjectedNull,
+                _,
+            ) if self.fdm.is_some() => return false,
             _ => (self.color.image, vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL),
         };
         // SAFETY: the side's own command buffer, recording; every struct lives across its call.
@@ -570,7 +571,10 @@ impl Side {
                 Case::BindPipeline => {
                     d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, self.compute.1);
                 }
-                Case::Rendering | Case::RenderingFdm | Case::RenderingInjected => {
+                Case::Rendering
+                | Case::RenderingFdm
+                | Case::RenderingInjected
+                | Case::RenderingInjectedNull => {
                     let colors = [vk::RenderingAttachmentInfo::default()
                         .image_view(self.color.view)
                         .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
@@ -585,6 +589,16 @@ impl Side {
                     if let (Case::RenderingFdm, Some((density, _, _))) = (case, &self.fdm) {
                         fdm.image_view = density.view;
                         info = info.push_next(&mut fdm);
+                    }
+                    // vkd3d-proton's: no view, so no attachment.
+                    let mut null_rate =
+                        vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
+                            .shading_rate_attachment_texel_size(vk::Extent2D {
+                                width: 16,
+                                height: 16,
+                            });
+                    if case == Case::RenderingInjectedNull {
+                        info = info.push_next(&mut null_rate);
                     }
                     d.cmd_begin_rendering(cb, &info);
                     d.cmd_end_rendering(cb);
@@ -651,11 +665,14 @@ enum Case {
     RenderingFdm,
     RenderPassInjected,
     RenderingInjected,
+    /// An injected eye pass whose rendering chains vkd3d-proton's null-view shading-rate struct,
+    /// which the layer's copy leaves out (per-thread scratch storage).
+    RenderingInjectedNull,
     SetRate,
 }
 
 impl Case {
-    const ALL: [Case; 11] = [
+    const ALL: [Case; 12] = [
         Case::Barrier,
         Case::Barrier2,
         Case::RenderPass,
@@ -666,6 +683,7 @@ impl Case {
         Case::RenderingFdm,
         Case::RenderPassInjected,
         Case::RenderingInjected,
+        Case::RenderingInjectedNull,
         Case::SetRate,
     ];
 
@@ -673,7 +691,10 @@ impl Case {
     fn injected(self) -> bool {
         matches!(
             self,
-            Case::RenderPassInjected | Case::RenderingInjected | Case::SetRate
+            Case::RenderPassInjected
+                | Case::RenderingInjected
+                | Case::RenderingInjectedNull
+                | Case::SetRate
         )
     }
 
@@ -689,6 +710,9 @@ impl Case {
             Case::RenderingFdm => "vkCmdBeginRendering+End (FDM attachment)",
             Case::RenderPassInjected => "vkCmdBeginRenderPass+End (injected eye pass)",
             Case::RenderingInjected => "vkCmdBeginRendering+End (injected eye pass)",
+            Case::RenderingInjectedNull => {
+                "vkCmdBeginRendering+End (injected eye pass, null-view shading-rate struct)"
+            }
             Case::SetRate => "vkCmdSetFragmentShadingRateKHR (injecting)",
         }
     }
@@ -698,7 +722,9 @@ impl Case {
         match self {
             Case::BarrierFdm => Case::Barrier,
             Case::RenderPassFdm => Case::RenderPass,
-            Case::RenderingFdm | Case::RenderingInjected => Case::Rendering,
+            Case::RenderingFdm | Case::RenderingInjected | Case::RenderingInjectedNull => {
+                Case::Rendering
+            }
             Case::RenderPassInjected => Case::RenderPass,
             c => c,
         }

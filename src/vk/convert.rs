@@ -487,7 +487,7 @@ impl Converter {
         // SAFETY: the layer's own objects, unused on an idle device.
         unsafe {
             for m in maps {
-                destroy_map(d, &m, false);
+                destroy_map(d, &m, None);
             }
             for p in self.pools.lock().drain(..) {
                 d.destroy_descriptor_pool(p, None);
@@ -654,13 +654,23 @@ impl Converter {
     }
 }
 
+/// `pools` (the device's pool list, whose lock serialises every use of the pools) is `Some` where
+/// the set goes back to its pool; sets also go with their pool at device destruction. Descriptor
+/// pools are externally synchronised
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkFreeDescriptorSets.html>, "Host
+/// Synchronization"), and views of density images come and go on any of the application's threads.
+///
 /// # Safety
 /// `m`'s objects must be the layer's own on `d`'s live device, unused from now on.
-unsafe fn destroy_map(d: &ash::Device, m: &MapObjects, free_set: bool) {
+unsafe fn destroy_map(
+    d: &ash::Device,
+    m: &MapObjects,
+    pools: Option<&parking_lot::Mutex<Vec<vk::DescriptorPool>>>,
+) {
     // SAFETY: as the caller promised.
     unsafe {
-        if free_set {
-            // Sets also go with their pool at device destruction.
+        if let Some(pools) = pools {
+            let _pools = pools.lock();
             let _ = d.free_descriptor_sets(m.pool, &[m.set]);
         }
         d.destroy_buffer(m.buffer, None);
@@ -704,7 +714,7 @@ pub unsafe fn map_destroyed(dev: &Device, app: vk::Image) {
     {
         // SAFETY: every command buffer that used them used the application's image, which the
         // application no longer uses.
-        unsafe { destroy_map(&c.own.fns, &m, true) };
+        unsafe { destroy_map(&c.own.fns, &m, Some(&c.pools)) };
     }
 }
 

@@ -7,7 +7,9 @@
 //! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkDeviceCreateInfo.html>,
 //! VUID-VkDeviceCreateInfo-fragmentDensityMap-04481), so the layer owns shading rates on such a
 //! device outright; an application that enables shading rates itself (or NV shading-rate images)
-//! is left alone.
+//! is left alone there. With injection on (docs/injection.md#switching-it-on), an application that
+//! enables shading rates, attachments included, is injected into; its own attachments win per
+//! pass.
 
 use std::ffi::{c_char, CStr};
 
@@ -47,10 +49,12 @@ unsafe fn device_link(ci: &vk::DeviceCreateInfo<'_>) -> Option<*mut LayerDeviceC
 
 /// A rewritten device create info and what it points at.
 struct Rewrite {
-    /// Owns the copied nodes `fsr` points into.
-    _chain: ChainCopy,
+    /// The copied chain: behind `fsr`, or the one the copy points at where `fsr` is `None`.
+    chain: ChainCopy,
     names: Vec<*const c_char>,
-    fsr: Box<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'static>>,
+    /// The layer's feature struct in front of the chain; `None` where the application's own,
+    /// enabling attachments, stays in it.
+    fsr: Option<Box<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'static>>>,
 }
 
 /// What to do with one `vkCreateDevice`.
@@ -60,7 +64,8 @@ enum Plan {
     Emulate(FdmEmulation, Rewrite),
     /// Injection is on (docs/injection.md#how-the-attachment-gets-in) and the device has
     /// shading-rate attachments: the create info gains `VK_KHR_fragment_shading_rate` and its
-    /// attachment feature; the device's facts are those the injected maps are made for.
+    /// attachment feature (the application's own feature struct kept where it enables it); the
+    /// device's facts are those the injected maps are made for.
     Inject(FdmEmulation, Rewrite),
 }
 
@@ -108,25 +113,31 @@ unsafe fn plan(
         if !crate::bridge::inject::wanted() {
             return Plan::Untouched(None);
         }
-        // Shading-rate attachments of its own, or NV shading-rate images: the application's maps
-        // are the ones that count (docs/injection.md#switching-it-on).
-        let own_attachments =
-            app_fsr.is_some_and(|f| f.attachment_fragment_shading_rate == vk::TRUE);
-        if nv_rates || own_attachments {
+        // NV shading-rate images: the application's maps are the ones that count
+        // (docs/injection.md#switching-it-on).
+        if nv_rates {
             return Plan::Untouched(Some(
-                "the application uses shading rates itself; nothing is injected on this device"
+                "the application uses NV shading-rate images; nothing is injected on this device"
                     .into(),
             ));
         }
-        // Pipeline or primitive rates without attachments (vkd3d-proton's every pipeline): the
-        // injected attachment is combined with them (docs/injection.md#apps-that-set-rates).
+        // The attachment feature enabled (vkd3d-proton enables every shading-rate feature the
+        // device has): whether the application uses attachments of its own is told per pass, and
+        // where it does, its own wins (docs/injection.md#apps-that-set-rates). Its feature struct
+        // already asks for what injection needs and goes down as it came.
+        let own_attachments =
+            app_fsr.is_some_and(|f| f.attachment_fragment_shading_rate == vk::TRUE);
+        // Pipeline or primitive rates (vkd3d-proton's every pipeline): the injected attachment is
+        // combined with them (docs/injection.md#apps-that-set-rates).
         let app_sets_rates = app_fsr.is_some_and(|f| {
             f.pipeline_fragment_shading_rate == vk::TRUE
                 || f.primitive_fragment_shading_rate == vk::TRUE
         });
         // SAFETY: as the caller promised; the application's feature struct, if any, is left out
-        // and stands in the layer's copy in front.
-        let chain = match unsafe { ChainCopy::without(ci.p_next, |t| t == fsr_features) } {
+        // and stands in the layer's copy in front, unless it enables attachments itself.
+        let chain = match unsafe {
+            ChainCopy::without(ci.p_next, |t| !own_attachments && t == fsr_features)
+        } {
             Ok(c) => c,
             Err(e) => {
                 return Plan::Untouched(Some(format!(
@@ -135,18 +146,26 @@ unsafe fn plan(
                 )))
             }
         };
+        if own_attachments {
+            tracing::info!(
+                "the application enables shading-rate attachments itself: fovea's maps go into \
+                 its eye passes without attachments of their own; where it names one, its own \
+                 wins"
+            );
+        }
         if app_sets_rates {
             tracing::info!(
                 non_trivial_combiners = fdm.non_trivial_combiners,
-                "the application sets shading rates per pipeline or per draw, without attachments \
-                 of its own: injected maps are combined with its rates"
+                "the application sets shading rates per pipeline or per draw: injected maps are \
+                 combined with its rates"
             );
         }
         let version = inst.api_version.min(*api_version);
-        return Plan::Inject(
-            fdm.clone(),
-            with_shading_rates(names, &enabled, chain, version, app_fsr.as_ref()),
-        );
+        let mut rewrite = with_shading_rates(names, &enabled, chain, version, app_fsr.as_ref());
+        if own_attachments {
+            rewrite.fsr = None;
+        }
+        return Plan::Inject(fdm.clone(), rewrite);
     }
     if own_rates {
         return Plan::Untouched(Some(
@@ -238,9 +257,9 @@ fn with_shading_rates(
     );
     fsr.p_next = chain.head() as *mut _;
     Rewrite {
-        _chain: chain,
+        chain,
         names: new_names,
-        fsr,
+        fsr: Some(fsr),
     }
 }
 
@@ -323,7 +342,10 @@ unsafe fn create_device_impl(
         }
         Plan::Emulate(fdm, rewrite) | Plan::Inject(fdm, rewrite) => {
             let mut copy = *ci;
-            copy.p_next = &*rewrite.fsr as *const _ as *const _;
+            copy.p_next = match &rewrite.fsr {
+                Some(fsr) => &**fsr as *const _ as *const _,
+                None => rewrite.chain.head(),
+            };
             copy.enabled_extension_count = rewrite.names.len() as u32;
             copy.pp_enabled_extension_names = rewrite.names.as_ptr();
             // SAFETY: the copy and everything it points at live across the call.

@@ -110,6 +110,11 @@ pub struct Injector {
     framebuffers: parking_lot::Mutex<HashMap<u64, InjectedFramebuffer>>,
     /// Set once the log has said that a map could not be made.
     failure_logged: AtomicBool,
+    /// The application's render passes with shading-rate attachments of their own, created as
+    /// they came (docs/injection.md#switching-it-on): their pipelines get nothing injected.
+    apps_passes: parking_lot::Mutex<std::collections::HashSet<u64>>,
+    /// Set once the log has said that the application uses attachments of its own.
+    own_logged: AtomicBool,
 }
 
 impl Injector {
@@ -131,7 +136,32 @@ impl Injector {
             passes: parking_lot::Mutex::new(HashMap::new()),
             framebuffers: parking_lot::Mutex::new(HashMap::new()),
             failure_logged: AtomicBool::new(false),
+            apps_passes: parking_lot::Mutex::new(std::collections::HashSet::new()),
+            own_logged: AtomicBool::new(false),
         }
+    }
+
+    /// Notes a pass that names a shading-rate attachment of the application's own, which wins over
+    /// fovea's map there (docs/injection.md#switching-it-on); the log says so the first time on
+    /// this device.
+    pub fn apps_own_attachment(&self, what: &str) {
+        if !self.own_logged.swap(true, Ordering::Relaxed) {
+            tracing::warn!(
+                what,
+                "the application uses a shading-rate attachment of its own; its passes with one \
+                 are left alone, fovea's maps go into its other eye passes"
+            );
+        }
+    }
+
+    /// Records a render pass the application gave a shading-rate attachment of its own.
+    pub fn apps_pass_created(&self, pass: vk::RenderPass) {
+        self.apps_passes.lock().insert(pass.as_raw());
+    }
+
+    /// Whether `pass` is a render pass with the application's own shading-rate attachment.
+    pub fn is_apps_pass(&self, pass: vk::RenderPass) -> bool {
+        pass != vk::RenderPass::null() && self.apps_passes.lock().contains(&pass.as_raw())
     }
 
     /// The attachment texel, as the begin info's `shadingRateAttachmentTexelSize`.
@@ -298,6 +328,7 @@ impl Injector {
     /// Forgets a destroyed render pass.
     pub fn pass_destroyed(&self, pass: vk::RenderPass) {
         self.passes.lock().remove(&pass.as_raw());
+        self.apps_passes.lock().remove(&pass.as_raw());
     }
 
     /// Notes a framebuffer of an injected pass.

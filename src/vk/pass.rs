@@ -37,7 +37,7 @@ use std::ffi::c_void;
 use ash::vk;
 use ash::vk::Handle as _;
 
-use crate::vk::chain::{self, ChainCopy};
+use crate::vk::chain::{self, ChainCopy, ChainError};
 use crate::vk::image::{SHADOW_FORMAT, SHADOW_LAYOUT, SHADOW_USAGE};
 use crate::vk::loader::guard;
 use crate::vk::registry::{self, raw, Device};
@@ -66,6 +66,9 @@ pub struct Pass2 {
     /// The shading-rate reference and one info per subpass ([`add_shading_rate`]).
     rate_ref: Box<vk::AttachmentReference2<'static>>,
     rate_infos: Vec<vk::FragmentShadingRateAttachmentInfoKHR<'static>>,
+    /// Subpass chains copied without the application's attachment-less shading-rate infos
+    /// ([`Pass2::without_apps_rate_infos`]), kept alive for the subpasses pointing into them.
+    _subpass_chains: Vec<ChainCopy>,
 }
 
 impl Pass2 {
@@ -117,8 +120,31 @@ impl Pass2 {
                 _refs: Vec::new(),
                 rate_ref: Box::default(),
                 rate_infos: Vec::new(),
+                _subpass_chains: Vec::new(),
             }
         }
+    }
+
+    /// Leaves the application's `VkFragmentShadingRateAttachmentInfoKHR`s (those naming no
+    /// attachment, [`apps_rate_attachment`]) out of copies of the subpasses' chains, so that the
+    /// one [`add_shading_rate`] puts in front is the only one in each
+    /// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-validusage-pNext>).
+    ///
+    /// # Safety
+    /// The subpasses' chains must be valid and outlive `self`.
+    pub unsafe fn without_apps_rate_infos(&mut self) -> Result<(), ChainError> {
+        let ty = vk::StructureType::FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR;
+        for s in &mut self.subpasses {
+            // SAFETY: as the caller promised.
+            if unsafe { chain::find::<u8>(s.p_next, ty)? }.is_none() {
+                continue;
+            }
+            // SAFETY: as above.
+            let copy = unsafe { ChainCopy::without(s.p_next, |t| t == ty)? };
+            s.p_next = copy.head();
+            self._subpass_chains.push(copy);
+        }
+        Ok(())
     }
 }
 
@@ -264,6 +290,7 @@ pub unsafe fn v1_to_v2(
         _refs: refs,
         rate_ref: Box::default(),
         rate_infos: Vec::new(),
+        _subpass_chains: Vec::new(),
     }
 }
 
@@ -432,6 +459,17 @@ unsafe fn create_injected(
         ),
         None => (None, 0),
     };
+    // SAFETY: the application's subpass chains, alive across the call, as the caller promised.
+    if let Err(e) = unsafe { pass.without_apps_rate_infos() } {
+        tracing::warn!(
+            error = ?e,
+            "a subpass pNext chain the layer cannot copy; the render pass is created as it came, \
+             at full rate"
+        );
+        let info = pass.info(flags, p_next);
+        // SAFETY: the application's pass, its arrays alive across the call.
+        return unsafe { create2(dev.handle, &info, alloc, out) };
+    }
     let rate = pass.attachments.len() as u32;
     pass.attachments.push(vk::AttachmentDescription2::default());
     add_shading_rate(&mut pass, rate, inj.texel());
@@ -476,6 +514,34 @@ unsafe fn create_injected(
         );
     }
     r
+}
+
+/// Whether a subpass of `ci` names a shading-rate attachment of the application's own (a
+/// `VkFragmentShadingRateAttachmentInfoKHR` whose reference is not `VK_ATTACHMENT_UNUSED`): such
+/// a pass is the application's to shade, and is created as it came
+/// (docs/injection.md#switching-it-on). `Ok(false)` also where a subpass chains the struct with no
+/// attachment: the injected info then takes its place ([`without_apps_rate_infos`]).
+///
+/// # Safety
+/// `ci` must be a valid create info.
+unsafe fn apps_rate_attachment(ci: &vk::RenderPassCreateInfo2<'_>) -> Result<bool, ChainError> {
+    let ty = vk::StructureType::FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR;
+    // SAFETY: as the caller promised.
+    for s in unsafe { slice(ci.p_subpasses, ci.subpass_count) } {
+        let found =
+            // SAFETY: as above; found by its sType, read only.
+            unsafe { chain::find::<vk::FragmentShadingRateAttachmentInfoKHR<'_>>(s.p_next, ty)? };
+        // SAFETY: as above; the reference, where there is one, is the application's.
+        let used = found.is_some_and(|f| unsafe {
+            (*f).p_fragment_shading_rate_attachment
+                .as_ref()
+                .is_some_and(|r| r.attachment != vk::ATTACHMENT_UNUSED)
+        });
+        if used {
+            return Ok(true);
+        }
+    }
+    Ok(false)
 }
 
 /// `vkCreateRenderPass`: with the density-map struct, upgraded to `vkCreateRenderPass2` and
@@ -606,6 +672,31 @@ unsafe fn create_render_pass2_with(
         };
         // SAFETY: as above.
         let ci = unsafe { &*info };
+        if let (Some(inj), vk::ATTACHMENT_UNUSED) = (&dev.inject, density) {
+            // SAFETY: the caller's subpasses and their chains, read only.
+            match unsafe { apps_rate_attachment(ci) } {
+                Ok(false) => {}
+                Ok(true) => {
+                    inj.apps_own_attachment(which);
+                    // SAFETY: the next layer's function, with the caller's arguments.
+                    let r = unsafe { create2(device, info, alloc, out) };
+                    if r == vk::Result::SUCCESS {
+                        // SAFETY: just created.
+                        inj.apps_pass_created(unsafe { *out });
+                    }
+                    return r;
+                }
+                Err(e) => {
+                    tracing::warn!(
+                        error = ?e,
+                        "{which}: a subpass pNext chain the layer cannot read; passed on as is, \
+                         at full rate"
+                    );
+                    // SAFETY: the next layer's function, with the caller's arguments.
+                    return unsafe { create2(device, info, alloc, out) };
+                }
+            }
+        }
         let fdm = vk::StructureType::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT;
         // SAFETY: the caller's chain, read only.
         let Ok(chain) = (unsafe { ChainCopy::without(ci.p_next, |t| t == fdm) }) else {
@@ -1261,6 +1352,13 @@ unsafe fn cmd_begin_rendering_with(
 /// application's chain (on the stack: no allocation per command); any other rendering goes down
 /// untouched. Either is counted for the stats line's `Inj=`.
 ///
+/// An application's own `VkRenderingFragmentShadingRateAttachmentInfoKHR` with a view wins: the
+/// rendering goes down as it came. One with a null view (vkd3d-proton chains one into every
+/// rendering, docs/injection.md#apps-that-set-rates) names no attachment; in an eye pass it is
+/// left out of the copy's chain (built in per-thread scratch storage, no allocation per command)
+/// and fovea's takes its place, since a struct may appear only once in a chain
+/// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-validusage-pNext>).
+///
 /// The attachment's layer count is 1 (merged, or one view) or the rendered views', as
 /// <https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentShadingRateAttachmentInfoKHR.html>
 /// asks of a multiview rendering; its extent covers the whole colour target.
@@ -1280,6 +1378,25 @@ unsafe fn begin_injected(
         // SAFETY: the next layer's function, with the caller's arguments.
         return unsafe { next(cb, info) };
     };
+    let rate_ty = vk::StructureType::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR;
+    // SAFETY: the caller's chain, read only; found by its sType.
+    let apps = match unsafe {
+        chain::find::<vk::RenderingFragmentShadingRateAttachmentInfoKHR<'_>>(ri.p_next, rate_ty)
+    } {
+        // SAFETY: found by its sType in the caller's chain.
+        Ok(found) => found.map(|f| unsafe { (*f).image_view }),
+        Err(_) => {
+            crate::bridge::inject::count_pass(false);
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { next(cb, info) };
+        }
+    };
+    if apps.is_some_and(|v| v != vk::ImageView::null()) {
+        inj.apps_own_attachment("vkCmdBeginRendering");
+        crate::bridge::inject::count_pass(false);
+        // SAFETY: the next layer's function, with the caller's arguments.
+        return unsafe { next(cb, info) };
+    }
     // SAFETY: the caller's colour attachments, `colorAttachmentCount` of them.
     let colour = unsafe { slice(ri.p_color_attachments, ri.color_attachment_count) }
         .first()
@@ -1293,15 +1410,38 @@ unsafe fn begin_injected(
         // SAFETY: the next layer's function, with the caller's arguments.
         return unsafe { next(cb, info) };
     };
-    let mut rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
-        .image_view(map)
-        .image_layout(SHADOW_LAYOUT)
-        .shading_rate_attachment_texel_size(inj.texel());
-    rate.p_next = ri.p_next;
-    let mut copy = *ri;
-    copy.p_next = &rate as *const _ as *const c_void;
-    // SAFETY: the copy and the struct in front of the application's chain live across the call.
-    unsafe { next(cb, &copy) }
+    let begin = |rest: *const c_void| {
+        let mut rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
+            .image_view(map)
+            .image_layout(SHADOW_LAYOUT)
+            .shading_rate_attachment_texel_size(inj.texel());
+        rate.p_next = rest;
+        let mut copy = *ri;
+        copy.p_next = &rate as *const _ as *const c_void;
+        // SAFETY: the copy and the struct in front of the chain live across the call.
+        unsafe { next(cb, &copy) }
+    };
+    if apps.is_none() {
+        return begin(ri.p_next);
+    }
+    // SAFETY: the caller's chain, read only; the copy lives across `begin`.
+    unsafe {
+        chain::with_removed(
+            ri.p_next,
+            |t| t == rate_ty,
+            |rest| match rest {
+                Ok(rest) => begin(rest),
+                Err(e) => {
+                    tracing::warn!(
+                        error = ?e,
+                        "vkCmdBeginRendering: a pNext chain the layer cannot copy; passed on as \
+                         is, at full rate"
+                    );
+                    next(cb, info)
+                }
+            },
+        )
+    }
 }
 
 hook_and_khr_alias! {
@@ -1537,6 +1677,70 @@ mod tests {
         );
         assert_eq!(atts[1].format, vk::Format::R8G8_UNORM, "not written");
         assert_eq!(pass.attachments[1].format, vk::Format::R8_UINT);
+    }
+
+    /// A subpass naming an attachment of the application's own makes the pass the application's;
+    /// one whose shading-rate info names `VK_ATTACHMENT_UNUSED` (or no reference) does not, and
+    /// that info is left out of the rewritten subpass's chain, the one in front the only one.
+    #[test]
+    fn an_applications_rate_info_decides_whose_pass_it_is() {
+        let tail = vk::BaseInStructure {
+            s_type: vk::StructureType::from_raw(4242),
+            ..Default::default()
+        };
+        let texel = vk::Extent2D {
+            width: 16,
+            height: 16,
+        };
+        let color = [vk::AttachmentReference2::default().attachment(0)];
+        let atts = [vk::AttachmentDescription2::default().format(vk::Format::R8G8B8A8_UNORM)];
+        let ty = vk::StructureType::FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR;
+        for (attachment, apps) in [
+            (Some(1), true),
+            (Some(vk::ATTACHMENT_UNUSED), false),
+            (None, false),
+        ] {
+            let reference = vk::AttachmentReference2::default().attachment(attachment.unwrap_or(0));
+            let mut info = vk::FragmentShadingRateAttachmentInfoKHR::default()
+                .shading_rate_attachment_texel_size(texel);
+            if attachment.is_some() {
+                info.p_fragment_shading_rate_attachment = &reference;
+            }
+            info.p_next = &tail as *const _ as *const c_void;
+            let mut sub = vk::SubpassDescription2::default().color_attachments(&color);
+            sub.p_next = &info as *const _ as *const c_void;
+            let subs = [sub];
+            let ci = vk::RenderPassCreateInfo2::default()
+                .attachments(&atts)
+                .subpasses(&subs);
+            // SAFETY: every array and chain lives to the end of the iteration.
+            let found = unsafe { apps_rate_attachment(&ci) };
+            assert_eq!(found, Ok(apps), "{attachment:?}");
+            if apps {
+                continue;
+            }
+            // SAFETY: as above.
+            let mut pass = unsafe { Pass2::from_v2(&ci) };
+            // SAFETY: as above.
+            unsafe { pass.without_apps_rate_infos() }.unwrap();
+            add_shading_rate(&mut pass, 1, texel);
+            let mut found = 0;
+            let mut node = pass.subpasses[0].p_next as *const vk::BaseInStructure<'_>;
+            while !node.is_null() {
+                // SAFETY: the rewritten chain, alive in `pass` and the test.
+                let n = unsafe { &*node };
+                found += usize::from(n.s_type == ty);
+                if n.s_type == tail.s_type {
+                    assert_eq!(node, &tail as *const _, "the rest shared");
+                }
+                node = n.p_next;
+            }
+            assert_eq!(found, 1, "{attachment:?}");
+            assert_eq!(
+                subs[0].p_next, &info as *const _ as *const c_void,
+                "not written"
+            );
+        }
     }
 
     #[test]

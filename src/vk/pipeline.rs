@@ -333,9 +333,15 @@ pub unsafe extern "system" fn create_graphics_pipelines(
             let facts: Vec<Facts> = list
                 .iter()
                 // SAFETY: valid create infos.
-                .map(|ci| unsafe { facts(ci, registry::pass_uses_fdm) })
-                .map(|f| Facts {
-                    inject: dev.inject.is_some(),
+                .map(|ci| (ci, unsafe { facts(ci, registry::pass_uses_fdm) }))
+                .map(|(ci, f)| Facts {
+                    // A render pass with the application's own shading-rate attachment is created
+                    // as it came (docs/injection.md#switching-it-on): its pipelines keep the
+                    // application's state, as they would without the layer.
+                    inject: dev
+                        .inject
+                        .as_ref()
+                        .is_some_and(|i| !i.is_apps_pass(ci.render_pass)),
                     non_trivial: dev
                         .inject
                         .as_ref()

@@ -26,7 +26,12 @@
 //!   two-layer targets, two layers on `nvidia` and one merged layer on `amd`; a level changed while
 //!   the application runs refills the map in place, once;
 //! - injection off: none of it, the double sees the application's calls as they were;
-//! - an application that enables shading rates itself: none of it either, and the log says so;
+//! - an application that names a shading-rate view of its own in the swapchain's rendering: that
+//!   view reaches the driver there, fovea's map in the eye-shaped target's; one whose render pass
+//!   references its own attachment: the pass, its framebuffers and pipeline as it made them; the
+//!   log says so once;
+//! - a vkd3d-like application (the attachment feature enabled, a null-view shading-rate struct in
+//!   every rendering): its eye renderings with fovea's map in place of that struct, one in the chain;
 //!
 //! and in every case validation says nothing and the double records no misuse.
 
@@ -103,12 +108,19 @@ enum Setup {
     Inject(Level),
     /// Injection off.
     Off,
-    /// `FOVEA_INJECT=1`, and the application enables shading-rate attachments itself.
+    /// `FOVEA_INJECT=1` at `high`; the application enables shading-rate attachments itself, its
+    /// pipeline with the attachment flag and the state {1×1, {KEEP, REPLACE}}, and names a
+    /// shading-rate view of its own in the rendering into the swapchain image.
     AppRates,
     /// As vkd3d-proton: the application enables pipeline shading rates (no attachments), makes its
     /// pipeline with shading-rate state {2×2, {KEEP, KEEP}} and the dynamic shading-rate state,
     /// and sets 1×1 with {KEEP, KEEP} before each draw; injection on at this level, or off.
     SetsRates(Option<Level>),
+    /// As vkd3d-proton really is: [`Setup::SetsRates`], and the attachment feature enabled too, the
+    /// pipeline with the attachment flag, a `VkRenderingFragmentShadingRateAttachmentInfoKHR` with
+    /// a null view in every rendering, and an R8_UINT image with the shading-rate usage it never
+    /// attaches.
+    Vkd3d(Option<Level>),
 }
 
 impl Setup {
@@ -116,8 +128,9 @@ impl Setup {
     fn level(self) -> Option<Level> {
         match self {
             Setup::Inject(level) => Some(level),
-            Setup::SetsRates(level) => level,
-            _ => None,
+            Setup::SetsRates(level) | Setup::Vkd3d(level) => level,
+            Setup::AppRates => Some(Level::High),
+            Setup::Off => None,
         }
     }
 
@@ -125,6 +138,7 @@ impl Setup {
     fn at(self, level: Level) -> Setup {
         match self {
             Setup::SetsRates(_) => Setup::SetsRates(Some(level)),
+            Setup::Vkd3d(_) => Setup::Vkd3d(Some(level)),
             _ => Setup::Inject(level),
         }
     }
@@ -150,6 +164,8 @@ struct Outcome {
     second: Option<u64>,
     fovs: [Fov; 2],
     log: String,
+    /// [`Setup::AppRates`]: the application's own shading-rate view.
+    apps_view: Option<u64>,
 }
 
 /// The folder for the log; sets the environment the run reads. Call first in the child process.
@@ -166,12 +182,17 @@ fn set_up(label: &str, setup: Setup) -> PathBuf {
             std::env::set_var("FOVEA_INJECT", "1");
             std::env::set_var("FOVEA_INJECT_LEVEL", (level as u8).to_string());
         }
-        Setup::SetsRates(Some(level)) => {
+        Setup::SetsRates(Some(level)) | Setup::Vkd3d(Some(level)) => {
             std::env::set_var("FOVEA_INJECT", "1");
             std::env::set_var("FOVEA_INJECT_LEVEL", (level as u8).to_string());
         }
-        Setup::AppRates => std::env::set_var("FOVEA_INJECT", "1"),
-        Setup::Off | Setup::SetsRates(None) => std::env::remove_var("FOVEA_INJECT"),
+        Setup::AppRates => {
+            std::env::set_var("FOVEA_INJECT", "1");
+            std::env::set_var("FOVEA_INJECT_LEVEL", (Level::High as u8).to_string());
+        }
+        Setup::Off | Setup::SetsRates(None) | Setup::Vkd3d(None) => {
+            std::env::remove_var("FOVEA_INJECT")
+        }
     }
     pick_lavapipe();
     dir
@@ -217,6 +238,60 @@ unsafe fn image(
     }
 }
 
+/// An R8_UINT shading-rate image of the application's own, `extent` texels, and a view of it.
+///
+/// # Safety
+/// `d` must be alive.
+unsafe fn rate_image(
+    d: &ash::Device,
+    memory: &vk::PhysicalDeviceMemoryProperties,
+    extent: [u32; 2],
+) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
+    let info = vk::ImageCreateInfo::default()
+        .image_type(vk::ImageType::TYPE_2D)
+        .format(vk::Format::R8_UINT)
+        .extent(vk::Extent3D {
+            width: extent[0],
+            height: extent[1],
+            depth: 1,
+        })
+        .mip_levels(1)
+        .array_layers(1)
+        .samples(vk::SampleCountFlags::TYPE_1)
+        .tiling(vk::ImageTiling::OPTIMAL)
+        .usage(
+            vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+                | vk::ImageUsageFlags::TRANSFER_DST,
+        );
+    // SAFETY: the caller's promise; the structs live across the calls.
+    unsafe {
+        let image = d.create_image(&info, None).unwrap();
+        let req = d.get_image_memory_requirements(image);
+        let mem = d
+            .allocate_memory(
+                &crate::support::vulkan::allocate_info(
+                    memory,
+                    req,
+                    vk::MemoryPropertyFlags::DEVICE_LOCAL,
+                ),
+                None,
+            )
+            .unwrap();
+        d.bind_image_memory(image, mem, 0).unwrap();
+        let view = d
+            .create_image_view(
+                &vk::ImageViewCreateInfo::default()
+                    .image(image)
+                    .view_type(vk::ImageViewType::TYPE_2D)
+                    .format(vk::Format::R8_UINT)
+                    .subresource_range(range(0, 1)),
+                None,
+            )
+            .unwrap();
+        (image, mem, view)
+    }
+}
+
 /// # Safety
 /// `d` and `image` must be alive.
 unsafe fn view(d: &ash::Device, image: vk::Image, layers: u32) -> vk::ImageView {
@@ -240,29 +315,49 @@ unsafe fn view(d: &ash::Device, image: vk::Image, layers: u32) -> vk::ImageView 
 }
 
 /// The application's render pass: one colour attachment, cleared and stored, already in and left
-/// in `COLOR_ATTACHMENT_OPTIMAL`; version 1, or version 2 for [`Api::Imageless`].
-fn render_pass(d: &ash::Device, api: Api) -> vk::RenderPass {
+/// in `COLOR_ATTACHMENT_OPTIMAL`; version 1, or version 2 for [`Api::Imageless`], then with
+/// `own`, a shading-rate attachment of the application's own of that texel after it.
+fn render_pass(d: &ash::Device, api: Api, own: Option<vk::Extent2D>) -> vk::RenderPass {
     let layout = vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL;
     // SAFETY: the device is alive; the structs live across the calls.
     unsafe {
         if api == Api::Imageless {
-            let atts = [vk::AttachmentDescription2::default()
-                .format(FORMAT)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .initial_layout(layout)
-                .final_layout(layout)];
+            let atts = [
+                vk::AttachmentDescription2::default()
+                    .format(FORMAT)
+                    .samples(vk::SampleCountFlags::TYPE_1)
+                    .load_op(vk::AttachmentLoadOp::CLEAR)
+                    .store_op(vk::AttachmentStoreOp::STORE)
+                    .initial_layout(layout)
+                    .final_layout(layout),
+                vk::AttachmentDescription2::default()
+                    .format(vk::Format::R8_UINT)
+                    .samples(vk::SampleCountFlags::TYPE_1)
+                    .load_op(vk::AttachmentLoadOp::LOAD)
+                    .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                    .initial_layout(FSR_LAYOUT)
+                    .final_layout(FSR_LAYOUT),
+            ];
             let colour = [vk::AttachmentReference2::default()
                 .attachment(0)
                 .layout(layout)
                 .aspect_mask(vk::ImageAspectFlags::COLOR)];
-            let subpass = [vk::SubpassDescription2::default()
+            let rate_ref = vk::AttachmentReference2::default()
+                .attachment(1)
+                .layout(FSR_LAYOUT);
+            let mut rate = vk::FragmentShadingRateAttachmentInfoKHR::default()
+                .fragment_shading_rate_attachment(&rate_ref)
+                .shading_rate_attachment_texel_size(own.unwrap_or_default());
+            let mut subpass = vk::SubpassDescription2::default()
                 .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-                .color_attachments(&colour)];
+                .color_attachments(&colour);
+            if own.is_some() {
+                subpass = subpass.push_next(&mut rate);
+            }
+            let subpass = [subpass];
             d.create_render_pass2(
                 &vk::RenderPassCreateInfo2::default()
-                    .attachments(&atts)
+                    .attachments(&atts[..1 + usize::from(own.is_some())])
                     .subpasses(&subpass),
                 None,
             )
@@ -292,23 +387,38 @@ fn render_pass(d: &ash::Device, api: Api) -> vk::RenderPass {
     .unwrap()
 }
 
-/// A framebuffer of `rp` over `view` of `extent`; imageless for [`Api::Imageless`].
+/// A framebuffer of `rp` over `view` of `extent`; imageless for [`Api::Imageless`], there with
+/// `rate` (the extent of the application's own shading-rate image) a second attachment of it.
 fn framebuffer(
     d: &ash::Device,
     rp: vk::RenderPass,
     api: Api,
     view: vk::ImageView,
     extent: [u32; 2],
+    rate: Option<[u32; 2]>,
 ) -> vk::Framebuffer {
     let formats = [FORMAT];
-    let described = [vk::FramebufferAttachmentImageInfo::default()
-        .usage(USAGE)
-        .width(extent[0])
-        .height(extent[1])
-        .layer_count(1)
-        .view_formats(&formats)];
-    let mut imageless =
-        vk::FramebufferAttachmentsCreateInfo::default().attachment_image_infos(&described);
+    let rate_formats = [vk::Format::R8_UINT];
+    let rate_extent = rate.unwrap_or_default();
+    let described = [
+        vk::FramebufferAttachmentImageInfo::default()
+            .usage(USAGE)
+            .width(extent[0])
+            .height(extent[1])
+            .layer_count(1)
+            .view_formats(&formats),
+        vk::FramebufferAttachmentImageInfo::default()
+            .usage(
+                vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+                    | vk::ImageUsageFlags::TRANSFER_DST,
+            )
+            .width(rate_extent[0])
+            .height(rate_extent[1])
+            .layer_count(1)
+            .view_formats(&rate_formats),
+    ];
+    let mut imageless = vk::FramebufferAttachmentsCreateInfo::default()
+        .attachment_image_infos(&described[..1 + usize::from(rate.is_some())]);
     let views = [view];
     let mut info = vk::FramebufferCreateInfo::default()
         .render_pass(rp)
@@ -319,7 +429,7 @@ fn framebuffer(
         info = info
             .flags(vk::FramebufferCreateFlags::IMAGELESS)
             .push_next(&mut imageless);
-        info.attachment_count = 1;
+        info.attachment_count = 1 + u32::from(rate.is_some());
     } else {
         info = info.attachments(&views);
     }
@@ -388,10 +498,12 @@ fn run_with(
         VALIDATION_LAYER,
         fovea_vkdouble::LAYER_NAME,
     ];
-    let sets_rates = matches!(setup, Setup::SetsRates(_));
+    let sets_rates = matches!(setup, Setup::SetsRates(_) | Setup::Vkd3d(_));
+    let vkd3d = matches!(setup, Setup::Vkd3d(_));
     let mut rates = if sets_rates {
         vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
             .pipeline_fragment_shading_rate(true)
+            .attachment_fragment_shading_rate(vkd3d)
     } else {
         vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
             .attachment_fragment_shading_rate(true)
@@ -451,6 +563,7 @@ fn run_with(
     };
     let (index, fovs, mut time) = frame.acquire(swapchain);
     let mut second = None;
+    let apps_view;
 
     let d = &v.device;
     // SAFETY: the instance and device are alive; every struct lives across its call; every object
@@ -486,7 +599,11 @@ fn run_with(
         let mut rendering = vk::PipelineRenderingCreateInfo::default()
             .color_attachment_formats(&formats)
             .view_mask(view_mask);
-        let render_pass = (!api.dynamic()).then(|| render_pass(d, api));
+        let texel = profile.texel();
+        let rate_extent = [WIDTH.div_ceil(texel.width), HEIGHT.div_ceil(texel.height)];
+        // An application with rates of its own names its shading-rate image in its render pass.
+        let apps_pass = setup == Setup::AppRates && api == Api::Imageless;
+        let render_pass = (!api.dynamic()).then(|| render_pass(d, api, apps_pass.then_some(texel)));
         let mut fixed = Fixed::new();
         let mut own_state = vk::PipelineFragmentShadingRateStateCreateInfoKHR::default()
             .fragment_size(vk::Extent2D {
@@ -503,8 +620,25 @@ fn run_with(
             Some(rp) => fixed.info(&st, layout).render_pass(rp),
             None => fixed.info(&st, layout).push_next(&mut rendering),
         };
+        let mut attaching_state = vk::PipelineFragmentShadingRateStateCreateInfoKHR::default()
+            .fragment_size(vk::Extent2D {
+                width: 1,
+                height: 1,
+            })
+            .combiner_ops([
+                vk::FragmentShadingRateCombinerOpKHR::KEEP,
+                vk::FragmentShadingRateCombinerOpKHR::REPLACE,
+            ]);
         if sets_rates {
             pipeline_info = pipeline_info.push_next(&mut own_state);
+        } else if setup == Setup::AppRates && api.dynamic() {
+            pipeline_info = pipeline_info.push_next(&mut attaching_state);
+        }
+        if api.dynamic() && (vkd3d || setup == Setup::AppRates) {
+            // Required of pipelines used in a rendering with a shading-rate struct, as vkd3d-proton
+            // sets it.
+            pipeline_info = pipeline_info
+                .flags(vk::PipelineCreateFlags::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT_KHR);
         }
         let set_rate = ash::khr::fragment_shading_rate::Device::new(&v.instance, d);
         let one = vk::Extent2D {
@@ -522,8 +656,22 @@ fn run_with(
             (own, [WIDTH, HEIGHT]),
         ];
         let views = targets.map(|(i, _)| view(d, i, target_layers));
-        let framebuffers = render_pass
-            .map(|rp| [0, 1, 2].map(|i| framebuffer(d, rp, api, views[i], targets[i].1)));
+        // The application's own shading-rate image: vkd3d-proton's, never attached; an
+        // application with rates of its own, for the swapchain's rendering.
+        let own_rate =
+            (vkd3d || setup == Setup::AppRates).then(|| rate_image(d, &memory, rate_extent));
+        let framebuffers = render_pass.map(|rp| {
+            [0, 1, 2].map(|i| {
+                framebuffer(
+                    d,
+                    rp,
+                    api,
+                    views[i],
+                    targets[i].1,
+                    apps_pass.then_some(rate_extent),
+                )
+            })
+        });
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .unwrap();
         let to_colour: Vec<_> = targets
@@ -548,6 +696,26 @@ fn run_with(
             &[],
             &to_colour,
         );
+        if let (Some((image, _, _)), Setup::AppRates) = (own_rate, setup) {
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::TOP_OF_PIPE,
+                // (Validation as installed refuses the shading-rate stage here with the rule for NV
+                // shading-rate images, VUID-vkCmdPipelineBarrier-dstStageMask-04097.)
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[vk::ImageMemoryBarrier::default()
+                    .image(image)
+                    .subresource_range(range(0, 1))
+                    .old_layout(vk::ImageLayout::UNDEFINED)
+                    .new_layout(FSR_LAYOUT)
+                    .dst_access_mask(vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR)
+                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)],
+            );
+        }
         for (i, (&(_, extent), &view)) in targets.iter().zip(&views).enumerate() {
             let area = vk::Rect2D {
                 offset: vk::Offset2D::default(),
@@ -557,9 +725,9 @@ fn run_with(
                 },
             };
             if let (Some(rp), Some(fbs)) = (render_pass, framebuffers) {
-                let attachments = [view];
-                let mut named =
-                    vk::RenderPassAttachmentBeginInfo::default().attachments(&attachments);
+                let attachments = [view, own_rate.map(|r| r.2).unwrap_or_default()];
+                let mut named = vk::RenderPassAttachmentBeginInfo::default()
+                    .attachments(&attachments[..1 + usize::from(apps_pass)]);
                 let mut begin = vk::RenderPassBeginInfo::default()
                     .render_pass(rp)
                     .framebuffer(fbs[i])
@@ -588,7 +756,7 @@ fn run_with(
                 .load_op(vk::AttachmentLoadOp::CLEAR)
                 .store_op(vk::AttachmentStoreOp::STORE)
                 .clear_value(crate::support::vulkan::CLEAR[0])];
-            let ri = vk::RenderingInfo::default()
+            let mut ri = vk::RenderingInfo::default()
                 .render_area(vk::Rect2D {
                     offset: vk::Offset2D::default(),
                     extent: vk::Extent2D {
@@ -599,6 +767,20 @@ fn run_with(
                 .layer_count(1)
                 .view_mask(view_mask)
                 .color_attachments(&colour);
+            // vkd3d-proton's null view in every rendering; the application's own view in the
+            // swapchain's.
+            let apps = match (setup, own_rate) {
+                (Setup::AppRates, Some((_, _, v))) if i == 0 => Some(v),
+                (Setup::Vkd3d(_), _) => Some(vk::ImageView::null()),
+                _ => None,
+            };
+            let mut apps_rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
+                .image_view(apps.unwrap_or_default())
+                .image_layout(FSR_LAYOUT)
+                .shading_rate_attachment_texel_size(texel);
+            if apps.is_some() {
+                ri = ri.push_next(&mut apps_rate);
+            }
             d.cmd_begin_rendering(cb, &ri);
             if sets_rates {
                 (set_rate.fp().cmd_set_fragment_shading_rate_khr)(cb, &one, &KEEP);
@@ -699,12 +881,20 @@ fn run_with(
             d.destroy_image(i, None);
             d.free_memory(m, None);
         }
+        if let Some((i, m, v)) = own_rate {
+            d.destroy_image_view(v, None);
+            d.destroy_image(i, None);
+            d.free_memory(m, None);
+        }
         d.destroy_pipeline(pipeline, None);
         d.destroy_pipeline_layout(layout, None);
         for m in modules {
             d.destroy_shader_module(m, None);
         }
         d.destroy_command_pool(pool, None);
+        apps_view = own_rate
+            .filter(|_| setup == Setup::AppRates)
+            .map(|(_, _, v)| v.as_raw());
         cb.as_raw()
     };
     frame.release(swapchain, time);
@@ -734,6 +924,7 @@ fn run_with(
         command_buffer: cb,
         fovs,
         log: std::fs::read_to_string(dir.join("fovea.log")).unwrap_or_default(),
+        apps_view,
     })
 }
 
@@ -769,6 +960,16 @@ impl Outcome {
             .collect();
         assert_eq!(r.len(), 3, "{r:?}");
         r
+    }
+
+    /// How many `VkRenderingFragmentShadingRateAttachmentInfoKHR`s the driver got in each of the
+    /// test's three renderings.
+    fn rate_structs(&self) -> Vec<u64> {
+        self.of("begin_rendering")
+            .into_iter()
+            .filter(|b| b["command_buffer"] == json!(self.command_buffer))
+            .map(|b| b["shading_rate_structs"].as_u64().unwrap())
+            .collect()
     }
 
     /// What the submit of the test's command buffer read of `image`: (extent, layers, codes).
@@ -879,7 +1080,8 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
     let pipelines = out.of("pipeline");
     assert_eq!(pipelines.len(), 1, "{what}: {pipelines:?}");
     let passes = out.of("render_pass");
-    let sets_rates = matches!(setup, Setup::SetsRates(_));
+    let sets_rates = matches!(setup, Setup::SetsRates(_) | Setup::Vkd3d(_));
+    let vkd3d = matches!(setup, Setup::Vkd3d(_));
     // The application's own rates: the pipeline's dynamic state and, per pass, its 1×1.
     let sets: Vec<&Value> = out
         .of("set_fragment_shading_rate")
@@ -893,7 +1095,7 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
         // Nothing of fovea's: no shading rates added to the device, no flag or state on the
         // pipeline, no attachment in any pass or rendering; an application's own rates as it set
         // them.
-        let enabled = setup == Setup::AppRates;
+        let enabled = vkd3d;
         assert_eq!(
             devices[0]["features"]["attachment"]
                 .as_bool()
@@ -910,7 +1112,11 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
             "{what}: {}",
             devices[0]
         );
-        assert_eq!(pipelines[0]["rendering_attachment_flag"], false, "{what}");
+        assert_eq!(
+            pipelines[0]["rendering_attachment_flag"],
+            vkd3d && api.dynamic(),
+            "{what}"
+        );
         let own = sets_rates.then(|| json!({"fragment_size": [2, 2], "combiner_ops": ops(KEEP)}));
         assert_eq!(
             pipelines[0]["shading_rate_state"],
@@ -938,22 +1144,18 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
         }
         if api.dynamic() {
             assert_eq!(out.rates(api), vec![Value::Null; 3], "{what}");
+            assert_eq!(out.rate_structs(), vec![u64::from(vkd3d); 3], "{what}");
         }
         assert!(
             !out.log.contains("injected shading-rate map"),
             "{what}: {}",
             out.log
         );
-        if setup == Setup::AppRates {
-            assert!(
-                out.log
-                    .contains("the application uses shading rates itself; nothing is injected"),
-                "{what}: {}",
-                out.log
-            );
-        }
         return;
     };
+    if setup == Setup::AppRates {
+        return assert_apps_own(profile, api, out, level);
+    }
     assert_eq!(
         passes.len(),
         usize::from(!api.dynamic()),
@@ -1006,9 +1208,8 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
     if sets_rates {
         assert!(
             out.log.contains(&format!(
-                "the application sets shading rates per pipeline or per draw, without \
-                 attachments of its own: injected maps are combined with its rates \
-                 non_trivial_combiners={}",
+                "the application sets shading rates per pipeline or per draw: injected maps are \
+                 combined with its rates non_trivial_combiners={}",
                 !trivial
             )),
             "{what}: {}",
@@ -1031,7 +1232,15 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
             assert_eq!(r["layout"], FSR_LAYOUT.as_raw(), "{what}: {r}");
             assert_eq!(r["texel"], json!([texel.width, texel.height]), "{what}");
         }
+        // One struct in each eye rendering (vkd3d-proton's null-view one replaced by fovea's);
+        // the small target's as the application chained it.
+        assert_eq!(out.rate_structs(), vec![1, u64::from(vkd3d), 1], "{what}");
     }
+    assert!(
+        !out.log.contains("a shading-rate attachment of its own"),
+        "{what}: {}",
+        out.log
+    );
     let view_of = |r: &Value| {
         if api.dynamic() {
             r["view"].clone()
@@ -1097,6 +1306,79 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
         assert_eq!((extent, layers), (n, 1), "{what}: the full-rate map");
         assert!(codes.iter().all(|&c| c == 0), "{what}: full rate");
     }
+}
+
+/// [`Setup::AppRates`]: the application's own view reaches the driver in the swapchain's
+/// rendering, fovea's map in the eye-shaped target's (which names none), and the log says once
+/// that the application's own attachment wins.
+fn assert_apps_own(profile: Profile, api: Api, out: &Outcome, level: Level) {
+    let what = format!("{profile:?} AppRates {api:?}");
+    let devices = out.of("device");
+    assert_eq!(
+        devices[0]["features"],
+        json!({"pipeline": false, "primitive": false, "attachment": true}),
+        "{what}: {}",
+        devices[0]
+    );
+    let pipelines = out.of("pipeline");
+    let apps = json!(out.apps_view.expect("the application's view"));
+    let once = || {
+        assert_eq!(
+            out.log
+                .matches("the application uses a shading-rate attachment of its own")
+                .count(),
+            1,
+            "{what}: {}",
+            out.log
+        )
+    };
+    if api == Api::Imageless {
+        // The application's render pass names its own attachment: the pass, its framebuffers'
+        // attachments and its pipeline (no shading-rate state: the application's attachment is
+        // not applied, as it chose) as it made them.
+        let passes = out.of("render_pass");
+        assert_eq!(passes.len(), 1, "{what}: {passes:?}");
+        let texel = profile.texel();
+        assert_eq!(
+            passes[0]["attachments"].as_array().unwrap().len(),
+            2,
+            "{what}: {}",
+            passes[0]
+        );
+        assert_eq!(
+            passes[0]["subpasses"][0]["shading_rate"],
+            json!({"attachment": 1, "layout": FSR_LAYOUT.as_raw(),
+                   "texel": [texel.width, texel.height]}),
+            "{what}: {}",
+            passes[0]
+        );
+        assert_eq!(pipelines[0]["rendering_attachment_flag"], false, "{what}");
+        assert_eq!(pipelines[0]["shading_rate_state"], Value::Null, "{what}");
+        assert_eq!(out.rates(api), vec![apps.clone(); 3], "{what}");
+        return once();
+    }
+    assert_eq!(pipelines[0]["rendering_attachment_flag"], true, "{what}");
+    // The application's own state, which lets its attachment decide: kept.
+    assert_eq!(
+        pipelines[0]["shading_rate_state"],
+        json!({"fragment_size": [1, 1], "combiner_ops": [
+            vk::FragmentShadingRateCombinerOpKHR::KEEP.as_raw(),
+            vk::FragmentShadingRateCombinerOpKHR::REPLACE.as_raw(),
+        ]}),
+        "{what}"
+    );
+    let rates = out.rates(api);
+    assert_eq!(rates[0]["view"], apps, "{what}: the application's own view");
+    assert_eq!(rates[1], Value::Null, "{what}: small target");
+    assert_ne!(rates[2]["view"], apps, "{what}");
+    let got = out.codes_of(&out.image_of(&rates[2]["view"]));
+    let want = expected(profile, Views::Merged, out.fovs, level);
+    assert!(
+        got == want,
+        "{what}: the eye-shaped target gets fovea's map"
+    );
+    assert_eq!(out.rate_structs(), vec![1, 0, 1], "{what}");
+    once();
 }
 
 #[test]
@@ -1269,11 +1551,49 @@ fn without_injection_an_applications_rates_reach_the_driver_unchanged() {
     );
 }
 
+/// An application that names a shading-rate view of its own in a rendering of an eye target: that
+/// view reaches the driver, fovea's map only the eye rendering that names none.
 #[test]
-fn an_application_with_its_own_shading_rates_is_left_alone() {
+fn an_applications_own_shading_rate_attachment_is_left_alone() {
     check(
-        "an_application_with_its_own_shading_rates_is_left_alone",
+        "an_applications_own_shading_rate_attachment_is_left_alone",
         Setup::AppRates,
+        Api::Dynamic,
+        &[],
+    );
+}
+
+/// An application whose render pass references a shading-rate attachment of its own: the pass,
+/// its framebuffers and its pipeline reach the driver as it made them, its view in every begin.
+#[test]
+fn an_applications_render_pass_with_its_own_attachment_is_left_alone() {
+    check(
+        "an_applications_render_pass_with_its_own_attachment_is_left_alone",
+        Setup::AppRates,
+        Api::Imageless,
+        &[],
+    );
+}
+
+/// vkd3d-proton as it is: the attachment feature enabled, a null-view shading-rate struct in every
+/// rendering, shading-rate images it never attaches, its own rates. Its eye renderings reach the
+/// driver with fovea's map (the model's codes) in place of its null-view struct, one struct in
+/// the chain; its other rendering unchanged.
+#[test]
+fn a_vkd3d_like_application_is_injected_into() {
+    check(
+        "a_vkd3d_like_application_is_injected_into",
+        Setup::Vkd3d(Some(Level::None)),
+        Api::Dynamic,
+        &[Level::High],
+    );
+}
+
+#[test]
+fn without_injection_a_vkd3d_like_application_reaches_the_driver_unchanged() {
+    check(
+        "without_injection_a_vkd3d_like_application_reaches_the_driver_unchanged",
+        Setup::Vkd3d(None),
         Api::Dynamic,
         &[],
     );

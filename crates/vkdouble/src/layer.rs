@@ -1742,10 +1742,22 @@ unsafe extern "system" fn cmd_begin_rendering(
                 }
                 None => Value::Null,
             };
+            // How many shading-rate structs the chain holds (one at most is valid).
+            let mut structs = 0;
+            let mut node = ri.p_next as *const vk::BaseInStructure<'_>;
+            while !node.is_null() {
+                if (*node).s_type
+                    == vk::StructureType::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR
+                {
+                    structs += 1;
+                }
+                node = (*node).p_next;
+            }
             event(json!({
                 "kind": "begin_rendering",
                 "command_buffer": cb.as_raw(),
                 "shading_rate": rec,
+                "shading_rate_structs": structs,
             }));
             let stripped = match chain::strip(
                 ri.p_next,
