@@ -166,6 +166,7 @@ impl<T> Records<T> {
     /// The record of `raw`, borrowed for the call that asks (see the module documentation for why
     /// that is sound): from this thread's cache where it is still good, else from the map under its
     /// lock, then cached.
+    #[inline]
     pub fn borrow(&self, raw: u64) -> Option<Borrowed<'_, T>> {
         let owner = self as *const Records<T> as usize;
         let set = set_of(owner, raw);
@@ -180,9 +181,22 @@ impl<T> Records<T> {
             })
             .ok()
             .flatten();
-        if let Some(record) = cached {
-            return NonNull::new(record.cast_mut().cast::<T>()).map(Borrowed::new);
+        match cached {
+            Some(record) => NonNull::new(record.cast_mut().cast::<T>()).map(Borrowed::new),
+            None => self.borrow_from_map(raw, owner, set, now),
         }
+    }
+
+    /// [`Records::borrow`]'s miss: the map under its lock, then the cache.
+    #[cold]
+    #[inline(never)]
+    fn borrow_from_map(
+        &self,
+        raw: u64,
+        owner: usize,
+        set: usize,
+        now: u64,
+    ) -> Option<Borrowed<'_, T>> {
         let record = NonNull::from(&**self.map.read().get(&raw)?);
         let entry = Entry {
             owner,
