@@ -212,7 +212,8 @@ impl Worker {
                 &image_info(
                     DENSITY,
                     SIZE / 16,
-                    vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
+                    vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT
+                        | vk::ImageUsageFlags::TRANSFER_DST,
                 ),
             );
             let pass = render_pass(d);
@@ -267,16 +268,43 @@ impl Worker {
                 .expect("vkAllocateCommandBuffers")[0];
             d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
                 .expect("vkBeginCommandBuffer");
-            // The density map into its layout, for the pass: density-map stage and access.
-            let to_fdm = vk::ImageMemoryBarrier::default()
+            // The application writes its density map (full density; a map left undefined would
+            // hand the layer's conversion undefined bytes), then moves it into its layout for the
+            // pass: density-map stage and access.
+            let to_dst = vk::ImageMemoryBarrier::default()
                 .image(self.density.image)
                 .subresource_range(range())
                 .old_layout(vk::ImageLayout::UNDEFINED)
-                .new_layout(FDM_LAYOUT)
-                .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT);
+                .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE);
             d.cmd_pipeline_barrier(
                 cb,
                 vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[to_dst],
+            );
+            d.cmd_clear_color_image(
+                cb,
+                self.density.image,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &vk::ClearColorValue {
+                    float32: [1.0, 1.0, 0.0, 0.0],
+                },
+                &[range()],
+            );
+            let to_fdm = vk::ImageMemoryBarrier::default()
+                .image(self.density.image)
+                .subresource_range(range())
+                .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .new_layout(FDM_LAYOUT)
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT);
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::TRANSFER,
                 vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT,
                 vk::DependencyFlags::empty(),
                 &[],
