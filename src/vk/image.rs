@@ -264,6 +264,63 @@ impl Own {
     }
 
     /// A device-local memory type among `bits` (any allowed one where none is device-local).
+    /// A layer-owned shading-rate image (`R8_UINT`, [`SHADOW_USAGE`], 2D, optimal tiling) of
+    /// `texels` and `layers`, bound to device-local memory of its own: what shadows and injection's
+    /// maps are made of. Nothing is left behind on failure.
+    ///
+    /// # Safety
+    /// The device must be live.
+    pub unsafe fn shading_rate_image(
+        &self,
+        texels: [u32; 2],
+        layers: u32,
+    ) -> Result<(vk::Image, vk::DeviceMemory), vk::Result> {
+        let d = &self.fns;
+        let info = vk::ImageCreateInfo::default()
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(SHADOW_FORMAT)
+            .extent(vk::Extent3D {
+                width: texels[0],
+                height: texels[1],
+                depth: 1,
+            })
+            .mip_levels(1)
+            .array_layers(layers)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(SHADOW_USAGE)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .initial_layout(vk::ImageLayout::UNDEFINED);
+        // SAFETY: the layer's own objects on a live device (the caller's promise); each is
+        // destroyed again on failure.
+        unsafe {
+            let image = d.create_image(&info, None)?;
+            let req = d.get_image_memory_requirements(image);
+            let Some(ty) = self.memory_type(req.memory_type_bits) else {
+                d.destroy_image(image, None);
+                return Err(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY);
+            };
+            let memory = match d.allocate_memory(
+                &vk::MemoryAllocateInfo::default()
+                    .allocation_size(req.size)
+                    .memory_type_index(ty),
+                None,
+            ) {
+                Ok(m) => m,
+                Err(e) => {
+                    d.destroy_image(image, None);
+                    return Err(e);
+                }
+            };
+            if let Err(e) = d.bind_image_memory(image, memory, 0) {
+                d.destroy_image(image, None);
+                d.free_memory(memory, None);
+                return Err(e);
+            }
+            Ok((image, memory))
+        }
+    }
+
     pub fn memory_type(&self, bits: u32) -> Option<u32> {
         let allowed = |i: u32| bits & (1 << i) != 0;
         let types = &self.memory.memory_types[..self.memory.memory_type_count as usize];
@@ -422,62 +479,22 @@ unsafe fn make_shadow(
     app_layers: u32,
     clear: bool,
 ) -> Result<ShadowImage, vk::Result> {
-    let d = &own.fns;
     let layers = shadow_layers(fdm, app_layers);
-    let info = vk::ImageCreateInfo::default()
-        .image_type(vk::ImageType::TYPE_2D)
-        .format(SHADOW_FORMAT)
-        .extent(vk::Extent3D {
+    // SAFETY: as the caller promised.
+    let (image, memory) = unsafe { own.shading_rate_image([extent.width, extent.height], layers) }?;
+    if clear {
+        own.clears.add(image, layers);
+    }
+    Ok(ShadowImage {
+        image,
+        memory,
+        extent: vk::Extent2D {
             width: extent.width,
             height: extent.height,
-            depth: 1,
-        })
-        .mip_levels(1)
-        .array_layers(layers)
-        .samples(vk::SampleCountFlags::TYPE_1)
-        .tiling(vk::ImageTiling::OPTIMAL)
-        .usage(SHADOW_USAGE)
-        .sharing_mode(vk::SharingMode::EXCLUSIVE)
-        .initial_layout(vk::ImageLayout::UNDEFINED);
-    // SAFETY: the layer's own objects on a live device; each is destroyed on failure.
-    unsafe {
-        let image = d.create_image(&info, None)?;
-        let req = d.get_image_memory_requirements(image);
-        let Some(ty) = own.memory_type(req.memory_type_bits) else {
-            d.destroy_image(image, None);
-            return Err(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY);
-        };
-        let memory = match d.allocate_memory(
-            &vk::MemoryAllocateInfo::default()
-                .allocation_size(req.size)
-                .memory_type_index(ty),
-            None,
-        ) {
-            Ok(m) => m,
-            Err(e) => {
-                d.destroy_image(image, None);
-                return Err(e);
-            }
-        };
-        if let Err(e) = d.bind_image_memory(image, memory, 0) {
-            d.destroy_image(image, None);
-            d.free_memory(memory, None);
-            return Err(e);
-        }
-        if clear {
-            own.clears.add(image, layers);
-        }
-        Ok(ShadowImage {
-            image,
-            memory,
-            extent: vk::Extent2D {
-                width: extent.width,
-                height: extent.height,
-            },
-            layers,
-            app_layers,
-        })
-    }
+        },
+        layers,
+        app_layers,
+    })
 }
 
 /// The shadow view's create info for an application view `ci` of an image shadowed by `s`: the

@@ -34,7 +34,7 @@ use ash::vk::Handle as _;
 
 use crate::bridge::inject::Injection;
 use crate::bridge::FdmEmulation;
-use crate::vk::image::{Own, SHADOW_FORMAT, SHADOW_USAGE};
+use crate::vk::image::{Own, SHADOW_FORMAT};
 use fovea_model::inject::{Pass, Views};
 
 /// What the layer knows of a colour image: its extent and array layers.
@@ -499,62 +499,28 @@ fn view_facts(
 /// `own` must belong to a live device.
 unsafe fn make(own: &Own, texels: [u32; 2], layers: u32) -> Result<MapObjects, vk::Result> {
     let d = &own.fns;
-    let info = vk::ImageCreateInfo::default()
-        .image_type(vk::ImageType::TYPE_2D)
-        .format(SHADOW_FORMAT)
-        .extent(vk::Extent3D {
-            width: texels[0],
-            height: texels[1],
-            depth: 1,
-        })
-        .mip_levels(1)
-        .array_layers(layers)
-        .samples(vk::SampleCountFlags::TYPE_1)
-        .tiling(vk::ImageTiling::OPTIMAL)
-        .usage(SHADOW_USAGE)
-        .sharing_mode(vk::SharingMode::EXCLUSIVE)
-        .initial_layout(vk::ImageLayout::UNDEFINED);
-    // SAFETY: the layer's own objects on a live device; each is destroyed again on failure.
+    // SAFETY: as the caller promised; the image and memory are destroyed again on failure.
     unsafe {
-        let image = d.create_image(&info, None)?;
-        let req = d.get_image_memory_requirements(image);
-        let Some(ty) = own.memory_type(req.memory_type_bits) else {
-            d.destroy_image(image, None);
-            return Err(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY);
-        };
-        let memory = match d.allocate_memory(
-            &vk::MemoryAllocateInfo::default()
-                .allocation_size(req.size)
-                .memory_type_index(ty),
-            None,
-        ) {
-            Ok(m) => m,
-            Err(e) => {
-                d.destroy_image(image, None);
-                return Err(e);
-            }
-        };
+        let (image, memory) = own.shading_rate_image(texels, layers)?;
         let view_type = if layers > 1 {
             vk::ImageViewType::TYPE_2D_ARRAY
         } else {
             vk::ImageViewType::TYPE_2D
         };
-        let view = d.bind_image_memory(image, memory, 0).and_then(|()| {
-            d.create_image_view(
-                &vk::ImageViewCreateInfo::default()
-                    .image(image)
-                    .view_type(view_type)
-                    .format(SHADOW_FORMAT)
-                    .subresource_range(vk::ImageSubresourceRange {
-                        aspect_mask: vk::ImageAspectFlags::COLOR,
-                        base_mip_level: 0,
-                        level_count: 1,
-                        base_array_layer: 0,
-                        layer_count: layers,
-                    }),
-                None,
-            )
-        });
+        let view = d.create_image_view(
+            &vk::ImageViewCreateInfo::default()
+                .image(image)
+                .view_type(view_type)
+                .format(SHADOW_FORMAT)
+                .subresource_range(vk::ImageSubresourceRange {
+                    aspect_mask: vk::ImageAspectFlags::COLOR,
+                    base_mip_level: 0,
+                    level_count: 1,
+                    base_array_layer: 0,
+                    layer_count: layers,
+                }),
+            None,
+        );
         match view {
             Ok(view) => Ok(MapObjects {
                 image,

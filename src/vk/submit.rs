@@ -388,19 +388,60 @@ unsafe fn reclaim(d: &ash::Device, st: &mut State, all: bool) {
 /// # Safety
 /// `cb` must be recording on `d`; the shadows live.
 unsafe fn record(d: &ash::Device, cb: vk::CommandBuffer, pending: &[(vk::Image, u32)]) {
-    let range = |layers| vk::ImageSubresourceRange {
+    // SAFETY: as the caller promised; new shadows have no earlier use to wait for.
+    unsafe {
+        write_shading_rate_images(
+            d,
+            cb,
+            vk::PipelineStageFlags::TOP_OF_PIPE,
+            pending.iter().copied(),
+            || {
+                for &(image, layers) in pending {
+                    d.cmd_clear_color_image(
+                        cb,
+                        image,
+                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                        &vk::ClearColorValue { uint32: [0; 4] },
+                        &[color_range(layers)],
+                    );
+                }
+            },
+        )
+    }
+}
+
+/// All `layers` of a colour image's one mip level.
+fn color_range(layers: u32) -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange {
         aspect_mask: vk::ImageAspectFlags::COLOR,
         base_mip_level: 0,
         level_count: 1,
         base_array_layer: 0,
         layer_count: layers,
-    };
-    let to_dst: Vec<vk::ImageMemoryBarrier<'_>> = pending
-        .iter()
-        .map(|&(image, layers)| {
+    }
+}
+
+/// Records `write` (transfer writes covering every image in `images`, each with its layers)
+/// between a barrier that takes each image from `UNDEFINED` to `TRANSFER_DST_OPTIMAL` after the
+/// `after` stage of earlier work, and one that moves it to [`SHADOW_LAYOUT`] for every later
+/// command. ALL_COMMANDS stands for the shading-rate stage: some validation-layer releases take
+/// that stage's bit for NVIDIA's shading-rate-image stage, which shares it, and refuse it without
+/// that feature.
+///
+/// # Safety
+/// `cb` must be recording on `d`; the images live; `write` records only transfer writes to them.
+unsafe fn write_shading_rate_images(
+    d: &ash::Device,
+    cb: vk::CommandBuffer,
+    after: vk::PipelineStageFlags,
+    images: impl Iterator<Item = (vk::Image, u32)>,
+    write: impl FnOnce(),
+) {
+    let to_dst: Vec<vk::ImageMemoryBarrier<'_>> = images
+        .map(|(image, layers)| {
             vk::ImageMemoryBarrier::default()
                 .image(image)
-                .subresource_range(range(layers))
+                .subresource_range(color_range(layers))
                 .old_layout(vk::ImageLayout::UNDEFINED)
                 .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
                 .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
@@ -421,25 +462,14 @@ unsafe fn record(d: &ash::Device, cb: vk::CommandBuffer, pending: &[(vk::Image, 
     unsafe {
         d.cmd_pipeline_barrier(
             cb,
-            vk::PipelineStageFlags::TOP_OF_PIPE,
+            after,
             vk::PipelineStageFlags::TRANSFER,
             vk::DependencyFlags::empty(),
             &[],
             &[],
             &to_dst,
         );
-        for &(image, layers) in pending {
-            d.cmd_clear_color_image(
-                cb,
-                image,
-                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                &vk::ClearColorValue { uint32: [0; 4] },
-                &[range(layers)],
-            );
-        }
-        // ALL_COMMANDS covers the shading-rate stage: some validation-layer releases take that
-        // stage's bit for NVIDIA's shading-rate-image stage, which shares it, and refuse it
-        // without that feature.
+        write();
         d.cmd_pipeline_barrier(
             cb,
             vk::PipelineStageFlags::TRANSFER,
@@ -528,89 +558,49 @@ unsafe fn record_uploads(
     buffer: vk::Buffer,
     uploads: &[Upload],
 ) {
-    let range = |layers| vk::ImageSubresourceRange {
-        aspect_mask: vk::ImageAspectFlags::COLOR,
-        base_mip_level: 0,
-        level_count: 1,
-        base_array_layer: 0,
-        layer_count: layers,
-    };
-    let to_dst: Vec<vk::ImageMemoryBarrier<'_>> = uploads
-        .iter()
-        .map(|u| {
-            vk::ImageMemoryBarrier::default()
-                .image(u.image)
-                .subresource_range(range(u.layers))
-                .old_layout(vk::ImageLayout::UNDEFINED)
-                .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-        })
-        .collect();
-    let to_rate: Vec<vk::ImageMemoryBarrier<'_>> = to_dst
-        .iter()
-        .map(|b| {
-            b.old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                .new_layout(SHADOW_LAYOUT)
-                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::MEMORY_READ)
-        })
-        .collect();
-    // SAFETY: as the caller promised.
+    // SAFETY: as the caller promised. ALL_COMMANDS first: passes submitted earlier on this queue
+    // may still read the old map (a write-after-read hazard needs only this execution
+    // dependency).
     unsafe {
-        // ALL_COMMANDS first: passes submitted earlier on this queue may still read the old map
-        // (a write-after-read hazard needs only this execution dependency).
-        d.cmd_pipeline_barrier(
+        write_shading_rate_images(
+            d,
             cb,
             vk::PipelineStageFlags::ALL_COMMANDS,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &to_dst,
-        );
-        let mut at = 0u64;
-        for u in uploads {
-            let layer_bytes = u64::from(u.extent[0]) * u64::from(u.extent[1]);
-            let regions: Vec<vk::BufferImageCopy> = (0..u.layers)
-                .map(|l| vk::BufferImageCopy {
-                    buffer_offset: at + u64::from(l) * layer_bytes,
-                    buffer_row_length: 0,
-                    buffer_image_height: 0,
-                    image_subresource: vk::ImageSubresourceLayers {
-                        aspect_mask: vk::ImageAspectFlags::COLOR,
-                        mip_level: 0,
-                        base_array_layer: l,
-                        layer_count: 1,
-                    },
-                    image_offset: vk::Offset3D::default(),
-                    image_extent: vk::Extent3D {
-                        width: u.extent[0],
-                        height: u.extent[1],
-                        depth: 1,
-                    },
-                })
-                .collect();
-            d.cmd_copy_buffer_to_image(
-                cb,
-                buffer,
-                u.image,
-                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                &regions,
-            );
-            at += u.bytes.len() as u64;
-        }
-        // ALL_COMMANDS covers the shading-rate stage (see [`record`]).
-        d.cmd_pipeline_barrier(
-            cb,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::PipelineStageFlags::ALL_COMMANDS,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &to_rate,
-        );
+            uploads.iter().map(|u| (u.image, u.layers)),
+            || {
+                let mut at = 0u64;
+                for u in uploads {
+                    let layer_bytes = u64::from(u.extent[0]) * u64::from(u.extent[1]);
+                    let regions: Vec<vk::BufferImageCopy> = (0..u.layers)
+                        .map(|l| vk::BufferImageCopy {
+                            buffer_offset: at + u64::from(l) * layer_bytes,
+                            buffer_row_length: 0,
+                            buffer_image_height: 0,
+                            image_subresource: vk::ImageSubresourceLayers {
+                                aspect_mask: vk::ImageAspectFlags::COLOR,
+                                mip_level: 0,
+                                base_array_layer: l,
+                                layer_count: 1,
+                            },
+                            image_offset: vk::Offset3D::default(),
+                            image_extent: vk::Extent3D {
+                                width: u.extent[0],
+                                height: u.extent[1],
+                                depth: 1,
+                            },
+                        })
+                        .collect();
+                    d.cmd_copy_buffer_to_image(
+                        cb,
+                        buffer,
+                        u.image,
+                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                        &regions,
+                    );
+                    at += u.bytes.len() as u64;
+                }
+            },
+        )
     }
 }
 
