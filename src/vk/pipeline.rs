@@ -330,10 +330,17 @@ pub unsafe extern "system" fn create_graphics_pipelines(
                 // SAFETY: `count` create infos, as the caller promised.
                 unsafe { std::slice::from_raw_parts(infos, count as usize) }
             };
+            // The render passes this device rewrote for a density map: their pipelines need the
+            // state that lets the shading-rate attachment decide, or they ignore it.
+            let fdm_pass = |pass: vk::RenderPass| {
+                use ash::vk::Handle as _;
+                pass != vk::RenderPass::null()
+                    && dev.attachments.passes.lock().contains_key(&pass.as_raw())
+            };
             let facts: Vec<Facts> = list
                 .iter()
                 // SAFETY: valid create infos.
-                .map(|ci| (ci, unsafe { facts(ci, registry::pass_uses_fdm) }))
+                .map(|ci| (ci, unsafe { facts(ci, fdm_pass) }))
                 .map(|(ci, f)| Facts {
                     // A render pass with the application's own shading-rate attachment is created
                     // as it came (docs/injection.md#switching-it-on): its pipelines keep the

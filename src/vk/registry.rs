@@ -258,30 +258,6 @@ pub fn raw(handle: impl vk::Handle) -> u64 {
     handle.as_raw()
 }
 
-/// Render passes with a density-map attachment, by handle. The render-pass translation records
-/// them here; pipeline creation asks [`pass_uses_fdm`].
-static FDM_PASSES: MapLock<std::collections::BTreeSet<u64>> =
-    MapLock::new("vk FDM render passes", std::collections::BTreeSet::new());
-
-/// Records (`true`) or forgets (`false`) that `pass` has a density-map attachment.
-#[allow(
-    dead_code,
-    reason = "the render-pass translation records its passes here"
-)]
-pub fn set_pass_uses_fdm(pass: vk::RenderPass, uses: bool) {
-    let mut set = FDM_PASSES.write();
-    if uses {
-        set.insert(pass.as_raw());
-    } else {
-        set.remove(&pass.as_raw());
-    }
-}
-
-/// Whether `pass` has a density-map attachment (so its pipelines get the shading-rate state).
-pub fn pass_uses_fdm(pass: vk::RenderPass) -> bool {
-    pass != vk::RenderPass::null() && FDM_PASSES.read().contains(&pass.as_raw())
-}
-
 /// What a command-recording hook needs of its device: whether it emulates density maps, and the
 /// next layer's pointers. Copied out of [`RECORDING`] by value, so no `Arc` is counted per command.
 #[derive(Clone, Copy)]
