@@ -6,6 +6,7 @@
 //! - [`projection`]: projection matrices and symmetric-FOV sizing;
 //! - [`density`]: the density model (which fragment size each density-map texel may use);
 //! - [`dynamic`]: the dynamic-level controller;
+//! - [`gaze`]: eye-tracker samples filtered, held and projected into each eye;
 //! - [`stats`]: the once-a-second stats window and its line;
 //! - [`maps`]: what each layer of a density map holds, and filling it;
 //! - [`headsets`]: headset presets as runtimes report them, and eye-buffer sizing;
@@ -16,6 +17,7 @@
 pub mod density;
 pub mod dynamic;
 pub mod fov;
+pub mod gaze;
 pub mod headsets;
 pub mod inject;
 pub mod maps;
