@@ -1,7 +1,13 @@
 //! Minimal input (spec chapter "Input and Haptics"): action sets and actions can be created,
 //! bindings suggested and sets attached, but the simulated headset has no controllers, so every
-//! action state is inactive and no interaction profile is ever current. Enough for applications
-//! such as Khronos hello_xr to run their input code unchanged.
+//! controller action is inactive. Enough for applications such as Khronos hello_xr to run their
+//! input code unchanged.
+//!
+//! The one device that can be present is an eye tracker (`XR_EXT_eye_gaze_interaction`,
+//! <https://registry.khronos.org/OpenXR/specs/1.1/html/xrspec.html#XR_EXT_eye_gaze_interaction>):
+//! a pose action bound to its gaze path through the latest suggestion for its profile is active
+//! while the tracker is supported, the session focused and the action's set made active by the
+//! last xrSyncActions; its action space then locates where the script says the eye looks.
 
 use std::ffi::c_char;
 
@@ -9,6 +15,7 @@ use openxr_sys as xr;
 use openxr_sys::Handle;
 
 use crate::ffi;
+use crate::instance::EXT_EYE_GAZE_INTERACTION;
 use crate::space::{check_pose, Space, SpaceKind};
 use crate::state::{entry, world, World};
 
@@ -19,9 +26,13 @@ pub(crate) struct ActionSet {
     attached: bool,
 }
 
+/// The eye gaze interaction profile and its one input.
+pub(crate) const EYE_GAZE_PROFILE: &str = "/interaction_profiles/ext/eye_gaze_interaction";
+pub(crate) const GAZE_POSE: &str = "/user/eyes_ext/input/gaze_ext/pose";
+
 pub(crate) struct Action {
     pub instance: u64,
-    set: u64,
+    pub set: u64,
     name: String,
     ty: xr::ActionType,
 }
@@ -158,6 +169,13 @@ pub(crate) unsafe extern "system" fn suggest_interaction_profile_bindings(
             return Err(xr::Result::ERROR_VALIDATION_FAILURE);
         }
         ffi::non_null(info.suggested_bindings)?;
+        let eye_gaze = profile == EYE_GAZE_PROFILE;
+        // The eye gaze profile exists only with its extension enabled.
+        if eye_gaze && !w.instances[&id].has_extension(EXT_EYE_GAZE_INTERACTION) {
+            return Err(xr::Result::ERROR_PATH_UNSUPPORTED);
+        }
+        let profile = profile.to_string();
+        let mut bindings = Vec::with_capacity(info.count_suggested_bindings as usize);
         for i in 0..info.count_suggested_bindings as usize {
             let b = &*info.suggested_bindings.add(i);
             let action = w
@@ -170,10 +188,19 @@ pub(crate) unsafe extern "system" fn suggest_interaction_profile_bindings(
             if w.action_sets[&action.set].attached {
                 return Err(xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED);
             }
-            w.instances[&id]
+            let path = w.instances[&id]
                 .path(b.binding)
                 .ok_or(xr::Result::ERROR_PATH_INVALID)?;
+            if eye_gaze && path != GAZE_POSE {
+                return Err(xr::Result::ERROR_PATH_UNSUPPORTED);
+            }
+            bindings.push((b.action.into_raw(), path.to_string()));
         }
+        w.instances
+            .get_mut(&id)
+            .expect("entered instance exists")
+            .suggested
+            .insert(profile, bindings);
         Ok(xr::Result::SUCCESS)
     })
 }
@@ -205,10 +232,20 @@ pub(crate) unsafe extern "system" fn attach_session_action_sets(
         for s in &sets {
             w.action_sets.get_mut(s).expect("checked above").attached = true;
         }
-        w.sessions
-            .get_mut(&id)
-            .expect("entered session exists")
-            .action_sets_attached = sets;
+        // Bindings are fixed at attach: the gaze actions are those the latest eye gaze
+        // suggestion names, in the sets attached now.
+        let instance = w.sessions[&id].instance;
+        let gaze_actions: Vec<u64> = w.instances[&instance]
+            .suggested
+            .get(EYE_GAZE_PROFILE)
+            .into_iter()
+            .flatten()
+            .map(|(a, _)| *a)
+            .filter(|a| w.actions.get(a).is_some_and(|a| sets.contains(&a.set)))
+            .collect();
+        let s = w.sessions.get_mut(&id).expect("entered session exists");
+        s.action_sets_attached = sets;
+        s.gaze_actions = gaze_actions;
         Ok(xr::Result::SUCCESS)
     })
 }
@@ -243,6 +280,7 @@ pub(crate) unsafe extern "system" fn sync_actions(
         let id = w.enter_session(ctx, session)?;
         let info = ffi::input(sync_info, xr::StructureType::ACTIONS_SYNC_INFO)?;
         let s = &w.sessions[&id];
+        let mut active = Vec::with_capacity(info.count_active_action_sets as usize);
         if info.count_active_action_sets > 0 {
             ffi::non_null(info.active_action_sets)?;
             for i in 0..info.count_active_action_sets as usize {
@@ -250,10 +288,15 @@ pub(crate) unsafe extern "system" fn sync_actions(
                 if !s.action_sets_attached.contains(&set) {
                     return Err(xr::Result::ERROR_ACTIONSET_NOT_ATTACHED);
                 }
+                active.push(set);
             }
         }
-        // Spec: input is only delivered to the focused session.
-        if s.state != xr::SessionState::FOCUSED {
+        // Spec: input is only delivered to the focused session, and a sync activates only the
+        // sets it lists.
+        let focused = s.state == xr::SessionState::FOCUSED;
+        let s = w.sessions.get_mut(&id).expect("entered session exists");
+        s.synced_sets = if focused { active } else { Vec::new() };
+        if !focused {
             return Ok(xr::Result::SESSION_NOT_FOCUSED);
         }
         Ok(xr::Result::SUCCESS)
@@ -280,6 +323,21 @@ unsafe fn check_action(
     Ok(())
 }
 
+/// Whether `action` gets gaze in `session` now: an eye tracker that is supported, its extension
+/// enabled, the session focused, the action bound to the gaze pose at attach and its set active
+/// since the last sync.
+pub(crate) fn gaze_active(w: &World, session: u64, action: u64) -> bool {
+    let s = &w.sessions[&session];
+    let inst = &w.instances[&s.instance];
+    inst.config.eye_gaze.as_ref().is_some_and(|g| g.supported)
+        && inst.has_extension(EXT_EYE_GAZE_INTERACTION)
+        && s.state == xr::SessionState::FOCUSED
+        && s.gaze_actions.contains(&action)
+        && w.actions
+            .get(&action)
+            .is_some_and(|a| s.synced_sets.contains(&a.set))
+}
+
 macro_rules! action_state_getter {
     ($fn_name:ident, $command:literal, $state:ty, $state_type:ident, $action_type:ident) => {
         pub(crate) unsafe extern "system" fn $fn_name(
@@ -293,15 +351,48 @@ macro_rules! action_state_getter {
                 let info = ffi::input(get_info, xr::StructureType::ACTION_STATE_GET_INFO)?;
                 let p = ffi::output(state, xr::StructureType::$state_type)?;
                 check_action(&w, id, info.action, &[xr::ActionType::$action_type])?;
-                // No controller: the action is inactive and every value is zero.
+                // No controller: the action is inactive and every value is zero; a pose bound to
+                // a present eye tracker is active (its `isActive` follows the zeroed header).
+                let active = gaze_active(&w, id, info.action.into_raw());
                 let (ty, next) = ((*p).ty, (*p).next);
                 std::ptr::write_bytes(p, 0, 1);
                 (*p).ty = ty;
                 (*p).next = next;
+                set_active(p, active);
                 Ok(xr::Result::SUCCESS)
             })
         }
     };
+}
+
+/// Marks a zeroed action state active; only pose states can be (the eye tracker's).
+pub(crate) trait ActionState {
+    fn set_active(&mut self, active: bool);
+}
+
+macro_rules! inactive_only {
+    ($($t:ty),*) => {$(
+        impl ActionState for $t {
+            fn set_active(&mut self, _: bool) {}
+        }
+    )*};
+}
+inactive_only!(
+    xr::ActionStateBoolean,
+    xr::ActionStateFloat,
+    xr::ActionStateVector2f
+);
+
+impl ActionState for xr::ActionStatePose {
+    fn set_active(&mut self, active: bool) {
+        self.is_active = active.into();
+    }
+}
+
+/// # Safety
+/// `p` must be a valid, writable state.
+pub(crate) unsafe fn set_active<T: ActionState>(p: *mut T, active: bool) {
+    (*p).set_active(active);
 }
 
 action_state_getter!(
@@ -382,12 +473,30 @@ pub(crate) unsafe extern "system" fn create_action_space(
             return Err(xr::Result::ERROR_ACTION_TYPE_MISMATCH);
         }
         check_pose(&info.pose_in_action_space)?;
+        let action_id = info.action.into_raw();
+        // Some runtimes cannot make a gaze space before the set is attached (configured).
+        let s = &w.sessions[&id];
+        let inst = &w.instances[&s.instance];
+        let suggested_for_gaze = inst
+            .suggested
+            .get(EYE_GAZE_PROFILE)
+            .is_some_and(|b| b.iter().any(|(a, _)| *a == action_id));
+        if inst
+            .config
+            .eye_gaze
+            .as_ref()
+            .is_some_and(|g| g.space_after_attach)
+            && suggested_for_gaze
+            && !s.action_sets_attached.contains(&action.set)
+        {
+            return Err(xr::Result::ERROR_ACTIONSET_NOT_ATTACHED);
+        }
         let space_id = w.alloc_handle();
         w.spaces.insert(
             space_id,
             Space {
                 session: id,
-                kind: SpaceKind::Action,
+                kind: SpaceKind::Action(action_id),
                 pose_in_parent: info.pose_in_action_space,
             },
         );

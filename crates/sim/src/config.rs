@@ -9,6 +9,8 @@ use std::cell::RefCell;
 use fovea_model::headsets::Headset;
 use openxr_sys as xr;
 
+use crate::gaze_script::GazeScript;
+
 /// The simulated runtime's settings, fixed for an instance at xrCreateInstance.
 #[derive(Clone, Debug)]
 pub struct SimConfig {
@@ -49,6 +51,23 @@ pub struct SimConfig {
     /// Monado prints an error line: it shows, in any test's output, which component made a call a
     /// strict runtime refuses.
     pub log_refusals: bool,
+    /// An eye tracker behind `XR_EXT_eye_gaze_interaction` (`FOVEA_SIM_EYE_GAZE`); `None` offers
+    /// no such extension.
+    pub eye_gaze: Option<EyeGaze>,
+}
+
+/// The simulated eye tracker: what the runtime says of it and where the eye looks.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EyeGaze {
+    /// `XrSystemEyeGazeInteractionPropertiesEXT::supportsEyeGazeInteraction`. `false` is what
+    /// Monado's simulated headset reports: the extension listed, no tracker behind it, the action
+    /// never active.
+    pub supported: bool,
+    /// Refuse a gaze action space before the application attached its set (some runtimes, VDXR
+    /// among them, cannot make one earlier): `FOVEA_SIM_GAZE_SPACE_AFTER_ATTACH=1`.
+    pub space_after_attach: bool,
+    /// Where the eye looks (`FOVEA_SIM_GAZE`; empty: straight ahead), from session creation on.
+    pub script: GazeScript,
 }
 
 /// A call that fails on purpose: `function` returns `result` without doing anything.
@@ -103,6 +122,7 @@ impl Default for SimConfig {
             journal: true,
             summary: false,
             log_refusals: false,
+            eye_gaze: None,
         }
     }
 }
@@ -121,7 +141,9 @@ impl SimConfig {
     /// `FOVEA_SIM_NATIVE_FOVEATION`, `FOVEA_SIM_VIEW_CONFIGURATION_FOV`,
     /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_JOURNAL`, `FOVEA_SIM_SUMMARY`, `FOVEA_SIM_LOG_REFUSALS`,
     /// `FOVEA_SIM_EXIT_AFTER_FRAMES`,
-    /// `FOVEA_SIM_FAULT` and `FOVEA_SIM_LOAD`.
+    /// `FOVEA_SIM_FAULT`, `FOVEA_SIM_LOAD`, and the eye tracker's `FOVEA_SIM_EYE_GAZE` (`on`,
+    /// `unsupported` or `off`), `FOVEA_SIM_GAZE` (a script, [`GazeScript`]) and
+    /// `FOVEA_SIM_GAZE_SPACE_AFTER_ATTACH`.
     /// The error names the variable and what it accepts.
     pub fn from_env() -> Result<SimConfig, String> {
         Self::from_vars(|name| std::env::var(name).ok())
@@ -173,6 +195,25 @@ impl SimConfig {
         }
         if let Some(v) = var("FOVEA_SIM_LOAD") {
             cfg.load = parse_load(&v).map_err(|e| format!("FOVEA_SIM_LOAD={v:?}: {e}"))?;
+        }
+        let supported = match var("FOVEA_SIM_EYE_GAZE").as_deref().map(str::trim) {
+            None | Some("" | "off") => None,
+            Some("on") => Some(true),
+            Some("unsupported") => Some(false),
+            Some(other) => {
+                return Err(format!(
+                    "FOVEA_SIM_EYE_GAZE={other:?}: expected on, unsupported or off"
+                ))
+            }
+        };
+        if let Some(supported) = supported {
+            let text = var("FOVEA_SIM_GAZE").unwrap_or_default();
+            cfg.eye_gaze = Some(EyeGaze {
+                supported,
+                space_after_attach: flag(&var, "FOVEA_SIM_GAZE_SPACE_AFTER_ATTACH")?,
+                script: GazeScript::parse(&text)
+                    .map_err(|e| format!("FOVEA_SIM_GAZE={text:?}: {e}"))?,
+            });
         }
         Ok(cfg)
     }
@@ -296,6 +337,9 @@ mod tests {
             ("FOVEA_SIM_EXIT_AFTER_FRAMES", "30"),
             ("FOVEA_SIM_FAULT", "xrCreateSwapchain:-2@2, xrEndFrame:-17"),
             ("FOVEA_SIM_LOAD", "8@0,14@100"),
+            ("FOVEA_SIM_EYE_GAZE", "on"),
+            ("FOVEA_SIM_GAZE", "fix 10,5 for 1s"),
+            ("FOVEA_SIM_GAZE_SPACE_AFTER_ATTACH", "1"),
         ]))
         .unwrap();
         assert_eq!(cfg.headset.id, "rift-s");
@@ -321,6 +365,11 @@ mod tests {
         assert_eq!(cfg.load.gpu_ms_at(0), 8.0);
         assert_eq!(cfg.load.gpu_ms_at(99), 8.0);
         assert_eq!(cfg.load.gpu_ms_at(100), 14.0);
+        let gaze = cfg.eye_gaze.unwrap();
+        assert!(gaze.supported && gaze.space_after_attach);
+        assert_eq!(gaze.script.eye_at(0), Some([10.0, 5.0]));
+        let listed = SimConfig::from_vars(vars(&[("FOVEA_SIM_EYE_GAZE", "unsupported")])).unwrap();
+        assert_eq!(listed.eye_gaze.map(|g| g.supported), Some(false));
     }
 
     #[test]
@@ -336,10 +385,20 @@ mod tests {
             ("FOVEA_SIM_EXIT_AFTER_FRAMES", "-1"),
             ("FOVEA_SIM_FAULT", "xrEndFrame"),
             ("FOVEA_SIM_LOAD", "8"),
+            ("FOVEA_SIM_EYE_GAZE", "yes"),
         ] {
             let e = SimConfig::from_vars(vars(&[(name, bad)])).unwrap_err();
             assert!(e.starts_with(name), "{e}");
         }
+        let e = SimConfig::from_vars(vars(&[
+            ("FOVEA_SIM_EYE_GAZE", "on"),
+            ("FOVEA_SIM_GAZE", "wink 1s"),
+        ]))
+        .unwrap_err();
+        assert!(
+            e.starts_with("FOVEA_SIM_GAZE=") && e.contains("step 1"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -21,6 +21,7 @@ pub(crate) const KHR_VULKAN_ENABLE2: &str = "XR_KHR_vulkan_enable2";
 pub(crate) const MND_HEADLESS: &str = "XR_MND_headless";
 pub(crate) const FB_SWAPCHAIN_UPDATE_STATE: &str = "XR_FB_swapchain_update_state";
 pub(crate) const FB_FOVEATION: &str = "XR_FB_foveation";
+pub(crate) const EXT_EYE_GAZE_INTERACTION: &str = "XR_EXT_eye_gaze_interaction";
 pub(crate) const FB_FOVEATION_CONFIGURATION: &str = "XR_FB_foveation_configuration";
 pub(crate) const EPIC_VIEW_CONFIGURATION_FOV: &str = "XR_EPIC_view_configuration_fov";
 
@@ -45,6 +46,9 @@ pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
     }
     if cfg.view_configuration_fov {
         list.push((EPIC_VIEW_CONFIGURATION_FOV, 2));
+    }
+    if cfg.eye_gaze.is_some() {
+        list.push((EXT_EYE_GAZE_INTERACTION, 2));
     }
     list
 }
@@ -74,6 +78,10 @@ pub(crate) struct InstanceState {
     pub vulkan: VulkanInstanceState,
     /// Successful xrEndFrame calls over all the instance's sessions, for the summary line.
     pub frames: u64,
+    /// The latest suggested bindings per interaction profile path, `(action, binding path)`: a
+    /// later suggestion for a profile replaces the earlier one
+    /// (<https://registry.khronos.org/OpenXR/specs/1.1/html/xrspec.html#xrSuggestInteractionProfileBindings>).
+    pub suggested: HashMap<String, Vec<(u64, String)>>,
 }
 
 impl InstanceState {
@@ -192,6 +200,7 @@ pub(crate) unsafe extern "system" fn create_instance(
             graphics_requirements_queried: false,
             vulkan: VulkanInstanceState::default(),
             frames: 0,
+            suggested: HashMap::new(),
         };
         w.instances.insert(id, state);
         *instance = xr::Instance::from_raw(id);

@@ -19,6 +19,11 @@
 //!
 //! Time is virtual and deterministic (see [`frame`](crate::frame) docs), every call is journaled, and
 //! faults and GPU load can be injected through [`control`].
+//!
+//! Optionally (`FOVEA_SIM_EYE_GAZE`) it has an eye tracker behind `XR_EXT_eye_gaze_interaction`
+//! whose gaze follows a script ([`gaze_script`]), as strict as real runtimes: inactive without
+//! focus or without a synced set bound to it, a second suggestion for its profile replacing the
+//! first, optionally no gaze space before attach, or listed without support as Monado does.
 
 mod actions;
 mod config;
@@ -27,6 +32,7 @@ mod dispatch;
 mod ffi;
 mod foveation;
 mod frame;
+pub mod gaze_script;
 mod instance;
 mod negotiate;
 mod session;

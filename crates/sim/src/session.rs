@@ -37,6 +37,12 @@ pub(crate) struct Session {
     pub graphics: Graphics,
     pub frame: FrameClock,
     pub action_sets_attached: Vec<u64>,
+    /// Actions bound to the eye gaze pose when the sets were attached.
+    pub gaze_actions: Vec<u64>,
+    /// The sets the last focused xrSyncActions made active (none while unfocused).
+    pub synced_sets: Vec<u64>,
+    /// The virtual time the session was created at: the eye tracker's script starts there.
+    pub gaze_origin_ns: i64,
 }
 
 /// Announces a state change: records it and queues the event with the instance's current time.
@@ -126,6 +132,7 @@ pub(crate) unsafe extern "system" fn create_session(
             // Spec: without a (recognised) graphics binding the session cannot be created.
             None => return Err(xr::Result::ERROR_GRAPHICS_DEVICE_INVALID),
         };
+        let gaze_origin_ns = inst.now_ns;
         let id = w.alloc_handle();
         w.sessions.insert(
             id,
@@ -139,6 +146,9 @@ pub(crate) unsafe extern "system" fn create_session(
                 graphics,
                 frame: FrameClock::default(),
                 action_sets_attached: Vec::new(),
+                gaze_actions: Vec::new(),
+                synced_sets: Vec::new(),
+                gaze_origin_ns,
             },
         );
         set_state(&mut w, id, xr::SessionState::IDLE);

@@ -16,9 +16,9 @@ pub(crate) const IPD_M: f32 = 0.063;
 
 pub(crate) enum SpaceKind {
     Reference(xr::ReferenceSpaceType),
-    /// Action spaces exist so applications can create them; no device is tracked, so they never
-    /// locate.
-    Action,
+    /// An action's space: it locates only while the action is the eye tracker's and active
+    /// ([`crate::actions::gaze_active`]) and the tracker has a sample; no controller is tracked.
+    Action(u64),
 }
 
 pub(crate) struct Space {
@@ -28,16 +28,44 @@ pub(crate) struct Space {
 }
 
 impl Space {
-    /// The space's pose in LOCAL, or `None` when untracked.
-    fn pose_in_local(&self) -> Option<xr::Posef> {
-        let origin = match self.kind {
+    /// The space's pose in LOCAL at `time`, or `None` when untracked; for a gaze space also the
+    /// time its sample was taken (`XrEyeGazeSampleTimeEXT`).
+    fn pose_in_local(&self, w: &World, time: i64) -> Option<(xr::Posef, Option<i64>)> {
+        let (origin, sampled) = match self.kind {
             SpaceKind::Reference(xr::ReferenceSpaceType::STAGE) => {
-                translation(0.0, -EYE_HEIGHT_M, 0.0)
+                (translation(0.0, -EYE_HEIGHT_M, 0.0), None)
             }
-            SpaceKind::Reference(_) => IDENTITY,
-            SpaceKind::Action => return None,
+            SpaceKind::Reference(_) => (IDENTITY, None),
+            SpaceKind::Action(action) => {
+                if !crate::actions::gaze_active(w, self.session, action) {
+                    return None;
+                }
+                let s = &w.sessions[&self.session];
+                let gaze = w.instances[&s.instance].config.eye_gaze.as_ref()?;
+                let ([yaw, pitch], at) = gaze.script.sample_at(time - s.gaze_origin_ns)?;
+                // The head does not move, so VIEW is LOCAL: the gaze pose sits between the eyes,
+                // −Z turned right by the yaw and up by the pitch.
+                let half = |deg: f32| deg.to_radians() / 2.0;
+                let turn = xr::Quaternionf {
+                    x: 0.0,
+                    y: (-half(yaw)).sin(),
+                    z: 0.0,
+                    w: (-half(yaw)).cos(),
+                };
+                let lift = xr::Quaternionf {
+                    x: half(pitch).sin(),
+                    y: 0.0,
+                    z: 0.0,
+                    w: half(pitch).cos(),
+                };
+                let pose = xr::Posef {
+                    orientation: quat_mul(turn, lift),
+                    ..IDENTITY
+                };
+                (pose, Some(at + s.gaze_origin_ns))
+            }
         };
-        Some(compose(origin, self.pose_in_parent))
+        Some((compose(origin, self.pose_in_parent), sampled))
     }
 }
 
@@ -267,10 +295,17 @@ pub(crate) unsafe extern "system" fn locate_space(
         }
         let location = ffi::output(location, xr::StructureType::SPACE_LOCATION)?;
         check_time(time)?;
-        match (space.pose_in_local(), base_space.pose_in_local()) {
-            (Some(s), Some(b)) => {
+        match (
+            space.pose_in_local(&w, time.as_nanos()),
+            base_space.pose_in_local(&w, time.as_nanos()),
+        ) {
+            (Some((s, sampled)), Some((b, _))) => {
                 (*location).pose = compose(inverse(b), s);
                 (*location).location_flags = tracked();
+                let ty = xr::StructureType::EYE_GAZE_SAMPLE_TIME_EXT;
+                if let (Some(t), Some(e)) = (sampled, ffi::find_in_chain((*location).next, ty)) {
+                    (*(e as *mut xr::EyeGazeSampleTimeEXT)).time = xr::Time::from_nanos(t);
+                }
             }
             _ => {
                 (*location).pose = IDENTITY;
@@ -332,7 +367,9 @@ pub(crate) unsafe extern "system" fn locate_views(
         if space.session != session {
             return Err(xr::Result::ERROR_VALIDATION_FAILURE);
         }
-        let base = space.pose_in_local();
+        let base = space
+            .pose_in_local(&w, info.display_time.as_nanos())
+            .map(|(pose, _)| pose);
         let fovs = eye_fovs(&w, session);
         ffi::two_call(capacity, count_out, views, VIEW_COUNT, |i, p| {
             let p = ffi::output(p, xr::StructureType::VIEW)?;

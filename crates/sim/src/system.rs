@@ -4,7 +4,7 @@
 use openxr_sys as xr;
 
 use crate::ffi;
-use crate::instance::{check_system, EPIC_VIEW_CONFIGURATION_FOV};
+use crate::instance::{check_system, EPIC_VIEW_CONFIGURATION_FOV, EXT_EYE_GAZE_INTERACTION};
 use crate::state::{entry, world};
 
 pub(crate) const SYSTEM_ID: u64 = 0x5157_0001;
@@ -59,6 +59,15 @@ pub(crate) unsafe extern "system" fn get_system_properties(
             orientation_tracking: xr::TRUE,
             position_tracking: xr::TRUE,
         };
+        let inst = &w.instances[&id];
+        if inst.has_extension(EXT_EYE_GAZE_INTERACTION) {
+            let ty = xr::StructureType::SYSTEM_EYE_GAZE_INTERACTION_PROPERTIES_EXT;
+            if let Some(e) = ffi::find_in_chain((*p).next, ty) {
+                let e = e as *mut xr::SystemEyeGazeInteractionPropertiesEXT;
+                let supported = inst.config.eye_gaze.as_ref().is_some_and(|g| g.supported);
+                (*e).supports_eye_gaze_interaction = supported.into();
+            }
+        }
         Ok(xr::Result::SUCCESS)
     })
 }
