@@ -7,7 +7,9 @@
 #   2. the example's fill-bound scene (--heavy) at each level, with and without the Vulkan layer,
 #      eye passes timed with GPU timestamps: a table of GPU ms per eye pass per level, as a ratio
 #      to level NONE, beside the shaded fraction fovea's model predicts (fovea report --json);
-#   3. frames read back from the GPU as PNGs (--dump), where coarse shading shows in the periphery;
+#   3. frames read back from the GPU as PNGs (--dump), where coarse shading shows in the periphery,
+#      and the fragment size each density-map texel was shaded at, read from those pixels, against
+#      what the map allows (--check-rates);
 #   4. injection (docs/injection.md): the same fill-bound scene from an app that never asks for
 #      foveation (--no-fb: no XR_FB_foveation, plain passes), with injection off and at each
 #      injected level (FOVEA_INJECT=1 FOVEA_INJECT_LEVEL=low|medium|high), eye passes timed the
@@ -106,9 +108,13 @@ echo "== 3. Frames read back from the GPU"
 FRAMES_DIR=$OUT/frames
 rm -rf "$FRAMES_DIR"
 FRAMES=2
-run with high --dump "$FRAMES_DIR" >"$OUT/dump.txt"
-grep 'PNGs' "$OUT/dump.txt" || true
-echo "fNNNNN_high_{left,right}.png: with shading-rate attachments, coarse blocks in the periphery"
+run with high --dump "$FRAMES_DIR" --check-rates >"$OUT/dump.txt" || {
+    echo "the example failed or found texels shaded coarser than their map allows: see $OUT/dump.txt" >&2
+    exit 1
+}
+grep -E 'PNGs|shaded sizes|rates not checked' "$OUT/dump.txt" || true
+echo "fNNNNN_high_{left,right}.png: with shading-rate attachments, coarse blocks in the periphery;"
+echo "the shaded sizes are read from those pixels, per density-map texel (--check-rates)"
 
 FRAMES=$TIMED_FRAMES
 echo

@@ -23,7 +23,9 @@
 //! `--dump DIR` (read back each new density map and the frames where a level starts, and the last
 //! frame, as PNGs), `--validate` (the Vulkan validation layer with a messenger; the run fails on
 //! any message), `--vk-layer NAME` (one more Vulkan layer for the VkInstance, after validation;
-//! repeatable), `--heavy` (a fill-bound fragment shader, for timing eye passes), `--help`.
+//! repeatable), `--heavy` (a fill-bound fragment shader, for timing eye passes), `--check-rates`
+//! (with `--heavy`: the fragment size each density-map texel was shaded at, read from the pixels
+//! of frames read back, against what the map allows), `--help`.
 //!
 //! The options below make the example a test subject for fovea's injection (docs/injection.md),
 //! which foveates applications that never ask, by their eye passes:
@@ -101,6 +103,8 @@ struct Options {
     vk_layers: Vec<std::ffi::CString>,
     /// The fill-bound fragment shader: a loop of arithmetic per fragment.
     heavy: bool,
+    /// Read the fragment sizes the GPU shaded at from the frames' pixels (`--check-rates`).
+    check_rates: bool,
     /// No XR_FB_foveation* extension and no density maps (`--no-fb`).
     no_fb: bool,
     /// Offscreen passes before the eye passes (`--offscreen`).
@@ -123,6 +127,7 @@ impl Options {
             validate: false,
             vk_layers: Vec::new(),
             heavy: false,
+            check_rates: false,
             no_fb: false,
             offscreen: false,
             layout: Layout::Array,
@@ -167,6 +172,10 @@ impl Options {
                         .map_err(|_| format!("{arg}: a layer name has no NUL"))?,
                 ),
                 "--heavy" => o.heavy = true,
+                "--check-rates" => {
+                    o.check_rates = true;
+                    o.capture = true;
+                }
                 "--no-fb" => o.no_fb = true,
                 "--offscreen" => o.offscreen = true,
                 "--double-wide" => o.layout = Layout::DoubleWide,
@@ -186,6 +195,11 @@ impl Options {
         } else if o.layout == Layout::DoubleWide {
             // The FB path's density maps, overlay and read-back are per layer of an array.
             return Err("--double-wide renders without the FB API: add --no-fb".into());
+        }
+        if o.check_rates && (!o.heavy || o.no_fb) {
+            // Only the heavy shader gives every pixel its own colour, which is what tells a
+            // coarse fragment from fine ones; and only the FB path has maps to compare with.
+            return Err("--check-rates needs --heavy and the FB path (no --no-fb)".into());
         }
         o.frames = frames.unwrap_or(o.levels.len() as u64 * o.frames_per_level * 2);
         Ok(o)
@@ -249,6 +263,8 @@ usage: foveated_vulkan [options]   (run through an OpenXR runtime; see the file'
   --vk-layer NAME         one more Vulkan layer for the VkInstance, after validation (repeatable)
   --heavy                 a fill-bound fragment shader (a loop of arithmetic per fragment), for
                           timing eye passes on a real GPU
+  --check-rates           (with --heavy) read the fragment size each density-map texel was shaded
+                          at from the frames read back, and compare it with what the map allows
   --no-fb                 no XR_FB_foveation* extension, profile or density map: plain passes, as
                           an app unaware of foveation renders (levels and --dynamic do not apply)
   --offscreen             before the eye passes, render a 256x256 and a 64x36 offscreen target
@@ -274,6 +290,9 @@ fn main() {
     let outcome = run(&options).and_then(|o| {
         if let Some(dir) = &options.dump {
             dump(&o, dir)?;
+        }
+        if options.check_rates {
+            check_rates(&o)?;
         }
         Ok(o)
     });
@@ -1105,6 +1124,101 @@ fn dump(o: &Outcome, dir: &Path) -> Result<(), String> {
     Ok(())
 }
 
+/// The fragment sizes a GPU with rates up to 4×4 offers (NVIDIA, NVK, Intel): every power-of-two
+/// size with an aspect of at most 2.
+const RATES_UP_TO_4X4: [[u32; 2]; 7] = [[1, 1], [1, 2], [2, 1], [2, 2], [2, 4], [4, 2], [4, 4]];
+
+/// The fragment size one `texel`-square tile of an eye was shaded at, read from its pixels (RGBA8
+/// rows of `width`): the largest power-of-two width (height) such that every aligned run of that
+/// many pixels in each row (column) has one colour. With the heavy shader every fragment has its
+/// own colour, so a fine tile is never read as coarse: that would take every pair of its
+/// neighbouring fragments to agree.
+fn shaded_size(pixels: &[u8], width: usize, x0: usize, y0: usize, texel: usize) -> [u32; 2] {
+    let at = |x: usize, y: usize| &pixels[(y * width + x) * 4..][..3];
+    let uniform = |horizontal: bool, n: usize| {
+        (0..texel).all(|a| {
+            (0..texel).step_by(n).all(|b| {
+                let p = |k: usize| {
+                    if horizontal {
+                        at(x0 + b + k, y0 + a)
+                    } else {
+                        at(x0 + a, y0 + b + k)
+                    }
+                };
+                (1..n).all(|k| p(k) == p(0))
+            })
+        })
+    };
+    let size = |horizontal| {
+        [4u32, 2]
+            .into_iter()
+            .find(|&n| uniform(horizontal, n as usize))
+            .unwrap_or(1)
+    };
+    [size(true), size(false)]
+}
+
+/// `--check-rates`: for each frame read back with its map, the fragment size every whole
+/// density-map texel of each eye was shaded at, from the pixels, against the map: never coarser
+/// than the texel's density allows (the extension's rule,
+/// <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fragmentdensitymapops>), and
+/// how many texels got the full allowance as a GPU with rates up to 4×4 gives it. Fails on any
+/// texel shaded coarser than its map allows.
+fn check_rates(o: &Outcome) -> Result<(), String> {
+    let (w, h) = o.view_size;
+    let (dw, dh) = o.density_images.first().map_or((0, 0), |d| (d.1, d.2));
+    if o.mode != Mode::Attachment || dw == 0 {
+        println!("foveated_vulkan: rates not checked: the density maps were not attached");
+        return Ok(());
+    }
+    // The density texel: the view over the map, rounded up (the map covers the whole view).
+    let texel = (w.div_ceil(dw)).max(h.div_ceil(dh)) as usize;
+    let texels = (dw * dh) as usize;
+    let mut coarser = 0;
+    for c in &o.captures {
+        let Some(eyes) = &c.eyes else { continue };
+        let level = ["none", "low", "medium", "high"][c.level];
+        for (layer, eye) in ["left", "right"].into_iter().enumerate() {
+            let Some(map) = c.density.chunks_exact(texels * 2).nth(layer) else {
+                continue;
+            };
+            let pixels = &eyes[layer * (w * h) as usize * 4..][..(w * h) as usize * 4];
+            let (mut whole, mut allowed, mut full) = (0, 0, 0);
+            let mut sizes = std::collections::BTreeMap::new();
+            for ty in 0..(h as usize / texel) {
+                for tx in 0..(w as usize / texel) {
+                    let d = &map[(ty * dw as usize + tx) * 2..][..2];
+                    let allowance = [
+                        fovea_model::shading_rate::axis_size(d[0], 4),
+                        fovea_model::shading_rate::axis_size(d[1], 4),
+                    ];
+                    let got = shaded_size(pixels, w as usize, tx * texel, ty * texel, texel);
+                    whole += 1;
+                    *sizes.entry(format!("{}x{}", got[0], got[1])).or_insert(0) += 1;
+                    if got[0] <= allowance[0] && got[1] <= allowance[1] {
+                        allowed += 1;
+                    }
+                    if got == fovea_model::shading_rate::clamp(allowance, &RATES_UP_TO_4X4) {
+                        full += 1;
+                    }
+                }
+            }
+            coarser += whole - allowed;
+            println!(
+                "foveated_vulkan: shaded sizes from pixels, frame {} level={level} eye={eye}:                  {whole} texels of {texel}x{texel}; {} coarser than the map allows; {full} at                  the map's full allowance (rates up to 4x4); sizes {sizes:?}",
+                c.frame,
+                whole - allowed,
+            );
+        }
+    }
+    if coarser > 0 {
+        return Err(format!(
+            "{coarser} texels were shaded coarser than their density map allows"
+        ));
+    }
+    Ok(())
+}
+
 fn write_png(
     path: &Path,
     (width, height): (u32, u32),
@@ -1151,6 +1265,7 @@ mod tests {
             vec!["--offscreen"],
             vec!["--double-wide", "--no-fb"],
             vec!["--dynamic-rendering"],
+            vec!["--check-rates", "--heavy"],
         ];
         for args in &taken {
             assert!(USAGE.contains(args[0]), "{} missing from --help", args[0]);
@@ -1165,6 +1280,41 @@ mod tests {
         );
         let err = Options::parse(&["--nope".to_string()]).unwrap_err();
         assert!(err.contains("--help"), "{err}");
+        let err = Options::parse(&["--check-rates".to_string()]).unwrap_err();
+        assert!(err.contains("--heavy"), "{err}");
+    }
+
+    /// The shaded size of a tile is read from its pixels: blocks of one colour as large as the
+    /// fragments, every fragment its own colour.
+    #[test]
+    fn shaded_sizes_are_read_from_pixels() {
+        let (width, texel) = (32usize, 16usize);
+        // Tile (0,0) in 4x2 fragments, tile (16,0) in 1x1 fragments, tile (0,16) in 2x4.
+        let tile = |x: usize, y: usize| -> [u32; 2] {
+            match (x / texel, y / texel) {
+                (0, 0) => [4, 2],
+                (1, 0) => [1, 1],
+                (0, 1) => [2, 4],
+                _ => [4, 4],
+            }
+        };
+        let mut pixels = vec![0u8; width * width * 4];
+        for y in 0..width {
+            for x in 0..width {
+                let [fw, fh] = tile(x, y).map(|v| v as usize);
+                // A colour per fragment: its index in the image.
+                let id = ((y / fh) * width + x / fw) as u32;
+                pixels[(y * width + x) * 4..][..4].copy_from_slice(&id.to_le_bytes());
+            }
+        }
+        // Alpha carries the id's top byte; only RGB is compared, and ids stay below 2^24.
+        for (x, y) in [(0, 0), (16, 0), (0, 16), (16, 16)] {
+            assert_eq!(
+                shaded_size(&pixels, width, x, y, texel),
+                tile(x, y),
+                "tile at ({x},{y})"
+            );
+        }
     }
 
     const LAVAPIPE: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
