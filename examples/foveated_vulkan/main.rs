@@ -1205,7 +1205,9 @@ fn check_rates(o: &Outcome) -> Result<(), String> {
             }
             coarser += whole - allowed;
             println!(
-                "foveated_vulkan: shaded sizes from pixels, frame {} level={level} eye={eye}:                  {whole} texels of {texel}x{texel}; {} coarser than the map allows; {full} at                  the map's full allowance (rates up to 4x4); sizes {sizes:?}",
+                "foveated_vulkan: shaded sizes from pixels, frame {} level={level} eye={eye}: \
+                 {whole} texels of {texel}x{texel}; {} coarser than the map allows; {full} at \
+                 the map's full allowance (rates up to 4x4); sizes {sizes:?}",
                 c.frame,
                 whole - allowed,
             );
