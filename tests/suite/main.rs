@@ -31,6 +31,7 @@ mod threads;
 mod tidy;
 mod vk_clears;
 mod vk_convert;
+mod vk_device_matrix;
 mod vk_enable;
 mod vk_faults;
 mod vk_fuzz;
