@@ -36,6 +36,7 @@ mod vk_enable;
 mod vk_faults;
 mod vk_fuzz;
 mod vk_inject;
+mod vk_inject_devices;
 mod vk_layer;
 mod vk_passes;
 mod vk_pipelines;
