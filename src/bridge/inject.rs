@@ -309,6 +309,27 @@ pub(crate) mod tests {
     pub(crate) static STATE_TESTS: parking_lot::Mutex<()> = parking_lot::Mutex::new(());
 
     #[test]
+    fn the_sessions_device_is_the_one_created_inside_xr_create_vulkan_device() {
+        let _one = STATE_TESTS.lock();
+        stop();
+        assert!(!device_gets_maps());
+        let inner = creating_xr_device(|| {
+            // Nested (a runtime calling through another layer's hook): still marked, and
+            // unmarked only when the outermost call returns.
+            let nested = creating_xr_device(device_gets_maps);
+            (nested, device_gets_maps())
+        });
+        assert_eq!(inner, (true, true));
+        assert!(!device_gets_maps(), "unmarked after the call");
+        let other_thread = creating_xr_device(|| std::thread::spawn(device_gets_maps).join());
+        assert_eq!(other_thread.ok(), Some(false), "the mark is this thread's");
+        legacy_enable_used();
+        assert!(device_gets_maps(), "XR_KHR_vulkan_enable: every device");
+        stop();
+        assert!(!device_gets_maps(), "forgotten with the instance");
+    }
+
+    #[test]
     fn publishing_bumps_the_generation_only_on_change() {
         let _one = STATE_TESTS.lock();
         stop();

@@ -136,7 +136,9 @@ impl ChainCopy {
 
     /// Copies `next` without every struct `remove` selects. Unlike the OpenXR side, a struct of
     /// unknown size before a removed one is an error: the removed structs here are ones the driver
-    /// must not see (they would make the device creation invalid), so keeping them is no option.
+    /// must not see (they would make the device creation invalid), so keeping them is no option,
+    /// and the caller refuses the call instead (docs/vulkan-fdm-on-fsr.md#device-creation). Every
+    /// struct that can extend a device create info up to Vulkan 1.4 has a known size.
     ///
     /// # Safety
     /// `next` must be NULL or a valid chain of Vulkan structs.

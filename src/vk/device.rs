@@ -7,9 +7,14 @@
 //! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkDeviceCreateInfo.html>,
 //! VUID-VkDeviceCreateInfo-fragmentDensityMap-04481), so the layer owns shading rates on such a
 //! device outright; an application that enables shading rates itself (or NV shading-rate images)
-//! is left alone there. With injection on (docs/injection.md#switching-it-on), an application that
-//! enables shading rates, attachments included, is injected into; its own attachments win per
-//! pass.
+//! is left alone there, less any density-map name or struct it sent too (Godot sends both). No
+//! density-map name or struct ever reaches a driver the layer emulates them on; where one cannot be
+//! left out (behind a struct of unknown type), the device is refused
+//! (docs/vulkan-fdm-on-fsr.md#device-creation). With injection on
+//! (docs/injection.md#switching-it-on), the device that renders the session's views
+//! (docs/injection.md#which-devices-get-the-feature) gets the attachment feature, and an
+//! application that enables shading rates, attachments included, is injected into; its own
+//! attachments win per pass.
 
 use std::ffi::{c_char, CStr};
 
