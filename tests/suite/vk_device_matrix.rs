@@ -48,6 +48,9 @@ const LOADER_DEVICE_CREATE_INFO: i32 = 48;
 enum Link {
     /// `fragmentDensityMap` and `…NonSubsampledImages` enabled.
     Fdm,
+    /// `VkPhysicalDeviceFragmentDensityMap2FeaturesEXT`, nothing enabled (an extension neither
+    /// the driver nor the layer offers; chained by engines that query every struct they know).
+    Fdm2,
     /// The shading-rate features: pipeline rates as given, attachments enabled.
     Fsr {
         pipeline: bool,
@@ -68,6 +71,7 @@ impl Link {
     fn stype(self) -> i32 {
         match self {
             Link::Fdm => vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT,
+            Link::Fdm2 => vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_2_FEATURES_EXT,
             Link::Fsr { .. } => {
                 vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR
             }
@@ -105,6 +109,7 @@ impl Link {
             Link::Fdm => of(vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
                 .fragment_density_map(true)
                 .fragment_density_map_non_subsampled_images(true)),
+            Link::Fdm2 => of(vk::PhysicalDeviceFragmentDensityMap2FeaturesEXT::default()),
             Link::Fsr { pipeline } => {
                 of(vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
                     .pipeline_fragment_shading_rate(pipeline)
@@ -241,6 +246,12 @@ const CASES: &[Case] = &[
         name: "Vulkan14Features after the density-map features",
         exts: &[FDM],
         links: &[Link::Fdm, Link::Vulkan14, Link::Vulkan12],
+        expect: Expect::Emulated,
+    },
+    Case {
+        name: "density-map 2 features beside the density-map features",
+        exts: &[FDM],
+        links: &[Link::Vulkan12, Link::Fdm, Link::Fdm2, Link::Vulkan13],
         expect: Expect::Emulated,
     },
     Case {
@@ -394,7 +405,7 @@ fn driver_request(case: &Case, expect: Expect, devices: &[Value]) -> Vec<String>
     let want: Vec<i32> = case
         .links
         .iter()
-        .filter(|l| !matches!(l, Link::Fdm | Link::Fsr { .. }))
+        .filter(|l| !matches!(l, Link::Fdm | Link::Fdm2 | Link::Fsr { .. }))
         .map(|l| l.stype())
         .filter(|t| !newer.contains(t) || chain.contains(t))
         .collect();
