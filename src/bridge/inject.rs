@@ -167,6 +167,44 @@ fn update(f: impl FnOnce(&mut Injection)) {
     }
 }
 
+thread_local! {
+    /// Set while this thread is inside `xrCreateVulkanDeviceKHR` (XR_KHR_vulkan_enable2): the
+    /// `vkCreateDevice` the runtime makes there is the device the session renders its views with.
+    static CREATING_XR_DEVICE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Set once the application asked `xrGetVulkanGraphicsDeviceKHR` (XR_KHR_vulkan_enable), whose
+/// applications create their `VkDevice` themselves: nothing at `vkCreateDevice` tells which of
+/// their devices the session will use.
+static LEGACY_ENABLE: AtomicBool = AtomicBool::new(false);
+
+/// Runs `f` (the runtime's `xrCreateVulkanDeviceKHR`) with this thread marked as creating the
+/// session's device.
+pub fn creating_xr_device<R>(f: impl FnOnce() -> R) -> R {
+    struct Reset(bool);
+    impl Drop for Reset {
+        fn drop(&mut self) {
+            let old = self.0;
+            CREATING_XR_DEVICE.with(|c| c.set(old));
+        }
+    }
+    let _reset = Reset(CREATING_XR_DEVICE.with(|c| c.replace(true)));
+    f()
+}
+
+/// The application uses XR_KHR_vulkan_enable (`xrGetVulkanGraphicsDeviceKHR` answered).
+pub fn legacy_enable_used() {
+    LEGACY_ENABLE.store(true, Ordering::Release);
+}
+
+/// Whether a `vkCreateDevice` now creates a device that will render eye passes, and so gets the
+/// shading-rate attachment feature under injection (docs/injection.md#which-devices-get-the-feature):
+/// one created inside `xrCreateVulkanDeviceKHR`, or, where the application uses
+/// XR_KHR_vulkan_enable, any (its session's device cannot be told from its others at creation).
+pub fn device_gets_maps() -> bool {
+    CREATING_XR_DEVICE.with(|c| c.get()) || LEGACY_ENABLE.load(Ordering::Acquire)
+}
+
 /// Switches injection on at `level` (at `xrCreateInstance`).
 pub fn start(level: Level) {
     *STATE.write() = Some(Arc::new(Injection::new(level)));
@@ -178,6 +216,7 @@ pub fn start(level: Level) {
 pub fn stop() {
     *STATE.write() = None;
     WANTED.store(false, Ordering::Release);
+    LEGACY_ENABLE.store(false, Ordering::Release);
     GENERATION.fetch_add(1, Ordering::AcqRel);
 }
 
@@ -268,6 +307,27 @@ pub(crate) mod tests {
 
     /// The published state is process-wide; the tests that change it take this.
     pub(crate) static STATE_TESTS: parking_lot::Mutex<()> = parking_lot::Mutex::new(());
+
+    #[test]
+    fn the_sessions_device_is_the_one_created_inside_xr_create_vulkan_device() {
+        let _one = STATE_TESTS.lock();
+        stop();
+        assert!(!device_gets_maps());
+        let inner = creating_xr_device(|| {
+            // Nested (a runtime calling through another layer's hook): still marked, and
+            // unmarked only when the outermost call returns.
+            let nested = creating_xr_device(device_gets_maps);
+            (nested, device_gets_maps())
+        });
+        assert_eq!(inner, (true, true));
+        assert!(!device_gets_maps(), "unmarked after the call");
+        let other_thread = creating_xr_device(|| std::thread::spawn(device_gets_maps).join());
+        assert_eq!(other_thread.ok(), Some(false), "the mark is this thread's");
+        legacy_enable_used();
+        assert!(device_gets_maps(), "XR_KHR_vulkan_enable: every device");
+        stop();
+        assert!(!device_gets_maps(), "forgotten with the instance");
+    }
 
     #[test]
     fn publishing_bumps_the_generation_only_on_change() {

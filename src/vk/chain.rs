@@ -6,7 +6,7 @@ use std::mem::size_of;
 
 use ash::vk;
 
-use crate::vk::link;
+use crate::vk::{link, structs};
 
 /// The longest chain the layer follows; a longer one is taken for a loop, which the spec forbids
 /// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-validusage-pNext>).
@@ -60,9 +60,10 @@ pub unsafe fn find_out<T>(next: *mut c_void, ty: vk::StructureType) -> Option<*m
         .map(|p| p as *mut T)
 }
 
-/// Byte sizes of the structs that may precede one the layer removes from a chain (device create
-/// infos; graphics pipeline infos; render pass, framebuffer and rendering infos). A struct not
-/// listed cannot be copied; see [`ChainCopy::without`].
+/// Byte sizes of the structs that may precede one the layer removes from a chain: every struct
+/// that extends a device create info up to Vulkan 1.4's registry ([`structs`]), and those of
+/// graphics pipeline infos and render pass, framebuffer and rendering infos. A struct not listed
+/// cannot be copied; see [`ChainCopy::without`].
 fn known_size(ty: vk::StructureType) -> Option<usize> {
     macro_rules! sizes {
         ($($t:ident),* $(,)?) => {
@@ -70,91 +71,7 @@ fn known_size(ty: vk::StructureType) -> Option<usize> {
         };
     }
     static SIZES: &[(vk::StructureType, usize)] = &sizes![
-        DeviceGroupDeviceCreateInfo,
-        DevicePrivateDataCreateInfo,
-        DeviceMemoryOverallocationCreateInfoAMD,
-        DeviceDiagnosticsConfigCreateInfoNV,
-        PhysicalDeviceFeatures2,
-        PhysicalDeviceVulkan11Features,
-        PhysicalDeviceVulkan12Features,
-        PhysicalDeviceVulkan13Features,
-        PhysicalDeviceMultiviewFeatures,
-        PhysicalDevice16BitStorageFeatures,
-        PhysicalDevice8BitStorageFeatures,
-        PhysicalDeviceShaderFloat16Int8Features,
-        PhysicalDeviceVariablePointersFeatures,
-        PhysicalDeviceProtectedMemoryFeatures,
-        PhysicalDeviceSamplerYcbcrConversionFeatures,
-        PhysicalDeviceShaderDrawParametersFeatures,
-        PhysicalDeviceDescriptorIndexingFeatures,
-        PhysicalDeviceTimelineSemaphoreFeatures,
-        PhysicalDeviceBufferDeviceAddressFeatures,
-        PhysicalDeviceImagelessFramebufferFeatures,
-        PhysicalDeviceSeparateDepthStencilLayoutsFeatures,
-        PhysicalDeviceScalarBlockLayoutFeatures,
-        PhysicalDeviceUniformBufferStandardLayoutFeatures,
-        PhysicalDeviceHostQueryResetFeatures,
-        PhysicalDeviceVulkanMemoryModelFeatures,
-        PhysicalDeviceShaderAtomicInt64Features,
-        PhysicalDeviceShaderSubgroupExtendedTypesFeatures,
-        PhysicalDeviceDynamicRenderingFeatures,
-        PhysicalDeviceSynchronization2Features,
-        PhysicalDeviceMaintenance4Features,
-        PhysicalDeviceInlineUniformBlockFeatures,
-        PhysicalDeviceImageRobustnessFeatures,
-        PhysicalDevicePipelineCreationCacheControlFeatures,
-        PhysicalDevicePrivateDataFeatures,
-        PhysicalDeviceShaderDemoteToHelperInvocationFeatures,
-        PhysicalDeviceShaderIntegerDotProductFeatures,
-        PhysicalDeviceShaderTerminateInvocationFeatures,
-        PhysicalDeviceSubgroupSizeControlFeatures,
-        PhysicalDeviceTextureCompressionASTCHDRFeatures,
-        PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures,
-        PhysicalDeviceExtendedDynamicStateFeaturesEXT,
-        PhysicalDeviceExtendedDynamicState2FeaturesEXT,
-        PhysicalDeviceExtendedDynamicState3FeaturesEXT,
-        PhysicalDeviceVertexInputDynamicStateFeaturesEXT,
-        PhysicalDeviceRobustness2FeaturesEXT,
-        PhysicalDeviceCustomBorderColorFeaturesEXT,
-        PhysicalDeviceTransformFeedbackFeaturesEXT,
-        PhysicalDeviceMultiDrawFeaturesEXT,
-        PhysicalDeviceIndexTypeUint8FeaturesKHR,
-        PhysicalDeviceLineRasterizationFeaturesKHR,
-        PhysicalDeviceVertexAttributeDivisorFeaturesKHR,
-        PhysicalDeviceFragmentShaderInterlockFeaturesEXT,
-        PhysicalDeviceDepthClipEnableFeaturesEXT,
-        PhysicalDeviceMemoryPriorityFeaturesEXT,
-        PhysicalDeviceShaderObjectFeaturesEXT,
-        PhysicalDeviceGraphicsPipelineLibraryFeaturesEXT,
-        PhysicalDeviceMaintenance5FeaturesKHR,
-        PhysicalDeviceMutableDescriptorTypeFeaturesEXT,
-        PhysicalDeviceDescriptorBufferFeaturesEXT,
-        PhysicalDeviceMeshShaderFeaturesEXT,
-        PhysicalDeviceRayTracingPipelineFeaturesKHR,
-        PhysicalDeviceAccelerationStructureFeaturesKHR,
-        PhysicalDeviceRayQueryFeaturesKHR,
-        PhysicalDeviceColorWriteEnableFeaturesEXT,
-        PhysicalDevicePrimitiveTopologyListRestartFeaturesEXT,
-        PhysicalDeviceYcbcrImageArraysFeaturesEXT,
-        PhysicalDevice4444FormatsFeaturesEXT,
-        PhysicalDeviceShaderImageAtomicInt64FeaturesEXT,
-        PhysicalDeviceShaderAtomicFloatFeaturesEXT,
-        PhysicalDeviceConditionalRenderingFeaturesEXT,
-        PhysicalDeviceProvokingVertexFeaturesEXT,
-        PhysicalDeviceBorderColorSwizzleFeaturesEXT,
-        PhysicalDeviceShaderClockFeaturesKHR,
-        PhysicalDevicePipelineExecutablePropertiesFeaturesKHR,
-        PhysicalDevicePresentIdFeaturesKHR,
-        PhysicalDevicePresentWaitFeaturesKHR,
-        PhysicalDeviceDynamicRenderingUnusedAttachmentsFeaturesEXT,
-        PhysicalDeviceMultisampledRenderToSingleSampledFeaturesEXT,
-        PhysicalDeviceImage2DViewOf3DFeaturesEXT,
-        PhysicalDeviceNonSeamlessCubeMapFeaturesEXT,
-        PhysicalDeviceHostImageCopyFeaturesEXT,
-        PhysicalDeviceFragmentDensityMapFeaturesEXT,
-        PhysicalDeviceFragmentDensityMap2FeaturesEXT,
-        PhysicalDeviceFragmentShadingRateFeaturesKHR,
-        PhysicalDeviceShadingRateImageFeaturesNV,
+        // Device create infos: [`structs`].
         // VkGraphicsPipelineCreateInfo chains.
         PipelineRenderingCreateInfo,
         GraphicsPipelineLibraryCreateInfoEXT,
@@ -188,7 +105,11 @@ fn known_size(ty: vk::StructureType) -> Option<usize> {
     if ty == vk::StructureType::LOADER_DEVICE_CREATE_INFO {
         return Some(size_of::<link::LayerDeviceCreateInfo>());
     }
-    SIZES.iter().find(|(t, _)| *t == ty).map(|&(_, size)| size)
+    SIZES
+        .iter()
+        .find(|(t, _)| *t == ty)
+        .map(|&(_, size)| size)
+        .or_else(|| structs::device_create_info_extender(ty))
 }
 
 /// An edited copy of an input chain, owning the nodes it copied.
@@ -215,7 +136,9 @@ impl ChainCopy {
 
     /// Copies `next` without every struct `remove` selects. Unlike the OpenXR side, a struct of
     /// unknown size before a removed one is an error: the removed structs here are ones the driver
-    /// must not see (they would make the device creation invalid), so keeping them is no option.
+    /// must not see (they would make the device creation invalid), so keeping them is no option,
+    /// and the caller refuses the call instead (docs/vulkan-fdm-on-fsr.md#device-creation). Every
+    /// struct that can extend a device create info up to Vulkan 1.4 has a known size.
     ///
     /// # Safety
     /// `next` must be NULL or a valid chain of Vulkan structs.

@@ -7,9 +7,14 @@
 //! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkDeviceCreateInfo.html>,
 //! VUID-VkDeviceCreateInfo-fragmentDensityMap-04481), so the layer owns shading rates on such a
 //! device outright; an application that enables shading rates itself (or NV shading-rate images)
-//! is left alone there. With injection on (docs/injection.md#switching-it-on), an application that
-//! enables shading rates, attachments included, is injected into; its own attachments win per
-//! pass.
+//! is left alone there, less any density-map name or struct it sent too (Godot sends both). No
+//! density-map name or struct ever reaches a driver the layer emulates them on; where one cannot be
+//! left out (behind a struct of unknown type), the device is refused
+//! (docs/vulkan-fdm-on-fsr.md#device-creation). With injection on
+//! (docs/injection.md#switching-it-on), the device that renders the session's views
+//! (docs/injection.md#which-devices-get-the-feature) gets the attachment feature, and an
+//! application that enables shading rates, attachments included, is injected into; its own
+//! attachments win per pass.
 
 use std::ffi::{c_char, CStr};
 
@@ -61,15 +66,63 @@ struct Rewrite {
 enum Plan {
     /// Pass the application's create info down untouched; `Some(why)` is logged.
     Untouched(Option<String>),
+    /// The application's request less the density-map extension and structs, which the driver
+    /// does not have (docs/vulkan-fdm-on-fsr.md#device-creation); `why` is logged.
+    Stripped(Rewrite, String),
+    /// Refused with `VK_ERROR_FEATURE_NOT_PRESENT` without reaching the driver: a density-map
+    /// struct sits behind a struct the layer cannot copy, so it cannot be left out, and the driver
+    /// must never see it (docs/vulkan-fdm-on-fsr.md#device-creation); `why` is logged.
+    Refused(String),
     Emulate(FdmEmulation, Rewrite),
-    /// Injection is on (docs/injection.md#how-the-attachment-gets-in) and the device has
-    /// shading-rate attachments: the create info gains `VK_KHR_fragment_shading_rate` and its
-    /// attachment feature (the application's own feature struct kept where it enables it); the
-    /// device's facts are those the injected maps are made for.
-    Inject(FdmEmulation, Rewrite),
+    /// Injection is on (docs/injection.md#how-the-attachment-gets-in), the device has
+    /// shading-rate attachments and will render eye passes
+    /// (docs/injection.md#which-devices-get-the-feature): the create info gains
+    /// `VK_KHR_fragment_shading_rate` and its attachment feature (the application's own feature
+    /// struct kept where it enables it); the device's facts are those the injected maps are made
+    /// for. Where the driver refuses that, the fallback (the application's request, less density
+    /// maps where it had any) goes down instead.
+    Inject(FdmEmulation, Rewrite, Option<Rewrite>),
 }
 
-/// Decides and, for emulation, builds the rewritten create info.
+/// The feature structs of the density-map family: on a device the layer emulates density maps
+/// for, the driver has none of these extensions, so none of the structs may reach it.
+fn density_map_struct(ty: vk::StructureType) -> bool {
+    ty == vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT
+        || ty == vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_2_FEATURES_EXT
+        || ty == vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_FEATURES_QCOM
+        || ty == FRAGMENT_DENSITY_MAP_LAYERED_FEATURES_VALVE
+}
+
+/// `VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_LAYERED_FEATURES_VALVE`, newer than
+/// ash's headers (<https://registry.khronos.org/vulkan/specs/latest/man/html/VK_VALVE_fragment_density_map_layered.html>).
+const FRAGMENT_DENSITY_MAP_LAYERED_FEATURES_VALVE: vk::StructureType =
+    vk::StructureType::from_raw(1_000_611_000);
+
+/// The refusal's log line for a chain the layer cannot strip density maps from.
+fn cannot_strip(e: chain::ChainError) -> String {
+    match e {
+        chain::ChainError::Unknown(ty) => format!(
+            "a struct of unknown type {} sits before a density-map struct in the device create \
+             info's pNext chain, so the density-map struct cannot be left out, and this driver \
+             does not have density maps: VK_ERROR_FEATURE_NOT_PRESENT",
+            ty.as_raw()
+        ),
+        chain::ChainError::TooLong => "the device create info's pNext chain is too long to \
+            leave its density-map struct out, and this driver does not have density maps: \
+            VK_ERROR_FEATURE_NOT_PRESENT"
+            .into(),
+    }
+}
+
+/// Decides and builds the rewritten create info.
+///
+/// On a physical device the layer emulates density maps for, whatever else happens, the
+/// density-map extension name and every density-map feature struct are left out of what reaches
+/// the driver, which has neither (a copy of the name list and of the chain up to the last such
+/// struct; the application's create info is never written). Every struct that can extend a
+/// device create info up to Vulkan 1.4 can be copied ([`crate::vk::structs`]); where one of a type
+/// no registry the layer knows sits before a density-map struct, the device is refused
+/// ([`Plan::Refused`]).
 ///
 /// # Safety
 /// `ci` must be a valid create info; `physical` must belong to `inst`.
@@ -109,98 +162,16 @@ unsafe fn plan(
     let nv_rates = enabled(ash::nv::shading_rate_image::NAME)
         || in_chain(vk::StructureType::PHYSICAL_DEVICE_SHADING_RATE_IMAGE_FEATURES_NV);
     let own_rates = enabled(ash::khr::fragment_shading_rate::NAME) || nv_rates || app_fsr.is_some();
-    if !enabled(ash::ext::fragment_density_map::NAME) {
-        if !crate::bridge::inject::wanted() {
-            return Plan::Untouched(None);
-        }
-        // NV shading-rate images: the application's maps are the ones that count
-        // (docs/injection.md#switching-it-on).
-        if nv_rates {
-            return Plan::Untouched(Some(
-                "the application uses NV shading-rate images; nothing is injected on this device"
-                    .into(),
-            ));
-        }
-        // The attachment feature enabled (vkd3d-proton enables every shading-rate feature the
-        // device has): whether the application uses attachments of its own is told per pass, and
-        // where it does, its own wins (docs/injection.md#apps-that-set-rates). Its feature struct
-        // already asks for what injection needs and goes down as it came.
-        let own_attachments =
-            app_fsr.is_some_and(|f| f.attachment_fragment_shading_rate == vk::TRUE);
-        // Pipeline or primitive rates (vkd3d-proton's every pipeline): the injected attachment is
-        // combined with them (docs/injection.md#apps-that-set-rates).
-        let app_sets_rates = app_fsr.is_some_and(|f| {
-            f.pipeline_fragment_shading_rate == vk::TRUE
-                || f.primitive_fragment_shading_rate == vk::TRUE
-        });
-        // SAFETY: as the caller promised; the application's feature struct, if any, is left out
-        // and stands in the layer's copy in front, unless it enables attachments itself.
-        let chain = match unsafe {
-            ChainCopy::without(ci.p_next, |t| !own_attachments && t == fsr_features)
-        } {
-            Ok(c) => c,
-            Err(e) => {
-                return Plan::Untouched(Some(format!(
-                    "cannot extend the device create info's pNext chain ({e:?}); nothing is \
-                     injected on this device"
-                )))
-            }
-        };
-        if own_attachments {
-            tracing::info!(
-                "the application enables shading-rate attachments itself: fovea's maps go into \
-                 its eye passes without attachments of their own; where it names one, its own \
-                 wins"
-            );
-        }
-        if app_sets_rates {
-            tracing::info!(
-                non_trivial_combiners = fdm.non_trivial_combiners,
-                "the application sets shading rates per pipeline or per draw: injected maps are \
-                 combined with its rates"
-            );
-        }
-        let version = inst.api_version.min(*api_version);
-        let mut rewrite = with_shading_rates(names, &enabled, chain, version, app_fsr.as_ref());
-        if own_attachments {
-            rewrite.fsr = None;
-        }
-        return Plan::Inject(fdm.clone(), rewrite);
-    }
-    if own_rates {
-        return Plan::Untouched(Some(
-            "the application enables shading rates itself; VK_EXT_fragment_density_map is not \
-             emulated on this device"
-                .into(),
-        ));
-    }
-    let fdm_features = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT;
-    // SAFETY: as the caller promised.
-    if let Ok(Some(f)) = unsafe {
-        chain::find::<vk::PhysicalDeviceFragmentDensityMapFeaturesEXT>(ci.p_next, fdm_features)
-    } {
-        // SAFETY: found by its sType.
-        if unsafe { (*f).fragment_density_map_dynamic } == vk::TRUE {
-            tracing::warn!(
-                "the application enables fragmentDensityMapDynamic, which the layer does not \
-                 offer; density maps are emulated as static ones"
-            );
-        }
-    }
-    // SAFETY: as the caller promised.
-    let chain = match unsafe { ChainCopy::without(ci.p_next, |t| t == fdm_features) } {
-        Ok(c) => c,
-        Err(e) => {
-            return Plan::Untouched(Some(format!(
-                "cannot rewrite the device create info's pNext chain ({e:?}); passing it through"
-            )))
-        }
-    };
-    tracing::debug!(
-        feature_structs_removed = chain.removed(),
-        "density maps stripped from the device create info"
-    );
     let fdm_name = ash::ext::fragment_density_map::NAME;
+    let fdm_named = enabled(fdm_name);
+    let fdm_structs = [
+        vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT,
+        vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_2_FEATURES_EXT,
+        vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_FEATURES_QCOM,
+        FRAGMENT_DENSITY_MAP_LAYERED_FEATURES_VALVE,
+    ]
+    .into_iter()
+    .any(in_chain);
     let kept: Vec<*const c_char> = names
         .iter()
         .copied()
@@ -210,10 +181,134 @@ unsafe fn plan(
         })
         .collect();
     let version = inst.api_version.min(*api_version);
-    Plan::Emulate(
-        fdm.clone(),
-        with_shading_rates(&kept, &enabled, chain, version, None),
-    )
+    if fdm_named && !own_rates {
+        let fdm_features = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT;
+        // SAFETY: as the caller promised.
+        if let Ok(Some(f)) = unsafe {
+            chain::find::<vk::PhysicalDeviceFragmentDensityMapFeaturesEXT>(ci.p_next, fdm_features)
+        } {
+            // SAFETY: found by its sType.
+            if unsafe { (*f).fragment_density_map_dynamic } == vk::TRUE {
+                tracing::warn!(
+                    "the application enables fragmentDensityMapDynamic, which the layer does not \
+                     offer; density maps are emulated as static ones"
+                );
+            }
+        }
+        // SAFETY: as the caller promised.
+        let chain = match unsafe { ChainCopy::without(ci.p_next, density_map_struct) } {
+            Ok(c) => c,
+            Err(e) => return Plan::Refused(cannot_strip(e)),
+        };
+        tracing::debug!(
+            feature_structs_removed = chain.removed(),
+            "density maps stripped from the device create info"
+        );
+        return Plan::Emulate(
+            fdm.clone(),
+            with_shading_rates(&kept, &enabled, chain, version, None),
+        );
+    }
+    // Density maps are not emulated on this device: the application does not ask for them, or it
+    // enables shading rates itself (Godot enables every extension the device lists, density maps
+    // included, and then uses shading rates; the two are exclusive,
+    // VUID-VkDeviceCreateInfo-fragmentDensityMap-04481). Whatever density-map name or struct it
+    // sent still leaves the create info.
+    let stripped = if fdm_named || fdm_structs {
+        // SAFETY: as the caller promised.
+        match unsafe { ChainCopy::without(ci.p_next, density_map_struct) } {
+            Ok(chain) => Some(Rewrite {
+                chain,
+                names: kept.clone(),
+                fsr: None,
+            }),
+            Err(e) => return Plan::Refused(cannot_strip(e)),
+        }
+    } else {
+        None
+    };
+    let why_stripped = if fdm_named {
+        "the application enables shading rates itself; VK_EXT_fragment_density_map is not \
+             emulated on this device, and its name and structs are left out"
+    } else {
+        "density-map structs in a device create info without VK_EXT_fragment_density_map are \
+             left out"
+    };
+    let untouched = |stripped: Option<Rewrite>, why: Option<String>| match stripped {
+        Some(rewrite) => Plan::Stripped(rewrite, why.unwrap_or_else(|| why_stripped.to_owned())),
+        None => Plan::Untouched(why),
+    };
+    if !crate::bridge::inject::wanted() {
+        return untouched(stripped, None);
+    }
+    // NV shading-rate images: the application's maps are the ones that count
+    // (docs/injection.md#switching-it-on).
+    if nv_rates {
+        return untouched(
+            stripped,
+            Some(
+                "the application uses NV shading-rate images; nothing is injected on this device"
+                    .into(),
+            ),
+        );
+    }
+    if !crate::bridge::inject::device_gets_maps() {
+        tracing::info!(
+            physical = raw(physical),
+            "injection is on, but this device is not the one the OpenXR session renders with \
+             (docs/injection.md#which-devices-get-the-feature): it gets no shading-rate \
+             attachments"
+        );
+        return untouched(stripped, None);
+    }
+    // The attachment feature enabled (vkd3d-proton enables every shading-rate feature the
+    // device has): whether the application uses attachments of its own is told per pass, and
+    // where it does, its own wins (docs/injection.md#apps-that-set-rates). Its feature struct
+    // already asks for what injection needs and goes down as it came.
+    let own_attachments = app_fsr.is_some_and(|f| f.attachment_fragment_shading_rate == vk::TRUE);
+    // Pipeline or primitive rates (vkd3d-proton's every pipeline): the injected attachment is
+    // combined with them (docs/injection.md#apps-that-set-rates).
+    let app_sets_rates = app_fsr.is_some_and(|f| {
+        f.pipeline_fragment_shading_rate == vk::TRUE
+            || f.primitive_fragment_shading_rate == vk::TRUE
+    });
+    // SAFETY: as the caller promised; the application's feature struct, if any, is left out
+    // and stands in the layer's copy in front, unless it enables attachments itself.
+    let chain = match unsafe {
+        ChainCopy::without(ci.p_next, |t| {
+            density_map_struct(t) || (!own_attachments && t == fsr_features)
+        })
+    } {
+        Ok(c) => c,
+        Err(e) => {
+            return untouched(
+                stripped,
+                Some(format!(
+                    "cannot extend the device create info's pNext chain ({e:?}); nothing is \
+                 injected on this device"
+                )),
+            )
+        }
+    };
+    if own_attachments {
+        tracing::info!(
+            "the application enables shading-rate attachments itself: fovea's maps go into \
+             its eye passes without attachments of their own; where it names one, its own \
+             wins"
+        );
+    }
+    if app_sets_rates {
+        tracing::info!(
+            non_trivial_combiners = fdm.non_trivial_combiners,
+            "the application sets shading rates per pipeline or per draw: injected maps are \
+             combined with its rates"
+        );
+    }
+    let mut rewrite = with_shading_rates(&kept, &enabled, chain, version, app_fsr.as_ref());
+    if own_attachments {
+        rewrite.fsr = None;
+    }
+    Plan::Inject(fdm.clone(), rewrite, stripped)
 }
 
 /// The create info's extensions (`names`) with `VK_KHR_fragment_shading_rate` and what it needs,
@@ -328,6 +423,20 @@ unsafe fn create_device_impl(
     // SAFETY: as the caller promised.
     let plan = unsafe { plan(&inst, physical, ci) };
     let inject = matches!(plan, Plan::Inject(..));
+    /// The create info `rewrite` describes: the caller's, with its chain and names.
+    fn rewritten<'a>(
+        ci: &vk::DeviceCreateInfo<'a>,
+        rewrite: &'a Rewrite,
+    ) -> vk::DeviceCreateInfo<'a> {
+        let mut copy = *ci;
+        copy.p_next = match &rewrite.fsr {
+            Some(fsr) => &**fsr as *const _ as *const _,
+            None => rewrite.chain.head(),
+        };
+        copy.enabled_extension_count = rewrite.names.len() as u32;
+        copy.pp_enabled_extension_names = rewrite.names.as_ptr();
+        copy
+    }
     let (r, fdm) = match plan {
         Plan::Untouched(why) => {
             if let Some(why) = why {
@@ -340,14 +449,35 @@ unsafe fn create_device_impl(
             // SAFETY: the next layer's function, with the caller's arguments.
             (unsafe { create(physical, info, alloc, out) }, None)
         }
-        Plan::Emulate(fdm, rewrite) | Plan::Inject(fdm, rewrite) => {
-            let mut copy = *ci;
-            copy.p_next = match &rewrite.fsr {
-                Some(fsr) => &**fsr as *const _ as *const _,
-                None => rewrite.chain.head(),
-            };
-            copy.enabled_extension_count = rewrite.names.len() as u32;
-            copy.pp_enabled_extension_names = rewrite.names.as_ptr();
+        Plan::Refused(why) => {
+            tracing::error!(
+                physical = raw(physical),
+                why = why.as_str(),
+                "vkCreateDevice"
+            );
+            return vk::Result::ERROR_FEATURE_NOT_PRESENT;
+        }
+        Plan::Stripped(rewrite, why) => {
+            tracing::info!(
+                physical = raw(physical),
+                why = why.as_str(),
+                "vkCreateDevice"
+            );
+            let copy = rewritten(ci, &rewrite);
+            // SAFETY: the copy and everything it points at live across the call.
+            (unsafe { create(physical, &copy, alloc, out) }, None)
+        }
+        Plan::Emulate(fdm, rewrite) => {
+            let copy = rewritten(ci, &rewrite);
+            // SAFETY: the copy and everything it points at live across the call.
+            let r = unsafe { create(physical, &copy, alloc, out) };
+            // No retry: the application asked for density maps, which this driver has only as
+            // shading-rate attachments; its own request would name an extension the driver
+            // lacks. The driver's answer is the application's.
+            (r, (r == vk::Result::SUCCESS).then_some(fdm))
+        }
+        Plan::Inject(fdm, rewrite, fallback) => {
+            let copy = rewritten(ci, &rewrite);
             // SAFETY: the copy and everything it points at live across the call.
             let r = unsafe { create(physical, &copy, alloc, out) };
             drop(rewrite);
@@ -359,22 +489,29 @@ unsafe fn create_device_impl(
                     | vk::Result::ERROR_OUT_OF_DEVICE_MEMORY
                     | vk::Result::ERROR_DEVICE_LOST
             ) {
-                // Not the rewrite's doing: the driver's answer, unchanged. A retry without the
-                // rewrite would ask for the density-map extension the driver lacks and answer
-                // with that instead.
+                // Not the rewrite's doing: the driver's answer, unchanged.
                 (r, None)
             } else {
-                // Fail open: the application's own request, as it was, gets its answer.
+                // Fail open: the application's own request (less density maps, which the driver
+                // does not have) gets its answer.
                 tracing::warn!(
                     physical = raw(physical),
                     result = ?r,
                     inject,
-                    "creating the device with shading-rate attachments failed; retrying untouched"
+                    "creating the device with shading-rate attachments failed; retrying without"
                 );
                 // SAFETY: the loader's struct gets its link back for the retry.
                 unsafe { (*link_info).u = (*layer).p_next as *mut _ };
-                // SAFETY: the next layer's function, with the caller's arguments.
-                (unsafe { create(physical, info, alloc, out) }, None)
+                let r = match &fallback {
+                    Some(f) => {
+                        let copy = rewritten(ci, f);
+                        // SAFETY: the copy and everything it points at live across the call.
+                        unsafe { create(physical, &copy, alloc, out) }
+                    }
+                    // SAFETY: the next layer's function, with the caller's arguments.
+                    None => unsafe { create(physical, info, alloc, out) },
+                };
+                (r, None)
             }
         }
     };

@@ -23,7 +23,8 @@
 //!   begin, with the application's compute bindings given back;
 //! - [`submit`]: new shadows' clears ahead of the application's next submit, and semaphore wait
 //!   stages without the density-map stage;
-//! - [`chain`], [`link`]: `pNext` chains and the loader's link structs.
+//! - [`chain`], [`link`], [`structs`]: `pNext` chains, the loader's link structs, and the size of
+//!   every struct a device create info may chain.
 //!
 //! Per physical device: native density maps → everything passes through untouched;
 //! `attachmentFragmentShadingRate` without them → emulate; neither → pass through. Fail open:
@@ -74,4 +75,5 @@ mod pass;
 mod physical;
 mod pipeline;
 mod registry;
+mod structs;
 mod submit;

@@ -614,7 +614,11 @@ fn unintercepted_commands_go_straight_to_the_next_layer() {
 /// the OpenXR manifest does (relative to the manifest's folder), and lists the device extension
 /// the layer provides, which the Vulkan loader requires of a layer that offers one
 /// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
-/// "Layer Manifest File Format").
+/// "Layer Manifest File Format"). Both manifests (explicit and implicit, which `fovea install`
+/// writes) name Vulkan 1.4.359, the registry the layer's device-creation struct table is laid
+/// out from (src/vk/structs.rs): a loader leaves out (before 1.3.227) or warns about (since) an
+/// implicit layer older than the application's `apiVersion`, and Vulkan 1.4 applications exist
+/// (`vk_api14` shows one getting the layer).
 #[test]
 fn checked_in_manifest() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -647,6 +651,17 @@ fn checked_in_manifest() {
         .as_object()
         .expect("object")
         .contains_key("disable_environment"));
+    let implicit: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            root.join("manifest/vulkan/implicit")
+                .join(path.file_name().unwrap()),
+        )
+        .expect("implicit manifest"),
+    )
+    .expect("JSON");
+    for m in [&m, &implicit] {
+        assert_eq!(m["layer"]["api_version"], "1.4.359");
+    }
     assert_eq!(
         l["device_extensions"],
         json!([{

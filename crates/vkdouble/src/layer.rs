@@ -689,7 +689,22 @@ unsafe extern "system" fn create_device(
                             );
                         }
                     }
-                    event(json!({"kind": "device", "extension": asked, "features": features}));
+                    // Every name and chained sType, as they reached the driver: what a test
+                    // checks that no density-map name or struct got through.
+                    let extensions: Vec<String> = names
+                        .iter()
+                        .map(|&n| CStr::from_ptr(n).to_string_lossy().into_owned())
+                        .collect();
+                    let mut chain_types = Vec::new();
+                    let mut node = ci.p_next as *const vk::BaseInStructure<'static>;
+                    while !node.is_null() && chain_types.len() < 64 {
+                        chain_types.push((*node).s_type.as_raw());
+                        node = (*node).p_next;
+                    }
+                    event(
+                        json!({"kind": "device", "extension": asked, "features": features,
+                        "extensions": extensions, "chain": chain_types}),
+                    );
                     stripped = match chain::strip(
                         ci.p_next,
                         &[vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR],

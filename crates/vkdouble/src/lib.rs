@@ -24,7 +24,7 @@
 //! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkValidationFeatureDisableEXT.html>);
 //! dispatchable handles (command buffers) are never wrapped.
 //!
-//! Records (`kind` and fields): `instance` {profile}; `device` {extension, features}; `image`
+//! Records (`kind` and fields): `instance` {profile}; `device` {extension, features, extensions (every name), chain (every sType)}; `image`
 //! {image, format, extent, layers} and `image_view` {view, image, base_layer, layers} for
 //! shading-rate images only; `render_pass` {render_pass, attachments, subpasses[{shading_rate:
 //! null | {attachment, layout, texel}}]}; `framebuffer` {framebuffer, render_pass, attachments,

@@ -179,6 +179,7 @@ pub fn get_vulkan_graphics_device(
     let r = unsafe { f(inst, system, vk_instance, physical_device.raw()) };
     if let (true, Some(pd)) = (succeeded(r), physical_device.read()) {
         record_graphics_device(&s, vk_instance, pd as u64);
+        crate::bridge::inject::legacy_enable_used();
     }
     Ok(r)
 }
@@ -270,7 +271,22 @@ unsafe fn app_request(info: &vk::DeviceCreateInfo) -> AppDeviceRequest {
 /// VkDeviceCreateInfo goes down with the extension added and `fragmentDensityMap` enabled through a
 /// chained VkPhysicalDeviceFragmentDensityMapFeaturesEXT. The application's structs are never
 /// written. Whether FDM ended up enabled is recorded for the device, for its density images' usage.
+///
+/// The `vkCreateDevice` the runtime makes in it is marked as the session's device: under injection
+/// it is the one that gets shading-rate attachments (docs/injection.md#which-devices-get-the-feature).
 pub fn create_vulkan_device(
+    inst: xr::Instance,
+    info: In<xr::VulkanDeviceCreateInfoKHR>,
+    device: Out<xr::platform::VkDevice>,
+    vk_result: Out<xr::platform::VkResult>,
+) -> HookResult<xr::Result> {
+    crate::bridge::inject::creating_xr_device(|| {
+        create_vulkan_device_marked(inst, info, device, vk_result)
+    })
+}
+
+/// [`create_vulkan_device`]'s work.
+fn create_vulkan_device_marked(
     inst: xr::Instance,
     info: In<xr::VulkanDeviceCreateInfoKHR>,
     device: Out<xr::platform::VkDevice>,
