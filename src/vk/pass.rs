@@ -1212,7 +1212,7 @@ pub unsafe extern "system" fn cmd_begin_render_pass(
 ) {
     guard("vkCmdBeginRenderPass", (), || {
         // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device(cb) }) else {
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
             return;
         };
         let Some(next) = dev.next.cmd_begin_render_pass else {
@@ -1237,7 +1237,7 @@ unsafe fn cmd_begin_render_pass2_with(
 ) {
     guard(which, (), || {
         // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device(cb) }) else {
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
             return;
         };
         let Some(next) = next(&dev) else {
@@ -1271,7 +1271,7 @@ unsafe fn cmd_begin_rendering_with(
 ) {
     guard(which, (), || {
         // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device(cb) }) else {
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
             return;
         };
         let Some(next) = next(&dev) else {

@@ -419,7 +419,7 @@ pub unsafe extern "system" fn cmd_set_fragment_shading_rate(
 ) {
     guard("vkCmdSetFragmentShadingRateKHR", (), || {
         // SAFETY: a command buffer dispatched by the loader.
-        let Some(dev) = (unsafe { registry::device(cb) }) else {
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
             return;
         };
         let Some(next) = dev.next.cmd_set_fragment_shading_rate else {
