@@ -38,4 +38,5 @@ mod vk_inject;
 mod vk_layer;
 mod vk_passes;
 mod vk_pipelines;
+mod vk_recording;
 mod vk_threads;

@@ -1,0 +1,129 @@
+//! Recording through fovea's Vulkan layer for a long time, and the commands whose density-map bits
+//! the layer translates besides barriers: the same stack as [`crate::vk_layer`] (this test →
+//! fovea → validation → the shading-rate double → lavapipe), on the `nvidia` profile.
+
+use ash::vk;
+use fovea_vkdouble::Profile;
+
+use crate::vk_layer::{assert_only_stage_false_positives, env, take_messages, Vk, FDM};
+
+const FDM_STAGE: vk::PipelineStageFlags = vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT;
+const FSR_STAGE: vk::PipelineStageFlags =
+    vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
+
+/// A device with emulated density maps (and synchronization2, dynamic rendering).
+fn fdm_device(vk: &Vk) -> ash::Device {
+    let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+        .fragment_density_map(true)
+        .fragment_density_map_non_subsampled_images(true);
+    vk.device(&[FDM], Some(&mut fdm))
+        .unwrap_or_else(|e| panic!("vkCreateDevice: {e}; {:?}", take_messages()))
+}
+
+/// A resettable pool on queue family 0 and one primary command buffer from it.
+fn pool_and_buffer(d: &ash::Device) -> (vk::CommandPool, vk::CommandBuffer) {
+    // SAFETY: create infos live across the calls.
+    unsafe {
+        let pool = d
+            .create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
+                    .queue_family_index(0),
+                None,
+            )
+            .expect("vkCreateCommandPool");
+        let cb = d
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(pool)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            )
+            .expect("vkAllocateCommandBuffers")[0];
+        (pool, cb)
+    }
+}
+
+/// An application that records for hours, resetting its command buffer between frames, runs in
+/// bounded memory through the layer and the double: after more barriers than the double keeps
+/// (each becomes one of its `barrier` records), the records stay under their bound, say how many
+/// were left out, and the newest are there, with the density-map stage translated.
+#[test]
+fn recording_for_long_keeps_the_records_bounded() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let d = fdm_device(&vk);
+    let (pool, cb) = pool_and_buffer(&d);
+    let kept = fovea_vkdouble::KEPT_EVENTS;
+    let frames = 5;
+    let per_frame = kept / 2 + 1;
+    let plain = [vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+        .dst_access_mask(vk::AccessFlags::SHADER_READ)];
+    let density = [vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+        .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT)];
+    // SAFETY: the test's own command buffer; arrays live across the calls.
+    unsafe {
+        for frame in 0..frames {
+            d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+                .expect("vkBeginCommandBuffer");
+            for i in 0..per_frame {
+                // The last frame's last barrier waits on the density-map stage.
+                let (dst, memory) = if frame == frames - 1 && i == per_frame - 1 {
+                    (FDM_STAGE, &density)
+                } else {
+                    (vk::PipelineStageFlags::FRAGMENT_SHADER, &plain)
+                };
+                d.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    dst,
+                    vk::DependencyFlags::empty(),
+                    memory,
+                    &[],
+                    &[],
+                );
+            }
+            d.end_command_buffer(cb).expect("vkEndCommandBuffer");
+            d.reset_command_buffer(cb, vk::CommandBufferResetFlags::RELEASE_RESOURCES)
+                .expect("vkResetCommandBuffer");
+        }
+    }
+    let records = env.double.records();
+    let events = records["events"].as_array().expect("events");
+    let barriers: Vec<_> = events.iter().filter(|e| e["kind"] == "barrier").collect();
+    let recorded = frames * per_frame;
+    assert!(recorded > 2 * kept, "the test records past the bound");
+    assert!(
+        events.len() < 2 * kept,
+        "{} records after {recorded} barriers: they grow with what is recorded",
+        events.len()
+    );
+    assert_eq!(
+        records["dropped"].as_u64(),
+        Some((recorded - barriers.len()) as u64),
+        "every barrier is either kept or counted as left out"
+    );
+    assert!(barriers.len() >= kept, "the newest {kept} are kept");
+    assert!(
+        events.iter().any(|e| e["kind"] == "device"),
+        "the device's record is kept"
+    );
+    let last = barriers.last().expect("a barrier");
+    assert_eq!(last["command_buffer"], ash::vk::Handle::as_raw(cb));
+    assert_eq!(
+        last["stages"][1].as_u64(),
+        Some(u64::from(FSR_STAGE.as_raw())),
+        "the newest barrier reached the driver, translated"
+    );
+    assert!(env.double.errors().is_empty(), "{:?}", env.double.errors());
+    // SAFETY: nothing is pending on the device.
+    unsafe {
+        d.destroy_command_pool(pool, None);
+        d.destroy_device(None);
+    }
+    assert_only_stage_false_positives();
+}
