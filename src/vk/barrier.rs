@@ -662,6 +662,156 @@ hook_and_khr_alias! {
     )
 }
 
+/// Calls `f` with the next layer's function picked from `cb`'s device and, where the device
+/// emulates density maps, `translate` applied to the stage mask; nothing where the device is
+/// unknown or the next layer lacks the command.
+///
+/// # Safety
+/// `cb` must be a command buffer dispatched by the loader.
+#[inline]
+unsafe fn with_stage<F: Copy, S: Copy>(
+    cb: vk::CommandBuffer,
+    pick: impl FnOnce(&registry::Recording) -> Option<F>,
+    stage: S,
+    translate: fn(S) -> S,
+    f: impl FnOnce(F, S),
+) {
+    // SAFETY: as the caller promised.
+    let Some(rec) = (unsafe { registry::recording(cb) }) else {
+        return;
+    };
+    let Some(next) = pick(&rec) else { return };
+    f(
+        next,
+        if rec.emulated {
+            translate(stage)
+        } else {
+            stage
+        },
+    )
+}
+
+/// `vkCmdSetEvent`: the stage mask without the density-map stage (the bits are invalid on the
+/// driver's device, VUID-vkCmdSetEvent-stageMask-04093 family,
+/// <https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdSetEvent.html>); it stays
+/// matched to the `vkCmdWaitEvents` source stages, which are translated alike.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_set_event(
+    cb: vk::CommandBuffer,
+    event: vk::Event,
+    mask: vk::PipelineStageFlags,
+) {
+    guard("vkCmdSetEvent", (), || {
+        // SAFETY: the caller's arguments; the next layer's function.
+        unsafe {
+            with_stage(
+                cb,
+                |r| r.next.cmd_set_event,
+                mask,
+                stage,
+                |next, m| next(cb, event, m),
+            )
+        }
+    })
+}
+
+/// `vkCmdResetEvent`: as [`cmd_set_event`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_reset_event(
+    cb: vk::CommandBuffer,
+    event: vk::Event,
+    mask: vk::PipelineStageFlags,
+) {
+    guard("vkCmdResetEvent", (), || {
+        // SAFETY: the caller's arguments; the next layer's function.
+        unsafe {
+            with_stage(
+                cb,
+                |r| r.next.cmd_reset_event,
+                mask,
+                stage,
+                |next, m| next(cb, event, m),
+            )
+        }
+    })
+}
+
+/// The shared body of `vkCmdResetEvent2` and its KHR alias: as [`cmd_set_event`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn reset_event2(
+    what: &'static str,
+    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdResetEvent2>,
+    cb: vk::CommandBuffer,
+    event: vk::Event,
+    mask: vk::PipelineStageFlags2,
+) {
+    guard(what, (), || {
+        // SAFETY: the caller's arguments; the next layer's function.
+        unsafe { with_stage(cb, pick, mask, stage2, |next, m| next(cb, event, m)) }
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdResetEvent2`.
+    cmd_reset_event2, cmd_reset_event2_khr = reset_event2("vkCmdResetEvent2")
+    (cb: vk::CommandBuffer, event: vk::Event, mask: vk::PipelineStageFlags2)
+}
+
+/// `vkCmdWriteTimestamp`: a timestamp after the density-map stage is one after the shading-rate
+/// attachment stage, which takes its place on the driver's device.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_write_timestamp(
+    cb: vk::CommandBuffer,
+    at: vk::PipelineStageFlags,
+    pool: vk::QueryPool,
+    query: u32,
+) {
+    guard("vkCmdWriteTimestamp", (), || {
+        // SAFETY: the caller's arguments; the next layer's function.
+        unsafe {
+            with_stage(
+                cb,
+                |r| r.next.cmd_write_timestamp,
+                at,
+                stage,
+                |next, s| next(cb, s, pool, query),
+            )
+        }
+    })
+}
+
+/// The shared body of `vkCmdWriteTimestamp2` and its KHR alias: as [`cmd_write_timestamp`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn write_timestamp2(
+    what: &'static str,
+    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdWriteTimestamp2>,
+    cb: vk::CommandBuffer,
+    at: vk::PipelineStageFlags2,
+    pool: vk::QueryPool,
+    query: u32,
+) {
+    guard(what, (), || {
+        // SAFETY: the caller's arguments; the next layer's function.
+        unsafe { with_stage(cb, pick, at, stage2, |next, s| next(cb, s, pool, query)) }
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdWriteTimestamp2`.
+    cmd_write_timestamp2, cmd_write_timestamp2_khr = write_timestamp2("vkCmdWriteTimestamp2")
+    (cb: vk::CommandBuffer, at: vk::PipelineStageFlags2, pool: vk::QueryPool, query: u32)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

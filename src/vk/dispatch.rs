@@ -195,6 +195,21 @@ hooks! {
             When::Emulated;
         c"vkCmdSetEvent2KHR" => cmd_set_event2_khr: PFN_vkCmdSetEvent2 =
             barrier::cmd_set_event2_khr, When::Emulated;
+        // Stage masks of event sets and resets and of timestamps lose the density-map stage.
+        c"vkCmdSetEvent" => cmd_set_event: PFN_vkCmdSetEvent = barrier::cmd_set_event,
+            When::Emulated;
+        c"vkCmdResetEvent" => cmd_reset_event: PFN_vkCmdResetEvent = barrier::cmd_reset_event,
+            When::Emulated;
+        c"vkCmdResetEvent2" => cmd_reset_event2: PFN_vkCmdResetEvent2 = barrier::cmd_reset_event2,
+            When::Emulated;
+        c"vkCmdResetEvent2KHR" => cmd_reset_event2_khr: PFN_vkCmdResetEvent2 =
+            barrier::cmd_reset_event2_khr, When::Emulated;
+        c"vkCmdWriteTimestamp" => cmd_write_timestamp: PFN_vkCmdWriteTimestamp =
+            barrier::cmd_write_timestamp, When::Emulated;
+        c"vkCmdWriteTimestamp2" => cmd_write_timestamp2: PFN_vkCmdWriteTimestamp2 =
+            barrier::cmd_write_timestamp2, When::Emulated;
+        c"vkCmdWriteTimestamp2KHR" => cmd_write_timestamp2_khr: PFN_vkCmdWriteTimestamp2 =
+            barrier::cmd_write_timestamp2_khr, When::Emulated;
         // Shadow clears go ahead of the application's submits; wait stages are translated.
         c"vkQueueSubmit" => queue_submit: PFN_vkQueueSubmit = submit::queue_submit, When::Injected;
         c"vkQueueSubmit2" => queue_submit2: PFN_vkQueueSubmit2 = submit::queue_submit2,

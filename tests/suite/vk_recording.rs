@@ -127,3 +127,52 @@ fn recording_for_long_keeps_the_records_bounded() {
     }
     assert_only_stage_false_positives();
 }
+
+/// Event sets and resets and timestamp writes name pipeline stages too: the density-map stage is
+/// invalid on the driver's device, which never has the density-map feature (VUID-vkCmdSetEvent-
+/// stageMask-04095 and the like, <https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdSetEvent.html>),
+/// so it reaches the driver as the shading-rate attachment stage. Validation, which sees the
+/// driver's device, reports any density-map stage that gets through.
+#[test]
+fn event_and_timestamp_stages_are_translated() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let d = fdm_device(&vk);
+    let (pool, cb) = pool_and_buffer(&d);
+    let stage2 = vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT;
+    // SAFETY: the test's own objects; create infos live across the calls.
+    unsafe {
+        let event = d
+            .create_event(&vk::EventCreateInfo::default(), None)
+            .expect("vkCreateEvent");
+        let queries = d
+            .create_query_pool(
+                &vk::QueryPoolCreateInfo::default()
+                    .query_type(vk::QueryType::TIMESTAMP)
+                    .query_count(2),
+                None,
+            )
+            .expect("vkCreateQueryPool");
+        d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+            .expect("vkBeginCommandBuffer");
+        d.cmd_reset_query_pool(cb, queries, 0, 2);
+        d.cmd_set_event(cb, event, FDM_STAGE | vk::PipelineStageFlags::TRANSFER);
+        d.cmd_reset_event(cb, event, FDM_STAGE);
+        d.cmd_reset_event2(cb, event, stage2);
+        d.cmd_write_timestamp(cb, FDM_STAGE, queries, 0);
+        d.cmd_write_timestamp2(cb, stage2, queries, 1);
+        d.end_command_buffer(cb).expect("vkEndCommandBuffer");
+        let messages = crate::vk_layer::take_real_messages();
+        assert!(
+            messages.is_empty(),
+            "the density-map stage reached the driver: {messages:#?}"
+        );
+        d.destroy_query_pool(queries, None);
+        d.destroy_event(event, None);
+        d.destroy_command_pool(pool, None);
+        d.destroy_device(None);
+    }
+    assert_only_stage_false_positives();
+}
