@@ -176,3 +176,91 @@ fn event_and_timestamp_stages_are_translated() {
     }
     assert_only_stage_false_positives();
 }
+
+/// A `vkCreateGraphicsPipelines` batch in which one create info has a chain the layer cannot copy
+/// (a struct of a size it does not know before the `VkPipelineCreateFlags2CreateInfoKHR` it would
+/// rewrite): that pipeline alone falls back, and still gets the shading-rate state in front of its
+/// chain; the other pipeline of the batch is rewritten in full. Before, the whole batch went down
+/// untouched and every pipeline in it ignored the shading-rate attachment.
+#[test]
+fn an_uncopyable_chain_falls_back_for_its_pipeline_only() {
+    use crate::support::vulkan::{spv, stages, Fixed, COLOR};
+    use ash::vk::Handle as _;
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let d = fdm_device(&vk);
+    let vert = spv(include_bytes!("shaders/triangle.vert.spv"));
+    let frag = spv(include_bytes!("shaders/white.frag.spv"));
+    // SAFETY: create infos live across the calls; the objects are destroyed at the end.
+    unsafe {
+        let modules = [
+            d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&vert), None)
+                .expect("vertex shader"),
+            d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&frag), None)
+                .expect("fragment shader"),
+        ];
+        let layout = d
+            .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
+            .expect("layout");
+        let fixed = Fixed::new();
+        let stages = stages(modules);
+        let formats = [COLOR];
+        let mut rendering0 =
+            vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&formats);
+        let mut rendering1 =
+            vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&formats);
+        // A struct whose size the layer's chain copier does not know, in front of the 64-bit
+        // flags it would have to rewrite.
+        let mut flags2 = vk::PipelineCreateFlags2CreateInfoKHR::default()
+            .flags(vk::PipelineCreateFlags2KHR::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT);
+        let mut unknown = vk::PipelineRepresentativeFragmentTestStateCreateInfoNV::default();
+        let uncopyable = fixed
+            .info(&stages, layout)
+            .push_next(&mut rendering0)
+            .push_next(&mut flags2)
+            .push_next(&mut unknown);
+        let plain = fixed
+            .info(&stages, layout)
+            .flags(vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT)
+            .push_next(&mut rendering1);
+        let pipelines = d
+            .create_graphics_pipelines(vk::PipelineCache::null(), &[uncopyable, plain], None)
+            .unwrap_or_else(|(_, e)| panic!("vkCreateGraphicsPipelines: {e}"));
+        // Validation reports the deliberately odd chain of the first create info; nothing else.
+        let others: Vec<String> = crate::vk_layer::take_real_messages()
+            .into_iter()
+            .filter(|m| !m.contains("pCreateInfos[0]"))
+            .collect();
+        assert!(others.is_empty(), "{others:#?}");
+        let state = serde_json::json!({"fragment_size": [1, 1], "combiner_ops": [0, 1]});
+        let record = |p: vk::Pipeline| {
+            env.double
+                .events("pipeline")
+                .into_iter()
+                .find(|e| e["pipeline"] == p.as_raw())
+                .unwrap_or_else(|| panic!("no record of {p:?}"))
+        };
+        let r = record(pipelines[1]);
+        assert_eq!(
+            r["shading_rate_state"], state,
+            "the pipeline beside the uncopyable one lets the attachment decide: {r}"
+        );
+        assert_eq!(r["rendering_attachment_flag"], true, "{r}");
+        let r = record(pipelines[0]);
+        assert_eq!(
+            r["shading_rate_state"], state,
+            "the uncopyable one gets the state in front of its chain: {r}"
+        );
+        for p in pipelines {
+            d.destroy_pipeline(p, None);
+        }
+        d.destroy_pipeline_layout(layout, None);
+        for m in modules {
+            d.destroy_shader_module(m, None);
+        }
+        d.destroy_device(None);
+    }
+    let _ = take_messages();
+}
