@@ -264,3 +264,63 @@ fn an_uncopyable_chain_falls_back_for_its_pipeline_only() {
     }
     let _ = take_messages();
 }
+
+/// A render pass 2 dependency may chain a `VkMemoryBarrier2`, whose masks then replace the
+/// dependency's own (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkSubpassDependency2.html>):
+/// its density-map stage and access reach the driver as the shading-rate attachment's, on a
+/// copy, and the application's struct is not written.
+#[test]
+fn a_dependencys_chained_memory_barrier_is_translated() {
+    use crate::support::vulkan::attachments2;
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let d = fdm_device(&vk);
+    let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
+    let color = [vk::AttachmentReference2::default()
+        .attachment(0)
+        .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
+    let subpass = [vk::SubpassDescription2::default()
+        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+        .color_attachments(&color)];
+    let mut barrier = vk::MemoryBarrier2::default()
+        .src_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
+        .src_access_mask(vk::AccessFlags2::SHADER_WRITE)
+        .dst_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
+        .dst_access_mask(vk::AccessFlags2::FRAGMENT_DENSITY_MAP_READ_EXT);
+    let deps = [vk::SubpassDependency2::default()
+        .src_subpass(vk::SUBPASS_EXTERNAL)
+        .dst_subpass(0)
+        .push_next(&mut barrier)];
+    let mut fdm_info = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
+        .fragment_density_map_attachment(
+            vk::AttachmentReference::default()
+                .attachment(1)
+                .layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT),
+        );
+    let info = vk::RenderPassCreateInfo2::default()
+        .attachments(&atts)
+        .subpasses(&subpass)
+        .dependencies(&deps)
+        .push_next(&mut fdm_info);
+    // SAFETY: the create info lives across the call.
+    let pass = unsafe { d.create_render_pass2(&info, None) }
+        .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()));
+    let messages = crate::vk_layer::take_real_messages();
+    assert!(
+        messages.is_empty(),
+        "the density-map stage or access reached the driver: {messages:#?}"
+    );
+    assert_eq!(
+        barrier.dst_stage_mask,
+        vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT,
+        "the application's barrier is not written"
+    );
+    // SAFETY: nothing uses it.
+    unsafe {
+        d.destroy_render_pass(pass, None);
+        d.destroy_device(None);
+    }
+    assert_only_stage_false_positives();
+}
