@@ -175,6 +175,8 @@ hooks! {
         c"vkCreateImage" => create_image: PFN_vkCreateImage = device::create_image, When::Injected;
         c"vkCreateGraphicsPipelines" => create_graphics_pipelines: PFN_vkCreateGraphicsPipelines =
             pipeline::create_graphics_pipelines, When::Injected;
+        c"vkCreateShadersEXT" => create_shaders_ext: PFN_vkCreateShadersEXT =
+            pipeline::create_shaders_ext, When::Emulated;
         c"vkCreateShaderModule" => create_shader_module: PFN_vkCreateShaderModule =
             pipeline::create_shader_module, When::Emulated;
         c"vkCreateSampler" => create_sampler: PFN_vkCreateSampler = pipeline::create_sampler,

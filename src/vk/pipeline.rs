@@ -478,6 +478,71 @@ pub unsafe extern "system" fn cmd_set_fragment_shading_rate(
     })
 }
 
+const SHADER_FDM: vk::ShaderCreateFlagsEXT =
+    vk::ShaderCreateFlagsEXT::FRAGMENT_DENSITY_MAP_ATTACHMENT;
+const SHADER_FSR: vk::ShaderCreateFlagsEXT =
+    vk::ShaderCreateFlagsEXT::FRAGMENT_SHADING_RATE_ATTACHMENT;
+
+/// The flags a shader object's create info reaches the driver with: a fragment shader used with a
+/// density-map attachment is one used with the shading-rate attachment standing in for it
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkShaderCreateFlagBitsEXT.html>);
+/// the density-map bit is invalid on the driver's device, which has no density maps.
+pub fn shader_flags(f: vk::ShaderCreateFlagsEXT) -> vk::ShaderCreateFlagsEXT {
+    if f.contains(SHADER_FDM) {
+        (f & !SHADER_FDM) | SHADER_FSR
+    } else {
+        f
+    }
+}
+
+/// `vkCreateShadersEXT` on an emulating device: create infos with the density-map flag go down as
+/// copies with [`shader_flags`] (the application's array is not written).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_shaders_ext(
+    device: vk::Device,
+    count: u32,
+    infos: *const vk::ShaderCreateInfoEXT<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::ShaderEXT,
+) -> vk::Result {
+    guard(
+        "vkCreateShadersEXT",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let Some(dev) = (unsafe { registry::device(device) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = dev.next.create_shaders_ext else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let list: &[vk::ShaderCreateInfoEXT<'_>] = if infos.is_null() || count == 0 {
+                &[]
+            } else {
+                // SAFETY: `count` create infos, as the caller promised.
+                unsafe { std::slice::from_raw_parts(infos, count as usize) }
+            };
+            if dev.fdm.is_none() || !list.iter().any(|ci| ci.flags.contains(SHADER_FDM)) {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { next(device, count, infos, alloc, out) };
+            }
+            let copies: Vec<vk::ShaderCreateInfoEXT<'_>> = list
+                .iter()
+                .map(|ci| {
+                    let mut c = *ci;
+                    c.flags = shader_flags(ci.flags);
+                    c
+                })
+                .collect();
+            // SAFETY: the copies (pointing into the application's create infos) live across the
+            // call.
+            unsafe { next(device, count, copies.as_ptr(), alloc, out) }
+        },
+    )
+}
+
 /// SPIR-V's `OpCapability` opcode and the `FragmentDensityEXT` capability
 /// (<https://registry.khronos.org/SPIR-V/specs/unified1/SPIRV.html>, "Capability").
 const OP_CAPABILITY: u32 = 17;
@@ -625,6 +690,14 @@ pub fn view_flags(flags: vk::ImageViewCreateFlags) -> Option<vk::ImageViewCreate
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shader_objects_for_density_maps_are_for_the_shading_rate_attachment() {
+        let other = vk::ShaderCreateFlagsEXT::LINK_STAGE;
+        assert_eq!(shader_flags(SHADER_FDM | other), SHADER_FSR | other);
+        assert_eq!(shader_flags(other), other);
+        assert_eq!(shader_flags(SHADER_FSR), SHADER_FSR);
+    }
     use ash::vk::Handle as _;
 
     #[test]
