@@ -197,6 +197,11 @@ hooks! {
             When::Emulated;
         c"vkCmdSetEvent2KHR" => cmd_set_event2_khr: PFN_vkCmdSetEvent2 =
             barrier::cmd_set_event2_khr, When::Emulated;
+        // Command buffers' queue families, to tell the release half of an ownership transfer.
+        c"vkCreateCommandPool" => create_command_pool: PFN_vkCreateCommandPool =
+            barrier::create_command_pool, When::Emulated;
+        c"vkAllocateCommandBuffers" => allocate_command_buffers: PFN_vkAllocateCommandBuffers =
+            barrier::allocate_command_buffers, When::Emulated;
         // Stage masks of event sets and resets and of timestamps lose the density-map stage.
         c"vkCmdSetEvent" => cmd_set_event: PFN_vkCmdSetEvent = barrier::cmd_set_event,
             When::Emulated;

@@ -324,3 +324,117 @@ fn a_dependencys_chained_memory_barrier_is_translated() {
     }
     assert_only_stage_false_positives();
 }
+
+/// A queue family ownership transfer of a density image into the density-map layout: the release
+/// half (recorded on the source family's queue, its destination masks ignored by the
+/// specification) reaches the driver as the application wrote it, translated, with no barrier of
+/// the layer's added; the acquire half still orders the image's shading-rate shadow. Checked
+/// between the device's family and `VK_QUEUE_FAMILY_EXTERNAL` (lavapipe has one family), for
+/// both barrier commands, on the double's `barrier` records.
+#[test]
+fn queue_family_release_halves_are_left_alone() {
+    use ash::vk::Handle as _;
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let d = fdm_device(&vk);
+    let (pool, cb) = pool_and_buffer(&d);
+    let range = crate::support::vulkan::range(0, 2);
+    // SAFETY: the test's own objects; structs live across the calls.
+    unsafe {
+        let image = d
+            .create_image(&crate::vk_layer::fdm_image_info(), None)
+            .expect("vkCreateImage");
+        let req = d.get_image_memory_requirements(image);
+        let memory = d
+            .allocate_memory(
+                &vk::MemoryAllocateInfo::default()
+                    .allocation_size(req.size)
+                    .memory_type_index(req.memory_type_bits.trailing_zeros()),
+                None,
+            )
+            .expect("memory");
+        d.bind_image_memory(image, memory, 0).expect("bind");
+        let fdm = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+        let transfer = |src: u32, dst: u32| {
+            vk::ImageMemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT)
+                .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .new_layout(fdm)
+                .src_queue_family_index(src)
+                .dst_queue_family_index(dst)
+                .image(image)
+                .subresource_range(range)
+        };
+        let transfer2 = |src: u32, dst: u32| {
+            vk::ImageMemoryBarrier2::default()
+                .src_stage_mask(vk::PipelineStageFlags2::COPY)
+                .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+                .dst_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
+                .dst_access_mask(vk::AccessFlags2::FRAGMENT_DENSITY_MAP_READ_EXT)
+                // Where the first pair left it.
+                .old_layout(fdm)
+                .new_layout(fdm)
+                .src_queue_family_index(src)
+                .dst_queue_family_index(dst)
+                .image(image)
+                .subresource_range(range)
+        };
+        let external = vk::QUEUE_FAMILY_EXTERNAL;
+        env.double.clear();
+        d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+            .expect("vkBeginCommandBuffer");
+        for (src, dst) in [(0, external), (external, 0)] {
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::TRANSFER,
+                FDM_STAGE,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[transfer(src, dst)],
+            );
+        }
+        for (src, dst) in [(0, external), (external, 0)] {
+            d.cmd_pipeline_barrier2(
+                cb,
+                &vk::DependencyInfo::default().image_memory_barriers(&[transfer2(src, dst)]),
+            );
+        }
+        d.end_command_buffer(cb).expect("vkEndCommandBuffer");
+        let images = |e: &serde_json::Value| -> Vec<u64> {
+            e["images"]
+                .as_array()
+                .expect("images")
+                .iter()
+                .map(|i| i["image"].as_u64().expect("handle"))
+                .collect()
+        };
+        let barriers: Vec<Vec<u64>> = env
+            .double
+            .events("barrier")
+            .iter()
+            .filter(|e| e["command_buffer"] == cb.as_raw())
+            .map(images)
+            .collect();
+        assert_eq!(barriers.len(), 4, "{barriers:?}");
+        for (n, b) in barriers.iter().enumerate() {
+            let release = n % 2 == 0;
+            assert_eq!(b[0], image.as_raw(), "the application's barrier first");
+            assert_eq!(
+                b.len(),
+                if release { 1 } else { 2 },
+                "barrier {n} ({}): {b:?}",
+                if release { "release" } else { "acquire" }
+            );
+        }
+        assert_eq!(env.double.errors(), Vec::<String>::new());
+        d.destroy_command_pool(pool, None);
+        d.destroy_image(image, None);
+        d.free_memory(memory, None);
+        d.destroy_device(None);
+    }
+    assert_only_stage_false_positives();
+}
