@@ -162,6 +162,161 @@ pub fn image_barrier2(
     (out, shadow)
 }
 
+/// The shadow's barrier for an application image moved into the density-map layout, except in a
+/// queue family release: the release half of an ownership transfer is the source queue's, whose
+/// destination stages and accesses the specification ignores
+/// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#synchronization-queue-transfers-release>);
+/// it goes down as the application wrote it (translated), and the acquire half orders the shadow.
+/// The map is noted as moved into the layout either way.
+fn shadow_unless(release: bool, image: vk::Image) -> Option<crate::bridge::Shadow> {
+    let s = crate::vk::convert::shadow_of_transitioned(image);
+    if release {
+        None
+    } else {
+        s
+    }
+}
+
+/// Whether a barrier with these queue family indices, recorded into `cb`, is the release half of a
+/// queue family ownership transfer. Not a transfer where the indices are equal or either is
+/// `IGNORED`; a release where the destination is outside the device (`EXTERNAL`, `FOREIGN`), an
+/// acquire where the source is; between two of the device's families, a release where `cb`'s pool
+/// belongs to the source family ([`FAMILIES`]). Where that family is not known, a release: an
+/// acquire half then goes without the shadow's barrier, which is what the application wrote.
+fn is_release(cb: vk::CommandBuffer, src: u32, dst: u32) -> bool {
+    let outside = |q: u32| q == vk::QUEUE_FAMILY_EXTERNAL || q == vk::QUEUE_FAMILY_FOREIGN_EXT;
+    if src == dst || src == vk::QUEUE_FAMILY_IGNORED || dst == vk::QUEUE_FAMILY_IGNORED {
+        return false;
+    }
+    if outside(dst) {
+        return true;
+    }
+    if outside(src) {
+        return false;
+    }
+    FAMILIES.command_buffer(cb).is_none_or(|f| f == src)
+}
+
+/// Slots per table in [`Families`]: more command pools and command buffers than an application
+/// keeps alive at once, so that a live one is rarely evicted.
+const POOL_SLOTS: usize = 256;
+const BUFFER_SLOTS: usize = 4096;
+
+/// The queue family of command pools (from `vkCreateCommandPool`) and of command buffers (from
+/// their pool at `vkAllocateCommandBuffers`), for [`is_release`]. Direct-mapped tables of fixed
+/// size, so nothing grows however many pools and buffers come and go (a freed handle's slot is
+/// taken by the next one that maps there, and a handle the driver reuses is entered again when it
+/// is made). Written when pools and buffers are made, read only for an ownership transfer of a
+/// density image: a leaf lock, never taken per command on the common path.
+struct Families {
+    pools: parking_lot::Mutex<[(u64, u32); POOL_SLOTS]>,
+    buffers: parking_lot::Mutex<[(u64, u32); BUFFER_SLOTS]>,
+}
+
+static FAMILIES: Families = Families {
+    pools: parking_lot::Mutex::new([(0, 0); POOL_SLOTS]),
+    buffers: parking_lot::Mutex::new([(0, 0); BUFFER_SLOTS]),
+};
+
+fn slot(raw: u64, slots: usize) -> usize {
+    ((raw ^ (raw >> 29)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40) as usize % slots
+}
+
+impl Families {
+    fn command_buffer(&self, cb: vk::CommandBuffer) -> Option<u32> {
+        use ash::vk::Handle as _;
+        let raw = cb.as_raw();
+        let t = self.buffers.lock();
+        let (h, f) = t[slot(raw, BUFFER_SLOTS)];
+        (raw != 0 && h == raw).then_some(f)
+    }
+}
+
+/// `vkCreateCommandPool`: its queue family is noted.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_command_pool(
+    device: vk::Device,
+    info: *const vk::CommandPoolCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::CommandPool,
+) -> vk::Result {
+    use ash::vk::Handle as _;
+    guard(
+        "vkCreateCommandPool",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let Some(rec) = (unsafe { registry::recording(device) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = rec.next.create_command_pool else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // SAFETY: the next layer's function, with the caller's arguments.
+            let r = unsafe { next(device, info, alloc, out) };
+            // SAFETY: the caller's create info.
+            let info = unsafe { info.as_ref() };
+            if let (vk::Result::SUCCESS, Some(i), false) = (r, info, out.is_null()) {
+                // SAFETY: on success `out` holds the new pool.
+                let raw = unsafe { *out }.as_raw();
+                FAMILIES.pools.lock()[slot(raw, POOL_SLOTS)] = (raw, i.queue_family_index);
+            }
+            r
+        },
+    )
+}
+
+/// `vkAllocateCommandBuffers`: each buffer's queue family (its pool's) is noted.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn allocate_command_buffers(
+    device: vk::Device,
+    info: *const vk::CommandBufferAllocateInfo<'_>,
+    out: *mut vk::CommandBuffer,
+) -> vk::Result {
+    use ash::vk::Handle as _;
+    guard(
+        "vkAllocateCommandBuffers",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let Some(rec) = (unsafe { registry::recording(device) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = rec.next.allocate_command_buffers else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // SAFETY: the next layer's function, with the caller's arguments.
+            let r = unsafe { next(device, info, out) };
+            // SAFETY: the caller's create info.
+            let Some(i) = (unsafe { info.as_ref() }) else {
+                return r;
+            };
+            if r != vk::Result::SUCCESS || out.is_null() {
+                return r;
+            }
+            let pool = i.command_pool.as_raw();
+            let family = {
+                let t = FAMILIES.pools.lock();
+                let (h, f) = t[slot(pool, POOL_SLOTS)];
+                (h == pool).then_some(f)
+            };
+            // SAFETY: on success `out` holds `commandBufferCount` new buffers.
+            let cbs = unsafe { std::slice::from_raw_parts(out, i.command_buffer_count as usize) };
+            let mut t = FAMILIES.buffers.lock();
+            for cb in cbs {
+                let raw = cb.as_raw();
+                // A pool whose family is not known leaves its buffers unknown too.
+                t[slot(raw, BUFFER_SLOTS)] = family.map_or((0, 0), |f| (raw, f));
+            }
+            r
+        },
+    )
+}
+
 fn touches_image(b: &vk::ImageMemoryBarrier<'_>) -> bool {
     b.old_layout == FDM_LAYOUT
         || b.new_layout == FDM_LAYOUT
@@ -302,6 +457,7 @@ unsafe fn forever<T: Copy, U: Copy>(t: T) -> U {
 /// The copies must not outlive the caller's barriers (they live across the call down only).
 unsafe fn translate1(
     s: &mut Scratch,
+    cb: vk::CommandBuffer,
     memory: &[vk::MemoryBarrier<'_>],
     buffers: &[vk::BufferMemoryBarrier<'_>],
     images: &[vk::ImageMemoryBarrier<'_>],
@@ -323,7 +479,8 @@ unsafe fn translate1(
     for b in images {
         // SAFETY: as above.
         let b: vk::ImageMemoryBarrier<'static> = unsafe { forever(*b) };
-        let (c, shadow) = image_barrier(&b, crate::vk::convert::shadow_of_transitioned);
+        let release = is_release(cb, b.src_queue_family_index, b.dst_queue_family_index);
+        let (c, shadow) = image_barrier(&b, |i| shadow_unless(release, i));
         s.images.push(c);
         s.images.extend(shadow);
     }
@@ -335,6 +492,7 @@ unsafe fn translate1(
 /// The infos' arrays must be valid for their counts.
 unsafe fn translate2<'s>(
     s: &'s mut Scratch,
+    cb: vk::CommandBuffer,
     infos: &[vk::DependencyInfo<'_>],
 ) -> &'s [vk::DependencyInfo<'static>] {
     for d in infos {
@@ -369,7 +527,8 @@ unsafe fn translate2<'s>(
         for b in i {
             // SAFETY: as above.
             let b: vk::ImageMemoryBarrier2<'static> = unsafe { forever(*b) };
-            let (c, shadow) = image_barrier2(&b, crate::vk::convert::shadow_of_transitioned);
+            let release = is_release(cb, b.src_queue_family_index, b.dst_queue_family_index);
+            let (c, shadow) = image_barrier2(&b, |i| shadow_unless(release, i));
             s.images2.push(c);
             s.images2.extend(shadow);
         }
@@ -445,7 +604,7 @@ pub unsafe extern "system" fn cmd_pipeline_barrier(
         with_scratch(|s| {
             // SAFETY: the next layer's function; the copies live across the call.
             unsafe {
-                translate1(s, m, b, i);
+                translate1(s, cb, m, b, i);
                 next(
                     cb,
                     stage(src),
@@ -487,7 +646,7 @@ unsafe fn pipeline_barrier2(
         with_scratch(|s| {
             // SAFETY: the caller's dependency info; the copies live across the call down.
             unsafe {
-                let infos = translate2(s, std::slice::from_ref(&*info));
+                let infos = translate2(s, cb, std::slice::from_ref(&*info));
                 next(cb, infos.as_ptr())
             }
         })
@@ -529,7 +688,7 @@ unsafe fn set_event2(
         with_scratch(|s| {
             // SAFETY: the caller's dependency info; the copies live across the call down.
             unsafe {
-                let infos = translate2(s, std::slice::from_ref(&*info));
+                let infos = translate2(s, cb, std::slice::from_ref(&*info));
                 next(cb, event, infos.as_ptr())
             }
         })
@@ -598,7 +757,7 @@ pub unsafe extern "system" fn cmd_wait_events(
         with_scratch(|s| {
             // SAFETY: the next layer's function; the copies live across the call.
             unsafe {
-                translate1(s, m, b, i);
+                translate1(s, cb, m, b, i);
                 next(
                     cb,
                     event_count,
@@ -644,7 +803,7 @@ unsafe fn wait_events2(
         with_scratch(|s| {
             // SAFETY: the caller's dependency infos; the copies live across the call down.
             unsafe {
-                let infos = translate2(s, list);
+                let infos = translate2(s, cb, list);
                 next(cb, count, events, infos.as_ptr())
             }
         })
@@ -662,6 +821,156 @@ hook_and_khr_alias! {
     )
 }
 
+/// Calls `f` with the next layer's function picked from `cb`'s device and, where the device
+/// emulates density maps, `translate` applied to the stage mask; nothing where the device is
+/// unknown or the next layer lacks the command.
+///
+/// # Safety
+/// `cb` must be a command buffer dispatched by the loader.
+#[inline]
+unsafe fn with_stage<F: Copy, S: Copy>(
+    cb: vk::CommandBuffer,
+    pick: impl FnOnce(&registry::Recording) -> Option<F>,
+    stage: S,
+    translate: fn(S) -> S,
+    f: impl FnOnce(F, S),
+) {
+    // SAFETY: as the caller promised.
+    let Some(rec) = (unsafe { registry::recording(cb) }) else {
+        return;
+    };
+    let Some(next) = pick(&rec) else { return };
+    f(
+        next,
+        if rec.emulated {
+            translate(stage)
+        } else {
+            stage
+        },
+    )
+}
+
+/// `vkCmdSetEvent`: the stage mask without the density-map stage (the bits are invalid on the
+/// driver's device, VUID-vkCmdSetEvent-stageMask-04093 family,
+/// <https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdSetEvent.html>); it stays
+/// matched to the `vkCmdWaitEvents` source stages, which are translated alike.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_set_event(
+    cb: vk::CommandBuffer,
+    event: vk::Event,
+    mask: vk::PipelineStageFlags,
+) {
+    guard("vkCmdSetEvent", (), || {
+        // SAFETY: the caller's arguments; the next layer's function.
+        unsafe {
+            with_stage(
+                cb,
+                |r| r.next.cmd_set_event,
+                mask,
+                stage,
+                |next, m| next(cb, event, m),
+            )
+        }
+    })
+}
+
+/// `vkCmdResetEvent`: as [`cmd_set_event`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_reset_event(
+    cb: vk::CommandBuffer,
+    event: vk::Event,
+    mask: vk::PipelineStageFlags,
+) {
+    guard("vkCmdResetEvent", (), || {
+        // SAFETY: the caller's arguments; the next layer's function.
+        unsafe {
+            with_stage(
+                cb,
+                |r| r.next.cmd_reset_event,
+                mask,
+                stage,
+                |next, m| next(cb, event, m),
+            )
+        }
+    })
+}
+
+/// The shared body of `vkCmdResetEvent2` and its KHR alias: as [`cmd_set_event`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn reset_event2(
+    what: &'static str,
+    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdResetEvent2>,
+    cb: vk::CommandBuffer,
+    event: vk::Event,
+    mask: vk::PipelineStageFlags2,
+) {
+    guard(what, (), || {
+        // SAFETY: the caller's arguments; the next layer's function.
+        unsafe { with_stage(cb, pick, mask, stage2, |next, m| next(cb, event, m)) }
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdResetEvent2`.
+    cmd_reset_event2, cmd_reset_event2_khr = reset_event2("vkCmdResetEvent2")
+    (cb: vk::CommandBuffer, event: vk::Event, mask: vk::PipelineStageFlags2)
+}
+
+/// `vkCmdWriteTimestamp`: a timestamp after the density-map stage is one after the shading-rate
+/// attachment stage, which takes its place on the driver's device.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_write_timestamp(
+    cb: vk::CommandBuffer,
+    at: vk::PipelineStageFlags,
+    pool: vk::QueryPool,
+    query: u32,
+) {
+    guard("vkCmdWriteTimestamp", (), || {
+        // SAFETY: the caller's arguments; the next layer's function.
+        unsafe {
+            with_stage(
+                cb,
+                |r| r.next.cmd_write_timestamp,
+                at,
+                stage,
+                |next, s| next(cb, s, pool, query),
+            )
+        }
+    })
+}
+
+/// The shared body of `vkCmdWriteTimestamp2` and its KHR alias: as [`cmd_write_timestamp`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn write_timestamp2(
+    what: &'static str,
+    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdWriteTimestamp2>,
+    cb: vk::CommandBuffer,
+    at: vk::PipelineStageFlags2,
+    pool: vk::QueryPool,
+    query: u32,
+) {
+    guard(what, (), || {
+        // SAFETY: the caller's arguments; the next layer's function.
+        unsafe { with_stage(cb, pick, at, stage2, |next, s| next(cb, s, pool, query)) }
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdWriteTimestamp2`.
+    cmd_write_timestamp2, cmd_write_timestamp2_khr = write_timestamp2("vkCmdWriteTimestamp2")
+    (cb: vk::CommandBuffer, at: vk::PipelineStageFlags2, pool: vk::QueryPool, query: u32)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -676,6 +985,32 @@ mod tests {
             base_array_layer: 0,
             layer_count: layers,
         }
+    }
+
+    #[test]
+    fn release_halves_are_told_from_acquire_halves() {
+        let ignored = vk::QUEUE_FAMILY_IGNORED;
+        let external = vk::QUEUE_FAMILY_EXTERNAL;
+        let cb = vk::CommandBuffer::from_raw(0x5a5a_0010);
+        // Not transfers.
+        assert!(!is_release(cb, ignored, ignored));
+        assert!(!is_release(cb, 1, 1));
+        assert!(!is_release(cb, 0, ignored));
+        // To and from outside the device.
+        assert!(is_release(cb, 0, external));
+        assert!(!is_release(cb, external, 0));
+        // Between two families: by the command buffer's; unknown counts as a release.
+        assert!(is_release(cb, 0, 1));
+        FAMILIES.buffers.lock()[slot(cb.as_raw(), BUFFER_SLOTS)] = (cb.as_raw(), 1);
+        assert!(
+            !is_release(cb, 0, 1),
+            "recorded on the destination family: acquire"
+        );
+        assert!(
+            is_release(cb, 1, 0),
+            "recorded on the source family: release"
+        );
+        FAMILIES.buffers.lock()[slot(cb.as_raw(), BUFFER_SLOTS)] = (0, 0);
     }
 
     #[test]
@@ -794,7 +1129,7 @@ mod tests {
         ];
         let mut s = Scratch::default();
         // SAFETY: arrays on the stack.
-        let out = unsafe { translate2(&mut s, &infos) };
+        let out = unsafe { translate2(&mut s, vk::CommandBuffer::null(), &infos) };
         assert_eq!(out.len(), 2);
         assert_eq!(out[0].memory_barrier_count, 1);
         assert_eq!(out[0].image_memory_barrier_count, 0);

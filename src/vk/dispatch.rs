@@ -175,6 +175,8 @@ hooks! {
         c"vkCreateImage" => create_image: PFN_vkCreateImage = device::create_image, When::Injected;
         c"vkCreateGraphicsPipelines" => create_graphics_pipelines: PFN_vkCreateGraphicsPipelines =
             pipeline::create_graphics_pipelines, When::Injected;
+        c"vkCreateShadersEXT" => create_shaders_ext: PFN_vkCreateShadersEXT =
+            pipeline::create_shaders_ext, When::Emulated;
         c"vkCreateShaderModule" => create_shader_module: PFN_vkCreateShaderModule =
             pipeline::create_shader_module, When::Emulated;
         c"vkCreateSampler" => create_sampler: PFN_vkCreateSampler = pipeline::create_sampler,
@@ -195,6 +197,26 @@ hooks! {
             When::Emulated;
         c"vkCmdSetEvent2KHR" => cmd_set_event2_khr: PFN_vkCmdSetEvent2 =
             barrier::cmd_set_event2_khr, When::Emulated;
+        // Command buffers' queue families, to tell the release half of an ownership transfer.
+        c"vkCreateCommandPool" => create_command_pool: PFN_vkCreateCommandPool =
+            barrier::create_command_pool, When::Emulated;
+        c"vkAllocateCommandBuffers" => allocate_command_buffers: PFN_vkAllocateCommandBuffers =
+            barrier::allocate_command_buffers, When::Emulated;
+        // Stage masks of event sets and resets and of timestamps lose the density-map stage.
+        c"vkCmdSetEvent" => cmd_set_event: PFN_vkCmdSetEvent = barrier::cmd_set_event,
+            When::Emulated;
+        c"vkCmdResetEvent" => cmd_reset_event: PFN_vkCmdResetEvent = barrier::cmd_reset_event,
+            When::Emulated;
+        c"vkCmdResetEvent2" => cmd_reset_event2: PFN_vkCmdResetEvent2 = barrier::cmd_reset_event2,
+            When::Emulated;
+        c"vkCmdResetEvent2KHR" => cmd_reset_event2_khr: PFN_vkCmdResetEvent2 =
+            barrier::cmd_reset_event2_khr, When::Emulated;
+        c"vkCmdWriteTimestamp" => cmd_write_timestamp: PFN_vkCmdWriteTimestamp =
+            barrier::cmd_write_timestamp, When::Emulated;
+        c"vkCmdWriteTimestamp2" => cmd_write_timestamp2: PFN_vkCmdWriteTimestamp2 =
+            barrier::cmd_write_timestamp2, When::Emulated;
+        c"vkCmdWriteTimestamp2KHR" => cmd_write_timestamp2_khr: PFN_vkCmdWriteTimestamp2 =
+            barrier::cmd_write_timestamp2_khr, When::Emulated;
         // Shadow clears go ahead of the application's submits; wait stages are translated.
         c"vkQueueSubmit" => queue_submit: PFN_vkQueueSubmit = submit::queue_submit, When::Injected;
         c"vkQueueSubmit2" => queue_submit2: PFN_vkQueueSubmit2 = submit::queue_submit2,

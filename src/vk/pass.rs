@@ -69,6 +69,9 @@ pub struct Pass2 {
     /// Subpass chains copied without the application's attachment-less shading-rate infos
     /// ([`Pass2::without_apps_rate_infos`]), kept alive for the subpasses pointing into them.
     _subpass_chains: Vec<ChainCopy>,
+    /// Translated copies of dependencies' chained `VkMemoryBarrier2`s and the rest of their
+    /// chains ([`add_shading_rate`]), kept alive for the dependencies pointing at them.
+    _dependency_barriers: Vec<(Box<vk::MemoryBarrier2<'static>>, ChainCopy)>,
 }
 
 impl Pass2 {
@@ -121,6 +124,7 @@ impl Pass2 {
                 rate_ref: Box::default(),
                 rate_infos: Vec::new(),
                 _subpass_chains: Vec::new(),
+                _dependency_barriers: Vec::new(),
             }
         }
     }
@@ -291,6 +295,7 @@ pub unsafe fn v1_to_v2(
         rate_ref: Box::default(),
         rate_infos: Vec::new(),
         _subpass_chains: Vec::new(),
+        _dependency_barriers: Vec::new(),
     }
 }
 
@@ -350,7 +355,71 @@ pub fn add_shading_rate(pass: &mut Pass2, density: u32, texel: vk::Extent2D) {
         d.dst_stage_mask = rate_stages(d.dst_stage_mask);
         d.src_access_mask = rate_access(d.src_access_mask);
         d.dst_access_mask = rate_access(d.dst_access_mask);
+        // SAFETY: the dependency's chain is the application's, valid while the pass is (the
+        // constructors' contract).
+        if let Some(kept) = unsafe { translated_barrier(d) } {
+            pass._dependency_barriers.push(kept);
+        }
     }
+}
+
+/// Where `d` chains a `VkMemoryBarrier2` with density-map bits (its masks then replace the
+/// dependency's own, <https://registry.khronos.org/vulkan/specs/latest/man/html/VkSubpassDependency2.html>):
+/// points `d` at a translated copy in front of a copy of the rest of its chain, and returns both
+/// for the caller to keep. Where the chain cannot be copied, `d` is left as it is and the log says
+/// so once.
+///
+/// # Safety
+/// `d.p_next` must be NULL or a valid chain that outlives the copies' use.
+unsafe fn translated_barrier(
+    d: &mut vk::SubpassDependency2<'static>,
+) -> Option<(Box<vk::MemoryBarrier2<'static>>, ChainCopy)> {
+    use crate::vk::barrier::{access2, stage2};
+    let ty = vk::StructureType::MEMORY_BARRIER_2;
+    // SAFETY: as the caller promised.
+    let found = unsafe { chain::find::<vk::MemoryBarrier2<'_>>(d.p_next, ty) }
+        .ok()
+        .flatten()?;
+    // SAFETY: found by its sType, read only.
+    let b = unsafe { *found };
+    let mut mine = vk::MemoryBarrier2::default()
+        .src_stage_mask(stage2(b.src_stage_mask))
+        .dst_stage_mask(stage2(b.dst_stage_mask))
+        .src_access_mask(access2(b.src_access_mask))
+        .dst_access_mask(access2(b.dst_access_mask));
+    if (
+        mine.src_stage_mask,
+        mine.dst_stage_mask,
+        mine.src_access_mask,
+        mine.dst_access_mask,
+    ) == (
+        b.src_stage_mask,
+        b.dst_stage_mask,
+        b.src_access_mask,
+        b.dst_access_mask,
+    ) {
+        return None;
+    }
+    // SAFETY: as the caller promised.
+    let rest = match unsafe { ChainCopy::without(d.p_next, |t| t == ty) } {
+        Ok(r) => r,
+        Err(e) => {
+            static LOGGED: std::sync::atomic::AtomicBool =
+                std::sync::atomic::AtomicBool::new(false);
+            if !LOGGED.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                tracing::warn!(
+                    error = ?e,
+                    "a subpass dependency's pNext chain the layer cannot copy: its memory \
+                     barrier keeps density-map bits the driver does not know"
+                );
+            }
+            return None;
+        }
+    };
+    mine.p_next = rest.head();
+    let mine = Box::new(mine);
+    d.p_next = &*mine as *const vk::MemoryBarrier2<'static> as *const c_void;
+    Some((mine, rest))
 }
 
 fn texel_of(dev: &Device) -> Option<vk::Extent2D> {
@@ -1212,7 +1281,7 @@ pub unsafe extern "system" fn cmd_begin_render_pass(
 ) {
     guard("vkCmdBeginRenderPass", (), || {
         // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device(cb) }) else {
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
             return;
         };
         let Some(next) = dev.next.cmd_begin_render_pass else {
@@ -1237,7 +1306,7 @@ unsafe fn cmd_begin_render_pass2_with(
 ) {
     guard(which, (), || {
         // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device(cb) }) else {
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
             return;
         };
         let Some(next) = next(&dev) else {
@@ -1271,7 +1340,7 @@ unsafe fn cmd_begin_rendering_with(
 ) {
     guard(which, (), || {
         // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device(cb) }) else {
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
             return;
         };
         let Some(next) = next(&dev) else {

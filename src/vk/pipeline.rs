@@ -42,6 +42,9 @@ const FDM_FLAG2: vk::PipelineCreateFlags2KHR =
 const FSR_FLAG2: vk::PipelineCreateFlags2KHR =
     vk::PipelineCreateFlags2KHR::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT;
 
+/// Set once the log has said that a graphics pipeline's chain could not be copied.
+static CHAIN_LOGGED: AtomicBool = AtomicBool::new(false);
+
 /// Logs `message` the first time `flag` is seen unset.
 fn once(flag: &AtomicBool, message: &str) {
     if !flag.swap(true, Ordering::Relaxed) {
@@ -228,6 +231,22 @@ unsafe fn rewrite(
     ci: &vk::GraphicsPipelineCreateInfo<'_>,
     f: Facts,
 ) -> Result<(vk::GraphicsPipelineCreateInfo<'static>, Owned), chain::ChainError> {
+    // SAFETY: as the caller promised.
+    unsafe { rewrite_with(ci, f, true) }
+}
+
+/// [`rewrite`]; with `copy_chain` false, only what needs no copy of the application's chain is done (the
+/// 32-bit flag, the shading-rate state put in front of the chain): a chained
+/// `VkPipelineCreateFlags2CreateInfoKHR` and the application's own shading-rate state stay as
+/// given. That cannot fail.
+///
+/// # Safety
+/// `ci` must be a valid create info with a valid chain.
+unsafe fn rewrite_with(
+    ci: &vk::GraphicsPipelineCreateInfo<'_>,
+    f: Facts,
+    copy_chain: bool,
+) -> Result<(vk::GraphicsPipelineCreateInfo<'static>, Owned), chain::ChainError> {
     // SAFETY: lives as long as the caller's create info, across the call down.
     let mut copy = unsafe {
         std::mem::transmute::<
@@ -246,8 +265,8 @@ unsafe fn rewrite(
     let mut head = ci.p_next;
     let flags2_ty = vk::StructureType::PIPELINE_CREATE_FLAGS_2_CREATE_INFO_KHR;
     let state_ty = vk::StructureType::PIPELINE_FRAGMENT_SHADING_RATE_STATE_CREATE_INFO_KHR;
-    let rewrite_flags2 = f.rewrite_flags2();
-    let retuned = f.retuned_combiner();
+    let rewrite_flags2 = copy_chain && f.rewrite_flags2();
+    let retuned = f.retuned_combiner().filter(|_| copy_chain);
     if rewrite_flags2 || retuned.is_some() {
         let flags2 = if rewrite_flags2 {
             // SAFETY: as the caller promised; found by its sType.
@@ -291,7 +310,7 @@ unsafe fn rewrite(
         }
         owned._chain = Some(rest);
     }
-    if f.add_state() {
+    if f.add_state() && owned.state.is_none() {
         let mut state = Box::new(fsr_state());
         state.p_next = head as *mut c_void;
         head = &*state as *const _ as *const c_void;
@@ -374,21 +393,37 @@ pub unsafe extern "system" fn create_graphics_pipelines(
                     continue;
                 }
                 // SAFETY: a valid create info.
-                match unsafe { rewrite(ci, *f) } {
-                    Ok((c, o)) => {
-                        copies.push(c);
-                        owned.push(o);
-                    }
+                let (c, o) = match unsafe { rewrite(ci, *f) } {
+                    Ok(r) => r,
                     Err(e) => {
-                        tracing::warn!(
-                            error = ?e,
-                            "cannot rewrite a graphics pipeline's pNext chain; passing the \
-                             pipelines through untouched (they will ignore the density map)"
+                        // This pipeline alone falls back; the others in the batch are rewritten
+                        // in full.
+                        once(
+                            &CHAIN_LOGGED,
+                            &format!(
+                                "cannot copy a graphics pipeline's pNext chain ({e:?}): that \
+                                 pipeline gets the shading-rate state in front of its chain, \
+                                 its own chained flags and rate stay as given"
+                            ),
                         );
-                        // SAFETY: the next layer's function, with the caller's arguments.
-                        return unsafe { next(device, cache, count, infos, alloc, out) };
+                        // SAFETY: a valid create info; without a chain copy this cannot fail.
+                        match unsafe { rewrite_with(ci, *f, false) } {
+                            Ok(r) => r,
+                            Err(_) => (
+                                // SAFETY: lives as long as the caller's create info.
+                                unsafe {
+                                    std::mem::transmute::<
+                                        vk::GraphicsPipelineCreateInfo<'_>,
+                                        vk::GraphicsPipelineCreateInfo<'static>,
+                                    >(*ci)
+                                },
+                                Owned::default(),
+                            ),
+                        }
                     }
-                }
+                };
+                copies.push(c);
+                owned.push(o);
             }
             tracing::debug!(
                 count,
@@ -419,7 +454,7 @@ pub unsafe extern "system" fn cmd_set_fragment_shading_rate(
 ) {
     guard("vkCmdSetFragmentShadingRateKHR", (), || {
         // SAFETY: a command buffer dispatched by the loader.
-        let Some(dev) = (unsafe { registry::device(cb) }) else {
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
             return;
         };
         let Some(next) = dev.next.cmd_set_fragment_shading_rate else {
@@ -441,6 +476,71 @@ pub unsafe extern "system" fn cmd_set_fragment_shading_rate(
             None => unsafe { next(cb, size, ops) },
         }
     })
+}
+
+const SHADER_FDM: vk::ShaderCreateFlagsEXT =
+    vk::ShaderCreateFlagsEXT::FRAGMENT_DENSITY_MAP_ATTACHMENT;
+const SHADER_FSR: vk::ShaderCreateFlagsEXT =
+    vk::ShaderCreateFlagsEXT::FRAGMENT_SHADING_RATE_ATTACHMENT;
+
+/// The flags a shader object's create info reaches the driver with: a fragment shader used with a
+/// density-map attachment is one used with the shading-rate attachment standing in for it
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkShaderCreateFlagBitsEXT.html>);
+/// the density-map bit is invalid on the driver's device, which has no density maps.
+pub fn shader_flags(f: vk::ShaderCreateFlagsEXT) -> vk::ShaderCreateFlagsEXT {
+    if f.contains(SHADER_FDM) {
+        (f & !SHADER_FDM) | SHADER_FSR
+    } else {
+        f
+    }
+}
+
+/// `vkCreateShadersEXT` on an emulating device: create infos with the density-map flag go down as
+/// copies with [`shader_flags`] (the application's array is not written).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_shaders_ext(
+    device: vk::Device,
+    count: u32,
+    infos: *const vk::ShaderCreateInfoEXT<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::ShaderEXT,
+) -> vk::Result {
+    guard(
+        "vkCreateShadersEXT",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let Some(dev) = (unsafe { registry::device(device) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = dev.next.create_shaders_ext else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let list: &[vk::ShaderCreateInfoEXT<'_>] = if infos.is_null() || count == 0 {
+                &[]
+            } else {
+                // SAFETY: `count` create infos, as the caller promised.
+                unsafe { std::slice::from_raw_parts(infos, count as usize) }
+            };
+            if dev.fdm.is_none() || !list.iter().any(|ci| ci.flags.contains(SHADER_FDM)) {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { next(device, count, infos, alloc, out) };
+            }
+            let copies: Vec<vk::ShaderCreateInfoEXT<'_>> = list
+                .iter()
+                .map(|ci| {
+                    let mut c = *ci;
+                    c.flags = shader_flags(ci.flags);
+                    c
+                })
+                .collect();
+            // SAFETY: the copies (pointing into the application's create infos) live across the
+            // call.
+            unsafe { next(device, count, copies.as_ptr(), alloc, out) }
+        },
+    )
 }
 
 /// SPIR-V's `OpCapability` opcode and the `FragmentDensityEXT` capability
@@ -590,6 +690,14 @@ pub fn view_flags(flags: vk::ImageViewCreateFlags) -> Option<vk::ImageViewCreate
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shader_objects_for_density_maps_are_for_the_shading_rate_attachment() {
+        let other = vk::ShaderCreateFlagsEXT::LINK_STAGE;
+        assert_eq!(shader_flags(SHADER_FDM | other), SHADER_FSR | other);
+        assert_eq!(shader_flags(other), other);
+        assert_eq!(shader_flags(SHADER_FSR), SHADER_FSR);
+    }
     use ash::vk::Handle as _;
 
     #[test]

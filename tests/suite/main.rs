@@ -41,4 +41,5 @@ mod vk_inject_devices;
 mod vk_layer;
 mod vk_passes;
 mod vk_pipelines;
+mod vk_recording;
 mod vk_threads;

@@ -55,6 +55,7 @@ use std::path::{Path, PathBuf};
 
 pub use layer::FAULTABLE;
 pub use profile::Profile;
+pub use record::KEPT_EVENTS;
 use serde_json::Value;
 
 /// The layer's name, as in its manifest.
@@ -81,7 +82,7 @@ pub const TRIVIAL_COMBINERS_ENV: &str = "FOVEA_VKDOUBLE_TRIVIAL_COMBINERS";
 /// application it runs as a child process (`tests/suite/hello_xr.rs`).
 pub const RECORDS_FILE_ENV: &str = "FOVEA_VKDOUBLE_RECORDS_FILE";
 
-/// Copies the records (`{"events": [...], "errors": [...]}` as UTF-8 JSON, no terminator) into
+/// Copies the records (`{"events": [...], "errors": [...], "dropped": n, "dropped_errors": n}`, bounded as [`KEPT_EVENTS`] says, as UTF-8 JSON, no terminator) into
 /// `buf`, at most `len` bytes, and returns the full length, so a caller can size its buffer.
 ///
 /// # Safety

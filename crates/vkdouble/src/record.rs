@@ -9,12 +9,31 @@ use crate::Profile;
 struct Records {
     events: Vec<Value>,
     errors: Vec<String>,
+    /// Events left out to keep the records bounded ([`KEPT_EVENTS`]).
+    dropped: u64,
+    /// Errors past [`KEPT_EVENTS`], counted only.
+    dropped_errors: u64,
 }
 
 static RECORDS: Mutex<Records> = Mutex::new(Records {
     events: Vec::new(),
     errors: Vec::new(),
+    dropped: 0,
+    dropped_errors: 0,
 });
+
+/// How many events the records keep at least: once twice as many have piled up, the oldest are
+/// dropped down to this many (`instance` and `device` events excepted: there are few, and tests
+/// read them long after). A process that records for hours through the double (the demo on
+/// lavapipe, a benchmark recording millions of commands) then runs in bounded memory; a test,
+/// which reads back far fewer, sees everything, and `dropped` in the snapshot says where it would
+/// not.
+pub const KEPT_EVENTS: usize = 1 << 15;
+
+/// Whether an event is kept however old it is.
+fn lasting(v: &Value) -> bool {
+    matches!(v["kind"].as_str(), Some("instance" | "device"))
+}
 
 /// Set by [`crate::fovea_vkdouble_set_profile`]; overrides the environment.
 static PROFILE: Mutex<Option<Profile>> = Mutex::new(None);
@@ -25,18 +44,43 @@ fn records() -> std::sync::MutexGuard<'static, Records> {
 
 /// Appends one event (an object with a `kind`).
 pub fn event(v: Value) {
-    records().events.push(v);
+    let mut r = records();
+    r.events.push(v);
+    if r.events.len() >= 2 * KEPT_EVENTS {
+        let mut excess = r.events.len() - KEPT_EVENTS;
+        let before = r.events.len();
+        r.events.retain(|e| {
+            if excess > 0 && !lasting(e) {
+                excess -= 1;
+                false
+            } else {
+                true
+            }
+        });
+        r.dropped += (before - r.events.len()) as u64;
+    }
 }
 
-/// Appends a misuse a driver with shading-rate attachments would refuse.
+/// Appends a misuse a driver with shading-rate attachments would refuse (the first
+/// [`KEPT_EVENTS`]; later ones are counted).
 pub fn error(message: String) {
-    records().errors.push(message);
+    let mut r = records();
+    if r.errors.len() < KEPT_EVENTS {
+        r.errors.push(message);
+    } else {
+        r.dropped_errors += 1;
+    }
 }
 
-/// `{"events": [...], "errors": [...]}`.
+/// `{"events": [...], "errors": [...], "dropped": n, "dropped_errors": n}`.
 pub fn snapshot() -> Value {
     let r = records();
-    json!({ "events": r.events, "errors": r.errors })
+    json!({
+        "events": r.events,
+        "errors": r.errors,
+        "dropped": r.dropped,
+        "dropped_errors": r.dropped_errors,
+    })
 }
 
 /// Forgets every event and error.
@@ -44,6 +88,8 @@ pub fn clear() {
     let mut r = records();
     r.events.clear();
     r.errors.clear();
+    r.dropped = 0;
+    r.dropped_errors = 0;
     drop(r);
     clear_faults();
 }
