@@ -168,12 +168,6 @@ struct MapObjects {
 struct MapEntry {
     shadow: ShadowImage,
     objects: Option<MapObjects>,
-    /// Whether a barrier of the application's has moved the image into the density-map layout
-    /// (`GENERAL` on the driver's side). Until then it is still in its initial `UNDEFINED`
-    /// layout (the emulated passes never transition it), its content is undefined, and reading it
-    /// would be invalid, so it is not converted: it renders at full rate, as its cleared shadow
-    /// says.
-    transitioned: bool,
 }
 
 /// Per emulating device: the conversion's objects and what the begin hooks look up.
@@ -193,9 +187,9 @@ pub struct Converter {
     maps: parking_lot::Mutex<HashMap<u64, MapEntry>>,
     /// Application view → its image, for views of converted images.
     views: parking_lot::Mutex<HashMap<u64, u64>>,
-    /// Rewritten render pass → whether its density attachment's `initialLayout` leaves the map
-    /// readable (`GENERAL`, or the density layout, which barriers turn into `GENERAL`).
-    passes: parking_lot::Mutex<HashMap<u64, bool>>,
+    /// Rewritten render pass → its density attachment's `initialLayout` and `finalLayout`, as the
+    /// driver knows them (the density layout is `GENERAL` there).
+    passes: parking_lot::Mutex<HashMap<u64, (vk::ImageLayout, vk::ImageLayout)>>,
     logged_layout: AtomicBool,
     logged_state: AtomicBool,
 }
@@ -692,7 +686,6 @@ pub unsafe fn map_created(dev: &Device, app: vk::Image, shadow: &ShadowImage) {
             MapEntry {
                 shadow: *shadow,
                 objects: None,
-                transitioned: false,
             },
         );
     }
@@ -801,15 +794,11 @@ static FRAMEBUFFERS: parking_lot::RwLock<
 > = parking_lot::RwLock::new(HashMap::with_hasher(BuildHasherDefault::new()));
 
 /// The barrier translation's look-up of a shadow for an image the application moves into the
-/// density-map layout (`crate::vk::barrier`): notes, where the image is an application's map, that
-/// it may be read from now on ([`MapEntry::transitioned`]).
+/// density-map layout (`crate::vk::barrier`). Whether a map may be read is decided by the layout
+/// each pass that reads it names, at that pass's recording ([`before_render_pass`],
+/// [`before_rendering`]), not by which barriers were recorded before: command buffers may be
+/// submitted in another order than they were recorded.
 pub fn shadow_of_transitioned(image: vk::Image) -> Option<crate::bridge::Shadow> {
-    for (_, c) in CONVERTERS.read().iter() {
-        if let Some(e) = c.maps.lock().get_mut(&image.as_raw()) {
-            e.transitioned = true;
-            break;
-        }
-    }
     crate::bridge::shadow_of(image)
 }
 
@@ -820,19 +809,23 @@ fn readable(layout: vk::ImageLayout) -> bool {
         || layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT
 }
 
-/// Notes a rewritten render pass's density attachment `initialLayout` (`Some`), or its
-/// destruction.
+/// Notes a rewritten render pass's density attachment `initialLayout` and `finalLayout` as the
+/// driver gets them (`Some`), or its destruction.
 ///
 /// # Safety
 /// `dev` must be live.
-pub unsafe fn pass_changed(dev: &Device, pass: vk::RenderPass, initial: Option<vk::ImageLayout>) {
+pub unsafe fn pass_changed(
+    dev: &Device,
+    pass: vk::RenderPass,
+    layouts: Option<(vk::ImageLayout, vk::ImageLayout)>,
+) {
     // SAFETY: as the caller promised.
     let Some(c) = (unsafe { converter(dev.handle) }) else {
         return;
     };
     let mut passes = c.passes.lock();
-    match initial {
-        Some(l) => passes.insert(pass.as_raw(), readable(l)),
+    match layouts {
+        Some(l) => passes.insert(pass.as_raw(), l),
         None => passes.remove(&pass.as_raw()),
     };
 }
@@ -882,9 +875,11 @@ pub unsafe fn before_render_pass(
     let Some(view) = view else {
         return;
     };
-    let readable = c.passes.lock().get(&b.render_pass.as_raw()).copied();
+    let Some((initial, last)) = c.passes.lock().get(&b.render_pass.as_raw()).copied() else {
+        return;
+    };
     // SAFETY: as the caller promised.
-    unsafe { c.convert(cb, view, readable.unwrap_or(false)) };
+    unsafe { c.convert_for_pass(cb, view, initial, last) };
 }
 
 /// `vkCmdBeginRendering`, before calling down: converts the density map the rendering info names
@@ -922,28 +917,108 @@ pub unsafe fn before_rendering(
     let Some(c) = (unsafe { converter(cb) }) else {
         return;
     };
-    // SAFETY: as the caller promised.
-    unsafe { c.convert(cb, f.image_view.as_raw(), readable(f.image_layout)) };
+    if let Some((image, m)) = c.map_of_view(f.image_view.as_raw()) {
+        // SAFETY: as the caller promised.
+        unsafe { c.convert(cb, image, &m, readable(f.image_layout)) };
+    }
 }
 
 impl Converter {
-    /// Records the conversion of the map `view` shows into its shadow, if it is an application's.
+    /// The application image a view shows and its conversion objects, if it is a converted map.
+    fn map_of_view(&self, view: u64) -> Option<(u64, MapObjects)> {
+        let image = self.views.lock().get(&view).copied()?;
+        let m = self.maps.lock().get(&image).and_then(|e| e.objects)?;
+        Some((image, m))
+    }
+
+    /// In front of a rewritten render pass: the application's image makes the pass's
+    /// `initialLayout` → `finalLayout` transition the driver's pass no longer makes (the shadow
+    /// stands in for the image there), so the layouts the application's later barriers name are
+    /// the image's; and the map is converted in whichever of the two layouts it can be read, in
+    /// the order that reads it there. A map whose content the transition discards (`UNDEFINED`)
+    /// is not converted: its shadow keeps what it had, which the density map's undefined content
+    /// allows.
+    ///
+    /// # Safety
+    /// As [`Converter::convert`].
+    unsafe fn convert_for_pass(
+        &self,
+        cb: vk::CommandBuffer,
+        view: u64,
+        initial: vk::ImageLayout,
+        last: vk::ImageLayout,
+    ) {
+        let Some((image, m)) = self.map_of_view(view) else {
+            return;
+        };
+        let discarded = matches!(
+            initial,
+            vk::ImageLayout::UNDEFINED | vk::ImageLayout::PREINITIALIZED
+        );
+        let before = readable(initial);
+        if before {
+            // SAFETY: as the caller promised.
+            unsafe { self.convert(cb, image, &m, true) };
+        }
+        if initial != last {
+            // SAFETY: as the caller promised; the application's image, whole.
+            unsafe { self.transition(cb, image, &m.shadow, initial, last) };
+        }
+        if !before {
+            // SAFETY: as the caller promised.
+            unsafe { self.convert(cb, image, &m, !discarded && readable(last)) };
+        }
+    }
+
+    /// Records a layout transition of the application's image, ordered after everything before
+    /// it and before everything after it (a render pass's own transitions are ordered by its
+    /// external dependencies, which the application made for the pass's use of the map).
+    ///
+    /// # Safety
+    /// As [`Converter::convert`].
+    unsafe fn transition(
+        &self,
+        cb: vk::CommandBuffer,
+        image: u64,
+        shadow: &ShadowImage,
+        old: vk::ImageLayout,
+        new: vk::ImageLayout,
+    ) {
+        let d = &self.own.fns;
+        // SAFETY: as the caller promised.
+        unsafe {
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[vk::ImageMemoryBarrier::default()
+                    .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
+                    .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE)
+                    .old_layout(old)
+                    .new_layout(new)
+                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .image(vk::Image::from_raw(image))
+                    .subresource_range(vk::ImageSubresourceRange {
+                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                        base_mip_level: 0,
+                        level_count: 1,
+                        base_array_layer: 0,
+                        layer_count: shadow.app_layers.max(1),
+                    })],
+            );
+        }
+    }
+
+    /// Records the conversion of the application's map `image` into its shadow, where `readable`
+    /// (its layout at this point is `GENERAL`).
     ///
     /// # Safety
     /// `cb` must be recording, outside a render pass, on this converter's device.
-    unsafe fn convert(&self, cb: vk::CommandBuffer, view: u64, readable: bool) {
-        let Some(image) = self.views.lock().get(&view).copied() else {
-            return;
-        };
-        let Some(m) = self
-            .maps
-            .lock()
-            .get(&image)
-            .filter(|e| e.transitioned)
-            .and_then(|e| e.objects)
-        else {
-            return;
-        };
+    unsafe fn convert(&self, cb: vk::CommandBuffer, image: u64, m: &MapObjects, readable: bool) {
         if !readable {
             if !self.logged_layout.swap(true, Ordering::Relaxed) {
                 tracing::warn!(

@@ -203,6 +203,11 @@ hooks! {
             When::Injected;
         // The attachment path: shadows, render passes, framebuffers, dynamic rendering.
         c"vkDestroyImage" => destroy_image: PFN_vkDestroyImage = image::destroy_image, When::Injected;
+        // Host-side transitions name the density-map layout as barriers do (host image copy).
+        c"vkTransitionImageLayout" => transition_image_layout: PFN_vkTransitionImageLayoutEXT =
+            image::transition_image_layout, When::Emulated;
+        c"vkTransitionImageLayoutEXT" => transition_image_layout_ext:
+            PFN_vkTransitionImageLayoutEXT = image::transition_image_layout_ext, When::Emulated;
         c"vkCreateImageView" => create_image_view: PFN_vkCreateImageView =
             image::create_image_view, When::Injected;
         c"vkDestroyImageView" => destroy_image_view: PFN_vkDestroyImageView =

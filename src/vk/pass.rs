@@ -26,11 +26,20 @@
 //!   gets a [`VkRenderingFragmentShadingRateAttachmentInfoKHR`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentShadingRateAttachmentInfoKHR.html)
 //!   with the shadow view instead.
 //!
-//! Everything is rewritten in copies; the application's structs are never written. Passes without
-//! the density-map struct, and begin infos without views to swap, go down untouched (a begin with
-//! an empty `pNext` costs one null test). Fail open: where a copy cannot be made (a struct of
-//! unknown size before the one to drop) the call goes down as it came; where a view has no shadow
-//! the pass renders at full rate; one log line says so.
+//! - On an emulating device, a pass without the density-map struct that names the density layout
+//!   (an attachment's initial or final layout, a reference's), stage or access (a dependency's, or
+//!   a `VkMemoryBarrier2` chained to one) goes down translated ([`Pass2::without_density_enums`]):
+//!   such a pass writes a density map (its colour attachment ends in the density layout, as the
+//!   Khronos sample's fragment path does) or orders one, and the driver never has the extension
+//!   those values belong to. A map written so is the application's; the pass that reads it
+//!   converts it (`crate::vk::convert`).
+//!
+//! Everything is rewritten in copies; the application's structs are never written. Other passes,
+//! and begin infos without views to swap, go down untouched (a begin with an empty `pNext` costs
+//! one null test). Fail open, never with density enums: where a struct of unknown size stands
+//! before the density-map struct, it is left out of the driver's copy with the struct
+//! ([`chain_without`]); where a view has no shadow the pass renders at full rate; one log line
+//! says so.
 
 use std::ffi::c_void;
 
@@ -69,6 +78,12 @@ pub struct Pass2 {
     /// Subpass chains copied without the application's attachment-less shading-rate infos
     /// ([`Pass2::without_apps_rate_infos`]), kept alive for the subpasses pointing into them.
     _subpass_chains: Vec<ChainCopy>,
+    /// Dependency chains copied without the application's `VkMemoryBarrier2`, and the translated
+    /// barriers put in front of them ([`Pass2::without_density_enums`]).
+    _dependency_chains: Vec<ChainCopy>,
+    /// Boxed: the dependencies point at them, and a growing vector would move them.
+    #[allow(clippy::vec_box)]
+    _barriers: Vec<Box<vk::MemoryBarrier2<'static>>>,
 }
 
 impl Pass2 {
@@ -121,6 +136,8 @@ impl Pass2 {
                 rate_ref: Box::default(),
                 rate_infos: Vec::new(),
                 _subpass_chains: Vec::new(),
+                _dependency_chains: Vec::new(),
+                _barriers: Vec::new(),
             }
         }
     }
@@ -145,6 +162,216 @@ impl Pass2 {
             self._subpass_chains.push(copy);
         }
         Ok(())
+    }
+}
+
+impl Pass2 {
+    /// Every density-map layout, stage and access bit of the pass becomes what the driver knows
+    /// (docs/vulkan-fdm-on-fsr.md#mapping): layouts of attachments and references the one
+    /// `crate::vk::barrier` gives the application's density images (`GENERAL`), stages and
+    /// accesses of dependencies (and of a `VkMemoryBarrier2` chained to one) the shading-rate
+    /// ones. The driver never has the density-map extension enabled, so these are invalid values
+    /// for it; a pass that names them without the density-map struct (one that writes a map, or
+    /// orders it for a later pass) is otherwise left as it is. References are copied where they
+    /// change; the application's arrays are never written.
+    ///
+    /// # Safety
+    /// The subpasses' reference arrays and the dependencies' chains must be valid and outlive
+    /// `self`.
+    pub unsafe fn without_density_enums(&mut self) {
+        use crate::vk::barrier;
+        for a in &mut self.attachments {
+            a.initial_layout = barrier::layout(a.initial_layout);
+            a.final_layout = barrier::layout(a.final_layout);
+        }
+        let fdm = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+        let refs = &mut self._refs;
+        let mut fix = |p: *const vk::AttachmentReference2<'static>, n: u32| {
+            // SAFETY: as the caller promised.
+            let old = unsafe { slice(p, n) };
+            if !old.iter().any(|r| r.layout == fdm) {
+                return p;
+            }
+            let v: Vec<vk::AttachmentReference2<'static>> = old
+                .iter()
+                .map(|r| {
+                    let mut r = *r;
+                    r.layout = barrier::layout(r.layout);
+                    r
+                })
+                .collect();
+            let ptr = v.as_ptr();
+            refs.push(v);
+            ptr
+        };
+        for s in &mut self.subpasses {
+            s.p_input_attachments = fix(s.p_input_attachments, s.input_attachment_count);
+            s.p_color_attachments = fix(s.p_color_attachments, s.color_attachment_count);
+            s.p_resolve_attachments = fix(s.p_resolve_attachments, s.color_attachment_count);
+            s.p_depth_stencil_attachment = fix(s.p_depth_stencil_attachment, 1);
+        }
+        let ty = vk::StructureType::MEMORY_BARRIER_2;
+        for d in &mut self.dependencies {
+            d.src_stage_mask = barrier::stage(d.src_stage_mask);
+            d.dst_stage_mask = barrier::stage(d.dst_stage_mask);
+            d.src_access_mask = barrier::access(d.src_access_mask);
+            d.dst_access_mask = barrier::access(d.dst_access_mask);
+            // SAFETY: as the caller promised; found by its sType, read only.
+            let found = unsafe { chain::find::<vk::MemoryBarrier2<'static>>(d.p_next, ty) };
+            let Some(m) = found.ok().flatten() else {
+                continue;
+            };
+            // SAFETY: found by its sType in a valid chain.
+            let m = unsafe { *m };
+            let mut t = m;
+            t.src_stage_mask = barrier::stage2(m.src_stage_mask);
+            t.dst_stage_mask = barrier::stage2(m.dst_stage_mask);
+            t.src_access_mask = barrier::access2(m.src_access_mask);
+            t.dst_access_mask = barrier::access2(m.dst_access_mask);
+            if (
+                t.src_stage_mask,
+                t.dst_stage_mask,
+                t.src_access_mask,
+                t.dst_access_mask,
+            ) == (
+                m.src_stage_mask,
+                m.dst_stage_mask,
+                m.src_access_mask,
+                m.dst_access_mask,
+            ) {
+                continue;
+            }
+            // SAFETY: as the caller promised.
+            let rest = unsafe { chain_without(d.p_next, |s| s == ty, "VkSubpassDependency2") };
+            let Ok(rest) = rest else {
+                // Only the translated barrier goes down: it is what the dependency orders.
+                t.p_next = std::ptr::null();
+                let b = Box::new(t);
+                d.p_next = &*b as *const vk::MemoryBarrier2<'static> as *const c_void;
+                self._barriers.push(b);
+                continue;
+            };
+            t.p_next = rest.head();
+            let b = Box::new(t);
+            d.p_next = &*b as *const vk::MemoryBarrier2<'static> as *const c_void;
+            self._barriers.push(b);
+            self._dependency_chains.push(rest);
+        }
+    }
+}
+
+/// Whether a version-1 create info names a density-map layout, stage or access bit outside the
+/// density-map struct (see [`Pass2::without_density_enums`]).
+///
+/// # Safety
+/// `ci` must be a valid create info.
+unsafe fn v1_names_density(ci: &vk::RenderPassCreateInfo<'_>) -> bool {
+    let fdm = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+    // SAFETY: as the caller promised.
+    unsafe {
+        slice(ci.p_attachments, ci.attachment_count)
+            .iter()
+            .any(|a| a.initial_layout == fdm || a.final_layout == fdm)
+            || slice(ci.p_subpasses, ci.subpass_count).iter().any(|s| {
+                [
+                    slice(s.p_input_attachments, s.input_attachment_count),
+                    slice(s.p_color_attachments, s.color_attachment_count),
+                    slice(s.p_resolve_attachments, s.color_attachment_count),
+                    slice(s.p_depth_stencil_attachment, 1),
+                ]
+                .iter()
+                .any(|refs| refs.iter().any(|r| r.layout == fdm))
+            })
+            || slice(ci.p_dependencies, ci.dependency_count)
+                .iter()
+                .any(|d| {
+                    density_bits(
+                        d.src_stage_mask | d.dst_stage_mask,
+                        d.src_access_mask | d.dst_access_mask,
+                    )
+                })
+    }
+}
+
+/// [`v1_names_density`] for version 2 (dependencies' chained `VkMemoryBarrier2`s included).
+///
+/// # Safety
+/// `ci` must be a valid create info.
+unsafe fn v2_names_density(ci: &vk::RenderPassCreateInfo2<'_>) -> bool {
+    let fdm = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+    let ty = vk::StructureType::MEMORY_BARRIER_2;
+    // SAFETY: as the caller promised.
+    unsafe {
+        slice(ci.p_attachments, ci.attachment_count)
+            .iter()
+            .any(|a| a.initial_layout == fdm || a.final_layout == fdm)
+            || slice(ci.p_subpasses, ci.subpass_count).iter().any(|s| {
+                [
+                    slice(s.p_input_attachments, s.input_attachment_count),
+                    slice(s.p_color_attachments, s.color_attachment_count),
+                    slice(s.p_resolve_attachments, s.color_attachment_count),
+                    slice(s.p_depth_stencil_attachment, 1),
+                ]
+                .iter()
+                .any(|refs| refs.iter().any(|r| r.layout == fdm))
+            })
+            || slice(ci.p_dependencies, ci.dependency_count)
+                .iter()
+                .any(|d| {
+                    density_bits(
+                        d.src_stage_mask | d.dst_stage_mask,
+                        d.src_access_mask | d.dst_access_mask,
+                    ) || chain::find::<vk::MemoryBarrier2<'_>>(d.p_next, ty)
+                        .ok()
+                        .flatten()
+                        .is_some_and(|m| {
+                            let m = &*m;
+                            crate::vk::barrier::stage2(m.src_stage_mask | m.dst_stage_mask)
+                                != (m.src_stage_mask | m.dst_stage_mask)
+                                || crate::vk::barrier::access2(
+                                    m.src_access_mask | m.dst_access_mask,
+                                ) != (m.src_access_mask | m.dst_access_mask)
+                        })
+                })
+    }
+}
+
+fn density_bits(stages: vk::PipelineStageFlags, access: vk::AccessFlags) -> bool {
+    stages.intersects(vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT)
+        || access.intersects(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT)
+}
+
+/// [`ChainCopy::without`] that never gives up: a struct of a size the layer does not know that
+/// stands before one to remove is left out too (one log line names it). The driver gets no
+/// density-map struct, which it does not know, at the price of a struct the layer cannot copy;
+/// passing the chain down as it came would hand the driver enums of an extension it never
+/// enabled. Past [`chain::MAX_CHAIN_LENGTH`] structs the rest is shared as it is.
+///
+/// # Safety
+/// `next` must be NULL or a valid chain.
+unsafe fn chain_without(
+    next: *const c_void,
+    remove: impl Fn(vk::StructureType) -> bool,
+    which: &str,
+) -> Result<ChainCopy, ChainError> {
+    let mut dropped: Vec<vk::StructureType> = Vec::new();
+    loop {
+        // SAFETY: as the caller promised.
+        match unsafe { ChainCopy::without(next, |t| remove(t) || dropped.contains(&t)) } {
+            Ok(c) => {
+                if !dropped.is_empty() {
+                    tracing::warn!(
+                        which,
+                        dropped = ?dropped,
+                        "structs of a size the layer does not know stand before a density-map \
+                         struct it must remove: they are left out of the driver's copy"
+                    );
+                }
+                return Ok(c);
+            }
+            Err(ChainError::Unknown(t)) if !dropped.contains(&t) => dropped.push(t),
+            Err(e) => return Err(e),
+        }
     }
 }
 
@@ -291,25 +518,8 @@ pub unsafe fn v1_to_v2(
         rate_ref: Box::default(),
         rate_infos: Vec::new(),
         _subpass_chains: Vec::new(),
-    }
-}
-
-/// Density-map stage and access bits → the shading-rate ones (docs/vulkan-fdm-on-fsr.md#mapping).
-fn rate_stages(s: vk::PipelineStageFlags) -> vk::PipelineStageFlags {
-    if s.contains(vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT) {
-        (s & !vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT)
-            | vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
-    } else {
-        s
-    }
-}
-
-fn rate_access(a: vk::AccessFlags) -> vk::AccessFlags {
-    if a.contains(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT) {
-        (a & !vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT)
-            | vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR
-    } else {
-        a
+        _dependency_chains: Vec::new(),
+        _barriers: Vec::new(),
     }
 }
 
@@ -344,12 +554,6 @@ pub fn add_shading_rate(pass: &mut Pass2, density: u32, texel: vk::Extent2D) {
         .collect();
     for (s, f) in pass.subpasses.iter_mut().zip(&pass.rate_infos) {
         s.p_next = f as *const _ as *const c_void;
-    }
-    for d in &mut pass.dependencies {
-        d.src_stage_mask = rate_stages(d.src_stage_mask);
-        d.dst_stage_mask = rate_stages(d.dst_stage_mask);
-        d.src_access_mask = rate_access(d.src_access_mask);
-        d.dst_access_mask = rate_access(d.dst_access_mask);
     }
 }
 
@@ -394,15 +598,19 @@ unsafe fn create_rewritten(
     alloc: *const vk::AllocationCallbacks<'_>,
     out: *mut vk::RenderPass,
 ) -> vk::Result {
+    if dev.fdm.is_some() {
+        // SAFETY: as the caller promised.
+        unsafe { pass.without_density_enums() };
+    }
     if let Some(inj) = &dev.inject {
         // SAFETY: as the caller promised.
         return unsafe { create_injected(dev, inj, create2, pass, flags, p_next, alloc, out) };
     }
     let texel = texel_of(dev);
-    let initial = pass
+    let layouts = pass
         .attachments
         .get(density as usize)
-        .map(|a| a.initial_layout);
+        .map(|a| (a.initial_layout, a.final_layout));
     if let (Some(texel), true) = (texel, density != vk::ATTACHMENT_UNUSED) {
         add_shading_rate(&mut pass, density, texel);
     }
@@ -417,7 +625,7 @@ unsafe fn create_rewritten(
             .lock()
             .insert(handle.as_raw(), density);
         // SAFETY: the device is live.
-        unsafe { crate::vk::convert::pass_changed(dev, handle, initial) };
+        unsafe { crate::vk::convert::pass_changed(dev, handle, layouts) };
         tracing::debug!(
             render_pass = raw(handle),
             density,
@@ -573,7 +781,14 @@ pub unsafe extern "system" fn create_render_pass(
                 _ => None,
             };
             let inject = dev.inject.is_some() && !info.is_null();
-            let Some(density) = density.or(inject.then_some(vk::ATTACHMENT_UNUSED)) else {
+            // A pass without the density-map struct that still names the density layout, stage
+            // or access (it writes a map, or orders one) goes down translated.
+            // SAFETY: the caller's create info, read only.
+            let ci = unsafe { info.as_ref() };
+            // SAFETY: as above.
+            let names = dev.fdm.is_some() && ci.is_some_and(|ci| unsafe { v1_names_density(ci) });
+            let Some(density) = density.or((inject || names).then_some(vk::ATTACHMENT_UNUSED))
+            else {
                 // SAFETY: the next layer's function, with the caller's arguments.
                 return unsafe { next(device, info, alloc, out) };
             };
@@ -599,7 +814,7 @@ pub unsafe extern "system" fn create_render_pass(
             // SAFETY: the caller's chain, read only.
             let (chain, multiview, aspects) = unsafe {
                 (
-                    ChainCopy::without(ci.p_next, folded),
+                    chain_without(ci.p_next, folded, "vkCreateRenderPass"),
                     chain::find::<vk::RenderPassMultiviewCreateInfo>(
                         ci.p_next,
                         S::RENDER_PASS_MULTIVIEW_CREATE_INFO,
@@ -610,15 +825,24 @@ pub unsafe extern "system" fn create_render_pass(
                     ),
                 )
             };
-            let (Some(create2), Ok(chain), Ok(multiview), Ok(aspects)) =
-                (create2, chain, multiview, aspects)
-            else {
+            // A chain too long to look through to its end has neither struct where the layer
+            // looks; the copy shares what lies past its limit.
+            let (multiview, aspects) = (multiview.ok().flatten(), aspects.ok().flatten());
+            let (Some(create2), Ok(chain)) = (create2, chain) else {
+                // Every emulating device has render pass 2 (the layer enables it), so this is an
+                // injecting one: no density enums are valid on it anyway.
                 tracing::warn!(
                     inject,
-                    "vkCreateRenderPass: cannot upgrade a density-map (or, injecting, any) \
-                     render pass to version 2 (no vkCreateRenderPass2 below, or a pNext chain the \
-                     layer cannot copy); passed on as is, at full rate"
+                    "vkCreateRenderPass: cannot upgrade a render pass to version 2 (no \
+                     vkCreateRenderPass2 below, or a pNext chain the layer cannot copy); passed \
+                     on as is, at full rate"
                 );
+                if dev.fdm.is_some() {
+                    // A driver without the density-map extension must not get its enums; an
+                    // unexpected failure of the layer's is what the specification lets any
+                    // command answer (VK_ERROR_UNKNOWN).
+                    return vk::Result::ERROR_UNKNOWN;
+                }
                 // SAFETY: the next layer's function, with the caller's arguments.
                 return unsafe { next(device, info, alloc, out) };
             };
@@ -666,7 +890,12 @@ unsafe fn create_render_pass2_with(
             _ => None,
         };
         let inject = dev.inject.is_some() && !info.is_null();
-        let Some(density) = density.or(inject.then_some(vk::ATTACHMENT_UNUSED)) else {
+        // As in `create_render_pass`: density enums outside the density-map struct.
+        // SAFETY: the caller's create info, read only.
+        let ci = unsafe { info.as_ref() };
+        // SAFETY: as above.
+        let names = dev.fdm.is_some() && ci.is_some_and(|ci| unsafe { v2_names_density(ci) });
+        let Some(density) = density.or((inject || names).then_some(vk::ATTACHMENT_UNUSED)) else {
             // SAFETY: the next layer's function, with the caller's arguments.
             return unsafe { create2(device, info, alloc, out) };
         };
@@ -699,13 +928,13 @@ unsafe fn create_render_pass2_with(
         }
         let fdm = vk::StructureType::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT;
         // SAFETY: the caller's chain, read only.
-        let Ok(chain) = (unsafe { ChainCopy::without(ci.p_next, |t| t == fdm) }) else {
+        let Ok(chain) = (unsafe { chain_without(ci.p_next, |t| t == fdm, which) }) else {
+            // `chain_without` leaves out what it cannot copy, so this is not expected; the
+            // driver must not get the density-map struct all the same.
             tracing::warn!(
-                "{which}: a pNext chain the layer cannot copy; the density-map render pass is \
-                 passed on as is, at full rate"
+                "{which}: a pNext chain the layer cannot copy; the render pass is refused"
             );
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { create2(device, info, alloc, out) };
+            return vk::Result::ERROR_UNKNOWN;
         };
         // SAFETY: the caller's arrays outlive the call.
         let pass = unsafe { Pass2::from_v2(ci) };
@@ -1579,6 +1808,8 @@ mod tests {
             width: 16,
             height: 16,
         };
+        // SAFETY: the converted pass owns its references; its dependencies have no chains.
+        unsafe { pass.without_density_enums() };
         add_shading_rate(&mut pass, 2, texel);
         let d = &pass.attachments[2];
         assert_eq!(d.format, vk::Format::R8_UINT);

@@ -29,6 +29,7 @@ mod settings_file;
 mod symmetric_fov;
 mod threads;
 mod tidy;
+mod vk_app_written_maps;
 mod vk_clears;
 mod vk_convert;
 mod vk_enable;
