@@ -192,6 +192,7 @@ pub struct Converter {
     passes: parking_lot::Mutex<HashMap<u64, (vk::ImageLayout, vk::ImageLayout)>>,
     logged_layout: AtomicBool,
     logged_state: AtomicBool,
+    logged_conditional: AtomicBool,
 }
 
 /// Each converting device's [`Converter`], by dispatch key; a leaf lock like [`crate::vk::image`]'s.
@@ -377,9 +378,7 @@ pub unsafe fn device_destroyed(handle: vk::Device) {
     }
     FRAMEBUFFERS.write().retain(|_, (key, _)| *key != k);
     // Command buffers go with their device (and pools) without vkFreeCommandBuffers.
-    for s in &RECORDS {
-        s.lock().retain(|_, b| b.device != k);
-    }
+    forget_where(|_, r| r.device == k);
 }
 
 impl Converter {
@@ -464,6 +463,7 @@ impl Converter {
                 passes: parking_lot::Mutex::new(HashMap::new()),
                 logged_layout: AtomicBool::new(false),
                 logged_state: AtomicBool::new(false),
+                logged_conditional: AtomicBool::new(false),
             })
         }
     }
@@ -1040,6 +1040,38 @@ impl Converter {
             }
             return;
         };
+        if bound.inherited_conditional {
+            if !self.logged_conditional.swap(true, Ordering::Relaxed) {
+                tracing::warn!(
+                    image = image,
+                    "a secondary command buffer that inherits conditional rendering begins a \
+                     pass with a density map the application writes: the layer cannot suspend \
+                     the condition there (its dispatch would be skipped when its copy is not), so \
+                     the map is not converted and its shadow keeps what it had"
+                );
+            }
+            return;
+        }
+        // Conditional rendering discards dispatches but not copies
+        // (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#drawing-conditional-rendering>):
+        // the conversion runs outside it, since the pass reads the map whatever the condition.
+        // The begin hooks run outside any render pass, where a condition begun outside one may
+        // end and begin again (VUID-vkCmdEndConditionalRenderingEXT-None-01986).
+        // SAFETY: `cb` is recording on this device.
+        let next = unsafe { registry::recording(cb) }.map(|r| r.next);
+        let suspend = bound.conditional.and_then(|c| {
+            let n = next?;
+            Some((
+                c,
+                n.cmd_end_conditional_rendering_ext?,
+                n.cmd_begin_conditional_rendering_ext?,
+            ))
+        });
+        if let Some((_, end, _)) = suspend {
+            // SAFETY: the next layer's command, on the application's recording command buffer
+            // whose condition is active.
+            unsafe { end(cb) };
+        }
         let d = &self.own.fns;
         let s = &m.shadow;
         let merged = s.layers == 1 && s.app_layers > 1;
@@ -1165,6 +1197,14 @@ impl Converter {
             );
             restore(d, cb, &bound);
         }
+        if let Some(((buffer, offset, flags), _, begin)) = suspend {
+            let info = vk::ConditionalRenderingBeginInfoEXT::default()
+                .buffer(buffer)
+                .offset(offset)
+                .flags(flags);
+            // SAFETY: the application's condition again, as it began it.
+            unsafe { begin(cb, &info) };
+        }
     }
 }
 
@@ -1197,6 +1237,12 @@ struct PushRange {
     stages: vk::ShaderStageFlags,
     offset: u32,
     size: u32,
+    /// Order of the range's latest push among the command buffer's pushes: ranges are given back
+    /// in the order the application last pushed them, so the last layout it pushed with (which
+    /// decides which earlier push constants stay defined,
+    /// <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#descriptorsets-compatibility>)
+    /// is the last one again.
+    seq: u32,
 }
 
 /// What the application has bound at the compute bind point of one command buffer, and its
@@ -1211,8 +1257,11 @@ pub struct Bound {
     push_count: u32,
     /// Something was bound that this record cannot give back.
     lost: bool,
-    /// The command buffer's device (its dispatch key), whose destruction drops the record.
-    device: Key,
+    /// Conditional rendering the application made active in this command buffer (buffer, offset,
+    /// flags), which the conversion suspends.
+    conditional: Option<(vk::Buffer, u64, vk::ConditionalRenderingFlagsEXT)>,
+    /// A secondary command buffer that inherits conditional rendering: it cannot suspend it.
+    inherited_conditional: bool,
 }
 
 impl Default for Bound {
@@ -1225,7 +1274,8 @@ impl Default for Bound {
             pushes: [PushRange::default(); PUSHES],
             push_count: 0,
             lost: false,
-            device: 0,
+            conditional: None,
+            inherited_conditional: false,
         }
     }
 }
@@ -1268,18 +1318,21 @@ impl Bound {
             return;
         }
         self.push[range.offset as usize..end].copy_from_slice(values);
-        let known = &self.pushes[..self.push_count as usize];
-        if known.iter().any(|p| {
+        self.seq = self.seq.wrapping_add(1).max(1);
+        let seq = self.seq;
+        let known = &mut self.pushes[..self.push_count as usize];
+        if let Some(p) = known.iter_mut().find(|p| {
             p.layout == range.layout
                 && p.stages == range.stages
                 && p.offset == range.offset
                 && p.size == range.size
         }) {
+            p.seq = seq;
             return;
         }
         match self.pushes.get_mut(self.push_count as usize) {
             Some(slot) => {
-                *slot = range;
+                *slot = PushRange { seq, ..range };
                 self.push_count += 1;
             }
             None => self.lost = true,
@@ -1314,7 +1367,10 @@ unsafe fn restore(d: &ash::Device, cb: vk::CommandBuffer, bound: &Bound) {
                 &s.dynamic[..s.dynamic_count as usize],
             );
         }
-        for p in &bound.pushes[..bound.push_count as usize] {
+        let mut pushes = bound.pushes;
+        let pushes = &mut pushes[..bound.push_count as usize];
+        pushes.sort_by_key(|p| p.seq);
+        for p in pushes.iter() {
             let at = p.offset as usize;
             d.cmd_push_constants(
                 cb,
@@ -1345,37 +1401,188 @@ impl Hasher for HandleHasher {
     }
 }
 
-type Records = HashMap<u64, Box<Bound>, BuildHasherDefault<HandleHasher>>;
-
-/// Shards of the per-command-buffer records, so threads recording different command buffers
-/// rarely meet on a lock. Leaf locks: held for a look-up and a copy into or out of one record.
-const SHARDS: usize = 16;
-static RECORDS: [parking_lot::Mutex<Records>; SHARDS] =
-    [const { parking_lot::Mutex::new(HashMap::with_hasher(BuildHasherDefault::new())) }; SHARDS];
-
-fn shard(cb: vk::CommandBuffer) -> &'static parking_lot::Mutex<Records> {
-    let h = cb.as_raw() >> 4;
-    &RECORDS[((h ^ (h >> 7)) as usize) % SHARDS]
+/// One command buffer's record: what it has bound ([`Bound`]), behind a lock of its own. Command
+/// buffers are externally synchronised (a command buffer and its pool are used by one thread at a
+/// time, <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-threadingbehavior>),
+/// so that lock is never contended: it is one uncontended atomic on the record's own memory, which
+/// no other command buffer shares.
+struct CbRecord {
+    /// The device's dispatch key, whose destruction drops the record.
+    device: Key,
+    /// The pool it was allocated from (0 where the layer did not see the allocation), whose
+    /// destruction drops the record.
+    pool: u64,
+    /// A secondary command buffer (whose begin info's inheritance info is read).
+    secondary: bool,
+    bound: parking_lot::Mutex<Bound>,
 }
 
-/// Runs `f` on `cb`'s record, if it has one.
+type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<HandleHasher>>;
+
+/// Every command buffer's record. Taken only to add a record (at allocation), to drop one (free,
+/// pool or device destruction), and on a thread's first look-up of a command buffer since any of
+/// these: recording threads find their command buffers' records in their own [`CB_CACHE`]
+/// without it. A leaf lock.
+static CB_RECORDS: parking_lot::Mutex<Records> =
+    parking_lot::Mutex::new(HashMap::with_hasher(BuildHasherDefault::new()));
+
+/// Advanced (under [`CB_RECORDS`]) whenever a record is added or dropped: a cached look-up is good
+/// only while the generation it was made in is current, so a handle value the driver reuses for a
+/// new command buffer never finds the old one's record.
+static CB_GENERATION: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+/// A thread's cached look-up: command buffer, generation, record.
+type CacheEntry = (u64, u64, *const CbRecord);
+
+/// Look-ups a thread keeps: the command buffers it records at once.
+const CACHED: usize = 4;
+
+thread_local! {
+    static CB_CACHE: std::cell::Cell<[CacheEntry; CACHED]> =
+        const { std::cell::Cell::new([(0, 0, std::ptr::null()); CACHED]) };
+}
+
+/// `cb`'s record, for the length of a call on `cb`: from this thread's cache where it is current,
+/// else from [`CB_RECORDS`], then cached.
+///
+/// Sound because a record leaves [`CB_RECORDS`] (and may be freed) only when its command buffer is
+/// freed, its pool or its device destroyed, which the application synchronises with every call on
+/// the command buffer; and every such change advances [`CB_GENERATION`], so no entry made before
+/// it is used after it.
+#[inline]
+fn record_of<R>(cb: vk::CommandBuffer, f: impl FnOnce(&CbRecord) -> R) -> Option<R> {
+    let raw = cb.as_raw();
+    let now = CB_GENERATION.load(Ordering::Acquire);
+    let cached = CB_CACHE
+        .try_with(|c| {
+            c.get()
+                .iter()
+                .find(|e| e.0 == raw && e.1 == now)
+                .map(|e| e.2)
+        })
+        .ok()
+        .flatten();
+    let ptr = match cached {
+        Some(p) => p,
+        None => {
+            let map = CB_RECORDS.lock();
+            let p = Arc::as_ptr(map.get(&raw)?);
+            let _ = CB_CACHE.try_with(|c| {
+                let mut v = c.get();
+                v.rotate_right(1);
+                v[0] = (raw, now, p);
+                c.set(v);
+            });
+            p
+        }
+    };
+    // SAFETY: the record is alive for this call on `cb` (see above).
+    Some(f(unsafe { &*ptr }))
+}
+
+/// Runs `f` on `cb`'s bindings, if it has a record.
 #[inline]
 fn with_record(cb: vk::CommandBuffer, f: impl FnOnce(&mut Bound)) {
-    if let Some(b) = shard(cb).lock().get_mut(&cb.as_raw()) {
-        f(b);
+    record_of(cb, |r| f(&mut r.bound.lock()));
+}
+
+/// A copy of `cb`'s bindings, `None` where it has no record or they cannot be given back.
+fn bound_of(cb: vk::CommandBuffer) -> Option<Bound> {
+    record_of(cb, |r| *r.bound.lock()).filter(|b| !b.lost)
+}
+
+/// Drops the records `drop` selects.
+fn forget_where(drop: impl Fn(u64, &CbRecord) -> bool) {
+    let mut map = CB_RECORDS.lock();
+    let before = map.len();
+    map.retain(|&cb, r| !drop(cb, r));
+    if map.len() != before {
+        CB_GENERATION.fetch_add(1, Ordering::Release);
     }
 }
 
-/// A copy of `cb`'s record, `None` where it has none or cannot be given back.
-fn bound_of(cb: vk::CommandBuffer) -> Option<Bound> {
-    let r = shard(cb).lock();
-    let b = r.get(&cb.as_raw())?;
-    (!b.lost).then_some(**b)
+/// Adds (or renews) `cb`'s record.
+fn remember(cb: vk::CommandBuffer, device: Key, pool: u64, secondary: bool) {
+    let mut map = CB_RECORDS.lock();
+    map.insert(
+        cb.as_raw(),
+        Arc::new(CbRecord {
+            device,
+            pool,
+            secondary,
+            bound: parking_lot::Mutex::new(Bound::default()),
+        }),
+    );
+    CB_GENERATION.fetch_add(1, Ordering::Release);
 }
 
-/// Forgets every record (tests only reach it through device destruction of all command buffers).
-fn forget(cb: vk::CommandBuffer) {
-    shard(cb).lock().remove(&cb.as_raw());
+/// `vkAllocateCommandBuffers`: each new command buffer gets its record, with its pool.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn allocate_command_buffers(
+    device: vk::Device,
+    info: *const vk::CommandBufferAllocateInfo<'_>,
+    out: *mut vk::CommandBuffer,
+) -> vk::Result {
+    guard(
+        "vkAllocateCommandBuffers",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let rec = unsafe { registry::recording(device) };
+            let Some(next) = rec.and_then(|r| r.next.allocate_command_buffers) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // SAFETY: the next layer's function, with the caller's arguments.
+            let r = unsafe { next(device, info, out) };
+            // SAFETY: as the caller promised.
+            let (Some(k), Some(i)) = (unsafe { registry::key(device) }, unsafe { info.as_ref() })
+            else {
+                return r;
+            };
+            if r == vk::Result::SUCCESS && !out.is_null() {
+                let n = i.command_buffer_count as usize;
+                // SAFETY: the driver wrote `command_buffer_count` handles.
+                let cbs = unsafe { std::slice::from_raw_parts(out, n) };
+                let secondary = i.level == vk::CommandBufferLevel::SECONDARY;
+                for &cb in cbs {
+                    remember(cb, k, i.command_pool.as_raw(), secondary);
+                }
+            }
+            r
+        },
+    )
+}
+
+/// The records of a destroyed pool's command buffers go.
+fn pool_destroyed(device: Key, pool: u64) {
+    forget_where(|_, r| r.device == device && r.pool == pool);
+}
+
+/// `vkDestroyCommandPool`: its command buffers are freed with it, and their records go
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkDestroyCommandPool.html>).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn destroy_command_pool(
+    device: vk::Device,
+    pool: vk::CommandPool,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyCommandPool", (), || {
+        // SAFETY: as the caller promised.
+        let key = unsafe { registry::key(device) };
+        if let (Some(k), false) = (key, pool == vk::CommandPool::null()) {
+            pool_destroyed(k, pool.as_raw());
+        }
+        // SAFETY: as the caller promised.
+        let next = unsafe { registry::recording(device) }.and_then(|r| r.next.destroy_command_pool);
+        if let Some(next) = next {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            unsafe { next(device, pool, alloc) };
+        }
+    })
 }
 
 /// `vkBeginCommandBuffer`: the command buffer's bindings start empty
@@ -1397,20 +1604,21 @@ pub unsafe extern "system" fn begin_command_buffer(
             let Some(next) = rec.and_then(|r| r.next.begin_command_buffer) else {
                 return vk::Result::ERROR_INITIALIZATION_FAILED;
             };
-            // SAFETY: as the caller promised.
-            let device = unsafe { registry::key(cb) }.unwrap_or(0);
-            {
-                let mut r = shard(cb).lock();
-                let fresh = Bound {
-                    device,
+            let found = record_of(cb, |r| {
+                // SAFETY: the caller's begin info, read only; its inheritance info is read for
+                // secondary command buffers only, as the specification says.
+                let inherits = r.secondary && unsafe { inherits_conditional_rendering(info) };
+                *r.bound.lock() = Bound {
+                    inherited_conditional: inherits,
                     ..Bound::default()
                 };
-                match r.get_mut(&cb.as_raw()) {
-                    Some(b) => **b = fresh,
-                    None => {
-                        r.insert(cb.as_raw(), Box::new(fresh));
-                    }
-                }
+            });
+            if found.is_none() {
+                // Allocated before the layer saw it (not expected on an emulating device): a
+                // primary's record without a pool, dropped with the command buffer or its device.
+                // SAFETY: as the caller promised.
+                let device = unsafe { registry::key(cb) }.unwrap_or(0);
+                remember(cb, device, 0, false);
             }
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(cb, info) }
@@ -1431,11 +1639,8 @@ pub unsafe extern "system" fn free_command_buffers(
     guard("vkFreeCommandBuffers", (), || {
         if !cbs.is_null() {
             // SAFETY: the caller's array.
-            for &cb in unsafe { std::slice::from_raw_parts(cbs, count as usize) } {
-                if cb != vk::CommandBuffer::null() {
-                    forget(cb);
-                }
-            }
+            let freed = unsafe { std::slice::from_raw_parts(cbs, count as usize) };
+            forget_where(|cb, _| freed.iter().any(|f| f.as_raw() == cb && cb != 0));
         }
         // The leaf table, not the registry's ranked map: fovea's own uploads free their command
         // buffers through the layer under their submit lock (`crate::common::lock::Rank`).
@@ -1461,6 +1666,72 @@ pub unsafe fn framebuffer_destroyed(device: vk::Device, fb: vk::Framebuffer) {
             fbs.remove(&fb.as_raw());
         }
     }
+}
+
+/// Whether a begin info's inheritance info makes the command buffer inherit conditional rendering.
+///
+/// # Safety
+/// `info` must be NULL or a valid begin info of a secondary command buffer.
+unsafe fn inherits_conditional_rendering(info: *const vk::CommandBufferBeginInfo<'_>) -> bool {
+    // SAFETY: as the caller promised.
+    let Some(begin) = (unsafe { info.as_ref() }) else {
+        return false;
+    };
+    // SAFETY: as the caller promised: a secondary's begin info has a valid inheritance info.
+    let Some(inh) = (unsafe { begin.p_inheritance_info.as_ref() }) else {
+        return false;
+    };
+    let ty = vk::StructureType::COMMAND_BUFFER_INHERITANCE_CONDITIONAL_RENDERING_INFO_EXT;
+    // SAFETY: the caller's chain, read only.
+    let found = unsafe {
+        chain::find::<vk::CommandBufferInheritanceConditionalRenderingInfoEXT<'_>>(inh.p_next, ty)
+    };
+    let Some(c) = found.ok().flatten() else {
+        return false;
+    };
+    // SAFETY: found by its sType in a valid chain.
+    unsafe { (*c).conditional_rendering_enable == vk::TRUE }
+}
+
+/// `vkCmdBeginConditionalRenderingEXT`: the condition is noted, so a conversion can suspend it.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_begin_conditional_rendering(
+    cb: vk::CommandBuffer,
+    info: *const vk::ConditionalRenderingBeginInfoEXT<'_>,
+) {
+    guard("vkCmdBeginConditionalRenderingEXT", (), || {
+        // SAFETY: as the caller promised.
+        let rec = unsafe { registry::recording(cb) };
+        let Some(next) = rec.and_then(|r| r.next.cmd_begin_conditional_rendering_ext) else {
+            return;
+        };
+        // SAFETY: as the caller promised.
+        if let Some(i) = unsafe { info.as_ref() } {
+            let c = (i.buffer, i.offset, i.flags);
+            with_record(cb, |b| b.conditional = Some(c));
+        }
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { next(cb, info) }
+    })
+}
+
+/// `vkCmdEndConditionalRenderingEXT`: the condition is forgotten.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_end_conditional_rendering(cb: vk::CommandBuffer) {
+    guard("vkCmdEndConditionalRenderingEXT", (), || {
+        // SAFETY: as the caller promised.
+        let rec = unsafe { registry::recording(cb) };
+        let Some(next) = rec.and_then(|r| r.next.cmd_end_conditional_rendering_ext) else {
+            return;
+        };
+        with_record(cb, |b| b.conditional = None);
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { next(cb) }
+    })
 }
 
 /// `vkCmdBindPipeline`: a compute pipeline is noted.
@@ -1570,6 +1841,7 @@ pub unsafe extern "system" fn cmd_push_constants(
                 stages,
                 offset,
                 size,
+                seq: 0,
             };
             with_record(cb, |b| b.push(range, v));
         }
@@ -1757,6 +2029,7 @@ mod tests {
             stages: vk::ShaderStageFlags::COMPUTE,
             offset,
             size,
+            seq: 0,
         };
         b.push(r(0, 4), &[1, 2, 3, 4]);
         b.push(r(0, 4), &[5, 6, 7, 8]);
@@ -1769,6 +2042,68 @@ mod tests {
             b.push(r(i * 4, 4), &[0; 4]);
         }
         assert!(b.lost, "more ranges than the record holds");
+    }
+
+    /// Ranges come back in the order of their latest push, not the order first seen: after
+    /// pushes with layouts A, B, A the last layout pushed with is A again.
+    #[test]
+    fn push_constants_come_back_in_the_order_last_pushed() {
+        let a = vk::PipelineLayout::from_raw(1);
+        let b = vk::PipelineLayout::from_raw(2);
+        let r = |layout| PushRange {
+            layout,
+            stages: vk::ShaderStageFlags::COMPUTE,
+            offset: 0,
+            size: 4,
+            seq: 0,
+        };
+        let mut bound = Bound::default();
+        bound.push(r(a), &[1; 4]);
+        bound.push(r(b), &[2; 4]);
+        bound.push(r(a), &[3; 4]);
+        let mut order = bound.pushes[..bound.push_count as usize].to_vec();
+        order.sort_by_key(|p| p.seq);
+        let layouts: Vec<_> = order.iter().map(|p| p.layout).collect();
+        assert_eq!(layouts, [b, a]);
+        assert_eq!(&bound.push[..4], &[3; 4]);
+    }
+
+    /// A pool's destruction drops the records of the command buffers allocated from it, and only
+    /// those: over many create, allocate and destroy cycles the records do not grow.
+    #[test]
+    fn destroyed_pools_take_their_command_buffers_records() {
+        let device: Key = 0xD0_0000;
+        let count = |pool: u64| {
+            CB_RECORDS
+                .lock()
+                .values()
+                .filter(|r| r.device == device && r.pool == pool)
+                .count()
+        };
+        remember(vk::CommandBuffer::from_raw(0xD0_0001), device, 7, false);
+        for cycle in 0..100u64 {
+            let pool = 100 + cycle;
+            for i in 0..4 {
+                let cb = vk::CommandBuffer::from_raw(0xD1_0000 + cycle * 8 + i);
+                remember(cb, device, pool, i % 2 == 1);
+                with_record(cb, |b| b.lost = true);
+            }
+            assert_eq!(count(pool), 4);
+            pool_destroyed(device, pool);
+            assert_eq!(count(pool), 0, "cycle {cycle}");
+        }
+        let left = CB_RECORDS
+            .lock()
+            .values()
+            .filter(|r| r.device == device)
+            .count();
+        assert_eq!(left, 1, "the other pool's command buffer stays");
+        assert!(bound_of(vk::CommandBuffer::from_raw(0xD0_0001)).is_some());
+        assert!(
+            bound_of(vk::CommandBuffer::from_raw(0xD1_0000)).is_none(),
+            "a freed handle finds no record, in this thread's cache either"
+        );
+        forget_where(|_, r| r.device == device);
     }
 
     /// The checked-in SPIR-V is what `shaders/build.sh` makes of the checked-in source.

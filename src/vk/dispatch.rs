@@ -242,8 +242,19 @@ hooks! {
         // compute bindings are recorded so that they can be given back after the conversion.
         c"vkBeginCommandBuffer" => begin_command_buffer: PFN_vkBeginCommandBuffer =
             convert::begin_command_buffer, When::Emulated;
+        c"vkAllocateCommandBuffers" => allocate_command_buffers: PFN_vkAllocateCommandBuffers =
+            convert::allocate_command_buffers, When::Emulated;
         c"vkFreeCommandBuffers" => free_command_buffers: PFN_vkFreeCommandBuffers =
             convert::free_command_buffers, When::Emulated;
+        c"vkDestroyCommandPool" => destroy_command_pool: PFN_vkDestroyCommandPool =
+            convert::destroy_command_pool, When::Emulated;
+        // Conversions run outside the application's conditional rendering.
+        c"vkCmdBeginConditionalRenderingEXT" => cmd_begin_conditional_rendering_ext:
+            PFN_vkCmdBeginConditionalRenderingEXT = convert::cmd_begin_conditional_rendering,
+            When::Emulated;
+        c"vkCmdEndConditionalRenderingEXT" => cmd_end_conditional_rendering_ext:
+            PFN_vkCmdEndConditionalRenderingEXT = convert::cmd_end_conditional_rendering,
+            When::Emulated;
         c"vkCmdBindPipeline" => cmd_bind_pipeline: PFN_vkCmdBindPipeline =
             convert::cmd_bind_pipeline, When::Emulated;
         c"vkCmdBindDescriptorSets" => cmd_bind_descriptor_sets: PFN_vkCmdBindDescriptorSets =

@@ -9,7 +9,9 @@
 //! (`fovea_model::shading_rate`) for the bytes the application wrote; validation says nothing
 //! but its 1.3.239 stage false positives (so the driver got no density-map enum, and every layout
 //! the application names is the image's). Also: a pass that moves its map from another layout
-//! into the density layout leaves the application's image in the layout its later barriers name.
+//! into the density layout leaves the application's image in the layout its later barriers name;
+//! a pass recorded inside the application's conditional rendering shades with its map whether
+//! the condition holds or not.
 
 use ash::vk;
 use fovea_vkdouble::Profile;
@@ -686,6 +688,66 @@ fn a_pass_that_moves_its_map_into_the_density_layout_keeps_the_apps_layouts() {
         dev.d.destroy_render_pass(reader, None);
         dev.free(staging);
         dev.free(back);
+        app.destroy(&dev);
+    }
+    dev.destroy();
+    assert_eq!(env.double.errors(), Vec::<String>::new());
+    drop(vk);
+    assert_only_stage_false_positives();
+}
+
+/// A pass inside the application's conditional rendering, with the condition false and true: the
+/// pass reads its map either way (conditional rendering discards draws and dispatches, not the
+/// density map's read), so the rates are the model's for the map the application wrote this
+/// frame, not what an earlier frame left behind.
+#[test]
+fn maps_read_inside_conditional_rendering_shade_whatever_the_condition() {
+    let Some((_serial, env)) = env() else { return };
+    let profile = Profile::Nvidia;
+    let Some(vk) = Vk::new(env, profile, true) else {
+        return;
+    };
+    let dev = Dev::with_conditional_rendering(&vk, true);
+    // SAFETY: as in the tests above.
+    unsafe {
+        let app = App::new(
+            &dev,
+            profile,
+            vk::ImageUsageFlags::COLOR_ATTACHMENT
+                | vk::ImageUsageFlags::STORAGE
+                | vk::ImageUsageFlags::TRANSFER_DST,
+        );
+        let condition = dev.buffer(4, vk::BufferUsageFlags::CONDITIONAL_RENDERING_EXT);
+        for (round, value) in [(0u32, None), (1, Some(0u32)), (2, Some(1)), (3, Some(0))] {
+            let what = format!("round {round}, condition {value:?}");
+            let bytes = compute_bytes(app.side, round * 2 + 1);
+            let staging = dev.buffer(bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC);
+            dev.write(&staging, &bytes);
+            if let Some(v) = value {
+                dev.write(&condition, &v.to_ne_bytes());
+            }
+            let cb = dev.begin();
+            dev.upload(cb, &staging, app.map.0, app.side, 1);
+            let loader = ash::ext::conditional_rendering::Device::new(&vk.instance, &dev.d);
+            if value.is_some() {
+                (loader.fp().cmd_begin_conditional_rendering_ext)(
+                    cb,
+                    &vk::ConditionalRenderingBeginInfoEXT::default()
+                        .buffer(condition.buffer)
+                        .offset(0),
+                );
+            }
+            app.read(&dev, cb, app.reader, app.reader_fb);
+            if value.is_some() {
+                (loader.fp().cmd_end_conditional_rendering_ext)(cb);
+            }
+            dev.submit(cb);
+            let got = rates_of(env, cb, &what);
+            assert_eq!(got, model_rates(profile, &bytes), "{what}");
+            dev.free(staging);
+        }
+        dev.d.device_wait_idle().expect("idle");
+        dev.free(condition);
         app.destroy(&dev);
     }
     dev.destroy();

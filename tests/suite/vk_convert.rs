@@ -82,6 +82,13 @@ pub(crate) struct Dev {
 
 impl Dev {
     pub(crate) fn new(vk: &Vk) -> Dev {
+        Dev::with_conditional_rendering(vk, false)
+    }
+
+    /// [`Dev::new`], with `VK_EXT_conditional_rendering` and its feature where `conditional`.
+    pub(crate) fn with_conditional_rendering(vk: &Vk, conditional: bool) -> Dev {
+        let mut cond = vk::PhysicalDeviceConditionalRenderingFeaturesEXT::default()
+            .conditional_rendering(true);
         let mut v11 = vk::PhysicalDeviceVulkan11Features::default().multiview(true);
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default().imageless_framebuffer(true);
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
@@ -94,14 +101,20 @@ impl Dev {
         let queues = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(0)
             .queue_priorities(&prio)];
-        let names = [FDM.as_ptr()];
-        let info = vk::DeviceCreateInfo::default()
+        let mut names = vec![FDM.as_ptr()];
+        if conditional {
+            names.push(ash::ext::conditional_rendering::NAME.as_ptr());
+        }
+        let mut info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queues)
             .enabled_extension_names(&names)
             .push_next(&mut fdm)
             .push_next(&mut v11)
             .push_next(&mut v12)
             .push_next(&mut v13);
+        if conditional {
+            info = info.push_next(&mut cond);
+        }
         // SAFETY: every struct lives across the calls.
         unsafe {
             let d = vk
