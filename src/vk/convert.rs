@@ -793,12 +793,41 @@ static FRAMEBUFFERS: parking_lot::RwLock<
     HashMap<u64, (Key, u64), BuildHasherDefault<HandleHasher>>,
 > = parking_lot::RwLock::new(HashMap::with_hasher(BuildHasherDefault::new()));
 
+/// Advanced whenever the layer sees something that may change an application's density map:
+/// a barrier moving an image into the density-map layout, a host-side transition into it, the
+/// begin of a render pass that names the density layout, stage or access without reading a map
+/// (one that writes or orders one, [`writer_pass_created`]). A conversion recorded in a command
+/// buffer at one value is still good for a later pass of the same command buffer that reads the
+/// same map at the same value: nothing the application recorded between them made the map change
+/// visible to the density-map read, so that pass needs no conversion and no barrier
+/// ([`Bound::converted`]). Within one command buffer the order of execution is the order of
+/// recording, so this holds however command buffers are submitted.
+static MAP_EPOCH: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+/// Notes that an application's density map may have changed (see [`MAP_EPOCH`]).
+pub fn map_may_have_changed() {
+    MAP_EPOCH.fetch_add(1, Ordering::AcqRel);
+}
+
+/// A filter of render passes that write or order density maps (see [`MAP_EPOCH`]): one bit per
+/// hash slot, never cleared; a stale or shared bit only costs a conversion.
+static WRITER_FILTER: [std::sync::atomic::AtomicU64; FILTER_WORDS] =
+    [const { std::sync::atomic::AtomicU64::new(0) }; FILTER_WORDS];
+
+/// A render pass that names the density layout, stage or access but reads no map was created:
+/// its begins advance [`MAP_EPOCH`].
+pub fn writer_pass_created(pass: vk::RenderPass) {
+    let (word, bit) = filter_slot(pass.as_raw());
+    WRITER_FILTER[word].fetch_or(bit, Ordering::Release);
+}
+
 /// The barrier translation's look-up of a shadow for an image the application moves into the
 /// density-map layout (`crate::vk::barrier`). Whether a map may be read is decided by the layout
 /// each pass that reads it names, at that pass's recording ([`before_render_pass`],
 /// [`before_rendering`]), not by which barriers were recorded before: command buffers may be
 /// submitted in another order than they were recorded.
 pub fn shadow_of_transitioned(image: vk::Image) -> Option<crate::bridge::Shadow> {
+    map_may_have_changed();
     crate::bridge::shadow_of(image)
 }
 
@@ -844,6 +873,10 @@ pub unsafe fn before_render_pass(
     let (Some(k), Some(b)) = (unsafe { registry::key(cb) }, unsafe { begin.as_ref() }) else {
         return;
     };
+    let (word, bit) = filter_slot(b.render_pass.as_raw());
+    if WRITER_FILTER[word].load(Ordering::Acquire) & bit != 0 {
+        map_may_have_changed();
+    }
     let (word, bit) = filter_slot(b.framebuffer.as_raw());
     let known = (FRAMEBUFFER_FILTER[word].load(Ordering::Acquire) & bit != 0)
         .then(|| FRAMEBUFFERS.read().get(&b.framebuffer.as_raw()).copied())
@@ -1040,6 +1073,11 @@ impl Converter {
             }
             return;
         };
+        let epoch = MAP_EPOCH.load(Ordering::Acquire);
+        if bound.converted.contains(&(image, epoch)) {
+            // Converted earlier in this command buffer, and nothing since may have changed it.
+            return;
+        }
         if bound.inherited_conditional {
             if !self.logged_conditional.swap(true, Ordering::Relaxed) {
                 tracing::warn!(
@@ -1197,6 +1235,10 @@ impl Converter {
             );
             restore(d, cb, &bound);
         }
+        with_record(cb, |b| {
+            b.converted.rotate_right(1);
+            b.converted[0] = (image, epoch);
+        });
         if let Some(((buffer, offset, flags), _, begin)) = suspend {
             let info = vk::ConditionalRenderingBeginInfoEXT::default()
                 .buffer(buffer)
@@ -1262,6 +1304,9 @@ pub struct Bound {
     conditional: Option<(vk::Buffer, u64, vk::ConditionalRenderingFlagsEXT)>,
     /// A secondary command buffer that inherits conditional rendering: it cannot suspend it.
     inherited_conditional: bool,
+    /// Maps this recording converted, with the [`MAP_EPOCH`] they were converted at (image 0:
+    /// none).
+    converted: [(u64, u64); 4],
 }
 
 impl Default for Bound {
@@ -1276,6 +1321,7 @@ impl Default for Bound {
             lost: false,
             conditional: None,
             inherited_conditional: false,
+            converted: [(0, 0); 4],
         }
     }
 }

@@ -756,6 +756,7 @@ unsafe fn transition_image_layout_with(
             // SAFETY: the next layer's function, with the caller's arguments.
             return unsafe { down(device, count, infos) };
         }
+        crate::vk::convert::map_may_have_changed();
         let copy: Vec<vk::HostImageLayoutTransitionInfoEXT<'_>> = given
             .iter()
             .map(|t| {

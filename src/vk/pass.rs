@@ -617,6 +617,12 @@ unsafe fn create_rewritten(
     let info = pass.info(flags, p_next);
     // SAFETY: the copy and everything it points at live across the call.
     let r = unsafe { create2(dev.handle, &info, alloc, out) };
+    if r == vk::Result::SUCCESS && density == vk::ATTACHMENT_UNUSED {
+        // A pass that names the density layout, stage or access but reads no map writes or
+        // orders one.
+        // SAFETY: just created.
+        crate::vk::convert::writer_pass_created(unsafe { *out });
+    }
     if r == vk::Result::SUCCESS && density != vk::ATTACHMENT_UNUSED && texel.is_some() {
         // SAFETY: just created.
         let handle = unsafe { *out };

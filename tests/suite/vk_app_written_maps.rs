@@ -755,3 +755,74 @@ fn maps_read_inside_conditional_rendering_shade_whatever_the_condition() {
     drop(vk);
     assert_only_stage_false_positives();
 }
+
+/// The barriers the double saw recorded in `cb`.
+fn barriers_in(env: &Env, cb: vk::CommandBuffer) -> usize {
+    use ash::vk::Handle as _;
+    env.double
+        .events("barrier")
+        .iter()
+        .filter(|b| b["command_buffer"] == serde_json::json!(cb.as_raw()))
+        .count()
+}
+
+/// Two passes in one command buffer read the same map: where nothing between them wrote it, the
+/// second costs no conversion and no barrier (the double counts the same barriers as for one
+/// pass); where the application wrote it between them (compute and a barrier), the second pass
+/// is converted again and shades with the new content.
+#[test]
+fn a_map_read_again_unchanged_costs_no_barrier() {
+    let Some((_serial, env)) = env() else { return };
+    let profile = Profile::Nvidia;
+    let Some(vk) = Vk::new(env, profile, true) else {
+        return;
+    };
+    let dev = Dev::new(&vk);
+    // SAFETY: as in the tests above.
+    unsafe {
+        let app = App::new(
+            &dev,
+            profile,
+            vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::STORAGE,
+        );
+        let mut counts = Vec::new();
+        for (passes, rewrite) in [(1, false), (2, false), (2, true)] {
+            let what = format!("{passes} pass(es), map rewritten between: {rewrite}");
+            let cb = dev.begin();
+            app.write_by_compute(&dev, cb, 1);
+            let mut bytes = compute_bytes(app.side, 1);
+            app.read(&dev, cb, app.reader, app.reader_fb);
+            if passes == 2 {
+                if rewrite {
+                    app.write_by_compute(&dev, cb, 2);
+                    bytes = compute_bytes(app.side, 2);
+                }
+                app.read(&dev, cb, app.reader, app.reader_fb);
+            }
+            dev.submit(cb);
+            assert_eq!(
+                rates_of(env, cb, &what),
+                model_rates(profile, &bytes),
+                "{what}"
+            );
+            counts.push(barriers_in(env, cb));
+        }
+        let (one, unchanged, rewritten) = (counts[0], counts[1], counts[2]);
+        // The second pass's own colour barrier is the application's: one more than one pass.
+        assert_eq!(
+            unchanged,
+            one + 1,
+            "a second pass over an unchanged map added barriers beyond the application's: {counts:?}"
+        );
+        assert!(
+            rewritten > unchanged + 2,
+            "a rewritten map was not converted again: {counts:?}"
+        );
+        dev.d.device_wait_idle().expect("idle");
+        app.destroy(&dev);
+    }
+    dev.destroy();
+    assert_eq!(env.double.errors(), Vec::<String>::new());
+    drop(vk);
+    assert_only_stage_false_positives();
+}
