@@ -157,11 +157,24 @@ fn shader_on_cpu(density: &[u8], push: &Push) -> Vec<u8> {
 struct MapObjects {
     /// A sampled 2D-array view of every layer of the application's image.
     view: vk::ImageView,
+    shadow: ShadowImage,
+}
+
+/// What one command buffer converts one map with: a code buffer the dispatch writes and the copy
+/// reads, and a descriptor set naming it and the map's view. Owned by the command buffer's record
+/// ([`CbRecord::slots`]), so command buffers that may run at once (on two queues, with
+/// `SIMULTANEOUS_USE`, primaries executing secondaries that convert) share no buffer the
+/// conversion writes; made at a command buffer's first conversion of the map and kept across its
+/// recordings, so recording allocates nothing in steady state; destroyed when the command buffer
+/// is freed or its pool or device destroyed, none of which may happen while it is pending.
+#[derive(Clone, Copy, Debug)]
+struct Slot {
+    image: u64,
+    view: vk::ImageView,
     buffer: vk::Buffer,
     memory: vk::DeviceMemory,
     set: vk::DescriptorSet,
     pool: vk::DescriptorPool,
-    shadow: ShadowImage,
 }
 
 /// One application density image.
@@ -367,6 +380,9 @@ pub unsafe fn device_destroyed(handle: vk::Device) {
     let Some(k) = (unsafe { registry::key(handle) }) else {
         return;
     };
+    // Command buffers go with their device (and pools) without vkFreeCommandBuffers; their slots
+    // go while the converter is still there.
+    forget_where(|_, r| r.device == k);
     let c = {
         let mut v = CONVERTERS.write();
         let at = v.iter().position(|(key, _)| *key == k);
@@ -377,8 +393,6 @@ pub unsafe fn device_destroyed(handle: vk::Device) {
         unsafe { c.destroy() };
     }
     FRAMEBUFFERS.write().retain(|_, (key, _)| *key != k);
-    // Command buffers go with their device (and pools) without vkFreeCommandBuffers.
-    forget_where(|_, r| r.device == k);
 }
 
 impl Converter {
@@ -481,7 +495,7 @@ impl Converter {
         // SAFETY: the layer's own objects, unused on an idle device.
         unsafe {
             for m in maps {
-                destroy_map(d, &m, None);
+                d.destroy_image_view(m.view, None);
             }
             for p in self.pools.lock().drain(..) {
                 d.destroy_descriptor_pool(p, None);
@@ -545,15 +559,9 @@ impl Converter {
         app: vk::Image,
         shadow: &ShadowImage,
     ) -> Result<MapObjects, vk::Result> {
-        let d = &self.own.fns;
-        let codes = u64::from(shadow.extent.width)
-            * u64::from(shadow.extent.height)
-            * u64::from(shadow.layers);
-        let size = codes.div_ceil(4).max(1) * 4;
-        // SAFETY: the layer's own objects on a live device (and a view of the application's
-        // live image); each is destroyed again on failure.
-        unsafe {
-            let view = d.create_image_view(
+        // SAFETY: a view of the application's live image, which has memory (it has a view).
+        let view = unsafe {
+            self.own.fns.create_image_view(
                 &vk::ImageViewCreateInfo::default()
                     .image(app)
                     .view_type(vk::ImageViewType::TYPE_2D_ARRAY)
@@ -566,8 +574,28 @@ impl Converter {
                         layer_count: shadow.app_layers.max(1),
                     }),
                 None,
-            )?;
-            let buffer = match d.create_buffer(
+            )
+        }?;
+        Ok(MapObjects {
+            view,
+            shadow: *shadow,
+        })
+    }
+
+    /// A command buffer's code buffer and descriptor set for the map `m` of `image` ([`Slot`]).
+    ///
+    /// # Safety
+    /// The device must be live; `m` this converter's objects of a live map.
+    unsafe fn make_slot(&self, image: u64, m: &MapObjects) -> Result<Slot, vk::Result> {
+        let d = &self.own.fns;
+        let shadow = &m.shadow;
+        let codes = u64::from(shadow.extent.width)
+            * u64::from(shadow.extent.height)
+            * u64::from(shadow.layers);
+        let size = codes.div_ceil(4).max(1) * 4;
+        // SAFETY: the layer's own objects on a live device; each is destroyed again on failure.
+        unsafe {
+            let buffer = d.create_buffer(
                 &vk::BufferCreateInfo::default()
                     .size(size)
                     .usage(
@@ -575,13 +603,7 @@ impl Converter {
                     )
                     .sharing_mode(vk::SharingMode::EXCLUSIVE),
                 None,
-            ) {
-                Ok(b) => b,
-                Err(e) => {
-                    d.destroy_image_view(view, None);
-                    return Err(e);
-                }
-            };
+            )?;
             let req = d.get_buffer_memory_requirements(buffer);
             let memory = match self
                 .own
@@ -598,24 +620,21 @@ impl Converter {
                 Ok(m) => m,
                 Err(e) => {
                     d.destroy_buffer(buffer, None);
-                    d.destroy_image_view(view, None);
                     return Err(e);
                 }
             };
             let bound = d.bind_buffer_memory(buffer, memory, 0);
-            let set = bound.and_then(|()| self.allocate_set());
-            let (set, pool) = match set {
+            let (set, pool) = match bound.and_then(|()| self.allocate_set()) {
                 Ok(s) => s,
                 Err(e) => {
                     d.destroy_buffer(buffer, None);
                     d.free_memory(memory, None);
-                    d.destroy_image_view(view, None);
                     return Err(e);
                 }
             };
-            let image = [vk::DescriptorImageInfo {
+            let image_info = [vk::DescriptorImageInfo {
                 sampler: vk::Sampler::null(),
-                image_view: view,
+                image_view: m.view,
                 image_layout: vk::ImageLayout::GENERAL,
             }];
             let buf = [vk::DescriptorBufferInfo {
@@ -628,7 +647,7 @@ impl Converter {
                     .dst_set(set)
                     .dst_binding(0)
                     .descriptor_type(vk::DescriptorType::SAMPLED_IMAGE)
-                    .image_info(&image),
+                    .image_info(&image_info),
                 vk::WriteDescriptorSet::default()
                     .dst_set(set)
                     .dst_binding(1)
@@ -636,40 +655,88 @@ impl Converter {
                     .buffer_info(&buf),
             ];
             d.update_descriptor_sets(&writes, &[]);
-            Ok(MapObjects {
-                view,
+            Ok(Slot {
+                image,
+                view: m.view,
                 buffer,
                 memory,
                 set,
                 pool,
-                shadow: *shadow,
             })
         }
     }
-}
 
-/// `pools` (the device's pool list, whose lock serialises every use of the pools) is `Some` where
-/// the set goes back to its pool; sets also go with their pool at device destruction. Descriptor
-/// pools are externally synchronised
-/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkFreeDescriptorSets.html>, "Host
-/// Synchronization"), and views of density images come and go on any of the application's threads.
-///
-/// # Safety
-/// `m`'s objects must be the layer's own on `d`'s live device, unused from now on.
-unsafe fn destroy_map(
-    d: &ash::Device,
-    m: &MapObjects,
-    pools: Option<&parking_lot::Mutex<Vec<vk::DescriptorPool>>>,
-) {
-    // SAFETY: as the caller promised.
-    unsafe {
-        if let Some(pools) = pools {
-            let _pools = pools.lock();
-            let _ = d.free_descriptor_sets(m.pool, &[m.set]);
+    /// `cb`'s slot for the map `m` of `image`: the one it converted the map with before, or a new
+    /// one (a slot made for an earlier image with the same handle is replaced).
+    ///
+    /// # Safety
+    /// As [`Converter::make_slot`]; `cb` recording on this device.
+    unsafe fn slot(&self, cb: vk::CommandBuffer, image: u64, m: &MapObjects) -> Option<Slot> {
+        let known = record_of(cb, |r| {
+            r.slots
+                .lock()
+                .iter()
+                .find(|s| s.image == image && s.view == m.view)
+                .copied()
+        })?;
+        if known.is_some() {
+            return known;
         }
-        d.destroy_buffer(m.buffer, None);
-        d.free_memory(m.memory, None);
-        d.destroy_image_view(m.view, None);
+        // SAFETY: as the caller promised.
+        match unsafe { self.make_slot(image, m) } {
+            Ok(slot) => {
+                let stale = record_of(cb, |r| {
+                    let mut slots = r.slots.lock();
+                    let stale: Vec<Slot> =
+                        slots.iter().filter(|s| s.image == image).copied().collect();
+                    slots.retain(|s| s.image != image);
+                    slots.push(slot);
+                    stale
+                })
+                .unwrap_or_default();
+                // SAFETY: slots of a view destroyed with its image; the command buffer is
+                // recording, so none of its earlier recordings is pending.
+                unsafe { self.destroy_slots(&stale) };
+                Some(slot)
+            }
+            Err(e) => {
+                if !self.logged_state.swap(true, Ordering::Relaxed) {
+                    tracing::warn!(
+                        image = image,
+                        result = ?e,
+                        "no code buffer for a density-map conversion: the pass renders with what \
+                         the shadow holds"
+                    );
+                }
+                None
+            }
+        }
+    }
+
+    /// Destroys a command buffer's slots. The set goes back to its pool under the pools' lock,
+    /// which serialises every use of the pools (descriptor pools are externally synchronised,
+    /// <https://registry.khronos.org/vulkan/specs/latest/man/html/vkFreeDescriptorSets.html>,
+    /// and command buffers are freed on any of the application's threads).
+    ///
+    /// # Safety
+    /// The slots must be this converter's, on its live device, and their command buffer not
+    /// pending.
+    unsafe fn destroy_slots(&self, slots: &[Slot]) {
+        if slots.is_empty() {
+            return;
+        }
+        let d = &self.own.fns;
+        let pools = self.pools.lock();
+        // SAFETY: as the caller promised.
+        unsafe {
+            for s in slots {
+                if pools.contains(&s.pool) {
+                    let _ = d.free_descriptor_sets(s.pool, &[s.set]);
+                }
+                d.destroy_buffer(s.buffer, None);
+                d.free_memory(s.memory, None);
+            }
+        }
     }
 }
 
@@ -705,9 +772,10 @@ pub unsafe fn map_destroyed(dev: &Device, app: vk::Image) {
         objects: Some(m), ..
     }) = m
     {
-        // SAFETY: every command buffer that used them used the application's image, which the
-        // application no longer uses.
-        unsafe { destroy_map(&c.own.fns, &m, Some(&c.pools)) };
+        // SAFETY: every command buffer that used it used the application's image, which the
+        // application no longer uses; command buffers' sets naming it are rewritten before they
+        // convert another map with this image's handle (`Converter::slot`).
+        unsafe { c.own.fns.destroy_image_view(m.view, None) };
     }
 }
 
@@ -1090,6 +1158,10 @@ impl Converter {
             }
             return;
         }
+        // SAFETY: as the caller promised.
+        let Some(slot) = (unsafe { self.slot(cb, image, m) }) else {
+            return;
+        };
         // Conditional rendering discards dispatches but not copies
         // (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#drawing-conditional-rendering>):
         // the conversion runs outside it, since the pass reads the map whatever the condition.
@@ -1130,22 +1202,43 @@ impl Converter {
             base_array_layer: 0,
             layer_count: s.layers,
         };
+        let shadow_barrier = |old, new, src, dst| {
+            vk::ImageMemoryBarrier::default()
+                .src_access_mask(src)
+                .dst_access_mask(dst)
+                .old_layout(old)
+                .new_layout(new)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .image(s.image)
+                .subresource_range(shadow_range)
+        };
         // SAFETY: the next layer's commands on the application's recording command buffer, with
         // the layer's own objects; outside a render pass, as the begin hooks are.
         unsafe {
-            // Whatever wrote the map (or last read the code buffer) comes first
-            // (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#synchronization-dependencies>):
-            // the application's own barrier to the density layout made its writes available.
+            // 1. Whatever wrote the map comes before the dispatch reads it, and whatever read this
+            // command buffer's code buffer (an earlier conversion's copy) before the dispatch
+            // writes it (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#synchronization-dependencies>):
+            // the application's own dependency into the density layout made its writes
+            // available. The shadow's old content is discarded (UNDEFINED) once earlier passes'
+            // shading-rate reads are done, ready for the copy. ALL_COMMANDS stands in for the
+            // unknown writer and for the shading-rate stage, which validation 1.3.239 refuses
+            // without NVIDIA's shading-rate-image feature (docs/vulkan-fdm-on-fsr.md#shadows).
             d.cmd_pipeline_barrier(
                 cb,
                 vk::PipelineStageFlags::ALL_COMMANDS,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
                 vk::DependencyFlags::empty(),
                 &[vk::MemoryBarrier::default()
                     .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
                     .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)],
                 &[],
-                &[],
+                &[shadow_barrier(
+                    vk::ImageLayout::UNDEFINED,
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    vk::AccessFlags::empty(),
+                    vk::AccessFlags::TRANSFER_WRITE,
+                )],
             );
             d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, self.pipeline);
             d.cmd_bind_descriptor_sets(
@@ -1153,7 +1246,7 @@ impl Converter {
                 vk::PipelineBindPoint::COMPUTE,
                 self.layout,
                 0,
-                &[m.set],
+                &[slot.set],
                 &[],
             );
             d.cmd_push_constants(
@@ -1164,14 +1257,10 @@ impl Converter {
                 &push.bytes(),
             );
             d.cmd_dispatch(cb, groups, 1, 1);
-            // The shadow's old content is discarded (UNDEFINED): the copy writes all of it, after
-            // the shading-rate reads of earlier passes. ALL_COMMANDS stands in for the
-            // shading-rate stage here and below, as in the shadow clears (`crate::vk::submit`):
-            // it covers that stage, and the validation layers CI runs refuse the stage bit
-            // without NVIDIA's shading-rate-image feature (docs/vulkan-fdm-on-fsr.md#shadows).
+            // 2. The codes, from the dispatch to the copy: exactly those stages.
             d.cmd_pipeline_barrier(
                 cb,
-                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
                 vk::PipelineStageFlags::TRANSFER,
                 vk::DependencyFlags::empty(),
                 &[],
@@ -1180,22 +1269,14 @@ impl Converter {
                     .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
                     .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                     .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .buffer(m.buffer)
+                    .buffer(slot.buffer)
                     .offset(0)
                     .size(vk::WHOLE_SIZE)],
-                &[vk::ImageMemoryBarrier::default()
-                    .src_access_mask(vk::AccessFlags::empty())
-                    .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .old_layout(vk::ImageLayout::UNDEFINED)
-                    .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .image(s.image)
-                    .subresource_range(shadow_range)],
+                &[],
             );
             d.cmd_copy_buffer_to_image(
                 cb,
-                m.buffer,
+                slot.buffer,
                 s.image,
                 vk::ImageLayout::TRANSFER_DST_OPTIMAL,
                 &[vk::BufferImageCopy {
@@ -1216,6 +1297,8 @@ impl Converter {
                     },
                 }],
             );
+            // 3. The shadow, from the copy to the pass's shading-rate read (ALL_COMMANDS for the
+            // shading-rate stage, as above).
             d.cmd_pipeline_barrier(
                 cb,
                 vk::PipelineStageFlags::TRANSFER,
@@ -1223,15 +1306,12 @@ impl Converter {
                 vk::DependencyFlags::empty(),
                 &[],
                 &[],
-                &[vk::ImageMemoryBarrier::default()
-                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .dst_access_mask(vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR)
-                    .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                    .new_layout(SHADOW_LAYOUT)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .image(s.image)
-                    .subresource_range(shadow_range)],
+                &[shadow_barrier(
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    SHADOW_LAYOUT,
+                    vk::AccessFlags::TRANSFER_WRITE,
+                    vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR,
+                )],
             );
             restore(d, cb, &bound);
         }
@@ -1461,6 +1541,8 @@ struct CbRecord {
     /// A secondary command buffer (whose begin info's inheritance info is read).
     secondary: bool,
     bound: parking_lot::Mutex<Bound>,
+    /// The command buffer's conversion objects, one per map it converted ([`Slot`]).
+    slots: parking_lot::Mutex<Vec<Slot>>,
 }
 
 type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<HandleHasher>>;
@@ -1537,13 +1619,38 @@ fn bound_of(cb: vk::CommandBuffer) -> Option<Bound> {
     record_of(cb, |r| *r.bound.lock()).filter(|b| !b.lost)
 }
 
-/// Drops the records `drop` selects.
+/// Drops the records `drop` selects, and destroys their conversion objects (their command
+/// buffers are being freed, with their pool or device, and so are not pending).
 fn forget_where(drop: impl Fn(u64, &CbRecord) -> bool) {
-    let mut map = CB_RECORDS.lock();
-    let before = map.len();
-    map.retain(|&cb, r| !drop(cb, r));
-    if map.len() != before {
-        CB_GENERATION.fetch_add(1, Ordering::Release);
+    let mut gone = Vec::new();
+    {
+        let mut map = CB_RECORDS.lock();
+        let before = map.len();
+        map.retain(|&cb, r| {
+            let d = drop(cb, r);
+            if d {
+                gone.push(Arc::clone(r));
+            }
+            !d
+        });
+        if map.len() != before {
+            CB_GENERATION.fetch_add(1, Ordering::Release);
+        }
+    }
+    for r in gone {
+        let slots = std::mem::take(&mut *r.slots.lock());
+        if slots.is_empty() {
+            continue;
+        }
+        let c = CONVERTERS
+            .read()
+            .iter()
+            .find(|(key, _)| *key == r.device)
+            .map(|(_, c)| Arc::clone(c));
+        if let Some(c) = c {
+            // SAFETY: the converter's own slots; their command buffer is not pending.
+            unsafe { c.destroy_slots(&slots) };
+        }
     }
 }
 
@@ -1557,6 +1664,7 @@ fn remember(cb: vk::CommandBuffer, device: Key, pool: u64, secondary: bool) {
             pool,
             secondary,
             bound: parking_lot::Mutex::new(Bound::default()),
+            slots: parking_lot::Mutex::new(Vec::new()),
         }),
     );
     CB_GENERATION.fetch_add(1, Ordering::Release);
