@@ -5,13 +5,16 @@
 //! (`gpu::density_images`). An application's own map is written by the application's commands
 //! (copies, draws, dispatches), so its content is known only on the device, when the pass runs. At
 //! `vkCmdBeginRenderPass(2)` and `vkCmdBeginRendering` of a pass whose density map is such an image,
-//! the layer records, before calling down: a barrier making earlier writes visible to compute, a
-//! dispatch of `shaders/convert.comp` that reads the map (a layer-owned sampled view) and writes
-//! codes into a layer-owned buffer, a copy of that buffer into the shadow, barriers handing the
-//! shadow to the shading-rate stage in `FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR`, and finally
-//! the application's own compute bindings again (docs/vulkan-fdm-on-fsr.md#shadows). The
-//! conversion runs at every such pass begin: the map may have been written anywhere since, and a
-//! map of a few thousand texels is a small dispatch.
+//! the layer records, before calling down: a barrier making earlier writes visible to compute
+//! (and discarding the shadow's old content once earlier passes read it), a dispatch of
+//! `shaders/convert.comp` that reads the map (a layer-owned sampled view) and writes codes into a
+//! code buffer the command buffer owns ([`Slot`]), a barrier from that dispatch to a copy of the
+//! buffer into the shadow, a barrier handing the shadow to the shading-rate stage in
+//! `FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR`, and finally the application's own compute
+//! bindings again (docs/vulkan-fdm-on-fsr.md#shadows). The conversion runs at every such pass
+//! begin unless the command buffer already converted the map and nothing since may have changed
+//! it ([`MAP_EPOCH`]); it runs outside the application's conditional rendering, which would skip
+//! the dispatch but not the copy.
 //!
 //! The byte → code mapping is `fovea_model::shading_rate::fill_codes`; the shader gets everything
 //! device-specific (the clamp to `maxFragmentSize` and to the rates
@@ -30,8 +33,10 @@
 //! shader objects, device-generated commands) convert nothing.
 //!
 //! Objects: pipeline, layouts and descriptor pools at device creation; per density image a sampled
-//! view of it, a code buffer and a descriptor set at image creation; all destroyed with their
-//! owners. Nothing is allocated per command.
+//! view of it with its first view; per command buffer and map a code buffer and a descriptor set
+//! at the command buffer's first conversion of the map; all destroyed with their owners. Nothing is
+//! allocated per command in steady state, and no process-wide lock is taken while recording: each
+//! thread finds its command buffers' records in a cache of its own ([`record_of`]).
 
 use std::collections::HashMap;
 use std::ffi::{c_void, CStr};

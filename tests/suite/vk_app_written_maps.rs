@@ -826,3 +826,133 @@ fn a_map_read_again_unchanged_costs_no_barrier() {
     drop(vk);
     assert_only_stage_false_positives();
 }
+
+/// A secondary command buffer (`SIMULTANEOUS_USE`) renders with the map through dynamic rendering
+/// and is executed from two primaries, each of which first uploads its own content into the map;
+/// both primaries go down in one submit, in either order. The conversion recorded in the
+/// secondary uses the secondary's own code buffer, and the rates after the submit are the model's
+/// for the content the last primary uploaded; validation (which checks simultaneous use) says
+/// nothing.
+///
+/// lavapipe runs one queue in order, so a code buffer shared between command buffers could not
+/// race here; the test holds the conversion's per-command-buffer objects to what the application
+/// sees, whichever order its command buffers run in.
+#[test]
+fn a_secondary_executed_from_two_primaries_shades_with_each_primarys_map() {
+    let Some((_serial, env)) = env() else { return };
+    let profile = Profile::Amd;
+    let Some(vk) = Vk::new(env, profile, true) else {
+        return;
+    };
+    let dev = Dev::new(&vk);
+    // SAFETY: as in the tests above.
+    unsafe {
+        let app = App::new(
+            &dev,
+            profile,
+            vk::ImageUsageFlags::COLOR_ATTACHMENT
+                | vk::ImageUsageFlags::STORAGE
+                | vk::ImageUsageFlags::TRANSFER_DST,
+        );
+        let d = &dev.d;
+        let secondary = d
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(dev.pool)
+                    .level(vk::CommandBufferLevel::SECONDARY)
+                    .command_buffer_count(1),
+            )
+            .expect("a secondary")[0];
+        let inheritance = vk::CommandBufferInheritanceInfo::default();
+        d.begin_command_buffer(
+            secondary,
+            &vk::CommandBufferBeginInfo::default()
+                .flags(vk::CommandBufferUsageFlags::SIMULTANEOUS_USE)
+                .inheritance_info(&inheritance),
+        )
+        .expect("vkBeginCommandBuffer (secondary)");
+        let color_att = [vk::RenderingAttachmentInfo::default()
+            .image_view(app.color.2)
+            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .clear_value(CLEAR[0])];
+        let mut density_att = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
+            .image_view(app.map.2)
+            .image_layout(FDM_LAYOUT);
+        let info = vk::RenderingInfo::default()
+            .render_area(AREA)
+            .layer_count(1)
+            .color_attachments(&color_att)
+            .push_next(&mut density_att);
+        d.cmd_begin_rendering(secondary, &info);
+        d.cmd_end_rendering(secondary);
+        d.end_command_buffer(secondary).expect("vkEndCommandBuffer");
+        let contents = [compute_bytes(app.side, 3), compute_bytes(app.side, 4)];
+        let staging: Vec<Buffer> = contents
+            .iter()
+            .map(|bytes| {
+                let b = dev.buffer(bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC);
+                dev.write(&b, bytes);
+                b
+            })
+            .collect();
+        let primaries: Vec<vk::CommandBuffer> = staging
+            .iter()
+            .map(|s| {
+                let cb = dev.begin();
+                dev.upload(cb, s, app.map.0, app.side, 1);
+                d.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::ALL_COMMANDS,
+                    vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[vk::ImageMemoryBarrier::default()
+                        .image(app.color.0)
+                        .subresource_range(range(0, 1))
+                        .old_layout(vk::ImageLayout::UNDEFINED)
+                        .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                        .src_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
+                        .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
+                        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)],
+                );
+                d.cmd_execute_commands(cb, &[secondary]);
+                d.end_command_buffer(cb).expect("vkEndCommandBuffer");
+                cb
+            })
+            .collect();
+        for (order, last) in [([0usize, 1usize], 1usize), ([1, 0], 0)] {
+            let cbs = [primaries[order[0]], primaries[order[1]]];
+            d.queue_submit(
+                dev.queue,
+                &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                vk::Fence::null(),
+            )
+            .expect("vkQueueSubmit");
+            d.queue_wait_idle(dev.queue).expect("idle");
+            let what = format!("primaries in order {order:?}");
+            let submits = env.double.events("submit");
+            let read = submits
+                .last()
+                .and_then(|s| s["shading_rate_images"].as_array().cloned())
+                .unwrap_or_default();
+            assert_eq!(
+                codes_of(&read, &what),
+                model_rates(profile, &contents[last]),
+                "{what}"
+            );
+        }
+        d.device_wait_idle().expect("idle");
+        for s in staging {
+            dev.free(s);
+        }
+        app.destroy(&dev);
+    }
+    dev.destroy();
+    assert_eq!(env.double.errors(), Vec::<String>::new());
+    drop(vk);
+    assert_only_stage_false_positives();
+}
