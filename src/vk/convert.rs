@@ -206,8 +206,9 @@ pub struct Converter {
     /// Application view → its image, for views of converted images.
     views: parking_lot::Mutex<HashMap<u64, u64>>,
     /// Rewritten render pass → its density attachment's `initialLayout` and `finalLayout`, as the
-    /// driver knows them (the density layout is `GENERAL` there).
-    passes: parking_lot::Mutex<HashMap<u64, (vk::ImageLayout, vk::ImageLayout)>>,
+    /// driver knows them (the density layout is `GENERAL` there), and whether the application
+    /// named the density layout itself as the initial one.
+    passes: parking_lot::Mutex<HashMap<u64, (vk::ImageLayout, vk::ImageLayout, bool)>>,
     logged_layout: AtomicBool,
     logged_state: AtomicBool,
     logged_conditional: AtomicBool,
@@ -919,7 +920,7 @@ fn readable(layout: vk::ImageLayout) -> bool {
 pub unsafe fn pass_changed(
     dev: &Device,
     pass: vk::RenderPass,
-    layouts: Option<(vk::ImageLayout, vk::ImageLayout)>,
+    layouts: Option<(vk::ImageLayout, vk::ImageLayout, bool)>,
 ) {
     // SAFETY: as the caller promised.
     let Some(c) = (unsafe { converter(dev.handle) }) else {
@@ -981,11 +982,13 @@ pub unsafe fn before_render_pass(
     let Some(view) = view else {
         return;
     };
-    let Some((initial, last)) = c.passes.lock().get(&b.render_pass.as_raw()).copied() else {
+    let Some((initial, last, density_initial)) =
+        c.passes.lock().get(&b.render_pass.as_raw()).copied()
+    else {
         return;
     };
     // SAFETY: as the caller promised.
-    unsafe { c.convert_for_pass(cb, view, initial, last) };
+    unsafe { c.convert_for_pass(cb, view, initial, last, density_initial) };
 }
 
 /// `vkCmdBeginRendering`, before calling down: converts the density map the rendering info names
@@ -1024,8 +1027,9 @@ pub unsafe fn before_rendering(
         return;
     };
     if let Some((image, m)) = c.map_of_view(f.image_view.as_raw()) {
+        let fdm = f.image_layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
         // SAFETY: as the caller promised.
-        unsafe { c.convert(cb, image, &m, readable(f.image_layout)) };
+        unsafe { c.convert(cb, image, &m, readable(f.image_layout), fdm) };
     }
 }
 
@@ -1053,6 +1057,7 @@ impl Converter {
         view: u64,
         initial: vk::ImageLayout,
         last: vk::ImageLayout,
+        density_initial: bool,
     ) {
         let Some((image, m)) = self.map_of_view(view) else {
             return;
@@ -1064,7 +1069,7 @@ impl Converter {
         let before = readable(initial);
         if before {
             // SAFETY: as the caller promised.
-            unsafe { self.convert(cb, image, &m, true) };
+            unsafe { self.convert(cb, image, &m, true, density_initial && initial == last) };
         }
         if initial != last {
             // SAFETY: as the caller promised; the application's image, whole.
@@ -1072,7 +1077,7 @@ impl Converter {
         }
         if !before {
             // SAFETY: as the caller promised.
-            unsafe { self.convert(cb, image, &m, !discarded && readable(last)) };
+            unsafe { self.convert(cb, image, &m, !discarded && readable(last), false) };
         }
     }
 
@@ -1120,11 +1125,21 @@ impl Converter {
     }
 
     /// Records the conversion of the application's map `image` into its shadow, where `readable`
-    /// (its layout at this point is `GENERAL`).
+    /// (its layout at this point is `GENERAL`). `in_density_layout`: the application names the map
+    /// in the density layout itself here, which nothing can write in, so a change since an earlier
+    /// conversion in this command buffer had to move it back into that layout, which the layer
+    /// sees ([`MAP_EPOCH`]); only then may the conversion be skipped.
     ///
     /// # Safety
     /// `cb` must be recording, outside a render pass, on this converter's device.
-    unsafe fn convert(&self, cb: vk::CommandBuffer, image: u64, m: &MapObjects, readable: bool) {
+    unsafe fn convert(
+        &self,
+        cb: vk::CommandBuffer,
+        image: u64,
+        m: &MapObjects,
+        readable: bool,
+        in_density_layout: bool,
+    ) {
         if !readable {
             if !self.logged_layout.swap(true, Ordering::Relaxed) {
                 tracing::warn!(
@@ -1147,7 +1162,7 @@ impl Converter {
             return;
         };
         let epoch = MAP_EPOCH.load(Ordering::Acquire);
-        if bound.converted.contains(&(image, epoch)) {
+        if in_density_layout && bound.converted.contains(&(image, epoch)) {
             // Converted earlier in this command buffer, and nothing since may have changed it.
             return;
         }

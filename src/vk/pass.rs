@@ -598,6 +598,12 @@ unsafe fn create_rewritten(
     alloc: *const vk::AllocationCallbacks<'_>,
     out: *mut vk::RenderPass,
 ) -> vk::Result {
+    // Whether the application names the map in the density layout itself when the pass begins
+    // (before the translation makes it `GENERAL`): `crate::vk::convert` relies on it.
+    let density_initial = pass
+        .attachments
+        .get(density as usize)
+        .is_some_and(|a| a.initial_layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT);
     if dev.fdm.is_some() {
         // SAFETY: as the caller promised.
         unsafe { pass.without_density_enums() };
@@ -610,7 +616,7 @@ unsafe fn create_rewritten(
     let layouts = pass
         .attachments
         .get(density as usize)
-        .map(|a| (a.initial_layout, a.final_layout));
+        .map(|a| (a.initial_layout, a.final_layout, density_initial));
     if let (Some(texel), true) = (texel, density != vk::ATTACHMENT_UNUSED) {
         add_shading_rate(&mut pass, density, texel);
     }
