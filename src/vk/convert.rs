@@ -232,6 +232,27 @@ unsafe fn converter(handle: impl vk::Handle) -> Option<Arc<Converter>> {
         .map(|(_, c)| Arc::clone(c))
 }
 
+/// The converter of a device's dispatch key.
+fn converter_by_key(k: Key) -> Option<Arc<Converter>> {
+    CONVERTERS
+        .read()
+        .iter()
+        .find(|(key, _)| *key == k)
+        .map(|(_, c)| Arc::clone(c))
+}
+
+/// Runs `f` with the converter of a command buffer's device, reached through the command
+/// buffer's record (this thread's cache: no process-wide lock, no reference count), if the
+/// device converts.
+fn with_converter<R>(cb: vk::CommandBuffer, f: impl FnOnce(&Converter) -> R) -> Option<R> {
+    record_of(cb, |r| r.converter.as_deref().map(f)).flatten()
+}
+
+/// Whether a command buffer's device converts.
+fn has_converter(cb: vk::CommandBuffer) -> bool {
+    record_of(cb, |r| r.converter.is_some()).unwrap_or(false)
+}
+
 /// Extensions whose commands bind compute state the layer does not intercept, so it could not
 /// give the application its bindings back after a conversion.
 const UNTRACKED: &[&CStr] = &[
@@ -960,9 +981,9 @@ pub unsafe fn before_render_pass(
         return;
     }
     // SAFETY: as the caller promised.
-    let Some(c) = (unsafe { converter(cb) }) else {
+    if !has_converter(cb) {
         return;
-    };
+    }
     let Some(density) = dev.attachments.density_attachment(b.render_pass) else {
         return;
     };
@@ -982,13 +1003,15 @@ pub unsafe fn before_render_pass(
     let Some(view) = view else {
         return;
     };
-    let Some((initial, last, density_initial)) =
-        c.passes.lock().get(&b.render_pass.as_raw()).copied()
-    else {
-        return;
-    };
-    // SAFETY: as the caller promised.
-    unsafe { c.convert_for_pass(cb, view, initial, last, density_initial) };
+    with_converter(cb, |c| {
+        let Some((initial, last, density_initial)) =
+            c.passes.lock().get(&b.render_pass.as_raw()).copied()
+        else {
+            return;
+        };
+        // SAFETY: as the caller promised.
+        unsafe { c.convert_for_pass(cb, view, initial, last, density_initial) };
+    });
 }
 
 /// `vkCmdBeginRendering`, before calling down: converts the density map the rendering info names
@@ -1022,15 +1045,13 @@ pub unsafe fn before_rendering(
     if f.image_view == vk::ImageView::null() {
         return;
     }
-    // SAFETY: as the caller promised.
-    let Some(c) = (unsafe { converter(cb) }) else {
-        return;
-    };
-    if let Some((image, m)) = c.map_of_view(f.image_view.as_raw()) {
-        let fdm = f.image_layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
-        // SAFETY: as the caller promised.
-        unsafe { c.convert(cb, image, &m, readable(f.image_layout), fdm) };
-    }
+    with_converter(cb, |c| {
+        if let Some((image, m)) = c.map_of_view(f.image_view.as_raw()) {
+            let fdm = f.image_layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+            // SAFETY: as the caller promised.
+            unsafe { c.convert(cb, image, &m, readable(f.image_layout), fdm) };
+        }
+    });
 }
 
 impl Converter {
@@ -1563,6 +1584,9 @@ struct CbRecord {
     bound: parking_lot::Mutex<Bound>,
     /// The command buffer's conversion objects, one per map it converted ([`Slot`]).
     slots: parking_lot::Mutex<Vec<Slot>>,
+    /// The device's converter (`None` where it converts nothing), found once at allocation, so
+    /// that a pass begin reaches it without the process-wide [`CONVERTERS`].
+    converter: Option<Arc<Converter>>,
 }
 
 type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<HandleHasher>>;
@@ -1662,12 +1686,7 @@ fn forget_where(drop: impl Fn(u64, &CbRecord) -> bool) {
         if slots.is_empty() {
             continue;
         }
-        let c = CONVERTERS
-            .read()
-            .iter()
-            .find(|(key, _)| *key == r.device)
-            .map(|(_, c)| Arc::clone(c));
-        if let Some(c) = c {
+        if let Some(c) = &r.converter {
             // SAFETY: the converter's own slots; their command buffer is not pending.
             unsafe { c.destroy_slots(&slots) };
         }
@@ -1685,6 +1704,7 @@ fn remember(cb: vk::CommandBuffer, device: Key, pool: u64, secondary: bool) {
             secondary,
             bound: parking_lot::Mutex::new(Bound::default()),
             slots: parking_lot::Mutex::new(Vec::new()),
+            converter: converter_by_key(device),
         }),
     );
     CB_GENERATION.fetch_add(1, Ordering::Release);
