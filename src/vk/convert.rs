@@ -1681,6 +1681,28 @@ fn forget_where(drop: impl Fn(u64, &CbRecord) -> bool) {
             CB_GENERATION.fetch_add(1, Ordering::Release);
         }
     }
+    destroy_records(gone);
+}
+
+/// Drops the records of freed command buffers (a look-up each, not a scan of every record).
+fn forget(cbs: &[vk::CommandBuffer]) {
+    let mut gone = Vec::new();
+    {
+        let mut map = CB_RECORDS.lock();
+        for cb in cbs {
+            if let Some(r) = map.remove(&cb.as_raw()) {
+                gone.push(r);
+            }
+        }
+        if !gone.is_empty() {
+            CB_GENERATION.fetch_add(1, Ordering::Release);
+        }
+    }
+    destroy_records(gone);
+}
+
+/// Destroys the conversion objects of dropped records.
+fn destroy_records(gone: Vec<Arc<CbRecord>>) {
     for r in gone {
         let slots = std::mem::take(&mut *r.slots.lock());
         if slots.is_empty() {
@@ -1693,21 +1715,24 @@ fn forget_where(drop: impl Fn(u64, &CbRecord) -> bool) {
     }
 }
 
-/// Adds (or renews) `cb`'s record.
+/// Adds (or renews) `cb`'s record. A record the handle still had belonged to a command buffer the
+/// layer did not see go (its handle now names a new one): its objects go.
 fn remember(cb: vk::CommandBuffer, device: Key, pool: u64, secondary: bool) {
-    let mut map = CB_RECORDS.lock();
-    map.insert(
-        cb.as_raw(),
-        Arc::new(CbRecord {
-            device,
-            pool,
-            secondary,
-            bound: parking_lot::Mutex::new(Bound::default()),
-            slots: parking_lot::Mutex::new(Vec::new()),
-            converter: converter_by_key(device),
-        }),
-    );
-    CB_GENERATION.fetch_add(1, Ordering::Release);
+    let record = Arc::new(CbRecord {
+        device,
+        pool,
+        secondary,
+        bound: parking_lot::Mutex::new(Bound::default()),
+        slots: parking_lot::Mutex::new(Vec::new()),
+        converter: converter_by_key(device),
+    });
+    let old = {
+        let mut map = CB_RECORDS.lock();
+        let old = map.insert(cb.as_raw(), record);
+        CB_GENERATION.fetch_add(1, Ordering::Release);
+        old
+    };
+    destroy_records(old.into_iter().collect());
 }
 
 /// `vkAllocateCommandBuffers`: each new command buffer gets its record, with its pool.
@@ -1833,8 +1858,7 @@ pub unsafe extern "system" fn free_command_buffers(
     guard("vkFreeCommandBuffers", (), || {
         if !cbs.is_null() {
             // SAFETY: the caller's array.
-            let freed = unsafe { std::slice::from_raw_parts(cbs, count as usize) };
-            forget_where(|cb, _| freed.iter().any(|f| f.as_raw() == cb && cb != 0));
+            forget(unsafe { std::slice::from_raw_parts(cbs, count as usize) });
         }
         // The leaf table, not the registry's ranked map: fovea's own uploads free their command
         // buffers through the layer under their submit lock (`crate::common::lock::Rank`).
