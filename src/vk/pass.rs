@@ -851,8 +851,8 @@ pub unsafe extern "system" fn create_render_pass(
                 );
                 if dev.fdm.is_some() {
                     // A driver without the density-map extension must not get its enums; an
-                    // unexpected failure of the layer's is what the specification lets any
-                    // command answer (VK_ERROR_UNKNOWN).
+                    // unexpected failure is what any command may answer with VK_ERROR_UNKNOWN
+                    // (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkResult.html>).
                     return vk::Result::ERROR_UNKNOWN;
                 }
                 // SAFETY: the next layer's function, with the caller's arguments.
