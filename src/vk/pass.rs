@@ -1882,6 +1882,90 @@ mod tests {
         assert!(pass.correlated.is_empty());
     }
 
+    /// A pass that writes a density map (no density-map struct): its attachment's final layout,
+    /// a reference's layout, a dependency's masks and a `VkMemoryBarrier2` chained to another
+    /// dependency lose every density-map value, on copies; the rest of the dependency's chain
+    /// stays behind the translated barrier, and the application's structs are unchanged.
+    #[test]
+    fn a_pass_that_writes_a_map_loses_the_density_enums() {
+        let fdm = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+        let atts = [vk::AttachmentDescription2::default()
+            .format(vk::Format::R8G8_UNORM)
+            .initial_layout(vk::ImageLayout::UNDEFINED)
+            .final_layout(fdm)];
+        let input = [vk::AttachmentReference2::default()
+            .attachment(0)
+            .layout(fdm)];
+        let subpasses = [vk::SubpassDescription2::default().input_attachments(&input)];
+        // A struct the layer does not know, after the barrier.
+        let tail = vk::BaseInStructure {
+            s_type: vk::StructureType::from_raw(1_000_999_000),
+            ..Default::default()
+        };
+        let mut barrier = vk::MemoryBarrier2::default()
+            .src_stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)
+            .dst_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
+            .dst_access_mask(vk::AccessFlags2::FRAGMENT_DENSITY_MAP_READ_EXT);
+        barrier.p_next = &tail as *const _ as *const c_void;
+        let mut with_barrier = vk::SubpassDependency2::default().src_subpass(0);
+        with_barrier.dst_subpass = vk::SUBPASS_EXTERNAL;
+        with_barrier.p_next = &barrier as *const _ as *const c_void;
+        let deps = [
+            with_barrier,
+            vk::SubpassDependency2::default()
+                .dst_stage_mask(vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT)
+                .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT),
+        ];
+        let ci = vk::RenderPassCreateInfo2::default()
+            .attachments(&atts)
+            .subpasses(&subpasses)
+            .dependencies(&deps);
+        // SAFETY: the arrays and chains live across the test.
+        unsafe {
+            assert!(v2_names_density(&ci));
+            let mut pass = Pass2::from_v2(&ci);
+            pass.without_density_enums();
+            assert_eq!(pass.attachments[0].final_layout, vk::ImageLayout::GENERAL);
+            assert_eq!(
+                (*pass.subpasses[0].p_input_attachments).layout,
+                vk::ImageLayout::GENERAL
+            );
+            assert_eq!(
+                input[0].layout, fdm,
+                "the application's reference is not written"
+            );
+            assert_eq!(
+                pass.dependencies[1].dst_stage_mask,
+                vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+            );
+            assert_eq!(
+                pass.dependencies[1].dst_access_mask,
+                vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR
+            );
+            let b = &*(pass.dependencies[0].p_next as *const vk::MemoryBarrier2);
+            assert_eq!(b.s_type, vk::StructureType::MEMORY_BARRIER_2);
+            assert_eq!(
+                b.dst_stage_mask,
+                vk::PipelineStageFlags2::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+            );
+            assert_eq!(
+                b.dst_access_mask,
+                vk::AccessFlags2::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR
+            );
+            assert_eq!(
+                b.p_next, &tail as *const _ as *const c_void,
+                "the rest stays"
+            );
+            assert_eq!(
+                barrier.dst_stage_mask,
+                vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT,
+                "the application's barrier is not written"
+            );
+            let plain = vk::RenderPassCreateInfo2::default().subpasses(&subpasses[..0]);
+            assert!(!v2_names_density(&plain));
+        }
+    }
+
     #[test]
     fn v2_keeps_the_subpass_chain_behind_the_rate_info() {
         let tail = vk::BaseInStructure {
