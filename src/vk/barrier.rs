@@ -268,53 +268,23 @@ pub unsafe extern "system" fn create_command_pool(
     )
 }
 
-/// `vkAllocateCommandBuffers`: each buffer's queue family (its pool's) is noted.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn allocate_command_buffers(
-    device: vk::Device,
-    info: *const vk::CommandBufferAllocateInfo<'_>,
-    out: *mut vk::CommandBuffer,
-) -> vk::Result {
+/// Notes the queue family (their pool's) of command buffers `vkAllocateCommandBuffers` just made
+/// from `info` (its hook is [`crate::vk::convert::allocate_command_buffers`], which also gives
+/// each its record).
+pub fn buffers_allocated(info: &vk::CommandBufferAllocateInfo<'_>, cbs: &[vk::CommandBuffer]) {
     use ash::vk::Handle as _;
-    guard(
-        "vkAllocateCommandBuffers",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let Some(rec) = (unsafe { registry::recording(device) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = rec.next.allocate_command_buffers else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            // SAFETY: the next layer's function, with the caller's arguments.
-            let r = unsafe { next(device, info, out) };
-            // SAFETY: the caller's create info.
-            let Some(i) = (unsafe { info.as_ref() }) else {
-                return r;
-            };
-            if r != vk::Result::SUCCESS || out.is_null() {
-                return r;
-            }
-            let pool = i.command_pool.as_raw();
-            let family = {
-                let t = FAMILIES.pools.lock();
-                let (h, f) = t[slot(pool, POOL_SLOTS)];
-                (h == pool).then_some(f)
-            };
-            // SAFETY: on success `out` holds `commandBufferCount` new buffers.
-            let cbs = unsafe { std::slice::from_raw_parts(out, i.command_buffer_count as usize) };
-            let mut t = FAMILIES.buffers.lock();
-            for cb in cbs {
-                let raw = cb.as_raw();
-                // A pool whose family is not known leaves its buffers unknown too.
-                t[slot(raw, BUFFER_SLOTS)] = family.map_or((0, 0), |f| (raw, f));
-            }
-            r
-        },
-    )
+    let pool = info.command_pool.as_raw();
+    let family = {
+        let t = FAMILIES.pools.lock();
+        let (h, f) = t[slot(pool, POOL_SLOTS)];
+        (h == pool).then_some(f)
+    };
+    let mut t = FAMILIES.buffers.lock();
+    for cb in cbs {
+        let raw = cb.as_raw();
+        // A pool whose family is not known leaves its buffers unknown too.
+        t[slot(raw, BUFFER_SLOTS)] = family.map_or((0, 0), |f| (raw, f));
+    }
 }
 
 fn touches_image(b: &vk::ImageMemoryBarrier<'_>) -> bool {

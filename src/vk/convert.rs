@@ -5,13 +5,16 @@
 //! (`gpu::density_images`). An application's own map is written by the application's commands
 //! (copies, draws, dispatches), so its content is known only on the device, when the pass runs. At
 //! `vkCmdBeginRenderPass(2)` and `vkCmdBeginRendering` of a pass whose density map is such an image,
-//! the layer records, before calling down: a barrier making earlier writes visible to compute, a
-//! dispatch of `shaders/convert.comp` that reads the map (a layer-owned sampled view) and writes
-//! codes into a layer-owned buffer, a copy of that buffer into the shadow, barriers handing the
-//! shadow to the shading-rate stage in `FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR`, and finally
-//! the application's own compute bindings again (docs/vulkan-fdm-on-fsr.md#shadows). The
-//! conversion runs at every such pass begin: the map may have been written anywhere since, and a
-//! map of a few thousand texels is a small dispatch.
+//! the layer records, before calling down: a barrier making earlier writes visible to compute
+//! (and discarding the shadow's old content once earlier passes read it), a dispatch of
+//! `shaders/convert.comp` that reads the map (a layer-owned sampled view) and writes codes into a
+//! code buffer the command buffer owns ([`Slot`]), a barrier from that dispatch to a copy of the
+//! buffer into the shadow, a barrier handing the shadow to the shading-rate stage in
+//! `FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR`, and finally the application's own compute
+//! bindings again (docs/vulkan-fdm-on-fsr.md#shadows). The conversion runs at every such pass
+//! begin unless the command buffer already converted the map and nothing since may have changed
+//! it ([`MAP_EPOCH`]); it runs outside the application's conditional rendering, which would skip
+//! the dispatch but not the copy.
 //!
 //! The byte → code mapping is `fovea_model::shading_rate::fill_codes`; the shader gets everything
 //! device-specific (the clamp to `maxFragmentSize` and to the rates
@@ -30,8 +33,10 @@
 //! shader objects, device-generated commands) convert nothing.
 //!
 //! Objects: pipeline, layouts and descriptor pools at device creation; per density image a sampled
-//! view of it, a code buffer and a descriptor set at image creation; all destroyed with their
-//! owners. Nothing is allocated per command.
+//! view of it with its first view; per command buffer and map a code buffer and a descriptor set
+//! at the command buffer's first conversion of the map; all destroyed with their owners. Nothing is
+//! allocated per command in steady state, and no process-wide lock is taken while recording: each
+//! thread finds its command buffers' records in a cache of its own ([`record_of`]).
 
 use std::collections::HashMap;
 use std::ffi::{c_void, CStr};
@@ -157,23 +162,30 @@ fn shader_on_cpu(density: &[u8], push: &Push) -> Vec<u8> {
 struct MapObjects {
     /// A sampled 2D-array view of every layer of the application's image.
     view: vk::ImageView,
+    shadow: ShadowImage,
+}
+
+/// What one command buffer converts one map with: a code buffer the dispatch writes and the copy
+/// reads, and a descriptor set naming it and the map's view. Owned by the command buffer's record
+/// ([`CbRecord::slots`]), so command buffers that may run at once (on two queues, with
+/// `SIMULTANEOUS_USE`, primaries executing secondaries that convert) share no buffer the
+/// conversion writes; made at a command buffer's first conversion of the map and kept across its
+/// recordings, so recording allocates nothing in steady state; destroyed when the command buffer
+/// is freed or its pool or device destroyed, none of which may happen while it is pending.
+#[derive(Clone, Copy, Debug)]
+struct Slot {
+    image: u64,
+    view: vk::ImageView,
     buffer: vk::Buffer,
     memory: vk::DeviceMemory,
     set: vk::DescriptorSet,
     pool: vk::DescriptorPool,
-    shadow: ShadowImage,
 }
 
 /// One application density image.
 struct MapEntry {
     shadow: ShadowImage,
     objects: Option<MapObjects>,
-    /// Whether a barrier of the application's has moved the image into the density-map layout
-    /// (`GENERAL` on the driver's side). Until then it is still in its initial `UNDEFINED`
-    /// layout (the emulated passes never transition it), its content is undefined, and reading it
-    /// would be invalid, so it is not converted: it renders at full rate, as its cleared shadow
-    /// says.
-    transitioned: bool,
 }
 
 /// Per emulating device: the conversion's objects and what the begin hooks look up.
@@ -193,11 +205,13 @@ pub struct Converter {
     maps: parking_lot::Mutex<HashMap<u64, MapEntry>>,
     /// Application view → its image, for views of converted images.
     views: parking_lot::Mutex<HashMap<u64, u64>>,
-    /// Rewritten render pass → whether its density attachment's `initialLayout` leaves the map
-    /// readable (`GENERAL`, or the density layout, which barriers turn into `GENERAL`).
-    passes: parking_lot::Mutex<HashMap<u64, bool>>,
+    /// Rewritten render pass → its density attachment's `initialLayout` and `finalLayout`, as the
+    /// driver knows them (the density layout is `GENERAL` there), and whether the application
+    /// named the density layout itself as the initial one.
+    passes: parking_lot::Mutex<HashMap<u64, (vk::ImageLayout, vk::ImageLayout, bool)>>,
     logged_layout: AtomicBool,
     logged_state: AtomicBool,
+    logged_conditional: AtomicBool,
 }
 
 /// Each converting device's [`Converter`], by dispatch key; a leaf lock like [`crate::vk::image`]'s.
@@ -216,6 +230,27 @@ unsafe fn converter(handle: impl vk::Handle) -> Option<Arc<Converter>> {
         .iter()
         .find(|(key, _)| *key == k)
         .map(|(_, c)| Arc::clone(c))
+}
+
+/// The converter of a device's dispatch key.
+fn converter_by_key(k: Key) -> Option<Arc<Converter>> {
+    CONVERTERS
+        .read()
+        .iter()
+        .find(|(key, _)| *key == k)
+        .map(|(_, c)| Arc::clone(c))
+}
+
+/// Runs `f` with the converter of a command buffer's device, reached through the command
+/// buffer's record (this thread's cache: no process-wide lock, no reference count), if the
+/// device converts.
+fn with_converter<R>(cb: vk::CommandBuffer, f: impl FnOnce(&Converter) -> R) -> Option<R> {
+    record_of(cb, |r| r.converter.as_deref().map(f)).flatten()
+}
+
+/// Whether a command buffer's device converts.
+fn has_converter(cb: vk::CommandBuffer) -> bool {
+    record_of(cb, |r| r.converter.is_some()).unwrap_or(false)
 }
 
 /// Extensions whose commands bind compute state the layer does not intercept, so it could not
@@ -372,6 +407,9 @@ pub unsafe fn device_destroyed(handle: vk::Device) {
     let Some(k) = (unsafe { registry::key(handle) }) else {
         return;
     };
+    // Command buffers go with their device (and pools) without vkFreeCommandBuffers; their slots
+    // go while the converter is still there.
+    forget_where(|_, r| r.device == k);
     let c = {
         let mut v = CONVERTERS.write();
         let at = v.iter().position(|(key, _)| *key == k);
@@ -382,10 +420,6 @@ pub unsafe fn device_destroyed(handle: vk::Device) {
         unsafe { c.destroy() };
     }
     FRAMEBUFFERS.write().retain(|_, (key, _)| *key != k);
-    // Command buffers go with their device (and pools) without vkFreeCommandBuffers.
-    for s in &RECORDS {
-        s.lock().retain(|_, b| b.device != k);
-    }
 }
 
 impl Converter {
@@ -470,6 +504,7 @@ impl Converter {
                 passes: parking_lot::Mutex::new(HashMap::new()),
                 logged_layout: AtomicBool::new(false),
                 logged_state: AtomicBool::new(false),
+                logged_conditional: AtomicBool::new(false),
             })
         }
     }
@@ -487,7 +522,7 @@ impl Converter {
         // SAFETY: the layer's own objects, unused on an idle device.
         unsafe {
             for m in maps {
-                destroy_map(d, &m, None);
+                d.destroy_image_view(m.view, None);
             }
             for p in self.pools.lock().drain(..) {
                 d.destroy_descriptor_pool(p, None);
@@ -551,15 +586,9 @@ impl Converter {
         app: vk::Image,
         shadow: &ShadowImage,
     ) -> Result<MapObjects, vk::Result> {
-        let d = &self.own.fns;
-        let codes = u64::from(shadow.extent.width)
-            * u64::from(shadow.extent.height)
-            * u64::from(shadow.layers);
-        let size = codes.div_ceil(4).max(1) * 4;
-        // SAFETY: the layer's own objects on a live device (and a view of the application's
-        // live image); each is destroyed again on failure.
-        unsafe {
-            let view = d.create_image_view(
+        // SAFETY: a view of the application's live image, which has memory (it has a view).
+        let view = unsafe {
+            self.own.fns.create_image_view(
                 &vk::ImageViewCreateInfo::default()
                     .image(app)
                     .view_type(vk::ImageViewType::TYPE_2D_ARRAY)
@@ -572,8 +601,28 @@ impl Converter {
                         layer_count: shadow.app_layers.max(1),
                     }),
                 None,
-            )?;
-            let buffer = match d.create_buffer(
+            )
+        }?;
+        Ok(MapObjects {
+            view,
+            shadow: *shadow,
+        })
+    }
+
+    /// A command buffer's code buffer and descriptor set for the map `m` of `image` ([`Slot`]).
+    ///
+    /// # Safety
+    /// The device must be live; `m` this converter's objects of a live map.
+    unsafe fn make_slot(&self, image: u64, m: &MapObjects) -> Result<Slot, vk::Result> {
+        let d = &self.own.fns;
+        let shadow = &m.shadow;
+        let codes = u64::from(shadow.extent.width)
+            * u64::from(shadow.extent.height)
+            * u64::from(shadow.layers);
+        let size = codes.div_ceil(4).max(1) * 4;
+        // SAFETY: the layer's own objects on a live device; each is destroyed again on failure.
+        unsafe {
+            let buffer = d.create_buffer(
                 &vk::BufferCreateInfo::default()
                     .size(size)
                     .usage(
@@ -581,13 +630,7 @@ impl Converter {
                     )
                     .sharing_mode(vk::SharingMode::EXCLUSIVE),
                 None,
-            ) {
-                Ok(b) => b,
-                Err(e) => {
-                    d.destroy_image_view(view, None);
-                    return Err(e);
-                }
-            };
+            )?;
             let req = d.get_buffer_memory_requirements(buffer);
             let memory = match self
                 .own
@@ -604,24 +647,21 @@ impl Converter {
                 Ok(m) => m,
                 Err(e) => {
                     d.destroy_buffer(buffer, None);
-                    d.destroy_image_view(view, None);
                     return Err(e);
                 }
             };
             let bound = d.bind_buffer_memory(buffer, memory, 0);
-            let set = bound.and_then(|()| self.allocate_set());
-            let (set, pool) = match set {
+            let (set, pool) = match bound.and_then(|()| self.allocate_set()) {
                 Ok(s) => s,
                 Err(e) => {
                     d.destroy_buffer(buffer, None);
                     d.free_memory(memory, None);
-                    d.destroy_image_view(view, None);
                     return Err(e);
                 }
             };
-            let image = [vk::DescriptorImageInfo {
+            let image_info = [vk::DescriptorImageInfo {
                 sampler: vk::Sampler::null(),
-                image_view: view,
+                image_view: m.view,
                 image_layout: vk::ImageLayout::GENERAL,
             }];
             let buf = [vk::DescriptorBufferInfo {
@@ -634,7 +674,7 @@ impl Converter {
                     .dst_set(set)
                     .dst_binding(0)
                     .descriptor_type(vk::DescriptorType::SAMPLED_IMAGE)
-                    .image_info(&image),
+                    .image_info(&image_info),
                 vk::WriteDescriptorSet::default()
                     .dst_set(set)
                     .dst_binding(1)
@@ -642,40 +682,88 @@ impl Converter {
                     .buffer_info(&buf),
             ];
             d.update_descriptor_sets(&writes, &[]);
-            Ok(MapObjects {
-                view,
+            Ok(Slot {
+                image,
+                view: m.view,
                 buffer,
                 memory,
                 set,
                 pool,
-                shadow: *shadow,
             })
         }
     }
-}
 
-/// `pools` (the device's pool list, whose lock serialises every use of the pools) is `Some` where
-/// the set goes back to its pool; sets also go with their pool at device destruction. Descriptor
-/// pools are externally synchronised
-/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkFreeDescriptorSets.html>, "Host
-/// Synchronization"), and views of density images come and go on any of the application's threads.
-///
-/// # Safety
-/// `m`'s objects must be the layer's own on `d`'s live device, unused from now on.
-unsafe fn destroy_map(
-    d: &ash::Device,
-    m: &MapObjects,
-    pools: Option<&parking_lot::Mutex<Vec<vk::DescriptorPool>>>,
-) {
-    // SAFETY: as the caller promised.
-    unsafe {
-        if let Some(pools) = pools {
-            let _pools = pools.lock();
-            let _ = d.free_descriptor_sets(m.pool, &[m.set]);
+    /// `cb`'s slot for the map `m` of `image`: the one it converted the map with before, or a new
+    /// one (a slot made for an earlier image with the same handle is replaced).
+    ///
+    /// # Safety
+    /// As [`Converter::make_slot`]; `cb` recording on this device.
+    unsafe fn slot(&self, cb: vk::CommandBuffer, image: u64, m: &MapObjects) -> Option<Slot> {
+        let known = record_of(cb, |r| {
+            r.slots
+                .lock()
+                .iter()
+                .find(|s| s.image == image && s.view == m.view)
+                .copied()
+        })?;
+        if known.is_some() {
+            return known;
         }
-        d.destroy_buffer(m.buffer, None);
-        d.free_memory(m.memory, None);
-        d.destroy_image_view(m.view, None);
+        // SAFETY: as the caller promised.
+        match unsafe { self.make_slot(image, m) } {
+            Ok(slot) => {
+                let stale = record_of(cb, |r| {
+                    let mut slots = r.slots.lock();
+                    let stale: Vec<Slot> =
+                        slots.iter().filter(|s| s.image == image).copied().collect();
+                    slots.retain(|s| s.image != image);
+                    slots.push(slot);
+                    stale
+                })
+                .unwrap_or_default();
+                // SAFETY: slots of a view destroyed with its image; the command buffer is
+                // recording, so none of its earlier recordings is pending.
+                unsafe { self.destroy_slots(&stale) };
+                Some(slot)
+            }
+            Err(e) => {
+                if !self.logged_state.swap(true, Ordering::Relaxed) {
+                    tracing::warn!(
+                        image = image,
+                        result = ?e,
+                        "no code buffer for a density-map conversion: the pass renders with what \
+                         the shadow holds"
+                    );
+                }
+                None
+            }
+        }
+    }
+
+    /// Destroys a command buffer's slots. The set goes back to its pool under the pools' lock,
+    /// which serialises every use of the pools (descriptor pools are externally synchronised,
+    /// <https://registry.khronos.org/vulkan/specs/latest/man/html/vkFreeDescriptorSets.html>,
+    /// and command buffers are freed on any of the application's threads).
+    ///
+    /// # Safety
+    /// The slots must be this converter's, on its live device, and their command buffer not
+    /// pending.
+    unsafe fn destroy_slots(&self, slots: &[Slot]) {
+        if slots.is_empty() {
+            return;
+        }
+        let d = &self.own.fns;
+        let pools = self.pools.lock();
+        // SAFETY: as the caller promised.
+        unsafe {
+            for s in slots {
+                if pools.contains(&s.pool) {
+                    let _ = d.free_descriptor_sets(s.pool, &[s.set]);
+                }
+                d.destroy_buffer(s.buffer, None);
+                d.free_memory(s.memory, None);
+            }
+        }
     }
 }
 
@@ -692,7 +780,6 @@ pub unsafe fn map_created(dev: &Device, app: vk::Image, shadow: &ShadowImage) {
             MapEntry {
                 shadow: *shadow,
                 objects: None,
-                transitioned: false,
             },
         );
     }
@@ -712,9 +799,10 @@ pub unsafe fn map_destroyed(dev: &Device, app: vk::Image) {
         objects: Some(m), ..
     }) = m
     {
-        // SAFETY: every command buffer that used them used the application's image, which the
-        // application no longer uses.
-        unsafe { destroy_map(&c.own.fns, &m, Some(&c.pools)) };
+        // SAFETY: every command buffer that used it used the application's image, which the
+        // application no longer uses; command buffers' sets naming it are rewritten before they
+        // convert another map with this image's handle (`Converter::slot`).
+        unsafe { c.own.fns.destroy_image_view(m.view, None) };
     }
 }
 
@@ -800,16 +888,41 @@ static FRAMEBUFFERS: parking_lot::RwLock<
     HashMap<u64, (Key, u64), BuildHasherDefault<HandleHasher>>,
 > = parking_lot::RwLock::new(HashMap::with_hasher(BuildHasherDefault::new()));
 
+/// Advanced whenever the layer sees something that may change an application's density map:
+/// a barrier moving an image into the density-map layout, a host-side transition into it, the
+/// begin of a render pass that names the density layout, stage or access without reading a map
+/// (one that writes or orders one, [`writer_pass_created`]). A conversion recorded in a command
+/// buffer at one value is still good for a later pass of the same command buffer that reads the
+/// same map at the same value: nothing the application recorded between them made the map change
+/// visible to the density-map read, so that pass needs no conversion and no barrier
+/// ([`Bound::converted`]). Within one command buffer the order of execution is the order of
+/// recording, so this holds however command buffers are submitted.
+static MAP_EPOCH: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+/// Notes that an application's density map may have changed (see [`MAP_EPOCH`]).
+pub fn map_may_have_changed() {
+    MAP_EPOCH.fetch_add(1, Ordering::AcqRel);
+}
+
+/// A filter of render passes that write or order density maps (see [`MAP_EPOCH`]): one bit per
+/// hash slot, never cleared; a stale or shared bit only costs a conversion.
+static WRITER_FILTER: [std::sync::atomic::AtomicU64; FILTER_WORDS] =
+    [const { std::sync::atomic::AtomicU64::new(0) }; FILTER_WORDS];
+
+/// A render pass that names the density layout, stage or access but reads no map was created:
+/// its begins advance [`MAP_EPOCH`].
+pub fn writer_pass_created(pass: vk::RenderPass) {
+    let (word, bit) = filter_slot(pass.as_raw());
+    WRITER_FILTER[word].fetch_or(bit, Ordering::Release);
+}
+
 /// The barrier translation's look-up of a shadow for an image the application moves into the
-/// density-map layout (`crate::vk::barrier`): notes, where the image is an application's map, that
-/// it may be read from now on ([`MapEntry::transitioned`]).
+/// density-map layout (`crate::vk::barrier`). Whether a map may be read is decided by the layout
+/// each pass that reads it names, at that pass's recording ([`before_render_pass`],
+/// [`before_rendering`]), not by which barriers were recorded before: command buffers may be
+/// submitted in another order than they were recorded.
 pub fn shadow_of_transitioned(image: vk::Image) -> Option<crate::bridge::Shadow> {
-    for (_, c) in CONVERTERS.read().iter() {
-        if let Some(e) = c.maps.lock().get_mut(&image.as_raw()) {
-            e.transitioned = true;
-            break;
-        }
-    }
+    map_may_have_changed();
     crate::bridge::shadow_of(image)
 }
 
@@ -820,19 +933,23 @@ fn readable(layout: vk::ImageLayout) -> bool {
         || layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT
 }
 
-/// Notes a rewritten render pass's density attachment `initialLayout` (`Some`), or its
-/// destruction.
+/// Notes a rewritten render pass's density attachment `initialLayout` and `finalLayout` as the
+/// driver gets them (`Some`), or its destruction.
 ///
 /// # Safety
 /// `dev` must be live.
-pub unsafe fn pass_changed(dev: &Device, pass: vk::RenderPass, initial: Option<vk::ImageLayout>) {
+pub unsafe fn pass_changed(
+    dev: &Device,
+    pass: vk::RenderPass,
+    layouts: Option<(vk::ImageLayout, vk::ImageLayout, bool)>,
+) {
     // SAFETY: as the caller promised.
     let Some(c) = (unsafe { converter(dev.handle) }) else {
         return;
     };
     let mut passes = c.passes.lock();
-    match initial {
-        Some(l) => passes.insert(pass.as_raw(), readable(l)),
+    match layouts {
+        Some(l) => passes.insert(pass.as_raw(), l),
         None => passes.remove(&pass.as_raw()),
     };
 }
@@ -851,6 +968,10 @@ pub unsafe fn before_render_pass(
     let (Some(k), Some(b)) = (unsafe { registry::key(cb) }, unsafe { begin.as_ref() }) else {
         return;
     };
+    let (word, bit) = filter_slot(b.render_pass.as_raw());
+    if WRITER_FILTER[word].load(Ordering::Acquire) & bit != 0 {
+        map_may_have_changed();
+    }
     let (word, bit) = filter_slot(b.framebuffer.as_raw());
     let known = (FRAMEBUFFER_FILTER[word].load(Ordering::Acquire) & bit != 0)
         .then(|| FRAMEBUFFERS.read().get(&b.framebuffer.as_raw()).copied())
@@ -860,9 +981,9 @@ pub unsafe fn before_render_pass(
         return;
     }
     // SAFETY: as the caller promised.
-    let Some(c) = (unsafe { converter(cb) }) else {
+    if !has_converter(cb) {
         return;
-    };
+    }
     let Some(density) = dev.attachments.density_attachment(b.render_pass) else {
         return;
     };
@@ -882,9 +1003,15 @@ pub unsafe fn before_render_pass(
     let Some(view) = view else {
         return;
     };
-    let readable = c.passes.lock().get(&b.render_pass.as_raw()).copied();
-    // SAFETY: as the caller promised.
-    unsafe { c.convert(cb, view, readable.unwrap_or(false)) };
+    with_converter(cb, |c| {
+        let Some((initial, last, density_initial)) =
+            c.passes.lock().get(&b.render_pass.as_raw()).copied()
+        else {
+            return;
+        };
+        // SAFETY: as the caller promised.
+        unsafe { c.convert_for_pass(cb, view, initial, last, density_initial) };
+    });
 }
 
 /// `vkCmdBeginRendering`, before calling down: converts the density map the rendering info names
@@ -918,32 +1045,122 @@ pub unsafe fn before_rendering(
     if f.image_view == vk::ImageView::null() {
         return;
     }
-    // SAFETY: as the caller promised.
-    let Some(c) = (unsafe { converter(cb) }) else {
-        return;
-    };
-    // SAFETY: as the caller promised.
-    unsafe { c.convert(cb, f.image_view.as_raw(), readable(f.image_layout)) };
+    with_converter(cb, |c| {
+        if let Some((image, m)) = c.map_of_view(f.image_view.as_raw()) {
+            let fdm = f.image_layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+            // SAFETY: as the caller promised.
+            unsafe { c.convert(cb, image, &m, readable(f.image_layout), fdm) };
+        }
+    });
 }
 
 impl Converter {
-    /// Records the conversion of the map `view` shows into its shadow, if it is an application's.
+    /// The application image a view shows and its conversion objects, if it is a converted map.
+    fn map_of_view(&self, view: u64) -> Option<(u64, MapObjects)> {
+        let image = self.views.lock().get(&view).copied()?;
+        let m = self.maps.lock().get(&image).and_then(|e| e.objects)?;
+        Some((image, m))
+    }
+
+    /// In front of a rewritten render pass: the application's image makes the pass's
+    /// `initialLayout` → `finalLayout` transition the driver's pass no longer makes (the shadow
+    /// stands in for the image there), so the layouts the application's later barriers name are
+    /// the image's; and the map is converted in whichever of the two layouts it can be read, in
+    /// the order that reads it there. A map whose content the transition discards (`UNDEFINED`)
+    /// is not converted: its shadow keeps what it had, which the density map's undefined content
+    /// allows.
+    ///
+    /// # Safety
+    /// As [`Converter::convert`].
+    unsafe fn convert_for_pass(
+        &self,
+        cb: vk::CommandBuffer,
+        view: u64,
+        initial: vk::ImageLayout,
+        last: vk::ImageLayout,
+        density_initial: bool,
+    ) {
+        let Some((image, m)) = self.map_of_view(view) else {
+            return;
+        };
+        let discarded = matches!(
+            initial,
+            vk::ImageLayout::UNDEFINED | vk::ImageLayout::PREINITIALIZED
+        );
+        let before = readable(initial);
+        if before {
+            // SAFETY: as the caller promised.
+            unsafe { self.convert(cb, image, &m, true, density_initial && initial == last) };
+        }
+        if initial != last {
+            // SAFETY: as the caller promised; the application's image, whole.
+            unsafe { self.transition(cb, image, &m.shadow, initial, last) };
+        }
+        if !before {
+            // SAFETY: as the caller promised.
+            unsafe { self.convert(cb, image, &m, !discarded && readable(last), false) };
+        }
+    }
+
+    /// Records a layout transition of the application's image, ordered after everything before
+    /// it and before everything after it (a render pass's own transitions are ordered by its
+    /// external dependencies, which the application made for the pass's use of the map).
+    ///
+    /// # Safety
+    /// As [`Converter::convert`].
+    unsafe fn transition(
+        &self,
+        cb: vk::CommandBuffer,
+        image: u64,
+        shadow: &ShadowImage,
+        old: vk::ImageLayout,
+        new: vk::ImageLayout,
+    ) {
+        let d = &self.own.fns;
+        // SAFETY: as the caller promised.
+        unsafe {
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[vk::ImageMemoryBarrier::default()
+                    .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
+                    .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE)
+                    .old_layout(old)
+                    .new_layout(new)
+                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .image(vk::Image::from_raw(image))
+                    .subresource_range(vk::ImageSubresourceRange {
+                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                        base_mip_level: 0,
+                        level_count: 1,
+                        base_array_layer: 0,
+                        layer_count: shadow.app_layers.max(1),
+                    })],
+            );
+        }
+    }
+
+    /// Records the conversion of the application's map `image` into its shadow, where `readable`
+    /// (its layout at this point is `GENERAL`). `in_density_layout`: the application names the map
+    /// in the density layout itself here, which nothing can write in, so a change since an earlier
+    /// conversion in this command buffer had to move it back into that layout, which the layer
+    /// sees ([`MAP_EPOCH`]); only then may the conversion be skipped.
     ///
     /// # Safety
     /// `cb` must be recording, outside a render pass, on this converter's device.
-    unsafe fn convert(&self, cb: vk::CommandBuffer, view: u64, readable: bool) {
-        let Some(image) = self.views.lock().get(&view).copied() else {
-            return;
-        };
-        let Some(m) = self
-            .maps
-            .lock()
-            .get(&image)
-            .filter(|e| e.transitioned)
-            .and_then(|e| e.objects)
-        else {
-            return;
-        };
+    unsafe fn convert(
+        &self,
+        cb: vk::CommandBuffer,
+        image: u64,
+        m: &MapObjects,
+        readable: bool,
+        in_density_layout: bool,
+    ) {
         if !readable {
             if !self.logged_layout.swap(true, Ordering::Relaxed) {
                 tracing::warn!(
@@ -965,6 +1182,47 @@ impl Converter {
             }
             return;
         };
+        let epoch = MAP_EPOCH.load(Ordering::Acquire);
+        if in_density_layout && bound.converted.contains(&(image, epoch)) {
+            // Converted earlier in this command buffer, and nothing since may have changed it.
+            return;
+        }
+        if bound.inherited_conditional {
+            if !self.logged_conditional.swap(true, Ordering::Relaxed) {
+                tracing::warn!(
+                    image = image,
+                    "a secondary command buffer that inherits conditional rendering begins a \
+                     pass with a density map the application writes: the layer cannot suspend \
+                     the condition there (its dispatch would be skipped when its copy is not), so \
+                     the map is not converted and its shadow keeps what it had"
+                );
+            }
+            return;
+        }
+        // SAFETY: as the caller promised.
+        let Some(slot) = (unsafe { self.slot(cb, image, m) }) else {
+            return;
+        };
+        // Conditional rendering discards dispatches but not copies
+        // (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#drawing-conditional-rendering>):
+        // the conversion runs outside it, since the pass reads the map whatever the condition.
+        // The begin hooks run outside any render pass, where a condition begun outside one may
+        // end and begin again (VUID-vkCmdEndConditionalRenderingEXT-None-01986).
+        // SAFETY: `cb` is recording on this device.
+        let next = unsafe { registry::recording(cb) }.map(|r| r.next);
+        let suspend = bound.conditional.and_then(|c| {
+            let n = next?;
+            Some((
+                c,
+                n.cmd_end_conditional_rendering_ext?,
+                n.cmd_begin_conditional_rendering_ext?,
+            ))
+        });
+        if let Some((_, end, _)) = suspend {
+            // SAFETY: the next layer's command, on the application's recording command buffer
+            // whose condition is active.
+            unsafe { end(cb) };
+        }
         let d = &self.own.fns;
         let s = &m.shadow;
         let merged = s.layers == 1 && s.app_layers > 1;
@@ -985,22 +1243,43 @@ impl Converter {
             base_array_layer: 0,
             layer_count: s.layers,
         };
+        let shadow_barrier = |old, new, src, dst| {
+            vk::ImageMemoryBarrier::default()
+                .src_access_mask(src)
+                .dst_access_mask(dst)
+                .old_layout(old)
+                .new_layout(new)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .image(s.image)
+                .subresource_range(shadow_range)
+        };
         // SAFETY: the next layer's commands on the application's recording command buffer, with
         // the layer's own objects; outside a render pass, as the begin hooks are.
         unsafe {
-            // Whatever wrote the map (or last read the code buffer) comes first
-            // (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#synchronization-dependencies>):
-            // the application's own barrier to the density layout made its writes available.
+            // 1. Whatever wrote the map comes before the dispatch reads it, and whatever read this
+            // command buffer's code buffer (an earlier conversion's copy) before the dispatch
+            // writes it (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#synchronization-dependencies>):
+            // the application's own dependency into the density layout made its writes
+            // available. The shadow's old content is discarded (UNDEFINED) once earlier passes'
+            // shading-rate reads are done, ready for the copy. ALL_COMMANDS stands in for the
+            // unknown writer and for the shading-rate stage, which validation 1.3.239 refuses
+            // without NVIDIA's shading-rate-image feature (docs/vulkan-fdm-on-fsr.md#shadows).
             d.cmd_pipeline_barrier(
                 cb,
                 vk::PipelineStageFlags::ALL_COMMANDS,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
                 vk::DependencyFlags::empty(),
                 &[vk::MemoryBarrier::default()
                     .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
                     .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)],
                 &[],
-                &[],
+                &[shadow_barrier(
+                    vk::ImageLayout::UNDEFINED,
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    vk::AccessFlags::empty(),
+                    vk::AccessFlags::TRANSFER_WRITE,
+                )],
             );
             d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, self.pipeline);
             d.cmd_bind_descriptor_sets(
@@ -1008,7 +1287,7 @@ impl Converter {
                 vk::PipelineBindPoint::COMPUTE,
                 self.layout,
                 0,
-                &[m.set],
+                &[slot.set],
                 &[],
             );
             d.cmd_push_constants(
@@ -1019,14 +1298,10 @@ impl Converter {
                 &push.bytes(),
             );
             d.cmd_dispatch(cb, groups, 1, 1);
-            // The shadow's old content is discarded (UNDEFINED): the copy writes all of it, after
-            // the shading-rate reads of earlier passes. ALL_COMMANDS stands in for the
-            // shading-rate stage here and below, as in the shadow clears (`crate::vk::submit`):
-            // it covers that stage, and the validation layers CI runs refuse the stage bit
-            // without NVIDIA's shading-rate-image feature (docs/vulkan-fdm-on-fsr.md#shadows).
+            // 2. The codes, from the dispatch to the copy: exactly those stages.
             d.cmd_pipeline_barrier(
                 cb,
-                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
                 vk::PipelineStageFlags::TRANSFER,
                 vk::DependencyFlags::empty(),
                 &[],
@@ -1035,22 +1310,14 @@ impl Converter {
                     .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
                     .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                     .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .buffer(m.buffer)
+                    .buffer(slot.buffer)
                     .offset(0)
                     .size(vk::WHOLE_SIZE)],
-                &[vk::ImageMemoryBarrier::default()
-                    .src_access_mask(vk::AccessFlags::empty())
-                    .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .old_layout(vk::ImageLayout::UNDEFINED)
-                    .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .image(s.image)
-                    .subresource_range(shadow_range)],
+                &[],
             );
             d.cmd_copy_buffer_to_image(
                 cb,
-                m.buffer,
+                slot.buffer,
                 s.image,
                 vk::ImageLayout::TRANSFER_DST_OPTIMAL,
                 &[vk::BufferImageCopy {
@@ -1071,6 +1338,8 @@ impl Converter {
                     },
                 }],
             );
+            // 3. The shadow, from the copy to the pass's shading-rate read (ALL_COMMANDS for the
+            // shading-rate stage, as above).
             d.cmd_pipeline_barrier(
                 cb,
                 vk::PipelineStageFlags::TRANSFER,
@@ -1078,17 +1347,26 @@ impl Converter {
                 vk::DependencyFlags::empty(),
                 &[],
                 &[],
-                &[vk::ImageMemoryBarrier::default()
-                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .dst_access_mask(vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR)
-                    .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                    .new_layout(SHADOW_LAYOUT)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .image(s.image)
-                    .subresource_range(shadow_range)],
+                &[shadow_barrier(
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    SHADOW_LAYOUT,
+                    vk::AccessFlags::TRANSFER_WRITE,
+                    vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR,
+                )],
             );
             restore(d, cb, &bound);
+        }
+        with_record(cb, |b| {
+            b.converted.rotate_right(1);
+            b.converted[0] = (image, epoch);
+        });
+        if let Some(((buffer, offset, flags), _, begin)) = suspend {
+            let info = vk::ConditionalRenderingBeginInfoEXT::default()
+                .buffer(buffer)
+                .offset(offset)
+                .flags(flags);
+            // SAFETY: the application's condition again, as it began it.
+            unsafe { begin(cb, &info) };
         }
     }
 }
@@ -1122,6 +1400,12 @@ struct PushRange {
     stages: vk::ShaderStageFlags,
     offset: u32,
     size: u32,
+    /// Order of the range's latest push among the command buffer's pushes: ranges are given back
+    /// in the order the application last pushed them, so the last layout it pushed with (which
+    /// decides which earlier push constants stay defined,
+    /// <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#descriptorsets-compatibility>)
+    /// is the last one again.
+    seq: u32,
 }
 
 /// What the application has bound at the compute bind point of one command buffer, and its
@@ -1136,8 +1420,14 @@ pub struct Bound {
     push_count: u32,
     /// Something was bound that this record cannot give back.
     lost: bool,
-    /// The command buffer's device (its dispatch key), whose destruction drops the record.
-    device: Key,
+    /// Conditional rendering the application made active in this command buffer (buffer, offset,
+    /// flags), which the conversion suspends.
+    conditional: Option<(vk::Buffer, u64, vk::ConditionalRenderingFlagsEXT)>,
+    /// A secondary command buffer that inherits conditional rendering: it cannot suspend it.
+    inherited_conditional: bool,
+    /// Maps this recording converted, with the [`MAP_EPOCH`] they were converted at (image 0:
+    /// none).
+    converted: [(u64, u64); 4],
 }
 
 impl Default for Bound {
@@ -1150,7 +1440,9 @@ impl Default for Bound {
             pushes: [PushRange::default(); PUSHES],
             push_count: 0,
             lost: false,
-            device: 0,
+            conditional: None,
+            inherited_conditional: false,
+            converted: [(0, 0); 4],
         }
     }
 }
@@ -1193,18 +1485,21 @@ impl Bound {
             return;
         }
         self.push[range.offset as usize..end].copy_from_slice(values);
-        let known = &self.pushes[..self.push_count as usize];
-        if known.iter().any(|p| {
+        self.seq = self.seq.wrapping_add(1).max(1);
+        let seq = self.seq;
+        let known = &mut self.pushes[..self.push_count as usize];
+        if let Some(p) = known.iter_mut().find(|p| {
             p.layout == range.layout
                 && p.stages == range.stages
                 && p.offset == range.offset
                 && p.size == range.size
         }) {
+            p.seq = seq;
             return;
         }
         match self.pushes.get_mut(self.push_count as usize) {
             Some(slot) => {
-                *slot = range;
+                *slot = PushRange { seq, ..range };
                 self.push_count += 1;
             }
             None => self.lost = true,
@@ -1239,7 +1534,10 @@ unsafe fn restore(d: &ash::Device, cb: vk::CommandBuffer, bound: &Bound) {
                 &s.dynamic[..s.dynamic_count as usize],
             );
         }
-        for p in &bound.pushes[..bound.push_count as usize] {
+        let mut pushes = bound.pushes;
+        let pushes = &mut pushes[..bound.push_count as usize];
+        pushes.sort_by_key(|p| p.seq);
+        for p in pushes.iter() {
             let at = p.offset as usize;
             d.cmd_push_constants(
                 cb,
@@ -1270,37 +1568,242 @@ impl Hasher for HandleHasher {
     }
 }
 
-type Records = HashMap<u64, Box<Bound>, BuildHasherDefault<HandleHasher>>;
-
-/// Shards of the per-command-buffer records, so threads recording different command buffers
-/// rarely meet on a lock. Leaf locks: held for a look-up and a copy into or out of one record.
-const SHARDS: usize = 16;
-static RECORDS: [parking_lot::Mutex<Records>; SHARDS] =
-    [const { parking_lot::Mutex::new(HashMap::with_hasher(BuildHasherDefault::new())) }; SHARDS];
-
-fn shard(cb: vk::CommandBuffer) -> &'static parking_lot::Mutex<Records> {
-    let h = cb.as_raw() >> 4;
-    &RECORDS[((h ^ (h >> 7)) as usize) % SHARDS]
+/// One command buffer's record: what it has bound ([`Bound`]), behind a lock of its own. Command
+/// buffers are externally synchronised (a command buffer and its pool are used by one thread at a
+/// time, <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-threadingbehavior>),
+/// so that lock is never contended: it is one uncontended atomic on the record's own memory, which
+/// no other command buffer shares.
+struct CbRecord {
+    /// The device's dispatch key, whose destruction drops the record.
+    device: Key,
+    /// The pool it was allocated from (0 where the layer did not see the allocation), whose
+    /// destruction drops the record.
+    pool: u64,
+    /// A secondary command buffer (whose begin info's inheritance info is read).
+    secondary: bool,
+    bound: parking_lot::Mutex<Bound>,
+    /// The command buffer's conversion objects, one per map it converted ([`Slot`]).
+    slots: parking_lot::Mutex<Vec<Slot>>,
+    /// The device's converter (`None` where it converts nothing), found once at allocation, so
+    /// that a pass begin reaches it without the process-wide [`CONVERTERS`].
+    converter: Option<Arc<Converter>>,
 }
 
-/// Runs `f` on `cb`'s record, if it has one.
+type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<HandleHasher>>;
+
+/// Every command buffer's record. Taken only to add a record (at allocation), to drop one (free,
+/// pool or device destruction), and on a thread's first look-up of a command buffer since any of
+/// these: recording threads find their command buffers' records in their own [`CB_CACHE`]
+/// without it. A leaf lock.
+static CB_RECORDS: parking_lot::Mutex<Records> =
+    parking_lot::Mutex::new(HashMap::with_hasher(BuildHasherDefault::new()));
+
+/// Advanced (under [`CB_RECORDS`]) whenever a record is added or dropped: a cached look-up is good
+/// only while the generation it was made in is current, so a handle value the driver reuses for a
+/// new command buffer never finds the old one's record.
+static CB_GENERATION: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+/// A thread's cached look-up: command buffer, generation, record.
+type CacheEntry = (u64, u64, *const CbRecord);
+
+/// Look-ups a thread keeps: the command buffers it records at once.
+const CACHED: usize = 4;
+
+thread_local! {
+    static CB_CACHE: std::cell::Cell<[CacheEntry; CACHED]> =
+        const { std::cell::Cell::new([(0, 0, std::ptr::null()); CACHED]) };
+}
+
+/// `cb`'s record, for the length of a call on `cb`: from this thread's cache where it is current,
+/// else from [`CB_RECORDS`], then cached.
+///
+/// Sound because a record leaves [`CB_RECORDS`] (and may be freed) only when its command buffer is
+/// freed, its pool or its device destroyed, which the application synchronises with every call on
+/// the command buffer; and every such change advances [`CB_GENERATION`], so no entry made before
+/// it is used after it.
+#[inline]
+fn record_of<R>(cb: vk::CommandBuffer, f: impl FnOnce(&CbRecord) -> R) -> Option<R> {
+    let raw = cb.as_raw();
+    let now = CB_GENERATION.load(Ordering::Acquire);
+    let cached = CB_CACHE
+        .try_with(|c| {
+            c.get()
+                .iter()
+                .find(|e| e.0 == raw && e.1 == now)
+                .map(|e| e.2)
+        })
+        .ok()
+        .flatten();
+    let ptr = match cached {
+        Some(p) => p,
+        None => {
+            let map = CB_RECORDS.lock();
+            let p = Arc::as_ptr(map.get(&raw)?);
+            let _ = CB_CACHE.try_with(|c| {
+                let mut v = c.get();
+                v.rotate_right(1);
+                v[0] = (raw, now, p);
+                c.set(v);
+            });
+            p
+        }
+    };
+    // SAFETY: the record is alive for this call on `cb` (see above).
+    Some(f(unsafe { &*ptr }))
+}
+
+/// Runs `f` on `cb`'s bindings, if it has a record.
 #[inline]
 fn with_record(cb: vk::CommandBuffer, f: impl FnOnce(&mut Bound)) {
-    if let Some(b) = shard(cb).lock().get_mut(&cb.as_raw()) {
-        f(b);
+    record_of(cb, |r| f(&mut r.bound.lock()));
+}
+
+/// A copy of `cb`'s bindings, `None` where it has no record or they cannot be given back.
+fn bound_of(cb: vk::CommandBuffer) -> Option<Bound> {
+    record_of(cb, |r| *r.bound.lock()).filter(|b| !b.lost)
+}
+
+/// Drops the records `drop` selects, and destroys their conversion objects (their command
+/// buffers are being freed, with their pool or device, and so are not pending).
+fn forget_where(drop: impl Fn(u64, &CbRecord) -> bool) {
+    let mut gone = Vec::new();
+    {
+        let mut map = CB_RECORDS.lock();
+        let before = map.len();
+        map.retain(|&cb, r| {
+            let d = drop(cb, r);
+            if d {
+                gone.push(Arc::clone(r));
+            }
+            !d
+        });
+        if map.len() != before {
+            CB_GENERATION.fetch_add(1, Ordering::Release);
+        }
+    }
+    destroy_records(gone);
+}
+
+/// Drops the records of freed command buffers (a look-up each, not a scan of every record).
+fn forget(cbs: &[vk::CommandBuffer]) {
+    let mut gone = Vec::new();
+    {
+        let mut map = CB_RECORDS.lock();
+        for cb in cbs {
+            if let Some(r) = map.remove(&cb.as_raw()) {
+                gone.push(r);
+            }
+        }
+        if !gone.is_empty() {
+            CB_GENERATION.fetch_add(1, Ordering::Release);
+        }
+    }
+    destroy_records(gone);
+}
+
+/// Destroys the conversion objects of dropped records.
+fn destroy_records(gone: Vec<Arc<CbRecord>>) {
+    for r in gone {
+        let slots = std::mem::take(&mut *r.slots.lock());
+        if slots.is_empty() {
+            continue;
+        }
+        if let Some(c) = &r.converter {
+            // SAFETY: the converter's own slots; their command buffer is not pending.
+            unsafe { c.destroy_slots(&slots) };
+        }
     }
 }
 
-/// A copy of `cb`'s record, `None` where it has none or cannot be given back.
-fn bound_of(cb: vk::CommandBuffer) -> Option<Bound> {
-    let r = shard(cb).lock();
-    let b = r.get(&cb.as_raw())?;
-    (!b.lost).then_some(**b)
+/// Adds (or renews) `cb`'s record. A record the handle still had belonged to a command buffer the
+/// layer did not see go (its handle now names a new one): its objects go.
+fn remember(cb: vk::CommandBuffer, device: Key, pool: u64, secondary: bool) {
+    let record = Arc::new(CbRecord {
+        device,
+        pool,
+        secondary,
+        bound: parking_lot::Mutex::new(Bound::default()),
+        slots: parking_lot::Mutex::new(Vec::new()),
+        converter: converter_by_key(device),
+    });
+    let old = {
+        let mut map = CB_RECORDS.lock();
+        let old = map.insert(cb.as_raw(), record);
+        CB_GENERATION.fetch_add(1, Ordering::Release);
+        old
+    };
+    destroy_records(old.into_iter().collect());
 }
 
-/// Forgets every record (tests only reach it through device destruction of all command buffers).
-fn forget(cb: vk::CommandBuffer) {
-    shard(cb).lock().remove(&cb.as_raw());
+/// `vkAllocateCommandBuffers`: each new command buffer gets its record, with its pool, and its
+/// queue family is noted for ownership transfers ([`crate::vk::barrier::buffers_allocated`]).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn allocate_command_buffers(
+    device: vk::Device,
+    info: *const vk::CommandBufferAllocateInfo<'_>,
+    out: *mut vk::CommandBuffer,
+) -> vk::Result {
+    guard(
+        "vkAllocateCommandBuffers",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let rec = unsafe { registry::recording(device) };
+            let Some(next) = rec.and_then(|r| r.next.allocate_command_buffers) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // SAFETY: the next layer's function, with the caller's arguments.
+            let r = unsafe { next(device, info, out) };
+            // SAFETY: as the caller promised.
+            let (Some(k), Some(i)) = (unsafe { registry::key(device) }, unsafe { info.as_ref() })
+            else {
+                return r;
+            };
+            if r == vk::Result::SUCCESS && !out.is_null() {
+                let n = i.command_buffer_count as usize;
+                // SAFETY: the driver wrote `command_buffer_count` handles.
+                let cbs = unsafe { std::slice::from_raw_parts(out, n) };
+                let secondary = i.level == vk::CommandBufferLevel::SECONDARY;
+                for &cb in cbs {
+                    remember(cb, k, i.command_pool.as_raw(), secondary);
+                }
+                crate::vk::barrier::buffers_allocated(i, cbs);
+            }
+            r
+        },
+    )
+}
+
+/// The records of a destroyed pool's command buffers go.
+fn pool_destroyed(device: Key, pool: u64) {
+    forget_where(|_, r| r.device == device && r.pool == pool);
+}
+
+/// `vkDestroyCommandPool`: its command buffers are freed with it, and their records go
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkDestroyCommandPool.html>).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn destroy_command_pool(
+    device: vk::Device,
+    pool: vk::CommandPool,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyCommandPool", (), || {
+        // SAFETY: as the caller promised.
+        let key = unsafe { registry::key(device) };
+        if let (Some(k), false) = (key, pool == vk::CommandPool::null()) {
+            pool_destroyed(k, pool.as_raw());
+        }
+        // SAFETY: as the caller promised.
+        let next = unsafe { registry::recording(device) }.and_then(|r| r.next.destroy_command_pool);
+        if let Some(next) = next {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            unsafe { next(device, pool, alloc) };
+        }
+    })
 }
 
 /// `vkBeginCommandBuffer`: the command buffer's bindings start empty
@@ -1322,20 +1825,21 @@ pub unsafe extern "system" fn begin_command_buffer(
             let Some(next) = rec.and_then(|r| r.next.begin_command_buffer) else {
                 return vk::Result::ERROR_INITIALIZATION_FAILED;
             };
-            // SAFETY: as the caller promised.
-            let device = unsafe { registry::key(cb) }.unwrap_or(0);
-            {
-                let mut r = shard(cb).lock();
-                let fresh = Bound {
-                    device,
+            let found = record_of(cb, |r| {
+                // SAFETY: the caller's begin info, read only; its inheritance info is read for
+                // secondary command buffers only, as the specification says.
+                let inherits = r.secondary && unsafe { inherits_conditional_rendering(info) };
+                *r.bound.lock() = Bound {
+                    inherited_conditional: inherits,
                     ..Bound::default()
                 };
-                match r.get_mut(&cb.as_raw()) {
-                    Some(b) => **b = fresh,
-                    None => {
-                        r.insert(cb.as_raw(), Box::new(fresh));
-                    }
-                }
+            });
+            if found.is_none() {
+                // Allocated before the layer saw it (not expected on an emulating device): a
+                // primary's record without a pool, dropped with the command buffer or its device.
+                // SAFETY: as the caller promised.
+                let device = unsafe { registry::key(cb) }.unwrap_or(0);
+                remember(cb, device, 0, false);
             }
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(cb, info) }
@@ -1356,11 +1860,7 @@ pub unsafe extern "system" fn free_command_buffers(
     guard("vkFreeCommandBuffers", (), || {
         if !cbs.is_null() {
             // SAFETY: the caller's array.
-            for &cb in unsafe { std::slice::from_raw_parts(cbs, count as usize) } {
-                if cb != vk::CommandBuffer::null() {
-                    forget(cb);
-                }
-            }
+            forget(unsafe { std::slice::from_raw_parts(cbs, count as usize) });
         }
         // The leaf table, not the registry's ranked map: fovea's own uploads free their command
         // buffers through the layer under their submit lock (`crate::common::lock::Rank`).
@@ -1386,6 +1886,72 @@ pub unsafe fn framebuffer_destroyed(device: vk::Device, fb: vk::Framebuffer) {
             fbs.remove(&fb.as_raw());
         }
     }
+}
+
+/// Whether a begin info's inheritance info makes the command buffer inherit conditional rendering.
+///
+/// # Safety
+/// `info` must be NULL or a valid begin info of a secondary command buffer.
+unsafe fn inherits_conditional_rendering(info: *const vk::CommandBufferBeginInfo<'_>) -> bool {
+    // SAFETY: as the caller promised.
+    let Some(begin) = (unsafe { info.as_ref() }) else {
+        return false;
+    };
+    // SAFETY: as the caller promised: a secondary's begin info has a valid inheritance info.
+    let Some(inh) = (unsafe { begin.p_inheritance_info.as_ref() }) else {
+        return false;
+    };
+    let ty = vk::StructureType::COMMAND_BUFFER_INHERITANCE_CONDITIONAL_RENDERING_INFO_EXT;
+    // SAFETY: the caller's chain, read only.
+    let found = unsafe {
+        chain::find::<vk::CommandBufferInheritanceConditionalRenderingInfoEXT<'_>>(inh.p_next, ty)
+    };
+    let Some(c) = found.ok().flatten() else {
+        return false;
+    };
+    // SAFETY: found by its sType in a valid chain.
+    unsafe { (*c).conditional_rendering_enable == vk::TRUE }
+}
+
+/// `vkCmdBeginConditionalRenderingEXT`: the condition is noted, so a conversion can suspend it.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_begin_conditional_rendering(
+    cb: vk::CommandBuffer,
+    info: *const vk::ConditionalRenderingBeginInfoEXT<'_>,
+) {
+    guard("vkCmdBeginConditionalRenderingEXT", (), || {
+        // SAFETY: as the caller promised.
+        let rec = unsafe { registry::recording(cb) };
+        let Some(next) = rec.and_then(|r| r.next.cmd_begin_conditional_rendering_ext) else {
+            return;
+        };
+        // SAFETY: as the caller promised.
+        if let Some(i) = unsafe { info.as_ref() } {
+            let c = (i.buffer, i.offset, i.flags);
+            with_record(cb, |b| b.conditional = Some(c));
+        }
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { next(cb, info) }
+    })
+}
+
+/// `vkCmdEndConditionalRenderingEXT`: the condition is forgotten.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_end_conditional_rendering(cb: vk::CommandBuffer) {
+    guard("vkCmdEndConditionalRenderingEXT", (), || {
+        // SAFETY: as the caller promised.
+        let rec = unsafe { registry::recording(cb) };
+        let Some(next) = rec.and_then(|r| r.next.cmd_end_conditional_rendering_ext) else {
+            return;
+        };
+        with_record(cb, |b| b.conditional = None);
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { next(cb) }
+    })
 }
 
 /// `vkCmdBindPipeline`: a compute pipeline is noted.
@@ -1495,6 +2061,7 @@ pub unsafe extern "system" fn cmd_push_constants(
                 stages,
                 offset,
                 size,
+                seq: 0,
             };
             with_record(cb, |b| b.push(range, v));
         }
@@ -1682,6 +2249,7 @@ mod tests {
             stages: vk::ShaderStageFlags::COMPUTE,
             offset,
             size,
+            seq: 0,
         };
         b.push(r(0, 4), &[1, 2, 3, 4]);
         b.push(r(0, 4), &[5, 6, 7, 8]);
@@ -1694,6 +2262,68 @@ mod tests {
             b.push(r(i * 4, 4), &[0; 4]);
         }
         assert!(b.lost, "more ranges than the record holds");
+    }
+
+    /// Ranges come back in the order of their latest push, not the order first seen: after
+    /// pushes with layouts A, B, A the last layout pushed with is A again.
+    #[test]
+    fn push_constants_come_back_in_the_order_last_pushed() {
+        let a = vk::PipelineLayout::from_raw(1);
+        let b = vk::PipelineLayout::from_raw(2);
+        let r = |layout| PushRange {
+            layout,
+            stages: vk::ShaderStageFlags::COMPUTE,
+            offset: 0,
+            size: 4,
+            seq: 0,
+        };
+        let mut bound = Bound::default();
+        bound.push(r(a), &[1; 4]);
+        bound.push(r(b), &[2; 4]);
+        bound.push(r(a), &[3; 4]);
+        let mut order = bound.pushes[..bound.push_count as usize].to_vec();
+        order.sort_by_key(|p| p.seq);
+        let layouts: Vec<_> = order.iter().map(|p| p.layout).collect();
+        assert_eq!(layouts, [b, a]);
+        assert_eq!(&bound.push[..4], &[3; 4]);
+    }
+
+    /// A pool's destruction drops the records of the command buffers allocated from it, and only
+    /// those: over many create, allocate and destroy cycles the records do not grow.
+    #[test]
+    fn destroyed_pools_take_their_command_buffers_records() {
+        let device: Key = 0xD0_0000;
+        let count = |pool: u64| {
+            CB_RECORDS
+                .lock()
+                .values()
+                .filter(|r| r.device == device && r.pool == pool)
+                .count()
+        };
+        remember(vk::CommandBuffer::from_raw(0xD0_0001), device, 7, false);
+        for cycle in 0..100u64 {
+            let pool = 100 + cycle;
+            for i in 0..4 {
+                let cb = vk::CommandBuffer::from_raw(0xD1_0000 + cycle * 8 + i);
+                remember(cb, device, pool, i % 2 == 1);
+                with_record(cb, |b| b.lost = true);
+            }
+            assert_eq!(count(pool), 4);
+            pool_destroyed(device, pool);
+            assert_eq!(count(pool), 0, "cycle {cycle}");
+        }
+        let left = CB_RECORDS
+            .lock()
+            .values()
+            .filter(|r| r.device == device)
+            .count();
+        assert_eq!(left, 1, "the other pool's command buffer stays");
+        assert!(bound_of(vk::CommandBuffer::from_raw(0xD0_0001)).is_some());
+        assert!(
+            bound_of(vk::CommandBuffer::from_raw(0xD1_0000)).is_none(),
+            "a freed handle finds no record, in this thread's cache either"
+        );
+        forget_where(|_, r| r.device == device);
     }
 
     /// The checked-in SPIR-V is what `shaders/build.sh` makes of the checked-in source.

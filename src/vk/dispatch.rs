@@ -200,8 +200,6 @@ hooks! {
         // Command buffers' queue families, to tell the release half of an ownership transfer.
         c"vkCreateCommandPool" => create_command_pool: PFN_vkCreateCommandPool =
             barrier::create_command_pool, When::Emulated;
-        c"vkAllocateCommandBuffers" => allocate_command_buffers: PFN_vkAllocateCommandBuffers =
-            barrier::allocate_command_buffers, When::Emulated;
         // Stage masks of event sets and resets and of timestamps lose the density-map stage.
         c"vkCmdSetEvent" => cmd_set_event: PFN_vkCmdSetEvent = barrier::cmd_set_event,
             When::Emulated;
@@ -225,6 +223,11 @@ hooks! {
             When::Injected;
         // The attachment path: shadows, render passes, framebuffers, dynamic rendering.
         c"vkDestroyImage" => destroy_image: PFN_vkDestroyImage = image::destroy_image, When::Injected;
+        // Host-side transitions name the density-map layout as barriers do (host image copy).
+        c"vkTransitionImageLayout" => transition_image_layout: PFN_vkTransitionImageLayoutEXT =
+            image::transition_image_layout, When::Emulated;
+        c"vkTransitionImageLayoutEXT" => transition_image_layout_ext:
+            PFN_vkTransitionImageLayoutEXT = image::transition_image_layout_ext, When::Emulated;
         c"vkCreateImageView" => create_image_view: PFN_vkCreateImageView =
             image::create_image_view, When::Injected;
         c"vkDestroyImageView" => destroy_image_view: PFN_vkDestroyImageView =
@@ -259,8 +262,19 @@ hooks! {
         // compute bindings are recorded so that they can be given back after the conversion.
         c"vkBeginCommandBuffer" => begin_command_buffer: PFN_vkBeginCommandBuffer =
             convert::begin_command_buffer, When::Emulated;
+        c"vkAllocateCommandBuffers" => allocate_command_buffers: PFN_vkAllocateCommandBuffers =
+            convert::allocate_command_buffers, When::Emulated;
         c"vkFreeCommandBuffers" => free_command_buffers: PFN_vkFreeCommandBuffers =
             convert::free_command_buffers, When::Emulated;
+        c"vkDestroyCommandPool" => destroy_command_pool: PFN_vkDestroyCommandPool =
+            convert::destroy_command_pool, When::Emulated;
+        // Conversions run outside the application's conditional rendering.
+        c"vkCmdBeginConditionalRenderingEXT" => cmd_begin_conditional_rendering_ext:
+            PFN_vkCmdBeginConditionalRenderingEXT = convert::cmd_begin_conditional_rendering,
+            When::Emulated;
+        c"vkCmdEndConditionalRenderingEXT" => cmd_end_conditional_rendering_ext:
+            PFN_vkCmdEndConditionalRenderingEXT = convert::cmd_end_conditional_rendering,
+            When::Emulated;
         c"vkCmdBindPipeline" => cmd_bind_pipeline: PFN_vkCmdBindPipeline =
             convert::cmd_bind_pipeline, When::Emulated;
         c"vkCmdBindDescriptorSets" => cmd_bind_descriptor_sets: PFN_vkCmdBindDescriptorSets =

@@ -719,6 +719,100 @@ pub unsafe fn destroy_all(dev: &Device) {
     }
 }
 
+/// `vkTransitionImageLayout(EXT)` (`VK_EXT_host_image_copy`, core in Vulkan 1.4): a host-side
+/// layout transition names layouts as barriers do, so the density-map layout becomes the one the
+/// application's density images have on the driver's side (`GENERAL`, `crate::vk::barrier`), on a
+/// copy of the array. The shadow needs nothing: it keeps its own layout, and whether a map is read
+/// is decided by the layout each pass names (`crate::vk::convert`).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn transition_image_layout_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkTransitionImageLayoutEXT>,
+    device: vk::Device,
+    count: u32,
+    infos: *const vk::HostImageLayoutTransitionInfoEXT<'_>,
+) -> vk::Result {
+    guard(which, vk::Result::ERROR_INITIALIZATION_FAILED, || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(device) }) else {
+            return vk::Result::ERROR_INITIALIZATION_FAILED;
+        };
+        let Some(down) = next(&dev) else {
+            return vk::Result::ERROR_INITIALIZATION_FAILED;
+        };
+        let given = if infos.is_null() || count == 0 {
+            &[][..]
+        } else {
+            // SAFETY: the caller's array of `count` infos.
+            unsafe { std::slice::from_raw_parts(infos, count as usize) }
+        };
+        let fdm = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+        if !given
+            .iter()
+            .any(|t| t.old_layout == fdm || t.new_layout == fdm)
+        {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { down(device, count, infos) };
+        }
+        crate::vk::convert::map_may_have_changed();
+        let copy: Vec<vk::HostImageLayoutTransitionInfoEXT<'_>> = given
+            .iter()
+            .map(|t| {
+                let mut t = *t;
+                t.old_layout = crate::vk::barrier::layout(t.old_layout);
+                t.new_layout = crate::vk::barrier::layout(t.new_layout);
+                t
+            })
+            .collect();
+        // SAFETY: the next layer's function, with a copy that lives across the call.
+        unsafe { down(device, count, copy.as_ptr()) }
+    })
+}
+
+/// `vkTransitionImageLayout` (Vulkan 1.4): see [`transition_image_layout_with`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn transition_image_layout(
+    device: vk::Device,
+    count: u32,
+    infos: *const vk::HostImageLayoutTransitionInfoEXT<'_>,
+) -> vk::Result {
+    // SAFETY: the caller's arguments.
+    unsafe {
+        transition_image_layout_with(
+            "vkTransitionImageLayout",
+            |d| d.next.transition_image_layout,
+            device,
+            count,
+            infos,
+        )
+    }
+}
+
+/// `vkTransitionImageLayoutEXT`: see [`transition_image_layout_with`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn transition_image_layout_ext(
+    device: vk::Device,
+    count: u32,
+    infos: *const vk::HostImageLayoutTransitionInfoEXT<'_>,
+) -> vk::Result {
+    // SAFETY: the caller's arguments.
+    unsafe {
+        transition_image_layout_with(
+            "vkTransitionImageLayoutEXT",
+            |d| d.next.transition_image_layout_ext,
+            device,
+            count,
+            infos,
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

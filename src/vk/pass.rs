@@ -26,11 +26,20 @@
 //!   gets a [`VkRenderingFragmentShadingRateAttachmentInfoKHR`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentShadingRateAttachmentInfoKHR.html)
 //!   with the shadow view instead.
 //!
-//! Everything is rewritten in copies; the application's structs are never written. Passes without
-//! the density-map struct, and begin infos without views to swap, go down untouched (a begin with
-//! an empty `pNext` costs one null test). Fail open: where a copy cannot be made (a struct of
-//! unknown size before the one to drop) the call goes down as it came; where a view has no shadow
-//! the pass renders at full rate; one log line says so.
+//! - On an emulating device, a pass without the density-map struct that names the density layout
+//!   (an attachment's initial or final layout, a reference's), stage or access (a dependency's, or
+//!   a `VkMemoryBarrier2` chained to one) goes down translated ([`Pass2::without_density_enums`]):
+//!   such a pass writes a density map (its colour attachment ends in the density layout, as the
+//!   Khronos sample's fragment path does) or orders one, and the driver never has the extension
+//!   those values belong to. A map written so is the application's; the pass that reads it
+//!   converts it (`crate::vk::convert`).
+//!
+//! Everything is rewritten in copies; the application's structs are never written. Other passes,
+//! and begin infos without views to swap, go down untouched (a begin with an empty `pNext` costs
+//! one null test). Fail open, never with density enums: where a struct of unknown size stands
+//! before the density-map struct, it is left out of the driver's copy with the struct
+//! ([`chain_without`]); where a view has no shadow the pass renders at full rate; one log line
+//! says so.
 
 use std::ffi::c_void;
 
@@ -69,9 +78,12 @@ pub struct Pass2 {
     /// Subpass chains copied without the application's attachment-less shading-rate infos
     /// ([`Pass2::without_apps_rate_infos`]), kept alive for the subpasses pointing into them.
     _subpass_chains: Vec<ChainCopy>,
-    /// Translated copies of dependencies' chained `VkMemoryBarrier2`s and the rest of their
-    /// chains ([`add_shading_rate`]), kept alive for the dependencies pointing at them.
-    _dependency_barriers: Vec<(Box<vk::MemoryBarrier2<'static>>, ChainCopy)>,
+    /// Dependency chains copied without the application's `VkMemoryBarrier2`, and the translated
+    /// barriers put in front of them ([`Pass2::without_density_enums`]).
+    _dependency_chains: Vec<ChainCopy>,
+    /// Boxed: the dependencies point at them, and a growing vector would move them.
+    #[allow(clippy::vec_box)]
+    _barriers: Vec<Box<vk::MemoryBarrier2<'static>>>,
 }
 
 impl Pass2 {
@@ -124,7 +136,8 @@ impl Pass2 {
                 rate_ref: Box::default(),
                 rate_infos: Vec::new(),
                 _subpass_chains: Vec::new(),
-                _dependency_barriers: Vec::new(),
+                _dependency_chains: Vec::new(),
+                _barriers: Vec::new(),
             }
         }
     }
@@ -149,6 +162,216 @@ impl Pass2 {
             self._subpass_chains.push(copy);
         }
         Ok(())
+    }
+}
+
+impl Pass2 {
+    /// Every density-map layout, stage and access bit of the pass becomes what the driver knows
+    /// (docs/vulkan-fdm-on-fsr.md#mapping): layouts of attachments and references the one
+    /// `crate::vk::barrier` gives the application's density images (`GENERAL`), stages and
+    /// accesses of dependencies (and of a `VkMemoryBarrier2` chained to one) the shading-rate
+    /// ones. The driver never has the density-map extension enabled, so these are invalid values
+    /// for it; a pass that names them without the density-map struct (one that writes a map, or
+    /// orders it for a later pass) is otherwise left as it is. References are copied where they
+    /// change; the application's arrays are never written.
+    ///
+    /// # Safety
+    /// The subpasses' reference arrays and the dependencies' chains must be valid and outlive
+    /// `self`.
+    pub unsafe fn without_density_enums(&mut self) {
+        use crate::vk::barrier;
+        for a in &mut self.attachments {
+            a.initial_layout = barrier::layout(a.initial_layout);
+            a.final_layout = barrier::layout(a.final_layout);
+        }
+        let fdm = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+        let refs = &mut self._refs;
+        let mut fix = |p: *const vk::AttachmentReference2<'static>, n: u32| {
+            // SAFETY: as the caller promised.
+            let old = unsafe { slice(p, n) };
+            if !old.iter().any(|r| r.layout == fdm) {
+                return p;
+            }
+            let v: Vec<vk::AttachmentReference2<'static>> = old
+                .iter()
+                .map(|r| {
+                    let mut r = *r;
+                    r.layout = barrier::layout(r.layout);
+                    r
+                })
+                .collect();
+            let ptr = v.as_ptr();
+            refs.push(v);
+            ptr
+        };
+        for s in &mut self.subpasses {
+            s.p_input_attachments = fix(s.p_input_attachments, s.input_attachment_count);
+            s.p_color_attachments = fix(s.p_color_attachments, s.color_attachment_count);
+            s.p_resolve_attachments = fix(s.p_resolve_attachments, s.color_attachment_count);
+            s.p_depth_stencil_attachment = fix(s.p_depth_stencil_attachment, 1);
+        }
+        let ty = vk::StructureType::MEMORY_BARRIER_2;
+        for d in &mut self.dependencies {
+            d.src_stage_mask = barrier::stage(d.src_stage_mask);
+            d.dst_stage_mask = barrier::stage(d.dst_stage_mask);
+            d.src_access_mask = barrier::access(d.src_access_mask);
+            d.dst_access_mask = barrier::access(d.dst_access_mask);
+            // SAFETY: as the caller promised; found by its sType, read only.
+            let found = unsafe { chain::find::<vk::MemoryBarrier2<'static>>(d.p_next, ty) };
+            let Some(m) = found.ok().flatten() else {
+                continue;
+            };
+            // SAFETY: found by its sType in a valid chain.
+            let m = unsafe { *m };
+            let mut t = m;
+            t.src_stage_mask = barrier::stage2(m.src_stage_mask);
+            t.dst_stage_mask = barrier::stage2(m.dst_stage_mask);
+            t.src_access_mask = barrier::access2(m.src_access_mask);
+            t.dst_access_mask = barrier::access2(m.dst_access_mask);
+            if (
+                t.src_stage_mask,
+                t.dst_stage_mask,
+                t.src_access_mask,
+                t.dst_access_mask,
+            ) == (
+                m.src_stage_mask,
+                m.dst_stage_mask,
+                m.src_access_mask,
+                m.dst_access_mask,
+            ) {
+                continue;
+            }
+            // SAFETY: as the caller promised.
+            let rest = unsafe { chain_without(d.p_next, |s| s == ty, "VkSubpassDependency2") };
+            let Ok(rest) = rest else {
+                // Only the translated barrier goes down: it is what the dependency orders.
+                t.p_next = std::ptr::null();
+                let b = Box::new(t);
+                d.p_next = &*b as *const vk::MemoryBarrier2<'static> as *const c_void;
+                self._barriers.push(b);
+                continue;
+            };
+            t.p_next = rest.head();
+            let b = Box::new(t);
+            d.p_next = &*b as *const vk::MemoryBarrier2<'static> as *const c_void;
+            self._barriers.push(b);
+            self._dependency_chains.push(rest);
+        }
+    }
+}
+
+/// Whether a version-1 create info names a density-map layout, stage or access bit outside the
+/// density-map struct (see [`Pass2::without_density_enums`]).
+///
+/// # Safety
+/// `ci` must be a valid create info.
+unsafe fn v1_names_density(ci: &vk::RenderPassCreateInfo<'_>) -> bool {
+    let fdm = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+    // SAFETY: as the caller promised.
+    unsafe {
+        slice(ci.p_attachments, ci.attachment_count)
+            .iter()
+            .any(|a| a.initial_layout == fdm || a.final_layout == fdm)
+            || slice(ci.p_subpasses, ci.subpass_count).iter().any(|s| {
+                [
+                    slice(s.p_input_attachments, s.input_attachment_count),
+                    slice(s.p_color_attachments, s.color_attachment_count),
+                    slice(s.p_resolve_attachments, s.color_attachment_count),
+                    slice(s.p_depth_stencil_attachment, 1),
+                ]
+                .iter()
+                .any(|refs| refs.iter().any(|r| r.layout == fdm))
+            })
+            || slice(ci.p_dependencies, ci.dependency_count)
+                .iter()
+                .any(|d| {
+                    density_bits(
+                        d.src_stage_mask | d.dst_stage_mask,
+                        d.src_access_mask | d.dst_access_mask,
+                    )
+                })
+    }
+}
+
+/// [`v1_names_density`] for version 2 (dependencies' chained `VkMemoryBarrier2`s included).
+///
+/// # Safety
+/// `ci` must be a valid create info.
+unsafe fn v2_names_density(ci: &vk::RenderPassCreateInfo2<'_>) -> bool {
+    let fdm = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+    let ty = vk::StructureType::MEMORY_BARRIER_2;
+    // SAFETY: as the caller promised.
+    unsafe {
+        slice(ci.p_attachments, ci.attachment_count)
+            .iter()
+            .any(|a| a.initial_layout == fdm || a.final_layout == fdm)
+            || slice(ci.p_subpasses, ci.subpass_count).iter().any(|s| {
+                [
+                    slice(s.p_input_attachments, s.input_attachment_count),
+                    slice(s.p_color_attachments, s.color_attachment_count),
+                    slice(s.p_resolve_attachments, s.color_attachment_count),
+                    slice(s.p_depth_stencil_attachment, 1),
+                ]
+                .iter()
+                .any(|refs| refs.iter().any(|r| r.layout == fdm))
+            })
+            || slice(ci.p_dependencies, ci.dependency_count)
+                .iter()
+                .any(|d| {
+                    density_bits(
+                        d.src_stage_mask | d.dst_stage_mask,
+                        d.src_access_mask | d.dst_access_mask,
+                    ) || chain::find::<vk::MemoryBarrier2<'_>>(d.p_next, ty)
+                        .ok()
+                        .flatten()
+                        .is_some_and(|m| {
+                            let m = &*m;
+                            crate::vk::barrier::stage2(m.src_stage_mask | m.dst_stage_mask)
+                                != (m.src_stage_mask | m.dst_stage_mask)
+                                || crate::vk::barrier::access2(
+                                    m.src_access_mask | m.dst_access_mask,
+                                ) != (m.src_access_mask | m.dst_access_mask)
+                        })
+                })
+    }
+}
+
+fn density_bits(stages: vk::PipelineStageFlags, access: vk::AccessFlags) -> bool {
+    stages.intersects(vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT)
+        || access.intersects(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT)
+}
+
+/// [`ChainCopy::without`] that never gives up: a struct of a size the layer does not know that
+/// stands before one to remove is left out too (one log line names it). The driver gets no
+/// density-map struct, which it does not know, at the price of a struct the layer cannot copy;
+/// passing the chain down as it came would hand the driver enums of an extension it never
+/// enabled. Past [`chain::MAX_CHAIN_LENGTH`] structs the rest is shared as it is.
+///
+/// # Safety
+/// `next` must be NULL or a valid chain.
+unsafe fn chain_without(
+    next: *const c_void,
+    remove: impl Fn(vk::StructureType) -> bool,
+    which: &str,
+) -> Result<ChainCopy, ChainError> {
+    let mut dropped: Vec<vk::StructureType> = Vec::new();
+    loop {
+        // SAFETY: as the caller promised.
+        match unsafe { ChainCopy::without(next, |t| remove(t) || dropped.contains(&t)) } {
+            Ok(c) => {
+                if !dropped.is_empty() {
+                    tracing::warn!(
+                        which,
+                        dropped = ?dropped,
+                        "structs of a size the layer does not know stand before a density-map \
+                         struct it must remove: they are left out of the driver's copy"
+                    );
+                }
+                return Ok(c);
+            }
+            Err(ChainError::Unknown(t)) if !dropped.contains(&t) => dropped.push(t),
+            Err(e) => return Err(e),
+        }
     }
 }
 
@@ -295,26 +518,8 @@ pub unsafe fn v1_to_v2(
         rate_ref: Box::default(),
         rate_infos: Vec::new(),
         _subpass_chains: Vec::new(),
-        _dependency_barriers: Vec::new(),
-    }
-}
-
-/// Density-map stage and access bits → the shading-rate ones (docs/vulkan-fdm-on-fsr.md#mapping).
-fn rate_stages(s: vk::PipelineStageFlags) -> vk::PipelineStageFlags {
-    if s.contains(vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT) {
-        (s & !vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT)
-            | vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
-    } else {
-        s
-    }
-}
-
-fn rate_access(a: vk::AccessFlags) -> vk::AccessFlags {
-    if a.contains(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT) {
-        (a & !vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT)
-            | vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR
-    } else {
-        a
+        _dependency_chains: Vec::new(),
+        _barriers: Vec::new(),
     }
 }
 
@@ -350,76 +555,6 @@ pub fn add_shading_rate(pass: &mut Pass2, density: u32, texel: vk::Extent2D) {
     for (s, f) in pass.subpasses.iter_mut().zip(&pass.rate_infos) {
         s.p_next = f as *const _ as *const c_void;
     }
-    for d in &mut pass.dependencies {
-        d.src_stage_mask = rate_stages(d.src_stage_mask);
-        d.dst_stage_mask = rate_stages(d.dst_stage_mask);
-        d.src_access_mask = rate_access(d.src_access_mask);
-        d.dst_access_mask = rate_access(d.dst_access_mask);
-        // SAFETY: the dependency's chain is the application's, valid while the pass is (the
-        // constructors' contract).
-        if let Some(kept) = unsafe { translated_barrier(d) } {
-            pass._dependency_barriers.push(kept);
-        }
-    }
-}
-
-/// Where `d` chains a `VkMemoryBarrier2` with density-map bits (its masks then replace the
-/// dependency's own, <https://registry.khronos.org/vulkan/specs/latest/man/html/VkSubpassDependency2.html>):
-/// points `d` at a translated copy in front of a copy of the rest of its chain, and returns both
-/// for the caller to keep. Where the chain cannot be copied, `d` is left as it is and the log says
-/// so once.
-///
-/// # Safety
-/// `d.p_next` must be NULL or a valid chain that outlives the copies' use.
-unsafe fn translated_barrier(
-    d: &mut vk::SubpassDependency2<'static>,
-) -> Option<(Box<vk::MemoryBarrier2<'static>>, ChainCopy)> {
-    use crate::vk::barrier::{access2, stage2};
-    let ty = vk::StructureType::MEMORY_BARRIER_2;
-    // SAFETY: as the caller promised.
-    let found = unsafe { chain::find::<vk::MemoryBarrier2<'_>>(d.p_next, ty) }
-        .ok()
-        .flatten()?;
-    // SAFETY: found by its sType, read only.
-    let b = unsafe { *found };
-    let mut mine = vk::MemoryBarrier2::default()
-        .src_stage_mask(stage2(b.src_stage_mask))
-        .dst_stage_mask(stage2(b.dst_stage_mask))
-        .src_access_mask(access2(b.src_access_mask))
-        .dst_access_mask(access2(b.dst_access_mask));
-    if (
-        mine.src_stage_mask,
-        mine.dst_stage_mask,
-        mine.src_access_mask,
-        mine.dst_access_mask,
-    ) == (
-        b.src_stage_mask,
-        b.dst_stage_mask,
-        b.src_access_mask,
-        b.dst_access_mask,
-    ) {
-        return None;
-    }
-    // SAFETY: as the caller promised.
-    let rest = match unsafe { ChainCopy::without(d.p_next, |t| t == ty) } {
-        Ok(r) => r,
-        Err(e) => {
-            static LOGGED: std::sync::atomic::AtomicBool =
-                std::sync::atomic::AtomicBool::new(false);
-            if !LOGGED.swap(true, std::sync::atomic::Ordering::Relaxed) {
-                tracing::warn!(
-                    error = ?e,
-                    "a subpass dependency's pNext chain the layer cannot copy: its memory \
-                     barrier keeps density-map bits the driver does not know"
-                );
-            }
-            return None;
-        }
-    };
-    mine.p_next = rest.head();
-    let mine = Box::new(mine);
-    d.p_next = &*mine as *const vk::MemoryBarrier2<'static> as *const c_void;
-    Some((mine, rest))
 }
 
 fn texel_of(dev: &Device) -> Option<vk::Extent2D> {
@@ -463,21 +598,37 @@ unsafe fn create_rewritten(
     alloc: *const vk::AllocationCallbacks<'_>,
     out: *mut vk::RenderPass,
 ) -> vk::Result {
+    // Whether the application names the map in the density layout itself when the pass begins
+    // (before the translation makes it `GENERAL`): `crate::vk::convert` relies on it.
+    let density_initial = pass
+        .attachments
+        .get(density as usize)
+        .is_some_and(|a| a.initial_layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT);
+    if dev.fdm.is_some() {
+        // SAFETY: as the caller promised.
+        unsafe { pass.without_density_enums() };
+    }
     if let Some(inj) = &dev.inject {
         // SAFETY: as the caller promised.
         return unsafe { create_injected(dev, inj, create2, pass, flags, p_next, alloc, out) };
     }
     let texel = texel_of(dev);
-    let initial = pass
+    let layouts = pass
         .attachments
         .get(density as usize)
-        .map(|a| a.initial_layout);
+        .map(|a| (a.initial_layout, a.final_layout, density_initial));
     if let (Some(texel), true) = (texel, density != vk::ATTACHMENT_UNUSED) {
         add_shading_rate(&mut pass, density, texel);
     }
     let info = pass.info(flags, p_next);
     // SAFETY: the copy and everything it points at live across the call.
     let r = unsafe { create2(dev.handle, &info, alloc, out) };
+    if r == vk::Result::SUCCESS && density == vk::ATTACHMENT_UNUSED {
+        // A pass that names the density layout, stage or access but reads no map writes or
+        // orders one.
+        // SAFETY: just created.
+        crate::vk::convert::writer_pass_created(unsafe { *out });
+    }
     if r == vk::Result::SUCCESS && density != vk::ATTACHMENT_UNUSED && texel.is_some() {
         // SAFETY: just created.
         let handle = unsafe { *out };
@@ -486,7 +637,7 @@ unsafe fn create_rewritten(
             .lock()
             .insert(handle.as_raw(), density);
         // SAFETY: the device is live.
-        unsafe { crate::vk::convert::pass_changed(dev, handle, initial) };
+        unsafe { crate::vk::convert::pass_changed(dev, handle, layouts) };
         tracing::debug!(
             render_pass = raw(handle),
             density,
@@ -642,7 +793,14 @@ pub unsafe extern "system" fn create_render_pass(
                 _ => None,
             };
             let inject = dev.inject.is_some() && !info.is_null();
-            let Some(density) = density.or(inject.then_some(vk::ATTACHMENT_UNUSED)) else {
+            // A pass without the density-map struct that still names the density layout, stage
+            // or access (it writes a map, or orders one) goes down translated.
+            // SAFETY: the caller's create info, read only.
+            let ci = unsafe { info.as_ref() };
+            // SAFETY: as above.
+            let names = dev.fdm.is_some() && ci.is_some_and(|ci| unsafe { v1_names_density(ci) });
+            let Some(density) = density.or((inject || names).then_some(vk::ATTACHMENT_UNUSED))
+            else {
                 // SAFETY: the next layer's function, with the caller's arguments.
                 return unsafe { next(device, info, alloc, out) };
             };
@@ -668,7 +826,7 @@ pub unsafe extern "system" fn create_render_pass(
             // SAFETY: the caller's chain, read only.
             let (chain, multiview, aspects) = unsafe {
                 (
-                    ChainCopy::without(ci.p_next, folded),
+                    chain_without(ci.p_next, folded, "vkCreateRenderPass"),
                     chain::find::<vk::RenderPassMultiviewCreateInfo>(
                         ci.p_next,
                         S::RENDER_PASS_MULTIVIEW_CREATE_INFO,
@@ -679,15 +837,24 @@ pub unsafe extern "system" fn create_render_pass(
                     ),
                 )
             };
-            let (Some(create2), Ok(chain), Ok(multiview), Ok(aspects)) =
-                (create2, chain, multiview, aspects)
-            else {
+            // A chain too long to look through to its end has neither struct where the layer
+            // looks; the copy shares what lies past its limit.
+            let (multiview, aspects) = (multiview.ok().flatten(), aspects.ok().flatten());
+            let (Some(create2), Ok(chain)) = (create2, chain) else {
+                // Every emulating device has render pass 2 (the layer enables it), so this is an
+                // injecting one: no density enums are valid on it anyway.
                 tracing::warn!(
                     inject,
-                    "vkCreateRenderPass: cannot upgrade a density-map (or, injecting, any) \
-                     render pass to version 2 (no vkCreateRenderPass2 below, or a pNext chain the \
-                     layer cannot copy); passed on as is, at full rate"
+                    "vkCreateRenderPass: cannot upgrade a render pass to version 2 (no \
+                     vkCreateRenderPass2 below, or a pNext chain the layer cannot copy); passed \
+                     on as is, at full rate"
                 );
+                if dev.fdm.is_some() {
+                    // A driver without the density-map extension must not get its enums; an
+                    // unexpected failure is what any command may answer with VK_ERROR_UNKNOWN
+                    // (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkResult.html>).
+                    return vk::Result::ERROR_UNKNOWN;
+                }
                 // SAFETY: the next layer's function, with the caller's arguments.
                 return unsafe { next(device, info, alloc, out) };
             };
@@ -735,7 +902,12 @@ unsafe fn create_render_pass2_with(
             _ => None,
         };
         let inject = dev.inject.is_some() && !info.is_null();
-        let Some(density) = density.or(inject.then_some(vk::ATTACHMENT_UNUSED)) else {
+        // As in `create_render_pass`: density enums outside the density-map struct.
+        // SAFETY: the caller's create info, read only.
+        let ci = unsafe { info.as_ref() };
+        // SAFETY: as above.
+        let names = dev.fdm.is_some() && ci.is_some_and(|ci| unsafe { v2_names_density(ci) });
+        let Some(density) = density.or((inject || names).then_some(vk::ATTACHMENT_UNUSED)) else {
             // SAFETY: the next layer's function, with the caller's arguments.
             return unsafe { create2(device, info, alloc, out) };
         };
@@ -768,13 +940,13 @@ unsafe fn create_render_pass2_with(
         }
         let fdm = vk::StructureType::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT;
         // SAFETY: the caller's chain, read only.
-        let Ok(chain) = (unsafe { ChainCopy::without(ci.p_next, |t| t == fdm) }) else {
+        let Ok(chain) = (unsafe { chain_without(ci.p_next, |t| t == fdm, which) }) else {
+            // `chain_without` leaves out what it cannot copy, so this is not expected; the
+            // driver must not get the density-map struct all the same.
             tracing::warn!(
-                "{which}: a pNext chain the layer cannot copy; the density-map render pass is \
-                 passed on as is, at full rate"
+                "{which}: a pNext chain the layer cannot copy; the render pass is refused"
             );
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { create2(device, info, alloc, out) };
+            return vk::Result::ERROR_UNKNOWN;
         };
         // SAFETY: the caller's arrays outlive the call.
         let pass = unsafe { Pass2::from_v2(ci) };
@@ -1648,6 +1820,8 @@ mod tests {
             width: 16,
             height: 16,
         };
+        // SAFETY: the converted pass owns its references; its dependencies have no chains.
+        unsafe { pass.without_density_enums() };
         add_shading_rate(&mut pass, 2, texel);
         let d = &pass.attachments[2];
         assert_eq!(d.format, vk::Format::R8_UINT);
@@ -1706,6 +1880,90 @@ mod tests {
         assert_eq!(pass.subpasses[0].view_mask, 0);
         assert!(pass.dependencies.is_empty());
         assert!(pass.correlated.is_empty());
+    }
+
+    /// A pass that writes a density map (no density-map struct): its attachment's final layout,
+    /// a reference's layout, a dependency's masks and a `VkMemoryBarrier2` chained to another
+    /// dependency lose every density-map value, on copies; the rest of the dependency's chain
+    /// stays behind the translated barrier, and the application's structs are unchanged.
+    #[test]
+    fn a_pass_that_writes_a_map_loses_the_density_enums() {
+        let fdm = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+        let atts = [vk::AttachmentDescription2::default()
+            .format(vk::Format::R8G8_UNORM)
+            .initial_layout(vk::ImageLayout::UNDEFINED)
+            .final_layout(fdm)];
+        let input = [vk::AttachmentReference2::default()
+            .attachment(0)
+            .layout(fdm)];
+        let subpasses = [vk::SubpassDescription2::default().input_attachments(&input)];
+        // A struct the layer does not know, after the barrier.
+        let tail = vk::BaseInStructure {
+            s_type: vk::StructureType::from_raw(1_000_999_000),
+            ..Default::default()
+        };
+        let mut barrier = vk::MemoryBarrier2::default()
+            .src_stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)
+            .dst_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
+            .dst_access_mask(vk::AccessFlags2::FRAGMENT_DENSITY_MAP_READ_EXT);
+        barrier.p_next = &tail as *const _ as *const c_void;
+        let mut with_barrier = vk::SubpassDependency2::default().src_subpass(0);
+        with_barrier.dst_subpass = vk::SUBPASS_EXTERNAL;
+        with_barrier.p_next = &barrier as *const _ as *const c_void;
+        let deps = [
+            with_barrier,
+            vk::SubpassDependency2::default()
+                .dst_stage_mask(vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT)
+                .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT),
+        ];
+        let ci = vk::RenderPassCreateInfo2::default()
+            .attachments(&atts)
+            .subpasses(&subpasses)
+            .dependencies(&deps);
+        // SAFETY: the arrays and chains live across the test.
+        unsafe {
+            assert!(v2_names_density(&ci));
+            let mut pass = Pass2::from_v2(&ci);
+            pass.without_density_enums();
+            assert_eq!(pass.attachments[0].final_layout, vk::ImageLayout::GENERAL);
+            assert_eq!(
+                (*pass.subpasses[0].p_input_attachments).layout,
+                vk::ImageLayout::GENERAL
+            );
+            assert_eq!(
+                input[0].layout, fdm,
+                "the application's reference is not written"
+            );
+            assert_eq!(
+                pass.dependencies[1].dst_stage_mask,
+                vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+            );
+            assert_eq!(
+                pass.dependencies[1].dst_access_mask,
+                vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR
+            );
+            let b = &*(pass.dependencies[0].p_next as *const vk::MemoryBarrier2);
+            assert_eq!(b.s_type, vk::StructureType::MEMORY_BARRIER_2);
+            assert_eq!(
+                b.dst_stage_mask,
+                vk::PipelineStageFlags2::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+            );
+            assert_eq!(
+                b.dst_access_mask,
+                vk::AccessFlags2::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR
+            );
+            assert_eq!(
+                b.p_next, &tail as *const _ as *const c_void,
+                "the rest stays"
+            );
+            assert_eq!(
+                barrier.dst_stage_mask,
+                vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT,
+                "the application's barrier is not written"
+            );
+            let plain = vk::RenderPassCreateInfo2::default().subpasses(&subpasses[..0]);
+            assert!(!v2_names_density(&plain));
+        }
     }
 
     #[test]

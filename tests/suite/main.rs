@@ -30,6 +30,7 @@ mod symmetric_fov;
 mod threads;
 mod tidy;
 mod vk_api14;
+mod vk_app_written_maps;
 mod vk_clears;
 mod vk_convert;
 mod vk_device_matrix;

@@ -147,7 +147,10 @@ impl Dev {
 
     /// A render pass v2 with a colour and a density-map attachment, and its framebuffer.
     fn pass(&self, color: &Image, density: &Image) -> (vk::RenderPass, vk::Framebuffer) {
-        let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
+        let mut atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
+        // The map is never written: its content is undefined when the pass begins, and it is
+        // still in its initial layout.
+        atts[1].initial_layout = vk::ImageLayout::UNDEFINED;
         let color_ref = [vk::AttachmentReference2::default()
             .attachment(0)
             .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];

@@ -45,7 +45,7 @@ fn pattern(texels: usize, layers: usize) -> Vec<u8> {
 }
 
 /// The codes the model gives `bytes` on `profile`.
-fn model_codes(profile: Profile, bytes: &[u8], texels: usize, layers: usize) -> Vec<u8> {
+pub(crate) fn model_codes(profile: Profile, bytes: &[u8], texels: usize, layers: usize) -> Vec<u8> {
     let merged = !profile.layered() && layers > 1;
     let rates: Vec<[u32; 2]> = profile
         .rates()
@@ -58,9 +58,9 @@ fn model_codes(profile: Profile, bytes: &[u8], texels: usize, layers: usize) -> 
     out
 }
 
-struct Buffer {
-    buffer: vk::Buffer,
-    memory: vk::DeviceMemory,
+pub(crate) struct Buffer {
+    pub(crate) buffer: vk::Buffer,
+    pub(crate) memory: vk::DeviceMemory,
 }
 
 /// The application's compute work: a pipeline that stores its push constant through its set.
@@ -73,15 +73,22 @@ struct Compute {
     out: Buffer,
 }
 
-struct Dev {
-    d: ash::Device,
-    queue: vk::Queue,
-    pool: vk::CommandPool,
-    memory: vk::PhysicalDeviceMemoryProperties,
+pub(crate) struct Dev {
+    pub(crate) d: ash::Device,
+    pub(crate) queue: vk::Queue,
+    pub(crate) pool: vk::CommandPool,
+    pub(crate) memory: vk::PhysicalDeviceMemoryProperties,
 }
 
 impl Dev {
-    fn new(vk: &Vk) -> Dev {
+    pub(crate) fn new(vk: &Vk) -> Dev {
+        Dev::with_conditional_rendering(vk, false)
+    }
+
+    /// [`Dev::new`], with `VK_EXT_conditional_rendering` and its feature where `conditional`.
+    pub(crate) fn with_conditional_rendering(vk: &Vk, conditional: bool) -> Dev {
+        let mut cond = vk::PhysicalDeviceConditionalRenderingFeaturesEXT::default()
+            .conditional_rendering(true);
         let mut v11 = vk::PhysicalDeviceVulkan11Features::default().multiview(true);
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default().imageless_framebuffer(true);
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
@@ -94,14 +101,20 @@ impl Dev {
         let queues = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(0)
             .queue_priorities(&prio)];
-        let names = [FDM.as_ptr()];
-        let info = vk::DeviceCreateInfo::default()
+        let mut names = vec![FDM.as_ptr()];
+        if conditional {
+            names.push(ash::ext::conditional_rendering::NAME.as_ptr());
+        }
+        let mut info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queues)
             .enabled_extension_names(&names)
             .push_next(&mut fdm)
             .push_next(&mut v11)
             .push_next(&mut v12)
             .push_next(&mut v13);
+        if conditional {
+            info = info.push_next(&mut cond);
+        }
         // SAFETY: every struct lives across the calls.
         unsafe {
             let d = vk
@@ -127,7 +140,7 @@ impl Dev {
         }
     }
 
-    fn buffer(&self, size: u64, usage: vk::BufferUsageFlags) -> Buffer {
+    pub(crate) fn buffer(&self, size: u64, usage: vk::BufferUsageFlags) -> Buffer {
         // SAFETY: the device is alive; structs live across the calls.
         unsafe {
             let buffer = self
@@ -155,7 +168,7 @@ impl Dev {
         }
     }
 
-    fn write(&self, b: &Buffer, bytes: &[u8]) {
+    pub(crate) fn write(&self, b: &Buffer, bytes: &[u8]) {
         // SAFETY: host-visible, coherent memory of at least `bytes.len()` bytes, idle.
         unsafe {
             let p = self
@@ -167,7 +180,7 @@ impl Dev {
         }
     }
 
-    fn read_words(&self, b: &Buffer, n: usize) -> Vec<u32> {
+    pub(crate) fn read_words(&self, b: &Buffer, n: usize) -> Vec<u32> {
         // SAFETY: as in write.
         unsafe {
             let p = self
@@ -180,7 +193,7 @@ impl Dev {
         }
     }
 
-    fn free(&self, b: Buffer) {
+    pub(crate) fn free(&self, b: Buffer) {
         // SAFETY: idle, destroyed once.
         unsafe {
             self.d.destroy_buffer(b.buffer, None);
@@ -189,7 +202,7 @@ impl Dev {
     }
 
     /// A device-local image of `side`×`side` texels and `layers` layers, and a view of all of them.
-    fn image(
+    pub(crate) fn image(
         &self,
         format: vk::Format,
         side: u32,
@@ -331,7 +344,7 @@ impl Dev {
         self.free(c.out);
     }
 
-    fn begin(&self) -> vk::CommandBuffer {
+    pub(crate) fn begin(&self) -> vk::CommandBuffer {
         // SAFETY: the pool is this device's and used by this thread only.
         unsafe {
             let cb = self
@@ -350,7 +363,7 @@ impl Dev {
         }
     }
 
-    fn submit(&self, cb: vk::CommandBuffer) {
+    pub(crate) fn submit(&self, cb: vk::CommandBuffer) {
         // SAFETY: `cb` is recording on this device; the queue is this thread's.
         unsafe {
             self.d.end_command_buffer(cb).expect("vkEndCommandBuffer");
@@ -368,7 +381,7 @@ impl Dev {
 
     /// Records the application's upload of `staging` into every layer of `image`, ending in the
     /// density-map layout.
-    fn upload(
+    pub(crate) fn upload(
         &self,
         cb: vk::CommandBuffer,
         staging: &Buffer,
@@ -496,7 +509,7 @@ impl Dev {
         }
     }
 
-    fn destroy(self) {
+    pub(crate) fn destroy(self) {
         // SAFETY: the queue is idle; nothing else made from the device is left.
         unsafe {
             self.d.device_wait_idle().expect("idle");
@@ -507,7 +520,7 @@ impl Dev {
 }
 
 /// The shading-rate images the double read back at the submit of `cb`.
-fn read_at_submit(env: &Env, cb: vk::CommandBuffer) -> Vec<Value> {
+pub(crate) fn read_at_submit(env: &Env, cb: vk::CommandBuffer) -> Vec<Value> {
     use ash::vk::Handle as _;
     let submits: Vec<Value> = env
         .double
@@ -526,7 +539,7 @@ fn read_at_submit(env: &Env, cb: vk::CommandBuffer) -> Vec<Value> {
         .unwrap_or_default()
 }
 
-fn codes_of(read: &[Value], what: &str) -> Vec<u8> {
+pub(crate) fn codes_of(read: &[Value], what: &str) -> Vec<u8> {
     assert_eq!(read.len(), 1, "{what}: {read:?}");
     read[0]["codes"]
         .as_array()

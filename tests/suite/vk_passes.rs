@@ -301,6 +301,70 @@ struct Drawn {
     command_buffer: u64,
 }
 
+/// The application fills its density map with full-rate bytes (255: a fragment per pixel) and
+/// moves it into the density layout that its passes name as the map's initial layout: a pass
+/// reads the map it names, so it must hold something and be in that layout
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkAttachmentDescription.html>).
+///
+/// # Safety
+/// `cb` must be recording outside a pass; `image` a density map with transfer-destination usage.
+unsafe fn full_rate_map(d: &ash::Device, cb: vk::CommandBuffer, image: vk::Image, layers: u32) {
+    let barrier = |old, new, src, dst| {
+        vk::ImageMemoryBarrier::default()
+            .image(image)
+            .subresource_range(range(0, layers))
+            .old_layout(old)
+            .new_layout(new)
+            .src_access_mask(src)
+            .dst_access_mask(dst)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+    };
+    // SAFETY: as the caller promised.
+    unsafe {
+        d.cmd_pipeline_barrier(
+            cb,
+            vk::PipelineStageFlags::TOP_OF_PIPE,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &[barrier(
+                vk::ImageLayout::UNDEFINED,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                vk::AccessFlags::empty(),
+                vk::AccessFlags::TRANSFER_WRITE,
+            )],
+        );
+        d.cmd_clear_color_image(
+            cb,
+            image,
+            vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+            &vk::ClearColorValue {
+                float32: [1.0, 1.0, 0.0, 0.0],
+            },
+            &[range(0, layers)],
+        );
+        d.cmd_pipeline_barrier(
+            cb,
+            vk::PipelineStageFlags::TRANSFER,
+            // Not the density-map stage: validation 1.3.239 refuses the shading-rate stage it
+            // becomes (see `vk_layer::assert_only_stage_false_positives`), and these cases assert
+            // silence.
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &[barrier(
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                FDM_LAYOUT,
+                vk::AccessFlags::TRANSFER_WRITE,
+                vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT,
+            )],
+        );
+    }
+}
+
 /// Draws the case once: with `fdm`, through fovea and a 2-layer density map; without, with no
 /// density map and no fovea.
 fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
@@ -442,6 +506,9 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
             .unwrap()[0];
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .unwrap();
+        if let Some((img, _)) = density {
+            full_rate_map(d, cb, img, 2);
+        }
         let draw_it = || {
             draw_fullscreen(d, cb, pipe);
         };
