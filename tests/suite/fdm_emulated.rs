@@ -578,6 +578,7 @@ fn release(
 fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
     let what = format!("{} {layout:?}", profile.name());
     env.double.set_profile(Some(profile));
+    crate::vk_layer::assert_no_double_errors(env);
     env.double.clear();
     take_messages();
     let app = app("XR_KHR_vulkan_enable2", true);
@@ -707,6 +708,7 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
         let mut seen = [0; 3];
         for n in 0..4 {
             let case = format!("{what} level {level} offset {offset} frame {n}");
+            crate::vk_layer::assert_no_double_errors(env);
             env.double.clear();
             let (index, fovs, time) = frame.acquire(swapchain);
             renderer.draw(&v.device, index);

@@ -488,6 +488,7 @@ fn run_with(
 ) -> Option<Outcome> {
     let (_serial, env) = crate::vk_layer::env()?;
     env.double.set_profile(Some(profile));
+    crate::vk_layer::assert_no_double_errors(env);
     env.double.clear();
     vulkan::take_messages();
     let app = App::new(Chain::fovea().unwrap(), &["XR_KHR_vulkan_enable2"], API_1_0).unwrap();

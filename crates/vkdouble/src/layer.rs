@@ -23,6 +23,7 @@ use serde_json::{json, Value};
 use crate::chain::{self, find};
 use crate::ffi;
 use crate::record::{self, error, event};
+use crate::shade::PipelineRate;
 use crate::Profile;
 
 type Key = usize;
@@ -61,14 +62,46 @@ struct ImageInfo {
     layers: u32,
 }
 
+/// A view of a shading-rate image: which image, which layers.
+#[derive(Clone, Copy)]
+struct ViewInfo {
+    image: u64,
+    base_layer: u32,
+    layers: u32,
+}
+
+/// One subpass of a render pass: its shading-rate attachment (index, texel size) and view mask.
+#[derive(Clone, Copy)]
+struct SubpassInfo {
+    rate: Option<(u32, vk::Extent2D)>,
+    view_mask: u32,
+}
+
+/// What the double keeps of a render pass.
+struct PassInfo {
+    subpasses: Vec<SubpassInfo>,
+    /// Per attachment: its load and store operations.
+    ops: Vec<(vk::AttachmentLoadOp, vk::AttachmentStoreOp)>,
+}
+
+impl PassInfo {
+    fn rates(&self) -> impl Iterator<Item = (u32, vk::Extent2D)> + '_ {
+        self.subpasses.iter().filter_map(|s| s.rate)
+    }
+}
+
 #[derive(Default)]
 struct DeviceState {
     /// Images created with the shading-rate usage.
     images: BTreeMap<u64, ImageInfo>,
-    /// Views of those images → image.
-    views: BTreeMap<u64, u64>,
-    /// Per render pass, per subpass: the shading-rate attachment index and texel size.
-    passes: BTreeMap<u64, Vec<Option<(u32, vk::Extent2D)>>>,
+    /// Views of those images.
+    views: BTreeMap<u64, ViewInfo>,
+    /// Render passes.
+    passes: BTreeMap<u64, PassInfo>,
+    /// Graphics pipelines: their rate state, and whether it is dynamic.
+    pipelines: BTreeMap<u64, (PipelineRate, bool)>,
+    /// Per command buffer: what its recording does to the rates of its draws.
+    recordings: BTreeMap<u64, Recording>,
     /// Framebuffer → its attachments' views.
     framebuffers: BTreeMap<u64, Vec<u64>>,
     /// Command buffer → shading-rate images its render passes read.
@@ -288,6 +321,24 @@ table! { device_commands:
     b"vkCmdPipelineBarrier2KHR" => cmd_pipeline_barrier2 as PFN_vkCmdPipelineBarrier2,
     b"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate as PFN_vkCmdSetFragmentShadingRateKHR,
     b"vkCmdExecuteCommands" => cmd_execute_commands as PFN_vkCmdExecuteCommands,
+    b"vkDestroyPipeline" => destroy_pipeline as PFN_vkDestroyPipeline,
+    b"vkCmdBindPipeline" => cmd_bind_pipeline as PFN_vkCmdBindPipeline,
+    b"vkCmdNextSubpass" => cmd_next_subpass as PFN_vkCmdNextSubpass,
+    b"vkCmdNextSubpass2" => cmd_next_subpass2 as PFN_vkCmdNextSubpass2,
+    b"vkCmdNextSubpass2KHR" => cmd_next_subpass2 as PFN_vkCmdNextSubpass2,
+    b"vkCmdEndRenderPass" => cmd_end_render_pass as PFN_vkCmdEndRenderPass,
+    b"vkCmdEndRenderPass2" => cmd_end_render_pass2 as PFN_vkCmdEndRenderPass2,
+    b"vkCmdEndRenderPass2KHR" => cmd_end_render_pass2 as PFN_vkCmdEndRenderPass2,
+    b"vkCmdEndRendering" => cmd_end_rendering as PFN_vkCmdEndRendering,
+    b"vkCmdEndRenderingKHR" => cmd_end_rendering as PFN_vkCmdEndRendering,
+    b"vkCmdDraw" => cmd_draw as PFN_vkCmdDraw,
+    b"vkCmdDrawIndexed" => cmd_draw_indexed as PFN_vkCmdDrawIndexed,
+    b"vkCmdDrawIndirect" => cmd_draw_indirect as PFN_vkCmdDrawIndirect,
+    b"vkCmdDrawIndexedIndirect" => cmd_draw_indexed_indirect as PFN_vkCmdDrawIndexedIndirect,
+    b"vkCmdDrawIndirectCount" => cmd_draw_indirect_count as PFN_vkCmdDrawIndirectCount,
+    b"vkCmdDrawIndirectCountKHR" => cmd_draw_indirect_count as PFN_vkCmdDrawIndirectCount,
+    b"vkCmdDrawIndexedIndirectCount" => cmd_draw_indexed_indirect_count as PFN_vkCmdDrawIndexedIndirectCount,
+    b"vkCmdDrawIndexedIndirectCountKHR" => cmd_draw_indexed_indirect_count as PFN_vkCmdDrawIndexedIndirectCount,
     b"vkQueueSubmit" => queue_submit as PFN_vkQueueSubmit,
     b"vkQueueSubmit2" => queue_submit2 as PFN_vkQueueSubmit2,
     b"vkQueueSubmit2KHR" => queue_submit2 as PFN_vkQueueSubmit2,
@@ -757,6 +808,9 @@ unsafe extern "system" fn destroy_device(
                 for (_, pool) in std::mem::take(&mut lock(&d.state).pools) {
                     d.fns.destroy_command_pool(pool, None);
                 }
+                for (_, r) in std::mem::take(&mut lock(&d.state).recordings) {
+                    drop_recording(&d, r);
+                }
                 (d.fns.fp_v1_0().destroy_device)(device, alloc);
             }
         }
@@ -1119,6 +1173,13 @@ forgetting_destroy!(
     passes
 );
 forgetting_destroy!(
+    destroy_pipeline,
+    "vkDestroyPipeline",
+    vk::Pipeline,
+    destroy_pipeline,
+    pipelines
+);
+forgetting_destroy!(
     destroy_framebuffer,
     "vkDestroyFramebuffer",
     vk::Framebuffer,
@@ -1157,8 +1218,11 @@ unsafe extern "system" fn create_image(
                 ));
             }
             let mut copy = *ci;
-            // TRANSFER_SRC lets the double read the rates back after a submit.
-            copy.usage = lavapipe_usage(ci.usage) | vk::ImageUsageFlags::TRANSFER_SRC;
+            // TRANSFER_SRC lets the double copy the rates a pass reads; TRANSFER_DST lets it poison
+            // an attachment a pass left undefined.
+            copy.usage = lavapipe_usage(ci.usage)
+                | vk::ImageUsageFlags::TRANSFER_SRC
+                | vk::ImageUsageFlags::TRANSFER_DST;
             let r = next(device, &copy, alloc, out);
             if r == vk::Result::SUCCESS {
                 let image = (*out).as_raw();
@@ -1206,7 +1270,14 @@ unsafe extern "system" fn create_image_view(
                          layeredShadingRateAttachments is FALSE"
                     ));
                 }
-                lock(&d.state).views.insert((*out).as_raw(), image);
+                lock(&d.state).views.insert(
+                    (*out).as_raw(),
+                    ViewInfo {
+                        image,
+                        base_layer: ci.subresource_range.base_array_layer,
+                        layers,
+                    },
+                );
                 event(json!({
                     "kind": "image_view",
                     "view": (*out).as_raw(),
@@ -1266,7 +1337,10 @@ unsafe extern "system" fn create_render_pass2(
                 match fsr {
                     Some((a, layout, texel)) => {
                         check_pass_attachment(profile, i, a, layout, texel, attachments_in);
-                        per_subpass.push(Some((a, texel)));
+                        per_subpass.push(SubpassInfo {
+                            rate: Some((a, texel)),
+                            view_mask: s.view_mask,
+                        });
                         record_subpasses.push(json!({"shading_rate": {
                             "attachment": a,
                             "layout": layout.as_raw(),
@@ -1274,7 +1348,10 @@ unsafe extern "system" fn create_render_pass2(
                         }}));
                     }
                     None => {
-                        per_subpass.push(None);
+                        per_subpass.push(SubpassInfo {
+                            rate: None,
+                            view_mask: s.view_mask,
+                        });
                         record_subpasses.push(json!({"shading_rate": null}));
                     }
                 }
@@ -1318,7 +1395,16 @@ unsafe extern "system" fn create_render_pass2(
             let r = (d.fns.fp_v1_2().create_render_pass2)(device, &copy, alloc, out);
             if r == vk::Result::SUCCESS {
                 let pass = (*out).as_raw();
-                lock(&d.state).passes.insert(pass, per_subpass);
+                lock(&d.state).passes.insert(
+                    pass,
+                    PassInfo {
+                        subpasses: per_subpass,
+                        ops: attachments_in
+                            .iter()
+                            .map(|a| (a.load_op, a.store_op))
+                            .collect(),
+                    },
+                );
                 event(json!({
                     "kind": "render_pass",
                     "render_pass": pass,
@@ -1461,13 +1547,13 @@ unsafe extern "system" fn create_framebuffer(
                 width: ci.width,
                 height: ci.height,
             };
-            for (a, texel) in st.passes.get(&pass).into_iter().flatten().flatten() {
+            for (a, texel) in st.passes.get(&pass).into_iter().flat_map(PassInfo::rates) {
                 let image = views
-                    .get(*a as usize)
+                    .get(a as usize)
                     .and_then(|v| st.views.get(v))
-                    .and_then(|i| st.images.get(i));
+                    .and_then(|v| st.images.get(&v.image));
                 if let Some(image) = image {
-                    check_covers("vkCreateFramebuffer", *image, extent, *texel);
+                    check_covers("vkCreateFramebuffer", *image, extent, texel);
                 }
             }
             st.framebuffers.insert((*out).as_raw(), views.clone());
@@ -1513,6 +1599,7 @@ unsafe extern "system" fn create_graphics_pipelines(
                 let mut dynamic_infos: Vec<Box<vk::PipelineDynamicStateCreateInfo<'_>>> =
                     Vec::new();
                 let mut records = Vec::new();
+                let mut rates = Vec::new();
                 for ci in slice(infos, count) {
                     let mut c = *ci;
                     let state =
@@ -1557,6 +1644,13 @@ unsafe extern "system" fn create_graphics_pipelines(
                             dynamic_infos.push(dc);
                         }
                     }
+                    rates.push((
+                        state.map_or(PipelineRate::NONE, |s| PipelineRate {
+                            size: [s.fragment_size.width, s.fragment_size.height],
+                            ops: s.combiner_ops,
+                        }),
+                        dynamic_rate,
+                    ));
                     records.push(json!({
                     "kind": "pipeline",
                     "render_pass": ci.render_pass.as_raw(),
@@ -1581,6 +1675,7 @@ unsafe extern "system" fn create_graphics_pipelines(
                 for (i, mut rec) in records.into_iter().enumerate() {
                     let p = *out.add(i);
                     if p != vk::Pipeline::null() {
+                        lock(&d.state).pipelines.insert(p.as_raw(), rates[i]);
                         rec["pipeline"] = json!(p.as_raw());
                         event(rec);
                     }
@@ -1602,7 +1697,15 @@ unsafe extern "system" fn begin_command_buffer(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(cb.as_raw());
-            lock(&d.state).commands.insert(cb.as_raw(), Vec::new());
+            let old = {
+                let mut st = lock(&d.state);
+                st.commands.insert(cb.as_raw(), Vec::new());
+                st.recordings.remove(&cb.as_raw())
+            };
+            if let Some(old) = old {
+                // The application waited for the command buffer before recording it anew.
+                drop_recording(&d, old);
+            }
             (d.fns.fp_v1_0().begin_command_buffer)(cb, info)
         }
     })
@@ -1616,7 +1719,7 @@ unsafe fn note_begin_render_pass(
     d: &DeviceData,
     cb: vk::CommandBuffer,
     info: &vk::RenderPassBeginInfo<'_>,
-) {
+) -> PassRec {
     let mut st = lock(&d.state);
     let pass = info.render_pass.as_raw();
     let fb = info.framebuffer.as_raw();
@@ -1631,14 +1734,14 @@ unsafe fn note_begin_render_pass(
         None => st.framebuffers.get(&fb).cloned().unwrap_or_default(),
     };
     let mut used = Vec::new();
-    for (a, _) in st.passes.get(&pass).into_iter().flatten().flatten() {
-        if let Some(&v) = views.get(*a as usize) {
+    for (a, _) in st.passes.get(&pass).into_iter().flat_map(PassInfo::rates) {
+        if let Some(&v) = views.get(a as usize) {
             used.push(v);
         }
     }
     let images: Vec<u64> = used
         .iter()
-        .filter_map(|v| st.views.get(v).copied())
+        .filter_map(|v| st.views.get(v).map(|v| v.image))
         .collect();
     let list = st.commands.entry(cb.as_raw()).or_default();
     for i in images {
@@ -1654,6 +1757,34 @@ unsafe fn note_begin_render_pass(
         "framebuffer": fb,
         "shading_rate_views": used,
     }));
+    let a = info.render_area;
+    let subpasses = match st.passes.get(&pass) {
+        Some(p) => p
+            .subpasses
+            .iter()
+            .map(|s| {
+                let attach = s.rate.and_then(|(i, texel)| {
+                    let view = *views.get(i as usize)?;
+                    let dont_care = p
+                        .ops
+                        .get(i as usize)
+                        .is_some_and(|o| o.1 == vk::AttachmentStoreOp::DONT_CARE);
+                    attach_of(&st, view, texel, dont_care)
+                });
+                (attach, s.view_mask)
+            })
+            .collect(),
+        None => vec![(None, 0)],
+    };
+    PassRec {
+        rendering: false,
+        area: vk::Extent2D {
+            width: a.offset.x.max(0) as u32 + a.extent.width,
+            height: a.offset.y.max(0) as u32 + a.extent.height,
+        },
+        subpasses,
+        draws: Vec::new(),
+    }
 }
 
 unsafe extern "system" fn cmd_begin_render_pass(
@@ -1665,7 +1796,8 @@ unsafe extern "system" fn cmd_begin_render_pass(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(cb.as_raw());
-            note_begin_render_pass(&d, cb, &*info);
+            let pass = note_begin_render_pass(&d, cb, &*info);
+            open_pass(&d, cb, pass, false);
             (d.fns.fp_v1_0().cmd_begin_render_pass)(cb, info, contents);
         }
     })
@@ -1680,7 +1812,8 @@ unsafe extern "system" fn cmd_begin_render_pass2(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(cb.as_raw());
-            note_begin_render_pass(&d, cb, &*info);
+            let pass = note_begin_render_pass(&d, cb, &*info);
+            open_pass(&d, cb, pass, false);
             (d.fns.fp_v1_2().cmd_begin_render_pass2)(cb, info, subpass);
         }
     })
@@ -1717,7 +1850,7 @@ unsafe extern "system" fn cmd_begin_rendering(
                     }
                     let mut st = lock(&d.state);
                     let view = f.image_view.as_raw();
-                    let image = st.views.get(&view).copied();
+                    let image = st.views.get(&view).map(|v| v.image);
                     if let Some(image) = image {
                         if let Some(info) = st.images.get(&image) {
                             let a = ri.render_area;
@@ -1769,6 +1902,29 @@ unsafe extern "system" fn cmd_begin_rendering(
                     return;
                 }
             };
+            let attach = fsr.and_then(|f| {
+                attach_of(
+                    &lock(&d.state),
+                    f.image_view.as_raw(),
+                    f.shading_rate_attachment_texel_size,
+                    false,
+                )
+            });
+            let a = ri.render_area;
+            open_pass(
+                &d,
+                cb,
+                PassRec {
+                    rendering: true,
+                    area: vk::Extent2D {
+                        width: a.offset.x.max(0) as u32 + a.extent.width,
+                        height: a.offset.y.max(0) as u32 + a.extent.height,
+                    },
+                    subpasses: vec![(attach, ri.view_mask)],
+                    draws: Vec::new(),
+                },
+                ri.flags.contains(vk::RenderingFlags::RESUMING),
+            );
             let mut copy = *ri;
             copy.p_next = stripped.head;
             (d.fns.fp_v1_3().cmd_begin_rendering)(cb, &copy);
@@ -1929,6 +2085,15 @@ unsafe extern "system" fn cmd_set_fragment_shading_rate(
         // SAFETY: the caller's arguments; nothing reaches lavapipe, which lacks the command.
         unsafe {
             let (s, o) = (*size, *ops);
+            let d = device_of(cb.as_raw());
+            lock(&d.state)
+                .recordings
+                .entry(cb.as_raw())
+                .or_default()
+                .dynamic = Some(PipelineRate {
+                size: [s.width, s.height],
+                ops: o,
+            });
             event(json!({
                 "kind": "set_fragment_shading_rate",
                 "command_buffer": cb.as_raw(),
@@ -1961,6 +2126,24 @@ unsafe extern "system" fn cmd_execute_commands(
                         list.push(i);
                     }
                 }
+                // A secondary's draws outside its own passes run in the primary's pass; its own
+                // renderings are the primary's too.
+                let mut loose = Vec::new();
+                let mut passes = Vec::new();
+                for s in slice(secondaries, count) {
+                    if let Some(r) = st.recordings.get(&s.as_raw()) {
+                        loose.extend(r.loose.iter().copied());
+                        passes.extend(r.passes.iter().cloned());
+                    }
+                }
+                let r = st.recordings.entry(cb.as_raw()).or_default();
+                let subpass = r.subpass;
+                if let Some(open) = r.open {
+                    r.passes[open]
+                        .draws
+                        .extend(loose.into_iter().map(|dr| Draw { subpass, ..dr }));
+                }
+                r.passes.extend(passes);
             }
             (d.fns.fp_v1_0().cmd_execute_commands)(cb, count, secondaries);
         }
@@ -2129,6 +2312,22 @@ unsafe fn note_submit(d: &DeviceData, queue: vk::Queue, cbs: Vec<u64>) {
         // SAFETY: the caller's promise.
         unsafe { read_back(d, queue, &images) }
     };
+    let draws = {
+        let st = lock(&d.state);
+        cbs.iter().any(|cb| {
+            st.recordings
+                .get(cb)
+                .is_some_and(|r| r.passes.iter().any(|p| !p.draws.is_empty()))
+        })
+    };
+    if draws {
+        // SAFETY: the caller's promise: the queue is ours to wait on.
+        match unsafe { d.fns.queue_wait_idle(queue) } {
+            // SAFETY: the submit's work is complete.
+            Ok(()) => unsafe { report_draws(d, &cbs) },
+            Err(e) => error(format!("waiting for a submit failed: {e:?}")),
+        }
+    }
     event(json!({
         "kind": "submit",
         "command_buffers": cbs,
@@ -2395,3 +2594,660 @@ unsafe fn null_outputs<T: vk::Handle>(out: *mut T, n: u32) {
         unsafe { out.add(i).write(T::from_raw(0)) };
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Effects: the fragment size each draw gets, as the GPU the double plays would shade it.
+//
+// Per command buffer the double follows the bound pipeline's rate state, the dynamic rate, and the
+// render pass instances (or renderings) with their shading-rate attachments. A pass cannot change
+// its attachment while it runs, so the attachment's codes as the pass sees them are copied, in the
+// command buffer, just before the pass begins, into a buffer the double owns; after the submit
+// completed, each draw's effective size per attachment texel is computed from that copy.
+
+/// A buffer of the double's own, host visible, that a pass's attachment is copied into.
+#[derive(Clone, Copy)]
+struct Snapshot {
+    buffer: vk::Buffer,
+    memory: vk::DeviceMemory,
+    size: u64,
+}
+
+/// A pass's shading-rate attachment: the layers of the image its view names.
+#[derive(Clone, Copy)]
+struct Attach {
+    image: u64,
+    base_layer: u32,
+    layers: u32,
+    extent: vk::Extent2D,
+    texel: vk::Extent2D,
+    snapshot: Option<Snapshot>,
+    /// `storeOp = DONT_CARE`: the contents are undefined after the pass.
+    dont_care: bool,
+}
+
+#[derive(Clone, Copy)]
+struct Draw {
+    subpass: u32,
+    rate: PipelineRate,
+}
+
+/// One render pass instance or rendering.
+#[derive(Clone)]
+struct PassRec {
+    rendering: bool,
+    /// The render area's far corner: the framebuffer region the draws can touch.
+    area: vk::Extent2D,
+    /// Per subpass (one for a rendering): the attachment and the view mask.
+    subpasses: Vec<(Option<Attach>, u32)>,
+    draws: Vec<Draw>,
+}
+
+#[derive(Default)]
+struct Recording {
+    /// The bound graphics pipeline's rate state and whether it is dynamic.
+    bound: Option<(PipelineRate, bool)>,
+    /// The last `vkCmdSetFragmentShadingRateKHR`.
+    dynamic: Option<PipelineRate>,
+    passes: Vec<PassRec>,
+    /// The pass being recorded, an index into `passes`.
+    open: Option<usize>,
+    subpass: u32,
+    /// Draws outside any pass of this command buffer: a secondary's, which run in the pass of
+    /// the primary that executes it.
+    loose: Vec<Draw>,
+    /// The snapshots this recording owns (freed when it is recorded anew).
+    snapshots: Vec<Snapshot>,
+}
+
+/// What poisons a shading-rate attachment after `storeOp = DONT_CARE`: the code of 4×4, the
+/// coarsest rate (clamped to what the device lists), so a later pass that relies on the old
+/// contents shades visibly wrong.
+pub const POISON: u8 = 0b1010;
+
+/// Forgets a recording and frees what it owned.
+///
+/// # Safety
+/// The snapshots' command buffer must not be pending.
+unsafe fn drop_recording(d: &DeviceData, r: Recording) {
+    for s in r.snapshots {
+        // SAFETY: the double's own objects, no longer in use (the caller's promise).
+        unsafe {
+            d.fns.destroy_buffer(s.buffer, None);
+            d.fns.free_memory(s.memory, None);
+        }
+    }
+}
+
+/// A host-visible, coherent buffer of `size` bytes.
+///
+/// # Safety
+/// `d` must be live.
+unsafe fn host_buffer(
+    d: &DeviceData,
+    size: u64,
+    usage: vk::BufferUsageFlags,
+) -> Result<Snapshot, vk::Result> {
+    let f = &d.fns;
+    // SAFETY: plain Vulkan calls on the double's own objects.
+    unsafe {
+        let buffer = f.create_buffer(
+            &vk::BufferCreateInfo::default()
+                .size(size.max(1))
+                .usage(usage),
+            None,
+        )?;
+        let req = f.get_buffer_memory_requirements(buffer);
+        let props = d
+            .instance
+            .fns
+            .get_physical_device_memory_properties(d.physical);
+        let want = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+        let Some(ty) = (0..props.memory_type_count).find(|&i| {
+            req.memory_type_bits & (1 << i) != 0
+                && props.memory_types[i as usize].property_flags.contains(want)
+        }) else {
+            f.destroy_buffer(buffer, None);
+            return Err(vk::Result::ERROR_FEATURE_NOT_PRESENT);
+        };
+        let memory = match f.allocate_memory(
+            &vk::MemoryAllocateInfo::default()
+                .allocation_size(req.size)
+                .memory_type_index(ty),
+            None,
+        ) {
+            Ok(m) => m,
+            Err(e) => {
+                f.destroy_buffer(buffer, None);
+                return Err(e);
+            }
+        };
+        if let Err(e) = f.bind_buffer_memory(buffer, memory, 0) {
+            f.destroy_buffer(buffer, None);
+            f.free_memory(memory, None);
+            return Err(e);
+        }
+        Ok(Snapshot {
+            buffer,
+            memory,
+            size,
+        })
+    }
+}
+
+/// A global barrier between everything before and everything after, for the double's own copies
+/// and clears (lavapipe ignores layouts; these commands never pass the validation layer).
+///
+/// # Safety
+/// `cb` must be recording outside a pass.
+unsafe fn full_barrier(d: &DeviceData, cb: vk::CommandBuffer) {
+    let all = vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE;
+    // SAFETY: the caller's promise.
+    unsafe {
+        (d.fns.fp_v1_0().cmd_pipeline_barrier)(
+            cb,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::PipelineStageFlags::ALL_COMMANDS | vk::PipelineStageFlags::HOST,
+            vk::DependencyFlags::empty(),
+            1,
+            &vk::MemoryBarrier::default()
+                .src_access_mask(all)
+                .dst_access_mask(all | vk::AccessFlags::HOST_READ),
+            0,
+            std::ptr::null(),
+            0,
+            std::ptr::null(),
+        );
+    }
+}
+
+fn subresource(base: u32, layers: u32) -> vk::ImageSubresourceLayers {
+    vk::ImageSubresourceLayers {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        mip_level: 0,
+        base_array_layer: base,
+        layer_count: layers,
+    }
+}
+
+/// Records, in front of a pass, the copy of its attachment's layers into a new snapshot.
+///
+/// # Safety
+/// `cb` must be recording outside a pass, on `d`.
+unsafe fn snapshot(d: &DeviceData, cb: vk::CommandBuffer, a: &Attach) -> Option<Snapshot> {
+    let size = a.extent.width as u64 * a.extent.height as u64 * a.layers as u64;
+    // SAFETY: the caller's promise.
+    let s = match unsafe { host_buffer(d, size, vk::BufferUsageFlags::TRANSFER_DST) } {
+        Ok(s) => s,
+        Err(e) => {
+            error(format!(
+                "snapshot of a shading-rate attachment failed: {e:?}"
+            ));
+            return None;
+        }
+    };
+    // SAFETY: the caller's promise; the image is a live shading-rate image the pass reads.
+    unsafe {
+        full_barrier(d, cb);
+        (d.fns.fp_v1_0().cmd_copy_image_to_buffer)(
+            cb,
+            vk::Image::from_raw(a.image),
+            vk::ImageLayout::GENERAL,
+            s.buffer,
+            1,
+            &vk::BufferImageCopy::default()
+                .image_subresource(subresource(a.base_layer, a.layers))
+                .image_extent(vk::Extent3D {
+                    width: a.extent.width,
+                    height: a.extent.height,
+                    depth: 1,
+                }),
+        );
+        full_barrier(d, cb);
+    }
+    Some(s)
+}
+
+/// Records, after a pass, the poisoning of an attachment it stored with `DONT_CARE`.
+///
+/// # Safety
+/// `cb` must be recording outside a pass, on `d`.
+unsafe fn poison(d: &DeviceData, cb: vk::CommandBuffer, a: &Attach) {
+    let value = vk::ClearColorValue {
+        uint32: [POISON as u32; 4],
+    };
+    let range = vk::ImageSubresourceRange {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        base_mip_level: 0,
+        level_count: 1,
+        base_array_layer: a.base_layer,
+        layer_count: a.layers,
+    };
+    // SAFETY: the caller's promise; the image got TRANSFER_DST when the double created it.
+    unsafe {
+        full_barrier(d, cb);
+        (d.fns.fp_v1_0().cmd_clear_color_image)(
+            cb,
+            vk::Image::from_raw(a.image),
+            vk::ImageLayout::GENERAL,
+            &value,
+            1,
+            &range,
+        );
+        full_barrier(d, cb);
+    }
+    event(json!({
+        "kind": "poison",
+        "command_buffer": cb.as_raw(),
+        "image": a.image,
+        "base_layer": a.base_layer,
+        "layers": a.layers,
+    }));
+}
+
+/// The attachment a view names, as a pass uses it.
+fn attach_of(st: &DeviceState, view: u64, texel: vk::Extent2D, dont_care: bool) -> Option<Attach> {
+    let v = st.views.get(&view)?;
+    let image = st.images.get(&v.image)?;
+    Some(Attach {
+        image: v.image,
+        base_layer: v.base_layer,
+        layers: v.layers,
+        extent: vk::Extent2D {
+            width: image.extent.width,
+            height: image.extent.height,
+        },
+        texel,
+        snapshot: None,
+        dont_care,
+    })
+}
+
+/// Opens a pass in `cb`'s recording, with snapshots of its attachments recorded in front of it.
+///
+/// # Safety
+/// `cb` must be recording outside a pass, on `d`; the begin is forwarded after this returns.
+unsafe fn open_pass(d: &DeviceData, cb: vk::CommandBuffer, mut pass: PassRec, resuming: bool) {
+    let mut taken: Vec<(u64, u32, u32, Snapshot)> = Vec::new();
+    if resuming {
+        // A resumed rendering continues the suspended one: nothing may come between them.
+        let st = lock(&d.state);
+        if let Some(prev) = st
+            .recordings
+            .get(&cb.as_raw())
+            .and_then(|r| r.passes.last())
+        {
+            for (a, _) in pass.subpasses.iter_mut() {
+                if let (Some(a), Some((Some(p), _))) = (a.as_mut(), prev.subpasses.first()) {
+                    if p.image == a.image {
+                        a.snapshot = p.snapshot;
+                    }
+                }
+            }
+        }
+    } else {
+        for (a, _) in pass.subpasses.iter_mut() {
+            let Some(a) = a.as_mut() else { continue };
+            if let Some(&(_, _, _, s)) = taken
+                .iter()
+                .find(|t| (t.0, t.1, t.2) == (a.image, a.base_layer, a.layers))
+            {
+                a.snapshot = Some(s);
+                continue;
+            }
+            // SAFETY: the caller's promise.
+            a.snapshot = unsafe { snapshot(d, cb, a) };
+            if let Some(s) = a.snapshot {
+                taken.push((a.image, a.base_layer, a.layers, s));
+            }
+        }
+    }
+    let mut st = lock(&d.state);
+    let r = st.recordings.entry(cb.as_raw()).or_default();
+    r.snapshots.extend(taken.iter().map(|t| t.3));
+    r.passes.push(pass);
+    r.open = Some(r.passes.len() - 1);
+    r.subpass = 0;
+}
+
+/// Closes the open pass; poisons what it left undefined.
+///
+/// # Safety
+/// `cb` must be recording on `d`, the pass's end just forwarded.
+unsafe fn close_pass(d: &DeviceData, cb: vk::CommandBuffer) {
+    let poisoned: Vec<Attach> = {
+        let mut st = lock(&d.state);
+        let Some(r) = st.recordings.get_mut(&cb.as_raw()) else {
+            return;
+        };
+        let Some(open) = r.open.take() else { return };
+        r.subpass = 0;
+        let mut out: Vec<Attach> = Vec::new();
+        for (a, _) in &r.passes[open].subpasses {
+            if let Some(a) = a.filter(|a| a.dont_care) {
+                if !out
+                    .iter()
+                    .any(|o| (o.image, o.base_layer) == (a.image, a.base_layer))
+                {
+                    out.push(a);
+                }
+            }
+        }
+        out
+    };
+    for a in &poisoned {
+        // SAFETY: the caller's promise.
+        unsafe { poison(d, cb, a) };
+    }
+}
+
+/// Notes a draw with the state bound now.
+fn note_draw(d: &DeviceData, cb: vk::CommandBuffer) {
+    let mut st = lock(&d.state);
+    let r = st.recordings.entry(cb.as_raw()).or_default();
+    let rate = match r.bound {
+        Some((rate, false)) => rate,
+        Some((_, true)) => r.dynamic.unwrap_or_else(|| {
+            error(
+                "draw with a dynamic fragment shading rate that was never set \
+                 (VUID-vkCmdDraw-None-08608)"
+                    .into(),
+            );
+            PipelineRate::NONE
+        }),
+        None => PipelineRate::NONE,
+    };
+    let draw = Draw {
+        subpass: r.subpass,
+        rate,
+    };
+    match r.open {
+        Some(i) => r.passes[i].draws.push(draw),
+        None => r.loose.push(draw),
+    }
+}
+
+/// The attachment's codes per texel of one layer, from a snapshot read back.
+struct Codes<'a> {
+    bytes: &'a [u8],
+    extent: vk::Extent2D,
+}
+
+/// After a submit completed: the effective rates of every draw of the submitted command buffers.
+///
+/// # Safety
+/// The submit's work must be complete.
+unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) {
+    let rates: Vec<[u32; 2]> = d
+        .instance
+        .profile
+        .rates()
+        .iter()
+        .map(|(e, _)| [e.width, e.height])
+        .collect();
+    let st = lock(&d.state);
+    let mut read: BTreeMap<u64, Vec<u8>> = BTreeMap::new();
+    for &cb in cbs {
+        let Some(r) = st.recordings.get(&cb) else {
+            continue;
+        };
+        for (pi, pass) in r.passes.iter().enumerate() {
+            for (k, draw) in pass.draws.iter().enumerate() {
+                let (attach, mask) = pass
+                    .subpasses
+                    .get(draw.subpass as usize)
+                    .copied()
+                    .unwrap_or((None, 0));
+                let bytes = attach.and_then(|a| a.snapshot).map(|s| {
+                    read.entry(s.buffer.as_raw())
+                        .or_insert_with(|| {
+                            // SAFETY: the double's own memory; the copy into it completed.
+                            unsafe {
+                                match d.fns.map_memory(
+                                    s.memory,
+                                    0,
+                                    s.size,
+                                    vk::MemoryMapFlags::empty(),
+                                ) {
+                                    Ok(p) => {
+                                        let v = std::slice::from_raw_parts(
+                                            p as *const u8,
+                                            s.size as usize,
+                                        )
+                                        .to_vec();
+                                        d.fns.unmap_memory(s.memory);
+                                        v
+                                    }
+                                    Err(e) => {
+                                        error(format!("mapping a snapshot failed: {e:?}"));
+                                        Vec::new()
+                                    }
+                                }
+                            }
+                        })
+                        .clone()
+                });
+                let views: Vec<u32> = if mask == 0 {
+                    vec![0]
+                } else {
+                    (0..32).filter(|v| mask & (1 << v) != 0).collect()
+                };
+                let mut out = Vec::new();
+                for v in views {
+                    out.push(match (attach, &bytes) {
+                        (Some(a), Some(b)) => {
+                            // Layered attachment with multiview: layer = ViewIndex; else layer 0
+                            // ("Attachment Fragment Shading Rate").
+                            let layer = if a.layers > 1 && mask != 0 { v } else { 0 };
+                            if layer >= a.layers {
+                                error(format!(
+                                    "view {v} reads layer {layer} of a {}-layer shading-rate view",
+                                    a.layers
+                                ));
+                            }
+                            let texels = (a.extent.width * a.extent.height) as usize;
+                            let start = (layer.min(a.layers - 1) as usize) * texels;
+                            let codes = Codes {
+                                bytes: b.get(start..start + texels).unwrap_or(&[]),
+                                extent: a.extent,
+                            };
+                            view_rates(
+                                v,
+                                Some(layer),
+                                &codes,
+                                a.texel,
+                                pass.area,
+                                draw.rate,
+                                &rates,
+                            )
+                        }
+                        _ => {
+                            let e = draw.rate.effective([1, 1], &rates);
+                            json!({
+                                "view": v,
+                                "layer": null,
+                                "columns": 1,
+                                "rows": 1,
+                                "codes": format!("{:x}", crate::shade::encode(e)),
+                            })
+                        }
+                    });
+                }
+                event(json!({
+                    "kind": "draw",
+                    "command_buffer": cb,
+                    "pass": pi,
+                    "rendering": pass.rendering,
+                    "subpass": draw.subpass,
+                    "draw": k,
+                    "pipeline_rate": {
+                        "fragment_size": draw.rate.size,
+                        "combiner_ops": [draw.rate.ops[0].as_raw(), draw.rate.ops[1].as_raw()],
+                    },
+                    "views": out,
+                }));
+            }
+        }
+    }
+}
+
+/// One view's effective sizes over the attachment texels the render area covers, as one hex digit
+/// (the attachment encoding) per texel, rows top to bottom.
+fn view_rates(
+    view: u32,
+    layer: Option<u32>,
+    codes: &Codes<'_>,
+    texel: vk::Extent2D,
+    area: vk::Extent2D,
+    rate: PipelineRate,
+    rates: &[[u32; 2]],
+) -> Value {
+    let columns = area
+        .width
+        .div_ceil(texel.width.max(1))
+        .min(codes.extent.width);
+    let rows = area
+        .height
+        .div_ceil(texel.height.max(1))
+        .min(codes.extent.height);
+    let mut s = String::with_capacity((columns * rows) as usize);
+    for y in 0..rows {
+        for x in 0..columns {
+            let at = (y * codes.extent.width + x) as usize;
+            let code = codes.bytes.get(at).copied().unwrap_or(0);
+            let e = rate.effective(crate::shade::decode(code), rates);
+            s.push(char::from_digit(crate::shade::encode(e) as u32, 16).unwrap_or('0'));
+        }
+    }
+    json!({
+        "view": view,
+        "layer": layer,
+        "columns": columns,
+        "rows": rows,
+        "codes": s,
+    })
+}
+
+unsafe extern "system" fn cmd_bind_pipeline(
+    cb: vk::CommandBuffer,
+    point: vk::PipelineBindPoint,
+    pipeline: vk::Pipeline,
+) {
+    guard("vkCmdBindPipeline", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            if point == vk::PipelineBindPoint::GRAPHICS {
+                let mut st = lock(&d.state);
+                let rate = st
+                    .pipelines
+                    .get(&pipeline.as_raw())
+                    .copied()
+                    .unwrap_or((PipelineRate::NONE, false));
+                st.recordings.entry(cb.as_raw()).or_default().bound = Some(rate);
+            }
+            (d.fns.fp_v1_0().cmd_bind_pipeline)(cb, point, pipeline);
+        }
+    })
+}
+
+fn next_subpass(d: &DeviceData, cb: vk::CommandBuffer) {
+    lock(&d.state)
+        .recordings
+        .entry(cb.as_raw())
+        .or_default()
+        .subpass += 1;
+}
+
+unsafe extern "system" fn cmd_next_subpass(cb: vk::CommandBuffer, contents: vk::SubpassContents) {
+    guard("vkCmdNextSubpass", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            next_subpass(&d, cb);
+            (d.fns.fp_v1_0().cmd_next_subpass)(cb, contents);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_next_subpass2(
+    cb: vk::CommandBuffer,
+    begin: *const vk::SubpassBeginInfo<'_>,
+    end: *const vk::SubpassEndInfo<'_>,
+) {
+    guard("vkCmdNextSubpass2", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            next_subpass(&d, cb);
+            (d.fns.fp_v1_2().cmd_next_subpass2)(cb, begin, end);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_end_render_pass(cb: vk::CommandBuffer) {
+    guard("vkCmdEndRenderPass", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged; the double's own commands follow.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_0().cmd_end_render_pass)(cb);
+            close_pass(&d, cb);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_end_render_pass2(
+    cb: vk::CommandBuffer,
+    end: *const vk::SubpassEndInfo<'_>,
+) {
+    guard("vkCmdEndRenderPass2", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged; the double's own commands follow.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_2().cmd_end_render_pass2)(cb, end);
+            close_pass(&d, cb);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_end_rendering(cb: vk::CommandBuffer) {
+    guard("vkCmdEndRendering", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_3().cmd_end_rendering)(cb);
+            close_pass(&d, cb);
+        }
+    })
+}
+
+macro_rules! draw_hook {
+    ($f:ident, $name:literal, $table:ident . $field:ident ($($a:ident: $t:ty),*)) => {
+        unsafe extern "system" fn $f(cb: vk::CommandBuffer $(, $a: $t)*) {
+            guard($name, (), || {
+                // SAFETY: the caller's arguments, forwarded unchanged.
+                unsafe {
+                    let d = device_of(cb.as_raw());
+                    note_draw(&d, cb);
+                    (d.fns.$table().$field)(cb $(, $a)*);
+                }
+            })
+        }
+    };
+}
+
+draw_hook!(cmd_draw, "vkCmdDraw", fp_v1_0.cmd_draw(
+    vertices: u32, instances: u32, first_vertex: u32, first_instance: u32));
+draw_hook!(cmd_draw_indexed, "vkCmdDrawIndexed", fp_v1_0.cmd_draw_indexed(
+    indices: u32, instances: u32, first_index: u32, offset: i32, first_instance: u32));
+draw_hook!(cmd_draw_indirect, "vkCmdDrawIndirect", fp_v1_0.cmd_draw_indirect(
+    buffer: vk::Buffer, offset: vk::DeviceSize, count: u32, stride: u32));
+draw_hook!(cmd_draw_indexed_indirect, "vkCmdDrawIndexedIndirect",
+    fp_v1_0.cmd_draw_indexed_indirect(
+    buffer: vk::Buffer, offset: vk::DeviceSize, count: u32, stride: u32));
+draw_hook!(cmd_draw_indirect_count, "vkCmdDrawIndirectCount", fp_v1_2.cmd_draw_indirect_count(
+    buffer: vk::Buffer, offset: vk::DeviceSize, count_buffer: vk::Buffer,
+    count_offset: vk::DeviceSize, max: u32, stride: u32));
+draw_hook!(cmd_draw_indexed_indirect_count, "vkCmdDrawIndexedIndirectCount",
+    fp_v1_2.cmd_draw_indexed_indirect_count(
+    buffer: vk::Buffer, offset: vk::DeviceSize, count_buffer: vk::Buffer,
+    count_offset: vk::DeviceSize, max: u32, stride: u32));
