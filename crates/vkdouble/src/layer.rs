@@ -53,6 +53,8 @@ struct DeviceData {
     set_loader_data: Option<ffi::PfnSetDeviceLoaderData>,
     /// [`crate::NULL_COMMANDS_ENV`] was set when the device was created.
     null_commands: bool,
+    /// `attachmentFragmentShadingRate` was enabled: without it, no shading-rate attachment.
+    attachment_feature: bool,
     state: Mutex<DeviceState>,
 }
 
@@ -163,7 +165,7 @@ fn guard<R>(what: &str, fail: R, f: impl FnOnce() -> R) -> R {
 ///
 /// # Safety
 /// `p` must be null or valid for `n` elements.
-unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
+pub(crate) unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
     if p.is_null() || n == 0 {
         &[]
     } else {
@@ -322,6 +324,20 @@ table! { device_commands:
     b"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate as PFN_vkCmdSetFragmentShadingRateKHR,
     b"vkCmdExecuteCommands" => cmd_execute_commands as PFN_vkCmdExecuteCommands,
     b"vkDestroyPipeline" => destroy_pipeline as PFN_vkDestroyPipeline,
+    b"vkCreateRenderPass" => create_render_pass as PFN_vkCreateRenderPass,
+    b"vkCreateSampler" => create_sampler as PFN_vkCreateSampler,
+    b"vkCmdSetEvent" => cmd_set_event as PFN_vkCmdSetEvent,
+    b"vkCmdResetEvent" => cmd_reset_event as PFN_vkCmdResetEvent,
+    b"vkCmdWriteTimestamp" => cmd_write_timestamp as PFN_vkCmdWriteTimestamp,
+    b"vkCmdWaitEvents" => cmd_wait_events as PFN_vkCmdWaitEvents,
+    b"vkCmdSetEvent2" => cmd_set_event2 as PFN_vkCmdSetEvent2,
+    b"vkCmdSetEvent2KHR" => cmd_set_event2 as PFN_vkCmdSetEvent2,
+    b"vkCmdResetEvent2" => cmd_reset_event2 as PFN_vkCmdResetEvent2,
+    b"vkCmdResetEvent2KHR" => cmd_reset_event2 as PFN_vkCmdResetEvent2,
+    b"vkCmdWriteTimestamp2" => cmd_write_timestamp2 as PFN_vkCmdWriteTimestamp2,
+    b"vkCmdWriteTimestamp2KHR" => cmd_write_timestamp2 as PFN_vkCmdWriteTimestamp2,
+    b"vkCmdWaitEvents2" => cmd_wait_events2 as PFN_vkCmdWaitEvents2,
+    b"vkCmdWaitEvents2KHR" => cmd_wait_events2 as PFN_vkCmdWaitEvents2,
     b"vkCmdBindPipeline" => cmd_bind_pipeline as PFN_vkCmdBindPipeline,
     b"vkCmdNextSubpass" => cmd_next_subpass as PFN_vkCmdNextSubpass,
     b"vkCmdNextSubpass2" => cmd_next_subpass2 as PFN_vkCmdNextSubpass2,
@@ -708,6 +724,12 @@ unsafe extern "system" fn create_device(
                     return vk::Result::ERROR_INITIALIZATION_FAILED;
                 };
                 let create: vk::PFN_vkCreateDevice = std::mem::transmute(create);
+                if let Some(r) = crate::strict::device(ci) {
+                    return r;
+                }
+                let attachment_feature =
+                    find::<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR>(ci.p_next)
+                        .is_some_and(|f| (*f).attachment_fragment_shading_rate != 0);
 
                 let mut copy = *ci;
                 let exts: Vec<*const c_char>;
@@ -783,6 +805,7 @@ unsafe extern "system" fn create_device(
                         fns,
                         set_loader_data,
                         null_commands: std::env::var_os(crate::NULL_COMMANDS_ENV).is_some(),
+                        attachment_feature,
                         state: Mutex::new(DeviceState::default()),
                     }),
                 );
@@ -1202,8 +1225,26 @@ unsafe extern "system" fn create_image(
             let d = device_of(device.as_raw());
             let ci = &*info;
             let next = d.fns.fp_v1_0().create_image;
+            crate::strict::chain("vkCreateImage", ci.p_next);
+            crate::strict::usage("vkCreateImage", ci.usage);
+            crate::strict::flag(
+                "vkCreateImage",
+                ci.flags.intersects(
+                    vk::ImageCreateFlags::SUBSAMPLED_EXT
+                        | vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM,
+                ),
+                "a subsampled or density-map-offset image",
+            );
+            crate::strict::layout("vkCreateImage", ci.initial_layout);
             if !ci.usage.contains(FSR_USAGE) {
                 return next(device, info, alloc, out);
+            }
+            if !d.attachment_feature {
+                error(
+                    "vkCreateImage: shading-rate usage without the attachmentFragmentShadingRate \
+                     feature"
+                        .into(),
+                );
             }
             if !fsr_image_possible(ci.format, ci.image_type, ci.tiling) {
                 error(format!(
@@ -1259,8 +1300,17 @@ unsafe extern "system" fn create_image_view(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(device.as_raw());
-            let r = (d.fns.fp_v1_0().create_image_view)(device, info, alloc, out);
             let ci = &*info;
+            crate::strict::chain("vkCreateImageView", ci.p_next);
+            crate::strict::flag(
+                "vkCreateImageView",
+                ci.flags.intersects(
+                    vk::ImageViewCreateFlags::FRAGMENT_DENSITY_MAP_DYNAMIC_EXT
+                        | vk::ImageViewCreateFlags::FRAGMENT_DENSITY_MAP_DEFERRED_EXT,
+                ),
+                "a dynamic or deferred density-map view",
+            );
+            let r = (d.fns.fp_v1_0().create_image_view)(device, info, alloc, out);
             let image = ci.image.as_raw();
             if r == vk::Result::SUCCESS && lock(&d.state).images.contains_key(&image) {
                 let layers = ci.subresource_range.layer_count;
@@ -1307,6 +1357,7 @@ unsafe extern "system" fn create_render_pass2(
             let d = device_of(device.as_raw());
             let profile = d.instance.profile;
             let ci = &*info;
+            check_render_pass2(&d, ci);
             let attachments_in = slice(ci.p_attachments, ci.attachment_count);
             let attachments: Vec<vk::AttachmentDescription2<'_>> = attachments_in
                 .iter()
@@ -1601,6 +1652,14 @@ unsafe extern "system" fn create_graphics_pipelines(
                 let mut records = Vec::new();
                 let mut rates = Vec::new();
                 for ci in slice(infos, count) {
+                    crate::strict::chain("vkCreateGraphicsPipelines", ci.p_next);
+                    crate::strict::flag(
+                        "vkCreateGraphicsPipelines",
+                        ci.flags.contains(
+                            vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT,
+                        ),
+                        "flag RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT",
+                    );
                     let mut c = *ci;
                     let state =
                         find::<vk::PipelineFragmentShadingRateStateCreateInfoKHR>(ci.p_next)
@@ -1796,6 +1855,7 @@ unsafe extern "system" fn cmd_begin_render_pass(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(cb.as_raw());
+            crate::strict::chain("vkCmdBeginRenderPass", (*info).p_next);
             let pass = note_begin_render_pass(&d, cb, &*info);
             open_pass(&d, cb, pass, false);
             (d.fns.fp_v1_0().cmd_begin_render_pass)(cb, info, contents);
@@ -1812,6 +1872,7 @@ unsafe extern "system" fn cmd_begin_render_pass2(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(cb.as_raw());
+            crate::strict::chain("vkCmdBeginRenderPass2", (*info).p_next);
             let pass = note_begin_render_pass(&d, cb, &*info);
             open_pass(&d, cb, pass, false);
             (d.fns.fp_v1_2().cmd_begin_render_pass2)(cb, info, subpass);
@@ -1829,11 +1890,27 @@ unsafe extern "system" fn cmd_begin_rendering(
         unsafe {
             let d = device_of(cb.as_raw());
             let ri = &*info;
+            let what = "vkCmdBeginRendering";
+            crate::strict::chain(what, ri.p_next);
+            for a in slice(ri.p_color_attachments, ri.color_attachment_count)
+                .iter()
+                .chain(ri.p_depth_attachment.as_ref())
+                .chain(ri.p_stencil_attachment.as_ref())
+            {
+                crate::strict::layout(what, a.image_layout);
+                crate::strict::layout(what, a.resolve_image_layout);
+            }
             let fsr = find::<vk::RenderingFragmentShadingRateAttachmentInfoKHR>(ri.p_next)
                 .map(|f| *f)
                 .filter(|f| f.image_view != vk::ImageView::null());
             let rec = match &fsr {
                 Some(f) => {
+                    if !d.attachment_feature {
+                        error(format!(
+                            "{what}: a shading-rate attachment without the \
+                             attachmentFragmentShadingRate feature"
+                        ));
+                    }
                     let t = d.instance.profile.texel();
                     let texel = f.shading_rate_attachment_texel_size;
                     if texel != t {
@@ -1949,6 +2026,23 @@ unsafe extern "system" fn cmd_pipeline_barrier(
         // SAFETY: the caller's arrays are read; lavapipe gets copies that live across the call.
         unsafe {
             let d = device_of(cb.as_raw());
+            let what = "vkCmdPipelineBarrier";
+            crate::strict::stage(what, src.as_raw() as u64);
+            crate::strict::stage(what, dst.as_raw() as u64);
+            for b in slice(memory, memory_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+            }
+            for b in slice(buffers, buffer_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+            }
+            for b in slice(images, image_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+                crate::strict::layout(what, b.old_layout);
+                crate::strict::layout(what, b.new_layout);
+            }
             let m: Vec<_> = slice(memory, memory_count)
                 .iter()
                 .map(|b| {
@@ -2016,6 +2110,7 @@ unsafe extern "system" fn cmd_pipeline_barrier2(
         unsafe {
             let d = device_of(cb.as_raw());
             let di = &*info;
+            crate::strict::dependency("vkCmdPipelineBarrier2", di);
             let m: Vec<_> = slice(di.p_memory_barriers, di.memory_barrier_count)
                 .iter()
                 .map(|b| {
@@ -2350,6 +2445,12 @@ unsafe extern "system" fn queue_submit(
         unsafe {
             let d = device_of(queue.as_raw());
             let subs = slice(submits, count);
+            for s in subs {
+                crate::strict::chain("vkQueueSubmit", s.p_next);
+                for m in slice(s.p_wait_dst_stage_mask, s.wait_semaphore_count) {
+                    crate::strict::stage("vkQueueSubmit", m.as_raw() as u64);
+                }
+            }
             let masks: Vec<Vec<vk::PipelineStageFlags>> = subs
                 .iter()
                 .map(|s| {
@@ -2418,6 +2519,18 @@ unsafe extern "system" fn queue_submit2(
         unsafe {
             let d = device_of(queue.as_raw());
             let subs = slice(submits, count);
+            for s in subs {
+                crate::strict::chain("vkQueueSubmit2", s.p_next);
+                for i in slice(s.p_wait_semaphore_infos, s.wait_semaphore_info_count)
+                    .iter()
+                    .chain(slice(
+                        s.p_signal_semaphore_infos,
+                        s.signal_semaphore_info_count,
+                    ))
+                {
+                    crate::strict::stage("vkQueueSubmit2", i.stage_mask.as_raw());
+                }
+            }
             let waits: Vec<_> = subs
                 .iter()
                 .map(|s| fix_semaphores(s.p_wait_semaphore_infos, s.wait_semaphore_info_count))
@@ -3178,6 +3291,9 @@ unsafe extern "system" fn cmd_next_subpass2(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(cb.as_raw());
+            if let Some(e) = end.as_ref() {
+                crate::strict::chain("vkCmdNextSubpass2", e.p_next);
+            }
             next_subpass(&d, cb);
             (d.fns.fp_v1_2().cmd_next_subpass2)(cb, begin, end);
         }
@@ -3203,6 +3319,9 @@ unsafe extern "system" fn cmd_end_render_pass2(
         // SAFETY: the caller's arguments, forwarded unchanged; the double's own commands follow.
         unsafe {
             let d = device_of(cb.as_raw());
+            if let Some(e) = end.as_ref() {
+                crate::strict::chain("vkCmdEndRenderPass2", e.p_next);
+            }
             (d.fns.fp_v1_2().cmd_end_render_pass2)(cb, end);
             close_pass(&d, cb);
         }
@@ -3251,3 +3370,313 @@ draw_hook!(cmd_draw_indexed_indirect_count, "vkCmdDrawIndexedIndirectCount",
     fp_v1_2.cmd_draw_indexed_indirect_count(
     buffer: vk::Buffer, offset: vk::DeviceSize, count_buffer: vk::Buffer,
     count_offset: vk::DeviceSize, max: u32, stride: u32));
+
+// ---------------------------------------------------------------------------------------------
+// Strictness: what a driver without fragment density maps refuses (`crate::strict`).
+
+/// A render pass 2's density-map enums and structs, and a shading-rate attachment without the
+/// feature.
+///
+/// # Safety
+/// `ci` must be valid.
+unsafe fn check_render_pass2(d: &DeviceData, ci: &vk::RenderPassCreateInfo2<'_>) {
+    let what = "vkCreateRenderPass2";
+    // SAFETY: the caller's promise.
+    unsafe {
+        crate::strict::chain(what, ci.p_next);
+        for a in slice(ci.p_attachments, ci.attachment_count) {
+            crate::strict::chain(what, a.p_next);
+            crate::strict::layout(what, a.initial_layout);
+            crate::strict::layout(what, a.final_layout);
+        }
+        for s in slice(ci.p_subpasses, ci.subpass_count) {
+            crate::strict::chain(what, s.p_next);
+            let refs = slice(s.p_input_attachments, s.input_attachment_count)
+                .iter()
+                .chain(slice(s.p_color_attachments, s.color_attachment_count))
+                .chain(if s.p_resolve_attachments.is_null() {
+                    &[][..]
+                } else {
+                    slice(s.p_resolve_attachments, s.color_attachment_count)
+                })
+                .chain(s.p_depth_stencil_attachment.as_ref());
+            for r in refs {
+                crate::strict::layout(what, r.layout);
+            }
+            let fsr = find::<vk::FragmentShadingRateAttachmentInfoKHR>(s.p_next)
+                .and_then(|f| (*f).p_fragment_shading_rate_attachment.as_ref())
+                .filter(|r| r.attachment != vk::ATTACHMENT_UNUSED);
+            if fsr.is_some() && !d.attachment_feature {
+                error(format!(
+                    "{what}: a shading-rate attachment without the attachmentFragmentShadingRate \
+                     feature"
+                ));
+            }
+        }
+        for dep in slice(ci.p_dependencies, ci.dependency_count) {
+            crate::strict::barrier(
+                what,
+                [
+                    dep.src_stage_mask.as_raw() as u64,
+                    dep.dst_stage_mask.as_raw() as u64,
+                ],
+                [
+                    dep.src_access_mask.as_raw() as u64,
+                    dep.dst_access_mask.as_raw() as u64,
+                ],
+            );
+            // A VkMemoryBarrier2 chained to the dependency replaces its masks
+            // (VK_KHR_synchronization2).
+            if let Some(m) = find::<vk::MemoryBarrier2>(dep.p_next) {
+                let m = &*m;
+                crate::strict::barrier(
+                    what,
+                    [m.src_stage_mask.as_raw(), m.dst_stage_mask.as_raw()],
+                    [m.src_access_mask.as_raw(), m.dst_access_mask.as_raw()],
+                );
+            }
+        }
+    }
+}
+
+unsafe extern "system" fn create_render_pass(
+    device: vk::Device,
+    info: *const vk::RenderPassCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    guard("vkCreateRenderPass", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkCreateRenderPass") {
+            return r;
+        }
+        // SAFETY: the caller's create info is read and forwarded unchanged.
+        unsafe {
+            let d = device_of(device.as_raw());
+            let ci = &*info;
+            let what = "vkCreateRenderPass";
+            crate::strict::chain(what, ci.p_next);
+            for a in slice(ci.p_attachments, ci.attachment_count) {
+                crate::strict::layout(what, a.initial_layout);
+                crate::strict::layout(what, a.final_layout);
+            }
+            for s in slice(ci.p_subpasses, ci.subpass_count) {
+                let refs = slice(s.p_input_attachments, s.input_attachment_count)
+                    .iter()
+                    .chain(slice(s.p_color_attachments, s.color_attachment_count))
+                    .chain(if s.p_resolve_attachments.is_null() {
+                        &[][..]
+                    } else {
+                        slice(s.p_resolve_attachments, s.color_attachment_count)
+                    })
+                    .chain(s.p_depth_stencil_attachment.as_ref());
+                for r in refs {
+                    crate::strict::layout(what, r.layout);
+                }
+            }
+            for dep in slice(ci.p_dependencies, ci.dependency_count) {
+                crate::strict::barrier(
+                    what,
+                    [
+                        dep.src_stage_mask.as_raw() as u64,
+                        dep.dst_stage_mask.as_raw() as u64,
+                    ],
+                    [
+                        dep.src_access_mask.as_raw() as u64,
+                        dep.dst_access_mask.as_raw() as u64,
+                    ],
+                );
+            }
+            (d.fns.fp_v1_0().create_render_pass)(device, info, alloc, out)
+        }
+    })
+}
+
+unsafe extern "system" fn create_sampler(
+    device: vk::Device,
+    info: *const vk::SamplerCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Sampler,
+) -> vk::Result {
+    guard("vkCreateSampler", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkCreateSampler") {
+            return r;
+        }
+        // SAFETY: the caller's create info is read and forwarded unchanged.
+        unsafe {
+            let d = device_of(device.as_raw());
+            let ci = &*info;
+            crate::strict::chain("vkCreateSampler", ci.p_next);
+            crate::strict::flag(
+                "vkCreateSampler",
+                ci.flags.intersects(
+                    vk::SamplerCreateFlags::SUBSAMPLED_EXT
+                        | vk::SamplerCreateFlags::SUBSAMPLED_COARSE_RECONSTRUCTION_EXT,
+                ),
+                "a subsampled sampler",
+            );
+            (d.fns.fp_v1_0().create_sampler)(device, info, alloc, out)
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_set_event(
+    cb: vk::CommandBuffer,
+    event_: vk::Event,
+    stage: vk::PipelineStageFlags,
+) {
+    guard("vkCmdSetEvent", (), || {
+        crate::strict::stage("vkCmdSetEvent", stage.as_raw() as u64);
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_0().cmd_set_event)(cb, event_, stage);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_reset_event(
+    cb: vk::CommandBuffer,
+    event_: vk::Event,
+    stage: vk::PipelineStageFlags,
+) {
+    guard("vkCmdResetEvent", (), || {
+        crate::strict::stage("vkCmdResetEvent", stage.as_raw() as u64);
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_0().cmd_reset_event)(cb, event_, stage);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_write_timestamp(
+    cb: vk::CommandBuffer,
+    stage: vk::PipelineStageFlags,
+    pool: vk::QueryPool,
+    query: u32,
+) {
+    guard("vkCmdWriteTimestamp", (), || {
+        crate::strict::stage("vkCmdWriteTimestamp", stage.as_raw() as u64);
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_0().cmd_write_timestamp)(cb, stage, pool, query);
+        }
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+unsafe extern "system" fn cmd_wait_events(
+    cb: vk::CommandBuffer,
+    count: u32,
+    events: *const vk::Event,
+    src: vk::PipelineStageFlags,
+    dst: vk::PipelineStageFlags,
+    memory_count: u32,
+    memory: *const vk::MemoryBarrier<'_>,
+    buffer_count: u32,
+    buffers: *const vk::BufferMemoryBarrier<'_>,
+    image_count: u32,
+    images: *const vk::ImageMemoryBarrier<'_>,
+) {
+    guard("vkCmdWaitEvents", (), || {
+        // SAFETY: the caller's arguments, read and forwarded unchanged.
+        unsafe {
+            let what = "vkCmdWaitEvents";
+            crate::strict::stage(what, src.as_raw() as u64);
+            crate::strict::stage(what, dst.as_raw() as u64);
+            for b in slice(memory, memory_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+            }
+            for b in slice(buffers, buffer_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+            }
+            for b in slice(images, image_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+                crate::strict::layout(what, b.old_layout);
+                crate::strict::layout(what, b.new_layout);
+            }
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_0().cmd_wait_events)(
+                cb,
+                count,
+                events,
+                src,
+                dst,
+                memory_count,
+                memory,
+                buffer_count,
+                buffers,
+                image_count,
+                images,
+            );
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_set_event2(
+    cb: vk::CommandBuffer,
+    event_: vk::Event,
+    info: *const vk::DependencyInfo<'_>,
+) {
+    guard("vkCmdSetEvent2", (), || {
+        // SAFETY: the caller's arguments, read and forwarded unchanged.
+        unsafe {
+            crate::strict::dependency("vkCmdSetEvent2", &*info);
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_3().cmd_set_event2)(cb, event_, info);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_reset_event2(
+    cb: vk::CommandBuffer,
+    event_: vk::Event,
+    stage: vk::PipelineStageFlags2,
+) {
+    guard("vkCmdResetEvent2", (), || {
+        crate::strict::stage("vkCmdResetEvent2", stage.as_raw());
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_3().cmd_reset_event2)(cb, event_, stage);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_write_timestamp2(
+    cb: vk::CommandBuffer,
+    stage: vk::PipelineStageFlags2,
+    pool: vk::QueryPool,
+    query: u32,
+) {
+    guard("vkCmdWriteTimestamp2", (), || {
+        crate::strict::stage("vkCmdWriteTimestamp2", stage.as_raw());
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_3().cmd_write_timestamp2)(cb, stage, pool, query);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_wait_events2(
+    cb: vk::CommandBuffer,
+    count: u32,
+    events: *const vk::Event,
+    infos: *const vk::DependencyInfo<'_>,
+) {
+    guard("vkCmdWaitEvents2", (), || {
+        // SAFETY: the caller's arguments, read and forwarded unchanged.
+        unsafe {
+            for i in slice(infos, count) {
+                crate::strict::dependency("vkCmdWaitEvents2", i);
+            }
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_3().cmd_wait_events2)(cb, count, events, infos);
+        }
+    })
+}

@@ -57,6 +57,16 @@
 //! attachment's encoding, rows top to bottom, over the texels the render area covers; a pass
 //! without an attachment gives one texel, `layer` null.
 //!
+//! Strictness, as a driver without fragment density maps (every desktop driver with shading-rate
+//! attachments): `vkCreateDevice` with a density-map extension name fails with
+//! `VK_ERROR_EXTENSION_NOT_PRESENT`, with a density-map features struct that enables anything with
+//! `VK_ERROR_FEATURE_NOT_PRESENT`; density-map layouts, stages, access bits, usage, image, view,
+//! sampler and pipeline flags, and density-map structs in any chain the double sees (render passes
+//! v1 and v2 with their attachments, references, dependencies and a `VkMemoryBarrier2` chained to
+//! one, renderings, barriers v1 and v2, events, timestamps, submits' wait stages) are recorded as
+//! errors, as is a shading-rate attachment (image usage, render pass, rendering) on a device that
+//! did not enable `attachmentFragmentShadingRate`.
+//!
 //! Strictness: after a render pass whose shading-rate attachment has `storeOp = DONT_CARE`, the
 //! double overwrites the layers the pass used with [`POISON`] (4×4, the coarsest rate), as the
 //! contents are undefined then
@@ -75,6 +85,7 @@ mod layer;
 mod profile;
 mod record;
 mod shade;
+mod strict;
 
 use std::ffi::{c_char, CStr};
 use std::path::{Path, PathBuf};

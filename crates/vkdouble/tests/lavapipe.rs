@@ -1728,3 +1728,128 @@ fn a_pass_that_stores_its_attachment_with_dont_care_leaves_it_poisoned() {
         assert_eq!(got, vec![vec![Case::halves(16)], vec![second]], "{store:?}");
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Strictness: the driver has no fragment density maps.
+
+/// The double's errors, which must name `want`; forgets them and validation's messages (which
+/// report the same misuse from above).
+fn take_errors_naming(env: &Env, want: &str) {
+    let errors = env.double.errors();
+    assert!(
+        errors.iter().any(|e| e.contains(want)),
+        "no error naming {want}: {errors:?}"
+    );
+    env.double.clear();
+    take_messages();
+}
+
+#[test]
+fn density_map_enums_in_barriers_events_and_timestamps_are_errors() {
+    with_vk(Profile::Nvidia, |env, vk| {
+        let dev = vk.device(true);
+        let d = &dev.device;
+        // SAFETY: every struct lives across its call; the objects are destroyed after use.
+        unsafe {
+            let (img, mem) = make_image(
+                &dev,
+                vk::Format::R8G8B8A8_UNORM,
+                8,
+                1,
+                vk::ImageUsageFlags::SAMPLED,
+            );
+            let cb = d
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(dev.pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
+                .unwrap()[0];
+            d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+                .unwrap();
+            assert_eq!(env.double.errors(), Vec::<String>::new());
+            let layout = vk::ImageMemoryBarrier::default()
+                .image(img)
+                .subresource_range(color_range())
+                .old_layout(vk::ImageLayout::UNDEFINED)
+                .new_layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT);
+            image_barrier(
+                d,
+                cb,
+                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                layout,
+            );
+            take_errors_naming(env, "FRAGMENT_DENSITY_MAP_OPTIMAL_EXT");
+            let access = [vk::MemoryBarrier2::default()
+                .src_stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
+                .dst_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
+                .dst_access_mask(vk::AccessFlags2::FRAGMENT_DENSITY_MAP_READ_EXT)];
+            d.cmd_pipeline_barrier2(cb, &vk::DependencyInfo::default().memory_barriers(&access));
+            take_errors_naming(env, "FRAGMENT_DENSITY_MAP_READ_EXT");
+            let ev = d
+                .create_event(&vk::EventCreateInfo::default(), None)
+                .unwrap();
+            d.cmd_set_event(cb, ev, vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT);
+            take_errors_naming(env, "vkCmdSetEvent: stage FRAGMENT_DENSITY_PROCESS_EXT");
+            d.cmd_set_event2(
+                cb,
+                ev,
+                &vk::DependencyInfo::default().memory_barriers(&access),
+            );
+            take_errors_naming(env, "vkCmdSetEvent2");
+            d.end_command_buffer(cb).unwrap();
+            d.free_command_buffers(dev.pool, &[cb]);
+            d.destroy_event(ev, None);
+            d.destroy_image(img, None);
+            d.free_memory(mem, None);
+        }
+        drop(dev);
+        assert_eq!(env.double.errors(), Vec::<String>::new());
+        take_messages();
+    });
+}
+
+#[test]
+fn a_device_asking_for_density_map_features_is_refused() {
+    with_vk(Profile::Amd, |env, vk| {
+        // SAFETY: every struct lives across the call.
+        unsafe {
+            let prio = [1.0];
+            let queues = [vk::DeviceQueueCreateInfo::default()
+                .queue_family_index(0)
+                .queue_priorities(&prio)];
+            let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+                .fragment_density_map(true);
+            let info = vk::DeviceCreateInfo::default()
+                .queue_create_infos(&queues)
+                .push_next(&mut fdm);
+            let r = vk.instance.create_device(vk.physical, &info, None);
+            assert_eq!(r.err(), Some(vk::Result::ERROR_FEATURE_NOT_PRESENT));
+        }
+        take_errors_naming(env, "vkCreateDevice");
+    });
+}
+
+#[test]
+fn a_shading_rate_attachment_without_the_feature_is_an_error() {
+    with_vk(Profile::Nvidia, |env, vk| {
+        let dev = vk.device(false);
+        // SAFETY: the image is destroyed before the device.
+        unsafe {
+            let (img, mem) = make_image(
+                &dev,
+                vk::Format::R8_UINT,
+                4,
+                1,
+                vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR,
+            );
+            take_errors_naming(env, "attachmentFragmentShadingRate");
+            dev.device.destroy_image(img, None);
+            dev.device.free_memory(mem, None);
+        }
+        drop(dev);
+        take_messages();
+    });
+}
