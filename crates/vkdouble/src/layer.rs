@@ -204,6 +204,21 @@ unsafe fn two_call<T: Copy>(items: &[T], count: *mut u32, out: *mut T) -> vk::Re
 const FSR_USAGE: vk::ImageUsageFlags = vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
 const FSR_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
 const FSR_EXT: &CStr = c"VK_KHR_fragment_shading_rate";
+/// Offered as the desktop drivers the double plays offer it (NVIDIA's and RADV list it): `NONE`
+/// load and store operations. lavapipe 22.3 has the store operation (core in Vulkan 1.3) but not
+/// the extension; the double strips the name and hands lavapipe `LOAD` for a `NONE` load, which
+/// keeps the contents as `NONE` does
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkAttachmentLoadOp.html>).
+const LOAD_STORE_NONE_EXT: &CStr = c"VK_EXT_load_store_op_none";
+
+/// The load operation lavapipe gets.
+fn fix_load(op: vk::AttachmentLoadOp) -> vk::AttachmentLoadOp {
+    if op == vk::AttachmentLoadOp::NONE_EXT {
+        vk::AttachmentLoadOp::LOAD
+    } else {
+        op
+    }
+}
 
 fn fix_layout(l: vk::ImageLayout) -> vk::ImageLayout {
     if l == FSR_LAYOUT {
@@ -737,10 +752,18 @@ unsafe extern "system" fn create_device(
                 if inst.profile.offers_fsr() {
                     let names = slice(ci.pp_enabled_extension_names, ci.enabled_extension_count);
                     let asked = names.iter().any(|&n| CStr::from_ptr(n) == FSR_EXT);
+                    // lavapipe 22.3 has neither (a driver that has the second keeps it).
+                    let native_none = inst
+                        .fns
+                        .enumerate_device_extension_properties(physical)
+                        .unwrap_or_default()
+                        .iter()
+                        .any(|e| e.extension_name_as_c_str() == Ok(LOAD_STORE_NONE_EXT));
                     exts = names
                         .iter()
                         .copied()
                         .filter(|&n| CStr::from_ptr(n) != FSR_EXT)
+                        .filter(|&n| native_none || CStr::from_ptr(n) != LOAD_STORE_NONE_EXT)
                         .collect();
                     let features = find::<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR>(
                         ci.p_next,
@@ -864,9 +887,15 @@ unsafe extern "system" fn enumerate_device_extension_properties(
                 }
                 .extension_name(FSR_EXT)
                 .expect("a short name");
+                let none = vk::ExtensionProperties {
+                    spec_version: 1,
+                    ..Default::default()
+                }
+                .extension_name(LOAD_STORE_NONE_EXT)
+                .expect("a short name");
                 if !layer.is_null() {
                     if CStr::from_ptr(layer) == crate::LAYER_NAME {
-                        return two_call(&[fsr], count, out);
+                        return two_call(&[fsr, none], count, out);
                     }
                     return next(physical, layer, count, out);
                 }
@@ -886,6 +915,12 @@ unsafe extern "system" fn enumerate_device_extension_properties(
                     .any(|e| e.extension_name_as_c_str() == Ok(FSR_EXT))
                 {
                     all.push(fsr);
+                }
+                if !all
+                    .iter()
+                    .any(|e| e.extension_name_as_c_str() == Ok(LOAD_STORE_NONE_EXT))
+                {
+                    all.push(none);
                 }
                 two_call(&all, count, out)
             }
@@ -1365,6 +1400,8 @@ unsafe extern "system" fn create_render_pass2(
                     let mut a = *a;
                     a.initial_layout = fix_layout(a.initial_layout);
                     a.final_layout = fix_layout(a.final_layout);
+                    a.load_op = fix_load(a.load_op);
+                    a.stencil_load_op = fix_load(a.stencil_load_op);
                     a
                 })
                 .collect();
@@ -2002,8 +2039,29 @@ unsafe extern "system" fn cmd_begin_rendering(
                 },
                 ri.flags.contains(vk::RenderingFlags::RESUMING),
             );
+            fn fixed<'a>(a: &vk::RenderingAttachmentInfo<'a>) -> vk::RenderingAttachmentInfo<'a> {
+                let mut a = *a;
+                a.load_op = fix_load(a.load_op);
+                a
+            }
+            let colors: Vec<vk::RenderingAttachmentInfo<'_>> =
+                slice(ri.p_color_attachments, ri.color_attachment_count)
+                    .iter()
+                    .map(fixed)
+                    .collect();
+            let depth = ri.p_depth_attachment.as_ref().map(fixed);
+            let stencil = ri.p_stencil_attachment.as_ref().map(fixed);
             let mut copy = *ri;
             copy.p_next = stripped.head;
+            if !ri.p_color_attachments.is_null() {
+                copy.p_color_attachments = colors.as_ptr();
+            }
+            if let Some(a) = &depth {
+                copy.p_depth_attachment = a;
+            }
+            if let Some(a) = &stencil {
+                copy.p_stencil_attachment = a;
+            }
             (d.fns.fp_v1_3().cmd_begin_rendering)(cb, &copy);
         }
     })
@@ -3486,7 +3544,21 @@ unsafe extern "system" fn create_render_pass(
                     ],
                 );
             }
-            (d.fns.fp_v1_0().create_render_pass)(device, info, alloc, out)
+            let attachments: Vec<vk::AttachmentDescription> =
+                slice(ci.p_attachments, ci.attachment_count)
+                    .iter()
+                    .map(|a| {
+                        let mut a = *a;
+                        a.load_op = fix_load(a.load_op);
+                        a.stencil_load_op = fix_load(a.stencil_load_op);
+                        a
+                    })
+                    .collect();
+            let mut copy = *ci;
+            if !ci.p_attachments.is_null() {
+                copy.p_attachments = attachments.as_ptr();
+            }
+            (d.fns.fp_v1_0().create_render_pass)(device, &copy, alloc, out)
         }
     })
 }

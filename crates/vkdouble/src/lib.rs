@@ -217,6 +217,9 @@ pub fn manifest_json(library: &Path) -> String {
                 "name": "VK_KHR_fragment_shading_rate",
                 "spec_version": "2",
                 "entrypoints": ["vkCmdSetFragmentShadingRateKHR"]
+            }, {
+                "name": "VK_EXT_load_store_op_none",
+                "spec_version": "1"
             }]
         }
     })

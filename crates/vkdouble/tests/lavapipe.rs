@@ -1853,3 +1853,32 @@ fn a_shading_rate_attachment_without_the_feature_is_an_error() {
         take_messages();
     });
 }
+
+#[test]
+fn load_store_op_none_is_offered_as_desktop_drivers_do_and_a_device_gets_it() {
+    with_vk(Profile::Nvidia, |env, vk| {
+        let name = c"VK_EXT_load_store_op_none";
+        // SAFETY: plain queries; the structs live across the calls.
+        unsafe {
+            let exts = vk
+                .instance
+                .enumerate_device_extension_properties(vk.physical)
+                .unwrap();
+            assert!(exts.iter().any(|e| e.extension_name_as_c_str() == Ok(name)));
+            let prio = [1.0];
+            let queues = [vk::DeviceQueueCreateInfo::default()
+                .queue_family_index(0)
+                .queue_priorities(&prio)];
+            let names = [name.as_ptr()];
+            let info = vk::DeviceCreateInfo::default()
+                .queue_create_infos(&queues)
+                .enabled_extension_names(&names);
+            let device = vk
+                .instance
+                .create_device(vk.physical, &info, None)
+                .expect("a device with VK_EXT_load_store_op_none");
+            device.destroy_device(None);
+        }
+        drop_ok(env, Profile::Nvidia);
+    });
+}
