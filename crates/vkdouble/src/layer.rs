@@ -72,11 +72,23 @@ struct ViewInfo {
     layers: u32,
 }
 
-/// One subpass of a render pass: its shading-rate attachment (index, texel size) and view mask.
-#[derive(Clone, Copy)]
+/// One subpass of a render pass: its shading-rate attachment (index, texel size), view mask and
+/// colour attachments.
+#[derive(Clone)]
 struct SubpassInfo {
     rate: Option<(u32, vk::Extent2D)>,
     view_mask: u32,
+    colors: Vec<u32>,
+}
+
+/// A colour attachment's image as the double coarsens it: format, size, the first layer a view
+/// names.
+#[derive(Clone, Copy)]
+struct ColourTarget {
+    image: u64,
+    base_layer: u32,
+    format: vk::Format,
+    extent: vk::Extent2D,
 }
 
 /// What the double keeps of a render pass.
@@ -100,6 +112,10 @@ struct DeviceState {
     views: BTreeMap<u64, ViewInfo>,
     /// Render passes.
     passes: BTreeMap<u64, PassInfo>,
+    /// Images with the colour-attachment usage (`base_layer` 0).
+    colour_images: BTreeMap<u64, ColourTarget>,
+    /// Views of those.
+    colour_views: BTreeMap<u64, ColourTarget>,
     /// Graphics pipelines: their rate state, and whether it is dynamic.
     pipelines: BTreeMap<u64, (PipelineRate, bool)>,
     /// Per command buffer: what its recording does to the rates of its draws.
@@ -1189,7 +1205,7 @@ unsafe extern "system" fn get_device_queue2(
 }
 
 macro_rules! forgetting_destroy {
-    ($f:ident, $name:literal, $handle:ty, $next:ident, $map:ident) => {
+    ($f:ident, $name:literal, $handle:ty, $next:ident, $($map:ident),+) => {
         /// Forgets the object before the driver frees it: drivers reuse addresses as handles, so a
         /// stale entry would make a later, unrelated object look like a shading-rate one.
         unsafe extern "system" fn $f(
@@ -1201,7 +1217,10 @@ macro_rules! forgetting_destroy {
                 // SAFETY: the caller's arguments, forwarded unchanged.
                 unsafe {
                     let d = device_of(device.as_raw());
-                    lock(&d.state).$map.remove(&handle.as_raw());
+                    {
+                        let mut st = lock(&d.state);
+                        $(st.$map.remove(&handle.as_raw());)+
+                    }
                     (d.fns.fp_v1_0().$next)(device, handle, alloc);
                 }
             })
@@ -1214,14 +1233,16 @@ forgetting_destroy!(
     "vkDestroyImage",
     vk::Image,
     destroy_image,
-    images
+    images,
+    colour_images
 );
 forgetting_destroy!(
     destroy_image_view,
     "vkDestroyImageView",
     vk::ImageView,
     destroy_image_view,
-    views
+    views,
+    colour_views
 );
 forgetting_destroy!(
     destroy_render_pass,
@@ -1272,7 +1293,29 @@ unsafe extern "system" fn create_image(
             );
             crate::strict::layout("vkCreateImage", ci.initial_layout);
             if !ci.usage.contains(FSR_USAGE) {
-                return next(device, info, alloc, out);
+                if !ci.usage.contains(vk::ImageUsageFlags::COLOR_ATTACHMENT) {
+                    return next(device, info, alloc, out);
+                }
+                // The double draws coarse fragments into colour attachments
+                // ([`coarsen`]): it copies them out and back.
+                let mut copy = *ci;
+                copy.usage |= vk::ImageUsageFlags::TRANSFER_SRC | vk::ImageUsageFlags::TRANSFER_DST;
+                let r = next(device, &copy, alloc, out);
+                if r == vk::Result::SUCCESS && ci.image_type == vk::ImageType::TYPE_2D {
+                    lock(&d.state).colour_images.insert(
+                        (*out).as_raw(),
+                        ColourTarget {
+                            image: (*out).as_raw(),
+                            base_layer: 0,
+                            format: ci.format,
+                            extent: vk::Extent2D {
+                                width: ci.extent.width,
+                                height: ci.extent.height,
+                            },
+                        },
+                    );
+                }
+                return r;
             }
             if !d.attachment_feature {
                 error(
@@ -1347,6 +1390,18 @@ unsafe extern "system" fn create_image_view(
             );
             let r = (d.fns.fp_v1_0().create_image_view)(device, info, alloc, out);
             let image = ci.image.as_raw();
+            if r == vk::Result::SUCCESS {
+                let mut st = lock(&d.state);
+                if let Some(c) = st.colour_images.get(&image).copied() {
+                    st.colour_views.insert(
+                        (*out).as_raw(),
+                        ColourTarget {
+                            base_layer: ci.subresource_range.base_array_layer,
+                            ..c
+                        },
+                    );
+                }
+            }
             if r == vk::Result::SUCCESS && lock(&d.state).images.contains_key(&image) {
                 let layers = ci.subresource_range.layer_count;
                 if layers != 1 && !d.instance.profile.layered() {
@@ -1428,6 +1483,7 @@ unsafe extern "system" fn create_render_pass2(
                         per_subpass.push(SubpassInfo {
                             rate: Some((a, texel)),
                             view_mask: s.view_mask,
+                            colors: colors_of(s),
                         });
                         record_subpasses.push(json!({"shading_rate": {
                             "attachment": a,
@@ -1439,6 +1495,7 @@ unsafe extern "system" fn create_render_pass2(
                         per_subpass.push(SubpassInfo {
                             rate: None,
                             view_mask: s.view_mask,
+                            colors: colors_of(s),
                         });
                         record_subpasses.push(json!({"shading_rate": null}));
                     }
@@ -1872,7 +1929,27 @@ unsafe fn note_begin_render_pass(
             .collect(),
         None => vec![(None, 0)],
     };
+    let mut colours: Vec<ColourTarget> = Vec::new();
+    for s in st
+        .passes
+        .get(&pass)
+        .map(|p| &p.subpasses[..])
+        .unwrap_or(&[])
+    {
+        for &c in &s.colors {
+            let target = views.get(c as usize).and_then(|v| st.colour_views.get(v));
+            if let Some(t) = target {
+                if !colours
+                    .iter()
+                    .any(|o| (o.image, o.base_layer) == (t.image, t.base_layer))
+                {
+                    colours.push(*t);
+                }
+            }
+        }
+    }
     PassRec {
+        colours,
         rendering: false,
         area: vk::Extent2D {
             width: a.offset.x.max(0) as u32 + a.extent.width,
@@ -2025,10 +2102,18 @@ unsafe extern "system" fn cmd_begin_rendering(
                 )
             });
             let a = ri.render_area;
+            let colours: Vec<ColourTarget> = {
+                let st = lock(&d.state);
+                slice(ri.p_color_attachments, ri.color_attachment_count)
+                    .iter()
+                    .filter_map(|c| st.colour_views.get(&c.image_view.as_raw()).copied())
+                    .collect()
+            };
             open_pass(
                 &d,
                 cb,
                 PassRec {
+                    colours,
                     rendering: true,
                     area: vk::Extent2D {
                         width: a.offset.x.max(0) as u32 + a.extent.width,
@@ -2477,7 +2562,10 @@ unsafe fn note_submit(d: &DeviceData, queue: vk::Queue, cbs: Vec<u64>) {
         // SAFETY: the caller's promise: the queue is ours to wait on.
         match unsafe { d.fns.queue_wait_idle(queue) } {
             // SAFETY: the submit's work is complete.
-            Ok(()) => unsafe { report_draws(d, &cbs) },
+            Ok(()) => unsafe {
+                let jobs = report_draws(d, &cbs);
+                coarsen(d, queue, jobs);
+            },
             Err(e) => error(format!("waiting for a submit failed: {e:?}")),
         }
     }
@@ -2811,6 +2899,8 @@ struct PassRec {
     /// Per subpass (one for a rendering): the attachment and the view mask.
     subpasses: Vec<(Option<Attach>, u32)>,
     draws: Vec<Draw>,
+    /// The colour attachments its subpasses write.
+    colours: Vec<ColourTarget>,
 }
 
 #[derive(Default)]
@@ -3147,7 +3237,7 @@ struct Codes<'a> {
 ///
 /// # Safety
 /// The submit's work must be complete.
-unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) {
+unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) -> Vec<CoarseJob> {
     let rates: Vec<[u32; 2]> = d
         .instance
         .profile
@@ -3157,6 +3247,8 @@ unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) {
         .collect();
     let st = lock(&d.state);
     let mut read: BTreeMap<u64, Vec<u8>> = BTreeMap::new();
+    // Per (command buffer, pass, view): the texel size, the columns and the finest size per texel.
+    let mut finest: BTreeMap<(u64, usize, u32), Finest> = BTreeMap::new();
     for &cb in cbs {
         let Some(r) = st.recordings.get(&cb) else {
             continue;
@@ -3221,15 +3313,24 @@ unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) {
                                 bytes: b.get(start..start + texels).unwrap_or(&[]),
                                 extent: a.extent,
                             };
-                            view_rates(
-                                v,
-                                Some(layer),
-                                &codes,
-                                a.texel,
-                                pass.area,
-                                draw.rate,
-                                &rates,
-                            )
+                            let (columns, rows, grid) =
+                                view_rates(&codes, a.texel, pass.area, draw.rate, &rates);
+                            let f = finest
+                                .entry((cb, pi, v))
+                                .or_insert_with(|| (a.texel, columns, grid.clone()));
+                            for (o, &g) in f.2.iter_mut().zip(&grid) {
+                                let (oa, ga) = (crate::shade::decode(*o), crate::shade::decode(g));
+                                if ga[0] * ga[1] < oa[0] * oa[1] {
+                                    *o = g;
+                                }
+                            }
+                            json!({
+                                "view": v,
+                                "layer": layer,
+                                "columns": columns,
+                                "rows": rows,
+                                "codes": hex(&grid),
+                            })
                         }
                         _ => {
                             let e = draw.rate.effective([1, 1], &rates);
@@ -3259,19 +3360,56 @@ unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) {
             }
         }
     }
+    // Per colour attachment layer, what the last pass of the submit that wrote it leaves.
+    let mut jobs: BTreeMap<(u64, u32), CoarseJob> = BTreeMap::new();
+    for &cb in cbs {
+        let Some(r) = st.recordings.get(&cb) else {
+            continue;
+        };
+        for (pi, pass) in r.passes.iter().enumerate() {
+            let mask = pass.subpasses.iter().fold(0, |m, s| m | s.1);
+            let views: Vec<u32> = if mask == 0 {
+                vec![0]
+            } else {
+                (0..32).filter(|v| mask & (1 << v) != 0).collect()
+            };
+            for target in &pass.colours {
+                for &v in &views {
+                    let layer = target.base_layer + if mask == 0 { 0 } else { v };
+                    match finest.get(&(cb, pi, v)) {
+                        Some((texel, columns, codes)) => {
+                            jobs.insert(
+                                (target.image, layer),
+                                CoarseJob {
+                                    target: *target,
+                                    layer,
+                                    texel: *texel,
+                                    area: pass.area,
+                                    columns: *columns,
+                                    codes: codes.clone(),
+                                },
+                            );
+                        }
+                        None => {
+                            jobs.remove(&(target.image, layer));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    jobs.into_values().collect()
 }
 
-/// One view's effective sizes over the attachment texels the render area covers, as one hex digit
-/// (the attachment encoding) per texel, rows top to bottom.
+/// One view's effective sizes over the attachment texels the render area covers, as codes in
+/// the attachment's encoding, rows top to bottom: (columns, rows, codes).
 fn view_rates(
-    view: u32,
-    layer: Option<u32>,
     codes: &Codes<'_>,
     texel: vk::Extent2D,
     area: vk::Extent2D,
     rate: PipelineRate,
     rates: &[[u32; 2]],
-) -> Value {
+) -> (u32, u32, Vec<u8>) {
     let columns = area
         .width
         .div_ceil(texel.width.max(1))
@@ -3280,22 +3418,256 @@ fn view_rates(
         .height
         .div_ceil(texel.height.max(1))
         .min(codes.extent.height);
-    let mut s = String::with_capacity((columns * rows) as usize);
+    let mut out = Vec::with_capacity((columns * rows) as usize);
     for y in 0..rows {
         for x in 0..columns {
             let at = (y * codes.extent.width + x) as usize;
             let code = codes.bytes.get(at).copied().unwrap_or(0);
-            let e = rate.effective(crate::shade::decode(code), rates);
-            s.push(char::from_digit(crate::shade::encode(e) as u32, 16).unwrap_or('0'));
+            out.push(crate::shade::encode(
+                rate.effective(crate::shade::decode(code), rates),
+            ));
         }
     }
-    json!({
-        "view": view,
-        "layer": layer,
-        "columns": columns,
-        "rows": rows,
-        "codes": s,
-    })
+    (columns, rows, out)
+}
+
+/// Codes as the `draw` record gives them: one hex digit per texel.
+fn hex(codes: &[u8]) -> String {
+    codes
+        .iter()
+        .map(|&c| char::from_digit(c as u32, 16).unwrap_or('0'))
+        .collect()
+}
+
+/// Per view of a pass: the attachment texel size, the columns of the grid and, per texel, the
+/// finest effective size any of its draws got.
+type Finest = (vk::Extent2D, u32, Vec<u8>);
+
+/// What [`coarsen`] does to one layer of one colour attachment after a submit.
+struct CoarseJob {
+    target: ColourTarget,
+    layer: u32,
+    texel: vk::Extent2D,
+    area: vk::Extent2D,
+    columns: u32,
+    /// Per attachment texel, the finest effective size any draw of the pass got there.
+    codes: Vec<u8>,
+}
+
+/// The pixel size of the colour formats the double coarsens (8-bit and 16-bit RGBA, 32-bit
+/// packed, 32-bit float RGBA); others are left alone.
+fn pixel_bytes(format: vk::Format) -> Option<u64> {
+    use vk::Format as F;
+    match format {
+        F::R8G8B8A8_UNORM
+        | F::R8G8B8A8_SRGB
+        | F::B8G8R8A8_UNORM
+        | F::B8G8R8A8_SRGB
+        | F::A2B10G10R10_UNORM_PACK32
+        | F::A2R10G10B10_UNORM_PACK32
+        | F::B10G11R11_UFLOAT_PACK32 => Some(4),
+        F::R16G16B16A16_SFLOAT | F::R16G16B16A16_UNORM => Some(8),
+        F::R32G32B32A32_SFLOAT => Some(16),
+        _ => None,
+    }
+}
+
+/// Draws the effect of coarse fragments: in each layer of a colour attachment that the last pass
+/// of the submit writing it drew with fragments larger than 1×1, every fragment-sized block of
+/// pixels of an attachment texel gets the value of its top-left pixel, one shaded value per
+/// fragment as on a GPU with shading-rate attachments. Done on the host after the submit
+/// completed: the double copies the layer out, replicates, and copies it back, with command
+/// buffers of its own (validation never sees them).
+///
+/// # Safety
+/// `queue` must be idle and belong to `d`.
+unsafe fn coarsen(d: &DeviceData, queue: vk::Queue, jobs: Vec<CoarseJob>) {
+    for job in jobs {
+        let Some(bpp) = pixel_bytes(job.target.format) else {
+            continue;
+        };
+        if !job.codes.iter().any(|&c| c != 0) {
+            continue;
+        }
+        let e = job.target.extent;
+        let size = e.width as u64 * e.height as u64 * bpp;
+        let usage = vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
+        // SAFETY: the caller's promise; every object is the double's own.
+        unsafe {
+            let buffer = match host_buffer(d, size, usage) {
+                Ok(b) => b,
+                Err(e) => {
+                    error(format!("coarse shading: no buffer: {e:?}"));
+                    continue;
+                }
+            };
+            let region = vk::BufferImageCopy::default()
+                .image_subresource(subresource(job.layer, 1))
+                .image_extent(vk::Extent3D {
+                    width: e.width,
+                    height: e.height,
+                    depth: 1,
+                });
+            let image = vk::Image::from_raw(job.target.image);
+            let done = once(d, queue, |cb| {
+                full_barrier(d, cb);
+                (d.fns.fp_v1_0().cmd_copy_image_to_buffer)(
+                    cb,
+                    image,
+                    vk::ImageLayout::GENERAL,
+                    buffer.buffer,
+                    1,
+                    &region,
+                );
+                full_barrier(d, cb);
+            })
+            .and_then(|()| {
+                let p = d
+                    .fns
+                    .map_memory(buffer.memory, 0, size, vk::MemoryMapFlags::empty())?;
+                let pixels = std::slice::from_raw_parts_mut(p as *mut u8, size as usize);
+                replicate(&job, pixels, bpp as usize);
+                d.fns.unmap_memory(buffer.memory);
+                once(d, queue, |cb| {
+                    full_barrier(d, cb);
+                    (d.fns.fp_v1_0().cmd_copy_buffer_to_image)(
+                        cb,
+                        buffer.buffer,
+                        image,
+                        vk::ImageLayout::GENERAL,
+                        1,
+                        &region,
+                    );
+                    full_barrier(d, cb);
+                })
+            });
+            if let Err(e) = done {
+                error(format!("coarse shading failed: {e:?}"));
+            }
+            d.fns.destroy_buffer(buffer.buffer, None);
+            d.fns.free_memory(buffer.memory, None);
+        }
+        event(json!({
+            "kind": "coarsened",
+            "image": job.target.image,
+            "layer": job.layer,
+        }));
+    }
+}
+
+/// Replicates each block's top-left pixel over the block, per attachment texel.
+fn replicate(job: &CoarseJob, pixels: &mut [u8], bpp: usize) {
+    let e = job.target.extent;
+    let right = job.area.width.min(e.width);
+    let bottom = job.area.height.min(e.height);
+    let row = e.width as usize * bpp;
+    for (i, &code) in job.codes.iter().enumerate() {
+        if code == 0 {
+            continue;
+        }
+        let [w, h] = crate::shade::decode(code);
+        let (tx, ty) = (i as u32 % job.columns, i as u32 / job.columns);
+        let x0 = tx * job.texel.width;
+        let y0 = ty * job.texel.height;
+        let x1 = (x0 + job.texel.width).min(right);
+        let y1 = (y0 + job.texel.height).min(bottom);
+        for by in (y0..y1).step_by(h as usize) {
+            for bx in (x0..x1).step_by(w as usize) {
+                let src = by as usize * row + bx as usize * bpp;
+                let mut value = [0u8; 16];
+                value[..bpp].copy_from_slice(&pixels[src..src + bpp]);
+                for y in by..(by + h).min(y1) {
+                    for x in bx..(bx + w).min(x1) {
+                        let at = y as usize * row + x as usize * bpp;
+                        pixels[at..at + bpp].copy_from_slice(&value[..bpp]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Records `f` into a command buffer of the double's own on `queue`'s family, submits it and
+/// waits.
+///
+/// # Safety
+/// `queue` must belong to `d` and be externally synchronised by the current call.
+unsafe fn once(
+    d: &DeviceData,
+    queue: vk::Queue,
+    f: impl FnOnce(vk::CommandBuffer),
+) -> Result<(), vk::Result> {
+    let fns = &d.fns;
+    // SAFETY: the caller's promise; the pool and command buffer are the double's own.
+    unsafe {
+        let pool = pool_for(d, queue)?;
+        let cbs = fns.allocate_command_buffers(
+            &vk::CommandBufferAllocateInfo::default()
+                .command_pool(pool)
+                .level(vk::CommandBufferLevel::PRIMARY)
+                .command_buffer_count(1),
+        )?;
+        let cb = cbs[0];
+        if let Some(set) = d.set_loader_data {
+            set(d.handle, cb.as_raw() as usize as *mut c_void).result()?;
+        }
+        fns.begin_command_buffer(
+            cb,
+            &vk::CommandBufferBeginInfo::default()
+                .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+        )?;
+        f(cb);
+        fns.end_command_buffer(cb)?;
+        let r = fns
+            .queue_submit(
+                queue,
+                &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                vk::Fence::null(),
+            )
+            .and_then(|()| fns.queue_wait_idle(queue));
+        fns.free_command_buffers(pool, &cbs);
+        r
+    }
+}
+
+/// The double's command pool for `queue`'s family, made on first use.
+///
+/// # Safety
+/// `queue` must belong to `d`.
+unsafe fn pool_for(d: &DeviceData, queue: vk::Queue) -> Result<vk::CommandPool, vk::Result> {
+    let family = lock(&d.state)
+        .queues
+        .get(&queue.as_raw())
+        .copied()
+        .unwrap_or(0);
+    let existing = lock(&d.state).pools.get(&family).copied();
+    if let Some(p) = existing {
+        return Ok(p);
+    }
+    // SAFETY: a plain creation on a live device.
+    let p = unsafe {
+        d.fns.create_command_pool(
+            &vk::CommandPoolCreateInfo::default()
+                .queue_family_index(family)
+                .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+            None,
+        )
+    }?;
+    lock(&d.state).pools.insert(family, p);
+    Ok(p)
+}
+
+/// The colour attachment indices of a subpass.
+///
+/// # Safety
+/// `s` must be valid.
+unsafe fn colors_of(s: &vk::SubpassDescription2<'_>) -> Vec<u32> {
+    // SAFETY: the caller's promise.
+    unsafe { slice(s.p_color_attachments, s.color_attachment_count) }
+        .iter()
+        .map(|r| r.attachment)
+        .filter(|&a| a != vk::ATTACHMENT_UNUSED)
+        .collect()
 }
 
 unsafe extern "system" fn cmd_bind_pipeline(

@@ -67,6 +67,20 @@
 //! errors, as is a shading-rate attachment (image usage, render pass, rendering) on a device that
 //! did not enable `attachmentFragmentShadingRate`.
 //!
+//! Drawing the effect (`coarsened` {image, layer} records): lavapipe shades every pixel, so once a
+//! submit has completed the double makes its colour attachments look as a GPU with shading-rate
+//! attachments leaves them. For each layer of each colour attachment (a 2D image with the
+//! colour-attachment usage, in an 8-, 16- or 32-bit-per-channel RGBA or 32-bit packed format),
+//! the last pass instance or rendering of the submit that wrote it decides: per shading-rate
+//! attachment texel, the finest effective fragment size any of its draws got there; every block
+//! of that size gets the value of its top-left pixel, one shaded value per fragment. It is done on
+//! the host (the layer copied out, replicated, copied back, with command buffers of the double's
+//! own), so frames read after the submit (the compositor's, a test's later read-back) show it.
+//! Approximations, where a GPU differs: the whole block is replaced, so edges of geometry become
+//! blocky where a GPU keeps per-pixel coverage; the value is the top-left pixel's, where a GPU
+//! shades at the fragment's centre; pixels no draw wrote (a cleared background, loaded contents)
+//! are coarsened too; reads of the attachment within the same submit see it at full rate.
+//!
 //! Strictness: after a render pass whose shading-rate attachment has `storeOp = DONT_CARE`, the
 //! double overwrites the layers the pass used with [`POISON`] (4×4, the coarsest rate), as the
 //! contents are undefined then

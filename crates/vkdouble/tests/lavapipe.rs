@@ -657,7 +657,7 @@ fn shader(dev: &Dev, bytes: &[u8]) -> vk::ShaderModule {
 }
 
 /// How the draw reaches the shading-rate attachment.
-#[derive(Clone, Copy, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 enum Path {
     /// vkCreateRenderPass2 with the attachment in the subpass.
     RenderPass,
@@ -670,6 +670,8 @@ enum Path {
 /// What [`draw`] made and saw.
 struct Drawn {
     pixels: Vec<u8>,
+    /// The colour read back in a submit after the draw's completed.
+    after: Vec<u8>,
     texel: u32,
     codes: Vec<u8>,
     command_buffer: u64,
@@ -716,6 +718,8 @@ struct Case<'a> {
     view_mask: u32,
     /// How often the pass (with its one draw) runs in the one command buffer.
     passes: u32,
+    /// Draw with a colour that differs at every pixel (else red on the left, none on the right).
+    gradient: bool,
 }
 
 impl Case<'_> {
@@ -738,6 +742,7 @@ impl Case<'_> {
             store: vk::AttachmentStoreOp::STORE,
             view_mask: 0,
             passes: 1,
+            gradient: false,
         }
     }
 }
@@ -877,7 +882,11 @@ fn draw_case(dev: &Dev, c: &Case<'_>) -> Drawn {
         });
 
         let vert = shader(dev, include_bytes!("shaders/fullscreen.vert.spv"));
-        let frag = shader(dev, include_bytes!("shaders/solid.frag.spv"));
+        let frag = if c.gradient {
+            shader(dev, include_bytes!("shaders/gradient.frag.spv"))
+        } else {
+            shader(dev, include_bytes!("shaders/solid.frag.spv"))
+        };
         let layout = d
             .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
             .unwrap();
@@ -1151,6 +1160,48 @@ fn draw_case(dev: &Dev, c: &Case<'_>) -> Drawn {
         let pixels =
             std::slice::from_raw_parts(p as *const u8, (SIZE * SIZE * 4) as usize).to_vec();
         d.unmap_memory(readback_mem);
+        // The colour once more, in a submit of its own after the first completed.
+        let again = d
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(dev.pool)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            )
+            .unwrap();
+        d.begin_command_buffer(again[0], &vk::CommandBufferBeginInfo::default())
+            .unwrap();
+        d.cmd_copy_image_to_buffer(
+            again[0],
+            color,
+            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+            readback,
+            &[whole_layer(SIZE)],
+        );
+        d.cmd_pipeline_barrier(
+            again[0],
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::HOST,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[host],
+            &[],
+        );
+        d.end_command_buffer(again[0]).unwrap();
+        d.reset_fences(&[fence]).unwrap();
+        d.queue_submit(
+            dev.queue,
+            &[vk::SubmitInfo::default().command_buffers(&again)],
+            fence,
+        )
+        .expect("vkQueueSubmit");
+        d.wait_for_fences(&[fence], true, u64::MAX).unwrap();
+        let p = d
+            .map_memory(readback_mem, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty())
+            .unwrap();
+        let after = std::slice::from_raw_parts(p as *const u8, (SIZE * SIZE * 4) as usize).to_vec();
+        d.unmap_memory(readback_mem);
+        d.free_command_buffers(dev.pool, &again);
 
         d.destroy_fence(fence, None);
         d.free_command_buffers(dev.pool, &cbs);
@@ -1178,6 +1229,7 @@ fn draw_case(dev: &Dev, c: &Case<'_>) -> Drawn {
         d.free_memory(color_mem, None);
         Drawn {
             pixels,
+            after,
             texel,
             codes,
             command_buffer: cb.as_raw(),
@@ -1881,4 +1933,45 @@ fn load_store_op_none_is_offered_as_desktop_drivers_do_and_a_device_gets_it() {
         }
         drop_ok(env, Profile::Nvidia);
     });
+}
+
+#[test]
+fn coarse_fragments_are_visible_in_a_later_read_back() {
+    for (profile, texel) in [(Profile::Nvidia, 16), (Profile::Amd, 8)] {
+        for path in [Path::RenderPass, Path::Dynamic] {
+            with_vk(profile, |env, vk| {
+                let dev = vk.device(true);
+                // 1x1 on the left half, 2x2 on the right.
+                let drawn = draw_case(
+                    &dev,
+                    &Case {
+                        gradient: true,
+                        ..Case::new(path, texel)
+                    },
+                );
+                let px = |p: &[u8], x: u32, y: u32| {
+                    let i = ((y * SIZE + x) * 4) as usize;
+                    [p[i], p[i + 1], p[i + 2], p[i + 3]]
+                };
+                for y in 0..SIZE {
+                    for x in 0..SIZE {
+                        let (got, drawn_px) = (px(&drawn.after, x, y), px(&drawn.pixels, x, y));
+                        if x < SIZE / 2 {
+                            // Full rate: every pixel shaded on its own, as lavapipe drew it.
+                            assert_eq!(got, drawn_px, "{profile:?} {path:?} ({x},{y})");
+                        } else {
+                            // 2x2: one shaded value per fragment, its top-left pixel's.
+                            let want = px(&drawn.pixels, x & !1, y & !1);
+                            assert_eq!(got, want, "{profile:?} {path:?} ({x},{y})");
+                        }
+                    }
+                }
+                // The gradient differs between neighbours, so the comparison shows something.
+                assert_ne!(px(&drawn.after, 40, 40), px(&drawn.after, 42, 40));
+                assert_ne!(px(&drawn.pixels, 40, 40), px(&drawn.pixels, 41, 40));
+                drop(dev);
+                drop_ok(env, profile);
+            });
+        }
+    }
 }
