@@ -10,9 +10,11 @@
 //! foveation profile, acquires, renders one pass with the density image as its fragment density
 //! map, submits, releases and ends the frame with its projection views. Two layouts: one eye per
 //! array layer drawn in one multiview pass, and both eyes side by side in one layer (double-wide).
-//! The double reads the shading-rate attachment back after the submit; those codes must equal,
-//! texel for texel, the density model for the views' FOVs and rectangles at the device's texel,
-//! converted by `fovea_model::shading_rate` for the profile's rates. Validation must say nothing,
+//! The double computes what the draw shades at, per view and shading-rate attachment texel (its
+//! pipeline's rate state combined with the attachment the pass read, clamped to the device's
+//! rates); those effective rates must equal, texel for texel, the density model for the views'
+//! FOVs and rectangles at the device's texel, converted by `fovea_model::shading_rate` for the
+//! profile's rates. Validation must say nothing,
 //! leaks included (it reports them when the device is destroyed).
 //!
 //! Why a test of its own: the modules below test the halves apart. `fdm_vulkan` reads the density

@@ -19,8 +19,9 @@
 //! - injection on: the device with `VK_KHR_fragment_shading_rate`'s attachment feature; the pipeline
 //!   with the state {1×1, {KEEP, REPLACE}} (and, for dynamic rendering, the shading-rate flag);
 //!   render passes with a shading-rate attachment after the colour one in their subpass; the
-//!   swapchain pass with a shading-rate attachment of the device's texel whose codes at submit are
-//!   exactly `fovea_model::inject::codes` for view 0 at the located FOVs and the level; the
+//!   swapchain pass with a shading-rate attachment of the device's texel whose draws shade (the
+//!   double's effective rates per view and texel) exactly at `fovea_model::inject::codes` for
+//!   view 0 at the located FOVs and the level, and off-eye passes at full rate everywhere; the
 //!   eye-shaped one with the merged map of both eyes; the small one with none (dynamic rendering)
 //!   or a full-rate map covering it (render passes); multiview, one map of both views for both
 //!   two-layer targets, two layers on `nvidia` and one merged layer on `amd`; a level changed while
