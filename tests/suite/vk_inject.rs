@@ -1185,6 +1185,19 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
             "{what}: {}",
             out.log
         );
+        // What the GPU shades: full rate everywhere, unless the application asked otherwise.
+        if !sets_rates {
+            for pass in 0..3 {
+                for draw in out.effective(pass) {
+                    for v in &draw {
+                        assert!(
+                            v.codes.iter().all(|&c| c == 0),
+                            "{what}: pass {pass} shades at full rate: {v:?}"
+                        );
+                    }
+                }
+            }
+        }
         return;
     };
     if setup == Setup::AppRates {
