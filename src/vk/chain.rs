@@ -10,7 +10,11 @@ use crate::vk::{link, structs};
 
 /// The longest chain the layer follows; a longer one is taken for a loop, which the spec forbids
 /// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-validusage-pNext>).
-pub const MAX_CHAIN_LENGTH: usize = fovea_abi::MAX_CHAIN_LENGTH;
+/// Longer than the OpenXR side's ([`fovea_abi::MAX_CHAIN_LENGTH`]): a struct the layer must remove
+/// or translate (a density-map struct a driver without density maps would see) has to be found
+/// wherever a valid chain puts it, so the bound only guards against loops. Walks stop at the
+/// chain's end, so a real chain costs what its length costs.
+pub const MAX_CHAIN_LENGTH: usize = 1024;
 
 /// Why a chain could not be handled.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -150,9 +154,8 @@ impl ChainCopy {
         let mut node = next as *const vk::BaseInStructure<'static>;
         while !node.is_null() {
             if nodes.len() == MAX_CHAIN_LENGTH {
-                // The layer looks at the first MAX_CHAIN_LENGTH structs only ([`find`] too); the
-                // rest stays as it is, shared. Refusing the whole chain instead would pass the
-                // structs this copy exists to remove down to a driver that does not know them.
+                // A loop (no valid chain is this long): the layer looks no further ([`find`]
+                // neither), and the rest stays as it is, shared.
                 break;
             }
             nodes.push(node);

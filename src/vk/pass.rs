@@ -523,15 +523,35 @@ pub unsafe fn v1_to_v2(
     }
 }
 
-/// Makes attachment `density` the shading-rate attachment of every subpass, at `texel`.
-pub fn add_shading_rate(pass: &mut Pass2, density: u32, texel: vk::Extent2D) {
+/// How a shading-rate attachment that later passes read again is stored: with `DONT_CARE` its
+/// contents are undefined after every pass
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkAttachmentStoreOp.html>), so the
+/// next pass would shade with whatever the driver left there. `NONE` keeps them without a write
+/// and is core from Vulkan 1.3; below that, `STORE` (the layer enables no
+/// `VK_*_load_store_op_none` of its own).
+pub fn rate_store_op(dev: &Device) -> vk::AttachmentStoreOp {
+    if dev.api_version >= vk::API_VERSION_1_3 {
+        vk::AttachmentStoreOp::NONE
+    } else {
+        vk::AttachmentStoreOp::STORE
+    }
+}
+
+/// Makes attachment `density` the shading-rate attachment of every subpass, at `texel`, stored
+/// with `store` ([`rate_store_op`]).
+pub fn add_shading_rate(
+    pass: &mut Pass2,
+    density: u32,
+    texel: vk::Extent2D,
+    store: vk::AttachmentStoreOp,
+) {
     if let Some(a) = pass.attachments.get_mut(density as usize) {
         a.format = SHADOW_FORMAT;
         a.samples = vk::SampleCountFlags::TYPE_1;
         // The shadow's content is the point: loaded, never cleared
-        // (VUID-VkRenderPassCreateInfo2-pAttachments-09387); the pass does not write it.
+        // (VUID-VkRenderPassCreateInfo2-pAttachments-09387), and kept for the passes after.
         a.load_op = vk::AttachmentLoadOp::LOAD;
-        a.store_op = vk::AttachmentStoreOp::DONT_CARE;
+        a.store_op = store;
         a.stencil_load_op = vk::AttachmentLoadOp::DONT_CARE;
         a.stencil_store_op = vk::AttachmentStoreOp::DONT_CARE;
         a.initial_layout = SHADOW_LAYOUT;
@@ -618,7 +638,7 @@ unsafe fn create_rewritten(
         .get(density as usize)
         .map(|a| (a.initial_layout, a.final_layout, density_initial));
     if let (Some(texel), true) = (texel, density != vk::ATTACHMENT_UNUSED) {
-        add_shading_rate(&mut pass, density, texel);
+        add_shading_rate(&mut pass, density, texel, rate_store_op(dev));
     }
     let info = pass.info(flags, p_next);
     // SAFETY: the copy and everything it points at live across the call.
@@ -692,7 +712,7 @@ unsafe fn create_injected(
     }
     let rate = pass.attachments.len() as u32;
     pass.attachments.push(vk::AttachmentDescription2::default());
-    add_shading_rate(&mut pass, rate, inj.texel());
+    add_shading_rate(&mut pass, rate, inj.texel(), rate_store_op(dev));
     let info = pass.info(flags, p_next);
     // SAFETY: the copy and everything it points at live across the call.
     let r = unsafe { create2(dev.handle, &info, alloc, out) };
@@ -1822,11 +1842,11 @@ mod tests {
         };
         // SAFETY: the converted pass owns its references; its dependencies have no chains.
         unsafe { pass.without_density_enums() };
-        add_shading_rate(&mut pass, 2, texel);
+        add_shading_rate(&mut pass, 2, texel, vk::AttachmentStoreOp::NONE);
         let d = &pass.attachments[2];
         assert_eq!(d.format, vk::Format::R8_UINT);
         assert_eq!(d.load_op, vk::AttachmentLoadOp::LOAD);
-        assert_eq!(d.store_op, vk::AttachmentStoreOp::DONT_CARE);
+        assert_eq!(d.store_op, vk::AttachmentStoreOp::NONE);
         assert_eq!(d.initial_layout, SHADOW_LAYOUT);
         assert_eq!(d.final_layout, SHADOW_LAYOUT);
         assert_eq!(
@@ -1992,6 +2012,7 @@ mod tests {
                 width: 8,
                 height: 8,
             },
+            vk::AttachmentStoreOp::STORE,
         );
         // SAFETY: pointers into `pass`.
         let f = unsafe {
@@ -2050,7 +2071,7 @@ mod tests {
             let mut pass = unsafe { Pass2::from_v2(&ci) };
             // SAFETY: as above.
             unsafe { pass.without_apps_rate_infos() }.unwrap();
-            add_shading_rate(&mut pass, 1, texel);
+            add_shading_rate(&mut pass, 1, texel, vk::AttachmentStoreOp::STORE);
             let mut found = 0;
             let mut node = pass.subpasses[0].p_next as *const vk::BaseInStructure<'_>;
             while !node.is_null() {

@@ -193,6 +193,11 @@ impl Drop for Run {
 /// layers on lavapipe, and checks everything every mode must show (see the module's doc); `None`
 /// (skipped) where the system lacks a component.
 fn run_example(label: &str, args: &[&str]) -> Option<Run> {
+    run_example_with(label, args, &[])
+}
+
+/// [`run_example`] with more environment variables (`env`, set last).
+fn run_example_with(label: &str, args: &[&str], env: &[(&str, OsString)]) -> Option<Run> {
     if let Err(reason) = system() {
         skip(&reason);
         return None;
@@ -242,6 +247,7 @@ fn run_example(label: &str, args: &[&str]) -> Option<Run> {
         // A small headset keeps lavapipe quick.
         .env("FOVEA_SIM_HEADSET", "rift-cv1")
         .env("FOVEA_SIM_SUMMARY", "1")
+        .envs(env.iter().map(|(k, v)| (k, v)))
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     let done = crate::support::run_with_timeout(&mut cmd, TIMEOUT);
@@ -482,4 +488,133 @@ fn dynamic_rendering_runs_validation_clean() {
     );
     assert_eq!(run.views().len(), 2, "{}", run.transcript());
     assert_stripes(&run, true);
+}
+
+/// On the shading-rate double, playing a desktop GPU (`nvidia`) under the validation layer the
+/// example enables: the validation layer it finds is a meta layer of the real one with the double
+/// below it (as `hello_xr` does; the loader's "Meta-layers",
+/// <https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>). Returns
+/// the run and the double's records.
+fn run_on_the_double(label: &str, args: &[&str], inject: bool) -> Option<(Run, serde_json::Value)> {
+    let double = match fovea_vkdouble::find_library() {
+        Ok(d) => d,
+        Err(reason) => {
+            skip(&reason);
+            return None;
+        }
+    };
+    let Ok(text) = std::fs::read_to_string(VALIDATION) else {
+        skip("the Vulkan validation layer is not installed");
+        return None;
+    };
+    let dir = std::env::temp_dir().join(format!(
+        "fovea-example-double-{label}-{}",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    let explicit = dir.join("explicit");
+    std::fs::create_dir_all(&explicit).unwrap();
+    fovea_vkdouble::write_manifest(&explicit, &double).unwrap();
+    // `VK_LAYER_PATH` replaces the loader's explicit folders, `VK_ADD_LAYER_PATH` included: fovea's
+    // Vulkan layer goes there too.
+    let lib = fovea_harness::artifact("libfovea.so").expect("libfovea.so: cargo build");
+    let checked_in = std::fs::read_to_string(root().join("manifest/vulkan").join(VK_MANIFEST));
+    let mut m: serde_json::Value = serde_json::from_str(&checked_in.unwrap()).unwrap();
+    m["layer"]["library_path"] = lib.canonicalize().unwrap().to_str().unwrap().into();
+    std::fs::write(explicit.join(VK_MANIFEST), m.to_string()).unwrap();
+    let mut real: serde_json::Value = serde_json::from_str(&text).unwrap();
+    real["layer"]["name"] = "VK_LAYER_FOVEA_test_khronos_validation".into();
+    std::fs::write(explicit.join("validation_real.json"), real.to_string()).unwrap();
+    let meta = serde_json::json!({
+        "file_format_version": "1.1.2",
+        "layer": {
+            "name": "VK_LAYER_KHRONOS_validation",
+            "type": "GLOBAL",
+            "api_version": real["layer"]["api_version"],
+            "implementation_version": "1",
+            "description": "the validation layer above the shading-rate double (fovea's tests)",
+            "component_layers": [
+                "VK_LAYER_FOVEA_test_khronos_validation",
+                fovea_vkdouble::LAYER_NAME.to_str().unwrap(),
+            ],
+        }
+    });
+    std::fs::write(explicit.join("validation_meta.json"), meta.to_string()).unwrap();
+    let records = dir.join("records.json");
+    let mut env: Vec<(&str, OsString)> = vec![
+        ("VK_LAYER_PATH", explicit.into_os_string()),
+        (
+            fovea_vkdouble::RECORDS_FILE_ENV,
+            records.clone().into_os_string(),
+        ),
+        (fovea_vkdouble::PROFILE_ENV, "nvidia".into()),
+    ];
+    if inject {
+        env.push(("FOVEA_INJECT", "1".into()));
+        env.push(("FOVEA_INJECT_LEVEL", "high".into()));
+    }
+    let run = run_example_with(label, args, &env)?;
+    let text = std::fs::read_to_string(&records)
+        .unwrap_or_else(|e| panic!("no records ({e})\n{}", run.transcript()));
+    std::fs::remove_dir_all(&dir).ok();
+    Some((run, serde_json::from_str(&text).unwrap()))
+}
+
+/// What the GPU the double plays shades in the example at level HIGH: the double refused nothing;
+/// every draw of an eye pass (one whose shading-rate grid spans the swapchain) is coarse somewhere
+/// and at full rate somewhere (the fovea), in render passes and dynamic rendering; every draw of the offscreen passes (256×256, 64×36) is at full rate everywhere.
+#[test]
+fn on_a_desktop_gpu_eye_passes_shade_coarse_and_offscreen_passes_at_full_rate() {
+    // Injected (the application without the FB API): the FB API's modes hand validation 1.3.239
+    // barriers into the shading-rate stage, which it checks against `shadingRateImage` alone
+    // (`vk_layer::assert_only_stage_false_positives`), and the example fails on any message.
+    for (label, args, inject) in [
+        ("double-inject", &["--no-fb", "--offscreen"][..], true),
+        (
+            "double-inject-dynamic",
+            &["--no-fb", "--offscreen", "--dynamic-rendering"][..],
+            true,
+        ),
+    ] {
+        let Some((run, records)) = run_on_the_double(label, args, inject) else {
+            return;
+        };
+        assert_eq!(
+            records["errors"],
+            serde_json::json!([]),
+            "{label}\n{}",
+            run.transcript()
+        );
+        let (width, _) = run.swapchain_size();
+        let draws: Vec<&serde_json::Value> = records["events"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|e| e["kind"] == "draw")
+            .collect();
+        let (mut eye, mut offscreen) = (0, 0);
+        for d in &draws {
+            for v in d["views"].as_array().unwrap() {
+                let codes = v["codes"].as_str().unwrap();
+                let columns = v["columns"].as_u64().unwrap() as i32;
+                if columns * 16 >= width / 2 {
+                    eye += 1;
+                    assert!(
+                        codes.contains('0') && codes.chars().any(|c| c != '0'),
+                        "{label}: an eye pass's draw at HIGH: {d}"
+                    );
+                } else {
+                    offscreen += 1;
+                    assert!(
+                        codes.chars().all(|c| c == '0'),
+                        "{label}: an offscreen pass's draw: {d}"
+                    );
+                }
+            }
+        }
+        assert!(
+            eye >= 2 && offscreen >= 2,
+            "{label}: {eye} eye and {offscreen} offscreen draws"
+        );
+    }
 }

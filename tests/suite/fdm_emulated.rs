@@ -10,9 +10,11 @@
 //! foveation profile, acquires, renders one pass with the density image as its fragment density
 //! map, submits, releases and ends the frame with its projection views. Two layouts: one eye per
 //! array layer drawn in one multiview pass, and both eyes side by side in one layer (double-wide).
-//! The double reads the shading-rate attachment back after the submit; those codes must equal,
-//! texel for texel, the density model for the views' FOVs and rectangles at the device's texel,
-//! converted by `fovea_model::shading_rate` for the profile's rates. Validation must say nothing,
+//! The double computes what the draw shades at, per view and shading-rate attachment texel (its
+//! pipeline's rate state combined with the attachment the pass read, clamped to the device's
+//! rates); those effective rates must equal, texel for texel, the density model for the views'
+//! FOVs and rectangles at the device's texel, converted by `fovea_model::shading_rate` for the
+//! profile's rates. Validation must say nothing,
 //! leaks included (it reports them when the device is destroyed).
 //!
 //! Why a test of its own: the modules below test the halves apart. `fdm_vulkan` reads the density
@@ -36,7 +38,6 @@ use fovea_model::density::{self, Grid, Level, Pattern, Rect, View};
 use fovea_model::{shading_rate, Fov};
 use fovea_vkdouble::Profile;
 use openxr_sys as xr;
-use serde_json::Value;
 use xr::Handle as _;
 
 use crate::fdm_vulkan::{
@@ -434,36 +435,35 @@ fn expected_codes(
     codes
 }
 
-/// The codes the one submit since the double's last clear that read a shading-rate attachment
-/// found there: it must be `shadow`, of `layers` layers of `texels` texels. The double recorded no
-/// misuse meanwhile.
-fn rates_read(env: &Env, case: &str, shadow: u64, layers: u32, texels: usize) -> Vec<u8> {
+/// What the one draw submitted since the double's last clear shaded at: its effective fragment
+/// size per shading-rate attachment texel (`extent` texels), per shading-rate layer, as the GPU the
+/// double plays computes it from the pipeline's rate state and the attachment the pass read. Each
+/// view reads its own layer where `layers` is 2 (layered attachment, multiview), else layer 0:
+/// then every view must get the same rates. The double recorded no misuse meanwhile.
+fn rates_drawn(env: &Env, case: &str, layout: Layout, layers: u32, extent: [u32; 2]) -> Vec<u8> {
     assert_eq!(env.double.errors(), Vec::<String>::new(), "{case}");
-    let reads: Vec<Value> = env
-        .double
-        .events("submit")
-        .iter()
-        .flat_map(|s| {
-            s["shading_rate_images"]
-                .as_array()
-                .cloned()
-                .unwrap_or_default()
-        })
-        .collect();
-    assert_eq!(reads.len(), 1, "{case}: {reads:?}");
-    assert_eq!(
-        reads[0]["image"], shadow,
-        "{case}: the acquired image's shadow"
-    );
-    assert_eq!(reads[0]["layers"], layers, "{case}");
-    let got: Vec<u8> = reads[0]["codes"]
-        .as_array()
-        .expect("codes read back")
-        .iter()
-        .map(|c| u8::try_from(c.as_u64().expect("a code")).expect("a byte"))
-        .collect();
-    assert_eq!(got.len(), texels * layers as usize, "{case}");
-    got
+    let draws = env.double.draws();
+    assert_eq!(draws.len(), 1, "{case}: {draws:?}");
+    let views = &draws[0].views;
+    let want_views = if layout == Layout::Multiview { 2 } else { 1 };
+    assert_eq!(views.len(), want_views, "{case}: {views:?}");
+    for (i, v) in views.iter().enumerate() {
+        assert_eq!(v.view, i as u32, "{case}");
+        let layer = if layers > 1 { i as u32 } else { 0 };
+        assert_eq!(v.layer, Some(layer), "{case}: view {i}");
+        assert_eq!([v.columns, v.rows], extent, "{case}: view {i}");
+    }
+    if layers > 1 {
+        views.iter().flat_map(|v| v.codes.iter().copied()).collect()
+    } else {
+        for v in &views[1..] {
+            assert_eq!(
+                v.codes, views[0].codes,
+                "{case}: one layer, one rate for every view"
+            );
+        }
+        views[0].codes.clone()
+    }
 }
 
 /// What the comparison with the model stands on, checked without the model: every code is a
@@ -578,6 +578,7 @@ fn release(
 fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
     let what = format!("{} {layout:?}", profile.name());
     env.double.set_profile(Some(profile));
+    crate::vk_layer::assert_no_double_errors(env);
     env.double.clear();
     take_messages();
     let app = app("XR_KHR_vulkan_enable2", true);
@@ -707,12 +708,13 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
         let mut seen = [0; 3];
         for n in 0..4 {
             let case = format!("{what} level {level} offset {offset} frame {n}");
+            crate::vk_layer::assert_no_double_errors(env);
             env.double.clear();
             let (index, fovs, time) = frame.acquire(swapchain);
             renderer.draw(&v.device, index);
             release(&frame, layout, swapchain, time, fovs);
             seen[index as usize] += 1;
-            let got = rates_read(env, &case, shadows[index as usize], layers, texels);
+            let got = rates_drawn(env, &case, layout, layers, extent);
             let views = layout.views(fovs, submitted);
             submitted = true;
             let want = expected_codes(profile, &views, pattern, merged);

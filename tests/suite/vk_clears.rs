@@ -408,6 +408,7 @@ fn a_shadow_that_cannot_be_made_leaves_the_image_at_full_rate() {
             dev.d.destroy_render_pass(pass, None);
         }
         density.destroy(&dev.d);
+        crate::vk_layer::assert_no_double_errors(env);
         env.double.clear();
     }
     color.destroy(&dev.d);

@@ -19,8 +19,9 @@
 //! - injection on: the device with `VK_KHR_fragment_shading_rate`'s attachment feature; the pipeline
 //!   with the state {1×1, {KEEP, REPLACE}} (and, for dynamic rendering, the shading-rate flag);
 //!   render passes with a shading-rate attachment after the colour one in their subpass; the
-//!   swapchain pass with a shading-rate attachment of the device's texel whose codes at submit are
-//!   exactly `fovea_model::inject::codes` for view 0 at the located FOVs and the level; the
+//!   swapchain pass with a shading-rate attachment of the device's texel whose draws shade (the
+//!   double's effective rates per view and texel) exactly at `fovea_model::inject::codes` for
+//!   view 0 at the located FOVs and the level, and off-eye passes at full rate everywhere; the
 //!   eye-shaped one with the merged map of both eyes; the small one with none (dynamic rendering)
 //!   or a full-rate map covering it (render passes); multiview, one map of both views for both
 //!   two-layer targets, two layers on `nvidia` and one merged layer on `amd`; a level changed while
@@ -488,6 +489,7 @@ fn run_with(
 ) -> Option<Outcome> {
     let (_serial, env) = crate::vk_layer::env()?;
     env.double.set_profile(Some(profile));
+    crate::vk_layer::assert_no_double_errors(env);
     env.double.clear();
     vulkan::take_messages();
     let app = App::new(Chain::fovea().unwrap(), &["XR_KHR_vulkan_enable2"], API_1_0).unwrap();
@@ -1008,6 +1010,38 @@ impl Outcome {
         )
     }
 
+    /// What each draw of the test's `pass`-th pass or rendering shaded at, per view: its
+    /// effective fragment size per shading-rate attachment texel, as the GPU the double plays
+    /// computes it.
+    fn effective(&self, pass: usize) -> Vec<Vec<fovea_vkdouble::ViewRates>> {
+        let draws: Vec<Vec<fovea_vkdouble::ViewRates>> = self
+            .of("draw")
+            .into_iter()
+            .filter(|d| d["command_buffer"] == json!(self.command_buffer) && d["pass"] == pass)
+            .map(|d| {
+                d["views"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| fovea_vkdouble::ViewRates {
+                        view: v["view"].as_u64().unwrap() as u32,
+                        layer: v["layer"].as_u64().map(|l| l as u32),
+                        columns: v["columns"].as_u64().unwrap() as u32,
+                        rows: v["rows"].as_u64().unwrap() as u32,
+                        codes: v["codes"]
+                            .as_str()
+                            .unwrap()
+                            .chars()
+                            .map(|c| c.to_digit(16).unwrap() as u8)
+                            .collect(),
+                    })
+                    .collect()
+            })
+            .collect();
+        assert!(!draws.is_empty(), "no draw in pass {pass}");
+        draws
+    }
+
     /// The shading-rate image a view the double saw made is of.
     fn image_of(&self, view: &Value) -> Value {
         self.of("image_view")
@@ -1151,6 +1185,19 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
             "{what}: {}",
             out.log
         );
+        // What the GPU shades: full rate everywhere, unless the application asked otherwise.
+        if !sets_rates {
+            for pass in 0..3 {
+                for draw in out.effective(pass) {
+                    for v in &draw {
+                        assert!(
+                            v.codes.iter().all(|&c| c == 0),
+                            "{what}: pass {pass} shades at full rate: {v:?}"
+                        );
+                    }
+                }
+            }
+        }
         return;
     };
     if setup == Setup::AppRates {
@@ -1266,19 +1313,42 @@ fn assert_outcome(profile: Profile, setup: Setup, api: Api, out: &Outcome) {
             (want.0, want.1),
             "{what} {views:?}: extent, layers"
         );
-        assert!(
-            got.2 == want.2,
-            "{what} {views:?}: codes differ from the model"
-        );
+        let texels = (want.0[0] * want.0[1]) as usize;
         if level == Level::None {
             assert!(
-                got.2.iter().all(|&c| c == 0),
+                want.2.iter().all(|&c| c == 0),
                 "{what}: level none is full rate"
             );
         } else {
             assert!(
-                got.2.iter().any(|&c| c != 0),
+                want.2.iter().any(|&c| c != 0),
                 "{what}: {level:?} coarsens somewhere"
+            );
+        }
+        // What the GPU shades: every draw of the pass, every view (its layer of the map where the
+        // map is layered, else the one layer), the model's rates texel for texel.
+        let pass = if std::ptr::eq(r, &rates[0]) { 0 } else { 2 };
+        for draw in out.effective(pass) {
+            let view_count = if api == Api::Multiview { 2 } else { 1 };
+            assert_eq!(draw.len(), view_count, "{what}: pass {pass}: {draw:?}");
+            for v in &draw {
+                let layer = if want.1 > 1 { v.view as usize } else { 0 };
+                assert_eq!([v.columns, v.rows], want.0, "{what}: pass {pass}");
+                assert!(
+                    v.codes[..] == want.2[layer * texels..(layer + 1) * texels],
+                    "{what} {views:?}: pass {pass} view {}: the effective rates differ from \
+                     the model",
+                    v.view
+                );
+            }
+        }
+    }
+    // Off the eyes, full rate: every draw of the small target's pass, everywhere.
+    for draw in out.effective(1) {
+        for v in &draw {
+            assert!(
+                v.codes.iter().all(|&c| c == 0),
+                "{what}: the small target shades at full rate: {v:?}"
             );
         }
     }

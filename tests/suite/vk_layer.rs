@@ -85,8 +85,42 @@ pub(crate) struct Env {
     pub(crate) double: Loaded,
 }
 
+/// Fails the test where the double recorded a misuse a driver would refuse: every test that runs
+/// on the double asserts that at its end (the guard [`env`] returns) and whenever it makes a new
+/// instance ([`Vk::new`]), which forgets the records. A test that provokes misuse on purpose reads
+/// and clears them itself.
+pub(crate) fn assert_no_double_errors(env: &Env) {
+    if std::thread::panicking() {
+        return;
+    }
+    let errors = env.double.errors();
+    assert!(
+        errors.is_empty(),
+        "the shading-rate double refused {} call(s), as a driver would:\n{}",
+        errors.len(),
+        errors.join("\n")
+    );
+}
+
+/// What [`env`] returns with the environment: the suite's serialisation, and at its end the
+/// check that the double recorded no misuse ([`assert_no_double_errors`]).
+pub(crate) struct Serial {
+    _lock: MutexGuard<'static, ()>,
+    env: &'static Env,
+}
+
+impl Drop for Serial {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.env.double.clear();
+            return;
+        }
+        assert_no_double_errors(self.env);
+    }
+}
+
 /// Both manifests, `VK_ADD_LAYER_PATH`, the loader and the double's loaded copy; once per process.
-pub(crate) fn env() -> Option<(MutexGuard<'static, ()>, &'static Env)> {
+pub(crate) fn env() -> Option<(Serial, &'static Env)> {
     let guard = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     static ENV: OnceLock<Result<Env, String>> = OnceLock::new();
     let env = ENV.get_or_init(|| {
@@ -125,7 +159,13 @@ pub(crate) fn env() -> Option<(MutexGuard<'static, ()>, &'static Env)> {
         Ok(Env { entry, double })
     });
     match env {
-        Ok(e) => Some((guard, e)),
+        Ok(e) => Some((
+            Serial {
+                _lock: guard,
+                env: e,
+            },
+            e,
+        )),
         Err(e) => {
             skip(e);
             None
@@ -143,6 +183,7 @@ pub(crate) struct Vk {
 
 impl Vk {
     pub(crate) fn new(env: &Env, profile: Profile, with_fovea: bool) -> Option<Vk> {
+        assert_no_double_errors(env);
         env.double.set_profile(Some(profile));
         env.double.clear();
         take_messages();

@@ -7,9 +7,11 @@
 //! (`nvidia`: 16×16 texels, layered; `amd`: 8×8, one layer) → lavapipe. For each case and profile:
 //! validation says nothing and the double records no misuse; every pass (or rendering) reached the
 //! double with a shading-rate attachment of the device's texel that is a shadow (R8_UINT, 2 layers
-//! on `nvidia`, 1 merged layer on `amd`); the shadow's codes at submit are 0 (1×1, full rate, as
-//! made); and the colour read back equals the same draw without fovea and without the density map
-//! (lavapipe renders at 1×1 under the double either way).
+//! on `nvidia`, 1 merged layer on `amd`); every draw gets, per view and per attachment texel, the
+//! effective fragment size the GPU the double plays would shade with (the application's map holds
+//! a different density per layer: 2×2 and 4×4), the one of its layer of the map; and the colour
+//! read back equals the same draw without fovea and without the density map (lavapipe renders at
+//! 1×1 under the double either way).
 
 use std::collections::HashSet;
 use std::ffi::CStr;
@@ -23,7 +25,9 @@ use crate::support::vulkan::{
     allocate_info, attachments, attachments2, draw_fullscreen, image_info, range, spv, stages,
     Fixed, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
-use crate::vk_layer::{assert_no_messages, env, take_messages, Env, Vk, FDM};
+use crate::vk_layer::{
+    assert_no_messages, assert_only_stage_false_positives, env, take_messages, Env, Vk, FDM,
+};
 
 /// The colour attachment's width and height.
 const FSR_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
@@ -277,11 +281,10 @@ fn pipeline(
     if case == Case::Dynamic {
         info = info.push_next(&mut rendering);
         if fdm {
-            // An application sets RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT here; swapping it for
-            // the shading-rate flag is the pipeline path's part, not this one's, so the test sets
-            // the flag the driver must see.
+            // As an application does: fovea's pipeline path swaps the flag for the shading-rate
+            // one and adds the rate state that lets the attachment decide.
             info =
-                info.flags(vk::PipelineCreateFlags::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT_KHR);
+                info.flags(vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT);
         }
     } else {
         info = info.render_pass(pass).subpass(0);
@@ -299,70 +302,6 @@ struct Drawn {
     /// Every colour layer, tightly packed RGBA8.
     pixels: Vec<u8>,
     command_buffer: u64,
-}
-
-/// The application fills its density map with full-rate bytes (255: a fragment per pixel) and
-/// moves it into the density layout that its passes name as the map's initial layout: a pass
-/// reads the map it names, so it must hold something and be in that layout
-/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkAttachmentDescription.html>).
-///
-/// # Safety
-/// `cb` must be recording outside a pass; `image` a density map with transfer-destination usage.
-unsafe fn full_rate_map(d: &ash::Device, cb: vk::CommandBuffer, image: vk::Image, layers: u32) {
-    let barrier = |old, new, src, dst| {
-        vk::ImageMemoryBarrier::default()
-            .image(image)
-            .subresource_range(range(0, layers))
-            .old_layout(old)
-            .new_layout(new)
-            .src_access_mask(src)
-            .dst_access_mask(dst)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-    };
-    // SAFETY: as the caller promised.
-    unsafe {
-        d.cmd_pipeline_barrier(
-            cb,
-            vk::PipelineStageFlags::TOP_OF_PIPE,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &[barrier(
-                vk::ImageLayout::UNDEFINED,
-                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                vk::AccessFlags::empty(),
-                vk::AccessFlags::TRANSFER_WRITE,
-            )],
-        );
-        d.cmd_clear_color_image(
-            cb,
-            image,
-            vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-            &vk::ClearColorValue {
-                float32: [1.0, 1.0, 0.0, 0.0],
-            },
-            &[range(0, layers)],
-        );
-        d.cmd_pipeline_barrier(
-            cb,
-            vk::PipelineStageFlags::TRANSFER,
-            // Not the density-map stage: validation 1.3.239 refuses the shading-rate stage it
-            // becomes (see `vk_layer::assert_only_stage_false_positives`), and these cases assert
-            // silence.
-            vk::PipelineStageFlags::ALL_COMMANDS,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &[barrier(
-                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                FDM_LAYOUT,
-                vk::AccessFlags::TRANSFER_WRITE,
-                vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT,
-            )],
-        );
-    }
 }
 
 /// Draws the case once: with `fdm`, through fovea and a 2-layer density map; without, with no
@@ -507,7 +446,50 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .unwrap();
         if let Some((img, _)) = density {
-            full_rate_map(d, cb, img, 2);
+            // The application writes its map: layer 0 [`DENSITY_BYTES`]`[0]`, layer 1 `[1]`.
+            let to_dst = vk::ImageMemoryBarrier::default()
+                .image(img)
+                .subresource_range(range(0, 2))
+                .old_layout(vk::ImageLayout::UNDEFINED)
+                .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE);
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[to_dst],
+            );
+            for (layer, byte) in DENSITY_BYTES.iter().enumerate() {
+                let v = *byte as f32 / 255.0;
+                d.cmd_clear_color_image(
+                    cb,
+                    img,
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    &vk::ClearColorValue {
+                        float32: [v, v, 0.0, 0.0],
+                    },
+                    &[range(layer as u32, 1)],
+                );
+            }
+            let to_fdm = vk::ImageMemoryBarrier::default()
+                .image(img)
+                .subresource_range(range(0, 2))
+                .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .new_layout(FDM_LAYOUT)
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT);
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[to_fdm],
+            );
         }
         let draw_it = || {
             draw_fullscreen(d, cb, pipe);
@@ -682,6 +664,20 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
     }
 }
 
+/// What the application writes into its density map's two layers: densities 0.3 (a 2×2
+/// fragment) and 0.1 (4×4), so a pass whose pipelines ignored the attachment, or read the wrong
+/// layer, shades visibly differently.
+const DENSITY_BYTES: [u8; 2] = [77, 26];
+
+/// The fragment size code a draw gets from layer `layer` of the map on `profile`: 2×2 and 4×4 on
+/// `nvidia`; on `amd` 2×2 for both (one merged layer holding the finer, fragments up to 2×2).
+fn code_of(profile: Profile, layer: usize) -> u8 {
+    match (profile, layer) {
+        (Profile::Nvidia, 1) => 0b1010,
+        _ => 0b0101,
+    }
+}
+
 fn texel_of(profile: Profile) -> u32 {
     match profile {
         Profile::Amd => 8,
@@ -701,7 +697,9 @@ fn check(case: Case) {
             Vec::<String>::new(),
             "{case:?} {profile:?}"
         );
-        assert_no_messages();
+        // The application's barrier into the density-map layout reaches validation 1.3.239 as
+        // one into the shading-rate stage ([`assert_only_stage_false_positives`]).
+        assert_only_stage_false_positives();
         // The shader's colour: red on the left 32 columns only, in every layer drawn. (lavapipe
         // 22.3 draws a multiview pass's second view as cleared only, with or without fovea; the
         // comparison below covers it.)
@@ -780,29 +778,36 @@ fn check(case: Case) {
                 );
             }
         }
-        // At submit the shadow holds what it was made with: rate code 0 (1×1) everywhere.
-        let submits: Vec<Value> = env
+        // What the GPU would shade: every draw gets, at every texel of every view, the rate of its
+        // layer of the map (the view index under multiview, the eye's layer per eye).
+        let draws: Vec<_> = env
             .double
-            .events("submit")
+            .draws()
             .into_iter()
-            .filter(|s| {
-                s["command_buffers"]
-                    .as_array()
-                    .unwrap()
-                    .contains(&json!(drawn.command_buffer))
-            })
+            .filter(|dr| dr.command_buffer == drawn.command_buffer)
             .collect();
-        assert_eq!(submits.len(), 1, "{submits:?}");
-        let read = submits[0]["shading_rate_images"].as_array().unwrap();
-        assert_eq!(read.len(), 1, "{case:?} {profile:?}: {read:?}");
-        assert_eq!(read[0]["image"], shadow["image"]);
-        assert_eq!(read[0]["layers"], shadow_layers);
-        let codes = read[0]["codes"].as_array().unwrap();
-        assert_eq!(codes.len() as u32, n * n * shadow_layers);
-        assert!(
-            codes.iter().all(|c| c == 0),
-            "{case:?} {profile:?}: {codes:?}"
-        );
+        assert_eq!(draws.len() as u32, case.passes(), "{case:?} {profile:?}");
+        for (pass, dr) in draws.iter().enumerate() {
+            assert_eq!(dr.pass, pass, "{case:?} {profile:?}");
+            assert_eq!(dr.rendering, case == Case::Dynamic);
+            let views = if case.multiview() { 2 } else { 1 };
+            assert_eq!(dr.views.len(), views, "{case:?} {profile:?}: {dr:?}");
+            for v in &dr.views {
+                let layer = if case == Case::PerEye {
+                    pass
+                } else {
+                    v.view as usize
+                };
+                assert_eq!((v.columns, v.rows), (n, n), "{case:?} {profile:?}");
+                let want = vec![code_of(profile, layer); (n * n) as usize];
+                assert_eq!(
+                    v.codes, want,
+                    "{case:?} {profile:?}: pass {pass} view {}",
+                    v.view
+                );
+            }
+        }
+        let _ = shadow_layers;
     }
 }
 

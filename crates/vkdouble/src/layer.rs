@@ -23,6 +23,7 @@ use serde_json::{json, Value};
 use crate::chain::{self, find};
 use crate::ffi;
 use crate::record::{self, error, event};
+use crate::shade::PipelineRate;
 use crate::Profile;
 
 type Key = usize;
@@ -52,6 +53,8 @@ struct DeviceData {
     set_loader_data: Option<ffi::PfnSetDeviceLoaderData>,
     /// [`crate::NULL_COMMANDS_ENV`] was set when the device was created.
     null_commands: bool,
+    /// `attachmentFragmentShadingRate` was enabled: without it, no shading-rate attachment.
+    attachment_feature: bool,
     state: Mutex<DeviceState>,
 }
 
@@ -61,14 +64,62 @@ struct ImageInfo {
     layers: u32,
 }
 
+/// A view of a shading-rate image: which image, which layers.
+#[derive(Clone, Copy)]
+struct ViewInfo {
+    image: u64,
+    base_layer: u32,
+    layers: u32,
+}
+
+/// One subpass of a render pass: its shading-rate attachment (index, texel size), view mask and
+/// colour attachments.
+#[derive(Clone)]
+struct SubpassInfo {
+    rate: Option<(u32, vk::Extent2D)>,
+    view_mask: u32,
+    colors: Vec<u32>,
+}
+
+/// A colour attachment's image as the double coarsens it: format, size, the first layer a view
+/// names.
+#[derive(Clone, Copy)]
+struct ColourTarget {
+    image: u64,
+    base_layer: u32,
+    format: vk::Format,
+    extent: vk::Extent2D,
+}
+
+/// What the double keeps of a render pass.
+struct PassInfo {
+    subpasses: Vec<SubpassInfo>,
+    /// Per attachment: its load and store operations.
+    ops: Vec<(vk::AttachmentLoadOp, vk::AttachmentStoreOp)>,
+}
+
+impl PassInfo {
+    fn rates(&self) -> impl Iterator<Item = (u32, vk::Extent2D)> + '_ {
+        self.subpasses.iter().filter_map(|s| s.rate)
+    }
+}
+
 #[derive(Default)]
 struct DeviceState {
     /// Images created with the shading-rate usage.
     images: BTreeMap<u64, ImageInfo>,
-    /// Views of those images → image.
-    views: BTreeMap<u64, u64>,
-    /// Per render pass, per subpass: the shading-rate attachment index and texel size.
-    passes: BTreeMap<u64, Vec<Option<(u32, vk::Extent2D)>>>,
+    /// Views of those images.
+    views: BTreeMap<u64, ViewInfo>,
+    /// Render passes.
+    passes: BTreeMap<u64, PassInfo>,
+    /// Images with the colour-attachment usage (`base_layer` 0).
+    colour_images: BTreeMap<u64, ColourTarget>,
+    /// Views of those.
+    colour_views: BTreeMap<u64, ColourTarget>,
+    /// Graphics pipelines: their rate state, and whether it is dynamic.
+    pipelines: BTreeMap<u64, (PipelineRate, bool)>,
+    /// Per command buffer: what its recording does to the rates of its draws.
+    recordings: BTreeMap<u64, Recording>,
     /// Framebuffer → its attachments' views.
     framebuffers: BTreeMap<u64, Vec<u64>>,
     /// Command buffer → shading-rate images its render passes read.
@@ -130,7 +181,7 @@ fn guard<R>(what: &str, fail: R, f: impl FnOnce() -> R) -> R {
 ///
 /// # Safety
 /// `p` must be null or valid for `n` elements.
-unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
+pub(crate) unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
     if p.is_null() || n == 0 {
         &[]
     } else {
@@ -169,6 +220,21 @@ unsafe fn two_call<T: Copy>(items: &[T], count: *mut u32, out: *mut T) -> vk::Re
 const FSR_USAGE: vk::ImageUsageFlags = vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
 const FSR_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR;
 const FSR_EXT: &CStr = c"VK_KHR_fragment_shading_rate";
+/// Offered as the desktop drivers the double plays offer it (NVIDIA's and RADV list it): `NONE`
+/// load and store operations. lavapipe 22.3 has the store operation (core in Vulkan 1.3) but not
+/// the extension; the double strips the name and hands lavapipe `LOAD` for a `NONE` load, which
+/// keeps the contents as `NONE` does
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkAttachmentLoadOp.html>).
+const LOAD_STORE_NONE_EXT: &CStr = c"VK_EXT_load_store_op_none";
+
+/// The load operation lavapipe gets.
+fn fix_load(op: vk::AttachmentLoadOp) -> vk::AttachmentLoadOp {
+    if op == vk::AttachmentLoadOp::NONE_EXT {
+        vk::AttachmentLoadOp::LOAD
+    } else {
+        op
+    }
+}
 
 fn fix_layout(l: vk::ImageLayout) -> vk::ImageLayout {
     if l == FSR_LAYOUT {
@@ -288,6 +354,38 @@ table! { device_commands:
     b"vkCmdPipelineBarrier2KHR" => cmd_pipeline_barrier2 as PFN_vkCmdPipelineBarrier2,
     b"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate as PFN_vkCmdSetFragmentShadingRateKHR,
     b"vkCmdExecuteCommands" => cmd_execute_commands as PFN_vkCmdExecuteCommands,
+    b"vkDestroyPipeline" => destroy_pipeline as PFN_vkDestroyPipeline,
+    b"vkCreateRenderPass" => create_render_pass as PFN_vkCreateRenderPass,
+    b"vkCreateSampler" => create_sampler as PFN_vkCreateSampler,
+    b"vkCmdSetEvent" => cmd_set_event as PFN_vkCmdSetEvent,
+    b"vkCmdResetEvent" => cmd_reset_event as PFN_vkCmdResetEvent,
+    b"vkCmdWriteTimestamp" => cmd_write_timestamp as PFN_vkCmdWriteTimestamp,
+    b"vkCmdWaitEvents" => cmd_wait_events as PFN_vkCmdWaitEvents,
+    b"vkCmdSetEvent2" => cmd_set_event2 as PFN_vkCmdSetEvent2,
+    b"vkCmdSetEvent2KHR" => cmd_set_event2 as PFN_vkCmdSetEvent2,
+    b"vkCmdResetEvent2" => cmd_reset_event2 as PFN_vkCmdResetEvent2,
+    b"vkCmdResetEvent2KHR" => cmd_reset_event2 as PFN_vkCmdResetEvent2,
+    b"vkCmdWriteTimestamp2" => cmd_write_timestamp2 as PFN_vkCmdWriteTimestamp2,
+    b"vkCmdWriteTimestamp2KHR" => cmd_write_timestamp2 as PFN_vkCmdWriteTimestamp2,
+    b"vkCmdWaitEvents2" => cmd_wait_events2 as PFN_vkCmdWaitEvents2,
+    b"vkCmdWaitEvents2KHR" => cmd_wait_events2 as PFN_vkCmdWaitEvents2,
+    b"vkCmdBindPipeline" => cmd_bind_pipeline as PFN_vkCmdBindPipeline,
+    b"vkCmdNextSubpass" => cmd_next_subpass as PFN_vkCmdNextSubpass,
+    b"vkCmdNextSubpass2" => cmd_next_subpass2 as PFN_vkCmdNextSubpass2,
+    b"vkCmdNextSubpass2KHR" => cmd_next_subpass2 as PFN_vkCmdNextSubpass2,
+    b"vkCmdEndRenderPass" => cmd_end_render_pass as PFN_vkCmdEndRenderPass,
+    b"vkCmdEndRenderPass2" => cmd_end_render_pass2 as PFN_vkCmdEndRenderPass2,
+    b"vkCmdEndRenderPass2KHR" => cmd_end_render_pass2 as PFN_vkCmdEndRenderPass2,
+    b"vkCmdEndRendering" => cmd_end_rendering as PFN_vkCmdEndRendering,
+    b"vkCmdEndRenderingKHR" => cmd_end_rendering as PFN_vkCmdEndRendering,
+    b"vkCmdDraw" => cmd_draw as PFN_vkCmdDraw,
+    b"vkCmdDrawIndexed" => cmd_draw_indexed as PFN_vkCmdDrawIndexed,
+    b"vkCmdDrawIndirect" => cmd_draw_indirect as PFN_vkCmdDrawIndirect,
+    b"vkCmdDrawIndexedIndirect" => cmd_draw_indexed_indirect as PFN_vkCmdDrawIndexedIndirect,
+    b"vkCmdDrawIndirectCount" => cmd_draw_indirect_count as PFN_vkCmdDrawIndirectCount,
+    b"vkCmdDrawIndirectCountKHR" => cmd_draw_indirect_count as PFN_vkCmdDrawIndirectCount,
+    b"vkCmdDrawIndexedIndirectCount" => cmd_draw_indexed_indirect_count as PFN_vkCmdDrawIndexedIndirectCount,
+    b"vkCmdDrawIndexedIndirectCountKHR" => cmd_draw_indexed_indirect_count as PFN_vkCmdDrawIndexedIndirectCount,
     b"vkQueueSubmit" => queue_submit as PFN_vkQueueSubmit,
     b"vkQueueSubmit2" => queue_submit2 as PFN_vkQueueSubmit2,
     b"vkQueueSubmit2KHR" => queue_submit2 as PFN_vkQueueSubmit2,
@@ -657,6 +755,12 @@ unsafe extern "system" fn create_device(
                     return vk::Result::ERROR_INITIALIZATION_FAILED;
                 };
                 let create: vk::PFN_vkCreateDevice = std::mem::transmute(create);
+                if let Some(r) = crate::strict::device(ci) {
+                    return r;
+                }
+                let attachment_feature =
+                    find::<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR>(ci.p_next)
+                        .is_some_and(|f| (*f).attachment_fragment_shading_rate != 0);
 
                 let mut copy = *ci;
                 let exts: Vec<*const c_char>;
@@ -664,10 +768,18 @@ unsafe extern "system" fn create_device(
                 if inst.profile.offers_fsr() {
                     let names = slice(ci.pp_enabled_extension_names, ci.enabled_extension_count);
                     let asked = names.iter().any(|&n| CStr::from_ptr(n) == FSR_EXT);
+                    // lavapipe 22.3 has neither (a driver that has the second keeps it).
+                    let native_none = inst
+                        .fns
+                        .enumerate_device_extension_properties(physical)
+                        .unwrap_or_default()
+                        .iter()
+                        .any(|e| e.extension_name_as_c_str() == Ok(LOAD_STORE_NONE_EXT));
                     exts = names
                         .iter()
                         .copied()
                         .filter(|&n| CStr::from_ptr(n) != FSR_EXT)
+                        .filter(|&n| native_none || CStr::from_ptr(n) != LOAD_STORE_NONE_EXT)
                         .collect();
                     let features = find::<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR>(
                         ci.p_next,
@@ -747,6 +859,7 @@ unsafe extern "system" fn create_device(
                         fns,
                         set_loader_data,
                         null_commands: std::env::var_os(crate::NULL_COMMANDS_ENV).is_some(),
+                        attachment_feature,
                         state: Mutex::new(DeviceState::default()),
                     }),
                 );
@@ -771,6 +884,9 @@ unsafe extern "system" fn destroy_device(
             if let Some(d) = data {
                 for (_, pool) in std::mem::take(&mut lock(&d.state).pools) {
                     d.fns.destroy_command_pool(pool, None);
+                }
+                for (_, r) in std::mem::take(&mut lock(&d.state).recordings) {
+                    drop_recording(&d, r);
                 }
                 (d.fns.fp_v1_0().destroy_device)(device, alloc);
             }
@@ -802,9 +918,15 @@ unsafe extern "system" fn enumerate_device_extension_properties(
                 }
                 .extension_name(FSR_EXT)
                 .expect("a short name");
+                let none = vk::ExtensionProperties {
+                    spec_version: 1,
+                    ..Default::default()
+                }
+                .extension_name(LOAD_STORE_NONE_EXT)
+                .expect("a short name");
                 if !layer.is_null() {
                     if CStr::from_ptr(layer) == crate::LAYER_NAME {
-                        return two_call(&[fsr], count, out);
+                        return two_call(&[fsr, none], count, out);
                     }
                     return next(physical, layer, count, out);
                 }
@@ -824,6 +946,12 @@ unsafe extern "system" fn enumerate_device_extension_properties(
                     .any(|e| e.extension_name_as_c_str() == Ok(FSR_EXT))
                 {
                     all.push(fsr);
+                }
+                if !all
+                    .iter()
+                    .any(|e| e.extension_name_as_c_str() == Ok(LOAD_STORE_NONE_EXT))
+                {
+                    all.push(none);
                 }
                 two_call(&all, count, out)
             }
@@ -1092,7 +1220,7 @@ unsafe extern "system" fn get_device_queue2(
 }
 
 macro_rules! forgetting_destroy {
-    ($f:ident, $name:literal, $handle:ty, $next:ident, $map:ident) => {
+    ($f:ident, $name:literal, $handle:ty, $next:ident, $($map:ident),+) => {
         /// Forgets the object before the driver frees it: drivers reuse addresses as handles, so a
         /// stale entry would make a later, unrelated object look like a shading-rate one.
         unsafe extern "system" fn $f(
@@ -1104,7 +1232,10 @@ macro_rules! forgetting_destroy {
                 // SAFETY: the caller's arguments, forwarded unchanged.
                 unsafe {
                     let d = device_of(device.as_raw());
-                    lock(&d.state).$map.remove(&handle.as_raw());
+                    {
+                        let mut st = lock(&d.state);
+                        $(st.$map.remove(&handle.as_raw());)+
+                    }
                     (d.fns.fp_v1_0().$next)(device, handle, alloc);
                 }
             })
@@ -1117,14 +1248,16 @@ forgetting_destroy!(
     "vkDestroyImage",
     vk::Image,
     destroy_image,
-    images
+    images,
+    colour_images
 );
 forgetting_destroy!(
     destroy_image_view,
     "vkDestroyImageView",
     vk::ImageView,
     destroy_image_view,
-    views
+    views,
+    colour_views
 );
 forgetting_destroy!(
     destroy_render_pass,
@@ -1132,6 +1265,13 @@ forgetting_destroy!(
     vk::RenderPass,
     destroy_render_pass,
     passes
+);
+forgetting_destroy!(
+    destroy_pipeline,
+    "vkDestroyPipeline",
+    vk::Pipeline,
+    destroy_pipeline,
+    pipelines
 );
 forgetting_destroy!(
     destroy_framebuffer,
@@ -1156,8 +1296,48 @@ unsafe extern "system" fn create_image(
             let d = device_of(device.as_raw());
             let ci = &*info;
             let next = d.fns.fp_v1_0().create_image;
+            crate::strict::chain("vkCreateImage", ci.p_next);
+            crate::strict::usage("vkCreateImage", ci.usage);
+            crate::strict::flag(
+                "vkCreateImage",
+                ci.flags.intersects(
+                    vk::ImageCreateFlags::SUBSAMPLED_EXT
+                        | vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM,
+                ),
+                "a subsampled or density-map-offset image",
+            );
+            crate::strict::layout("vkCreateImage", ci.initial_layout);
             if !ci.usage.contains(FSR_USAGE) {
-                return next(device, info, alloc, out);
+                if !ci.usage.contains(vk::ImageUsageFlags::COLOR_ATTACHMENT) {
+                    return next(device, info, alloc, out);
+                }
+                // The double draws coarse fragments into colour attachments
+                // ([`coarsen`]): it copies them out and back.
+                let mut copy = *ci;
+                copy.usage |= vk::ImageUsageFlags::TRANSFER_SRC | vk::ImageUsageFlags::TRANSFER_DST;
+                let r = next(device, &copy, alloc, out);
+                if r == vk::Result::SUCCESS && ci.image_type == vk::ImageType::TYPE_2D {
+                    lock(&d.state).colour_images.insert(
+                        (*out).as_raw(),
+                        ColourTarget {
+                            image: (*out).as_raw(),
+                            base_layer: 0,
+                            format: ci.format,
+                            extent: vk::Extent2D {
+                                width: ci.extent.width,
+                                height: ci.extent.height,
+                            },
+                        },
+                    );
+                }
+                return r;
+            }
+            if !d.attachment_feature {
+                error(
+                    "vkCreateImage: shading-rate usage without the attachmentFragmentShadingRate \
+                     feature"
+                        .into(),
+                );
             }
             if !fsr_image_possible(ci.format, ci.image_type, ci.tiling) {
                 error(format!(
@@ -1172,8 +1352,11 @@ unsafe extern "system" fn create_image(
                 ));
             }
             let mut copy = *ci;
-            // TRANSFER_SRC lets the double read the rates back after a submit.
-            copy.usage = lavapipe_usage(ci.usage) | vk::ImageUsageFlags::TRANSFER_SRC;
+            // TRANSFER_SRC lets the double copy the rates a pass reads; TRANSFER_DST lets it poison
+            // an attachment a pass left undefined.
+            copy.usage = lavapipe_usage(ci.usage)
+                | vk::ImageUsageFlags::TRANSFER_SRC
+                | vk::ImageUsageFlags::TRANSFER_DST;
             let r = next(device, &copy, alloc, out);
             if r == vk::Result::SUCCESS {
                 let image = (*out).as_raw();
@@ -1210,9 +1393,30 @@ unsafe extern "system" fn create_image_view(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(device.as_raw());
-            let r = (d.fns.fp_v1_0().create_image_view)(device, info, alloc, out);
             let ci = &*info;
+            crate::strict::chain("vkCreateImageView", ci.p_next);
+            crate::strict::flag(
+                "vkCreateImageView",
+                ci.flags.intersects(
+                    vk::ImageViewCreateFlags::FRAGMENT_DENSITY_MAP_DYNAMIC_EXT
+                        | vk::ImageViewCreateFlags::FRAGMENT_DENSITY_MAP_DEFERRED_EXT,
+                ),
+                "a dynamic or deferred density-map view",
+            );
+            let r = (d.fns.fp_v1_0().create_image_view)(device, info, alloc, out);
             let image = ci.image.as_raw();
+            if r == vk::Result::SUCCESS {
+                let mut st = lock(&d.state);
+                if let Some(c) = st.colour_images.get(&image).copied() {
+                    st.colour_views.insert(
+                        (*out).as_raw(),
+                        ColourTarget {
+                            base_layer: ci.subresource_range.base_array_layer,
+                            ..c
+                        },
+                    );
+                }
+            }
             if r == vk::Result::SUCCESS && lock(&d.state).images.contains_key(&image) {
                 let layers = ci.subresource_range.layer_count;
                 if layers != 1 && !d.instance.profile.layered() {
@@ -1221,7 +1425,14 @@ unsafe extern "system" fn create_image_view(
                          layeredShadingRateAttachments is FALSE"
                     ));
                 }
-                lock(&d.state).views.insert((*out).as_raw(), image);
+                lock(&d.state).views.insert(
+                    (*out).as_raw(),
+                    ViewInfo {
+                        image,
+                        base_layer: ci.subresource_range.base_array_layer,
+                        layers,
+                    },
+                );
                 event(json!({
                     "kind": "image_view",
                     "view": (*out).as_raw(),
@@ -1251,6 +1462,7 @@ unsafe extern "system" fn create_render_pass2(
             let d = device_of(device.as_raw());
             let profile = d.instance.profile;
             let ci = &*info;
+            check_render_pass2(&d, ci);
             let attachments_in = slice(ci.p_attachments, ci.attachment_count);
             let attachments: Vec<vk::AttachmentDescription2<'_>> = attachments_in
                 .iter()
@@ -1258,6 +1470,8 @@ unsafe extern "system" fn create_render_pass2(
                     let mut a = *a;
                     a.initial_layout = fix_layout(a.initial_layout);
                     a.final_layout = fix_layout(a.final_layout);
+                    a.load_op = fix_load(a.load_op);
+                    a.stencil_load_op = fix_load(a.stencil_load_op);
                     a
                 })
                 .collect();
@@ -1281,7 +1495,11 @@ unsafe extern "system" fn create_render_pass2(
                 match fsr {
                     Some((a, layout, texel)) => {
                         check_pass_attachment(profile, i, a, layout, texel, attachments_in);
-                        per_subpass.push(Some((a, texel)));
+                        per_subpass.push(SubpassInfo {
+                            rate: Some((a, texel)),
+                            view_mask: s.view_mask,
+                            colors: colors_of(s),
+                        });
                         record_subpasses.push(json!({"shading_rate": {
                             "attachment": a,
                             "layout": layout.as_raw(),
@@ -1289,7 +1507,11 @@ unsafe extern "system" fn create_render_pass2(
                         }}));
                     }
                     None => {
-                        per_subpass.push(None);
+                        per_subpass.push(SubpassInfo {
+                            rate: None,
+                            view_mask: s.view_mask,
+                            colors: colors_of(s),
+                        });
                         record_subpasses.push(json!({"shading_rate": null}));
                     }
                 }
@@ -1333,7 +1555,16 @@ unsafe extern "system" fn create_render_pass2(
             let r = (d.fns.fp_v1_2().create_render_pass2)(device, &copy, alloc, out);
             if r == vk::Result::SUCCESS {
                 let pass = (*out).as_raw();
-                lock(&d.state).passes.insert(pass, per_subpass);
+                lock(&d.state).passes.insert(
+                    pass,
+                    PassInfo {
+                        subpasses: per_subpass,
+                        ops: attachments_in
+                            .iter()
+                            .map(|a| (a.load_op, a.store_op))
+                            .collect(),
+                    },
+                );
                 event(json!({
                     "kind": "render_pass",
                     "render_pass": pass,
@@ -1476,13 +1707,13 @@ unsafe extern "system" fn create_framebuffer(
                 width: ci.width,
                 height: ci.height,
             };
-            for (a, texel) in st.passes.get(&pass).into_iter().flatten().flatten() {
+            for (a, texel) in st.passes.get(&pass).into_iter().flat_map(PassInfo::rates) {
                 let image = views
-                    .get(*a as usize)
+                    .get(a as usize)
                     .and_then(|v| st.views.get(v))
-                    .and_then(|i| st.images.get(i));
+                    .and_then(|v| st.images.get(&v.image));
                 if let Some(image) = image {
-                    check_covers("vkCreateFramebuffer", *image, extent, *texel);
+                    check_covers("vkCreateFramebuffer", *image, extent, texel);
                 }
             }
             st.framebuffers.insert((*out).as_raw(), views.clone());
@@ -1528,7 +1759,16 @@ unsafe extern "system" fn create_graphics_pipelines(
                 let mut dynamic_infos: Vec<Box<vk::PipelineDynamicStateCreateInfo<'_>>> =
                     Vec::new();
                 let mut records = Vec::new();
+                let mut rates = Vec::new();
                 for ci in slice(infos, count) {
+                    crate::strict::chain("vkCreateGraphicsPipelines", ci.p_next);
+                    crate::strict::flag(
+                        "vkCreateGraphicsPipelines",
+                        ci.flags.contains(
+                            vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT,
+                        ),
+                        "flag RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT",
+                    );
                     let mut c = *ci;
                     let state =
                         find::<vk::PipelineFragmentShadingRateStateCreateInfoKHR>(ci.p_next)
@@ -1572,6 +1812,13 @@ unsafe extern "system" fn create_graphics_pipelines(
                             dynamic_infos.push(dc);
                         }
                     }
+                    rates.push((
+                        state.map_or(PipelineRate::NONE, |s| PipelineRate {
+                            size: [s.fragment_size.width, s.fragment_size.height],
+                            ops: s.combiner_ops,
+                        }),
+                        dynamic_rate,
+                    ));
                     records.push(json!({
                     "kind": "pipeline",
                     "render_pass": ci.render_pass.as_raw(),
@@ -1596,6 +1843,7 @@ unsafe extern "system" fn create_graphics_pipelines(
                 for (i, mut rec) in records.into_iter().enumerate() {
                     let p = *out.add(i);
                     if p != vk::Pipeline::null() {
+                        lock(&d.state).pipelines.insert(p.as_raw(), rates[i]);
                         rec["pipeline"] = json!(p.as_raw());
                         event(rec);
                     }
@@ -1617,7 +1865,15 @@ unsafe extern "system" fn begin_command_buffer(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(cb.as_raw());
-            lock(&d.state).commands.insert(cb.as_raw(), Vec::new());
+            let old = {
+                let mut st = lock(&d.state);
+                st.commands.insert(cb.as_raw(), Vec::new());
+                st.recordings.remove(&cb.as_raw())
+            };
+            if let Some(old) = old {
+                // The application waited for the command buffer before recording it anew.
+                drop_recording(&d, old);
+            }
             (d.fns.fp_v1_0().begin_command_buffer)(cb, info)
         }
     })
@@ -1631,7 +1887,7 @@ unsafe fn note_begin_render_pass(
     d: &DeviceData,
     cb: vk::CommandBuffer,
     info: &vk::RenderPassBeginInfo<'_>,
-) {
+) -> PassRec {
     let mut st = lock(&d.state);
     let pass = info.render_pass.as_raw();
     let fb = info.framebuffer.as_raw();
@@ -1646,14 +1902,14 @@ unsafe fn note_begin_render_pass(
         None => st.framebuffers.get(&fb).cloned().unwrap_or_default(),
     };
     let mut used = Vec::new();
-    for (a, _) in st.passes.get(&pass).into_iter().flatten().flatten() {
-        if let Some(&v) = views.get(*a as usize) {
+    for (a, _) in st.passes.get(&pass).into_iter().flat_map(PassInfo::rates) {
+        if let Some(&v) = views.get(a as usize) {
             used.push(v);
         }
     }
     let images: Vec<u64> = used
         .iter()
-        .filter_map(|v| st.views.get(v).copied())
+        .filter_map(|v| st.views.get(v).map(|v| v.image))
         .collect();
     let list = st.commands.entry(cb.as_raw()).or_default();
     for i in images {
@@ -1669,6 +1925,54 @@ unsafe fn note_begin_render_pass(
         "framebuffer": fb,
         "shading_rate_views": used,
     }));
+    let a = info.render_area;
+    let subpasses = match st.passes.get(&pass) {
+        Some(p) => p
+            .subpasses
+            .iter()
+            .map(|s| {
+                let attach = s.rate.and_then(|(i, texel)| {
+                    let view = *views.get(i as usize)?;
+                    let dont_care = p
+                        .ops
+                        .get(i as usize)
+                        .is_some_and(|o| o.1 == vk::AttachmentStoreOp::DONT_CARE);
+                    attach_of(&st, view, texel, dont_care)
+                });
+                (attach, s.view_mask)
+            })
+            .collect(),
+        None => vec![(None, 0)],
+    };
+    let mut colours: Vec<ColourTarget> = Vec::new();
+    for s in st
+        .passes
+        .get(&pass)
+        .map(|p| &p.subpasses[..])
+        .unwrap_or(&[])
+    {
+        for &c in &s.colors {
+            let target = views.get(c as usize).and_then(|v| st.colour_views.get(v));
+            if let Some(t) = target {
+                if !colours
+                    .iter()
+                    .any(|o| (o.image, o.base_layer) == (t.image, t.base_layer))
+                {
+                    colours.push(*t);
+                }
+            }
+        }
+    }
+    PassRec {
+        colours,
+        rendering: false,
+        area: vk::Extent2D {
+            width: a.offset.x.max(0) as u32 + a.extent.width,
+            height: a.offset.y.max(0) as u32 + a.extent.height,
+        },
+        subpasses,
+        draws: Vec::new(),
+    }
 }
 
 unsafe extern "system" fn cmd_begin_render_pass(
@@ -1680,7 +1984,9 @@ unsafe extern "system" fn cmd_begin_render_pass(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(cb.as_raw());
-            note_begin_render_pass(&d, cb, &*info);
+            crate::strict::chain("vkCmdBeginRenderPass", (*info).p_next);
+            let pass = note_begin_render_pass(&d, cb, &*info);
+            open_pass(&d, cb, pass, false);
             (d.fns.fp_v1_0().cmd_begin_render_pass)(cb, info, contents);
         }
     })
@@ -1695,7 +2001,9 @@ unsafe extern "system" fn cmd_begin_render_pass2(
         // SAFETY: the caller's arguments, forwarded unchanged.
         unsafe {
             let d = device_of(cb.as_raw());
-            note_begin_render_pass(&d, cb, &*info);
+            crate::strict::chain("vkCmdBeginRenderPass2", (*info).p_next);
+            let pass = note_begin_render_pass(&d, cb, &*info);
+            open_pass(&d, cb, pass, false);
             (d.fns.fp_v1_2().cmd_begin_render_pass2)(cb, info, subpass);
         }
     })
@@ -1711,11 +2019,27 @@ unsafe extern "system" fn cmd_begin_rendering(
         unsafe {
             let d = device_of(cb.as_raw());
             let ri = &*info;
+            let what = "vkCmdBeginRendering";
+            crate::strict::chain(what, ri.p_next);
+            for a in slice(ri.p_color_attachments, ri.color_attachment_count)
+                .iter()
+                .chain(ri.p_depth_attachment.as_ref())
+                .chain(ri.p_stencil_attachment.as_ref())
+            {
+                crate::strict::layout(what, a.image_layout);
+                crate::strict::layout(what, a.resolve_image_layout);
+            }
             let fsr = find::<vk::RenderingFragmentShadingRateAttachmentInfoKHR>(ri.p_next)
                 .map(|f| *f)
                 .filter(|f| f.image_view != vk::ImageView::null());
             let rec = match &fsr {
                 Some(f) => {
+                    if !d.attachment_feature {
+                        error(format!(
+                            "{what}: a shading-rate attachment without the \
+                             attachmentFragmentShadingRate feature"
+                        ));
+                    }
                     let t = d.instance.profile.texel();
                     let texel = f.shading_rate_attachment_texel_size;
                     if texel != t {
@@ -1732,7 +2056,7 @@ unsafe extern "system" fn cmd_begin_rendering(
                     }
                     let mut st = lock(&d.state);
                     let view = f.image_view.as_raw();
-                    let image = st.views.get(&view).copied();
+                    let image = st.views.get(&view).map(|v| v.image);
                     if let Some(image) = image {
                         if let Some(info) = st.images.get(&image) {
                             let a = ri.render_area;
@@ -1784,8 +2108,60 @@ unsafe extern "system" fn cmd_begin_rendering(
                     return;
                 }
             };
+            let attach = fsr.and_then(|f| {
+                attach_of(
+                    &lock(&d.state),
+                    f.image_view.as_raw(),
+                    f.shading_rate_attachment_texel_size,
+                    false,
+                )
+            });
+            let a = ri.render_area;
+            let colours: Vec<ColourTarget> = {
+                let st = lock(&d.state);
+                slice(ri.p_color_attachments, ri.color_attachment_count)
+                    .iter()
+                    .filter_map(|c| st.colour_views.get(&c.image_view.as_raw()).copied())
+                    .collect()
+            };
+            open_pass(
+                &d,
+                cb,
+                PassRec {
+                    colours,
+                    rendering: true,
+                    area: vk::Extent2D {
+                        width: a.offset.x.max(0) as u32 + a.extent.width,
+                        height: a.offset.y.max(0) as u32 + a.extent.height,
+                    },
+                    subpasses: vec![(attach, ri.view_mask)],
+                    draws: Vec::new(),
+                },
+                ri.flags.contains(vk::RenderingFlags::RESUMING),
+            );
+            fn fixed<'a>(a: &vk::RenderingAttachmentInfo<'a>) -> vk::RenderingAttachmentInfo<'a> {
+                let mut a = *a;
+                a.load_op = fix_load(a.load_op);
+                a
+            }
+            let colors: Vec<vk::RenderingAttachmentInfo<'_>> =
+                slice(ri.p_color_attachments, ri.color_attachment_count)
+                    .iter()
+                    .map(fixed)
+                    .collect();
+            let depth = ri.p_depth_attachment.as_ref().map(fixed);
+            let stencil = ri.p_stencil_attachment.as_ref().map(fixed);
             let mut copy = *ri;
             copy.p_next = stripped.head;
+            if !ri.p_color_attachments.is_null() {
+                copy.p_color_attachments = colors.as_ptr();
+            }
+            if let Some(a) = &depth {
+                copy.p_depth_attachment = a;
+            }
+            if let Some(a) = &stencil {
+                copy.p_stencil_attachment = a;
+            }
             (d.fns.fp_v1_3().cmd_begin_rendering)(cb, &copy);
         }
     })
@@ -1808,6 +2184,23 @@ unsafe extern "system" fn cmd_pipeline_barrier(
         // SAFETY: the caller's arrays are read; lavapipe gets copies that live across the call.
         unsafe {
             let d = device_of(cb.as_raw());
+            let what = "vkCmdPipelineBarrier";
+            crate::strict::stage(what, src.as_raw() as u64);
+            crate::strict::stage(what, dst.as_raw() as u64);
+            for b in slice(memory, memory_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+            }
+            for b in slice(buffers, buffer_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+            }
+            for b in slice(images, image_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+                crate::strict::layout(what, b.old_layout);
+                crate::strict::layout(what, b.new_layout);
+            }
             let m: Vec<_> = slice(memory, memory_count)
                 .iter()
                 .map(|b| {
@@ -1875,6 +2268,7 @@ unsafe extern "system" fn cmd_pipeline_barrier2(
         unsafe {
             let d = device_of(cb.as_raw());
             let di = &*info;
+            crate::strict::dependency("vkCmdPipelineBarrier2", di);
             let m: Vec<_> = slice(di.p_memory_barriers, di.memory_barrier_count)
                 .iter()
                 .map(|b| {
@@ -1944,6 +2338,15 @@ unsafe extern "system" fn cmd_set_fragment_shading_rate(
         // SAFETY: the caller's arguments; nothing reaches lavapipe, which lacks the command.
         unsafe {
             let (s, o) = (*size, *ops);
+            let d = device_of(cb.as_raw());
+            lock(&d.state)
+                .recordings
+                .entry(cb.as_raw())
+                .or_default()
+                .dynamic = Some(PipelineRate {
+                size: [s.width, s.height],
+                ops: o,
+            });
             event(json!({
                 "kind": "set_fragment_shading_rate",
                 "command_buffer": cb.as_raw(),
@@ -1976,6 +2379,24 @@ unsafe extern "system" fn cmd_execute_commands(
                         list.push(i);
                     }
                 }
+                // A secondary's draws outside its own passes run in the primary's pass; its own
+                // renderings are the primary's too.
+                let mut loose = Vec::new();
+                let mut passes = Vec::new();
+                for s in slice(secondaries, count) {
+                    if let Some(r) = st.recordings.get(&s.as_raw()) {
+                        loose.extend(r.loose.iter().copied());
+                        passes.extend(r.passes.iter().cloned());
+                    }
+                }
+                let r = st.recordings.entry(cb.as_raw()).or_default();
+                let subpass = r.subpass;
+                if let Some(open) = r.open {
+                    r.passes[open]
+                        .draws
+                        .extend(loose.into_iter().map(|dr| Draw { subpass, ..dr }));
+                }
+                r.passes.extend(passes);
             }
             (d.fns.fp_v1_0().cmd_execute_commands)(cb, count, secondaries);
         }
@@ -2144,6 +2565,25 @@ unsafe fn note_submit(d: &DeviceData, queue: vk::Queue, cbs: Vec<u64>) {
         // SAFETY: the caller's promise.
         unsafe { read_back(d, queue, &images) }
     };
+    let draws = {
+        let st = lock(&d.state);
+        cbs.iter().any(|cb| {
+            st.recordings
+                .get(cb)
+                .is_some_and(|r| r.passes.iter().any(|p| !p.draws.is_empty()))
+        })
+    };
+    if draws {
+        // SAFETY: the caller's promise: the queue is ours to wait on.
+        match unsafe { d.fns.queue_wait_idle(queue) } {
+            // SAFETY: the submit's work is complete.
+            Ok(()) => unsafe {
+                let jobs = report_draws(d, &cbs);
+                coarsen(d, queue, jobs);
+            },
+            Err(e) => error(format!("waiting for a submit failed: {e:?}")),
+        }
+    }
     event(json!({
         "kind": "submit",
         "command_buffers": cbs,
@@ -2166,6 +2606,12 @@ unsafe extern "system" fn queue_submit(
         unsafe {
             let d = device_of(queue.as_raw());
             let subs = slice(submits, count);
+            for s in subs {
+                crate::strict::chain("vkQueueSubmit", s.p_next);
+                for m in slice(s.p_wait_dst_stage_mask, s.wait_semaphore_count) {
+                    crate::strict::stage("vkQueueSubmit", m.as_raw() as u64);
+                }
+            }
             let masks: Vec<Vec<vk::PipelineStageFlags>> = subs
                 .iter()
                 .map(|s| {
@@ -2234,6 +2680,18 @@ unsafe extern "system" fn queue_submit2(
         unsafe {
             let d = device_of(queue.as_raw());
             let subs = slice(submits, count);
+            for s in subs {
+                crate::strict::chain("vkQueueSubmit2", s.p_next);
+                for i in slice(s.p_wait_semaphore_infos, s.wait_semaphore_info_count)
+                    .iter()
+                    .chain(slice(
+                        s.p_signal_semaphore_infos,
+                        s.signal_semaphore_info_count,
+                    ))
+                {
+                    crate::strict::stage("vkQueueSubmit2", i.stage_mask.as_raw());
+                }
+            }
             let waits: Vec<_> = subs
                 .iter()
                 .map(|s| fix_semaphores(s.p_wait_semaphore_infos, s.wait_semaphore_info_count))
@@ -2409,4 +2867,1275 @@ unsafe fn null_outputs<T: vk::Handle>(out: *mut T, n: u32) {
         // SAFETY: as the caller promised.
         unsafe { out.add(i).write(T::from_raw(0)) };
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Effects: the fragment size each draw gets, as the GPU the double plays would shade it.
+//
+// Per command buffer the double follows the bound pipeline's rate state, the dynamic rate, and the
+// render pass instances (or renderings) with their shading-rate attachments. A pass cannot change
+// its attachment while it runs, so the attachment's codes as the pass sees them are copied, in the
+// command buffer, just before the pass begins, into a buffer the double owns; after the submit
+// completed, each draw's effective size per attachment texel is computed from that copy.
+
+/// A buffer of the double's own, host visible, that a pass's attachment is copied into.
+#[derive(Clone, Copy)]
+struct Snapshot {
+    buffer: vk::Buffer,
+    memory: vk::DeviceMemory,
+    size: u64,
+}
+
+/// A pass's shading-rate attachment: the layers of the image its view names.
+#[derive(Clone, Copy)]
+struct Attach {
+    image: u64,
+    base_layer: u32,
+    layers: u32,
+    extent: vk::Extent2D,
+    texel: vk::Extent2D,
+    snapshot: Option<Snapshot>,
+    /// `storeOp = DONT_CARE`: the contents are undefined after the pass.
+    dont_care: bool,
+}
+
+#[derive(Clone, Copy)]
+struct Draw {
+    subpass: u32,
+    rate: PipelineRate,
+}
+
+/// One render pass instance or rendering.
+#[derive(Clone)]
+struct PassRec {
+    rendering: bool,
+    /// The render area's far corner: the framebuffer region the draws can touch.
+    area: vk::Extent2D,
+    /// Per subpass (one for a rendering): the attachment and the view mask.
+    subpasses: Vec<(Option<Attach>, u32)>,
+    draws: Vec<Draw>,
+    /// The colour attachments its subpasses write.
+    colours: Vec<ColourTarget>,
+}
+
+#[derive(Default)]
+struct Recording {
+    /// The bound graphics pipeline's rate state and whether it is dynamic.
+    bound: Option<(PipelineRate, bool)>,
+    /// The last `vkCmdSetFragmentShadingRateKHR`.
+    dynamic: Option<PipelineRate>,
+    passes: Vec<PassRec>,
+    /// The pass being recorded, an index into `passes`.
+    open: Option<usize>,
+    subpass: u32,
+    /// Draws outside any pass of this command buffer: a secondary's, which run in the pass of
+    /// the primary that executes it.
+    loose: Vec<Draw>,
+    /// The snapshots this recording owns (freed when it is recorded anew).
+    snapshots: Vec<Snapshot>,
+}
+
+/// What poisons a shading-rate attachment after `storeOp = DONT_CARE`: the code of 4×4, the
+/// coarsest rate (clamped to what the device lists), so a later pass that relies on the old
+/// contents shades visibly wrong.
+pub const POISON: u8 = 0b1010;
+
+/// Forgets a recording and frees what it owned.
+///
+/// # Safety
+/// The snapshots' command buffer must not be pending.
+unsafe fn drop_recording(d: &DeviceData, r: Recording) {
+    for s in r.snapshots {
+        // SAFETY: the double's own objects, no longer in use (the caller's promise).
+        unsafe {
+            d.fns.destroy_buffer(s.buffer, None);
+            d.fns.free_memory(s.memory, None);
+        }
+    }
+}
+
+/// A host-visible, coherent buffer of `size` bytes.
+///
+/// # Safety
+/// `d` must be live.
+unsafe fn host_buffer(
+    d: &DeviceData,
+    size: u64,
+    usage: vk::BufferUsageFlags,
+) -> Result<Snapshot, vk::Result> {
+    let f = &d.fns;
+    // SAFETY: plain Vulkan calls on the double's own objects.
+    unsafe {
+        let buffer = f.create_buffer(
+            &vk::BufferCreateInfo::default()
+                .size(size.max(1))
+                .usage(usage),
+            None,
+        )?;
+        let req = f.get_buffer_memory_requirements(buffer);
+        let props = d
+            .instance
+            .fns
+            .get_physical_device_memory_properties(d.physical);
+        let want = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+        let Some(ty) = (0..props.memory_type_count).find(|&i| {
+            req.memory_type_bits & (1 << i) != 0
+                && props.memory_types[i as usize].property_flags.contains(want)
+        }) else {
+            f.destroy_buffer(buffer, None);
+            return Err(vk::Result::ERROR_FEATURE_NOT_PRESENT);
+        };
+        let memory = match f.allocate_memory(
+            &vk::MemoryAllocateInfo::default()
+                .allocation_size(req.size)
+                .memory_type_index(ty),
+            None,
+        ) {
+            Ok(m) => m,
+            Err(e) => {
+                f.destroy_buffer(buffer, None);
+                return Err(e);
+            }
+        };
+        if let Err(e) = f.bind_buffer_memory(buffer, memory, 0) {
+            f.destroy_buffer(buffer, None);
+            f.free_memory(memory, None);
+            return Err(e);
+        }
+        Ok(Snapshot {
+            buffer,
+            memory,
+            size,
+        })
+    }
+}
+
+/// A global barrier between everything before and everything after, for the double's own copies
+/// and clears (lavapipe ignores layouts; these commands never pass the validation layer).
+///
+/// # Safety
+/// `cb` must be recording outside a pass.
+unsafe fn full_barrier(d: &DeviceData, cb: vk::CommandBuffer) {
+    let all = vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE;
+    // SAFETY: the caller's promise.
+    unsafe {
+        (d.fns.fp_v1_0().cmd_pipeline_barrier)(
+            cb,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::PipelineStageFlags::ALL_COMMANDS | vk::PipelineStageFlags::HOST,
+            vk::DependencyFlags::empty(),
+            1,
+            &vk::MemoryBarrier::default()
+                .src_access_mask(all)
+                .dst_access_mask(all | vk::AccessFlags::HOST_READ),
+            0,
+            std::ptr::null(),
+            0,
+            std::ptr::null(),
+        );
+    }
+}
+
+fn subresource(base: u32, layers: u32) -> vk::ImageSubresourceLayers {
+    vk::ImageSubresourceLayers {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        mip_level: 0,
+        base_array_layer: base,
+        layer_count: layers,
+    }
+}
+
+/// Records, in front of a pass, the copy of its attachment's layers into a new snapshot.
+///
+/// # Safety
+/// `cb` must be recording outside a pass, on `d`.
+unsafe fn snapshot(d: &DeviceData, cb: vk::CommandBuffer, a: &Attach) -> Option<Snapshot> {
+    let size = a.extent.width as u64 * a.extent.height as u64 * a.layers as u64;
+    // SAFETY: the caller's promise.
+    let s = match unsafe { host_buffer(d, size, vk::BufferUsageFlags::TRANSFER_DST) } {
+        Ok(s) => s,
+        Err(e) => {
+            error(format!(
+                "snapshot of a shading-rate attachment failed: {e:?}"
+            ));
+            return None;
+        }
+    };
+    // SAFETY: the caller's promise; the image is a live shading-rate image the pass reads.
+    unsafe {
+        full_barrier(d, cb);
+        (d.fns.fp_v1_0().cmd_copy_image_to_buffer)(
+            cb,
+            vk::Image::from_raw(a.image),
+            vk::ImageLayout::GENERAL,
+            s.buffer,
+            1,
+            &vk::BufferImageCopy::default()
+                .image_subresource(subresource(a.base_layer, a.layers))
+                .image_extent(vk::Extent3D {
+                    width: a.extent.width,
+                    height: a.extent.height,
+                    depth: 1,
+                }),
+        );
+        full_barrier(d, cb);
+    }
+    Some(s)
+}
+
+/// Records, after a pass, the poisoning of an attachment it stored with `DONT_CARE`.
+///
+/// # Safety
+/// `cb` must be recording outside a pass, on `d`.
+unsafe fn poison(d: &DeviceData, cb: vk::CommandBuffer, a: &Attach) {
+    let value = vk::ClearColorValue {
+        uint32: [POISON as u32; 4],
+    };
+    let range = vk::ImageSubresourceRange {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        base_mip_level: 0,
+        level_count: 1,
+        base_array_layer: a.base_layer,
+        layer_count: a.layers,
+    };
+    // SAFETY: the caller's promise; the image got TRANSFER_DST when the double created it.
+    unsafe {
+        full_barrier(d, cb);
+        (d.fns.fp_v1_0().cmd_clear_color_image)(
+            cb,
+            vk::Image::from_raw(a.image),
+            vk::ImageLayout::GENERAL,
+            &value,
+            1,
+            &range,
+        );
+        full_barrier(d, cb);
+    }
+    event(json!({
+        "kind": "poison",
+        "command_buffer": cb.as_raw(),
+        "image": a.image,
+        "base_layer": a.base_layer,
+        "layers": a.layers,
+    }));
+}
+
+/// The attachment a view names, as a pass uses it.
+fn attach_of(st: &DeviceState, view: u64, texel: vk::Extent2D, dont_care: bool) -> Option<Attach> {
+    let v = st.views.get(&view)?;
+    let image = st.images.get(&v.image)?;
+    Some(Attach {
+        image: v.image,
+        base_layer: v.base_layer,
+        layers: v.layers,
+        extent: vk::Extent2D {
+            width: image.extent.width,
+            height: image.extent.height,
+        },
+        texel,
+        snapshot: None,
+        dont_care,
+    })
+}
+
+/// Opens a pass in `cb`'s recording, with snapshots of its attachments recorded in front of it.
+///
+/// # Safety
+/// `cb` must be recording outside a pass, on `d`; the begin is forwarded after this returns.
+unsafe fn open_pass(d: &DeviceData, cb: vk::CommandBuffer, mut pass: PassRec, resuming: bool) {
+    let mut taken: Vec<(u64, u32, u32, Snapshot)> = Vec::new();
+    if resuming {
+        // A resumed rendering continues the suspended one: nothing may come between them.
+        let st = lock(&d.state);
+        if let Some(prev) = st
+            .recordings
+            .get(&cb.as_raw())
+            .and_then(|r| r.passes.last())
+        {
+            for (a, _) in pass.subpasses.iter_mut() {
+                if let (Some(a), Some((Some(p), _))) = (a.as_mut(), prev.subpasses.first()) {
+                    if p.image == a.image {
+                        a.snapshot = p.snapshot;
+                    }
+                }
+            }
+        }
+    } else {
+        for (a, _) in pass.subpasses.iter_mut() {
+            let Some(a) = a.as_mut() else { continue };
+            if let Some(&(_, _, _, s)) = taken
+                .iter()
+                .find(|t| (t.0, t.1, t.2) == (a.image, a.base_layer, a.layers))
+            {
+                a.snapshot = Some(s);
+                continue;
+            }
+            // SAFETY: the caller's promise.
+            a.snapshot = unsafe { snapshot(d, cb, a) };
+            if let Some(s) = a.snapshot {
+                taken.push((a.image, a.base_layer, a.layers, s));
+            }
+        }
+    }
+    let mut st = lock(&d.state);
+    let r = st.recordings.entry(cb.as_raw()).or_default();
+    r.snapshots.extend(taken.iter().map(|t| t.3));
+    r.passes.push(pass);
+    r.open = Some(r.passes.len() - 1);
+    r.subpass = 0;
+}
+
+/// Closes the open pass; poisons what it left undefined.
+///
+/// # Safety
+/// `cb` must be recording on `d`, the pass's end just forwarded.
+unsafe fn close_pass(d: &DeviceData, cb: vk::CommandBuffer) {
+    let poisoned: Vec<Attach> = {
+        let mut st = lock(&d.state);
+        let Some(r) = st.recordings.get_mut(&cb.as_raw()) else {
+            return;
+        };
+        let Some(open) = r.open.take() else { return };
+        r.subpass = 0;
+        let mut out: Vec<Attach> = Vec::new();
+        for (a, _) in &r.passes[open].subpasses {
+            if let Some(a) = a.filter(|a| a.dont_care) {
+                if !out
+                    .iter()
+                    .any(|o| (o.image, o.base_layer) == (a.image, a.base_layer))
+                {
+                    out.push(a);
+                }
+            }
+        }
+        out
+    };
+    for a in &poisoned {
+        // SAFETY: the caller's promise.
+        unsafe { poison(d, cb, a) };
+    }
+}
+
+/// Notes a draw with the state bound now.
+fn note_draw(d: &DeviceData, cb: vk::CommandBuffer) {
+    let mut st = lock(&d.state);
+    let r = st.recordings.entry(cb.as_raw()).or_default();
+    let rate = match r.bound {
+        Some((rate, false)) => rate,
+        Some((_, true)) => r.dynamic.unwrap_or_else(|| {
+            error(
+                "draw with a dynamic fragment shading rate that was never set \
+                 (VUID-vkCmdDraw-None-08608)"
+                    .into(),
+            );
+            PipelineRate::NONE
+        }),
+        None => PipelineRate::NONE,
+    };
+    let draw = Draw {
+        subpass: r.subpass,
+        rate,
+    };
+    match r.open {
+        Some(i) => r.passes[i].draws.push(draw),
+        None => r.loose.push(draw),
+    }
+}
+
+/// The attachment's codes per texel of one layer, from a snapshot read back.
+struct Codes<'a> {
+    bytes: &'a [u8],
+    extent: vk::Extent2D,
+}
+
+/// After a submit completed: the effective rates of every draw of the submitted command buffers.
+///
+/// # Safety
+/// The submit's work must be complete.
+unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) -> Vec<CoarseJob> {
+    let rates: Vec<[u32; 2]> = d
+        .instance
+        .profile
+        .rates()
+        .iter()
+        .map(|(e, _)| [e.width, e.height])
+        .collect();
+    let st = lock(&d.state);
+    let mut read: BTreeMap<u64, Vec<u8>> = BTreeMap::new();
+    // Per (command buffer, pass, view): the texel size, the columns and the finest size per texel.
+    let mut finest: BTreeMap<(u64, usize, u32), Finest> = BTreeMap::new();
+    for &cb in cbs {
+        let Some(r) = st.recordings.get(&cb) else {
+            continue;
+        };
+        for (pi, pass) in r.passes.iter().enumerate() {
+            for (k, draw) in pass.draws.iter().enumerate() {
+                let (attach, mask) = pass
+                    .subpasses
+                    .get(draw.subpass as usize)
+                    .copied()
+                    .unwrap_or((None, 0));
+                let bytes = attach.and_then(|a| a.snapshot).map(|s| {
+                    read.entry(s.buffer.as_raw())
+                        .or_insert_with(|| {
+                            // SAFETY: the double's own memory; the copy into it completed.
+                            unsafe {
+                                match d.fns.map_memory(
+                                    s.memory,
+                                    0,
+                                    s.size,
+                                    vk::MemoryMapFlags::empty(),
+                                ) {
+                                    Ok(p) => {
+                                        let v = std::slice::from_raw_parts(
+                                            p as *const u8,
+                                            s.size as usize,
+                                        )
+                                        .to_vec();
+                                        d.fns.unmap_memory(s.memory);
+                                        v
+                                    }
+                                    Err(e) => {
+                                        error(format!("mapping a snapshot failed: {e:?}"));
+                                        Vec::new()
+                                    }
+                                }
+                            }
+                        })
+                        .clone()
+                });
+                let views: Vec<u32> = if mask == 0 {
+                    vec![0]
+                } else {
+                    (0..32).filter(|v| mask & (1 << v) != 0).collect()
+                };
+                let mut out = Vec::new();
+                for v in views {
+                    out.push(match (attach, &bytes) {
+                        (Some(a), Some(b)) => {
+                            // Layered attachment with multiview: layer = ViewIndex; else layer 0
+                            // ("Attachment Fragment Shading Rate").
+                            let layer = if a.layers > 1 && mask != 0 { v } else { 0 };
+                            if layer >= a.layers {
+                                error(format!(
+                                    "view {v} reads layer {layer} of a {}-layer shading-rate view",
+                                    a.layers
+                                ));
+                            }
+                            let texels = (a.extent.width * a.extent.height) as usize;
+                            let start = (layer.min(a.layers - 1) as usize) * texels;
+                            let codes = Codes {
+                                bytes: b.get(start..start + texels).unwrap_or(&[]),
+                                extent: a.extent,
+                            };
+                            let (columns, rows, grid) =
+                                view_rates(&codes, a.texel, pass.area, draw.rate, &rates);
+                            let f = finest
+                                .entry((cb, pi, v))
+                                .or_insert_with(|| (a.texel, columns, grid.clone()));
+                            for (o, &g) in f.2.iter_mut().zip(&grid) {
+                                let (oa, ga) = (crate::shade::decode(*o), crate::shade::decode(g));
+                                if ga[0] * ga[1] < oa[0] * oa[1] {
+                                    *o = g;
+                                }
+                            }
+                            json!({
+                                "view": v,
+                                "layer": layer,
+                                "columns": columns,
+                                "rows": rows,
+                                "codes": hex(&grid),
+                            })
+                        }
+                        _ => {
+                            let e = draw.rate.effective([1, 1], &rates);
+                            json!({
+                                "view": v,
+                                "layer": null,
+                                "columns": 1,
+                                "rows": 1,
+                                "codes": format!("{:x}", crate::shade::encode(e)),
+                            })
+                        }
+                    });
+                }
+                event(json!({
+                    "kind": "draw",
+                    "command_buffer": cb,
+                    "pass": pi,
+                    "rendering": pass.rendering,
+                    "subpass": draw.subpass,
+                    "draw": k,
+                    "pipeline_rate": {
+                        "fragment_size": draw.rate.size,
+                        "combiner_ops": [draw.rate.ops[0].as_raw(), draw.rate.ops[1].as_raw()],
+                    },
+                    "views": out,
+                }));
+            }
+        }
+    }
+    // Per colour attachment layer, what the last pass of the submit that wrote it leaves.
+    let mut jobs: BTreeMap<(u64, u32), CoarseJob> = BTreeMap::new();
+    for &cb in cbs {
+        let Some(r) = st.recordings.get(&cb) else {
+            continue;
+        };
+        for (pi, pass) in r.passes.iter().enumerate() {
+            let mask = pass.subpasses.iter().fold(0, |m, s| m | s.1);
+            let views: Vec<u32> = if mask == 0 {
+                vec![0]
+            } else {
+                (0..32).filter(|v| mask & (1 << v) != 0).collect()
+            };
+            for target in &pass.colours {
+                for &v in &views {
+                    let layer = target.base_layer + if mask == 0 { 0 } else { v };
+                    match finest.get(&(cb, pi, v)) {
+                        Some((texel, columns, codes)) => {
+                            jobs.insert(
+                                (target.image, layer),
+                                CoarseJob {
+                                    target: *target,
+                                    layer,
+                                    texel: *texel,
+                                    area: pass.area,
+                                    columns: *columns,
+                                    codes: codes.clone(),
+                                },
+                            );
+                        }
+                        None => {
+                            jobs.remove(&(target.image, layer));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    jobs.into_values().collect()
+}
+
+/// One view's effective sizes over the attachment texels the render area covers, as codes in
+/// the attachment's encoding, rows top to bottom: (columns, rows, codes).
+fn view_rates(
+    codes: &Codes<'_>,
+    texel: vk::Extent2D,
+    area: vk::Extent2D,
+    rate: PipelineRate,
+    rates: &[[u32; 2]],
+) -> (u32, u32, Vec<u8>) {
+    let columns = area
+        .width
+        .div_ceil(texel.width.max(1))
+        .min(codes.extent.width);
+    let rows = area
+        .height
+        .div_ceil(texel.height.max(1))
+        .min(codes.extent.height);
+    let mut out = Vec::with_capacity((columns * rows) as usize);
+    for y in 0..rows {
+        for x in 0..columns {
+            let at = (y * codes.extent.width + x) as usize;
+            let code = codes.bytes.get(at).copied().unwrap_or(0);
+            out.push(crate::shade::encode(
+                rate.effective(crate::shade::decode(code), rates),
+            ));
+        }
+    }
+    (columns, rows, out)
+}
+
+/// Codes as the `draw` record gives them: one hex digit per texel.
+fn hex(codes: &[u8]) -> String {
+    codes
+        .iter()
+        .map(|&c| char::from_digit(c as u32, 16).unwrap_or('0'))
+        .collect()
+}
+
+/// Per view of a pass: the attachment texel size, the columns of the grid and, per texel, the
+/// finest effective size any of its draws got.
+type Finest = (vk::Extent2D, u32, Vec<u8>);
+
+/// What [`coarsen`] does to one layer of one colour attachment after a submit.
+struct CoarseJob {
+    target: ColourTarget,
+    layer: u32,
+    texel: vk::Extent2D,
+    area: vk::Extent2D,
+    columns: u32,
+    /// Per attachment texel, the finest effective size any draw of the pass got there.
+    codes: Vec<u8>,
+}
+
+/// The pixel size of the colour formats the double coarsens (8-bit and 16-bit RGBA, 32-bit
+/// packed, 32-bit float RGBA); others are left alone.
+fn pixel_bytes(format: vk::Format) -> Option<u64> {
+    use vk::Format as F;
+    match format {
+        F::R8G8B8A8_UNORM
+        | F::R8G8B8A8_SRGB
+        | F::B8G8R8A8_UNORM
+        | F::B8G8R8A8_SRGB
+        | F::A2B10G10R10_UNORM_PACK32
+        | F::A2R10G10B10_UNORM_PACK32
+        | F::B10G11R11_UFLOAT_PACK32 => Some(4),
+        F::R16G16B16A16_SFLOAT | F::R16G16B16A16_UNORM => Some(8),
+        F::R32G32B32A32_SFLOAT => Some(16),
+        _ => None,
+    }
+}
+
+/// Draws the effect of coarse fragments: in each layer of a colour attachment that the last pass
+/// of the submit writing it drew with fragments larger than 1×1, every fragment-sized block of
+/// pixels of an attachment texel gets the value of its top-left pixel, one shaded value per
+/// fragment as on a GPU with shading-rate attachments. Done on the host after the submit
+/// completed: the double copies the layer out, replicates, and copies it back, with command
+/// buffers of its own (validation never sees them).
+///
+/// # Safety
+/// `queue` must be idle and belong to `d`.
+unsafe fn coarsen(d: &DeviceData, queue: vk::Queue, jobs: Vec<CoarseJob>) {
+    for job in jobs {
+        let Some(bpp) = pixel_bytes(job.target.format) else {
+            continue;
+        };
+        if !job.codes.iter().any(|&c| c != 0) {
+            continue;
+        }
+        let e = job.target.extent;
+        let size = e.width as u64 * e.height as u64 * bpp;
+        let usage = vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
+        // SAFETY: the caller's promise; every object is the double's own.
+        unsafe {
+            let buffer = match host_buffer(d, size, usage) {
+                Ok(b) => b,
+                Err(e) => {
+                    error(format!("coarse shading: no buffer: {e:?}"));
+                    continue;
+                }
+            };
+            let region = vk::BufferImageCopy::default()
+                .image_subresource(subresource(job.layer, 1))
+                .image_extent(vk::Extent3D {
+                    width: e.width,
+                    height: e.height,
+                    depth: 1,
+                });
+            let image = vk::Image::from_raw(job.target.image);
+            let done = once(d, queue, |cb| {
+                full_barrier(d, cb);
+                (d.fns.fp_v1_0().cmd_copy_image_to_buffer)(
+                    cb,
+                    image,
+                    vk::ImageLayout::GENERAL,
+                    buffer.buffer,
+                    1,
+                    &region,
+                );
+                full_barrier(d, cb);
+            })
+            .and_then(|()| {
+                let p = d
+                    .fns
+                    .map_memory(buffer.memory, 0, size, vk::MemoryMapFlags::empty())?;
+                let pixels = std::slice::from_raw_parts_mut(p as *mut u8, size as usize);
+                replicate(&job, pixels, bpp as usize);
+                d.fns.unmap_memory(buffer.memory);
+                once(d, queue, |cb| {
+                    full_barrier(d, cb);
+                    (d.fns.fp_v1_0().cmd_copy_buffer_to_image)(
+                        cb,
+                        buffer.buffer,
+                        image,
+                        vk::ImageLayout::GENERAL,
+                        1,
+                        &region,
+                    );
+                    full_barrier(d, cb);
+                })
+            });
+            if let Err(e) = done {
+                error(format!("coarse shading failed: {e:?}"));
+            }
+            d.fns.destroy_buffer(buffer.buffer, None);
+            d.fns.free_memory(buffer.memory, None);
+        }
+        event(json!({
+            "kind": "coarsened",
+            "image": job.target.image,
+            "layer": job.layer,
+        }));
+    }
+}
+
+/// Replicates each block's top-left pixel over the block, per attachment texel.
+fn replicate(job: &CoarseJob, pixels: &mut [u8], bpp: usize) {
+    let e = job.target.extent;
+    let right = job.area.width.min(e.width);
+    let bottom = job.area.height.min(e.height);
+    let row = e.width as usize * bpp;
+    for (i, &code) in job.codes.iter().enumerate() {
+        if code == 0 {
+            continue;
+        }
+        let [w, h] = crate::shade::decode(code);
+        let (tx, ty) = (i as u32 % job.columns, i as u32 / job.columns);
+        let x0 = tx * job.texel.width;
+        let y0 = ty * job.texel.height;
+        let x1 = (x0 + job.texel.width).min(right);
+        let y1 = (y0 + job.texel.height).min(bottom);
+        for by in (y0..y1).step_by(h as usize) {
+            for bx in (x0..x1).step_by(w as usize) {
+                let src = by as usize * row + bx as usize * bpp;
+                let mut value = [0u8; 16];
+                value[..bpp].copy_from_slice(&pixels[src..src + bpp]);
+                for y in by..(by + h).min(y1) {
+                    for x in bx..(bx + w).min(x1) {
+                        let at = y as usize * row + x as usize * bpp;
+                        pixels[at..at + bpp].copy_from_slice(&value[..bpp]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Records `f` into a command buffer of the double's own on `queue`'s family, submits it and
+/// waits.
+///
+/// # Safety
+/// `queue` must belong to `d` and be externally synchronised by the current call.
+unsafe fn once(
+    d: &DeviceData,
+    queue: vk::Queue,
+    f: impl FnOnce(vk::CommandBuffer),
+) -> Result<(), vk::Result> {
+    let fns = &d.fns;
+    // SAFETY: the caller's promise; the pool and command buffer are the double's own.
+    unsafe {
+        let pool = pool_for(d, queue)?;
+        let cbs = fns.allocate_command_buffers(
+            &vk::CommandBufferAllocateInfo::default()
+                .command_pool(pool)
+                .level(vk::CommandBufferLevel::PRIMARY)
+                .command_buffer_count(1),
+        )?;
+        let cb = cbs[0];
+        if let Some(set) = d.set_loader_data {
+            set(d.handle, cb.as_raw() as usize as *mut c_void).result()?;
+        }
+        fns.begin_command_buffer(
+            cb,
+            &vk::CommandBufferBeginInfo::default()
+                .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+        )?;
+        f(cb);
+        fns.end_command_buffer(cb)?;
+        let r = fns
+            .queue_submit(
+                queue,
+                &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                vk::Fence::null(),
+            )
+            .and_then(|()| fns.queue_wait_idle(queue));
+        fns.free_command_buffers(pool, &cbs);
+        r
+    }
+}
+
+/// The double's command pool for `queue`'s family, made on first use.
+///
+/// # Safety
+/// `queue` must belong to `d`.
+unsafe fn pool_for(d: &DeviceData, queue: vk::Queue) -> Result<vk::CommandPool, vk::Result> {
+    let family = lock(&d.state)
+        .queues
+        .get(&queue.as_raw())
+        .copied()
+        .unwrap_or(0);
+    let existing = lock(&d.state).pools.get(&family).copied();
+    if let Some(p) = existing {
+        return Ok(p);
+    }
+    // SAFETY: a plain creation on a live device.
+    let p = unsafe {
+        d.fns.create_command_pool(
+            &vk::CommandPoolCreateInfo::default()
+                .queue_family_index(family)
+                .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+            None,
+        )
+    }?;
+    lock(&d.state).pools.insert(family, p);
+    Ok(p)
+}
+
+/// The colour attachment indices of a subpass.
+///
+/// # Safety
+/// `s` must be valid.
+unsafe fn colors_of(s: &vk::SubpassDescription2<'_>) -> Vec<u32> {
+    // SAFETY: the caller's promise.
+    unsafe { slice(s.p_color_attachments, s.color_attachment_count) }
+        .iter()
+        .map(|r| r.attachment)
+        .filter(|&a| a != vk::ATTACHMENT_UNUSED)
+        .collect()
+}
+
+unsafe extern "system" fn cmd_bind_pipeline(
+    cb: vk::CommandBuffer,
+    point: vk::PipelineBindPoint,
+    pipeline: vk::Pipeline,
+) {
+    guard("vkCmdBindPipeline", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            if point == vk::PipelineBindPoint::GRAPHICS {
+                let mut st = lock(&d.state);
+                let rate = st
+                    .pipelines
+                    .get(&pipeline.as_raw())
+                    .copied()
+                    .unwrap_or((PipelineRate::NONE, false));
+                st.recordings.entry(cb.as_raw()).or_default().bound = Some(rate);
+            }
+            (d.fns.fp_v1_0().cmd_bind_pipeline)(cb, point, pipeline);
+        }
+    })
+}
+
+fn next_subpass(d: &DeviceData, cb: vk::CommandBuffer) {
+    lock(&d.state)
+        .recordings
+        .entry(cb.as_raw())
+        .or_default()
+        .subpass += 1;
+}
+
+unsafe extern "system" fn cmd_next_subpass(cb: vk::CommandBuffer, contents: vk::SubpassContents) {
+    guard("vkCmdNextSubpass", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            next_subpass(&d, cb);
+            (d.fns.fp_v1_0().cmd_next_subpass)(cb, contents);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_next_subpass2(
+    cb: vk::CommandBuffer,
+    begin: *const vk::SubpassBeginInfo<'_>,
+    end: *const vk::SubpassEndInfo<'_>,
+) {
+    guard("vkCmdNextSubpass2", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            if let Some(e) = end.as_ref() {
+                crate::strict::chain("vkCmdNextSubpass2", e.p_next);
+            }
+            next_subpass(&d, cb);
+            (d.fns.fp_v1_2().cmd_next_subpass2)(cb, begin, end);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_end_render_pass(cb: vk::CommandBuffer) {
+    guard("vkCmdEndRenderPass", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged; the double's own commands follow.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_0().cmd_end_render_pass)(cb);
+            close_pass(&d, cb);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_end_render_pass2(
+    cb: vk::CommandBuffer,
+    end: *const vk::SubpassEndInfo<'_>,
+) {
+    guard("vkCmdEndRenderPass2", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged; the double's own commands follow.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            if let Some(e) = end.as_ref() {
+                crate::strict::chain("vkCmdEndRenderPass2", e.p_next);
+            }
+            (d.fns.fp_v1_2().cmd_end_render_pass2)(cb, end);
+            close_pass(&d, cb);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_end_rendering(cb: vk::CommandBuffer) {
+    guard("vkCmdEndRendering", (), || {
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_3().cmd_end_rendering)(cb);
+            close_pass(&d, cb);
+        }
+    })
+}
+
+macro_rules! draw_hook {
+    ($f:ident, $name:literal, $table:ident . $field:ident ($($a:ident: $t:ty),*)) => {
+        unsafe extern "system" fn $f(cb: vk::CommandBuffer $(, $a: $t)*) {
+            guard($name, (), || {
+                // SAFETY: the caller's arguments, forwarded unchanged.
+                unsafe {
+                    let d = device_of(cb.as_raw());
+                    note_draw(&d, cb);
+                    (d.fns.$table().$field)(cb $(, $a)*);
+                }
+            })
+        }
+    };
+}
+
+draw_hook!(cmd_draw, "vkCmdDraw", fp_v1_0.cmd_draw(
+    vertices: u32, instances: u32, first_vertex: u32, first_instance: u32));
+draw_hook!(cmd_draw_indexed, "vkCmdDrawIndexed", fp_v1_0.cmd_draw_indexed(
+    indices: u32, instances: u32, first_index: u32, offset: i32, first_instance: u32));
+draw_hook!(cmd_draw_indirect, "vkCmdDrawIndirect", fp_v1_0.cmd_draw_indirect(
+    buffer: vk::Buffer, offset: vk::DeviceSize, count: u32, stride: u32));
+draw_hook!(cmd_draw_indexed_indirect, "vkCmdDrawIndexedIndirect",
+    fp_v1_0.cmd_draw_indexed_indirect(
+    buffer: vk::Buffer, offset: vk::DeviceSize, count: u32, stride: u32));
+draw_hook!(cmd_draw_indirect_count, "vkCmdDrawIndirectCount", fp_v1_2.cmd_draw_indirect_count(
+    buffer: vk::Buffer, offset: vk::DeviceSize, count_buffer: vk::Buffer,
+    count_offset: vk::DeviceSize, max: u32, stride: u32));
+draw_hook!(cmd_draw_indexed_indirect_count, "vkCmdDrawIndexedIndirectCount",
+    fp_v1_2.cmd_draw_indexed_indirect_count(
+    buffer: vk::Buffer, offset: vk::DeviceSize, count_buffer: vk::Buffer,
+    count_offset: vk::DeviceSize, max: u32, stride: u32));
+
+// ---------------------------------------------------------------------------------------------
+// Strictness: what a driver without fragment density maps refuses (`crate::strict`).
+
+/// A render pass 2's density-map enums and structs, and a shading-rate attachment without the
+/// feature.
+///
+/// # Safety
+/// `ci` must be valid.
+unsafe fn check_render_pass2(d: &DeviceData, ci: &vk::RenderPassCreateInfo2<'_>) {
+    let what = "vkCreateRenderPass2";
+    // SAFETY: the caller's promise.
+    unsafe {
+        crate::strict::chain(what, ci.p_next);
+        for a in slice(ci.p_attachments, ci.attachment_count) {
+            crate::strict::chain(what, a.p_next);
+            crate::strict::layout(what, a.initial_layout);
+            crate::strict::layout(what, a.final_layout);
+        }
+        for s in slice(ci.p_subpasses, ci.subpass_count) {
+            crate::strict::chain(what, s.p_next);
+            let refs = slice(s.p_input_attachments, s.input_attachment_count)
+                .iter()
+                .chain(slice(s.p_color_attachments, s.color_attachment_count))
+                .chain(if s.p_resolve_attachments.is_null() {
+                    &[][..]
+                } else {
+                    slice(s.p_resolve_attachments, s.color_attachment_count)
+                })
+                .chain(s.p_depth_stencil_attachment.as_ref());
+            for r in refs {
+                crate::strict::layout(what, r.layout);
+            }
+            let fsr = find::<vk::FragmentShadingRateAttachmentInfoKHR>(s.p_next)
+                .and_then(|f| (*f).p_fragment_shading_rate_attachment.as_ref())
+                .filter(|r| r.attachment != vk::ATTACHMENT_UNUSED);
+            if fsr.is_some() && !d.attachment_feature {
+                error(format!(
+                    "{what}: a shading-rate attachment without the attachmentFragmentShadingRate \
+                     feature"
+                ));
+            }
+        }
+        for dep in slice(ci.p_dependencies, ci.dependency_count) {
+            crate::strict::barrier(
+                what,
+                [
+                    dep.src_stage_mask.as_raw() as u64,
+                    dep.dst_stage_mask.as_raw() as u64,
+                ],
+                [
+                    dep.src_access_mask.as_raw() as u64,
+                    dep.dst_access_mask.as_raw() as u64,
+                ],
+            );
+            // A VkMemoryBarrier2 chained to the dependency replaces its masks
+            // (VK_KHR_synchronization2).
+            if let Some(m) = find::<vk::MemoryBarrier2>(dep.p_next) {
+                let m = &*m;
+                crate::strict::barrier(
+                    what,
+                    [m.src_stage_mask.as_raw(), m.dst_stage_mask.as_raw()],
+                    [m.src_access_mask.as_raw(), m.dst_access_mask.as_raw()],
+                );
+            }
+        }
+    }
+}
+
+unsafe extern "system" fn create_render_pass(
+    device: vk::Device,
+    info: *const vk::RenderPassCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    guard("vkCreateRenderPass", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkCreateRenderPass") {
+            return r;
+        }
+        // SAFETY: the caller's create info is read and forwarded unchanged.
+        unsafe {
+            let d = device_of(device.as_raw());
+            let ci = &*info;
+            let what = "vkCreateRenderPass";
+            crate::strict::chain(what, ci.p_next);
+            for a in slice(ci.p_attachments, ci.attachment_count) {
+                crate::strict::layout(what, a.initial_layout);
+                crate::strict::layout(what, a.final_layout);
+            }
+            for s in slice(ci.p_subpasses, ci.subpass_count) {
+                let refs = slice(s.p_input_attachments, s.input_attachment_count)
+                    .iter()
+                    .chain(slice(s.p_color_attachments, s.color_attachment_count))
+                    .chain(if s.p_resolve_attachments.is_null() {
+                        &[][..]
+                    } else {
+                        slice(s.p_resolve_attachments, s.color_attachment_count)
+                    })
+                    .chain(s.p_depth_stencil_attachment.as_ref());
+                for r in refs {
+                    crate::strict::layout(what, r.layout);
+                }
+            }
+            for dep in slice(ci.p_dependencies, ci.dependency_count) {
+                crate::strict::barrier(
+                    what,
+                    [
+                        dep.src_stage_mask.as_raw() as u64,
+                        dep.dst_stage_mask.as_raw() as u64,
+                    ],
+                    [
+                        dep.src_access_mask.as_raw() as u64,
+                        dep.dst_access_mask.as_raw() as u64,
+                    ],
+                );
+            }
+            let attachments: Vec<vk::AttachmentDescription> =
+                slice(ci.p_attachments, ci.attachment_count)
+                    .iter()
+                    .map(|a| {
+                        let mut a = *a;
+                        a.load_op = fix_load(a.load_op);
+                        a.stencil_load_op = fix_load(a.stencil_load_op);
+                        a
+                    })
+                    .collect();
+            let mut copy = *ci;
+            if !ci.p_attachments.is_null() {
+                copy.p_attachments = attachments.as_ptr();
+            }
+            (d.fns.fp_v1_0().create_render_pass)(device, &copy, alloc, out)
+        }
+    })
+}
+
+unsafe extern "system" fn create_sampler(
+    device: vk::Device,
+    info: *const vk::SamplerCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Sampler,
+) -> vk::Result {
+    guard("vkCreateSampler", vk::Result::ERROR_UNKNOWN, || {
+        if let Some(r) = record::fault("vkCreateSampler") {
+            return r;
+        }
+        // SAFETY: the caller's create info is read and forwarded unchanged.
+        unsafe {
+            let d = device_of(device.as_raw());
+            let ci = &*info;
+            crate::strict::chain("vkCreateSampler", ci.p_next);
+            crate::strict::flag(
+                "vkCreateSampler",
+                ci.flags.intersects(
+                    vk::SamplerCreateFlags::SUBSAMPLED_EXT
+                        | vk::SamplerCreateFlags::SUBSAMPLED_COARSE_RECONSTRUCTION_EXT,
+                ),
+                "a subsampled sampler",
+            );
+            (d.fns.fp_v1_0().create_sampler)(device, info, alloc, out)
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_set_event(
+    cb: vk::CommandBuffer,
+    event_: vk::Event,
+    stage: vk::PipelineStageFlags,
+) {
+    guard("vkCmdSetEvent", (), || {
+        crate::strict::stage("vkCmdSetEvent", stage.as_raw() as u64);
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_0().cmd_set_event)(cb, event_, stage);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_reset_event(
+    cb: vk::CommandBuffer,
+    event_: vk::Event,
+    stage: vk::PipelineStageFlags,
+) {
+    guard("vkCmdResetEvent", (), || {
+        crate::strict::stage("vkCmdResetEvent", stage.as_raw() as u64);
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_0().cmd_reset_event)(cb, event_, stage);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_write_timestamp(
+    cb: vk::CommandBuffer,
+    stage: vk::PipelineStageFlags,
+    pool: vk::QueryPool,
+    query: u32,
+) {
+    guard("vkCmdWriteTimestamp", (), || {
+        crate::strict::stage("vkCmdWriteTimestamp", stage.as_raw() as u64);
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_0().cmd_write_timestamp)(cb, stage, pool, query);
+        }
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+unsafe extern "system" fn cmd_wait_events(
+    cb: vk::CommandBuffer,
+    count: u32,
+    events: *const vk::Event,
+    src: vk::PipelineStageFlags,
+    dst: vk::PipelineStageFlags,
+    memory_count: u32,
+    memory: *const vk::MemoryBarrier<'_>,
+    buffer_count: u32,
+    buffers: *const vk::BufferMemoryBarrier<'_>,
+    image_count: u32,
+    images: *const vk::ImageMemoryBarrier<'_>,
+) {
+    guard("vkCmdWaitEvents", (), || {
+        // SAFETY: the caller's arguments, read and forwarded unchanged.
+        unsafe {
+            let what = "vkCmdWaitEvents";
+            crate::strict::stage(what, src.as_raw() as u64);
+            crate::strict::stage(what, dst.as_raw() as u64);
+            for b in slice(memory, memory_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+            }
+            for b in slice(buffers, buffer_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+            }
+            for b in slice(images, image_count) {
+                crate::strict::access(what, b.src_access_mask.as_raw() as u64);
+                crate::strict::access(what, b.dst_access_mask.as_raw() as u64);
+                crate::strict::layout(what, b.old_layout);
+                crate::strict::layout(what, b.new_layout);
+            }
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_0().cmd_wait_events)(
+                cb,
+                count,
+                events,
+                src,
+                dst,
+                memory_count,
+                memory,
+                buffer_count,
+                buffers,
+                image_count,
+                images,
+            );
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_set_event2(
+    cb: vk::CommandBuffer,
+    event_: vk::Event,
+    info: *const vk::DependencyInfo<'_>,
+) {
+    guard("vkCmdSetEvent2", (), || {
+        // SAFETY: the caller's arguments, read and forwarded unchanged.
+        unsafe {
+            crate::strict::dependency("vkCmdSetEvent2", &*info);
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_3().cmd_set_event2)(cb, event_, info);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_reset_event2(
+    cb: vk::CommandBuffer,
+    event_: vk::Event,
+    stage: vk::PipelineStageFlags2,
+) {
+    guard("vkCmdResetEvent2", (), || {
+        crate::strict::stage("vkCmdResetEvent2", stage.as_raw());
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_3().cmd_reset_event2)(cb, event_, stage);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_write_timestamp2(
+    cb: vk::CommandBuffer,
+    stage: vk::PipelineStageFlags2,
+    pool: vk::QueryPool,
+    query: u32,
+) {
+    guard("vkCmdWriteTimestamp2", (), || {
+        crate::strict::stage("vkCmdWriteTimestamp2", stage.as_raw());
+        // SAFETY: the caller's arguments, forwarded unchanged.
+        unsafe {
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_3().cmd_write_timestamp2)(cb, stage, pool, query);
+        }
+    })
+}
+
+unsafe extern "system" fn cmd_wait_events2(
+    cb: vk::CommandBuffer,
+    count: u32,
+    events: *const vk::Event,
+    infos: *const vk::DependencyInfo<'_>,
+) {
+    guard("vkCmdWaitEvents2", (), || {
+        // SAFETY: the caller's arguments, read and forwarded unchanged.
+        unsafe {
+            for i in slice(infos, count) {
+                crate::strict::dependency("vkCmdWaitEvents2", i);
+            }
+            let d = device_of(cb.as_raw());
+            (d.fns.fp_v1_3().cmd_wait_events2)(cb, count, events, infos);
+        }
+    })
 }

@@ -36,7 +36,56 @@
 //! {command_buffer, stages, access, images[{image, layouts}]} as given, raw values (version 1: the
 //! two stage masks; version 2: per memory and image barrier); `submit`
 //! {command_buffers, shading_rate_images[{image, extent, layers, codes}]}, the codes read back
-//! after the submit completed. With the `none` profile nothing but `instance` is recorded.
+//! after the submit completed; `draw` {command_buffer, pass, rendering, subpass, draw,
+//! pipeline_rate, views[{view, layer, columns, rows, codes}]}, one per draw of each submitted
+//! command buffer ([`Loaded::draws`], [`Loaded::effective_rates`]); `poison` {command_buffer,
+//! image, base_layer, layers}. With the `none` profile nothing but `instance` is recorded.
+//!
+//! Effects, not inputs: for every draw (`vkCmdDraw*`, indexed, indirect, indirect count) the
+//! double computes the fragment size the device it plays would shade each shading-rate attachment
+//! texel with, by the specification's combiner pipeline
+//! (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#primsrast-fragment-shading-rate>):
+//! the bound pipeline's `VkPipelineFragmentShadingRateStateCreateInfoKHR` (absent: 1×1 and
+//! `{KEEP, KEEP}`, so the attachment is ignored) or, where the pipeline has that dynamic state, the
+//! last `vkCmdSetFragmentShadingRateKHR`; a 1×1 primitive rate; the attachment's code at that texel
+//! of layer `ViewIndex` (layered attachment under multiview) or 0; clamped to the largest listed
+//! rate no wider and no taller (then the smallest aspect ratio; ties go to the wider). The
+//! attachment's codes are those the pass reads: the double records, in the command buffer in front
+//! of each pass instance or rendering, a copy of its attachment's layers into a host-visible
+//! buffer of its own (these commands go straight to lavapipe, so validation above never sees
+//! them), and evaluates after the submit completed. `codes` are one hex digit per texel in the
+//! attachment's encoding, rows top to bottom, over the texels the render area covers; a pass
+//! without an attachment gives one texel, `layer` null.
+//!
+//! Strictness, as a driver without fragment density maps (every desktop driver with shading-rate
+//! attachments): `vkCreateDevice` with a density-map extension name fails with
+//! `VK_ERROR_EXTENSION_NOT_PRESENT`, with a density-map features struct that enables anything with
+//! `VK_ERROR_FEATURE_NOT_PRESENT`; density-map layouts, stages, access bits, usage, image, view,
+//! sampler and pipeline flags, and density-map structs in any chain the double sees (render passes
+//! v1 and v2 with their attachments, references, dependencies and a `VkMemoryBarrier2` chained to
+//! one, renderings, barriers v1 and v2, events, timestamps, submits' wait stages) are recorded as
+//! errors, as is a shading-rate attachment (image usage, render pass, rendering) on a device that
+//! did not enable `attachmentFragmentShadingRate`.
+//!
+//! Drawing the effect (`coarsened` {image, layer} records): lavapipe shades every pixel, so once a
+//! submit has completed the double makes its colour attachments look as a GPU with shading-rate
+//! attachments leaves them. For each layer of each colour attachment (a 2D image with the
+//! colour-attachment usage, in an 8-, 16- or 32-bit-per-channel RGBA or 32-bit packed format),
+//! the last pass instance or rendering of the submit that wrote it decides: per shading-rate
+//! attachment texel, the finest effective fragment size any of its draws got there; every block
+//! of that size gets the value of its top-left pixel, one shaded value per fragment. It is done on
+//! the host (the layer copied out, replicated, copied back, with command buffers of the double's
+//! own), so frames read after the submit (the compositor's, a test's later read-back) show it.
+//! Approximations, where a GPU differs: the whole block is replaced, so edges of geometry become
+//! blocky where a GPU keeps per-pixel coverage; the value is the top-left pixel's, where a GPU
+//! shades at the fragment's centre; pixels no draw wrote (a cleared background, loaded contents)
+//! are coarsened too; reads of the attachment within the same submit see it at full rate.
+//!
+//! Strictness: after a render pass whose shading-rate attachment has `storeOp = DONT_CARE`, the
+//! double overwrites the layers the pass used with [`POISON`] (4×4, the coarsest rate), as the
+//! contents are undefined then
+//! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkAttachmentStoreOp.html>): a later
+//! pass that relies on them shades visibly wrong.
 //!
 //! Fault injection ([`fovea_vkdouble_fail`], [`Loaded::fail`]): any of [`FAULTABLE`] (and
 //! `vkCreateDevice`) can be made to fail at its n-th call, whatever the profile; since the double
@@ -49,11 +98,13 @@ mod ffi;
 mod layer;
 mod profile;
 mod record;
+mod shade;
+mod strict;
 
 use std::ffi::{c_char, CStr};
 use std::path::{Path, PathBuf};
 
-pub use layer::FAULTABLE;
+pub use layer::{FAULTABLE, POISON};
 pub use profile::Profile;
 pub use record::KEPT_EVENTS;
 use serde_json::Value;
@@ -181,6 +232,9 @@ pub fn manifest_json(library: &Path) -> String {
                 "name": "VK_KHR_fragment_shading_rate",
                 "spec_version": "2",
                 "entrypoints": ["vkCmdSetFragmentShadingRateKHR"]
+            }, {
+                "name": "VK_EXT_load_store_op_none",
+                "spec_version": "1"
             }]
         }
     })
@@ -215,6 +269,71 @@ pub fn find_library() -> Result<PathBuf, String> {
         "{LIBRARY_FILE} not found next to {} (cargo build -p fovea-vkdouble)",
         exe.display()
     ))
+}
+
+/// The effective fragment sizes one view of one draw got, per shading-rate attachment texel that
+/// the render area covers (row-major, `columns` × `rows`; one texel, `layer` `None`, where the pass
+/// had no attachment).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ViewRates {
+    pub view: u32,
+    pub layer: Option<u32>,
+    pub columns: u32,
+    pub rows: u32,
+    /// Each texel's effective size in the attachment's encoding (`(log2 w << 2) | log2 h`).
+    pub codes: Vec<u8>,
+}
+
+impl ViewRates {
+    /// The effective sizes, `[width, height]` per texel.
+    pub fn sizes(&self) -> Vec<[u32; 2]> {
+        self.codes.iter().map(|&c| shade::decode(c)).collect()
+    }
+}
+
+/// What one draw of a submitted command buffer shaded at (a `draw` record).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DrawRates {
+    pub command_buffer: u64,
+    /// The render pass instance or rendering, counted from 0 in the command buffer's recording
+    /// (a secondary's renderings count where it is executed).
+    pub pass: usize,
+    pub rendering: bool,
+    pub subpass: u32,
+    /// The draw, counted from 0 in its pass.
+    pub draw: usize,
+    /// Per view (one where the pass has no view mask).
+    pub views: Vec<ViewRates>,
+}
+
+impl DrawRates {
+    fn from_json(e: &Value) -> Option<DrawRates> {
+        let views = e["views"]
+            .as_array()?
+            .iter()
+            .map(|v| {
+                Some(ViewRates {
+                    view: v["view"].as_u64()? as u32,
+                    layer: v["layer"].as_u64().map(|l| l as u32),
+                    columns: v["columns"].as_u64()? as u32,
+                    rows: v["rows"].as_u64()? as u32,
+                    codes: v["codes"]
+                        .as_str()?
+                        .chars()
+                        .map(|c| c.to_digit(16).map(|d| d as u8))
+                        .collect::<Option<Vec<u8>>>()?,
+                })
+            })
+            .collect::<Option<Vec<_>>>()?;
+        Some(DrawRates {
+            command_buffer: e["command_buffer"].as_u64()?,
+            pass: e["pass"].as_u64()? as usize,
+            rendering: e["rendering"].as_bool()?,
+            subpass: e["subpass"].as_u64()? as u32,
+            draw: e["draw"].as_u64()? as usize,
+            views,
+        })
+    }
 }
 
 /// The double's library as the loader loads it, for reading its records in-process.
@@ -263,6 +382,26 @@ impl Loaded {
             .as_array()
             .map(|a| a.iter().filter(|e| e["kind"] == kind).cloned().collect())
             .unwrap_or_default()
+    }
+
+    /// Every draw of every submit since [`Loaded::clear`], in order: the effective fragment
+    /// size each got per shading-rate attachment texel, as the device the double plays would
+    /// shade it.
+    pub fn draws(&self) -> Vec<DrawRates> {
+        self.events("draw")
+            .iter()
+            .map(|e| DrawRates::from_json(e).expect("a draw record"))
+            .collect()
+    }
+
+    /// The effective rates of draw `draw` of pass `pass` on command buffer `cb`, at its last
+    /// submit.
+    pub fn effective_rates(&self, cb: u64, pass: usize, draw: usize) -> Option<Vec<ViewRates>> {
+        self.draws()
+            .into_iter()
+            .rev()
+            .find(|d| d.command_buffer == cb && d.pass == pass && d.draw == draw)
+            .map(|d| d.views)
     }
 
     /// The misuses recorded so far.

@@ -16,7 +16,7 @@ use std::sync::{Mutex, MutexGuard, OnceLock};
 
 use ash::vk;
 use ash::vk::Handle as _;
-use fovea_vkdouble::{Loaded, Profile, LAYER_NAME};
+use fovea_vkdouble::{Loaded, Profile, ViewRates, LAYER_NAME};
 use serde_json::{json, Value};
 
 const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
@@ -189,13 +189,15 @@ impl Vk {
             let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
                 .dynamic_rendering(true)
                 .synchronization2(true);
+            let mut v11 = vk::PhysicalDeviceVulkan11Features::default().multiview(true);
             let mut fsr_features = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
                 .pipeline_fragment_shading_rate(true)
                 .attachment_fragment_shading_rate(true);
             let mut info = vk::DeviceCreateInfo::default()
                 .queue_create_infos(&queues)
                 .enabled_extension_names(&exts)
-                .push_next(&mut v13);
+                .push_next(&mut v13)
+                .push_next(&mut v11);
             if fsr {
                 info = info.push_next(&mut fsr_features);
             }
@@ -564,19 +566,32 @@ unsafe fn make_buffer(
     }
 }
 
-fn view(dev: &Dev, image: vk::Image, format: vk::Format) -> vk::ImageView {
+/// A view of the first `layers` layers (an array view where more than one).
+fn view_layers(dev: &Dev, image: vk::Image, format: vk::Format, layers: u32) -> vk::ImageView {
+    let ty = if layers == 1 {
+        vk::ImageViewType::TYPE_2D
+    } else {
+        vk::ImageViewType::TYPE_2D_ARRAY
+    };
     // SAFETY: the image is alive; the struct lives across the call.
     unsafe {
         dev.device
             .create_image_view(
                 &vk::ImageViewCreateInfo::default()
                     .image(image)
-                    .view_type(vk::ImageViewType::TYPE_2D)
+                    .view_type(ty)
                     .format(format)
-                    .subresource_range(color_range()),
+                    .subresource_range(layers_range(layers)),
                 None,
             )
             .unwrap()
+    }
+}
+
+fn layers_range(layers: u32) -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange {
+        layer_count: layers,
+        ..color_range()
     }
 }
 
@@ -642,7 +657,7 @@ fn shader(dev: &Dev, bytes: &[u8]) -> vk::ShaderModule {
 }
 
 /// How the draw reaches the shading-rate attachment.
-#[derive(Clone, Copy, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 enum Path {
     /// vkCreateRenderPass2 with the attachment in the subpass.
     RenderPass,
@@ -655,6 +670,9 @@ enum Path {
 /// What [`draw`] made and saw.
 struct Drawn {
     pixels: Vec<u8>,
+    /// The colour read back in a submit after the draw's completed.
+    after: Vec<u8>,
+    texel: u32,
     codes: Vec<u8>,
     command_buffer: u64,
     /// Raw handles as the application holds them (0 where not made).
@@ -665,6 +683,70 @@ struct Drawn {
     fsr_view: u64,
 }
 
+type Ops = [vk::FragmentShadingRateCombinerOpKHR; 2];
+const KEEP_REPLACE: Ops = [
+    vk::FragmentShadingRateCombinerOpKHR::KEEP,
+    vk::FragmentShadingRateCombinerOpKHR::REPLACE,
+];
+
+fn extent(w: u32, h: u32) -> vk::Extent2D {
+    vk::Extent2D {
+        width: w,
+        height: h,
+    }
+}
+
+/// What [`draw_case`] draws.
+struct Case<'a> {
+    path: Path,
+    texel: u32,
+    /// The shading-rate image's codes, layer after layer (`SIZE / texel` texels per side).
+    codes: Vec<u8>,
+    /// The shading-rate image's (and its view's) layers.
+    rate_layers: u32,
+    /// The pipeline's `VkPipelineFragmentShadingRateStateCreateInfoKHR`, if any.
+    state: Option<(vk::Extent2D, Ops)>,
+    /// With the dynamic rate state: the device's functions and what is set before the draw.
+    dynamic: Option<(
+        &'a ash::khr::fragment_shading_rate::Device,
+        vk::Extent2D,
+        Ops,
+    )>,
+    /// The shading-rate attachment's store operation (render pass path).
+    store: vk::AttachmentStoreOp,
+    /// Multiview: the view mask (the colour image then has two layers).
+    view_mask: u32,
+    /// How often the pass (with its one draw) runs in the one command buffer.
+    passes: u32,
+    /// Draw with a colour that differs at every pixel (else red on the left, none on the right).
+    gradient: bool,
+}
+
+impl Case<'_> {
+    /// Code (log2 w << 2) | log2 h: 1x1 in the left half, 2x2 on the right.
+    fn halves(texel: u32) -> Vec<u8> {
+        let n = SIZE / texel;
+        (0..n * n)
+            .map(|i| if i % n < n / 2 { 0 } else { 0b0101 })
+            .collect()
+    }
+
+    fn new(path: Path, texel: u32) -> Case<'static> {
+        Case {
+            path,
+            texel,
+            codes: Case::halves(texel),
+            rate_layers: 1,
+            state: Some((extent(1, 1), KEEP_REPLACE)),
+            dynamic: None,
+            store: vk::AttachmentStoreOp::STORE,
+            view_mask: 0,
+            passes: 1,
+            gradient: false,
+        }
+    }
+}
+
 /// Uploads rate codes into a shading-rate image (`SIZE / texel` texels per side), draws a
 /// full-screen triangle into a `SIZE`² colour image through `path`, and reads the colour back.
 fn draw(
@@ -673,36 +755,46 @@ fn draw(
     texel: u32,
     rate_device: Option<&ash::khr::fragment_shading_rate::Device>,
 ) -> Drawn {
+    let mut c = Case::new(path, texel);
+    c.dynamic = rate_device.map(|r| (r, extent(1, 1), KEEP_REPLACE));
+    draw_case(dev, &c)
+}
+
+/// [`draw`] as `c` says.
+fn draw_case(dev: &Dev, c: &Case<'_>) -> Drawn {
+    let (path, texel) = (c.path, c.texel);
     let d = &dev.device;
     let color_format = vk::Format::R8G8B8A8_UNORM;
     let n = SIZE / texel;
-    // Code (log2 w << 2) | log2 h: 1x1 in the left half, 2x2 on the right.
-    let codes: Vec<u8> = (0..n * n)
-        .map(|i| if i % n < n / 2 { 0 } else { 0b0101 })
-        .collect();
+    let codes = c.codes.clone();
+    let color_layers = if c.view_mask == 0 { 1 } else { 2 };
     // SAFETY: every struct lives across its call; objects are destroyed after the queue is idle.
     unsafe {
         let (color, color_mem) = make_image(
             dev,
             color_format,
             SIZE,
-            1,
+            color_layers,
             vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
         );
-        let color_view = view(dev, color, color_format);
+        let color_view = view_layers(dev, color, color_format, color_layers);
         let fsr = (path != Path::Plain).then(|| {
             let (img, mem) = make_image(
                 dev,
                 vk::Format::R8_UINT,
                 n,
-                1,
+                c.rate_layers,
                 vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
                     | vk::ImageUsageFlags::TRANSFER_DST,
             );
-            (img, mem, view(dev, img, vk::Format::R8_UINT))
+            (
+                img,
+                mem,
+                view_layers(dev, img, vk::Format::R8_UINT, c.rate_layers),
+            )
         });
         let (staging, staging_mem) =
-            make_buffer(dev, (n * n) as u64, vk::BufferUsageFlags::TRANSFER_SRC);
+            make_buffer(dev, codes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC);
         let p = d
             .map_memory(staging_mem, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty())
             .unwrap();
@@ -728,7 +820,7 @@ fn draw(
                     .format(vk::Format::R8_UINT)
                     .samples(vk::SampleCountFlags::TYPE_1)
                     .load_op(vk::AttachmentLoadOp::LOAD)
-                    .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                    .store_op(c.store)
                     .initial_layout(fsr_layout)
                     .final_layout(fsr_layout),
             ];
@@ -747,6 +839,7 @@ fn draw(
                 });
             let subpass = [vk::SubpassDescription2::default()
                 .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+                .view_mask(c.view_mask)
                 .color_attachments(&color_ref)
                 .push_next(&mut fsr_info)];
             let deps = [
@@ -789,7 +882,11 @@ fn draw(
         });
 
         let vert = shader(dev, include_bytes!("shaders/fullscreen.vert.spv"));
-        let frag = shader(dev, include_bytes!("shaders/solid.frag.spv"));
+        let frag = if c.gradient {
+            shader(dev, include_bytes!("shaders/gradient.frag.spv"))
+        } else {
+            shader(dev, include_bytes!("shaders/solid.frag.spv"))
+        };
         let layout = d
             .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
             .unwrap();
@@ -819,22 +916,18 @@ fn draw(
             .color_write_mask(vk::ColorComponentFlags::RGBA)];
         let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_att);
         let mut dynamic_states = vec![vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
-        if rate_device.is_some() {
+        if c.dynamic.is_some() {
             dynamic_states.push(vk::DynamicState::FRAGMENT_SHADING_RATE_KHR);
         }
         let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
         let formats = [color_format];
-        let mut rendering =
-            vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&formats);
+        let mut rendering = vk::PipelineRenderingCreateInfo::default()
+            .color_attachment_formats(&formats)
+            .view_mask(c.view_mask);
+        let (size, ops) = c.state.unwrap_or((extent(1, 1), KEEP_REPLACE));
         let mut rate_state = vk::PipelineFragmentShadingRateStateCreateInfoKHR::default()
-            .fragment_size(vk::Extent2D {
-                width: 1,
-                height: 1,
-            })
-            .combiner_ops([
-                vk::FragmentShadingRateCombinerOpKHR::KEEP,
-                vk::FragmentShadingRateCombinerOpKHR::REPLACE,
-            ]);
+            .fragment_size(size)
+            .combiner_ops(ops);
         let mut info = vk::GraphicsPipelineCreateInfo::default()
             .stages(&stages)
             .vertex_input_state(&vertex_input)
@@ -847,16 +940,18 @@ fn draw(
             .layout(layout);
         match path {
             Path::RenderPass => {
-                info = info
-                    .render_pass(render_pass.unwrap())
-                    .subpass(0)
-                    .push_next(&mut rate_state)
+                info = info.render_pass(render_pass.unwrap()).subpass(0);
+                if c.state.is_some() {
+                    info = info.push_next(&mut rate_state);
+                }
             }
             Path::Dynamic => {
                 info = info
                     .flags(vk::PipelineCreateFlags::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT_KHR)
-                    .push_next(&mut rendering)
-                    .push_next(&mut rate_state)
+                    .push_next(&mut rendering);
+                if c.state.is_some() {
+                    info = info.push_next(&mut rate_state);
+                }
             }
             Path::Plain => info = info.push_next(&mut rendering),
         }
@@ -877,7 +972,7 @@ fn draw(
         if let Some((img, _, _)) = fsr {
             let to_dst = vk::ImageMemoryBarrier::default()
                 .image(img)
-                .subresource_range(color_range())
+                .subresource_range(layers_range(c.rate_layers))
                 .old_layout(vk::ImageLayout::UNDEFINED)
                 .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
                 .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE);
@@ -888,17 +983,19 @@ fn draw(
                 vk::PipelineStageFlags::TRANSFER,
                 to_dst,
             );
+            let mut region = whole_layer(n);
+            region.image_subresource.layer_count = c.rate_layers;
             d.cmd_copy_buffer_to_image(
                 cb,
                 staging,
                 img,
                 vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                &[whole_layer(n)],
+                &[region],
             );
             // sync2, so both barrier paths of the double are crossed.
             let to_fsr = [vk::ImageMemoryBarrier2::default()
                 .image(img)
-                .subresource_range(color_range())
+                .subresource_range(layers_range(c.rate_layers))
                 .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
                 .new_layout(fsr_layout)
                 .src_stage_mask(vk::PipelineStageFlags2::COPY)
@@ -922,88 +1019,84 @@ fn draw(
                 float32: [0.0, 0.0, 1.0, 1.0],
             },
         }];
-        match path {
-            Path::RenderPass => d.cmd_begin_render_pass2(
-                cb,
-                &vk::RenderPassBeginInfo::default()
-                    .render_pass(render_pass.unwrap())
-                    .framebuffer(framebuffer.unwrap())
-                    .render_area(area)
-                    .clear_values(&clear),
-                &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-            ),
-            Path::Dynamic | Path::Plain => {
-                let to_color = vk::ImageMemoryBarrier::default()
-                    .image(color)
-                    .subresource_range(color_range())
-                    .old_layout(vk::ImageLayout::UNDEFINED)
-                    .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                    .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE);
-                image_barrier(
-                    d,
+        for _ in 0..c.passes {
+            match path {
+                Path::RenderPass => d.cmd_begin_render_pass2(
                     cb,
-                    vk::PipelineStageFlags::TOP_OF_PIPE,
-                    vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-                    to_color,
-                );
-                let color_att = [vk::RenderingAttachmentInfo::default()
-                    .image_view(color_view)
-                    .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                    .load_op(vk::AttachmentLoadOp::CLEAR)
-                    .store_op(vk::AttachmentStoreOp::STORE)
-                    .clear_value(clear[0])];
-                let mut fsr_att = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
-                    .image_view(fsr.map(|f| f.2).unwrap_or_default())
-                    .image_layout(fsr_layout)
-                    .shading_rate_attachment_texel_size(vk::Extent2D {
-                        width: texel,
-                        height: texel,
-                    });
-                let mut ri = vk::RenderingInfo::default()
-                    .render_area(area)
-                    .layer_count(1)
-                    .color_attachments(&color_att);
-                if path == Path::Dynamic {
-                    ri = ri.push_next(&mut fsr_att);
+                    &vk::RenderPassBeginInfo::default()
+                        .render_pass(render_pass.unwrap())
+                        .framebuffer(framebuffer.unwrap())
+                        .render_area(area)
+                        .clear_values(&clear),
+                    &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+                ),
+                Path::Dynamic | Path::Plain => {
+                    let to_color = vk::ImageMemoryBarrier::default()
+                        .image(color)
+                        .subresource_range(layers_range(color_layers))
+                        .old_layout(vk::ImageLayout::UNDEFINED)
+                        .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                        .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE);
+                    image_barrier(
+                        d,
+                        cb,
+                        vk::PipelineStageFlags::TOP_OF_PIPE,
+                        vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+                        to_color,
+                    );
+                    let color_att = [vk::RenderingAttachmentInfo::default()
+                        .image_view(color_view)
+                        .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                        .load_op(vk::AttachmentLoadOp::CLEAR)
+                        .store_op(vk::AttachmentStoreOp::STORE)
+                        .clear_value(clear[0])];
+                    let mut fsr_att = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
+                        .image_view(fsr.map(|f| f.2).unwrap_or_default())
+                        .image_layout(fsr_layout)
+                        .shading_rate_attachment_texel_size(vk::Extent2D {
+                            width: texel,
+                            height: texel,
+                        });
+                    let mut ri = vk::RenderingInfo::default()
+                        .render_area(area)
+                        .layer_count(1)
+                        .view_mask(c.view_mask)
+                        .color_attachments(&color_att);
+                    if path == Path::Dynamic {
+                        ri = ri.push_next(&mut fsr_att);
+                    }
+                    d.cmd_begin_rendering(cb, &ri);
                 }
-                d.cmd_begin_rendering(cb, &ri);
+            }
+            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
+            d.cmd_set_viewport(
+                cb,
+                0,
+                &[vk::Viewport {
+                    x: 0.0,
+                    y: 0.0,
+                    width: SIZE as f32,
+                    height: SIZE as f32,
+                    min_depth: 0.0,
+                    max_depth: 1.0,
+                }],
+            );
+            d.cmd_set_scissor(cb, 0, &[area]);
+            if let Some((rd, size, ops)) = c.dynamic {
+                (rd.fp().cmd_set_fragment_shading_rate_khr)(cb, &size, &ops);
+            }
+            d.cmd_draw(cb, 3, 1, 0, 0);
+            match path {
+                Path::RenderPass => d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default()),
+                _ => d.cmd_end_rendering(cb),
             }
         }
-        d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
-        d.cmd_set_viewport(
-            cb,
-            0,
-            &[vk::Viewport {
-                x: 0.0,
-                y: 0.0,
-                width: SIZE as f32,
-                height: SIZE as f32,
-                min_depth: 0.0,
-                max_depth: 1.0,
-            }],
-        );
-        d.cmd_set_scissor(cb, 0, &[area]);
-        if let Some(rd) = rate_device {
-            (rd.fp().cmd_set_fragment_shading_rate_khr)(
-                cb,
-                &vk::Extent2D {
-                    width: 1,
-                    height: 1,
-                },
-                &[
-                    vk::FragmentShadingRateCombinerOpKHR::KEEP,
-                    vk::FragmentShadingRateCombinerOpKHR::REPLACE,
-                ],
-            );
-        }
-        d.cmd_draw(cb, 3, 1, 0, 0);
         match path {
-            Path::RenderPass => d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default()),
+            Path::RenderPass => {}
             _ => {
-                d.cmd_end_rendering(cb);
                 let to_src = vk::ImageMemoryBarrier::default()
                     .image(color)
-                    .subresource_range(color_range())
+                    .subresource_range(layers_range(color_layers))
                     .old_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                     .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
                     .src_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
@@ -1067,6 +1160,48 @@ fn draw(
         let pixels =
             std::slice::from_raw_parts(p as *const u8, (SIZE * SIZE * 4) as usize).to_vec();
         d.unmap_memory(readback_mem);
+        // The colour once more, in a submit of its own after the first completed.
+        let again = d
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(dev.pool)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            )
+            .unwrap();
+        d.begin_command_buffer(again[0], &vk::CommandBufferBeginInfo::default())
+            .unwrap();
+        d.cmd_copy_image_to_buffer(
+            again[0],
+            color,
+            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+            readback,
+            &[whole_layer(SIZE)],
+        );
+        d.cmd_pipeline_barrier(
+            again[0],
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::HOST,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[host],
+            &[],
+        );
+        d.end_command_buffer(again[0]).unwrap();
+        d.reset_fences(&[fence]).unwrap();
+        d.queue_submit(
+            dev.queue,
+            &[vk::SubmitInfo::default().command_buffers(&again)],
+            fence,
+        )
+        .expect("vkQueueSubmit");
+        d.wait_for_fences(&[fence], true, u64::MAX).unwrap();
+        let p = d
+            .map_memory(readback_mem, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty())
+            .unwrap();
+        let after = std::slice::from_raw_parts(p as *const u8, (SIZE * SIZE * 4) as usize).to_vec();
+        d.unmap_memory(readback_mem);
+        d.free_command_buffers(dev.pool, &again);
 
         d.destroy_fence(fence, None);
         d.free_command_buffers(dev.pool, &cbs);
@@ -1094,6 +1229,8 @@ fn draw(
         d.free_memory(color_mem, None);
         Drawn {
             pixels,
+            after,
+            texel,
             codes,
             command_buffer: cb.as_raw(),
             render_pass: render_pass.map_or(0, |h| h.as_raw()),
@@ -1459,5 +1596,383 @@ fn multi_layer_views_need_layered_attachments() {
                 env.double.clear();
             }
         });
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Effects: the fragment size each draw gets, as the device the double plays would shade it.
+
+use vk::FragmentShadingRateCombinerOpKHR as Op;
+
+/// The effective codes per view of draw 0 of pass `pass` in what `drawn` submitted; the double
+/// recorded no misuse.
+fn effective(env: &Env, drawn: &Drawn, pass: usize) -> Vec<ViewRates> {
+    assert_eq!(env.double.errors(), Vec::<String>::new());
+    let views = env
+        .double
+        .effective_rates(drawn.command_buffer, pass, 0)
+        .expect("a draw record");
+    let n = SIZE / (drawn.texel.max(1));
+    for v in &views {
+        if v.layer.is_some() {
+            assert_eq!((v.columns, v.rows), (n, n), "{v:?}");
+        }
+    }
+    views
+}
+
+/// Runs `c` on a fresh device of `profile` and returns the effective codes of each view of the one
+/// draw in each pass.
+fn effective_of(
+    profile: Profile,
+    c: impl Fn(&ash::khr::fragment_shading_rate::Device) -> Case<'_>,
+) -> Vec<Vec<Vec<u8>>> {
+    let mut out = Vec::new();
+    with_vk(profile, |env, vk| {
+        let dev = vk.device(true);
+        let rates = ash::khr::fragment_shading_rate::Device::new(&vk.instance, &dev.device);
+        let case = c(&rates);
+        let drawn = draw_case(&dev, &case);
+        for pass in 0..case.passes as usize {
+            out.push(
+                effective(env, &drawn, pass)
+                    .into_iter()
+                    .map(|v| v.codes)
+                    .collect(),
+            );
+        }
+        drop(dev);
+        drop_ok(env, profile);
+    });
+    out
+}
+
+fn uniform(texel: u32, code: u8) -> Vec<u8> {
+    vec![code; ((SIZE / texel) * (SIZE / texel)) as usize]
+}
+
+#[test]
+fn the_attachment_decides_with_keep_replace_on_both_paths_and_profiles() {
+    for (profile, texel) in [(Profile::Nvidia, 16), (Profile::Amd, 8)] {
+        for path in [Path::RenderPass, Path::Dynamic] {
+            let got = effective_of(profile, |_| Case::new(path, texel));
+            if got.is_empty() {
+                return;
+            }
+            assert_eq!(got, vec![vec![Case::halves(texel)]], "{profile:?}");
+        }
+    }
+}
+
+#[test]
+fn a_pipeline_without_rate_state_ignores_the_attachment() {
+    for path in [Path::RenderPass, Path::Dynamic] {
+        let got = effective_of(Profile::Nvidia, |_| Case {
+            state: None,
+            ..Case::new(path, 16)
+        });
+        if got.is_empty() {
+            return;
+        }
+        assert_eq!(got, vec![vec![uniform(16, 0)]]);
+    }
+}
+
+#[test]
+fn max_min_and_mul_combine_the_pipeline_rate_with_the_attachment() {
+    // The attachment: 1x1 on the left half, 2x2 on the right.
+    for (size, op, left, right) in [
+        (extent(2, 2), Op::MAX, 0b0101, 0b0101),
+        (extent(2, 1), Op::MIN, 0b0000, 0b0100),
+        (extent(2, 1), Op::MUL, 0b0100, 0b1001),
+    ] {
+        let got = effective_of(Profile::Nvidia, |_| Case {
+            state: Some((size, [Op::KEEP, op])),
+            ..Case::new(Path::RenderPass, 16)
+        });
+        if got.is_empty() {
+            return;
+        }
+        let n = SIZE / 16;
+        let want: Vec<u8> = (0..n * n)
+            .map(|i| if i % n < n / 2 { left } else { right })
+            .collect();
+        assert_eq!(got, vec![vec![want]], "{op:?}");
+    }
+}
+
+#[test]
+fn the_dynamic_rate_replaces_the_pipelines_where_the_state_is_dynamic() {
+    let got = effective_of(Profile::Nvidia, |rates| Case {
+        state: None,
+        dynamic: Some((rates, extent(2, 1), [Op::KEEP, Op::MUL])),
+        ..Case::new(Path::Dynamic, 16)
+    });
+    if got.is_empty() {
+        return;
+    }
+    let n = SIZE / 16;
+    let want: Vec<u8> = (0..n * n)
+        .map(|i| if i % n < n / 2 { 0b0100 } else { 0b1001 })
+        .collect();
+    assert_eq!(got, vec![vec![want]]);
+}
+
+#[test]
+fn rates_the_device_lacks_are_clamped_to_its_list() {
+    // 4x4 and 4x1 on the AMD profile (fragments up to 2x2): 2x2 and 2x1.
+    let n = SIZE / 8;
+    let codes: Vec<u8> = (0..n * n)
+        .map(|i| if i % n < n / 2 { 0b1010 } else { 0b1000 })
+        .collect();
+    let got = effective_of(Profile::Amd, |_| Case {
+        codes: codes.clone(),
+        ..Case::new(Path::RenderPass, 8)
+    });
+    if got.is_empty() {
+        return;
+    }
+    let want: Vec<u8> = (0..n * n)
+        .map(|i| if i % n < n / 2 { 0b0101 } else { 0b0100 })
+        .collect();
+    assert_eq!(got, vec![vec![want]]);
+}
+
+#[test]
+fn multiview_reads_the_view_index_layer_of_a_layered_attachment_else_layer_zero() {
+    for path in [Path::RenderPass, Path::Dynamic] {
+        // NVIDIA: two layers, the second all 2x2; each view its own.
+        let mut codes = Case::halves(16);
+        codes.extend(uniform(16, 0b0101));
+        let got = effective_of(Profile::Nvidia, |_| Case {
+            codes: codes.clone(),
+            rate_layers: 2,
+            view_mask: 0b11,
+            ..Case::new(path, 16)
+        });
+        if got.is_empty() {
+            return;
+        }
+        assert_eq!(got, vec![vec![Case::halves(16), uniform(16, 0b0101)]]);
+        // AMD: one layer serves both views.
+        let got = effective_of(Profile::Amd, |_| Case {
+            view_mask: 0b11,
+            ..Case::new(path, 8)
+        });
+        assert_eq!(got, vec![vec![Case::halves(8), Case::halves(8)]]);
+    }
+}
+
+#[test]
+fn a_pass_that_stores_its_attachment_with_dont_care_leaves_it_poisoned() {
+    for (store, second) in [
+        (vk::AttachmentStoreOp::STORE, Case::halves(16)),
+        (vk::AttachmentStoreOp::NONE, Case::halves(16)),
+        (vk::AttachmentStoreOp::DONT_CARE, uniform(16, 0b1010)),
+    ] {
+        let got = effective_of(Profile::Nvidia, |_| Case {
+            store,
+            passes: 2,
+            ..Case::new(Path::RenderPass, 16)
+        });
+        if got.is_empty() {
+            return;
+        }
+        assert_eq!(got, vec![vec![Case::halves(16)], vec![second]], "{store:?}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Strictness: the driver has no fragment density maps.
+
+/// The double's errors, which must name `want`; forgets them and validation's messages (which
+/// report the same misuse from above).
+fn take_errors_naming(env: &Env, want: &str) {
+    let errors = env.double.errors();
+    assert!(
+        errors.iter().any(|e| e.contains(want)),
+        "no error naming {want}: {errors:?}"
+    );
+    env.double.clear();
+    take_messages();
+}
+
+#[test]
+fn density_map_enums_in_barriers_events_and_timestamps_are_errors() {
+    with_vk(Profile::Nvidia, |env, vk| {
+        let dev = vk.device(true);
+        let d = &dev.device;
+        // SAFETY: every struct lives across its call; the objects are destroyed after use.
+        unsafe {
+            let (img, mem) = make_image(
+                &dev,
+                vk::Format::R8G8B8A8_UNORM,
+                8,
+                1,
+                vk::ImageUsageFlags::SAMPLED,
+            );
+            let cb = d
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(dev.pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
+                .unwrap()[0];
+            d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+                .unwrap();
+            assert_eq!(env.double.errors(), Vec::<String>::new());
+            let layout = vk::ImageMemoryBarrier::default()
+                .image(img)
+                .subresource_range(color_range())
+                .old_layout(vk::ImageLayout::UNDEFINED)
+                .new_layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT);
+            image_barrier(
+                d,
+                cb,
+                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                layout,
+            );
+            take_errors_naming(env, "FRAGMENT_DENSITY_MAP_OPTIMAL_EXT");
+            let access = [vk::MemoryBarrier2::default()
+                .src_stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
+                .dst_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
+                .dst_access_mask(vk::AccessFlags2::FRAGMENT_DENSITY_MAP_READ_EXT)];
+            d.cmd_pipeline_barrier2(cb, &vk::DependencyInfo::default().memory_barriers(&access));
+            take_errors_naming(env, "FRAGMENT_DENSITY_MAP_READ_EXT");
+            let ev = d
+                .create_event(&vk::EventCreateInfo::default(), None)
+                .unwrap();
+            d.cmd_set_event(cb, ev, vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT);
+            take_errors_naming(env, "vkCmdSetEvent: stage FRAGMENT_DENSITY_PROCESS_EXT");
+            d.cmd_set_event2(
+                cb,
+                ev,
+                &vk::DependencyInfo::default().memory_barriers(&access),
+            );
+            take_errors_naming(env, "vkCmdSetEvent2");
+            d.end_command_buffer(cb).unwrap();
+            d.free_command_buffers(dev.pool, &[cb]);
+            d.destroy_event(ev, None);
+            d.destroy_image(img, None);
+            d.free_memory(mem, None);
+        }
+        drop(dev);
+        assert_eq!(env.double.errors(), Vec::<String>::new());
+        take_messages();
+    });
+}
+
+#[test]
+fn a_device_asking_for_density_map_features_is_refused() {
+    with_vk(Profile::Amd, |env, vk| {
+        // SAFETY: every struct lives across the call.
+        unsafe {
+            let prio = [1.0];
+            let queues = [vk::DeviceQueueCreateInfo::default()
+                .queue_family_index(0)
+                .queue_priorities(&prio)];
+            let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+                .fragment_density_map(true);
+            let info = vk::DeviceCreateInfo::default()
+                .queue_create_infos(&queues)
+                .push_next(&mut fdm);
+            let r = vk.instance.create_device(vk.physical, &info, None);
+            assert_eq!(r.err(), Some(vk::Result::ERROR_FEATURE_NOT_PRESENT));
+        }
+        take_errors_naming(env, "vkCreateDevice");
+    });
+}
+
+#[test]
+fn a_shading_rate_attachment_without_the_feature_is_an_error() {
+    with_vk(Profile::Nvidia, |env, vk| {
+        let dev = vk.device(false);
+        // SAFETY: the image is destroyed before the device.
+        unsafe {
+            let (img, mem) = make_image(
+                &dev,
+                vk::Format::R8_UINT,
+                4,
+                1,
+                vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR,
+            );
+            take_errors_naming(env, "attachmentFragmentShadingRate");
+            dev.device.destroy_image(img, None);
+            dev.device.free_memory(mem, None);
+        }
+        drop(dev);
+        take_messages();
+    });
+}
+
+#[test]
+fn load_store_op_none_is_offered_as_desktop_drivers_do_and_a_device_gets_it() {
+    with_vk(Profile::Nvidia, |env, vk| {
+        let name = c"VK_EXT_load_store_op_none";
+        // SAFETY: plain queries; the structs live across the calls.
+        unsafe {
+            let exts = vk
+                .instance
+                .enumerate_device_extension_properties(vk.physical)
+                .unwrap();
+            assert!(exts.iter().any(|e| e.extension_name_as_c_str() == Ok(name)));
+            let prio = [1.0];
+            let queues = [vk::DeviceQueueCreateInfo::default()
+                .queue_family_index(0)
+                .queue_priorities(&prio)];
+            let names = [name.as_ptr()];
+            let info = vk::DeviceCreateInfo::default()
+                .queue_create_infos(&queues)
+                .enabled_extension_names(&names);
+            let device = vk
+                .instance
+                .create_device(vk.physical, &info, None)
+                .expect("a device with VK_EXT_load_store_op_none");
+            device.destroy_device(None);
+        }
+        drop_ok(env, Profile::Nvidia);
+    });
+}
+
+#[test]
+fn coarse_fragments_are_visible_in_a_later_read_back() {
+    for (profile, texel) in [(Profile::Nvidia, 16), (Profile::Amd, 8)] {
+        for path in [Path::RenderPass, Path::Dynamic] {
+            with_vk(profile, |env, vk| {
+                let dev = vk.device(true);
+                // 1x1 on the left half, 2x2 on the right.
+                let drawn = draw_case(
+                    &dev,
+                    &Case {
+                        gradient: true,
+                        ..Case::new(path, texel)
+                    },
+                );
+                let px = |p: &[u8], x: u32, y: u32| {
+                    let i = ((y * SIZE + x) * 4) as usize;
+                    [p[i], p[i + 1], p[i + 2], p[i + 3]]
+                };
+                for y in 0..SIZE {
+                    for x in 0..SIZE {
+                        let (got, drawn_px) = (px(&drawn.after, x, y), px(&drawn.pixels, x, y));
+                        if x < SIZE / 2 {
+                            // Full rate: every pixel shaded on its own, as lavapipe drew it.
+                            assert_eq!(got, drawn_px, "{profile:?} {path:?} ({x},{y})");
+                        } else {
+                            // 2x2: one shaded value per fragment, its top-left pixel's.
+                            let want = px(&drawn.pixels, x & !1, y & !1);
+                            assert_eq!(got, want, "{profile:?} {path:?} ({x},{y})");
+                        }
+                    }
+                }
+                // The gradient differs between neighbours, so the comparison shows something.
+                assert_ne!(px(&drawn.after, 40, 40), px(&drawn.after, 42, 40));
+                assert_ne!(px(&drawn.pixels, 40, 40), px(&drawn.pixels, 41, 40));
+                drop(dev);
+                drop_ok(env, profile);
+            });
+        }
     }
 }
