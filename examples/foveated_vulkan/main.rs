@@ -1167,7 +1167,6 @@ mod tests {
         assert!(err.contains("--help"), "{err}");
     }
 
-    const LAVAPIPE: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
     const VALIDATION: &str = "/usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json";
     /// fovea's density texel without VK_EXT_fragment_density_map (lavapipe).
     const TEXEL: u32 = 32;
@@ -1180,10 +1179,10 @@ mod tests {
             skip(&format!("the Khronos OpenXR loader is not installed: {e}"));
             return None;
         }
-        if !Path::new(LAVAPIPE).exists() {
+        let Some(lavapipe) = fovea_harness::vulkan::lavapipe_icd() else {
             skip("Mesa's lavapipe Vulkan driver is not installed (mesa-vulkan-drivers)");
             return None;
-        }
+        };
         if !Path::new(VALIDATION).exists() {
             skip("the Vulkan validation layer is not installed (vulkan-validationlayers)");
             return None;
@@ -1216,8 +1215,8 @@ mod tests {
         std::env::set_var("XR_RUNTIME_JSON", dir.join("runtime.json"));
         std::env::set_var("XR_API_LAYER_PATH", dir.join("layers"));
         std::env::set_var("XR_ENABLE_API_LAYERS", FOVEA_LAYER);
-        std::env::set_var("VK_ICD_FILENAMES", LAVAPIPE);
-        std::env::set_var("VK_DRIVER_FILES", LAVAPIPE);
+        std::env::set_var("VK_ICD_FILENAMES", &lavapipe);
+        std::env::set_var("VK_DRIVER_FILES", &lavapipe);
         // The maps must be the app's levels: no debug override from the environment.
         for var in [
             "FOVEA_PROPS",

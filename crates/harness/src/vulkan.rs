@@ -62,6 +62,23 @@ pub fn pick_lavapipe() {
     ONCE.call_once(|| std::env::set_var("FOVEA_SIM_VK_DEVICE", "llvmpipe"));
 }
 
+/// Mesa's lavapipe ICD manifest in the Vulkan loader's system folders: Debian 12 names it
+/// `lvp_icd.x86_64.json`, Debian 13 `lvp_icd.json`. `None` where Mesa's Vulkan drivers are absent.
+pub fn lavapipe_icd() -> Option<std::path::PathBuf> {
+    ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"]
+        .iter()
+        .filter_map(|d| std::fs::read_dir(d).ok())
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("lvp_icd") && n.ends_with(".json"))
+        })
+        .min()
+}
+
 /// The system Vulkan loader, or why there is none.
 pub fn entry() -> Result<ash::Entry, String> {
     // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
