@@ -482,7 +482,15 @@ unsafe fn run_vulkan(
         layers.push(c"VK_LAYER_KHRONOS_validation".as_ptr());
     }
     layers.extend(options.vk_layers.iter().map(|l| l.as_ptr()));
-    let instance_extensions = [ash::ext::debug_utils::NAME.as_ptr()];
+    let instance_extensions = [
+        ash::ext::debug_utils::NAME.as_ptr(),
+        ash::ext::validation_features::NAME.as_ptr(),
+    ];
+    // Synchronization validation too: hazards between commands and submissions
+    // (<https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>).
+    let enabled_features = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+    let mut validation_features =
+        vk::ValidationFeaturesEXT::default().enabled_validation_features(&enabled_features);
     let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
         .message_severity(
             vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
@@ -501,7 +509,8 @@ unsafe fn run_vulkan(
         // Chained, the messenger also sees vkCreateInstance and vkDestroyInstance.
         instance_info = instance_info
             .enabled_extension_names(&instance_extensions)
-            .push_next(&mut messenger_info);
+            .push_next(&mut messenger_info)
+            .push_next(&mut validation_features);
     }
     let raw_instance = instance
         .create_vulkan_instance(

@@ -235,8 +235,12 @@ impl Vulkan {
             // in vkDestroyDebugUtilsMessengerEXT). With every validated instance alike, tests in one
             // process cannot flip it under each other.
             let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
-            let mut features =
-                vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
+            // Synchronization validation: hazards between commands and submissions
+            // (<https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>).
+            let enabled = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+            let mut features = vk::ValidationFeaturesEXT::default()
+                .disabled_validation_features(&disabled)
+                .enabled_validation_features(&enabled);
             let mut vk_create = vk::InstanceCreateInfo::default()
                 .application_info(&app_info)
                 .push_next(&mut messenger_info);

@@ -113,8 +113,12 @@ impl Vk {
         ];
         // Without handle wrapping, the double records the handles the application holds.
         let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
-        let mut features =
-            vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
+        // Synchronization validation: hazards between commands and submissions
+        // (<https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>).
+        let enabled = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+        let mut features = vk::ValidationFeaturesEXT::default()
+            .disabled_validation_features(&disabled)
+            .enabled_validation_features(&enabled);
         let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
             .message_severity(
