@@ -310,6 +310,19 @@ fn main() {
                     Mode::Absent => "not asked for (--no-fb: no XR_FB_foveation)",
                 },
             );
+            // The FOVs exactly (`{:?}` of an f32 reads back as the same f32), for tests that
+            // compare the maps read back with fovea's model at the runtime's FOVs.
+            println!(
+                "foveated_vulkan: located FOVs in radians (left,right,up,down per view) {}",
+                o.fovs
+                    .iter()
+                    .map(|f| format!(
+                        "{:?},{:?},{:?},{:?}",
+                        f.angle_left, f.angle_right, f.angle_up, f.angle_down
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            );
             // What the passes and the submitted views were, for tests and scripts.
             println!(
                 "foveated_vulkan: {} layout; eye passes begun with {}; offscreen passes {}; \

@@ -56,7 +56,7 @@ fn system() -> Result<(), String> {
 /// The example built with this test binary's profile, next to it (`target/<profile>/examples`).
 /// `cargo test --test suite` builds no example, so the first call builds it with the Cargo that
 /// built the suite; once per process.
-fn example() -> &'static Path {
+pub(crate) fn example() -> &'static Path {
     static BUILT: OnceLock<PathBuf> = OnceLock::new();
     BUILT.get_or_init(|| {
         let exe = std::env::current_exe().unwrap();

@@ -190,14 +190,25 @@ fn is_hello_xr_log(line: &str) -> bool {
 ///   warnings and errors there).
 pub(crate) fn messages(run: &Run) -> Vec<String> {
     let banner = |l: &str| l.starts_with("Core Validation output type:");
-    // Core validation 1.1's own debug and info records (`[time][VALID_DEBUG|VUID|function]: ...`,
-    // e.g. that it was initialised and destroyed); its warnings and errors are `VALID_WARNING`
-    // and `VALID_ERROR`.
-    let core_info = |l: &str| {
-        l.starts_with('[') && (l.contains("][VALID_DEBUG|") || l.contains("][VALID_INFO|"))
-    };
-    let stdout = run.stdout.lines().filter(|l| {
+    // An indented line continues the record above it (the validation layer's "Khronos Validation
+    // Layer Active" info record lists its enables so) and is a message where that record is.
+    let mut previous = false;
+    let stdout = run.stdout.lines().filter(move |l| {
         let l = l.trim_end();
+        if l.starts_with("    ") && !l.trim().is_empty() {
+            return previous;
+        }
+        previous = is_message(l);
+        previous
+    });
+    fn is_message(l: &str) -> bool {
+        let banner = |l: &str| l.starts_with("Core Validation output type:");
+        // Core validation 1.1's own debug and info records (`[time][VALID_DEBUG|VUID|function]:
+        // ...`, e.g. that it was initialised and destroyed); its warnings and errors are
+        // `VALID_WARNING` and `VALID_ERROR`.
+        let core_info = |l: &str| {
+            l.starts_with('[') && (l.contains("][VALID_DEBUG|") || l.contains("][VALID_INFO|"))
+        };
         if l.is_empty() || banner(l) || core_info(l) {
             return false;
         }
@@ -210,7 +221,7 @@ pub(crate) fn messages(run: &Run) -> Vec<String> {
             || ["] ERROR:", "] WARNING:", "] PERF:"]
                 .iter()
                 .any(|m| l.contains(m))
-    });
+    }
     let stderr = run.stderr.lines().filter(|l| {
         !l.trim().is_empty()
             && !banner(l)
