@@ -447,7 +447,7 @@ fn hello_xr_on_monado(graphics: &str) {
                         .unwrap()
                         .1
                         .split(')')
-                        .last()
+                        .next_back()
                         .unwrap()
                         .to_owned()
                 })
