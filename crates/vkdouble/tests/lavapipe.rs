@@ -758,9 +758,18 @@ fn draw(
                     .src_subpass(vk::SUBPASS_EXTERNAL)
                     .dst_subpass(0)
                     .src_stage_mask(vk::PipelineStageFlags::TRANSFER)
-                    .dst_stage_mask(vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR)
+                    // The colour attachment's clear too: it must follow the layout transition
+                    // this dependency carries (synchronization validation 1.4.309,
+                    // SYNC-HAZARD-WRITE-AFTER-WRITE at vkCmdBeginRenderPass2).
+                    .dst_stage_mask(
+                        vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+                            | vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+                    )
                     .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .dst_access_mask(vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR),
+                    .dst_access_mask(
+                        vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR
+                            | vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
+                    ),
                 vk::SubpassDependency2::default()
                     .src_subpass(0)
                     .dst_subpass(vk::SUBPASS_EXTERNAL)
