@@ -329,6 +329,19 @@ fn main() {
                     Mode::Absent => "not asked for (--no-fb: no XR_FB_foveation)",
                 },
             );
+            // The FOVs exactly (`{:?}` of an f32 reads back as the same f32), for tests that
+            // compare the maps read back with fovea's model at the runtime's FOVs.
+            println!(
+                "foveated_vulkan: located FOVs in radians (left,right,up,down per view) {}",
+                o.fovs
+                    .iter()
+                    .map(|f| format!(
+                        "{:?},{:?},{:?},{:?}",
+                        f.angle_left, f.angle_right, f.angle_up, f.angle_down
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            );
             // What the passes and the submitted views were, for tests and scripts.
             println!(
                 "foveated_vulkan: {} layout; eye passes begun with {}; offscreen passes {}; \
@@ -501,7 +514,15 @@ unsafe fn run_vulkan(
         layers.push(c"VK_LAYER_KHRONOS_validation".as_ptr());
     }
     layers.extend(options.vk_layers.iter().map(|l| l.as_ptr()));
-    let instance_extensions = [ash::ext::debug_utils::NAME.as_ptr()];
+    let instance_extensions = [
+        ash::ext::debug_utils::NAME.as_ptr(),
+        ash::ext::validation_features::NAME.as_ptr(),
+    ];
+    // Synchronization validation too: hazards between commands and submissions
+    // (<https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>).
+    let enabled_features = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+    let mut validation_features =
+        vk::ValidationFeaturesEXT::default().enabled_validation_features(&enabled_features);
     let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
         .message_severity(
             vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
@@ -520,7 +541,8 @@ unsafe fn run_vulkan(
         // Chained, the messenger also sees vkCreateInstance and vkDestroyInstance.
         instance_info = instance_info
             .enabled_extension_names(&instance_extensions)
-            .push_next(&mut messenger_info);
+            .push_next(&mut messenger_info)
+            .push_next(&mut validation_features);
     }
     let raw_instance = instance
         .create_vulkan_instance(
@@ -1319,7 +1341,6 @@ mod tests {
         }
     }
 
-    const LAVAPIPE: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
     const VALIDATION: &str = "/usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json";
     /// fovea's density texel without VK_EXT_fragment_density_map (lavapipe).
     const TEXEL: u32 = 32;
@@ -1332,10 +1353,10 @@ mod tests {
             skip(&format!("the Khronos OpenXR loader is not installed: {e}"));
             return None;
         }
-        if !Path::new(LAVAPIPE).exists() {
+        let Some(lavapipe) = fovea_harness::vulkan::lavapipe_icd() else {
             skip("Mesa's lavapipe Vulkan driver is not installed (mesa-vulkan-drivers)");
             return None;
-        }
+        };
         if !Path::new(VALIDATION).exists() {
             skip("the Vulkan validation layer is not installed (vulkan-validationlayers)");
             return None;
@@ -1368,8 +1389,8 @@ mod tests {
         std::env::set_var("XR_RUNTIME_JSON", dir.join("runtime.json"));
         std::env::set_var("XR_API_LAYER_PATH", dir.join("layers"));
         std::env::set_var("XR_ENABLE_API_LAYERS", FOVEA_LAYER);
-        std::env::set_var("VK_ICD_FILENAMES", LAVAPIPE);
-        std::env::set_var("VK_DRIVER_FILES", LAVAPIPE);
+        std::env::set_var("VK_ICD_FILENAMES", &lavapipe);
+        std::env::set_var("VK_DRIVER_FILES", &lavapipe);
         // The maps must be the app's levels: no debug override from the environment.
         for var in [
             "FOVEA_PROPS",

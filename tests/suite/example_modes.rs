@@ -23,7 +23,6 @@ use fovea_harness::{skip, FOVEA_LAYER};
 
 use crate::support::{root, Manifests};
 
-const LAVAPIPE: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
 const VALIDATION: &str = "/usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json";
 const LOADER: &str = "libopenxr_loader.so.1";
 const VK_MANIFEST: &str = "VK_LAYER_FOVEA_fragment_density_map.json";
@@ -43,7 +42,7 @@ fn system() -> Result<(), String> {
     // SAFETY: loading the loader runs its initialisers, nothing else; it is unloaded at once.
     unsafe { libloading::Library::new(LOADER) }
         .map_err(|e| format!("the Khronos OpenXR loader is not installed: {e}"))?;
-    if !Path::new(LAVAPIPE).exists() {
+    if fovea_harness::vulkan::lavapipe_icd().is_none() {
         return Err("Mesa's lavapipe Vulkan driver is not installed (mesa-vulkan-drivers)".into());
     }
     if !Path::new(VALIDATION).exists() {
@@ -57,7 +56,7 @@ fn system() -> Result<(), String> {
 /// The example built with this test binary's profile, next to it (`target/<profile>/examples`).
 /// `cargo test --test suite` builds no example, so the first call builds it with the Cargo that
 /// built the suite; once per process.
-fn example() -> &'static Path {
+pub(crate) fn example() -> &'static Path {
     static BUILT: OnceLock<PathBuf> = OnceLock::new();
     BUILT.get_or_init(|| {
         let exe = std::env::current_exe().unwrap();
@@ -215,6 +214,7 @@ fn run_example_with(label: &str, args: &[&str], env: &[(&str, OsString)]) -> Opt
     let frames = manifests.dir.join("frames");
 
     let frame_count = FRAMES.to_string();
+    let lavapipe = fovea_harness::vulkan::lavapipe_icd().expect("checked by system()");
     let mut cmd = Command::new(example);
     cmd.args(["--validate", "--frames", &frame_count])
         .args(["--frames-per-level", &frame_count])
@@ -235,8 +235,8 @@ fn run_example_with(label: &str, args: &[&str], env: &[(&str, OsString)]) -> Opt
     cmd.env("XR_RUNTIME_JSON", manifests.dir.join("runtime.json"))
         .env("XR_API_LAYER_PATH", manifests.dir.join("layers"))
         .env("XR_ENABLE_API_LAYERS", FOVEA_LAYER)
-        .env("VK_ICD_FILENAMES", LAVAPIPE)
-        .env("VK_DRIVER_FILES", LAVAPIPE)
+        .env("VK_ICD_FILENAMES", &lavapipe)
+        .env("VK_DRIVER_FILES", &lavapipe)
         .env("VK_ADD_LAYER_PATH", &vk_layers)
         // The per-user folders are the run's own: no implicit layer or fovea.toml from the user.
         .env("XDG_DATA_HOME", home.join("data"))

@@ -51,12 +51,12 @@ const ICD_DIRS: [&str; 2] = ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"];
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// What a run needs from the system, or the reason to skip.
-struct System {
-    hello_xr: PathBuf,
-    lavapipe_icd: PathBuf,
+pub(crate) struct System {
+    pub(crate) hello_xr: PathBuf,
+    pub(crate) lavapipe_icd: PathBuf,
 }
 
-fn find_system() -> Result<System, String> {
+pub(crate) fn find_system() -> Result<System, String> {
     let hello_xr = std::env::var_os("PATH")
         .iter()
         .flat_map(std::env::split_paths)
@@ -82,20 +82,24 @@ fn find_system() -> Result<System, String> {
 }
 
 /// What one hello_xr run left behind.
-struct Run {
-    code: Option<i32>,
-    stdout: String,
-    stderr: String,
+pub(crate) struct Run {
+    pub(crate) code: Option<i32>,
+    pub(crate) stdout: String,
+    pub(crate) stderr: String,
 }
 
 impl Run {
-    fn transcript(&self) -> String {
+    pub(crate) fn transcript(&self) -> String {
         format!(
             "exit code {:?}\n--- stdout ---\n{}\n--- stderr ---\n{}",
             self.code, self.stdout, self.stderr
         )
     }
 }
+
+/// The validation layer's environment value that turns on synchronization validation.
+pub(crate) const SYNC_VALIDATION: &str =
+    "VK_VALIDATION_FEATURE_ENABLE_SYNCHRONIZATION_VALIDATION_EXT";
 
 /// Runs hello_xr with `-g graphics -v`, `layers` enabled (first = closest to the app) and `env` set
 /// on top of the test's own environment.
@@ -120,6 +124,12 @@ fn run_hello_xr(system: &System, graphics: &str, layers: &[&str], env: &[(&str, 
         .env("XR_ENABLE_API_LAYERS", layers.join(":"))
         .env("VK_ICD_FILENAMES", &system.lavapipe_icd)
         .env("VK_DRIVER_FILES", &system.lavapipe_icd)
+        // hello_xr enables the validation layer without its synchronization validation: the
+        // layer's environment settings turn it on (`VK_LAYER_ENABLES` in 1.3.2xx, still read by
+        // 1.4.3xx beside `VK_LAYER_VALIDATE_SYNC`;
+        // <https://vulkan.lunarg.com/doc/sdk/latest/linux/khronos_validation_layer.html>).
+        .env("VK_LAYER_ENABLES", SYNC_VALIDATION)
+        .env("VK_LAYER_VALIDATE_SYNC", "1")
         .env("FOVEA_SIM_EXIT_AFTER_FRAMES", FRAMES.to_string())
         .env("FOVEA_SIM_SUMMARY", "1")
         .envs(env.iter().map(|(k, v)| (k, v)))
@@ -178,11 +188,28 @@ fn is_hello_xr_log(line: &str) -> bool {
 ///   hello_xr's debug callback forwards (logged at Info as `ERROR:`, `WARNING:`, `PERF:`);
 /// - on stderr, any line other than the runtime's summary and fovea's info lines (fovea logs
 ///   warnings and errors there).
-fn messages(run: &Run) -> Vec<String> {
+pub(crate) fn messages(run: &Run) -> Vec<String> {
     let banner = |l: &str| l.starts_with("Core Validation output type:");
-    let stdout = run.stdout.lines().filter(|l| {
+    // An indented line continues the record above it (the validation layer's "Khronos Validation
+    // Layer Active" info record lists its enables so) and is a message where that record is.
+    let mut previous = false;
+    let stdout = run.stdout.lines().filter(move |l| {
         let l = l.trim_end();
-        if l.is_empty() || banner(l) {
+        if l.starts_with("    ") && !l.trim().is_empty() {
+            return previous;
+        }
+        previous = is_message(l);
+        previous
+    });
+    fn is_message(l: &str) -> bool {
+        let banner = |l: &str| l.starts_with("Core Validation output type:");
+        // Core validation 1.1's own debug and info records (`[time][VALID_DEBUG|VUID|function]:
+        // ...`, e.g. that it was initialised and destroyed); its warnings and errors are
+        // `VALID_WARNING` and `VALID_ERROR`.
+        let core_info = |l: &str| {
+            l.starts_with('[') && (l.contains("][VALID_DEBUG|") || l.contains("][VALID_INFO|"))
+        };
+        if l.is_empty() || banner(l) || core_info(l) {
             return false;
         }
         if !is_hello_xr_log(l) {
@@ -194,7 +221,7 @@ fn messages(run: &Run) -> Vec<String> {
             || ["] ERROR:", "] WARNING:", "] PERF:"]
                 .iter()
                 .any(|m| l.contains(m))
-    });
+    }
     let stderr = run.stderr.lines().filter(|l| {
         !l.trim().is_empty()
             && !banner(l)
@@ -264,9 +291,9 @@ fn hello_xr_passes_with(graphics: &str, layers: &[&str], env: &[(&str, OsString)
     Some(run)
 }
 
-const VK_MANIFEST: &str = "VK_LAYER_FOVEA_fragment_density_map.json";
+pub(crate) const VK_MANIFEST: &str = "VK_LAYER_FOVEA_fragment_density_map.json";
 /// fovea's line on creating a VkInstance (target [`log_target::VK_INSTANCE`]).
-const VK_INSTANCE_LINE: &str = "the Vulkan layer is in this VkInstance";
+pub(crate) const VK_INSTANCE_LINE: &str = "the Vulkan layer is in this VkInstance";
 /// The end of fovea's line on a physical device it does not emulate on.
 const PASS_THROUGH_LINE: &str = "fragment density maps: passing through";
 /// Why lavapipe is passed through: no shading-rate attachments. With the implicit manifest the

@@ -24,6 +24,7 @@ mod hello_xr;
 mod khronos_loader;
 mod layer_core;
 mod manifests;
+mod monado;
 mod pipeline;
 mod settings_file;
 mod symmetric_fov;

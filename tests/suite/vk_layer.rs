@@ -197,8 +197,12 @@ impl Vk {
             ash::ext::validation_features::NAME.as_ptr(),
         ];
         let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
-        let mut features =
-            vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
+        // Synchronization validation: hazards between commands and submissions
+        // (<https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>).
+        let enabled = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+        let mut features = vk::ValidationFeaturesEXT::default()
+            .disabled_validation_features(&disabled)
+            .enabled_validation_features(&enabled);
         let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
             .message_severity(
@@ -710,4 +714,68 @@ fn checked_in_manifest() {
             "spec_version": fovea_abi::VK_FDM_SPEC_VERSION.to_string()
         }])
     );
+}
+
+/// Synchronization validation is on in these instances (as in every Vulkan test's): two fills of one
+/// buffer recorded without a barrier between them are a write-after-write hazard it reports at
+/// record time (<https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>). Without
+/// it, the validation layer would stay silent and every "no message" in the suite would say less.
+#[test]
+fn synchronization_validation_reports_an_unsynchronized_write() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::None, true) else {
+        return;
+    };
+    let device = vk.device(&[], None).expect("vkCreateDevice");
+    // SAFETY: every handle is used while alive and destroyed once, before its device.
+    unsafe {
+        let buffer = device
+            .create_buffer(
+                &vk::BufferCreateInfo::default()
+                    .size(256)
+                    .usage(vk::BufferUsageFlags::TRANSFER_DST),
+                None,
+            )
+            .expect("vkCreateBuffer");
+        let needs = device.get_buffer_memory_requirements(buffer);
+        let memory = device
+            .allocate_memory(
+                &vk::MemoryAllocateInfo::default()
+                    .allocation_size(needs.size)
+                    .memory_type_index(needs.memory_type_bits.trailing_zeros()),
+                None,
+            )
+            .expect("vkAllocateMemory");
+        device
+            .bind_buffer_memory(buffer, memory, 0)
+            .expect("vkBindBufferMemory");
+        let pool = device
+            .create_command_pool(&vk::CommandPoolCreateInfo::default(), None)
+            .expect("vkCreateCommandPool");
+        let cb = device
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(pool)
+                    .command_buffer_count(1),
+            )
+            .expect("vkAllocateCommandBuffers")[0];
+        device
+            .begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+            .expect("vkBeginCommandBuffer");
+        assert_no_messages();
+        device.cmd_fill_buffer(cb, buffer, 0, 256, 1);
+        device.cmd_fill_buffer(cb, buffer, 0, 256, 2);
+        let messages = take_messages();
+        device.end_command_buffer(cb).expect("vkEndCommandBuffer");
+        device.destroy_command_pool(pool, None);
+        device.destroy_buffer(buffer, None);
+        device.free_memory(memory, None);
+        device.destroy_device(None);
+        assert!(
+            messages.iter().any(|m| m.contains("WRITE_AFTER_WRITE")),
+            "no write-after-write hazard reported: {messages:#?}"
+        );
+    }
+    drop(vk);
+    assert_no_messages();
 }

@@ -62,6 +62,23 @@ pub fn pick_lavapipe() {
     ONCE.call_once(|| std::env::set_var("FOVEA_SIM_VK_DEVICE", "llvmpipe"));
 }
 
+/// Mesa's lavapipe ICD manifest in the Vulkan loader's system folders: Debian 12 names it
+/// `lvp_icd.x86_64.json`, Debian 13 `lvp_icd.json`. `None` where Mesa's Vulkan drivers are absent.
+pub fn lavapipe_icd() -> Option<std::path::PathBuf> {
+    ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"]
+        .iter()
+        .filter_map(|d| std::fs::read_dir(d).ok())
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("lvp_icd") && n.ends_with(".json"))
+        })
+        .min()
+}
+
 /// The system Vulkan loader, or why there is none.
 pub fn entry() -> Result<ash::Entry, String> {
     // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
@@ -218,8 +235,12 @@ impl Vulkan {
             // in vkDestroyDebugUtilsMessengerEXT). With every validated instance alike, tests in one
             // process cannot flip it under each other.
             let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
-            let mut features =
-                vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
+            // Synchronization validation: hazards between commands and submissions
+            // (<https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>).
+            let enabled = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+            let mut features = vk::ValidationFeaturesEXT::default()
+                .disabled_validation_features(&disabled)
+                .enabled_validation_features(&enabled);
             let mut vk_create = vk::InstanceCreateInfo::default()
                 .application_info(&app_info)
                 .push_next(&mut messenger_info);

@@ -113,8 +113,12 @@ impl Vk {
         ];
         // Without handle wrapping, the double records the handles the application holds.
         let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
-        let mut features =
-            vk::ValidationFeaturesEXT::default().disabled_validation_features(&disabled);
+        // Synchronization validation: hazards between commands and submissions
+        // (<https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>).
+        let enabled = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+        let mut features = vk::ValidationFeaturesEXT::default()
+            .disabled_validation_features(&disabled)
+            .enabled_validation_features(&enabled);
         let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
             .message_severity(
@@ -847,9 +851,18 @@ fn draw_case(dev: &Dev, c: &Case<'_>) -> Drawn {
                     .src_subpass(vk::SUBPASS_EXTERNAL)
                     .dst_subpass(0)
                     .src_stage_mask(vk::PipelineStageFlags::TRANSFER)
-                    .dst_stage_mask(vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR)
+                    // The colour attachment's clear too: it must follow the layout transition
+                    // this dependency carries (synchronization validation 1.4.309,
+                    // SYNC-HAZARD-WRITE-AFTER-WRITE at vkCmdBeginRenderPass2).
+                    .dst_stage_mask(
+                        vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+                            | vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+                    )
                     .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .dst_access_mask(vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR),
+                    .dst_access_mask(
+                        vk::AccessFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_READ_KHR
+                            | vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
+                    ),
                 vk::SubpassDependency2::default()
                     .src_subpass(0)
                     .dst_subpass(vk::SUBPASS_EXTERNAL)
