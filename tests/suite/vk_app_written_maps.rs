@@ -430,9 +430,11 @@ impl App {
         let d = &dev.d;
         // SAFETY: as the caller promised.
         unsafe {
+            // After an earlier read in the same command buffer, its pass's colour writes come
+            // before this transition (synchronization validation sees the hazard otherwise).
             d.cmd_pipeline_barrier(
                 cb,
-                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
                 vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
                 vk::DependencyFlags::empty(),
                 &[],
@@ -442,6 +444,7 @@ impl App {
                     .subresource_range(range(0, 1))
                     .old_layout(vk::ImageLayout::UNDEFINED)
                     .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                    .src_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
                     .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
                     .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                     .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)],

@@ -159,6 +159,17 @@ fn event_and_timestamp_stages_are_translated() {
             .expect("vkBeginCommandBuffer");
         d.cmd_reset_query_pool(cb, queries, 0, 2);
         d.cmd_set_event(cb, event, FDM_STAGE | vk::PipelineStageFlags::TRANSFER);
+        // A reset right after a set races with it without an execution barrier between
+        // (synchronization validation reports it).
+        d.cmd_pipeline_barrier(
+            cb,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &[],
+        );
         d.cmd_reset_event(cb, event, FDM_STAGE);
         d.cmd_reset_event2(cb, event, stage2);
         d.cmd_write_timestamp(cb, FDM_STAGE, queries, 0);

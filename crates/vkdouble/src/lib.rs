@@ -225,7 +225,10 @@ pub fn manifest_json(library: &Path) -> String {
             "name": LAYER_NAME.to_str().unwrap_or_default(),
             "type": "GLOBAL",
             "library_path": library.to_string_lossy(),
-            "api_version": "1.3.239",
+            // As fovea's own manifests: a loader skips a layer older than the application's
+            // API version, and a meta-layer (the tests' validation-over-double) any component
+            // older than itself.
+            "api_version": "1.4.359",
             "implementation_version": "1",
             "description": "fovea test double: shading-rate attachments on a device without them",
             "device_extensions": [{
