@@ -422,6 +422,25 @@ pub unsafe fn device_destroyed(handle: vk::Device) {
     FRAMEBUFFERS.write().retain(|_, (key, _)| *key != k);
 }
 
+/// Forgets, without a call to the driver, what the layer kept for a device whose dispatch key a
+/// new device now has: the application destroyed the old device's instance with the device still
+/// alive (VUID-vkDestroyInstance-instance-00629), the loader freed the device's dispatch table, and
+/// the new device got its address. The old device's objects are gone with it; destroying them
+/// now would call a driver that no longer has them, so its command buffers' records, its
+/// converter and its framebuffers are dropped as they are.
+pub fn device_key_reused(k: Key) {
+    {
+        let mut map = CB_RECORDS.lock();
+        let before = map.len();
+        map.retain(|_, r| r.device != k);
+        if map.len() != before {
+            CB_GENERATION.fetch_add(1, Ordering::Release);
+        }
+    }
+    CONVERTERS.write().retain(|(key, _)| *key != k);
+    FRAMEBUFFERS.write().retain(|_, (key, _)| *key != k);
+}
+
 impl Converter {
     /// # Safety
     /// `own` must belong to a live device emulating as `fdm` says.

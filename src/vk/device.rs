@@ -566,6 +566,15 @@ unsafe fn create_device_impl(
                 }
             }
         });
+        // The device was just created, so its handle is live for `registry::key`.
+        if let Some(k) = registry::key(handle).filter(|&k| registry::has_key(k)) {
+            tracing::warn!(
+                device = raw(handle),
+                "a new device has the dispatch key of one that was never destroyed (its instance \
+                 was destroyed first): what the layer kept for the old one is forgotten"
+            );
+            crate::vk::convert::device_key_reused(k);
+        }
         registry::add_device(registry::Device {
             handle,
             gdpa,

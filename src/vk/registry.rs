@@ -367,6 +367,11 @@ pub unsafe fn add_device(data: Device) {
     }
 }
 
+/// Whether a device with dispatch key `k` is recorded.
+pub fn has_key(k: Key) -> bool {
+    DEVICES.read().contains_key(&k)
+}
+
 /// Forgets a device, returning its record.
 ///
 /// # Safety

@@ -519,7 +519,19 @@ impl Dev {
     }
 }
 
-/// The shading-rate images the double read back at the submit of `cb`.
+/// How many barrier commands the double has recorded for a command buffer with `cb`'s handle.
+fn barriers_of(env: &Env, cb: vk::CommandBuffer) -> usize {
+    use ash::vk::Handle as _;
+    env.double
+        .events("barrier")
+        .iter()
+        .filter(|b| b["command_buffer"] == json!(cb.as_raw()))
+        .count()
+}
+
+/// The shading-rate images the double read back at the latest submit of `cb`. The latest: the
+/// records outlive devices, and a command buffer of an earlier device can have had the same
+/// handle (the driver reuses the memory).
 pub(crate) fn read_at_submit(env: &Env, cb: vk::CommandBuffer) -> Vec<Value> {
     use ash::vk::Handle as _;
     let submits: Vec<Value> = env
@@ -532,8 +544,8 @@ pub(crate) fn read_at_submit(env: &Env, cb: vk::CommandBuffer) -> Vec<Value> {
                 .is_some_and(|a| a.contains(&json!(cb.as_raw())))
         })
         .collect();
-    assert_eq!(submits.len(), 1, "{submits:?}");
-    submits[0]["shading_rate_images"]
+    let last = submits.last().expect("the command buffer was submitted");
+    last["shading_rate_images"]
         .as_array()
         .cloned()
         .unwrap_or_default()
@@ -595,6 +607,9 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32, lose: b
         };
         dev.write(&staging, &bytes);
         let cb = dev.begin();
+        // An earlier device's command buffer may have had this handle: only barriers from here on
+        // are this recording's.
+        let barriers_before = barriers_of(env, cb);
         dev.upload(cb, &staging, map, side, layers);
         dev.bind_compute(cb, &compute, round, lose);
         let mut made = None;
@@ -739,14 +754,7 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32, lose: b
         let got = codes_of(&read_at_submit(env, cb), &what);
         // Both rounds record the same commands but for the suspended and resumed instance of
         // round 1: one conversion each, so as many barriers reach the driver.
-        let barriers = {
-            use ash::vk::Handle as _;
-            env.double
-                .events("barrier")
-                .iter()
-                .filter(|b| b["command_buffer"] == json!(cb.as_raw()))
-                .count()
-        };
+        let barriers = barriers_of(env, cb) - barriers_before;
         match barrier_counts.first() {
             Some(&first) => assert_eq!(
                 barriers, first,
