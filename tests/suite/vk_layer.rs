@@ -197,12 +197,9 @@ impl Vk {
             ash::ext::validation_features::NAME.as_ptr(),
         ];
         let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
-        // Synchronization validation: hazards between commands and submissions
-        // (<https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>).
-        let enabled = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
         let mut features = vk::ValidationFeaturesEXT::default()
             .disabled_validation_features(&disabled)
-            .enabled_validation_features(&enabled);
+            .enabled_validation_features(fovea_harness::validation_enables());
         let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
             .message_severity(

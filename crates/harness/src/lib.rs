@@ -208,6 +208,22 @@ fn check_fresh(library: &Path, file: &str) -> Result<(), String> {
 
 /// Whether tests that need a system component must fail rather than skip (`FOVEA_REQUIRE_SYSTEM=1`,
 /// set by CI).
+/// The validation layer's features the tests' Vulkan instances turn on: synchronization validation
+/// (hazards between commands and submissions,
+/// <https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>), unless
+/// `FOVEA_VK_SYNC_VALIDATION=0`. `.ci/valgrind` sets that: validation 1.3.239's synchronization
+/// state for command buffers is lost under memcheck (its own leak, not the code under test), and
+/// the suite runs with it on in both roots anyway.
+pub fn validation_enables() -> &'static [ash::vk::ValidationFeatureEnableEXT] {
+    const SYNC: [ash::vk::ValidationFeatureEnableEXT; 1] =
+        [ash::vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+    if std::env::var("FOVEA_VK_SYNC_VALIDATION").is_ok_and(|v| v.trim() == "0") {
+        &[]
+    } else {
+        &SYNC
+    }
+}
+
 pub fn require_system() -> bool {
     std::env::var("FOVEA_REQUIRE_SYSTEM").is_ok_and(|v| v == "1")
 }

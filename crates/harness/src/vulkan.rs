@@ -235,12 +235,9 @@ impl Vulkan {
             // in vkDestroyDebugUtilsMessengerEXT). With every validated instance alike, tests in one
             // process cannot flip it under each other.
             let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
-            // Synchronization validation: hazards between commands and submissions
-            // (<https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>).
-            let enabled = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
             let mut features = vk::ValidationFeaturesEXT::default()
                 .disabled_validation_features(&disabled)
-                .enabled_validation_features(&enabled);
+                .enabled_validation_features(crate::validation_enables());
             let mut vk_create = vk::InstanceCreateInfo::default()
                 .application_info(&app_info)
                 .push_next(&mut messenger_info);
