@@ -19,8 +19,6 @@
 //! replaces in the same run on the same machine state. `benches/compare-baseline.sh` builds the
 //! baseline from a commit and runs this.
 
-use std::ffi::c_void;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use criterion::{criterion_group, Criterion};
@@ -30,59 +28,8 @@ use fovea_harness::{sim, App, Chain, LayerSpec, FOVEA_LAYER};
 use openxr_sys as xr;
 use xr::Handle;
 
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-extern "C" {
-    fn __libc_malloc(size: usize) -> *mut c_void;
-    fn __libc_calloc(n: usize, size: usize) -> *mut c_void;
-    fn __libc_realloc(p: *mut c_void, size: usize) -> *mut c_void;
-    fn __libc_memalign(align: usize, size: usize) -> *mut c_void;
-}
-
-/// # Safety
-/// The C `malloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn malloc(size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    __libc_malloc(size)
-}
-
-/// # Safety
-/// The C `calloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn calloc(n: usize, size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    __libc_calloc(n, size)
-}
-
-/// # Safety
-/// The C `realloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn realloc(p: *mut c_void, size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    __libc_realloc(p, size)
-}
-
-/// # Safety
-/// The C `posix_memalign` contract.
-#[no_mangle]
-pub unsafe extern "C" fn posix_memalign(out: *mut *mut c_void, align: usize, size: usize) -> i32 {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    let p = __libc_memalign(align, size);
-    if p.is_null() {
-        return 12; // ENOMEM
-    }
-    *out = p;
-    0
-}
-
-/// # Safety
-/// The C `aligned_alloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn aligned_alloc(align: usize, size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    __libc_memalign(align, size)
-}
+#[path = "support/alloc.rs"]
+mod alloc;
 
 fn running_loop(chain: Chain) -> HeadlessLoop {
     let mut cfg = sim::control::SimConfig::from_env().expect("simulated runtime configuration");
@@ -142,13 +89,13 @@ fn bench_frames(c: &mut Criterion) {
 
 /// Mean ns per frame over `n` frames, and allocations per frame.
 fn timed(lp: &mut HeadlessLoop, n: u32) -> (f64, f64) {
-    let a0 = ALLOCATIONS.load(Ordering::Relaxed);
+    let a0 = alloc::allocations();
     let t0 = Instant::now();
     for _ in 0..n {
         lp.frame().unwrap();
     }
     let ns = t0.elapsed().as_nanos() as f64 / f64::from(n);
-    let allocs = (ALLOCATIONS.load(Ordering::Relaxed) - a0) as f64 / f64::from(n);
+    let allocs = (alloc::allocations() - a0) as f64 / f64::from(n);
     (ns, allocs)
 }
 
@@ -157,7 +104,7 @@ fn timed(lp: &mut HeadlessLoop, n: u32) -> (f64, f64) {
 fn check_counter_sees_the_layer() {
     let chain = Chain::fovea().expect("libfovea.so is built");
     // SAFETY: the name's type matches; the count pointer is valid.
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let before = alloc::allocations();
     unsafe {
         let f: xr::pfn::EnumerateInstanceExtensionProperties = fovea_harness::lookup(
             chain.gipa(),
@@ -168,7 +115,7 @@ fn check_counter_sees_the_layer() {
         let mut n = 0;
         f(std::ptr::null(), 0, &mut n, std::ptr::null_mut());
     }
-    let seen = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let seen = alloc::allocations() - before;
     assert!(
         seen > 0,
         "the malloc interposer does not see the layer's allocations"

@@ -44,75 +44,19 @@
 //!
 //! Run: `cargo bench --bench vk_commands` (needs the Vulkan loader and lavapipe; skips otherwise).
 
-use std::ffi::{c_void, CStr};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::ffi::c_void;
 use std::time::{Duration, Instant};
 
 use ash::vk;
 use criterion::Criterion;
 
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+#[path = "support/vulkan.rs"]
+mod vulkan;
+use vulkan::{colour_range, compute_pipeline, median, pass_and_framebuffer, Target};
 
-extern "C" {
-    fn __libc_malloc(size: usize) -> *mut c_void;
-    fn __libc_calloc(n: usize, size: usize) -> *mut c_void;
-    fn __libc_realloc(p: *mut c_void, size: usize) -> *mut c_void;
-    fn __libc_memalign(align: usize, size: usize) -> *mut c_void;
-}
+#[path = "support/alloc.rs"]
+mod alloc;
 
-/// # Safety
-/// The C `malloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn malloc(size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    // SAFETY: glibc's own allocator, with the caller's arguments.
-    unsafe { __libc_malloc(size) }
-}
-
-/// # Safety
-/// The C `calloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn calloc(n: usize, size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    // SAFETY: as in malloc.
-    unsafe { __libc_calloc(n, size) }
-}
-
-/// # Safety
-/// The C `realloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn realloc(p: *mut c_void, size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    // SAFETY: as in malloc.
-    unsafe { __libc_realloc(p, size) }
-}
-
-/// # Safety
-/// The C `posix_memalign` contract.
-#[no_mangle]
-pub unsafe extern "C" fn posix_memalign(out: *mut *mut c_void, align: usize, size: usize) -> i32 {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    // SAFETY: as in malloc.
-    let p = unsafe { __libc_memalign(align, size) };
-    if p.is_null() {
-        return 12; // ENOMEM
-    }
-    // SAFETY: the caller's out pointer.
-    unsafe { *out = p };
-    0
-}
-
-/// # Safety
-/// The C `aligned_alloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn aligned_alloc(align: usize, size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    // SAFETY: as in malloc.
-    unsafe { __libc_memalign(align, size) }
-}
-
-const FOVEA: &CStr = c"VK_LAYER_FOVEA_fragment_density_map";
-const FDM_EXT: &CStr = c"VK_EXT_fragment_density_map";
 /// The colour target's size; the density map's is this over the NVIDIA-like texel (16).
 const SIZE: u32 = 64;
 const DENSITY: u32 = SIZE / 16;
@@ -132,13 +76,6 @@ enum Kind {
     Inject,
 }
 
-/// One image with memory and a view.
-struct Target {
-    image: vk::Image,
-    memory: vk::DeviceMemory,
-    view: vk::ImageView,
-}
-
 /// One instance, device and command buffer, with what the cases record.
 struct Side {
     instance: ash::Instance,
@@ -156,273 +93,19 @@ struct Side {
     compute: (vk::PipelineLayout, vk::Pipeline),
 }
 
-/// A compute pipeline and its layout (one storage buffer, eight bytes of push constants).
-///
-/// # Safety
-/// `device` must be live.
-unsafe fn compute_pipeline(device: &ash::Device) -> (vk::PipelineLayout, vk::Pipeline) {
-    let code = ash::util::read_spv(&mut std::io::Cursor::new(
-        &include_bytes!("../tests/suite/shaders/store.comp.spv")[..],
-    ))
-    .expect("SPIR-V");
-    let bindings = [vk::DescriptorSetLayoutBinding::default()
-        .binding(0)
-        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-        .descriptor_count(1)
-        .stage_flags(vk::ShaderStageFlags::COMPUTE)];
-    let ranges = [vk::PushConstantRange {
-        stage_flags: vk::ShaderStageFlags::COMPUTE,
-        offset: 0,
-        size: 8,
-    }];
-    // SAFETY: as the caller promised; every struct lives across its call.
-    unsafe {
-        let set_layout = device
-            .create_descriptor_set_layout(
-                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
-                None,
-            )
-            .expect("vkCreateDescriptorSetLayout");
-        let set_layouts = [set_layout];
-        let layout = device
-            .create_pipeline_layout(
-                &vk::PipelineLayoutCreateInfo::default()
-                    .set_layouts(&set_layouts)
-                    .push_constant_ranges(&ranges),
-                None,
-            )
-            .expect("vkCreatePipelineLayout");
-        device.destroy_descriptor_set_layout(set_layout, None);
-        let module = device
-            .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None)
-            .expect("vkCreateShaderModule");
-        let info = [vk::ComputePipelineCreateInfo::default()
-            .stage(
-                vk::PipelineShaderStageCreateInfo::default()
-                    .stage(vk::ShaderStageFlags::COMPUTE)
-                    .module(module)
-                    .name(c"main"),
-            )
-            .layout(layout)];
-        let pipeline = device
-            .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
-            .expect("vkCreateComputePipelines")[0];
-        device.destroy_shader_module(module, None);
-        (layout, pipeline)
-    }
-}
-
-fn memory_type(instance: &ash::Instance, physical: vk::PhysicalDevice, bits: u32) -> u32 {
-    // SAFETY: a plain query on a live physical device.
-    let props = unsafe { instance.get_physical_device_memory_properties(physical) };
-    (0..props.memory_type_count)
-        .find(|i| bits & (1 << i) != 0)
-        .expect("a memory type")
-}
-
-/// # Safety
-/// `device` must be live and made from `physical`.
-unsafe fn target(
-    instance: &ash::Instance,
-    physical: vk::PhysicalDevice,
-    device: &ash::Device,
-    format: vk::Format,
-    extent: [u32; 2],
-    usage: vk::ImageUsageFlags,
-) -> Target {
-    let info = vk::ImageCreateInfo::default()
-        .image_type(vk::ImageType::TYPE_2D)
-        .format(format)
-        .extent(vk::Extent3D {
-            width: extent[0],
-            height: extent[1],
-            depth: 1,
-        })
-        .mip_levels(1)
-        .array_layers(1)
-        .samples(vk::SampleCountFlags::TYPE_1)
-        .tiling(vk::ImageTiling::OPTIMAL)
-        .usage(usage);
-    // SAFETY: as the caller promised; every struct lives across its call.
-    unsafe {
-        let image = device.create_image(&info, None).expect("vkCreateImage");
-        let req = device.get_image_memory_requirements(image);
-        let alloc = vk::MemoryAllocateInfo::default()
-            .allocation_size(req.size)
-            .memory_type_index(memory_type(instance, physical, req.memory_type_bits));
-        let memory = device.allocate_memory(&alloc, None).expect("memory");
-        device
-            .bind_image_memory(image, memory, 0)
-            .expect("vkBindImageMemory");
-        let view = device
-            .create_image_view(
-                &vk::ImageViewCreateInfo::default()
-                    .image(image)
-                    .view_type(vk::ImageViewType::TYPE_2D)
-                    .format(format)
-                    .subresource_range(range()),
-                None,
-            )
-            .expect("vkCreateImageView");
-        Target {
-            image,
-            memory,
-            view,
-        }
-    }
-}
-
-fn range() -> vk::ImageSubresourceRange {
-    vk::ImageSubresourceRange::default()
-        .aspect_mask(vk::ImageAspectFlags::COLOR)
-        .level_count(1)
-        .layer_count(1)
-}
-
-/// # Safety
-/// `device` must be live; the views must be its own.
-unsafe fn pass_and_framebuffer(
-    device: &ash::Device,
-    color: vk::ImageView,
-    density: Option<vk::ImageView>,
-) -> (vk::RenderPass, vk::Framebuffer) {
-    let mut attachments = vec![vk::AttachmentDescription::default()
-        .format(vk::Format::R8G8B8A8_UNORM)
-        .samples(vk::SampleCountFlags::TYPE_1)
-        .load_op(vk::AttachmentLoadOp::DONT_CARE)
-        .store_op(vk::AttachmentStoreOp::STORE)
-        .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
-        .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
-        .initial_layout(vk::ImageLayout::UNDEFINED)
-        .final_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-    if density.is_some() {
-        attachments.push(
-            vk::AttachmentDescription::default()
-                .format(vk::Format::R8G8_UNORM)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .load_op(vk::AttachmentLoadOp::LOAD)
-                .store_op(vk::AttachmentStoreOp::DONT_CARE)
-                .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
-                .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
-                .initial_layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT)
-                .final_layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT),
-        );
-    }
-    let refs = [vk::AttachmentReference::default()
-        .attachment(0)
-        .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-    let subpasses = [vk::SubpassDescription::default()
-        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-        .color_attachments(&refs)];
-    let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
-        .fragment_density_map_attachment(
-            vk::AttachmentReference::default()
-                .attachment(1)
-                .layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT),
-        );
-    let mut info = vk::RenderPassCreateInfo::default()
-        .attachments(&attachments)
-        .subpasses(&subpasses);
-    if density.is_some() {
-        info = info.push_next(&mut fdm);
-    }
-    let views: Vec<vk::ImageView> = std::iter::once(color).chain(density).collect();
-    // SAFETY: as the caller promised; every struct lives across its call.
-    unsafe {
-        let pass = device
-            .create_render_pass(&info, None)
-            .expect("vkCreateRenderPass");
-        let framebuffer = device
-            .create_framebuffer(
-                &vk::FramebufferCreateInfo::default()
-                    .render_pass(pass)
-                    .attachments(&views)
-                    .width(SIZE)
-                    .height(SIZE)
-                    .layers(1),
-                None,
-            )
-            .expect("vkCreateFramebuffer");
-        (pass, framebuffer)
-    }
-}
-
 impl Side {
     fn new(entry: &ash::Entry, kind: Kind) -> Result<Side, String> {
-        let with_fovea = kind != Kind::Bare;
-        let mut layers = vec![fovea_vkdouble::LAYER_NAME.as_ptr()];
-        if with_fovea {
-            layers.insert(0, FOVEA.as_ptr());
-        }
-        let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
-        let info = vk::InstanceCreateInfo::default()
-            .application_info(&app)
-            .enabled_layer_names(&layers);
+        let (instance, physical) = vulkan::instance_on_lavapipe(entry, kind != Kind::Bare)?;
         // SAFETY: every struct lives across the calls; handles are used while alive.
         unsafe {
-            let instance = entry
-                .create_instance(&info, None)
-                .map_err(|e| format!("vkCreateInstance: {e}"))?;
-            let physical = instance
-                .enumerate_physical_devices()
-                .unwrap_or_default()
-                .into_iter()
-                .find(|&p| {
-                    instance
-                        .get_physical_device_properties(p)
-                        .device_name_as_c_str()
-                        .is_ok_and(|n| n.to_string_lossy().contains("llvmpipe"))
-                })
-                .ok_or("lavapipe (llvmpipe) is not installed")?;
-            let prio = [1.0];
-            let queues = [vk::DeviceQueueCreateInfo::default()
-                .queue_family_index(0)
-                .queue_priorities(&prio)];
-            let exts = [FDM_EXT.as_ptr()];
-            let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-                .fragment_density_map(true)
-                .fragment_density_map_non_subsampled_images(true);
-            let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
-                .dynamic_rendering(true)
-                .synchronization2(true);
-            let mut dinfo = vk::DeviceCreateInfo::default()
-                .queue_create_infos(&queues)
-                .push_next(&mut v13);
-            let fsr_exts = [ash::khr::fragment_shading_rate::NAME.as_ptr()];
-            let mut rates = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
-                .pipeline_fragment_shading_rate(true);
-            if kind == Kind::Fdm {
-                dinfo = dinfo.enabled_extension_names(&exts).push_next(&mut fdm);
-            } else {
-                dinfo = dinfo
-                    .enabled_extension_names(&fsr_exts)
-                    .push_next(&mut rates);
-            }
-            let device = instance
-                .create_device(physical, &dinfo, None)
-                .map_err(|e| format!("vkCreateDevice: {e}"))?;
-            let pool = device
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default()
-                        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                        .queue_family_index(0),
-                    None,
-                )
-                .expect("vkCreateCommandPool");
-            let cb = device
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .expect("vkAllocateCommandBuffers")[0];
+            let device = vulkan::device(&instance, physical, kind == Kind::Fdm, kind != Kind::Fdm)?;
+            let (pool, cb) = vulkan::command_buffer(&device);
             let extent = if kind == Kind::Inject {
                 EYE
             } else {
                 [SIZE, SIZE]
             };
-            let color = target(
+            let color = Target::new(
                 &instance,
                 physical,
                 &device,
@@ -430,9 +113,9 @@ impl Side {
                 extent,
                 vk::ImageUsageFlags::COLOR_ATTACHMENT,
             );
-            let (pass, framebuffer) = pass_and_framebuffer(&device, color.view, None);
+            let (pass, framebuffer) = pass_and_framebuffer(&device, color.view, None, SIZE);
             let fdm = (kind == Kind::Fdm).then(|| {
-                let density = target(
+                let density = Target::new(
                     &instance,
                     physical,
                     &device,
@@ -440,7 +123,7 @@ impl Side {
                     [DENSITY, DENSITY],
                     vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
                 );
-                let (p, f) = pass_and_framebuffer(&device, color.view, Some(density.view));
+                let (p, f) = pass_and_framebuffer(&device, color.view, Some(density.view), SIZE);
                 (density, p, f)
             });
             let set_rate = (kind != Kind::Fdm)
@@ -528,7 +211,7 @@ impl Side {
                         .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                         .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                         .image(image)
-                        .subresource_range(range())];
+                        .subresource_range(colour_range())];
                     d.cmd_pipeline_barrier(
                         cb,
                         vk::PipelineStageFlags::FRAGMENT_SHADER,
@@ -550,7 +233,7 @@ impl Side {
                         .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                         .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                         .image(image)
-                        .subresource_range(range())];
+                        .subresource_range(colour_range())];
                     d.cmd_pipeline_barrier2(
                         cb,
                         &vk::DependencyInfo::default().image_memory_barriers(&barrier),
@@ -612,7 +295,7 @@ impl Side {
     /// allocations made meanwhile.
     fn round(&self, case: Case, n: usize) -> Option<(Duration, u64)> {
         self.begin();
-        let a = ALLOCATIONS.load(Ordering::Relaxed);
+        let a = alloc::allocations();
         let t = Instant::now();
         for _ in 0..n {
             if !self.record(case) {
@@ -621,7 +304,7 @@ impl Side {
             }
         }
         let elapsed = t.elapsed();
-        let allocations = ALLOCATIONS.load(Ordering::Relaxed) - a;
+        let allocations = alloc::allocations() - a;
         self.end_and_reset();
         Some((elapsed, allocations))
     }
@@ -635,17 +318,13 @@ impl Drop for Side {
             if let Some((density, p, f)) = self.fdm.take() {
                 d.destroy_framebuffer(f, None);
                 d.destroy_render_pass(p, None);
-                d.destroy_image_view(density.view, None);
-                d.destroy_image(density.image, None);
-                d.free_memory(density.memory, None);
+                density.destroy(d);
             }
             d.destroy_pipeline(self.compute.1, None);
             d.destroy_pipeline_layout(self.compute.0, None);
             d.destroy_framebuffer(self.framebuffer, None);
             d.destroy_render_pass(self.pass, None);
-            d.destroy_image_view(self.color.view, None);
-            d.destroy_image(self.color.image, None);
-            d.free_memory(self.color.memory, None);
+            self.color.destroy(d);
             d.destroy_command_pool(self.pool, None);
             d.destroy_device(None);
             self.instance.destroy_instance(None);
@@ -846,26 +525,7 @@ fn injecting(entry: &ash::Entry) -> Result<Injecting, String> {
 
 /// The three sides on both bottoms, and what keeps injection on; or why not.
 fn sides() -> Result<(Vec<Sides>, Injecting), String> {
-    let fovea_lib = fovea_harness::artifact("libfovea.so")?
-        .canonicalize()
-        .map_err(|e| e.to_string())?;
-    let double_lib = fovea_vkdouble::find_library()?;
-    let dir = std::env::temp_dir().join(format!("fovea-vkbench-{}", std::process::id()));
-    fovea_vkdouble::write_manifest(&dir, &double_lib).map_err(|e| e.to_string())?;
-    let checked_in = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("manifest/vulkan/VK_LAYER_FOVEA_fragment_density_map.json");
-    let mut manifest: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&checked_in).map_err(|e| e.to_string())?)
-            .map_err(|e| e.to_string())?;
-    manifest["layer"]["library_path"] = serde_json::json!(fovea_lib.to_string_lossy());
-    std::fs::write(
-        dir.join("VK_LAYER_FOVEA_fragment_density_map.json"),
-        manifest.to_string(),
-    )
-    .map_err(|e| e.to_string())?;
-    // Set before the loader first reads the environment, while nothing else runs.
-    std::env::set_var("VK_ADD_LAYER_PATH", &dir);
-    std::env::set_var(fovea_vkdouble::PROFILE_ENV, "nvidia");
+    vulkan::layers_on_search_path("vkbench")?;
     std::env::remove_var(fovea_vkdouble::NULL_COMMANDS_ENV);
     // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
     let entry = unsafe { ash::Entry::load() }.map_err(|e| format!("no Vulkan loader ({e})"))?;
@@ -911,11 +571,6 @@ fn bench(c: &mut Criterion, sides: &Sides) {
         }
     }
     g.finish();
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 /// Interleaved rounds of both sides, case by case: the summary table. Returns the cases where the

@@ -38,73 +38,21 @@
 //! Run: `cargo build --release -p fovea -p fovea-vkdouble && cargo bench --bench vk_parallel --
 //! --warm-up-time 1 --measurement-time 2` (needs the Vulkan loader and lavapipe; skips otherwise).
 
-use std::ffi::{c_void, CStr};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Barrier, Mutex};
 use std::time::{Duration, Instant};
 
 use ash::vk;
 use criterion::Criterion;
 
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+#[path = "support/vulkan.rs"]
+mod vulkan;
+use vulkan::{colour_range, compute_pipeline, median, pass_and_framebuffer, Target};
+
+#[path = "support/alloc.rs"]
+mod alloc;
 
 extern "C" {
-    fn __libc_malloc(size: usize) -> *mut c_void;
-    fn __libc_calloc(n: usize, size: usize) -> *mut c_void;
-    fn __libc_realloc(p: *mut c_void, size: usize) -> *mut c_void;
-    fn __libc_memalign(align: usize, size: usize) -> *mut c_void;
     fn clock_gettime(clock: i32, out: *mut Timespec) -> i32;
-}
-
-/// # Safety
-/// The C `malloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn malloc(size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    // SAFETY: glibc's own allocator, with the caller's arguments.
-    unsafe { __libc_malloc(size) }
-}
-
-/// # Safety
-/// The C `calloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn calloc(n: usize, size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    // SAFETY: as in malloc.
-    unsafe { __libc_calloc(n, size) }
-}
-
-/// # Safety
-/// The C `realloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn realloc(p: *mut c_void, size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    // SAFETY: as in malloc.
-    unsafe { __libc_realloc(p, size) }
-}
-
-/// # Safety
-/// The C `posix_memalign` contract.
-#[no_mangle]
-pub unsafe extern "C" fn posix_memalign(out: *mut *mut c_void, align: usize, size: usize) -> i32 {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    // SAFETY: as in malloc.
-    let p = unsafe { __libc_memalign(align, size) };
-    if p.is_null() {
-        return 12; // ENOMEM
-    }
-    // SAFETY: the caller's out pointer.
-    unsafe { *out = p };
-    0
-}
-
-/// # Safety
-/// The C `aligned_alloc` contract.
-#[no_mangle]
-pub unsafe extern "C" fn aligned_alloc(align: usize, size: usize) -> *mut c_void {
-    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    // SAFETY: as in malloc.
-    unsafe { __libc_memalign(align, size) }
 }
 
 #[repr(C)]
@@ -124,8 +72,6 @@ fn thread_cpu() -> Duration {
     Duration::new(t.sec as u64, t.nsec as u32)
 }
 
-const FOVEA: &CStr = c"VK_LAYER_FOVEA_fragment_density_map";
-const FDM_EXT: &CStr = c"VK_EXT_fragment_density_map";
 const THREADS: usize = 8;
 const SIZE: u32 = 64;
 /// Commands per round (each thread's command buffer is ended and reset between rounds, outside
@@ -139,7 +85,7 @@ const MIX: usize = 6;
 struct Side {
     instance: ash::Instance,
     device: ash::Device,
-    color: (vk::Image, vk::DeviceMemory, vk::ImageView),
+    color: Target,
     pass: vk::RenderPass,
     framebuffer: vk::Framebuffer,
     layout: vk::PipelineLayout,
@@ -150,73 +96,22 @@ struct Side {
 
 impl Side {
     fn new(entry: &ash::Entry, with_fovea: bool) -> Result<Side, String> {
-        let mut layers = vec![fovea_vkdouble::LAYER_NAME.as_ptr()];
-        if with_fovea {
-            layers.insert(0, FOVEA.as_ptr());
-        }
-        let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
-        let info = vk::InstanceCreateInfo::default()
-            .application_info(&app)
-            .enabled_layer_names(&layers);
+        let (instance, physical) = vulkan::instance_on_lavapipe(entry, with_fovea)?;
         // SAFETY: every struct lives across its call; handles are used while alive.
         unsafe {
-            let instance = entry
-                .create_instance(&info, None)
-                .map_err(|e| format!("vkCreateInstance: {e}"))?;
-            let physical = instance
-                .enumerate_physical_devices()
-                .unwrap_or_default()
-                .into_iter()
-                .find(|&p| {
-                    instance
-                        .get_physical_device_properties(p)
-                        .device_name_as_c_str()
-                        .is_ok_and(|n| n.to_string_lossy().contains("llvmpipe"))
-                })
-                .ok_or("lavapipe (llvmpipe) is not installed")?;
-            let prio = [1.0];
-            let queues = [vk::DeviceQueueCreateInfo::default()
-                .queue_family_index(0)
-                .queue_priorities(&prio)];
-            let exts = [FDM_EXT.as_ptr()];
-            let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-                .fragment_density_map(true)
-                .fragment_density_map_non_subsampled_images(true);
-            let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
-                .dynamic_rendering(true)
-                .synchronization2(true);
-            let mut dinfo = vk::DeviceCreateInfo::default()
-                .queue_create_infos(&queues)
-                .push_next(&mut v13);
-            if with_fovea {
-                dinfo = dinfo.enabled_extension_names(&exts).push_next(&mut fdm);
-            }
-            let device = instance
-                .create_device(physical, &dinfo, None)
-                .map_err(|e| format!("vkCreateDevice: {e}"))?;
-            let color = color_target(&instance, physical, &device);
-            let (pass, framebuffer) = pass_and_framebuffer(&device, color.2);
+            let device = vulkan::device(&instance, physical, with_fovea, false)?;
+            let color = Target::new(
+                &instance,
+                physical,
+                &device,
+                vk::Format::R8G8B8A8_UNORM,
+                [SIZE, SIZE],
+                vk::ImageUsageFlags::COLOR_ATTACHMENT,
+            );
+            let (pass, framebuffer) = pass_and_framebuffer(&device, color.view, None, SIZE);
             let (layout, pipeline) = compute_pipeline(&device);
             let buffers = (0..THREADS)
-                .map(|_| {
-                    let pool = device
-                        .create_command_pool(
-                            &vk::CommandPoolCreateInfo::default()
-                                .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                                .queue_family_index(0),
-                            None,
-                        )
-                        .expect("vkCreateCommandPool");
-                    let cb = device
-                        .allocate_command_buffers(
-                            &vk::CommandBufferAllocateInfo::default()
-                                .command_pool(pool)
-                                .level(vk::CommandBufferLevel::PRIMARY)
-                                .command_buffer_count(1),
-                        )
-                        .expect("vkAllocateCommandBuffers")[0];
-                    (pool, cb)
-                })
+                .map(|_| vulkan::command_buffer(&device))
                 .collect();
             Ok(Side {
                 instance,
@@ -253,8 +148,8 @@ impl Side {
                         .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                         .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                         .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                        .image(self.color.0)
-                        .subresource_range(range())];
+                        .image(self.color.image)
+                        .subresource_range(colour_range())];
                     d.cmd_pipeline_barrier(
                         cb,
                         vk::PipelineStageFlags::FRAGMENT_SHADER,
@@ -275,8 +170,8 @@ impl Side {
                         .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                         .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                         .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                        .image(self.color.0)
-                        .subresource_range(range())];
+                        .image(self.color.image)
+                        .subresource_range(colour_range())];
                     d.cmd_pipeline_barrier2(
                         cb,
                         &vk::DependencyInfo::default().image_memory_barriers(&barrier),
@@ -300,7 +195,7 @@ impl Side {
                 }
                 _ => {
                     let colors = [vk::RenderingAttachmentInfo::default()
-                        .image_view(self.color.2)
+                        .image_view(self.color.view)
                         .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                         .load_op(vk::AttachmentLoadOp::DONT_CARE)
                         .store_op(vk::AttachmentStoreOp::STORE)];
@@ -350,181 +245,10 @@ impl Drop for Side {
             d.destroy_pipeline_layout(self.layout, None);
             d.destroy_framebuffer(self.framebuffer, None);
             d.destroy_render_pass(self.pass, None);
-            d.destroy_image_view(self.color.2, None);
-            d.destroy_image(self.color.0, None);
-            d.free_memory(self.color.1, None);
+            self.color.destroy(d);
             d.destroy_device(None);
             self.instance.destroy_instance(None);
         }
-    }
-}
-
-fn range() -> vk::ImageSubresourceRange {
-    vk::ImageSubresourceRange::default()
-        .aspect_mask(vk::ImageAspectFlags::COLOR)
-        .level_count(1)
-        .layer_count(1)
-}
-
-/// A 64×64 colour image with memory and a view.
-///
-/// # Safety
-/// `device` must be live and made from `physical`.
-unsafe fn color_target(
-    instance: &ash::Instance,
-    physical: vk::PhysicalDevice,
-    device: &ash::Device,
-) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
-    let format = vk::Format::R8G8B8A8_UNORM;
-    let info = vk::ImageCreateInfo::default()
-        .image_type(vk::ImageType::TYPE_2D)
-        .format(format)
-        .extent(vk::Extent3D {
-            width: SIZE,
-            height: SIZE,
-            depth: 1,
-        })
-        .mip_levels(1)
-        .array_layers(1)
-        .samples(vk::SampleCountFlags::TYPE_1)
-        .tiling(vk::ImageTiling::OPTIMAL)
-        .usage(vk::ImageUsageFlags::COLOR_ATTACHMENT);
-    // SAFETY: as the caller promised; every struct lives across its call.
-    unsafe {
-        let image = device.create_image(&info, None).expect("vkCreateImage");
-        let req = device.get_image_memory_requirements(image);
-        let props = instance.get_physical_device_memory_properties(physical);
-        let ty = (0..props.memory_type_count)
-            .find(|i| req.memory_type_bits & (1 << i) != 0)
-            .expect("a memory type");
-        let memory = device
-            .allocate_memory(
-                &vk::MemoryAllocateInfo::default()
-                    .allocation_size(req.size)
-                    .memory_type_index(ty),
-                None,
-            )
-            .expect("memory");
-        device
-            .bind_image_memory(image, memory, 0)
-            .expect("vkBindImageMemory");
-        let view = device
-            .create_image_view(
-                &vk::ImageViewCreateInfo::default()
-                    .image(image)
-                    .view_type(vk::ImageViewType::TYPE_2D)
-                    .format(format)
-                    .subresource_range(range()),
-                None,
-            )
-            .expect("vkCreateImageView");
-        (image, memory, view)
-    }
-}
-
-/// A one-subpass pass without a density map, and its framebuffer.
-///
-/// # Safety
-/// `device` must be live; `color` its view.
-unsafe fn pass_and_framebuffer(
-    device: &ash::Device,
-    color: vk::ImageView,
-) -> (vk::RenderPass, vk::Framebuffer) {
-    let attachments = [vk::AttachmentDescription::default()
-        .format(vk::Format::R8G8B8A8_UNORM)
-        .samples(vk::SampleCountFlags::TYPE_1)
-        .load_op(vk::AttachmentLoadOp::DONT_CARE)
-        .store_op(vk::AttachmentStoreOp::STORE)
-        .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
-        .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
-        .initial_layout(vk::ImageLayout::UNDEFINED)
-        .final_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-    let refs = [vk::AttachmentReference::default()
-        .attachment(0)
-        .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-    let subpasses = [vk::SubpassDescription::default()
-        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-        .color_attachments(&refs)];
-    let views = [color];
-    // SAFETY: as the caller promised; every struct lives across its call.
-    unsafe {
-        let pass = device
-            .create_render_pass(
-                &vk::RenderPassCreateInfo::default()
-                    .attachments(&attachments)
-                    .subpasses(&subpasses),
-                None,
-            )
-            .expect("vkCreateRenderPass");
-        let framebuffer = device
-            .create_framebuffer(
-                &vk::FramebufferCreateInfo::default()
-                    .render_pass(pass)
-                    .attachments(&views)
-                    .width(SIZE)
-                    .height(SIZE)
-                    .layers(1),
-                None,
-            )
-            .expect("vkCreateFramebuffer");
-        (pass, framebuffer)
-    }
-}
-
-/// A compute pipeline (`tests/suite/shaders/store.comp`) and its layout (one storage buffer,
-/// eight bytes of push constants).
-///
-/// # Safety
-/// `device` must be live.
-unsafe fn compute_pipeline(device: &ash::Device) -> (vk::PipelineLayout, vk::Pipeline) {
-    let code = ash::util::read_spv(&mut std::io::Cursor::new(
-        &include_bytes!("../tests/suite/shaders/store.comp.spv")[..],
-    ))
-    .expect("SPIR-V");
-    let bindings = [vk::DescriptorSetLayoutBinding::default()
-        .binding(0)
-        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-        .descriptor_count(1)
-        .stage_flags(vk::ShaderStageFlags::COMPUTE)];
-    let ranges = [vk::PushConstantRange {
-        stage_flags: vk::ShaderStageFlags::COMPUTE,
-        offset: 0,
-        size: 8,
-    }];
-    // SAFETY: as the caller promised; every struct lives across its call.
-    unsafe {
-        let set_layout = device
-            .create_descriptor_set_layout(
-                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
-                None,
-            )
-            .expect("vkCreateDescriptorSetLayout");
-        let set_layouts = [set_layout];
-        let layout = device
-            .create_pipeline_layout(
-                &vk::PipelineLayoutCreateInfo::default()
-                    .set_layouts(&set_layouts)
-                    .push_constant_ranges(&ranges),
-                None,
-            )
-            .expect("vkCreatePipelineLayout");
-        device.destroy_descriptor_set_layout(set_layout, None);
-        let module = device
-            .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None)
-            .expect("vkCreateShaderModule");
-        let info = [vk::ComputePipelineCreateInfo::default()
-            .stage(
-                vk::PipelineShaderStageCreateInfo::default()
-                    .stage(vk::ShaderStageFlags::COMPUTE)
-                    .module(module)
-                    .name(c"main"),
-            )
-            .layout(layout)];
-        let pipeline = device
-            .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
-            .expect("vkCreateComputePipelines")[0];
-        device.destroy_shader_module(module, None);
-        (layout, pipeline)
     }
 }
 
@@ -634,12 +358,12 @@ impl Workers {
         while left > 0 {
             let n = left.min(ROUND);
             g.begun.wait();
-            let a = ALLOCATIONS.load(Ordering::Relaxed);
+            let a = alloc::allocations();
             let t = Instant::now();
             g.go.wait();
             g.done.wait();
             run.wall += t.elapsed();
-            run.allocations += ALLOCATIONS.load(Ordering::Relaxed) - a;
+            run.allocations += alloc::allocations() - a;
             g.counted.wait();
             left -= n;
         }
@@ -662,26 +386,7 @@ impl Drop for Workers {
 
 /// Both sides on the null bottom, or why not.
 fn sides() -> Result<(Arc<Side>, Arc<Side>), String> {
-    let fovea_lib = fovea_harness::artifact("libfovea.so")?
-        .canonicalize()
-        .map_err(|e| e.to_string())?;
-    let double_lib = fovea_vkdouble::find_library()?;
-    let dir = std::env::temp_dir().join(format!("fovea-vkparallel-{}", std::process::id()));
-    fovea_vkdouble::write_manifest(&dir, &double_lib).map_err(|e| e.to_string())?;
-    let checked_in = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("manifest/vulkan/VK_LAYER_FOVEA_fragment_density_map.json");
-    let mut manifest: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&checked_in).map_err(|e| e.to_string())?)
-            .map_err(|e| e.to_string())?;
-    manifest["layer"]["library_path"] = serde_json::json!(fovea_lib.to_string_lossy());
-    std::fs::write(
-        dir.join("VK_LAYER_FOVEA_fragment_density_map.json"),
-        manifest.to_string(),
-    )
-    .map_err(|e| e.to_string())?;
-    // Set before the loader first reads the environment, while nothing else runs.
-    std::env::set_var("VK_ADD_LAYER_PATH", &dir);
-    std::env::set_var(fovea_vkdouble::PROFILE_ENV, "nvidia");
+    vulkan::layers_on_search_path("vkparallel")?;
     // Read by the double at vkCreateDevice.
     std::env::set_var(fovea_vkdouble::NULL_COMMANDS_ENV, "1");
     // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
@@ -696,11 +401,6 @@ fn sides() -> Result<(Arc<Side>, Arc<Side>), String> {
 /// Criterion's time for `iters` commands per thread: the mean over threads of their CPU time.
 fn timed(workers: &Workers, side: &Arc<Side>, threads: usize, iters: u64) -> Duration {
     workers.run(side, threads, iters as usize).cpu / threads as u32
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 /// Per command, from interleaved runs: (CPU ns, scaled wall ns, allocations per command; fewest
