@@ -5,6 +5,10 @@
 //! the same run, so the ratio says what the model costs beyond touching the memory. The run ends with
 //! a summary line per texel size from interleaved timing rounds: µs per 2-layer map, the baseline,
 //! the ratio; and for scale, both layers filled without the mirror shortcut and texel by texel.
+//!
+//! `gaze_refill` is what a gaze move costs on devices whose maps are filled on the CPU: both
+//! layers written again from the fixed map, shifted to the fovea's new place
+//! (`fovea_model::shift`); the target is no more than `fovea_fill`, the fixed map's build.
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -13,12 +17,17 @@ use criterion::{criterion_group, Criterion};
 use fovea_model::density::{
     fill, fill_reference, is_mirror, mirror_into, Grid, Level, Pattern, Rect, View,
 };
+use fovea_model::shift::{shift_into, texel_shift};
 
 struct Case {
     grid: Grid,
     views: [View; 2],
     pattern: Pattern,
     layers: [Vec<u8>; 2],
+    /// Each eye's fixed map, for the gaze refill.
+    fixed: [Vec<u8>; 2],
+    /// Each eye's fovea after a gaze move, NDC.
+    gaze: [[f32; 2]; 2],
 }
 
 impl Case {
@@ -38,7 +47,7 @@ impl Case {
         let grid = Grid::new([w, hh], [texel, texel]);
         let [mw, mh] = grid.map_extent();
         let len = mw as usize * mh as usize * 2;
-        Case {
+        let mut case = Case {
             grid,
             views: [view(0), view(1)],
             pattern: Pattern {
@@ -46,7 +55,28 @@ impl Case {
                 vertical_offset_deg: 0.0,
             },
             layers: [vec![0; len], vec![0; len]],
+            fixed: [vec![0; len], vec![0; len]],
+            gaze: [[0.31, -0.22], [0.12, -0.22]],
+        };
+        case.unmirrored();
+        case.fixed = case.layers.clone();
+        case
+    }
+
+    /// A gaze move: each layer written again from its fixed map, shifted to the new fovea.
+    fn gaze_refill(&mut self) {
+        for eye in 0..2 {
+            let view = black_box(&self.views[eye]);
+            let shift = texel_shift(&self.grid, view, black_box(self.gaze[eye]));
+            shift_into(
+                &self.grid,
+                view,
+                shift,
+                &self.fixed[eye],
+                &mut self.layers[eye],
+            );
         }
+        black_box(&self.layers);
     }
 
     /// What the layer does: the left eye's layer, then the right eye's as its mirror when the
@@ -103,6 +133,7 @@ fn bench_maps(c: &mut Criterion) {
         group.bench_function("trivial_fill", |b| b.iter(|| case.trivial()));
         group.bench_function("fovea_fill", |b| b.iter(|| case.model()));
         group.bench_function("fovea_fill_unmirrored", |b| b.iter(|| case.unmirrored()));
+        group.bench_function("gaze_refill", |b| b.iter(|| case.gaze_refill()));
         group.finish();
     }
 }
@@ -119,22 +150,26 @@ fn summary() {
             }
             t.elapsed().as_secs_f64() * 1e6 / f64::from(n)
         };
-        let (mut model, mut trivial, mut reference, mut unmirrored) = (0.0, 0.0, 0.0, 0.0);
+        let (mut model, mut trivial, mut reference, mut unmirrored, mut refill) =
+            (0.0, 0.0, 0.0, 0.0, 0.0);
         let rounds = 20;
         for _ in 0..rounds {
             model += time(&mut case, Case::model, 200);
             trivial += time(&mut case, Case::trivial, 200);
             reference += time(&mut case, Case::reference, 5);
             unmirrored += time(&mut case, Case::unmirrored, 100);
+            refill += time(&mut case, Case::gaze_refill, 200);
         }
         let r = f64::from(rounds);
-        let [model, trivial, reference, unmirrored] =
-            [model, trivial, reference, unmirrored].map(|t| t / r);
+        let [model, trivial, reference, unmirrored, refill] =
+            [model, trivial, reference, unmirrored, refill].map(|t| t / r);
         println!(
             "summary: quest3 2-layer {mw}x{mh} texels (texel {texel}), HIGH: fovea {model:.2} us, \
              trivial fill {trivial:.2} us, ratio {:.1}; both eyes filled {unmirrored:.2} us, \
-             texel by texel {reference:.1} us",
-            model / trivial
+             texel by texel {reference:.1} us; gaze refill {refill:.2} us, ratio to fovea {:.2} \
+             (target <= 1)",
+            model / trivial,
+            refill / model
         );
     }
 }

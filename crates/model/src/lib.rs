@@ -11,7 +11,8 @@
 //! - [`maps`]: what each layer of a density map holds, and filling it;
 //! - [`headsets`]: headset presets as runtimes report them, and eye-buffer sizing;
 //! - [`inject`]: which passes of an app that never asked are eye passes, and their rate codes;
-//! - [`shading_rate`]: density-map bytes to shading-rate attachment codes.
+//! - [`shading_rate`]: density-map bytes to shading-rate attachment codes;
+//! - [`shift`]: moving the fovea by shifting a fixed map, as density-map offsets do.
 #![forbid(unsafe_code)]
 
 pub mod density;
@@ -23,6 +24,7 @@ pub mod inject;
 pub mod maps;
 pub mod projection;
 pub mod shading_rate;
+pub mod shift;
 pub mod stats;
 
 pub use fov::Fov;
