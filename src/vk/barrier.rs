@@ -24,7 +24,7 @@ use std::cell::RefCell;
 
 use ash::vk;
 
-use crate::vk::loader::guard;
+use crate::vk::base::ffi::{guard, slice};
 use crate::vk::registry;
 
 const FDM_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
@@ -302,19 +302,6 @@ fn touches_image2(b: &vk::ImageMemoryBarrier2<'_>) -> bool {
 
 fn touches2(access: vk::AccessFlags2, stage: vk::PipelineStageFlags2) -> bool {
     access.intersects(ACCESS2) || stage.intersects(STAGE2)
-}
-
-/// The application's array, or an empty one for NULL or a zero count.
-///
-/// # Safety
-/// `p` must be NULL or valid for `n` reads.
-unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
-    if p.is_null() || n == 0 {
-        &[]
-    } else {
-        // SAFETY: as the caller promised.
-        unsafe { std::slice::from_raw_parts(p, n as usize) }
-    }
 }
 
 /// Whether a version-1 barrier call needs translating: a scan of masks and layouts only.

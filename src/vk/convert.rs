@@ -48,10 +48,10 @@ use ash::vk;
 use ash::vk::Handle as _;
 
 use crate::bridge::FdmEmulation;
-use crate::vk::chain;
+use crate::vk::base::chain;
+use crate::vk::base::ffi::{guard, key, raw, Key};
 use crate::vk::image::{Own, SHADOW_LAYOUT};
-use crate::vk::loader::guard;
-use crate::vk::registry::{self, raw, Device, Key, ShadowImage};
+use crate::vk::registry::{self, Device, ShadowImage};
 
 /// The compute shader, built from `shaders/convert.comp` by `shaders/build.sh`.
 static SHADER: &[u8] = include_bytes!("shaders/convert.comp.spv");
@@ -224,7 +224,7 @@ static CONVERTERS: parking_lot::RwLock<Vec<(Key, Arc<Converter>)>> =
 /// `handle` must be NULL or a live dispatchable handle made by the loader.
 unsafe fn converter(handle: impl vk::Handle) -> Option<Arc<Converter>> {
     // SAFETY: as the caller promised.
-    let k = unsafe { registry::key(handle) }?;
+    let k = unsafe { key(handle) }?;
     CONVERTERS
         .read()
         .iter()
@@ -383,7 +383,7 @@ pub unsafe fn device_created(
     match unsafe { Converter::new(Arc::clone(own), fdm) } {
         Ok(c) => {
             // SAFETY: as the caller promised.
-            if let Some(k) = unsafe { registry::key(handle) } {
+            if let Some(k) = unsafe { key(handle) } {
                 let mut v = CONVERTERS.write();
                 v.retain(|(key, _)| *key != k);
                 v.push((k, Arc::new(c)));
@@ -404,7 +404,7 @@ pub unsafe fn device_created(
 /// `handle` must be live and idle.
 pub unsafe fn device_destroyed(handle: vk::Device) {
     // SAFETY: as the caller promised.
-    let Some(k) = (unsafe { registry::key(handle) }) else {
+    let Some(k) = (unsafe { key(handle) }) else {
         return;
     };
     // Command buffers go with their device (and pools) without vkFreeCommandBuffers; their slots
@@ -872,7 +872,7 @@ pub unsafe fn framebuffer_changed(dev: &Device, fb: vk::Framebuffer, view: Optio
         return;
     }
     // SAFETY: as the caller promised.
-    let Some(k) = (unsafe { registry::key(dev.handle) }) else {
+    let Some(k) = (unsafe { key(dev.handle) }) else {
         return;
     };
     let mut fbs = FRAMEBUFFERS.write();
@@ -984,7 +984,7 @@ pub unsafe fn before_render_pass(
     begin: *const vk::RenderPassBeginInfo<'_>,
 ) {
     // SAFETY: as the caller promised.
-    let (Some(k), Some(b)) = (unsafe { registry::key(cb) }, unsafe { begin.as_ref() }) else {
+    let (Some(k), Some(b)) = (unsafe { key(cb) }, unsafe { begin.as_ref() }) else {
         return;
     };
     let (word, bit) = filter_slot(b.render_pass.as_raw());
@@ -1776,8 +1776,7 @@ pub unsafe extern "system" fn allocate_command_buffers(
             // SAFETY: the next layer's function, with the caller's arguments.
             let r = unsafe { next(device, info, out) };
             // SAFETY: as the caller promised.
-            let (Some(k), Some(i)) = (unsafe { registry::key(device) }, unsafe { info.as_ref() })
-            else {
+            let (Some(k), Some(i)) = (unsafe { key(device) }, unsafe { info.as_ref() }) else {
                 return r;
             };
             if r == vk::Result::SUCCESS && !out.is_null() {
@@ -1812,7 +1811,7 @@ pub unsafe extern "system" fn destroy_command_pool(
 ) {
     guard("vkDestroyCommandPool", (), || {
         // SAFETY: as the caller promised.
-        let key = unsafe { registry::key(device) };
+        let key = unsafe { key(device) };
         if let (Some(k), false) = (key, pool == vk::CommandPool::null()) {
             pool_destroyed(k, pool.as_raw());
         }
@@ -1857,7 +1856,7 @@ pub unsafe extern "system" fn begin_command_buffer(
                 // Allocated before the layer saw it (not expected on an emulating device): a
                 // primary's record without a pool, dropped with the command buffer or its device.
                 // SAFETY: as the caller promised.
-                let device = unsafe { registry::key(cb) }.unwrap_or(0);
+                let device = unsafe { key(cb) }.unwrap_or(0);
                 remember(cb, device, 0, false);
             }
             // SAFETY: the next layer's function, with the caller's arguments.
@@ -1899,7 +1898,7 @@ pub unsafe extern "system" fn free_command_buffers(
 /// `device` is a device the loader dispatched.
 pub unsafe fn framebuffer_destroyed(device: vk::Device, fb: vk::Framebuffer) {
     // SAFETY: as the caller promised.
-    if let Some(k) = unsafe { registry::key(device) } {
+    if let Some(k) = unsafe { key(device) } {
         let mut fbs = FRAMEBUFFERS.write();
         if fbs.get(&fb.as_raw()).is_some_and(|(key, _)| *key == k) {
             fbs.remove(&fb.as_raw());

@@ -21,13 +21,13 @@ use std::ffi::{c_char, CStr};
 use ash::vk;
 
 use crate::bridge::FdmEmulation;
-use crate::vk::chain::{self, ChainCopy};
-use crate::vk::dispatch::DeviceNext;
+use crate::vk::base::chain::{self, ChainCopy};
+use crate::vk::base::ffi::{guard, key, name, raw};
+use crate::vk::base::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
+use crate::vk::base::next::DeviceNext;
 use crate::vk::image;
-use crate::vk::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
-use crate::vk::loader::{guard, name};
 use crate::vk::physical::{self, needs_translation, translate_image};
-use crate::vk::registry::{self, raw, Decision, Instance};
+use crate::vk::registry::{self, Decision, Instance};
 
 /// The loader's `VK_LAYER_LINK_INFO` struct in a device create info.
 ///
@@ -120,7 +120,7 @@ fn cannot_strip(e: chain::ChainError) -> String {
 /// density-map extension name and every density-map feature struct are left out of what reaches
 /// the driver, which has neither (a copy of the name list and of the chain up to the last such
 /// struct; the application's create info is never written). Every struct that can extend a
-/// device create info up to Vulkan 1.4 can be copied ([`crate::vk::structs`]); where one of a type
+/// device create info up to Vulkan 1.4 can be copied ([`crate::vk::base::structs`]); where one of a type
 /// no registry the layer knows sits before a density-map struct, the device is refused
 /// ([`Plan::Refused`]).
 ///
@@ -567,7 +567,7 @@ unsafe fn create_device_impl(
             }
         });
         // The device was just created, so its handle is live for `registry::key`.
-        if let Some(k) = registry::key(handle).filter(|&k| registry::has_key(k)) {
+        if let Some(k) = key(handle).filter(|&k| registry::has_key(k)) {
             tracing::warn!(
                 device = raw(handle),
                 "a new device has the dispatch key of one that was never destroyed (its instance \

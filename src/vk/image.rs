@@ -38,11 +38,11 @@ use crate::bridge::{self, FdmEmulation, Shadow};
 use std::sync::Arc;
 
 use crate::common::lock::{Mutex, Rank};
-use crate::vk::chain;
-use crate::vk::link::LayerDeviceCreateInfo;
-use crate::vk::loader::guard;
+use crate::vk::base::chain;
+use crate::vk::base::ffi::{guard, key, raw, Key};
+use crate::vk::base::link::LayerDeviceCreateInfo;
 use crate::vk::pipeline;
-use crate::vk::registry::{self, raw, Device, Instance, Key, ShadowImage, ShadowView};
+use crate::vk::registry::{self, Device, Instance, ShadowImage, ShadowView};
 use crate::vk::submit::Clears;
 
 /// `PFN_vkSetDeviceLoaderData`.
@@ -380,7 +380,7 @@ pub fn set_own(k: Key, own: Option<Arc<Own>>) {
 /// `handle` must be NULL or a live dispatchable handle made by the loader.
 pub unsafe fn own_of(handle: impl vk::Handle) -> Option<Arc<Own>> {
     // SAFETY: as the caller promised.
-    let k = unsafe { registry::key(handle) }?;
+    let k = unsafe { key(handle) }?;
     OWNS.read()
         .iter()
         .find(|(key, _)| *key == k)

@@ -3,39 +3,17 @@
 //! <https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>.
 
 use std::ffi::{c_char, CStr};
-use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use ash::vk;
 
-use crate::vk::dispatch::{self, InstanceNext};
-use crate::vk::link::{self, LayerInstanceCreateInfo, LayerInstanceLink, NegotiateLayerInterface};
-use crate::vk::{chain, registry};
-
-/// Runs an entry point's body so that a panic never unwinds into the application: it becomes
-/// `fail` and one error line naming the command.
-pub fn guard<R>(function: &'static str, fail: R, body: impl FnOnce() -> R) -> R {
-    match catch_unwind(AssertUnwindSafe(body)) {
-        Ok(r) => r,
-        Err(payload) => {
-            let message = payload
-                .downcast_ref::<&str>()
-                .map(|s| (*s).to_owned())
-                .or_else(|| payload.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "non-string panic payload".to_owned());
-            tracing::error!(function, %message, "panic inside the Vulkan layer");
-            fail
-        }
-    }
-}
-
-/// A NUL-terminated name from the caller.
-///
-/// # Safety
-/// `p` must be NULL or NUL-terminated.
-pub unsafe fn name<'a>(p: *const c_char) -> Option<&'a CStr> {
-    // SAFETY: as the caller promised.
-    (!p.is_null()).then(|| unsafe { CStr::from_ptr(p) })
-}
+use crate::vk::base::chain;
+use crate::vk::base::ffi::{extension_enabled, guard, name, raw};
+use crate::vk::base::link::{
+    self, LayerInstanceCreateInfo, LayerInstanceLink, NegotiateLayerInterface,
+};
+use crate::vk::base::next::InstanceNext;
+use crate::vk::dispatch;
+use crate::vk::registry;
 
 /// The loader's entry point into the layer: agrees on interface version 2 and hands over the
 /// layer's `vkGetInstanceProcAddr` and `vkGetDeviceProcAddr`
@@ -315,7 +293,7 @@ unsafe extern "system" fn create_instance(
                 ));
                 tracing::info!(
                     target: fovea_abi::log_target::VK_INSTANCE,
-                    instance = registry::raw(handle),
+                    instance = raw(handle),
                     api_version = format_args!(
                         "{}.{}",
                         vk::api_version_major(api_version),
@@ -355,21 +333,6 @@ unsafe fn instance_link(ci: &vk::InstanceCreateInfo<'_>) -> Option<*mut LayerIns
     None
 }
 
-/// Whether `want` is among `count` extension names.
-///
-/// # Safety
-/// `names` must be NULL or hold `count` NUL-terminated strings.
-pub unsafe fn extension_enabled(names: *const *const c_char, count: u32, want: &CStr) -> bool {
-    if names.is_null() {
-        return false;
-    }
-    // SAFETY: as the caller promised.
-    unsafe { std::slice::from_raw_parts(names, count as usize) }
-        .iter()
-        // SAFETY: as the caller promised.
-        .any(|&n| unsafe { name(n) } == Some(want))
-}
-
 /// `vkDestroyInstance`: forgets the instance and destroys it below.
 ///
 /// # Safety
@@ -388,69 +351,4 @@ pub unsafe extern "system" fn destroy_instance(
             unsafe { destroy(instance, alloc) };
         }
     })
-}
-
-/// The Vulkan two-call idiom: NULL `out` asks for the count; otherwise as many as fit are written
-/// and `VK_INCOMPLETE` says some were left out
-/// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-returncodes>).
-///
-/// # Safety
-/// `count` must be valid for reads and writes; `out` NULL or valid for `*count` writes.
-pub unsafe fn two_call<T: Copy>(items: &[T], count: *mut u32, out: *mut T) -> vk::Result {
-    if count.is_null() {
-        return vk::Result::ERROR_INITIALIZATION_FAILED;
-    }
-    // SAFETY: as the caller promised.
-    unsafe {
-        if out.is_null() {
-            *count = items.len() as u32;
-            return vk::Result::SUCCESS;
-        }
-        let n = (*count as usize).min(items.len());
-        std::ptr::copy_nonoverlapping(items.as_ptr(), out, n);
-        *count = n as u32;
-        if n < items.len() {
-            vk::Result::INCOMPLETE
-        } else {
-            vk::Result::SUCCESS
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn two_call_idiom() {
-        let items = [1u32, 2, 3];
-        let mut count = 0;
-        let mut out = [0u32; 3];
-        // SAFETY: valid pointers on the stack.
-        unsafe {
-            assert_eq!(
-                two_call(&items, &mut count, std::ptr::null_mut()),
-                vk::Result::SUCCESS
-            );
-            assert_eq!(count, 3);
-            count = 2;
-            assert_eq!(
-                two_call(&items, &mut count, out.as_mut_ptr()),
-                vk::Result::INCOMPLETE
-            );
-            assert_eq!((count, out), (2, [1, 2, 0]));
-            count = 3;
-            assert_eq!(
-                two_call(&items, &mut count, out.as_mut_ptr()),
-                vk::Result::SUCCESS
-            );
-        }
-        assert_eq!(out, items);
-    }
-
-    #[test]
-    fn guard_turns_panics_into_the_failure_value() {
-        assert_eq!(guard("t", 1, || panic!("boom")), 1);
-        assert_eq!(guard("t", 1, || 2), 2);
-    }
 }

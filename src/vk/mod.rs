@@ -63,17 +63,15 @@ macro_rules! hook_and_khr_alias {
 }
 
 mod barrier;
-mod chain;
+mod base;
 mod convert;
 mod device;
 mod dispatch;
 mod image;
 mod inject;
-mod link;
 mod loader;
 mod pass;
 mod physical;
 mod pipeline;
 mod registry;
-mod structs;
 mod submit;

@@ -46,21 +46,10 @@ use std::ffi::c_void;
 use ash::vk;
 use ash::vk::Handle as _;
 
-use crate::vk::chain::{self, ChainCopy, ChainError};
+use crate::vk::base::chain::{self, ChainCopy, ChainError};
+use crate::vk::base::ffi::{guard, raw, slice};
 use crate::vk::image::{SHADOW_FORMAT, SHADOW_LAYOUT, SHADOW_USAGE};
-use crate::vk::loader::guard;
-use crate::vk::registry::{self, raw, Device};
-
-/// # Safety
-/// `p` must be NULL or valid for `n` elements that outlive the slice.
-unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
-    if p.is_null() || n == 0 {
-        &[]
-    } else {
-        // SAFETY: as the caller promised.
-        unsafe { std::slice::from_raw_parts(p, n as usize) }
-    }
-}
+use crate::vk::registry::{self, Device};
 
 /// A version-2 render pass the layer builds, owning every array its pointers reach (apart from
 /// what it shares with the application's create info: preserve lists and `pNext` chains).

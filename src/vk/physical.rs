@@ -8,9 +8,9 @@ use std::sync::Arc;
 use ash::vk;
 
 use crate::bridge::FdmEmulation;
-use crate::vk::loader::{guard, name, two_call};
+use crate::vk::base::chain;
+use crate::vk::base::ffi::{guard, name, raw, two_call};
 use crate::vk::registry::{self, Decision, Instance};
-use crate::vk::{chain, registry::raw};
 
 /// `VK_EXT_fragment_density_map` as the layer offers it.
 pub fn fdm_extension() -> vk::ExtensionProperties {

@@ -29,8 +29,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use ash::vk;
 
-use crate::vk::chain::{self, ChainCopy};
-use crate::vk::loader::guard;
+use crate::vk::base::chain::{self, ChainCopy};
+use crate::vk::base::ffi::guard;
 use crate::vk::registry;
 
 const FDM_FLAG: vk::PipelineCreateFlags =

@@ -16,20 +16,8 @@ use ash::vk::Handle as _;
 
 use crate::bridge::FdmEmulation;
 use crate::common::lock::{MapLock, Mutex, Rank};
-use crate::vk::dispatch::{DeviceNext, InstanceNext};
-
-/// The loader's dispatch pointer of a dispatchable handle.
-pub type Key = usize;
-
-/// The key of a dispatchable handle; `None` for a null handle.
-///
-/// # Safety
-/// `handle` must be null or a live dispatchable handle made by the loader.
-pub unsafe fn key(handle: impl vk::Handle) -> Option<Key> {
-    let raw = handle.as_raw() as usize;
-    // SAFETY: a live dispatchable handle points at an object starting with the dispatch pointer.
-    (raw != 0).then(|| unsafe { *(raw as *const usize) })
-}
+use crate::vk::base::ffi::{key, Key};
+use crate::vk::base::next::{DeviceNext, InstanceNext};
 
 /// What the layer does for one physical device, decided once from what the driver offers.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -389,11 +377,6 @@ pub unsafe fn remove_device(handle: vk::Device) -> Option<Arc<Device>> {
         crate::bridge::set_device_fdm(handle, None);
     }
     d
-}
-
-/// The raw handle, for log lines.
-pub fn raw(handle: impl vk::Handle) -> u64 {
-    handle.as_raw()
 }
 
 /// What a command-recording hook needs of its device: whether it emulates density maps, and the

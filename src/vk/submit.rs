@@ -50,9 +50,9 @@ use ash::vk;
 use ash::vk::Handle as _;
 
 use crate::vk::barrier;
+use crate::vk::base::ffi::{guard, raw, slice};
 use crate::vk::image::{Own, SHADOW_LAYOUT};
-use crate::vk::loader::guard;
-use crate::vk::registry::{self, raw, ShadowImage};
+use crate::vk::registry::{self, ShadowImage};
 
 /// Pending clears in the whole process: what the submit hooks' fast path reads.
 static PENDING: AtomicUsize = AtomicUsize::new(0);
@@ -795,19 +795,6 @@ hook_and_khr_alias! {
         submits: *const vk::SubmitInfo2<'_>,
         fence: vk::Fence,
     ) -> vk::Result
-}
-
-/// The application's array, or an empty one for NULL or a zero count.
-///
-/// # Safety
-/// `p` must be NULL or valid for `n` reads.
-unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
-    if p.is_null() || n == 0 {
-        &[]
-    } else {
-        // SAFETY: as the caller promised.
-        unsafe { std::slice::from_raw_parts(p, n as usize) }
-    }
 }
 
 #[cfg(test)]
