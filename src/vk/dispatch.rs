@@ -8,7 +8,9 @@ use ash::vk;
 
 use crate::vk::base::commands::{command_list, When};
 use crate::vk::base::next::{DeviceNext, InstanceNext};
-use crate::vk::{barrier, convert, device, image, loader, pass, physical, pipeline, submit};
+use crate::vk::hooks::{
+    barrier, device, image, instance, pass, physical, pipeline, record, submit,
+};
 
 /// An intercepted instance or physical-device command.
 pub struct InstanceHook {

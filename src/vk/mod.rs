@@ -62,16 +62,14 @@ macro_rules! hook_and_khr_alias {
     };
 }
 
-mod barrier;
 mod base;
 mod convert;
-mod device;
+mod decide;
 mod dispatch;
-mod image;
-mod inject;
+mod emulation;
+mod hooks;
+mod injection;
 mod loader;
-mod pass;
-mod physical;
-mod pipeline;
+mod own;
 mod registry;
-mod submit;
+mod translate;

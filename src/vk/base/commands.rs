@@ -45,7 +45,7 @@ macro_rules! command_list {
     ($then:ident) => {
         $then! {
             instance {
-                c"vkDestroyInstance" => destroy_instance: PFN_vkDestroyInstance = loader::destroy_instance;
+                c"vkDestroyInstance" => destroy_instance: PFN_vkDestroyInstance = instance::destroy_instance;
                 c"vkCreateDevice" => create_device: PFN_vkCreateDevice = device::create_device;
                 c"vkEnumerateDeviceExtensionProperties" => enumerate_device_extension_properties:
                     PFN_vkEnumerateDeviceExtensionProperties = physical::enumerate_device_extension_properties;
@@ -72,7 +72,7 @@ macro_rules! command_list {
             }
             device {
                 c"vkDestroyDevice" => destroy_device: PFN_vkDestroyDevice = device::destroy_device, When::Always;
-                c"vkCreateImage" => create_image: PFN_vkCreateImage = device::create_image, When::Injected;
+                c"vkCreateImage" => create_image: PFN_vkCreateImage = image::create_image, When::Injected;
                 c"vkCreateGraphicsPipelines" => create_graphics_pipelines: PFN_vkCreateGraphicsPipelines =
                     pipeline::create_graphics_pipelines, When::Injected;
                 c"vkCreateShadersEXT" => create_shaders_ext: PFN_vkCreateShadersEXT =
@@ -161,31 +161,31 @@ macro_rules! command_list {
                 // Density maps the application writes are converted at pass begin; the application's
                 // compute bindings are recorded so that they can be given back after the conversion.
                 c"vkBeginCommandBuffer" => begin_command_buffer: PFN_vkBeginCommandBuffer =
-                    convert::begin_command_buffer, When::Emulated;
+                    record::begin_command_buffer, When::Emulated;
                 c"vkAllocateCommandBuffers" => allocate_command_buffers: PFN_vkAllocateCommandBuffers =
-                    convert::allocate_command_buffers, When::Emulated;
+                    record::allocate_command_buffers, When::Emulated;
                 c"vkFreeCommandBuffers" => free_command_buffers: PFN_vkFreeCommandBuffers =
-                    convert::free_command_buffers, When::Emulated;
+                    record::free_command_buffers, When::Emulated;
                 c"vkDestroyCommandPool" => destroy_command_pool: PFN_vkDestroyCommandPool =
-                    convert::destroy_command_pool, When::Emulated;
+                    record::destroy_command_pool, When::Emulated;
                 // Conversions run outside the application's conditional rendering.
                 c"vkCmdBeginConditionalRenderingEXT" => cmd_begin_conditional_rendering_ext:
-                    PFN_vkCmdBeginConditionalRenderingEXT = convert::cmd_begin_conditional_rendering,
+                    PFN_vkCmdBeginConditionalRenderingEXT = record::cmd_begin_conditional_rendering,
                     When::Emulated;
                 c"vkCmdEndConditionalRenderingEXT" => cmd_end_conditional_rendering_ext:
-                    PFN_vkCmdEndConditionalRenderingEXT = convert::cmd_end_conditional_rendering,
+                    PFN_vkCmdEndConditionalRenderingEXT = record::cmd_end_conditional_rendering,
                     When::Emulated;
                 c"vkCmdBindPipeline" => cmd_bind_pipeline: PFN_vkCmdBindPipeline =
-                    convert::cmd_bind_pipeline, When::Emulated;
+                    record::cmd_bind_pipeline, When::Emulated;
                 c"vkCmdBindDescriptorSets" => cmd_bind_descriptor_sets: PFN_vkCmdBindDescriptorSets =
-                    convert::cmd_bind_descriptor_sets, When::Emulated;
+                    record::cmd_bind_descriptor_sets, When::Emulated;
                 c"vkCmdPushConstants" => cmd_push_constants: PFN_vkCmdPushConstants =
-                    convert::cmd_push_constants, When::Emulated;
+                    record::cmd_push_constants, When::Emulated;
                 c"vkCmdPushDescriptorSetKHR" => cmd_push_descriptor_set_khr: PFN_vkCmdPushDescriptorSetKHR =
-                    convert::cmd_push_descriptor_set_khr, When::Emulated;
+                    record::cmd_push_descriptor_set_khr, When::Emulated;
                 c"vkCmdPushDescriptorSetWithTemplateKHR" => cmd_push_descriptor_set_with_template_khr:
                     PFN_vkCmdPushDescriptorSetWithTemplateKHR =
-                    convert::cmd_push_descriptor_set_with_template_khr, When::Emulated;
+                    record::cmd_push_descriptor_set_with_template_khr, When::Emulated;
             }
         }
     };

@@ -2,7 +2,9 @@
 //! idiom, and a dispatchable handle's loader key.
 
 use std::ffi::{c_char, CStr};
+use std::hash::Hasher;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use ash::vk;
 
@@ -102,6 +104,31 @@ pub unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
     } else {
         // SAFETY: as the caller promised.
         unsafe { std::slice::from_raw_parts(p, n as usize) }
+    }
+}
+
+/// Logs `message` the first time `flag` is seen unset.
+pub fn once(flag: &AtomicBool, message: &str) {
+    if !flag.swap(true, Ordering::Relaxed) {
+        tracing::warn!("{message}");
+    }
+}
+
+/// A cheap hasher for dispatchable handles (heap addresses): one multiply.
+#[derive(Default)]
+pub struct HandleHasher(u64);
+
+impl Hasher for HandleHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(8) ^ u64::from(b)).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        }
+    }
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (v ^ (v >> 29)).wrapping_mul(0x9e37_79b9_7f4a_7c15);
     }
 }
 

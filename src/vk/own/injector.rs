@@ -34,7 +34,8 @@ use ash::vk::Handle as _;
 
 use crate::bridge::inject::Injection;
 use crate::bridge::FdmEmulation;
-use crate::vk::image::{Own, SHADOW_FORMAT};
+use crate::vk::own::calls::Own;
+use crate::vk::translate::formats::SHADOW_FORMAT;
 use fovea_model::inject::{Pass, Views};
 
 /// What the layer knows of a colour image: its extent and array layers.
