@@ -25,7 +25,7 @@
 //! persist across passes (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#pipelines-bindpoint-commands>,
 //! <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#descriptorsets-compatibility>).
 //! So on emulating devices the layer records per command buffer what the application bound at the
-//! compute bind point and every push-constant update ([`Bound`], fixed size, made at
+//! compute bind point and every push-constant update ([`Bound`](crate::vk::own::bindings::Bound), fixed size, made at
 //! `vkBeginCommandBuffer`), and binds it all again after the conversion. Where it cannot (push
 //! descriptors, more sets or dynamic offsets than a record holds), that pass's map is not converted
 //! and renders at full rate, and the log says so once. Devices with commands that bind compute
@@ -547,7 +547,7 @@ pub unsafe fn framebuffer_destroyed(device: vk::Device, fb: vk::Framebuffer) {
 /// buffer at one value is still good for a later pass of the same command buffer that reads the
 /// same map at the same value: nothing the application recorded between them made the map change
 /// visible to the density-map read, so that pass needs no conversion and no barrier
-/// ([`Bound::converted`]). Within one command buffer the order of execution is the order of
+/// ([`Bound::converted`](crate::vk::own::bindings::Bound::converted)). Within one command buffer the order of execution is the order of
 /// recording, so this holds however command buffers are submitted.
 static MAP_EPOCH: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
@@ -557,7 +557,7 @@ pub fn map_may_have_changed() {
 }
 
 /// The barrier translation's look-up of a shadow for an image the application moves into the
-/// density-map layout (`crate::vk::barrier`). Whether a map may be read is decided by the layout
+/// density-map layout (`crate::vk::translate::sync`). Whether a map may be read is decided by the layout
 /// each pass that reads it names, at that pass's recording ([`before_render_pass`],
 /// [`before_rendering`]), not by which barriers were recorded before: command buffers may be
 /// submitted in another order than they were recorded.
@@ -567,7 +567,7 @@ pub fn shadow_of_transitioned(image: vk::Image) -> Option<crate::bridge::Shadow>
 }
 
 /// Whether a density map in `layout` (as the application names it) is readable as `GENERAL`:
-/// the density layout becomes `GENERAL` on the application's image (`crate::vk::barrier`).
+/// the density layout becomes `GENERAL` on the application's image (`crate::vk::translate::sync`).
 fn readable(layout: vk::ImageLayout) -> bool {
     layout == vk::ImageLayout::GENERAL
         || layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT

@@ -6,10 +6,10 @@
 //! is an integer image (`R8_UINT`) with the `FRAGMENT_SHADING_RATE_ATTACHMENT` usage
 //! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkFragmentShadingRateAttachmentInfoKHR.html>,
 //! docs/vulkan-fdm-on-fsr.md#mapping, #shadows). The application keeps its own image, which the driver gets
-//! without the density usage ([`crate::vk::device::create_image`]); beside it the layer makes a
+//! without the density usage ([`crate::vk::hooks::image::create_image`]); beside it the layer makes a
 //! shadow of the same extent, 2D, one sample, optimal tiling, in device-local memory it owns, and
 //! destroys it with the image. Render passes, framebuffers and dynamic rendering name the shadow
-//! ([`crate::vk::pass`]); the bridge ([`crate::bridge::shadow_of`]) tells fovea's own density
+//! ([`crate::vk::hooks::pass`]); the bridge ([`crate::bridge::shadow_of`]) tells fovea's own density
 //! images where to upload their rates.
 //!
 //! Layers: one per application layer where the driver has `layeredShadingRateAttachments`;
@@ -19,7 +19,7 @@
 //! Content: rate code 0 (1×1, full rate) before first use, so a density map nobody converts renders
 //! correctly, at full rate; the shadow then lives in `FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR`.
 //! The clear never takes a queue on its own: it waits, pending, for the application's next submit
-//! on one of its graphics queues and runs in front of it ([`crate::vk::submit`]), since Vulkan makes
+//! on one of its graphics queues and runs in front of it ([`crate::vk::own::calls::Clears`]), since Vulkan makes
 //! queue use externally synchronised by the application
 //! (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkQueueSubmit.html>). Command
 //! buffers the layer allocates get the loader's dispatch pointer through `vkSetDeviceLoaderData`
@@ -28,7 +28,7 @@
 //!
 //! Fail open: where a shadow cannot be made, the image (or view) is the application's alone, the
 //! passes that would have used it run at full rate (a framebuffer gets a full-rate stand-in,
-//! [`Own::full_rate_view`]), and one log line says so.
+//! [`crate::vk::own::calls::Own::full_rate_view`]), and one log line says so.
 
 use std::ffi::c_void;
 
@@ -48,9 +48,9 @@ use crate::vk::registry::Device;
 /// Fail open: a shadow that cannot be made (the driver is out of memory) leaves the application's
 /// image as the driver made it, without a shadow; its views get none either, dynamic rendering with
 /// it goes down without a shading-rate attachment, and a framebuffer with it gets the device's
-/// full-rate stand-in ([`Own::full_rate_view`]), so its passes render at full rate. One log line
+/// full-rate stand-in ([`crate::vk::own::calls::Own::full_rate_view`]), so its passes render at full rate. One log line
 /// says why. The shadow's clear is left pending for the application's next submit
-/// ([`crate::vk::submit`]), except for fovea's own density images, whose uploads write the whole
+/// ([`crate::vk::own::calls::Clears`]), except for fovea's own density images, whose uploads write the whole
 /// shadow before first use.
 ///
 /// # Safety

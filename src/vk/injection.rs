@@ -21,7 +21,7 @@ use crate::vk::translate::render_pass::{add_shading_rate, rate_store_op, Pass2};
 /// open: its framebuffers are then left alone).
 ///
 /// # Safety
-/// As [`create_rewritten`].
+/// As `create_rewritten` in [`crate::vk::hooks::pass`].
 #[allow(clippy::too_many_arguments)]
 pub unsafe fn create_injected(
     dev: &Device,

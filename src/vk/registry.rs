@@ -469,7 +469,7 @@ pub fn pool_created(pool: u64, family: u32) {
 
 /// Each emulating device's [`Own`] by the loader's dispatch key, for the submit hooks. A leaf lock
 /// outside [`crate::common::lock::Rank`]'s order, like the recording table
-/// ([`registry::recording`]): held for a scan and an `Arc` clone only, so it may be taken under
+/// ([`recording`]): held for a scan and an `Arc` clone only, so it may be taken under
 /// fovea's own upload locks, whose submits pass through the layer.
 static OWNS: parking_lot::RwLock<Vec<(Key, Arc<Own>)>> = parking_lot::RwLock::new(Vec::new());
 
@@ -498,7 +498,7 @@ pub unsafe fn own_of(handle: impl vk::Handle) -> Option<Arc<Own>> {
 // ---------------------------------------------------------------------------------------------
 // Each converting device's converter, and every command buffer's record.
 
-/// Each converting device's [`Converter`], by dispatch key; a leaf lock like [`crate::vk::image`]'s.
+/// Each converting device's [`Converter`], by dispatch key; a leaf lock like [`OWNS`].
 pub static CONVERTERS: parking_lot::RwLock<Vec<(Key, Arc<Converter>)>> =
     parking_lot::RwLock::new(Vec::new());
 

@@ -1,33 +1,8 @@
-//! Shadows: the layer-owned shading-rate images and views that stand in for an application's
-//! density-map images and views on an emulating device.
-//!
-//! A density map is `R8G8_UNORM` with the `FRAGMENT_DENSITY_MAP` usage; a shading-rate attachment
-//! is an integer image (`R8_UINT`) with the `FRAGMENT_SHADING_RATE_ATTACHMENT` usage
-//! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkFragmentShadingRateAttachmentInfoKHR.html>,
-//! docs/vulkan-fdm-on-fsr.md#mapping, #shadows). The application keeps its own image, which the driver gets
-//! without the density usage ([`crate::vk::device::create_image`]); beside it the layer makes a
-//! shadow of the same extent, 2D, one sample, optimal tiling, in device-local memory it owns, and
-//! destroys it with the image. Render passes, framebuffers and dynamic rendering name the shadow
-//! ([`crate::vk::pass`]); the bridge ([`crate::bridge::shadow_of`]) tells fovea's own density
-//! images where to upload their rates.
-//!
-//! Layers: one per application layer where the driver has `layeredShadingRateAttachments`;
-//! otherwise one, which both eyes share, so whoever fills it writes per texel the finer rate of all
-//! the application's layers (docs/vulkan-fdm-on-fsr.md#multiview).
-//!
-//! Content: rate code 0 (1×1, full rate) before first use, so a density map nobody converts renders
-//! correctly, at full rate; the shadow then lives in `FRAGMENT_SHADING_RATE_ATTACHMENT_OPTIMAL_KHR`.
-//! The clear never takes a queue on its own: it waits, pending, for the application's next submit
-//! on one of its graphics queues and runs in front of it ([`crate::vk::submit`]), since Vulkan makes
-//! queue use externally synchronised by the application
-//! (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkQueueSubmit.html>). Command
-//! buffers the layer allocates get the loader's dispatch pointer through `vkSetDeviceLoaderData`
-//! (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
-//! "Creating New Dispatchable Objects").
-//!
-//! Fail open: where a shadow cannot be made, the image (or view) is the application's alone, the
-//! passes that would have used it run at full rate (a framebuffer gets a full-rate stand-in,
-//! [`Own::full_rate_view`]), and one log line says so.
+//! Images and views, created and destroyed side by side: on an injecting device colour images and
+//! views are noted for finding eye passes ([`crate::vk::own::injector`]); on an emulating device a
+//! density map reaches the driver without the density usage and gets a shading-rate shadow
+//! ([`crate::vk::emulation`]) that its views and host-side layout transitions follow, and a map the
+//! application writes is handed to [`crate::vk::convert`].
 
 use ash::vk;
 use ash::vk::Handle as _;

@@ -107,7 +107,7 @@ unsafe fn create_rewritten(
 }
 
 /// `vkCreateRenderPass`: with the density-map struct, upgraded to `vkCreateRenderPass2` and
-/// rewritten; on an injecting device every pass is (see [`create_injected`]); otherwise untouched.
+/// rewritten; on an injecting device every pass is (see [`injection::create_injected`]); otherwise untouched.
 ///
 /// # Safety
 /// The caller's arguments, valid as the command requires.

@@ -56,8 +56,8 @@ pub struct Bound {
     pub conditional: Option<(vk::Buffer, u64, vk::ConditionalRenderingFlagsEXT)>,
     /// A secondary command buffer that inherits conditional rendering: it cannot suspend it.
     pub inherited_conditional: bool,
-    /// Maps this recording converted, with the [`MAP_EPOCH`] they were converted at (image 0:
-    /// none).
+    /// Maps this recording converted, with the `MAP_EPOCH` of [`crate::vk::convert`] they were
+    /// converted at (image 0: none).
     pub converted: [(u64, u64); 4],
 }
 

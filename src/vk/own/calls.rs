@@ -42,7 +42,6 @@
 //! execution dependency on everything earlier on that queue (a pass that still reads the image's
 //! old content), ending in the shading-rate layout. The staging buffer is freed with the command
 //! buffer, once its fence has signalled.
-//!
 
 use std::ffi::c_void;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -70,7 +69,7 @@ pub struct Own {
     pub fns: ash::Device,
     pub memory: vk::PhysicalDeviceMemoryProperties,
     pub set_loader_data: SetDeviceLoaderData,
-    /// The shadows' clears, run ahead of the application's submits ([`crate::vk::submit`]).
+    /// The shadows' clears, run ahead of the application's submits ([`Clears`]).
     pub clears: Clears,
     /// Full-rate stand-ins for density views without a shadow ([`Own::full_rate_view`]): one
     /// layer each, kept until the device is destroyed.

@@ -24,7 +24,7 @@ pub struct MapObjects {
 
 /// What one command buffer converts one map with: a code buffer the dispatch writes and the copy
 /// reads, and a descriptor set naming it and the map's view. Owned by the command buffer's record
-/// ([`CbRecord::slots`]), so command buffers that may run at once (on two queues, with
+/// ([`CbRecord::slots`](crate::vk::registry::CbRecord::slots)), so command buffers that may run at once (on two queues, with
 /// `SIMULTANEOUS_USE`, primaries executing secondaries that convert) share no buffer the
 /// conversion writes; made at a command buffer's first conversion of the map and kept across its
 /// recordings, so recording allocates nothing in steady state; destroyed when the command buffer

@@ -6,7 +6,7 @@ use ash::vk;
 use crate::vk::translate::formats::SHADOW_FORMAT;
 
 /// A layer-owned shading-rate image standing in for an application's density-map image
-/// ([`crate::vk::image`]).
+/// ([`crate::vk::emulation`]).
 #[derive(Clone, Copy, Debug)]
 pub struct ShadowImage {
     pub image: vk::Image,

@@ -15,10 +15,10 @@
 //!   every pipeline gets the same state (every render pass there has a shading-rate attachment,
 //!   and whether a dynamic rendering gets one is decided only when it begins), and pipelines for
 //!   dynamic rendering the shading-rate flag. An application with shading-rate attachments of its
-//!   own never has an injecting device ([`crate::vk::device`]); one that sets rates per pipeline
+//!   own never has an injecting device ([`crate::vk::hooks::device`]); one that sets rates per pipeline
 //!   or per draw without them (vkd3d-proton) may, and its own state keeps its rate with
 //!   `combinerOps[1]` rewritten on a copy ([`attachment_combiner`]), as do its
-//!   `vkCmdSetFragmentShadingRateKHR` calls ([`cmd_set_fragment_shading_rate`]).
+//!   `vkCmdSetFragmentShadingRateKHR` calls ([`cmd_set_fragment_shading_rate`](crate::vk::hooks::pipeline::cmd_set_fragment_shading_rate)).
 //! - Shader modules using `FragSizeEXT` or `FragInvocationCountEXT` (capability
 //!   `FragmentDensityEXT`) cannot be emulated (docs/vulkan-fdm-on-fsr.md#shader-built-ins): said
 //!   once, passed through.

@@ -3,7 +3,8 @@
 //!
 //! - `vkCreateRenderPass` with a
 //!   [`VkRenderPassFragmentDensityMapCreateInfoEXT`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderPassFragmentDensityMapCreateInfoEXT.html)
-//!   is upgraded to `vkCreateRenderPass2` ([`v1_to_v2`]): shading-rate attachments exist only on
+//!   is upgraded to `vkCreateRenderPass2` ([`crate::vk::translate::render_pass_v1`]): shading-rate
+//!   attachments exist only on
 //!   [`VkSubpassDescription2`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkSubpassDescription2.html).
 //!   `VkRenderPassMultiviewCreateInfo` folds into the subpasses' view masks, the dependencies' view
 //!   offsets and the correlated masks; `VkRenderPassInputAttachmentAspectCreateInfo` into the input
@@ -145,7 +146,7 @@ impl Pass2 {
 impl Pass2 {
     /// Every density-map layout, stage and access bit of the pass becomes what the driver knows
     /// (docs/vulkan-fdm-on-fsr.md#mapping): layouts of attachments and references the one
-    /// `crate::vk::barrier` gives the application's density images (`GENERAL`), stages and
+    /// `crate::vk::translate::sync` gives the application's density images (`GENERAL`), stages and
     /// accesses of dependencies (and of a `VkMemoryBarrier2` chained to one) the shading-rate
     /// ones. The driver never has the density-map extension enabled, so these are invalid values
     /// for it; a pass that names them without the density-map struct (one that writes a map, or
@@ -236,7 +237,7 @@ impl Pass2 {
     }
 }
 
-/// [`v1_names_density`] for version 2 (dependencies' chained `VkMemoryBarrier2`s included).
+/// [`v1_names_density`](crate::vk::translate::render_pass_v1::v1_names_density) for version 2 (dependencies' chained `VkMemoryBarrier2`s included).
 ///
 /// # Safety
 /// `ci` must be a valid create info.
@@ -393,7 +394,7 @@ pub unsafe fn density_attachment(p_next: *const c_void) -> Option<u32> {
 /// `VkFragmentShadingRateAttachmentInfoKHR` whose reference is not `VK_ATTACHMENT_UNUSED`): such
 /// a pass is the application's to shade, and is created as it came
 /// (docs/injection.md#switching-it-on). `Ok(false)` also where a subpass chains the struct with no
-/// attachment: the injected info then takes its place ([`without_apps_rate_infos`]).
+/// attachment: the injected info then takes its place ([`Pass2::without_apps_rate_infos`]).
 ///
 /// # Safety
 /// `ci` must be a valid create info.
