@@ -54,8 +54,8 @@ use crate::vk::own::convert_shader::{Push, GROUP};
 use crate::vk::own::converter::{Converter, MapEntry, MapObjects, Slot};
 use crate::vk::own::shadows::ShadowImage;
 use crate::vk::registry::{
-    self, bound_of, converter, forget_where, record_of, with_record, Device, CB_GENERATION,
-    CB_RECORDS, CONVERTERS,
+    self, bound_of, converter, forget_command_buffers_where, record_of, with_record, Device,
+    CB_GENERATION, CB_RECORDS, CONVERTERS,
 };
 use crate::vk::translate::formats::SHADOW_LAYOUT;
 
@@ -227,7 +227,7 @@ pub unsafe fn device_destroyed(handle: vk::Device) {
     };
     // Command buffers go with their device (and pools) without vkFreeCommandBuffers; their slots
     // go while the converter is still there.
-    forget_where(|_, r| r.device == k);
+    forget_command_buffers_where(|_, r| r.device == k);
     let c = {
         let mut v = CONVERTERS.write();
         let at = v.iter().position(|(key, _)| *key == k);

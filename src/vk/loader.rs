@@ -1,5 +1,6 @@
 //! The loader interface: `vkNegotiateLoaderLayerInterfaceVersion` (interface version 2),
-//! `vkGetInstanceProcAddr`, `vkGetDeviceProcAddr`, and instance creation and destruction, following
+//! `vkGetInstanceProcAddr` and `vkGetDeviceProcAddr` (instance creation and destruction are
+//! [`crate::vk::hooks::instance`]'s), following
 //! <https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>.
 
 use std::ffi::{c_char, CStr};

@@ -1,4 +1,6 @@
-//! The layer's per-instance and per-device state, keyed by the loader's dispatch pointer.
+//! The layer's per-instance and per-device state, keyed by the loader's dispatch pointer, and every
+//! per-handle index: command pools' and command buffers' queue families, each device's own calls
+//! and converter, and each command buffer's record.
 //!
 //! Every dispatchable handle (instance, physical device, device, queue, command buffer) points at
 //! an object whose first word is the loader's dispatch table pointer; a physical device shares its
@@ -622,7 +624,7 @@ pub fn bound_of(cb: vk::CommandBuffer) -> Option<Bound> {
 
 /// Drops the records `drop` selects, and destroys their conversion objects (their command
 /// buffers are being freed, with their pool or device, and so are not pending).
-pub fn forget_where(drop: impl Fn(u64, &CbRecord) -> bool) {
+pub fn forget_command_buffers_where(drop: impl Fn(u64, &CbRecord) -> bool) {
     let mut gone = Vec::new();
     {
         let mut map = CB_RECORDS.lock();
@@ -642,7 +644,7 @@ pub fn forget_where(drop: impl Fn(u64, &CbRecord) -> bool) {
 }
 
 /// Drops the records of freed command buffers (a look-up each, not a scan of every record).
-pub fn forget(cbs: &[vk::CommandBuffer]) {
+pub fn forget_command_buffers(cbs: &[vk::CommandBuffer]) {
     let mut gone = Vec::new();
     {
         let mut map = CB_RECORDS.lock();
@@ -659,7 +661,7 @@ pub fn forget(cbs: &[vk::CommandBuffer]) {
 }
 
 /// Destroys the conversion objects of dropped records.
-pub fn destroy_records(gone: Vec<Arc<CbRecord>>) {
+fn destroy_records(gone: Vec<Arc<CbRecord>>) {
     for r in gone {
         let slots = std::mem::take(&mut *r.slots.lock());
         if slots.is_empty() {
@@ -674,7 +676,7 @@ pub fn destroy_records(gone: Vec<Arc<CbRecord>>) {
 
 /// Adds (or renews) `cb`'s record. A record the handle still had belonged to a command buffer the
 /// layer did not see go (its handle now names a new one): its objects go.
-pub fn remember(cb: vk::CommandBuffer, device: Key, pool: u64, secondary: bool) {
+pub fn remember_command_buffer(cb: vk::CommandBuffer, device: Key, pool: u64, secondary: bool) {
     let record = Arc::new(CbRecord {
         device,
         pool,
@@ -693,8 +695,8 @@ pub fn remember(cb: vk::CommandBuffer, device: Key, pool: u64, secondary: bool) 
 }
 
 /// The records of a destroyed pool's command buffers go.
-pub fn pool_destroyed(device: Key, pool: u64) {
-    forget_where(|_, r| r.device == device && r.pool == pool);
+pub fn command_pool_destroyed(device: Key, pool: u64) {
+    forget_command_buffers_where(|_, r| r.device == device && r.pool == pool);
 }
 
 #[cfg(test)]
@@ -796,16 +798,16 @@ mod tests {
                 .filter(|r| r.device == device && r.pool == pool)
                 .count()
         };
-        remember(vk::CommandBuffer::from_raw(0xD0_0001), device, 7, false);
+        remember_command_buffer(vk::CommandBuffer::from_raw(0xD0_0001), device, 7, false);
         for cycle in 0..100u64 {
             let pool = 100 + cycle;
             for i in 0..4 {
                 let cb = vk::CommandBuffer::from_raw(0xD1_0000 + cycle * 8 + i);
-                remember(cb, device, pool, i % 2 == 1);
+                remember_command_buffer(cb, device, pool, i % 2 == 1);
                 with_record(cb, |b| b.lost = true);
             }
             assert_eq!(count(pool), 4);
-            pool_destroyed(device, pool);
+            command_pool_destroyed(device, pool);
             assert_eq!(count(pool), 0, "cycle {cycle}");
         }
         let left = CB_RECORDS
@@ -819,6 +821,6 @@ mod tests {
             bound_of(vk::CommandBuffer::from_raw(0xD1_0000)).is_none(),
             "a freed handle finds no record, in this thread's cache either"
         );
-        forget_where(|_, r| r.device == device);
+        forget_command_buffers_where(|_, r| r.device == device);
     }
 }

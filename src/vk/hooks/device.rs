@@ -1,4 +1,5 @@
-//! Device creation and the device commands.
+//! Devices: `vkCreateDevice` (what reaches the driver, the layer's own calls and the modes set up)
+//! and `vkDestroyDevice`.
 //!
 //! On an emulated physical device, a `vkCreateDevice` that enables `VK_EXT_fragment_density_map`
 //! reaches the driver as one that enables `VK_KHR_fragment_shading_rate` with only

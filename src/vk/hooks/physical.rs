@@ -1,5 +1,5 @@
-//! What the application sees of a physical device: the decision per device, and the queries that
-//! show emulated fragment density maps
+//! What the application sees of a physical device ([`crate::vk::decide`] decides): the queries
+//! that show emulated fragment density maps
 //! (<https://registry.khronos.org/vulkan/specs/latest/man/html/VK_EXT_fragment_density_map.html>).
 
 use std::ffi::{c_char, c_void};

@@ -10,7 +10,10 @@ use ash::vk::Handle as _;
 use crate::vk::base::chain;
 use crate::vk::base::ffi::{guard, key};
 use crate::vk::own::bindings::{Bound, PushRange};
-use crate::vk::registry::{self, forget, pool_destroyed, record_of, remember, with_record};
+use crate::vk::registry::{
+    self, command_pool_destroyed, forget_command_buffers, record_of, remember_command_buffer,
+    with_record,
+};
 
 /// `vkAllocateCommandBuffers`: each new command buffer gets its record, with its pool, and its
 /// queue family is noted for ownership transfers ([`registry::buffers_allocated`]).
@@ -43,7 +46,7 @@ pub unsafe extern "system" fn allocate_command_buffers(
                 let cbs = unsafe { std::slice::from_raw_parts(out, n) };
                 let secondary = i.level == vk::CommandBufferLevel::SECONDARY;
                 for &cb in cbs {
-                    remember(cb, k, i.command_pool.as_raw(), secondary);
+                    remember_command_buffer(cb, k, i.command_pool.as_raw(), secondary);
                 }
                 registry::buffers_allocated(i, cbs);
             }
@@ -66,7 +69,7 @@ pub unsafe extern "system" fn destroy_command_pool(
         // SAFETY: as the caller promised.
         let key = unsafe { key(device) };
         if let (Some(k), false) = (key, pool == vk::CommandPool::null()) {
-            pool_destroyed(k, pool.as_raw());
+            command_pool_destroyed(k, pool.as_raw());
         }
         // SAFETY: as the caller promised.
         let next = unsafe { registry::recording(device) }.and_then(|r| r.next.destroy_command_pool);
@@ -110,7 +113,7 @@ pub unsafe extern "system" fn begin_command_buffer(
                 // primary's record without a pool, dropped with the command buffer or its device.
                 // SAFETY: as the caller promised.
                 let device = unsafe { key(cb) }.unwrap_or(0);
-                remember(cb, device, 0, false);
+                remember_command_buffer(cb, device, 0, false);
             }
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(cb, info) }
@@ -131,7 +134,7 @@ pub unsafe extern "system" fn free_command_buffers(
     guard("vkFreeCommandBuffers", (), || {
         if !cbs.is_null() {
             // SAFETY: the caller's array.
-            forget(unsafe { std::slice::from_raw_parts(cbs, count as usize) });
+            forget_command_buffers(unsafe { std::slice::from_raw_parts(cbs, count as usize) });
         }
         // The leaf table, not the registry's ranked map: fovea's own uploads free their command
         // buffers through the layer under their submit lock (`crate::common::lock::Rank`).

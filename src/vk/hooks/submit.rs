@@ -1,6 +1,6 @@
-//! Submits on an emulating device: the layer's pending shadow clears run in front of the
-//! application's next submit on a graphics queue, and the density-map stage bits of semaphore
-//! waits become the shading-rate ones.
+//! Submits on an emulating device: the layer's pending shadow clears and uploads
+//! ([`crate::vk::own::calls::Clears`]) run in front of the application's next submit on a graphics
+//! queue, and the density-map stage bits of semaphore waits become the shading-rate ones.
 //!
 //! With nothing pending anywhere (the steady state) a submit costs one atomic load and a scan of
 //! its wait-stage masks before the call down.
