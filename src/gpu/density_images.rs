@@ -810,7 +810,7 @@ impl DensityImages {
         };
         // The shadow, where there is one, gets the codes from the same staging buffer. Every
         // layer is overwritten, so it too starts from UNDEFINED: the Vulkan layer gives the
-        // shadows of fovea's own density images no clear of their own (`src/vk/submit.rs`), and
+        // shadows of fovea's own density images no clear of their own (`src/vk/own/calls.rs`), and
         // the first upload is what makes them valid. It ends in the shading-rate layout
         // (docs/vulkan-fdm-on-fsr.md#shadows) before the density image's own final barrier, to
         // which the Vulkan layer adds an ordering barrier on the shadow in that layout.

@@ -1,48 +1,16 @@
-//! Dispatch: the one list of Vulkan commands the layer intercepts.
-//!
-//! Each line names the command, the field that holds the next layer's pointer, its ash `PFN_` type
-//! and the hook; device commands also say when the hook is needed. From that list the macro derives
-//! the next-layer tables ([`InstanceNext`], [`DeviceNext`]) and the hook tables that
-//! `vkGetInstanceProcAddr` and `vkGetDeviceProcAddr` answer from, so a command is declared once and
-//! the compiler checks each hook against the command's signature. A command not listed here is
-//! never intercepted: `vkGetDeviceProcAddr` hands out the next layer's own pointer for it
-//! (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
-//! "Layer Conventions and Rules").
+//! The hook tables that `vkGetInstanceProcAddr` and `vkGetDeviceProcAddr` answer from, expanded
+//! from the one command list ([`crate::vk::base::commands`]) beside the next-layer tables
+//! ([`crate::vk::base::next`]).
 
 use std::ffi::CStr;
 
 use ash::vk;
 
-use crate::vk::{barrier, convert, device, image, loader, pass, physical, pipeline, submit};
-
-/// When a device command's hook is handed out by `vkGetDeviceProcAddr`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum When {
-    /// On every device (the layer must see it, e.g. to forget the device).
-    Always,
-    /// Only on devices that emulate fragment density maps; others get the next layer's pointer.
-    Emulated,
-    /// On devices that emulate, and on devices that inject shading-rate maps into eye passes
-    /// (docs/injection.md): image and view tracking, pipelines, dynamic rendering, and the submits
-    /// that carry the maps' uploads.
-    Injected,
-    /// Only on devices that inject: what concerns an application's own shading rates, which an
-    /// emulating device never has (docs/injection.md#apps-that-set-rates).
-    Injecting,
-}
-
-impl When {
-    /// Whether the hook is handed out on a device that emulates (`emulated`) or injects
-    /// (`injected`).
-    pub fn applies(self, emulated: bool, injected: bool) -> bool {
-        match self {
-            When::Always => true,
-            When::Emulated => emulated,
-            When::Injected => emulated || injected,
-            When::Injecting => injected,
-        }
-    }
-}
+use crate::vk::base::commands::{command_list, When};
+use crate::vk::base::next::{DeviceNext, InstanceNext};
+use crate::vk::hooks::{
+    barrier, device, image, instance, pass, physical, pipeline, record, submit,
+};
 
 /// An intercepted instance or physical-device command.
 pub struct InstanceHook {
@@ -60,61 +28,11 @@ pub struct DeviceHook {
     pub offered: fn(&DeviceNext) -> bool,
 }
 
-macro_rules! hooks {
+macro_rules! hook_tables {
     (
         instance { $($iname:literal => $ifield:ident: $ipfn:ident = $ihook:path;)* }
         device { $($dname:literal => $dfield:ident: $dpfn:ident = $dhook:path, $when:expr;)* }
     ) => {
-        /// The next layer's pointer for every intercepted instance command (`None` where it has
-        /// none), loaded once at `vkCreateInstance`.
-        #[derive(Clone, Copy, Default)]
-        pub struct InstanceNext {
-            $(pub $ifield: Option<vk::$ipfn>,)*
-        }
-
-        impl InstanceNext {
-            /// Asks the next layer for every intercepted instance command.
-            ///
-            /// # Safety
-            /// `gipa` must be the next layer's `vkGetInstanceProcAddr`, `instance` its instance.
-            pub unsafe fn load(gipa: vk::PFN_vkGetInstanceProcAddr, instance: vk::Instance) -> Self {
-                InstanceNext {
-                    // SAFETY: the next layer returns a pointer of the type the name implies.
-                    $($ifield: unsafe { gipa(instance, $iname.as_ptr()) }
-                        .map(|f| {
-                            // SAFETY: function pointers share one representation; the name
-                            // implies this type.
-                            unsafe { std::mem::transmute::<unsafe extern "system" fn(), vk::$ipfn>(f) }
-                        }),)*
-                }
-            }
-        }
-
-        /// The next layer's pointer for every intercepted device command, loaded at
-        /// `vkCreateDevice`.
-        #[derive(Clone, Copy, Default)]
-        pub struct DeviceNext {
-            $(pub $dfield: Option<vk::$dpfn>,)*
-        }
-
-        impl DeviceNext {
-            /// Asks the next layer for every intercepted device command.
-            ///
-            /// # Safety
-            /// `gdpa` must be the next layer's `vkGetDeviceProcAddr`, `device` its device.
-            pub unsafe fn load(gdpa: vk::PFN_vkGetDeviceProcAddr, device: vk::Device) -> Self {
-                DeviceNext {
-                    // SAFETY: as in InstanceNext::load.
-                    $($dfield: unsafe { gdpa(device, $dname.as_ptr()) }
-                        .map(|f| {
-                            // SAFETY: function pointers share one representation; the name
-                            // implies this type.
-                            unsafe { std::mem::transmute::<unsafe extern "system" fn(), vk::$dpfn>(f) }
-                        }),)*
-                }
-            }
-        }
-
         /// Every intercepted instance and physical-device command.
         pub static INSTANCE_HOOKS: &[InstanceHook] = &[
             $(InstanceHook {
@@ -143,151 +61,7 @@ macro_rules! hooks {
     };
 }
 
-hooks! {
-    instance {
-        c"vkDestroyInstance" => destroy_instance: PFN_vkDestroyInstance = loader::destroy_instance;
-        c"vkCreateDevice" => create_device: PFN_vkCreateDevice = device::create_device;
-        c"vkEnumerateDeviceExtensionProperties" => enumerate_device_extension_properties:
-            PFN_vkEnumerateDeviceExtensionProperties = physical::enumerate_device_extension_properties;
-        c"vkGetPhysicalDeviceFeatures2" => get_features2: PFN_vkGetPhysicalDeviceFeatures2 =
-            physical::get_features2;
-        c"vkGetPhysicalDeviceFeatures2KHR" => get_features2_khr: PFN_vkGetPhysicalDeviceFeatures2 =
-            physical::get_features2_khr;
-        c"vkGetPhysicalDeviceProperties2" => get_properties2: PFN_vkGetPhysicalDeviceProperties2 =
-            physical::get_properties2;
-        c"vkGetPhysicalDeviceProperties2KHR" => get_properties2_khr: PFN_vkGetPhysicalDeviceProperties2 =
-            physical::get_properties2_khr;
-        c"vkGetPhysicalDeviceFormatProperties" => get_format_properties:
-            PFN_vkGetPhysicalDeviceFormatProperties = physical::get_format_properties;
-        c"vkGetPhysicalDeviceFormatProperties2" => get_format_properties2:
-            PFN_vkGetPhysicalDeviceFormatProperties2 = physical::get_format_properties2;
-        c"vkGetPhysicalDeviceFormatProperties2KHR" => get_format_properties2_khr:
-            PFN_vkGetPhysicalDeviceFormatProperties2 = physical::get_format_properties2_khr;
-        c"vkGetPhysicalDeviceImageFormatProperties" => get_image_format_properties:
-            PFN_vkGetPhysicalDeviceImageFormatProperties = physical::get_image_format_properties;
-        c"vkGetPhysicalDeviceImageFormatProperties2" => get_image_format_properties2:
-            PFN_vkGetPhysicalDeviceImageFormatProperties2 = physical::get_image_format_properties2;
-        c"vkGetPhysicalDeviceImageFormatProperties2KHR" => get_image_format_properties2_khr:
-            PFN_vkGetPhysicalDeviceImageFormatProperties2 = physical::get_image_format_properties2_khr;
-    }
-    device {
-        c"vkDestroyDevice" => destroy_device: PFN_vkDestroyDevice = device::destroy_device, When::Always;
-        c"vkCreateImage" => create_image: PFN_vkCreateImage = device::create_image, When::Injected;
-        c"vkCreateGraphicsPipelines" => create_graphics_pipelines: PFN_vkCreateGraphicsPipelines =
-            pipeline::create_graphics_pipelines, When::Injected;
-        c"vkCreateShadersEXT" => create_shaders_ext: PFN_vkCreateShadersEXT =
-            pipeline::create_shaders_ext, When::Emulated;
-        c"vkCreateShaderModule" => create_shader_module: PFN_vkCreateShaderModule =
-            pipeline::create_shader_module, When::Emulated;
-        c"vkCreateSampler" => create_sampler: PFN_vkCreateSampler = pipeline::create_sampler,
-            When::Emulated;
-        c"vkCmdPipelineBarrier" => cmd_pipeline_barrier: PFN_vkCmdPipelineBarrier =
-            barrier::cmd_pipeline_barrier, When::Emulated;
-        c"vkCmdPipelineBarrier2" => cmd_pipeline_barrier2: PFN_vkCmdPipelineBarrier2 =
-            barrier::cmd_pipeline_barrier2, When::Emulated;
-        c"vkCmdPipelineBarrier2KHR" => cmd_pipeline_barrier2_khr: PFN_vkCmdPipelineBarrier2 =
-            barrier::cmd_pipeline_barrier2_khr, When::Emulated;
-        c"vkCmdWaitEvents" => cmd_wait_events: PFN_vkCmdWaitEvents = barrier::cmd_wait_events,
-            When::Emulated;
-        c"vkCmdWaitEvents2" => cmd_wait_events2: PFN_vkCmdWaitEvents2 = barrier::cmd_wait_events2,
-            When::Emulated;
-        c"vkCmdWaitEvents2KHR" => cmd_wait_events2_khr: PFN_vkCmdWaitEvents2 =
-            barrier::cmd_wait_events2_khr, When::Emulated;
-        c"vkCmdSetEvent2" => cmd_set_event2: PFN_vkCmdSetEvent2 = barrier::cmd_set_event2,
-            When::Emulated;
-        c"vkCmdSetEvent2KHR" => cmd_set_event2_khr: PFN_vkCmdSetEvent2 =
-            barrier::cmd_set_event2_khr, When::Emulated;
-        // Command buffers' queue families, to tell the release half of an ownership transfer.
-        c"vkCreateCommandPool" => create_command_pool: PFN_vkCreateCommandPool =
-            barrier::create_command_pool, When::Emulated;
-        // Stage masks of event sets and resets and of timestamps lose the density-map stage.
-        c"vkCmdSetEvent" => cmd_set_event: PFN_vkCmdSetEvent = barrier::cmd_set_event,
-            When::Emulated;
-        c"vkCmdResetEvent" => cmd_reset_event: PFN_vkCmdResetEvent = barrier::cmd_reset_event,
-            When::Emulated;
-        c"vkCmdResetEvent2" => cmd_reset_event2: PFN_vkCmdResetEvent2 = barrier::cmd_reset_event2,
-            When::Emulated;
-        c"vkCmdResetEvent2KHR" => cmd_reset_event2_khr: PFN_vkCmdResetEvent2 =
-            barrier::cmd_reset_event2_khr, When::Emulated;
-        c"vkCmdWriteTimestamp" => cmd_write_timestamp: PFN_vkCmdWriteTimestamp =
-            barrier::cmd_write_timestamp, When::Emulated;
-        c"vkCmdWriteTimestamp2" => cmd_write_timestamp2: PFN_vkCmdWriteTimestamp2 =
-            barrier::cmd_write_timestamp2, When::Emulated;
-        c"vkCmdWriteTimestamp2KHR" => cmd_write_timestamp2_khr: PFN_vkCmdWriteTimestamp2 =
-            barrier::cmd_write_timestamp2_khr, When::Emulated;
-        // Shadow clears go ahead of the application's submits; wait stages are translated.
-        c"vkQueueSubmit" => queue_submit: PFN_vkQueueSubmit = submit::queue_submit, When::Injected;
-        c"vkQueueSubmit2" => queue_submit2: PFN_vkQueueSubmit2 = submit::queue_submit2,
-            When::Injected;
-        c"vkQueueSubmit2KHR" => queue_submit2_khr: PFN_vkQueueSubmit2 = submit::queue_submit2_khr,
-            When::Injected;
-        // The attachment path: shadows, render passes, framebuffers, dynamic rendering.
-        c"vkDestroyImage" => destroy_image: PFN_vkDestroyImage = image::destroy_image, When::Injected;
-        // Host-side transitions name the density-map layout as barriers do (host image copy).
-        c"vkTransitionImageLayout" => transition_image_layout: PFN_vkTransitionImageLayoutEXT =
-            image::transition_image_layout, When::Emulated;
-        c"vkTransitionImageLayoutEXT" => transition_image_layout_ext:
-            PFN_vkTransitionImageLayoutEXT = image::transition_image_layout_ext, When::Emulated;
-        c"vkCreateImageView" => create_image_view: PFN_vkCreateImageView =
-            image::create_image_view, When::Injected;
-        c"vkDestroyImageView" => destroy_image_view: PFN_vkDestroyImageView =
-            image::destroy_image_view, When::Injected;
-        c"vkCreateRenderPass" => create_render_pass: PFN_vkCreateRenderPass =
-            pass::create_render_pass, When::Injected;
-        c"vkCreateRenderPass2" => create_render_pass2: PFN_vkCreateRenderPass2 =
-            pass::create_render_pass2, When::Injected;
-        c"vkCreateRenderPass2KHR" => create_render_pass2_khr: PFN_vkCreateRenderPass2 =
-            pass::create_render_pass2_khr, When::Injected;
-        c"vkDestroyRenderPass" => destroy_render_pass: PFN_vkDestroyRenderPass =
-            pass::destroy_render_pass, When::Injected;
-        c"vkCreateFramebuffer" => create_framebuffer: PFN_vkCreateFramebuffer =
-            pass::create_framebuffer, When::Injected;
-        c"vkDestroyFramebuffer" => destroy_framebuffer: PFN_vkDestroyFramebuffer =
-            pass::destroy_framebuffer, When::Injected;
-        c"vkCmdBeginRenderPass" => cmd_begin_render_pass: PFN_vkCmdBeginRenderPass =
-            pass::cmd_begin_render_pass, When::Injected;
-        c"vkCmdBeginRenderPass2" => cmd_begin_render_pass2: PFN_vkCmdBeginRenderPass2 =
-            pass::cmd_begin_render_pass2, When::Injected;
-        c"vkCmdBeginRenderPass2KHR" => cmd_begin_render_pass2_khr: PFN_vkCmdBeginRenderPass2 =
-            pass::cmd_begin_render_pass2_khr, When::Injected;
-        c"vkCmdBeginRendering" => cmd_begin_rendering: PFN_vkCmdBeginRendering =
-            pass::cmd_begin_rendering, When::Injected;
-        c"vkCmdBeginRenderingKHR" => cmd_begin_rendering_khr: PFN_vkCmdBeginRendering =
-            pass::cmd_begin_rendering_khr, When::Injected;
-        // The application's own rates meet the injected attachment.
-        c"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate:
-            PFN_vkCmdSetFragmentShadingRateKHR = pipeline::cmd_set_fragment_shading_rate,
-            When::Injecting;
-        // Density maps the application writes are converted at pass begin; the application's
-        // compute bindings are recorded so that they can be given back after the conversion.
-        c"vkBeginCommandBuffer" => begin_command_buffer: PFN_vkBeginCommandBuffer =
-            convert::begin_command_buffer, When::Emulated;
-        c"vkAllocateCommandBuffers" => allocate_command_buffers: PFN_vkAllocateCommandBuffers =
-            convert::allocate_command_buffers, When::Emulated;
-        c"vkFreeCommandBuffers" => free_command_buffers: PFN_vkFreeCommandBuffers =
-            convert::free_command_buffers, When::Emulated;
-        c"vkDestroyCommandPool" => destroy_command_pool: PFN_vkDestroyCommandPool =
-            convert::destroy_command_pool, When::Emulated;
-        // Conversions run outside the application's conditional rendering.
-        c"vkCmdBeginConditionalRenderingEXT" => cmd_begin_conditional_rendering_ext:
-            PFN_vkCmdBeginConditionalRenderingEXT = convert::cmd_begin_conditional_rendering,
-            When::Emulated;
-        c"vkCmdEndConditionalRenderingEXT" => cmd_end_conditional_rendering_ext:
-            PFN_vkCmdEndConditionalRenderingEXT = convert::cmd_end_conditional_rendering,
-            When::Emulated;
-        c"vkCmdBindPipeline" => cmd_bind_pipeline: PFN_vkCmdBindPipeline =
-            convert::cmd_bind_pipeline, When::Emulated;
-        c"vkCmdBindDescriptorSets" => cmd_bind_descriptor_sets: PFN_vkCmdBindDescriptorSets =
-            convert::cmd_bind_descriptor_sets, When::Emulated;
-        c"vkCmdPushConstants" => cmd_push_constants: PFN_vkCmdPushConstants =
-            convert::cmd_push_constants, When::Emulated;
-        c"vkCmdPushDescriptorSetKHR" => cmd_push_descriptor_set_khr: PFN_vkCmdPushDescriptorSetKHR =
-            convert::cmd_push_descriptor_set_khr, When::Emulated;
-        c"vkCmdPushDescriptorSetWithTemplateKHR" => cmd_push_descriptor_set_with_template_khr:
-            PFN_vkCmdPushDescriptorSetWithTemplateKHR =
-            convert::cmd_push_descriptor_set_with_template_khr, When::Emulated;
-    }
-}
+command_list!(hook_tables);
 
 /// The instance hook for `name`, if the layer intercepts it.
 pub fn instance_hook(name: &CStr) -> Option<&'static InstanceHook> {

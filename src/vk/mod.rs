@@ -5,26 +5,31 @@
 //!
 //! This folder never imports the OpenXR side; both meet in [`crate::bridge`].
 //!
-//! - [`loader`]: the loader interface (negotiation, `vkGetInstanceProcAddr`,
-//!   `vkGetDeviceProcAddr`), instance creation, and the panic guard;
-//! - [`dispatch`]: the one list of intercepted commands;
-//! - [`registry`]: per-instance and per-device state, keyed by the loader's dispatch pointer;
-//! - [`physical`]: the per-physical-device decision and what the application sees of a device;
-//! - [`device`]: device creation (density maps stripped, shading-rate attachments enabled) and the
-//!   device commands;
-//! - [`pipeline`]: graphics pipelines get the shading-rate state, shader modules that read the
-//!   fragment size are detected, subsampled sampler and dynamic view flags are left out;
-//! - [`barrier`]: barriers, event sets and waits without the density-map layout, stage and access bits;
-//! - [`image`]: the layer-owned shading-rate shadows of density-map images and views;
-//! - [`inject`]: injection's own shading-rate maps for eye passes, and the colour images and views
-//!   tracked to find them (docs/injection.md);
-//! - [`pass`]: render passes, framebuffers and dynamic rendering, rewritten to name the shadows;
-//! - [`convert`]: density maps the application writes, converted into their shadows at pass
-//!   begin, with the application's compute bindings given back;
-//! - [`submit`]: new shadows' clears ahead of the application's next submit, and semaphore wait
-//!   stages without the density-map stage;
-//! - [`chain`], [`link`], [`structs`]: `pNext` chains, the loader's link structs, and the size of
-//!   every struct a device create info may chain.
+//! The files stand on floors, each importing only files on floors below it (and, inside `base/`,
+//! `own/` and `translate/`, files of its own folder, never in a circle); a hook never imports
+//! another hook, and the modes never import each other:
+//!
+//! | floor | path | job |
+//! |---|---|---|
+//! | 9 | `mod.rs` | this table and the module declarations |
+//! | 8 | `loader.rs` | the loader interface: negotiation, `vkGetInstanceProcAddr`, `vkGetDeviceProcAddr` |
+//! | 7 | `dispatch.rs` | the hook tables, expanded from the one command list |
+//! | 6 | `hooks/` (`mod.rs`, `instance.rs`, `physical.rs`, `device.rs`, `image.rs`, `pass.rs`, `pipeline.rs`, `barrier.rs`, `record.rs`, `submit.rs`) | the `extern "system"` bodies, one file per kind of object: look the device up, call each mode in turn, call down; create and destroy of a thing side by side |
+//! | 5 | `decide.rs` | the mode per physical device: native, emulate or pass through |
+//! | 5 | `emulation.rs` | emulation's shadows made and destroyed with density maps, and the render pass begins that name them |
+//! | 5 | `convert.rs` | density maps the application writes, converted at pass begin |
+//! | 5 | `injection.rs` | injection's render passes, framebuffers and eye-pass begins |
+//! | 4 | `registry.rs` | per-instance and per-device records, the lock-free device table, and every per-handle index (command pools' queue families, each device's own calls and converter, command buffers' records) |
+//! | 3 | `own/` (`mod.rs`, `calls.rs`, `shadows.rs`, `converter.rs`, `convert_shader.rs`, `bindings.rs`, `injector.rs`), `shaders/` | the layer's own device objects: its calls on a device with the clears and uploads ahead of the application's submits, shadows and their views, the GPU converter with its shader and the compute bindings it gives back, injection's maps and tracking |
+//! | 2 | `translate/` (`mod.rs`, `render_pass.rs`, `render_pass_v1.rs`, `sync.rs`, `rate_state.rs`, `formats.rs`) | pure struct translation, no device calls: render passes v1 → v2 and without the density map, sync stages, accesses and layouts, pipelines' rate state, formats |
+//! | 1 | `base/` (`mod.rs`, `ffi.rs`, `chain.rs`, `structs.rs`, `link.rs`, `commands.rs`, `next.rs`) | the FFI edge (guard, names, slices, two-call, handle keys), `pNext` chains and the size of every struct a device create info may chain, the loader's link structs, the one command list, the next-layer tables |
+//!
+//! Inside a folder: `base/chain.rs` uses `base/link.rs` and `base/structs.rs`, `base/next.rs` uses
+//! `base/commands.rs`; `own/calls.rs` uses `own/shadows.rs`, `own/converter.rs` uses
+//! `own/calls.rs`, `own/convert_shader.rs` and `own/shadows.rs`,
+//! `own/injector.rs` uses `own/calls.rs`; `translate/render_pass.rs` uses `translate/formats.rs`
+//! and `translate/sync.rs`, `translate/render_pass_v1.rs` uses `translate/render_pass.rs` and
+//! `translate/formats.rs`.
 //!
 //! Per physical device: native density maps → everything passes through untouched;
 //! `attachmentFragmentShadingRate` without them → emulate; neither → pass through. Fail open:
@@ -33,47 +38,14 @@
 
 #![deny(unsafe_op_in_unsafe_fn)]
 
-/// A command's hook and its KHR alias's: two `extern "system"` functions that hand their arguments
-/// to one shared body, `$shared(name, pick, arguments…)`, where `pick` takes the next layer's
-/// function of the hook's own name from the device (or recording) state.
-macro_rules! hook_and_khr_alias {
-    (
-        $(#[$doc:meta])*
-        $hook:ident, $khr:ident = $shared:ident($name:literal)
-        ($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?
-    ) => {
-        $(#[$doc])*
-        ///
-        /// # Safety
-        /// The caller's arguments, valid as the command requires.
-        pub unsafe extern "system" fn $hook($($arg: $ty),*) $(-> $ret)? {
-            // SAFETY: the caller's arguments.
-            unsafe { $shared($name, |d| d.next.$hook, $($arg),*) }
-        }
-
-        #[doc = concat!("`", $name, "KHR`: as [`", stringify!($hook), "`].")]
-        ///
-        /// # Safety
-        /// The caller's arguments, valid as the command requires.
-        pub unsafe extern "system" fn $khr($($arg: $ty),*) $(-> $ret)? {
-            // SAFETY: the caller's arguments.
-            unsafe { $shared(concat!($name, "KHR"), |d| d.next.$khr, $($arg),*) }
-        }
-    };
-}
-
-mod barrier;
-mod chain;
+mod base;
 mod convert;
-mod device;
+mod decide;
 mod dispatch;
-mod image;
-mod inject;
-mod link;
+mod emulation;
+mod hooks;
+mod injection;
 mod loader;
-mod pass;
-mod physical;
-mod pipeline;
+mod own;
 mod registry;
-mod structs;
-mod submit;
+mod translate;

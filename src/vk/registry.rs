@@ -1,4 +1,6 @@
-//! The layer's per-instance and per-device state, keyed by the loader's dispatch pointer.
+//! The layer's per-instance and per-device state, keyed by the loader's dispatch pointer, and every
+//! per-handle index: command pools' and command buffers' queue families, each device's own calls
+//! and converter, and each command buffer's record.
 //!
 //! Every dispatchable handle (instance, physical device, device, queue, command buffer) points at
 //! an object whose first word is the loader's dispatch table pointer; a physical device shares its
@@ -7,6 +9,7 @@
 //! "Dispatchable Object Creation"). That word is the key.
 
 use std::collections::{BTreeMap, HashMap};
+use std::hash::BuildHasherDefault;
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicPtr, AtomicUsize, Ordering};
 use std::sync::Arc;
@@ -16,20 +19,12 @@ use ash::vk::Handle as _;
 
 use crate::bridge::FdmEmulation;
 use crate::common::lock::{MapLock, Mutex, Rank};
-use crate::vk::dispatch::{DeviceNext, InstanceNext};
-
-/// The loader's dispatch pointer of a dispatchable handle.
-pub type Key = usize;
-
-/// The key of a dispatchable handle; `None` for a null handle.
-///
-/// # Safety
-/// `handle` must be null or a live dispatchable handle made by the loader.
-pub unsafe fn key(handle: impl vk::Handle) -> Option<Key> {
-    let raw = handle.as_raw() as usize;
-    // SAFETY: a live dispatchable handle points at an object starting with the dispatch pointer.
-    (raw != 0).then(|| unsafe { *(raw as *const usize) })
-}
+use crate::vk::base::ffi::{key, HandleHasher, Key};
+use crate::vk::base::next::{DeviceNext, InstanceNext};
+use crate::vk::own::bindings::Bound;
+use crate::vk::own::calls::Own;
+use crate::vk::own::converter::{Converter, Slot};
+use crate::vk::own::shadows::{ShadowImage, ShadowView};
 
 /// What the layer does for one physical device, decided once from what the driver offers.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -112,8 +107,8 @@ pub struct Device {
     pub fdm: Option<FdmEmulation>,
     /// Where injection is on (docs/injection.md), the device got shading-rate attachments at
     /// `vkCreateDevice` and the layer could set up its own calls on it: its injected maps and what
-    /// it tracks to find eye passes ([`crate::vk::inject`]).
-    pub inject: Option<crate::vk::inject::Injector>,
+    /// it tracks to find eye passes ([`crate::vk::own::injector`]).
+    pub inject: Option<crate::vk::own::injector::Injector>,
     /// The device's Vulkan version (the instance's and the physical device's lower one): below
     /// 1.2 render pass 2 is `VK_KHR_create_renderpass2`'s, which the layer enables for emulation,
     /// and the core names may not be called.
@@ -122,33 +117,13 @@ pub struct Device {
     pub attachments: Attachments,
 }
 
-/// A layer-owned shading-rate image standing in for an application's density-map image
-/// ([`crate::vk::image`]).
-#[derive(Clone, Copy, Debug)]
-pub struct ShadowImage {
-    pub image: vk::Image,
-    pub memory: vk::DeviceMemory,
-    pub extent: vk::Extent2D,
-    /// The shadow's array layers: the application image's, or 1 where the device lacks
-    /// `layeredShadingRateAttachments` (one merged layer).
-    pub layers: u32,
-    /// The application image's array layers.
-    pub app_layers: u32,
-}
-
-/// A layer-owned view of a shadow, standing in for a view of a density-map image.
-#[derive(Clone, Copy, Debug)]
-pub struct ShadowView {
-    pub view: vk::ImageView,
-}
-
 /// Per device: application handles → the layer's shadows, and the render passes the layer
 /// rewrote (by handle → the index of the density attachment, now a shading-rate attachment).
 pub struct Attachments {
     /// The layer's own device-level calls (creating, clearing and destroying shadows and injected
     /// maps); `None` where the device neither emulates nor injects, or the layer could not set them
     /// up (no shadows or maps then).
-    pub own: Option<Arc<crate::vk::image::Own>>,
+    pub own: Option<Arc<crate::vk::own::calls::Own>>,
     pub images: Mutex<HashMap<u64, ShadowImage>>,
     pub views: Mutex<HashMap<u64, ShadowView>>,
     pub passes: Mutex<HashMap<u64, u32>>,
@@ -159,7 +134,7 @@ pub struct Attachments {
 
 impl Attachments {
     /// No shadows yet.
-    pub fn new(own: Option<Arc<crate::vk::image::Own>>) -> Attachments {
+    pub fn new(own: Option<Arc<crate::vk::own::calls::Own>>) -> Attachments {
         Attachments {
             own,
             images: Mutex::ranked(Rank::Record, "vk shadow images", HashMap::new()),
@@ -356,7 +331,7 @@ pub unsafe fn add_device(data: Device) {
     crate::bridge::set_device_fdm(data.handle, data.fdm.clone());
     // SAFETY: as the caller promised.
     if let Some(k) = unsafe { key(data.handle) } {
-        crate::vk::image::set_own(k, data.attachments.own.clone());
+        set_own(k, data.attachments.own.clone());
         let d = Arc::new(data);
         let mut devices = DEVICES.write();
         // A key reused by a new device (the old one's gone, or the loader's tables are at
@@ -384,16 +359,11 @@ pub unsafe fn remove_device(handle: vk::Device) -> Option<Arc<Device>> {
         fast_remove(k);
         devices.remove(&k)
     };
-    crate::vk::image::set_own(k, None);
+    set_own(k, None);
     if d.is_some() {
         crate::bridge::set_device_fdm(handle, None);
     }
     d
-}
-
-/// The raw handle, for log lines.
-pub fn raw(handle: impl vk::Handle) -> u64 {
-    handle.as_raw()
 }
 
 /// What a command-recording hook needs of its device: whether it emulates density maps, and the
@@ -416,6 +386,317 @@ pub unsafe fn recording<'a>(handle: impl vk::Handle) -> Option<Recording<'a>> {
         emulated: d.device.fdm.is_some(),
         next: &d.device.next,
     })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Command pools' and command buffers' queue families.
+
+/// Slots per table in [`Families`]: more command pools and command buffers than an application
+/// keeps alive at once, so that a live one is rarely evicted.
+const POOL_SLOTS: usize = 256;
+const BUFFER_SLOTS: usize = 4096;
+
+/// The queue family of command pools (from `vkCreateCommandPool`) and of command buffers (from
+/// their pool at `vkAllocateCommandBuffers`), for [`is_release`]. Direct-mapped tables of fixed
+/// size, so nothing grows however many pools and buffers come and go (a freed handle's slot is
+/// taken by the next one that maps there, and a handle the driver reuses is entered again when it
+/// is made). Written when pools and buffers are made, read only for an ownership transfer of a
+/// density image: a leaf lock, never taken per command on the common path.
+struct Families {
+    pools: parking_lot::Mutex<[(u64, u32); POOL_SLOTS]>,
+    buffers: parking_lot::Mutex<[(u64, u32); BUFFER_SLOTS]>,
+}
+
+static FAMILIES: Families = Families {
+    pools: parking_lot::Mutex::new([(0, 0); POOL_SLOTS]),
+    buffers: parking_lot::Mutex::new([(0, 0); BUFFER_SLOTS]),
+};
+
+fn slot(raw: u64, slots: usize) -> usize {
+    ((raw ^ (raw >> 29)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40) as usize % slots
+}
+
+impl Families {
+    fn command_buffer(&self, cb: vk::CommandBuffer) -> Option<u32> {
+        let raw = cb.as_raw();
+        let t = self.buffers.lock();
+        let (h, f) = t[slot(raw, BUFFER_SLOTS)];
+        (raw != 0 && h == raw).then_some(f)
+    }
+}
+
+/// Notes the queue family (their pool's) of command buffers `vkAllocateCommandBuffers` just made
+/// from `info` (its hook is [`crate::vk::hooks::record::allocate_command_buffers`], which also gives
+/// each its record).
+pub fn buffers_allocated(info: &vk::CommandBufferAllocateInfo<'_>, cbs: &[vk::CommandBuffer]) {
+    use ash::vk::Handle as _;
+    let pool = info.command_pool.as_raw();
+    let family = {
+        let t = FAMILIES.pools.lock();
+        let (h, f) = t[slot(pool, POOL_SLOTS)];
+        (h == pool).then_some(f)
+    };
+    let mut t = FAMILIES.buffers.lock();
+    for cb in cbs {
+        let raw = cb.as_raw();
+        // A pool whose family is not known leaves its buffers unknown too.
+        t[slot(raw, BUFFER_SLOTS)] = family.map_or((0, 0), |f| (raw, f));
+    }
+}
+
+/// Whether a barrier with these queue family indices, recorded into `cb`, is the release half of a
+/// queue family ownership transfer. Not a transfer where the indices are equal or either is
+/// `IGNORED`; a release where the destination is outside the device (`EXTERNAL`, `FOREIGN`), an
+/// acquire where the source is; between two of the device's families, a release where `cb`'s pool
+/// belongs to the source family ([`FAMILIES`]). Where that family is not known, a release: an
+/// acquire half then goes without the shadow's barrier, which is what the application wrote.
+pub fn is_release(cb: vk::CommandBuffer, src: u32, dst: u32) -> bool {
+    let outside = |q: u32| q == vk::QUEUE_FAMILY_EXTERNAL || q == vk::QUEUE_FAMILY_FOREIGN_EXT;
+    if src == dst || src == vk::QUEUE_FAMILY_IGNORED || dst == vk::QUEUE_FAMILY_IGNORED {
+        return false;
+    }
+    if outside(dst) {
+        return true;
+    }
+    if outside(src) {
+        return false;
+    }
+    FAMILIES.command_buffer(cb).is_none_or(|f| f == src)
+}
+
+/// Notes the queue family of a command pool `vkCreateCommandPool` just made.
+pub fn pool_created(pool: u64, family: u32) {
+    FAMILIES.pools.lock()[slot(pool, POOL_SLOTS)] = (pool, family);
+}
+
+/// Each emulating device's [`Own`] by the loader's dispatch key, for the submit hooks. A leaf lock
+/// outside [`crate::common::lock::Rank`]'s order, like the recording table
+/// ([`recording`]): held for a scan and an `Arc` clone only, so it may be taken under
+/// fovea's own upload locks, whose submits pass through the layer.
+static OWNS: parking_lot::RwLock<Vec<(Key, Arc<Own>)>> = parking_lot::RwLock::new(Vec::new());
+
+/// Records (or, with `None`, forgets) the device `k`'s own calls.
+pub fn set_own(k: Key, own: Option<Arc<Own>>) {
+    let mut v = OWNS.write();
+    v.retain(|(key, _)| *key != k);
+    if let Some(o) = own {
+        v.push((k, o));
+    }
+}
+
+/// The own calls of a queue's (or any dispatchable handle's) device.
+///
+/// # Safety
+/// `handle` must be NULL or a live dispatchable handle made by the loader.
+pub unsafe fn own_of(handle: impl vk::Handle) -> Option<Arc<Own>> {
+    // SAFETY: as the caller promised.
+    let k = unsafe { key(handle) }?;
+    OWNS.read()
+        .iter()
+        .find(|(key, _)| *key == k)
+        .map(|(_, o)| Arc::clone(o))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Each converting device's converter, and every command buffer's record.
+
+/// Each converting device's [`Converter`], by dispatch key; a leaf lock like [`OWNS`].
+pub static CONVERTERS: parking_lot::RwLock<Vec<(Key, Arc<Converter>)>> =
+    parking_lot::RwLock::new(Vec::new());
+
+/// The converter of a device's dispatch key.
+pub fn converter_by_key(k: Key) -> Option<Arc<Converter>> {
+    CONVERTERS
+        .read()
+        .iter()
+        .find(|(key, _)| *key == k)
+        .map(|(_, c)| Arc::clone(c))
+}
+
+/// The converter of a device's (or command buffer's) dispatch key.
+///
+/// # Safety
+/// `handle` must be NULL or a live dispatchable handle made by the loader.
+pub unsafe fn converter(handle: impl vk::Handle) -> Option<Arc<Converter>> {
+    // SAFETY: as the caller promised.
+    let k = unsafe { key(handle) }?;
+    CONVERTERS
+        .read()
+        .iter()
+        .find(|(key, _)| *key == k)
+        .map(|(_, c)| Arc::clone(c))
+}
+
+/// One command buffer's record: what it has bound ([`Bound`]), behind a lock of its own. Command
+/// buffers are externally synchronised (a command buffer and its pool are used by one thread at a
+/// time, <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-threadingbehavior>),
+/// so that lock is never contended: it is one uncontended atomic on the record's own memory, which
+/// no other command buffer shares.
+pub struct CbRecord {
+    /// The device's dispatch key, whose destruction drops the record.
+    pub device: Key,
+    /// The pool it was allocated from (0 where the layer did not see the allocation), whose
+    /// destruction drops the record.
+    pub pool: u64,
+    /// A secondary command buffer (whose begin info's inheritance info is read).
+    pub secondary: bool,
+    pub bound: parking_lot::Mutex<Bound>,
+    /// The command buffer's conversion objects, one per map it converted ([`Slot`]).
+    pub slots: parking_lot::Mutex<Vec<Slot>>,
+    /// The device's converter (`None` where it converts nothing), found once at allocation, so
+    /// that a pass begin reaches it without the process-wide [`CONVERTERS`].
+    pub converter: Option<Arc<Converter>>,
+}
+
+type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<HandleHasher>>;
+
+/// Every command buffer's record. Taken only to add a record (at allocation), to drop one (free,
+/// pool or device destruction), and on a thread's first look-up of a command buffer since any of
+/// these: recording threads find their command buffers' records in their own [`CB_CACHE`]
+/// without it. A leaf lock.
+pub static CB_RECORDS: parking_lot::Mutex<Records> =
+    parking_lot::Mutex::new(HashMap::with_hasher(BuildHasherDefault::new()));
+
+/// Advanced (under [`CB_RECORDS`]) whenever a record is added or dropped: a cached look-up is good
+/// only while the generation it was made in is current, so a handle value the driver reuses for a
+/// new command buffer never finds the old one's record.
+pub static CB_GENERATION: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+/// A thread's cached look-up: command buffer, generation, record.
+type CacheEntry = (u64, u64, *const CbRecord);
+
+/// Look-ups a thread keeps: the command buffers it records at once.
+const CACHED: usize = 4;
+
+thread_local! {
+    static CB_CACHE: std::cell::Cell<[CacheEntry; CACHED]> =
+        const { std::cell::Cell::new([(0, 0, std::ptr::null()); CACHED]) };
+}
+
+/// `cb`'s record, for the length of a call on `cb`: from this thread's cache where it is current,
+/// else from [`CB_RECORDS`], then cached.
+///
+/// Sound because a record leaves [`CB_RECORDS`] (and may be freed) only when its command buffer is
+/// freed, its pool or its device destroyed, which the application synchronises with every call on
+/// the command buffer; and every such change advances [`CB_GENERATION`], so no entry made before
+/// it is used after it.
+#[inline]
+pub fn record_of<R>(cb: vk::CommandBuffer, f: impl FnOnce(&CbRecord) -> R) -> Option<R> {
+    let raw = cb.as_raw();
+    let now = CB_GENERATION.load(Ordering::Acquire);
+    let cached = CB_CACHE
+        .try_with(|c| {
+            c.get()
+                .iter()
+                .find(|e| e.0 == raw && e.1 == now)
+                .map(|e| e.2)
+        })
+        .ok()
+        .flatten();
+    let ptr = match cached {
+        Some(p) => p,
+        None => {
+            let map = CB_RECORDS.lock();
+            let p = Arc::as_ptr(map.get(&raw)?);
+            let _ = CB_CACHE.try_with(|c| {
+                let mut v = c.get();
+                v.rotate_right(1);
+                v[0] = (raw, now, p);
+                c.set(v);
+            });
+            p
+        }
+    };
+    // SAFETY: the record is alive for this call on `cb` (see above).
+    Some(f(unsafe { &*ptr }))
+}
+
+/// Runs `f` on `cb`'s bindings, if it has a record.
+#[inline]
+pub fn with_record(cb: vk::CommandBuffer, f: impl FnOnce(&mut Bound)) {
+    record_of(cb, |r| f(&mut r.bound.lock()));
+}
+
+/// A copy of `cb`'s bindings, `None` where it has no record or they cannot be given back.
+pub fn bound_of(cb: vk::CommandBuffer) -> Option<Bound> {
+    record_of(cb, |r| *r.bound.lock()).filter(|b| !b.lost)
+}
+
+/// Drops the records `drop` selects, and destroys their conversion objects (their command
+/// buffers are being freed, with their pool or device, and so are not pending).
+pub fn forget_command_buffers_where(drop: impl Fn(u64, &CbRecord) -> bool) {
+    let mut gone = Vec::new();
+    {
+        let mut map = CB_RECORDS.lock();
+        let before = map.len();
+        map.retain(|&cb, r| {
+            let d = drop(cb, r);
+            if d {
+                gone.push(Arc::clone(r));
+            }
+            !d
+        });
+        if map.len() != before {
+            CB_GENERATION.fetch_add(1, Ordering::Release);
+        }
+    }
+    destroy_records(gone);
+}
+
+/// Drops the records of freed command buffers (a look-up each, not a scan of every record).
+pub fn forget_command_buffers(cbs: &[vk::CommandBuffer]) {
+    let mut gone = Vec::new();
+    {
+        let mut map = CB_RECORDS.lock();
+        for cb in cbs {
+            if let Some(r) = map.remove(&cb.as_raw()) {
+                gone.push(r);
+            }
+        }
+        if !gone.is_empty() {
+            CB_GENERATION.fetch_add(1, Ordering::Release);
+        }
+    }
+    destroy_records(gone);
+}
+
+/// Destroys the conversion objects of dropped records.
+fn destroy_records(gone: Vec<Arc<CbRecord>>) {
+    for r in gone {
+        let slots = std::mem::take(&mut *r.slots.lock());
+        if slots.is_empty() {
+            continue;
+        }
+        if let Some(c) = &r.converter {
+            // SAFETY: the converter's own slots; their command buffer is not pending.
+            unsafe { c.destroy_slots(&slots) };
+        }
+    }
+}
+
+/// Adds (or renews) `cb`'s record. A record the handle still had belonged to a command buffer the
+/// layer did not see go (its handle now names a new one): its objects go.
+pub fn remember_command_buffer(cb: vk::CommandBuffer, device: Key, pool: u64, secondary: bool) {
+    let record = Arc::new(CbRecord {
+        device,
+        pool,
+        secondary,
+        bound: parking_lot::Mutex::new(Bound::default()),
+        slots: parking_lot::Mutex::new(Vec::new()),
+        converter: converter_by_key(device),
+    });
+    let old = {
+        let mut map = CB_RECORDS.lock();
+        let old = map.insert(cb.as_raw(), record);
+        CB_GENERATION.fetch_add(1, Ordering::Release);
+        old
+    };
+    destroy_records(old.into_iter().collect());
+}
+
+/// The records of a destroyed pool's command buffers go.
+pub fn command_pool_destroyed(device: Key, pool: u64) {
+    forget_command_buffers_where(|_, r| r.device == device && r.pool == pool);
 }
 
 #[cfg(test)]
@@ -477,5 +758,69 @@ mod tests {
                 assert!(device_ref(cb(i)).is_none());
             }
         }
+    }
+
+    #[test]
+    fn release_halves_are_told_from_acquire_halves() {
+        let ignored = vk::QUEUE_FAMILY_IGNORED;
+        let external = vk::QUEUE_FAMILY_EXTERNAL;
+        let cb = vk::CommandBuffer::from_raw(0x5a5a_0010);
+        // Not transfers.
+        assert!(!is_release(cb, ignored, ignored));
+        assert!(!is_release(cb, 1, 1));
+        assert!(!is_release(cb, 0, ignored));
+        // To and from outside the device.
+        assert!(is_release(cb, 0, external));
+        assert!(!is_release(cb, external, 0));
+        // Between two families: by the command buffer's; unknown counts as a release.
+        assert!(is_release(cb, 0, 1));
+        FAMILIES.buffers.lock()[slot(cb.as_raw(), BUFFER_SLOTS)] = (cb.as_raw(), 1);
+        assert!(
+            !is_release(cb, 0, 1),
+            "recorded on the destination family: acquire"
+        );
+        assert!(
+            is_release(cb, 1, 0),
+            "recorded on the source family: release"
+        );
+        FAMILIES.buffers.lock()[slot(cb.as_raw(), BUFFER_SLOTS)] = (0, 0);
+    }
+
+    /// A pool's destruction drops the records of the command buffers allocated from it, and only
+    /// those: over many create, allocate and destroy cycles the records do not grow.
+    #[test]
+    fn destroyed_pools_take_their_command_buffers_records() {
+        let device: Key = 0xD0_0000;
+        let count = |pool: u64| {
+            CB_RECORDS
+                .lock()
+                .values()
+                .filter(|r| r.device == device && r.pool == pool)
+                .count()
+        };
+        remember_command_buffer(vk::CommandBuffer::from_raw(0xD0_0001), device, 7, false);
+        for cycle in 0..100u64 {
+            let pool = 100 + cycle;
+            for i in 0..4 {
+                let cb = vk::CommandBuffer::from_raw(0xD1_0000 + cycle * 8 + i);
+                remember_command_buffer(cb, device, pool, i % 2 == 1);
+                with_record(cb, |b| b.lost = true);
+            }
+            assert_eq!(count(pool), 4);
+            command_pool_destroyed(device, pool);
+            assert_eq!(count(pool), 0, "cycle {cycle}");
+        }
+        let left = CB_RECORDS
+            .lock()
+            .values()
+            .filter(|r| r.device == device)
+            .count();
+        assert_eq!(left, 1, "the other pool's command buffer stays");
+        assert!(bound_of(vk::CommandBuffer::from_raw(0xD0_0001)).is_some());
+        assert!(
+            bound_of(vk::CommandBuffer::from_raw(0xD1_0000)).is_none(),
+            "a freed handle finds no record, in this thread's cache either"
+        );
+        forget_command_buffers_where(|_, r| r.device == device);
     }
 }

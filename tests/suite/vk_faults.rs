@@ -35,7 +35,7 @@ use crate::support::vulkan::{
 use crate::vk_layer::{assert_only_stage_false_positives, env, take_real_messages, Env, Vk, FDM};
 
 /// The calls fovea makes to clear new shadows ahead of the application's submit
-/// (`src/vk/submit.rs`); where one fails, that submit fails with its result.
+/// (`src/vk/own/calls.rs`); where one fails, that submit fails with its result.
 const CLEAR_CALLS: [&str; 5] = [
     "vkCreateCommandPool",
     "vkAllocateCommandBuffers",

@@ -658,7 +658,7 @@ fn unintercepted_commands_go_straight_to_the_next_layer() {
 /// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
 /// "Layer Manifest File Format"). Both manifests (explicit and implicit, which `fovea install`
 /// writes) name Vulkan 1.4.359, the registry the layer's device-creation struct table is laid
-/// out from (src/vk/structs.rs): a loader leaves out (before 1.3.227) or warns about (since) an
+/// out from (src/vk/base/structs.rs): a loader leaves out (before 1.3.227) or warns about (since) an
 /// implicit layer older than the application's `apiVersion`, and Vulkan 1.4 applications exist
 /// (`vk_api14` shows one getting the layer).
 #[test]

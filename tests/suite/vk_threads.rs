@@ -11,7 +11,7 @@
 //!
 //! Density maps are made without holding the queue's mutex while the workers submit: the layer
 //! must not use the queue inside `vkCreateImage` (it clears new shadows ahead of the application's
-//! next submit instead, `src/vk/submit.rs`). A layer that did would make validation's thread checks
+//! next submit instead, `src/vk/own/calls.rs`). A layer that did would make validation's thread checks
 //! report `vkQueueSubmit` on one queue from two threads at once. Shadows destroyed before any
 //! submit drop their clear, ones destroyed while it runs outlive it; validation's object tracker
 //! reports anything left at `vkDestroyDevice`.

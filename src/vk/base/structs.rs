@@ -1,6 +1,6 @@
 //! The byte size of every struct that may extend `VkDeviceCreateInfo`, by `sType`, so that the
 //! layer can copy any of them when it must leave a density-map struct out of a device create info
-//! (the preceding structs are relinked on copies; see [`crate::vk::chain::ChainCopy`]).
+//! (the preceding structs are relinked on copies; see [`crate::vk::base::chain::ChainCopy`]).
 //!
 //! The table is every struct whose `structextends` names `VkDeviceCreateInfo` in the Vulkan
 //! registry (`xml/vk.xml`) of Vulkan 1.4.359, Vulkan SC's own left out

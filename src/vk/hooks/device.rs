@@ -1,4 +1,5 @@
-//! Device creation and the device commands.
+//! Devices: `vkCreateDevice` (what reaches the driver, the layer's own calls and the modes set up)
+//! and `vkDestroyDevice`.
 //!
 //! On an emulated physical device, a `vkCreateDevice` that enables `VK_EXT_fragment_density_map`
 //! reaches the driver as one that enables `VK_KHR_fragment_shading_rate` with only
@@ -21,13 +22,13 @@ use std::ffi::{c_char, CStr};
 use ash::vk;
 
 use crate::bridge::FdmEmulation;
-use crate::vk::chain::{self, ChainCopy};
-use crate::vk::dispatch::DeviceNext;
-use crate::vk::image;
-use crate::vk::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
-use crate::vk::loader::{guard, name};
-use crate::vk::physical::{self, needs_translation, translate_image};
-use crate::vk::registry::{self, raw, Decision, Instance};
+use crate::vk::base::chain::{self, ChainCopy};
+use crate::vk::base::ffi::{guard, key, name, raw};
+use crate::vk::base::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
+use crate::vk::base::next::DeviceNext;
+use crate::vk::own::calls::Own;
+use crate::vk::registry::{self, Decision, Instance};
+use crate::vk::{convert, decide, emulation};
 
 /// The loader's `VK_LAYER_LINK_INFO` struct in a device create info.
 ///
@@ -120,7 +121,7 @@ fn cannot_strip(e: chain::ChainError) -> String {
 /// density-map extension name and every density-map feature struct are left out of what reaches
 /// the driver, which has neither (a copy of the name list and of the chain up to the last such
 /// struct; the application's create info is never written). Every struct that can extend a
-/// device create info up to Vulkan 1.4 can be copied ([`crate::vk::structs`]); where one of a type
+/// device create info up to Vulkan 1.4 can be copied ([`crate::vk::base::structs`]); where one of a type
 /// no registry the layer knows sits before a density-map struct, the device is refused
 /// ([`Plan::Refused`]).
 ///
@@ -131,7 +132,7 @@ unsafe fn plan(
     physical: vk::PhysicalDevice,
     ci: &vk::DeviceCreateInfo<'_>,
 ) -> Plan {
-    let decision = physical::decision(inst, physical);
+    let decision = decide::decision(inst, physical);
     let Decision::Emulate { fdm, api_version } = &*decision else {
         return Plan::Untouched(None);
     };
@@ -524,7 +525,7 @@ unsafe fn create_device_impl(
     unsafe {
         let handle = *out;
         let next = DeviceNext::load(gdpa, handle);
-        let api_version = match &*physical::decision(&inst, physical) {
+        let api_version = match &*decide::decision(&inst, physical) {
             registry::Decision::Emulate { api_version, .. } => inst.api_version.min(*api_version),
             _ => inst.api_version,
         };
@@ -534,7 +535,7 @@ unsafe fn create_device_impl(
                 device = raw(handle),
                 "device emulates fragment density maps"
             );
-            match image::Own::new(&inst, physical, ci, handle, gdpa) {
+            match Own::new(inst.handle, inst.gipa, physical, ci, handle, gdpa) {
                 Ok(o) => own = Some(std::sync::Arc::new(o)),
                 Err(why) => tracing::warn!(
                     device = raw(handle),
@@ -545,14 +546,14 @@ unsafe fn create_device_impl(
             }
         }
         let inject = inject.and_then(|facts| {
-            match image::Own::new(&inst, physical, ci, handle, gdpa) {
+            match Own::new(inst.handle, inst.gipa, physical, ci, handle, gdpa) {
                 Ok(o) => {
                     own = Some(std::sync::Arc::new(o));
                     tracing::info!(
                         device = raw(handle),
                         "device has shading-rate attachments for injection"
                     );
-                    Some(crate::vk::inject::Injector::new(facts))
+                    Some(crate::vk::own::injector::Injector::new(facts))
                 }
                 // Fail open: the device keeps the feature, and its passes run unmodified.
                 Err(why) => {
@@ -567,13 +568,13 @@ unsafe fn create_device_impl(
             }
         });
         // The device was just created, so its handle is live for `registry::key`.
-        if let Some(k) = registry::key(handle).filter(|&k| registry::has_key(k)) {
+        if let Some(k) = key(handle).filter(|&k| registry::has_key(k)) {
             tracing::warn!(
                 device = raw(handle),
                 "a new device has the dispatch key of one that was never destroyed (its instance \
                  was destroyed first): what the layer kept for the old one is forgotten"
             );
-            crate::vk::convert::device_key_reused(k);
+            convert::device_key_reused(k);
         }
         registry::add_device(registry::Device {
             handle,
@@ -584,7 +585,7 @@ unsafe fn create_device_impl(
             api_version,
             attachments: registry::Attachments::new(own),
         });
-        crate::vk::convert::device_created(&inst, physical, ci, handle);
+        convert::device_created(&inst, physical, ci, handle);
     }
     r
 }
@@ -605,8 +606,8 @@ pub unsafe extern "system" fn destroy_device(
         // SAFETY: the device is live; the application has finished with it (destroy_all waits
         // for the layer's clears and uploads in flight before the maps go).
         unsafe {
-            crate::vk::convert::device_destroyed(device);
-            image::destroy_all(&dev);
+            convert::device_destroyed(device);
+            emulation::destroy_all(&dev);
             if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
                 inj.destroy(own);
             }
@@ -616,88 +617,4 @@ pub unsafe extern "system" fn destroy_device(
             unsafe { destroy(device, alloc) };
         }
     })
-}
-
-/// `vkCreateImage` on an injecting device: the image goes down untouched, and a colour image's
-/// extent and layers are noted for finding eye passes ([`crate::vk::inject`]).
-///
-/// `vkCreateImage` on an emulating device: a density map reaches the driver without the
-/// density-map usage and subsampled flag it does not know (on a copy of the create info), and
-/// gets a shading-rate shadow ([`image::image_created`]); where the shadow cannot be made, the
-/// application's image is returned all the same (fail open: its passes render at full rate).
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_image(
-    device: vk::Device,
-    info: *const vk::ImageCreateInfo<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::Image,
-) -> vk::Result {
-    guard(
-        "vkCreateImage",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let Some(dev) = (unsafe { registry::device(device) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = dev.next.create_image else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            if let Some(inj) = &dev.inject {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                let r = unsafe { next(device, info, alloc, out) };
-                if r == vk::Result::SUCCESS && !info.is_null() && !out.is_null() {
-                    // SAFETY: the caller's create info, read only; the image just created.
-                    unsafe { inj.image_created(*out, &*info) };
-                }
-                return r;
-            }
-            if info.is_null() || dev.fdm.is_none() {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(device, info, alloc, out) };
-            }
-            // SAFETY: the caller's create info, read only.
-            let mut copy = unsafe { *info };
-            if !needs_translation(copy.usage, copy.flags) {
-                // SAFETY: as above.
-                return unsafe { next(device, info, alloc, out) };
-            }
-            match translate_image(
-                copy.format,
-                copy.image_type,
-                copy.tiling,
-                copy.usage,
-                copy.flags,
-            ) {
-                Some((usage, flags)) => {
-                    copy.usage = usage;
-                    copy.flags = flags;
-                }
-                None => {
-                    tracing::warn!(
-                        format = ?copy.format,
-                        "a density-map image that is not 2D, optimal R8G8_UNORM; passed on as is"
-                    );
-                    // SAFETY: as above.
-                    return unsafe { next(device, info, alloc, out) };
-                }
-            }
-            // SAFETY: the translated copy lives across the call.
-            let r = unsafe { next(device, &copy, alloc, out) };
-            // SAFETY: the caller's create info, read only.
-            let app = unsafe { &*info };
-            if r == vk::Result::SUCCESS
-                && !out.is_null()
-                && app
-                    .usage
-                    .contains(vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT)
-            {
-                // SAFETY: the image was just created from `app`.
-                unsafe { image::image_created(&dev, *out, app) };
-            }
-            r
-        },
-    )
 }

@@ -1,4 +1,5 @@
-//! Pipelines, shader modules, samplers and image views on an emulating or injecting device.
+//! The shading-rate state pipelines get in place of density maps, read from and written into
+//! copies of their create infos, and the shader, sampler and view flags the emulation leaves out.
 //!
 //! - Graphics pipelines used with a density map (their render pass has one, or they carry
 //!   `RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_BIT_EXT` for dynamic rendering, in the 32-bit flags
@@ -14,10 +15,10 @@
 //!   every pipeline gets the same state (every render pass there has a shading-rate attachment,
 //!   and whether a dynamic rendering gets one is decided only when it begins), and pipelines for
 //!   dynamic rendering the shading-rate flag. An application with shading-rate attachments of its
-//!   own never has an injecting device ([`crate::vk::device`]); one that sets rates per pipeline
+//!   own never has an injecting device ([`crate::vk::hooks::device`]); one that sets rates per pipeline
 //!   or per draw without them (vkd3d-proton) may, and its own state keeps its rate with
 //!   `combinerOps[1]` rewritten on a copy ([`attachment_combiner`]), as do its
-//!   `vkCmdSetFragmentShadingRateKHR` calls ([`cmd_set_fragment_shading_rate`]).
+//!   `vkCmdSetFragmentShadingRateKHR` calls ([`cmd_set_fragment_shading_rate`](crate::vk::hooks::pipeline::cmd_set_fragment_shading_rate)).
 //! - Shader modules using `FragSizeEXT` or `FragInvocationCountEXT` (capability
 //!   `FragmentDensityEXT`) cannot be emulated (docs/vulkan-fdm-on-fsr.md#shader-built-ins): said
 //!   once, passed through.
@@ -25,13 +26,12 @@
 //!   which the emulation does not offer (docs/vulkan-fdm-on-fsr.md#subsampled-images), said once.
 
 use std::ffi::c_void;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 use ash::vk;
 
-use crate::vk::chain::{self, ChainCopy};
-use crate::vk::loader::guard;
-use crate::vk::registry;
+use crate::vk::base::chain::{self, ChainCopy};
+use crate::vk::base::ffi::once;
 
 const FDM_FLAG: vk::PipelineCreateFlags =
     vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT;
@@ -41,16 +41,6 @@ const FDM_FLAG2: vk::PipelineCreateFlags2KHR =
     vk::PipelineCreateFlags2KHR::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT;
 const FSR_FLAG2: vk::PipelineCreateFlags2KHR =
     vk::PipelineCreateFlags2KHR::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT;
-
-/// Set once the log has said that a graphics pipeline's chain could not be copied.
-static CHAIN_LOGGED: AtomicBool = AtomicBool::new(false);
-
-/// Logs `message` the first time `flag` is seen unset.
-fn once(flag: &AtomicBool, message: &str) {
-    if !flag.swap(true, Ordering::Relaxed) {
-        tracing::warn!("{message}");
-    }
-}
 
 /// The shading-rate state that lets the attachment decide: the pipeline's own rate 1×1 kept
 /// (`KEEP` with the primitive rate, which is 1×1 too), then replaced by the attachment's.
@@ -66,7 +56,7 @@ pub fn fsr_state() -> vk::PipelineFragmentShadingRateStateCreateInfoKHR<'static>
         ])
 }
 
-type CombinerOp = vk::FragmentShadingRateCombinerOpKHR;
+pub type CombinerOp = vk::FragmentShadingRateCombinerOpKHR;
 
 /// The `combinerOps[1]` with which an injected shading-rate attachment applies on top of an
 /// application's own rate (`size` combined with the primitive rate by `ops[0]`), given the
@@ -217,7 +207,7 @@ pub unsafe fn facts(
 
 /// The storage one rewritten create info points into.
 #[derive(Default)]
-struct Owned {
+pub struct Owned {
     state: Option<Box<vk::PipelineFragmentShadingRateStateCreateInfoKHR<'static>>>,
     flags2: Option<Box<vk::PipelineCreateFlags2CreateInfoKHR<'static>>>,
     _chain: Option<ChainCopy>,
@@ -227,7 +217,7 @@ struct Owned {
 ///
 /// # Safety
 /// `ci` must be a valid create info with a valid chain.
-unsafe fn rewrite(
+pub unsafe fn rewrite(
     ci: &vk::GraphicsPipelineCreateInfo<'_>,
     f: Facts,
 ) -> Result<(vk::GraphicsPipelineCreateInfo<'static>, Owned), chain::ChainError> {
@@ -242,7 +232,7 @@ unsafe fn rewrite(
 ///
 /// # Safety
 /// `ci` must be a valid create info with a valid chain.
-unsafe fn rewrite_with(
+pub unsafe fn rewrite_with(
     ci: &vk::GraphicsPipelineCreateInfo<'_>,
     f: Facts,
     copy_chain: bool,
@@ -320,165 +310,7 @@ unsafe fn rewrite_with(
     Ok((copy, owned))
 }
 
-/// `vkCreateGraphicsPipelines` on an emulating device.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_graphics_pipelines(
-    device: vk::Device,
-    cache: vk::PipelineCache,
-    count: u32,
-    infos: *const vk::GraphicsPipelineCreateInfo<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::Pipeline,
-) -> vk::Result {
-    guard(
-        "vkCreateGraphicsPipelines",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let Some(dev) = (unsafe { registry::device(device) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = dev.next.create_graphics_pipelines else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let list: &[vk::GraphicsPipelineCreateInfo<'_>] = if infos.is_null() || count == 0 {
-                &[]
-            } else {
-                // SAFETY: `count` create infos, as the caller promised.
-                unsafe { std::slice::from_raw_parts(infos, count as usize) }
-            };
-            // The render passes this device rewrote for a density map: their pipelines need the
-            // state that lets the shading-rate attachment decide, or they ignore it.
-            let fdm_pass = |pass: vk::RenderPass| {
-                use ash::vk::Handle as _;
-                pass != vk::RenderPass::null()
-                    && dev.attachments.passes.lock().contains_key(&pass.as_raw())
-            };
-            let facts: Vec<Facts> = list
-                .iter()
-                // SAFETY: valid create infos.
-                .map(|ci| (ci, unsafe { facts(ci, fdm_pass) }))
-                .map(|(ci, f)| Facts {
-                    // A render pass with the application's own shading-rate attachment is created
-                    // as it came (docs/injection.md#switching-it-on): its pipelines keep the
-                    // application's state, as they would without the layer.
-                    inject: dev
-                        .inject
-                        .as_ref()
-                        .is_some_and(|i| !i.is_apps_pass(ci.render_pass)),
-                    non_trivial: dev
-                        .inject
-                        .as_ref()
-                        .is_some_and(|i| i.fdm.non_trivial_combiners),
-                    ..f
-                })
-                .collect();
-            if (dev.fdm.is_none() && dev.inject.is_none()) || !facts.iter().any(Facts::rewrite) {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(device, cache, count, infos, alloc, out) };
-            }
-            let mut copies = Vec::with_capacity(list.len());
-            let mut owned = Vec::with_capacity(list.len());
-            for (ci, f) in list.iter().zip(&facts) {
-                if !f.rewrite() {
-                    // SAFETY: lives as long as the caller's create info, across the call down.
-                    copies.push(unsafe {
-                        std::mem::transmute::<
-                            vk::GraphicsPipelineCreateInfo<'_>,
-                            vk::GraphicsPipelineCreateInfo<'static>,
-                        >(*ci)
-                    });
-                    continue;
-                }
-                // SAFETY: a valid create info.
-                let (c, o) = match unsafe { rewrite(ci, *f) } {
-                    Ok(r) => r,
-                    Err(e) => {
-                        // This pipeline alone falls back; the others in the batch are rewritten
-                        // in full.
-                        once(
-                            &CHAIN_LOGGED,
-                            &format!(
-                                "cannot copy a graphics pipeline's pNext chain ({e:?}): that \
-                                 pipeline gets the shading-rate state in front of its chain, \
-                                 its own chained flags and rate stay as given"
-                            ),
-                        );
-                        // SAFETY: a valid create info; without a chain copy this cannot fail.
-                        match unsafe { rewrite_with(ci, *f, false) } {
-                            Ok(r) => r,
-                            Err(_) => (
-                                // SAFETY: lives as long as the caller's create info.
-                                unsafe {
-                                    std::mem::transmute::<
-                                        vk::GraphicsPipelineCreateInfo<'_>,
-                                        vk::GraphicsPipelineCreateInfo<'static>,
-                                    >(*ci)
-                                },
-                                Owned::default(),
-                            ),
-                        }
-                    }
-                };
-                copies.push(c);
-                owned.push(o);
-            }
-            tracing::debug!(
-                count,
-                rewritten = facts.iter().filter(|f| f.rewrite()).count(),
-                "graphics pipelines get the shading-rate state"
-            );
-            // SAFETY: the copies and what they point at live across the call.
-            let r = unsafe { next(device, cache, count, copies.as_ptr(), alloc, out) };
-            drop(owned);
-            r
-        },
-    )
-}
-
-/// `vkCmdSetFragmentShadingRateKHR` on an injecting device: the application's rate and
-/// `combinerOps[0]` go down as given, `combinerOps[1]` as [`attachment_combiner`] makes it, on a
-/// copy of the two combiners on the stack, so an injected map applies to pipelines with the
-/// dynamic shading-rate state too (docs/injection.md#apps-that-set-rates). Whether the device has
-/// non-trivial combiners was read at `vkCreateDevice`; nothing is looked up per call but the
-/// device.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_set_fragment_shading_rate(
-    cb: vk::CommandBuffer,
-    size: *const vk::Extent2D,
-    ops: *const [CombinerOp; 2],
-) {
-    guard("vkCmdSetFragmentShadingRateKHR", (), || {
-        // SAFETY: a command buffer dispatched by the loader.
-        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
-            return;
-        };
-        let Some(next) = dev.next.cmd_set_fragment_shading_rate else {
-            return;
-        };
-        let retuned = match &dev.inject {
-            Some(inj) if !size.is_null() && !ops.is_null() => {
-                // SAFETY: the caller's arguments, read only.
-                let (s, o) = unsafe { (*size, *ops) };
-                let op = attachment_combiner(inj.fdm.non_trivial_combiners, s, o);
-                (op != o[1]).then_some([o[0], op])
-            }
-            _ => None,
-        };
-        match retuned {
-            // SAFETY: the next layer's function; the copy lives across the call.
-            Some(copy) => unsafe { next(cb, size, &copy) },
-            // SAFETY: the next layer's function, with the caller's arguments.
-            None => unsafe { next(cb, size, ops) },
-        }
-    })
-}
-
-const SHADER_FDM: vk::ShaderCreateFlagsEXT =
+pub const SHADER_FDM: vk::ShaderCreateFlagsEXT =
     vk::ShaderCreateFlagsEXT::FRAGMENT_DENSITY_MAP_ATTACHMENT;
 const SHADER_FSR: vk::ShaderCreateFlagsEXT =
     vk::ShaderCreateFlagsEXT::FRAGMENT_SHADING_RATE_ATTACHMENT;
@@ -493,54 +325,6 @@ pub fn shader_flags(f: vk::ShaderCreateFlagsEXT) -> vk::ShaderCreateFlagsEXT {
     } else {
         f
     }
-}
-
-/// `vkCreateShadersEXT` on an emulating device: create infos with the density-map flag go down as
-/// copies with [`shader_flags`] (the application's array is not written).
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_shaders_ext(
-    device: vk::Device,
-    count: u32,
-    infos: *const vk::ShaderCreateInfoEXT<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::ShaderEXT,
-) -> vk::Result {
-    guard(
-        "vkCreateShadersEXT",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let Some(dev) = (unsafe { registry::device(device) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = dev.next.create_shaders_ext else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let list: &[vk::ShaderCreateInfoEXT<'_>] = if infos.is_null() || count == 0 {
-                &[]
-            } else {
-                // SAFETY: `count` create infos, as the caller promised.
-                unsafe { std::slice::from_raw_parts(infos, count as usize) }
-            };
-            if dev.fdm.is_none() || !list.iter().any(|ci| ci.flags.contains(SHADER_FDM)) {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(device, count, infos, alloc, out) };
-            }
-            let copies: Vec<vk::ShaderCreateInfoEXT<'_>> = list
-                .iter()
-                .map(|ci| {
-                    let mut c = *ci;
-                    c.flags = shader_flags(ci.flags);
-                    c
-                })
-                .collect();
-            // SAFETY: the copies (pointing into the application's create infos) live across the
-            // call.
-            unsafe { next(device, count, copies.as_ptr(), alloc, out) }
-        },
-    )
 }
 
 /// SPIR-V's `OpCapability` opcode and the `FragmentDensityEXT` capability
@@ -571,102 +355,6 @@ pub fn uses_fragment_density(code: &[u32]) -> bool {
     false
 }
 
-static FRAG_SIZE_SAID: AtomicBool = AtomicBool::new(false);
-
-/// `vkCreateShaderModule` on an emulating device: detects shaders that read the fragment size.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_shader_module(
-    device: vk::Device,
-    info: *const vk::ShaderModuleCreateInfo<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::ShaderModule,
-) -> vk::Result {
-    guard(
-        "vkCreateShaderModule",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let Some(dev) = (unsafe { registry::device(device) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = dev.next.create_shader_module else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            if dev.fdm.is_some() && !info.is_null() {
-                // SAFETY: the caller's create info: `codeSize` bytes of 4-byte-aligned SPIR-V.
-                let code = unsafe {
-                    let ci = &*info;
-                    if ci.p_code.is_null() {
-                        &[][..]
-                    } else {
-                        std::slice::from_raw_parts(ci.p_code, ci.code_size / 4)
-                    }
-                };
-                if uses_fragment_density(code) {
-                    once(
-                        &FRAG_SIZE_SAID,
-                        "a shader uses FragSizeEXT or FragInvocationCountEXT (capability \
-                         FragmentDensityEXT), which shading-rate attachments cannot emulate; it is \
-                         passed on as is and the driver may refuse it",
-                    );
-                }
-            }
-            // SAFETY: the next layer's function, with the caller's arguments.
-            unsafe { next(device, info, alloc, out) }
-        },
-    )
-}
-
-const SUBSAMPLED: vk::SamplerCreateFlags = vk::SamplerCreateFlags::from_raw(
-    vk::SamplerCreateFlags::SUBSAMPLED_EXT.as_raw()
-        | vk::SamplerCreateFlags::SUBSAMPLED_COARSE_RECONSTRUCTION_EXT.as_raw(),
-);
-static SUBSAMPLED_SAID: AtomicBool = AtomicBool::new(false);
-
-/// `vkCreateSampler` on an emulating device: the subsampled flags are left out of a copy.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_sampler(
-    device: vk::Device,
-    info: *const vk::SamplerCreateInfo<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::Sampler,
-) -> vk::Result {
-    guard(
-        "vkCreateSampler",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let Some(dev) = (unsafe { registry::device(device) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = dev.next.create_sampler else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let subsampled = !info.is_null()
-                // SAFETY: the caller's create info, read only.
-                && unsafe { (*info).flags }.intersects(SUBSAMPLED);
-            if dev.fdm.is_none() || !subsampled {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(device, info, alloc, out) };
-            }
-            once(
-                &SUBSAMPLED_SAID,
-                "subsampled sampler flags left out: emulated density maps never subsample images",
-            );
-            // SAFETY: a copy of the caller's create info, alive across the call.
-            unsafe {
-                let mut copy = *info;
-                copy.flags &= !SUBSAMPLED;
-                next(device, &copy, alloc, out)
-            }
-        },
-    )
-}
-
 const VIEW_FLAGS: vk::ImageViewCreateFlags = vk::ImageViewCreateFlags::from_raw(
     vk::ImageViewCreateFlags::FRAGMENT_DENSITY_MAP_DYNAMIC_EXT.as_raw()
         | vk::ImageViewCreateFlags::FRAGMENT_DENSITY_MAP_DEFERRED_EXT.as_raw(),
@@ -686,6 +374,12 @@ pub fn view_flags(flags: vk::ImageViewCreateFlags) -> Option<vk::ImageViewCreate
     );
     Some(flags & !VIEW_FLAGS)
 }
+
+/// The sampler flags the emulation leaves out: it never subsamples images.
+pub const SUBSAMPLED: vk::SamplerCreateFlags = vk::SamplerCreateFlags::from_raw(
+    vk::SamplerCreateFlags::SUBSAMPLED_EXT.as_raw()
+        | vk::SamplerCreateFlags::SUBSAMPLED_COARSE_RECONSTRUCTION_EXT.as_raw(),
+);
 
 #[cfg(test)]
 mod tests {

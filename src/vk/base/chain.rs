@@ -6,7 +6,7 @@ use std::mem::size_of;
 
 use ash::vk;
 
-use crate::vk::{link, structs};
+use crate::vk::base::{link, structs};
 
 /// The longest chain the layer follows; a longer one is taken for a loop, which the spec forbids
 /// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-validusage-pNext>).

@@ -11,7 +11,7 @@
 //! - **Maps.** Per target shape (extent, the views it holds) one `R8_UINT` image with the
 //!   `FRAGMENT_SHADING_RATE_ATTACHMENT` usage and a view of it, filled with
 //!   [`fovea_model::inject::codes`] for the published pattern and FOVs. The bytes reach the image
-//!   through the pending uploads of [`crate::vk::submit`], in front of the application's next
+//!   through the pending uploads of [`crate::vk::own::calls::Clears`], in front of the application's next
 //!   submit on a graphics queue: the layer uses a queue only inside a call the application made on
 //!   it (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkQueueSubmit.html>, "Host
 //!   Synchronization"). A map is made the first time a pass of its shape begins and filled again
@@ -23,7 +23,7 @@
 //! line says why.
 //!
 //! Locks: the maps' and the tracking tables' are leaves outside
-//! [`crate::common::lock::Rank`]'s order, like [`crate::vk::submit`]'s: under them the layer calls
+//! [`crate::common::lock::Rank`]'s order, like [`crate::vk::own::calls::Clears`]': under them the layer calls
 //! only the next layer's commands on its own objects, which never call back into fovea.
 
 use std::collections::HashMap;
@@ -34,7 +34,8 @@ use ash::vk::Handle as _;
 
 use crate::bridge::inject::Injection;
 use crate::bridge::FdmEmulation;
-use crate::vk::image::{Own, SHADOW_FORMAT};
+use crate::vk::own::calls::Own;
+use crate::vk::translate::formats::SHADOW_FORMAT;
 use fovea_model::inject::{Pass, Views};
 
 /// What the layer knows of a colour image: its extent and array layers.

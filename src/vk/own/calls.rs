@@ -1,6 +1,8 @@
-//! Submits on an emulating device: the layer's pending shadow clears run in front of the
-//! application's next submit on a graphics queue, and the density-map stage bits of semaphore
-//! waits become the shading-rate ones.
+//! The layer's own calls on a device ([`Own`]): the next layer's device commands, memory types,
+//! `vkSetDeviceLoaderData` for the command buffers it allocates
+//! (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
+//! "Creating New Dispatchable Objects"), full-rate stand-ins, and the clears and uploads it runs
+//! ahead of the application's next submit ([`Clears`]).
 //!
 //! Clears. A new shadow must hold rate code 0 (1×1, full rate) before any pass reads it
 //! (docs/vulkan-fdm-on-fsr.md#shadows), and a clear needs a queue. Vulkan makes every use of a
@@ -40,68 +42,373 @@
 //! execution dependency on everything earlier on that queue (a pass that still reads the image's
 //! old content), ending in the shading-rate layout. The staging buffer is freed with the command
 //! buffer, once its fence has signalled.
-//!
-//! With nothing pending anywhere (the steady state) a submit costs one atomic load and a scan of
-//! its wait-stage masks before the call down.
 
+use std::ffi::c_void;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use ash::vk;
 use ash::vk::Handle as _;
 
-use crate::vk::barrier;
-use crate::vk::image::{Own, SHADOW_LAYOUT};
-use crate::vk::loader::guard;
-use crate::vk::registry::{self, raw, ShadowImage};
+use crate::bridge::FdmEmulation;
+use crate::common::lock::{Mutex, Rank};
+use crate::vk::base::chain;
+use crate::vk::base::ffi::raw;
+use crate::vk::base::link::LayerDeviceCreateInfo;
+use crate::vk::own::shadows::ShadowImage;
+use crate::vk::translate::formats::{shadow_layers, SHADOW_FORMAT, SHADOW_LAYOUT, SHADOW_USAGE};
+
+/// `PFN_vkSetDeviceLoaderData`.
+pub type SetDeviceLoaderData = unsafe extern "system" fn(vk::Device, *mut c_void) -> vk::Result;
+
+/// `VK_LOADER_DATA_CALLBACK`: the `VkLayerDeviceCreateInfo` that carries `pfnSetDeviceLoaderData`.
+pub const LOADER_DATA_CALLBACK: u32 = 1;
+
+/// What the layer needs to make, clear and destroy shadows on one device.
+pub struct Own {
+    /// The next layer's device commands.
+    pub fns: ash::Device,
+    pub memory: vk::PhysicalDeviceMemoryProperties,
+    pub set_loader_data: SetDeviceLoaderData,
+    /// The shadows' clears, run ahead of the application's submits ([`Clears`]).
+    pub clears: Clears,
+    /// Full-rate stand-ins for density views without a shadow ([`Own::full_rate_view`]): one
+    /// layer each, kept until the device is destroyed.
+    pub fallbacks: Mutex<Vec<(ShadowImage, vk::ImageView)>>,
+}
+
+impl Own {
+    /// Sets up the layer's own calls on a device just created.
+    ///
+    /// # Safety
+    /// `ci` must be the application's valid create info of `device`, made on `physical` of
+    /// `instance`, whose next layer's `vkGetInstanceProcAddr` is `gipa`;
+    /// `gdpa` the next layer's `vkGetDeviceProcAddr`.
+    pub unsafe fn new(
+        instance: vk::Instance,
+        gipa: vk::PFN_vkGetInstanceProcAddr,
+        physical: vk::PhysicalDevice,
+        ci: &vk::DeviceCreateInfo<'_>,
+        device: vk::Device,
+        gdpa: vk::PFN_vkGetDeviceProcAddr,
+    ) -> Result<Own, String> {
+        // SAFETY: a valid chain, as the caller promised.
+        let set_loader_data = unsafe { loader_data_callback(ci) }
+            .ok_or("the loader passed no vkSetDeviceLoaderData")?;
+        // SAFETY: the next layer's instance commands, of the types their names imply.
+        let (families, memory) = unsafe {
+            let f = gipa(
+                instance,
+                c"vkGetPhysicalDeviceQueueFamilyProperties".as_ptr(),
+            )
+            .ok_or("no vkGetPhysicalDeviceQueueFamilyProperties")?;
+            let f = std::mem::transmute::<
+                unsafe extern "system" fn(),
+                vk::PFN_vkGetPhysicalDeviceQueueFamilyProperties,
+            >(f);
+            let mut n = 0;
+            f(physical, &mut n, std::ptr::null_mut());
+            let mut families = vec![vk::QueueFamilyProperties::default(); n as usize];
+            f(physical, &mut n, families.as_mut_ptr());
+            families.truncate(n as usize);
+            let m = gipa(instance, c"vkGetPhysicalDeviceMemoryProperties".as_ptr())
+                .ok_or("no vkGetPhysicalDeviceMemoryProperties")?;
+            let m = std::mem::transmute::<
+                unsafe extern "system" fn(),
+                vk::PFN_vkGetPhysicalDeviceMemoryProperties,
+            >(m);
+            let mut memory = vk::PhysicalDeviceMemoryProperties::default();
+            m(physical, &mut memory);
+            (families, memory)
+        };
+        let infos = if ci.p_queue_create_infos.is_null() {
+            &[][..]
+        } else {
+            // SAFETY: as the caller promised.
+            unsafe {
+                std::slice::from_raw_parts(
+                    ci.p_queue_create_infos,
+                    ci.queue_create_info_count as usize,
+                )
+            }
+        };
+        // SAFETY: the next layer's commands for the live device, of the types their names imply.
+        let fns = unsafe {
+            ash::Device::load_with(
+                |name| gdpa(device, name.as_ptr()).map_or(std::ptr::null(), |f| f as *const c_void),
+                device,
+            )
+        };
+        // The application's queues of graphics families, where the passes that read shadows run
+        // and so where their clears go. Protected-capable queues (created with flags) are left out:
+        // they need vkGetDeviceQueue2, and a clear never needs one.
+        let mut queues = Vec::new();
+        for q in infos.iter().filter(|q| {
+            q.flags.is_empty()
+                && families
+                    .get(q.queue_family_index as usize)
+                    .is_some_and(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
+        }) {
+            for i in 0..q.queue_count {
+                // SAFETY: a queue the application created; only its handle is kept.
+                let queue = unsafe { fns.get_device_queue(q.queue_family_index, i) };
+                queues.push((queue.as_raw(), q.queue_family_index));
+            }
+        }
+        if queues.is_empty() {
+            return Err("the device has no graphics queue the layer could clear shadows on".into());
+        }
+        Ok(Own {
+            fns,
+            memory,
+            set_loader_data,
+            clears: Clears::new(queues),
+            fallbacks: Mutex::ranked(Rank::Record, "vk full-rate shadows", Vec::new()),
+        })
+    }
+
+    /// Gives a command buffer the layer allocated the loader's dispatch pointer
+    /// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
+    /// "Creating New Dispatchable Objects").
+    ///
+    /// # Safety
+    /// `cb` must be a command buffer the layer just allocated on this device.
+    pub unsafe fn set_loader_data(&self, cb: vk::CommandBuffer) -> Result<(), vk::Result> {
+        // SAFETY: as the caller promised.
+        unsafe { (self.set_loader_data)(self.fns.handle(), cb.as_raw() as *mut c_void) }.result()
+    }
+
+    /// A full-rate shading-rate view (rate code 0 everywhere, one layer) that covers a framebuffer
+    /// of `width`×`height` pixels: the stand-in for a density view whose shadow could not be made,
+    /// in a framebuffer of a pass translated for shading rates, where the density view itself is
+    /// invalid usage
+    /// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkFramebufferCreateInfo.html>,
+    /// VUID-VkFramebufferCreateInfo-flags-04548). One layer is valid with any framebuffer layer count
+    /// and view mask (a shading-rate attachment's layer count "must be either 1, or greater than"
+    /// them, same page). Made at framebuffer
+    /// creation, shared by every framebuffer it covers; `None` (logged) where it cannot be made.
+    ///
+    /// # Safety
+    /// `self` must belong to a live device emulating as `fdm` says.
+    pub unsafe fn full_rate_view(
+        &self,
+        fdm: &FdmEmulation,
+        width: u32,
+        height: u32,
+    ) -> Option<vk::ImageView> {
+        let need = vk::Extent2D {
+            width: width.div_ceil(fdm.texel[0].max(1)).max(1),
+            height: height.div_ceil(fdm.texel[1].max(1)).max(1),
+        };
+        let mut list = self.fallbacks.lock();
+        if let Some((_, v)) = list
+            .iter()
+            .find(|(s, _)| s.extent.width >= need.width && s.extent.height >= need.height)
+        {
+            return Some(*v);
+        }
+        let extent = vk::Extent3D {
+            width: need.width,
+            height: need.height,
+            depth: 1,
+        };
+        // SAFETY: the layer's own image and view on a live device; the image is destroyed again
+        // where its view cannot be made (its clear, still pending, is dropped first).
+        let made = unsafe {
+            make_shadow(self, fdm, extent, 1, true).and_then(|s| {
+                let info = vk::ImageViewCreateInfo::default()
+                    .image(s.image)
+                    .view_type(vk::ImageViewType::TYPE_2D)
+                    .format(SHADOW_FORMAT)
+                    .subresource_range(vk::ImageSubresourceRange {
+                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                        base_mip_level: 0,
+                        level_count: 1,
+                        base_array_layer: 0,
+                        layer_count: 1,
+                    });
+                match self.fns.create_image_view(&info, None) {
+                    Ok(v) => Ok((s, v)),
+                    Err(e) => {
+                        self.clears.forget(&self.fns, &s);
+                        Err(e)
+                    }
+                }
+            })
+        };
+        match made {
+            Ok((s, v)) => {
+                tracing::info!(
+                    width = need.width,
+                    height = need.height,
+                    "a full-rate shading-rate attachment stands in for density views without a \
+                     shadow"
+                );
+                list.push((s, v));
+                Some(v)
+            }
+            Err(e) => {
+                tracing::warn!(
+                    result = ?e,
+                    "no full-rate stand-in for a density view without a shadow either; the \
+                     framebuffer is passed on as the application made it"
+                );
+                None
+            }
+        }
+    }
+
+    /// A host-visible, host-coherent memory type among `bits`, for staging uploads.
+    pub fn host_memory_type(&self, bits: u32) -> Option<u32> {
+        let want = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+        let types = &self.memory.memory_types[..self.memory.memory_type_count as usize];
+        (0..types.len() as u32)
+            .find(|&i| bits & (1 << i) != 0 && types[i as usize].property_flags.contains(want))
+    }
+
+    /// A device-local memory type among `bits` (any allowed one where none is device-local).
+    /// A layer-owned shading-rate image (`R8_UINT`, [`SHADOW_USAGE`], 2D, optimal tiling) of
+    /// `texels` and `layers`, bound to device-local memory of its own: what shadows and injection's
+    /// maps are made of. Nothing is left behind on failure.
+    ///
+    /// # Safety
+    /// The device must be live.
+    pub unsafe fn shading_rate_image(
+        &self,
+        texels: [u32; 2],
+        layers: u32,
+    ) -> Result<(vk::Image, vk::DeviceMemory), vk::Result> {
+        let d = &self.fns;
+        let info = vk::ImageCreateInfo::default()
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(SHADOW_FORMAT)
+            .extent(vk::Extent3D {
+                width: texels[0],
+                height: texels[1],
+                depth: 1,
+            })
+            .mip_levels(1)
+            .array_layers(layers)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(SHADOW_USAGE)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .initial_layout(vk::ImageLayout::UNDEFINED);
+        // SAFETY: the layer's own objects on a live device (the caller's promise); each is
+        // destroyed again on failure.
+        unsafe {
+            let image = d.create_image(&info, None)?;
+            let req = d.get_image_memory_requirements(image);
+            let Some(ty) = self.memory_type(req.memory_type_bits) else {
+                d.destroy_image(image, None);
+                return Err(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY);
+            };
+            let memory = match d.allocate_memory(
+                &vk::MemoryAllocateInfo::default()
+                    .allocation_size(req.size)
+                    .memory_type_index(ty),
+                None,
+            ) {
+                Ok(m) => m,
+                Err(e) => {
+                    d.destroy_image(image, None);
+                    return Err(e);
+                }
+            };
+            if let Err(e) = d.bind_image_memory(image, memory, 0) {
+                d.destroy_image(image, None);
+                d.free_memory(memory, None);
+                return Err(e);
+            }
+            Ok((image, memory))
+        }
+    }
+
+    pub fn memory_type(&self, bits: u32) -> Option<u32> {
+        let allowed = |i: u32| bits & (1 << i) != 0;
+        let types = &self.memory.memory_types[..self.memory.memory_type_count as usize];
+        (0..types.len() as u32)
+            .find(|&i| {
+                allowed(i)
+                    && types[i as usize]
+                        .property_flags
+                        .contains(vk::MemoryPropertyFlags::DEVICE_LOCAL)
+            })
+            .or_else(|| (0..types.len() as u32).find(|&i| allowed(i)))
+    }
+}
+
+/// The loader's `vkSetDeviceLoaderData` from a device create info.
+///
+/// # Safety
+/// `ci.p_next` must be a valid chain.
+pub unsafe fn loader_data_callback(ci: &vk::DeviceCreateInfo<'_>) -> Option<SetDeviceLoaderData> {
+    let mut next = ci.p_next;
+    for _ in 0..chain::MAX_CHAIN_LENGTH {
+        // SAFETY: as the caller promised.
+        let found = unsafe {
+            chain::find::<LayerDeviceCreateInfo>(next, vk::StructureType::LOADER_DEVICE_CREATE_INFO)
+        }
+        .ok()
+        .flatten()?;
+        // SAFETY: found in a valid chain, of the type its sType names.
+        let f = unsafe { &*found };
+        if f.function == LOADER_DATA_CALLBACK && !f.u.is_null() {
+            // SAFETY: with this function value the union holds `pfnSetDeviceLoaderData`.
+            return Some(unsafe { std::mem::transmute::<*mut c_void, SetDeviceLoaderData>(f.u) });
+        }
+        next = f.p_next;
+    }
+    None
+}
 
 /// Pending clears in the whole process: what the submit hooks' fast path reads.
-static PENDING: AtomicUsize = AtomicUsize::new(0);
+pub static PENDING: AtomicUsize = AtomicUsize::new(0);
 
 /// How long `vkDestroyDevice` waits for a clear still in flight (the application must have waited
 /// for its work, and the clear precedes it on the queue; this bounds a misbehaving one).
-const DESTROY_WAIT_NS: u64 = 1_000_000_000;
+pub const DESTROY_WAIT_NS: u64 = 1_000_000_000;
 
 /// One submitted clear.
-struct InFlight {
-    pool: vk::CommandPool,
-    cb: vk::CommandBuffer,
-    fence: vk::Fence,
+pub struct InFlight {
+    pub pool: vk::CommandPool,
+    pub cb: vk::CommandBuffer,
+    pub fence: vk::Fence,
     /// The shadows it clears.
-    shadows: Vec<vk::Image>,
+    pub shadows: Vec<vk::Image>,
     /// Shadows destroyed by the application meanwhile, destroyed when `fence` has signalled.
-    retired: Vec<(vk::Image, vk::DeviceMemory)>,
+    pub retired: Vec<(vk::Image, vk::DeviceMemory)>,
     /// The uploads' staging buffer, freed when `fence` has signalled.
-    staging: Option<(vk::Buffer, vk::DeviceMemory)>,
+    pub staging: Option<(vk::Buffer, vk::DeviceMemory)>,
 }
 
 /// Bytes waiting to be copied into a layer-owned shading-rate image: `layers` layers of
 /// `extent` texels, one byte each, layer after layer.
-struct Upload {
-    image: vk::Image,
-    extent: [u32; 2],
-    layers: u32,
-    bytes: Vec<u8>,
+pub struct Upload {
+    pub image: vk::Image,
+    pub extent: [u32; 2],
+    pub layers: u32,
+    pub bytes: Vec<u8>,
 }
 
 #[derive(Default)]
-struct State {
+pub struct State {
     /// Shadows waiting for their clear, with their layers.
-    pending: Vec<(vk::Image, u32)>,
+    pub pending: Vec<(vk::Image, u32)>,
     /// Images waiting for their upload (at most one per image: the newest bytes).
-    uploads: Vec<Upload>,
+    pub uploads: Vec<Upload>,
     /// A command pool per graphics family the layer submitted on, made at its first clear there.
-    pools: Vec<(u32, vk::CommandPool)>,
-    in_flight: Vec<InFlight>,
+    pub pools: Vec<(u32, vk::CommandPool)>,
+    pub in_flight: Vec<InFlight>,
 }
 
 /// One device's shadow clears.
 pub struct Clears {
     /// The application's queues of graphics families (handle, family), from the device create info.
-    queues: Vec<(u64, u32)>,
+    pub queues: Vec<(u64, u32)>,
     /// A leaf lock outside [`crate::common::lock::Rank`]'s order: under it the layer calls only the
     /// next layer's commands on its own objects (which never call back into fovea), and it may be
     /// taken under fovea's own upload locks, whose submits pass through this layer.
-    state: parking_lot::Mutex<State>,
+    pub state: parking_lot::Mutex<State>,
 }
 
 impl Clears {
@@ -114,7 +421,7 @@ impl Clears {
     }
 
     /// The family of `queue`, where it is one of the application's graphics queues.
-    fn family_of(&self, queue: vk::Queue) -> Option<u32> {
+    pub fn family_of(&self, queue: vk::Queue) -> Option<u32> {
         self.queues
             .iter()
             .find(|(q, _)| *q == queue.as_raw())
@@ -194,7 +501,7 @@ impl Clears {
     ///
     /// # Safety
     /// Called inside the application's submit on `queue`, of `own`'s live device.
-    unsafe fn flush(&self, own: &Own, queue: vk::Queue) -> Result<(), vk::Result> {
+    pub unsafe fn flush(&self, own: &Own, queue: vk::Queue) -> Result<(), vk::Result> {
         let Some(family) = self.family_of(queue) else {
             return Ok(());
         };
@@ -208,7 +515,7 @@ impl Clears {
             return Ok(());
         }
         // SAFETY: a buffer of the layer's own on a live device, freed again on failure.
-        let staging = unsafe { stage(own, &st.uploads) }?;
+        let staging = unsafe { stage_uploads(own, &st.uploads) }?;
         let free_staging = |d: &ash::Device| {
             if let Some((b, m)) = staging {
                 // SAFETY: the layer's own buffer, not in use (its copy was never submitted).
@@ -342,7 +649,7 @@ impl Clears {
 ///
 /// # Safety
 /// The objects in `st` must belong to `d`'s live device.
-unsafe fn reclaim(d: &ash::Device, st: &mut State, all: bool) {
+pub unsafe fn reclaim(d: &ash::Device, st: &mut State, all: bool) {
     if st.in_flight.is_empty() {
         return;
     }
@@ -387,7 +694,7 @@ unsafe fn reclaim(d: &ash::Device, st: &mut State, all: bool) {
 ///
 /// # Safety
 /// `cb` must be recording on `d`; the shadows live.
-unsafe fn record(d: &ash::Device, cb: vk::CommandBuffer, pending: &[(vk::Image, u32)]) {
+pub unsafe fn record(d: &ash::Device, cb: vk::CommandBuffer, pending: &[(vk::Image, u32)]) {
     // SAFETY: as the caller promised; new shadows have no earlier use to wait for.
     unsafe {
         write_shading_rate_images(
@@ -411,7 +718,7 @@ unsafe fn record(d: &ash::Device, cb: vk::CommandBuffer, pending: &[(vk::Image, 
 }
 
 /// All `layers` of a colour image's one mip level.
-fn color_range(layers: u32) -> vk::ImageSubresourceRange {
+pub fn color_range(layers: u32) -> vk::ImageSubresourceRange {
     vk::ImageSubresourceRange {
         aspect_mask: vk::ImageAspectFlags::COLOR,
         base_mip_level: 0,
@@ -430,7 +737,7 @@ fn color_range(layers: u32) -> vk::ImageSubresourceRange {
 ///
 /// # Safety
 /// `cb` must be recording on `d`; the images live; `write` records only transfer writes to them.
-unsafe fn write_shading_rate_images(
+pub unsafe fn write_shading_rate_images(
     d: &ash::Device,
     cb: vk::CommandBuffer,
     after: vk::PipelineStageFlags,
@@ -487,7 +794,7 @@ unsafe fn write_shading_rate_images(
 ///
 /// # Safety
 /// `own` must belong to a live device.
-unsafe fn stage(
+pub unsafe fn stage_uploads(
     own: &Own,
     uploads: &[Upload],
 ) -> Result<Option<(vk::Buffer, vk::DeviceMemory)>, vk::Result> {
@@ -548,11 +855,11 @@ unsafe fn stage(
 }
 
 /// Records the copies of every upload from `buffer` (their bytes one after the other, as
-/// [`stage`] wrote them), each image from `UNDEFINED` to [`SHADOW_LAYOUT`].
+/// [`stage_uploads`] wrote them), each image from `UNDEFINED` to [`SHADOW_LAYOUT`].
 ///
 /// # Safety
 /// `cb` must be recording on `d`; the images and `buffer` live.
-unsafe fn record_uploads(
+pub unsafe fn record_uploads(
     d: &ash::Device,
     cb: vk::CommandBuffer,
     buffer: vk::Buffer,
@@ -604,255 +911,32 @@ unsafe fn record_uploads(
     }
 }
 
-/// The result an application's submit returns where the layer's clear ahead of it failed: the
-/// failure's own where `vkQueueSubmit` may return it, else out of host memory.
-fn submit_result(e: vk::Result) -> vk::Result {
-    match e {
-        vk::Result::ERROR_OUT_OF_HOST_MEMORY
-        | vk::Result::ERROR_OUT_OF_DEVICE_MEMORY
-        | vk::Result::ERROR_DEVICE_LOST => e,
-        _ => vk::Result::ERROR_OUT_OF_HOST_MEMORY,
-    }
-}
-
-/// Runs the pending clears ahead of a submit on `queue`: `Err` with the result the application's
-/// submit must return instead of going down. One atomic load where nothing is pending.
+/// Creates and binds one shadow of `extent` for an image of `app_layers` layers; with `clear`, its
+/// clear to rate code 0 is left pending for the next submit.
 ///
 /// # Safety
-/// Called inside the application's submit on `queue`, a queue dispatched by the loader.
-unsafe fn before_submit(what: &'static str, queue: vk::Queue) -> Result<(), vk::Result> {
-    if PENDING.load(Ordering::Acquire) == 0 {
-        return Ok(());
+/// `own` must belong to a live device.
+pub unsafe fn make_shadow(
+    own: &Own,
+    fdm: &FdmEmulation,
+    extent: vk::Extent3D,
+    app_layers: u32,
+    clear: bool,
+) -> Result<ShadowImage, vk::Result> {
+    let layers = shadow_layers(fdm, app_layers);
+    // SAFETY: as the caller promised.
+    let (image, memory) = unsafe { own.shading_rate_image([extent.width, extent.height], layers) }?;
+    if clear {
+        own.clears.add(image, layers);
     }
-    // SAFETY: as the caller promised.
-    let Some(own) = (unsafe { crate::vk::image::own_of(queue) }) else {
-        return Ok(());
-    };
-    // SAFETY: as the caller promised.
-    unsafe { own.clears.flush(&own, queue) }.map_err(|e| {
-        tracing::warn!(
-            queue = raw(queue),
-            result = ?e,
-            "{what}: the layer could not clear new density maps' shadows or upload shading-rate \
-             maps ahead of it; the submit fails with that result and they stay pending"
-        );
-        submit_result(e)
-    })
-}
-
-/// `vkQueueSubmit`: pending clears first; wait-stage masks without the density-map stage, on a copy.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn queue_submit(
-    queue: vk::Queue,
-    count: u32,
-    submits: *const vk::SubmitInfo<'_>,
-    fence: vk::Fence,
-) -> vk::Result {
-    guard(
-        "vkQueueSubmit",
-        vk::Result::ERROR_OUT_OF_HOST_MEMORY,
-        || {
-            // SAFETY: a queue dispatched by the loader (or NULL).
-            let Some(rec) = (unsafe { registry::recording(queue) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = rec.next.queue_submit else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            // SAFETY: inside the application's submit on `queue`.
-            if let Err(e) = unsafe { before_submit("vkQueueSubmit", queue) } {
-                return e;
-            }
-            // SAFETY: the caller's array of `count` submits.
-            let list = unsafe { slice(submits, count) };
-            // SAFETY: each submit's masks, valid for its wait count.
-            let masks = |s: &vk::SubmitInfo<'_>| unsafe {
-                slice(s.p_wait_dst_stage_mask, s.wait_semaphore_count)
-            };
-            if !list
-                .iter()
-                .any(|s| masks(s).iter().any(|&m| barrier::stage(m) != m))
-            {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(queue, count, submits, fence) };
-            }
-            let stages: Vec<Vec<vk::PipelineStageFlags>> = list
-                .iter()
-                .map(|s| masks(s).iter().map(|&m| barrier::stage(m)).collect())
-                .collect();
-            let copies: Vec<vk::SubmitInfo<'_>> = list
-                .iter()
-                .zip(&stages)
-                .map(|(s, m)| {
-                    let mut c = *s;
-                    if !s.p_wait_dst_stage_mask.is_null() {
-                        c.p_wait_dst_stage_mask = m.as_ptr();
-                    }
-                    c
-                })
-                .collect();
-            // SAFETY: the copies and their masks live across the call.
-            unsafe { next(queue, count, copies.as_ptr(), fence) }
+    Ok(ShadowImage {
+        image,
+        memory,
+        extent: vk::Extent2D {
+            width: extent.width,
+            height: extent.height,
         },
-    )
-}
-
-/// The semaphore infos of a submit with the density-map stage replaced, where any has it.
-fn semaphores2<'a>(
-    infos: &[vk::SemaphoreSubmitInfo<'a>],
-) -> Option<Vec<vk::SemaphoreSubmitInfo<'a>>> {
-    infos
-        .iter()
-        .any(|i| barrier::stage2(i.stage_mask) != i.stage_mask)
-        .then(|| {
-            infos
-                .iter()
-                .map(|i| vk::SemaphoreSubmitInfo {
-                    stage_mask: barrier::stage2(i.stage_mask),
-                    ..*i
-                })
-                .collect()
-        })
-}
-
-/// The shared body of `vkQueueSubmit2` and its KHR alias.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn submit2(
-    what: &'static str,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkQueueSubmit2>,
-    queue: vk::Queue,
-    count: u32,
-    submits: *const vk::SubmitInfo2<'_>,
-    fence: vk::Fence,
-) -> vk::Result {
-    guard(what, vk::Result::ERROR_OUT_OF_HOST_MEMORY, || {
-        // SAFETY: a queue dispatched by the loader (or NULL).
-        let Some(rec) = (unsafe { registry::recording(queue) }) else {
-            return vk::Result::ERROR_INITIALIZATION_FAILED;
-        };
-        let Some(next) = pick(&rec) else {
-            return vk::Result::ERROR_INITIALIZATION_FAILED;
-        };
-        // SAFETY: inside the application's submit on `queue`.
-        if let Err(e) = unsafe { before_submit(what, queue) } {
-            return e;
-        }
-        // SAFETY: the caller's array of `count` submits.
-        let list = unsafe { slice(submits, count) };
-        fn waits<'a>(s: &vk::SubmitInfo2<'a>) -> &'a [vk::SemaphoreSubmitInfo<'a>] {
-            // SAFETY: the caller's array, valid for its count (the command's valid usage).
-            unsafe { slice(s.p_wait_semaphore_infos, s.wait_semaphore_info_count) }
-        }
-        fn signals<'a>(s: &vk::SubmitInfo2<'a>) -> &'a [vk::SemaphoreSubmitInfo<'a>] {
-            // SAFETY: as above.
-            unsafe { slice(s.p_signal_semaphore_infos, s.signal_semaphore_info_count) }
-        }
-        let touched = |i: &[vk::SemaphoreSubmitInfo<'_>]| {
-            i.iter()
-                .any(|i| barrier::stage2(i.stage_mask) != i.stage_mask)
-        };
-        if !list
-            .iter()
-            .any(|s| touched(waits(s)) || touched(signals(s)))
-        {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { next(queue, count, submits, fence) };
-        }
-        let arrays: Vec<_> = list
-            .iter()
-            .map(|s| (semaphores2(waits(s)), semaphores2(signals(s))))
-            .collect();
-        let copies: Vec<vk::SubmitInfo2<'_>> = list
-            .iter()
-            .zip(&arrays)
-            .map(|(s, (w, g))| {
-                let mut c = *s;
-                if let Some(w) = w {
-                    c.p_wait_semaphore_infos = w.as_ptr();
-                }
-                if let Some(g) = g {
-                    c.p_signal_semaphore_infos = g.as_ptr();
-                }
-                c
-            })
-            .collect();
-        // SAFETY: the copies and their arrays live across the call.
-        unsafe { next(queue, count, copies.as_ptr(), fence) }
+        layers,
+        app_layers,
     })
-}
-
-hook_and_khr_alias! {
-    /// `vkQueueSubmit2`: pending clears first; semaphore stage masks without the density-map
-    /// stage, on copies.
-    queue_submit2, queue_submit2_khr = submit2("vkQueueSubmit2")
-    (
-        queue: vk::Queue,
-        count: u32,
-        submits: *const vk::SubmitInfo2<'_>,
-        fence: vk::Fence,
-    ) -> vk::Result
-}
-
-/// The application's array, or an empty one for NULL or a zero count.
-///
-/// # Safety
-/// `p` must be NULL or valid for `n` reads.
-unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
-    if p.is_null() || n == 0 {
-        &[]
-    } else {
-        // SAFETY: as the caller promised.
-        unsafe { std::slice::from_raw_parts(p, n as usize) }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn semaphore_stages_are_translated_on_a_copy_and_only_where_needed() {
-        let plain = [vk::SemaphoreSubmitInfo::default()
-            .stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)];
-        assert!(semaphores2(&plain).is_none());
-        let fdm = [
-            plain[0],
-            vk::SemaphoreSubmitInfo::default().stage_mask(
-                vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT
-                    | vk::PipelineStageFlags2::FRAGMENT_SHADER,
-            ),
-        ];
-        let copy = semaphores2(&fdm).expect("translated");
-        assert_eq!(copy[0].stage_mask, plain[0].stage_mask);
-        assert_eq!(
-            copy[1].stage_mask,
-            vk::PipelineStageFlags2::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
-                | vk::PipelineStageFlags2::FRAGMENT_SHADER
-        );
-        assert_eq!(
-            fdm[1].stage_mask,
-            vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT
-                | vk::PipelineStageFlags2::FRAGMENT_SHADER,
-            "the application's array is kept"
-        );
-    }
-
-    #[test]
-    fn a_failed_clear_answers_with_a_result_submit_may_return() {
-        for e in [
-            vk::Result::ERROR_OUT_OF_HOST_MEMORY,
-            vk::Result::ERROR_OUT_OF_DEVICE_MEMORY,
-            vk::Result::ERROR_DEVICE_LOST,
-        ] {
-            assert_eq!(submit_result(e), e);
-        }
-        assert_eq!(
-            submit_result(vk::Result::ERROR_INITIALIZATION_FAILED),
-            vk::Result::ERROR_OUT_OF_HOST_MEMORY
-        );
-    }
 }

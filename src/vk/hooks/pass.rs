@@ -1,0 +1,657 @@
+//! Render passes, framebuffers and dynamic rendering: the density-map attachment becomes a
+//! shading-rate attachment that names the layer's shadow ([`crate::vk::emulation`]), or injection
+//! adds one of its own ([`crate::vk::injection`]); the struct translation is
+//! [`crate::vk::translate::render_pass`]'s.
+//!
+//! - `vkCreateFramebuffer`: the density view is replaced by its shadow view; for an imageless
+//!   framebuffer the density attachment's
+//!   [`VkFramebufferAttachmentImageInfo`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkFramebufferAttachmentImageInfo.html)
+//!   describes the shadow (format, usage, flags, layers), and `vkCmdBeginRenderPass(2)` swaps the
+//!   view in `VkRenderPassAttachmentBeginInfo`. The shadow has the density image's extent, and
+//!   both extensions ask the same of it: at least `ceil(framebuffer size / texel)` texels, with
+//!   the density texel fixed to the shading-rate one (docs/vulkan-fdm-on-fsr.md#texel-size).
+//! - `vkCmdBeginRendering(KHR)` with
+//!   [`VkRenderingFragmentDensityMapAttachmentInfoEXT`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentDensityMapAttachmentInfoEXT.html)
+//!   gets a [`VkRenderingFragmentShadingRateAttachmentInfoKHR`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentShadingRateAttachmentInfoKHR.html)
+//!   with the shadow view instead.
+//!
+
+use std::ffi::c_void;
+
+use ash::vk;
+use ash::vk::Handle as _;
+
+use crate::vk::base::chain::{self, ChainCopy};
+use crate::vk::base::ffi::{guard, raw, slice};
+use crate::vk::registry::{self, Device};
+use crate::vk::translate::formats::{SHADOW_FORMAT, SHADOW_LAYOUT};
+use crate::vk::translate::render_pass::{
+    add_shading_rate, apps_rate_attachment, chain_without, density_attachment, rate_store_op,
+    shadow_attachment_info, v2_names_density, Pass2,
+};
+use crate::vk::translate::render_pass_v1::{v1_names_density, v1_to_v2};
+use crate::vk::{convert, emulation, injection};
+
+fn texel_of(dev: &Device) -> Option<vk::Extent2D> {
+    dev.fdm.as_ref().map(|f| vk::Extent2D {
+        width: f.texel[0],
+        height: f.texel[1],
+    })
+}
+
+/// Creates `pass` below, with the shading-rate attachment where `density` names one; on success
+/// records the pass as rewritten.
+///
+/// # Safety
+/// `pass` and `p_next` must be valid and outlive the call; the rest are the caller's arguments.
+#[allow(clippy::too_many_arguments)]
+unsafe fn create_rewritten(
+    dev: &Device,
+    create2: vk::PFN_vkCreateRenderPass2,
+    mut pass: Pass2,
+    flags: vk::RenderPassCreateFlags,
+    p_next: *const c_void,
+    density: u32,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    // Whether the application names the map in the density layout itself when the pass begins
+    // (before the translation makes it `GENERAL`): `crate::vk::convert` relies on it.
+    let density_initial = pass
+        .attachments
+        .get(density as usize)
+        .is_some_and(|a| a.initial_layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT);
+    if dev.fdm.is_some() {
+        // SAFETY: as the caller promised.
+        unsafe { pass.without_density_enums() };
+    }
+    if let Some(inj) = &dev.inject {
+        // SAFETY: as the caller promised.
+        return unsafe {
+            injection::create_injected(dev, inj, create2, pass, flags, p_next, alloc, out)
+        };
+    }
+    let texel = texel_of(dev);
+    let layouts = pass
+        .attachments
+        .get(density as usize)
+        .map(|a| (a.initial_layout, a.final_layout, density_initial));
+    if let (Some(texel), true) = (texel, density != vk::ATTACHMENT_UNUSED) {
+        add_shading_rate(&mut pass, density, texel, rate_store_op(dev.api_version));
+    }
+    let info = pass.info(flags, p_next);
+    // SAFETY: the copy and everything it points at live across the call.
+    let r = unsafe { create2(dev.handle, &info, alloc, out) };
+    if r == vk::Result::SUCCESS && density == vk::ATTACHMENT_UNUSED {
+        // A pass that names the density layout, stage or access but reads no map writes or
+        // orders one.
+        // SAFETY: just created.
+        convert::writer_pass_created(unsafe { *out });
+    }
+    if r == vk::Result::SUCCESS && density != vk::ATTACHMENT_UNUSED && texel.is_some() {
+        // SAFETY: just created.
+        let handle = unsafe { *out };
+        dev.attachments
+            .passes
+            .lock()
+            .insert(handle.as_raw(), density);
+        // SAFETY: the device is live.
+        unsafe { convert::pass_changed(dev, handle, layouts) };
+        tracing::debug!(
+            render_pass = raw(handle),
+            density,
+            "render pass: density map → shading-rate attachment"
+        );
+    }
+    r
+}
+
+/// `vkCreateRenderPass`: with the density-map struct, upgraded to `vkCreateRenderPass2` and
+/// rewritten; on an injecting device every pass is (see [`injection::create_injected`]); otherwise untouched.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_render_pass(
+    device: vk::Device,
+    info: *const vk::RenderPassCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    guard(
+        "vkCreateRenderPass",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let Some(dev) = (unsafe { registry::device(device) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = dev.next.create_render_pass else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // SAFETY: the caller's create info, read only.
+            let density = match unsafe { info.as_ref() } {
+                // SAFETY: the caller's valid chain.
+                Some(ci) if dev.fdm.is_some() => unsafe { density_attachment(ci.p_next) },
+                _ => None,
+            };
+            let inject = dev.inject.is_some() && !info.is_null();
+            // A pass without the density-map struct that still names the density layout, stage
+            // or access (it writes a map, or orders one) goes down translated.
+            // SAFETY: the caller's create info, read only.
+            let ci = unsafe { info.as_ref() };
+            // SAFETY: as above.
+            let names = dev.fdm.is_some() && ci.is_some_and(|ci| unsafe { v1_names_density(ci) });
+            let Some(density) = density.or((inject || names).then_some(vk::ATTACHMENT_UNUSED))
+            else {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { next(device, info, alloc, out) };
+            };
+            // Below Vulkan 1.2 the core name may not be called (drivers return no pointer for
+            // it); the extension's, which the layer enabled, is the one.
+            let (first, second) = (
+                dev.next.create_render_pass2,
+                dev.next.create_render_pass2_khr,
+            );
+            let create2 = if dev.api_version < vk::API_VERSION_1_2 {
+                second.or(first)
+            } else {
+                first.or(second)
+            };
+            // SAFETY: as above.
+            let ci = unsafe { &*info };
+            use vk::StructureType as S;
+            let folded = |t| {
+                t == S::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT
+                    || t == S::RENDER_PASS_MULTIVIEW_CREATE_INFO
+                    || t == S::RENDER_PASS_INPUT_ATTACHMENT_ASPECT_CREATE_INFO
+            };
+            // SAFETY: the caller's chain, read only.
+            let (chain, multiview, aspects) = unsafe {
+                (
+                    chain_without(ci.p_next, folded, "vkCreateRenderPass"),
+                    chain::find::<vk::RenderPassMultiviewCreateInfo>(
+                        ci.p_next,
+                        S::RENDER_PASS_MULTIVIEW_CREATE_INFO,
+                    ),
+                    chain::find::<vk::RenderPassInputAttachmentAspectCreateInfo>(
+                        ci.p_next,
+                        S::RENDER_PASS_INPUT_ATTACHMENT_ASPECT_CREATE_INFO,
+                    ),
+                )
+            };
+            // A chain too long to look through to its end has neither struct where the layer
+            // looks; the copy shares what lies past its limit.
+            let (multiview, aspects) = (multiview.ok().flatten(), aspects.ok().flatten());
+            let (Some(create2), Ok(chain)) = (create2, chain) else {
+                // Every emulating device has render pass 2 (the layer enables it), so this is an
+                // injecting one: no density enums are valid on it anyway.
+                tracing::warn!(
+                    inject,
+                    "vkCreateRenderPass: cannot upgrade a render pass to version 2 (no \
+                     vkCreateRenderPass2 below, or a pNext chain the layer cannot copy); passed \
+                     on as is, at full rate"
+                );
+                if dev.fdm.is_some() {
+                    // A driver without the density-map extension must not get its enums; an
+                    // unexpected failure is what any command may answer with VK_ERROR_UNKNOWN
+                    // (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkResult.html>).
+                    return vk::Result::ERROR_UNKNOWN;
+                }
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { next(device, info, alloc, out) };
+            };
+            // SAFETY: the structs were found by their sTypes in the caller's valid chain.
+            let pass = unsafe { v1_to_v2(ci, multiview.map(|m| &*m), aspects.map(|a| &*a)) };
+            // SAFETY: the converted pass and the chain copy live across the call.
+            unsafe {
+                create_rewritten(
+                    &dev,
+                    create2,
+                    pass,
+                    ci.flags,
+                    chain.head(),
+                    density,
+                    alloc,
+                    out,
+                )
+            }
+        },
+    )
+}
+
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn create_render_pass2_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkCreateRenderPass2>,
+    device: vk::Device,
+    info: *const vk::RenderPassCreateInfo2<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    guard(which, vk::Result::ERROR_INITIALIZATION_FAILED, || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(device) }) else {
+            return vk::Result::ERROR_INITIALIZATION_FAILED;
+        };
+        let Some(create2) = next(&dev) else {
+            return vk::Result::ERROR_INITIALIZATION_FAILED;
+        };
+        // SAFETY: the caller's create info, read only.
+        let density = match unsafe { info.as_ref() } {
+            // SAFETY: the caller's valid chain.
+            Some(ci) if dev.fdm.is_some() => unsafe { density_attachment(ci.p_next) },
+            _ => None,
+        };
+        let inject = dev.inject.is_some() && !info.is_null();
+        // As in `create_render_pass`: density enums outside the density-map struct.
+        // SAFETY: the caller's create info, read only.
+        let ci = unsafe { info.as_ref() };
+        // SAFETY: as above.
+        let names = dev.fdm.is_some() && ci.is_some_and(|ci| unsafe { v2_names_density(ci) });
+        let Some(density) = density.or((inject || names).then_some(vk::ATTACHMENT_UNUSED)) else {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { create2(device, info, alloc, out) };
+        };
+        // SAFETY: as above.
+        let ci = unsafe { &*info };
+        if let (Some(inj), vk::ATTACHMENT_UNUSED) = (&dev.inject, density) {
+            // SAFETY: the caller's subpasses and their chains, read only.
+            match unsafe { apps_rate_attachment(ci) } {
+                Ok(false) => {}
+                Ok(true) => {
+                    inj.apps_own_attachment(which);
+                    // SAFETY: the next layer's function, with the caller's arguments.
+                    let r = unsafe { create2(device, info, alloc, out) };
+                    if r == vk::Result::SUCCESS {
+                        // SAFETY: just created.
+                        inj.apps_pass_created(unsafe { *out });
+                    }
+                    return r;
+                }
+                Err(e) => {
+                    tracing::warn!(
+                        error = ?e,
+                        "{which}: a subpass pNext chain the layer cannot read; passed on as is, \
+                         at full rate"
+                    );
+                    // SAFETY: the next layer's function, with the caller's arguments.
+                    return unsafe { create2(device, info, alloc, out) };
+                }
+            }
+        }
+        let fdm = vk::StructureType::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT;
+        // SAFETY: the caller's chain, read only.
+        let Ok(chain) = (unsafe { chain_without(ci.p_next, |t| t == fdm, which) }) else {
+            // `chain_without` leaves out what it cannot copy, so this is not expected; the
+            // driver must not get the density-map struct all the same.
+            tracing::warn!(
+                "{which}: a pNext chain the layer cannot copy; the render pass is refused"
+            );
+            return vk::Result::ERROR_UNKNOWN;
+        };
+        // SAFETY: the caller's arrays outlive the call.
+        let pass = unsafe { Pass2::from_v2(ci) };
+        // SAFETY: the copied pass and chain live across the call.
+        unsafe {
+            create_rewritten(
+                &dev,
+                create2,
+                pass,
+                ci.flags,
+                chain.head(),
+                density,
+                alloc,
+                out,
+            )
+        }
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkCreateRenderPass2`: see the module documentation.
+    create_render_pass2, create_render_pass2_khr = create_render_pass2_with("vkCreateRenderPass2")
+    (
+        device: vk::Device,
+        info: *const vk::RenderPassCreateInfo2<'_>,
+        alloc: *const vk::AllocationCallbacks<'_>,
+        out: *mut vk::RenderPass,
+    ) -> vk::Result
+}
+
+/// `vkDestroyRenderPass`: forgets a rewritten pass.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn destroy_render_pass(
+    device: vk::Device,
+    pass: vk::RenderPass,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyRenderPass", (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(device) }) else {
+            return;
+        };
+        dev.attachments.passes.lock().remove(&pass.as_raw());
+        if let Some(inj) = &dev.inject {
+            inj.pass_destroyed(pass);
+        }
+        // SAFETY: the device is live.
+        unsafe { convert::pass_changed(&dev, pass, None) };
+        if let Some(next) = dev.next.destroy_render_pass {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            unsafe { next(device, pass, alloc) };
+        }
+    })
+}
+
+/// `vkCreateFramebuffer`: a rewritten pass's density view becomes its shadow view; an imageless
+/// framebuffer describes the shadow instead.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn create_framebuffer(
+    device: vk::Device,
+    info: *const vk::FramebufferCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Framebuffer,
+) -> vk::Result {
+    guard(
+        "vkCreateFramebuffer",
+        vk::Result::ERROR_INITIALIZATION_FAILED,
+        || {
+            // SAFETY: as the caller promised.
+            let Some(dev) = (unsafe { registry::device(device) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = dev.next.create_framebuffer else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // SAFETY: the caller's create info, read only.
+            let Some(ci) = (unsafe { info.as_ref() }) else {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { next(device, info, alloc, out) };
+            };
+            if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+                let Some(p) = inj.pass(ci.render_pass) else {
+                    // SAFETY: as above.
+                    return unsafe { next(device, info, alloc, out) };
+                };
+                // SAFETY: the caller's arguments; `own` is the device's.
+                return unsafe {
+                    injection::create_injected_framebuffer(
+                        inj, own, p, next, device, ci, alloc, out,
+                    )
+                };
+            }
+            let Some(density) = dev.attachments.density_attachment(ci.render_pass) else {
+                // SAFETY: as above.
+                return unsafe { next(device, info, alloc, out) };
+            };
+            let mut copy = *ci;
+            if ci.flags.contains(vk::FramebufferCreateFlags::IMAGELESS) {
+                let ty = vk::StructureType::FRAMEBUFFER_ATTACHMENTS_CREATE_INFO;
+                let found =
+                    // SAFETY: the caller's chain, read only.
+                    unsafe { chain::find::<vk::FramebufferAttachmentsCreateInfo>(ci.p_next, ty) };
+                // SAFETY: as above.
+                let rest = unsafe { ChainCopy::without(ci.p_next, |t| t == ty) };
+                let (Ok(Some(found)), Ok(rest)) = (found, rest) else {
+                    tracing::warn!(
+                        "vkCreateFramebuffer: an imageless framebuffer the layer cannot rewrite; \
+                         passed on as is"
+                    );
+                    // SAFETY: as above.
+                    return unsafe { next(device, info, alloc, out) };
+                };
+                // SAFETY: found by its sType in a valid chain.
+                let found = unsafe { &*found };
+                // SAFETY: the caller's array.
+                let mut infos: Vec<vk::FramebufferAttachmentImageInfo<'_>> = unsafe {
+                    slice(
+                        found.p_attachment_image_infos,
+                        found.attachment_image_info_count,
+                    )
+                }
+                .to_vec();
+                let formats = [SHADOW_FORMAT];
+                let layered = dev.fdm.as_ref().is_some_and(|f| f.layered);
+                if let Some(a) = infos.get_mut(density as usize) {
+                    *a = shadow_attachment_info(a, layered, &formats);
+                }
+                let mut attachments = *found;
+                attachments.p_next = rest.head();
+                attachments.attachment_image_info_count = infos.len() as u32;
+                attachments.p_attachment_image_infos = infos.as_ptr();
+                copy.p_next = &attachments as *const _ as *const c_void;
+                // SAFETY: the copies live across the call.
+                return unsafe { next(device, &copy, alloc, out) };
+            }
+            let mut views: Vec<vk::ImageView> =
+                // SAFETY: the caller's array.
+                unsafe { slice(ci.p_attachments, ci.attachment_count) }.to_vec();
+            let app_view = views.get(density as usize).copied();
+            if let Some(v) = views.get_mut(density as usize) {
+                // A density view without a shadow (it could not be made) gets the device's
+                // full-rate stand-in ([`crate::vk::own::calls::Own::full_rate_view`]).
+                let shadow = dev.attachments.shadow_view(*v).or_else(|| {
+                    let (own, fdm) = (dev.attachments.own.as_ref()?, dev.fdm.as_ref()?);
+                    // SAFETY: the device is live and emulates as `fdm` says.
+                    unsafe { own.full_rate_view(fdm, ci.width, ci.height) }
+                });
+                match shadow {
+                    Some(s) => *v = s,
+                    None => tracing::warn!(
+                        view = raw(*v),
+                        "vkCreateFramebuffer: the density view has no shadow; passed on as is"
+                    ),
+                }
+            }
+            copy.p_attachments = views.as_ptr();
+            // SAFETY: the copy and the views live across the call.
+            let r = unsafe { next(device, &copy, alloc, out) };
+            if r == vk::Result::SUCCESS && !out.is_null() {
+                // SAFETY: the framebuffer was just created on the live device.
+                unsafe { convert::framebuffer_changed(&dev, *out, app_view) };
+            }
+            r
+        },
+    )
+}
+
+/// `vkDestroyFramebuffer` on an injecting device: forgets what the framebuffer got.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn destroy_framebuffer(
+    device: vk::Device,
+    fb: vk::Framebuffer,
+    alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    guard("vkDestroyFramebuffer", (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device(device) }) else {
+            return;
+        };
+        if let Some(inj) = &dev.inject {
+            inj.framebuffer_destroyed(fb);
+        }
+        if let Some(next) = dev.next.destroy_framebuffer {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            unsafe { next(device, fb, alloc) };
+        }
+        // SAFETY: as the caller promised.
+        unsafe { convert::framebuffer_destroyed(device, fb) };
+    })
+}
+
+/// The begin a render pass goes down with: on an injecting device injection's
+/// ([`injection::begin_injected_pass`]), else emulation's ([`emulation::with_swapped_begin`]);
+/// `f` runs with it.
+///
+/// # Safety
+/// `begin` must be NULL or valid.
+unsafe fn begin_pass(
+    dev: &Device,
+    begin: *const vk::RenderPassBeginInfo<'_>,
+    f: impl FnOnce(*const vk::RenderPassBeginInfo<'_>),
+) {
+    if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+        // SAFETY: as the caller promised; `own` is the device's.
+        return unsafe { injection::begin_injected_pass(inj, own, begin, f) };
+    }
+    // SAFETY: as the caller promised.
+    unsafe { emulation::with_swapped_begin(dev, begin, f) }
+}
+
+/// `vkCmdBeginRenderPass`: see [`begin_pass`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_begin_render_pass(
+    cb: vk::CommandBuffer,
+    begin: *const vk::RenderPassBeginInfo<'_>,
+    contents: vk::SubpassContents,
+) {
+    guard("vkCmdBeginRenderPass", (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
+            return;
+        };
+        let Some(next) = dev.next.cmd_begin_render_pass else {
+            return;
+        };
+        // SAFETY: as the caller promised; recorded before the pass begins.
+        unsafe { convert::before_render_pass(&dev, cb, begin) };
+        // SAFETY: the next layer's function, with the caller's arguments or a copy that lives
+        // across the call.
+        unsafe { begin_pass(&dev, begin, |b| next(cb, b, contents)) }
+    })
+}
+
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn cmd_begin_render_pass2_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkCmdBeginRenderPass2>,
+    cb: vk::CommandBuffer,
+    begin: *const vk::RenderPassBeginInfo<'_>,
+    subpass: *const vk::SubpassBeginInfo<'_>,
+) {
+    guard(which, (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
+            return;
+        };
+        let Some(next) = next(&dev) else {
+            return;
+        };
+        // SAFETY: as the caller promised; recorded before the pass begins.
+        unsafe { convert::before_render_pass(&dev, cb, begin) };
+        // SAFETY: as in cmd_begin_render_pass.
+        unsafe { begin_pass(&dev, begin, |b| next(cb, b, subpass)) }
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdBeginRenderPass2`: see [`begin_pass`].
+    cmd_begin_render_pass2, cmd_begin_render_pass2_khr =
+        cmd_begin_render_pass2_with("vkCmdBeginRenderPass2")
+    (
+        cb: vk::CommandBuffer,
+        begin: *const vk::RenderPassBeginInfo<'_>,
+        subpass: *const vk::SubpassBeginInfo<'_>,
+    )
+}
+
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn cmd_begin_rendering_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkCmdBeginRendering>,
+    cb: vk::CommandBuffer,
+    info: *const vk::RenderingInfo<'_>,
+) {
+    guard(which, (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
+            return;
+        };
+        let Some(next) = next(&dev) else {
+            return;
+        };
+        // SAFETY: as the caller promised; recorded before rendering begins.
+        unsafe { convert::before_rendering(&dev, cb, info) };
+        if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+            // SAFETY: the caller's arguments; `own` is the device's.
+            return unsafe { injection::begin_injected(inj, own, next, cb, info) };
+        }
+        // SAFETY: the caller's rendering info, read only.
+        let ri = match unsafe { info.as_ref() } {
+            Some(ri) if !ri.p_next.is_null() => ri,
+            // SAFETY: the next layer's function, with the caller's arguments.
+            _ => return unsafe { next(cb, info) },
+        };
+        let ty = vk::StructureType::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_INFO_EXT;
+        // SAFETY: the caller's chain, read only.
+        let found = unsafe {
+            chain::find::<vk::RenderingFragmentDensityMapAttachmentInfoEXT>(ri.p_next, ty)
+        };
+        let (Ok(Some(found)), Some(texel)) = (found, texel_of(&dev)) else {
+            // SAFETY: as above.
+            return unsafe { next(cb, info) };
+        };
+        // SAFETY: found by its sType.
+        let view = unsafe { (*found).image_view };
+        let shadow = (view != vk::ImageView::null())
+            .then(|| dev.attachments.shadow_view(view))
+            .flatten();
+        // The edited chain is built in per-thread scratch storage: no heap allocation per
+        // command (docs/ARCHITECTURE.md, "Nothing per frame that can be done at creation").
+        // SAFETY: the caller's chain, read only.
+        unsafe {
+            chain::with_removed(
+                ri.p_next,
+                |t| t == ty,
+                |rest| {
+                    let Ok(rest) = rest else {
+                        tracing::warn!(
+                            "{which}: a pNext chain the layer cannot copy; passed on as is"
+                        );
+                        return next(cb, info);
+                    };
+                    let mut rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
+                        .image_layout(SHADOW_LAYOUT)
+                        .shading_rate_attachment_texel_size(texel);
+                    rate.p_next = rest;
+                    let mut copy = *ri;
+                    match shadow {
+                        Some(s) => {
+                            rate.image_view = s;
+                            copy.p_next = &rate as *const _ as *const c_void;
+                        }
+                        None => {
+                            if view != vk::ImageView::null() {
+                                tracing::debug!(
+                                    view = raw(view),
+                                    "{which}: the density view has no shadow; rendering at full \
+                                     rate"
+                                );
+                            }
+                            copy.p_next = rest;
+                        }
+                    }
+                    // The copy and everything it points at live across the call.
+                    next(cb, &copy)
+                },
+            )
+        }
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdBeginRendering`: the density-map attachment becomes a shading-rate attachment.
+    cmd_begin_rendering, cmd_begin_rendering_khr = cmd_begin_rendering_with("vkCmdBeginRendering")
+    (cb: vk::CommandBuffer, info: *const vk::RenderingInfo<'_>)
+}

@@ -1,0 +1,251 @@
+//! Submits on an emulating device: the layer's pending shadow clears and uploads
+//! ([`crate::vk::own::calls::Clears`]) run in front of the application's next submit on a graphics
+//! queue, and the density-map stage bits of semaphore waits become the shading-rate ones.
+//!
+//! With nothing pending anywhere (the steady state) a submit costs one atomic load and a scan of
+//! its wait-stage masks before the call down.
+
+use std::sync::atomic::Ordering;
+
+use ash::vk;
+
+use crate::vk::base::ffi::{guard, raw, slice};
+use crate::vk::own::calls::PENDING;
+use crate::vk::registry::{self};
+use crate::vk::translate::sync::{stage, stage2};
+
+/// The result an application's submit returns where the layer's clear ahead of it failed: the
+/// failure's own where `vkQueueSubmit` may return it, else out of host memory.
+fn submit_result(e: vk::Result) -> vk::Result {
+    match e {
+        vk::Result::ERROR_OUT_OF_HOST_MEMORY
+        | vk::Result::ERROR_OUT_OF_DEVICE_MEMORY
+        | vk::Result::ERROR_DEVICE_LOST => e,
+        _ => vk::Result::ERROR_OUT_OF_HOST_MEMORY,
+    }
+}
+
+/// Runs the pending clears ahead of a submit on `queue`: `Err` with the result the application's
+/// submit must return instead of going down. One atomic load where nothing is pending.
+///
+/// # Safety
+/// Called inside the application's submit on `queue`, a queue dispatched by the loader.
+unsafe fn before_submit(what: &'static str, queue: vk::Queue) -> Result<(), vk::Result> {
+    if PENDING.load(Ordering::Acquire) == 0 {
+        return Ok(());
+    }
+    // SAFETY: as the caller promised.
+    let Some(own) = (unsafe { crate::vk::registry::own_of(queue) }) else {
+        return Ok(());
+    };
+    // SAFETY: as the caller promised.
+    unsafe { own.clears.flush(&own, queue) }.map_err(|e| {
+        tracing::warn!(
+            queue = raw(queue),
+            result = ?e,
+            "{what}: the layer could not clear new density maps' shadows or upload shading-rate \
+             maps ahead of it; the submit fails with that result and they stay pending"
+        );
+        submit_result(e)
+    })
+}
+
+/// `vkQueueSubmit`: pending clears first; wait-stage masks without the density-map stage, on a copy.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn queue_submit(
+    queue: vk::Queue,
+    count: u32,
+    submits: *const vk::SubmitInfo<'_>,
+    fence: vk::Fence,
+) -> vk::Result {
+    guard(
+        "vkQueueSubmit",
+        vk::Result::ERROR_OUT_OF_HOST_MEMORY,
+        || {
+            // SAFETY: a queue dispatched by the loader (or NULL).
+            let Some(rec) = (unsafe { registry::recording(queue) }) else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            let Some(next) = rec.next.queue_submit else {
+                return vk::Result::ERROR_INITIALIZATION_FAILED;
+            };
+            // SAFETY: inside the application's submit on `queue`.
+            if let Err(e) = unsafe { before_submit("vkQueueSubmit", queue) } {
+                return e;
+            }
+            // SAFETY: the caller's array of `count` submits.
+            let list = unsafe { slice(submits, count) };
+            // SAFETY: each submit's masks, valid for its wait count.
+            let masks = |s: &vk::SubmitInfo<'_>| unsafe {
+                slice(s.p_wait_dst_stage_mask, s.wait_semaphore_count)
+            };
+            if !list.iter().any(|s| masks(s).iter().any(|&m| stage(m) != m)) {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { next(queue, count, submits, fence) };
+            }
+            let stages: Vec<Vec<vk::PipelineStageFlags>> = list
+                .iter()
+                .map(|s| masks(s).iter().map(|&m| stage(m)).collect())
+                .collect();
+            let copies: Vec<vk::SubmitInfo<'_>> = list
+                .iter()
+                .zip(&stages)
+                .map(|(s, m)| {
+                    let mut c = *s;
+                    if !s.p_wait_dst_stage_mask.is_null() {
+                        c.p_wait_dst_stage_mask = m.as_ptr();
+                    }
+                    c
+                })
+                .collect();
+            // SAFETY: the copies and their masks live across the call.
+            unsafe { next(queue, count, copies.as_ptr(), fence) }
+        },
+    )
+}
+
+/// The semaphore infos of a submit with the density-map stage replaced, where any has it.
+fn semaphores2<'a>(
+    infos: &[vk::SemaphoreSubmitInfo<'a>],
+) -> Option<Vec<vk::SemaphoreSubmitInfo<'a>>> {
+    infos
+        .iter()
+        .any(|i| stage2(i.stage_mask) != i.stage_mask)
+        .then(|| {
+            infos
+                .iter()
+                .map(|i| vk::SemaphoreSubmitInfo {
+                    stage_mask: stage2(i.stage_mask),
+                    ..*i
+                })
+                .collect()
+        })
+}
+
+/// The shared body of `vkQueueSubmit2` and its KHR alias.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn submit2(
+    what: &'static str,
+    pick: fn(&registry::Recording) -> Option<vk::PFN_vkQueueSubmit2>,
+    queue: vk::Queue,
+    count: u32,
+    submits: *const vk::SubmitInfo2<'_>,
+    fence: vk::Fence,
+) -> vk::Result {
+    guard(what, vk::Result::ERROR_OUT_OF_HOST_MEMORY, || {
+        // SAFETY: a queue dispatched by the loader (or NULL).
+        let Some(rec) = (unsafe { registry::recording(queue) }) else {
+            return vk::Result::ERROR_INITIALIZATION_FAILED;
+        };
+        let Some(next) = pick(&rec) else {
+            return vk::Result::ERROR_INITIALIZATION_FAILED;
+        };
+        // SAFETY: inside the application's submit on `queue`.
+        if let Err(e) = unsafe { before_submit(what, queue) } {
+            return e;
+        }
+        // SAFETY: the caller's array of `count` submits.
+        let list = unsafe { slice(submits, count) };
+        fn waits<'a>(s: &vk::SubmitInfo2<'a>) -> &'a [vk::SemaphoreSubmitInfo<'a>] {
+            // SAFETY: the caller's array, valid for its count (the command's valid usage).
+            unsafe { slice(s.p_wait_semaphore_infos, s.wait_semaphore_info_count) }
+        }
+        fn signals<'a>(s: &vk::SubmitInfo2<'a>) -> &'a [vk::SemaphoreSubmitInfo<'a>] {
+            // SAFETY: as above.
+            unsafe { slice(s.p_signal_semaphore_infos, s.signal_semaphore_info_count) }
+        }
+        let touched = |i: &[vk::SemaphoreSubmitInfo<'_>]| {
+            i.iter().any(|i| stage2(i.stage_mask) != i.stage_mask)
+        };
+        if !list
+            .iter()
+            .any(|s| touched(waits(s)) || touched(signals(s)))
+        {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { next(queue, count, submits, fence) };
+        }
+        let arrays: Vec<_> = list
+            .iter()
+            .map(|s| (semaphores2(waits(s)), semaphores2(signals(s))))
+            .collect();
+        let copies: Vec<vk::SubmitInfo2<'_>> = list
+            .iter()
+            .zip(&arrays)
+            .map(|(s, (w, g))| {
+                let mut c = *s;
+                if let Some(w) = w {
+                    c.p_wait_semaphore_infos = w.as_ptr();
+                }
+                if let Some(g) = g {
+                    c.p_signal_semaphore_infos = g.as_ptr();
+                }
+                c
+            })
+            .collect();
+        // SAFETY: the copies and their arrays live across the call.
+        unsafe { next(queue, count, copies.as_ptr(), fence) }
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkQueueSubmit2`: pending clears first; semaphore stage masks without the density-map
+    /// stage, on copies.
+    queue_submit2, queue_submit2_khr = submit2("vkQueueSubmit2")
+    (
+        queue: vk::Queue,
+        count: u32,
+        submits: *const vk::SubmitInfo2<'_>,
+        fence: vk::Fence,
+    ) -> vk::Result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn semaphore_stages_are_translated_on_a_copy_and_only_where_needed() {
+        let plain = [vk::SemaphoreSubmitInfo::default()
+            .stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)];
+        assert!(semaphores2(&plain).is_none());
+        let fdm = [
+            plain[0],
+            vk::SemaphoreSubmitInfo::default().stage_mask(
+                vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT
+                    | vk::PipelineStageFlags2::FRAGMENT_SHADER,
+            ),
+        ];
+        let copy = semaphores2(&fdm).expect("translated");
+        assert_eq!(copy[0].stage_mask, plain[0].stage_mask);
+        assert_eq!(
+            copy[1].stage_mask,
+            vk::PipelineStageFlags2::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR
+                | vk::PipelineStageFlags2::FRAGMENT_SHADER
+        );
+        assert_eq!(
+            fdm[1].stage_mask,
+            vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT
+                | vk::PipelineStageFlags2::FRAGMENT_SHADER,
+            "the application's array is kept"
+        );
+    }
+
+    #[test]
+    fn a_failed_clear_answers_with_a_result_submit_may_return() {
+        for e in [
+            vk::Result::ERROR_OUT_OF_HOST_MEMORY,
+            vk::Result::ERROR_OUT_OF_DEVICE_MEMORY,
+            vk::Result::ERROR_DEVICE_LOST,
+        ] {
+            assert_eq!(submit_result(e), e);
+        }
+        assert_eq!(
+            submit_result(vk::Result::ERROR_INITIALIZATION_FAILED),
+            vk::Result::ERROR_OUT_OF_HOST_MEMORY
+        );
+    }
+}

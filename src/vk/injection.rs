@@ -1,0 +1,422 @@
+//! Injection's modes (docs/injection.md#how-the-attachment-gets-in): on an injecting device, render
+//! passes and framebuffers get a shading-rate attachment of the layer's own after the
+//! application's, and an eye pass's begin names the injected map ([`crate::vk::own::injector`]).
+
+use std::ffi::c_void;
+
+use ash::vk;
+
+use crate::vk::base::chain::{self, ChainCopy};
+use crate::vk::base::ffi::{raw, slice};
+use crate::vk::registry::Device;
+use crate::vk::translate::formats::{SHADOW_FORMAT, SHADOW_LAYOUT, SHADOW_USAGE};
+use crate::vk::translate::render_pass::{add_shading_rate, rate_store_op, Pass2};
+
+/// On an injecting device (docs/injection.md#how-the-attachment-gets-in): creates `pass` below with
+/// a shading-rate attachment added after the application's, named by every subpass; whether a
+/// framebuffer's pass is an eye pass is not known yet, and compatibility of render passes would
+/// not let a framebuffer or pipeline made for one pass serve the other
+/// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#renderpass-compatibility>).
+/// Where the driver refuses the rewritten pass, the application's goes down as it came (fail
+/// open: its framebuffers are then left alone).
+///
+/// # Safety
+/// As `create_rewritten` in [`crate::vk::hooks::pass`].
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn create_injected(
+    dev: &Device,
+    inj: &crate::vk::own::injector::Injector,
+    create2: vk::PFN_vkCreateRenderPass2,
+    mut pass: Pass2,
+    flags: vk::RenderPassCreateFlags,
+    p_next: *const c_void,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::RenderPass,
+) -> vk::Result {
+    let (first, view_mask) = match pass.subpasses.first() {
+        Some(s) => (
+            // SAFETY: the application's array, as the caller promised, alive across the call.
+            unsafe { slice(s.p_color_attachments, s.color_attachment_count) }
+                .first()
+                .map(|r| r.attachment)
+                .filter(|&a| a != vk::ATTACHMENT_UNUSED),
+            s.view_mask,
+        ),
+        None => (None, 0),
+    };
+    // SAFETY: the application's subpass chains, alive across the call, as the caller promised.
+    if let Err(e) = unsafe { pass.without_apps_rate_infos() } {
+        tracing::warn!(
+            error = ?e,
+            "a subpass pNext chain the layer cannot copy; the render pass is created as it came, \
+             at full rate"
+        );
+        let info = pass.info(flags, p_next);
+        // SAFETY: the application's pass, its arrays alive across the call.
+        return unsafe { create2(dev.handle, &info, alloc, out) };
+    }
+    let rate = pass.attachments.len() as u32;
+    pass.attachments.push(vk::AttachmentDescription2::default());
+    add_shading_rate(&mut pass, rate, inj.texel(), rate_store_op(dev.api_version));
+    let info = pass.info(flags, p_next);
+    // SAFETY: the copy and everything it points at live across the call.
+    let r = unsafe { create2(dev.handle, &info, alloc, out) };
+    if !matches!(
+        r,
+        vk::Result::SUCCESS
+            | vk::Result::ERROR_OUT_OF_HOST_MEMORY
+            | vk::Result::ERROR_OUT_OF_DEVICE_MEMORY
+    ) {
+        tracing::warn!(
+            result = ?r,
+            "a render pass with an injected shading-rate attachment was refused; the \
+             application's pass is created as it came, at full rate"
+        );
+        // The application's pass: its attachments and its subpasses' own chains.
+        pass.attachments.pop();
+        for (s, f) in pass.subpasses.iter_mut().zip(&pass.rate_infos) {
+            s.p_next = f.p_next;
+        }
+        let info = pass.info(flags, p_next);
+        // SAFETY: as above.
+        return unsafe { create2(dev.handle, &info, alloc, out) };
+    }
+    if r == vk::Result::SUCCESS {
+        // SAFETY: just created.
+        let handle = unsafe { *out };
+        inj.pass_created(
+            handle,
+            crate::vk::own::injector::InjectedPass {
+                rate,
+                colour: first,
+                view_mask,
+            },
+        );
+        tracing::debug!(
+            render_pass = raw(handle),
+            rate,
+            "render pass: a shading-rate attachment added for injection"
+        );
+    }
+    r
+}
+
+/// `vkCreateFramebuffer` of a pass with an injected shading-rate attachment
+/// (docs/injection.md#how-the-attachment-gets-in): the framebuffer gets that attachment after the
+/// application's, the eye map where its colour target is an eye target, otherwise a full-rate map
+/// covering it ([`crate::vk::own::injector::Injector::neutral`]). An imageless framebuffer describes a
+/// one-layer map of exactly `ceil(size / texel)` texels, which each begin names
+/// ([`begin_injected_pass`]).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires; `own` must be `inj`'s device's.
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn create_injected_framebuffer(
+    inj: &crate::vk::own::injector::Injector,
+    own: &crate::vk::own::calls::Own,
+    p: crate::vk::own::injector::InjectedPass,
+    next: vk::PFN_vkCreateFramebuffer,
+    device: vk::Device,
+    ci: &vk::FramebufferCreateInfo<'_>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: *mut vk::Framebuffer,
+) -> vk::Result {
+    let extent = [ci.width, ci.height];
+    let texels = inj.texels_for(extent);
+    let mut copy = *ci;
+    let record = |eye: Option<([u32; 2], fovea_model::inject::Views)>, imageless: bool| {
+        // SAFETY: just created.
+        let fb = unsafe { *out };
+        inj.framebuffer_created(
+            fb,
+            crate::vk::own::injector::InjectedFramebuffer {
+                pass: p,
+                extent,
+                imageless,
+                eye,
+            },
+        );
+        tracing::debug!(
+            framebuffer = raw(fb),
+            eye = eye.is_some(),
+            imageless,
+            "framebuffer: injected shading-rate attachment"
+        );
+    };
+    if ci.flags.contains(vk::FramebufferCreateFlags::IMAGELESS) {
+        let ty = vk::StructureType::FRAMEBUFFER_ATTACHMENTS_CREATE_INFO;
+        // SAFETY: the caller's chain, read only.
+        let found = unsafe { chain::find::<vk::FramebufferAttachmentsCreateInfo>(ci.p_next, ty) };
+        // SAFETY: as above.
+        let rest = unsafe { ChainCopy::without(ci.p_next, |t| t == ty) };
+        let (Ok(Some(found)), Ok(rest)) = (found, rest) else {
+            tracing::warn!(
+                "vkCreateFramebuffer: an imageless framebuffer of an injected pass the layer \
+                 cannot extend; passed on as is"
+            );
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { next(device, ci, alloc, out) };
+        };
+        // SAFETY: found by its sType in a valid chain.
+        let found = unsafe { &*found };
+        // SAFETY: the caller's array.
+        let mut infos: Vec<vk::FramebufferAttachmentImageInfo<'_>> = unsafe {
+            slice(
+                found.p_attachment_image_infos,
+                found.attachment_image_info_count,
+            )
+        }
+        .to_vec();
+        let formats = [SHADOW_FORMAT];
+        infos.push(vk::FramebufferAttachmentImageInfo {
+            usage: SHADOW_USAGE,
+            width: texels[0],
+            height: texels[1],
+            layer_count: 1,
+            view_format_count: 1,
+            p_view_formats: formats.as_ptr(),
+            ..Default::default()
+        });
+        let mut attachments = *found;
+        attachments.p_next = rest.head();
+        attachments.attachment_image_info_count = infos.len() as u32;
+        attachments.p_attachment_image_infos = infos.as_ptr();
+        copy.p_next = &attachments as *const _ as *const c_void;
+        copy.attachment_count = ci.attachment_count + 1;
+        // SAFETY: the copies live across the call.
+        let r = unsafe { next(device, &copy, alloc, out) };
+        if r == vk::Result::SUCCESS {
+            record(None, true);
+        }
+        return r;
+    }
+    let mut views: Vec<vk::ImageView> =
+        // SAFETY: the caller's array.
+        unsafe { slice(ci.p_attachments, ci.attachment_count) }.to_vec();
+    let colour = p.colour.and_then(|c| views.get(c as usize).copied());
+    let layers = if p.view_mask != 0 {
+        crate::vk::own::injector::rendered_layers(p.view_mask, 0)
+    } else {
+        Some(ci.layers)
+    };
+    let eye = match (colour, crate::bridge::inject::current()) {
+        // SAFETY: `own` is the device's, as the caller promised.
+        (Some(v), Some(state)) => unsafe { inj.eye_map(own, &state, v, layers) },
+        _ => None,
+    };
+    let rate = eye.map(|e| e.0).or_else(|| {
+        // SAFETY: as above.
+        unsafe { inj.neutral(own, texels) }
+    });
+    let Some(rate) = rate else {
+        // The pass names an attachment the framebuffer cannot fill: the driver's answer for
+        // memory it cannot get (logged by `neutral`).
+        return vk::Result::ERROR_OUT_OF_DEVICE_MEMORY;
+    };
+    views.push(rate);
+    copy.attachment_count = views.len() as u32;
+    copy.p_attachments = views.as_ptr();
+    // SAFETY: the copy and the views live across the call.
+    let r = unsafe { next(device, &copy, alloc, out) };
+    if r == vk::Result::SUCCESS {
+        record(eye.map(|(_, e, v)| (e, v)), false);
+    }
+    r
+}
+
+/// Views a begin names inline, before a longer list takes the heap.
+pub const INLINE_VIEWS: usize = 16;
+
+/// A begin of a render pass on an injecting device: the eye map a framebuffer names is refilled
+/// where the published maps moved on, and the pass is counted; for an imageless framebuffer, a copy
+/// of `begin` whose `VkRenderPassAttachmentBeginInfo` adds the map of this begin's colour view (or
+/// the full-rate one of the framebuffer's size). No allocation for up to [`INLINE_VIEWS`] views.
+///
+/// # Safety
+/// `begin` must be NULL or valid; `own` must be `inj`'s device's.
+pub unsafe fn begin_injected_pass(
+    inj: &crate::vk::own::injector::Injector,
+    own: &crate::vk::own::calls::Own,
+    begin: *const vk::RenderPassBeginInfo<'_>,
+    f: impl FnOnce(*const vk::RenderPassBeginInfo<'_>),
+) {
+    // SAFETY: as the caller promised.
+    let Some(b) = (unsafe { begin.as_ref() }) else {
+        return f(begin);
+    };
+    let Some(fb) = inj.framebuffer(b.framebuffer) else {
+        crate::bridge::inject::count_pass(false);
+        return f(begin);
+    };
+    let state = crate::bridge::inject::current();
+    if !fb.imageless {
+        if let (Some((extent, views)), Some(state)) = (fb.eye, &state) {
+            // SAFETY: as the caller promised.
+            unsafe { inj.refresh(own, state, extent, views) };
+        }
+        crate::bridge::inject::count_pass(fb.eye.is_some());
+        return f(begin);
+    }
+    let ty = vk::StructureType::RENDER_PASS_ATTACHMENT_BEGIN_INFO;
+    let Ok(Some(found)) =
+        // SAFETY: the caller's chain, read only.
+        (unsafe { chain::find::<vk::RenderPassAttachmentBeginInfo>(b.p_next, ty) })
+    else {
+        return f(begin);
+    };
+    // SAFETY: found by its sType in a valid chain.
+    let found = unsafe { &*found };
+    // SAFETY: the caller's array.
+    let app = unsafe { slice(found.p_attachments, found.attachment_count) };
+    let texels = inj.texels_for(fb.extent);
+    let layers = if fb.pass.view_mask != 0 {
+        crate::vk::own::injector::rendered_layers(fb.pass.view_mask, 0)
+    } else {
+        None
+    };
+    let colour = fb.pass.colour.and_then(|c| app.get(c as usize).copied());
+    let eye = match (colour, &state) {
+        // SAFETY: as the caller promised.
+        (Some(v), Some(state)) => unsafe { inj.eye_map(own, state, v, layers) },
+        _ => None,
+    }
+    // The framebuffer describes a one-layer map of exactly its texels.
+    .filter(|&(_, e, v)| inj.map_size(e, v) == Some((texels, 1)));
+    let Some(rate) = eye.map(|e| e.0).or_else(|| {
+        // SAFETY: as the caller promised.
+        unsafe { inj.neutral(own, texels) }
+    }) else {
+        return f(begin);
+    };
+    crate::bridge::inject::count_pass(eye.is_some());
+    let mut inline = [vk::ImageView::null(); INLINE_VIEWS];
+    let heap: Vec<vk::ImageView>;
+    let views: &[vk::ImageView] = if app.len() < INLINE_VIEWS {
+        inline[..app.len()].copy_from_slice(app);
+        inline[app.len()] = rate;
+        &inline[..=app.len()]
+    } else {
+        heap = app.iter().copied().chain([rate]).collect();
+        &heap
+    };
+    // SAFETY: the caller's chain, read only; the copy lives across `f`.
+    unsafe {
+        chain::with_removed(
+            b.p_next,
+            |t| t == ty,
+            |rest| {
+                let Ok(rest) = rest else {
+                    tracing::warn!(
+                        "vkCmdBeginRenderPass: a pNext chain the layer cannot copy; passed on as is"
+                    );
+                    return f(begin);
+                };
+                let mut attachments = *found;
+                attachments.p_next = rest;
+                attachments.attachment_count = views.len() as u32;
+                attachments.p_attachments = views.as_ptr();
+                let mut copy = *b;
+                copy.p_next = &attachments as *const _ as *const c_void;
+                f(&copy)
+            },
+        )
+    }
+}
+
+/// `vkCmdBeginRendering` on an injecting device (docs/injection.md#how-the-attachment-gets-in): where
+/// the first colour attachment's view is an eye target, a copy of the begin info goes down with a
+/// `VkRenderingFragmentShadingRateAttachmentInfoKHR` naming the map for its shape in front of the
+/// application's chain (on the stack: no allocation per command); any other rendering goes down
+/// untouched. Either is counted for the stats line's `Inj=`.
+///
+/// An application's own `VkRenderingFragmentShadingRateAttachmentInfoKHR` with a view wins: the
+/// rendering goes down as it came. One with a null view (vkd3d-proton chains one into every
+/// rendering, docs/injection.md#apps-that-set-rates) names no attachment; in an eye pass it is
+/// left out of the copy's chain (built in per-thread scratch storage, no allocation per command)
+/// and fovea's takes its place, since a struct may appear only once in a chain
+/// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-validusage-pNext>).
+///
+/// The attachment's layer count is 1 (merged, or one view) or the rendered views', as
+/// <https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentShadingRateAttachmentInfoKHR.html>
+/// asks of a multiview rendering; its extent covers the whole colour target.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires; `own` must be `inj`'s device's.
+pub unsafe fn begin_injected(
+    inj: &crate::vk::own::injector::Injector,
+    own: &crate::vk::own::calls::Own,
+    next: vk::PFN_vkCmdBeginRendering,
+    cb: vk::CommandBuffer,
+    info: *const vk::RenderingInfo<'_>,
+) {
+    // SAFETY: the caller's rendering info, read only.
+    let (Some(ri), Some(state)) = (unsafe { info.as_ref() }, crate::bridge::inject::current())
+    else {
+        // SAFETY: the next layer's function, with the caller's arguments.
+        return unsafe { next(cb, info) };
+    };
+    let rate_ty = vk::StructureType::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR;
+    // SAFETY: the caller's chain, read only; found by its sType.
+    let apps = match unsafe {
+        chain::find::<vk::RenderingFragmentShadingRateAttachmentInfoKHR<'_>>(ri.p_next, rate_ty)
+    } {
+        // SAFETY: found by its sType in the caller's chain.
+        Ok(found) => found.map(|f| unsafe { (*f).image_view }),
+        Err(_) => {
+            crate::bridge::inject::count_pass(false);
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { next(cb, info) };
+        }
+    };
+    if apps.is_some_and(|v| v != vk::ImageView::null()) {
+        inj.apps_own_attachment("vkCmdBeginRendering");
+        crate::bridge::inject::count_pass(false);
+        // SAFETY: the next layer's function, with the caller's arguments.
+        return unsafe { next(cb, info) };
+    }
+    // SAFETY: the caller's colour attachments, `colorAttachmentCount` of them.
+    let colour = unsafe { slice(ri.p_color_attachments, ri.color_attachment_count) }
+        .first()
+        .map(|a| a.image_view)
+        .filter(|v| *v != vk::ImageView::null());
+    let layers = crate::vk::own::injector::rendered_layers(ri.view_mask, ri.layer_count);
+    // SAFETY: `own` is the device's, as the caller promised.
+    let map = colour.and_then(|v| unsafe { inj.eye_view(own, &state, v, layers) });
+    crate::bridge::inject::count_pass(map.is_some());
+    let Some(map) = map else {
+        // SAFETY: the next layer's function, with the caller's arguments.
+        return unsafe { next(cb, info) };
+    };
+    let begin = |rest: *const c_void| {
+        let mut rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
+            .image_view(map)
+            .image_layout(SHADOW_LAYOUT)
+            .shading_rate_attachment_texel_size(inj.texel());
+        rate.p_next = rest;
+        let mut copy = *ri;
+        copy.p_next = &rate as *const _ as *const c_void;
+        // SAFETY: the copy and the struct in front of the chain live across the call.
+        unsafe { next(cb, &copy) }
+    };
+    if apps.is_none() {
+        return begin(ri.p_next);
+    }
+    // SAFETY: the caller's chain, read only; the copy lives across `begin`.
+    unsafe {
+        chain::with_removed(
+            ri.p_next,
+            |t| t == rate_ty,
+            |rest| match rest {
+                Ok(rest) => begin(rest),
+                Err(e) => {
+                    tracing::warn!(
+                        error = ?e,
+                        "vkCmdBeginRendering: a pNext chain the layer cannot copy; passed on as \
+                         is, at full rate"
+                    );
+                    next(cb, info)
+                }
+            },
+        )
+    }
+}
