@@ -30,6 +30,9 @@ PATH = re.compile(r"\b((?:crate|super|self)(?:::\{?\s*\w+)+)")
 
 
 def strip_comments(text):
+    # A file's unit tests (`#[cfg(test)] mod tests`, last in the file) import its parent with
+    # `use super::*`: that is the file testing itself, not an import.
+    text = re.split(r"#\[cfg\(test\)\]\s*mod tests\b", text)[0]
     text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
     return "\n".join(l.split("//")[0] for l in text.splitlines())
 
@@ -149,6 +152,14 @@ def report(tree):
     for c in comps:
         print("   ", " ".join(sorted(name(m).split("::")[-1] if len(m) else name(m) for m in c)))
     print(f"  largest file: {mods[big]} ({lines[big]} lines)")
+    # The same graph with each top-level folder of the tree as one unit.
+    depth = len(min(mods, key=len))
+    unit = lambda m: m[: depth + 1]
+    top = {(unit(a), unit(b)) for a, b in es if unit(a) != unit(b)}
+    units = {unit(m) for m in mods}
+    top_comps = [c for c in sccs(list(units), top) if len(c) > 1]
+    print(f"  top level: {len(units)} files and folders, {len(top)} imports between them, "
+          f"{sum(len(c) for c in top_comps)} in circles")
 
 
 for t in sys.argv[1:]:
