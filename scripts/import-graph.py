@@ -78,23 +78,28 @@ def expand(use):
 
 
 def add(found, mod, path, target, mods):
+    """Records the file that `target` (a path written in module `mod`) names, if any."""
     segs = target.split("::")
-    base = list(mod) if is_dir_module(path) else list(mod[:-1])
     if segs[0] == "crate":
         base, segs = [], segs[1:]
     elif segs[0] == "self":
+        base, segs = list(mod), segs[1:]
+    elif segs[0] == "super":
         base = list(mod)
-        segs = segs[1:]
-    while segs and segs[0] == "super":
-        base = base[:-1]
-        segs = segs[1:]
+        while segs and segs[0] == "super":
+            base, segs = base[:-1], segs[1:]
+    else:
+        # A plain path names a crate (std, ash, ...) or an item of this module; it names another
+        # file only where it starts with a child module's name.
+        if tuple(list(mod) + segs[:1]) not in mods:
+            return
+        base = list(mod)
     full = base + segs
     for n in range(len(full), 0, -1):
         t = tuple(full[:n])
-        if t in mods and t != mod:
-            # a module importing its own child through a path is not an import of another file
-            # that matters for floors unless it is a different file
-            found.add((mod, t))
+        if t in mods:
+            if t != mod:
+                found.add((mod, t))
             return
 
 
