@@ -11,11 +11,14 @@ use ash::vk::Handle as _;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{instance, next, succeeded, HookResult};
-use crate::common::ffi::{In, Out, OutArray};
-use crate::gpu::density_images;
+use crate::xr::density_images;
 use crate::xr::extensions::Ext;
+use crate::xr::ffi::HookResult;
+use crate::xr::ffi::{In, Out, OutArray};
+use crate::xr::next_layer::next;
+use crate::xr::registry::instance;
 use crate::xr::registry::{registry, Instance, VulkanDevice};
+use crate::xr::values::succeeded;
 
 /// What the physical device the application picked supports, if fovea knows the device.
 fn recorded_support(state: &Instance) -> Option<(u64, density_images::FdmSupport)> {
@@ -240,7 +243,7 @@ unsafe fn app_request(info: &vk::DeviceCreateInfo) -> AppDeviceRequest {
         };
         for &p in names {
             // SAFETY: as above.
-            let name = unsafe { crate::common::ffi::cstr(p) };
+            let name = unsafe { crate::xr::ffi::cstr(p) };
             if name == Some(ash::ext::fragment_density_map::NAME) {
                 req.extension = true;
             }
@@ -248,7 +251,7 @@ unsafe fn app_request(info: &vk::DeviceCreateInfo) -> AppDeviceRequest {
     }
     let mut node = info.p_next as *const vk::BaseInStructure;
     let mut seen = 0;
-    while !node.is_null() && seen < crate::common::ffi::MAX_CHAIN_LENGTH {
+    while !node.is_null() && seen < crate::xr::ffi::MAX_CHAIN_LENGTH {
         // SAFETY: the pNext chain of a valid VkDeviceCreateInfo is a chain of valid structs, each
         // starting with sType and pNext; a node of the FDM features type is that struct.
         unsafe {
