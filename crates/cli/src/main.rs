@@ -10,6 +10,7 @@ mod demo;
 mod discovery;
 mod doctor;
 mod doctor_settings;
+mod found;
 mod fov;
 mod install;
 mod json;
