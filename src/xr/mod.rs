@@ -13,9 +13,10 @@
 //! | 1 | `commands.rs` | the one list of intercepted functions, expanded into both tables ([`next_layer`], [`dispatch`]) |
 //! | 1 | `extensions.rs` | the extensions fovea provides and which of them an instance has |
 //! | 1 | `records.rs` | handle maps with a per-thread cache: per-frame look-ups without atomics |
+//! | 1 | `session_gpu.rs` | what fovea keeps of a session's Vulkan device: the binding, the loader's entry points, FDM support, the queue, pool and fence it uploads with |
 //! | 1 | `values.rs` | value conversions: OpenXR's result codes and FOVs as plain values and back |
-//! | 2 | `next_layer.rs` | the next layer's table (expanded from the command list) and its loading; how a hook goes down |
 //! | 2 | `density_images.rs` | fovea's own Vulkan objects: density images on the application's device, filled from the model |
+//! | 2 | `next_layer.rs` | the next layer's table (expanded from the command list) and its loading; how a hook goes down |
 //! | 3 | `registry.rs` | per-instance, per-session, per-swapchain and per-profile records (the FOV records among them), their look-ups and the losses the runtime reported |
 //! | 4 | `below.rs` | what lies below: the instance extensions the layers and runtime under fovea offer |
 //! | 4 | `symmetric.rs` | symmetric-FOV mode: learning each eye's FOV and enlarging the recommended sizes |
@@ -34,5 +35,6 @@ pub mod loader;
 pub mod next_layer;
 pub mod records;
 pub mod registry;
+pub mod session_gpu;
 pub mod symmetric;
 pub mod values;

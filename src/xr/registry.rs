@@ -36,9 +36,10 @@ use xr::Handle;
 
 use crate::bridge::{effective, FoveationState, ProfileParams, Submitted, ViewFovs};
 use crate::common::settings::Overrides;
-use crate::xr::density_images::{DensityImages, SessionGpu, VulkanBinding};
+use crate::xr::density_images::DensityImages;
 use crate::xr::extensions::Extensions;
 use crate::xr::next_layer::Next;
+use crate::xr::session_gpu::{SessionGpu, VulkanBinding};
 use fovea_model::density::Pattern;
 use fovea_model::dynamic::{step_of, Controller};
 use fovea_model::projection::symmetric_fov;

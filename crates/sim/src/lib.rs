@@ -26,8 +26,8 @@
 //! first, optionally no gaze space before attach, or listed without support as Monado does.
 //!
 //! The files stand in floors: each imports only files on floors below its own. The objects are
-//! plain data that the state holds; the modules of each chapter of the spec implement the calls on
-//! them and never reach back down into one another's floor.
+//! plain data that the state holds ([`objects`], [`state`]); the modules of the spec's chapters
+//! implement the calls on them, and the state never imports one of them.
 //!
 //! | floor | path | job |
 //! |---|---|---|

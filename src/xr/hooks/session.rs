@@ -5,14 +5,13 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::xr::density_images::SessionGpu;
-use crate::xr::density_images::VulkanBinding;
 use crate::xr::extensions::Ext;
 use crate::xr::ffi::HookResult;
 use crate::xr::ffi::{In, Out, OutArray};
 use crate::xr::next_layer::next;
 use crate::xr::registry::{instance, observed, observed_instance, session};
 use crate::xr::registry::{registry, Instance, Session};
+use crate::xr::session_gpu::{SessionGpu, VulkanBinding};
 use crate::xr::symmetric;
 use crate::xr::values::succeeded;
 
