@@ -26,7 +26,7 @@
 //! first, optionally no gaze space before attach, or listed without support as Monado does.
 //!
 //! The files stand in floors: each imports only files on floors below its own. The objects are
-//! plain data that the state holds ([`objects`], [`state`]); the modules of the spec's chapters
+//! plain data that the state holds (`objects.rs`, `state.rs`); the modules of the spec's chapters
 //! implement the calls on them, and the state never imports one of them.
 //!
 //! | floor | path | job |
