@@ -3,12 +3,13 @@
 //! XR_FB_foveation_vulkan, XR_META_vulkan_swapchain_create_info) to any OpenXR runtime with Vulkan.
 //!
 //! The crate builds `libfovea.so`; nothing in it is public but the entry points the loaders call.
-//! The folders (see `docs/ARCHITECTURE.md`):
-//! - [`xr`]: the OpenXR side: loader interface, dispatch, handle registry, hooks per function group;
+//! The folders (see `docs/ARCHITECTURE.md`), in floors: each imports only those below it.
+//! - [`xr`] and [`vk`]: the OpenXR side (loader interface, dispatch, handle registry, hooks per
+//!   function group, fovea's density images; its own floors in its module doc) and the Vulkan layer.
+//!   Neither imports the other;
 //! - [`bridge`]: per-swapchain density-map state: the one place that decides when a map is stale
 //!   and what each image, view and map holds. Any API side meets the others only here;
-//! - [`gpu`]: the Vulkan work: density images on the application's device and their upload;
-//! - [`common`]: plumbing: the FFI guard and chain walking, locks, logging, settings.
+//! - [`common`]: plumbing both sides use: ranked locks, logging, settings.
 //!
 //! The pure model (density, projection, dynamic levels, stats) is the `fovea-model` crate.
 //!
@@ -20,6 +21,5 @@
 
 mod bridge;
 mod common;
-mod gpu;
 mod vk;
 mod xr;

@@ -19,8 +19,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::common::ffi;
-use crate::xr::dispatch;
+use crate::xr::ffi;
+use crate::xr::next_layer;
 
 /// The once-per-process line about how the list was learned was written.
 static SAID: AtomicBool = AtomicBool::new(false);
@@ -50,7 +50,7 @@ pub unsafe fn extensions_below(
     // what each step relies on.
     unsafe {
         let gipa = enumeration_gipa(next_gipa, ours);
-        if let Some(f) = dispatch::load(
+        if let Some(f) = next_layer::load(
             gipa,
             xr::Instance::NULL,
             c"xrEnumerateInstanceExtensionProperties",
@@ -145,7 +145,7 @@ unsafe fn probe(
             tracing::debug!(?r, "no instance below to ask for its extensions");
             return None;
         }
-        let list = dispatch::load(
+        let list = next_layer::load(
             next_gipa,
             instance,
             c"xrEnumerateInstanceExtensionProperties",
@@ -157,7 +157,7 @@ unsafe fn probe(
                 xr::pfn::EnumerateInstanceExtensionProperties,
             >(f))
         });
-        match dispatch::load(next_gipa, instance, c"xrDestroyInstance") {
+        match next_layer::load(next_gipa, instance, c"xrDestroyInstance") {
             Some(f) => {
                 // SAFETY: the name's signature is that of the pfn type; the instance is fovea's own.
                 let destroy: xr::pfn::DestroyInstance = std::mem::transmute(f);

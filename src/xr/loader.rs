@@ -10,12 +10,13 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::common::ffi::{self, shim, HookResult, In, Out, OutArray};
 use crate::common::settings;
 use crate::xr::below;
-use crate::xr::dispatch::{self, Next, Owner};
+use crate::xr::dispatch::{self, Owner};
 use crate::xr::extensions::{self, Ext, Extensions, EXTENSIONS};
-use crate::xr::registry::{registry, Instance};
+use crate::xr::ffi::{self, shim, HookResult, In, Out, OutArray};
+use crate::xr::next_layer::{self, Next};
+use crate::xr::registry::{registry, Instance, InstanceFovs};
 use crate::xr::symmetric;
 use fovea_abi::LAYER_NAME;
 
@@ -236,7 +237,7 @@ fn create_instance_inner(
         symmetric_fov: settings.symmetric_fov,
         overrides: settings::Overrides::from_env(settings.config.clone(), id.clone()),
         stereo_fovs: Default::default(),
-        fovs: symmetric::InstanceFovs::new(epic),
+        fovs: InstanceFovs::new(epic),
         vulkan: Default::default(),
         lost: Default::default(),
         inject: injection(&settings, exts),
@@ -295,7 +296,7 @@ fn identity(info: &xr::ApplicationInfo) -> fovea_config::Identity {
 /// `gipa` must be the next layer's `xrGetInstanceProcAddr` and `instance` its live instance.
 unsafe fn runtime_name(gipa: xr::pfn::GetInstanceProcAddr, instance: xr::Instance) -> String {
     // SAFETY: the caller's contract.
-    let Some(f) = (unsafe { dispatch::load(gipa, instance, c"xrGetInstanceProperties") }) else {
+    let Some(f) = (unsafe { next_layer::load(gipa, instance, c"xrGetInstanceProperties") }) else {
         return "unknown".into();
     };
     let f: xr::pfn::GetInstanceProperties =

@@ -8,7 +8,7 @@
 //! Per frame, resolving a handle was the layer's main cost (a map lock, a hash, an `Arc` clone and
 //! drop: four atomic read-modify-writes). The frame loop's hooks borrow their record for the call
 //! instead ([`Registry::session_for_call`], [`Registry::swapchain_for_call`]), which a per-thread
-//! cache answers without any (`crate::common::records` says why that is sound). Hooks that keep a
+//! cache answers without any (`crate::xr::records` says why that is sound). Hooks that keep a
 //! record past their call, or destroy its handle, take the `Arc`.
 //!
 //! Lock order ([`crate::common::lock::Rank`], outermost first; checked in debug builds by [`crate::common::lock`]):
@@ -29,15 +29,17 @@ use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 use crate::common::lock::{Mutex, Rank, SpinMutex};
-use crate::common::records::{Borrowed, Records};
+use crate::xr::ffi::HookResult;
+use crate::xr::records::{Borrowed, Records};
 use openxr_sys as xr;
 use xr::Handle;
 
 use crate::bridge::{effective, FoveationState, ProfileParams, Submitted, ViewFovs};
 use crate::common::settings::Overrides;
-use crate::gpu::density_images::{DensityImages, SessionGpu, VulkanBinding};
-use crate::xr::dispatch::Next;
+use crate::xr::density_images::DensityImages;
 use crate::xr::extensions::Extensions;
+use crate::xr::next_layer::Next;
+use crate::xr::session_gpu::{SessionGpu, VulkanBinding};
 use fovea_model::density::Pattern;
 use fovea_model::dynamic::{step_of, Controller};
 use fovea_model::projection::symmetric_fov;
@@ -60,7 +62,7 @@ pub struct Instance {
     /// may hand on), learned from `xrLocateViews`.
     pub stereo_fovs: StereoFovs,
     /// How symmetric-FOV mode learns the FOVs ([`crate::xr::symmetric`]).
-    pub fovs: crate::xr::symmetric::InstanceFovs,
+    pub fovs: InstanceFovs,
     /// What the application told the runtime about its Vulkan objects.
     pub vulkan: Mutex<VulkanSetup>,
     /// The runtime returned XR_ERROR_INSTANCE_LOST through a call fovea passed on.
@@ -156,6 +158,39 @@ impl StereoFovs {
     }
 }
 
+/// What an instance knows about how symmetric-FOV mode learns its FOVs ([`crate::xr::symmetric`]).
+#[derive(Debug, Default)]
+pub struct InstanceFovs {
+    /// XR_EPIC_view_configuration_fov is enabled on the instance below (by the application or by
+    /// fovea in symmetric mode).
+    pub epic: bool,
+    /// The application's last stereo xrEnumerateViewConfigurationViews, in symmetric mode, got the
+    /// runtime's own sizes: the FOVs were not known yet.
+    pub handed_unenlarged: AtomicBool,
+    /// The fallback's log line was written for this instance.
+    pub fallback_logged: AtomicBool,
+}
+
+impl InstanceFovs {
+    pub fn new(epic: bool) -> InstanceFovs {
+        InstanceFovs {
+            epic,
+            ..InstanceFovs::default()
+        }
+    }
+}
+
+/// Per session: whether it runs, and whether symmetric-FOV mode is off for it
+/// ([`crate::xr::symmetric`]).
+#[derive(Debug, Default)]
+pub struct SessionFovs {
+    /// Between a successful xrBeginSession with the primary stereo configuration and xrEndSession:
+    /// views can be located.
+    pub running_stereo: AtomicBool,
+    /// The application sized for each eye's own FOV: the views keep it.
+    pub symmetric_off: AtomicBool,
+}
+
 /// The Vulkan set-up calls fovea watches (XR_KHR_vulkan_enable / enable2), as raw handle values.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct VulkanSetup {
@@ -214,7 +249,7 @@ pub struct Session {
     pub lost: AtomicBool,
     /// Whether the session runs, and whether symmetric-FOV mode is off for it
     /// ([`crate::xr::symmetric`]).
-    pub fovs: crate::xr::symmetric::SessionFovs,
+    pub fovs: SessionFovs,
 }
 
 impl Session {
@@ -467,6 +502,80 @@ impl Default for Registry {
 pub fn registry() -> &'static Registry {
     static REGISTRY: OnceLock<Registry> = OnceLock::new();
     REGISTRY.get_or_init(Registry::default)
+}
+
+/// The record for an instance handle, or XR_ERROR_HANDLE_INVALID.
+pub fn instance(h: xr::Instance) -> HookResult<Arc<Instance>> {
+    registry()
+        .instance(h)
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)
+}
+
+/// The record for a session handle, or XR_ERROR_HANDLE_INVALID.
+pub fn session(h: xr::Session) -> HookResult<Arc<Session>> {
+    registry()
+        .session(h)
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)
+}
+
+/// The record for a swapchain handle, or XR_ERROR_HANDLE_INVALID.
+pub fn swapchain(h: xr::Swapchain) -> HookResult<Arc<Swapchain>> {
+    registry()
+        .swapchain(h)
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)
+}
+
+/// A session's record for the length of the calling hook, or XR_ERROR_HANDLE_INVALID: for the frame
+/// loop's hooks, which neither keep it nor destroy the session. No atomic read-modify-write where
+/// this thread resolved the handle before ([`crate::xr::records`]).
+pub fn session_for_call(h: xr::Session) -> HookResult<Borrowed<'static, Session>> {
+    registry()
+        .session_for_call(h)
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)
+}
+
+/// A swapchain's record for the length of the calling hook, or XR_ERROR_HANDLE_INVALID (see
+/// [`session_for_call`]).
+pub fn swapchain_for_call(h: xr::Swapchain) -> HookResult<Borrowed<'static, Swapchain>> {
+    registry()
+        .swapchain_for_call(h)
+        .ok_or(xr::Result::ERROR_HANDLE_INVALID)
+}
+
+/// A loss the runtime reported is final: once XR_ERROR_INSTANCE_LOST or XR_ERROR_SESSION_LOST is
+/// returned, every later non-destroy call on that object or its children returns it too
+/// (fundamentals.adoc, "Instance Lost", "Session Lost"). fovea's own functions are part of the
+/// runtime as the application sees it, so they follow: they answer the loss once fovea saw the
+/// runtime report it through a call it passed on. Losses reported through calls fovea does not
+/// intercept (xrPollEvent, xrBeginSession, ...) stay unseen until an intercepted call reports them.
+pub fn check_lost(session: &Session) -> HookResult<()> {
+    use std::sync::atomic::Ordering::Relaxed;
+    if session.instance.lost.load(Relaxed) {
+        return Err(xr::Result::ERROR_INSTANCE_LOST);
+    }
+    if session.lost.load(Relaxed) {
+        return Err(xr::Result::ERROR_SESSION_LOST);
+    }
+    Ok(())
+}
+
+/// Notes a loss in the result of a call on `session` (or its children) that fovea passed on.
+pub fn observed(session: &Session, r: xr::Result) -> xr::Result {
+    use std::sync::atomic::Ordering::Relaxed;
+    if r == xr::Result::ERROR_SESSION_LOST {
+        session.lost.store(true, Relaxed);
+    }
+    observed_instance(&session.instance, r)
+}
+
+/// Notes an instance loss in the result of a call on `instance` that fovea passed on.
+pub fn observed_instance(instance: &Instance, r: xr::Result) -> xr::Result {
+    if r == xr::Result::ERROR_INSTANCE_LOST {
+        instance
+            .lost
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+    r
 }
 
 impl Registry {

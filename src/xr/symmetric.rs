@@ -21,15 +21,15 @@
 //! and the mode is on again for it.
 
 use std::ffi::{CStr, CString};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::xr::dispatch;
-use crate::xr::hooks::{fov_from_xr, succeeded};
+use crate::xr::next_layer;
 use crate::xr::registry::{registry, Instance, Session};
+use crate::xr::values::{fov_from_xr, succeeded};
 use fovea_model::projection::rescaled_size;
 use fovea_model::Fov;
 
@@ -38,38 +38,6 @@ pub const EPIC_VIEW_CONFIGURATION_FOV: &CStr = c"XR_EPIC_view_configuration_fov"
 
 /// Most views fovea enumerates into an array of its own (the primary stereo configuration has 2).
 const MAX_VIEWS: usize = 16;
-
-/// What an instance knows about how to learn its FOVs.
-#[derive(Debug, Default)]
-pub struct InstanceFovs {
-    /// XR_EPIC_view_configuration_fov is enabled on the instance below (by the application or by
-    /// fovea in symmetric mode).
-    pub epic: bool,
-    /// The application's last stereo xrEnumerateViewConfigurationViews, in symmetric mode, got the
-    /// runtime's own sizes: the FOVs were not known yet.
-    pub handed_unenlarged: AtomicBool,
-    /// The fallback's log line was written for this instance.
-    pub fallback_logged: AtomicBool,
-}
-
-impl InstanceFovs {
-    pub fn new(epic: bool) -> InstanceFovs {
-        InstanceFovs {
-            epic,
-            ..InstanceFovs::default()
-        }
-    }
-}
-
-/// Per session: whether it runs, and whether symmetric mode is off for it.
-#[derive(Debug, Default)]
-pub struct SessionFovs {
-    /// Between a successful xrBeginSession with the primary stereo configuration and xrEndSession:
-    /// views can be located.
-    pub running_stereo: AtomicBool,
-    /// The application sized for each eye's own FOV: the views keep it.
-    pub symmetric_off: AtomicBool,
-}
 
 /// Whether the session's views get the shared symmetric FOV.
 pub fn active(session: &Session) -> bool {
@@ -220,7 +188,7 @@ unsafe fn enumerate_with_epic(
             a.max_swapchain_sample_count = o.max_swapchain_sample_count;
             // SAFETY: the application's chain is valid by the call's valid usage; only the first EPIC
             // struct counts ("Next Chain Structure Uniqueness"), and it is the application's output.
-            if let Ok(Some(theirs)) = crate::common::ffi::find_in_chain::<
+            if let Ok(Some(theirs)) = crate::xr::ffi::find_in_chain::<
                 xr::ViewConfigurationViewFovEPIC,
             >(
                 a.next, xr::StructureType::VIEW_CONFIGURATION_VIEW_FOV_EPIC
@@ -351,13 +319,13 @@ unsafe fn probe(s: &Session) -> Option<[Fov; 2]> {
     unsafe {
         let state = &s.instance;
         // SAFETY: the names' signatures are those of the pfn types they are cast to.
-        let create: xr::pfn::CreateReferenceSpace = std::mem::transmute(dispatch::load(
+        let create: xr::pfn::CreateReferenceSpace = std::mem::transmute(next_layer::load(
             state.next_gipa,
             state.handle,
             c"xrCreateReferenceSpace",
         )?);
         // SAFETY: as above.
-        let destroy: xr::pfn::DestroySpace = std::mem::transmute(dispatch::load(
+        let destroy: xr::pfn::DestroySpace = std::mem::transmute(next_layer::load(
             state.next_gipa,
             state.handle,
             c"xrDestroySpace",

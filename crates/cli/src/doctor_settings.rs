@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use fovea_config::Identity;
 
 use crate::discovery::{Environment, LAYER_PATH_VAR};
-use crate::doctor::Discovery;
+use crate::found::{Discovery, Manifest};
 
 /// The per-user data folder the container sees: `$XDG_DATA_HOME`, else `~/.local/share`.
 fn user_data(env: &Environment) -> Option<PathBuf> {
@@ -93,7 +93,7 @@ pub fn order_findings(d: &Discovery) -> (Vec<String>, Vec<String>) {
         crate::discovery::Kind::Explicit => "explicit",
         crate::discovery::Kind::Implicit => "implicit",
     };
-    let others: Vec<&crate::doctor::Manifest> = d
+    let others: Vec<&Manifest> = d
         .explicit
         .iter()
         .chain(&d.implicit)
@@ -113,7 +113,7 @@ pub fn order_findings(d: &Discovery) -> (Vec<String>, Vec<String>) {
             m.path.display()
         ));
     }
-    let order: Vec<&crate::doctor::Manifest> = d.order.iter().map(|l| d.manifest(l)).collect();
+    let order: Vec<&Manifest> = d.order.iter().map(|l| d.manifest(l)).collect();
     let Some(fovea_at) = order.iter().position(|m| m.is_fovea()) else {
         return (lines, problems);
     };
@@ -211,7 +211,7 @@ mod tests {
     use std::collections::BTreeMap;
 
     use super::*;
-    use crate::doctor::discover;
+    use crate::found::discover;
 
     fn scratch(name: &str) -> PathBuf {
         let d = std::env::temp_dir().join(format!("fovea-doctor-s-{}-{name}", std::process::id()));

@@ -3,6 +3,29 @@
 //! [`args`] declares the command line; each subcommand lives in its own module and exposes a `run`
 //! taking its parsed arguments. Usage errors exit with status 2 (clap's convention), failures of a
 //! command that ran with status 1.
+//!
+//! The files stand in floors: each imports only files on floors below its own.
+//!
+//! | floor | path | job |
+//! |---|---|---|
+//! | 1 | `args.rs` | the command line, declared once with clap |
+//! | 1 | `discovery.rs` | where the OpenXR and Vulkan loaders look for manifests on Linux, as data (`install` and `doctor` both read it) |
+//! | 1 | `json.rs` | numbers for the JSON outputs |
+//! | 2 | `target.rs` | the headset `maps` and `report` describe: a preset, or FOVs and a size |
+//! | 2 | `fov.rs` | `fovea fov` |
+//! | 2 | `config.rs` | `fovea config` |
+//! | 2 | `install.rs` | `fovea install`, `fovea uninstall` |
+//! | 2 | `found.rs` | what the OpenXR loader would find: the active runtime, each layer manifest, the load order |
+//! | 2 | `vk_doctor.rs` | `fovea doctor`'s Vulkan half: each GPU, and where the Vulkan layer is installed |
+//! | 2 | `demo/setup.rs` | what both ways of running the demo share |
+//! | 3 | `maps.rs` | `fovea maps` |
+//! | 3 | `report.rs` | `fovea report` |
+//! | 3 | `doctor_settings.rs` | `fovea doctor`'s checks of Steam installs, other layers and the configuration file |
+//! | 4 | `doctor.rs` | `fovea doctor` |
+//! | 4 | `demo/harness.rs` | the demo through fovea's fake loader harness |
+//! | 4 | `demo/loader.rs` | the demo through the system's Khronos loader |
+//! | 5 | `demo/mod.rs` | `fovea demo`: chooses the way and runs it |
+//! | 6 | `main.rs` | parses the command line and runs the command |
 
 mod args;
 mod config;
@@ -10,6 +33,7 @@ mod demo;
 mod discovery;
 mod doctor;
 mod doctor_settings;
+mod found;
 mod fov;
 mod install;
 mod json;

@@ -14,28 +14,14 @@ use std::ffi::c_char;
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
-use crate::ffi;
-use crate::instance::EXT_EYE_GAZE_INTERACTION;
-use crate::space::{check_pose, Space, SpaceKind};
+use crate::extensions::EXT_EYE_GAZE_INTERACTION;
+use crate::ffi::{self, check_pose};
+use crate::objects::{Action, ActionSet, Space, SpaceKind};
 use crate::state::{entry, world, World};
-
-pub(crate) struct ActionSet {
-    pub instance: u64,
-    name: String,
-    /// Attached to a session: no more actions may be added (XR_ERROR_ACTIONSETS_ALREADY_ATTACHED).
-    attached: bool,
-}
 
 /// The eye gaze interaction profile and its one input.
 pub(crate) const EYE_GAZE_PROFILE: &str = "/interaction_profiles/ext/eye_gaze_interaction";
 pub(crate) const GAZE_POSE: &str = "/user/eyes_ext/input/gaze_ext/pose";
-
-pub(crate) struct Action {
-    pub instance: u64,
-    pub set: u64,
-    name: String,
-    ty: xr::ActionType,
-}
 
 /// Action and action set names follow path-component rules (spec "Well-Formed Path Strings").
 fn check_names(name: &[c_char], localized: &[c_char]) -> Result<String, xr::Result> {

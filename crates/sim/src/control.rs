@@ -7,38 +7,8 @@ use openxr_sys as xr;
 use openxr_sys::Handle;
 
 pub use crate::config::{set_thread_config, EyeGaze, Fault, Load, SimConfig};
-pub use crate::foveation::FoveationParams;
+pub use crate::objects::{Call, FoveationParams, SubmittedView};
 use crate::state::world;
-
-/// One call that reached the runtime (xrGetInstanceProcAddr lookups are not journaled: the loader
-/// makes hundreds of them and they change no state).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Call {
-    /// The OpenXR command name.
-    pub function: &'static str,
-    /// What the runtime returned.
-    pub result: xr::Result,
-    /// The structure types seen in the main input struct's `next` chain (xrCreateSwapchain,
-    /// xrCreateSession, xrCreateInstance, xrEndFrame, ...).
-    pub next_types: Vec<xr::StructureType>,
-    /// Call-specific facts: enabled extensions, frame timing, submitted views, injected faults.
-    pub detail: String,
-    /// The runtime refused the call by its own rules (an error that is not an injected fault): the
-    /// caller did something a conformant runtime may refuse.
-    pub refused: bool,
-}
-
-/// One projection view as xrEndFrame received it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SubmittedView {
-    /// Index of the projection layer in the frame's layer list.
-    pub layer: usize,
-    /// The raw swapchain handle.
-    pub swapchain: u64,
-    pub image_rect: xr::Rect2Di,
-    pub image_array_index: u32,
-    pub fov: xr::Fovf,
-}
 
 /// Fails a call to `fault.function` on `instance` (see [`Fault`]).
 pub fn inject_fault(instance: xr::Instance, fault: Fault) {

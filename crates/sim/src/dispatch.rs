@@ -15,7 +15,7 @@ use openxr_sys as xr;
 use openxr_sys::pfn;
 use openxr_sys::Handle;
 
-use crate::instance::{
+use crate::extensions::{
     FB_FOVEATION, FB_SWAPCHAIN_UPDATE_STATE, KHR_VULKAN_ENABLE, KHR_VULKAN_ENABLE2,
 };
 use crate::state::world;

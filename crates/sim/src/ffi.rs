@@ -4,6 +4,21 @@ use std::ffi::{c_char, c_void, CStr};
 
 use openxr_sys as xr;
 
+/// Spec "Valid Usage" for XrPosef inputs: the orientation must be a unit quaternion (runtimes accept
+/// about 1% deviation), otherwise XR_ERROR_POSE_INVALID.
+pub(crate) fn check_pose(p: &xr::Posef) -> Result<(), xr::Result> {
+    let q = p.orientation;
+    let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
+    let finite = [q.x, q.y, q.z, q.w, p.position.x, p.position.y, p.position.z]
+        .iter()
+        .all(|v| v.is_finite());
+    if finite && (norm - 1.0).abs() <= 0.01 {
+        Ok(())
+    } else {
+        Err(xr::Result::ERROR_POSE_INVALID)
+    }
+}
+
 /// Fails with XR_ERROR_VALIDATION_FAILURE when a required pointer is NULL (implicit valid usage:
 /// "must be a pointer to a valid ...").
 pub(crate) fn non_null<T>(p: *const T) -> Result<(), xr::Result> {

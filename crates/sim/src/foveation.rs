@@ -12,38 +12,8 @@ use openxr_sys as xr;
 use openxr_sys::Handle;
 
 use crate::ffi;
+use crate::objects::{FoveationParams, Profile};
 use crate::state::{entry, world};
-
-/// A foveation profile's parameters (XrFoveationLevelProfileCreateInfoFB; without it the spec
-/// requires a profile that applies no foveation).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FoveationParams {
-    pub level: xr::FoveationLevelFB,
-    pub vertical_offset: f32,
-    pub dynamic: xr::FoveationDynamicFB,
-}
-
-impl FoveationParams {
-    const NONE: FoveationParams = FoveationParams {
-        level: xr::FoveationLevelFB::NONE,
-        vertical_offset: 0.0,
-        dynamic: xr::FoveationDynamicFB::DISABLED,
-    };
-}
-
-pub(crate) struct Profile {
-    pub session: u64,
-    pub params: FoveationParams,
-}
-
-/// What xrUpdateSwapchainFB applied to a swapchain: the profile's handle (for
-/// xrGetSwapchainStateFB) and a copy of its parameters (the spec: destroying the profile afterwards
-/// does not change the swapchain's foveation).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Applied {
-    pub profile: u64,
-    pub params: FoveationParams,
-}
 
 pub(crate) unsafe extern "system" fn create_foveation_profile_fb(
     session: xr::Session,
@@ -61,7 +31,7 @@ pub(crate) unsafe extern "system" fn create_foveation_profile_fb(
         ctx.next_types = ffi::chain_types(info.next);
         let instance = w.sessions[&session].instance;
         let configuration =
-            w.instances[&instance].has_extension(crate::instance::FB_FOVEATION_CONFIGURATION);
+            w.instances[&instance].has_extension(crate::extensions::FB_FOVEATION_CONFIGURATION);
         // A level struct of an extension that is not enabled is an unrecognised struct: ignored.
         let level = ffi::find_in_chain(
             info.next,

@@ -13,27 +13,11 @@ use std::time::{Duration, Instant};
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
-use crate::control::SubmittedView;
 use crate::ffi;
+use crate::objects::SubmittedView;
 use crate::session::{request_exit, set_state};
 use crate::state::{entry, world, World, XrResult};
 use crate::system::{MAX_LAYER_COUNT, VIEW_COUNT};
-
-#[derive(Default)]
-pub(crate) struct FrameClock {
-    /// xrWaitFrame calls since xrBeginSession: the index of the next frame.
-    pub waits: u64,
-    /// The last predicted display time.
-    pub last_display_ns: Option<i64>,
-    /// A wait's display time that no xrBeginFrame has consumed yet.
-    pub pending_wait: Option<i64>,
-    /// The display time of the frame between xrBeginFrame and xrEndFrame.
-    pub begun: Option<i64>,
-    /// Successful xrEndFrame calls since xrBeginSession.
-    pub ends: u64,
-    /// Real time and virtual time at the first wait, for `realtime`.
-    pub realtime_origin: Option<(Instant, i64)>,
-}
 
 /// Whole display periods a frame of `gpu_ms` occupies (at least one).
 pub(crate) fn periods_for(gpu_ms: f32, period_ns: i64) -> i64 {

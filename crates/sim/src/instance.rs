@@ -7,93 +7,17 @@ use std::ffi::c_char;
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
-use crate::config::{self, Fault, SimConfig};
-use crate::control::SubmittedView;
+use crate::config;
+use crate::extensions::extensions;
 use crate::ffi;
-use crate::state::{entry, world, Record, World};
-use crate::vulkan::VulkanInstanceState;
+use crate::objects::{Event, InstanceState, Record, SubmittedView, VulkanInstanceState};
+use crate::state::{entry, world, World};
 
 pub(crate) const RUNTIME_NAME: &str = "fovea simulated headset";
 pub(crate) const RUNTIME_VERSION: xr::Version = xr::Version::new(0, 1, 0);
 
-pub(crate) const KHR_VULKAN_ENABLE: &str = "XR_KHR_vulkan_enable";
-pub(crate) const KHR_VULKAN_ENABLE2: &str = "XR_KHR_vulkan_enable2";
-pub(crate) const MND_HEADLESS: &str = "XR_MND_headless";
-pub(crate) const FB_SWAPCHAIN_UPDATE_STATE: &str = "XR_FB_swapchain_update_state";
-pub(crate) const FB_FOVEATION: &str = "XR_FB_foveation";
-pub(crate) const EXT_EYE_GAZE_INTERACTION: &str = "XR_EXT_eye_gaze_interaction";
-pub(crate) const FB_FOVEATION_CONFIGURATION: &str = "XR_FB_foveation_configuration";
-pub(crate) const EPIC_VIEW_CONFIGURATION_FOV: &str = "XR_EPIC_view_configuration_fov";
-
 /// Virtual time starts here (1000 s) so that "zero" and small times stay recognisably invalid.
 pub(crate) const CLOCK_START_NS: i64 = 1_000_000_000_000;
-
-/// The extensions this runtime offers under `cfg`, with their spec versions.
-pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
-    let mut list = vec![
-        (KHR_VULKAN_ENABLE, 8),
-        (KHR_VULKAN_ENABLE2, 2),
-        (MND_HEADLESS, 2),
-    ];
-    // XR_FB_foveation depends on XR_FB_swapchain_update_state (its xrUpdateSwapchainFB applies
-    // profiles), so native foveation brings it along.
-    if cfg.native_swapchain_update_state || cfg.native_foveation {
-        list.push((FB_SWAPCHAIN_UPDATE_STATE, 3));
-    }
-    if cfg.native_foveation {
-        list.push((FB_FOVEATION, 1));
-        list.push((FB_FOVEATION_CONFIGURATION, 1));
-    }
-    if cfg.view_configuration_fov {
-        list.push((EPIC_VIEW_CONFIGURATION_FOV, 2));
-    }
-    if cfg.eye_gaze.is_some() {
-        list.push((EXT_EYE_GAZE_INTERACTION, 2));
-    }
-    list
-}
-
-/// An event waiting for xrPollEvent.
-pub(crate) enum Event {
-    SessionStateChanged {
-        session: u64,
-        state: xr::SessionState,
-        time: i64,
-    },
-}
-
-pub(crate) struct InstanceState {
-    pub config: SimConfig,
-    pub record: Record,
-    pub faults: Vec<Fault>,
-    pub call_counts: HashMap<&'static str, u32>,
-    pub lost: bool,
-    pub events: VecDeque<Event>,
-    /// Path strings; `XrPath` n is `paths[n - 1]`.
-    pub paths: Vec<String>,
-    /// The virtual clock: advanced by frame timing, never by wall time.
-    pub now_ns: i64,
-    /// xrGetVulkanGraphicsRequirements(2)KHR was called (required before xrCreateSession).
-    pub graphics_requirements_queried: bool,
-    pub vulkan: VulkanInstanceState,
-    /// Successful xrEndFrame calls over all the instance's sessions, for the summary line.
-    pub frames: u64,
-    /// The latest suggested bindings per interaction profile path, `(action, binding path)`: a
-    /// later suggestion for a profile replaces the earlier one
-    /// (<https://registry.khronos.org/OpenXR/specs/1.1/html/xrspec.html#xrSuggestInteractionProfileBindings>).
-    pub suggested: HashMap<String, Vec<(u64, String)>>,
-}
-
-impl InstanceState {
-    pub fn has_extension(&self, name: &str) -> bool {
-        self.record.enabled_extensions.iter().any(|e| e == name)
-    }
-
-    pub fn path(&self, path: xr::Path) -> Option<&str> {
-        let i = usize::try_from(path.into_raw()).ok()?.checked_sub(1)?;
-        self.paths.get(i).map(String::as_str)
-    }
-}
 
 pub(crate) unsafe extern "system" fn enumerate_instance_extension_properties(
     layer_name: *const c_char,
@@ -458,15 +382,6 @@ pub(crate) unsafe extern "system" fn path_to_string(
         ffi::two_call_str(capacity, count_out, buffer, &s)?;
         Ok(xr::Result::SUCCESS)
     })
-}
-
-/// Validates an `XrSystemId` against the only system the runtime has.
-pub(crate) fn check_system(system: xr::SystemId) -> Result<(), xr::Result> {
-    if system.into_raw() == crate::system::SYSTEM_ID {
-        Ok(())
-    } else {
-        Err(xr::Result::ERROR_SYSTEM_INVALID)
-    }
 }
 
 #[cfg(test)]

@@ -24,17 +24,45 @@
 //! whose gaze follows a script ([`gaze_script`]), as strict as real runtimes: inactive without
 //! focus or without a synced set bound to it, a second suggestion for its profile replacing the
 //! first, optionally no gaze space before attach, or listed without support as Monado does.
+//!
+//! The files stand in floors: each imports only files on floors below its own. The objects are
+//! plain data that the state holds (`objects.rs`, `state.rs`); the modules of the spec's chapters
+//! implement the calls on them, and the state never imports one of them.
+//!
+//! | floor | path | job |
+//! |---|---|---|
+//! | 1 | `ffi.rs` | the C side of entry points: next chains, the two-call idiom, strings, pose valid usage |
+//! | 1 | `gaze_script.rs` | the simulated eye tracker's script |
+//! | 2 | `config.rs` | what the simulated headset is: preset, refresh rate, optional extensions, faults and load |
+//! | 3 | `objects.rs` | the runtime's objects as data: what each handle holds, the journal's records |
+//! | 3 | `extensions.rs` | the extensions the runtime knows and which it offers under a configuration |
+//! | 4 | `state.rs` | the objects in one map-of-maps behind one lock; the per-call bookkeeping (`entry`) |
+//! | 5 | `control.rs` | the test-facing control API |
+//! | 5 | `system.rs` | the one system and its view configuration |
+//! | 6 | `vulkan.rs` | XR_KHR_vulkan_enable(2) and the Vulkan side of sessions and swapchains |
+//! | 6 | `actions.rs` | input: action sets, actions, the eye tracker's gaze action |
+//! | 6 | `foveation.rs` | native XR_FB_foveation profiles |
+//! | 7 | `session.rs` | session lifetime and state machine |
+//! | 7 | `space.rs` | spaces and view location |
+//! | 7 | `swapchain.rs` | swapchains and native XR_FB_swapchain_update_state |
+//! | 8 | `frame.rs` | the frame loop against the virtual display clock |
+//! | 8 | `instance.rs` | instance lifetime, events, strings and paths |
+//! | 9 | `dispatch.rs` | `xrGetInstanceProcAddr`: the name → function table |
+//! | 10 | `negotiate.rs` | loader ↔ runtime negotiation |
+//! | 11 | `lib.rs` | the runtime's export and the module list |
 
 mod actions;
 mod config;
 pub mod control;
 mod dispatch;
+mod extensions;
 mod ffi;
 mod foveation;
 mod frame;
 pub mod gaze_script;
 mod instance;
 mod negotiate;
+mod objects;
 mod session;
 mod space;
 mod state;

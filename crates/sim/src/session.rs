@@ -10,40 +10,12 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
+use crate::extensions::{KHR_VULKAN_ENABLE, KHR_VULKAN_ENABLE2, MND_HEADLESS};
 use crate::ffi;
-use crate::frame::FrameClock;
-use crate::instance::{check_system, Event, KHR_VULKAN_ENABLE, KHR_VULKAN_ENABLE2, MND_HEADLESS};
+use crate::objects::{Event, FrameClock, Graphics, Session};
 use crate::state::{entry, world, World};
-use crate::vulkan::{self, VulkanSession};
-
-pub(crate) enum Graphics {
-    /// XR_MND_headless: no graphics binding, swapchains without images.
-    Headless,
-    Vulkan(Arc<VulkanSession>),
-}
-
-pub(crate) struct Session {
-    pub instance: u64,
-    /// The latest state announced (queued) to the application.
-    pub state: xr::SessionState,
-    /// Between a successful xrBeginSession and xrEndSession.
-    pub running: bool,
-    /// The primary view configuration xrBeginSession was given; `None` while not running. A real
-    /// runtime sets up its views only here, so xrLocateViews is refused outside a running session
-    /// and for any other configuration (see `space::locate_views`).
-    pub view_configuration: Option<xr::ViewConfigurationType>,
-    pub exit_requested: bool,
-    pub lost: bool,
-    pub graphics: Graphics,
-    pub frame: FrameClock,
-    pub action_sets_attached: Vec<u64>,
-    /// Actions bound to the eye gaze pose when the sets were attached.
-    pub gaze_actions: Vec<u64>,
-    /// The sets the last focused xrSyncActions made active (none while unfocused).
-    pub synced_sets: Vec<u64>,
-    /// The virtual time the session was created at: the eye tracker's script starts there.
-    pub gaze_origin_ns: i64,
-}
+use crate::system::check_system;
+use crate::vulkan;
 
 /// Announces a state change: records it and queues the event with the instance's current time.
 pub(crate) fn set_state(w: &mut World, session: u64, state: xr::SessionState) {

@@ -7,25 +7,13 @@
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
-use crate::ffi;
+use crate::ffi::{self, check_pose};
+use crate::objects::{Space, SpaceKind};
 use crate::state::{entry, world, World};
 use crate::system::VIEW_COUNT;
 
 const EYE_HEIGHT_M: f32 = 1.6;
 pub(crate) const IPD_M: f32 = 0.063;
-
-pub(crate) enum SpaceKind {
-    Reference(xr::ReferenceSpaceType),
-    /// An action's space: it locates only while the action is the eye tracker's and active
-    /// ([`crate::actions::gaze_active`]) and the tracker has a sample; no controller is tracked.
-    Action(u64),
-}
-
-pub(crate) struct Space {
-    pub session: u64,
-    pub kind: SpaceKind,
-    pub pose_in_parent: xr::Posef,
-}
 
 impl Space {
     /// The space's pose in LOCAL at `time`, or `None` when untracked; for a gaze space also the
@@ -151,21 +139,6 @@ fn inverse(p: xr::Posef) -> xr::Posef {
             y: -t.y,
             z: -t.z,
         },
-    }
-}
-
-/// Spec "Valid Usage" for XrPosef inputs: the orientation must be a unit quaternion (runtimes accept
-/// about 1% deviation), otherwise XR_ERROR_POSE_INVALID.
-pub(crate) fn check_pose(p: &xr::Posef) -> Result<(), xr::Result> {
-    let q = p.orientation;
-    let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
-    let finite = [q.x, q.y, q.z, q.w, p.position.x, p.position.y, p.position.z]
-        .iter()
-        .all(|v| v.is_finite());
-    if finite && (norm - 1.0).abs() <= 0.01 {
-        Ok(())
-    } else {
-        Err(xr::Result::ERROR_POSE_INVALID)
     }
 }
 

@@ -6,7 +6,7 @@
 //! objects the runtime owns; calls through application-provided function pointers
 //! (xrCreateVulkanInstanceKHR/DeviceKHR) and real-time sleeps happen with the lock released.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::LazyLock;
 
@@ -14,29 +14,13 @@ use openxr_sys as xr;
 use openxr_sys::Handle;
 use parking_lot::{Mutex, MutexGuard};
 
-use crate::actions::{Action, ActionSet};
-use crate::control::{Call, SubmittedView};
-use crate::instance::InstanceState;
-use crate::session::Session;
-use crate::space::Space;
-use crate::swapchain::Swapchain;
+use crate::objects::{
+    Action, ActionSet, Call, InstanceState, Profile, Record, Session, Space, Swapchain,
+};
 
 /// `Ok` carries a success code (XR_SUCCESS, XR_FRAME_DISCARDED, ...), `Err` an error code, so
 /// implementations can use `?` on validation.
 pub(crate) type XrResult = Result<xr::Result, xr::Result>;
-
-/// What stays observable about an instance after it is destroyed.
-#[derive(Default)]
-pub(crate) struct Record {
-    pub journal: Vec<Call>,
-    pub enabled_extensions: Vec<String>,
-    pub end_frames: Vec<Vec<SubmittedView>>,
-    /// Calls that returned an error code, by command (kept whether or not the journal is).
-    pub errors: BTreeMap<&'static str, u64>,
-    /// The subset of `errors` the runtime chose itself because the caller broke a rule (every error
-    /// that is not an injected fault): what a strict runtime such as Monado would also refuse.
-    pub refusals: BTreeMap<&'static str, u64>,
-}
 
 #[derive(Default)]
 pub(crate) struct World {
@@ -47,7 +31,7 @@ pub(crate) struct World {
     pub spaces: HashMap<u64, Space>,
     pub action_sets: HashMap<u64, ActionSet>,
     pub actions: HashMap<u64, Action>,
-    pub profiles: HashMap<u64, crate::foveation::Profile>,
+    pub profiles: HashMap<u64, Profile>,
     /// Records of destroyed instances, so tests can read the journal after teardown.
     pub retired: HashMap<u64, Record>,
 }

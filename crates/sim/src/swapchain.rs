@@ -12,52 +12,15 @@ use std::collections::VecDeque;
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
+use crate::extensions::FB_FOVEATION;
 use crate::ffi;
-use crate::foveation::Applied;
-use crate::instance::FB_FOVEATION;
-use crate::session::Graphics;
+use crate::objects::{Applied, Graphics, Swapchain};
 use crate::state::{entry, world};
 use crate::system::MAX_IMAGE_SIZE;
-use crate::vulkan::{self, SwapchainImages};
+use crate::vulkan::{self, FORMATS};
 
 /// How many images a non-static swapchain has.
 const IMAGE_COUNT: u32 = 3;
-
-/// Vulkan formats offered, in order of preference (sRGB colour first, as the spec recommends).
-pub(crate) const FORMATS: [ash::vk::Format; 7] = [
-    ash::vk::Format::R8G8B8A8_SRGB,
-    ash::vk::Format::B8G8R8A8_SRGB,
-    ash::vk::Format::R8G8B8A8_UNORM,
-    ash::vk::Format::B8G8R8A8_UNORM,
-    ash::vk::Format::D32_SFLOAT,
-    ash::vk::Format::D16_UNORM,
-    ash::vk::Format::D24_UNORM_S8_UINT,
-];
-
-pub(crate) struct Swapchain {
-    pub session: u64,
-    pub width: u32,
-    pub height: u32,
-    pub array_size: u32,
-    pub image_count: u32,
-    is_static: bool,
-    /// Acquired and not yet released, oldest first.
-    acquired: VecDeque<u32>,
-    /// The oldest acquired image has been waited.
-    waited: bool,
-    next_index: u32,
-    /// Acquisitions ever made (a static swapchain allows one).
-    acquisitions: u64,
-    /// An image has been released at least once, so the swapchain may be used in a layer.
-    pub ever_released: bool,
-    /// Real images for Vulkan sessions; destroyed with the swapchain.
-    images: Option<SwapchainImages>,
-    /// Created with XrSwapchainCreateInfoFoveationFB while XR_FB_foveation was enabled: profiles
-    /// may be applied (native foveation only).
-    pub foveation_supported: bool,
-    /// The foveation xrUpdateSwapchainFB last applied.
-    pub foveation: Option<Applied>,
-}
 
 pub(crate) unsafe extern "system" fn enumerate_swapchain_formats(
     session: xr::Session,

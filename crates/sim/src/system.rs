@@ -3,8 +3,8 @@
 
 use openxr_sys as xr;
 
+use crate::extensions::{EPIC_VIEW_CONFIGURATION_FOV, EXT_EYE_GAZE_INTERACTION};
 use crate::ffi;
-use crate::instance::{check_system, EPIC_VIEW_CONFIGURATION_FOV, EXT_EYE_GAZE_INTERACTION};
 use crate::state::{entry, world};
 
 pub(crate) const SYSTEM_ID: u64 = 0x5157_0001;
@@ -12,6 +12,15 @@ const VENDOR_ID: u32 = 0xF0FE;
 pub(crate) const MAX_IMAGE_SIZE: u32 = 8192;
 pub(crate) const MAX_LAYER_COUNT: u32 = 16;
 pub(crate) const VIEW_COUNT: usize = 2;
+
+/// Validates an `XrSystemId` against the only system the runtime has.
+pub(crate) fn check_system(system: xr::SystemId) -> Result<(), xr::Result> {
+    if system.into_raw() == SYSTEM_ID {
+        Ok(())
+    } else {
+        Err(xr::Result::ERROR_SYSTEM_INVALID)
+    }
+}
 
 pub(crate) unsafe extern "system" fn get_system(
     instance: xr::Instance,

@@ -18,20 +18,20 @@ use ash::vk::Handle as _;
 use openxr_sys as xr;
 
 use crate::ffi;
-use crate::instance::check_system;
+use crate::objects::{SwapchainImages, VulkanInstanceState, VulkanSession};
 use crate::state::{entry, world, World};
-use crate::swapchain::FORMATS;
+use crate::system::check_system;
 
-/// What the runtime learned about the application's Vulkan objects through the enable calls.
-#[derive(Default)]
-pub(crate) struct VulkanInstanceState {
-    /// The application's `vkGetInstanceProcAddr` (enable2 only).
-    pub gipa: Option<xr::platform::VkGetInstanceProcAddr>,
-    /// The VkInstance the physical device was picked from.
-    pub vk_instance: Option<vk::Instance>,
-    /// The physical device returned by xrGetVulkanGraphicsDevice(2)KHR.
-    pub physical_device: Option<vk::PhysicalDevice>,
-}
+/// Vulkan formats offered, in order of preference (sRGB colour first, as the spec recommends).
+pub(crate) const FORMATS: [ash::vk::Format; 7] = [
+    ash::vk::Format::R8G8B8A8_SRGB,
+    ash::vk::Format::B8G8R8A8_SRGB,
+    ash::vk::Format::R8G8B8A8_UNORM,
+    ash::vk::Format::B8G8R8A8_UNORM,
+    ash::vk::Format::D32_SFLOAT,
+    ash::vk::Format::D16_UNORM,
+    ash::vk::Format::D24_UNORM_S8_UINT,
+];
 
 /// The system Vulkan loader, loaded once and kept for the process lifetime.
 fn system_entry() -> Result<ash::Entry, xr::Result> {
@@ -55,18 +55,6 @@ fn entry_for(state: &VulkanInstanceState) -> Result<ash::Entry, xr::Result> {
         }),
         None => system_entry(),
     }
-}
-
-/// A Vulkan session: the application's device, seen through function tables loaded from its
-/// instance.
-pub(crate) struct VulkanSession {
-    instance: ash::Instance,
-    device: ash::Device,
-    physical_device: vk::PhysicalDevice,
-    queue_family: u32,
-    queue: vk::Queue,
-    /// The offered formats this device can render to.
-    pub formats: Vec<vk::Format>,
 }
 
 fn is_depth(format: vk::Format) -> bool {
@@ -132,18 +120,6 @@ pub(crate) unsafe fn open_session(
         queue,
         formats,
     })
-}
-
-/// A swapchain's images with their memory, plus what the one-time layout transition needs.
-pub(crate) struct SwapchainImages {
-    vk: Arc<VulkanSession>,
-    images: Vec<(vk::Image, vk::DeviceMemory)>,
-    prepared: Vec<bool>,
-    layout: vk::ImageLayout,
-    range: vk::ImageSubresourceRange,
-    pool: vk::CommandPool,
-    command_buffer: vk::CommandBuffer,
-    fence: vk::Fence,
 }
 
 fn vk_error(_: vk::Result) -> xr::Result {

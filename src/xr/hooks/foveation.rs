@@ -11,10 +11,11 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{check_lost, session, swapchain, HookResult};
 use crate::bridge::ProfileParams;
-use crate::common::ffi::{In, Out};
 use crate::xr::extensions::Ext;
+use crate::xr::ffi::HookResult;
+use crate::xr::ffi::{In, Out};
+use crate::xr::registry::{check_lost, session, swapchain};
 use crate::xr::registry::{registry, Profile};
 
 /// Reads the profile parameters from a create info's nested chain

@@ -7,9 +7,12 @@ use std::time::Instant;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{fov_from_xr, fov_to_xr, next, observed, session_for_call, succeeded, HookResult};
-use crate::common::ffi::{In, Out, OutArray};
+use crate::xr::ffi::HookResult;
+use crate::xr::ffi::{In, Out, OutArray};
+use crate::xr::next_layer::next;
+use crate::xr::registry::{observed, session_for_call};
 use crate::xr::registry::{registry, Instance, Session};
+use crate::xr::values::{fov_from_xr, fov_to_xr, succeeded};
 use fovea_model::density::Rect;
 use fovea_model::dynamic::LADDER;
 use fovea_model::maps::{SubmittedView, MAX_VIEWS};

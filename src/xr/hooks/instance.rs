@@ -2,8 +2,11 @@
 
 use openxr_sys as xr;
 
-use super::{instance, next, succeeded, HookResult};
+use crate::xr::ffi::HookResult;
+use crate::xr::next_layer::next;
+use crate::xr::registry::instance;
 use crate::xr::registry::registry;
+use crate::xr::values::succeeded;
 
 /// `xrDestroyInstance`: the instance's sessions, swapchains and profiles die with it
 /// (fundamentals.adoc "Object Lifetime"). As in `xrDestroySession`, their records leave the

@@ -5,13 +5,15 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{instance, next, observed, observed_instance, session, succeeded, HookResult};
-use crate::common::ffi::{In, Out, OutArray};
-use crate::gpu::density_images::SessionGpu;
-use crate::gpu::density_images::VulkanBinding;
 use crate::xr::extensions::Ext;
+use crate::xr::ffi::HookResult;
+use crate::xr::ffi::{In, Out, OutArray};
+use crate::xr::next_layer::next;
+use crate::xr::registry::{instance, observed, observed_instance, session};
 use crate::xr::registry::{registry, Instance, Session};
+use crate::xr::session_gpu::{SessionGpu, VulkanBinding};
 use crate::xr::symmetric;
+use crate::xr::values::succeeded;
 
 /// fovea's Vulkan objects for a new session on `binding`'s device, or `None` (logged) where they
 /// cannot be made: the session then works without density images (fail open).

@@ -9,12 +9,15 @@ use xr::Handle;
 
 use crate::common::lock::Mutex;
 
-use super::{next, observed, session, succeeded, swapchain, swapchain_for_call, HookResult};
 use crate::bridge::{FoveationState, MapSources};
-use crate::common::ffi::{self, In, Out, OutArray};
-use crate::gpu::density_images::{DensityImages, Refreshed};
+use crate::xr::density_images::{DensityImages, Refreshed};
 use crate::xr::extensions::Ext;
+use crate::xr::ffi::HookResult;
+use crate::xr::ffi::{self, In, Out, OutArray};
+use crate::xr::next_layer::next;
+use crate::xr::registry::{observed, session, swapchain, swapchain_for_call};
 use crate::xr::registry::{registry, Session, Swapchain, SwapchainInfo};
+use crate::xr::values::succeeded;
 
 /// What the foveation structs in a swapchain create info ask for.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

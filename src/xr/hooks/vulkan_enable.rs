@@ -11,26 +11,29 @@ use ash::vk::Handle as _;
 use openxr_sys as xr;
 use xr::Handle;
 
-use super::{instance, next, succeeded, HookResult};
-use crate::common::ffi::{In, Out, OutArray};
-use crate::gpu::density_images;
 use crate::xr::extensions::Ext;
+use crate::xr::ffi::HookResult;
+use crate::xr::ffi::{In, Out, OutArray};
+use crate::xr::next_layer::next;
+use crate::xr::registry::instance;
 use crate::xr::registry::{registry, Instance, VulkanDevice};
+use crate::xr::session_gpu;
+use crate::xr::values::succeeded;
 
 /// What the physical device the application picked supports, if fovea knows the device.
-fn recorded_support(state: &Instance) -> Option<(u64, density_images::FdmSupport)> {
+fn recorded_support(state: &Instance) -> Option<(u64, session_gpu::FdmSupport)> {
     let (vk_instance, pd) = state.vulkan.lock().graphics_device?;
     Some((pd, support_of(vk_instance, pd)?))
 }
 
 /// Asks a physical device of a VkInstance the runtime handed out (or was handed) about FDM.
-fn support_of(vk_instance: u64, pd: u64) -> Option<density_images::FdmSupport> {
-    let entry = density_images::entry()?;
+fn support_of(vk_instance: u64, pd: u64) -> Option<session_gpu::FdmSupport> {
+    let entry = session_gpu::entry()?;
     // SAFETY: the recorded VkInstance is live: the application made it for the runtime and must
     // keep it while the OpenXR instance uses it (XR_KHR_vulkan_enable), and `pd` came from it.
     unsafe {
-        let instance = density_images::instance_fns(entry, vk_instance);
-        Some(density_images::query_support(
+        let instance = session_gpu::instance_fns(entry, vk_instance);
+        Some(session_gpu::query_support(
             entry,
             &instance,
             vk::PhysicalDevice::from_raw(pd),
@@ -44,7 +47,7 @@ fn support_of(vk_instance: u64, pd: u64) -> Option<density_images::FdmSupport> {
 /// own order and hello_xr have it), exactly the FDM extensions it supports. Where it is not, only
 /// VK_EXT_fragment_density_map: an application that then enables it on a device
 /// without it fails vkCreateDevice, which is why the known-device path is preferred (README).
-pub fn extensions_to_add(support: Option<density_images::FdmSupport>) -> Vec<&'static CStr> {
+pub fn extensions_to_add(support: Option<session_gpu::FdmSupport>) -> Vec<&'static CStr> {
     match support {
         Some(s) => {
             let mut v = Vec::new();
@@ -211,10 +214,7 @@ pub struct AppDeviceRequest {
 /// What fovea adds to a device create info: (add the extension name, chain a features struct), and
 /// whether FDM ends up enabled. Nothing is added that the device lacks; a features struct the
 /// application chained itself is respected (Vulkan forbids a second one of the same type).
-pub fn device_plan(
-    support: density_images::FdmSupport,
-    app: AppDeviceRequest,
-) -> (bool, bool, bool) {
+pub fn device_plan(support: session_gpu::FdmSupport, app: AppDeviceRequest) -> (bool, bool, bool) {
     let add_extension = support.extension && !app.extension;
     let add_feature = support.extension && support.feature && app.feature_struct.is_none();
     let extension = app.extension || add_extension;
@@ -240,7 +240,7 @@ unsafe fn app_request(info: &vk::DeviceCreateInfo) -> AppDeviceRequest {
         };
         for &p in names {
             // SAFETY: as above.
-            let name = unsafe { crate::common::ffi::cstr(p) };
+            let name = unsafe { crate::xr::ffi::cstr(p) };
             if name == Some(ash::ext::fragment_density_map::NAME) {
                 req.extension = true;
             }
@@ -248,7 +248,7 @@ unsafe fn app_request(info: &vk::DeviceCreateInfo) -> AppDeviceRequest {
     }
     let mut node = info.p_next as *const vk::BaseInStructure;
     let mut seen = 0;
-    while !node.is_null() && seen < crate::common::ffi::MAX_CHAIN_LENGTH {
+    while !node.is_null() && seen < crate::xr::ffi::MAX_CHAIN_LENGTH {
         // SAFETY: the pNext chain of a valid VkDeviceCreateInfo is a chain of valid structs, each
         // starting with sType and pNext; a node of the FDM features type is that struct.
         unsafe {
@@ -407,8 +407,8 @@ mod tests {
             "VK_EXT_fragment_density_map VK_EXT_fragment_density_map2"
         );
         assert_eq!(append_extensions("A B", &[]), "A B");
-        let none = density_images::FdmSupport::default();
-        let both = density_images::FdmSupport {
+        let none = session_gpu::FdmSupport::default();
+        let both = session_gpu::FdmSupport {
             extension: true,
             extension2: true,
             ..none
@@ -420,8 +420,8 @@ mod tests {
 
     #[test]
     fn device_plans() {
-        let none = density_images::FdmSupport::default();
-        let full = density_images::FdmSupport {
+        let none = session_gpu::FdmSupport::default();
+        let full = session_gpu::FdmSupport {
             extension: true,
             feature: true,
             ..none
@@ -429,7 +429,7 @@ mod tests {
         let app = AppDeviceRequest::default();
         assert_eq!(device_plan(none, app), (false, false, false));
         assert_eq!(device_plan(full, app), (true, true, true));
-        let ext_only = density_images::FdmSupport {
+        let ext_only = session_gpu::FdmSupport {
             feature: false,
             ..full
         };

@@ -25,8 +25,11 @@ use std::sync::Once;
 use ash::vk;
 use openxr_sys as xr;
 
-use super::{instance, next, succeeded, HookResult};
-use crate::common::ffi::{self, In, Out};
+use crate::xr::ffi::HookResult;
+use crate::xr::ffi::{self, In, Out};
+use crate::xr::next_layer::next;
+use crate::xr::registry::instance;
+use crate::xr::values::succeeded;
 use fovea_abi::env::{DISABLE_VK_LAYER, VK_LAYER};
 
 /// The Vulkan layer's name (fovea_abi::VK_LAYER_NAME) as a C string.

@@ -11,7 +11,7 @@ use openxr_sys as xr;
 
 use fovea_model::density::{Level, Pattern};
 
-use super::{cargo_build, load_description, Setup, LOAD};
+use super::setup::{cargo_build, load_description, Setup, LOAD};
 use crate::maps::render;
 use crate::target::Target;
 

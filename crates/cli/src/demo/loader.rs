@@ -20,7 +20,7 @@ use std::process::{Command, Stdio};
 
 use ash::vk;
 
-use super::{build_dir, cargo_build, load_description, Setup, LOAD};
+use super::setup::{build_dir, cargo_build, load_description, Setup, LOAD};
 use crate::discovery::{Kind, VK_ADD_LAYER_PATH};
 use crate::install::{manifest_text, vk_explicit_manifest_text};
 use crate::vk_doctor::Fdm;

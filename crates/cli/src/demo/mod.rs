@@ -11,75 +11,12 @@
 
 mod harness;
 mod loader;
-
-use std::path::PathBuf;
-
-use fovea_model::headsets::Headset;
+mod setup;
 
 use crate::args::{DemoArgs, Via};
 
-/// The load script, in frames at 90 Hz: light, then past the 11.1 ms budget, then light again.
-const LOAD: [(u64, f32); 3] = [(0, 6.0), (270, 14.0), (630, 6.0)];
-
-/// What the override writes, four fifths through.
-const OVERRIDE: &str = "debug.oculus.foveation.level=2\ndebug.oculus.foveation.dynamic=0\n";
-
-/// What both ways share: the command line, the output folder and the property file.
-pub struct Setup {
-    /// `--seconds`, when given.
-    seconds: Option<u64>,
-    out: PathBuf,
-    props: PathBuf,
-    /// `FOVEA_LOG` for the layer: the caller's, else warnings and the stats lines.
-    log: String,
-    /// `--headset`, when given.
-    headset: &'static Headset,
-    headset_given: bool,
-}
-
-impl Setup {
-    fn new(args: &DemoArgs) -> Result<Setup, String> {
-        let out = &args.out;
-        std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-        let out = std::fs::canonicalize(out).map_err(|e| format!("{}: {e}", out.display()))?;
-        let props = out.join("foveation.props");
-        std::fs::write(
-            &props,
-            "# Quest debug properties, re-read while the app runs\n",
-        )
-        .map_err(|e| format!("{}: {e}", props.display()))?;
-        let headset = args.headset.unwrap_or_else(|| {
-            fovea_model::headsets::by_id("quest3").expect("quest3 preset exists")
-        });
-        Ok(Setup {
-            seconds: args.seconds,
-            out,
-            props,
-            log: std::env::var("FOVEA_LOG")
-                .unwrap_or_else(|_| format!("warn,{}=info", fovea_abi::log_target::STATS)),
-            headset,
-            headset_given: args.headset.is_some(),
-        })
-    }
-
-    fn write_override(&self) -> Result<(), String> {
-        std::fs::write(&self.props, OVERRIDE)
-            .map_err(|e| format!("{}: {e}", self.props.display()))?;
-        println!(
-            "-- wrote debug.oculus.foveation.level=2, dynamic=0 to {}",
-            self.props.display()
-        );
-        Ok(())
-    }
-
-    /// The run's length: `--seconds`, else `default`.
-    fn seconds_or(&self, default: u64) -> u64 {
-        self.seconds.unwrap_or(default)
-    }
-}
-
 pub fn run(args: &DemoArgs) -> Result<(), String> {
-    let setup = Setup::new(args)?;
+    let setup = setup::Setup::new(args)?;
     match args.via {
         Some(Via::Harness) => harness::run(&setup),
         Some(Via::Loader) => loader::run(&setup, loader::System::find()?),
@@ -90,43 +27,5 @@ pub fn run(args: &DemoArgs) -> Result<(), String> {
                 harness::run(&setup)
             }
         },
-    }
-}
-
-fn load_description() -> String {
-    LOAD.iter()
-        .map(|(f, ms)| format!("{ms} ms from frame {f}"))
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
-/// The folder the running `fovea` was built into (`target/release`, `target/debug`), where Cargo
-/// also puts the libraries and examples the demo runs.
-fn build_dir() -> Result<PathBuf, String> {
-    let exe = std::env::current_exe().map_err(|e| format!("current executable: {e}"))?;
-    let exe = std::fs::canonicalize(&exe).unwrap_or(exe);
-    exe.parent()
-        .map(PathBuf::from)
-        .ok_or_else(|| "the executable has no directory".into())
-}
-
-/// Builds `what` with the profile the running `fovea` was built with, when the demo was started by
-/// Cargo (`$CARGO` is set): `cargo run` builds only what the binary links.
-fn cargo_build(what: &[&str]) -> Result<(), String> {
-    let cargo = std::env::var_os("CARGO").ok_or("not started by cargo")?;
-    let dir = build_dir()?;
-    let profile = match dir.file_name().and_then(|n| n.to_str()) {
-        Some("debug") | None => "dev".to_owned(),
-        Some(p) => p.to_owned(),
-    };
-    let status = std::process::Command::new(cargo)
-        .args(["build", "--quiet", "--profile", &profile])
-        .args(what)
-        .status()
-        .map_err(|e| format!("cargo: {e}"))?;
-    if status.success() {
-        Ok(())
-    } else {
-        Err(format!("cargo build {} failed: {status}", what.join(" ")))
     }
 }

@@ -7,7 +7,6 @@
 
 use std::ffi::{c_char, c_void, CStr};
 use std::marker::PhantomData;
-use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use openxr_sys as xr;
 
@@ -59,7 +58,7 @@ fn refused(function: &'static str, result: xr::Result) -> xr::Result {
 /// - `(required_out) T`: a `*mut T` that must be non-NULL, else XR_ERROR_VALIDATION_FAILURE; the
 ///   body gets `&mut T`.
 ///
-/// The body returns [`HookResult`]; the shim runs it inside [`guard`] under the table's name and
+/// The body returns [`HookResult`]; the shim runs it inside [`run_hook`] under the table's name and
 /// logs a refusal ([`finish`]).
 macro_rules! shim {
     ($(#[$attr:meta])* $vis:vis fn $shim:ident = $name:literal => $body:path,
@@ -71,12 +70,12 @@ macro_rules! shim {
         /// Called by the loader or the layer above with arguments that meet the function's valid
         /// usage in the OpenXR specification: every pointer is NULL or valid for the call.
         $vis unsafe extern "system" fn $shim(
-            $($arg: $crate::common::ffi::shim_c_type!($mode $ty)),*
+            $($arg: $crate::xr::ffi::shim_c_type!($mode $ty)),*
         ) -> openxr_sys::Result {
-            const FUNCTION: &str = $crate::common::ffi::function_name($name);
-            $crate::common::ffi::guard(FUNCTION, || {
-                $(let $arg = $crate::common::ffi::shim_arg!(FUNCTION, $mode $arg);)*
-                $crate::common::ffi::finish(FUNCTION, $body($($arg),*))
+            const FUNCTION: &str = $crate::xr::ffi::function_name($name);
+            $crate::xr::ffi::run_hook(FUNCTION, || {
+                $(let $arg = $crate::xr::ffi::shim_arg!(FUNCTION, $mode $arg);)*
+                $crate::xr::ffi::finish(FUNCTION, $body($($arg),*))
             })
         }
     };
@@ -104,35 +103,35 @@ macro_rules! shim_arg {
     ($function:ident, in $arg:ident) => {
         // SAFETY: the shim's contract: the application's pointer is NULL or a valid struct, with
         // a valid next chain, for the whole call.
-        unsafe { $crate::common::ffi::In::new($arg) }
+        unsafe { $crate::xr::ffi::In::new($arg) }
     };
     ($function:ident, out $arg:ident) => {
         // SAFETY: the shim's contract: the application's pointer is NULL or valid for reads and
         // writes for the whole call.
-        unsafe { $crate::common::ffi::Out::new($arg) }
+        unsafe { $crate::xr::ffi::Out::new($arg) }
     };
     ($function:ident, (array $capacity:ident) $arg:ident) => {
         // SAFETY: the shim's contract (the two-call idiom's valid usage): NULL, or valid for
         // `capacity` elements for the whole call.
-        unsafe { $crate::common::ffi::OutArray::new($arg, $capacity) }
+        unsafe { $crate::xr::ffi::OutArray::new($arg, $capacity) }
     };
     ($function:ident, (string) $arg:ident) => {
         // SAFETY: the shim's contract: NULL or a NUL-terminated string, alive for the call.
-        unsafe { $crate::common::ffi::cstr($arg) }
+        unsafe { $crate::xr::ffi::cstr($arg) }
     };
     ($function:ident, (required) $arg:ident) => {
         // SAFETY: as for `in`.
-        match unsafe { $crate::common::ffi::In::new($arg) }.require() {
+        match unsafe { $crate::xr::ffi::In::new($arg) }.require() {
             Ok(v) => v,
-            Err(e) => return $crate::common::ffi::finish($function, Err(e)),
+            Err(e) => return $crate::xr::ffi::finish($function, Err(e)),
         }
     };
     ($function:ident, (required_out) $arg:ident) => {
         // SAFETY: as for `out`.
-        match unsafe { $crate::common::ffi::Out::new($arg) }.into_mut() {
+        match unsafe { $crate::xr::ffi::Out::new($arg) }.into_mut() {
             Some(v) => v,
             None => {
-                return $crate::common::ffi::finish(
+                return $crate::xr::ffi::finish(
                     $function,
                     Err(openxr_sys::Result::ERROR_VALIDATION_FAILURE),
                 )
@@ -459,39 +458,30 @@ impl<'a, T: Chained> OutArray<'a, T> {
     }
 }
 
-/// Runs a hook body so that a panic never unwinds into the application (that would be undefined
-/// behaviour across `extern "system"`). A panic becomes `XR_ERROR_RUNTIME_FAILURE` and one error
-/// line naming the function; the application goes on.
+/// Runs a hook body inside the layer's panic guard ([`crate::common::guard`]): a panic becomes
+/// `XR_ERROR_RUNTIME_FAILURE` and one error line naming the function; the application goes on.
+/// `FOVEA_INJECT_PANIC` makes the named hook panic inside it.
 /// Inlined into each shim (one call frame fewer on every call; the frame loop makes seven), with
 /// the rare paths out of line.
 #[inline(always)]
-pub fn guard(function: &'static str, body: impl FnOnce() -> xr::Result) -> xr::Result {
+pub fn run_hook(function: &'static str, body: impl FnOnce() -> xr::Result) -> xr::Result {
     let body = || {
         if injected_panic().is_some_and(|f| f == function) {
             injected(function);
         }
         body()
     };
-    match catch_unwind(AssertUnwindSafe(body)) {
-        Ok(result) => result,
-        Err(payload) => caught(function, payload),
-    }
+    crate::common::guard::guard(
+        function,
+        "panic inside the layer; returning XR_ERROR_RUNTIME_FAILURE",
+        xr::Result::ERROR_RUNTIME_FAILURE,
+        body,
+    )
 }
 
 #[cold]
 fn injected(function: &'static str) -> ! {
     panic!("{INJECT_PANIC_ENV} asked for a panic in {function}");
-}
-
-#[cold]
-fn caught(function: &'static str, payload: Box<dyn std::any::Any + Send>) -> xr::Result {
-    let message = payload
-        .downcast_ref::<&str>()
-        .map(|s| (*s).to_owned())
-        .or_else(|| payload.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "non-string panic payload".to_owned());
-    tracing::error!(function, %message, "panic inside the layer; returning XR_ERROR_RUNTIME_FAILURE");
-    xr::Result::ERROR_RUNTIME_FAILURE
 }
 
 /// `FOVEA_INJECT_PANIC=<function name>` makes that hook panic, to prove the guard holds in a real
@@ -859,10 +849,10 @@ mod tests {
     #[test]
     fn guard_turns_panics_into_runtime_failure() {
         assert_eq!(
-            guard("t", || panic!("boom")),
+            run_hook("t", || panic!("boom")),
             xr::Result::ERROR_RUNTIME_FAILURE
         );
-        assert_eq!(guard("t", || xr::Result::SUCCESS), xr::Result::SUCCESS);
+        assert_eq!(run_hook("t", || xr::Result::SUCCESS), xr::Result::SUCCESS);
     }
 
     #[test]
