@@ -2,7 +2,7 @@
 //! application's command buffer, in front of every pass that reads them.
 //!
 //! fovea's own density images write shading-rate codes into their shadow at upload
-//! (`gpu::density_images`). An application's own map is written by the application's commands
+//! (`xr::density_images`). An application's own map is written by the application's commands
 //! (copies, draws, dispatches), so its content is known only on the device, when the pass runs. At
 //! `vkCmdBeginRenderPass(2)` and `vkCmdBeginRendering` of a pass whose density map is such an image,
 //! the layer records, before calling down: a barrier making earlier writes visible to compute

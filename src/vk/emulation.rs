@@ -92,7 +92,7 @@ pub unsafe fn image_created(
                 "density map shadowed"
             );
             // fovea's own density images get their rates with every upload
-            // (`gpu::density_images`); an application's own maps are converted at every pass
+            // (`xr::density_images`); an application's own maps are converted at every pass
             // begin that reads them ([`crate::vk::convert`]): the caller hands those on.
             (!own_image).then_some(s)
         }

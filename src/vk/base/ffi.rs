@@ -3,26 +3,16 @@
 
 use std::ffi::{c_char, CStr};
 use std::hash::Hasher;
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use ash::vk;
 
-/// Runs an entry point's body so that a panic never unwinds into the application: it becomes
-/// `fail` and one error line naming the command.
+/// Runs a Vulkan entry point's body inside the layer's one panic guard
+/// ([`crate::common::guard`]): a panic never unwinds into the application, it becomes `fail` and
+/// one error line naming the command.
+#[inline(always)]
 pub fn guard<R>(function: &'static str, fail: R, body: impl FnOnce() -> R) -> R {
-    match catch_unwind(AssertUnwindSafe(body)) {
-        Ok(r) => r,
-        Err(payload) => {
-            let message = payload
-                .downcast_ref::<&str>()
-                .map(|s| (*s).to_owned())
-                .or_else(|| payload.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "non-string panic payload".to_owned());
-            tracing::error!(function, %message, "panic inside the Vulkan layer");
-            fail
-        }
-    }
+    crate::common::guard::guard(function, "panic inside the Vulkan layer", fail, body)
 }
 
 /// A NUL-terminated name from the caller.

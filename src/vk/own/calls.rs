@@ -32,7 +32,7 @@
 //! destroyed while its clear is in flight is destroyed once that clear's fence has signalled
 //! ([`Clears::forget`]). fovea's own density images get no clear: every upload writes the whole
 //! shadow, from `UNDEFINED`, before the application can render with the image
-//! (`src/gpu/density_images.rs`, docs/ARCHITECTURE.md "Maps are written only on acquire"), so no
+//! (`src/xr/density_images.rs`, docs/ARCHITECTURE.md "Maps are written only on acquire"), so no
 //! clear can land after an upload.
 //!
 //! Uploads. Injected shading-rate maps (docs/injection.md#how-the-attachment-gets-in) are filled
