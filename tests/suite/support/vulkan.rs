@@ -1,4 +1,4 @@
-//! Vulkan set-up the `vk_*` modules share: the formats and shaders they draw with, the colour +
+//! Vulkan set-up the `vk::` modules share: the formats and shaders they draw with, the colour +
 //! density attachments of their render passes, images and their memory, and a graphics
 //! pipeline's fixed state.
 

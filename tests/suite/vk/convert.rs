@@ -2,7 +2,7 @@
 //! shading-rate shadows on the GPU at every pass begin that reads them, and gives the application
 //! its compute bindings back afterwards (src/vk/convert.rs).
 //!
-//! Stack as in [`crate::vk_layer`] (this test → fovea → validation → the double → lavapipe, which
+//! Stack as in [`crate::vk::layer`] (this test → fovea → validation → the double → lavapipe, which
 //! runs the conversion's compute shader for real). The application uploads a known pattern with
 //! `vkCmdCopyBufferToImage`, binds its own compute pipeline, descriptor set and push constants,
 //! renders a pass with the map (render pass or dynamic rendering), and after the pass dispatches
@@ -22,10 +22,10 @@ use crate::support::vulkan::{
     allocate_info, attachments2, image_info, range, spv, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT,
     SIZE,
 };
-use crate::vk_layer::{assert_only_stage_false_positives, env, take_messages, Env, Vk, FDM};
+use crate::vk::layer::{assert_only_stage_false_positives, env, take_messages, Env, Vk, FDM};
 
 /// The application's compute shader: `value[index] = word` (push constants `{word, index}`).
-const STORE: &[u8] = include_bytes!("shaders/store.comp.spv");
+const STORE: &[u8] = include_bytes!("../shaders/store.comp.spv");
 /// The word the application pushes before the pass.
 const WORD: u32 = 0xC0FF_EE01;
 

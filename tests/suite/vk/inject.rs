@@ -54,7 +54,7 @@ use openxr_sys as xr;
 use serde_json::{json, Value};
 use xr::Handle as _;
 
-use crate::fdm_vulkan::{func, running_session, Frame};
+use crate::both::fdm_vulkan::{func, running_session, Frame};
 use crate::support::in_own_process;
 use crate::support::vulkan::{draw_fullscreen, range, spv, stages, Fixed, FRAGMENT, VERTEX};
 
@@ -487,9 +487,9 @@ fn run_with(
     dir: &std::path::Path,
     refresh: Option<Level>,
 ) -> Option<Outcome> {
-    let (_serial, env) = crate::vk_layer::env()?;
+    let (_serial, env) = crate::vk::layer::env()?;
     env.double.set_profile(Some(profile));
-    crate::vk_layer::assert_no_double_errors(env);
+    crate::vk::layer::assert_no_double_errors(env);
     env.double.clear();
     vulkan::take_messages();
     let app = App::new(Chain::fovea().unwrap(), &["XR_KHR_vulkan_enable2"], API_1_0).unwrap();

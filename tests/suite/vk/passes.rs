@@ -3,7 +3,7 @@
 //! framebuffer, dynamic rendering); the layer hands the driver shading-rate attachments that name
 //! its shadows instead.
 //!
-//! Stack as in [`crate::vk_layer`]: this test → fovea → VK_LAYER_KHRONOS_validation → the double
+//! Stack as in [`crate::vk::layer`]: this test → fovea → VK_LAYER_KHRONOS_validation → the double
 //! (`nvidia`: 16×16 texels, layered; `amd`: 8×8, one layer) → lavapipe. For each case and profile:
 //! validation says nothing and the double records no misuse; every pass (or rendering) reached the
 //! double with a shading-rate attachment of the device's texel that is a shadow (R8_UINT, 2 layers
@@ -25,7 +25,7 @@ use crate::support::vulkan::{
     allocate_info, attachments, attachments2, draw_fullscreen, image_info, range, spv, stages,
     Fixed, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
-use crate::vk_layer::{
+use crate::vk::layer::{
     assert_no_messages, assert_only_stage_false_positives, env, take_messages, Env, Vk, FDM,
 };
 

@@ -1,5 +1,5 @@
 //! fovea's Vulkan layer on pipelines, samplers, views, shaders and barriers: the same stack as
-//! [`crate::vk_layer`] (this test → fovea → validation → the shading-rate double → lavapipe), on
+//! [`crate::vk::layer`] (this test → fovea → validation → the shading-rate double → lavapipe), on
 //! both shading-rate profiles. Validation must stay silent; the double's records say what the
 //! driver was told.
 //!
@@ -13,7 +13,7 @@ use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
 use crate::support::vulkan::{range, spv, stages, Fixed, COLOR};
-use crate::vk_layer::{
+use crate::vk::layer::{
     assert_no_messages, assert_only_stage_false_positives, env, fdm_image_info, take_messages, Env,
     Vk, FDM,
 };
@@ -51,8 +51,8 @@ struct Objects {
 
 impl Objects {
     fn new(d: &ash::Device) -> Objects {
-        let vert = spv(include_bytes!("shaders/triangle.vert.spv"));
-        let frag = spv(include_bytes!("shaders/white.frag.spv"));
+        let vert = spv(include_bytes!("../shaders/triangle.vert.spv"));
+        let frag = spv(include_bytes!("../shaders/white.frag.spv"));
         // SAFETY: create infos live across the calls.
         unsafe {
             Objects {
@@ -329,7 +329,7 @@ fn subsampled_samplers_dynamic_views_and_frag_size_shaders() {
             assert_eq!(env.double.errors(), Vec::<String>::new());
             assert_no_messages();
 
-            let code = spv(include_bytes!("shaders/frag_size.frag.spv"));
+            let code = spv(include_bytes!("../shaders/frag_size.frag.spv"));
             let r =
                 d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None);
             // The driver below has no density maps, so validation may refuse the capability; what

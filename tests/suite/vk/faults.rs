@@ -1,6 +1,6 @@
 //! Fault injection through fovea's Vulkan layer: the layer below fails each call in turn.
 //!
-//! Stack as in `vk_layer`: this test → fovea → VK_LAYER_KHRONOS_validation → the double →
+//! Stack as in `vk::layer`: this test → fovea → VK_LAYER_KHRONOS_validation → the double →
 //! lavapipe. The double ([`fovea_vkdouble::Loaded::fail`]) makes one call return
 //! `VK_ERROR_OUT_OF_DEVICE_MEMORY` or `VK_ERROR_OUT_OF_HOST_MEMORY` without reaching lavapipe.
 //! Since it sits below validation, the calls fovea makes for itself (a density map's shadow: image,
@@ -18,7 +18,7 @@
 //!   fails with that result (its work would read shadows in an undefined layout otherwise).
 //!
 //! Either way validation stays silent (but for its 1.3.239 stage false positive, see
-//! `vk_layer::assert_only_stage_false_positives`), which includes its object tracker's reports of objects
+//! `vk::layer::assert_only_stage_false_positives`), which includes its object tracker's reports of objects
 //! left alive at `vkDestroyDevice` and `vkDestroyInstance`
 //! (<https://vulkan.lunarg.com/doc/sdk/latest/linux/khronos_validation_layer.html>): nothing
 //! fovea made leaks, nothing is destroyed twice.
@@ -32,7 +32,7 @@ use crate::support::vulkan::{
     allocate_info, attachments2, draw_fullscreen, image_info, range, spv, stages, Fixed, AREA,
     CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
-use crate::vk_layer::{assert_only_stage_false_positives, env, take_real_messages, Env, Vk, FDM};
+use crate::vk::layer::{assert_only_stage_false_positives, env, take_real_messages, Env, Vk, FDM};
 
 /// The calls fovea makes to clear new shadows ahead of the application's submit
 /// (`src/vk/submit.rs`); where one fails, that submit fails with its result.

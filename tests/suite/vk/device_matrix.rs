@@ -1,6 +1,6 @@
 //! Device creation through fovea's Vulkan layer, whatever the application's create info holds.
 //!
-//! Stack (as in `vk_layer`): this test → fovea's layer → VK_LAYER_KHRONOS_validation → the
+//! Stack (as in `vk::layer`): this test → fovea's layer → VK_LAYER_KHRONOS_validation → the
 //! shading-rate double (`nvidia`, `amd`) → lavapipe. Each case is one `vkCreateDevice` with a
 //! pNext chain and extension list of the kind real applications send: Godot's (both the
 //! density-map and the shading-rate extension enabled, shading-rate features used), shading rates
@@ -31,7 +31,7 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
-use crate::vk_layer::{env, take_messages, Vk, FDM};
+use crate::vk::layer::{env, take_messages, Vk, FDM};
 
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
 /// An sType no registry has.
@@ -280,7 +280,7 @@ fn density_map_structs() -> [i32; 4] {
 }
 
 /// Creates the case's device, checks it, destroys it; the problems found.
-fn run_case(env: &crate::vk_layer::Env, profile: Profile, case: &Case) -> Vec<String> {
+fn run_case(env: &crate::vk::layer::Env, profile: Profile, case: &Case) -> Vec<String> {
     let Some(vk) = Vk::new(env, profile, true) else {
         return vec!["no instance".into()];
     };

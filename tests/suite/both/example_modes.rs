@@ -567,7 +567,7 @@ fn run_on_the_double(label: &str, args: &[&str], inject: bool) -> Option<(Run, s
 fn on_a_desktop_gpu_eye_passes_shade_coarse_and_offscreen_passes_at_full_rate() {
     // Injected (the application without the FB API): the FB API's modes hand validation 1.3.239
     // barriers into the shading-rate stage, which it checks against `shadingRateImage` alone
-    // (`vk_layer::assert_only_stage_false_positives`), and the example fails on any message.
+    // (`vk::layer::assert_only_stage_false_positives`), and the example fails on any message.
     for (label, args, inject) in [
         ("double-inject", &["--no-fb", "--offscreen"][..], true),
         (

@@ -4,7 +4,7 @@
 //! frame's is written by a compute dispatch with `imageStore` and handed over with a barrier, and
 //! so on, the contents changing every frame. Each frame then renders a pass that reads the map.
 //!
-//! Stack as in [`crate::vk_layer`] (this test → fovea → validation → the double → lavapipe).
+//! Stack as in [`crate::vk::layer`] (this test → fovea → validation → the double → lavapipe).
 //! Checked per frame: what the GPU would shade with ([`rates_of`]) is the model's
 //! (`fovea_model::shading_rate`) for the bytes the application wrote; validation says nothing
 //! but its 1.3.239 stage false positives (so the driver got no density-map enum, and every layout
@@ -19,11 +19,11 @@ use fovea_vkdouble::Profile;
 use crate::support::vulkan::{
     attachments2, range, spv, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
 };
-use crate::vk_convert::{codes_of, model_codes, read_at_submit, Buffer, Dev};
-use crate::vk_layer::{assert_only_stage_false_positives, env, Env, Vk};
+use crate::vk::convert::{codes_of, model_codes, read_at_submit, Buffer, Dev};
+use crate::vk::layer::{assert_only_stage_false_positives, env, Env, Vk};
 
 /// `shaders/write_map.comp`: the application's compute path.
-const WRITE_MAP: &[u8] = include_bytes!("shaders/write_map.comp.spv");
+const WRITE_MAP: &[u8] = include_bytes!("../shaders/write_map.comp.spv");
 
 /// The density bytes both paths write: away from the mapping's boundaries (63/64, 127/128), so
 /// that a unorm rounding of one either way changes nothing.
@@ -67,7 +67,7 @@ fn pass_bytes(side: u32, frame: u32) -> Vec<u8> {
 
 /// What the GPU would shade the pass recorded in `cb` with, per map texel: for now the shading-rate
 /// codes the double reads back from the shading-rate attachment at the submit (every pipeline of a
-/// rewritten pass lets the attachment decide, `vk_pipelines`). Where the double reports effective
+/// rewritten pass lets the attachment decide, `vk::pipelines`). Where the double reports effective
 /// rates per draw, this is the one function to change.
 fn rates_of(env: &Env, cb: vk::CommandBuffer, what: &str) -> Vec<u8> {
     codes_of(&read_at_submit(env, cb), what)

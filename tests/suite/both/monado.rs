@@ -36,7 +36,7 @@ use fovea_model::maps::{fill_layers, Inputs};
 use fovea_model::projection::symmetric_fov;
 use fovea_model::Fov;
 
-use crate::hello_xr::{self, Run, SYNC_VALIDATION, VK_INSTANCE_LINE, VK_MANIFEST};
+use crate::both::hello_xr::{self, Run, SYNC_VALIDATION, VK_INSTANCE_LINE, VK_MANIFEST};
 use crate::support::{root, Manifests, CORE_VALIDATION_MANIFEST, DEBIAN_LAYERS};
 
 /// Monado's runtime manifest (libopenxr1-monado).
@@ -603,7 +603,7 @@ fn example_on_monado(
     env: &[(&str, &str)],
     allowed: &[&str],
 ) -> ExampleRun {
-    let example = crate::example_modes::example();
+    let example = crate::both::example_modes::example();
     let mut service = Service::start(m, &format!("example-{label}"));
     let manifests = Manifests::write(&format!("monado-example-{label}"));
     let frames = std::env::temp_dir().join(format!(

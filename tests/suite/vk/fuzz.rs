@@ -1,7 +1,7 @@
 //! Fuzzed calls through fovea's Vulkan layer: structs it does not know in every chain it edits,
 //! null handles where the specification allows them, and handles of a device it never saw.
 //!
-//! Stack as in `vk_layer`. Each case attaches a random chain of structs with sTypes no extension
+//! Stack as in `vk::layer`. Each case attaches a random chain of structs with sTypes no extension
 //! has yet (a valid `VkBaseInStructure` header and a zeroed body) to one struct fovea rewrites:
 //! device, image and image-view create infos, render pass v1 and v2 create infos, framebuffer
 //! create info, render-pass begin info, rendering info, pipeline create info, image barriers and
@@ -27,7 +27,7 @@ use crate::support::vulkan::{
     allocate_info, attachments, attachments2, image_info, range, spv, stages, Fixed, COLOR,
     DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
-use crate::vk_layer::{env, take_real_messages, Vk, FDM};
+use crate::vk::layer::{env, take_real_messages, Vk, FDM};
 
 /// What validation must say of a call with a bad handle.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

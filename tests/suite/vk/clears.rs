@@ -3,11 +3,11 @@
 //! open; the density-map stage bits of submits and event sets reach the driver as shading-rate
 //! ones.
 //!
-//! Stack as in [`crate::vk_layer`] (this test → fovea → validation → the double → lavapipe), on the
+//! Stack as in [`crate::vk::layer`] (this test → fovea → validation → the double → lavapipe), on the
 //! `nvidia` profile (16×16 texels). The double counts every `vkQueueSubmit` that reaches it, and at
 //! each one reads back the shading-rate images its command buffers use. Validation must report
 //! nothing but its 1.3.239 stage false positives
-//! ([`crate::vk_layer::assert_only_stage_false_positives`]), which includes objects left alive at
+//! ([`crate::vk::layer::assert_only_stage_false_positives`]), which includes objects left alive at
 //! `vkDestroyDevice` (a dropped clear's command buffer, a shadow that outlived its image) and
 //! objects destroyed while in use (a shadow destroyed while its clear runs).
 
@@ -18,7 +18,7 @@ use serde_json::{json, Value};
 use crate::support::vulkan::{
     allocate_info, attachments2, image_info, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
 };
-use crate::vk_layer::{assert_only_stage_false_positives, env, take_messages, Env, Vk, FDM};
+use crate::vk::layer::{assert_only_stage_false_positives, env, take_messages, Env, Vk, FDM};
 
 /// The density map's side in texels (the `nvidia` profile's 16×16 texel).
 const N: u32 = SIZE / 16;
@@ -408,7 +408,7 @@ fn a_shadow_that_cannot_be_made_leaves_the_image_at_full_rate() {
             dev.d.destroy_render_pass(pass, None);
         }
         density.destroy(&dev.d);
-        crate::vk_layer::assert_no_double_errors(env);
+        crate::vk::layer::assert_no_double_errors(env);
         env.double.clear();
     }
     color.destroy(&dev.d);

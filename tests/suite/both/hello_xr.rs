@@ -443,10 +443,10 @@ fn headset_views() -> ([u32; 2], [fovea_model::Fov; 2]) {
     use fovea_harness::{app::API_1_0, App, Chain};
     fovea_harness::sim::control::set_thread_config(None);
     let app = App::new(Chain::fovea().unwrap(), &["XR_MND_headless"], API_1_0).unwrap();
-    let sizes = crate::symmetric_fov::views(&app);
+    let sizes = crate::xr::symmetric_fov::views(&app);
     let session = app.headless_session().unwrap();
-    crate::symmetric_fov::begin(&app, session);
-    let fovs = crate::symmetric_fov::locate(&app, session);
+    crate::xr::symmetric_fov::begin(&app, session);
+    let fovs = crate::xr::symmetric_fov::locate(&app, session);
     assert_eq!(app.destroy(), openxr_sys::Result::SUCCESS);
     ([sizes[0][0], sizes[0][1]], fovs)
 }

@@ -1,11 +1,11 @@
 //! Recording through fovea's Vulkan layer for a long time, and the commands whose density-map bits
-//! the layer translates besides barriers: the same stack as [`crate::vk_layer`] (this test →
+//! the layer translates besides barriers: the same stack as [`crate::vk::layer`] (this test →
 //! fovea → validation → the shading-rate double → lavapipe), on the `nvidia` profile.
 
 use ash::vk;
 use fovea_vkdouble::Profile;
 
-use crate::vk_layer::{assert_only_stage_false_positives, env, take_messages, Vk, FDM};
+use crate::vk::layer::{assert_only_stage_false_positives, env, take_messages, Vk, FDM};
 
 const FDM_STAGE: vk::PipelineStageFlags = vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT;
 const FSR_STAGE: vk::PipelineStageFlags =
@@ -175,7 +175,7 @@ fn event_and_timestamp_stages_are_translated() {
         d.cmd_write_timestamp(cb, FDM_STAGE, queries, 0);
         d.cmd_write_timestamp2(cb, stage2, queries, 1);
         d.end_command_buffer(cb).expect("vkEndCommandBuffer");
-        let messages = crate::vk_layer::take_real_messages();
+        let messages = crate::vk::layer::take_real_messages();
         assert!(
             messages.is_empty(),
             "the density-map stage reached the driver: {messages:#?}"
@@ -202,8 +202,8 @@ fn an_uncopyable_chain_falls_back_for_its_pipeline_only() {
         return;
     };
     let d = fdm_device(&vk);
-    let vert = spv(include_bytes!("shaders/triangle.vert.spv"));
-    let frag = spv(include_bytes!("shaders/white.frag.spv"));
+    let vert = spv(include_bytes!("../shaders/triangle.vert.spv"));
+    let frag = spv(include_bytes!("../shaders/white.frag.spv"));
     // SAFETY: create infos live across the calls; the objects are destroyed at the end.
     unsafe {
         let modules = [
@@ -240,7 +240,7 @@ fn an_uncopyable_chain_falls_back_for_its_pipeline_only() {
             .create_graphics_pipelines(vk::PipelineCache::null(), &[uncopyable, plain], None)
             .unwrap_or_else(|(_, e)| panic!("vkCreateGraphicsPipelines: {e}"));
         // Validation reports the deliberately odd chain of the first create info; nothing else.
-        let others: Vec<String> = crate::vk_layer::take_real_messages()
+        let others: Vec<String> = crate::vk::layer::take_real_messages()
             .into_iter()
             .filter(|m| !m.contains("pCreateInfos[0]"))
             .collect();
@@ -318,7 +318,7 @@ fn a_dependencys_chained_memory_barrier_is_translated() {
     // SAFETY: the create info lives across the call.
     let pass = unsafe { d.create_render_pass2(&info, None) }
         .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()));
-    let messages = crate::vk_layer::take_real_messages();
+    let messages = crate::vk::layer::take_real_messages();
     assert!(
         messages.is_empty(),
         "the density-map stage or access reached the driver: {messages:#?}"
@@ -355,7 +355,7 @@ fn queue_family_release_halves_are_left_alone() {
     // SAFETY: the test's own objects; structs live across the calls.
     unsafe {
         let image = d
-            .create_image(&crate::vk_layer::fdm_image_info(), None)
+            .create_image(&crate::vk::layer::fdm_image_info(), None)
             .expect("vkCreateImage");
         let req = d.get_image_memory_requirements(image);
         let memory = d

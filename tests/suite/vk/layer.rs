@@ -660,7 +660,7 @@ fn unintercepted_commands_go_straight_to_the_next_layer() {
 /// writes) name Vulkan 1.4.359, the registry the layer's device-creation struct table is laid
 /// out from (src/vk/structs.rs): a loader leaves out (before 1.3.227) or warns about (since) an
 /// implicit layer older than the application's `apiVersion`, and Vulkan 1.4 applications exist
-/// (`vk_api14` shows one getting the layer).
+/// (`vk::api14` shows one getting the layer).
 #[test]
 fn checked_in_manifest() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
