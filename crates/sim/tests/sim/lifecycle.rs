@@ -1,11 +1,9 @@
 //! The simulated runtime driven directly through its xrGetInstanceProcAddr (no layer, no loader).
 
-mod common;
-
 use std::ffi::{c_char, CStr, CString};
 use std::ptr::{null, null_mut};
 
-use common::*;
+use crate::common::*;
 use fovea_sim::control::{self, Fault, Load};
 use openxr_sys as xr;
 use openxr_sys::Handle;

@@ -8,11 +8,9 @@
 //! #xrWaitFrame, #xrBeginFrame, #xrEndFrame, #xrAcquireSwapchainImage, #xrWaitSwapchainImage,
 //! #xrReleaseSwapchainImage, #xrBeginSession, #xrEndSession).
 
-mod common;
-
 use std::ptr::{null, null_mut};
 
-use common::*;
+use crate::common::*;
 use fovea_sim::control::{self, Fault};
 use openxr_sys as xr;
 

@@ -4,12 +4,10 @@
 //! time; nothing during a blink; Monado's "listed, not supported"; optionally no gaze space before
 //! attach (<https://registry.khronos.org/OpenXR/specs/1.1/html/xrspec.html#XR_EXT_eye_gaze_interaction>).
 
-mod common;
-
 use std::ffi::CString;
 use std::ptr::{null, null_mut};
 
-use common::*;
+use crate::common::*;
 use fovea_sim::control::{EyeGaze, SimConfig};
 use fovea_sim::gaze_script::GazeScript;
 use openxr_sys as xr;

@@ -2,25 +2,34 @@
 //! Khronos validation layer. Skips (with a reason) when lavapipe or the validation layer is missing,
 //! unless FOVEA_REQUIRE_SYSTEM=1.
 
-mod common;
-
 use std::ffi::c_void;
 use std::ptr::{null, null_mut};
 
+use crate::common::*;
 use ash::vk;
 use ash::vk::Handle as _;
-use common::*;
 use fovea_harness::skip;
 use fovea_harness::vulkan::{assert_no_messages, pick_lavapipe, validated_entry, Vulkan};
 use fovea_sim::control;
 use openxr_sys as xr;
 
+use crate::process::in_own_process;
+
+/// In a process of its own ([`crate::process::in_own_process`]): it sets process-wide environment variables.
 #[test]
 fn vulkan_session_on_lavapipe_is_validation_clean() {
+    in_own_process(
+        module_path!(),
+        "vulkan_session_on_lavapipe_is_validation_clean",
+        vulkan_session_on_lavapipe_is_validation_clean_here,
+    );
+}
+
+fn vulkan_session_on_lavapipe_is_validation_clean_here() {
     let Ok(entry) = validated_entry().map_err(|why| skip(&why)) else {
         return;
     };
-    // The only test in this binary, so setting the process environment is race-free.
+    // In a process of its own, so setting the process environment is race-free.
     pick_lavapipe();
 
     let instance = create_instance(config("quest3"), &["XR_KHR_vulkan_enable2"]);

@@ -4,11 +4,9 @@
 //! an `XrViewConfigurationViewFovEPIC` chained to each view with the headset's per-eye FOVs, without
 //! a session; without it enabled, the struct is ignored and enabling it is refused.
 
-mod common;
-
 use std::ptr::null_mut;
 
-use common::*;
+use crate::common::*;
 use fovea_sim::control::{self, SimConfig};
 use openxr_sys as xr;
 use openxr_sys::Handle;

@@ -2,11 +2,9 @@
 //! `FOVEA_SIM_NATIVE_FOVEATION=1`): what a layer above must pass through
 //! (https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#XR_FB_foveation).
 
-mod common;
-
 use std::ptr::null;
 
-use common::*;
+use crate::common::*;
 use fovea_sim::control::{self, FoveationParams};
 use openxr_sys as xr;
 use openxr_sys::Handle;

@@ -1,5 +1,4 @@
 //! Calls into the simulated runtime the way a loader would: through its xrGetInstanceProcAddr.
-#![allow(dead_code)]
 
 use std::ffi::CString;
 

@@ -1,16 +1,25 @@
-//! Nothing outlives its parent: the only test in this binary, so the global object count is not
-//! disturbed by other tests.
-
-mod common;
+//! Nothing outlives its parent: the one test runs in a process of its own, so the global object
+//! count is not disturbed by other tests.
 
 use std::ptr::null;
 
-use common::*;
+use crate::common::*;
 use fovea_sim::control;
 use openxr_sys as xr;
 
+use crate::process::in_own_process;
+
+/// In a process of its own ([`crate::process::in_own_process`]): it asserts on the process-wide object count.
 #[test]
 fn destroying_the_instance_destroys_everything() {
+    in_own_process(
+        module_path!(),
+        "destroying_the_instance_destroys_everything",
+        destroying_the_instance_destroys_everything_here,
+    );
+}
+
+fn destroying_the_instance_destroys_everything_here() {
     assert_eq!(control::live_objects(), 0);
     let (instance, session) = headless(config("quest3"));
     reference_space(instance, session, xr::ReferenceSpaceType::VIEW);

@@ -1,6 +1,6 @@
 //! The real Khronos loader (libopenxr_loader.so.1, Debian 1.0.20) loading target/debug/libfovea_sim.so
-//! through a runtime manifest named by XR_RUNTIME_JSON. The only test in this binary, because it sets
-//! process-wide environment variables.
+//! through a runtime manifest named by XR_RUNTIME_JSON. One test, in a process of its own, because it
+//! sets process-wide environment variables.
 
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::path::PathBuf;
@@ -8,6 +8,8 @@ use std::ptr::{null, null_mut};
 
 use openxr_sys as xr;
 use openxr_sys::Handle;
+
+use crate::process::in_own_process;
 
 fn skip(reason: &str) {
     if std::env::var("FOVEA_REQUIRE_SYSTEM").as_deref() == Ok("1") {
@@ -26,8 +28,17 @@ fn runtime_library() -> PathBuf {
         .join("libfovea_sim.so")
 }
 
+/// In a process of its own ([`crate::process::in_own_process`]): it sets process-wide environment variables.
 #[test]
 fn khronos_loader_creates_an_instance_and_a_headless_session() {
+    in_own_process(
+        module_path!(),
+        "khronos_loader_creates_an_instance_and_a_headless_session",
+        khronos_loader_creates_an_instance_and_a_headless_session_here,
+    );
+}
+
+fn khronos_loader_creates_an_instance_and_a_headless_session_here() {
     let library = runtime_library();
     if !library.exists() {
         return skip(&format!("{} was not built", library.display()));

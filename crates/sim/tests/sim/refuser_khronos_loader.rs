@@ -1,7 +1,7 @@
 //! crates/refuser's layer through the real Khronos loader (libopenxr_loader.so.1), found through a
 //! manifest this test writes (`XR_API_LAYER_PATH`) and enabled by name, over libfovea_sim.so
-//! (`XR_RUNTIME_JSON`) offering XR_FB_swapchain_update_state natively. The only test in this
-//! binary, because it sets process-wide environment variables and the loader allows one instance.
+//! (`XR_RUNTIME_JSON`) offering XR_FB_swapchain_update_state natively. One test, in a process
+//! of its own, because it sets process-wide environment variables and the loader allows one instance.
 //!
 //! 1. The refusing layer alone: an instance, a headless session that begins, and located views pass
 //!    through it to the runtime, and the loader never asks it a NULL-instance lookup (the loader
@@ -20,6 +20,8 @@ fovea_harness::private_home!();
 use fovea_harness::{artifact, open_library, refuser_stats, skip, LayerSpec};
 use openxr_sys as xr;
 use openxr_sys::Handle;
+
+use crate::process::in_own_process;
 
 struct Loader {
     gipa: xr::pfn::GetInstanceProcAddr,
@@ -167,8 +169,17 @@ impl Loader {
     }
 }
 
+/// In a process of its own ([`crate::process::in_own_process`]): it sets process-wide environment variables and the loader allows one instance.
 #[test]
 fn the_refusing_layer_through_the_khronos_loader() {
+    in_own_process(
+        module_path!(),
+        "the_refusing_layer_through_the_khronos_loader",
+        the_refusing_layer_through_the_khronos_loader_here,
+    );
+}
+
+fn the_refusing_layer_through_the_khronos_loader_here() {
     let (Ok(runtime), Ok(refuser), Ok(fovea)) = (
         artifact("libfovea_sim.so"),
         LayerSpec::refuse_null_lookups(),
