@@ -6,7 +6,11 @@
 //! - no `static mut` in any of the workspace's Rust sources;
 //! - no import cycle between the layer crate's top-level modules;
 //! - every `unsafe` block in the layer has a `SAFETY:` comment on the lines just above it;
-//! - no comment cites a file a clone of the repository does not have, or an issue number.
+//! - no comment cites a file a clone of the repository does not have, or an issue number;
+//! - inside `src/vk` and `src/xr`, files stand on floors (a table per tree, [`VK_FLOORS`] and
+//!   [`XR_FLOORS`], as docs/ARCHITECTURE.md draws them) and import only from lower floors: never
+//!   up, never sideways between rows of one floor, never between the files of a folder whose
+//!   files are kept apart.
 //!
 //! Each rule is a checker function over a file's path and text, tested below on small strings so
 //! that each is seen to fail, then run over the tree. Comments and string literals are blanked out
@@ -375,6 +379,347 @@ fn outside_citations(path: &str, text: &str) -> Vec<String> {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Floors: the files of `src/vk` and `src/xr` in layers, each importing only those below it.
+
+/// One row of a floors table: a file (`loader.rs`) or a folder (`hooks`) of a tree, relative to
+/// the tree's root, and its floor. Whether the files of a folder may import each other is said
+/// by [`at`] (they may) or [`apart`] (they may not: "a hook never imports another hook").
+#[derive(Clone, Copy, Debug)]
+struct Place {
+    floor: u32,
+    path: &'static str,
+    sideways: bool,
+}
+
+/// A file, or a folder whose files may import each other, on `floor`.
+const fn at(floor: u32, path: &'static str) -> Place {
+    Place {
+        floor,
+        path,
+        sideways: true,
+    }
+}
+
+/// A folder on `floor` whose files never import each other.
+const fn apart(floor: u32, path: &'static str) -> Place {
+    Place {
+        floor,
+        path,
+        sideways: false,
+    }
+}
+
+// =============================================================================================
+// THE FLOORS TABLES: the one place to fill in once `src/vk` and `src/xr` are built in floors
+// (the same tables as in docs/ARCHITECTURE.md). Each row: `at(floor, "file.rs")`,
+// `at(floor, "folder")` or `apart(floor, "folder")`, paths relative to `src/vk` or `src/xr`; the
+// tree's own `mod.rs` is its door and is on no floor. `None` leaves a tree unchecked: today's
+// trees are circles, and no table of them would pass.
+// =============================================================================================
+const VK_FLOORS: Option<&[Place]> = None;
+const XR_FLOORS: Option<&[Place]> = None;
+
+/// Every path a text names from a root keyword (`crate`, `$crate`, `super`, `self`), in `use`
+/// declarations and inline in code, with `{a, b::c}` groups expanded, each with the byte offset
+/// where it starts. A path is its segments up to the first that is not followed by `::`
+/// (`crate::vk::registry::get(..)` is `[crate, vk, registry, get]`); a trailing `self` of a
+/// group is left out, and a glob ends at its module. `code` has comments and literals blanked.
+fn rooted_paths(code: &str) -> Vec<(Vec<String>, usize)> {
+    fn skip_ws(s: &[char], i: &mut usize) {
+        while *i < s.len() && s[*i].is_whitespace() {
+            *i += 1;
+        }
+    }
+    fn ident(s: &[char], i: &mut usize) -> Option<String> {
+        let start = *i;
+        while *i < s.len() && is_ident(s[*i]) {
+            *i += 1;
+        }
+        (*i > start).then(|| s[start..*i].iter().collect())
+    }
+    fn double_colon(s: &[char], i: &mut usize) -> bool {
+        let mut j = *i;
+        skip_ws(s, &mut j);
+        if s.get(j) == Some(&':') && s.get(j + 1) == Some(&':') {
+            *i = j + 2;
+            skip_ws(s, i);
+            true
+        } else {
+            false
+        }
+    }
+    /// The rest of a path after `prefix::`: one segment, a group or a glob.
+    fn tree(s: &[char], i: &mut usize, mut prefix: Vec<String>, out: &mut Vec<Vec<String>>) {
+        loop {
+            skip_ws(s, i);
+            match s.get(*i) {
+                Some('{') => {
+                    *i += 1;
+                    loop {
+                        skip_ws(s, i);
+                        match s.get(*i) {
+                            None => return,
+                            Some('}') => {
+                                *i += 1;
+                                return;
+                            }
+                            Some(',') => *i += 1,
+                            Some(_) => {
+                                let before = *i;
+                                tree(s, i, prefix.clone(), out);
+                                // Past what the group item left (`as x`, stray tokens).
+                                while *i < s.len() && !matches!(s[*i], ',' | '}' | '{') {
+                                    *i += 1;
+                                }
+                                if *i == before {
+                                    *i += 1;
+                                }
+                            }
+                        }
+                    }
+                }
+                Some('*') => {
+                    *i += 1;
+                    out.push(prefix);
+                    return;
+                }
+                Some(&c) if is_ident(c) => {
+                    let name = ident(s, i).unwrap();
+                    if name != "self" {
+                        prefix.push(name);
+                    }
+                    if !double_colon(s, i) {
+                        out.push(prefix);
+                        return;
+                    }
+                }
+                _ => {
+                    out.push(prefix);
+                    return;
+                }
+            }
+        }
+    }
+
+    let s: Vec<char> = code.chars().collect();
+    // Byte offsets of the chars, for line numbers.
+    let offsets: Vec<usize> = code.char_indices().map(|(at, _)| at).collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < s.len() {
+        if !is_ident(s[i]) {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        let name = ident(&s, &mut i).unwrap();
+        let before = start.checked_sub(1).map(|b| s[b]);
+        let follows_path = start >= 2 && s[start - 1] == ':' && s[start - 2] == ':';
+        if !matches!(name.as_str(), "crate" | "super" | "self") || follows_path {
+            continue;
+        }
+        let name = if before == Some('$') {
+            format!("${name}")
+        } else {
+            name
+        };
+        let mut j = i;
+        if !double_colon(&s, &mut j) {
+            continue;
+        }
+        let mut paths = Vec::new();
+        // `super::super::x`: the leading keywords are segments like any other.
+        tree(&s, &mut j, vec![name], &mut paths);
+        for p in paths {
+            out.push((p, offsets[start]));
+        }
+        i = j.max(i);
+    }
+    out
+}
+
+/// The inline modules (`mod tests { .. }`) around byte offset `at` of `code`, outermost first.
+fn inline_modules_at(code: &str, at: usize) -> Vec<String> {
+    let w = words(code);
+    let mut out = Vec::new();
+    for pair in w.windows(2) {
+        let (start, kw) = pair[0];
+        let (name_at, name) = pair[1];
+        if kw != "mod" || start > at {
+            continue;
+        }
+        let after = &code[name_at + name.len()..];
+        let Some(rest) = after.trim_start().strip_prefix('{') else {
+            continue;
+        };
+        let open = code.len() - rest.len() - 1;
+        // Where its block ends.
+        let mut depth = 0usize;
+        let mut end = code.len();
+        for (off, c) in code[open..].char_indices() {
+            match c {
+                '{' => depth += 1,
+                '}' => {
+                    depth -= 1;
+                    if depth == 0 {
+                        end = open + off;
+                        break;
+                    }
+                }
+                _ => {}
+            }
+        }
+        if open < at && at < end {
+            out.push(name.to_owned());
+        }
+    }
+    out
+}
+
+/// A file's module path inside its tree: `a/b.rs` is `[a, b]`, `a/mod.rs` is `[a]`, `mod.rs` `[]`.
+fn module_of(rel: &str) -> Vec<String> {
+    let mut parts: Vec<String> = rel.split('/').map(str::to_owned).collect();
+    let last = parts.pop().unwrap_or_default();
+    if last != "mod.rs" {
+        parts.push(last.trim_end_matches(".rs").to_owned());
+    }
+    parts
+}
+
+/// The row of `table` a file (path relative to the tree) is on: an error unless exactly one.
+fn place_of<'t>(rel: &str, table: &'t [Place]) -> Result<&'t Place, String> {
+    let rows: Vec<&Place> = table
+        .iter()
+        .filter(|p| rel == p.path || rel.starts_with(&format!("{}/", p.path)))
+        .collect();
+    match rows[..] {
+        [one] => Ok(one),
+        [] => Err("is on no floor of the table".to_owned()),
+        _ => Err(format!(
+            "is on {} rows of the table ({})",
+            rows.len(),
+            rows.iter().map(|p| p.path).collect::<Vec<_>>().join(", ")
+        )),
+    }
+}
+
+/// The floors rule over one tree: `tree` is its folder for messages (`src/vk`), `module` its
+/// path from the crate root (`["vk"]`), `files` its Rust files (path relative to the tree, text).
+///
+/// Every file but the tree's `mod.rs` is on exactly one row of `table`, and every row holds a
+/// file. Every module of the tree a file names (through `crate::vk::..`, `super::..`,
+/// `self::..`) is its own or one of its own submodules, or on a strictly lower floor, or in the
+/// same folder row as the file where that row allows sideways imports. The tree's `mod.rs` is on
+/// no floor: naming it from inside the tree is going up.
+fn floor_violations(
+    tree: &str,
+    module: &[&str],
+    files: &[(String, String)],
+    table: &[Place],
+) -> Vec<String> {
+    let mut out = Vec::new();
+    let modules: BTreeMap<Vec<String>, &str> = files
+        .iter()
+        .map(|(rel, _)| (module_of(rel), rel.as_str()))
+        .collect();
+    for row in table {
+        let holds = files.iter().any(|(rel, _)| {
+            rel != "mod.rs" && (rel == row.path || rel.starts_with(&format!("{}/", row.path)))
+        });
+        if !holds {
+            out.push(format!(
+                "{tree}/{}: a row of the floors table (floor {}) that holds no file",
+                row.path, row.floor
+            ));
+        }
+    }
+    for (rel, text) in files {
+        if rel == "mod.rs" {
+            continue;
+        }
+        let from = match place_of(rel, table) {
+            Ok(p) => p,
+            Err(e) => {
+                out.push(format!("{tree}/{rel}: {e}"));
+                continue;
+            }
+        };
+        let own = module_of(rel);
+        let code = split(text).code;
+        let mut seen = BTreeSet::new();
+        for (path, at) in rooted_paths(&code) {
+            let mut current = own.clone();
+            current.extend(inline_modules_at(&code, at));
+            // The path as segments from the tree's root; `None` outside the tree.
+            let inside: Option<Vec<String>> = match path[0].as_str() {
+                "crate" | "$crate" => {
+                    let rest = &path[1..];
+                    (rest.len() >= module.len() && rest.iter().zip(module).all(|(a, b)| a == b))
+                        .then(|| rest[module.len()..].to_vec())
+                }
+                "self" => Some(current.iter().chain(&path[1..]).cloned().collect()),
+                _ => {
+                    let supers = path.iter().take_while(|s| *s == "super").count();
+                    (supers <= current.len()).then(|| {
+                        let mut p = current[..current.len() - supers].to_vec();
+                        p.extend(path[supers..].iter().cloned());
+                        p
+                    })
+                }
+            };
+            let Some(inside) = inside else { continue };
+            // The module it names: the longest prefix that is a file of the tree.
+            let target = (0..=inside.len())
+                .rev()
+                .map(|n| inside[..n].to_vec())
+                .find(|m| modules.contains_key(m))
+                .unwrap_or_default();
+            if target.starts_with(&own) {
+                continue;
+            }
+            let line = line_of(&code, at);
+            let named = if target.is_empty() {
+                "mod.rs".to_owned()
+            } else {
+                target.join("::")
+            };
+            if !seen.insert(named.clone()) {
+                continue;
+            }
+            if target.is_empty() {
+                out.push(format!(
+                    "{tree}/{rel}:{line}: names the tree's root ({tree}/mod.rs), which is above \
+                     every floor: name the module instead"
+                ));
+                continue;
+            }
+            let to_rel = modules[&target];
+            let to = match place_of(to_rel, table) {
+                Ok(p) => p,
+                // Reported for that file itself.
+                Err(_) => continue,
+            };
+            if std::ptr::eq(from, to) {
+                if !from.sideways {
+                    out.push(format!(
+                        "{tree}/{rel}:{line}: imports `{named}` beside it in `{}` (floor {}), \
+                         whose files never import each other",
+                        from.path, from.floor
+                    ));
+                }
+            } else if to.floor >= from.floor {
+                out.push(format!(
+                    "{tree}/{rel}:{line}: imports `{named}` on floor {} from floor {}: imports \
+                     run only to lower floors",
+                    to.floor, from.floor
+                ));
+            }
+        }
+    }
+    out
+}
+
+// ---------------------------------------------------------------------------------------------
 // The tree.
 
 /// `path` relative to the repository's root, for messages.
@@ -520,6 +865,37 @@ fn no_comment_cites_outside_files_or_issue_numbers() {
     check(&files, outside_citations);
 }
 
+/// The Rust files of `src/<name>`, each as its path relative to that folder and its text.
+fn tree_files(name: &str) -> Vec<(String, String)> {
+    let dir = root().join("src").join(name);
+    rust_files(&dir)
+        .into_iter()
+        .map(|f| {
+            let rel = f.strip_prefix(&dir).unwrap().to_string_lossy().into_owned();
+            (rel, read(&f))
+        })
+        .collect()
+}
+
+#[test]
+fn the_vulkan_and_openxr_sides_are_built_in_floors() {
+    for (name, table) in [("vk", VK_FLOORS), ("xr", XR_FLOORS)] {
+        let Some(table) = table else {
+            println!("src/{name}: no floors table yet (VK_FLOORS, XR_FLOORS in tests/suite/meta/tidy.rs: {}_FLOORS)", name.to_uppercase());
+            continue;
+        };
+        let files = tree_files(name);
+        assert!(!files.is_empty(), "src/{name} has no Rust files");
+        let found = floor_violations(&format!("src/{name}"), &[name], &files, table);
+        assert!(
+            found.is_empty(),
+            "{} floor violation(s):\n{}",
+            found.len(),
+            found.join("\n")
+        );
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Each checker, seen to fail and to pass.
 
@@ -650,5 +1026,186 @@ fn citations_of_outside_files_and_issues_are_found() {
             "a.rs:2: a comment cites an issue number; say what it means instead",
             "a.rs:3: a comment cites `shared/docs`, which a clone does not have",
         ]
+    );
+}
+
+#[test]
+fn rooted_paths_expand_groups_and_skip_comments_and_literals() {
+    let text = "use crate::vk::{registry::{self, Records}, base::ffi::guard as g};\n\
+                let x = super::own::Map::new(); // crate::vk::hooks\n\
+                let s = \"self::x\"; pub(crate) fn f(&self) { self.g(); }\n\
+                use super::super::base::*; $crate::vk::loader::go!(); a::crate::b;\n";
+    let code = split(text).code;
+    let paths: Vec<(String, usize)> = rooted_paths(&code)
+        .into_iter()
+        .map(|(p, at)| (p.join("::"), line_of(&code, at)))
+        .collect();
+    let expected = [
+        ("crate::vk::registry", 1),
+        ("crate::vk::registry::Records", 1),
+        ("crate::vk::base::ffi::guard", 1),
+        ("super::own::Map::new", 2),
+        ("super::super::base", 4),
+        ("$crate::vk::loader::go", 4),
+    ];
+    let expected: Vec<(String, usize)> =
+        expected.iter().map(|(p, l)| (p.to_string(), *l)).collect();
+    assert_eq!(paths, expected);
+    assert_eq!(
+        inline_modules_at(&code, code.len() - 1),
+        Vec::<String>::new()
+    );
+    let nested = "fn a() {}\nmod tests {\n    mod deep { use super::x; }\n    fn b() {}\n}\n";
+    let at = nested.find("super").unwrap();
+    assert_eq!(inline_modules_at(nested, at), ["tests", "deep"]);
+    assert_eq!(
+        inline_modules_at(nested, nested.find("fn b").unwrap()),
+        ["tests"]
+    );
+}
+
+/// A small tree in floors, as [`floor_violations`] reads one: (path, text).
+fn floored_tree(extra: &[(&str, &str)]) -> Vec<(String, String)> {
+    let mut files: BTreeMap<&str, &str> = [
+        ("mod.rs", "mod base;\nmod registry;\nmod hooks;\nmod loader;\nuse self::hooks::pass;\n"),
+        ("base/mod.rs", "pub mod ffi;\npub use self::ffi::guard;\n"),
+        ("base/ffi.rs", "pub fn guard() {}\nuse super::helper; // a sibling in a sideways folder\n"),
+        ("registry.rs", "use crate::vk::base::ffi;\nuse crate::common::lock;\n#[cfg(test)]\nmod tests {\n    use super::*;\n}\n"),
+        ("hooks/mod.rs", "pub mod image;\npub mod pass;\npub use pass::begin;\n"),
+        ("hooks/image.rs", "use crate::vk::{base::ffi::guard, registry::Records};\n"),
+        ("hooks/pass.rs", "use super::super::registry;\nfn f() { crate::vk::base::guard(); }\n"),
+        ("loader.rs", "use crate::vk::hooks::{image, pass};\nuse crate::xr::Thing;\n"),
+    ]
+    .into_iter()
+    .collect();
+    files.extend(extra.iter().copied());
+    files
+        .into_iter()
+        .map(|(p, t)| (p.to_owned(), t.to_owned()))
+        .collect()
+}
+
+const FLOORED: [Place; 4] = [
+    at(1, "base"),
+    at(2, "registry.rs"),
+    apart(3, "hooks"),
+    at(4, "loader.rs"),
+];
+
+#[test]
+fn floors_hold_in_a_tree_built_in_floors() {
+    assert_eq!(
+        floor_violations("src/vk", &["vk"], &floored_tree(&[]), &FLOORED),
+        Vec::<String>::new()
+    );
+}
+
+#[test]
+fn floors_catch_imports_going_up_or_sideways() {
+    let violations = |extra: &[(&str, &str)], table: &[Place]| {
+        floor_violations("src/vk", &["vk"], &floored_tree(extra), table)
+    };
+    // Up, in a group, inline in code, and through `$crate` in a macro.
+    assert_eq!(
+        violations(
+            &[(
+                "registry.rs",
+                "use crate::vk::{base::ffi, hooks::{image}};\nfn f() { super::loader::go(); }\n\
+                 // crate::vk::loader, in a comment\nlet s = \"crate::vk::loader\";\n"
+            )],
+            &FLOORED
+        ),
+        [
+            "src/vk/registry.rs:1: imports `hooks::image` on floor 3 from floor 2: imports run \
+             only to lower floors",
+            "src/vk/registry.rs:2: imports `loader` on floor 4 from floor 2: imports run only \
+             to lower floors",
+        ]
+    );
+    assert_eq!(
+        violations(
+            &[(
+                "base/ffi.rs",
+                "macro_rules! m { () => { $crate::vk::registry::get() } }\n"
+            )],
+            &FLOORED
+        ),
+        [
+            "src/vk/base/ffi.rs:1: imports `registry` on floor 2 from floor 1: imports run only \
+          to lower floors"
+        ]
+    );
+    // Sideways inside a folder whose files never import each other, the folder's mod.rs too.
+    assert_eq!(
+        violations(
+            &[("hooks/pass.rs", "use super::image::x;\nuse super::begin;\n")],
+            &FLOORED
+        ),
+        [
+            "src/vk/hooks/pass.rs:1: imports `hooks::image` beside it in `hooks` (floor 3), \
+             whose files never import each other",
+            "src/vk/hooks/pass.rs:2: imports `hooks` beside it in `hooks` (floor 3), whose \
+             files never import each other",
+        ]
+    );
+    // Two rows on one floor do not import each other.
+    let same_floor = [
+        at(1, "base"),
+        at(2, "registry.rs"),
+        apart(3, "hooks"),
+        at(3, "loader.rs"),
+    ];
+    assert_eq!(
+        violations(&[], &same_floor),
+        [
+            "src/vk/loader.rs:1: imports `hooks::image` on floor 3 from floor 3: imports run \
+             only to lower floors",
+            "src/vk/loader.rs:1: imports `hooks::pass` on floor 3 from floor 3: imports run \
+             only to lower floors",
+        ]
+    );
+    // The tree's root is above every floor.
+    assert_eq!(
+        violations(
+            &[("registry.rs", "fn f() {}\nuse super::Shared;\n")],
+            &FLOORED
+        ),
+        [
+            "src/vk/registry.rs:2: names the tree's root (src/vk/mod.rs), which is above every \
+          floor: name the module instead"
+        ]
+    );
+}
+
+#[test]
+fn floors_tables_hold_every_file_once() {
+    let violations = |extra: &[(&str, &str)], table: &[Place]| {
+        floor_violations("src/vk", &["vk"], &floored_tree(extra), table)
+    };
+    assert_eq!(
+        violations(&[("extra.rs", "")], &FLOORED),
+        ["src/vk/extra.rs: is on no floor of the table"]
+    );
+    let twice = [
+        at(1, "base"),
+        at(1, "base/ffi.rs"),
+        at(2, "registry.rs"),
+        apart(3, "hooks"),
+        at(4, "loader.rs"),
+    ];
+    assert_eq!(
+        violations(&[], &twice),
+        ["src/vk/base/ffi.rs: is on 2 rows of the table (base, base/ffi.rs)"]
+    );
+    let stale = [
+        at(1, "base"),
+        at(2, "registry.rs"),
+        apart(3, "hooks"),
+        at(4, "loader.rs"),
+        at(5, "gone.rs"),
+    ];
+    assert_eq!(
+        violations(&[], &stale),
+        ["src/vk/gone.rs: a row of the floors table (floor 5) that holds no file"]
     );
 }
