@@ -9,7 +9,6 @@ pub mod device_matrix;
 pub mod faults;
 pub mod fuzz;
 pub mod inject;
-pub mod inject_devices;
 pub mod layer;
 pub mod passes;
 pub mod pipelines;
