@@ -23,7 +23,7 @@
 //! Only here do fovea's own density images, their uploads into the shadows (`bridge::shadow_of`)
 //! and the rewritten render pass meet.
 //!
-//! Shares [`crate::vk::layer::env`] (manifests, `VK_ADD_LAYER_PATH`, the double's records) and
+//! Shares [`crate::support::device::env`] (manifests, `VK_ADD_LAYER_PATH`, the double's records) and
 //! [`crate::both::fdm_vulkan`]'s frame helpers and its lock on the harness's validation messages. Skips
 //! with a reason when a system piece is missing; fails instead under `FOVEA_REQUIRE_SYSTEM=1`.
 
@@ -43,9 +43,9 @@ use xr::Handle as _;
 use crate::both::fdm_vulkan::{
     app, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT, VALIDATED, WIDTH,
 };
+use crate::support::device::{env, Env};
 use crate::support::level_info;
 use crate::support::vulkan::{spv, stages, Fixed, FRAGMENT, VERTEX};
-use crate::vk::layer::{env, Env};
 
 /// The simulated runtime's swapchain format (VK_FORMAT_R8G8B8A8_SRGB), as `swapchain_info` asks.
 const COLOR: vk::Format = vk::Format::R8G8B8A8_SRGB;
@@ -578,7 +578,7 @@ fn release(
 fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
     let what = format!("{} {layout:?}", profile.name());
     env.double.set_profile(Some(profile));
-    crate::vk::layer::assert_no_double_errors(env);
+    crate::support::device::assert_no_double_errors(env);
     env.double.clear();
     take_messages();
     let app = app("XR_KHR_vulkan_enable2", true);
@@ -708,7 +708,7 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
         let mut seen = [0; 3];
         for n in 0..4 {
             let case = format!("{what} level {level} offset {offset} frame {n}");
-            crate::vk::layer::assert_no_double_errors(env);
+            crate::support::device::assert_no_double_errors(env);
             env.double.clear();
             let (index, fovs, time) = frame.acquire(swapchain);
             renderer.draw(&v.device, index);

@@ -8,6 +8,7 @@ use std::process::Command;
 use fovea_harness::artifact;
 use openxr_sys as xr;
 
+pub mod device;
 pub mod process;
 pub mod vulkan;
 

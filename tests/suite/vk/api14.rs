@@ -22,8 +22,8 @@ use fovea_harness::skip;
 use fovea_vkdouble::{Loaded, Profile};
 use serde_json::json;
 
+use crate::support::device::FDM;
 use crate::support::{in_own_process, root};
-use crate::vk::layer::FDM;
 
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
 const MANIFEST: &str = "VK_LAYER_FOVEA_fragment_density_map.json";

@@ -4,7 +4,7 @@
 //! frame's is written by a compute dispatch with `imageStore` and handed over with a barrier, and
 //! so on, the contents changing every frame. Each frame then renders a pass that reads the map.
 //!
-//! Stack as in [`crate::vk::layer`] (this test → fovea → validation → the double → lavapipe).
+//! Stack as in [`crate::support::device`] (this test → fovea → validation → the double → lavapipe).
 //! Checked per frame: what the GPU would shade with ([`rates_of`]) is the model's
 //! (`fovea_model::shading_rate`) for the bytes the application wrote; validation says nothing
 //! but its 1.3.239 stage false positives (so the driver got no density-map enum, and every layout
@@ -16,11 +16,12 @@
 use ash::vk;
 use fovea_vkdouble::Profile;
 
+use crate::support::device::Dev;
+use crate::support::device::{assert_only_stage_false_positives, env, Env, Vk};
 use crate::support::vulkan::{
     attachments2, range, spv, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
 };
-use crate::vk::convert::{codes_of, model_codes, read_at_submit, Buffer, Dev};
-use crate::vk::layer::{assert_only_stage_false_positives, env, Env, Vk};
+use crate::vk::convert::{codes_of, converting_device, model_codes, read_at_submit, Buffer};
 
 /// `shaders/write_map.comp`: the application's compute path.
 const WRITE_MAP: &[u8] = include_bytes!("../shaders/write_map.comp.spv");
@@ -495,7 +496,7 @@ fn maps_written_by_render_passes_and_by_compute_shade_each_frame() {
         let Some(vk) = Vk::new(env, profile, true) else {
             return;
         };
-        let dev = Dev::new(&vk);
+        let dev = converting_device(&vk, false);
         // SAFETY: the device is alive until `destroy`; every recording is submitted and waited
         // for before the next.
         unsafe {
@@ -553,7 +554,7 @@ fn a_pass_that_moves_its_map_into_the_density_layout_keeps_the_apps_layouts() {
     let Some(vk) = Vk::new(env, profile, true) else {
         return;
     };
-    let dev = Dev::new(&vk);
+    let dev = converting_device(&vk, false);
     // SAFETY: as in the test above.
     unsafe {
         let app = App::new(
@@ -710,7 +711,7 @@ fn maps_read_inside_conditional_rendering_shade_whatever_the_condition() {
     let Some(vk) = Vk::new(env, profile, true) else {
         return;
     };
-    let dev = Dev::with_conditional_rendering(&vk, true);
+    let dev = converting_device(&vk, true);
     // SAFETY: as in the tests above.
     unsafe {
         let app = App::new(
@@ -780,7 +781,7 @@ fn a_map_read_again_unchanged_costs_no_barrier() {
     let Some(vk) = Vk::new(env, profile, true) else {
         return;
     };
-    let dev = Dev::new(&vk);
+    let dev = converting_device(&vk, false);
     // SAFETY: as in the tests above.
     unsafe {
         let app = App::new(
@@ -849,7 +850,7 @@ fn a_secondary_executed_from_two_primaries_shades_with_each_primarys_map() {
     let Some(vk) = Vk::new(env, profile, true) else {
         return;
     };
-    let dev = Dev::new(&vk);
+    let dev = converting_device(&vk, false);
     // SAFETY: as in the tests above.
     unsafe {
         let app = App::new(

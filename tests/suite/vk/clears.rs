@@ -3,11 +3,11 @@
 //! open; the density-map stage bits of submits and event sets reach the driver as shading-rate
 //! ones.
 //!
-//! Stack as in [`crate::vk::layer`] (this test → fovea → validation → the double → lavapipe), on the
+//! Stack as in [`crate::support::device`] (this test → fovea → validation → the double → lavapipe), on the
 //! `nvidia` profile (16×16 texels). The double counts every `vkQueueSubmit` that reaches it, and at
 //! each one reads back the shading-rate images its command buffers use. Validation must report
 //! nothing but its 1.3.239 stage false positives
-//! ([`crate::vk::layer::assert_only_stage_false_positives`]), which includes objects left alive at
+//! ([`crate::support::device::assert_only_stage_false_positives`]), which includes objects left alive at
 //! `vkDestroyDevice` (a dropped clear's command buffer, a shadow that outlived its image) and
 //! objects destroyed while in use (a shadow destroyed while its clear runs).
 
@@ -15,136 +15,14 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
-use crate::support::vulkan::{
-    allocate_info, attachments2, image_info, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
-};
-use crate::vk::layer::{assert_only_stage_false_positives, env, take_messages, Env, Vk, FDM};
+use crate::support::device::{assert_only_stage_false_positives, env, Dev, Env, Vk};
+use crate::support::vulkan::{attachments2, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE};
 
 /// The density map's side in texels (the `nvidia` profile's 16×16 texel).
 const N: u32 = SIZE / 16;
 
-/// An emulating device with one queue of family 0, and what the tests record with.
-struct Dev {
-    d: ash::Device,
-    queue: vk::Queue,
-    pool: vk::CommandPool,
-    memory: vk::PhysicalDeviceMemoryProperties,
-}
-
+/// What the tests here record with, on the shared test device ([`Dev`]).
 impl Dev {
-    fn new(vk: &Vk) -> Dev {
-        let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
-            .dynamic_rendering(true)
-            .synchronization2(true);
-        let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-            .fragment_density_map(true)
-            .fragment_density_map_non_subsampled_images(true);
-        let prio = [1.0];
-        let queues = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(0)
-            .queue_priorities(&prio)];
-        let names = [FDM.as_ptr()];
-        let info = vk::DeviceCreateInfo::default()
-            .queue_create_infos(&queues)
-            .enabled_extension_names(&names)
-            .push_next(&mut fdm)
-            .push_next(&mut v13);
-        // SAFETY: every struct lives across the calls.
-        unsafe {
-            let d = vk
-                .instance
-                .create_device(vk.physical, &info, None)
-                .unwrap_or_else(|e| panic!("vkCreateDevice: {e}; {:?}", take_messages()));
-            let queue = d.get_device_queue(0, 0);
-            let pool = d
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default().queue_family_index(0),
-                    None,
-                )
-                .expect("vkCreateCommandPool");
-            let memory = vk
-                .instance
-                .get_physical_device_memory_properties(vk.physical);
-            Dev {
-                d,
-                queue,
-                pool,
-                memory,
-            }
-        }
-    }
-
-    /// An image with device-local memory and a 2D view of its first layer.
-    fn image(&self, format: vk::Format, size: u32, usage: vk::ImageUsageFlags) -> Image {
-        // SAFETY: the device is alive; structs live across the calls.
-        unsafe {
-            let d = &self.d;
-            let image = d
-                .create_image(&image_info(format, size, 1, usage), None)
-                .expect("vkCreateImage");
-            let req = d.get_image_memory_requirements(image);
-            let memory = d
-                .allocate_memory(
-                    &allocate_info(&self.memory, req, vk::MemoryPropertyFlags::DEVICE_LOCAL),
-                    None,
-                )
-                .expect("vkAllocateMemory");
-            d.bind_image_memory(image, memory, 0).expect("bind");
-            let view = d
-                .create_image_view(
-                    &vk::ImageViewCreateInfo::default()
-                        .image(image)
-                        .view_type(vk::ImageViewType::TYPE_2D)
-                        .format(format)
-                        .subresource_range(range(0, 1)),
-                    None,
-                )
-                .expect("vkCreateImageView");
-            Image {
-                image,
-                memory,
-                view,
-            }
-        }
-    }
-
-    /// A recording command buffer.
-    fn begin(&self) -> vk::CommandBuffer {
-        // SAFETY: the pool is this device's and used by this thread only.
-        unsafe {
-            let cb = self
-                .d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(self.pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .expect("vkAllocateCommandBuffers")[0];
-            self.d
-                .begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
-                .expect("vkBeginCommandBuffer");
-            cb
-        }
-    }
-
-    /// Ends `cb`, submits it with `vkQueueSubmit` and waits for the queue.
-    fn submit(&self, cb: vk::CommandBuffer) {
-        // SAFETY: `cb` is recording on this device; the queue is this thread's.
-        unsafe {
-            self.d.end_command_buffer(cb).expect("vkEndCommandBuffer");
-            let cbs = [cb];
-            self.d
-                .queue_submit(
-                    self.queue,
-                    &[vk::SubmitInfo::default().command_buffers(&cbs)],
-                    vk::Fence::null(),
-                )
-                .expect("vkQueueSubmit");
-            self.d.queue_wait_idle(self.queue).expect("vkQueueWaitIdle");
-        }
-    }
-
     /// A render pass v2 with a colour and a density-map attachment, and its framebuffer.
     fn pass(&self, color: &Image, density: &Image) -> (vk::RenderPass, vk::Framebuffer) {
         let mut atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
@@ -208,16 +86,6 @@ impl Dev {
                 .cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
         }
     }
-
-    /// Destroys the pool and the device (everything else must be gone).
-    fn destroy(self) {
-        // SAFETY: the queue is idle; nothing else made from the device is left.
-        unsafe {
-            self.d.device_wait_idle().expect("idle");
-            self.d.destroy_command_pool(self.pool, None);
-            self.d.destroy_device(None);
-        }
-    }
 }
 
 struct Image {
@@ -238,12 +106,27 @@ impl Image {
     }
 }
 
+/// An image with device-local memory and a 2D view ([`Dev::image`]).
+fn image(dev: &Dev, format: vk::Format, size: u32, usage: vk::ImageUsageFlags) -> Image {
+    let (image, memory, view) = dev.image(format, size, 1, usage);
+    Image {
+        image,
+        memory,
+        view,
+    }
+}
+
 fn color(dev: &Dev) -> Image {
-    dev.image(COLOR, SIZE, vk::ImageUsageFlags::COLOR_ATTACHMENT)
+    image(dev, COLOR, SIZE, vk::ImageUsageFlags::COLOR_ATTACHMENT)
 }
 
 fn density(dev: &Dev) -> Image {
-    dev.image(DENSITY, N, vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT)
+    image(
+        dev,
+        DENSITY,
+        N,
+        vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
+    )
 }
 
 /// The shading-rate images the double read back at the submit of `cb`.
@@ -282,7 +165,7 @@ fn shadows_are_cleared_ahead_of_the_next_submit_not_at_creation() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let dev = Dev::new(&vk);
+    let dev = Dev::new(&vk, vk.fdm_device(&[], None));
     let (color, density) = (color(&dev), density(&dev));
     assert_eq!(
         env.double.calls("vkQueueSubmit"),
@@ -331,7 +214,7 @@ fn destroyed_density_maps_drop_or_outlive_their_clears() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let dev = Dev::new(&vk);
+    let dev = Dev::new(&vk, vk.fdm_device(&[], None));
     density(&dev).destroy(&dev.d);
     let cb = dev.begin();
     dev.submit(cb);
@@ -374,7 +257,7 @@ fn a_shadow_that_cannot_be_made_leaves_the_image_at_full_rate() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let dev = Dev::new(&vk);
+    let dev = Dev::new(&vk, vk.fdm_device(&[], None));
     let color = color(&dev);
     // Counted since the instance (colour image, density map, shadow), then since each clear of
     // the records (density map, shadow; the shadow's memory comes before the map's).
@@ -408,7 +291,7 @@ fn a_shadow_that_cannot_be_made_leaves_the_image_at_full_rate() {
             dev.d.destroy_render_pass(pass, None);
         }
         density.destroy(&dev.d);
-        crate::vk::layer::assert_no_double_errors(env);
+        crate::support::device::assert_no_double_errors(env);
         env.double.clear();
     }
     color.destroy(&dev.d);
@@ -428,7 +311,7 @@ fn submits_and_event_sets_lose_the_density_map_bits() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let dev = Dev::new(&vk);
+    let dev = Dev::new(&vk, vk.fdm_device(&[], None));
     let map = density(&dev);
     // SAFETY: every struct lives across its call; the queue is this thread's and idle at the end.
     unsafe {

@@ -2,7 +2,7 @@
 //! shading-rate shadows on the GPU at every pass begin that reads them, and gives the application
 //! its compute bindings back afterwards (src/vk/convert.rs).
 //!
-//! Stack as in [`crate::vk::layer`] (this test → fovea → validation → the double → lavapipe, which
+//! Stack as in [`crate::support::device`] (this test → fovea → validation → the double → lavapipe, which
 //! runs the conversion's compute shader for real). The application uploads a known pattern with
 //! `vkCmdCopyBufferToImage`, binds its own compute pipeline, descriptor set and push constants,
 //! renders a pass with the map (render pass or dynamic rendering), and after the pass dispatches
@@ -18,11 +18,10 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
+use crate::support::device::{assert_only_stage_false_positives, env, Dev, Env, Features, Vk};
 use crate::support::vulkan::{
-    allocate_info, attachments2, image_info, range, spv, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT,
-    SIZE,
+    allocate_info, attachments2, range, spv, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
 };
-use crate::vk::layer::{assert_only_stage_false_positives, env, take_messages, Env, Vk, FDM};
 
 /// The application's compute shader: `value[index] = word` (push constants `{word, index}`).
 const STORE: &[u8] = include_bytes!("../shaders/store.comp.spv");
@@ -73,73 +72,22 @@ struct Compute {
     out: Buffer,
 }
 
-pub(crate) struct Dev {
-    pub(crate) d: ash::Device,
-    pub(crate) queue: vk::Queue,
-    pub(crate) pool: vk::CommandPool,
-    pub(crate) memory: vk::PhysicalDeviceMemoryProperties,
+/// The device these tests convert on ([`Features::FDM_MULTIVIEW`]), with
+/// `VK_EXT_conditional_rendering` and its feature where `conditional`.
+pub(crate) fn converting_device(vk: &Vk, conditional: bool) -> Dev {
+    let mut cond =
+        vk::PhysicalDeviceConditionalRenderingFeaturesEXT::default().conditional_rendering(true);
+    let exts = [ash::ext::conditional_rendering::NAME];
+    let d = if conditional {
+        vk.device_with(&exts, Features::FDM_MULTIVIEW, Some(&mut cond))
+    } else {
+        vk.device_with(&[], Features::FDM_MULTIVIEW, None)
+    };
+    Dev::new(vk, d)
 }
 
+/// What the tests here do with the shared test device ([`Dev`]).
 impl Dev {
-    pub(crate) fn new(vk: &Vk) -> Dev {
-        Dev::with_conditional_rendering(vk, false)
-    }
-
-    /// [`Dev::new`], with `VK_EXT_conditional_rendering` and its feature where `conditional`.
-    pub(crate) fn with_conditional_rendering(vk: &Vk, conditional: bool) -> Dev {
-        let mut cond = vk::PhysicalDeviceConditionalRenderingFeaturesEXT::default()
-            .conditional_rendering(true);
-        let mut v11 = vk::PhysicalDeviceVulkan11Features::default().multiview(true);
-        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().imageless_framebuffer(true);
-        let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
-            .dynamic_rendering(true)
-            .synchronization2(true);
-        let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-            .fragment_density_map(true)
-            .fragment_density_map_non_subsampled_images(true);
-        let prio = [1.0];
-        let queues = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(0)
-            .queue_priorities(&prio)];
-        let mut names = vec![FDM.as_ptr()];
-        if conditional {
-            names.push(ash::ext::conditional_rendering::NAME.as_ptr());
-        }
-        let mut info = vk::DeviceCreateInfo::default()
-            .queue_create_infos(&queues)
-            .enabled_extension_names(&names)
-            .push_next(&mut fdm)
-            .push_next(&mut v11)
-            .push_next(&mut v12)
-            .push_next(&mut v13);
-        if conditional {
-            info = info.push_next(&mut cond);
-        }
-        // SAFETY: every struct lives across the calls.
-        unsafe {
-            let d = vk
-                .instance
-                .create_device(vk.physical, &info, None)
-                .unwrap_or_else(|e| panic!("vkCreateDevice: {e}; {:?}", take_messages()));
-            let queue = d.get_device_queue(0, 0);
-            let pool = d
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default().queue_family_index(0),
-                    None,
-                )
-                .expect("vkCreateCommandPool");
-            let memory = vk
-                .instance
-                .get_physical_device_memory_properties(vk.physical);
-            Dev {
-                d,
-                queue,
-                pool,
-                memory,
-            }
-        }
-    }
-
     pub(crate) fn buffer(&self, size: u64, usage: vk::BufferUsageFlags) -> Buffer {
         // SAFETY: the device is alive; structs live across the calls.
         unsafe {
@@ -198,47 +146,6 @@ impl Dev {
         unsafe {
             self.d.destroy_buffer(b.buffer, None);
             self.d.free_memory(b.memory, None);
-        }
-    }
-
-    /// A device-local image of `side`×`side` texels and `layers` layers, and a view of all of them.
-    pub(crate) fn image(
-        &self,
-        format: vk::Format,
-        side: u32,
-        layers: u32,
-        usage: vk::ImageUsageFlags,
-    ) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
-        // SAFETY: the device is alive; structs live across the calls.
-        unsafe {
-            let d = &self.d;
-            let image = d
-                .create_image(&image_info(format, side, layers, usage), None)
-                .expect("vkCreateImage");
-            let req = d.get_image_memory_requirements(image);
-            let memory = d
-                .allocate_memory(
-                    &allocate_info(&self.memory, req, vk::MemoryPropertyFlags::DEVICE_LOCAL),
-                    None,
-                )
-                .expect("vkAllocateMemory");
-            d.bind_image_memory(image, memory, 0).expect("bind");
-            let ty = if layers > 1 {
-                vk::ImageViewType::TYPE_2D_ARRAY
-            } else {
-                vk::ImageViewType::TYPE_2D
-            };
-            let view = d
-                .create_image_view(
-                    &vk::ImageViewCreateInfo::default()
-                        .image(image)
-                        .view_type(ty)
-                        .format(format)
-                        .subresource_range(range(0, layers)),
-                    None,
-                )
-                .expect("vkCreateImageView");
-            (image, memory, view)
         }
     }
 
@@ -342,41 +249,6 @@ impl Dev {
             self.d.destroy_descriptor_set_layout(c.set_layout, None);
         }
         self.free(c.out);
-    }
-
-    pub(crate) fn begin(&self) -> vk::CommandBuffer {
-        // SAFETY: the pool is this device's and used by this thread only.
-        unsafe {
-            let cb = self
-                .d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(self.pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .expect("vkAllocateCommandBuffers")[0];
-            self.d
-                .begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
-                .expect("vkBeginCommandBuffer");
-            cb
-        }
-    }
-
-    pub(crate) fn submit(&self, cb: vk::CommandBuffer) {
-        // SAFETY: `cb` is recording on this device; the queue is this thread's.
-        unsafe {
-            self.d.end_command_buffer(cb).expect("vkEndCommandBuffer");
-            let cbs = [cb];
-            self.d
-                .queue_submit(
-                    self.queue,
-                    &[vk::SubmitInfo::default().command_buffers(&cbs)],
-                    vk::Fence::null(),
-                )
-                .expect("vkQueueSubmit");
-            self.d.queue_wait_idle(self.queue).expect("vkQueueWaitIdle");
-        }
     }
 
     /// Records the application's upload of `staging` into every layer of `image`, ending in the
@@ -508,15 +380,6 @@ impl Dev {
             );
         }
     }
-
-    pub(crate) fn destroy(self) {
-        // SAFETY: the queue is idle; nothing else made from the device is left.
-        unsafe {
-            self.d.device_wait_idle().expect("idle");
-            self.d.destroy_command_pool(self.pool, None);
-            self.d.destroy_device(None);
-        }
-    }
 }
 
 /// How many barrier commands the double has recorded for a command buffer with `cb`'s handle.
@@ -579,7 +442,7 @@ enum Begin {
 /// the pass used the application's bindings.
 fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32, lose: bool) {
     let what = format!("{profile:?} {pass:?} {layers} layer(s), unrestorable {lose}");
-    let dev = Dev::new(vk);
+    let dev = converting_device(vk, false);
     let texel = profile.texel();
     let side = SIZE / texel.width;
     let texels = (side * side) as usize;

@@ -31,7 +31,7 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
-use crate::vk::layer::{env, take_messages, Vk, FDM};
+use crate::support::device::{env, take_messages, Vk, FDM};
 
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
 /// An sType no registry has.
@@ -280,7 +280,7 @@ fn density_map_structs() -> [i32; 4] {
 }
 
 /// Creates the case's device, checks it, destroys it; the problems found.
-fn run_case(env: &crate::vk::layer::Env, profile: Profile, case: &Case) -> Vec<String> {
+fn run_case(env: &crate::support::device::Env, profile: Profile, case: &Case) -> Vec<String> {
     let Some(vk) = Vk::new(env, profile, true) else {
         return vec!["no instance".into()];
     };

@@ -28,11 +28,13 @@ use std::collections::BTreeMap;
 use ash::vk;
 use fovea_vkdouble::Profile;
 
+use crate::support::device::{
+    assert_only_stage_false_positives, env, take_real_messages, Env, Features, Vk,
+};
 use crate::support::vulkan::{
     allocate_info, attachments2, draw_fullscreen, image_info, range, spv, stages, Fixed, AREA,
     CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
-use crate::vk::layer::{assert_only_stage_false_positives, env, take_real_messages, Env, Vk, FDM};
 
 /// The calls fovea makes to clear new shadows ahead of the application's submit
 /// (`src/vk/submit.rs`); where one fails, that submit fails with its result.
@@ -75,28 +77,12 @@ impl Flow {
     /// # Safety
     /// `vk` must be alive; everything made is recorded in `self` for [`Flow::teardown`].
     unsafe fn run(&mut self, vk: &Vk) -> Result<(), Failure> {
-        let prio = [1.0];
-        let queues = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(0)
-            .queue_priorities(&prio)];
-        let names = [FDM.as_ptr()];
-        let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
-            .dynamic_rendering(true)
-            .synchronization2(true);
-        let mut density = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-            .fragment_density_map(true)
-            .fragment_density_map_non_subsampled_images(true);
-        let info = vk::DeviceCreateInfo::default()
-            .queue_create_infos(&queues)
-            .enabled_extension_names(&names)
-            .push_next(&mut density)
-            .push_next(&mut v13);
         // SAFETY: every struct lives across its call; each object is recorded before the next
         // call, so teardown sees it whatever fails later.
         unsafe {
             let d = check(
                 "vkCreateDevice",
-                vk.instance.create_device(vk.physical, &info, None),
+                vk.try_device_with(&[], Features::FDM, None),
             )?;
             self.device = Some(d.clone());
             let memory = vk

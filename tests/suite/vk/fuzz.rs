@@ -23,11 +23,11 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use proptest::prelude::*;
 
+use crate::support::device::{env, fdm_features, take_real_messages, Vk, FDM};
 use crate::support::vulkan::{
     allocate_info, attachments, attachments2, image_info, range, spv, stages, Fixed, COLOR,
     DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
-use crate::vk::layer::{env, take_real_messages, Vk, FDM};
 
 /// What validation must say of a call with a bad handle.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -137,9 +137,7 @@ fn device(vk: &Vk, extra: *const c_void) -> Result<ash::Device, vk::Result> {
         .dynamic_rendering(true)
         .synchronization2(true);
     v13.p_next = extra as *mut c_void;
-    let mut density = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-        .fragment_density_map(true)
-        .fragment_density_map_non_subsampled_images(true);
+    let mut density = fdm_features();
     density.p_next = &mut v13 as *mut _ as *mut c_void;
     let mut info = vk::DeviceCreateInfo::default()
         .queue_create_infos(&queues)

@@ -1,6 +1,6 @@
 //! fovea's Vulkan layer, `VK_LAYER_FOVEA_fragment_density_map`, on lavapipe: the device level.
 //!
-//! Stack: this test → fovea's layer → VK_LAYER_KHRONOS_validation → VK_LAYER_FOVEA_shading_rate_double
+//! Stack ([`crate::support::device`]): this test → fovea's layer → VK_LAYER_KHRONOS_validation → VK_LAYER_FOVEA_shading_rate_double
 //! → lavapipe. The double makes lavapipe look like a desktop GPU with shading-rate attachments
 //! (profiles `nvidia`: 16×16 texels, `amd`: 8×8; `none`: lavapipe as it is) and records what reaches
 //! it; validation checks every call fovea passes down against that device, and must stay silent.
@@ -12,246 +12,22 @@
 //! Missing system pieces (loader, lavapipe, validation layer, the built libraries) skip, or fail
 //! under `FOVEA_REQUIRE_SYSTEM=1`.
 
-use std::ffi::{c_void, CStr, CString};
-use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::ffi::{CStr, CString};
 
 use ash::vk;
-use fovea_harness::skip;
-use fovea_vkdouble::{Loaded, Profile};
+use fovea_vkdouble::Profile;
 use serde_json::json;
 
-use crate::support::vulkan::image_info;
+use crate::support::device::{assert_no_messages, env, fdm_image_info, take_messages, Vk, FDM};
 
-const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
-pub(crate) const FDM: &CStr = c"VK_EXT_fragment_density_map";
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
-
-static SERIAL: Mutex<()> = Mutex::new(());
-static MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
 
 fn fovea_layer() -> CString {
     CString::new(fovea_abi::VK_LAYER_NAME).expect("no NUL")
 }
 
-unsafe extern "system" fn on_message(
-    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
-    _types: vk::DebugUtilsMessageTypeFlagsEXT,
-    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
-    _user: *mut c_void,
-) -> vk::Bool32 {
-    // SAFETY: the layer passes valid callback data with a NUL-terminated message.
-    let text = unsafe { CStr::from_ptr((*data).p_message) }.to_string_lossy();
-    if let Ok(mut m) = MESSAGES.lock() {
-        m.push(format!("{severity:?}: {text}"));
-    }
-    vk::FALSE
-}
-
-pub(crate) fn take_messages() -> Vec<String> {
-    std::mem::take(&mut *MESSAGES.lock().unwrap_or_else(|e| e.into_inner()))
-}
-
-pub(crate) fn assert_no_messages() {
-    let m = take_messages();
-    assert!(
-        m.is_empty(),
-        "validation reported {} message(s):\n{}",
-        m.len(),
-        m.join("\n")
-    );
-}
-
-/// Validation 1.3.239 checks the shading-rate attachment stage (the same bit as NVIDIA's
-/// shading-rate-image stage) against `shadingRateImage` alone, as the specification of its day
-/// worded it; later versions also accept `attachmentFragmentShadingRate`
-/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdPipelineBarrier.html>,
-/// VUID-vkCmdPipelineBarrier-dstStageMask-07318). Those messages, and nothing else, are allowed.
-pub(crate) fn assert_only_stage_false_positives() {
-    let others = take_real_messages();
-    assert!(others.is_empty(), "validation reported: {others:#?}");
-}
-
-/// The messages so far, less validation 1.3.239's stage false positives (see
-/// [`assert_only_stage_false_positives`]).
-pub(crate) fn take_real_messages() -> Vec<String> {
-    take_messages()
-        .into_iter()
-        .filter(|m| !m.contains("when the device does not have shadingRate feature enabled"))
-        .collect()
-}
-
-pub(crate) struct Env {
-    pub(crate) entry: ash::Entry,
-    pub(crate) double: Loaded,
-}
-
-/// Fails the test where the double recorded a misuse a driver would refuse: every test that runs
-/// on the double asserts that at its end (the guard [`env`] returns) and whenever it makes a new
-/// instance ([`Vk::new`]), which forgets the records. A test that provokes misuse on purpose reads
-/// and clears them itself.
-pub(crate) fn assert_no_double_errors(env: &Env) {
-    if std::thread::panicking() {
-        return;
-    }
-    let errors = env.double.errors();
-    assert!(
-        errors.is_empty(),
-        "the shading-rate double refused {} call(s), as a driver would:\n{}",
-        errors.len(),
-        errors.join("\n")
-    );
-}
-
-/// What [`env`] returns with the environment: the suite's serialisation, and at its end the
-/// check that the double recorded no misuse ([`assert_no_double_errors`]).
-pub(crate) struct Serial {
-    _lock: MutexGuard<'static, ()>,
-    env: &'static Env,
-}
-
-impl Drop for Serial {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            self.env.double.clear();
-            return;
-        }
-        assert_no_double_errors(self.env);
-    }
-}
-
-/// Both manifests, `VK_ADD_LAYER_PATH`, the loader and the double's loaded copy; once per process.
-pub(crate) fn env() -> Option<(Serial, &'static Env)> {
-    let guard = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    static ENV: OnceLock<Result<Env, String>> = OnceLock::new();
-    let env = ENV.get_or_init(|| {
-        let double_lib = fovea_vkdouble::find_library()?;
-        let fovea_lib = fovea_harness::artifact("libfovea.so")?
-            .canonicalize()
-            .map_err(|e| e.to_string())?;
-        let dir = std::env::temp_dir().join(format!("fovea-vklayer-{}", std::process::id()));
-        fovea_vkdouble::write_manifest(&dir, &double_lib).map_err(|e| e.to_string())?;
-        // The checked-in manifest, pointed at this build's library.
-        let checked_in = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("manifest/vulkan/VK_LAYER_FOVEA_fragment_density_map.json");
-        let mut manifest: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&checked_in).map_err(|e| e.to_string())?)
-                .map_err(|e| e.to_string())?;
-        manifest["layer"]["library_path"] = json!(fovea_lib.to_string_lossy());
-        std::fs::write(
-            dir.join("VK_LAYER_FOVEA_fragment_density_map.json"),
-            manifest.to_string(),
-        )
-        .map_err(|e| e.to_string())?;
-        // Set before the loader first reads the environment, every test serialised behind SERIAL.
-        std::env::set_var("VK_ADD_LAYER_PATH", &dir);
-        // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
-        let entry = unsafe { ash::Entry::load() }.map_err(|e| format!("no Vulkan loader ({e})"))?;
-        // SAFETY: a plain query.
-        let layers = unsafe { entry.enumerate_instance_layer_properties() }
-            .map_err(|e| format!("vkEnumerateInstanceLayerProperties: {e}"))?;
-        let ours = fovea_layer();
-        for want in [VALIDATION, fovea_vkdouble::LAYER_NAME, ours.as_c_str()] {
-            if !layers.iter().any(|l| l.layer_name_as_c_str() == Ok(want)) {
-                return Err(format!("{want:?} is not available"));
-            }
-        }
-        let double = Loaded::open(&double_lib)?;
-        Ok(Env { entry, double })
-    });
-    match env {
-        Ok(e) => Some((
-            Serial {
-                _lock: guard,
-                env: e,
-            },
-            e,
-        )),
-        Err(e) => {
-            skip(e);
-            None
-        }
-    }
-}
-
-/// An instance with the stack above (fovea's layer optional) and lavapipe's physical device.
-pub(crate) struct Vk {
-    pub(crate) instance: ash::Instance,
-    debug_utils: ash::ext::debug_utils::Instance,
-    messenger: vk::DebugUtilsMessengerEXT,
-    pub(crate) physical: vk::PhysicalDevice,
-}
-
+/// What these tests ask of the physical device beneath the layers.
 impl Vk {
-    pub(crate) fn new(env: &Env, profile: Profile, with_fovea: bool) -> Option<Vk> {
-        assert_no_double_errors(env);
-        env.double.set_profile(Some(profile));
-        env.double.clear();
-        take_messages();
-        let ours = fovea_layer();
-        let mut layers = vec![VALIDATION.as_ptr(), fovea_vkdouble::LAYER_NAME.as_ptr()];
-        if with_fovea {
-            layers.insert(0, ours.as_ptr());
-        }
-        let exts = [
-            ash::ext::debug_utils::NAME.as_ptr(),
-            ash::ext::validation_features::NAME.as_ptr(),
-        ];
-        let disabled = [vk::ValidationFeatureDisableEXT::UNIQUE_HANDLES];
-        let mut features = vk::ValidationFeaturesEXT::default()
-            .disabled_validation_features(&disabled)
-            .enabled_validation_features(fovea_harness::validation_enables());
-        let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
-        let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-            .message_severity(
-                vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-                    | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
-            )
-            .message_type(
-                vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
-                    | vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-                    | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
-            )
-            .pfn_user_callback(Some(on_message));
-        let info = vk::InstanceCreateInfo::default()
-            .application_info(&app)
-            .enabled_layer_names(&layers)
-            .enabled_extension_names(&exts)
-            .push_next(&mut messenger_info)
-            .push_next(&mut features);
-        // SAFETY: every struct lives across the calls; handles are used while alive.
-        unsafe {
-            let instance = env
-                .entry
-                .create_instance(&info, None)
-                .expect("vkCreateInstance");
-            let debug_utils = ash::ext::debug_utils::Instance::new(&env.entry, &instance);
-            let messenger = debug_utils
-                .create_debug_utils_messenger(&messenger_info, None)
-                .expect("messenger");
-            let physical = instance
-                .enumerate_physical_devices()
-                .unwrap_or_default()
-                .into_iter()
-                .find(|&p| {
-                    instance
-                        .get_physical_device_properties(p)
-                        .device_name_as_c_str()
-                        .is_ok_and(|n| n.to_string_lossy().contains("llvmpipe"))
-                });
-            let vk = Vk {
-                instance,
-                debug_utils,
-                messenger,
-                physical: physical.unwrap_or_default(),
-            };
-            if physical.is_none() {
-                skip("lavapipe (llvmpipe) is not installed");
-                return None;
-            }
-            Some(vk)
-        }
-    }
-
     fn extensions(&self) -> Vec<(CString, u32)> {
         // SAFETY: a plain query.
         unsafe {
@@ -282,20 +58,6 @@ impl Vk {
             fdm.fragment_density_map_dynamic,
             fdm.fragment_density_map_non_subsampled_images,
         ]
-    }
-
-    pub(crate) fn fdm_properties(
-        &self,
-    ) -> vk::PhysicalDeviceFragmentDensityMapPropertiesEXT<'static> {
-        let mut fdm = vk::PhysicalDeviceFragmentDensityMapPropertiesEXT::default();
-        let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut fdm);
-        // SAFETY: structs live across the call.
-        unsafe {
-            self.instance
-                .get_physical_device_properties2(self.physical, &mut p2)
-        };
-        fdm.p_next = std::ptr::null_mut();
-        fdm
     }
 
     /// R8G8_UNORM's optimal-tiling features: from vkGetPhysicalDeviceFormatProperties, from
@@ -347,54 +109,6 @@ impl Vk {
             Err(e) => e,
         }
     }
-
-    /// A device with one queue and `exts`, the Vulkan 1.3 features fovea's users enable, and the
-    /// given extra feature struct.
-    pub(crate) fn device(
-        &self,
-        exts: &[&CStr],
-        extra: Option<&mut dyn vk::ExtendsDeviceCreateInfo>,
-    ) -> Result<ash::Device, vk::Result> {
-        let prio = [1.0];
-        let queues = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(0)
-            .queue_priorities(&prio)];
-        let names: Vec<_> = exts.iter().map(|e| e.as_ptr()).collect();
-        let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
-            .dynamic_rendering(true)
-            .synchronization2(true);
-        let mut info = vk::DeviceCreateInfo::default()
-            .queue_create_infos(&queues)
-            .enabled_extension_names(&names);
-        if let Some(extra) = extra {
-            info = info.push_next(extra);
-        }
-        // Vulkan 1.3 features last in the chain, after the one the layer removes: the copy must
-        // keep the application's tail.
-        info = info.push_next(&mut v13);
-        // SAFETY: every struct lives across the call.
-        unsafe { self.instance.create_device(self.physical, &info, None) }
-    }
-}
-
-impl Drop for Vk {
-    fn drop(&mut self) {
-        // SAFETY: nothing made from the instance outlives it.
-        unsafe {
-            self.debug_utils
-                .destroy_debug_utils_messenger(self.messenger, None);
-            self.instance.destroy_instance(None);
-        }
-    }
-}
-
-pub(crate) fn fdm_image_info() -> vk::ImageCreateInfo<'static> {
-    image_info(
-        vk::Format::R8G8_UNORM,
-        8,
-        2,
-        vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT | vk::ImageUsageFlags::TRANSFER_DST,
-    )
 }
 
 /// On the NVIDIA-like and AMD-like profiles the application sees density maps with the driver's
@@ -485,15 +199,7 @@ fn emulated_density_maps_on_shading_rate_devices() {
             vk::Result::ERROR_FORMAT_NOT_SUPPORTED
         );
 
-        let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-            .fragment_density_map(true)
-            .fragment_density_map_non_subsampled_images(true);
-        let device = vk.device(&[FDM], Some(&mut fdm)).unwrap_or_else(|e| {
-            panic!(
-                "{profile:?}: vkCreateDevice with density maps: {e}; {:?}",
-                take_messages()
-            )
-        });
+        let device = vk.fdm_device(&[], None);
         // lavapipe would refuse the density-map extension name: the device's success says it never
         // got there. The double saw the shading-rate extension with the attachment feature only.
         let devices = env.double.events("device");
@@ -600,10 +306,7 @@ fn unintercepted_commands_go_straight_to_the_next_layer() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-        .fragment_density_map(true)
-        .fragment_density_map_non_subsampled_images(true);
-    let emulating = vk.device(&[FDM], Some(&mut fdm)).expect("emulating device");
+    let emulating = vk.fdm_device(&[], None);
     let untouched = vk.device(&[], None).expect("untouched device");
     let reference = plain.device(&[], None).expect("device without fovea");
     let gdpa = |i: &ash::Instance, d: &ash::Device, name: &CStr| {

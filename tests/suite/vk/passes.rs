@@ -3,7 +3,7 @@
 //! framebuffer, dynamic rendering); the layer hands the driver shading-rate attachments that name
 //! its shadows instead.
 //!
-//! Stack as in [`crate::vk::layer`]: this test → fovea → VK_LAYER_KHRONOS_validation → the double
+//! Stack as in [`crate::support::device`]: this test → fovea → VK_LAYER_KHRONOS_validation → the double
 //! (`nvidia`: 16×16 texels, layered; `amd`: 8×8, one layer) → lavapipe. For each case and profile:
 //! validation says nothing and the double records no misuse; every pass (or rendering) reached the
 //! double with a shading-rate attachment of the device's texel that is a shadow (R8_UINT, 2 layers
@@ -21,12 +21,13 @@ use ash::vk::Handle as _;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
+use crate::support::device::{
+    assert_no_messages, assert_only_stage_false_positives, env, take_messages, Dev, Env, Features,
+    Vk,
+};
 use crate::support::vulkan::{
     allocate_info, attachments, attachments2, draw_fullscreen, image_info, range, spv, stages,
     Fixed, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
-};
-use crate::vk::layer::{
-    assert_no_messages, assert_only_stage_false_positives, env, take_messages, Env, Vk, FDM,
 };
 
 /// The colour attachment's width and height.
@@ -74,41 +75,17 @@ impl Case {
     }
 }
 
-/// A device with one queue, the Vulkan 1.1–1.3 features the cases use and, with `fdm`, density
-/// maps.
+/// The device the cases draw on ([`Vk::device_with`]): multiview and imageless framebuffers and,
+/// with `fdm`, density maps.
 fn device(vk: &Vk, fdm: bool) -> ash::Device {
-    let prio = [1.0];
-    let queues = [vk::DeviceQueueCreateInfo::default()
-        .queue_family_index(0)
-        .queue_priorities(&prio)];
-    let names: Vec<_> = if fdm { vec![FDM.as_ptr()] } else { Vec::new() };
-    let mut v11 = vk::PhysicalDeviceVulkan11Features::default().multiview(true);
-    let mut v12 = vk::PhysicalDeviceVulkan12Features::default().imageless_framebuffer(true);
-    let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
-        .dynamic_rendering(true)
-        .synchronization2(true);
-    let mut density = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-        .fragment_density_map(true)
-        .fragment_density_map_non_subsampled_images(true);
-    let mut info = vk::DeviceCreateInfo::default()
-        .queue_create_infos(&queues)
-        .enabled_extension_names(&names)
-        .push_next(&mut v11)
-        .push_next(&mut v12)
-        .push_next(&mut v13);
-    if fdm {
-        info = info.push_next(&mut density);
-    }
-    // SAFETY: every struct lives across the call.
-    unsafe { vk.instance.create_device(vk.physical, &info, None) }
-        .unwrap_or_else(|e| panic!("vkCreateDevice: {e}; {:?}", take_messages()))
-}
-
-struct Dev {
-    device: ash::Device,
-    queue: vk::Queue,
-    pool: vk::CommandPool,
-    memory: vk::PhysicalDeviceMemoryProperties,
+    vk.device_with(
+        &[],
+        Features {
+            fdm,
+            multiview: true,
+        },
+        None,
+    )
 }
 
 /// # Safety
@@ -120,7 +97,7 @@ unsafe fn memory_for(
 ) -> vk::DeviceMemory {
     // SAFETY: the caller's promise.
     unsafe {
-        dev.device
+        dev.d
             .allocate_memory(&allocate_info(&dev.memory, req, want), None)
     }
     .expect("vkAllocateMemory")
@@ -138,12 +115,12 @@ unsafe fn image(
     // SAFETY: the caller's promise; structs live across the calls.
     unsafe {
         let image = dev
-            .device
+            .d
             .create_image(&image_info(format, size, layers, usage), None)
             .expect("vkCreateImage");
-        let req = dev.device.get_image_memory_requirements(image);
+        let req = dev.d.get_image_memory_requirements(image);
         let memory = memory_for(dev, req, vk::MemoryPropertyFlags::DEVICE_LOCAL);
-        dev.device.bind_image_memory(image, memory, 0).unwrap();
+        dev.d.bind_image_memory(image, memory, 0).unwrap();
         (image, memory)
     }
 }
@@ -164,7 +141,7 @@ fn view(
     };
     // SAFETY: the image is alive; the struct lives across the call.
     unsafe {
-        dev.device.create_image_view(
+        dev.d.create_image_view(
             &vk::ImageViewCreateInfo::default()
                 .image(image)
                 .view_type(ty)
@@ -180,7 +157,7 @@ fn shader(dev: &Dev, bytes: &[u8]) -> vk::ShaderModule {
     let words = spv(bytes);
     // SAFETY: the words live across the call.
     unsafe {
-        dev.device
+        dev.d
             .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
     }
     .unwrap()
@@ -188,7 +165,7 @@ fn shader(dev: &Dev, bytes: &[u8]) -> vk::ShaderModule {
 
 /// The case's render pass; with `fdm`, attachment 1 is the density map.
 fn render_pass(dev: &Dev, case: Case, fdm: bool) -> vk::RenderPass {
-    let d = &dev.device;
+    let d = &dev.d;
     let mask = if case.multiview() { 0b11 } else { 0 };
     let fdm_ref = vk::AttachmentReference {
         attachment: 1,
@@ -291,7 +268,7 @@ fn pipeline(
     }
     // SAFETY: every struct lives across the call.
     unsafe {
-        dev.device
+        dev.d
             .create_graphics_pipelines(vk::PipelineCache::null(), &[info], None)
     }
     .unwrap_or_else(|e| panic!("{case:?}: pipeline: {:?}; {:?}", e.1, take_messages()))[0]
@@ -317,22 +294,8 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
     // SAFETY: plain queries and creations on live objects; everything is destroyed before the
     // device, after the queue is idle.
     unsafe {
-        let memory = vk
-            .instance
-            .get_physical_device_memory_properties(vk.physical);
-        let pool = device
-            .create_command_pool(
-                &vk::CommandPoolCreateInfo::default().queue_family_index(0),
-                None,
-            )
-            .unwrap();
-        let dev = Dev {
-            queue: device.get_device_queue(0, 0),
-            device,
-            pool,
-            memory,
-        };
-        let d = &dev.device;
+        let dev = Dev::new(&vk, device);
+        let d = &dev.d;
         let layers = case.layers();
         let (color, color_mem) = image(
             &dev,
@@ -654,8 +617,7 @@ fn draw(env: &Env, profile: Profile, case: Case, fdm: bool) -> Drawn {
             d.destroy_image(img, None);
             d.free_memory(mem, None);
         }
-        d.destroy_command_pool(dev.pool, None);
-        d.destroy_device(None);
+        dev.destroy();
         drop(vk);
         Drawn {
             pixels,

@@ -1,22 +1,20 @@
 //! fovea's Vulkan layer on pipelines, samplers, views, shaders and barriers: the same stack as
-//! [`crate::vk::layer`] (this test → fovea → validation → the shading-rate double → lavapipe), on
+//! [`crate::support::device`] (this test → fovea → validation → the shading-rate double → lavapipe), on
 //! both shading-rate profiles. Validation must stay silent; the double's records say what the
 //! driver was told.
 //!
 //! The shaders are the GLSL files beside their SPIR-V in `tests/suite/shaders/`
 //! (`glslangValidator -V --target-env vulkan1.1 -Os -g0`).
 
-use std::ffi::c_void;
-
 use ash::vk;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
-use crate::support::vulkan::{range, spv, stages, Fixed, COLOR};
-use crate::vk::layer::{
+use crate::support::device::{
     assert_no_messages, assert_only_stage_false_positives, env, fdm_image_info, take_messages, Env,
-    Vk, FDM,
+    Vk,
 };
+use crate::support::vulkan::{range, spv, stages, Fixed, COLOR};
 
 const FDM_FLAG: vk::PipelineCreateFlags =
     vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT;
@@ -30,17 +28,15 @@ fn injected() -> Value {
 fn fdm_device(vk: &Vk, gpl: bool) -> ash::Device {
     let mut library = vk::PhysicalDeviceGraphicsPipelineLibraryFeaturesEXT::default()
         .graphics_pipeline_library(true);
-    let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-        .fragment_density_map(true)
-        .fragment_density_map_non_subsampled_images(true);
-    let mut exts = vec![FDM];
     if gpl {
-        fdm.p_next = &mut library as *mut _ as *mut c_void;
-        exts.push(ash::khr::pipeline_library::NAME);
-        exts.push(ash::ext::graphics_pipeline_library::NAME);
+        let exts = [
+            ash::khr::pipeline_library::NAME,
+            ash::ext::graphics_pipeline_library::NAME,
+        ];
+        vk.fdm_device(&exts, Some(&mut library))
+    } else {
+        vk.fdm_device(&[], None)
     }
-    vk.device(&exts, Some(&mut fdm))
-        .unwrap_or_else(|e| panic!("vkCreateDevice: {e}; {:?}", take_messages()))
 }
 
 struct Objects {

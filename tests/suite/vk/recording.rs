@@ -1,24 +1,15 @@
 //! Recording through fovea's Vulkan layer for a long time, and the commands whose density-map bits
-//! the layer translates besides barriers: the same stack as [`crate::vk::layer`] (this test →
+//! the layer translates besides barriers: the same stack as [`crate::support::device`] (this test →
 //! fovea → validation → the shading-rate double → lavapipe), on the `nvidia` profile.
 
 use ash::vk;
 use fovea_vkdouble::Profile;
 
-use crate::vk::layer::{assert_only_stage_false_positives, env, take_messages, Vk, FDM};
+use crate::support::device::{assert_only_stage_false_positives, env, take_messages, Vk};
 
 const FDM_STAGE: vk::PipelineStageFlags = vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT;
 const FSR_STAGE: vk::PipelineStageFlags =
     vk::PipelineStageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR;
-
-/// A device with emulated density maps (and synchronization2, dynamic rendering).
-fn fdm_device(vk: &Vk) -> ash::Device {
-    let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-        .fragment_density_map(true)
-        .fragment_density_map_non_subsampled_images(true);
-    vk.device(&[FDM], Some(&mut fdm))
-        .unwrap_or_else(|e| panic!("vkCreateDevice: {e}; {:?}", take_messages()))
-}
 
 /// A resettable pool on queue family 0 and one primary command buffer from it.
 fn pool_and_buffer(d: &ash::Device) -> (vk::CommandPool, vk::CommandBuffer) {
@@ -54,7 +45,7 @@ fn recording_for_long_keeps_the_records_bounded() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let d = fdm_device(&vk);
+    let d = vk.fdm_device(&[], None);
     let (pool, cb) = pool_and_buffer(&d);
     let kept = fovea_vkdouble::KEPT_EVENTS;
     let frames = 5;
@@ -139,7 +130,7 @@ fn event_and_timestamp_stages_are_translated() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let d = fdm_device(&vk);
+    let d = vk.fdm_device(&[], None);
     let (pool, cb) = pool_and_buffer(&d);
     let stage2 = vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT;
     // SAFETY: the test's own objects; create infos live across the calls.
@@ -175,7 +166,7 @@ fn event_and_timestamp_stages_are_translated() {
         d.cmd_write_timestamp(cb, FDM_STAGE, queries, 0);
         d.cmd_write_timestamp2(cb, stage2, queries, 1);
         d.end_command_buffer(cb).expect("vkEndCommandBuffer");
-        let messages = crate::vk::layer::take_real_messages();
+        let messages = crate::support::device::take_real_messages();
         assert!(
             messages.is_empty(),
             "the density-map stage reached the driver: {messages:#?}"
@@ -201,7 +192,7 @@ fn an_uncopyable_chain_falls_back_for_its_pipeline_only() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let d = fdm_device(&vk);
+    let d = vk.fdm_device(&[], None);
     let vert = spv(include_bytes!("../shaders/triangle.vert.spv"));
     let frag = spv(include_bytes!("../shaders/white.frag.spv"));
     // SAFETY: create infos live across the calls; the objects are destroyed at the end.
@@ -240,7 +231,7 @@ fn an_uncopyable_chain_falls_back_for_its_pipeline_only() {
             .create_graphics_pipelines(vk::PipelineCache::null(), &[uncopyable, plain], None)
             .unwrap_or_else(|(_, e)| panic!("vkCreateGraphicsPipelines: {e}"));
         // Validation reports the deliberately odd chain of the first create info; nothing else.
-        let others: Vec<String> = crate::vk::layer::take_real_messages()
+        let others: Vec<String> = crate::support::device::take_real_messages()
             .into_iter()
             .filter(|m| !m.contains("pCreateInfos[0]"))
             .collect();
@@ -287,7 +278,7 @@ fn a_dependencys_chained_memory_barrier_is_translated() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let d = fdm_device(&vk);
+    let d = vk.fdm_device(&[], None);
     let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
     let color = [vk::AttachmentReference2::default()
         .attachment(0)
@@ -318,7 +309,7 @@ fn a_dependencys_chained_memory_barrier_is_translated() {
     // SAFETY: the create info lives across the call.
     let pass = unsafe { d.create_render_pass2(&info, None) }
         .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()));
-    let messages = crate::vk::layer::take_real_messages();
+    let messages = crate::support::device::take_real_messages();
     assert!(
         messages.is_empty(),
         "the density-map stage or access reached the driver: {messages:#?}"
@@ -349,13 +340,13 @@ fn queue_family_release_halves_are_left_alone() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let d = fdm_device(&vk);
+    let d = vk.fdm_device(&[], None);
     let (pool, cb) = pool_and_buffer(&d);
     let range = crate::support::vulkan::range(0, 2);
     // SAFETY: the test's own objects; structs live across the calls.
     unsafe {
         let image = d
-            .create_image(&crate::vk::layer::fdm_image_info(), None)
+            .create_image(&crate::support::device::fdm_image_info(), None)
             .expect("vkCreateImage");
         let req = d.get_image_memory_requirements(image);
         let memory = d

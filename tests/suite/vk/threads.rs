@@ -2,7 +2,7 @@
 //! command buffers through the layer concurrently, each from its own command pool, while another
 //! thread creates and destroys density-map images and views in a loop.
 //!
-//! Stack as in [`crate::vk::layer`], on the `nvidia` profile. Each iteration of a worker records, in
+//! Stack as in [`crate::support::device`], on the `nvidia` profile. Each iteration of a worker records, in
 //! one command buffer: an image barrier with density-map bits (`vkCmdPipelineBarrier`), a render
 //! pass v2 with a density attachment on a framebuffer holding the density view, dynamic rendering
 //! with `VkRenderingFragmentDensityMapAttachmentInfoEXT`, and a synchronization2 barrier with
@@ -18,7 +18,7 @@
 //!
 //! - No deadlock: a watchdog ends the process with a failure after [`DEADLINE`].
 //! - No crash, the double records no misuse, and validation reports nothing but validation
-//!   1.3.239's stage false positives ([`crate::vk::layer::assert_only_stage_false_positives`]).
+//!   1.3.239's stage false positives ([`crate::support::device::assert_only_stage_false_positives`]).
 //! - Every pass and rendering reached the driver with a shading-rate attachment.
 //!
 //! `FOVEA_THREADS_ITERATIONS` sets the iterations per worker (default 200), e.g. for a run under
@@ -31,8 +31,8 @@ use std::time::{Duration, Instant};
 use ash::vk;
 use fovea_vkdouble::Profile;
 
-use crate::vk::layer::{
-    assert_only_stage_false_positives, env, fdm_image_info, take_messages, Vk, FDM,
+use crate::support::device::{
+    assert_only_stage_false_positives, env, fdm_image_info, take_messages, Vk,
 };
 
 const WORKERS: usize = 4;
@@ -381,12 +381,7 @@ fn recording_on_four_threads_while_density_images_come_and_go() {
     let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
         return;
     };
-    let mut features = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
-        .fragment_density_map(true)
-        .fragment_density_map_non_subsampled_images(true);
-    let d = vk
-        .device(&[FDM], Some(&mut features))
-        .unwrap_or_else(|e| panic!("vkCreateDevice: {e}; {:?}", take_messages()));
+    let d = vk.fdm_device(&[], None);
     // SAFETY: plain queries on live objects.
     let (memory, queue) = unsafe {
         (

@@ -443,9 +443,9 @@ pub(super) fn run_with(
     dir: &std::path::Path,
     refresh: Option<Level>,
 ) -> Option<Outcome> {
-    let (_serial, env) = crate::vk::layer::env()?;
+    let (_serial, env) = crate::support::device::env()?;
     env.double.set_profile(Some(profile));
-    crate::vk::layer::assert_no_double_errors(env);
+    crate::support::device::assert_no_double_errors(env);
     env.double.clear();
     vulkan::take_messages();
     let app = App::new(Chain::fovea().unwrap(), &["XR_KHR_vulkan_enable2"], API_1_0).unwrap();

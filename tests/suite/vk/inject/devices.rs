@@ -205,7 +205,7 @@ fn only_the_sessions_device_gets_shading_rate_attachments() {
             std::env::set_var("FOVEA_INJECT_LEVEL", "3");
             pick_lavapipe();
             for profile in [Profile::Nvidia, Profile::Amd] {
-                let Some((_serial, env)) = crate::vk::layer::env() else {
+                let Some((_serial, env)) = crate::support::device::env() else {
                     return;
                 };
                 env.double.set_profile(Some(profile));
