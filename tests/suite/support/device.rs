@@ -173,6 +173,14 @@ pub fn env() -> Option<(Serial, &'static Env)> {
     }
 }
 
+/// The stack on `profile` with fovea's layer on top: [`env`] and an instance on it ([`Vk::new`]);
+/// `None` where a system piece is missing (the test then skips).
+pub fn with_fovea(profile: Profile) -> Option<(Serial, &'static Env, Vk)> {
+    let (serial, env) = env()?;
+    let vk = Vk::new(env, profile, true)?;
+    Some((serial, env, vk))
+}
+
 /// An instance with the stack above (fovea's layer optional) and lavapipe's physical device.
 pub struct Vk {
     pub instance: ash::Instance,
@@ -501,6 +509,17 @@ impl Dev {
                 .expect("vkQueueSubmit");
             self.d.queue_wait_idle(self.queue).expect("vkQueueWaitIdle");
         }
+    }
+
+    /// The end of a test on this device: the device destroyed ([`Dev::destroy`]), the double's
+    /// records free of misuse, the instance destroyed, and validation silent but for its stage
+    /// false positives ([`assert_only_stage_false_positives`]), which includes any object left
+    /// alive at `vkDestroyDevice`.
+    pub fn finish(self, env: &Env, vk: Vk) {
+        self.destroy();
+        assert_eq!(env.double.errors(), Vec::<String>::new());
+        drop(vk);
+        assert_only_stage_false_positives();
     }
 
     /// Waits for the device, then destroys the pool and the device (everything else made from

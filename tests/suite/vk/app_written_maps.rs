@@ -694,10 +694,7 @@ fn a_pass_that_moves_its_map_into_the_density_layout_keeps_the_apps_layouts() {
         dev.free(back);
         app.destroy(&dev);
     }
-    dev.destroy();
-    assert_eq!(env.double.errors(), Vec::<String>::new());
-    drop(vk);
-    assert_only_stage_false_positives();
+    dev.finish(env, vk);
 }
 
 /// A pass inside the application's conditional rendering, with the condition false and true: the
@@ -754,10 +751,7 @@ fn maps_read_inside_conditional_rendering_shade_whatever_the_condition() {
         dev.free(condition);
         app.destroy(&dev);
     }
-    dev.destroy();
-    assert_eq!(env.double.errors(), Vec::<String>::new());
-    drop(vk);
-    assert_only_stage_false_positives();
+    dev.finish(env, vk);
 }
 
 /// The barriers the double saw recorded in command buffers with `cb`'s handle.
@@ -827,10 +821,7 @@ fn a_map_read_again_unchanged_costs_no_barrier() {
         dev.d.device_wait_idle().expect("idle");
         app.destroy(&dev);
     }
-    dev.destroy();
-    assert_eq!(env.double.errors(), Vec::<String>::new());
-    drop(vk);
-    assert_only_stage_false_positives();
+    dev.finish(env, vk);
 }
 
 /// A secondary command buffer (`SIMULTANEOUS_USE`) renders with the map through dynamic rendering
@@ -957,8 +948,5 @@ fn a_secondary_executed_from_two_primaries_shades_with_each_primarys_map() {
         }
         app.destroy(&dev);
     }
-    dev.destroy();
-    assert_eq!(env.double.errors(), Vec::<String>::new());
-    drop(vk);
-    assert_only_stage_false_positives();
+    dev.finish(env, vk);
 }

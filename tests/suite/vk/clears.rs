@@ -15,7 +15,7 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
-use crate::support::device::{assert_only_stage_false_positives, env, Dev, Env, Vk};
+use crate::support::device::{with_fovea, Dev, Env};
 use crate::support::vulkan::{attachments2, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE};
 
 /// The density map's side in texels (the `nvidia` profile's 16×16 texel).
@@ -161,8 +161,7 @@ fn assert_full_rate(read: &[Value], what: &str) {
 /// nothing ahead of them.
 #[test]
 fn shadows_are_cleared_ahead_of_the_next_submit_not_at_creation() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let dev = Dev::new(&vk, vk.fdm_device(&[], None));
@@ -198,10 +197,7 @@ fn shadows_are_cleared_ahead_of_the_next_submit_not_at_creation() {
     }
     density.destroy(&dev.d);
     color.destroy(&dev.d);
-    dev.destroy();
-    assert_eq!(env.double.errors(), Vec::<String>::new());
-    drop(vk);
-    assert_only_stage_false_positives();
+    dev.finish(env, vk);
 }
 
 /// A density map destroyed before any submit drops its clear: the next submit is the
@@ -210,8 +206,7 @@ fn shadows_are_cleared_ahead_of_the_next_submit_not_at_creation() {
 /// shadow destroyed in use.
 #[test]
 fn destroyed_density_maps_drop_or_outlive_their_clears() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let dev = Dev::new(&vk, vk.fdm_device(&[], None));
@@ -241,10 +236,7 @@ fn destroyed_density_maps_drop_or_outlive_their_clears() {
     }
     map.destroy(&dev.d);
     assert_eq!(env.double.calls("vkQueueSubmit"), 3, "the clear went ahead");
-    dev.destroy();
-    assert_eq!(env.double.errors(), Vec::<String>::new());
-    drop(vk);
-    assert_only_stage_false_positives();
+    dev.finish(env, vk);
 }
 
 /// Fail open: the shadow's memory (the second `vkAllocateMemory` below fovea: the colour image's
@@ -253,8 +245,7 @@ fn destroyed_density_maps_drop_or_outlive_their_clears() {
 /// nothing: the driver never sees the density view as a shading-rate attachment.
 #[test]
 fn a_shadow_that_cannot_be_made_leaves_the_image_at_full_rate() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let dev = Dev::new(&vk, vk.fdm_device(&[], None));
@@ -295,10 +286,7 @@ fn a_shadow_that_cannot_be_made_leaves_the_image_at_full_rate() {
         env.double.clear();
     }
     color.destroy(&dev.d);
-    dev.destroy();
-    assert_eq!(env.double.errors(), Vec::<String>::new());
-    drop(vk);
-    assert_only_stage_false_positives();
+    dev.finish(env, vk);
 }
 
 /// Density-map stage and access bits in a semaphore wait (`vkQueueSubmit`'s `pWaitDstStageMask`,
@@ -307,8 +295,7 @@ fn a_shadow_that_cannot_be_made_leaves_the_image_at_full_rate() {
 /// density maps, and says nothing here.
 #[test]
 fn submits_and_event_sets_lose_the_density_map_bits() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let dev = Dev::new(&vk, vk.fdm_device(&[], None));
@@ -377,8 +364,5 @@ fn submits_and_event_sets_lose_the_density_map_bits() {
         d.destroy_semaphore(semaphore, None);
     }
     map.destroy(&dev.d);
-    dev.destroy();
-    assert_eq!(env.double.errors(), Vec::<String>::new());
-    drop(vk);
-    assert_only_stage_false_positives();
+    dev.finish(env, vk);
 }

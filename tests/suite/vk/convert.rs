@@ -18,7 +18,9 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
-use crate::support::device::{assert_only_stage_false_positives, env, Dev, Env, Features, Vk};
+use crate::support::device::{
+    assert_only_stage_false_positives, env, with_fovea, Dev, Env, Features, Vk,
+};
 use crate::support::vulkan::{
     allocate_info, attachments2, range, spv, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
 };
@@ -669,8 +671,7 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32, lose: b
 /// of the application's bytes, frame after frame, and the application's compute bindings survive.
 #[test]
 fn app_written_maps_are_converted_for_render_passes() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     frame(env, &vk, Profile::Nvidia, Begin::Framebuffer, 1, false);
@@ -701,8 +702,7 @@ fn app_written_maps_are_converted_for_dynamic_rendering_layered_and_merged() {
 /// its full-rate clear) and the application's dispatch after the pass still finds its own state.
 #[test]
 fn unrestorable_bindings_leave_the_map_at_full_rate() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     frame(env, &vk, Profile::Nvidia, Begin::Framebuffer, 1, true);

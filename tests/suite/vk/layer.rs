@@ -18,7 +18,9 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 use serde_json::json;
 
-use crate::support::device::{assert_no_messages, env, fdm_image_info, take_messages, Vk, FDM};
+use crate::support::device::{
+    assert_no_messages, env, fdm_image_info, take_messages, with_fovea, Vk, FDM,
+};
 
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
 
@@ -227,8 +229,7 @@ fn emulated_density_maps_on_shading_rate_devices() {
 /// the driver gets exactly what the application asked for.
 #[test]
 fn device_without_density_maps_is_untouched() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let device = vk.device(&[], None).expect("vkCreateDevice");
@@ -244,8 +245,7 @@ fn device_without_density_maps_is_untouched() {
 /// An application that enables shading rates itself keeps them: nothing is rewritten.
 #[test]
 fn application_using_shading_rates_is_not_touched() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let mut fsr = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
@@ -422,8 +422,7 @@ fn checked_in_manifest() {
 /// it, the validation layer would stay silent and every "no message" in the suite would say less.
 #[test]
 fn synchronization_validation_reports_an_unsynchronized_write() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::None, true) else {
+    let Some((_serial, _env, vk)) = with_fovea(Profile::None) else {
         return;
     };
     let device = vk.device(&[], None).expect("vkCreateDevice");

@@ -5,7 +5,7 @@
 use ash::vk;
 use fovea_vkdouble::Profile;
 
-use crate::support::device::{assert_only_stage_false_positives, env, take_messages, Vk};
+use crate::support::device::{assert_only_stage_false_positives, take_messages, with_fovea};
 
 const FDM_STAGE: vk::PipelineStageFlags = vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT;
 const FSR_STAGE: vk::PipelineStageFlags =
@@ -41,8 +41,7 @@ fn pool_and_buffer(d: &ash::Device) -> (vk::CommandPool, vk::CommandBuffer) {
 /// were left out, and the newest are there, with the density-map stage translated.
 #[test]
 fn recording_for_long_keeps_the_records_bounded() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let d = vk.fdm_device(&[], None);
@@ -126,8 +125,7 @@ fn recording_for_long_keeps_the_records_bounded() {
 /// driver's device, reports any density-map stage that gets through.
 #[test]
 fn event_and_timestamp_stages_are_translated() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, _env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let d = vk.fdm_device(&[], None);
@@ -188,8 +186,7 @@ fn event_and_timestamp_stages_are_translated() {
 fn an_uncopyable_chain_falls_back_for_its_pipeline_only() {
     use crate::support::vulkan::{spv, stages, Fixed, COLOR};
     use ash::vk::Handle as _;
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let d = vk.fdm_device(&[], None);
@@ -274,8 +271,7 @@ fn an_uncopyable_chain_falls_back_for_its_pipeline_only() {
 #[test]
 fn a_dependencys_chained_memory_barrier_is_translated() {
     use crate::support::vulkan::attachments2;
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, _env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let d = vk.fdm_device(&[], None);
@@ -336,8 +332,7 @@ fn a_dependencys_chained_memory_barrier_is_translated() {
 #[test]
 fn queue_family_release_halves_are_left_alone() {
     use ash::vk::Handle as _;
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let d = vk.fdm_device(&[], None);

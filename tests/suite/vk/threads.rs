@@ -32,7 +32,7 @@ use ash::vk;
 use fovea_vkdouble::Profile;
 
 use crate::support::device::{
-    assert_only_stage_false_positives, env, fdm_image_info, take_messages, Vk,
+    assert_only_stage_false_positives, fdm_image_info, take_messages, with_fovea,
 };
 
 const WORKERS: usize = 4;
@@ -377,8 +377,7 @@ impl Worker {
 /// known false positive.
 #[test]
 fn recording_on_four_threads_while_density_images_come_and_go() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
         return;
     };
     let d = vk.fdm_device(&[], None);
