@@ -21,7 +21,7 @@ use fovea_harness::skip;
 use fovea_vkdouble::{Loaded, Profile};
 use serde_json::json;
 
-use super::vulkan::{allocate_info, image_info, range};
+use super::vulkan::{allocate_info, image_info, range, spv};
 
 const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
 pub const FDM: &CStr = c"VK_EXT_fragment_density_map";
@@ -474,6 +474,87 @@ impl Dev {
         }
     }
 
+    /// A [`ComputePipeline`] of the SPIR-V `code`: binding 0 one `ty` descriptor, `push` bytes of
+    /// push constants.
+    pub fn compute_pipeline(
+        &self,
+        code: &[u8],
+        ty: vk::DescriptorType,
+        push: u32,
+    ) -> ComputePipeline {
+        // SAFETY: the device is alive; structs live across the calls.
+        unsafe {
+            let d = &self.d;
+            let bindings = [vk::DescriptorSetLayoutBinding::default()
+                .binding(0)
+                .descriptor_type(ty)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::COMPUTE)];
+            let set_layout = d
+                .create_descriptor_set_layout(
+                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
+                    None,
+                )
+                .expect("set layout");
+            let ranges = [vk::PushConstantRange {
+                stage_flags: vk::ShaderStageFlags::COMPUTE,
+                offset: 0,
+                size: push,
+            }];
+            let set_layouts = [set_layout];
+            let layout = d
+                .create_pipeline_layout(
+                    &vk::PipelineLayoutCreateInfo::default()
+                        .set_layouts(&set_layouts)
+                        .push_constant_ranges(&ranges),
+                    None,
+                )
+                .expect("pipeline layout");
+            let code = spv(code);
+            let module = d
+                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None)
+                .expect("module");
+            let info = [vk::ComputePipelineCreateInfo::default()
+                .stage(
+                    vk::PipelineShaderStageCreateInfo::default()
+                        .stage(vk::ShaderStageFlags::COMPUTE)
+                        .module(module)
+                        .name(c"main"),
+                )
+                .layout(layout)];
+            let pipeline = d
+                .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
+                .expect("compute pipeline")[0];
+            d.destroy_shader_module(module, None);
+            let sizes = [vk::DescriptorPoolSize {
+                ty,
+                descriptor_count: 1,
+            }];
+            let pool = d
+                .create_descriptor_pool(
+                    &vk::DescriptorPoolCreateInfo::default()
+                        .max_sets(1)
+                        .pool_sizes(&sizes),
+                    None,
+                )
+                .expect("pool");
+            let set = d
+                .allocate_descriptor_sets(
+                    &vk::DescriptorSetAllocateInfo::default()
+                        .descriptor_pool(pool)
+                        .set_layouts(&set_layouts),
+                )
+                .expect("set")[0];
+            ComputePipeline {
+                set_layout,
+                layout,
+                pipeline,
+                pool,
+                set,
+            }
+        }
+    }
+
     /// A primary command buffer from the pool, recording.
     pub fn begin(&self) -> vk::CommandBuffer {
         // SAFETY: the pool is this device's and used by this thread only.
@@ -530,6 +611,29 @@ impl Dev {
             self.d.device_wait_idle().expect("idle");
             self.d.destroy_command_pool(self.pool, None);
             self.d.destroy_device(None);
+        }
+    }
+}
+
+/// A compute pipeline entered at `main`, with one descriptor set (from a pool of its own) of one
+/// binding 0, and push constants; made by [`Dev::compute_pipeline`], its set written by the caller.
+pub struct ComputePipeline {
+    pub set_layout: vk::DescriptorSetLayout,
+    pub layout: vk::PipelineLayout,
+    pub pipeline: vk::Pipeline,
+    pub pool: vk::DescriptorPool,
+    pub set: vk::DescriptorSet,
+}
+
+impl ComputePipeline {
+    /// Destroys it; nothing may use it any more.
+    pub fn destroy(self, d: &ash::Device) {
+        // SAFETY: the caller's promise; each object destroyed once.
+        unsafe {
+            d.destroy_descriptor_pool(self.pool, None);
+            d.destroy_pipeline(self.pipeline, None);
+            d.destroy_pipeline_layout(self.layout, None);
+            d.destroy_descriptor_set_layout(self.set_layout, None);
         }
     }
 }

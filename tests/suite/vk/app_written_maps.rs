@@ -16,11 +16,9 @@
 use ash::vk;
 use fovea_vkdouble::Profile;
 
-use crate::support::device::Dev;
 use crate::support::device::{assert_only_stage_false_positives, env, Env, Vk};
-use crate::support::vulkan::{
-    attachments2, range, spv, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
-};
+use crate::support::device::{ComputePipeline, Dev};
+use crate::support::vulkan::{attachments2, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE};
 use crate::vk::convert::{codes_of, converting_device, model_codes, read_at_submit, Buffer};
 
 /// `shaders/write_map.comp`: the application's compute path.
@@ -89,11 +87,7 @@ struct App {
     writer_fb: vk::Framebuffer,
     reader: vk::RenderPass,
     reader_fb: vk::Framebuffer,
-    set_layout: vk::DescriptorSetLayout,
-    layout: vk::PipelineLayout,
-    pipeline: vk::Pipeline,
-    pool: vk::DescriptorPool,
-    set: vk::DescriptorSet,
+    compute: ComputePipeline,
 }
 
 /// The pass that reads the map: colour + density attachment (the density-map struct), the map
@@ -205,66 +199,8 @@ impl App {
                     None,
                 )
                 .expect("vkCreateFramebuffer (the map's reader)");
-            let bindings = [vk::DescriptorSetLayoutBinding::default()
-                .binding(0)
-                .descriptor_type(vk::DescriptorType::STORAGE_IMAGE)
-                .descriptor_count(1)
-                .stage_flags(vk::ShaderStageFlags::COMPUTE)];
-            let set_layout = d
-                .create_descriptor_set_layout(
-                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
-                    None,
-                )
-                .expect("set layout");
-            let ranges = [vk::PushConstantRange {
-                stage_flags: vk::ShaderStageFlags::COMPUTE,
-                offset: 0,
-                size: 4,
-            }];
-            let set_layouts = [set_layout];
-            let layout = d
-                .create_pipeline_layout(
-                    &vk::PipelineLayoutCreateInfo::default()
-                        .set_layouts(&set_layouts)
-                        .push_constant_ranges(&ranges),
-                    None,
-                )
-                .expect("pipeline layout");
-            let code = spv(WRITE_MAP);
-            let module = d
-                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None)
-                .expect("module");
-            let info = [vk::ComputePipelineCreateInfo::default()
-                .stage(
-                    vk::PipelineShaderStageCreateInfo::default()
-                        .stage(vk::ShaderStageFlags::COMPUTE)
-                        .module(module)
-                        .name(c"main"),
-                )
-                .layout(layout)];
-            let pipeline = d
-                .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
-                .expect("compute pipeline")[0];
-            d.destroy_shader_module(module, None);
-            let sizes = [vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::STORAGE_IMAGE,
-                descriptor_count: 1,
-            }];
-            let pool = d
-                .create_descriptor_pool(
-                    &vk::DescriptorPoolCreateInfo::default()
-                        .max_sets(1)
-                        .pool_sizes(&sizes),
-                    None,
-                )
-                .expect("pool");
-            let set = d
-                .allocate_descriptor_sets(
-                    &vk::DescriptorSetAllocateInfo::default()
-                        .descriptor_pool(pool)
-                        .set_layouts(&set_layouts),
-                )
-                .expect("set")[0];
+            let compute = dev.compute_pipeline(WRITE_MAP, vk::DescriptorType::STORAGE_IMAGE, 4);
+            let set = compute.set;
             let image_info = [vk::DescriptorImageInfo {
                 sampler: vk::Sampler::null(),
                 image_view: map.2,
@@ -286,11 +222,7 @@ impl App {
                 writer_fb,
                 reader,
                 reader_fb,
-                set_layout,
-                layout,
-                pipeline,
-                pool,
-                set,
+                compute,
             }
         }
     }
@@ -383,18 +315,18 @@ impl App {
                     vk::AccessFlags::SHADER_WRITE,
                 )],
             );
-            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, self.pipeline);
+            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, self.compute.pipeline);
             d.cmd_bind_descriptor_sets(
                 cb,
                 vk::PipelineBindPoint::COMPUTE,
-                self.layout,
+                self.compute.layout,
                 0,
-                &[self.set],
+                &[self.compute.set],
                 &[],
             );
             d.cmd_push_constants(
                 cb,
-                self.layout,
+                self.compute.layout,
                 vk::ShaderStageFlags::COMPUTE,
                 0,
                 &frame.to_ne_bytes(),
@@ -467,12 +399,9 @@ impl App {
     /// The device must be idle.
     unsafe fn destroy(self, dev: &Dev) {
         let d = &dev.d;
+        self.compute.destroy(d);
         // SAFETY: as the caller promised; each object destroyed once.
         unsafe {
-            d.destroy_descriptor_pool(self.pool, None);
-            d.destroy_pipeline(self.pipeline, None);
-            d.destroy_pipeline_layout(self.layout, None);
-            d.destroy_descriptor_set_layout(self.set_layout, None);
             d.destroy_framebuffer(self.reader_fb, None);
             d.destroy_framebuffer(self.writer_fb, None);
             d.destroy_render_pass(self.reader, None);

@@ -19,10 +19,10 @@ use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
 use crate::support::device::{
-    assert_only_stage_false_positives, env, with_fovea, Dev, Env, Features, Vk,
+    assert_only_stage_false_positives, env, with_fovea, ComputePipeline, Dev, Env, Features, Vk,
 };
 use crate::support::vulkan::{
-    allocate_info, attachments2, range, spv, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
+    allocate_info, attachments2, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
 };
 
 /// The application's compute shader: `value[index] = word` (push constants `{word, index}`).
@@ -66,11 +66,7 @@ pub(crate) struct Buffer {
 
 /// The application's compute work: a pipeline that stores its push constant through its set.
 struct Compute {
-    set_layout: vk::DescriptorSetLayout,
-    layout: vk::PipelineLayout,
-    pipeline: vk::Pipeline,
-    pool: vk::DescriptorPool,
-    set: vk::DescriptorSet,
+    pipe: ComputePipeline,
     out: Buffer,
 }
 
@@ -155,67 +151,10 @@ impl Dev {
         // SAFETY: structs live across the calls.
         unsafe {
             let d = &self.d;
-            let bindings = [vk::DescriptorSetLayoutBinding::default()
-                .binding(0)
-                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                .descriptor_count(1)
-                .stage_flags(vk::ShaderStageFlags::COMPUTE)];
-            let set_layout = d
-                .create_descriptor_set_layout(
-                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
-                    None,
-                )
-                .expect("set layout");
-            let ranges = [vk::PushConstantRange {
-                stage_flags: vk::ShaderStageFlags::COMPUTE,
-                offset: 0,
-                // More than the shader reads, room for the ranges of `bind_compute(.., true)`.
-                size: 64,
-            }];
-            let set_layouts = [set_layout];
-            let layout = d
-                .create_pipeline_layout(
-                    &vk::PipelineLayoutCreateInfo::default()
-                        .set_layouts(&set_layouts)
-                        .push_constant_ranges(&ranges),
-                    None,
-                )
-                .expect("pipeline layout");
-            let code = spv(STORE);
-            let module = d
-                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None)
-                .expect("module");
-            let info = [vk::ComputePipelineCreateInfo::default()
-                .stage(
-                    vk::PipelineShaderStageCreateInfo::default()
-                        .stage(vk::ShaderStageFlags::COMPUTE)
-                        .module(module)
-                        .name(c"main"),
-                )
-                .layout(layout)];
-            let pipeline = d
-                .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
-                .expect("compute pipeline")[0];
-            d.destroy_shader_module(module, None);
-            let sizes = [vk::DescriptorPoolSize {
-                ty: vk::DescriptorType::STORAGE_BUFFER,
-                descriptor_count: 1,
-            }];
-            let pool = d
-                .create_descriptor_pool(
-                    &vk::DescriptorPoolCreateInfo::default()
-                        .max_sets(1)
-                        .pool_sizes(&sizes),
-                    None,
-                )
-                .expect("pool");
-            let set = d
-                .allocate_descriptor_sets(
-                    &vk::DescriptorSetAllocateInfo::default()
-                        .descriptor_pool(pool)
-                        .set_layouts(&set_layouts),
-                )
-                .expect("set")[0];
+            // More push constants than the shader reads, room for the ranges of
+            // `bind_compute(.., true)`.
+            let pipe = self.compute_pipeline(STORE, vk::DescriptorType::STORAGE_BUFFER, 64);
+            let set = pipe.set;
             let out = self.buffer(64, vk::BufferUsageFlags::STORAGE_BUFFER);
             self.write(&out, &[0; 64]);
             let info = [vk::DescriptorBufferInfo {
@@ -231,25 +170,12 @@ impl Dev {
                     .buffer_info(&info)],
                 &[],
             );
-            Compute {
-                set_layout,
-                layout,
-                pipeline,
-                pool,
-                set,
-                out,
-            }
+            Compute { pipe, out }
         }
     }
 
     fn destroy_compute(&self, c: Compute) {
-        // SAFETY: idle; each object destroyed once.
-        unsafe {
-            self.d.destroy_descriptor_pool(c.pool, None);
-            self.d.destroy_pipeline(c.pipeline, None);
-            self.d.destroy_pipeline_layout(c.layout, None);
-            self.d.destroy_descriptor_set_layout(c.set_layout, None);
-        }
+        c.pipe.destroy(&self.d);
         self.free(c.out);
     }
 
@@ -341,21 +267,21 @@ impl Dev {
         // SAFETY: `cb` is recording; the objects are alive.
         unsafe {
             self.d
-                .cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, c.pipeline);
+                .cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, c.pipe.pipeline);
             self.d.cmd_bind_descriptor_sets(
                 cb,
                 vk::PipelineBindPoint::COMPUTE,
-                c.layout,
+                c.pipe.layout,
                 0,
-                &[c.set],
+                &[c.pipe.set],
                 &[],
             );
             self.d
-                .cmd_push_constants(cb, c.layout, vk::ShaderStageFlags::COMPUTE, 0, &bytes);
+                .cmd_push_constants(cb, c.pipe.layout, vk::ShaderStageFlags::COMPUTE, 0, &bytes);
             for i in 0..8u32 * u32::from(many) {
                 self.d.cmd_push_constants(
                     cb,
-                    c.layout,
+                    c.pipe.layout,
                     vk::ShaderStageFlags::COMPUTE,
                     8 + 4 * i,
                     &i.to_ne_bytes(),
