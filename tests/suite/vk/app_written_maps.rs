@@ -18,7 +18,7 @@ use fovea_vkdouble::Profile;
 
 use crate::support::device::{assert_only_stage_false_positives, env, Env, Vk};
 use crate::support::device::{ComputePipeline, Dev};
-use crate::support::vulkan::{attachments2, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE};
+use crate::support::vulkan::{density_pass, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE};
 use crate::vk::convert::{codes_of, converting_device, model_codes, read_at_submit, Buffer};
 
 /// `shaders/write_map.comp`: the application's compute path.
@@ -96,30 +96,9 @@ struct App {
 /// # Safety
 /// The device must be alive.
 unsafe fn reader_pass(dev: &Dev, initial: vk::ImageLayout) -> vk::RenderPass {
-    let mut atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
-    atts[1].initial_layout = initial;
-    let color_ref = [vk::AttachmentReference2::default()
-        .attachment(0)
-        .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-    let subpass = [vk::SubpassDescription2::default()
-        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-        .color_attachments(&color_ref)];
-    let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
-        .fragment_density_map_attachment(vk::AttachmentReference {
-            attachment: 1,
-            layout: FDM_LAYOUT,
-        });
-    // SAFETY: as the caller promised; the structs live across the call.
-    unsafe {
-        dev.d.create_render_pass2(
-            &vk::RenderPassCreateInfo2::default()
-                .attachments(&atts)
-                .subpasses(&subpass)
-                .push_next(&mut fdm),
-            None,
-        )
-    }
-    .expect("vkCreateRenderPass2")
+    // SAFETY: as the caller promised.
+    unsafe { density_pass(&dev.d, vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL, initial) }
+        .expect("vkCreateRenderPass2")
 }
 
 impl App {

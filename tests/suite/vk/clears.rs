@@ -16,7 +16,7 @@ use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
 use crate::support::device::{with_fovea, Dev, Env};
-use crate::support::vulkan::{attachments2, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE};
+use crate::support::vulkan::{density_pass, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE};
 
 /// The density map's side in texels (the `nvidia` profile's 16×16 texel).
 const N: u32 = SIZE / 16;
@@ -25,33 +25,16 @@ const N: u32 = SIZE / 16;
 impl Dev {
     /// A render pass v2 with a colour and a density-map attachment, and its framebuffer.
     fn pass(&self, color: &Image, density: &Image) -> (vk::RenderPass, vk::Framebuffer) {
-        let mut atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
-        // The map is never written: its content is undefined when the pass begins, and it is
-        // still in its initial layout.
-        atts[1].initial_layout = vk::ImageLayout::UNDEFINED;
-        let color_ref = [vk::AttachmentReference2::default()
-            .attachment(0)
-            .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-        let subpass = [vk::SubpassDescription2::default()
-            .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-            .color_attachments(&color_ref)];
-        let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
-            .fragment_density_map_attachment(vk::AttachmentReference {
-                attachment: 1,
-                layout: FDM_LAYOUT,
-            });
         // SAFETY: structs live across the calls.
         unsafe {
-            let pass = self
-                .d
-                .create_render_pass2(
-                    &vk::RenderPassCreateInfo2::default()
-                        .attachments(&atts)
-                        .subpasses(&subpass)
-                        .push_next(&mut fdm),
-                    None,
-                )
-                .expect("vkCreateRenderPass2");
+            // The map is never written: its content is undefined when the pass begins, and it is
+            // still in its initial layout.
+            let pass = density_pass(
+                &self.d,
+                vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                vk::ImageLayout::UNDEFINED,
+            )
+            .expect("vkCreateRenderPass2");
             let views = [color.view, density.view];
             let fb = self
                 .d

@@ -22,7 +22,7 @@ use crate::support::device::{
     assert_only_stage_false_positives, env, with_fovea, ComputePipeline, Dev, Env, Features, Vk,
 };
 use crate::support::vulkan::{
-    allocate_info, attachments2, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
+    allocate_info, density_pass, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
 };
 
 /// The application's compute shader: `value[index] = word` (push constants `{word, index}`).
@@ -426,26 +426,7 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32, lose: b
             );
             match pass {
                 Begin::Framebuffer | Begin::Imageless => {
-                    let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
-                    let color_ref = [vk::AttachmentReference2::default()
-                        .attachment(0)
-                        .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-                    let subpass = [vk::SubpassDescription2::default()
-                        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-                        .color_attachments(&color_ref)];
-                    let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
-                        .fragment_density_map_attachment(vk::AttachmentReference {
-                            attachment: 1,
-                            layout: FDM_LAYOUT,
-                        });
-                    let rp = d
-                        .create_render_pass2(
-                            &vk::RenderPassCreateInfo2::default()
-                                .attachments(&atts)
-                                .subpasses(&subpass)
-                                .push_next(&mut fdm),
-                            None,
-                        )
+                    let rp = density_pass(d, vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL, FDM_LAYOUT)
                         .expect("vkCreateRenderPass2");
                     let views = [color_view, map_view];
                     let color_formats = [COLOR];

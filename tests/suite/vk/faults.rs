@@ -32,7 +32,7 @@ use crate::support::device::{
     assert_only_stage_false_positives, env, take_real_messages, Env, Features, Vk,
 };
 use crate::support::vulkan::{
-    allocate_info, attachments2, draw_fullscreen, image_info, range, spv, stages, Fixed, AREA,
+    allocate_info, density_pass, draw_fullscreen, image_info, range, spv, stages, Fixed, AREA,
     CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 
@@ -182,27 +182,9 @@ impl Flow {
             let color_view = view(color, COLOR)?;
             let density_view = view(density, DENSITY)?;
 
-            let atts = attachments2(vk::ImageLayout::TRANSFER_SRC_OPTIMAL);
-            let color_ref = [vk::AttachmentReference2::default()
-                .attachment(0)
-                .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-            let subpass = [vk::SubpassDescription2::default()
-                .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-                .color_attachments(&color_ref)];
-            let mut fdm_info = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
-                .fragment_density_map_attachment(vk::AttachmentReference {
-                    attachment: 1,
-                    layout: FDM_LAYOUT,
-                });
             let pass = check(
                 "vkCreateRenderPass2",
-                d.create_render_pass2(
-                    &vk::RenderPassCreateInfo2::default()
-                        .attachments(&atts)
-                        .subpasses(&subpass)
-                        .push_next(&mut fdm_info),
-                    None,
-                ),
+                density_pass(&d, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, FDM_LAYOUT),
             )?;
             self.pass = Some(pass);
             let list = [color_view, density_view];

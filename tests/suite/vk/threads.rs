@@ -34,15 +34,14 @@ use fovea_vkdouble::Profile;
 use crate::support::device::{
     assert_only_stage_false_positives, fdm_image_info, take_messages, with_fovea,
 };
+use crate::support::vulkan::{
+    allocate_info, density_pass, image_info, range, COLOR, DENSITY, FDM_LAYOUT, SIZE,
+};
 
 const WORKERS: usize = 4;
 /// The whole run must end within this (debug build, two shared cores, or valgrind).
 const DEADLINE: Duration = Duration::from_secs(300);
 /// The colour attachment's width and height; the density map has one texel per 16×16.
-const SIZE: u32 = 64;
-const COLOR: vk::Format = vk::Format::R8G8B8A8_UNORM;
-const DENSITY: vk::Format = vk::Format::R8G8_UNORM;
-const FDM_LAYOUT: vk::ImageLayout = vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
 const COLOR_LAYOUT: vk::ImageLayout = vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL;
 
 fn iterations() -> u64 {
@@ -50,16 +49,6 @@ fn iterations() -> u64 {
         .ok()
         .and_then(|v| v.trim().parse().ok())
         .unwrap_or(200)
-}
-
-fn range() -> vk::ImageSubresourceRange {
-    vk::ImageSubresourceRange {
-        aspect_mask: vk::ImageAspectFlags::COLOR,
-        base_mip_level: 0,
-        level_count: 1,
-        base_array_layer: 0,
-        layer_count: 1,
-    }
 }
 
 /// An image with memory bound, and a 2D view of its first layer.
@@ -81,14 +70,10 @@ impl Image {
         unsafe {
             let image = d.create_image(info, None).expect("vkCreateImage");
             let req = d.get_image_memory_requirements(image);
-            let ty = (0..memory.memory_type_count)
-                .find(|&i| req.memory_type_bits & (1 << i) != 0)
-                .expect("a memory type");
+            // The first memory type the image allows, whatever its properties.
             let memory = d
                 .allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(ty),
+                    &allocate_info(memory, req, vk::MemoryPropertyFlags::empty()),
                     None,
                 )
                 .expect("vkAllocateMemory");
@@ -100,7 +85,7 @@ impl Image {
                         .image(image)
                         .view_type(vk::ImageViewType::TYPE_2D)
                         .format(info.format)
-                        .subresource_range(range()),
+                        .subresource_range(range(0, 1)),
                     None,
                 )
                 .expect("vkCreateImageView");
@@ -124,65 +109,14 @@ impl Image {
     }
 }
 
-fn image_info(
-    format: vk::Format,
-    size: u32,
-    usage: vk::ImageUsageFlags,
-) -> vk::ImageCreateInfo<'static> {
-    vk::ImageCreateInfo::default()
-        .image_type(vk::ImageType::TYPE_2D)
-        .format(format)
-        .extent(vk::Extent3D {
-            width: size,
-            height: size,
-            depth: 1,
-        })
-        .mip_levels(1)
-        .array_layers(1)
-        .samples(vk::SampleCountFlags::TYPE_1)
-        .tiling(vk::ImageTiling::OPTIMAL)
-        .usage(usage)
-}
-
 /// A colour + density pass, version 2; the colour attachment ends in `COLOR_LAYOUT` for the
 /// dynamic rendering that follows it.
 ///
 /// # Safety
 /// `d` must be alive.
 unsafe fn render_pass(d: &ash::Device) -> vk::RenderPass {
-    let atts = [
-        vk::AttachmentDescription2::default()
-            .format(COLOR)
-            .samples(vk::SampleCountFlags::TYPE_1)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
-            .store_op(vk::AttachmentStoreOp::STORE)
-            .initial_layout(vk::ImageLayout::UNDEFINED)
-            .final_layout(COLOR_LAYOUT),
-        vk::AttachmentDescription2::default()
-            .format(DENSITY)
-            .samples(vk::SampleCountFlags::TYPE_1)
-            .load_op(vk::AttachmentLoadOp::DONT_CARE)
-            .store_op(vk::AttachmentStoreOp::DONT_CARE)
-            .initial_layout(FDM_LAYOUT)
-            .final_layout(FDM_LAYOUT),
-    ];
-    let color = [vk::AttachmentReference2::default()
-        .attachment(0)
-        .layout(COLOR_LAYOUT)];
-    let subpass = [vk::SubpassDescription2::default()
-        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-        .color_attachments(&color)];
-    let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
-        .fragment_density_map_attachment(vk::AttachmentReference {
-            attachment: 1,
-            layout: FDM_LAYOUT,
-        });
-    let info = vk::RenderPassCreateInfo2::default()
-        .attachments(&atts)
-        .subpasses(&subpass)
-        .push_next(&mut fdm);
-    // SAFETY: the caller's promise; the structs live across the call.
-    unsafe { d.create_render_pass2(&info, None) }
+    // SAFETY: the caller's promise.
+    unsafe { density_pass(d, COLOR_LAYOUT, FDM_LAYOUT) }
         .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()))
 }
 
@@ -204,7 +138,7 @@ impl Worker {
             let color = Image::new(
                 d,
                 memory,
-                &image_info(COLOR, SIZE, vk::ImageUsageFlags::COLOR_ATTACHMENT),
+                &image_info(COLOR, SIZE, 1, vk::ImageUsageFlags::COLOR_ATTACHMENT),
             );
             let density = Image::new(
                 d,
@@ -212,6 +146,7 @@ impl Worker {
                 &image_info(
                     DENSITY,
                     SIZE / 16,
+                    1,
                     vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT
                         | vk::ImageUsageFlags::TRANSFER_DST,
                 ),
@@ -273,7 +208,7 @@ impl Worker {
             // pass: density-map stage and access.
             let to_dst = vk::ImageMemoryBarrier::default()
                 .image(self.density.image)
-                .subresource_range(range())
+                .subresource_range(range(0, 1))
                 .old_layout(vk::ImageLayout::UNDEFINED)
                 .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
                 .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE);
@@ -293,11 +228,11 @@ impl Worker {
                 &vk::ClearColorValue {
                     float32: [1.0, 1.0, 0.0, 0.0],
                 },
-                &[range()],
+                &[range(0, 1)],
             );
             let to_fdm = vk::ImageMemoryBarrier::default()
                 .image(self.density.image)
-                .subresource_range(range())
+                .subresource_range(range(0, 1))
                 .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
                 .new_layout(FDM_LAYOUT)
                 .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
@@ -342,7 +277,7 @@ impl Worker {
             // Synchronization2: the density map read by the next frame's density processing.
             let again = [vk::ImageMemoryBarrier2::default()
                 .image(self.density.image)
-                .subresource_range(range())
+                .subresource_range(range(0, 1))
                 .old_layout(FDM_LAYOUT)
                 .new_layout(FDM_LAYOUT)
                 .src_stage_mask(vk::PipelineStageFlags2::FRAGMENT_DENSITY_PROCESS_EXT)
