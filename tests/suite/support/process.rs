@@ -1,6 +1,7 @@
 //! Running a test in a process of its own: a child process of the test binary that runs only
-//! that test. Shared by the suite and by the simulator's tests (crates/sim/tests/sim, through a
-//! `#[path]` module), so it needs nothing but the standard library.
+//! that test. Shared by the suite and by the simulator's and the test double's tests
+//! (crates/sim/tests/sim, crates/vkdouble/tests/vkdouble: a `#[path]` module each), so it needs
+//! nothing but the standard library.
 
 use std::process::{Command, Output};
 

@@ -2,24 +2,30 @@
 //! `VK_ADD_LAYER_PATH` names the folder with its manifest and `VK_INSTANCE_LAYERS` orders the
 //! stack (first = closest to the application), with the validation layer above the double
 //! (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderInterfaceArchitecture.md>,
-//! "Table of Debug Environment Variables"). Its own process, since the variables apply to every
-//! instance the process creates.
+//! "Table of Debug Environment Variables"). In a process of its own, since the variables apply to
+//! every instance the process creates.
 
 use std::ffi::CStr;
 
 use ash::vk;
 
+use crate::process::in_own_process;
+use crate::skip;
+
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
 
-fn skip(reason: &str) {
-    if std::env::var("FOVEA_REQUIRE_SYSTEM").is_ok_and(|v| v == "1") {
-        panic!("required system component missing: {reason}");
-    }
-    eprintln!("SKIPPED: {reason}");
-}
-
+/// In a process of its own ([`crate::process::in_own_process`]): the variables it sets apply to
+/// every instance the process creates.
 #[test]
 fn instance_layers_variable_puts_the_double_under_validation() {
+    in_own_process(
+        module_path!(),
+        "instance_layers_variable_puts_the_double_under_validation",
+        instance_layers_variable_puts_the_double_under_validation_here,
+    );
+}
+
+fn instance_layers_variable_puts_the_double_under_validation_here() {
     let lib = match fovea_vkdouble::find_library() {
         Ok(l) => l,
         Err(e) => return skip(&e),

@@ -19,6 +19,8 @@ use ash::vk::Handle as _;
 use fovea_vkdouble::{Loaded, Profile, ViewRates, LAYER_NAME};
 use serde_json::{json, Value};
 
+use crate::skip;
+
 const VALIDATION: &CStr = c"VK_LAYER_KHRONOS_validation";
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
 const SIZE: u32 = 64;
@@ -27,14 +29,6 @@ static SERIAL: Mutex<()> = Mutex::new(());
 static MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
 
 /// Skips (prints why, returns `true`) or, under `FOVEA_REQUIRE_SYSTEM=1`, fails.
-fn skip(reason: &str) -> bool {
-    if std::env::var("FOVEA_REQUIRE_SYSTEM").is_ok_and(|v| v == "1") {
-        panic!("required system component missing: {reason}");
-    }
-    eprintln!("SKIPPED: {reason}");
-    true
-}
-
 unsafe extern "system" fn on_message(
     severity: vk::DebugUtilsMessageSeverityFlagsEXT,
     _types: vk::DebugUtilsMessageTypeFlagsEXT,
@@ -894,11 +888,11 @@ fn draw_case(dev: &Dev, c: &Case<'_>) -> Drawn {
             .expect("vkCreateFramebuffer")
         });
 
-        let vert = shader(dev, include_bytes!("shaders/fullscreen.vert.spv"));
+        let vert = shader(dev, include_bytes!("../shaders/fullscreen.vert.spv"));
         let frag = if c.gradient {
-            shader(dev, include_bytes!("shaders/gradient.frag.spv"))
+            shader(dev, include_bytes!("../shaders/gradient.frag.spv"))
         } else {
-            shader(dev, include_bytes!("shaders/solid.frag.spv"))
+            shader(dev, include_bytes!("../shaders/solid.frag.spv"))
         };
         let layout = d
             .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
