@@ -3,12 +3,16 @@
 //! and the foveation structs most tests fill in.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
 use fovea_harness::artifact;
 use openxr_sys as xr;
 
+pub mod device;
+pub mod process;
 pub mod vulkan;
+
+pub use process::in_own_process;
 
 /// The repository's root (the layer package's folder).
 pub fn root() -> PathBuf {
@@ -34,49 +38,6 @@ pub fn rust_files(dir: &Path) -> Vec<PathBuf> {
     walk(dir, &mut out);
     out.sort();
     out
-}
-
-/// Set in a child process of the suite: the one test it runs.
-const CHILD: &str = "FOVEA_SUITE_CHILD";
-
-/// Runs a test that needs a process of its own: one that sets environment variables the layer or a
-/// loader reads (the layer reads some once per process, and changing the environment while other
-/// tests' threads read it is a data race in C's `getenv`), or that asserts on the simulated
-/// runtime's process-wide object count, which the suite's other tests change at the same time.
-///
-/// In the test process this runs the test `name` of module `module` (pass `module_path!()`) again
-/// in a child process of this binary and returns the child's output once it passed; in that child,
-/// it runs `body` and returns `None`.
-pub fn in_own_process(module: &str, name: &str, body: impl FnOnce()) -> Option<Output> {
-    // `module_path!()` starts with the crate's name, which test names leave out.
-    let test = match module.split_once("::") {
-        Some((_, path)) => format!("{path}::{name}"),
-        None => name.to_owned(),
-    };
-    if std::env::var_os(CHILD).is_some_and(|v| v == test.as_str()) {
-        body();
-        return None;
-    }
-    let out = Command::new(std::env::current_exe().unwrap())
-        .args([&test, "--exact", "--nocapture", "--test-threads=1"])
-        .env(CHILD, &test)
-        .output()
-        .expect("run the test in a child process");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        out.status.success(),
-        "{test} failed in its own process ({}):\n{stdout}\n{stderr}",
-        out.status
-    );
-    // A misspelt name would run nothing and pass.
-    assert!(
-        stdout.contains("test result: ok. 1 passed"),
-        "{test} did not run in its own process:\n{stdout}\n{stderr}"
-    );
-    print!("{stdout}");
-    eprint!("{stderr}");
-    Some(out)
 }
 
 /// Where Debian installs explicit OpenXR API layers (the Khronos core validation layer).

@@ -1,4 +1,4 @@
-//! Vulkan set-up the `vk_*` modules share: the formats and shaders they draw with, the colour +
+//! Vulkan set-up the `vk::` modules share: the formats and shaders they draw with, the colour +
 //! density attachments of their render passes, images and their memory, and a graphics
 //! pipeline's fixed state.
 
@@ -109,6 +109,38 @@ pub fn attachments(color_final: vk::ImageLayout) -> [vk::AttachmentDescription; 
 /// [`color_and_density!`] for `vkCreateRenderPass2`.
 pub fn attachments2(color_final: vk::ImageLayout) -> [vk::AttachmentDescription2<'static>; 2] {
     color_and_density!(vk::AttachmentDescription2, color_final)
+}
+
+/// A render pass v2 of one subpass that draws into attachment 0 (in `COLOR_ATTACHMENT_OPTIMAL`)
+/// with attachment 1 as its fragment density map: the attachments of [`attachments2`], the colour
+/// one ending in `color_final`, the map starting in `map_initial`.
+///
+/// # Safety
+/// `d` must be alive.
+pub unsafe fn density_pass(
+    d: &ash::Device,
+    color_final: vk::ImageLayout,
+    map_initial: vk::ImageLayout,
+) -> Result<vk::RenderPass, vk::Result> {
+    let mut atts = attachments2(color_final);
+    atts[1].initial_layout = map_initial;
+    let color_ref = [vk::AttachmentReference2::default()
+        .attachment(0)
+        .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
+    let subpass = [vk::SubpassDescription2::default()
+        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+        .color_attachments(&color_ref)];
+    let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
+        .fragment_density_map_attachment(vk::AttachmentReference {
+            attachment: 1,
+            layout: FDM_LAYOUT,
+        });
+    let info = vk::RenderPassCreateInfo2::default()
+        .attachments(&atts)
+        .subpasses(&subpass)
+        .push_next(&mut fdm);
+    // SAFETY: the caller's promise; the structs live across the call.
+    unsafe { d.create_render_pass2(&info, None) }
 }
 
 /// The vertex and fragment stages of `modules`, each entered at `main`.

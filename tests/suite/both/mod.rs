@@ -1,0 +1,9 @@
+//! Both layers at once: OpenXR applications whose Vulkan work goes through fovea's Vulkan layer,
+//! the example application, Khronos `hello_xr` and Monado.
+
+pub mod example_modes;
+pub mod fdm_emulated;
+pub mod fdm_vulkan;
+pub mod hello_xr;
+pub mod monado;
+pub mod vulkan_enable;

@@ -1,0 +1,16 @@
+//! The Vulkan side: fovea's Vulkan layer on lavapipe under the Khronos validation layer and the
+//! shading-rate test double ([`crate::support::vulkan`]).
+
+pub mod api14;
+pub mod app_written_maps;
+pub mod clears;
+pub mod convert;
+pub mod device_matrix;
+pub mod faults;
+pub mod fuzz;
+pub mod inject;
+pub mod layer;
+pub mod passes;
+pub mod pipelines;
+pub mod recording;
+pub mod threads;

@@ -1,0 +1,13 @@
+//! The OpenXR side: the layer as the OpenXR loader and applications see it, through the harness
+//! (fake loader, simulated runtime) or the Khronos loader.
+
+pub mod below;
+pub mod faults;
+pub mod foveation_state;
+pub mod frame_pipeline;
+pub mod fuzz;
+pub mod khronos_loader;
+pub mod layer;
+pub mod settings_file;
+pub mod symmetric_fov;
+pub mod threads;
