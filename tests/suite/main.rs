@@ -14,6 +14,7 @@ fovea_harness::private_home!();
 
 mod below;
 mod c_header;
+mod docs_commands;
 mod example_modes;
 mod fault_injection;
 mod fdm_emulated;
