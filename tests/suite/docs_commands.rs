@@ -359,19 +359,15 @@ fn parse_cargo(words: &[String]) -> Option<Cargo> {
                 c.filters.push(w.clone());
             }
         } else if c.sub == "test" {
-            if HARNESS_VALUED.contains(&w.split('=').next().unwrap_or("")) && !w.contains('=') {
+            if HARNESS_VALUED.contains(&w.as_str()) {
                 args.next();
             } else if w == "--exact" {
                 c.exact = true;
             } else if !w.starts_with('-') {
                 c.filters.push(w.clone());
             }
-        } else {
-            // Criterion's or the binary's own arguments.
-            if c.sub == "run" {
-                break;
-            }
         }
+        // After `--`, `cargo bench` and `cargo run` pass criterion's or the binary's own arguments.
     }
     Some(c)
 }
@@ -381,7 +377,6 @@ fn parse_cargo(words: &[String]) -> Option<Cargo> {
 
 /// The workspace's packages (name → folder) and its default members, from the Cargo.toml files.
 struct Workspace {
-    root: PathBuf,
     packages: BTreeMap<String, PathBuf>,
     defaults: Vec<String>,
 }
@@ -433,11 +428,7 @@ impl Workspace {
             .iter()
             .map(|m| by_dir[m].clone())
             .collect();
-        Workspace {
-            root: root.to_owned(),
-            packages,
-            defaults,
-        }
+        Workspace { packages, defaults }
     }
 
     /// The package folders a command selects, or the names it gets wrong.
@@ -719,7 +710,6 @@ fn check_cargo(ws: &Workspace, c: &Cargo) -> Vec<String> {
             ));
         }
     }
-    let _ = &ws.root;
     problems
 }
 
