@@ -7,7 +7,9 @@
 //!   of a `cargo test`'s name filters is a substring of at least one test path (`module::fn`) in
 //!   those targets, read from their sources;
 //! - every relative link (Markdown or `<img src>`) names a file that exists, and a link into a
-//!   Markdown file with a `#fragment` names one of its headings;
+//!   Markdown file with a `#fragment` names one of its headings; so does every file of this
+//!   repository named in inline code (`src/vk/convert.rs`: a path starting in one of its folders);
+//! - `docs/README.md` links every other document;
 //! - blocks marked ```` ```sh runnable ```` run, with `cargo run [--release] [-q] --` replaced by
 //!   the `fovea` binary of this build, in a temporary folder with its own XDG folders: quick,
 //!   hermetic commands only.
@@ -156,6 +158,40 @@ fn links(md: &str) -> Vec<String> {
                 let target = target.trim_start_matches('<').trim_end_matches('>');
                 out.push(target.to_owned());
                 rest = &rest[j..];
+            }
+        }
+    }
+    out
+}
+
+/// The inline code spans of a text outside its fenced blocks that name a file of this repository:
+/// a path whose first two components are a folder here (`src/vk/convert.rs`,
+/// `tests/suite/hello_xr.rs`), outside `target/`. Paths of other projects quoted in the documents (Mesa's
+/// `src/amd/…`, the loader's `src/loader/`) do not start in such a folder and are left alone.
+fn repository_paths(root: &Path, md: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut in_fence = false;
+    for line in md.lines() {
+        if line.trim_start().starts_with("```") {
+            in_fence = !in_fence;
+            continue;
+        }
+        if in_fence {
+            continue;
+        }
+        for (i, span) in line.split('`').enumerate() {
+            let plain = !span.contains(|c: char| c.is_whitespace() || "*{}…<>$,;".contains(c));
+            if i % 2 == 0 || !plain || span.contains("NNN") {
+                continue;
+            }
+            let path = span.split(['#', ':']).next().unwrap_or("");
+            let mut parts = path.split('/');
+            let (Some(a), Some(b)) = (parts.next(), parts.next()) else {
+                continue;
+            };
+            // `target/` holds build outputs, which a fresh checkout does not have.
+            if !a.is_empty() && !b.is_empty() && a != "target" && root.join(a).join(b).is_dir() {
+                out.push(path.to_owned());
             }
         }
     }
@@ -726,6 +762,11 @@ fn check_markdown(root: &Path, file: &str, md: &str) -> Vec<String> {
             }
         }
     }
+    for path in repository_paths(root, md) {
+        if !root.join(&path).exists() {
+            problems.push(format!("{file}: `{path}` names no file of this repository"));
+        }
+    }
     let dir = root.join(file).parent().unwrap().to_owned();
     for link in links(md) {
         if link.is_empty() || link.contains("://") || link.starts_with("mailto:") {
@@ -804,6 +845,44 @@ fn every_cargo_command_names_targets_and_tests_that_exist_and_every_link_resolve
         "only {cargo_commands} cargo commands found"
     );
     assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+/// The documents of `docs/` (file names) that the index `docs/README.md` does not link.
+fn unlisted<'a>(index: &str, files: &[&'a str]) -> Vec<&'a str> {
+    let listed: BTreeSet<String> = links(index).into_iter().collect();
+    files
+        .iter()
+        .copied()
+        .filter(|f| *f != "README.md" && !listed.contains(*f))
+        .collect()
+}
+
+#[test]
+fn the_index_lists_every_document() {
+    let docs = documents();
+    let index = &docs
+        .iter()
+        .find(|(f, _)| f == "docs/README.md")
+        .expect("docs/README.md")
+        .1;
+    let files: Vec<&str> = docs
+        .iter()
+        .filter_map(|(f, _)| f.strip_prefix("docs/"))
+        .collect();
+    assert!(files.len() > 10, "{files:?}");
+    let missing = unlisted(index, &files);
+    assert!(
+        missing.is_empty(),
+        "docs/README.md does not list {missing:?}"
+    );
+    assert_eq!(
+        unlisted(
+            "| [a.md](a.md) | one |\n`b.md`\n",
+            &["a.md", "b.md", "README.md"]
+        ),
+        ["b.md"],
+        "a document named but not linked is not listed"
+    );
 }
 
 /// The `fovea` binary of this build, refused when older than the sources it is built from.
@@ -956,6 +1035,18 @@ fn a_dead_link_fails() {
     assert!(p.len() == 1 && p[0].contains("no heading"), "{p:?}");
     // Links inside code are not links.
     let p = problems_of("`[x](gone.md)`\n\n```text\n[y](gone.md)\n```\n");
+    assert_eq!(p, Vec::<String>::new());
+}
+
+#[test]
+fn a_file_name_that_is_gone_fails() {
+    let p = problems_of("The test is `tests/suite/no_such_module.rs`; see `src/vk/gone.rs#L3`.\n");
+    assert_eq!(p.len(), 2, "{p:?}");
+    assert!(p[0].contains("`tests/suite/no_such_module.rs`"), "{p:?}");
+    // Files that exist, and other projects' paths, pass.
+    let p = problems_of(
+        "`tests/suite/main.rs`, `crates/cli/tests/cli/`, Mesa's `src/amd/vulkan/radv_device.c`, `target/demo/`\n",
+    );
     assert_eq!(p, Vec::<String>::new());
 }
 
