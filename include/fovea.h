@@ -19,14 +19,14 @@
 #define FOVEA_LAYER_NAME "XR_APILAYER_FOVEA_foveation"
 
 /*
- * The Vulkan layer in the same library (README, "Vulkan layer"): VK_EXT_fragment_density_map on
+ * The Vulkan layer in the same library (docs/vulkan-layer.md): VK_EXT_fragment_density_map on
  * devices with VK_KHR_fragment_shading_rate attachments. Its name, as in its manifests,
  * VK_INSTANCE_LAYERS and ppEnabledLayerNames.
  */
 #define FOVEA_VK_LAYER_NAME "VK_LAYER_FOVEA_fragment_density_map"
 
 /*
- * Environment variables fovea reads (README, "Settings"). FOVEA_DISABLE is read by the OpenXR
+ * Environment variables fovea reads (docs/settings.md). FOVEA_DISABLE is read by the OpenXR
  * loader: it is the implicit manifest's disable_environment.
  */
 #define FOVEA_ENV_LOG "FOVEA_LOG"                   /* a tracing filter, e.g. "info"; default "warn" */

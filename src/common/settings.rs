@@ -1,9 +1,9 @@
 //! Settings read from the environment and the configuration file.
 //!
-//! Every variable the layer reads is listed here or in `fovea_config` (and in the README's settings
-//! section and include/fovea.h), so there is one place to look. The file, `fovea.toml`, is
+//! Every variable the layer reads is listed here or in `fovea_config` (and in docs/settings.md
+//! and include/fovea.h), so there is one place to look. The file, `fovea.toml`, is
 //! `fovea_config`'s; its values sit below the environment's and Quest's debug properties and above
-//! the application's own profile (README, "Settings").
+//! the application's own profile (docs/settings.md).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicI64, Ordering};

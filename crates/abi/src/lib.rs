@@ -94,7 +94,7 @@ impl Ext {
 }
 
 /// Environment variables the layer reads, and the two the Vulkan loader reads for its Vulkan layer
-/// (the README's settings table lists each with its meaning).
+/// (docs/settings.md lists each with its meaning).
 pub mod env {
     /// `FOVEA_SYMMETRIC_FOV=1`: report one shared symmetric FOV for both eyes.
     pub const SYMMETRIC_FOV: &str = "FOVEA_SYMMETRIC_FOV";

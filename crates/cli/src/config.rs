@@ -120,7 +120,7 @@ pub fn render(vars: &BTreeMap<String, String>, id: &Identity) -> String {
     }
     line(
         "precedence: environment and Quest debug properties > [app] > [exe] > [engine] > global \
-         > the application's profile > defaults; inject and inject_level are not yet acted on"
+         > the application's profile > defaults"
             .into(),
     );
     if let Some(props) = vars.get("FOVEA_PROPS") {

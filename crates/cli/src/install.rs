@@ -5,7 +5,7 @@
 //! Install writes the Vulkan layer's manifest too, always implicit, into the Vulkan loader's folder
 //! (`$XDG_DATA_HOME/vulkan/implicit_layer.d`, or `/usr/local/share/vulkan/implicit_layer.d` with
 //! `--system`), with the same library path: it loads only where `FOVEA_VK_LAYER=1`, which fovea's
-//! OpenXR layer sets for OpenXR applications that use Vulkan (README, "Vulkan layer").
+//! OpenXR layer sets for OpenXR applications that use Vulkan (docs/vulkan-layer.md).
 //!
 //! Each manifest is the checked-in one with `library_path` replaced, so the extension list has one
 //! source (tests/manifests.rs checks it against the layer's table).

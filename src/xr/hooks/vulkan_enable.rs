@@ -46,7 +46,7 @@ fn support_of(vk_instance: u64, pd: u64) -> Option<session_gpu::FdmSupport> {
 /// Where the physical device is known (xrGetVulkanGraphicsDeviceKHR was called first, as the spec's
 /// own order and hello_xr have it), exactly the FDM extensions it supports. Where it is not, only
 /// VK_EXT_fragment_density_map: an application that then enables it on a device
-/// without it fails vkCreateDevice, which is why the known-device path is preferred (README).
+/// without it fails vkCreateDevice, which is why the known-device path is preferred (docs/vulkan-layer.md).
 pub fn extensions_to_add(support: Option<session_gpu::FdmSupport>) -> Vec<&'static CStr> {
     match support {
         Some(s) => {

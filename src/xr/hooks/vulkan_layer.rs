@@ -1,6 +1,6 @@
 //! fovea's Vulkan layer (`VK_LAYER_FOVEA_fragment_density_map`, the same library) under the
 //! application's VkInstance, with nothing for the application to do. Two ways, one per Vulkan enable
-//! extension (README, "Vulkan layer"):
+//! extension (docs/vulkan-layer.md):
 //!
 //! - XR_KHR_vulkan_enable2: the runtime creates the VkInstance in `xrCreateVulkanInstanceKHR`
 //!   (https://registry.khronos.org/OpenXR/specs/1.0/man/html/xrCreateVulkanInstanceKHR.html). fovea

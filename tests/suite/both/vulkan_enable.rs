@@ -1,4 +1,4 @@
-//! OpenXR applications get fovea's Vulkan layer without doing anything (README, "Vulkan layer"):
+//! OpenXR applications get fovea's Vulkan layer without doing anything (docs/vulkan-layer.md):
 //!
 //! - XR_KHR_vulkan_enable2: fovea's `xrCreateVulkanInstanceKHR` puts the layer into the VkInstance
 //!   the simulated runtime creates, where the Vulkan loader finds it. Stack: application → fovea's

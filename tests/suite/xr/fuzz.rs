@@ -15,7 +15,7 @@
 //! invalid in the layer (so no record leaked in fovea's registry, which lives in the loaded
 //! libfovea.so and is not reachable from here) and the runtime must hold no object.
 //!
-//! `FOVEA_FUZZ_CASES=N` runs N cases instead of 64 (README, "Hardening"). This module holds a single
+//! `FOVEA_FUZZ_CASES=N` runs N cases instead of 64 (docs/hardening.md). This module holds a single
 //! test, in a process of its own: the runtime's object count is process-wide, and it sets the
 //! layer's log filter.
 

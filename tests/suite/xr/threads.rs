@@ -11,7 +11,7 @@
 //!   reads back is always a profile some worker created, or XR_NULL_HANDLE once that was destroyed.
 //!
 //! `FOVEA_THREADS_ITERATIONS` sets the iterations per worker (default 2000), e.g. for a run under
-//! valgrind's DRD (README, "Hardening").
+//! valgrind's DRD (docs/hardening.md).
 
 use std::collections::HashSet;
 use std::ptr::null_mut;
