@@ -4,8 +4,8 @@
 //!
 //! The OpenXR side writes only when something changed (a swapchain created or destroyed, a FOV or
 //! the pattern changed), so per frame a write is a comparison. Each write replaces the published
-//! [`Injection`] with a new `Arc` and bumps [`generation`]: a reader compares one atomic with the
-//! generation it cached and clones the `Arc` only when it moved, and the shading-rate images made
+//! [`Injection`] with a new `Arc` and bumps the generation: a reader ([`with_current`]) compares one
+//! atomic with the generation it cached and reads the `Arc` again only when it moved, and the shading-rate images made
 //! for an older generation are stale ([`Injection::key`]).
 //!
 //! The lock is a leaf, like the shadows' in the parent module: taken for a swap or an `Arc` clone,
@@ -135,21 +135,36 @@ pub fn wanted() -> bool {
     WANTED.load(Ordering::Acquire)
 }
 
-#[cfg_attr(
-    not(test),
-    expect(
-        dead_code,
-        reason = "read by the Vulkan side's pass injection (docs/injection.md), which is not written yet"
-    )
-)]
-/// The published generation: unchanged means the [`current`] state is the one a reader cached.
-pub fn generation() -> u64 {
-    GENERATION.load(Ordering::Acquire)
-}
-
-/// The published state, `None` where injection is off.
+/// The published state, `None` where injection is off: a reference that stays valid while the
+/// caller holds it. For the paths that run per frame or per pass, [`with_current`].
 pub fn current() -> Option<Arc<Injection>> {
     STATE.read().clone()
+}
+
+thread_local! {
+    /// The state this thread last read and the generation it was read at.
+    static SEEN: std::cell::RefCell<(u64, Option<Arc<Injection>>)> =
+        const { std::cell::RefCell::new((u64::MAX, None)) };
+}
+
+/// Runs `f` on the published state, `None` where injection is off. In steady state (nothing
+/// published since this thread last looked) that is one atomic load: no lock and no reference
+/// count touched, so recording threads and the frame loop never contend here. After a change the
+/// thread reads the state once under the lock and keeps it.
+pub fn with_current<R>(f: impl FnOnce(Option<&Injection>) -> R) -> R {
+    let now = GENERATION.load(Ordering::Acquire);
+    SEEN.with(|seen| {
+        if seen.borrow().0 != now {
+            // A writer publishes the state before it bumps the generation, so the state read here
+            // is at least generation `now`'s; a newer one is read again at the next bump.
+            match seen.try_borrow_mut() {
+                Ok(mut s) => *s = (now, STATE.read().clone()),
+                // Only inside `f` of an outer call on this thread, which holds the borrow.
+                Err(_) => return f(current().as_deref()),
+            }
+        }
+        f(seen.borrow().1.as_deref())
+    })
 }
 
 /// Applies `f` to a copy of the state and publishes it when it changed; nothing where injection is
@@ -223,9 +238,9 @@ pub fn stop() {
 /// The pattern in force changed (overrides, dynamic step).
 pub fn set_pattern(pattern: Pattern, dynamic: bool, max_fragment: u32) {
     // A comparison when unchanged (no copy): this runs every frame.
-    if current()
-        .is_none_or(|s| (s.pattern, s.dynamic, s.max_fragment) == (pattern, dynamic, max_fragment))
-    {
+    if with_current(|s| {
+        s.is_none_or(|s| (s.pattern, s.dynamic, s.max_fragment) == (pattern, dynamic, max_fragment))
+    }) {
         return;
     }
     update(|s| {
@@ -244,7 +259,7 @@ pub fn set_fovs(fovs: &[Fov]) {
     for (slot, f) in new.iter_mut().zip(fovs) {
         *slot = Some(*f);
     }
-    if current().is_some_and(|s| s.fovs == new && usize::from(s.views) == fovs.len()) {
+    if with_current(|s| s.is_some_and(|s| s.fovs == new && usize::from(s.views) == fovs.len())) {
         return;
     }
     update(|s| {
@@ -330,25 +345,90 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn readers_see_each_change_and_take_no_lock_in_steady_state() {
+        let _one = STATE_TESTS.lock();
+        stop();
+        start(Level::High);
+        let level = || with_current(|s| s.map(|s| s.pattern.level));
+        assert_eq!(level(), Some(Level::High));
+        set_pattern(
+            Pattern {
+                level: Level::Low,
+                vertical_offset_deg: 0.0,
+            },
+            false,
+            4,
+        );
+        assert_eq!(
+            level(),
+            Some(Level::Low),
+            "a change is seen at the next call"
+        );
+        // Nested calls (a reader's closure that reads again) see the same state.
+        assert_eq!(
+            with_current(|outer| with_current(|inner| (
+                outer.map(|s| s.pattern.level),
+                inner.map(|s| s.pattern.level)
+            ))),
+            (Some(Level::Low), Some(Level::Low))
+        );
+
+        // A reader thread that has looked once reads again while a writer holds the lock: in
+        // steady state it never waits for it.
+        let (ask, asked) = std::sync::mpsc::channel::<()>();
+        let (answer, answered) = std::sync::mpsc::channel();
+        let reader = std::thread::spawn(move || {
+            while asked.recv().is_ok() {
+                answer
+                    .send(with_current(|s| s.map(|s| s.pattern.level)))
+                    .unwrap();
+            }
+        });
+        ask.send(()).unwrap();
+        assert_eq!(answered.recv().unwrap(), Some(Level::Low));
+        {
+            let _writer = STATE.write();
+            ask.send(()).unwrap();
+            assert_eq!(
+                answered.recv_timeout(std::time::Duration::from_secs(10)),
+                Ok(Some(Level::Low)),
+                "the reader waited for the lock"
+            );
+        }
+        drop(ask);
+        reader.join().unwrap();
+        stop();
+        assert_eq!(level(), None, "off is seen too");
+    }
+
+    #[test]
     fn publishing_bumps_the_generation_only_on_change() {
         let _one = STATE_TESTS.lock();
         stop();
-        let g = generation();
+        let g = GENERATION.load(Ordering::Acquire);
         set_fovs(&[fovea_model::maps::FALLBACK_FOV]);
-        assert_eq!(generation(), g, "nothing is published while off");
+        assert_eq!(
+            GENERATION.load(Ordering::Acquire),
+            g,
+            "nothing is published while off"
+        );
         assert!(current().is_none() && !wanted());
 
         start(Level::High);
         assert!(wanted());
-        let on = generation();
+        let on = GENERATION.load(Ordering::Acquire);
         assert_eq!(current().unwrap().pattern.level, Level::High);
         let f = fovea_model::maps::FALLBACK_FOV;
         set_fovs(&[f, f.mirrored()]);
-        let located = generation();
+        let located = GENERATION.load(Ordering::Acquire);
         assert!(located > on);
         let key = current().unwrap().key();
         set_fovs(&[f, f.mirrored()]);
-        assert_eq!(generation(), located, "the same FOVs again: no change");
+        assert_eq!(
+            GENERATION.load(Ordering::Acquire),
+            located,
+            "the same FOVs again: no change"
+        );
         set_pattern(
             Pattern {
                 level: Level::Low,

@@ -248,11 +248,14 @@ pub unsafe fn begin_injected_pass(
         crate::bridge::inject::count_pass(false);
         return f(begin);
     };
-    let state = crate::bridge::inject::current();
     if !fb.imageless {
-        if let (Some((extent, views)), Some(state)) = (fb.eye, &state) {
-            // SAFETY: as the caller promised.
-            unsafe { inj.refresh(own, state, extent, views) };
+        if let Some((extent, views)) = fb.eye {
+            crate::bridge::inject::with_current(|state| {
+                if let Some(state) = state {
+                    // SAFETY: as the caller promised.
+                    unsafe { inj.refresh(own, state, extent, views) };
+                }
+            });
         }
         crate::bridge::inject::count_pass(fb.eye.is_some());
         return f(begin);
@@ -275,13 +278,15 @@ pub unsafe fn begin_injected_pass(
         None
     };
     let colour = fb.pass.colour.and_then(|c| app.get(c as usize).copied());
-    let eye = match (colour, &state) {
-        // SAFETY: as the caller promised.
-        (Some(v), Some(state)) => unsafe { inj.eye_map(own, state, v, layers) },
-        _ => None,
-    }
-    // The framebuffer describes a one-layer map of exactly its texels.
-    .filter(|&(_, e, v)| inj.map_size(e, v) == Some((texels, 1)));
+    let eye = colour
+        .and_then(|v| {
+            crate::bridge::inject::with_current(|state| {
+                // SAFETY: as the caller promised.
+                state.and_then(|state| unsafe { inj.eye_map(own, state, v, layers) })
+            })
+        })
+        // The framebuffer describes a one-layer map of exactly its texels.
+        .filter(|&(_, e, v)| inj.map_size(e, v) == Some((texels, 1)));
     let Some(rate) = eye.map(|e| e.0).or_else(|| {
         // SAFETY: as the caller promised.
         unsafe { inj.neutral(own, texels) }

@@ -211,10 +211,16 @@ fn learn_submitted(s: &Session, info: In<xr::FrameEndInfo>) {
 /// swapchains that no projection layer names (UI, quad layers) are dropped once the app submits
 /// projection layers. No allocation unless something changed.
 fn learn_eye_swapchains(info: In<xr::FrameEndInfo>) {
+    crate::bridge::inject::with_current(|published| {
+        if let Some(published) = published {
+            learn_from(published, info);
+        }
+    });
+}
+
+/// [`learn_eye_swapchains`] against the published state.
+fn learn_from(published: &crate::bridge::inject::Injection, info: In<xr::FrameEndInfo>) {
     use fovea_model::inject::Holds;
-    let Some(published) = crate::bridge::inject::current() else {
-        return;
-    };
     // Per published swapchain (at most MAX_SWAPCHAINS): the views named, their layers and x.
     const N: usize = crate::bridge::inject::MAX_SWAPCHAINS;
     let mut seen = [(0u32, 0u32, u32::MAX, i32::MAX, i32::MIN); N];
