@@ -48,10 +48,10 @@ use ash::vk;
 use ash::vk::Handle as _;
 
 use crate::vk::base::chain;
-use crate::vk::base::ffi::{key, raw, HandleHasher, Key};
+use crate::vk::base::ffi::{key, raw, AddressHasher, Key};
 use crate::vk::own::bindings::restore;
 use crate::vk::own::convert_shader::{Push, GROUP};
-use crate::vk::own::converter::{Converter, MapEntry, MapObjects, Slot};
+use crate::vk::own::converter::{Converter, MapEntry, Slot, SourceAndShadow};
 use crate::vk::own::shadows::ShadowImage;
 use crate::vk::registry::{
     self, bound_of, converter, forget_command_buffers_where, record_of, with_record, Device,
@@ -389,7 +389,7 @@ fn filter_slot(fb: u64) -> (usize, u64) {
 /// table for all devices, looked up first at every render-pass begin whose framebuffer passes
 /// [`FRAMEBUFFER_FILTER`], before any per-device look-up. A leaf lock.
 static FRAMEBUFFERS: parking_lot::RwLock<
-    HashMap<u64, (Key, u64), BuildHasherDefault<HandleHasher>>,
+    HashMap<u64, (Key, u64), BuildHasherDefault<AddressHasher>>,
 > = parking_lot::RwLock::new(HashMap::with_hasher(BuildHasherDefault::new()));
 
 /// A filter of render passes that write or order density maps (see [`MAP_EPOCH`]): one bit per
@@ -579,7 +579,7 @@ impl Converter {
     ///
     /// # Safety
     /// As [`Converter::make_slot`]; `cb` recording on this device.
-    unsafe fn slot(&self, cb: vk::CommandBuffer, image: u64, m: &MapObjects) -> Option<Slot> {
+    unsafe fn slot(&self, cb: vk::CommandBuffer, image: u64, m: &SourceAndShadow) -> Option<Slot> {
         let known = record_of(cb, |r| {
             r.slots
                 .lock()
@@ -622,7 +622,7 @@ impl Converter {
     }
 
     /// The application image a view shows and its conversion objects, if it is a converted map.
-    fn map_of_view(&self, view: u64) -> Option<(u64, MapObjects)> {
+    fn map_of_view(&self, view: u64) -> Option<(u64, SourceAndShadow)> {
         let image = self.views.lock().get(&view).copied()?;
         let m = self.maps.lock().get(&image).and_then(|e| e.objects)?;
         Some((image, m))
@@ -723,7 +723,7 @@ impl Converter {
         &self,
         cb: vk::CommandBuffer,
         image: u64,
-        m: &MapObjects,
+        m: &SourceAndShadow,
         readable: bool,
         in_density_layout: bool,
     ) {

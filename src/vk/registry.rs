@@ -19,7 +19,7 @@ use ash::vk::Handle as _;
 
 use crate::bridge::FdmEmulation;
 use crate::common::lock::{MapLock, Mutex, Rank};
-use crate::vk::base::ffi::{key, HandleHasher, Key};
+use crate::vk::base::ffi::{key, AddressHasher, Key};
 use crate::vk::base::next::{DeviceNext, InstanceNext};
 use crate::vk::own::bindings::Bound;
 use crate::vk::own::calls::Own;
@@ -548,7 +548,7 @@ pub struct CbRecord {
     pub converter: Option<Arc<Converter>>,
 }
 
-type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<HandleHasher>>;
+type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<AddressHasher>>;
 
 /// Every command buffer's record. Taken only to add a record (at allocation), to drop one (free,
 /// pool or device destruction), and on a thread's first look-up of a command buffer since any of

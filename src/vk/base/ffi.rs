@@ -104,11 +104,12 @@ pub fn once(flag: &AtomicBool, message: &str) {
     }
 }
 
-/// A cheap hasher for dispatchable handles (heap addresses): one multiply.
+/// A cheap hasher for dispatchable handles, which are heap addresses (their low bits are alignment,
+/// so the high bits are mixed in): one multiply.
 #[derive(Default)]
-pub struct HandleHasher(u64);
+pub struct AddressHasher(u64);
 
-impl Hasher for HandleHasher {
+impl Hasher for AddressHasher {
     fn finish(&self) -> u64 {
         self.0
     }

@@ -16,7 +16,7 @@ use crate::vk::own::shadows::ShadowImage;
 
 /// What the layer made for one application density image.
 #[derive(Clone, Copy, Debug)]
-pub struct MapObjects {
+pub struct SourceAndShadow {
     /// A sampled 2D-array view of every layer of the application's image.
     pub view: vk::ImageView,
     pub shadow: ShadowImage,
@@ -42,7 +42,7 @@ pub struct Slot {
 /// One application density image.
 pub struct MapEntry {
     pub shadow: ShadowImage,
-    pub objects: Option<MapObjects>,
+    pub objects: Option<SourceAndShadow>,
 }
 
 /// Per emulating device: the conversion's objects and what the begin hooks look up.
@@ -162,7 +162,7 @@ impl Converter {
     /// The device must be live and idle.
     pub unsafe fn destroy(&self) {
         let d = &self.own.fns;
-        let maps: Vec<MapObjects> = self
+        let maps: Vec<SourceAndShadow> = self
             .maps
             .lock()
             .drain()
@@ -236,7 +236,7 @@ impl Converter {
         &self,
         app: vk::Image,
         shadow: &ShadowImage,
-    ) -> Result<MapObjects, vk::Result> {
+    ) -> Result<SourceAndShadow, vk::Result> {
         // SAFETY: a view of the application's live image, which has memory (it has a view).
         let view = unsafe {
             self.own.fns.create_image_view(
@@ -254,7 +254,7 @@ impl Converter {
                 None,
             )
         }?;
-        Ok(MapObjects {
+        Ok(SourceAndShadow {
             view,
             shadow: *shadow,
         })
@@ -264,7 +264,7 @@ impl Converter {
     ///
     /// # Safety
     /// The device must be live; `m` this converter's objects of a live map.
-    pub unsafe fn make_slot(&self, image: u64, m: &MapObjects) -> Result<Slot, vk::Result> {
+    pub unsafe fn make_slot(&self, image: u64, m: &SourceAndShadow) -> Result<Slot, vk::Result> {
         let d = &self.own.fns;
         let shadow = &m.shadow;
         let codes = u64::from(shadow.extent.width)

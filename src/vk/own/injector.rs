@@ -61,11 +61,11 @@ struct Map {
     views: Views,
     key: u64,
     /// `None` where it could not be made: the shape renders at full rate, not retried.
-    objects: Option<MapObjects>,
+    objects: Option<InjectedMap>,
 }
 
 #[derive(Clone, Copy)]
-struct MapObjects {
+struct InjectedMap {
     image: vk::Image,
     memory: vk::DeviceMemory,
     view: vk::ImageView,
@@ -106,7 +106,7 @@ pub struct Injector {
     views: parking_lot::Mutex<HashMap<u64, ViewFacts>>,
     maps: parking_lot::Mutex<Vec<Map>>,
     /// Full-rate (code 0) maps by exact extent in texels, for passes that are not eye passes.
-    neutral: parking_lot::Mutex<Vec<([u32; 2], Option<MapObjects>)>>,
+    neutral: parking_lot::Mutex<Vec<([u32; 2], Option<InjectedMap>)>>,
     passes: parking_lot::Mutex<HashMap<u64, InjectedPass>>,
     framebuffers: parking_lot::Mutex<HashMap<u64, InjectedFramebuffer>>,
     /// Set once the log has said that a map could not be made.
@@ -451,7 +451,7 @@ impl Injector {
     /// `own` must belong to this injector's live device, idle, its uploads done or dropped.
     pub unsafe fn destroy(&self, own: &Own) {
         let maps: Vec<Map> = self.maps.lock().drain(..).collect();
-        let neutral: Vec<MapObjects> = self
+        let neutral: Vec<InjectedMap> = self
             .neutral
             .lock()
             .drain(..)
@@ -498,7 +498,7 @@ fn view_facts(
 ///
 /// # Safety
 /// `own` must belong to a live device.
-unsafe fn make(own: &Own, texels: [u32; 2], layers: u32) -> Result<MapObjects, vk::Result> {
+unsafe fn make(own: &Own, texels: [u32; 2], layers: u32) -> Result<InjectedMap, vk::Result> {
     let d = &own.fns;
     // SAFETY: as the caller promised; the image and memory are destroyed again on failure.
     unsafe {
@@ -523,7 +523,7 @@ unsafe fn make(own: &Own, texels: [u32; 2], layers: u32) -> Result<MapObjects, v
             None,
         );
         match view {
-            Ok(view) => Ok(MapObjects {
+            Ok(view) => Ok(InjectedMap {
                 image,
                 memory,
                 view,
