@@ -30,9 +30,10 @@
 //! {KEEP, KEEP}), which the injecting device's hook passes down with `combinerOps[1]` rewritten
 //! (docs/injection.md#apps-that-set-rates).
 //! (The density-map passes, once the density-image barrier case has moved the map into the density
-//! layout, these include the conversion the layer records in front of the pass.) `vkCmdBindPipeline` of a compute pipeline (both devices): the layer
-//! notes the application's compute bindings on emulating devices, to give them back after it
-//! converts a density map the application writes (src/vk/convert.rs).
+//! layout, these include the conversion the layer records in front of the pass.)
+//! `vkCmdBindPipeline` of a compute pipeline (both devices): the layer notes the application's
+//! compute bindings on emulating devices, to give them back after it converts a density map the
+//! application writes (src/vk/convert.rs).
 //!
 //! Allocations are counted by interposing `malloc` and friends in this executable, as
 //! `benches/frame_loop.rs` does (the layer and the driver are dlopened libraries; ELF symbol
@@ -726,8 +727,10 @@ fn sides() -> Result<(Vec<Sides>, Xr, fovea_vkdouble::Loaded), String> {
     std::env::remove_var(fovea_vkdouble::NULL_COMMANDS_ENV);
     // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
     let entry = unsafe { ash::Entry::load() }.map_err(|e| format!("no Vulkan loader ({e})"))?;
-    let xr = Xr::new()?;
+    // Declared first, dropped last on an early return: the session's swapchain images live on the
+    // first injecting device.
     let mut all = Vec::new();
+    let xr = Xr::new()?;
     for bottom in [Bottom::Lavapipe, Bottom::Null] {
         if bottom == Bottom::Null {
             // Read by the double at vkCreateDevice.
