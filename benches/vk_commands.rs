@@ -15,17 +15,25 @@
 //! information, the density-map variants (`fovea` only: the bare device has no density maps):
 //! a barrier into `FRAGMENT_DENSITY_MAP_OPTIMAL_EXT`, a render pass and a dynamic rendering with a
 //! density-map attachment. And injection's (docs/injection.md): a third device, made with the
-//! layer after an OpenXR instance with `FOVEA_INJECT=1` (fovea's OpenXR layer on the simulated
-//! runtime) published an eye swapchain, begins a dynamic rendering and a render pass into an
-//! eye-shaped target of its own, which get fovea's map (made in the warm-up rounds; what is timed
-//! is the classification and the attachment chained on). The bare and injecting devices enable
-//! `VK_KHR_fragment_shading_rate`'s pipeline rates (no attachments), as vkd3d-proton does, and
-//! record `vkCmdSetFragmentShadingRateKHR` (1×1, {KEEP, KEEP}), which the injecting device's hook
-//! passes down with `combinerOps[1]` rewritten (docs/injection.md#apps-that-set-rates).
+//! layer through `xrCreateVulkanDeviceKHR` of an OpenXR instance with `FOVEA_INJECT=1` (fovea's
+//! OpenXR layer on the simulated runtime), as an XR_KHR_vulkan_enable2 application makes its
+//! session's device, the one device injection goes to
+//! (docs/injection.md#which-devices-get-the-feature); the session runs on the first such device
+//! and its eye swapchain is published. The device begins a dynamic rendering and a render pass
+//! into an eye-shaped target of its own, which get fovea's map (made before the timed rounds; what
+//! is timed is the classification and the attachment chained on). Before any round is timed, what
+//! reached the driver must show injection on for that device (`proves_injection`: the attachment
+//! feature, the framebuffer's eye map and, on lavapipe, the passes begun with it and the rewritten
+//! combiner), or the run fails: rows that measure a device without injection would say nothing.
+//! The bare and injecting devices enable `VK_KHR_fragment_shading_rate`'s pipeline rates (no
+//! attachments), as vkd3d-proton does, and record `vkCmdSetFragmentShadingRateKHR` (1×1,
+//! {KEEP, KEEP}), which the injecting device's hook passes down with `combinerOps[1]` rewritten
+//! (docs/injection.md#apps-that-set-rates).
 //! (The density-map passes, once the density-image barrier case has moved the map into the density
-//! layout, these include the conversion the layer records in front of the pass.) `vkCmdBindPipeline` of a compute pipeline (both devices): the layer
-//! notes the application's compute bindings on emulating devices, to give them back after it
-//! converts a density map the application writes (src/vk/convert.rs).
+//! layout, these include the conversion the layer records in front of the pass.)
+//! `vkCmdBindPipeline` of a compute pipeline (both devices): the layer notes the application's
+//! compute bindings on emulating devices, to give them back after it converts a density map the
+//! application writes (src/vk/convert.rs).
 //!
 //! Allocations are counted by interposing `malloc` and friends in this executable, as
 //! `benches/frame_loop.rs` does (the layer and the driver are dlopened libraries; ELF symbol
@@ -48,7 +56,10 @@ use std::ffi::c_void;
 use std::time::{Duration, Instant};
 
 use ash::vk;
+use ash::vk::Handle as _;
 use criterion::Criterion;
+use openxr_sys::Handle as _;
+use serde_json::Value;
 
 #[path = "support/vulkan.rs"]
 mod vulkan;
@@ -91,14 +102,53 @@ struct Side {
     set_rate: Option<ash::khr::fragment_shading_rate::Device>,
     /// A compute pipeline (`tests/suite/shaders/store.comp`) and its layout.
     compute: (vk::PipelineLayout, vk::Pipeline),
+    /// Where the instance and device were made through OpenXR (the injecting side): what destroys
+    /// them.
+    xr: Option<fovea_harness::vulkan::Vulkan>,
 }
 
 impl Side {
+    /// The bare or the emulating side: an instance and a device of its own, made directly.
     fn new(entry: &ash::Entry, kind: Kind) -> Result<Side, String> {
+        assert_ne!(kind, Kind::Inject, "made through OpenXR: Side::injecting");
         let (instance, physical) = vulkan::instance_on_lavapipe(entry, kind != Kind::Bare)?;
-        // SAFETY: every struct lives across the calls; handles are used while alive.
+        // SAFETY: `physical` is the instance's.
+        let device =
+            unsafe { vulkan::device(&instance, physical, kind == Kind::Fdm, kind == Kind::Bare) }?;
+        // SAFETY: the device is the instance's and the side's alone.
+        Ok(unsafe { Side::on(instance, physical, device, kind, None) })
+    }
+
+    /// The injecting side: its instance and device made through `xrCreateVulkanInstanceKHR` and
+    /// `xrCreateVulkanDeviceKHR`, as an XR_KHR_vulkan_enable2 application makes the device its
+    /// session renders with, which is the device injection goes to
+    /// (docs/injection.md#which-devices-get-the-feature); the first one made is the session's,
+    /// and the eye swapchain is published before the side's framebuffer is made (its map is
+    /// picked at `vkCreateFramebuffer`).
+    fn injecting(entry: &ash::Entry, xr: &Xr) -> Result<Side, String> {
+        let v = xr.vulkan(entry)?;
+        xr.publish_eye(&v)?;
+        let (instance, physical, device) =
+            (v.instance.clone(), v.physical_device, v.device.clone());
+        // SAFETY: the device is the instance's and the side's alone; `v` destroys both.
+        Ok(unsafe { Side::on(instance, physical, device, Kind::Inject, Some(v)) })
+    }
+
+    /// What a side records with, made on `device`.
+    ///
+    /// # Safety
+    /// `device` must be live and made from `instance`'s `physical`; the side destroys both (or
+    /// `xr` does, where given: the objects they were loaded from).
+    unsafe fn on(
+        instance: ash::Instance,
+        physical: vk::PhysicalDevice,
+        device: ash::Device,
+        kind: Kind,
+        xr: Option<fovea_harness::vulkan::Vulkan>,
+    ) -> Side {
+        // SAFETY: as the caller promised; every struct lives across the calls; handles are used
+        // while alive.
         unsafe {
-            let device = vulkan::device(&instance, physical, kind == Kind::Fdm, kind != Kind::Fdm)?;
             let (pool, cb) = vulkan::command_buffer(&device);
             let extent = if kind == Kind::Inject {
                 EYE
@@ -129,7 +179,7 @@ impl Side {
             let set_rate = (kind != Kind::Fdm)
                 .then(|| ash::khr::fragment_shading_rate::Device::new(&instance, &device));
             let compute = compute_pipeline(&device);
-            Ok(Side {
+            Side {
                 set_rate,
                 instance,
                 device,
@@ -140,7 +190,8 @@ impl Side {
                 framebuffer,
                 fdm,
                 compute,
-            })
+                xr,
+            }
         }
     }
 
@@ -326,8 +377,13 @@ impl Drop for Side {
             d.destroy_render_pass(self.pass, None);
             self.color.destroy(d);
             d.destroy_command_pool(self.pool, None);
-            d.destroy_device(None);
-            self.instance.destroy_instance(None);
+            match self.xr.take() {
+                Some(v) => v.destroy(),
+                None => {
+                    d.destroy_device(None);
+                    self.instance.destroy_instance(None);
+                }
+            }
         }
     }
 }
@@ -449,104 +505,259 @@ impl Sides {
 }
 
 /// What keeps injection on: an OpenXR instance with `FOVEA_INJECT=1` through fovea's OpenXR layer
-/// and the simulated runtime, a session on a Vulkan device of its own, and a 640×500 colour
-/// swapchain, which fovea publishes as the left eye's (docs/injection.md#which-passes). Kept for
-/// the process.
-struct Injecting {
-    _app: fovea_harness::App,
-    _vulkan: fovea_harness::vulkan::Vulkan,
+/// and the simulated runtime, whose `xrCreateVulkanDeviceKHR` makes the injecting sides' devices,
+/// and a session on the first of them with a 640×500 colour swapchain, which fovea publishes as
+/// the left eye's (docs/injection.md#which-passes). Destroy it before the sides: the swapchain's
+/// images are on the first injecting device.
+struct Xr {
+    app: fovea_harness::App,
+    sys: openxr_sys::SystemId,
+    /// The session, once the first injecting device exists.
+    session: std::cell::Cell<openxr_sys::Session>,
 }
 
-/// Starts injection for the devices made after it, or why not.
-fn injecting(entry: &ash::Entry) -> Result<Injecting, String> {
-    use openxr_sys as xr;
-    use xr::Handle as _;
-    std::env::set_var("FOVEA_INJECT", "1");
-    std::env::set_var("FOVEA_SIM_VK_DEVICE", "llvmpipe");
-    let app = fovea_harness::App::new(
-        fovea_harness::Chain::fovea()?,
-        &["XR_KHR_vulkan_enable2"],
-        fovea_harness::app::API_1_0,
-    )
-    .map_err(|r| format!("xrCreateInstance: {r:?}"))?;
-    let sys = app.system();
-    let options = fovea_harness::vulkan::Options {
-        layers: &[],
-        ..Default::default()
-    };
-    let v = fovea_harness::vulkan::Vulkan::through_xr_with(
-        entry,
-        app.chain.gipa(),
-        app.instance,
-        sys,
-        &options,
-    )?;
-    let binding = v.binding();
-    // SAFETY: each function is looked up as the type its name implies; every struct lives across
-    // its call.
-    unsafe {
-        let create_session: xr::pfn::CreateSession = app.func(c"xrCreateSession");
-        let create_swapchain: xr::pfn::CreateSwapchain = app.func(c"xrCreateSwapchain");
-        let info = xr::SessionCreateInfo {
-            ty: xr::StructureType::SESSION_CREATE_INFO,
-            next: &binding as *const _ as *const c_void,
-            create_flags: xr::SessionCreateFlags::EMPTY,
-            system_id: sys,
+impl Xr {
+    /// Starts injection for the devices made through it, or why not.
+    fn new() -> Result<Xr, String> {
+        std::env::set_var("FOVEA_INJECT", "1");
+        std::env::set_var("FOVEA_SIM_VK_DEVICE", "llvmpipe");
+        let app = fovea_harness::App::new(
+            fovea_harness::Chain::fovea()?,
+            &["XR_KHR_vulkan_enable2"],
+            fovea_harness::app::API_1_0,
+        )
+        .map_err(|r| format!("xrCreateInstance: {r:?}"))?;
+        let sys = app.system();
+        Ok(Xr {
+            app,
+            sys,
+            session: std::cell::Cell::new(openxr_sys::Session::NULL),
+        })
+    }
+
+    /// An instance and device made through the runtime, with fovea's Vulkan layer above the
+    /// double, Vulkan 1.3's dynamic rendering and synchronization2, and
+    /// `VK_KHR_fragment_shading_rate`'s pipeline rates (no attachments), as vkd3d-proton enables
+    /// them: the bare side's device, asked for the same way.
+    fn vulkan(&self, entry: &ash::Entry) -> Result<fovea_harness::vulkan::Vulkan, String> {
+        let layers = [vulkan::FOVEA, fovea_vkdouble::LAYER_NAME];
+        let extensions = [ash::khr::fragment_shading_rate::NAME];
+        let rates = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
+            .pipeline_fragment_shading_rate(true);
+        let options = fovea_harness::vulkan::Options {
+            layers: &layers,
+            api_version: vk::API_VERSION_1_3,
+            multiview: false,
+            dynamic_rendering: true,
+            device_extensions: &extensions,
+            device_next: &rates as *const _ as *const c_void,
         };
-        let mut session = xr::Session::NULL;
-        let r = create_session(app.instance, &info, &mut session);
-        if r != xr::Result::SUCCESS {
-            return Err(format!("xrCreateSession: {r:?}"));
+        fovea_harness::vulkan::Vulkan::through_xr_with(
+            entry,
+            self.app.chain.gipa(),
+            self.app.instance,
+            self.sys,
+            &options,
+        )
+    }
+
+    /// Makes the session on `v`'s device and its eye swapchain, where there is none yet.
+    fn publish_eye(&self, v: &fovea_harness::vulkan::Vulkan) -> Result<(), String> {
+        use openxr_sys as xr;
+        if self.session.get() != xr::Session::NULL {
+            return Ok(());
         }
-        let info = xr::SwapchainCreateInfo {
-            ty: xr::StructureType::SWAPCHAIN_CREATE_INFO,
-            next: std::ptr::null(),
-            create_flags: xr::SwapchainCreateFlags::EMPTY,
-            usage_flags: xr::SwapchainUsageFlags::COLOR_ATTACHMENT,
-            format: vk::Format::R8G8B8A8_SRGB.as_raw() as i64,
-            sample_count: 1,
-            width: EYE[0],
-            height: EYE[1],
-            face_count: 1,
-            array_size: 1,
-            mip_count: 1,
-        };
-        let mut swapchain = xr::Swapchain::NULL;
-        let r = create_swapchain(session, &info, &mut swapchain);
-        if r != xr::Result::SUCCESS {
-            return Err(format!("xrCreateSwapchain: {r:?}"));
+        let binding = v.binding();
+        // SAFETY: each function is looked up as the type its name implies; every struct lives
+        // across its call.
+        unsafe {
+            let create_session: xr::pfn::CreateSession = self.app.func(c"xrCreateSession");
+            let create_swapchain: xr::pfn::CreateSwapchain = self.app.func(c"xrCreateSwapchain");
+            let info = xr::SessionCreateInfo {
+                ty: xr::StructureType::SESSION_CREATE_INFO,
+                next: &binding as *const _ as *const c_void,
+                create_flags: xr::SessionCreateFlags::EMPTY,
+                system_id: self.sys,
+            };
+            let mut session = xr::Session::NULL;
+            let r = create_session(self.app.instance, &info, &mut session);
+            if r != xr::Result::SUCCESS {
+                return Err(format!("xrCreateSession: {r:?}"));
+            }
+            self.session.set(session);
+            let info = xr::SwapchainCreateInfo {
+                ty: xr::StructureType::SWAPCHAIN_CREATE_INFO,
+                next: std::ptr::null(),
+                create_flags: xr::SwapchainCreateFlags::EMPTY,
+                usage_flags: xr::SwapchainUsageFlags::COLOR_ATTACHMENT,
+                format: vk::Format::R8G8B8A8_SRGB.as_raw() as i64,
+                sample_count: 1,
+                width: EYE[0],
+                height: EYE[1],
+                face_count: 1,
+                array_size: 1,
+                mip_count: 1,
+            };
+            let mut swapchain = xr::Swapchain::NULL;
+            let r = create_swapchain(session, &info, &mut swapchain);
+            if r != xr::Result::SUCCESS {
+                return Err(format!("xrCreateSwapchain: {r:?}"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The handle a double's record names under `key`.
+fn handle(e: &Value, key: &str) -> u64 {
+    e[key].as_u64().unwrap_or(0)
+}
+
+/// The extent of the image `view` shows, as the double recorded them.
+fn extent_of(events: &[Value], view: u64) -> Option<Value> {
+    let image = events
+        .iter()
+        .find(|e| e["kind"] == "image_view" && handle(e, "view") == view)
+        .map(|e| handle(e, "image"))?;
+    events
+        .iter()
+        .find(|e| e["kind"] == "image" && handle(e, "image") == image)
+        .map(|e| e["extent"].clone())
+}
+
+/// That injection is on for the injecting side just made, from what reached the driver since the
+/// double's records were cleared in front of it: its device with the shading-rate attachment
+/// feature (asked for pipeline rates only) and its framebuffer with a second attachment, fovea's
+/// map for the eye-shaped target (`EYE` over the profile's texel: a full-rate map would cover the
+/// framebuffer only). On lavapipe it also records one of each injected case, outside any timing:
+/// the render pass begins with that map, each rendering with one shading-rate struct naming it,
+/// and `vkCmdSetFragmentShadingRateKHR` reaches the driver with `combinerOps[1]` = `MAX`. With the
+/// null bottom those commands reach nothing the double records; the device and the framebuffer
+/// are its evidence there.
+fn proves_injection(
+    double: &fovea_vkdouble::Loaded,
+    side: &Side,
+    bottom: Bottom,
+) -> Result<(), String> {
+    let texel = fovea_vkdouble::Profile::Nvidia.texel();
+    let eye_map = serde_json::json!([EYE[0].div_ceil(texel.width), EYE[1].div_ceil(texel.height)]);
+    let events = double.records()["events"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    let of = |kind: &str| -> Vec<&Value> { events.iter().filter(|e| e["kind"] == kind).collect() };
+    let devices = of("device");
+    match devices.as_slice() {
+        [d] if d["features"]["attachment"] == true => {}
+        _ => {
+            return Err(format!(
+                "the device reached the driver without the shading-rate attachment feature: \
+                 {devices:?}"
+            ))
         }
     }
-    Ok(Injecting {
-        _app: app,
-        _vulkan: v,
-    })
+    let fb = side.framebuffer.as_raw();
+    let made = of("framebuffer");
+    let map = made
+        .iter()
+        .find(|e| handle(e, "framebuffer") == fb)
+        .and_then(|e| e["attachments"].as_array()?.get(1)?.as_u64());
+    let Some(map) = map else {
+        return Err(format!(
+            "its framebuffer reached the driver without a shading-rate attachment: {made:?}"
+        ));
+    };
+    let extent = extent_of(&events, map);
+    if extent.as_ref() != Some(&eye_map) {
+        return Err(format!(
+            "its framebuffer's map is {extent:?}, not the eye target's {eye_map}"
+        ));
+    }
+    if bottom == Bottom::Null {
+        return Ok(());
+    }
+    for case in Case::ALL.into_iter().filter(|c| c.injected()) {
+        side.round(case, 1)
+            .ok_or_else(|| format!("{} not recordable", case.name()))?;
+    }
+    let events = double.records()["events"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    let cb = side.cb.as_raw();
+    let ours = |kind: &str| -> Vec<&Value> {
+        events
+            .iter()
+            .filter(|e| e["kind"] == kind && handle(e, "command_buffer") == cb)
+            .collect()
+    };
+    let passes = ours("begin_render_pass");
+    if passes.len() != 1 || passes[0]["shading_rate_views"] != serde_json::json!([map]) {
+        return Err(format!(
+            "the render pass did not begin with the eye map {map}: {passes:?}"
+        ));
+    }
+    let renderings = ours("begin_rendering");
+    let eye = |r: &&Value| {
+        r["shading_rate_structs"] == 1
+            && extent_of(&events, handle(&r["shading_rate"], "view")).as_ref() == Some(&eye_map)
+    };
+    if renderings.len() != 2 || !renderings.iter().all(eye) {
+        return Err(format!(
+            "the renderings did not begin with the eye map, one struct each: {renderings:?}"
+        ));
+    }
+    let max = vk::FragmentShadingRateCombinerOpKHR::MAX.as_raw();
+    let set = ours("set_fragment_shading_rate");
+    if set.len() != 1 || set[0]["combiner_ops"][1] != max {
+        return Err(format!(
+            "vkCmdSetFragmentShadingRateKHR reached the driver without combinerOps[1] = MAX: \
+             {set:?}"
+        ));
+    }
+    Ok(())
 }
 
-/// The three sides on both bottoms, and what keeps injection on; or why not.
-fn sides() -> Result<(Vec<Sides>, Injecting), String> {
-    vulkan::layers_on_search_path("vkbench")?;
+/// The three sides on both bottoms, each injecting side proven to inject, what keeps injection on,
+/// and the double's library (kept loaded: its records live there); or why not. Panics where an
+/// injecting side does not inject: its rows would measure nothing.
+fn sides() -> Result<(Vec<Sides>, Xr, fovea_vkdouble::Loaded), String> {
+    let double_lib = vulkan::layers_on_search_path("vkbench")?;
+    let double = fovea_vkdouble::Loaded::open(&double_lib)?;
     std::env::remove_var(fovea_vkdouble::NULL_COMMANDS_ENV);
     // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
     let entry = unsafe { ash::Entry::load() }.map_err(|e| format!("no Vulkan loader ({e})"))?;
-    let keep = injecting(&entry)?;
+    // Declared first, dropped last on an early return: the session's swapchain images live on the
+    // first injecting device.
     let mut all = Vec::new();
+    let xr = Xr::new()?;
     for bottom in [Bottom::Lavapipe, Bottom::Null] {
         if bottom == Bottom::Null {
             // Read by the double at vkCreateDevice.
             std::env::set_var(fovea_vkdouble::NULL_COMMANDS_ENV, "1");
         }
+        let bare = Side::new(&entry, Kind::Bare)?;
+        let fovea = Side::new(&entry, Kind::Fdm)?;
+        double.clear();
+        let inject = Side::injecting(&entry, &xr)?;
+        if let Err(e) = proves_injection(&double, &inject, bottom) {
+            panic!(
+                "vk_commands: the injecting device ({} bottom) does not inject, so its rows would \
+                 measure nothing: {e}",
+                bottom.name()
+            );
+        }
         all.push(Sides {
             bottom,
-            bare: Side::new(&entry, Kind::Bare)?,
-            fovea: Side::new(&entry, Kind::Fdm)?,
-            inject: Side::new(&entry, Kind::Inject)?,
+            bare,
+            fovea,
+            inject,
         });
     }
     std::env::remove_var(fovea_vkdouble::NULL_COMMANDS_ENV);
     // The entry (the loader library) must outlive every instance: keep it for the process.
     std::mem::forget(entry);
-    Ok((all, keep))
+    Ok((all, xr, double))
 }
 
 fn bench(c: &mut Criterion, sides: &Sides) {
@@ -629,7 +840,7 @@ fn summary(sides: &Sides) -> Vec<String> {
 }
 
 fn benches() {
-    let (all, _injecting) = match sides() {
+    let (all, xr, _double) = match sides() {
         Ok(s) => s,
         Err(e) => {
             eprintln!("vk_commands: skipped: {e}");
@@ -666,6 +877,9 @@ fn benches() {
         "the layer allocates while recording:\n{}",
         added.join("\n")
     );
+    // The session's swapchain images live on the first injecting device.
+    drop(xr);
+    drop(all);
 }
 
 fn main() {

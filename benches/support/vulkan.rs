@@ -12,8 +12,9 @@ pub const FDM_EXT: &std::ffi::CStr = c"VK_EXT_fragment_density_map";
 /// Writes the double's and this workspace's fovea manifests into a folder of their own and puts
 /// it on the loader's search path, with the double posing as an NVIDIA GPU (shading-rate
 /// attachments, no density maps: the emulating case). Call before the loader first reads the
-/// environment, while nothing else runs.
-pub fn layers_on_search_path(tag: &str) -> Result<(), String> {
+/// environment, while nothing else runs. Returns the double's library as its manifest names it,
+/// for [`fovea_vkdouble::Loaded::open`].
+pub fn layers_on_search_path(tag: &str) -> Result<std::path::PathBuf, String> {
     let fovea_lib = fovea_harness::artifact("libfovea.so")?
         .canonicalize()
         .map_err(|e| e.to_string())?;
@@ -33,7 +34,7 @@ pub fn layers_on_search_path(tag: &str) -> Result<(), String> {
     .map_err(|e| e.to_string())?;
     std::env::set_var("VK_ADD_LAYER_PATH", &dir);
     std::env::set_var(fovea_vkdouble::PROFILE_ENV, "nvidia");
-    Ok(())
+    Ok(double_lib)
 }
 
 /// An instance with the double (and fovea above it where `with_fovea`), and lavapipe's physical
