@@ -10,7 +10,8 @@
 //! - inside `src/vk` and `src/xr`, files stand on floors (a table per tree, [`VK_FLOORS`] and
 //!   [`XR_FLOORS`], as docs/ARCHITECTURE.md draws them) and import only from lower floors: never
 //!   up, never sideways between rows of one floor, never between the files of a folder whose
-//!   files are kept apart.
+//!   files are kept apart; the same in `crates/cli` and `crates/sim` ([`CLI_FLOORS`],
+//!   [`SIM_FLOORS`]).
 //!
 //! Each rule is a checker function over a file's path and text, tested below on small strings so
 //! that each is seen to fail, then run over the tree. Comments and string literals are blanked out
@@ -472,6 +473,48 @@ const XR_FLOORS: &[Place] = &[
     apart(50, "hooks"),
     at(60, "dispatch.rs"),
     at(70, "loader.rs"),
+];
+
+// The same for the two crates built in floors beyond the layer (their crate docs draw them); the
+// crate root (`main.rs`, `lib.rs`) is the door.
+const CLI_FLOORS: &[Place] = &[
+    at(10, "args.rs"),
+    at(10, "discovery.rs"),
+    at(10, "json.rs"),
+    at(20, "target.rs"),
+    at(20, "fov.rs"),
+    at(20, "config.rs"),
+    at(20, "install.rs"),
+    at(20, "found.rs"),
+    at(20, "vk_doctor.rs"),
+    at(20, "demo/setup.rs"),
+    at(30, "maps.rs"),
+    at(30, "report.rs"),
+    at(30, "doctor_settings.rs"),
+    at(40, "doctor.rs"),
+    at(40, "demo/harness.rs"),
+    at(40, "demo/loader.rs"),
+    at(50, "demo/mod.rs"),
+];
+const SIM_FLOORS: &[Place] = &[
+    at(10, "ffi.rs"),
+    at(10, "gaze_script.rs"),
+    at(20, "config.rs"),
+    at(30, "objects.rs"),
+    at(30, "extensions.rs"),
+    at(40, "state.rs"),
+    at(50, "control.rs"),
+    at(50, "system.rs"),
+    at(60, "vulkan.rs"),
+    at(60, "actions.rs"),
+    at(60, "foveation.rs"),
+    at(70, "session.rs"),
+    at(70, "space.rs"),
+    at(70, "swapchain.rs"),
+    at(80, "frame.rs"),
+    at(80, "instance.rs"),
+    at(90, "dispatch.rs"),
+    at(100, "negotiate.rs"),
 ];
 
 /// Every path a text names from a root keyword (`crate`, `$crate`, `super`, `self`), in `use`
@@ -936,19 +979,66 @@ fn tree_files(name: &str) -> Vec<(String, String)> {
         .collect()
 }
 
+/// A crate's files (path relative to its `src`, text), its root file named `mod.rs`: the door of
+/// the tree, as a folder's `mod.rs` is.
+fn crate_tree_files(krate: &str) -> Vec<(String, String)> {
+    let dir = root().join("crates").join(krate).join("src");
+    rust_files(&dir)
+        .into_iter()
+        .map(|f| {
+            let rel = f.strip_prefix(&dir).unwrap().to_string_lossy().into_owned();
+            let rel = match rel.as_str() {
+                "main.rs" | "lib.rs" => "mod.rs".to_owned(),
+                _ => rel,
+            };
+            (rel, read(&f))
+        })
+        .collect()
+}
+
+#[test]
+fn the_cli_and_the_simulator_are_built_in_floors() {
+    let mut found = Vec::new();
+    for (name, table) in [("cli", CLI_FLOORS), ("sim", SIM_FLOORS)] {
+        let files = crate_tree_files(name);
+        assert!(
+            files.iter().any(|(rel, _)| rel == "mod.rs"),
+            "crates/{name}/src has no crate root"
+        );
+        found.extend(floor_violations(
+            &format!("crates/{name}/src"),
+            &[],
+            &files,
+            table,
+        ));
+    }
+    assert!(
+        found.is_empty(),
+        "{} floor violation(s):\n{}",
+        found.len(),
+        found.join("\n")
+    );
+}
+
 #[test]
 fn the_vulkan_and_openxr_sides_are_built_in_floors() {
+    let mut found = Vec::new();
     for (name, table) in [("vk", VK_FLOORS), ("xr", XR_FLOORS)] {
         let files = tree_files(name);
         assert!(!files.is_empty(), "src/{name} has no Rust files");
-        let found = floor_violations(&format!("src/{name}"), &[name], &files, table);
-        assert!(
-            found.is_empty(),
-            "{} floor violation(s):\n{}",
-            found.len(),
-            found.join("\n")
-        );
+        found.extend(floor_violations(
+            &format!("src/{name}"),
+            &[name],
+            &files,
+            table,
+        ));
     }
+    assert!(
+        found.is_empty(),
+        "{} floor violation(s):\n{}",
+        found.len(),
+        found.join("\n")
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
