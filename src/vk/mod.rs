@@ -9,6 +9,9 @@
 //! `own/` and `translate/`, files of its own folder, never in a circle); a hook never imports
 //! another hook, and the modes never import each other:
 //!
+//! `tests/suite/meta/tidy.rs` holds the same table (`VK_FLOORS`) and fails on any import that runs
+//! up or sideways; docs/ARCHITECTURE.md#floors draws both sides.
+//!
 //! | floor | path | job |
 //! |---|---|---|
 //! | 9 | `mod.rs` | this table and the module declarations |

@@ -6,6 +6,9 @@
 //! Outside this folder it imports the bridge and the shared plumbing only (`crate::bridge`,
 //! `crate::common`); it never imports the Vulkan side.
 //!
+//! `tests/suite/meta/tidy.rs` holds the same table (`XR_FLOORS`) and fails on any import that runs
+//! up or sideways; docs/ARCHITECTURE.md#floors draws both sides.
+//!
 //! | floor | path | job |
 //! |---|---|---|
 //! | 0 | `mod.rs` | this table and the module list; imports nothing |
