@@ -255,3 +255,37 @@ fn invalid_create_info_here() {
     assert_eq!(names, [PROBE, APP]);
     assert_eq!(refused, [("xrCreateInstance", 2)]);
 }
+
+#[test]
+fn instances_created_at_once_under_a_new_stack_share_one_probe() {
+    in_own_process(
+        module_path!(),
+        "instances_created_at_once_under_a_new_stack_share_one_probe",
+        at_once_here,
+    );
+}
+
+/// Runs in a process of its own: it counts the simulated runtime's instances, and needs fovea to
+/// have learned nothing yet.
+fn at_once_here() {
+    let threads = 4;
+    let start = std::sync::Barrier::new(threads);
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| {
+                let chain = chain_over(fovea_harness::REFUSE_NULL_LOOKUPS_LAYER);
+                start.wait();
+                let app = App::new(chain, &FOVEATION_EXTENSIONS, API_1_0).unwrap();
+                assert_eq!(app.destroy(), xr::Result::SUCCESS);
+            });
+        }
+    });
+    let (names, refused) = runtime_saw();
+    assert_eq!(
+        names.iter().filter(|n| *n == PROBE).count(),
+        1,
+        "one probe between {threads} threads: {names:?}"
+    );
+    assert_eq!(names.len(), threads + 1, "{names:?}");
+    assert_eq!(refused, []);
+}
