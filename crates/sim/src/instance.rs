@@ -67,6 +67,7 @@ pub(crate) unsafe extern "system" fn create_instance(
             .iter()
             .find(|f| f.function == ctx.name && f.nth <= 1)
         {
+            ctx.set_injected();
             return Err(f.result);
         }
         let info = ffi::input(create_info, xr::StructureType::INSTANCE_CREATE_INFO)?;

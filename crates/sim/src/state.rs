@@ -67,6 +67,11 @@ impl Ctx {
     pub fn set_instance(&mut self, id: u64) {
         self.instance = Some(id);
     }
+
+    /// The call fails by an injected fault, not by the runtime's own checks.
+    pub fn set_injected(&mut self) {
+        self.injected = true;
+    }
 }
 
 /// Runs one entry point: catches panics (they must not cross the FFI boundary; the spec's catch-all
