@@ -121,7 +121,7 @@ pub unsafe fn extensions_below(
                 }
                 (list, true)
             }
-            failed => {
+            Probe::Unlisted => {
                 if !SAID.swap(true, Ordering::Relaxed) {
                     tracing::warn!(
                         target: fovea_abi::log_target::BELOW,
@@ -130,7 +130,18 @@ pub unsafe fn extensions_below(
                          extension of its own the application enables (said once for this process)"
                     );
                 }
-                (Vec::new(), matches!(failed, Probe::Unlisted))
+                (Vec::new(), true)
+            }
+            Probe::NoInstance(r) => {
+                tracing::warn!(
+                    target: fovea_abi::log_target::BELOW,
+                    ?r,
+                    "fovea cannot learn which extensions the runtime offers now (the layers below \
+                     refuse to list them without an instance, and none could be created to ask); \
+                     for this instance it provides every extension of its own the application \
+                     enables, and asks again at the next"
+                );
+                (Vec::new(), false)
             }
         };
         if keep {
@@ -218,9 +229,9 @@ enum Probe {
     /// An instance was created but the layers below would not list them on it: asking again with
     /// the same stack would get the same answer.
     Unlisted,
-    /// No instance could be created (the runtime's state: not running, an instance limit): a later
-    /// instance may ask again.
-    NoInstance,
+    /// No instance could be created (the runtime's state: not running, an instance limit), with the
+    /// result: a later instance may ask again.
+    NoInstance(xr::Result),
 }
 
 /// The create info of a probe: fovea's own, valid for every 1.x runtime (see the module's text).
@@ -268,12 +279,7 @@ unsafe fn probe(
         // SAFETY: fovea's own create info and a copy of the loader's layer info, pointing past fovea.
         let r = next_create(&info, &down, &mut instance);
         if r.into_raw() < 0 || instance == xr::Instance::NULL {
-            tracing::debug!(
-                target: fovea_abi::log_target::BELOW,
-                ?r,
-                "no instance below to ask for its extensions"
-            );
-            return Probe::NoInstance;
+            return Probe::NoInstance(r);
         }
         let list = next_layer::load(
             next_gipa,

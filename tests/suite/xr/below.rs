@@ -289,3 +289,51 @@ fn at_once_here() {
     assert_eq!(names.len(), threads + 1, "{names:?}");
     assert_eq!(refused, []);
 }
+
+#[test]
+fn a_probe_the_runtime_could_not_create_is_tried_again() {
+    in_own_process(
+        module_path!(),
+        "a_probe_the_runtime_could_not_create_is_tried_again",
+        tried_again_here,
+    );
+}
+
+/// Runs in a process of its own: it counts the simulated runtime's instances, and needs fovea to
+/// have learned nothing yet.
+fn tried_again_here() {
+    let native = sim::control::SimConfig {
+        native_foveation: true,
+        ..Default::default()
+    };
+    // The runtime cannot create instances yet (not running): the probe and the app's call fail.
+    sim::control::set_thread_config(Some(sim::control::SimConfig {
+        faults: vec![sim::control::Fault {
+            function: "xrCreateInstance".into(),
+            result: xr::Result::ERROR_RUNTIME_UNAVAILABLE,
+            nth: 0,
+        }],
+        ..native.clone()
+    }));
+    let chain = chain_over(fovea_harness::REFUSE_NULL_LOOKUPS_LAYER);
+    let r = App::new(chain, &FOVEATION_EXTENSIONS, API_1_0).err();
+    assert_eq!(r, Some(xr::Result::ERROR_RUNTIME_UNAVAILABLE));
+
+    // Now it can: fovea asks again rather than keeping "unknown", and passes the native FB down.
+    sim::control::set_thread_config(Some(native));
+    let chain = chain_over(fovea_harness::REFUSE_NULL_LOOKUPS_LAYER);
+    let app = App::new(chain, &FOVEATION_EXTENSIONS, API_1_0).unwrap();
+    let enabled = sim::control::enabled_extensions(app.instance);
+    assert!(
+        enabled.iter().any(|e| e == "XR_FB_foveation"),
+        "{enabled:?}"
+    );
+    let (names, refused) = runtime_saw();
+    assert_eq!(names, [PROBE, APP]);
+    assert_eq!(
+        refused,
+        [],
+        "injected failures are not the runtime's refusals"
+    );
+    sim::control::set_thread_config(None);
+}
