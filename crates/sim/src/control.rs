@@ -7,7 +7,7 @@ use openxr_sys as xr;
 use openxr_sys::Handle;
 
 pub use crate::config::{set_thread_config, EyeGaze, Fault, Load, SimConfig};
-pub use crate::objects::{Call, FoveationParams, SubmittedView};
+pub use crate::objects::{Call, CreatedInstance, FoveationParams, SubmittedView};
 use crate::state::world;
 
 /// Fails a call to `fault.function` on `instance` (see [`Fault`]).
@@ -65,6 +65,22 @@ pub fn refusals(instance: xr::Instance) -> Vec<(&'static str, u64)> {
         .record(instance.into_raw())
         .map(|r| r.refusals.iter().map(|(f, n)| (*f, *n)).collect())
         .unwrap_or_default()
+}
+
+/// Every instance created in this process, in order, whoever created it (the application or a
+/// layer above the runtime); destroyed ones included.
+pub fn created_instances() -> Vec<CreatedInstance> {
+    world().created.clone()
+}
+
+/// The refusals of calls that belong to no instance (an `xrCreateInstance` the runtime refused), by
+/// command name, in this process: the runtime's errors that no instance's [`refusals`] hold.
+pub fn refusals_without_instance() -> Vec<(&'static str, u64)> {
+    world()
+        .refusals_without_instance
+        .iter()
+        .map(|(f, n)| (*f, *n))
+        .collect()
 }
 
 /// With native foveation ([`SimConfig::native_foveation`]), what xrUpdateSwapchainFB last applied

@@ -10,7 +10,9 @@ use openxr_sys::Handle;
 use crate::config;
 use crate::extensions::extensions;
 use crate::ffi;
-use crate::objects::{Event, InstanceState, Record, SubmittedView, VulkanInstanceState};
+use crate::objects::{
+    CreatedInstance, Event, InstanceState, Record, SubmittedView, VulkanInstanceState,
+};
 use crate::state::{entry, world, World};
 
 pub(crate) const RUNTIME_NAME: &str = "fovea simulated headset";
@@ -65,6 +67,7 @@ pub(crate) unsafe extern "system" fn create_instance(
             .iter()
             .find(|f| f.function == ctx.name && f.nth <= 1)
         {
+            ctx.set_injected();
             return Err(f.result);
         }
         let info = ffi::input(create_info, xr::StructureType::INSTANCE_CREATE_INFO)?;
@@ -74,10 +77,10 @@ pub(crate) unsafe extern "system" fn create_instance(
             return Err(xr::Result::ERROR_VALIDATION_FAILURE);
         }
         let app = &info.application_info;
-        match ffi::fixed_str(&app.application_name) {
-            Some(name) if !name.is_empty() => {}
+        let application_name = match ffi::fixed_str(&app.application_name) {
+            Some(name) if !name.is_empty() => name.to_owned(),
             _ => return Err(xr::Result::ERROR_NAME_INVALID),
-        }
+        };
         ffi::fixed_str(&app.engine_name).ok_or(xr::Result::ERROR_NAME_INVALID)?;
         let v = app.api_version;
         if v.major() != 1 || v.minor() > 1 {
@@ -127,6 +130,11 @@ pub(crate) unsafe extern "system" fn create_instance(
             suggested: HashMap::new(),
         };
         w.instances.insert(id, state);
+        w.created.push(CreatedInstance {
+            instance: xr::Instance::from_raw(id),
+            application_name,
+            api_version: v,
+        });
         *instance = xr::Instance::from_raw(id);
         Ok(xr::Result::SUCCESS)
     })

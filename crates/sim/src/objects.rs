@@ -55,6 +55,14 @@ pub(crate) struct Record {
     pub refusals: BTreeMap<&'static str, u64>,
 }
 
+/// One successful xrCreateInstance, as the application info named it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CreatedInstance {
+    pub instance: xr::Instance,
+    pub application_name: String,
+    pub api_version: xr::Version,
+}
+
 /// An event waiting for xrPollEvent.
 pub(crate) enum Event {
     SessionStateChanged {

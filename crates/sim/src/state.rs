@@ -6,7 +6,7 @@
 //! objects the runtime owns; calls through application-provided function pointers
 //! (xrCreateVulkanInstanceKHR/DeviceKHR) and real-time sleeps happen with the lock released.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::LazyLock;
 
@@ -15,7 +15,8 @@ use openxr_sys::Handle;
 use parking_lot::{Mutex, MutexGuard};
 
 use crate::objects::{
-    Action, ActionSet, Call, InstanceState, Profile, Record, Session, Space, Swapchain,
+    Action, ActionSet, Call, CreatedInstance, InstanceState, Profile, Record, Session, Space,
+    Swapchain,
 };
 
 /// `Ok` carries a success code (XR_SUCCESS, XR_FRAME_DISCARDED, ...), `Err` an error code, so
@@ -34,6 +35,12 @@ pub(crate) struct World {
     pub profiles: HashMap<u64, Profile>,
     /// Records of destroyed instances, so tests can read the journal after teardown.
     pub retired: HashMap<u64, Record>,
+    /// Every instance created in this process, in order: what a layer above created on its own
+    /// shows here beside the application's.
+    pub created: Vec<CreatedInstance>,
+    /// Refusals of calls that belong to no instance (an `xrCreateInstance` refused), by command: an
+    /// instance's own are in its [`Record`].
+    pub refusals_without_instance: BTreeMap<&'static str, u64>,
 }
 
 static WORLD: LazyLock<Mutex<World>> = LazyLock::new(|| Mutex::new(World::default()));
@@ -60,6 +67,11 @@ impl Ctx {
     pub fn set_instance(&mut self, id: u64) {
         self.instance = Some(id);
     }
+
+    /// The call fails by an injected fault, not by the runtime's own checks.
+    pub fn set_injected(&mut self) {
+        self.injected = true;
+    }
 }
 
 /// Runs one entry point: catches panics (they must not cross the FFI boundary; the spec's catch-all
@@ -77,8 +89,13 @@ pub(crate) fn entry(name: &'static str, body: impl FnOnce(&mut Ctx) -> XrResult)
         Ok(Ok(r) | Err(r)) => r,
         Err(_) => xr::Result::ERROR_RUNTIME_FAILURE,
     };
+    let refused = result.into_raw() < 0 && !ctx.injected;
+    if ctx.instance.is_none() && refused {
+        let _ = catch_unwind(AssertUnwindSafe(|| {
+            *world().refusals_without_instance.entry(name).or_default() += 1;
+        }));
+    }
     if let Some(id) = ctx.instance {
-        let refused = result.into_raw() < 0 && !ctx.injected;
         let call = Call {
             function: name,
             result,
