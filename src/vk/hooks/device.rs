@@ -115,6 +115,26 @@ fn cannot_strip(e: chain::ChainError) -> String {
     }
 }
 
+/// Why injection cannot reach the device being created, where it is on and this is the device
+/// the OpenXR session renders with but the layer does not emulate on it: without that line the
+/// only sign is the stats line's `Inj=0/0` (docs/injection.md#which-devices-get-the-feature).
+fn injection_impossible(decision: &Decision) -> Option<String> {
+    if !crate::bridge::inject::wanted() || !crate::bridge::inject::device_gets_maps() {
+        return None;
+    }
+    let why = match decision {
+        Decision::Native => "the driver has density maps of its own, and injection puts \
+                             shading-rate attachments into passes"
+            .to_owned(),
+        Decision::PassThrough(why) => why.clone(),
+        Decision::Emulate { .. } => return None,
+    };
+    Some(format!(
+        "injection is on, but this device cannot take injected maps ({why}): its eye passes \
+         render at full rate"
+    ))
+}
+
 /// Decides and builds the rewritten create info.
 ///
 /// On a physical device the layer emulates density maps for, whatever else happens, the
@@ -134,7 +154,7 @@ unsafe fn plan(
 ) -> Plan {
     let decision = decide::decision(inst, physical);
     let Decision::Emulate { fdm, api_version } = &*decision else {
-        return Plan::Untouched(None);
+        return Plan::Untouched(injection_impossible(&decision));
     };
     let names: &[*const c_char] = if ci.pp_enabled_extension_names.is_null() {
         &[]

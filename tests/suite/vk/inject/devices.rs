@@ -318,3 +318,100 @@ fn only_the_sessions_device_gets_shading_rate_attachments() {
         },
     );
 }
+
+/// Injection on a session whose device has no shading-rate attachments (the double's `none`
+/// profile: no `VK_KHR_fragment_shading_rate` at all) cannot work: the device is created as the
+/// application asked, the application renders, and fovea's log says once why nothing is injected,
+/// where before the stats line's `Inj=0/0` was the only sign. On an NVIDIA-like device the line
+/// is not written.
+#[test]
+fn a_session_device_without_shading_rate_attachments_says_why_once() {
+    in_own_process(
+        module_path!(),
+        "a_session_device_without_shading_rate_attachments_says_why_once",
+        || {
+            let dir = std::env::temp_dir().join(format!("fovea-inject-why-{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&dir);
+            std::fs::create_dir_all(&dir).unwrap();
+            std::env::set_var("FOVEA_LOG", "info");
+            std::env::set_var("FOVEA_LOG_FILE", dir.join("fovea.log"));
+            std::env::set_var("FOVEA_INJECT", "1");
+            std::env::set_var("FOVEA_INJECT_LEVEL", "3");
+            pick_lavapipe();
+            let line = "injection is on, but this device cannot take injected maps";
+            for profile in [Profile::None, Profile::Nvidia] {
+                let Some((_serial, env)) = crate::support::device::env() else {
+                    return;
+                };
+                env.double.set_profile(Some(profile));
+                env.double.clear();
+                vulkan::take_messages();
+                let app =
+                    App::new(Chain::fovea().unwrap(), &["XR_KHR_vulkan_enable2"], API_1_0).unwrap();
+                let sys = app.system();
+                let ours = std::ffi::CString::new(fovea_abi::VK_LAYER_NAME).unwrap();
+                let layers: [&CStr; 3] = [
+                    ours.as_c_str(),
+                    VALIDATION_LAYER,
+                    fovea_vkdouble::LAYER_NAME,
+                ];
+                let options = Options {
+                    layers: &layers,
+                    api_version: vk::API_VERSION_1_3,
+                    multiview: false,
+                    dynamic_rendering: true,
+                    device_extensions: &[],
+                    device_next: std::ptr::null(),
+                };
+                let v = match Vulkan::through_xr_with(
+                    &env.entry,
+                    app.chain.gipa(),
+                    app.instance,
+                    sys,
+                    &options,
+                ) {
+                    Ok(v) => v,
+                    Err(why) => {
+                        fovea_harness::skip(&why);
+                        return;
+                    }
+                };
+                // SAFETY: the device is live and has dynamic rendering.
+                unsafe { render(&v.instance, v.physical_device, &v.device, v.family) };
+                // SAFETY: the device is used no more.
+                unsafe { v.destroy_device() };
+                assert_eq!(app.destroy(), openxr_sys::Result::SUCCESS);
+                // SAFETY: the device is gone.
+                unsafe { v.destroy_instance() };
+                vulkan::assert_no_messages();
+                assert_eq!(env.double.errors(), Vec::<String>::new(), "{profile:?}");
+                let events: Vec<Value> = env.double.records()["events"]
+                    .as_array()
+                    .cloned()
+                    .unwrap_or_default();
+                let devices = of(&events, "device");
+                let log = std::fs::read_to_string(dir.join("fovea.log")).unwrap_or_default();
+                let said = log.matches(line).count();
+                match profile {
+                    Profile::None => {
+                        assert_eq!(said, 1, "one line, with the reason:\n{log}");
+                        assert!(
+                            log.contains(&format!(
+                                "{line} (the driver offers no VK_KHR_fragment_shading_rate)"
+                            )),
+                            "{log}"
+                        );
+                    }
+                    _ => {
+                        assert_eq!(devices.len(), 1, "{profile:?}: {devices:#?}");
+                        assert_eq!(
+                            devices[0]["features"]["attachment"], true,
+                            "{profile:?}: injected into"
+                        );
+                        assert_eq!(said, 1, "{profile:?}: no second line:\n{log}");
+                    }
+                }
+            }
+        },
+    );
+}
