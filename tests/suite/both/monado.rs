@@ -778,18 +778,26 @@ fn example_maps_are_the_model_at_monado_s_fovs_in_both_fov_modes() {
 const SYMMETRIC_OFF: &str = "symmetric FOV is off for this session";
 
 /// Injection on (`FOVEA_INJECT=1`) and off, the example with and without the FB API: the same
-/// clean exits and silence, and with the FB API the same maps of fovea's model.
+/// clean exits and silence (but for fovea's one line, with injection on, that this GPU cannot take
+/// injected maps), and with the FB API the same maps of fovea's model.
 #[test]
 fn example_with_injection_on_and_off_on_monado_is_clean() {
     let Some(m) = monado() else { return };
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     for inject in ["0", "1"] {
+        // Where the GPU has no shading-rate attachments (lavapipe), injection cannot work, and
+        // fovea's Vulkan layer says so once, at the session's vkCreateDevice.
+        let allowed: &[&str] = if inject == "1" {
+            &["injection is on, but this device cannot take injected maps"]
+        } else {
+            &[]
+        };
         let fb = example_on_monado(
             &m,
             &format!("inject-{inject}"),
             &[],
             &[("FOVEA_INJECT", inject)],
-            &[],
+            allowed,
         );
         let fovs = fb.fovs();
         assert_maps_are_the_model(&fb, &fovs, None);
@@ -798,7 +806,7 @@ fn example_with_injection_on_and_off_on_monado_is_clean() {
             &format!("inject-{inject}-no-fb"),
             &["--no-fb"],
             &[("FOVEA_INJECT", inject)],
-            &[],
+            allowed,
         );
     }
 }
