@@ -195,6 +195,39 @@ fn of<'a>(events: &'a [Value], kind: &str) -> Vec<&'a Value> {
     events.iter().filter(|e| e["kind"] == kind).collect()
 }
 
+/// An OpenXR application (XR_KHR_vulkan_enable2) through fovea on the double posing as
+/// `profile`, and the session's Vulkan device made through `xrCreateVulkanDeviceKHR`, with fovea's
+/// Vulkan layer above validation and the double; the double's records and validation's messages
+/// cleared first. `None` (with the skip said) where the stack cannot be made.
+fn session_device(env: &crate::support::device::Env, profile: Profile) -> Option<(App, Vulkan)> {
+    env.double.set_profile(Some(profile));
+    env.double.clear();
+    vulkan::take_messages();
+    let app = App::new(Chain::fovea().unwrap(), &["XR_KHR_vulkan_enable2"], API_1_0).unwrap();
+    let sys = app.system();
+    let ours = std::ffi::CString::new(fovea_abi::VK_LAYER_NAME).unwrap();
+    let layers: [&CStr; 3] = [
+        ours.as_c_str(),
+        VALIDATION_LAYER,
+        fovea_vkdouble::LAYER_NAME,
+    ];
+    let options = Options {
+        layers: &layers,
+        api_version: vk::API_VERSION_1_3,
+        multiview: false,
+        dynamic_rendering: true,
+        device_extensions: &[],
+        device_next: std::ptr::null(),
+    };
+    match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options) {
+        Ok(v) => Some((app, v)),
+        Err(why) => {
+            fovea_harness::skip(&why);
+            None
+        }
+    }
+}
+
 #[test]
 fn only_the_sessions_device_gets_shading_rate_attachments() {
     in_own_process(
@@ -208,38 +241,8 @@ fn only_the_sessions_device_gets_shading_rate_attachments() {
                 let Some((_serial, env)) = crate::support::device::env() else {
                     return;
                 };
-                env.double.set_profile(Some(profile));
-                env.double.clear();
-                vulkan::take_messages();
-                let app =
-                    App::new(Chain::fovea().unwrap(), &["XR_KHR_vulkan_enable2"], API_1_0).unwrap();
-                let sys = app.system();
-                let ours = std::ffi::CString::new(fovea_abi::VK_LAYER_NAME).unwrap();
-                let layers: [&CStr; 3] = [
-                    ours.as_c_str(),
-                    VALIDATION_LAYER,
-                    fovea_vkdouble::LAYER_NAME,
-                ];
-                let options = Options {
-                    layers: &layers,
-                    api_version: vk::API_VERSION_1_3,
-                    multiview: false,
-                    dynamic_rendering: true,
-                    device_extensions: &[],
-                    device_next: std::ptr::null(),
-                };
-                let v = match Vulkan::through_xr_with(
-                    &env.entry,
-                    app.chain.gipa(),
-                    app.instance,
-                    sys,
-                    &options,
-                ) {
-                    Ok(v) => v,
-                    Err(why) => {
-                        fovea_harness::skip(&why);
-                        return;
-                    }
+                let Some((app, v)) = session_device(env, profile) else {
+                    return;
                 };
                 // The application's second device, on the same physical device, made directly.
                 let prio = [1.0];
@@ -343,38 +346,8 @@ fn a_session_device_without_shading_rate_attachments_says_why_once() {
                 let Some((_serial, env)) = crate::support::device::env() else {
                     return;
                 };
-                env.double.set_profile(Some(profile));
-                env.double.clear();
-                vulkan::take_messages();
-                let app =
-                    App::new(Chain::fovea().unwrap(), &["XR_KHR_vulkan_enable2"], API_1_0).unwrap();
-                let sys = app.system();
-                let ours = std::ffi::CString::new(fovea_abi::VK_LAYER_NAME).unwrap();
-                let layers: [&CStr; 3] = [
-                    ours.as_c_str(),
-                    VALIDATION_LAYER,
-                    fovea_vkdouble::LAYER_NAME,
-                ];
-                let options = Options {
-                    layers: &layers,
-                    api_version: vk::API_VERSION_1_3,
-                    multiview: false,
-                    dynamic_rendering: true,
-                    device_extensions: &[],
-                    device_next: std::ptr::null(),
-                };
-                let v = match Vulkan::through_xr_with(
-                    &env.entry,
-                    app.chain.gipa(),
-                    app.instance,
-                    sys,
-                    &options,
-                ) {
-                    Ok(v) => v,
-                    Err(why) => {
-                        fovea_harness::skip(&why);
-                        return;
-                    }
+                let Some((app, v)) = session_device(env, profile) else {
+                    return;
                 };
                 // SAFETY: the device is live and has dynamic rendering.
                 unsafe { render(&v.instance, v.physical_device, &v.device, v.family) };
