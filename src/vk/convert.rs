@@ -50,8 +50,8 @@ use ash::vk::Handle as _;
 use crate::vk::base::chain;
 use crate::vk::base::ffi::{key, raw, AddressHasher, Key};
 use crate::vk::own::bindings::restore;
-use crate::vk::own::convert_shader::{Push, GROUP};
-use crate::vk::own::converter::{Converter, MapEntry, Slot, SourceAndShadow};
+use crate::vk::own::convert_shader::{texel_shift, Push, GROUP, MAX_SHIFTS};
+use crate::vk::own::converter::{write_shifts, Converter, MapEntry, Slot, SourceAndShadow};
 use crate::vk::own::shadows::ShadowImage;
 use crate::vk::registry::{
     self, bound_of, converter, forget_command_buffers_where, record_of, with_record, Device,
@@ -259,12 +259,14 @@ pub fn device_key_reused(k: Key) {
     FRAMEBUFFERS.write().retain(|_, (key, _)| *key != k);
 }
 
-/// An application density image (not fovea's own) just got its shadow; its conversion objects
-/// are made with its first view ([`view_changed`]).
+/// A density image just got its shadow: an application's, or one of fovea's own created with
+/// `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` (`offsets`), whose passes may end with
+/// offsets, which only a conversion in front of the pass can apply; its conversion objects are
+/// made with its first view ([`view_changed`]).
 ///
 /// # Safety
 /// `app` must be the live image just created on `dev`, shadowed by `shadow`.
-pub unsafe fn map_created(dev: &Device, app: vk::Image, shadow: &ShadowImage) {
+pub unsafe fn map_created(dev: &Device, app: vk::Image, shadow: &ShadowImage, offsets: bool) {
     // SAFETY: as the caller promised.
     if let Some(c) = unsafe { converter(dev.handle) } {
         c.maps.lock().insert(
@@ -272,13 +274,15 @@ pub unsafe fn map_created(dev: &Device, app: vk::Image, shadow: &ShadowImage) {
             MapEntry {
                 shadow: *shadow,
                 objects: None,
+                offsets,
             },
         );
     }
-    if !dev
-        .attachments
-        .app_maps_logged
-        .swap(true, Ordering::Relaxed)
+    if !crate::bridge::creating_own_density_images()
+        && !dev
+            .attachments
+            .app_maps_logged
+            .swap(true, Ordering::Relaxed)
     {
         tracing::info!(
             image = raw(app),
@@ -329,7 +333,7 @@ pub unsafe fn view_changed(dev: &Device, view: vk::ImageView, image: Option<vk::
     };
     if entry.objects.is_none() {
         // SAFETY: the application's live image, with memory now (it has a view).
-        match unsafe { c.make_map(i, &entry.shadow) } {
+        match unsafe { c.make_map(i, &entry.shadow, entry.offsets) } {
             Ok(m) => entry.objects = Some(m),
             Err(e) => {
                 tracing::warn!(
@@ -474,14 +478,55 @@ pub unsafe fn before_render_pass(
     let Some(view) = view else {
         return;
     };
-    with_converter(cb, |c| {
-        let Some((initial, last, density_initial)) =
-            c.passes.lock().get(&b.render_pass.as_raw()).copied()
-        else {
+    let shifts = with_converter(cb, |c| {
+        let (initial, last, density_initial) =
+            c.passes.lock().get(&b.render_pass.as_raw()).copied()?;
+        // SAFETY: as the caller promised.
+        unsafe { c.convert_for_pass(cb, view, initial, last, density_initial) }
+    });
+    opened(cb, shifts.flatten(), false);
+}
+
+/// Notes the render pass instance just begun in `cb` (a non-resuming begin that names a density
+/// map): the shifts its conversion reads where its map takes offsets, which its end writes
+/// ([`ended`]); `suspending` where it was begun so.
+fn opened(cb: vk::CommandBuffer, shifts: Option<(usize, [u32; 2])>, suspending: bool) {
+    with_record(cb, |b| {
+        b.open = shifts;
+        b.suspended = suspending;
+    });
+}
+
+/// The end of a render pass instance (`vkCmdEndRenderPass2`, `vkCmdEndRendering2EXT`) with
+/// `offsets` (empty: none, or a count of zero, which both mean (0, 0)): where the instance's
+/// conversion reads shifts, they get the offsets, per layer, as whole texels
+/// ([`texel_shift`]); the recording is not pending, so nothing reads them until its next submit,
+/// which sees the host's write. The end of a part of a dynamic render pass instance begun
+/// suspending carries no offsets (the specification ignores them): the end after its last
+/// resumption does. Offsets beyond the map's layers or [`MAX_SHIFTS`] are ignored; missing ones
+/// are (0, 0). The application's errors are handled as the specification's lookup would: an
+/// offset that is not a multiple of the granularity shifts by the texel whose centre it lands
+/// nearest ([`texel_shift`]); offsets at the end of a pass whose map was created without the
+/// offset flag, or that reads no map, change nothing.
+pub fn ended(cb: vk::CommandBuffer, offsets: &[vk::Offset2D]) {
+    record_of(cb, |r| {
+        let open = {
+            let mut b = r.bound.lock();
+            if b.suspended {
+                return;
+            }
+            b.open.take()
+        };
+        let Some((at, texel)) = open else {
             return;
         };
-        // SAFETY: as the caller promised.
-        unsafe { c.convert_for_pass(cb, view, initial, last, density_initial) };
+        let mut shifts = [[0i32; 2]; MAX_SHIFTS];
+        for (s, o) in shifts.iter_mut().zip(offsets) {
+            *s = [texel_shift(o.x, texel[0]), texel_shift(o.y, texel[1])];
+        }
+        // SAFETY: a live slot's shifts (the slot lives as long as its command buffer's record,
+        // which this call on `cb` holds), written while `cb` records.
+        unsafe { write_shifts(at as *mut u8, &shifts) };
     });
 }
 
@@ -499,10 +544,7 @@ pub unsafe fn before_rendering(
     let Some(ri) = (unsafe { info.as_ref() }) else {
         return;
     };
-    // A resumed render pass instance was converted where it began, and nothing but the
-    // instance's own commands may come between its suspension and resumption
-    // (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#renderpass-suspension>).
-    if ri.p_next.is_null() || ri.flags.contains(vk::RenderingFlags::RESUMING) {
+    if ri.p_next.is_null() {
         return;
     }
     let ty = vk::StructureType::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_INFO_EXT;
@@ -516,13 +558,28 @@ pub unsafe fn before_rendering(
     if f.image_view == vk::ImageView::null() {
         return;
     }
-    with_converter(cb, |c| {
-        if let Some((image, m)) = c.map_of_view(f.image_view.as_raw()) {
-            let fdm = f.image_layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
-            // SAFETY: as the caller promised.
-            unsafe { c.convert(cb, image, &m, readable(f.image_layout), fdm) };
-        }
+    let suspending = ri.flags.contains(vk::RenderingFlags::SUSPENDING);
+    // A resumed render pass instance was converted where it began, and nothing but the
+    // instance's own commands may come between its suspension and resumption
+    // (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#renderpass-suspension>).
+    // Its offsets are those of the end after its last resumption; an instance suspended in
+    // another command buffer has its shifts there, which this recording cannot reach.
+    if ri.flags.contains(vk::RenderingFlags::RESUMING) {
+        with_record(cb, |b| {
+            if !b.suspended {
+                b.open = None;
+            }
+            b.suspended = suspending;
+        });
+        return;
+    }
+    let shifts = with_converter(cb, |c| {
+        let (image, m) = c.map_of_view(f.image_view.as_raw())?;
+        let fdm = f.image_layout == vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT;
+        // SAFETY: as the caller promised.
+        unsafe { c.convert(cb, image, &m, readable(f.image_layout), fdm) }
     });
+    opened(cb, shifts.flatten(), suspending);
 }
 
 /// Forgets a destroyed framebuffer's density view (called by `pass::destroy_framebuffer`, after
@@ -574,30 +631,41 @@ fn readable(layout: vk::ImageLayout) -> bool {
 }
 
 impl Converter {
-    /// `cb`'s slot for the map `m` of `image`: the one it converted the map with before, or a new
-    /// one (a slot made for an earlier image with the same handle is replaced).
+    /// `cb`'s slot for the map `m` of `image` in recording `recording`: one it converted the map
+    /// with before that no conversion of this recording took yet, or a new one (slots made for an
+    /// earlier image with the same handle are replaced).
     ///
     /// # Safety
     /// As [`Converter::make_slot`]; `cb` recording on this device.
-    unsafe fn slot(&self, cb: vk::CommandBuffer, image: u64, m: &SourceAndShadow) -> Option<Slot> {
+    unsafe fn slot(
+        &self,
+        cb: vk::CommandBuffer,
+        image: u64,
+        m: &SourceAndShadow,
+        recording: u64,
+    ) -> Option<Slot> {
         let known = record_of(cb, |r| {
             r.slots
                 .lock()
-                .iter()
-                .find(|s| s.image == image && s.view == m.view)
-                .copied()
+                .iter_mut()
+                .find(|s| s.image == image && s.view == m.view && s.used_in != recording)
+                .map(|s| {
+                    s.used_in = recording;
+                    *s
+                })
         })?;
         if known.is_some() {
             return known;
         }
         // SAFETY: as the caller promised.
         match unsafe { self.make_slot(image, m) } {
-            Ok(slot) => {
+            Ok(mut slot) => {
+                slot.used_in = recording;
                 let stale = record_of(cb, |r| {
                     let mut slots = r.slots.lock();
-                    let stale: Vec<Slot> =
-                        slots.iter().filter(|s| s.image == image).copied().collect();
-                    slots.retain(|s| s.image != image);
+                    let gone = |s: &Slot| s.image == image && s.view != m.view;
+                    let stale: Vec<Slot> = slots.iter().filter(|s| gone(s)).copied().collect();
+                    slots.retain(|s| !gone(s));
                     slots.push(slot);
                     stale
                 })
@@ -645,18 +713,18 @@ impl Converter {
         initial: vk::ImageLayout,
         last: vk::ImageLayout,
         density_initial: bool,
-    ) {
-        let Some((image, m)) = self.map_of_view(view) else {
-            return;
-        };
+    ) -> Option<(usize, [u32; 2])> {
+        let (image, m) = self.map_of_view(view)?;
         let discarded = matches!(
             initial,
             vk::ImageLayout::UNDEFINED | vk::ImageLayout::PREINITIALIZED
         );
         let before = readable(initial);
+        let mut shifts = None;
         if before {
+            let unchanged = density_initial && initial == last;
             // SAFETY: as the caller promised.
-            unsafe { self.convert(cb, image, &m, true, density_initial && initial == last) };
+            shifts = unsafe { self.convert(cb, image, &m, true, unchanged) };
         }
         if initial != last {
             // SAFETY: as the caller promised; the application's image, whole.
@@ -664,8 +732,9 @@ impl Converter {
         }
         if !before {
             // SAFETY: as the caller promised.
-            unsafe { self.convert(cb, image, &m, !discarded && readable(last), false) };
+            shifts = unsafe { self.convert(cb, image, &m, !discarded && readable(last), false) };
         }
+        shifts
     }
 
     /// Records a layout transition of the application's image, ordered after everything before
@@ -715,7 +784,9 @@ impl Converter {
     /// (its layout at this point is `GENERAL`). `in_density_layout`: the application names the map
     /// in the density layout itself here, which nothing can write in, so a change since an earlier
     /// conversion in this command buffer had to move it back into that layout, which the layer
-    /// sees ([`MAP_EPOCH`]); only then may the conversion be skipped.
+    /// sees ([`MAP_EPOCH`]); only then may the conversion be skipped, and never for a map that
+    /// takes offsets, whose passes each shift it by their own. Returns, for such a map, the shifts
+    /// the conversion reads (zero until the pass's end writes them, [`ended`]) and their texel.
     ///
     /// # Safety
     /// `cb` must be recording, outside a render pass, on this converter's device.
@@ -726,7 +797,7 @@ impl Converter {
         m: &SourceAndShadow,
         readable: bool,
         in_density_layout: bool,
-    ) {
+    ) -> Option<(usize, [u32; 2])> {
         if !readable {
             if !self.logged_layout.swap(true, Ordering::Relaxed) {
                 tracing::warn!(
@@ -735,7 +806,7 @@ impl Converter {
                      GENERAL or the density-map layout: not converted, it renders at full rate"
                 );
             }
-            return;
+            return None;
         }
         let Some(bound) = bound_of(cb) else {
             if !self.logged_state.swap(true, Ordering::Relaxed) {
@@ -746,12 +817,12 @@ impl Converter {
                      records): its passes' density maps are not converted, they render at full rate"
                 );
             }
-            return;
+            return None;
         };
         let epoch = MAP_EPOCH.load(Ordering::Acquire);
-        if in_density_layout && bound.converted.contains(&(image, epoch)) {
+        if in_density_layout && !m.offsets && bound.converted.contains(&(image, epoch)) {
             // Converted earlier in this command buffer, and nothing since may have changed it.
-            return;
+            return None;
         }
         if bound.inherited_conditional {
             if !self.logged_conditional.swap(true, Ordering::Relaxed) {
@@ -763,12 +834,13 @@ impl Converter {
                      the map is not converted and its shadow keeps what it had"
                 );
             }
-            return;
+            return None;
         }
         // SAFETY: as the caller promised.
-        let Some(slot) = (unsafe { self.slot(cb, image, m) }) else {
-            return;
-        };
+        let slot = unsafe { self.slot(cb, image, m, bound.recording) }?;
+        // This pass instance's offsets are (0, 0) until its end says otherwise.
+        // SAFETY: the slot's own shifts; `cb` is recording.
+        unsafe { slot.write_shifts(&[]) };
         // Conditional rendering discards dispatches but not copies
         // (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#drawing-conditional-rendering>):
         // the conversion runs outside it, since the pass reads the map whatever the condition.
@@ -934,5 +1006,6 @@ impl Converter {
             // SAFETY: the application's condition again, as it began it.
             unsafe { begin(cb, &info) };
         }
+        m.offsets.then_some((slot.shifts_at as usize, self.texel))
     }
 }

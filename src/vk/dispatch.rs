@@ -4,9 +4,8 @@
 
 use std::ffi::CStr;
 
-use ash::vk;
-
 use crate::vk::base::commands::{command_list, When};
+use crate::vk::base::ffi::pfn;
 use crate::vk::base::next::{DeviceNext, InstanceNext};
 use crate::vk::hooks::{
     barrier, device, image, instance, pass, physical, pipeline, record, submit,
@@ -40,7 +39,7 @@ macro_rules! hook_tables {
                 // SAFETY: function pointers share one representation; the caller casts it back to
                 // the type the name implies, which the `as` checks here.
                 function: unsafe {
-                    std::mem::transmute::<vk::$ipfn, unsafe extern "system" fn()>($ihook as vk::$ipfn)
+                    std::mem::transmute::<pfn::$ipfn, unsafe extern "system" fn()>($ihook as pfn::$ipfn)
                 },
                 offered: |n: &InstanceNext| n.$ifield.is_some(),
             },)*
@@ -52,7 +51,7 @@ macro_rules! hook_tables {
                 name: $dname,
                 // SAFETY: as for INSTANCE_HOOKS.
                 function: unsafe {
-                    std::mem::transmute::<vk::$dpfn, unsafe extern "system" fn()>($dhook as vk::$dpfn)
+                    std::mem::transmute::<pfn::$dpfn, unsafe extern "system" fn()>($dhook as pfn::$dpfn)
                 },
                 when: $when,
                 offered: |n: &DeviceNext| n.$dfield.is_some(),

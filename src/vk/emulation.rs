@@ -93,8 +93,10 @@ pub unsafe fn image_created(
             );
             // fovea's own density images get their rates with every upload
             // (`xr::density_images`); an application's own maps are converted at every pass
-            // begin that reads them ([`crate::vk::convert`]): the caller hands those on.
-            (!own_image).then_some(s)
+            // begin that reads them ([`crate::vk::convert`]): the caller hands those on, and
+            // fovea's own that take density-map offsets, which only a conversion in front of
+            // the pass can apply (docs/vulkan-layer.md#density-map-offsets).
+            (!own_image || takes_offsets(ci.flags)).then_some(s)
         }
         Err(e) => {
             tracing::warn!(
@@ -106,6 +108,12 @@ pub unsafe fn image_created(
             None
         }
     }
+}
+
+/// Whether an image was created for density-map offsets
+/// (`VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT`, the QCOM bit's value).
+pub fn takes_offsets(flags: vk::ImageCreateFlags) -> bool {
+    flags.contains(vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM)
 }
 
 /// Destroys every shadow left on a device about to be destroyed.

@@ -7,6 +7,7 @@ use std::ffi::{c_char, CStr};
 
 use ash::vk;
 
+use crate::vk::base::commands::When;
 use crate::vk::base::ffi::{guard, name};
 use crate::vk::base::link::{self, NegotiateLayerInterface};
 use crate::vk::dispatch;
@@ -118,7 +119,8 @@ unsafe extern "system" fn get_instance_proc_addr(
         }
         // SAFETY: the next layer's function, with the caller's arguments.
         let below = unsafe { (inst.gipa)(instance, p_name) };
-        if below.is_some() {
+        let provided = dispatch::device_hook(name).is_some_and(|h| h.when == When::Provided);
+        if below.is_some() || provided {
             if let Some(h) = dispatch::device_hook(name) {
                 // The device the command will be called on is not known yet: the hook looks it up
                 // and forwards where the device does not emulate.
@@ -161,7 +163,8 @@ unsafe extern "system" fn get_device_proc_addr(
         // SAFETY: as the caller promised.
         let dev = unsafe { registry::device(device) }?;
         if let Some(h) = dispatch::device_hook(name) {
-            if (h.offered)(&dev.next) && h.when.applies(dev.fdm.is_some(), dev.inject.is_some()) {
+            let offered = (h.offered)(&dev.next) || h.when == When::Provided;
+            if offered && h.when.applies(dev.fdm.is_some(), dev.inject.is_some()) {
                 return Some(h.function);
             }
         }

@@ -28,7 +28,7 @@
 //! | 1 | `base/` (`mod.rs`, `ffi.rs`, `chain.rs`, `structs.rs`, `link.rs`, `commands.rs`, `next.rs`) | the FFI edge (guard, names, slices, two-call, handle keys), `pNext` chains and the size of every struct a device create info may chain, the loader's link structs, the one command list, the next-layer tables |
 //!
 //! Inside a folder: `base/chain.rs` uses `base/link.rs` and `base/structs.rs`, `base/next.rs` uses
-//! `base/commands.rs`; `own/calls.rs` uses `own/shadows.rs`, `own/converter.rs` uses
+//! `base/commands.rs` and `base/ffi.rs`; `own/calls.rs` uses `own/shadows.rs`, `own/converter.rs` uses
 //! `own/calls.rs`, `own/convert_shader.rs` and `own/shadows.rs`,
 //! `own/injector.rs` uses `own/calls.rs`; `translate/render_pass.rs` uses `translate/formats.rs`
 //! and `translate/sync.rs`, `translate/render_pass_v1.rs` uses `translate/render_pass.rs` and

@@ -103,6 +103,9 @@ pub struct Device {
     /// The next layer's `vkGetDeviceProcAddr`.
     pub gdpa: vk::PFN_vkGetDeviceProcAddr,
     pub next: DeviceNext,
+    /// The next layer's `vkCmdEndRendering` (or its KHR alias), which `vkCmdEndRendering2EXT`
+    /// goes down as on an emulating device (`None` elsewhere).
+    pub end_rendering: Option<vk::PFN_vkCmdEndRendering>,
     /// `Some` where the device emulates fragment density maps.
     pub fdm: Option<FdmEmulation>,
     /// Where injection is on (docs/injection.md), the device got shading-rate attachments at
@@ -720,6 +723,7 @@ mod tests {
             handle: vk::Device::from_raw(handle as *const usize as u64),
             gdpa: no_gdpa,
             next: DeviceNext::default(),
+            end_rendering: None,
             fdm: None,
             inject: None,
             api_version,

@@ -24,6 +24,10 @@ pub enum When {
     /// Only on devices that inject: what concerns an application's own shading rates, which an
     /// emulating device never has (docs/injection.md#apps-that-set-rates).
     Injecting,
+    /// A command of an extension the layer itself offers on emulating devices
+    /// (`VK_EXT_fragment_density_map_offset`'s `vkCmdEndRendering2EXT`): handed out there whether
+    /// or not the next layer has it, which it does not.
+    Provided,
 }
 
 impl When {
@@ -35,6 +39,7 @@ impl When {
             When::Emulated => emulated,
             When::Injected => emulated || injected,
             When::Injecting => injected,
+            When::Provided => emulated,
         }
     }
 }
@@ -154,6 +159,20 @@ macro_rules! command_list {
                     pass::cmd_begin_rendering, When::Injected;
                 c"vkCmdBeginRenderingKHR" => cmd_begin_rendering_khr: PFN_vkCmdBeginRendering =
                     pass::cmd_begin_rendering_khr, When::Injected;
+                // Density-map offsets arrive with the end of a pass; their structs never reach the
+                // driver (docs/vulkan-layer.md#density-map-offsets).
+                c"vkCmdEndRenderPass2" => cmd_end_render_pass2: PFN_vkCmdEndRenderPass2 =
+                    pass::cmd_end_render_pass2, When::Emulated;
+                c"vkCmdEndRenderPass2KHR" => cmd_end_render_pass2_khr: PFN_vkCmdEndRenderPass2 =
+                    pass::cmd_end_render_pass2_khr, When::Emulated;
+                c"vkCmdNextSubpass2" => cmd_next_subpass2: PFN_vkCmdNextSubpass2 =
+                    pass::cmd_next_subpass2, When::Emulated;
+                c"vkCmdNextSubpass2KHR" => cmd_next_subpass2_khr: PFN_vkCmdNextSubpass2 =
+                    pass::cmd_next_subpass2_khr, When::Emulated;
+                c"vkCmdEndRendering2EXT" => cmd_end_rendering2_ext: PFN_vkCmdEndRendering2KHR =
+                    pass::cmd_end_rendering2_ext, When::Provided;
+                c"vkCmdEndRendering2KHR" => cmd_end_rendering2_khr: PFN_vkCmdEndRendering2KHR =
+                    pass::cmd_end_rendering2_khr, When::Emulated;
                 // The application's own rates meet the injected attachment.
                 c"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate:
                     PFN_vkCmdSetFragmentShadingRateKHR = pipeline::cmd_set_fragment_shading_rate,

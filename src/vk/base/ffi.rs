@@ -160,3 +160,61 @@ mod tests {
         assert_eq!(guard("t", 1, || 2), 2);
     }
 }
+
+/// `VK_EXT_fragment_density_map_offset` and the `VK_QCOM_fragment_density_map_offset` name it was
+/// promoted from: the layer offers both on emulating devices (docs/vulkan-layer.md#density-map-offsets).
+/// The structs are the same under both names
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VK_EXT_fragment_density_map_offset.html>):
+/// ash's `…QCOM` ones, with the same `sType` values; what ash 0.38 lacks is below.
+pub mod offset {
+    use std::ffi::{c_void, CStr};
+
+    use ash::vk;
+
+    pub const EXT_NAME: &CStr = c"VK_EXT_fragment_density_map_offset";
+    pub const EXT_SPEC_VERSION: u32 = 1;
+    pub const QCOM_NAME: &CStr = ash::qcom::fragment_density_map_offset::NAME;
+    /// Revision 3, the registry's latest (ash 0.38 has 1).
+    pub const QCOM_SPEC_VERSION: u32 = 3;
+
+    /// `VK_STRUCTURE_TYPE_RENDER_PASS_FRAGMENT_DENSITY_MAP_OFFSET_END_INFO_EXT`, the QCOM struct's.
+    pub const END_INFO: vk::StructureType =
+        vk::StructureType::SUBPASS_FRAGMENT_DENSITY_MAP_OFFSET_END_INFO_QCOM;
+    /// `VkRenderPassFragmentDensityMapOffsetEndInfoEXT`.
+    pub type EndInfo<'a> = vk::SubpassFragmentDensityMapOffsetEndInfoQCOM<'a>;
+
+    /// `VK_STRUCTURE_TYPE_RENDERING_END_INFO_KHR` (`…_EXT` is the same value), newer than ash's
+    /// headers (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingEndInfoKHR.html>).
+    pub const RENDERING_END_INFO: vk::StructureType = vk::StructureType::from_raw(1_000_619_003);
+
+    /// `VkRenderingEndInfoKHR` (= `VkRenderingEndInfoEXT`).
+    #[repr(C)]
+    #[derive(Clone, Copy, Debug)]
+    pub struct RenderingEndInfo {
+        pub s_type: vk::StructureType,
+        pub p_next: *const c_void,
+    }
+
+    impl Default for RenderingEndInfo {
+        fn default() -> RenderingEndInfo {
+            RenderingEndInfo {
+                s_type: RENDERING_END_INFO,
+                p_next: std::ptr::null(),
+            }
+        }
+    }
+}
+
+/// ash's command pointer types and the ones ash 0.38 lacks, for the one command list
+/// ([`crate::vk::base::commands`]).
+pub mod pfn {
+    pub use ash::vk::*;
+
+    /// `vkCmdEndRendering2KHR` (`VK_KHR_maintenance10`) and `vkCmdEndRendering2EXT`
+    /// (`VK_EXT_fragment_density_map_offset`): one signature.
+    #[allow(non_camel_case_types)]
+    pub type PFN_vkCmdEndRendering2KHR = unsafe extern "system" fn(
+        command_buffer: CommandBuffer,
+        info: *const super::offset::RenderingEndInfo,
+    );
+}

@@ -4,6 +4,7 @@
 use ash::vk;
 
 use crate::vk::base::commands::command_list;
+use crate::vk::base::ffi::pfn;
 
 macro_rules! next_tables {
     (
@@ -14,7 +15,7 @@ macro_rules! next_tables {
         /// none), loaded once at `vkCreateInstance`.
         #[derive(Clone, Copy, Default)]
         pub struct InstanceNext {
-            $(pub $ifield: Option<vk::$ipfn>,)*
+            $(pub $ifield: Option<pfn::$ipfn>,)*
         }
 
         impl InstanceNext {
@@ -29,7 +30,7 @@ macro_rules! next_tables {
                         .map(|f| {
                             // SAFETY: function pointers share one representation; the name
                             // implies this type.
-                            unsafe { std::mem::transmute::<unsafe extern "system" fn(), vk::$ipfn>(f) }
+                            unsafe { std::mem::transmute::<unsafe extern "system" fn(), pfn::$ipfn>(f) }
                         }),)*
                 }
             }
@@ -39,7 +40,7 @@ macro_rules! next_tables {
         /// `vkCreateDevice`.
         #[derive(Clone, Copy, Default)]
         pub struct DeviceNext {
-            $(pub $dfield: Option<vk::$dpfn>,)*
+            $(pub $dfield: Option<pfn::$dpfn>,)*
         }
 
         impl DeviceNext {
@@ -54,7 +55,7 @@ macro_rules! next_tables {
                         .map(|f| {
                             // SAFETY: function pointers share one representation; the name
                             // implies this type.
-                            unsafe { std::mem::transmute::<unsafe extern "system" fn(), vk::$dpfn>(f) }
+                            unsafe { std::mem::transmute::<unsafe extern "system" fn(), pfn::$dpfn>(f) }
                         }),)*
                 }
             }

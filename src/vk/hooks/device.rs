@@ -23,7 +23,7 @@ use ash::vk;
 
 use crate::bridge::FdmEmulation;
 use crate::vk::base::chain::{self, ChainCopy};
-use crate::vk::base::ffi::{guard, key, name, raw};
+use crate::vk::base::ffi::{guard, key, name, offset, raw};
 use crate::vk::base::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
 use crate::vk::base::next::DeviceNext;
 use crate::vk::own::calls::Own;
@@ -193,14 +193,17 @@ unsafe fn plan(
     ]
     .into_iter()
     .any(in_chain);
+    // The offset extensions, which the layer offers with density maps, go with them.
+    let leaves = |n: &CStr| n == fdm_name || n == offset::EXT_NAME || n == offset::QCOM_NAME;
     let kept: Vec<*const c_char> = names
         .iter()
         .copied()
         .filter(|&n| {
             // SAFETY: the application's names, NUL-terminated.
-            unsafe { name(n) != Some(fdm_name) }
+            !unsafe { name(n) }.is_some_and(leaves)
         })
         .collect();
+    let offset_named = enabled(offset::EXT_NAME) || enabled(offset::QCOM_NAME);
     let version = inst.api_version.min(*api_version);
     if fdm_named && !own_rates {
         let fdm_features = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT;
@@ -235,7 +238,7 @@ unsafe fn plan(
     // included, and then uses shading rates; the two are exclusive,
     // VUID-VkDeviceCreateInfo-fragmentDensityMap-04481). Whatever density-map name or struct it
     // sent still leaves the create info.
-    let stripped = if fdm_named || fdm_structs {
+    let stripped = if fdm_named || offset_named || fdm_structs {
         // SAFETY: as the caller promised.
         match unsafe { ChainCopy::without(ci.p_next, density_map_struct) } {
             Ok(chain) => Some(Rewrite {
@@ -596,10 +599,29 @@ unsafe fn create_device_impl(
             );
             convert::device_key_reused(k);
         }
+        // `vkCmdEndRendering2EXT`, which the driver does not have, goes down as the plain end:
+        // the core name from Vulkan 1.3, `VK_KHR_dynamic_rendering`'s below (a driver returns no
+        // pointer for a core name above the device's version).
+        let end_rendering = if fdm.is_some() {
+            let core = api_version >= vk::API_VERSION_1_3;
+            let (first, second) = if core {
+                (c"vkCmdEndRendering", c"vkCmdEndRenderingKHR")
+            } else {
+                (c"vkCmdEndRenderingKHR", c"vkCmdEndRendering")
+            };
+            gdpa(handle, first.as_ptr())
+                .or_else(|| gdpa(handle, second.as_ptr()))
+                .map(|f| {
+                    std::mem::transmute::<unsafe extern "system" fn(), vk::PFN_vkCmdEndRendering>(f)
+                })
+        } else {
+            None
+        };
         registry::add_device(registry::Device {
             handle,
             gdpa,
             next,
+            end_rendering,
             fdm,
             inject,
             api_version,

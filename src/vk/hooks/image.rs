@@ -337,8 +337,9 @@ pub unsafe extern "system" fn create_image(
             {
                 // SAFETY: the image was just created from `app`.
                 if let Some(s) = unsafe { emulation::image_created(&dev, *out, app) } {
+                    let offsets = emulation::takes_offsets(app.flags);
                     // SAFETY: as above, shadowed by `s`.
-                    unsafe { convert::map_created(&dev, *out, &s) };
+                    unsafe { convert::map_created(&dev, *out, &s, offsets) };
                 }
             }
             r

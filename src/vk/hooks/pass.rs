@@ -17,12 +17,13 @@
 //!
 
 use std::ffi::c_void;
+use std::sync::atomic::AtomicBool;
 
 use ash::vk;
 use ash::vk::Handle as _;
 
 use crate::vk::base::chain::{self, ChainCopy};
-use crate::vk::base::ffi::{guard, raw, slice};
+use crate::vk::base::ffi::{guard, offset, once, raw, slice};
 use crate::vk::registry::{self, Device};
 use crate::vk::translate::formats::{SHADOW_FORMAT, SHADOW_LAYOUT};
 use crate::vk::translate::render_pass::{
@@ -654,4 +655,225 @@ hook_and_khr_alias! {
     /// `vkCmdBeginRendering`: the density-map attachment becomes a shading-rate attachment.
     cmd_begin_rendering, cmd_begin_rendering_khr = cmd_begin_rendering_with("vkCmdBeginRendering")
     (cb: vk::CommandBuffer, info: *const vk::RenderingInfo<'_>)
+}
+
+/// The density-map offsets in an end info's chain (`VkRenderPassFragmentDensityMapOffsetEndInfoEXT`,
+/// the QCOM struct under its EXT name), as a slice of the caller's array: empty where there are
+/// none or the count is zero, which both mean offset (0, 0).
+///
+/// # Safety
+/// `next` must be NULL or a valid chain; the slice must not outlive the caller's call.
+unsafe fn offsets_in<'a>(next: *const c_void) -> &'a [vk::Offset2D] {
+    // SAFETY: as the caller promised.
+    let found = unsafe { chain::find::<offset::EndInfo<'_>>(next, offset::END_INFO) };
+    // SAFETY: found by its sType in a valid chain.
+    match found.ok().flatten().and_then(|p| unsafe { p.as_ref() }) {
+        // SAFETY: the caller's array of `fragment_density_offset_count` offsets.
+        Some(e) => unsafe {
+            slice(
+                e.p_fragment_density_offsets,
+                e.fragment_density_offset_count,
+            )
+        },
+        None => &[],
+    }
+}
+
+/// Calls `f` with `next` less the offsets struct, which a driver without offsets must not get.
+/// Where the chain cannot be copied (a struct of a type the layer does not know before the
+/// offsets), `f` gets an empty chain, logged once: the specification lets nothing but the offsets
+/// extend an end info (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkSubpassEndInfo.html>,
+/// <https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingEndInfoKHR.html>), so
+/// the end itself is kept.
+///
+/// # Safety
+/// `next` must be NULL or a valid chain.
+unsafe fn without_offsets(which: &str, next: *const c_void, f: impl FnOnce(*const c_void)) {
+    static LOGGED: AtomicBool = AtomicBool::new(false);
+    // SAFETY: as the caller promised.
+    unsafe {
+        chain::with_removed(
+            next,
+            |t| t == offset::END_INFO,
+            |rest| match rest {
+                Ok(rest) => f(rest),
+                Err(e) => {
+                    once(
+                        &LOGGED,
+                        &format!(
+                            "{which}: an end info's pNext chain with a struct the layer does not \
+                             know ({e:?}): it goes down without a chain"
+                        ),
+                    );
+                    f(std::ptr::null())
+                }
+            },
+        )
+    }
+}
+
+/// `vkCmdEndRenderPass2(KHR)`: the offsets of the last subpass's end
+/// ([`convert::ended`]); the end goes down without their struct.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn cmd_end_render_pass2_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkCmdEndRenderPass2>,
+    cb: vk::CommandBuffer,
+    end: *const vk::SubpassEndInfo<'_>,
+) {
+    guard(which, (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
+            return;
+        };
+        let Some(down) = next(&dev) else {
+            return;
+        };
+        // SAFETY: the caller's end info, read only.
+        let Some(e) = (unsafe { end.as_ref() }).filter(|e| !e.p_next.is_null()) else {
+            convert::ended(cb, &[]);
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { down(cb, end) };
+        };
+        // SAFETY: the caller's chain, read only; the offsets live across the call.
+        let offsets = unsafe { offsets_in(e.p_next) };
+        convert::ended(cb, offsets);
+        // SAFETY: as above.
+        unsafe {
+            without_offsets(which, e.p_next, |rest| {
+                let mut copy = *e;
+                copy.p_next = rest;
+                down(cb, &copy)
+            })
+        }
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdEndRenderPass2`: see [`cmd_end_render_pass2_with`].
+    cmd_end_render_pass2, cmd_end_render_pass2_khr =
+        cmd_end_render_pass2_with("vkCmdEndRenderPass2")
+    (cb: vk::CommandBuffer, end: *const vk::SubpassEndInfo<'_>)
+}
+
+/// `vkCmdNextSubpass2(KHR)`: offsets at the end of a subpass other than the last are ignored
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderPassFragmentDensityMapOffsetEndInfoEXT.html>);
+/// their struct is left out all the same.
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn cmd_next_subpass2_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkCmdNextSubpass2>,
+    cb: vk::CommandBuffer,
+    begin: *const vk::SubpassBeginInfo<'_>,
+    end: *const vk::SubpassEndInfo<'_>,
+) {
+    guard(which, (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
+            return;
+        };
+        let Some(down) = next(&dev) else {
+            return;
+        };
+        // SAFETY: the caller's end info, read only.
+        let Some(e) = (unsafe { end.as_ref() }).filter(|e| !e.p_next.is_null()) else {
+            // SAFETY: the next layer's function, with the caller's arguments.
+            return unsafe { down(cb, begin, end) };
+        };
+        // SAFETY: the caller's chain, read only.
+        unsafe {
+            without_offsets(which, e.p_next, |rest| {
+                let mut copy = *e;
+                copy.p_next = rest;
+                down(cb, begin, &copy)
+            })
+        }
+    })
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdNextSubpass2`: see [`cmd_next_subpass2_with`].
+    cmd_next_subpass2, cmd_next_subpass2_khr = cmd_next_subpass2_with("vkCmdNextSubpass2")
+    (
+        cb: vk::CommandBuffer,
+        begin: *const vk::SubpassBeginInfo<'_>,
+        end: *const vk::SubpassEndInfo<'_>,
+    )
+}
+
+/// `vkCmdEndRendering2EXT` and `vkCmdEndRendering2KHR` (`VK_KHR_maintenance10`, where the driver
+/// has it): the offsets of the end ([`convert::ended`]); the end goes down as
+/// `vkCmdEndRendering2KHR` without their struct where the driver has it, else as the plain
+/// `vkCmdEndRendering`, which the end info's other structs cannot reach (the specification allows
+/// none but the offsets,
+/// <https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingEndInfoKHR.html>).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn cmd_end_rendering2_with(
+    which: &'static str,
+    cb: vk::CommandBuffer,
+    info: *const offset::RenderingEndInfo,
+) {
+    guard(which, (), || {
+        // SAFETY: as the caller promised.
+        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
+            return;
+        };
+        // SAFETY: the caller's end info, read only.
+        let next = unsafe { info.as_ref() }.map_or(std::ptr::null(), |i| i.p_next);
+        // SAFETY: the caller's chain, read only; the offsets live across the call.
+        let offsets = unsafe { offsets_in(next) };
+        if dev.fdm.is_some() {
+            convert::ended(cb, offsets);
+        }
+        if let Some(down) = dev.next.cmd_end_rendering2_khr {
+            if next.is_null() {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                return unsafe { down(cb, info) };
+            }
+            // SAFETY: the caller's chain, read only.
+            return unsafe {
+                without_offsets(which, next, |rest| {
+                    let copy = offset::RenderingEndInfo {
+                        s_type: offset::RENDERING_END_INFO,
+                        p_next: rest,
+                    };
+                    down(cb, &copy)
+                })
+            };
+        }
+        if let Some(down) = dev.end_rendering {
+            // SAFETY: the next layer's function, on the caller's command buffer.
+            unsafe { down(cb) };
+        }
+    })
+}
+
+/// `vkCmdEndRendering2EXT`: see [`cmd_end_rendering2_with`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_end_rendering2_ext(
+    cb: vk::CommandBuffer,
+    info: *const offset::RenderingEndInfo,
+) {
+    // SAFETY: the caller's arguments.
+    unsafe { cmd_end_rendering2_with("vkCmdEndRendering2EXT", cb, info) }
+}
+
+/// `vkCmdEndRendering2KHR`: see [`cmd_end_rendering2_with`].
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_end_rendering2_khr(
+    cb: vk::CommandBuffer,
+    info: *const offset::RenderingEndInfo,
+) {
+    // SAFETY: the caller's arguments.
+    unsafe { cmd_end_rendering2_with("vkCmdEndRendering2KHR", cb, info) }
 }

@@ -11,11 +11,12 @@ use crate::vk::base::ffi::{guard, name, two_call};
 use crate::vk::decide::{driver_extensions, emulated, has};
 use crate::vk::registry::{self};
 use crate::vk::translate::formats::{
-    fdm_extension, needs_translation, translate_image, FDM_FORMAT,
+    needs_translation, offered_extensions, translate_image, FDM_FORMAT,
 };
 
 /// `vkEnumerateDeviceExtensionProperties`: on an emulated device the driver's list plus
-/// `VK_EXT_fragment_density_map`; asked for this layer's own extensions, that one where emulated.
+/// `VK_EXT_fragment_density_map` and its offsets under both names
+/// ([`offered_extensions`]); asked for this layer's own extensions, those where emulated.
 unsafe extern "system" fn enumerate_device_extension_properties_impl(
     physical: vk::PhysicalDevice,
     layer: *const c_char,
@@ -33,8 +34,9 @@ unsafe extern "system" fn enumerate_device_extension_properties_impl(
     if let Some(layer_name) = unsafe { name(layer) } {
         if layer_name.to_bytes() == fovea_abi::VK_LAYER_NAME.as_bytes() {
             let ours: Vec<_> = emulated(&inst, physical)
-                .map(|_| fdm_extension())
+                .map(|_| offered_extensions())
                 .into_iter()
+                .flatten()
                 .collect();
             // SAFETY: the caller's pointers.
             return unsafe { two_call(&ours, count, out) };
@@ -51,8 +53,12 @@ unsafe extern "system" fn enumerate_device_extension_properties_impl(
         Ok(e) => e,
         Err(r) => return r,
     };
-    if !has(&exts, ash::ext::fragment_density_map::NAME) {
-        exts.push(fdm_extension());
+    for e in offered_extensions() {
+        if let Ok(n) = e.extension_name_as_c_str() {
+            if !has(&exts, n) {
+                exts.push(e);
+            }
+        }
     }
     // SAFETY: the caller's pointers.
     unsafe { two_call(&exts, count, out) }
@@ -74,7 +80,8 @@ pub unsafe extern "system" fn enumerate_device_extension_properties(
 }
 
 /// Fills `VkPhysicalDeviceFragmentDensityMapFeaturesEXT` in an output chain: density maps and
-/// non-subsampled images, not dynamic ones.
+/// non-subsampled images, not dynamic ones; and `VkPhysicalDeviceFragmentDensityMapOffsetFeaturesEXT`
+/// (the QCOM struct is the same, with the same `sType`): offsets.
 ///
 /// # Safety
 /// `next` must be a valid, writable output chain.
@@ -92,6 +99,16 @@ unsafe fn fill_features(next: *mut c_void) {
             (*f).fragment_density_map_dynamic = vk::FALSE;
             (*f).fragment_density_map_non_subsampled_images = vk::TRUE;
         }
+    }
+    // SAFETY: as the caller promised.
+    if let Some(f) = unsafe {
+        chain::find_out::<vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM>(
+            next,
+            vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_FEATURES_QCOM,
+        )
+    } {
+        // SAFETY: found by its sType in the caller's output chain.
+        unsafe { (*f).fragment_density_map_offset = vk::TRUE };
     }
 }
 
@@ -143,7 +160,10 @@ pub unsafe extern "system" fn get_features2_khr(
 }
 
 /// `vkGetPhysicalDeviceProperties2`: `VkPhysicalDeviceFragmentDensityMapPropertiesEXT` with
-/// min = max density texel = the shading-rate texel, and no extra invocations.
+/// min = max density texel = the shading-rate texel, and no extra invocations;
+/// `VkPhysicalDeviceFragmentDensityMapOffsetPropertiesEXT` with the offset granularity = that
+/// texel, so every valid offset shifts the map by whole texels, which the layer applies exactly
+/// (docs/vulkan-layer.md#density-map-offsets).
 ///
 /// # Safety
 /// The caller's arguments, valid as the command requires.
@@ -170,6 +190,20 @@ unsafe fn properties2(
     if out.is_null() {
         return;
     }
+    let texel = vk::Extent2D {
+        width: fdm.texel[0],
+        height: fdm.texel[1],
+    };
+    // SAFETY: the caller's output chain.
+    if let Some(p) = unsafe {
+        chain::find_out::<vk::PhysicalDeviceFragmentDensityMapOffsetPropertiesQCOM>(
+            (*out).p_next,
+            vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_PROPERTIES_QCOM,
+        )
+    } {
+        // SAFETY: found by its sType in the caller's output chain.
+        unsafe { (*p).fragment_density_offset_granularity = texel };
+    }
     // SAFETY: the caller's output chain.
     if let Some(p) = unsafe {
         chain::find_out::<vk::PhysicalDeviceFragmentDensityMapPropertiesEXT>(
@@ -177,10 +211,6 @@ unsafe fn properties2(
             vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_PROPERTIES_EXT,
         )
     } {
-        let texel = vk::Extent2D {
-            width: fdm.texel[0],
-            height: fdm.texel[1],
-        };
         // SAFETY: found by its sType in the caller's output chain.
         unsafe {
             (*p).min_fragment_density_texel_size = texel;

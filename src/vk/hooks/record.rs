@@ -103,8 +103,10 @@ pub unsafe extern "system" fn begin_command_buffer(
                 // SAFETY: the caller's begin info, read only; its inheritance info is read for
                 // secondary command buffers only, as the specification says.
                 let inherits = r.secondary && unsafe { inherits_conditional_rendering(info) };
-                *r.bound.lock() = Bound {
+                let mut b = r.bound.lock();
+                *b = Bound {
                     inherited_conditional: inherits,
+                    recording: b.recording + 1,
                     ..Bound::default()
                 };
             });

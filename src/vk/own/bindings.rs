@@ -59,6 +59,17 @@ pub struct Bound {
     /// Maps this recording converted, with the `MAP_EPOCH` of [`crate::vk::convert`] they were
     /// converted at (image 0: none).
     pub converted: [(u64, u64); 4],
+    /// Which recording of the command buffer this is (1 for the first): a conversion takes a
+    /// slot no conversion of this recording took yet
+    /// ([`Slot::used_in`](crate::vk::own::converter::Slot::used_in)).
+    pub recording: u64,
+    /// The render pass instance whose end writes its density-map offsets: the address of the
+    /// shifts its conversion reads (a slot's `shifts_at`) and the texel they are counted in.
+    pub open: Option<(usize, [u32; 2])>,
+    /// The dynamic render pass instance open in this command buffer was begun suspending: its
+    /// ends until the one after the last resumption carry no offsets (the specification ignores
+    /// them).
+    pub suspended: bool,
 }
 
 impl Default for Bound {
@@ -74,6 +85,9 @@ impl Default for Bound {
             conditional: None,
             inherited_conditional: false,
             converted: [(0, 0); 4],
+            recording: 0,
+            open: None,
+            suspended: false,
         }
     }
 }

@@ -11,6 +11,24 @@ pub static SHADER: &[u8] = include_bytes!("../shaders/convert.comp.spv");
 pub const GROUP: u32 = 64;
 /// Descriptor sets per pool; a new pool is made when one is full.
 pub const POOL_SETS: u32 = 64;
+/// Density layers the shader shifts by their own offset (`MAX_SHIFTS`); layers from here on are
+/// not shifted.
+pub const MAX_SHIFTS: usize = 16;
+/// Bytes of the shader's shifts (`ivec2 shifts[MAX_SHIFTS]`).
+pub const SHIFT_BYTES: u64 = (MAX_SHIFTS * 8) as u64;
+
+/// A density-map offset in framebuffer pixels as the shader's whole-texel shift of one axis: the
+/// specification's lookup evaluated at the centre of each shading-rate texel, where the offset
+/// fetches texel `floor(i + 1/2 - offset / texel)` for texel `i`
+/// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fragmentdensitymapops-fetch-density-value>).
+/// An offset that is a multiple of the texel (of the granularity the layer reports) shifts by
+/// exactly `offset / texel`; another, which is the application's error, by the nearest whole
+/// texel (halves toward the smaller shift).
+pub fn texel_shift(offset: i32, texel: u32) -> i32 {
+    let t = i64::from(texel.max(1));
+    let s = (2 * i64::from(offset) + t - 1).div_euclid(2 * t);
+    s.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
+}
 
 /// The push constants, as the shader declares them.
 #[repr(C)]
@@ -69,7 +87,7 @@ pub fn table(fdm: &FdmEmulation) -> [u32; 4] {
 /// The shader's algorithm on the CPU (one code per output texel): what the tests hold against the
 /// model, so the table and the merge order are checked without a GPU.
 #[cfg(test)]
-pub fn shader_on_cpu(density: &[u8], push: &Push) -> Vec<u8> {
+pub fn shader_on_cpu(density: &[u8], push: &Push, shifts: &[[i32; 2]]) -> Vec<u8> {
     let table_at = |w: u32, h: u32| {
         let i = w * 4 + h;
         ((push.table[(i >> 2) as usize] >> ((i & 3) * 8)) & 0xff) as u8
@@ -81,6 +99,12 @@ pub fn shader_on_cpu(density: &[u8], push: &Push) -> Vec<u8> {
     };
     let texels = (push.width * push.height) as usize;
     let code_of = |t: usize, l: usize| {
+        let s = shifts.get(l).copied().unwrap_or([0, 0]);
+        let x = (t as i64 % i64::from(push.width) - i64::from(s[0]))
+            .clamp(0, i64::from(push.width) - 1);
+        let y = (t as i64 / i64::from(push.width) - i64::from(s[1]))
+            .clamp(0, i64::from(push.height) - 1);
+        let t = (y * i64::from(push.width) + x) as usize;
         let i = (l * texels + t) * 2;
         table_at(axis(density[i]), axis(density[i + 1]))
     };
@@ -183,12 +207,71 @@ mod tests {
                     &mut want,
                 );
                 assert!(
-                    shader_on_cpu(map, &push) == want,
+                    shader_on_cpu(map, &push, &[]) == want,
                     "profile {:?}, {layers} layers, merged {merged}",
                     f.rates
                 );
             }
         }
+    }
+
+    /// Shifts move each layer's lookup by whole texels, clamped to the map: texel (x, y) of a
+    /// layer shifted by (sx, sy) holds what texel (x - sx, y - sy) holds unshifted, the nearest
+    /// edge texel where that lies outside.
+    #[test]
+    fn shifts_move_each_layer_and_clamp_at_the_edges() {
+        let f = fdm([4, 4], rates(4, 4), true);
+        let (width, height) = (5u32, 4u32);
+        let texels = (width * height) as usize;
+        let levels = [255u8, 127, 63];
+        let mut density = vec![0u8; texels * 4];
+        for t in 0..texels * 2 {
+            density[t * 2] = levels[t % 3];
+            density[t * 2 + 1] = levels[(t / 3) % 3];
+        }
+        let push = Push {
+            width,
+            height,
+            layers: 2,
+            merged: 0,
+            table: table(&f),
+        };
+        let still = shader_on_cpu(&density, &push, &[]);
+        let shifts = [[2, -1], [-7, 3]];
+        let moved = shader_on_cpu(&density, &push, &shifts);
+        for (l, shift) in shifts.iter().enumerate() {
+            for y in 0..height as i32 {
+                for x in 0..width as i32 {
+                    let sx = (x - shift[0]).clamp(0, width as i32 - 1);
+                    let sy = (y - shift[1]).clamp(0, height as i32 - 1);
+                    let at = |x: i32, y: i32| l * texels + (y * width as i32 + x) as usize;
+                    assert_eq!(moved[at(x, y)], still[at(sx, sy)], "layer {l} ({x}, {y})");
+                }
+            }
+        }
+        assert_ne!(moved, still, "a pattern that tests nothing");
+    }
+
+    /// Offsets in pixels become whole-texel shifts: multiples of the texel exactly, others by the
+    /// specification's lookup at the texel's centre.
+    #[test]
+    fn offsets_become_texel_shifts() {
+        for (offset, want) in [
+            (0, 0),
+            (16, 1),
+            (-16, -1),
+            (48, 3),
+            (-32, -2),
+            (8, 0),
+            (9, 1),
+            (-8, -1),
+            (-9, -1),
+            (-7, 0),
+            (i32::MIN, -(1 << 27)),
+        ] {
+            assert_eq!(texel_shift(offset, 16), want, "offset {offset}");
+        }
+        assert_eq!(texel_shift(24, 8), 3);
     }
 
     #[test]

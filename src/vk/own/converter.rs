@@ -11,7 +11,7 @@ use ash::vk;
 
 use crate::bridge::FdmEmulation;
 use crate::vk::own::calls::Own;
-use crate::vk::own::convert_shader::{table, Push, POOL_SETS, SHADER};
+use crate::vk::own::convert_shader::{table, Push, POOL_SETS, SHADER, SHIFT_BYTES};
 use crate::vk::own::shadows::ShadowImage;
 
 /// What the layer made for one application density image.
@@ -20,10 +20,16 @@ pub struct SourceAndShadow {
     /// A sampled 2D-array view of every layer of the application's image.
     pub view: vk::ImageView,
     pub shadow: ShadowImage,
+    /// The image was created with `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT`: passes
+    /// with it may end with offsets ([`crate::vk::convert`]).
+    pub offsets: bool,
 }
 
 /// What one command buffer converts one map with: a code buffer the dispatch writes and the copy
-/// reads, and a descriptor set naming it and the map's view. Owned by the command buffer's record
+/// reads, a host-visible shifts buffer the dispatch reads (the density-map offsets of the pass,
+/// written when its end is recorded), and a descriptor set naming them and the map's view. The
+/// n-th conversion of a map in one recording uses the command buffer's n-th slot of that map, so
+/// each pass instance has shifts of its own, fixed with the recording. Owned by the command buffer's record
 /// ([`CbRecord::slots`](crate::vk::registry::CbRecord::slots)), so command buffers that may run at once (on two queues, with
 /// `SIMULTANEOUS_USE`, primaries executing secondaries that convert) share no buffer the
 /// conversion writes; made at a command buffer's first conversion of the map and kept across its
@@ -35,14 +41,58 @@ pub struct Slot {
     pub view: vk::ImageView,
     pub buffer: vk::Buffer,
     pub memory: vk::DeviceMemory,
+    pub shifts: vk::Buffer,
+    pub shifts_memory: vk::DeviceMemory,
+    /// `shifts_memory` mapped, host-coherent, for the life of the slot: [`SHIFT_BYTES`] bytes.
+    pub shifts_at: *mut u8,
     pub set: vk::DescriptorSet,
     pub pool: vk::DescriptorPool,
+    /// The recording of its command buffer that last used it ([`Bound::recording`](crate::vk::own::bindings::Bound::recording)).
+    pub used_in: u64,
+}
+
+// SAFETY: `shifts_at` points at memory the slot owns; it is written only by the thread recording
+// the slot's command buffer, which the application synchronises.
+unsafe impl Send for Slot {}
+// SAFETY: as above.
+unsafe impl Sync for Slot {}
+
+impl Slot {
+    /// Writes the shader's shifts ([`write_shifts`]).
+    ///
+    /// # Safety
+    /// As [`write_shifts`].
+    pub unsafe fn write_shifts(&self, shifts: &[[i32; 2]]) {
+        // SAFETY: the slot's own mapped memory; as the caller promised.
+        unsafe { write_shifts(self.shifts_at, shifts) }
+    }
+}
+
+/// Writes the shader's shifts (whole texels per layer,
+/// [`MAX_SHIFTS`](crate::vk::own::convert_shader::MAX_SHIFTS) at most; the rest 0) into a slot's
+/// mapped shifts memory `at`.
+///
+/// # Safety
+/// `at` must be a live slot's `shifts_at`, whose command buffer is recording (so none of its
+/// submissions is pending).
+pub unsafe fn write_shifts(at: *mut u8, shifts: &[[i32; 2]]) {
+    let mut bytes = [0u8; SHIFT_BYTES as usize];
+    for (o, s) in bytes.chunks_exact_mut(8).zip(shifts) {
+        o[..4].copy_from_slice(&s[0].to_ne_bytes());
+        o[4..].copy_from_slice(&s[1].to_ne_bytes());
+    }
+    // SAFETY: mapped memory of `SHIFT_BYTES` bytes; no submission reads it now (as the caller
+    // promised). Host-coherent, so the next submit sees it
+    // (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#synchronization-submission-host-writes>).
+    unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), at, bytes.len()) };
 }
 
 /// One application density image.
 pub struct MapEntry {
     pub shadow: ShadowImage,
     pub objects: Option<SourceAndShadow>,
+    /// Created with `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT`.
+    pub offsets: bool,
 }
 
 /// Per emulating device: the conversion's objects and what the begin hooks look up.
@@ -52,6 +102,8 @@ pub struct Converter {
     pub layout: vk::PipelineLayout,
     pub pipeline: vk::Pipeline,
     pub table: [u32; 4],
+    /// The density (and shading-rate) texel, in pixels: offsets are shifts by whole ones.
+    pub texel: [u32; 2],
     /// Leaf locks (outside [`crate::common::lock::Rank`]'s order): held for a look-up or an
     /// insertion, with nothing called under them but the layer's own object creation.
     pub pools: parking_lot::Mutex<Vec<vk::DescriptorPool>>,
@@ -86,6 +138,11 @@ impl Converter {
                 .stage_flags(vk::ShaderStageFlags::COMPUTE),
             vk::DescriptorSetLayoutBinding::default()
                 .binding(1)
+                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::COMPUTE),
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(2)
                 .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
                 .descriptor_count(1)
                 .stage_flags(vk::ShaderStageFlags::COMPUTE),
@@ -143,6 +200,7 @@ impl Converter {
             };
             Ok(Converter {
                 table: table(fdm),
+                texel: fdm.texel,
                 own,
                 set_layout,
                 layout,
@@ -208,7 +266,7 @@ impl Converter {
             },
             vk::DescriptorPoolSize {
                 ty: vk::DescriptorType::STORAGE_BUFFER,
-                descriptor_count: POOL_SETS,
+                descriptor_count: POOL_SETS * 2,
             },
         ];
         // SAFETY: as above.
@@ -236,6 +294,7 @@ impl Converter {
         &self,
         app: vk::Image,
         shadow: &ShadowImage,
+        offsets: bool,
     ) -> Result<SourceAndShadow, vk::Result> {
         // SAFETY: a view of the application's live image, which has memory (it has a view).
         let view = unsafe {
@@ -257,6 +316,7 @@ impl Converter {
         Ok(SourceAndShadow {
             view,
             shadow: *shadow,
+            offsets,
         })
     }
 
@@ -301,12 +361,24 @@ impl Converter {
                     return Err(e);
                 }
             };
-            let bound = d.bind_buffer_memory(buffer, memory, 0);
-            let (set, pool) = match bound.and_then(|()| self.allocate_set()) {
+            let shifts = match d
+                .bind_buffer_memory(buffer, memory, 0)
+                .and_then(|()| self.shifts_buffer())
+            {
                 Ok(s) => s,
                 Err(e) => {
                     d.destroy_buffer(buffer, None);
                     d.free_memory(memory, None);
+                    return Err(e);
+                }
+            };
+            let (set, pool) = match self.allocate_set() {
+                Ok(s) => s,
+                Err(e) => {
+                    d.destroy_buffer(buffer, None);
+                    d.free_memory(memory, None);
+                    d.destroy_buffer(shifts.0, None);
+                    d.free_memory(shifts.1, None);
                     return Err(e);
                 }
             };
@@ -317,6 +389,11 @@ impl Converter {
             }];
             let buf = [vk::DescriptorBufferInfo {
                 buffer,
+                offset: 0,
+                range: vk::WHOLE_SIZE,
+            }];
+            let shift_info = [vk::DescriptorBufferInfo {
+                buffer: shifts.0,
                 offset: 0,
                 range: vk::WHOLE_SIZE,
             }];
@@ -331,16 +408,78 @@ impl Converter {
                     .dst_binding(1)
                     .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
                     .buffer_info(&buf),
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(2)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(&shift_info),
             ];
             d.update_descriptor_sets(&writes, &[]);
-            Ok(Slot {
+            let slot = Slot {
                 image,
                 view: m.view,
                 buffer,
                 memory,
+                shifts: shifts.0,
+                shifts_memory: shifts.1,
+                shifts_at: shifts.2,
                 set,
                 pool,
-            })
+                used_in: 0,
+            };
+            slot.write_shifts(&[]);
+            Ok(slot)
+        }
+    }
+
+    /// A slot's shifts buffer: host-visible, host-coherent memory (every device has such a type,
+    /// <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#memory-device>),
+    /// mapped for the life of the slot.
+    ///
+    /// # Safety
+    /// The device must be live.
+    unsafe fn shifts_buffer(&self) -> Result<(vk::Buffer, vk::DeviceMemory, *mut u8), vk::Result> {
+        let d = &self.own.fns;
+        // SAFETY: the layer's own objects on a live device; each is destroyed again on failure.
+        unsafe {
+            let buffer = d.create_buffer(
+                &vk::BufferCreateInfo::default()
+                    .size(SHIFT_BYTES)
+                    .usage(vk::BufferUsageFlags::STORAGE_BUFFER)
+                    .sharing_mode(vk::SharingMode::EXCLUSIVE),
+                None,
+            )?;
+            let req = d.get_buffer_memory_requirements(buffer);
+            let made = self
+                .own
+                .host_memory_type(req.memory_type_bits)
+                .ok_or(vk::Result::ERROR_OUT_OF_HOST_MEMORY)
+                .and_then(|ty| {
+                    d.allocate_memory(
+                        &vk::MemoryAllocateInfo::default()
+                            .allocation_size(req.size)
+                            .memory_type_index(ty),
+                        None,
+                    )
+                });
+            let memory = match made {
+                Ok(m) => m,
+                Err(e) => {
+                    d.destroy_buffer(buffer, None);
+                    return Err(e);
+                }
+            };
+            let mapped = d.bind_buffer_memory(buffer, memory, 0).and_then(|()| {
+                d.map_memory(memory, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty())
+            });
+            match mapped {
+                Ok(p) => Ok((buffer, memory, p.cast())),
+                Err(e) => {
+                    d.destroy_buffer(buffer, None);
+                    d.free_memory(memory, None);
+                    Err(e)
+                }
+            }
         }
     }
 
@@ -366,6 +505,9 @@ impl Converter {
                 }
                 d.destroy_buffer(s.buffer, None);
                 d.free_memory(s.memory, None);
+                d.destroy_buffer(s.shifts, None);
+                // Freeing mapped memory unmaps it.
+                d.free_memory(s.shifts_memory, None);
             }
         }
     }

@@ -12,6 +12,11 @@ layout(local_size_x = 64) in;
 
 layout(set = 0, binding = 0) uniform texture2DArray density;
 layout(set = 0, binding = 1, std430) writeonly buffer Codes { uint words[]; };
+// Density-map offsets (VK_EXT_fragment_density_map_offset), per density layer, in whole texels:
+// written by the host when the pass's end is recorded, before the submit that runs this
+// (src/vk/convert.rs). Layers from MAX_SHIFTS on are not shifted.
+const uint MAX_SHIFTS = 16u;
+layout(set = 0, binding = 2, std430) readonly buffer Shifts { ivec2 shifts[MAX_SHIFTS]; };
 
 layout(push_constant) uniform Push {
     uint width;
@@ -37,8 +42,12 @@ uint axis_log2(uint b) {
     return b >= 64u ? 1u : 2u;
 }
 
+// The specification's lookup with an offset (x' = x - offset, clamped to the map), per layer.
 uint code_of(uint x, uint y, uint layer) {
-    vec2 d = texelFetch(density, ivec3(int(x), int(y), int(layer)), 0).rg;
+    ivec2 shift = layer < MAX_SHIFTS ? shifts[layer] : ivec2(0);
+    ivec2 last = ivec2(int(pc.width) - 1, int(pc.height) - 1);
+    ivec2 at = clamp(ivec2(int(x), int(y)) - shift, ivec2(0), last);
+    vec2 d = texelFetch(density, ivec3(at, int(layer)), 0).rg;
     uvec2 b = uvec2(round(clamp(d, 0.0, 1.0) * 255.0));
     return table_at(axis_log2(b.x), axis_log2(b.y));
 }

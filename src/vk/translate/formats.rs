@@ -1,11 +1,34 @@
 //! Formats and image descriptions: the extension and format the layer offers, what a density-map
 //! image becomes on the driver's side, and what every shadow is.
 
-use std::ffi::c_char;
+use std::ffi::{c_char, CStr};
 
 use ash::vk;
 
 use crate::bridge::FdmEmulation;
+use crate::vk::base::ffi::offset;
+
+/// Every device extension the layer offers on an emulating device: `VK_EXT_fragment_density_map`
+/// and its offsets under both names (docs/vulkan-layer.md#density-map-offsets).
+pub fn offered_extensions() -> [vk::ExtensionProperties; 3] {
+    [
+        fdm_extension(),
+        extension(offset::EXT_NAME, offset::EXT_SPEC_VERSION),
+        extension(offset::QCOM_NAME, offset::QCOM_SPEC_VERSION),
+    ]
+}
+
+/// An extension's properties.
+fn extension(name: &CStr, spec_version: u32) -> vk::ExtensionProperties {
+    let mut e = vk::ExtensionProperties {
+        spec_version,
+        ..Default::default()
+    };
+    for (d, &s) in e.extension_name.iter_mut().zip(name.to_bytes()) {
+        *d = s as c_char;
+    }
+    e
+}
 
 /// `VK_EXT_fragment_density_map` as the layer offers it.
 pub fn fdm_extension() -> vk::ExtensionProperties {
@@ -33,7 +56,8 @@ pub const FDM_FORMAT: vk::Format = vk::Format::R8G8_UNORM;
 /// empty, the application's views of the image need a usage that admits views
 /// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkImageViewCreateInfo.html>,
 /// VUID-VkImageViewCreateInfo-image-04441), and the layer reads density maps by sampling) and without
-/// `SUBSAMPLED` (emulated passes are never subsampled). `None` where the image is not a density map
+/// `SUBSAMPLED` (emulated passes are never subsampled) or `FRAGMENT_DENSITY_MAP_OFFSET`
+/// ([`DENSITY_FLAGS`]). `None` where the image is not a density map
 /// the layer accepts: not R8G8_UNORM, optimal, 2D.
 pub fn translate_image(
     format: vk::Format,
@@ -54,13 +78,20 @@ pub fn translate_image(
     if fdm || usage.is_empty() {
         usage |= vk::ImageUsageFlags::SAMPLED;
     }
-    Some((usage, flags & !vk::ImageCreateFlags::SUBSAMPLED_EXT))
+    Some((usage, flags & !DENSITY_FLAGS))
 }
+
+/// Image create flags of the density-map extensions, which the driver does not know:
+/// `SUBSAMPLED` (emulated passes are never subsampled) and `FRAGMENT_DENSITY_MAP_OFFSET` (the
+/// layer applies offsets itself, [`crate::vk::convert`]).
+pub const DENSITY_FLAGS: vk::ImageCreateFlags = vk::ImageCreateFlags::from_raw(
+    vk::ImageCreateFlags::SUBSAMPLED_EXT.as_raw()
+        | vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM.as_raw(),
+);
 
 /// Whether [`translate_image`] has anything to do.
 pub fn needs_translation(usage: vk::ImageUsageFlags, flags: vk::ImageCreateFlags) -> bool {
-    usage.contains(vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT)
-        || flags.contains(vk::ImageCreateFlags::SUBSAMPLED_EXT)
+    usage.contains(vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT) || flags.intersects(DENSITY_FLAGS)
 }
 
 /// The usage every shadow has.
@@ -95,6 +126,18 @@ mod tests {
             Ok(ash::ext::fragment_density_map::NAME)
         );
         assert_eq!(e.spec_version, 3);
+        let names: Vec<_> = offered_extensions()
+            .iter()
+            .map(|e| e.extension_name_as_c_str().unwrap().to_owned())
+            .collect();
+        assert_eq!(
+            names,
+            [
+                c"VK_EXT_fragment_density_map",
+                c"VK_EXT_fragment_density_map_offset",
+                c"VK_QCOM_fragment_density_map_offset"
+            ]
+        );
     }
 
     #[test]
@@ -153,6 +196,20 @@ mod tests {
             ),
             None
         );
+        assert_eq!(
+            translate_image(
+                Format::R8G8B8A8_SRGB,
+                t2,
+                T::OPTIMAL,
+                U::COLOR_ATTACHMENT,
+                F::FRAGMENT_DENSITY_MAP_OFFSET_QCOM | F::MUTABLE_FORMAT
+            ),
+            Some((U::COLOR_ATTACHMENT, F::MUTABLE_FORMAT))
+        );
+        assert!(needs_translation(
+            U::COLOR_ATTACHMENT,
+            F::FRAGMENT_DENSITY_MAP_OFFSET_QCOM
+        ));
         assert!(!needs_translation(U::SAMPLED, F::empty()));
     }
 

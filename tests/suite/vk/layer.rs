@@ -146,8 +146,47 @@ fn emulated_density_maps_on_shading_rate_devices() {
             );
             v
         };
-        assert_eq!(own.len(), 1);
-        assert_eq!(own[0].extension_name_as_c_str(), Ok(FDM));
+        let own: Vec<_> = own
+            .iter()
+            .map(|e| (e.extension_name_as_c_str().unwrap(), e.spec_version))
+            .collect();
+        assert_eq!(
+            own,
+            [
+                (FDM, 3),
+                (c"VK_EXT_fragment_density_map_offset", 1),
+                (c"VK_QCOM_fragment_density_map_offset", 3)
+            ]
+        );
+        // Density-map offsets under both names, with the feature and a granularity of one texel.
+        for (name, spec) in &own[1..] {
+            assert!(
+                exts.contains(&((*name).to_owned(), *spec)),
+                "{profile:?}: {name:?} offered"
+            );
+        }
+        let mut offset_features = vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM::default();
+        let mut offset_props = vk::PhysicalDeviceFragmentDensityMapOffsetPropertiesQCOM::default();
+        // SAFETY: valid output chains on the stack.
+        unsafe {
+            vk.instance.get_physical_device_features2(
+                vk.physical,
+                &mut vk::PhysicalDeviceFeatures2::default().push_next(&mut offset_features),
+            );
+            vk.instance.get_physical_device_properties2(
+                vk.physical,
+                &mut vk::PhysicalDeviceProperties2::default().push_next(&mut offset_props),
+            );
+        }
+        assert_eq!(offset_features.fragment_density_map_offset, vk::TRUE);
+        assert_eq!(
+            offset_props.fragment_density_offset_granularity,
+            vk::Extent2D {
+                width: texel,
+                height: texel
+            },
+            "{profile:?}"
+        );
         // VK_INCOMPLETE where the buffer is one short.
         // SAFETY: as above.
         unsafe {
@@ -407,13 +446,22 @@ fn checked_in_manifest() {
     for m in [&m, &implicit] {
         assert_eq!(m["layer"]["api_version"], "1.4.359");
     }
-    assert_eq!(
-        l["device_extensions"],
-        json!([{
-            "name": fovea_abi::VK_FDM_EXTENSION,
-            "spec_version": fovea_abi::VK_FDM_SPEC_VERSION.to_string()
-        }])
-    );
+    // The loader refuses a device extension that neither the driver nor an enabled layer's
+    // manifest names: the offsets under both names, the EXT's command with them.
+    let want = json!([{
+        "name": fovea_abi::VK_FDM_EXTENSION,
+        "spec_version": fovea_abi::VK_FDM_SPEC_VERSION.to_string()
+    }, {
+        "name": "VK_EXT_fragment_density_map_offset",
+        "spec_version": "1",
+        "entrypoints": ["vkCmdEndRendering2EXT"]
+    }, {
+        "name": "VK_QCOM_fragment_density_map_offset",
+        "spec_version": "3"
+    }]);
+    for m in [&m, &implicit] {
+        assert_eq!(m["layer"]["device_extensions"], want);
+    }
 }
 
 /// Synchronization validation is on in these instances (as in every Vulkan test's): two fills of one

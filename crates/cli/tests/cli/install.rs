@@ -607,11 +607,19 @@ fn install_writes_the_implicit_vulkan_manifest_and_the_last_uninstall_removes_it
         l["disable_environment"],
         serde_json::json!({ fovea_abi::env::DISABLE_VK_LAYER: "1" })
     );
+    // Density maps, and their offsets under both names (docs/vulkan-layer.md#density-map-offsets).
     assert_eq!(
         l["device_extensions"],
         serde_json::json!([{
             "name": fovea_abi::VK_FDM_EXTENSION,
             "spec_version": fovea_abi::VK_FDM_SPEC_VERSION.to_string()
+        }, {
+            "name": "VK_EXT_fragment_density_map_offset",
+            "spec_version": "1",
+            "entrypoints": ["vkCmdEndRendering2EXT"]
+        }, {
+            "name": "VK_QCOM_fragment_density_map_offset",
+            "spec_version": "3"
         }])
     );
     // The checked-in implicit manifest, library path replaced.
