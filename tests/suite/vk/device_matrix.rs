@@ -34,6 +34,9 @@ use serde_json::{json, Value};
 use crate::support::device::{env, take_messages, Vk, FDM};
 
 const FSR: &CStr = c"VK_KHR_fragment_shading_rate";
+/// Density-map offsets under both names, which the layer offers with density maps.
+const OFFSET_EXT: &CStr = c"VK_EXT_fragment_density_map_offset";
+const OFFSET_QCOM: &CStr = c"VK_QCOM_fragment_density_map_offset";
 /// An sType no registry has.
 const UNKNOWN: i32 = 1_000_900_001;
 /// `VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_MAINTENANCE_6_FEATURES` (vk.xml; newer than ash 0.38).
@@ -51,6 +54,9 @@ enum Link {
     /// `VkPhysicalDeviceFragmentDensityMap2FeaturesEXT`, nothing enabled (an extension neither
     /// the driver nor the layer offers; chained by engines that query every struct they know).
     Fdm2,
+    /// `VkPhysicalDeviceFragmentDensityMapOffsetFeaturesEXT` (the QCOM struct's `sType`),
+    /// `fragmentDensityMapOffset` enabled: offsets, which the layer offers with density maps.
+    FdmOffset,
     /// The shading-rate features: pipeline rates as given, attachments enabled.
     Fsr {
         pipeline: bool,
@@ -72,6 +78,9 @@ impl Link {
         match self {
             Link::Fdm => vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT,
             Link::Fdm2 => vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_2_FEATURES_EXT,
+            Link::FdmOffset => {
+                vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_FEATURES_QCOM
+            }
             Link::Fsr { .. } => {
                 vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR
             }
@@ -110,6 +119,10 @@ impl Link {
                 .fragment_density_map(true)
                 .fragment_density_map_non_subsampled_images(true)),
             Link::Fdm2 => of(vk::PhysicalDeviceFragmentDensityMap2FeaturesEXT::default()),
+            Link::FdmOffset => of(
+                vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM::default()
+                    .fragment_density_map_offset(true),
+            ),
             Link::Fsr { pipeline } => {
                 of(vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
                     .pipeline_fragment_shading_rate(pipeline)
@@ -255,6 +268,18 @@ const CASES: &[Case] = &[
         expect: Expect::Emulated,
     },
     Case {
+        name: "density maps with offsets under both names, their feature between core features",
+        exts: &[FDM, OFFSET_EXT, OFFSET_QCOM],
+        links: &[Link::Vulkan12, Link::Fdm, Link::FdmOffset, Link::Vulkan13],
+        expect: Expect::Emulated,
+    },
+    Case {
+        name: "Godot with the offset extension: shading rates of its own",
+        exts: &[FDM, OFFSET_EXT, FSR],
+        links: &[Link::Fsr { pipeline: true }, Link::FdmOffset],
+        expect: Expect::Own { pipeline: true },
+    },
+    Case {
         name: "an unknown struct after the density-map features",
         exts: &[FDM],
         links: &[Link::Vulkan13, Link::Fdm, Link::Unknown],
@@ -363,10 +388,10 @@ fn driver_request(case: &Case, expect: Expect, devices: &[Value]) -> Vec<String>
         .as_array()
         .map(|a| a.iter().filter_map(Value::as_str).collect())
         .unwrap_or_default();
-    if names.contains(&FDM.to_str().unwrap()) {
-        problems.push(format!(
-            "the density-map extension reached the driver: {names:?}"
-        ));
+    for n in [FDM, OFFSET_EXT, OFFSET_QCOM] {
+        if names.contains(&n.to_str().unwrap()) {
+            problems.push(format!("{n:?} reached the driver: {names:?}"));
+        }
     }
     if !names.contains(&FSR.to_str().unwrap()) {
         problems.push(format!("no shading-rate extension: {names:?}"));
@@ -405,7 +430,12 @@ fn driver_request(case: &Case, expect: Expect, devices: &[Value]) -> Vec<String>
     let want: Vec<i32> = case
         .links
         .iter()
-        .filter(|l| !matches!(l, Link::Fdm | Link::Fdm2 | Link::Fsr { .. }))
+        .filter(|l| {
+            !matches!(
+                l,
+                Link::Fdm | Link::Fdm2 | Link::FdmOffset | Link::Fsr { .. }
+            )
+        })
         .map(|l| l.stype())
         .filter(|t| !newer.contains(t) || chain.contains(t))
         .collect();

@@ -1,0 +1,733 @@
+//! Density-map offsets (`VK_EXT_fragment_density_map_offset`, and the
+//! `VK_QCOM_fragment_density_map_offset` name) that fovea's Vulkan layer offers on shading-rate
+//! GPUs (docs/vulkan-layer.md#density-map-offsets).
+//!
+//! Stack as in [`crate::support::device`]: this test → fovea → validation → the double (which
+//! reports the effective fragment size of every draw per shading-rate texel) → lavapipe (which
+//! runs the conversion's compute shader for real). The application enables the offset extension
+//! and its feature, creates its map and colour image with the offset flag, uploads a map whose
+//! every texel wants another fragment size, and draws one full-screen triangle in a pass it ends
+//! with offsets. Checked: each draw shades exactly as the specification's lookup with the offsets
+//! says (x′ = x − offset, clamped to the map, whole texels at the reported granularity), with
+//! render passes and dynamic rendering, under both names; zero or absent offsets change nothing;
+//! offsets are fixed per recording (a resubmission keeps them, a new recording takes its own);
+//! two command buffers on one map each get their own; a suspended and resumed instance shifts
+//! once, by its last end's offsets; a secondary that begins and ends rendering applies its own;
+//! nothing of the offsets reaches the driver (the double records every extension name and sType
+//! of the device, and errors for offset structs, flags and names anywhere), and validation is
+//! silent but for its 1.3.239 stage false positives.
+
+use std::ffi::{c_void, CStr};
+
+use ash::vk;
+use ash::vk::Handle as _;
+use fovea_vkdouble::Profile;
+use serde_json::Value;
+
+use crate::support::device::{env, take_messages, Dev, Env, Features, Vk};
+use crate::support::vulkan::{
+    allocate_info, attachments2, draw_fullscreen, image_info, range, spv, stages, Fixed, AREA,
+    CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+};
+use crate::vk::convert::{model_codes, Buffer};
+
+const EXT: &CStr = c"VK_EXT_fragment_density_map_offset";
+const QCOM: &CStr = c"VK_QCOM_fragment_density_map_offset";
+/// `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` (the QCOM bit's value).
+const OFFSET_BIT: vk::ImageCreateFlags = vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM;
+/// `VK_STRUCTURE_TYPE_RENDERING_END_INFO_EXT`.
+const RENDERING_END_INFO: vk::StructureType = vk::StructureType::from_raw(1_000_619_003);
+
+/// `VkRenderingEndInfoEXT`.
+#[repr(C)]
+struct RenderingEndInfo {
+    s_type: vk::StructureType,
+    p_next: *const c_void,
+}
+
+type EndRendering2 = unsafe extern "system" fn(vk::CommandBuffer, *const RenderingEndInfo);
+
+/// Density bytes that want a fragment edge of 1, 2 and 4 pixels.
+const EDGES: [u8; 3] = [255, 127, 63];
+
+/// The map: texel (x, y) wants an edge of `EDGES[(x + 2y) % 3]` wide and `EDGES[(2x + y) % 3]`
+/// high, so that a shift by one texel either way changes what almost every texel shades with.
+fn map_bytes(side: u32) -> Vec<u8> {
+    let mut out = Vec::new();
+    for y in 0..side {
+        for x in 0..side {
+            out.push(EDGES[((x + 2 * y) % 3) as usize]);
+            out.push(EDGES[((2 * x + y) % 3) as usize]);
+        }
+    }
+    out
+}
+
+/// The specification's lookup: the map as seen through `offset` (pixels, a multiple of `texel`),
+/// x′ = x − offset, clamped to the map.
+fn shifted(bytes: &[u8], side: u32, texel: u32, offset: vk::Offset2D) -> Vec<u8> {
+    let (sx, sy) = (offset.x / texel as i32, offset.y / texel as i32);
+    let last = side as i32 - 1;
+    let mut out = Vec::new();
+    for y in 0..side as i32 {
+        for x in 0..side as i32 {
+            let (mx, my) = ((x - sx).clamp(0, last), (y - sy).clamp(0, last));
+            let i = ((my * side as i32 + mx) * 2) as usize;
+            out.extend_from_slice(&bytes[i..i + 2]);
+        }
+    }
+    out
+}
+
+/// How a pass ends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum End<'a> {
+    /// No offsets struct.
+    Absent,
+    /// The offsets struct with these offsets (empty: a count of zero).
+    With(&'a [vk::Offset2D]),
+}
+
+/// How the pass is begun and ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Path {
+    /// `vkCmdBeginRenderPass2` … `vkCmdEndRenderPass2`.
+    RenderPass,
+    /// `vkCmdBeginRendering` … `vkCmdEndRendering2EXT`.
+    Rendering,
+}
+
+/// An application with the offset extension (`name`) enabled: its map (with the offset flag), a
+/// colour target (with it too, as the specification asks of a pass's attachments), a render pass
+/// and framebuffer, a pipeline for each path, and the map's bytes uploaded.
+struct Scene {
+    dev: Dev,
+    profile: Profile,
+    texel: u32,
+    side: u32,
+    bytes: Vec<u8>,
+    images: Vec<(vk::Image, vk::DeviceMemory, vk::ImageView)>,
+    pass: vk::RenderPass,
+    framebuffer: vk::Framebuffer,
+    layout: vk::PipelineLayout,
+    pass_pipeline: vk::Pipeline,
+    rendering_pipeline: vk::Pipeline,
+    end_rendering2: Option<EndRendering2>,
+    staging: Option<Buffer>,
+}
+
+impl Scene {
+    fn new(vk: &Vk, profile: Profile, name: &CStr) -> Scene {
+        let mut feature = vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM::default()
+            .fragment_density_map_offset(true);
+        let d = vk.device_with(&[name], Features::FDM_MULTIVIEW, Some(&mut feature));
+        let dev = Dev::new(vk, d);
+        let texel = profile.texel().width;
+        let side = SIZE / texel;
+        let map = image(
+            &dev,
+            DENSITY,
+            side,
+            vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
+        );
+        let color = image(&dev, COLOR, SIZE, vk::ImageUsageFlags::COLOR_ATTACHMENT);
+        let bytes = map_bytes(side);
+        let staging = dev.buffer(bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC);
+        dev.write(&staging, &bytes);
+        let d = &dev.d;
+        // SAFETY: every struct lives across its call; the objects are destroyed in `finish`.
+        unsafe {
+            let pass = render_pass(d);
+            let views = [color.2, map.2];
+            let framebuffer = d
+                .create_framebuffer(
+                    &vk::FramebufferCreateInfo::default()
+                        .render_pass(pass)
+                        .attachments(&views)
+                        .width(SIZE)
+                        .height(SIZE)
+                        .layers(1),
+                    None,
+                )
+                .expect("vkCreateFramebuffer");
+            let layout = d
+                .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
+                .expect("vkCreatePipelineLayout");
+            let module = |bytes: &[u8]| {
+                let words = spv(bytes);
+                d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+                    .expect("vkCreateShaderModule")
+            };
+            let modules = [module(VERTEX), module(FRAGMENT)];
+            let stages = stages(modules);
+            let fixed = Fixed::new();
+            let formats = [COLOR];
+            let mut rendering =
+                vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&formats);
+            let infos = [
+                fixed.info(&stages, layout).render_pass(pass).subpass(0),
+                fixed
+                    .info(&stages, layout)
+                    .flags(vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT)
+                    .push_next(&mut rendering),
+            ];
+            let pipelines = d
+                .create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
+                .unwrap_or_else(|e| panic!("pipelines: {:?}; {:?}", e.1, take_messages()));
+            for m in modules {
+                d.destroy_shader_module(m, None);
+            }
+            let f = (vk.instance.fp_v1_0().get_device_proc_addr)(
+                d.handle(),
+                c"vkCmdEndRendering2EXT".as_ptr(),
+            );
+            let end_rendering2 =
+                f.map(|f| std::mem::transmute::<unsafe extern "system" fn(), EndRendering2>(f));
+            Scene {
+                dev,
+                profile,
+                texel,
+                side,
+                bytes,
+                images: vec![map, color],
+                pass,
+                framebuffer,
+                layout,
+                pass_pipeline: pipelines[0],
+                rendering_pipeline: pipelines[1],
+                end_rendering2,
+                staging: Some(staging),
+            }
+        }
+    }
+
+    fn map(&self) -> (vk::Image, vk::ImageView) {
+        (self.images[0].0, self.images[0].2)
+    }
+
+    fn color(&self) -> (vk::Image, vk::ImageView) {
+        (self.images[1].0, self.images[1].2)
+    }
+
+    /// Records the upload of the map (ending in the density layout) and the colour image's move
+    /// into `COLOR_ATTACHMENT_OPTIMAL`.
+    fn prepare(&self, cb: vk::CommandBuffer) {
+        let staging = self.staging.as_ref().expect("staging");
+        self.dev.upload(cb, staging, self.map().0, self.side, 1);
+        let barrier = vk::ImageMemoryBarrier::default()
+            .image(self.color().0)
+            .subresource_range(range(0, 1))
+            .old_layout(vk::ImageLayout::UNDEFINED)
+            .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED);
+        // SAFETY: `cb` is recording on this device.
+        unsafe {
+            self.dev.d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[barrier],
+            );
+        }
+    }
+
+    /// Records a dependency from one pass's colour writes to the next's (which clears it again).
+    fn between(&self, cb: vk::CommandBuffer) {
+        let color = vk::AccessFlags::COLOR_ATTACHMENT_WRITE;
+        let stage = vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT;
+        // SAFETY: `cb` is recording on this device, outside a pass.
+        unsafe {
+            self.dev.d.cmd_pipeline_barrier(
+                cb,
+                stage,
+                stage,
+                vk::DependencyFlags::empty(),
+                &[vk::MemoryBarrier::default()
+                    .src_access_mask(color)
+                    .dst_access_mask(color)],
+                &[],
+                &[],
+            );
+        }
+    }
+
+    /// Begins `cbs` again (after resetting the pool, which resets every command buffer of it).
+    fn record_again(&self, cbs: &[vk::CommandBuffer]) {
+        // SAFETY: none of the pool's command buffers is pending (the queue is idle).
+        unsafe {
+            let d = &self.dev.d;
+            d.reset_command_pool(self.dev.pool, vk::CommandPoolResetFlags::empty())
+                .expect("vkResetCommandPool");
+            for &cb in cbs {
+                d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+                    .expect("vkBeginCommandBuffer");
+            }
+        }
+    }
+
+    /// Records one pass on `path` with one full-screen draw, ended as `end` says; a rendering
+    /// begun with `flags`.
+    fn pass(&self, cb: vk::CommandBuffer, path: Path, flags: vk::RenderingFlags, end: End<'_>) {
+        let d = &self.dev.d;
+        let mut offsets = vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default();
+        if let End::With(o) = end {
+            offsets = offsets.fragment_density_offsets(o);
+        }
+        let chain = match end {
+            End::Absent => std::ptr::null(),
+            End::With(_) => &offsets as *const _ as *const c_void,
+        };
+        // SAFETY: `cb` is recording on this device; every struct lives across its call.
+        unsafe {
+            match path {
+                Path::RenderPass => {
+                    let begin = vk::RenderPassBeginInfo::default()
+                        .render_pass(self.pass)
+                        .framebuffer(self.framebuffer)
+                        .render_area(AREA)
+                        .clear_values(&CLEAR);
+                    d.cmd_begin_render_pass2(
+                        cb,
+                        &begin,
+                        &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+                    );
+                    draw_fullscreen(d, cb, self.pass_pipeline);
+                    let info = vk::SubpassEndInfo {
+                        p_next: chain,
+                        ..Default::default()
+                    };
+                    d.cmd_end_render_pass2(cb, &info);
+                }
+                Path::Rendering => {
+                    let color = [vk::RenderingAttachmentInfo::default()
+                        .image_view(self.color().1)
+                        .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                        .load_op(vk::AttachmentLoadOp::CLEAR)
+                        .store_op(vk::AttachmentStoreOp::STORE)
+                        .clear_value(CLEAR[0])];
+                    let mut density = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
+                        .image_view(self.map().1)
+                        .image_layout(FDM_LAYOUT);
+                    let info = vk::RenderingInfo::default()
+                        .flags(flags)
+                        .render_area(AREA)
+                        .layer_count(1)
+                        .color_attachments(&color)
+                        .push_next(&mut density);
+                    d.cmd_begin_rendering(cb, &info);
+                    draw_fullscreen(d, cb, self.rendering_pipeline);
+                    let end2 = self
+                        .end_rendering2
+                        .expect("vkCmdEndRendering2EXT is offered");
+                    end2(
+                        cb,
+                        &RenderingEndInfo {
+                            s_type: RENDERING_END_INFO,
+                            p_next: chain,
+                        },
+                    );
+                }
+            }
+        }
+    }
+
+    /// The rates the model gives the map seen through `offset`, per texel.
+    fn want(&self, offset: vk::Offset2D) -> Vec<u8> {
+        let bytes = shifted(&self.bytes, self.side, self.texel, offset);
+        model_codes(self.profile, &bytes, (self.side * self.side) as usize, 1)
+    }
+
+    /// Asserts that draw 0 of every pass of `cb`'s latest submit shaded as the map seen through
+    /// `offsets[pass]`.
+    fn assert_shifted(
+        &self,
+        env: &Env,
+        cb: vk::CommandBuffer,
+        offsets: &[vk::Offset2D],
+        what: &str,
+    ) {
+        let still = self.want(vk::Offset2D::default());
+        for (pass, &o) in offsets.iter().enumerate() {
+            let got = env
+                .double
+                .effective_rates(cb.as_raw(), pass, 0)
+                .unwrap_or_else(|| panic!("{what}: no draw in pass {pass}"));
+            assert_eq!(got.len(), 1, "{what}: one view");
+            let v = &got[0];
+            assert_eq!((v.columns, v.rows), (self.side, self.side), "{what}");
+            let want = self.want(o);
+            assert!(
+                v.codes == want,
+                "{what}, pass {pass}, offset {o:?}: shaded {:?}, want {want:?}",
+                v.codes
+            );
+            if o != vk::Offset2D::default() {
+                assert_ne!(want, still, "{what}: an offset that tests nothing");
+            }
+        }
+    }
+
+    fn submit(&self, cb: vk::CommandBuffer) {
+        // SAFETY: `cb` is executable on this device; the queue is this thread's.
+        unsafe {
+            let cbs = [cb];
+            self.dev
+                .d
+                .queue_submit(
+                    self.dev.queue,
+                    &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                    vk::Fence::null(),
+                )
+                .expect("vkQueueSubmit");
+            self.dev.d.queue_wait_idle(self.dev.queue).expect("idle");
+        }
+    }
+
+    /// Destroys everything and checks what reached the driver: no offset name, struct or flag
+    /// (the double records each as an error), validation silent.
+    fn finish(mut self, env: &Env, vk: Vk) {
+        let devices = env.double.events("device");
+        let last = devices.last().expect("the device reached the double");
+        for name in [EXT, QCOM] {
+            let name = name.to_str().unwrap();
+            assert!(
+                !last["extensions"]
+                    .as_array()
+                    .expect("names")
+                    .contains(&Value::from(name)),
+                "{name} reached the driver: {last}"
+            );
+        }
+        let feature = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_FEATURES_QCOM;
+        assert!(
+            !last["chain"]
+                .as_array()
+                .expect("sTypes")
+                .contains(&Value::from(feature.as_raw())),
+            "the offset feature struct reached the driver: {last}"
+        );
+        if let Some(s) = self.staging.take() {
+            self.dev.free(s);
+        }
+        // SAFETY: the queue is idle; each object is destroyed once.
+        unsafe {
+            let d = &self.dev.d;
+            d.device_wait_idle().expect("idle");
+            d.destroy_pipeline(self.pass_pipeline, None);
+            d.destroy_pipeline(self.rendering_pipeline, None);
+            d.destroy_pipeline_layout(self.layout, None);
+            d.destroy_framebuffer(self.framebuffer, None);
+            d.destroy_render_pass(self.pass, None);
+            for (image, memory, view) in self.images.drain(..) {
+                d.destroy_image_view(view, None);
+                d.destroy_image(image, None);
+                d.free_memory(memory, None);
+            }
+        }
+        self.dev.finish(env, vk);
+    }
+}
+
+/// The render pass: colour attachment 0 (cleared, from `UNDEFINED`) and density map 1, as
+/// [`attachments2`] has them, and a dependency on earlier colour writes, so that two passes of one
+/// recording write the colour attachment in order.
+///
+/// # Safety
+/// `d` must be alive.
+unsafe fn render_pass(d: &ash::Device) -> vk::RenderPass {
+    let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
+    let color_ref = [vk::AttachmentReference2::default()
+        .attachment(0)
+        .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
+    let subpass = [vk::SubpassDescription2::default()
+        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+        .color_attachments(&color_ref)];
+    let color = vk::AccessFlags::COLOR_ATTACHMENT_WRITE;
+    let stage = vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT;
+    let deps = [vk::SubpassDependency2::default()
+        .src_subpass(vk::SUBPASS_EXTERNAL)
+        .dst_subpass(0)
+        .src_stage_mask(stage)
+        .dst_stage_mask(stage)
+        .src_access_mask(color)
+        .dst_access_mask(color)];
+    let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
+        .fragment_density_map_attachment(vk::AttachmentReference {
+            attachment: 1,
+            layout: FDM_LAYOUT,
+        });
+    let info = vk::RenderPassCreateInfo2::default()
+        .attachments(&atts)
+        .subpasses(&subpass)
+        .dependencies(&deps)
+        .push_next(&mut fdm);
+    // SAFETY: the caller's promise; the structs live across the call.
+    unsafe { d.create_render_pass2(&info, None) }
+        .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()))
+}
+
+/// A one-layer `side`×`side` image with the offset flag and a view of it.
+fn image(
+    dev: &Dev,
+    format: vk::Format,
+    side: u32,
+    usage: vk::ImageUsageFlags,
+) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
+    let usage = usage | vk::ImageUsageFlags::TRANSFER_DST;
+    // SAFETY: every struct lives across its call.
+    unsafe {
+        let d = &dev.d;
+        let image = d
+            .create_image(&image_info(format, side, 1, usage).flags(OFFSET_BIT), None)
+            .unwrap_or_else(|e| panic!("vkCreateImage: {e}; {:?}", take_messages()));
+        let req = d.get_image_memory_requirements(image);
+        let memory = d
+            .allocate_memory(
+                &allocate_info(&dev.memory, req, vk::MemoryPropertyFlags::DEVICE_LOCAL),
+                None,
+            )
+            .expect("vkAllocateMemory");
+        d.bind_image_memory(image, memory, 0).expect("bind");
+        let view = d
+            .create_image_view(
+                &vk::ImageViewCreateInfo::default()
+                    .image(image)
+                    .view_type(vk::ImageViewType::TYPE_2D)
+                    .format(format)
+                    .subresource_range(range(0, 1)),
+                None,
+            )
+            .expect("vkCreateImageView");
+        (image, memory, view)
+    }
+}
+
+fn at(x: i32, y: i32) -> vk::Offset2D {
+    vk::Offset2D { x, y }
+}
+
+/// On both profiles (16- and 8-pixel texels), with render passes and dynamic rendering: one
+/// recording per offset, each pass ending with offsets (whole texels, both signs, beyond the map
+/// so that the edge texels are repeated), with a zero offset, with a count of zero, and without
+/// the struct; each draw shades as the map seen through its offset.
+#[test]
+fn passes_ended_with_offsets_shade_as_the_shifted_map() {
+    let Some((_serial, env)) = env() else { return };
+    for profile in [Profile::Nvidia, Profile::Amd] {
+        let Some(vk) = Vk::new(env, profile, true) else {
+            return;
+        };
+        let scene = Scene::new(&vk, profile, EXT);
+        let t = scene.texel as i32;
+        for path in [Path::RenderPass, Path::Rendering] {
+            let cases: [(End<'_>, vk::Offset2D); 7] = [
+                (End::With(&[at(t, 0)]), at(t, 0)),
+                (End::With(&[at(-t, 2 * t)]), at(-t, 2 * t)),
+                (End::With(&[at(3 * t, -2 * t)]), at(3 * t, -2 * t)),
+                (End::With(&[at(-20 * t, 20 * t)]), at(-20 * t, 20 * t)),
+                (End::With(&[at(0, 0)]), at(0, 0)),
+                (End::With(&[]), at(0, 0)),
+                (End::Absent, at(0, 0)),
+            ];
+            for (end, o) in cases {
+                let what = format!("{profile:?} {path:?} {end:?}");
+                let cb = scene.dev.begin();
+                scene.prepare(cb);
+                scene.pass(cb, path, vk::RenderingFlags::empty(), end);
+                scene.dev.submit(cb);
+                scene.assert_shifted(env, cb, &[o], &what);
+            }
+        }
+        scene.finish(env, vk);
+    }
+}
+
+/// The QCOM name does the same (it has render passes only): the device gets offsets under it.
+#[test]
+fn the_qcom_name_shifts_render_passes_alike() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let scene = Scene::new(&vk, Profile::Nvidia, QCOM);
+    let t = scene.texel as i32;
+    for o in [at(2 * t, t), at(-t, -t), at(0, 0)] {
+        let cb = scene.dev.begin();
+        scene.prepare(cb);
+        scene.pass(
+            cb,
+            Path::RenderPass,
+            vk::RenderingFlags::empty(),
+            End::With(&[o]),
+        );
+        scene.dev.submit(cb);
+        scene.assert_shifted(env, cb, &[o], &format!("QCOM {o:?}"));
+    }
+    scene.finish(env, vk);
+}
+
+/// Offsets are fixed per recording, as on a native driver: a command buffer submitted again keeps
+/// the offsets it was recorded with (while another command buffer is recorded and submitted with
+/// other offsets on the same map in between), and recorded again with new offsets shades with
+/// those. Two command buffers recorded with different offsets on the same map, submitted
+/// together, each shade with their own; so do two passes of one recording.
+#[test]
+fn offsets_are_fixed_per_recording_and_per_command_buffer() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
+    let t = scene.texel as i32;
+    let (a, b, c) = (at(t, 0), at(0, -2 * t), at(-3 * t, t));
+    for path in [Path::RenderPass, Path::Rendering] {
+        let what = format!("{path:?}");
+        let first = scene.dev.begin();
+        scene.prepare(first);
+        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[a]));
+        scene.dev.submit(first);
+        scene.assert_shifted(env, first, &[a], &format!("{what}: first"));
+        let other = scene.dev.begin();
+        scene.prepare(other);
+        scene.pass(other, path, vk::RenderingFlags::empty(), End::With(&[b]));
+        scene.dev.submit(other);
+        scene.assert_shifted(env, other, &[b], &format!("{what}: other"));
+        // Submitted again, unchanged: its own offsets, not the other's.
+        scene.submit(first);
+        scene.assert_shifted(env, first, &[a], &format!("{what}: first again"));
+        // Recorded again with new offsets, two passes of which the second has other offsets.
+        scene.record_again(&[first]);
+        scene.prepare(first);
+        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[c]));
+        scene.between(first);
+        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[b]));
+        scene.dev.submit(first);
+        scene.assert_shifted(
+            env,
+            first,
+            &[c, b],
+            &format!("{what}: first recorded again"),
+        );
+        // Both in one submit: each its own.
+        scene.record_again(&[first, other]);
+        scene.prepare(first);
+        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[a]));
+        scene.between(other);
+        scene.prepare(other);
+        scene.pass(other, path, vk::RenderingFlags::empty(), End::With(&[c]));
+        // SAFETY: both are recording on this device; the queue is this thread's.
+        unsafe {
+            let d = &scene.dev.d;
+            d.end_command_buffer(first).expect("end");
+            d.end_command_buffer(other).expect("end");
+            let cbs = [first, other];
+            d.queue_submit(
+                scene.dev.queue,
+                &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                vk::Fence::null(),
+            )
+            .expect("vkQueueSubmit");
+            d.queue_wait_idle(scene.dev.queue).expect("idle");
+        }
+        scene.assert_shifted(env, first, &[a], &format!("{what}: together, first"));
+        scene.assert_shifted(env, other, &[c], &format!("{what}: together, other"));
+    }
+    scene.finish(env, vk);
+}
+
+/// A dynamic render pass instance suspended and resumed shifts once, by the offsets of the end
+/// after its last resumption: the suspending ends' offsets are ignored, as the specification
+/// says, and both parts' draws shade alike.
+#[test]
+fn a_suspended_and_resumed_instance_shifts_once_by_its_last_end() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
+    let t = scene.texel as i32;
+    let (ignored, last) = (at(2 * t, 2 * t), at(-t, t));
+    let cb = scene.dev.begin();
+    scene.prepare(cb);
+    let flags = vk::RenderingFlags::SUSPENDING;
+    scene.pass(cb, Path::Rendering, flags, End::With(&[ignored]));
+    let flags = vk::RenderingFlags::RESUMING | vk::RenderingFlags::SUSPENDING;
+    scene.pass(cb, Path::Rendering, flags, End::With(&[ignored]));
+    scene.pass(
+        cb,
+        Path::Rendering,
+        vk::RenderingFlags::RESUMING,
+        End::With(&[last]),
+    );
+    scene.dev.submit(cb);
+    scene.assert_shifted(env, cb, &[last, last, last], "suspended and resumed");
+    scene.finish(env, vk);
+}
+
+/// A secondary command buffer that begins and ends rendering itself, with offsets, executed from
+/// a primary: the draw shades with the secondary's offsets.
+#[test]
+fn a_secondary_that_begins_and_ends_rendering_applies_its_offsets() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
+    let t = scene.texel as i32;
+    let o = at(t, -t);
+    let d = &scene.dev.d;
+    // SAFETY: the pool is this device's; every struct lives across its call.
+    let secondary = unsafe {
+        let s = d
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(scene.dev.pool)
+                    .level(vk::CommandBufferLevel::SECONDARY)
+                    .command_buffer_count(1),
+            )
+            .expect("vkAllocateCommandBuffers")[0];
+        let inheritance = vk::CommandBufferInheritanceInfo::default();
+        d.begin_command_buffer(
+            s,
+            &vk::CommandBufferBeginInfo::default().inheritance_info(&inheritance),
+        )
+        .expect("vkBeginCommandBuffer");
+        s
+    };
+    scene.pass(
+        secondary,
+        Path::Rendering,
+        vk::RenderingFlags::empty(),
+        End::With(&[o]),
+    );
+    let primary = scene.dev.begin();
+    scene.prepare(primary);
+    // SAFETY: both are this device's; the secondary is executable.
+    unsafe {
+        d.end_command_buffer(secondary).expect("end");
+        d.cmd_execute_commands(primary, &[secondary]);
+    }
+    scene.dev.submit(primary);
+    let draws: Vec<_> = env
+        .double
+        .draws()
+        .into_iter()
+        .filter(|dr| {
+            dr.command_buffer == primary.as_raw() || dr.command_buffer == secondary.as_raw()
+        })
+        .collect();
+    assert_eq!(draws.len(), 1, "{draws:?}");
+    let want = scene.want(o);
+    assert!(
+        draws[0].views[0].codes == want,
+        "secondary: shaded {:?}, want {want:?}",
+        draws[0].views[0].codes
+    );
+    assert_ne!(want, scene.want(at(0, 0)));
+    scene.finish(env, vk);
+}
