@@ -50,29 +50,36 @@ type EndRendering2 = unsafe extern "system" fn(vk::CommandBuffer, *const Renderi
 /// Density bytes that want a fragment edge of 1, 2 and 4 pixels.
 const EDGES: [u8; 3] = [255, 127, 63];
 
-/// The map: texel (x, y) wants an edge of `EDGES[(x + 2y) % 3]` wide and `EDGES[(2x + y) % 3]`
-/// high, so that a shift by one texel either way changes what almost every texel shades with.
-fn map_bytes(side: u32) -> Vec<u8> {
+/// The map's layers, one after the other: texel (x, y) of layer l wants an edge of
+/// `EDGES[(x + 2y + l) % 3]` wide and `EDGES[(2x + y + 2l) % 3]` high, so that a shift by one
+/// texel either way changes what almost every texel shades with, and the layers differ.
+fn map_bytes(side: u32, layers: u32) -> Vec<u8> {
     let mut out = Vec::new();
-    for y in 0..side {
-        for x in 0..side {
-            out.push(EDGES[((x + 2 * y) % 3) as usize]);
-            out.push(EDGES[((2 * x + y) % 3) as usize]);
+    for l in 0..layers {
+        for y in 0..side {
+            for x in 0..side {
+                out.push(EDGES[((x + 2 * y + l) % 3) as usize]);
+                out.push(EDGES[((2 * x + y + 2 * l) % 3) as usize]);
+            }
         }
     }
     out
 }
 
-/// The specification's lookup: the map as seen through `offset` (pixels, a multiple of `texel`),
-/// x′ = x − offset, clamped to the map.
+/// The specification's lookup (x′ = x − offset, texel ⌊x′ / texel⌋ clamped to the map) at the
+/// centre of each shading-rate texel, for one layer of `bytes` and its offset.
 fn shifted(bytes: &[u8], side: u32, texel: u32, offset: vk::Offset2D) -> Vec<u8> {
-    let (sx, sy) = (offset.x / texel as i32, offset.y / texel as i32);
-    let last = side as i32 - 1;
+    let (t, last) = (i64::from(texel), i64::from(side) - 1);
+    let fetch = |i: i64, o: i32| {
+        ((2 * i + 1) * t - 2 * i64::from(o))
+            .div_euclid(2 * t)
+            .clamp(0, last)
+    };
     let mut out = Vec::new();
-    for y in 0..side as i32 {
-        for x in 0..side as i32 {
-            let (mx, my) = ((x - sx).clamp(0, last), (y - sy).clamp(0, last));
-            let i = ((my * side as i32 + mx) * 2) as usize;
+    for y in 0..i64::from(side) {
+        for x in 0..i64::from(side) {
+            let (mx, my) = (fetch(x, offset.x), fetch(y, offset.y));
+            let i = ((my * i64::from(side) + mx) * 2) as usize;
             out.extend_from_slice(&bytes[i..i + 2]);
         }
     }
@@ -105,6 +112,8 @@ struct Scene {
     profile: Profile,
     texel: u32,
     side: u32,
+    /// The map's and the colour image's layers; with 2, every pass has view mask 0b11.
+    layers: u32,
     bytes: Vec<u8>,
     images: Vec<(vk::Image, vk::DeviceMemory, vk::ImageView)>,
     pass: vk::RenderPass,
@@ -118,6 +127,11 @@ struct Scene {
 
 impl Scene {
     fn new(vk: &Vk, profile: Profile, name: &CStr) -> Scene {
+        Scene::with_views(vk, profile, name, 1)
+    }
+
+    /// A scene whose map and colour target have `layers` layers, one view each.
+    fn with_views(vk: &Vk, profile: Profile, name: &CStr, layers: u32) -> Scene {
         let mut feature = vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM::default()
             .fragment_density_map_offset(true);
         let d = vk.device_with(&[name], Features::FDM_MULTIVIEW, Some(&mut feature));
@@ -128,16 +142,24 @@ impl Scene {
             &dev,
             DENSITY,
             side,
+            layers,
             vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
         );
-        let color = image(&dev, COLOR, SIZE, vk::ImageUsageFlags::COLOR_ATTACHMENT);
-        let bytes = map_bytes(side);
+        let color = image(
+            &dev,
+            COLOR,
+            SIZE,
+            layers,
+            vk::ImageUsageFlags::COLOR_ATTACHMENT,
+        );
+        let bytes = map_bytes(side, layers);
+        let mask = if layers > 1 { (1u32 << layers) - 1 } else { 0 };
         let staging = dev.buffer(bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC);
         dev.write(&staging, &bytes);
         let d = &dev.d;
         // SAFETY: every struct lives across its call; the objects are destroyed in `finish`.
         unsafe {
-            let pass = render_pass(d);
+            let pass = render_pass(d, mask);
             let views = [color.2, map.2];
             let framebuffer = d
                 .create_framebuffer(
@@ -162,8 +184,9 @@ impl Scene {
             let stages = stages(modules);
             let fixed = Fixed::new();
             let formats = [COLOR];
-            let mut rendering =
-                vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&formats);
+            let mut rendering = vk::PipelineRenderingCreateInfo::default()
+                .color_attachment_formats(&formats)
+                .view_mask(mask);
             let infos = [
                 fixed.info(&stages, layout).render_pass(pass).subpass(0),
                 fixed
@@ -188,6 +211,7 @@ impl Scene {
                 profile,
                 texel,
                 side,
+                layers,
                 bytes,
                 images: vec![map, color],
                 pass,
@@ -213,10 +237,11 @@ impl Scene {
     /// into `COLOR_ATTACHMENT_OPTIMAL`.
     fn prepare(&self, cb: vk::CommandBuffer) {
         let staging = self.staging.as_ref().expect("staging");
-        self.dev.upload(cb, staging, self.map().0, self.side, 1);
+        self.dev
+            .upload(cb, staging, self.map().0, self.side, self.layers);
         let barrier = vk::ImageMemoryBarrier::default()
             .image(self.color().0)
-            .subresource_range(range(0, 1))
+            .subresource_range(range(0, self.layers))
             .old_layout(vk::ImageLayout::UNDEFINED)
             .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
             .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
@@ -313,12 +338,15 @@ impl Scene {
                     let mut density = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
                         .image_view(self.map().1)
                         .image_layout(FDM_LAYOUT);
-                    let info = vk::RenderingInfo::default()
+                    let mut info = vk::RenderingInfo::default()
                         .flags(flags)
                         .render_area(AREA)
                         .layer_count(1)
                         .color_attachments(&color)
                         .push_next(&mut density);
+                    if self.layers > 1 {
+                        info = info.view_mask((1 << self.layers) - 1);
+                    }
                     d.cmd_begin_rendering(cb, &info);
                     draw_fullscreen(d, cb, self.rendering_pipeline);
                     let end2 = self
@@ -336,38 +364,53 @@ impl Scene {
         }
     }
 
-    /// The rates the model gives the map seen through `offset`, per texel.
-    fn want(&self, offset: vk::Offset2D) -> Vec<u8> {
-        let bytes = shifted(&self.bytes, self.side, self.texel, offset);
-        model_codes(self.profile, &bytes, (self.side * self.side) as usize, 1)
+    /// What each view shades with where the pass ends with `offsets` (per view; missing ones are
+    /// (0, 0)): the model's rates of each layer seen through its offset, one per view (layered),
+    /// or of the finer of all layers, the same for every view (merged).
+    fn want(&self, offsets: &[vk::Offset2D]) -> Vec<Vec<u8>> {
+        let texels = (self.side * self.side) as usize;
+        let layer = |l: usize| {
+            let o = offsets.get(l).copied().unwrap_or_default();
+            let bytes = &self.bytes[l * texels * 2..(l + 1) * texels * 2];
+            shifted(bytes, self.side, self.texel, o)
+        };
+        let all: Vec<u8> = (0..self.layers as usize).flat_map(layer).collect();
+        let codes = model_codes(self.profile, &all, texels, self.layers as usize);
+        if codes.len() == texels {
+            vec![codes; self.layers as usize]
+        } else {
+            codes.chunks(texels).map(<[u8]>::to_vec).collect()
+        }
     }
 
-    /// Asserts that draw 0 of every pass of `cb`'s latest submit shaded as the map seen through
-    /// `offsets[pass]`.
+    /// Asserts that draw 0 of every pass of `cb`'s latest submit shaded, in every view, as the
+    /// map seen through the offsets `ends[pass]`.
     fn assert_shifted(
         &self,
         env: &Env,
         cb: vk::CommandBuffer,
-        offsets: &[vk::Offset2D],
+        ends: &[&[vk::Offset2D]],
         what: &str,
     ) {
-        let still = self.want(vk::Offset2D::default());
-        for (pass, &o) in offsets.iter().enumerate() {
+        let still = self.want(&[]);
+        for (pass, &offsets) in ends.iter().enumerate() {
             let got = env
                 .double
                 .effective_rates(cb.as_raw(), pass, 0)
                 .unwrap_or_else(|| panic!("{what}: no draw in pass {pass}"));
-            assert_eq!(got.len(), 1, "{what}: one view");
-            let v = &got[0];
-            assert_eq!((v.columns, v.rows), (self.side, self.side), "{what}");
-            let want = self.want(o);
-            assert!(
-                v.codes == want,
-                "{what}, pass {pass}, offset {o:?}: shaded {:?}, want {want:?}",
-                v.codes
-            );
-            if o != vk::Offset2D::default() {
-                assert_ne!(want, still, "{what}: an offset that tests nothing");
+            assert_eq!(got.len(), self.layers as usize, "{what}: one rate per view");
+            let want = self.want(offsets);
+            for (v, w) in got.iter().zip(&want) {
+                assert_eq!((v.columns, v.rows), (self.side, self.side), "{what}");
+                assert!(
+                    &v.codes == w,
+                    "{what}, pass {pass}, view {}, offsets {offsets:?}: shaded {:?}, want {w:?}",
+                    v.view,
+                    v.codes
+                );
+            }
+            if offsets.iter().any(|&o| o != vk::Offset2D::default()) {
+                assert_ne!(want, still, "{what}: offsets that test nothing");
             }
         }
     }
@@ -439,13 +482,14 @@ impl Scene {
 ///
 /// # Safety
 /// `d` must be alive.
-unsafe fn render_pass(d: &ash::Device) -> vk::RenderPass {
+unsafe fn render_pass(d: &ash::Device, view_mask: u32) -> vk::RenderPass {
     let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
     let color_ref = [vk::AttachmentReference2::default()
         .attachment(0)
         .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
     let subpass = [vk::SubpassDescription2::default()
         .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+        .view_mask(view_mask)
         .color_attachments(&color_ref)];
     let color = vk::AccessFlags::COLOR_ATTACHMENT_WRITE;
     let stage = vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT;
@@ -471,11 +515,12 @@ unsafe fn render_pass(d: &ash::Device) -> vk::RenderPass {
         .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()))
 }
 
-/// A one-layer `side`×`side` image with the offset flag and a view of it.
+/// A `side`×`side` image of `layers` layers with the offset flag and a view of every layer.
 fn image(
     dev: &Dev,
     format: vk::Format,
     side: u32,
+    layers: u32,
     usage: vk::ImageUsageFlags,
 ) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
     let usage = usage | vk::ImageUsageFlags::TRANSFER_DST;
@@ -483,7 +528,10 @@ fn image(
     unsafe {
         let d = &dev.d;
         let image = d
-            .create_image(&image_info(format, side, 1, usage).flags(OFFSET_BIT), None)
+            .create_image(
+                &image_info(format, side, layers, usage).flags(OFFSET_BIT),
+                None,
+            )
             .unwrap_or_else(|e| panic!("vkCreateImage: {e}; {:?}", take_messages()));
         let req = d.get_image_memory_requirements(image);
         let memory = d
@@ -497,9 +545,13 @@ fn image(
             .create_image_view(
                 &vk::ImageViewCreateInfo::default()
                     .image(image)
-                    .view_type(vk::ImageViewType::TYPE_2D)
+                    .view_type(if layers > 1 {
+                        vk::ImageViewType::TYPE_2D_ARRAY
+                    } else {
+                        vk::ImageViewType::TYPE_2D
+                    })
                     .format(format)
-                    .subresource_range(range(0, 1)),
+                    .subresource_range(range(0, layers)),
                 None,
             )
             .expect("vkCreateImageView");
@@ -540,7 +592,7 @@ fn passes_ended_with_offsets_shade_as_the_shifted_map() {
                 scene.prepare(cb);
                 scene.pass(cb, path, vk::RenderingFlags::empty(), end);
                 scene.dev.submit(cb);
-                scene.assert_shifted(env, cb, &[o], &what);
+                scene.assert_shifted(env, cb, &[&[o]], &what);
             }
         }
         scene.finish(env, vk);
@@ -566,7 +618,7 @@ fn the_qcom_name_shifts_render_passes_alike() {
             End::With(&[o]),
         );
         scene.dev.submit(cb);
-        scene.assert_shifted(env, cb, &[o], &format!("QCOM {o:?}"));
+        scene.assert_shifted(env, cb, &[&[o]], &format!("QCOM {o:?}"));
     }
     scene.finish(env, vk);
 }
@@ -591,15 +643,15 @@ fn offsets_are_fixed_per_recording_and_per_command_buffer() {
         scene.prepare(first);
         scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[a]));
         scene.dev.submit(first);
-        scene.assert_shifted(env, first, &[a], &format!("{what}: first"));
+        scene.assert_shifted(env, first, &[&[a]], &format!("{what}: first"));
         let other = scene.dev.begin();
         scene.prepare(other);
         scene.pass(other, path, vk::RenderingFlags::empty(), End::With(&[b]));
         scene.dev.submit(other);
-        scene.assert_shifted(env, other, &[b], &format!("{what}: other"));
+        scene.assert_shifted(env, other, &[&[b]], &format!("{what}: other"));
         // Submitted again, unchanged: its own offsets, not the other's.
         scene.submit(first);
-        scene.assert_shifted(env, first, &[a], &format!("{what}: first again"));
+        scene.assert_shifted(env, first, &[&[a]], &format!("{what}: first again"));
         // Recorded again with new offsets, two passes of which the second has other offsets.
         scene.record_again(&[first]);
         scene.prepare(first);
@@ -610,7 +662,7 @@ fn offsets_are_fixed_per_recording_and_per_command_buffer() {
         scene.assert_shifted(
             env,
             first,
-            &[c, b],
+            &[&[c], &[b]],
             &format!("{what}: first recorded again"),
         );
         // Both in one submit: each its own.
@@ -634,8 +686,8 @@ fn offsets_are_fixed_per_recording_and_per_command_buffer() {
             .expect("vkQueueSubmit");
             d.queue_wait_idle(scene.dev.queue).expect("idle");
         }
-        scene.assert_shifted(env, first, &[a], &format!("{what}: together, first"));
-        scene.assert_shifted(env, other, &[c], &format!("{what}: together, other"));
+        scene.assert_shifted(env, first, &[&[a]], &format!("{what}: together, first"));
+        scene.assert_shifted(env, other, &[&[c]], &format!("{what}: together, other"));
     }
     scene.finish(env, vk);
 }
@@ -665,7 +717,12 @@ fn a_suspended_and_resumed_instance_shifts_once_by_its_last_end() {
         End::With(&[last]),
     );
     scene.dev.submit(cb);
-    scene.assert_shifted(env, cb, &[last, last, last], "suspended and resumed");
+    scene.assert_shifted(
+        env,
+        cb,
+        &[&[last], &[last], &[last]],
+        "suspended and resumed",
+    );
     scene.finish(env, vk);
 }
 
@@ -722,12 +779,75 @@ fn a_secondary_that_begins_and_ends_rendering_applies_its_offsets() {
         })
         .collect();
     assert_eq!(draws.len(), 1, "{draws:?}");
-    let want = scene.want(o);
+    let want = &scene.want(&[o])[0];
     assert!(
-        draws[0].views[0].codes == want,
+        &draws[0].views[0].codes == want,
         "secondary: shaded {:?}, want {want:?}",
         draws[0].views[0].codes
     );
-    assert_ne!(want, scene.want(at(0, 0)));
+    assert_ne!(want, &scene.want(&[])[0]);
+    scene.finish(env, vk);
+}
+
+/// Multiview (a two-layer map, view mask 0b11), both paths: each view is shifted by its own
+/// offset, on `nvidia` in its own shadow layer, on `amd` before the finer rate of both layers is
+/// taken for the one shared layer; a count of one leaves the second view at (0, 0).
+#[test]
+fn each_view_is_shifted_by_its_own_offset() {
+    let Some((_serial, env)) = env() else { return };
+    for profile in [Profile::Nvidia, Profile::Amd] {
+        let Some(vk) = Vk::new(env, profile, true) else {
+            return;
+        };
+        let scene = Scene::with_views(&vk, profile, EXT, 2);
+        let t = scene.texel as i32;
+        for path in [Path::RenderPass, Path::Rendering] {
+            let ends: [&[vk::Offset2D]; 3] = [
+                &[at(t, 0), at(-2 * t, t)],
+                &[at(0, 0), at(3 * t, -t)],
+                &[at(-t, -t)],
+            ];
+            for offsets in ends {
+                let what = format!("{profile:?} {path:?} {offsets:?}");
+                let cb = scene.dev.begin();
+                scene.prepare(cb);
+                scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
+                scene.dev.submit(cb);
+                scene.assert_shifted(env, cb, &[offsets], &what);
+            }
+        }
+        scene.finish(env, vk);
+    }
+}
+
+/// Offsets that break the specification's valid usage (not multiples of the granularity, more
+/// than the views) are the application's error: nothing crashes, the driver and validation hear
+/// nothing of them, and each shading-rate texel shades as the specification's lookup at its
+/// centre says; offsets beyond the views are ignored.
+#[test]
+fn invalid_offsets_shade_as_the_lookup_at_each_texel_centre() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
+    let t = scene.texel as i32;
+    let cases: [&[vk::Offset2D]; 5] = [
+        &[at(t / 2 + 1, -t / 2)],
+        &[at(t + 3, 2 * t - 5)],
+        &[at(-t / 2 - 1, t / 2)],
+        &[at(-7, 9)],
+        &[at(t, 0), at(5 * t, 5 * t), at(-t, 0)],
+    ];
+    for path in [Path::RenderPass, Path::Rendering] {
+        for offsets in cases {
+            let what = format!("{path:?} {offsets:?}");
+            let cb = scene.dev.begin();
+            scene.prepare(cb);
+            scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
+            scene.dev.submit(cb);
+            scene.assert_shifted(env, cb, &[&offsets[..1]], &what);
+        }
+    }
     scene.finish(env, vk);
 }
