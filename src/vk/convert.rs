@@ -507,7 +507,10 @@ fn opened(cb: vk::CommandBuffer, shifts: Option<(usize, [u32; 2])>, suspending: 
 /// are (0, 0). The application's errors are handled as the specification's lookup would: an
 /// offset that is not a multiple of the granularity shifts by the texel whose centre it lands
 /// nearest ([`texel_shift`]); offsets at the end of a pass whose map was created without the
-/// offset flag, or that reads no map, change nothing.
+/// offset flag change nothing; those at the end of a pass that reads no map go to the last pass
+/// of the recording that read one with the flag, if it ended through the plain
+/// `vkCmdEndRenderPass` or `vkCmdEndRendering` (not intercepted, so that they cost nothing), else
+/// nowhere (docs/vulkan-layer.md#density-map-offsets).
 pub fn ended(cb: vk::CommandBuffer, offsets: &[vk::Offset2D]) {
     record_of(cb, |r| {
         let open = {
@@ -632,7 +635,8 @@ fn readable(layout: vk::ImageLayout) -> bool {
 
 impl Converter {
     /// `cb`'s slot for the map `m` of `image` in recording `recording`: one it converted the map
-    /// with before that no conversion of this recording took yet, or a new one (slots made for an
+    /// with before (for a map that takes offsets, one that no conversion of this recording took
+    /// yet, so that each pass instance has shifts of its own), or a new one (slots made for an
     /// earlier image with the same handle are replaced).
     ///
     /// # Safety
@@ -648,7 +652,9 @@ impl Converter {
             r.slots
                 .lock()
                 .iter_mut()
-                .find(|s| s.image == image && s.view == m.view && s.used_in != recording)
+                .find(|s| {
+                    s.image == image && s.view == m.view && (!m.offsets || s.used_in != recording)
+                })
                 .map(|s| {
                     s.used_in = recording;
                     *s

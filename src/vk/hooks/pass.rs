@@ -23,7 +23,7 @@ use ash::vk;
 use ash::vk::Handle as _;
 
 use crate::vk::base::chain::{self, ChainCopy};
-use crate::vk::base::ffi::{guard, offset, once, raw, slice};
+use crate::vk::base::ffi::{guard, offset, once, pfn, raw, slice};
 use crate::vk::registry::{self, Device};
 use crate::vk::translate::formats::{SHADOW_FORMAT, SHADOW_LAYOUT};
 use crate::vk::translate::render_pass::{
@@ -806,16 +806,19 @@ hook_and_khr_alias! {
 }
 
 /// `vkCmdEndRendering2EXT` and `vkCmdEndRendering2KHR` (`VK_KHR_maintenance10`, where the driver
-/// has it): the offsets of the end ([`convert::ended`]); the end goes down as
-/// `vkCmdEndRendering2KHR` without their struct where the driver has it, else as the plain
+/// has it). On an emulating device: the offsets of the end ([`convert::ended`]); the end goes down
+/// as `vkCmdEndRendering2KHR` without their struct where the driver has it, else as the plain
 /// `vkCmdEndRendering`, which the end info's other structs cannot reach (the specification allows
 /// none but the offsets,
 /// <https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingEndInfoKHR.html>).
+/// Elsewhere (the hook handed out by `vkGetInstanceProcAddr` before the device was known) the
+/// command goes down as it is, where the next layer has it.
 ///
 /// # Safety
 /// The caller's arguments, valid as the command requires.
 unsafe fn cmd_end_rendering2_with(
     which: &'static str,
+    own: fn(&Device) -> Option<pfn::PFN_vkCmdEndRendering2KHR>,
     cb: vk::CommandBuffer,
     info: *const offset::RenderingEndInfo,
 ) {
@@ -824,13 +827,17 @@ unsafe fn cmd_end_rendering2_with(
         let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
             return;
         };
+        if dev.fdm.is_none() {
+            if let Some(down) = own(&dev) {
+                // SAFETY: the next layer's function, with the caller's arguments.
+                unsafe { down(cb, info) };
+            }
+            return;
+        }
         // SAFETY: the caller's end info, read only.
         let next = unsafe { info.as_ref() }.map_or(std::ptr::null(), |i| i.p_next);
         // SAFETY: the caller's chain, read only; the offsets live across the call.
-        let offsets = unsafe { offsets_in(next) };
-        if dev.fdm.is_some() {
-            convert::ended(cb, offsets);
-        }
+        convert::ended(cb, unsafe { offsets_in(next) });
         if let Some(down) = dev.next.cmd_end_rendering2_khr {
             if next.is_null() {
                 // SAFETY: the next layer's function, with the caller's arguments.
@@ -863,7 +870,14 @@ pub unsafe extern "system" fn cmd_end_rendering2_ext(
     info: *const offset::RenderingEndInfo,
 ) {
     // SAFETY: the caller's arguments.
-    unsafe { cmd_end_rendering2_with("vkCmdEndRendering2EXT", cb, info) }
+    unsafe {
+        cmd_end_rendering2_with(
+            "vkCmdEndRendering2EXT",
+            |d| d.next.cmd_end_rendering2_ext,
+            cb,
+            info,
+        )
+    }
 }
 
 /// `vkCmdEndRendering2KHR`: see [`cmd_end_rendering2_with`].
@@ -875,5 +889,12 @@ pub unsafe extern "system" fn cmd_end_rendering2_khr(
     info: *const offset::RenderingEndInfo,
 ) {
     // SAFETY: the caller's arguments.
-    unsafe { cmd_end_rendering2_with("vkCmdEndRendering2KHR", cb, info) }
+    unsafe {
+        cmd_end_rendering2_with(
+            "vkCmdEndRendering2KHR",
+            |d| d.next.cmd_end_rendering2_khr,
+            cb,
+            info,
+        )
+    }
 }
