@@ -31,6 +31,12 @@
 //! (docs/injection.md#apps-that-set-rates).
 //! (The density-map passes, once the density-image barrier case has moved the map into the density
 //! layout, these include the conversion the layer records in front of the pass.)
+//! Density-map offsets (docs/vulkan-layer.md#density-map-offsets): `vkCmdBeginRenderPass2` +
+//! `vkCmdEndRenderPass2` on a pass without a density map (both devices; the end is intercepted on
+//! emulating devices), and, `fovea` only, the same on a pass whose map was created with the offset
+//! flag, ended with an offset, and `vkCmdBeginRendering` + `vkCmdEndRendering2EXT` with an offset
+//! (the bare device records the plain pair in their place): each such pass gets a conversion of
+//! its own in front of it, whose shifts its end writes.
 //! `vkCmdBindPipeline` of a compute pipeline (both devices): the layer notes the application's
 //! compute bindings on emulating devices, to give them back after it converts a density map the
 //! application writes (src/vk/convert.rs).
@@ -76,6 +82,15 @@ const ROUND: usize = 256;
 /// The eye swapchain's size, and the injected side's colour target's (an eye-shaped target).
 const EYE: [u32; 2] = [640, 500];
 
+/// `VkRenderingEndInfoEXT` (`VK_STRUCTURE_TYPE_RENDERING_END_INFO_EXT`, newer than ash 0.38).
+#[repr(C)]
+struct RenderingEndInfo {
+    s_type: vk::StructureType,
+    p_next: *const c_void,
+}
+const RENDERING_END_INFO: vk::StructureType = vk::StructureType::from_raw(1_000_619_003);
+type EndRendering2 = unsafe extern "system" fn(vk::CommandBuffer, *const RenderingEndInfo);
+
 /// Which device a side makes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
@@ -98,6 +113,9 @@ struct Side {
     framebuffer: vk::Framebuffer,
     /// Where the layer emulates density maps: the density image and its pass and framebuffer.
     fdm: Option<(Target, vk::RenderPass, vk::Framebuffer)>,
+    /// Where the layer emulates density maps: a density image with the offset flag, its pass and
+    /// framebuffer, and `vkCmdEndRendering2EXT`.
+    offsets: Option<(Target, vk::RenderPass, vk::Framebuffer, EndRendering2)>,
     /// Where the device has pipeline shading rates (not on the emulating one).
     set_rate: Option<ash::khr::fragment_shading_rate::Device>,
     /// A compute pipeline (`tests/suite/shaders/store.comp`) and its layout.
@@ -176,6 +194,25 @@ impl Side {
                 let (p, f) = pass_and_framebuffer(&device, color.view, Some(density.view), SIZE);
                 (density, p, f)
             });
+            let offsets = (kind == Kind::Fdm).then(|| {
+                let density = Target::with_flags(
+                    &instance,
+                    physical,
+                    &device,
+                    vk::Format::R8G8_UNORM,
+                    [DENSITY, DENSITY],
+                    vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
+                    vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM,
+                );
+                let (p, f) = pass_and_framebuffer(&device, color.view, Some(density.view), SIZE);
+                let end = (instance.fp_v1_0().get_device_proc_addr)(
+                    device.handle(),
+                    c"vkCmdEndRendering2EXT".as_ptr(),
+                )
+                .map(|f| std::mem::transmute::<unsafe extern "system" fn(), EndRendering2>(f))
+                .expect("vkCmdEndRendering2EXT on an emulating device");
+                (density, p, f, end)
+            });
             let set_rate = (kind != Kind::Fdm)
                 .then(|| ash::khr::fragment_shading_rate::Device::new(&instance, &device));
             let compute = compute_pipeline(&device);
@@ -189,6 +226,7 @@ impl Side {
                 pass,
                 framebuffer,
                 fdm,
+                offsets,
                 compute,
                 xr,
             }
@@ -232,7 +270,14 @@ impl Side {
                 density.image,
                 vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT,
             ),
-            (Case::BarrierFdm | Case::RenderPassFdm | Case::RenderingFdm, None) => return false,
+            (
+                Case::BarrierFdm
+                | Case::RenderPassFdm
+                | Case::RenderingFdm
+                | Case::RenderPassOffsets
+                | Case::RenderingOffsets,
+                None,
+            ) => return false,
             (
                 Case::RenderPassInjected | Case::RenderingInjected | Case::RenderingInjectedNull,
                 _,
@@ -302,6 +347,58 @@ impl Side {
                     d.cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE);
                     d.cmd_end_render_pass(cb);
                 }
+                Case::RenderPass2 | Case::RenderPassOffsets => {
+                    let (pass, framebuffer) = match (case, &self.offsets) {
+                        (Case::RenderPassOffsets, Some((_, p, f, _))) => (*p, *f),
+                        _ => (self.pass, self.framebuffer),
+                    };
+                    let begin = vk::RenderPassBeginInfo::default()
+                        .render_pass(pass)
+                        .framebuffer(framebuffer)
+                        .render_area(whole);
+                    let offsets = [vk::Offset2D { x: 16, y: -16 }];
+                    let mut end = vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default()
+                        .fragment_density_offsets(&offsets);
+                    let mut info = vk::SubpassEndInfo::default();
+                    if case == Case::RenderPassOffsets {
+                        info = info.push_next(&mut end);
+                    }
+                    d.cmd_begin_render_pass2(
+                        cb,
+                        &begin,
+                        &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+                    );
+                    d.cmd_end_render_pass2(cb, &info);
+                }
+                Case::RenderingOffsets => {
+                    let Some((density, _, _, end2)) = &self.offsets else {
+                        return false;
+                    };
+                    let colors = [vk::RenderingAttachmentInfo::default()
+                        .image_view(self.color.view)
+                        .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                        .load_op(vk::AttachmentLoadOp::DONT_CARE)
+                        .store_op(vk::AttachmentStoreOp::STORE)];
+                    let mut fdm = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
+                        .image_view(density.view)
+                        .image_layout(vk::ImageLayout::FRAGMENT_DENSITY_MAP_OPTIMAL_EXT);
+                    let info = vk::RenderingInfo::default()
+                        .render_area(whole)
+                        .layer_count(1)
+                        .color_attachments(&colors)
+                        .push_next(&mut fdm);
+                    let offsets = [vk::Offset2D { x: 16, y: -16 }];
+                    let end = vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default()
+                        .fragment_density_offsets(&offsets);
+                    d.cmd_begin_rendering(cb, &info);
+                    end2(
+                        cb,
+                        &RenderingEndInfo {
+                            s_type: RENDERING_END_INFO,
+                            p_next: &end as *const _ as *const c_void,
+                        },
+                    );
+                }
                 Case::BindPipeline => {
                     d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, self.compute.1);
                 }
@@ -366,6 +463,11 @@ impl Drop for Side {
         // SAFETY: nothing made from these handles outlives them; each is destroyed once.
         unsafe {
             let d = &self.device;
+            if let Some((density, p, f, _)) = self.offsets.take() {
+                d.destroy_framebuffer(f, None);
+                d.destroy_render_pass(p, None);
+                density.destroy(d);
+            }
             if let Some((density, p, f)) = self.fdm.take() {
                 d.destroy_framebuffer(f, None);
                 d.destroy_render_pass(p, None);
@@ -404,10 +506,13 @@ enum Case {
     /// which the layer's copy leaves out (per-thread scratch storage).
     RenderingInjectedNull,
     SetRate,
+    RenderPass2,
+    RenderPassOffsets,
+    RenderingOffsets,
 }
 
 impl Case {
-    const ALL: [Case; 12] = [
+    const ALL: [Case; 15] = [
         Case::Barrier,
         Case::Barrier2,
         Case::RenderPass,
@@ -420,6 +525,9 @@ impl Case {
         Case::RenderingInjected,
         Case::RenderingInjectedNull,
         Case::SetRate,
+        Case::RenderPass2,
+        Case::RenderPassOffsets,
+        Case::RenderingOffsets,
     ];
 
     /// Whether the injecting device records it.
@@ -449,6 +557,9 @@ impl Case {
                 "vkCmdBeginRendering+End (injected eye pass, null-view shading-rate struct)"
             }
             Case::SetRate => "vkCmdSetFragmentShadingRateKHR (injecting)",
+            Case::RenderPass2 => "vkCmdBeginRenderPass2+End2",
+            Case::RenderPassOffsets => "vkCmdBeginRenderPass2+End2 (FDM pass, offsets)",
+            Case::RenderingOffsets => "vkCmdBeginRendering+End2EXT (FDM attachment, offsets)",
         }
     }
 
@@ -461,6 +572,8 @@ impl Case {
                 Case::Rendering
             }
             Case::RenderPassInjected => Case::RenderPass,
+            Case::RenderPassOffsets => Case::RenderPass2,
+            Case::RenderingOffsets => Case::Rendering,
             c => c,
         }
     }

@@ -8,6 +8,7 @@ use ash::vk;
 pub const FOVEA: &std::ffi::CStr = c"VK_LAYER_FOVEA_fragment_density_map";
 /// The extension fovea offers on emulating devices.
 pub const FDM_EXT: &std::ffi::CStr = c"VK_EXT_fragment_density_map";
+pub const FDM_OFFSET_EXT: &std::ffi::CStr = c"VK_EXT_fragment_density_map_offset";
 
 /// Writes the double's and this workspace's fovea manifests into a folder of their own and puts
 /// it on the loader's search path, with the double posing as an NVIDIA GPU (shading-rate
@@ -75,8 +76,9 @@ pub fn instance_on_lavapipe(
 }
 
 /// A device on queue family 0 with dynamic rendering and synchronization2, and
-/// `VK_EXT_fragment_density_map` (which fovea emulates on the double's shading-rate GPU) or
-/// `VK_KHR_fragment_shading_rate` with pipeline rates where asked.
+/// `VK_EXT_fragment_density_map` with `VK_EXT_fragment_density_map_offset` (which fovea emulates on
+/// the double's shading-rate GPU) or `VK_KHR_fragment_shading_rate` with pipeline rates where
+/// asked.
 ///
 /// # Safety
 /// `physical` must be `instance`'s.
@@ -91,10 +93,12 @@ pub unsafe fn device(
     let queues = [vk::DeviceQueueCreateInfo::default()
         .queue_family_index(0)
         .queue_priorities(&prio)];
-    let fdm_exts = [FDM_EXT.as_ptr()];
+    let fdm_exts = [FDM_EXT.as_ptr(), FDM_OFFSET_EXT.as_ptr()];
     let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
         .fragment_density_map(true)
         .fragment_density_map_non_subsampled_images(true);
+    let mut offsets = vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM::default()
+        .fragment_density_map_offset(true);
     let fsr_exts = [ash::khr::fragment_shading_rate::NAME.as_ptr()];
     let mut rates = vk::PhysicalDeviceFragmentShadingRateFeaturesKHR::default()
         .pipeline_fragment_shading_rate(true);
@@ -105,7 +109,10 @@ pub unsafe fn device(
         .queue_create_infos(&queues)
         .push_next(&mut v13);
     if density_maps {
-        info = info.enabled_extension_names(&fdm_exts).push_next(&mut fdm);
+        info = info
+            .enabled_extension_names(&fdm_exts)
+            .push_next(&mut fdm)
+            .push_next(&mut offsets);
     }
     if pipeline_rates {
         info = info
@@ -164,7 +171,35 @@ impl Target {
         extent: [u32; 2],
         usage: vk::ImageUsageFlags,
     ) -> Target {
+        // SAFETY: as the caller promised.
+        unsafe {
+            Target::with_flags(
+                instance,
+                physical,
+                device,
+                format,
+                extent,
+                usage,
+                vk::ImageCreateFlags::empty(),
+            )
+        }
+    }
+
+    /// [`Target::new`] with image create `flags`.
+    ///
+    /// # Safety
+    /// As [`Target::new`].
+    pub unsafe fn with_flags(
+        instance: &ash::Instance,
+        physical: vk::PhysicalDevice,
+        device: &ash::Device,
+        format: vk::Format,
+        extent: [u32; 2],
+        usage: vk::ImageUsageFlags,
+        flags: vk::ImageCreateFlags,
+    ) -> Target {
         let info = vk::ImageCreateInfo::default()
+            .flags(flags)
             .image_type(vk::ImageType::TYPE_2D)
             .format(format)
             .extent(vk::Extent3D {

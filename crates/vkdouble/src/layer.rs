@@ -400,6 +400,8 @@ table! { null_commands:
     b"vkCmdBeginRenderPass2" => null_begin_render_pass2 as PFN_vkCmdBeginRenderPass2,
     b"vkCmdBeginRenderPass2KHR" => null_begin_render_pass2 as PFN_vkCmdBeginRenderPass2,
     b"vkCmdEndRenderPass" => null_end as PFN_vkCmdEndRenderPass,
+    b"vkCmdEndRenderPass2" => null_end2 as PFN_vkCmdEndRenderPass2,
+    b"vkCmdEndRenderPass2KHR" => null_end2 as PFN_vkCmdEndRenderPass2,
     b"vkCmdBeginRendering" => null_begin_rendering as PFN_vkCmdBeginRendering,
     b"vkCmdBeginRenderingKHR" => null_begin_rendering as PFN_vkCmdBeginRendering,
     b"vkCmdEndRendering" => null_end as PFN_vkCmdEndRendering,
@@ -455,6 +457,8 @@ unsafe extern "system" fn null_begin_rendering(
 }
 
 unsafe extern "system" fn null_end(_: vk::CommandBuffer) {}
+
+unsafe extern "system" fn null_end2(_: vk::CommandBuffer, _: *const vk::SubpassEndInfo<'_>) {}
 
 unsafe extern "system" fn null_set_fragment_shading_rate(
     _: vk::CommandBuffer,
