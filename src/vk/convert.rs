@@ -649,16 +649,19 @@ impl Converter {
         recording: u64,
     ) -> Option<Slot> {
         let known = record_of(cb, |r| {
-            r.slots
-                .lock()
-                .iter_mut()
-                .find(|s| {
-                    s.image == image && s.view == m.view && (!m.offsets || s.used_in != recording)
-                })
-                .map(|s| {
-                    s.used_in = recording;
-                    *s
-                })
+            let mut slots = r.slots.lock();
+            // A recording takes its slots in the order the previous one did: the search starts
+            // after the last one taken, so a recording of many passes finds each at once.
+            let mut b = r.bound.lock();
+            let n = slots.len();
+            let start = b.next_slot.min(n);
+            let at = (start..n).chain(0..start).find(|&i| {
+                let s = &slots[i];
+                s.image == image && s.view == m.view && (!m.offsets || s.used_in != recording)
+            })?;
+            b.next_slot = at + 1;
+            slots[at].used_in = recording;
+            Some(slots[at])
         })?;
         if known.is_some() {
             return known;

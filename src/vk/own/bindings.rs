@@ -70,6 +70,8 @@ pub struct Bound {
     /// ends until the one after the last resumption carry no offsets (the specification ignores
     /// them).
     pub suspended: bool,
+    /// Where the next conversion of this recording starts looking for its slot.
+    pub next_slot: usize,
 }
 
 impl Default for Bound {
@@ -88,6 +90,7 @@ impl Default for Bound {
             recording: 0,
             open: None,
             suspended: false,
+            next_slot: 0,
         }
     }
 }

@@ -851,3 +851,141 @@ fn invalid_offsets_shade_as_the_lookup_at_each_texel_centre() {
     }
     scene.finish(env, vk);
 }
+
+/// A render pass of two subpasses: offsets at the end of the first (`vkCmdNextSubpass2`) are
+/// ignored, as the specification says, and never reach the driver; those at the end of the last
+/// apply to the whole pass, both subpasses' draws.
+#[test]
+fn only_the_last_subpass_end_carries_offsets() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
+    let t = scene.texel as i32;
+    let (ignored, last) = (at(3 * t, 3 * t), at(-t, 2 * t));
+    let d = &scene.dev.d;
+    // SAFETY: every struct lives across its call; the objects are destroyed below.
+    let (pass, framebuffer, pipelines) = unsafe {
+        let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
+        let color_ref = [vk::AttachmentReference2::default()
+            .attachment(0)
+            .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
+        let subpass = vk::SubpassDescription2::default()
+            .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+            .color_attachments(&color_ref);
+        let subpasses = [subpass, subpass];
+        let color = vk::AccessFlags::COLOR_ATTACHMENT_WRITE;
+        let stage = vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT;
+        let deps = [vk::SubpassDependency2::default()
+            .src_subpass(0)
+            .dst_subpass(1)
+            .src_stage_mask(stage)
+            .dst_stage_mask(stage)
+            .src_access_mask(color)
+            .dst_access_mask(color)
+            .dependency_flags(vk::DependencyFlags::BY_REGION)];
+        let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
+            .fragment_density_map_attachment(vk::AttachmentReference {
+                attachment: 1,
+                layout: FDM_LAYOUT,
+            });
+        let pass = d
+            .create_render_pass2(
+                &vk::RenderPassCreateInfo2::default()
+                    .attachments(&atts)
+                    .subpasses(&subpasses)
+                    .dependencies(&deps)
+                    .push_next(&mut fdm),
+                None,
+            )
+            .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()));
+        let views = [scene.color().1, scene.map().1];
+        let framebuffer = d
+            .create_framebuffer(
+                &vk::FramebufferCreateInfo::default()
+                    .render_pass(pass)
+                    .attachments(&views)
+                    .width(SIZE)
+                    .height(SIZE)
+                    .layers(1),
+                None,
+            )
+            .expect("vkCreateFramebuffer");
+        let module = |bytes: &[u8]| {
+            let words = spv(bytes);
+            d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+                .expect("vkCreateShaderModule")
+        };
+        let modules = [module(VERTEX), module(FRAGMENT)];
+        let stages = stages(modules);
+        let fixed = Fixed::new();
+        let infos = [
+            fixed
+                .info(&stages, scene.layout)
+                .render_pass(pass)
+                .subpass(0),
+            fixed
+                .info(&stages, scene.layout)
+                .render_pass(pass)
+                .subpass(1),
+        ];
+        let pipelines = d
+            .create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
+            .unwrap_or_else(|e| panic!("pipelines: {:?}; {:?}", e.1, take_messages()));
+        for m in modules {
+            d.destroy_shader_module(m, None);
+        }
+        (pass, framebuffer, pipelines)
+    };
+    let cb = scene.dev.begin();
+    scene.prepare(cb);
+    let first = [ignored];
+    let second = [last];
+    let mut first_end =
+        vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&first);
+    let mut last_end =
+        vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&second);
+    // SAFETY: `cb` is recording on this device; every struct lives across its call.
+    unsafe {
+        d.cmd_begin_render_pass2(
+            cb,
+            &vk::RenderPassBeginInfo::default()
+                .render_pass(pass)
+                .framebuffer(framebuffer)
+                .render_area(AREA)
+                .clear_values(&CLEAR),
+            &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+        );
+        draw_fullscreen(d, cb, pipelines[0]);
+        d.cmd_next_subpass2(
+            cb,
+            &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+            &vk::SubpassEndInfo::default().push_next(&mut first_end),
+        );
+        draw_fullscreen(d, cb, pipelines[1]);
+        d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default().push_next(&mut last_end));
+    }
+    scene.dev.submit(cb);
+    let want = &scene.want(&[last])[0];
+    for draw in 0..2 {
+        let got = env
+            .double
+            .effective_rates(cb.as_raw(), 0, draw)
+            .unwrap_or_else(|| panic!("no draw {draw}"));
+        assert!(
+            &got[0].codes == want,
+            "draw {draw} (subpass {draw}): shaded {:?}, want {want:?}",
+            got[0].codes
+        );
+    }
+    // SAFETY: the queue is idle; each object is destroyed once.
+    unsafe {
+        for p in pipelines {
+            d.destroy_pipeline(p, None);
+        }
+        d.destroy_framebuffer(framebuffer, None);
+        d.destroy_render_pass(pass, None);
+    }
+    scene.finish(env, vk);
+}
