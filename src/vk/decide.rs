@@ -49,6 +49,26 @@ pub fn emulated(inst: &Instance, physical: vk::PhysicalDevice) -> Option<FdmEmul
     }
 }
 
+/// The emulation facts of `physical` where it also offers density-map offsets
+/// (docs/vulkan-layer.md#density-map-offsets): they are applied by the conversion in front of each
+/// pass, which a device of Vulkan 1.4 (the instance's version and the driver's) never sets up, since
+/// 1.4 binds compute state through commands the layer does not see (`crate::vk::convert`).
+pub fn offsets_offered(inst: &Instance, physical: vk::PhysicalDevice) -> Option<FdmEmulation> {
+    match &*decision(inst, physical) {
+        Decision::Emulate { fdm, api_version }
+            if converts_at(inst.api_version.min(*api_version)) =>
+        {
+            Some(fdm.clone())
+        }
+        _ => None,
+    }
+}
+
+/// Whether a device of `api_version` can convert density maps on the GPU (below Vulkan 1.4).
+fn converts_at(api_version: u32) -> bool {
+    api_version < vk::make_api_version(0, 1, 4, 0)
+}
+
 /// The driver's (the next layer's) device extensions.
 ///
 /// # Safety
@@ -219,5 +239,18 @@ pub unsafe fn decide(inst: &Instance, physical: vk::PhysicalDevice) -> Decision 
             non_trivial_combiners: props.fragment_shading_rate_non_trivial_combiner_ops == vk::TRUE,
         },
         api_version,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn offsets_need_a_device_below_vulkan_1_4() {
+        assert!(converts_at(vk::API_VERSION_1_3));
+        assert!(converts_at(vk::make_api_version(0, 1, 3, 290)));
+        assert!(!converts_at(vk::make_api_version(0, 1, 4, 0)));
+        assert!(!converts_at(vk::make_api_version(0, 1, 4, 309)));
     }
 }

@@ -8,15 +8,15 @@ use ash::vk;
 
 use crate::vk::base::chain;
 use crate::vk::base::ffi::{guard, name, two_call};
-use crate::vk::decide::{driver_extensions, emulated, has};
+use crate::vk::decide::{driver_extensions, emulated, has, offsets_offered};
 use crate::vk::registry::{self};
 use crate::vk::translate::formats::{
     needs_translation, offered_extensions, translate_image, FDM_FORMAT,
 };
 
 /// `vkEnumerateDeviceExtensionProperties`: on an emulated device the driver's list plus
-/// `VK_EXT_fragment_density_map` and its offsets under both names
-/// ([`offered_extensions`]); asked for this layer's own extensions, those where emulated.
+/// `VK_EXT_fragment_density_map` and, where they can be applied ([`offsets_offered`]), its offsets
+/// under both names ([`offered_extensions`]); asked for this layer's own extensions, those.
 unsafe extern "system" fn enumerate_device_extension_properties_impl(
     physical: vk::PhysicalDevice,
     layer: *const c_char,
@@ -33,11 +33,7 @@ unsafe extern "system" fn enumerate_device_extension_properties_impl(
     // SAFETY: the caller's name.
     if let Some(layer_name) = unsafe { name(layer) } {
         if layer_name.to_bytes() == fovea_abi::VK_LAYER_NAME.as_bytes() {
-            let ours: Vec<_> = emulated(&inst, physical)
-                .map(|_| offered_extensions())
-                .into_iter()
-                .flatten()
-                .collect();
+            let ours = ours(&inst, physical);
             // SAFETY: the caller's pointers.
             return unsafe { two_call(&ours, count, out) };
         }
@@ -53,7 +49,7 @@ unsafe extern "system" fn enumerate_device_extension_properties_impl(
         Ok(e) => e,
         Err(r) => return r,
     };
-    for e in offered_extensions() {
+    for e in ours(&inst, physical) {
         if let Ok(n) = e.extension_name_as_c_str() {
             if !has(&exts, n) {
                 exts.push(e);
@@ -62,6 +58,22 @@ unsafe extern "system" fn enumerate_device_extension_properties_impl(
     }
     // SAFETY: the caller's pointers.
     unsafe { two_call(&exts, count, out) }
+}
+
+/// The extensions the layer offers on `physical`: density maps where it emulates them, their
+/// offsets too where they can be applied.
+fn ours(inst: &registry::Instance, physical: vk::PhysicalDevice) -> Vec<vk::ExtensionProperties> {
+    if emulated(inst, physical).is_none() {
+        return Vec::new();
+    }
+    // Density maps first, then their offsets.
+    let all = offered_extensions();
+    let n = if offsets_offered(inst, physical).is_some() {
+        all.len()
+    } else {
+        1
+    };
+    all[..n].to_vec()
 }
 
 /// See [`enumerate_device_extension_properties_impl`].
@@ -81,11 +93,11 @@ pub unsafe extern "system" fn enumerate_device_extension_properties(
 
 /// Fills `VkPhysicalDeviceFragmentDensityMapFeaturesEXT` in an output chain: density maps and
 /// non-subsampled images, not dynamic ones; and `VkPhysicalDeviceFragmentDensityMapOffsetFeaturesEXT`
-/// (the QCOM struct is the same, with the same `sType`): offsets.
+/// (the QCOM struct is the same, with the same `sType`): offsets, where they can be applied.
 ///
 /// # Safety
 /// `next` must be a valid, writable output chain.
-unsafe fn fill_features(next: *mut c_void) {
+unsafe fn fill_features(next: *mut c_void, offsets: bool) {
     // SAFETY: as the caller promised.
     if let Some(f) = unsafe {
         chain::find_out::<vk::PhysicalDeviceFragmentDensityMapFeaturesEXT>(
@@ -108,7 +120,7 @@ unsafe fn fill_features(next: *mut c_void) {
         )
     } {
         // SAFETY: found by its sType in the caller's output chain.
-        unsafe { (*f).fragment_density_map_offset = vk::TRUE };
+        unsafe { (*f).fragment_density_map_offset = vk::Bool32::from(offsets) };
     }
 }
 
@@ -135,7 +147,7 @@ unsafe fn features2(
     unsafe { next(physical, out) };
     if !out.is_null() && emulated(&inst, physical).is_some() {
         // SAFETY: the caller's output chain.
-        unsafe { fill_features((*out).p_next) };
+        unsafe { fill_features((*out).p_next, offsets_offered(&inst, physical).is_some()) };
     }
 }
 
@@ -195,12 +207,13 @@ unsafe fn properties2(
         height: fdm.texel[1],
     };
     // SAFETY: the caller's output chain.
-    if let Some(p) = unsafe {
+    let offsets = unsafe {
         chain::find_out::<vk::PhysicalDeviceFragmentDensityMapOffsetPropertiesQCOM>(
             (*out).p_next,
             vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_PROPERTIES_QCOM,
         )
-    } {
+    };
+    if let (Some(p), Some(_)) = (offsets, offsets_offered(&inst, physical)) {
         // SAFETY: found by its sType in the caller's output chain.
         unsafe { (*p).fragment_density_offset_granularity = texel };
     }
