@@ -193,7 +193,7 @@ pub unsafe fn device_created(
             device = raw(handle),
             why = why.as_str(),
             "density maps the application writes itself are not converted on this device: they \
-             render at full rate"
+             render at full rate, and density-map offsets are not applied"
         );
         return;
     }
@@ -211,7 +211,7 @@ pub unsafe fn device_created(
             device = raw(handle),
             result = ?e,
             "no density-map conversion on this device: maps the application writes itself \
-             render at full rate"
+             render at full rate, and density-map offsets are not applied"
         ),
     }
 }
