@@ -12,7 +12,10 @@
 //! render passes and dynamic rendering, under both names; zero or absent offsets change nothing;
 //! offsets are fixed per recording (a resubmission keeps them, a new recording takes its own);
 //! two command buffers on one map each get their own; a suspended and resumed instance shifts
-//! once, by its last end's offsets; a secondary that begins and ends rendering applies its own;
+//! once, by its last end's offsets; a secondary that begins and ends rendering applies its own, and
+//! a secondary's draws inside a primary's pass take the primary's; only the last subpass's end
+//! carries offsets; each view is shifted by its own (layered and merged shadows); offsets that
+//! break the valid usage shade as the specification's lookup at each texel's centre;
 //! nothing of the offsets reaches the driver (the double records every extension name and sType
 //! of the device, and errors for offset structs, flags and names anywhere), and validation is
 //! silent but for its 1.3.239 stage false positives.
@@ -987,5 +990,82 @@ fn only_the_last_subpass_end_carries_offsets() {
         d.destroy_framebuffer(framebuffer, None);
         d.destroy_render_pass(pass, None);
     }
+    scene.finish(env, vk);
+}
+
+/// A render pass begun and ended in a primary whose draws a secondary records
+/// (`RENDER_PASS_CONTINUE`), as engines record them: the primary's end carries the offsets, and the
+/// secondary's draw shades with them.
+#[test]
+fn draws_of_a_secondary_inside_the_pass_take_the_primarys_offsets() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
+    let t = scene.texel as i32;
+    let o = [at(-2 * t, -t)];
+    let d = &scene.dev.d;
+    // SAFETY: the pool is this device's; every struct lives across its call.
+    let secondary = unsafe {
+        let s = d
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(scene.dev.pool)
+                    .level(vk::CommandBufferLevel::SECONDARY)
+                    .command_buffer_count(1),
+            )
+            .expect("vkAllocateCommandBuffers")[0];
+        let inheritance = vk::CommandBufferInheritanceInfo::default()
+            .render_pass(scene.pass)
+            .subpass(0)
+            .framebuffer(scene.framebuffer);
+        d.begin_command_buffer(
+            s,
+            &vk::CommandBufferBeginInfo::default()
+                .flags(vk::CommandBufferUsageFlags::RENDER_PASS_CONTINUE)
+                .inheritance_info(&inheritance),
+        )
+        .expect("vkBeginCommandBuffer");
+        draw_fullscreen(d, s, scene.pass_pipeline);
+        d.end_command_buffer(s).expect("end");
+        s
+    };
+    let primary = scene.dev.begin();
+    scene.prepare(primary);
+    let mut end =
+        vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&o);
+    // SAFETY: both are this device's; every struct lives across its call.
+    unsafe {
+        d.cmd_begin_render_pass2(
+            primary,
+            &vk::RenderPassBeginInfo::default()
+                .render_pass(scene.pass)
+                .framebuffer(scene.framebuffer)
+                .render_area(AREA)
+                .clear_values(&CLEAR),
+            &vk::SubpassBeginInfo::default()
+                .contents(vk::SubpassContents::SECONDARY_COMMAND_BUFFERS),
+        );
+        d.cmd_execute_commands(primary, &[secondary]);
+        d.cmd_end_render_pass2(primary, &vk::SubpassEndInfo::default().push_next(&mut end));
+    }
+    scene.dev.submit(primary);
+    let draws: Vec<_> = env
+        .double
+        .draws()
+        .into_iter()
+        .filter(|dr| {
+            dr.command_buffer == primary.as_raw() || dr.command_buffer == secondary.as_raw()
+        })
+        .collect();
+    assert_eq!(draws.len(), 1, "{draws:?}");
+    let want = &scene.want(&o)[0];
+    assert!(
+        &draws[0].views[0].codes == want,
+        "secondary inside the pass: shaded {:?}, want {want:?}",
+        draws[0].views[0].codes
+    );
+    assert_ne!(want, &scene.want(&[])[0]);
     scene.finish(env, vk);
 }
