@@ -16,6 +16,14 @@
 //! it ([`MAP_EPOCH`]); it runs outside the application's conditional rendering, which would skip
 //! the dispatch but not the copy.
 //!
+//! Density-map offsets (`VK_EXT_fragment_density_map_offset`, docs/vulkan-layer.md#density-map-offsets)
+//! arrive with the end of a pass, after its draws are recorded, while the shading-rate attachment
+//! is read as they run. A map created with the offset flag is therefore converted in front of every
+//! pass that reads it, with a slot of its own per pass instance of the recording whose
+//! host-visible shifts the shader reads; the pass's end writes them ([`ended`]), and the host's
+//! writes before `vkQueueSubmit` are visible to that submission. The shader's lookup is the
+//! specification's, x′ = x − offset clamped to the map, per layer.
+//!
 //! The byte → code mapping is `fovea_model::shading_rate::fill_codes`; the shader gets everything
 //! device-specific (the clamp to `maxFragmentSize` and to the rates
 //! `vkGetPhysicalDeviceFragmentShadingRatesKHR` lists) as a 4×4 table of codes indexed by the

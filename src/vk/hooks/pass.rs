@@ -14,6 +14,10 @@
 //!   [`VkRenderingFragmentDensityMapAttachmentInfoEXT`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentDensityMapAttachmentInfoEXT.html)
 //!   gets a [`VkRenderingFragmentShadingRateAttachmentInfoKHR`](https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingFragmentShadingRateAttachmentInfoKHR.html)
 //!   with the shadow view instead.
+//! - `vkCmdEndRenderPass2`, `vkCmdNextSubpass2`, `vkCmdEndRendering2EXT` (and
+//!   `vkCmdEndRendering2KHR`): the density-map offsets of the end go to the conversion in front of
+//!   the pass ([`crate::vk::convert::ended`]), their struct never to the driver
+//!   (docs/vulkan-layer.md#density-map-offsets).
 //!
 
 use std::ffi::c_void;

@@ -54,8 +54,6 @@ pub struct Slot {
 // SAFETY: `shifts_at` points at memory the slot owns; it is written only by the thread recording
 // the slot's command buffer, which the application synchronises.
 unsafe impl Send for Slot {}
-// SAFETY: as above.
-unsafe impl Sync for Slot {}
 
 impl Slot {
     /// Writes the shader's shifts ([`write_shifts`]).
