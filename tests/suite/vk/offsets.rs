@@ -15,7 +15,9 @@
 //! once, by its last end's offsets; a secondary that begins and ends rendering applies its own, and
 //! a secondary's draws inside a primary's pass take the primary's; only the last subpass's end
 //! carries offsets; each view is shifted by its own (layered and merged shadows); offsets that
-//! break the valid usage shade as the specification's lookup at each texel's centre;
+//! break the valid usage shade as the specification's lookup at each texel's centre; command
+//! buffers recorded on two threads at once, one of them run twice in one submit
+//! (`SIMULTANEOUS_USE`), each shade with their own;
 //! nothing of the offsets reaches the driver (the double records every extension name and sType
 //! of the device, and errors for offset structs, flags and names anywhere), and validation is
 //! silent but for its 1.3.239 stage false positives.
@@ -1067,5 +1069,93 @@ fn draws_of_a_secondary_inside_the_pass_take_the_primarys_offsets() {
         draws[0].views[0].codes
     );
     assert_ne!(want, &scene.want(&[])[0]);
+    scene.finish(env, vk);
+}
+
+/// Two threads record at once, each from a pool of its own, passes on the same map ended with
+/// different offsets, one command buffer with `SIMULTANEOUS_USE`; one submit runs that one twice,
+/// the other between: every execution shades with its own recording's offsets (the layer keeps
+/// them per command buffer, nothing shared is written while recording or running).
+#[test]
+fn threads_and_simultaneous_use_keep_their_own_offsets() {
+    let Some((_serial, env)) = env() else { return };
+    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+        return;
+    };
+    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
+    let t = scene.texel as i32;
+    let (oa, ob) = ([at(t, t)], [at(-2 * t, 0)]);
+    let record = |offsets: &[vk::Offset2D], flags: vk::CommandBufferUsageFlags, path: Path| {
+        let d = &scene.dev.d;
+        // SAFETY: the pool is this thread's own; every struct lives across its call.
+        unsafe {
+            let pool = d
+                .create_command_pool(
+                    &vk::CommandPoolCreateInfo::default().queue_family_index(0),
+                    None,
+                )
+                .expect("vkCreateCommandPool");
+            let cb = d
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
+                .expect("vkAllocateCommandBuffers")[0];
+            d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(flags))
+                .expect("vkBeginCommandBuffer");
+            scene.prepare(cb);
+            scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
+            scene.between(cb);
+            d.end_command_buffer(cb).expect("vkEndCommandBuffer");
+            (pool, cb)
+        }
+    };
+    for path in [Path::RenderPass, Path::Rendering] {
+        let simultaneous = vk::CommandBufferUsageFlags::SIMULTANEOUS_USE;
+        let ((pool_a, a), (pool_b, b)) = std::thread::scope(|s| {
+            let ta = s.spawn(|| record(&oa, simultaneous, path));
+            let tb = s.spawn(|| record(&ob, vk::CommandBufferUsageFlags::empty(), path));
+            (ta.join().expect("thread a"), tb.join().expect("thread b"))
+        });
+        let d = &scene.dev.d;
+        // Handles of the first path's command buffers may come back: only this submit's draws.
+        let before = env.double.draws().len();
+        // SAFETY: both are executable on this device; `a` may be pending twice (simultaneous use).
+        unsafe {
+            let cbs = [a, b, a];
+            d.queue_submit(
+                scene.dev.queue,
+                &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                vk::Fence::null(),
+            )
+            .expect("vkQueueSubmit");
+            d.queue_wait_idle(scene.dev.queue).expect("idle");
+        }
+        for (cb, offsets, runs) in [(a, &oa, 2), (b, &ob, 1)] {
+            let draws: Vec<_> = env
+                .double
+                .draws()
+                .into_iter()
+                .skip(before)
+                .filter(|dr| dr.command_buffer == cb.as_raw())
+                .collect();
+            assert_eq!(draws.len(), runs, "{path:?}: {draws:?}");
+            let want = &scene.want(offsets)[0];
+            for dr in &draws {
+                assert!(
+                    &dr.views[0].codes == want,
+                    "{path:?} {offsets:?}: shaded {:?}, want {want:?}",
+                    dr.views[0].codes
+                );
+            }
+        }
+        // SAFETY: the queue is idle; the pools' command buffers go with them.
+        unsafe {
+            d.destroy_command_pool(pool_a, None);
+            d.destroy_command_pool(pool_b, None);
+        }
+    }
     scene.finish(env, vk);
 }
