@@ -17,6 +17,7 @@
 //! | 1 | `extensions.rs` | the extensions fovea provides and which of them an instance has |
 //! | 1 | `records.rs` | handle maps with a per-thread cache: per-frame look-ups without atomics |
 //! | 1 | `session_gpu.rs` | what fovea keeps of a session's Vulkan device: the binding, the loader's entry points, FDM support, the queue, pool and fence it uploads with |
+//! | 1 | `eye_centres.rs` | where each view's fovea is this frame: what the gaze source leaves for the maps, injection and `XR_META_foveation_eye_tracked` |
 //! | 1 | `values.rs` | value conversions: OpenXR's result codes and FOVs as plain values and back |
 //! | 2 | `density_images.rs` | fovea's own Vulkan objects: density images on the application's device, filled from the model |
 //! | 2 | `next_layer.rs` | the next layer's table (expanded from the command list) and its loading; how a hook goes down |
@@ -32,6 +33,7 @@ pub mod commands;
 pub mod density_images;
 pub mod dispatch;
 pub mod extensions;
+pub mod eye_centres;
 pub mod ffi;
 pub mod hooks;
 pub mod loader;

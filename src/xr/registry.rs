@@ -38,6 +38,7 @@ use crate::bridge::{effective, FoveationState, ProfileParams, Submitted, ViewFov
 use crate::common::settings::Overrides;
 use crate::xr::density_images::DensityImages;
 use crate::xr::extensions::Extensions;
+use crate::xr::eye_centres::EyeCentres;
 use crate::xr::next_layer::Next;
 use crate::xr::session_gpu::{SessionGpu, VulkanBinding};
 use fovea_model::density::Pattern;
@@ -250,6 +251,9 @@ pub struct Session {
     /// Whether the session runs, and whether symmetric-FOV mode is off for it
     /// ([`crate::xr::symmetric`]).
     pub fovs: SessionFovs,
+    /// Where each view's fovea is this frame, as the gaze source last left it
+    /// ([`crate::xr::eye_centres`]); fixed foveation until a gaze is located.
+    pub eyes: SpinMutex<EyeCentres>,
 }
 
 impl Session {
@@ -274,6 +278,7 @@ impl Session {
             maps_uploaded: AtomicU64::new(0),
             lost: AtomicBool::new(false),
             fovs: Default::default(),
+            eyes: SpinMutex::spin(EyeCentres::FIXED),
         }
     }
 

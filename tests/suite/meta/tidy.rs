@@ -462,6 +462,7 @@ const XR_FLOORS: &[Place] = &[
     at(11, "records.rs"),
     at(11, "session_gpu.rs"),
     at(11, "values.rs"),
+    at(11, "eye_centres.rs"),
     at(12, "next_layer.rs"),
     at(12, "density_images.rs"),
     // 3: the registry of instances, sessions, swapchains and their FOV records.
