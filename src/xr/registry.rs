@@ -321,6 +321,7 @@ impl Session {
             level: level as u32,
             vertical_offset_deg: 0.0,
             dynamic: false,
+            eye_tracked: false,
         };
         Some(effective(params, self.instance.overrides.current(), step))
     }
