@@ -470,7 +470,7 @@ impl InstanceGaze {
             after_s = ?self.settings.attach_after_s,
             "the application attached no action set in the grace period; fovea attached its own \
              for eye gaze (an attach by the application from now on fails: see \
-             docs/eye-tracking.md#apps-that-never-attach)"
+             docs/eye-tracking.md#applications-that-do-not-cooperate)"
         );
         self.own.lock().attached = true;
         g.attached();
