@@ -749,31 +749,68 @@ fn a_refused_call_falls_back_to_fixed_foveation_with_one_line() {
         "a_refused_call_falls_back_to_fixed_foveation_with_one_line",
         || {
             let log = log_here("refused", &[]);
-            let mut cfg = eye_tracker(true, false, "fix 3,3 for 10s");
-            // fovea makes its gaze space inside the application's attach, before the application
-            // makes its own.
-            cfg.faults.push(sim::control::Fault {
-                function: "xrCreateActionSpace".into(),
-                result: xr::Result::ERROR_RUNTIME_FAILURE,
-                nth: 1,
-            });
-            let mut lp = running(cfg, &[]);
-            attach_and_sync(&mut lp, 200);
-            let lines = log_lines(&log);
-            assert!(located(&lines).is_empty());
-            assert_eq!(
-                said(&lines, "WARN", "refused fovea's eye gaze space").len(),
-                1,
-                "{lines:#?}"
-            );
-            assert!(stats(&lines).iter().all(|l| l.contains(" Gaze=fixed ")));
-            let instance = lp.app.instance;
-            drop(lp);
-            assert_eq!(
-                sim::control::refusals(instance),
-                vec![],
-                "only the injected fault"
-            );
+            // Each of fovea's calls refused in turn, with the call number that is fovea's (the
+            // application makes its own action set and spaces after fovea's, and its LOCAL space
+            // before fovea's VIEW space; 0: every call), and what fovea then says.
+            let cases = [
+                (
+                    "xrGetSystemProperties",
+                    1,
+                    "xrGetSystemProperties for eye gaze",
+                ),
+                ("xrCreateActionSet", 1, "refused fovea's eye gaze action"),
+                ("xrCreateAction", 1, "refused fovea's eye gaze action"),
+                ("xrCreateActionSpace", 1, "refused fovea's eye gaze space"),
+                ("xrCreateReferenceSpace", 2, "refused fovea's VIEW space"),
+                (
+                    "xrGetActionStatePose",
+                    0,
+                    "refused fovea's gaze action state",
+                ),
+                ("xrLocateSpace", 0, "refused to locate fovea's gaze"),
+            ];
+            for (function, nth, text) in cases {
+                let from = std::fs::read_to_string(&log).map_or(0, |t| t.len());
+                let mut cfg = eye_tracker(true, false, "fix 3,3 for 10s");
+                cfg.faults.push(sim::control::Fault {
+                    function: function.into(),
+                    result: xr::Result::ERROR_RUNTIME_FAILURE,
+                    nth,
+                });
+                let mut lp = running(cfg, &[]);
+                attach_and_sync(&mut lp, 200);
+                let text_since = std::fs::read_to_string(&log).unwrap();
+                let lines: Vec<String> = text_since[from..].lines().map(String::from).collect();
+                assert!(
+                    located(&lines)
+                        .iter()
+                        .all(|g| g.tracking == Tracking::Fixed),
+                    "{function}: no gaze"
+                );
+                // One line about it (the per-frame trace lines aside).
+                let gaze_lines: Vec<&String> = said(&lines, "", "")
+                    .into_iter()
+                    .filter(|l| !l.contains(" TRACE "))
+                    .collect();
+                assert_eq!(gaze_lines.len(), 1, "{function}: one line: {gaze_lines:#?}");
+                assert!(
+                    gaze_lines[0].contains(" WARN ") && gaze_lines[0].contains(text),
+                    "{function}: {}",
+                    gaze_lines[0]
+                );
+                let st = stats(&lines);
+                assert!(
+                    !st.is_empty() && st.iter().all(|l| l.contains(" Gaze=fixed ")),
+                    "{function}: {st:#?}"
+                );
+                let instance = lp.app.instance;
+                drop(lp);
+                assert_eq!(
+                    sim::control::refusals(instance),
+                    vec![],
+                    "{function}: only the injected fault"
+                );
+            }
         },
     );
 }
