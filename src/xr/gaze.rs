@@ -460,8 +460,17 @@ impl InstanceGaze {
         if succeeded(r) {
             self.own.lock().attached = true;
             g.attached(set);
+            return r;
         }
-        r
+        // Refused with fovea's set: the application's own list decides what it gets.
+        let again = down(info);
+        if succeeded(again) {
+            g.fail(
+                r,
+                "the runtime refused fovea's eye gaze set in the application's attach",
+            );
+        }
+        again
     }
 
     /// Attaches fovea's set alone, for an application that has not attached any in the grace
@@ -616,7 +625,7 @@ impl SessionGaze {
     }
 
     /// A refusal: fixed foveation for the rest of the session, said once.
-    fn fail(&self, r: xr::Result, why: &'static str) {
+    pub fn fail(&self, r: xr::Result, why: &'static str) {
         if self.phase.swap(FAILED, AcqRel) != FAILED {
             tracing::warn!(target: TARGET, ?r, "{why}: fixed foveation for this session");
         }

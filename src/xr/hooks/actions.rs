@@ -100,6 +100,15 @@ pub fn sync_actions(sess: xr::Session, info: In<xr::ActionsSyncInfo>) -> HookRes
         if let Some(centres) = sg.update() {
             *s.eyes.lock() = centres;
         }
+        return Ok(r);
     }
-    Ok(r)
+    // Refused with fovea's set: the application's own sync decides what it gets.
+    let again = observed(&s, down(info.raw()));
+    if again.into_raw() >= 0 {
+        sg.fail(
+            r,
+            "the runtime refused fovea's eye gaze set in the application's sync",
+        );
+    }
+    Ok(again)
 }

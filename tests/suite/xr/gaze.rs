@@ -751,7 +751,9 @@ fn a_refused_call_falls_back_to_fixed_foveation_with_one_line() {
             let log = log_here("refused", &[]);
             // Each of fovea's calls refused in turn, with the call number that is fovea's (the
             // application makes its own action set and spaces after fovea's, and its LOCAL space
-            // before fovea's VIEW space; 0: every call), and what fovea then says.
+            // before fovea's VIEW space; 0: every call), and what fovea then says. An attach or
+            // sync refused with fovea's set added goes down again as the application made it,
+            // which the application gets.
             let cases = [
                 (
                     "xrGetSystemProperties",
@@ -768,6 +770,12 @@ fn a_refused_call_falls_back_to_fixed_foveation_with_one_line() {
                     "refused fovea's gaze action state",
                 ),
                 ("xrLocateSpace", 0, "refused to locate fovea's gaze"),
+                (
+                    "xrAttachSessionActionSets",
+                    1,
+                    "eye gaze set in the application's attach",
+                ),
+                ("xrSyncActions", 1, "eye gaze set in the application's sync"),
             ];
             for (function, nth, text) in cases {
                 let from = std::fs::read_to_string(&log).map_or(0, |t| t.len());
