@@ -134,6 +134,9 @@ pub struct ProfileParams {
     pub vertical_offset_deg: f32,
     /// XR_FOVEATION_DYNAMIC_LEVEL_ENABLED_FB.
     pub dynamic: bool,
+    /// The profile was created with `XrFoveationEyeTrackedProfileCreateInfoMETA`
+    /// (XR_META_foveation_eye_tracked): its fovea follows the gaze where a gaze source exists.
+    pub eye_tracked: bool,
 }
 
 /// A foveated swapchain's current state: a copy of the last applied profile's parameters, so
@@ -276,6 +279,7 @@ mod tests {
             level: 1,
             vertical_offset_deg: 5.0,
             dynamic: false,
+            eye_tracked: false,
         };
         let none = DebugProperties::default();
         let level = |p: ProfileParams, o: DebugProperties, step| {

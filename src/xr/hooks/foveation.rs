@@ -41,6 +41,7 @@ pub fn validate_level(level: i32, dynamic: i32, vertical_offset: f32) -> HookRes
         level: level as u32,
         vertical_offset_deg: vertical_offset,
         dynamic: dynamic == 1,
+        eye_tracked: false,
     })
 }
 
@@ -189,7 +190,8 @@ mod tests {
             Ok(ProfileParams {
                 level: 3,
                 vertical_offset_deg: -5.0,
-                dynamic: true
+                dynamic: true,
+                eye_tracked: false,
             })
         );
         for (l, d, v) in [

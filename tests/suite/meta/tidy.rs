@@ -455,15 +455,18 @@ const VK_FLOORS: &[Place] = &[
 ];
 const XR_FLOORS: &[Place] = &[
     // 1: the FFI edge, the command list, extension names, handle records, the session's GPU,
-    // value conversions; then what is built on them: the next layer's table, density images.
+    // value conversions; then what is built on them: the next layer's table, density images, the
+    // gaze source.
     at(11, "ffi.rs"),
     at(11, "commands.rs"),
     at(11, "extensions.rs"),
     at(11, "records.rs"),
     at(11, "session_gpu.rs"),
     at(11, "values.rs"),
+    at(11, "eye_centres.rs"),
     at(12, "next_layer.rs"),
     at(12, "density_images.rs"),
+    at(12, "gaze.rs"),
     // 3: the registry of instances, sessions, swapchains and their FOV records.
     at(30, "registry.rs"),
     // 4: what lies below (probing the runtime) and symmetric FOVs.
@@ -487,6 +490,7 @@ const CLI_FLOORS: &[Place] = &[
     at(20, "install.rs"),
     at(20, "found.rs"),
     at(20, "vk_doctor.rs"),
+    at(20, "xr_doctor.rs"),
     at(20, "demo/setup.rs"),
     at(30, "maps.rs"),
     at(30, "report.rs"),
