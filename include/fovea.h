@@ -42,6 +42,8 @@
 #define FOVEA_ENV_MAX_FRAGMENT "FOVEA_MAX_FRAGMENT" /* 1, 2 or 4: the largest fragment a map asks for */
 #define FOVEA_ENV_INJECT "FOVEA_INJECT"             /* 0/1: foveate apps that never ask (shading rates in eye passes) */
 #define FOVEA_ENV_INJECT_LEVEL "FOVEA_INJECT_LEVEL" /* 0-4 or a level name: the level injection uses */
+/* XR_META_foveation_eye_tracked. */
+#define FOVEA_ENV_EYE_TRACKED_Y_UP "FOVEA_EYE_TRACKED_Y_UP" /* 0/1: the eye-tracked centres with y up (default y down) */
 /* Where fovea.toml (XDG_CONFIG_HOME/fovea) and the log (XDG_STATE_HOME/fovea) are by default. */
 #define FOVEA_ENV_XDG_CONFIG_HOME "XDG_CONFIG_HOME"
 #define FOVEA_ENV_XDG_STATE_HOME "XDG_STATE_HOME"
@@ -64,6 +66,7 @@
     X(FOVEA_ENV_MAX_FRAGMENT)                    \
     X(FOVEA_ENV_INJECT)                          \
     X(FOVEA_ENV_INJECT_LEVEL)                    \
+    X(FOVEA_ENV_EYE_TRACKED_Y_UP)                \
     X(FOVEA_ENV_XDG_CONFIG_HOME)                 \
     X(FOVEA_ENV_XDG_STATE_HOME)                  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL)    \
@@ -74,7 +77,7 @@
  * The instance extensions fovea provides, at the versions it reports, in registry order. Prefixed,
  * so they never clash with openxr.h's XR_*_SPEC_VERSION and XR_*_EXTENSION_NAME.
  */
-#define FOVEA_EXTENSION_COUNT 5
+#define FOVEA_EXTENSION_COUNT 6
 #define FOVEA_EXT_FB_SWAPCHAIN_UPDATE_STATE_NAME "XR_FB_swapchain_update_state"
 #define FOVEA_EXT_FB_SWAPCHAIN_UPDATE_STATE_VERSION 3
 #define FOVEA_EXT_FB_FOVEATION_NAME "XR_FB_foveation"
@@ -83,6 +86,8 @@
 #define FOVEA_EXT_FB_FOVEATION_CONFIGURATION_VERSION 1
 #define FOVEA_EXT_FB_FOVEATION_VULKAN_NAME "XR_FB_foveation_vulkan"
 #define FOVEA_EXT_FB_FOVEATION_VULKAN_VERSION 1
+#define FOVEA_EXT_META_FOVEATION_EYE_TRACKED_NAME "XR_META_foveation_eye_tracked"
+#define FOVEA_EXT_META_FOVEATION_EYE_TRACKED_VERSION 1
 #define FOVEA_EXT_META_VULKAN_SWAPCHAIN_CREATE_INFO_NAME "XR_META_vulkan_swapchain_create_info"
 #define FOVEA_EXT_META_VULKAN_SWAPCHAIN_CREATE_INFO_VERSION 1
 
@@ -92,6 +97,7 @@
     X(FOVEA_EXT_FB_FOVEATION_NAME, FOVEA_EXT_FB_FOVEATION_VERSION)                             \
     X(FOVEA_EXT_FB_FOVEATION_CONFIGURATION_NAME, FOVEA_EXT_FB_FOVEATION_CONFIGURATION_VERSION) \
     X(FOVEA_EXT_FB_FOVEATION_VULKAN_NAME, FOVEA_EXT_FB_FOVEATION_VULKAN_VERSION)               \
+    X(FOVEA_EXT_META_FOVEATION_EYE_TRACKED_NAME, FOVEA_EXT_META_FOVEATION_EYE_TRACKED_VERSION) \
     X(FOVEA_EXT_META_VULKAN_SWAPCHAIN_CREATE_INFO_NAME,                                        \
       FOVEA_EXT_META_VULKAN_SWAPCHAIN_CREATE_INFO_VERSION)
 

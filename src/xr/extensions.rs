@@ -12,7 +12,7 @@ fn bit(ext: Ext) -> u8 {
     1 << ext as u8
 }
 
-/// A set of [`Ext`], as a bit set.
+/// A set of [`Ext`], as a bit set (one bit each: at most eight extensions).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ExtSet(u8);
 
@@ -44,6 +44,9 @@ pub struct Extensions {
     pub vulkan_enable: bool,
     /// The application enabled XR_KHR_vulkan_enable2.
     pub vulkan_enable2: bool,
+    /// XR_EXT_eye_gaze_interaction is enabled on the instance below, so the system's eye-gaze
+    /// properties may be asked for (docs/eye-tracking.md#xr_meta_foveation_eye_tracked).
+    pub eye_gaze: bool,
 }
 
 impl Extensions {

@@ -188,6 +188,7 @@ fn create_instance_inner(
     }
     exts.vulkan_enable = names.contains(&c"XR_KHR_vulkan_enable");
     exts.vulkan_enable2 = names.contains(&c"XR_KHR_vulkan_enable2");
+    exts.eye_gaze = names.contains(&c"XR_EXT_eye_gaze_interaction");
     let api_version = app.application_info.api_version;
     // XR_ERROR_EXTENSION_DEPENDENCY_NOT_ENABLED is a 1.1 result; 1.0 apps never see it.
     if (api_version.major(), api_version.minor()) >= (1, 1) {
@@ -241,6 +242,7 @@ fn create_instance_inner(
         vulkan: Default::default(),
         lost: Default::default(),
         inject: injection(&settings, exts),
+        eye_tracked_y_up: settings.eye_tracked_y_up,
     };
     let provided: Vec<Ext> = exts.enabled.iter().filter(|e| exts.provided(*e)).collect();
     let native: Vec<Ext> = exts.native.iter().collect();

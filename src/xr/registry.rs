@@ -71,6 +71,10 @@ pub struct Instance {
     /// The level injected into the application's eye passes, where injection applies to it
     /// (docs/injection.md); the Vulkan side reads the published state ([`crate::bridge::inject`]).
     pub inject: Option<fovea_model::density::Level>,
+    /// `eye_tracked_y_up` (fovea.toml or `FOVEA_EYE_TRACKED_Y_UP`): the centres
+    /// `xrGetFoveationEyeTrackedStateMETA` returns have y up, OpenXR's NDC, instead of Quest's y
+    /// down (docs/eye-tracking.md#xr_meta_foveation_eye_tracked).
+    pub eye_tracked_y_up: bool,
 }
 
 impl Instance {
@@ -254,6 +258,11 @@ pub struct Session {
     /// Where each view's fovea is this frame, as the gaze source last left it
     /// ([`crate::xr::eye_centres`]); fixed foveation until a gaze is located.
     pub eyes: SpinMutex<EyeCentres>,
+    /// The system the session was created for (`XrSessionCreateInfo::systemId`).
+    pub system: xr::SystemId,
+    /// Whether the session's system has a gaze source, learned once when first needed
+    /// (`XR_META_foveation_eye_tracked`).
+    pub gaze_source: OnceLock<bool>,
 }
 
 impl Session {
@@ -279,6 +288,8 @@ impl Session {
             lost: AtomicBool::new(false),
             fovs: Default::default(),
             eyes: SpinMutex::spin(EyeCentres::FIXED),
+            system: xr::SystemId::from_raw(0),
+            gaze_source: OnceLock::new(),
         }
     }
 

@@ -38,6 +38,7 @@ use toml::de::{DeTable, DeValue};
 
 /// Environment variables this crate reads.
 pub mod env {
+    pub use fovea_abi::env::EYE_TRACKED_Y_UP;
     pub use fovea_abi::env::{
         CONFIG, INJECT, INJECT_LEVEL, LOG, LOG_FILE, MAX_FRAGMENT, SYMMETRIC_FOV,
     };
@@ -69,10 +70,12 @@ pub enum Key {
     InjectLevel,
     Log,
     LogFile,
+    // XR_META_foveation_eye_tracked.
+    EyeTrackedYUp,
 }
 
 /// How many keys there are.
-pub const KEYS: usize = 9;
+pub const KEYS: usize = 10;
 
 impl Key {
     pub const ALL: [Key; KEYS] = [
@@ -85,6 +88,7 @@ impl Key {
         Key::InjectLevel,
         Key::Log,
         Key::LogFile,
+        Key::EyeTrackedYUp,
     ];
 
     /// The key as written in the file.
@@ -99,6 +103,7 @@ impl Key {
             Key::InjectLevel => "inject_level",
             Key::Log => "log",
             Key::LogFile => "log_file",
+            Key::EyeTrackedYUp => "eye_tracked_y_up",
         }
     }
 
@@ -108,7 +113,7 @@ impl Key {
             Key::Level | Key::InjectLevel => {
                 "\"none\", \"low\", \"medium\", \"high\", \"high-top\" or 0-4"
             }
-            Key::Dynamic | Key::SymmetricFov | Key::Inject => {
+            Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::EyeTrackedYUp => {
                 "true or false (also \"on\"/\"off\", 1/0)"
             }
             Key::VerticalOffset => "degrees from -55 to 55, e.g. -5.5",
@@ -129,6 +134,7 @@ impl Key {
             Key::LogFile => Some(env::LOG_FILE),
             Key::Inject => Some(env::INJECT),
             Key::InjectLevel => Some(env::INJECT_LEVEL),
+            Key::EyeTrackedYUp => Some(env::EYE_TRACKED_Y_UP),
             Key::VerticalOffset => None,
         }
     }
@@ -176,7 +182,7 @@ fn parse_value(key: Key, raw: Raw<'_>) -> Option<Value> {
             Raw::Str(s) | Raw::Int(s) => s.parse::<Level>().ok().map(Value::Level),
             _ => None,
         },
-        Key::Dynamic | Key::SymmetricFov | Key::Inject => match raw {
+        Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::EyeTrackedYUp => match raw {
             Raw::Bool(b) => Some(Value::Bool(b)),
             Raw::Int("0") => Some(Value::Bool(false)),
             Raw::Int("1") => Some(Value::Bool(true)),

@@ -80,7 +80,12 @@ pub fn create_session(
         let gpu = binding
             .filter(|_| state.extensions.provided(Ext::FoveationVulkan))
             .and_then(|b| session_gpu(&state, &b));
-        let record = Arc::new(Session::new(handle, state, binding, gpu));
+        let system = info
+            .get()
+            .map_or(xr::SystemId::from_raw(0), |i| i.system_id);
+        let mut record = Session::new(handle, state, binding, gpu);
+        record.system = system;
+        let record = Arc::new(record);
         registry()
             .sessions
             .write()
