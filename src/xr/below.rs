@@ -36,9 +36,6 @@
 //!   implement) fovea cannot tell beforehand; the probe it may make first is valid and is refused
 //!   nothing.
 //!
-//! Below lies the gaze too: [`gaze_source`] says whether a system has one, which
-//! `XR_META_foveation_eye_tracked` reports (docs/eye-tracking.md#xr_meta_foveation_eye_tracked).
-//!
 //! The log says once per process that a probe was needed. Where the list cannot be learned at all,
 //! fovea provides every extension of its own the application enabled, and says so once.
 
@@ -51,7 +48,6 @@ use xr::Handle;
 
 use crate::xr::ffi;
 use crate::xr::next_layer;
-use crate::xr::registry::{observed_instance, Instance, Session};
 
 /// The once-per-process line about how the list was learned was written.
 static SAID: AtomicBool = AtomicBool::new(false);
@@ -349,67 +345,4 @@ unsafe fn enumerate_with(
                 .collect(),
         )
     }
-}
-
-/// Whether `system` has a gaze source fovea can follow: XR_EXT_eye_gaze_interaction is enabled on
-/// the instance below and the system reports `supportsEyeGazeInteraction`
-/// (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrSystemEyeGazeInteractionPropertiesEXT.html).
-/// The struct is only chained where the extension is enabled below, so a runtime never sees a
-/// struct of an extension it was not asked for. Calls the runtime; no lock is held.
-pub fn gaze_source(instance: &Instance, system: xr::SystemId) -> Result<(), &'static str> {
-    if !instance.extensions.eye_gaze {
-        return Err("XR_EXT_eye_gaze_interaction is not enabled on the runtime");
-    }
-    let Some(f) = instance.next.get_system_properties else {
-        return Err("the runtime has no xrGetSystemProperties");
-    };
-    let mut gaze = xr::SystemEyeGazeInteractionPropertiesEXT {
-        ty: xr::SystemEyeGazeInteractionPropertiesEXT::TYPE,
-        next: std::ptr::null_mut(),
-        supports_eye_gaze_interaction: xr::FALSE,
-    };
-    let mut props = xr::SystemProperties {
-        ty: xr::SystemProperties::TYPE,
-        next: (&mut gaze as *mut xr::SystemEyeGazeInteractionPropertiesEXT).cast(),
-        system_id: xr::SystemId::from_raw(0),
-        vendor_id: 0,
-        system_name: [0; xr::MAX_SYSTEM_NAME_SIZE],
-        graphics_properties: xr::SystemGraphicsProperties {
-            max_swapchain_image_height: 0,
-            max_swapchain_image_width: 0,
-            max_layer_count: 0,
-        },
-        tracking_properties: xr::SystemTrackingProperties {
-            orientation_tracking: xr::FALSE,
-            position_tracking: xr::FALSE,
-        },
-    };
-    crate::common::lock::assert_none_held("asking the runtime for its eye-gaze support");
-    // SAFETY: the next layer's xrGetSystemProperties with its own instance, the application's system
-    // and fovea's own output structs, live for the call.
-    let r = observed_instance(instance, unsafe { f(instance.handle, system, &mut props) });
-    if r.into_raw() < 0 {
-        return Err("xrGetSystemProperties failed");
-    }
-    if gaze.supports_eye_gaze_interaction != xr::TRUE {
-        return Err("the system does not support eye gaze interaction");
-    }
-    Ok(())
-}
-
-/// [`gaze_source`] for a session's system, learned at the first question and kept; the first
-/// answer without one says why in one log line.
-pub fn session_has_gaze_source(session: &Session) -> bool {
-    *session
-        .gaze_source
-        .get_or_init(|| match gaze_source(&session.instance, session.system) {
-            Ok(()) => true,
-            Err(why) => {
-                tracing::info!(
-                    why,
-                    "no gaze source: XR_META_foveation_eye_tracked reports fixed foveation"
-                );
-                false
-            }
-        })
 }

@@ -44,9 +44,6 @@ pub struct Extensions {
     pub vulkan_enable: bool,
     /// The application enabled XR_KHR_vulkan_enable2.
     pub vulkan_enable2: bool,
-    /// XR_EXT_eye_gaze_interaction is enabled on the instance below, so the system's eye-gaze
-    /// properties may be asked for (docs/eye-tracking.md#xr_meta_foveation_eye_tracked).
-    pub eye_gaze: bool,
 }
 
 impl Extensions {

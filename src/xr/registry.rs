@@ -39,6 +39,7 @@ use crate::common::settings::Overrides;
 use crate::xr::density_images::DensityImages;
 use crate::xr::extensions::Extensions;
 use crate::xr::eye_centres::EyeCentres;
+use crate::xr::gaze::{InstanceGaze, SessionGaze};
 use crate::xr::next_layer::Next;
 use crate::xr::session_gpu::{SessionGpu, VulkanBinding};
 use fovea_model::density::Pattern;
@@ -75,6 +76,12 @@ pub struct Instance {
     /// `xrGetFoveationEyeTrackedStateMETA` returns have y up, OpenXR's NDC, instead of Quest's y
     /// down (docs/eye-tracking.md#xr_meta_foveation_eye_tracked).
     pub eye_tracked_y_up: bool,
+    /// The gaze source's per-instance part, where gaze is on and XR_EXT_eye_gaze_interaction is
+    /// enabled below ([`crate::xr::gaze`]).
+    pub gaze: Option<InstanceGaze>,
+    /// Gaze is switched on for the instance (whether or not the runtime has any): the stats line
+    /// tells `off` from `fixed` by it.
+    pub gaze_on: bool,
 }
 
 impl Instance {
@@ -258,11 +265,9 @@ pub struct Session {
     /// Where each view's fovea is this frame, as the gaze source last left it
     /// ([`crate::xr::eye_centres`]); fixed foveation until a gaze is located.
     pub eyes: SpinMutex<EyeCentres>,
-    /// The system the session was created for (`XrSessionCreateInfo::systemId`).
-    pub system: xr::SystemId,
-    /// Whether the session's system has a gaze source, learned once when first needed
-    /// (`XR_META_foveation_eye_tracked`).
-    pub gaze_source: OnceLock<bool>,
+    /// The gaze source's per-session part, where the system has an eye tracker
+    /// ([`crate::xr::gaze`]); it writes `eyes`.
+    pub gaze: Option<SessionGaze>,
 }
 
 impl Session {
@@ -288,8 +293,7 @@ impl Session {
             lost: AtomicBool::new(false),
             fovs: Default::default(),
             eyes: SpinMutex::spin(EyeCentres::FIXED),
-            system: xr::SystemId::from_raw(0),
-            gaze_source: OnceLock::new(),
+            gaze: None,
         }
     }
 

@@ -15,11 +15,10 @@ use std::ffi::c_void;
 
 use openxr_sys as xr;
 
-use crate::xr::below::{gaze_source, session_has_gaze_source};
 use crate::xr::extensions::Ext;
 use crate::xr::ffi::{find_in_chain, ChainCopy, HookResult, Out};
 use crate::xr::next_layer::next;
-use crate::xr::registry::{check_lost, instance, observed_instance, session_for_call};
+use crate::xr::registry::{check_lost, instance, observed_instance, session_for_call, Instance};
 use crate::xr::values::succeeded;
 use fovea_model::gaze::Tracking;
 use fovea_model::Fov;
@@ -31,7 +30,7 @@ const META_PROPERTIES: xr::StructureType =
 /// chained `XrSystemFoveationEyeTrackedPropertiesMETA`, the call goes down with a copy of the chain
 /// without it (the runtime was not asked for the extension), what the runtime wrote is handed back
 /// to the application's structs, and fovea fills `supportsFoveationEyeTracked` itself: true where
-/// the system has a gaze source ([`gaze_source`]).
+/// the system has a gaze source ([`has_gaze_source`]).
 pub fn get_system_properties(
     inst: xr::Instance,
     system: xr::SystemId,
@@ -70,7 +69,7 @@ pub fn get_system_properties(
     }
     // SAFETY: the chain copied is the application's output chain of this call.
     unsafe { chain.write_back() };
-    let supported = gaze_source(&state, system).is_ok();
+    let supported = has_gaze_source(&state, system);
     // SAFETY: `meta` is the application's XrSystemFoveationEyeTrackedPropertiesMETA in its output
     // chain, valid for writes; only its output member is written.
     unsafe {
@@ -113,7 +112,7 @@ pub fn get_state(
         find_in_chain::<xr::BaseOutStructure>(st.next.cast_const(), xr::StructureType::UNKNOWN)
     }
     .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
-    let eyes = if session_has_gaze_source(&s) {
+    let eyes = if s.gaze.is_some() {
         *s.eyes.lock()
     } else {
         crate::xr::eye_centres::EyeCentres::FIXED
@@ -137,6 +136,17 @@ pub fn get_state(
         xr::FoveationEyeTrackedStateFlagsMETA::EMPTY
     };
     Ok(xr::Result::SUCCESS)
+}
+
+/// Whether `system` has a gaze source fovea follows: the gaze source is on for the instance
+/// (XR_EXT_eye_gaze_interaction enabled below, gaze not switched off) and the system reports
+/// `supportsEyeGazeInteraction` ([`crate::xr::gaze`]). A session of such a system gets one
+/// (`Session::gaze`), which is what `xrGetFoveationEyeTrackedStateMETA` follows.
+fn has_gaze_source(instance: &Instance, system: xr::SystemId) -> bool {
+    instance
+        .gaze
+        .as_ref()
+        .is_some_and(|g| g.supported(system) == Ok(true))
 }
 
 /// Each stereo view's projection centre in the NDC of the FOV the application renders with (y up),

@@ -12,7 +12,6 @@ use openxr_sys as xr;
 use xr::Handle;
 
 use crate::bridge::ProfileParams;
-use crate::xr::below::session_has_gaze_source;
 use crate::xr::extensions::Ext;
 use crate::xr::ffi::HookResult;
 use crate::xr::ffi::{In, Out};
@@ -101,7 +100,7 @@ pub fn create_profile(
     }
     let exts = &s.instance.extensions;
     let params = profile_params(info, exts.enabled.contains(Ext::MetaFoveationEyeTracked))?;
-    if params.eye_tracked && !session_has_gaze_source(&s) {
+    if params.eye_tracked && s.gaze.is_none() {
         tracing::debug!("an eye-tracked profile without a gaze source foveates as a fixed one");
     }
     let handle = registry().mint_profile_handle();

@@ -110,13 +110,18 @@ fn supported_only_where_the_system_has_a_gaze_source() {
         .next_types
         .contains(&xr::StructureType::SYSTEM_FOVEATION_EYE_TRACKED_PROPERTIES_META)));
 
+    // fovea enables eye gaze below on its own: the application need not.
+    let own = app(&[("FOVEA_SIM_EYE_GAZE", "on")], &[META]);
+    let (r, supported, ..) = system_properties(&own, false);
+    assert_eq!((r, supported), (xr::Result::SUCCESS, Some(true)));
+
     for (vars, more) in [
         (
             &[("FOVEA_SIM_EYE_GAZE", "unsupported")][..],
             &[META, EYE_GAZE][..],
         ),
-        (&[("FOVEA_SIM_EYE_GAZE", "on")][..], &[META][..]),
-        (&[][..], &[META][..]),
+        (&[("FOVEA_SIM_EYE_GAZE", "unsupported")][..], &[META][..]),
+        (&[("FOVEA_SIM_EYE_GAZE", "off")][..], &[META][..]),
     ] {
         let a = app(vars, more);
         let (r, supported, ..) = system_properties(&a, false);
