@@ -9,7 +9,7 @@ use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::support::level_info;
+use crate::support::{in_own_process, level_info};
 
 const META: &str = "XR_META_foveation_eye_tracked";
 const EYE_GAZE: &str = "XR_EXT_eye_gaze_interaction";
@@ -376,4 +376,226 @@ fn a_runtime_with_the_extension_is_passed_through() {
     assert!(calls
         .iter()
         .any(|c| c.function == "xrGetFoveationEyeTrackedStateMETA"));
+}
+
+/// The simulated Quest 3's eye tracker following `script`, the application enabling only
+/// XR_META_foveation_eye_tracked (fovea enables eye gaze below on its own).
+fn on_script(script: &str) -> (HeadlessLoop, AppInput) {
+    let lp = running(
+        &[("FOVEA_SIM_EYE_GAZE", "on"), ("FOVEA_SIM_GAZE", script)],
+        &[META],
+    );
+    let input = AppInput::attach(&lp);
+    (lp, input)
+}
+
+/// An application's own input, attached, so that fovea's gaze set rides along with it: one pose
+/// action bound to a controller, synced every frame.
+struct AppInput {
+    set: xr::ActionSet,
+    sync: xr::pfn::SyncActions,
+}
+
+impl AppInput {
+    fn attach(lp: &HeadlessLoop) -> AppInput {
+        let name = |s: &str, a: &mut [std::ffi::c_char]| {
+            for (d, b) in a.iter_mut().zip(s.bytes()) {
+                *d = b as std::ffi::c_char;
+            }
+        };
+        unsafe {
+            let path = |s: &std::ffi::CStr| {
+                let f: xr::pfn::StringToPath = lp.func(c"xrStringToPath");
+                let mut p = xr::Path::NULL;
+                assert_eq!(f(lp.app.instance, s.as_ptr(), &mut p), xr::Result::SUCCESS);
+                p
+            };
+            let mut info: xr::ActionSetCreateInfo = std::mem::zeroed();
+            info.ty = xr::ActionSetCreateInfo::TYPE;
+            name("gameplay", &mut info.action_set_name);
+            name("Gameplay", &mut info.localized_action_set_name);
+            let mut set = xr::ActionSet::NULL;
+            let create_set: xr::pfn::CreateActionSet = lp.func(c"xrCreateActionSet");
+            assert_eq!(
+                create_set(lp.app.instance, &info, &mut set),
+                xr::Result::SUCCESS
+            );
+            let mut info: xr::ActionCreateInfo = std::mem::zeroed();
+            info.ty = xr::ActionCreateInfo::TYPE;
+            info.action_type = xr::ActionType::POSE_INPUT;
+            name("aim", &mut info.action_name);
+            name("Aim", &mut info.localized_action_name);
+            let mut action = xr::Action::NULL;
+            let create_action: xr::pfn::CreateAction = lp.func(c"xrCreateAction");
+            assert_eq!(create_action(set, &info, &mut action), xr::Result::SUCCESS);
+            let bindings = [xr::ActionSuggestedBinding {
+                action,
+                binding: path(c"/user/hand/left/input/aim/pose"),
+            }];
+            let suggested = xr::InteractionProfileSuggestedBinding {
+                ty: xr::InteractionProfileSuggestedBinding::TYPE,
+                next: std::ptr::null(),
+                interaction_profile: path(c"/interaction_profiles/khr/simple_controller"),
+                count_suggested_bindings: 1,
+                suggested_bindings: bindings.as_ptr(),
+            };
+            let suggest: xr::pfn::SuggestInteractionProfileBindings =
+                lp.func(c"xrSuggestInteractionProfileBindings");
+            assert_eq!(suggest(lp.app.instance, &suggested), xr::Result::SUCCESS);
+            let sets = [set];
+            let attach = xr::SessionActionSetsAttachInfo {
+                ty: xr::SessionActionSetsAttachInfo::TYPE,
+                next: std::ptr::null(),
+                count_action_sets: 1,
+                action_sets: sets.as_ptr(),
+            };
+            let attach_fn: xr::pfn::AttachSessionActionSets = lp.func(c"xrAttachSessionActionSets");
+            assert_eq!(attach_fn(lp.session, &attach), xr::Result::SUCCESS);
+            AppInput {
+                set,
+                sync: lp.func(c"xrSyncActions"),
+            }
+        }
+    }
+
+    fn sync(&self, lp: &HeadlessLoop) {
+        let active = [xr::ActiveActionSet {
+            action_set: self.set,
+            subaction_path: xr::Path::NULL,
+        }];
+        let info = xr::ActionsSyncInfo {
+            ty: xr::ActionsSyncInfo::TYPE,
+            next: std::ptr::null(),
+            count_active_action_sets: 1,
+            active_action_sets: active.as_ptr(),
+        };
+        let r = unsafe { (self.sync)(lp.session, &info) };
+        assert!(
+            [xr::Result::SUCCESS, xr::Result::SESSION_NOT_FOCUSED].contains(&r),
+            "{r:?}"
+        );
+    }
+}
+
+/// What the application reads after each of `n` frames: the centres and whether VALID.
+fn read_states(lp: &mut HeadlessLoop, input: &AppInput, n: usize) -> Vec<([[f32; 2]; 2], bool)> {
+    (0..n)
+        .map(|_| {
+            lp.frame().unwrap();
+            input.sync(lp);
+            let mut st = state_struct();
+            assert_eq!(get_state(lp, lp.session, &mut st), xr::Result::SUCCESS);
+            let valid = st.flags == xr::FoveationEyeTrackedStateFlagsMETA::VALID;
+            assert!(valid || st.flags.is_empty(), "{:?}", st.flags);
+            (st.foveation_center.map(|c| [c.x, c.y]), valid)
+        })
+        .collect()
+}
+
+/// Where the model puts view `view`'s fovea (y up) for a gaze at (yaw, pitch) on the simulated
+/// Quest 3: its eyes 31.5 mm either side of the head's centre, looking ahead, each with its FOV.
+fn model_ndc(view: usize, yaw: f32, pitch: f32) -> [f32; 2] {
+    use fovea_model::gaze::{eye_centre, EyeView, Gaze, Tracking};
+    let headset = fovea_model::headsets::by_id("quest3").unwrap();
+    let eye = EyeView {
+        fov: headset.fovs()[view],
+        position: glam::Vec3::new([-0.0315, 0.0315][view], 0.0, 0.0),
+        orientation: glam::Quat::IDENTITY,
+    };
+    let gaze = Gaze {
+        angles: [yaw, pitch],
+        weight: 1.0,
+        tracking: Tracking::Tracked,
+    };
+    eye_centre(&gaze, &eye, 1.0)
+}
+
+/// How close a centre must be to the model's: 0.01 NDC is about 0.6° at the middle of Quest 3's
+/// views (2 NDC across tangents 1.38 + 0.84), under a twentieth of the smallest full-rate radius
+/// fovea draws; it leaves room for f32 rounding and the filter's last hundredths of a degree on a
+/// fixation, and none for a y of the wrong sign or a centre of the wrong eye.
+const TOLERANCE: f32 = 0.01;
+
+fn near(got: [f32; 2], want: [f32; 2]) -> bool {
+    (got[0] - want[0]).abs() < TOLERANCE && (got[1] - want[1]).abs() < TOLERANCE
+}
+
+/// `want` with y pointing down, as the application reads it by default.
+fn down([x, y]: [f32; 2]) -> [f32; 2] {
+    [x, -y]
+}
+
+const SCRIPT: &str = "fix 10,4 for 600ms; saccade -10,-6 in 1ms; fix for 600ms; blink 150ms; \
+                      fix for 600ms";
+
+#[test]
+fn the_centres_follow_the_scripted_gaze() {
+    let (mut lp, input) = on_script(SCRIPT);
+    let got = read_states(&mut lp, &input, 260);
+    let at = |yaw, pitch| [0, 1].map(|v| down(model_ndc(v, yaw, pitch)));
+
+    // The first fixation: VALID, each view's centre where the model puts it, y down.
+    let first = at(10.0, 4.0);
+    let (c, valid) = got[20];
+    assert!(valid, "tracked: {:?}", got[20]);
+    assert!(
+        near(c[0], first[0]) && near(c[1], first[1]),
+        "{c:?} vs {first:?}"
+    );
+    assert!(c[0][1] < 0.0, "looking up reads as y < 0 (y down): {c:?}");
+
+    // After the saccade: on the new point, VALID.
+    let second = at(-10.0, -6.0);
+    let landed = got
+        .iter()
+        .position(|(c, v)| *v && near(c[0], second[0]) && near(c[1], second[1]))
+        .expect("the centres reach the saccade's target");
+    assert!(landed > 20);
+
+    // The blink: not VALID throughout, the centres held where the eye was; VALID again after.
+    let blink = landed
+        + got[landed..]
+            .iter()
+            .position(|(_, v)| !v)
+            .expect("the blink clears VALID");
+    let run = got[blink..].iter().take_while(|(_, v)| !v).count();
+    let frames_per_s = 1e9 / lp.last_frame_state.predicted_display_period.as_nanos() as f64;
+    let expected = (0.150 * frames_per_s).round() as usize;
+    assert!(
+        run + 2 >= expected && run <= expected + 2,
+        "150 ms without VALID at {frames_per_s:.0} Hz: {run} frames"
+    );
+    assert!(
+        got[blink..blink + run]
+            .iter()
+            .all(|(c, _)| near(c[0], second[0]) && near(c[1], second[1])),
+        "held through the blink"
+    );
+    let (c, valid) = got[blink + run];
+    assert!(valid && near(c[0], second[0]), "followed again: {c:?}");
+}
+
+#[test]
+fn the_y_flip_setting_flips() {
+    in_own_process(
+        module_path!(),
+        "the_y_flip_setting_flips",
+        the_y_flip_setting_flips_here,
+    );
+}
+
+fn the_y_flip_setting_flips_here() {
+    std::env::set_var(fovea_abi::env::EYE_TRACKED_Y_UP, "1");
+    let (mut lp, input) = on_script("fix 5,8 for 2s");
+    let got = read_states(&mut lp, &input, 30);
+    let (c, valid) = got[20];
+    assert!(valid);
+    for (v, c) in c.iter().enumerate() {
+        let want = model_ndc(v, 5.0, 8.0);
+        assert!(
+            want[1] > 0.05,
+            "the model puts a look up at y > 0: {want:?}"
+        );
+        assert!(near(*c, want), "view {v}: y up as set: {c:?} vs {want:?}");
+    }
 }
