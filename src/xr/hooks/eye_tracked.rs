@@ -38,10 +38,13 @@ pub fn get_system_properties(
 ) -> HookResult<xr::Result> {
     let state = instance(inst)?;
     let f = next(state.next.get_system_properties)?;
-    // SAFETY: the next layer's xrGetSystemProperties with the application's instance and system,
-    // and either the application's output pointer as it passed it or fovea's copy of its struct.
-    let down =
-        |p: *mut xr::SystemProperties| observed_instance(&state, unsafe { f(inst, system, p) });
+    let down = |p: *mut xr::SystemProperties| {
+        // SAFETY: the next layer's xrGetSystemProperties with the application's instance and
+        // system, and either the application's output pointer as it passed it or fovea's copy of
+        // its struct.
+        let r = unsafe { f(inst, system, p) };
+        observed_instance(&state, r)
+    };
     let app = properties
         .read()
         .filter(|p| p.ty == xr::SystemProperties::TYPE);
