@@ -120,7 +120,6 @@ pub fn get_state(
     } else {
         crate::xr::eye_centres::EyeCentres::FIXED
     };
-    let fixed = projection_centres(&s);
     let flip = if s.instance.eye_tracked_y_up {
         1.0
     } else {
@@ -129,8 +128,12 @@ pub fn get_state(
     let Some(out) = state.into_mut() else {
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     };
+    // The projection centres cost eight tangents: only where a view does not follow the gaze.
+    let mut fixed = None;
     for (i, c) in out.foveation_center.iter_mut().enumerate() {
-        let [x, y] = eyes.of(i).unwrap_or(fixed[i]);
+        let [x, y] = eyes
+            .of(i)
+            .unwrap_or_else(|| fixed.get_or_insert_with(|| projection_centres(&s))[i]);
         *c = xr::Vector2f { x, y: y * flip };
     }
     out.flags = if eyes.tracking == Tracking::Tracked && eyes.follows() {
