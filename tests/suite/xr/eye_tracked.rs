@@ -599,3 +599,25 @@ fn the_y_flip_setting_flips_here() {
         assert!(near(*c, want), "view {v}: y up as set: {c:?} vs {want:?}");
     }
 }
+
+#[test]
+fn gaze_switched_off_means_not_supported() {
+    in_own_process(
+        module_path!(),
+        "gaze_switched_off_means_not_supported",
+        gaze_switched_off_means_not_supported_here,
+    );
+}
+
+fn gaze_switched_off_means_not_supported_here() {
+    std::env::set_var(fovea_abi::env::GAZE, "0");
+    let (mut lp, input) = on_script("fix 5,8 for 2s");
+    let (r, supported, ..) = system_properties(&lp.app, false);
+    assert_eq!(
+        (r, supported),
+        (xr::Result::SUCCESS, Some(false)),
+        "an eye tracker fovea does not follow is no gaze source"
+    );
+    let got = read_states(&mut lp, &input, 30);
+    assert!(got.iter().all(|(_, valid)| !valid), "never VALID");
+}
