@@ -229,6 +229,23 @@ mod tests {
     use super::*;
 
     #[test]
+    fn eye_tracked_validation() {
+        let info = |flags| xr::FoveationEyeTrackedProfileCreateInfoMETA {
+            ty: xr::FoveationEyeTrackedProfileCreateInfoMETA::TYPE,
+            next: std::ptr::null(),
+            flags: xr::FoveationEyeTrackedProfileCreateFlagsMETA::from_raw(flags),
+        };
+        assert_eq!(validate_eye_tracked(&info(0), true), Ok(true));
+        for (flags, after_level) in [(1, true), (1 << 63, true), (0, false)] {
+            assert_eq!(
+                validate_eye_tracked(&info(flags), after_level),
+                Err(xr::Result::ERROR_VALIDATION_FAILURE),
+                "{flags:#x} {after_level}"
+            );
+        }
+    }
+
+    #[test]
     fn level_validation() {
         assert_eq!(
             validate_level(3, 1, -5.0),
