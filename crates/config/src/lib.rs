@@ -89,7 +89,7 @@ pub enum Key {
 pub const KEYS: usize = 19;
 
 /// Seconds of display time before fovea attaches its own eye gaze action set in a session whose
-/// application attached none (`gaze_attach_after_s`; docs/eye-tracking.md#apps-that-never-attach):
+/// application attached none (`gaze_attach_after_s`; docs/eye-tracking.md#applications-that-do-not-cooperate):
 /// long enough for an application that attaches after a loading screen, short enough that one
 /// that never does still gets gaze within a minute.
 pub const DEFAULT_GAZE_ATTACH_AFTER_S: f32 = 30.0;

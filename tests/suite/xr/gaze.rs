@@ -762,3 +762,36 @@ fn a_refused_call_falls_back_to_fixed_foveation_with_one_line() {
         },
     );
 }
+
+#[test]
+fn a_gaze_that_never_becomes_active_is_said_once() {
+    in_own_process(
+        module_path!(),
+        "a_gaze_that_never_becomes_active_is_said_once",
+        || {
+            let log = log_here("never-active", &[]);
+            let mut cfg = eye_tracker(true, false, "fix 3,3 for 20s");
+            // Every sync answers XR_SESSION_NOT_FOCUSED and activates nothing, as a runtime does for
+            // a session that never gets the focus.
+            cfg.faults.push(sim::control::Fault {
+                function: "xrSyncActions".into(),
+                result: xr::Result::SESSION_NOT_FOCUSED,
+                nth: 0,
+            });
+            let mut lp = running(cfg, &[]);
+            attach_and_sync(&mut lp, 700);
+            let lines = log_lines(&log);
+            let got = located(&lines);
+            assert!(got.len() >= 690, "{}", got.len());
+            assert!(got.iter().all(|g| g.tracking == Tracking::Fixed));
+            assert_eq!(
+                said(&lines, "INFO", "has not been active for 5 s").len(),
+                1,
+                "{lines:#?}"
+            );
+            let instance = lp.app.instance;
+            drop(lp);
+            assert_eq!(sim::control::refusals(instance), vec![]);
+        },
+    );
+}
