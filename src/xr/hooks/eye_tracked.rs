@@ -95,8 +95,8 @@ pub fn get_system_properties(
 /// view's FOV, VALID while the gaze is fresh ([`Tracking::Tracked`]); held, returning or no gaze
 /// give the centres the maps use now without VALID, and no gaze at all the projection centres
 /// (fixed foveation). y points down unless the application's settings say up. No allocation and
-/// no process-wide lock: the session is borrowed, and its two record locks are taken one after
-/// the other.
+/// no process-wide lock: the session is borrowed, its gaze copied under its record lock, and only
+/// where a view does not follow the gaze is the instance's FOV record locked, after that one.
 pub fn get_state(
     sess: xr::Session,
     state: Out<xr::FoveationEyeTrackedStateMETA>,
