@@ -123,7 +123,7 @@ pub fn render(vars: &BTreeMap<String, String>, id: &Identity) -> String {
         ));
     }
     let (r, bad) = fovea_config::resolve(config, id, |k| vars.get(k).cloned());
-    line(format!("{:<16} {:<28} from", "setting", "value"));
+    line(format!("{:<19} {:<28} from", "setting", "value"));
     for key in Key::ALL {
         let value = r
             .get(key)
@@ -132,7 +132,7 @@ pub fn render(vars: &BTreeMap<String, String>, id: &Identity) -> String {
             Source::Default => "default".to_string(),
             s => s.to_string(),
         };
-        line(format!("{:<16} {:<28} {from}", key.name(), value));
+        line(format!("{:<19} {:<28} {from}", key.name(), value));
     }
     line(
         "precedence: environment and Quest debug properties > [app] > [exe] > [engine] > global \

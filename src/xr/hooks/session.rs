@@ -6,6 +6,7 @@ use openxr_sys as xr;
 use xr::Handle;
 
 use crate::xr::extensions::Ext;
+use crate::xr::eye_centres::EyeCentres;
 use crate::xr::ffi::HookResult;
 use crate::xr::ffi::{In, Out, OutArray};
 use crate::xr::next_layer::next;
@@ -159,6 +160,9 @@ pub fn end_session(handle: xr::Session) -> HookResult<xr::Result> {
         symmetric::session_ended(&s);
         if let Some(g) = &s.gaze {
             g.ended();
+            // No frames until the next begin: whatever follows the eyes goes back to fixed
+            // foveation.
+            *s.eyes.lock() = EyeCentres::FIXED;
         }
     }
     Ok(r)

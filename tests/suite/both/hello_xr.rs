@@ -395,6 +395,42 @@ fn vulkan_under_core_validation_has_no_messages() {
     hello_xr_passes("Vulkan", &[CORE_VALIDATION_LAYER, FOVEA_LAYER]);
 }
 
+/// hello_xr has input of its own (action sets, suggestions for controllers, a sync every frame):
+/// with the simulated headset's eye tracker on, fovea's gaze set rides along with hello_xr's, the
+/// stats line shows the gaze tracked where the script looks (right of centre in the left eye), and
+/// nothing is refused or said, under core validation.
+#[test]
+fn vulkan2_with_an_eye_tracker_the_gaze_is_tracked_and_nothing_is_said() {
+    let env = [
+        ("FOVEA_SIM_EYE_GAZE", OsString::from("on")),
+        ("FOVEA_SIM_GAZE", OsString::from("fix 12,0 for 60s")),
+        ("FOVEA_SIM_LOG_REFUSALS", OsString::from("1")),
+        (
+            fovea_abi::env::LOG,
+            OsString::from(format!("warn,{}=info", log_target::STATS)),
+        ),
+    ];
+    let Some(run) = hello_xr_passes_with("Vulkan2", &[CORE_VALIDATION_LAYER, FOVEA_LAYER], &env)
+    else {
+        return;
+    };
+    let stats: Vec<&str> = run
+        .stderr
+        .lines()
+        .filter(|l| l.contains("fovea::stats: FPS="))
+        .collect();
+    assert!(stats.len() >= 2, "{}", run.transcript());
+    assert!(
+        stats[1..].iter().all(|l| l.contains(" Gaze=tracked@+")),
+        "{stats:#?}"
+    );
+    assert!(
+        !run.stderr.contains("fovea-sim: refused"),
+        "{}",
+        run.transcript()
+    );
+}
+
 #[test]
 fn vulkan2_with_the_explicit_vulkan_layer_passes_through_unchanged() {
     hello_xr_passes_through_the_vulkan_layer("Vulkan2", false);

@@ -83,3 +83,52 @@ fn config_check_names_file_line_key_and_accepted_values() {
     assert!(r.ok(), "{}", r.text());
     assert!(r.out.contains("ok"));
 }
+
+#[test]
+fn config_shows_the_gaze_settings_per_app() {
+    let (file, mut c) = with_file(
+        "gaze",
+        "gaze_hold_s = 0.5\n[app.\"late\"]\ngaze_attach_after_s = \"never\"\ngaze_fixation_m = 0.05\n",
+    );
+    let r = run(c
+        .args(["config", "--app", "late"])
+        .env_remove("FOVEA_GAZE")
+        .env("FOVEA_GAZE_BETA", "0.2"));
+    let f = file.display().to_string();
+    let line = |key: &str| {
+        r.out
+            .lines()
+            .find(|l| l.starts_with(&format!("{key} ")))
+            .unwrap_or_else(|| panic!("{key} in {}", r.out))
+            .to_string()
+    };
+    assert!(
+        line("gaze").contains("on") && line("gaze").contains("default"),
+        "{}",
+        r.out
+    );
+    assert!(line("gaze_hold_s").contains("0.5") && line("gaze_hold_s").contains(&format!("{f}:1")));
+    assert!(
+        line("gaze_attach_after_s").contains("never")
+            && line("gaze_attach_after_s").contains("[app.\"late\"]"),
+        "{}",
+        r.out
+    );
+    assert!(
+        line("gaze_beta").contains("0.2")
+            && line("gaze_beta").contains("environment FOVEA_GAZE_BETA")
+    );
+    assert!(line("gaze_fixation_m").contains("1 ") && line("gaze_fixation_m").contains("default"));
+    assert!(r.out.contains("(1 problems;"), "{}", r.out);
+    let (_, mut c) = with_file(
+        "gaze-check",
+        "[app.\"late\"]\ngaze_attach_after_s = \"never\"\ngaze_fixation_m = 0.05\n",
+    );
+    let r = run(c.args(["config", "--check"]));
+    assert!(!r.ok());
+    assert!(
+        r.text().contains("gaze_fixation_m") && r.text().contains("metres from 0.1 to 100"),
+        "the bad value is named with what it accepts: {}",
+        r.text()
+    );
+}
