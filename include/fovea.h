@@ -52,6 +52,8 @@
 #define FOVEA_ENV_GAZE_RETURN_S "FOVEA_GAZE_RETURN_S" /* seconds of easing back to fixed foveation */
 #define FOVEA_ENV_GAZE_FIXATION_M "FOVEA_GAZE_FIXATION_M" /* metres to the plane the gaze ray meets */
 #define FOVEA_ENV_GAZE_ATTACH_AFTER_S "FOVEA_GAZE_ATTACH_AFTER_S" /* seconds, or "never": attach alone for apps that never attach */
+/* XR_META_foveation_eye_tracked. */
+#define FOVEA_ENV_EYE_TRACKED_Y_UP "FOVEA_EYE_TRACKED_Y_UP" /* 0/1: the eye-tracked centres with y up (default y down) */
 /* Where fovea.toml (XDG_CONFIG_HOME/fovea) and the log (XDG_STATE_HOME/fovea) are by default. */
 #define FOVEA_ENV_XDG_CONFIG_HOME "XDG_CONFIG_HOME"
 #define FOVEA_ENV_XDG_STATE_HOME "XDG_STATE_HOME"
@@ -83,6 +85,7 @@
     X(FOVEA_ENV_GAZE_RETURN_S)                   \
     X(FOVEA_ENV_GAZE_FIXATION_M)                 \
     X(FOVEA_ENV_GAZE_ATTACH_AFTER_S)             \
+    X(FOVEA_ENV_EYE_TRACKED_Y_UP)                \
     X(FOVEA_ENV_XDG_CONFIG_HOME)                 \
     X(FOVEA_ENV_XDG_STATE_HOME)                  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL)    \
@@ -93,7 +96,7 @@
  * The instance extensions fovea provides, at the versions it reports, in registry order. Prefixed,
  * so they never clash with openxr.h's XR_*_SPEC_VERSION and XR_*_EXTENSION_NAME.
  */
-#define FOVEA_EXTENSION_COUNT 5
+#define FOVEA_EXTENSION_COUNT 6
 #define FOVEA_EXT_FB_SWAPCHAIN_UPDATE_STATE_NAME "XR_FB_swapchain_update_state"
 #define FOVEA_EXT_FB_SWAPCHAIN_UPDATE_STATE_VERSION 3
 #define FOVEA_EXT_FB_FOVEATION_NAME "XR_FB_foveation"
@@ -102,6 +105,8 @@
 #define FOVEA_EXT_FB_FOVEATION_CONFIGURATION_VERSION 1
 #define FOVEA_EXT_FB_FOVEATION_VULKAN_NAME "XR_FB_foveation_vulkan"
 #define FOVEA_EXT_FB_FOVEATION_VULKAN_VERSION 1
+#define FOVEA_EXT_META_FOVEATION_EYE_TRACKED_NAME "XR_META_foveation_eye_tracked"
+#define FOVEA_EXT_META_FOVEATION_EYE_TRACKED_VERSION 1
 #define FOVEA_EXT_META_VULKAN_SWAPCHAIN_CREATE_INFO_NAME "XR_META_vulkan_swapchain_create_info"
 #define FOVEA_EXT_META_VULKAN_SWAPCHAIN_CREATE_INFO_VERSION 1
 
@@ -111,6 +116,7 @@
     X(FOVEA_EXT_FB_FOVEATION_NAME, FOVEA_EXT_FB_FOVEATION_VERSION)                             \
     X(FOVEA_EXT_FB_FOVEATION_CONFIGURATION_NAME, FOVEA_EXT_FB_FOVEATION_CONFIGURATION_VERSION) \
     X(FOVEA_EXT_FB_FOVEATION_VULKAN_NAME, FOVEA_EXT_FB_FOVEATION_VULKAN_VERSION)               \
+    X(FOVEA_EXT_META_FOVEATION_EYE_TRACKED_NAME, FOVEA_EXT_META_FOVEATION_EYE_TRACKED_VERSION) \
     X(FOVEA_EXT_META_VULKAN_SWAPCHAIN_CREATE_INFO_NAME,                                        \
       FOVEA_EXT_META_VULKAN_SWAPCHAIN_CREATE_INFO_VERSION)
 

@@ -1,6 +1,7 @@
 //! fovea: an OpenXR API layer that brings Meta Quest's fixed foveated rendering API
 //! (XR_FB_swapchain_update_state, XR_FB_foveation, XR_FB_foveation_configuration,
-//! XR_FB_foveation_vulkan, XR_META_vulkan_swapchain_create_info) to any OpenXR runtime with Vulkan.
+//! XR_FB_foveation_vulkan, XR_META_vulkan_swapchain_create_info) to any OpenXR runtime with Vulkan,
+//! and XR_META_foveation_eye_tracked where the runtime has eye gaze.
 //!
 //! The crate builds `libfovea.so`; nothing in it is public but the entry points the loaders call.
 //! The folders (see `docs/ARCHITECTURE.md`), in floors: each imports only those below it.

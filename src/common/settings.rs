@@ -335,6 +335,9 @@ pub struct Settings {
     pub identity: fovea_config::Identity,
     /// The configuration file, when there is one to watch.
     pub config: Option<PathBuf>,
+    /// `eye_tracked_y_up` (or `FOVEA_EYE_TRACKED_Y_UP`): XR_META_foveation_eye_tracked's centres
+    /// with y up instead of y down (docs/eye-tracking.md#xr_meta_foveation_eye_tracked).
+    pub eye_tracked_y_up: bool,
     /// The gaze source (docs/eye-tracking.md#settings).
     pub gaze: GazeSettings,
 }
@@ -460,6 +463,7 @@ impl Settings {
             log_file: r.text(Key::LogFile).map(String::from),
             identity: id.clone(),
             config: None,
+            eye_tracked_y_up: r.flag(Key::EyeTrackedYUp).unwrap_or(false),
             gaze: GazeSettings::from_resolved(&r),
         }
     }

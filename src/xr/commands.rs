@@ -14,6 +14,9 @@ macro_rules! with_commands {
             c"xrDestroyInstance" => destroy_instance: DestroyInstance =
                 hooks::instance::destroy_instance, Owner::Below,
                 (instance: val xr::Instance);
+            c"xrGetSystemProperties" => get_system_properties: GetSystemProperties =
+                hooks::eye_tracked::get_system_properties, Owner::Below,
+                (instance: val xr::Instance, system: val xr::SystemId, properties: out xr::SystemProperties);
             c"xrCreateSession" => create_session: CreateSession =
                 hooks::session::create_session, Owner::Below,
                 (instance: val xr::Instance, info: in xr::SessionCreateInfo, session: out xr::Session);
@@ -104,6 +107,9 @@ macro_rules! with_commands {
             c"xrDestroyFoveationProfileFB" => destroy_foveation_profile: DestroyFoveationProfileFB =
                 hooks::foveation::destroy_profile, Owner::Layer(Ext::Foveation),
                 (profile: val xr::FoveationProfileFB);
+            c"xrGetFoveationEyeTrackedStateMETA" => get_foveation_eye_tracked_state: GetFoveationEyeTrackedStateMETA =
+                hooks::eye_tracked::get_state, Owner::Layer(Ext::MetaFoveationEyeTracked),
+                (session: val xr::Session, state: out xr::FoveationEyeTrackedStateMETA);
         }
     };
 }

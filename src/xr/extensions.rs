@@ -12,7 +12,7 @@ fn bit(ext: Ext) -> u8 {
     1 << ext as u8
 }
 
-/// A set of [`Ext`], as a bit set.
+/// A set of [`Ext`], as a bit set (one bit each: at most eight extensions).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ExtSet(u8);
 

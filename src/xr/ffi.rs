@@ -169,6 +169,8 @@ typed!(
     xr::ApiLayerProperties,
     xr::CompositionLayerProjection,
     xr::ExtensionProperties,
+    xr::FoveationEyeTrackedProfileCreateInfoMETA,
+    xr::FoveationEyeTrackedStateMETA,
     xr::FoveationLevelProfileCreateInfoFB,
     xr::FoveationProfileCreateInfoFB,
     xr::FrameBeginInfo,
@@ -189,6 +191,9 @@ typed!(
     xr::SwapchainImageVulkanKHR,
     xr::SwapchainImageWaitInfo,
     xr::SwapchainStateFoveationFB,
+    xr::SystemEyeGazeInteractionPropertiesEXT,
+    xr::SystemFoveationEyeTrackedPropertiesMETA,
+    xr::SystemProperties,
     xr::View,
     xr::ViewConfigurationView,
     xr::ViewLocateInfo,
@@ -555,11 +560,22 @@ pub unsafe fn find_in_chain<T>(
     Ok(None)
 }
 
-/// The byte size of the input structs the layer may have to copy while editing a chain. A struct the
-/// layer does not know cannot be copied (its size is unknown), so it can only be kept in place.
+/// The byte size of the structs the layer may have to copy while editing a chain: input structs of
+/// the create infos it edits, and the output structs an `XrSystemProperties` chain commonly holds
+/// ahead of `XrSystemFoveationEyeTrackedPropertiesMETA`. A struct the layer does not know cannot be
+/// copied (its size is unknown), so it can only be kept in place.
 pub fn known_struct_size(ty: xr::StructureType) -> Option<usize> {
     use std::mem::size_of;
     Some(match ty {
+        xr::StructureType::SYSTEM_FOVEATION_EYE_TRACKED_PROPERTIES_META => {
+            size_of::<xr::SystemFoveationEyeTrackedPropertiesMETA>()
+        }
+        xr::StructureType::SYSTEM_EYE_GAZE_INTERACTION_PROPERTIES_EXT => {
+            size_of::<xr::SystemEyeGazeInteractionPropertiesEXT>()
+        }
+        xr::StructureType::SYSTEM_HAND_TRACKING_PROPERTIES_EXT => {
+            size_of::<xr::SystemHandTrackingPropertiesEXT>()
+        }
         xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB => {
             size_of::<xr::SwapchainCreateInfoFoveationFB>()
         }
@@ -584,6 +600,13 @@ pub struct ChainCopy {
     head: *const c_void,
     /// 8-byte aligned storage for copied nodes; boxes do not move when the vector grows.
     _nodes: Vec<Box<[u64]>>,
+    /// Each copied node: the application's node, its copy and their size, for
+    /// [`ChainCopy::write_back`].
+    copied: Vec<(
+        *const xr::BaseInStructure,
+        *const xr::BaseInStructure,
+        usize,
+    )>,
     removed: Vec<xr::StructureType>,
 }
 
@@ -596,6 +619,31 @@ impl ChainCopy {
     /// The struct types actually removed.
     pub fn removed(&self) -> &[xr::StructureType] {
         &self.removed
+    }
+
+    /// For a copy of an **output** chain that went down: hands what the runtime wrote into each
+    /// copied node to the application's node it was copied from, every member after `type` and
+    /// `next` (those stay the application's). Nodes that were shared were written in place.
+    ///
+    /// # Safety
+    /// The chain copied must be an output chain the application passed for this call, still
+    /// valid for writes.
+    pub unsafe fn write_back(&self) {
+        let header = std::mem::size_of::<xr::BaseOutStructure>();
+        for &(app, copy, size) in &self.copied {
+            if size > header {
+                // SAFETY: `copy` is fovea's own node of `size` bytes; `app` the application's node
+                // of the same type and size, valid for writes (the caller's contract); the two do
+                // not overlap.
+                unsafe {
+                    std::ptr::copy_nonoverlapping(
+                        (copy as *const u8).add(header),
+                        (app as *mut u8).add(header),
+                        size - header,
+                    );
+                }
+            }
+        }
     }
 
     /// Copies `next`, leaving out every struct whose type `remove` selects.
@@ -621,6 +669,7 @@ impl ChainCopy {
         let mut tail: *const xr::BaseInStructure = std::ptr::null();
         let mut shared = true;
         let mut owned = Vec::new();
+        let mut copied = Vec::new();
         let mut removed = Vec::new();
         for &node in nodes.iter().rev() {
             // SAFETY: as above.
@@ -646,6 +695,7 @@ impl ChainCopy {
                         (*copy).next = tail;
                     }
                     tail = copy;
+                    copied.push((node, copy as *const xr::BaseInStructure, size));
                     owned.push(storage);
                 }
                 None => {
@@ -659,6 +709,7 @@ impl ChainCopy {
                     tail = node;
                     shared = true;
                     owned.clear();
+                    copied.clear();
                 }
             }
         }
@@ -666,6 +717,7 @@ impl ChainCopy {
         Ok(ChainCopy {
             head: tail as *const c_void,
             _nodes: owned,
+            copied,
             removed,
         })
     }
@@ -809,6 +861,41 @@ mod tests {
         assert_eq!(
             copied.next as *const c_void,
             &unknown_tail as *const _ as *const c_void
+        );
+    }
+
+    #[test]
+    fn an_output_chain_gets_back_what_was_written_into_its_copies() {
+        let mut meta = xr::SystemFoveationEyeTrackedPropertiesMETA {
+            ty: xr::SystemFoveationEyeTrackedPropertiesMETA::TYPE,
+            next: std::ptr::null_mut(),
+            supports_foveation_eye_tracked: xr::FALSE,
+        };
+        let mut gaze = xr::SystemEyeGazeInteractionPropertiesEXT {
+            ty: xr::SystemEyeGazeInteractionPropertiesEXT::TYPE,
+            next: (&mut meta as *mut xr::SystemFoveationEyeTrackedPropertiesMETA).cast(),
+            supports_eye_gaze_interaction: xr::FALSE,
+        };
+        let head = &mut gaze as *mut _ as *const c_void;
+        let meta_ty = xr::SystemFoveationEyeTrackedPropertiesMETA::TYPE;
+        // SAFETY: a chain of live locals.
+        let copy = unsafe { ChainCopy::without(head, |t| t == meta_ty) }.unwrap();
+        assert_eq!(copy.removed(), [meta_ty]);
+        let copied = copy.head() as *mut xr::SystemEyeGazeInteractionPropertiesEXT;
+        assert_ne!(copied as *const c_void, head);
+        // SAFETY: the copy's only node, fovea's own, written as a runtime would.
+        unsafe {
+            assert!((*copied).next.is_null());
+            (*copied).supports_eye_gaze_interaction = xr::TRUE;
+        }
+        assert_eq!(gaze.supports_eye_gaze_interaction, xr::FALSE);
+        // SAFETY: the chain copied is this test's own output chain, alive.
+        unsafe { copy.write_back() };
+        assert_eq!(gaze.supports_eye_gaze_interaction, xr::TRUE);
+        assert_eq!(
+            gaze.next,
+            (&mut meta as *mut xr::SystemFoveationEyeTrackedPropertiesMETA).cast(),
+            "type and next stay the application's"
         );
     }
 

@@ -202,7 +202,7 @@ impl InstanceGaze {
 
     /// Whether `system` has an eye tracker (`supportsEyeGazeInteraction`), from fovea's own
     /// `xrGetSystemProperties`.
-    fn supported(&self, system: xr::SystemId) -> Result<bool, xr::Result> {
+    pub fn supported(&self, system: xr::SystemId) -> Result<bool, xr::Result> {
         let mut eye = xr::SystemEyeGazeInteractionPropertiesEXT {
             ty: xr::StructureType::SYSTEM_EYE_GAZE_INTERACTION_PROPERTIES_EXT,
             next: std::ptr::null_mut(),

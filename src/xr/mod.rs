@@ -25,7 +25,7 @@
 //! | 3 | `registry.rs` | per-instance, per-session, per-swapchain and per-profile records (the FOV records among them), their look-ups and the losses the runtime reported |
 //! | 4 | `below.rs` | what lies below: the instance extensions the layers and runtime under fovea offer |
 //! | 4 | `symmetric.rs` | symmetric-FOV mode: learning each eye's FOV and enlarging the recommended sizes |
-//! | 5 | `hooks/` (mod, actions, foveation, frame, instance, session, swapchain, vulkan_enable, vulkan_layer) | the hook bodies, one file per function group: look up, do the layer's work, go down. A hook never imports another hook; `mod.rs` only lists them |
+//! | 5 | `hooks/` (mod, actions, eye_tracked, foveation, frame, instance, session, swapchain, vulkan_enable, vulkan_layer) | the hook bodies, one file per function group: look up, do the layer's work, go down. A hook never imports another hook; `mod.rs` only lists them |
 //! | 6 | `dispatch.rs` | the exported entry points and the hook table `xrGetInstanceProcAddr` answers from, expanded from the command list |
 //! | 7 | `loader.rs` | negotiation, `xrCreateApiLayerInstance`, `xrGetInstanceProcAddr`, the layer's own enumerations |
 

@@ -72,6 +72,10 @@ pub struct Instance {
     /// The level injected into the application's eye passes, where injection applies to it
     /// (docs/injection.md); the Vulkan side reads the published state ([`crate::bridge::inject`]).
     pub inject: Option<fovea_model::density::Level>,
+    /// `eye_tracked_y_up` (fovea.toml or `FOVEA_EYE_TRACKED_Y_UP`): the centres
+    /// `xrGetFoveationEyeTrackedStateMETA` returns have y up, OpenXR's NDC, instead of Quest's y
+    /// down (docs/eye-tracking.md#xr_meta_foveation_eye_tracked).
+    pub eye_tracked_y_up: bool,
     /// The gaze source's per-instance part, where gaze is on and XR_EXT_eye_gaze_interaction is
     /// enabled below ([`crate::xr::gaze`]).
     pub gaze: Option<InstanceGaze>,

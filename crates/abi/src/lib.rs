@@ -23,13 +23,14 @@ pub const VK_FDM_EXTENSION: &str = "VK_EXT_fragment_density_map";
 /// See [`VK_FDM_EXTENSION`].
 pub const VK_FDM_SPEC_VERSION: u32 = 3;
 
-/// One of the five extensions the layer can provide.
+/// One of the six extensions the layer can provide.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Ext {
     SwapchainUpdateState,
     Foveation,
     FoveationConfiguration,
     FoveationVulkan,
+    MetaFoveationEyeTracked,
     MetaVulkanSwapchainCreateInfo,
 }
 
@@ -44,7 +45,7 @@ pub struct ExtInfo {
 }
 
 /// The extensions fovea implements, in registry order.
-pub const EXTENSIONS: [ExtInfo; 5] = [
+pub const EXTENSIONS: [ExtInfo; 6] = [
     ExtInfo {
         ext: Ext::SwapchainUpdateState,
         name: c"XR_FB_swapchain_update_state",
@@ -68,6 +69,14 @@ pub const EXTENSIONS: [ExtInfo; 5] = [
         name: c"XR_FB_foveation_vulkan",
         version: 1,
         depends: &[Ext::Foveation],
+    },
+    // Where a gaze source exists (docs/eye-tracking.md#xr_meta_foveation_eye_tracked); xr.xml:
+    // depends="XR_VERSION_1_0+XR_FB_foveation+XR_FB_foveation_configuration".
+    ExtInfo {
+        ext: Ext::MetaFoveationEyeTracked,
+        name: c"XR_META_foveation_eye_tracked",
+        version: 1,
+        depends: &[Ext::Foveation, Ext::FoveationConfiguration],
     },
     ExtInfo {
         ext: Ext::MetaVulkanSwapchainCreateInfo,
@@ -144,6 +153,12 @@ pub mod env {
     /// by the Vulkan loader; it wins over [`VK_LAYER`]
     /// (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>).
     pub const DISABLE_VK_LAYER: &str = "DISABLE_FOVEA_VK_LAYER";
+
+    // XR_META_foveation_eye_tracked.
+    /// `FOVEA_EYE_TRACKED_Y_UP=1`: the centres `xrGetFoveationEyeTrackedStateMETA` returns have y
+    /// up (OpenXR's NDC) instead of y down (Quest's and Godot's); above the file's
+    /// `eye_tracked_y_up`.
+    pub const EYE_TRACKED_Y_UP: &str = "FOVEA_EYE_TRACKED_Y_UP";
 }
 
 /// The longest `next` chain the layer follows. The spec puts no bound on chains, but real ones

@@ -62,6 +62,8 @@ fn default_of(key: Key, vars: &BTreeMap<String, String>) -> String {
             .map_or("none (no home folder)".into(), |p| {
                 format!("{:?}", p.display().to_string())
             }),
+        // XR_META_foveation_eye_tracked: y down, as Quest and Godot read the centres.
+        Key::EyeTrackedYUp => "off (y down)".into(),
     }
 }
 

@@ -38,6 +38,7 @@ use toml::de::{DeTable, DeValue};
 
 /// Environment variables this crate reads.
 pub mod env {
+    pub use fovea_abi::env::EYE_TRACKED_Y_UP;
     pub use fovea_abi::env::{
         CONFIG, GAZE, GAZE_ATTACH_AFTER_S, GAZE_BETA, GAZE_D_CUTOFF_HZ, GAZE_FIXATION_M,
         GAZE_HOLD_S, GAZE_MIN_CUTOFF_HZ, GAZE_RETURN_S, GAZE_SACCADE_DEG, INJECT, INJECT_LEVEL,
@@ -80,10 +81,12 @@ pub enum Key {
     GazeReturn,
     GazeFixation,
     GazeAttachAfter,
+    // XR_META_foveation_eye_tracked.
+    EyeTrackedYUp,
 }
 
 /// How many keys there are.
-pub const KEYS: usize = 18;
+pub const KEYS: usize = 19;
 
 /// Seconds of display time before fovea attaches its own eye gaze action set in a session whose
 /// application attached none (`gaze_attach_after_s`; docs/eye-tracking.md#applications-that-do-not-cooperate):
@@ -111,6 +114,7 @@ impl Key {
         Key::GazeReturn,
         Key::GazeFixation,
         Key::GazeAttachAfter,
+        Key::EyeTrackedYUp,
     ];
 
     /// The key as written in the file.
@@ -125,6 +129,7 @@ impl Key {
             Key::InjectLevel => "inject_level",
             Key::Log => "log",
             Key::LogFile => "log_file",
+            Key::EyeTrackedYUp => "eye_tracked_y_up",
             Key::Gaze => "gaze",
             Key::GazeMinCutoff => "gaze_min_cutoff_hz",
             Key::GazeBeta => "gaze_beta",
@@ -157,7 +162,7 @@ impl Key {
             Key::Level | Key::InjectLevel => {
                 "\"none\", \"low\", \"medium\", \"high\", \"high-top\" or 0-4"
             }
-            Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::Gaze => {
+            Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::Gaze | Key::EyeTrackedYUp => {
                 "true or false (also \"on\"/\"off\", 1/0)"
             }
             Key::GazeMinCutoff | Key::GazeDCutoff => "hertz above 0, at most 100, e.g. 1.0",
@@ -193,6 +198,7 @@ impl Key {
             Key::GazeReturn => Some(env::GAZE_RETURN_S),
             Key::GazeFixation => Some(env::GAZE_FIXATION_M),
             Key::GazeAttachAfter => Some(env::GAZE_ATTACH_AFTER_S),
+            Key::EyeTrackedYUp => Some(env::EYE_TRACKED_Y_UP),
             Key::VerticalOffset => None,
         }
     }
@@ -274,17 +280,19 @@ fn parse_value(key: Key, raw: Raw<'_>) -> Option<Value> {
                 _ => None,
             }
         }
-        Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::Gaze => match raw {
-            Raw::Bool(b) => Some(Value::Bool(b)),
-            Raw::Int("0") => Some(Value::Bool(false)),
-            Raw::Int("1") => Some(Value::Bool(true)),
-            Raw::Str(s) => match s.trim().to_ascii_lowercase().as_str() {
-                "on" | "true" | "1" => Some(Value::Bool(true)),
-                "off" | "false" | "0" => Some(Value::Bool(false)),
+        Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::Gaze | Key::EyeTrackedYUp => {
+            match raw {
+                Raw::Bool(b) => Some(Value::Bool(b)),
+                Raw::Int("0") => Some(Value::Bool(false)),
+                Raw::Int("1") => Some(Value::Bool(true)),
+                Raw::Str(s) => match s.trim().to_ascii_lowercase().as_str() {
+                    "on" | "true" | "1" => Some(Value::Bool(true)),
+                    "off" | "false" | "0" => Some(Value::Bool(false)),
+                    _ => None,
+                },
                 _ => None,
-            },
-            _ => None,
-        },
+            }
+        }
         Key::VerticalOffset => match raw {
             Raw::Int(s) | Raw::Float(s) | Raw::Str(s) => s
                 .trim()

@@ -26,6 +26,12 @@ pub struct SimConfig {
     /// applied with the spec's checks and recorded per swapchain (nothing renders differently). A
     /// layer above must pass them through, not shadow them.
     pub native_foveation: bool,
+    /// With [`SimConfig::native_foveation`], also offer XR_META_foveation_eye_tracked (v1) natively
+    /// (`FOVEA_SIM_META_EYE_TRACKED=1`): the system reports `supportsFoveationEyeTracked`, profiles
+    /// accept `XrFoveationEyeTrackedProfileCreateInfoMETA`, and `xrGetFoveationEyeTrackedStateMETA`
+    /// answers [`META_NATIVE_CENTRES`], VALID: an answer no layer computes, so a test sees whose
+    /// answer reached the application.
+    pub native_meta_eye_tracked: bool,
     /// Offer XR_EPIC_view_configuration_fov (v2), as Monado does: xrEnumerateViewConfigurationViews
     /// fills an `XrViewConfigurationViewFovEPIC` chained to each view with the headset's FOVs,
     /// without a session, where the instance enabled the extension
@@ -55,6 +61,10 @@ pub struct SimConfig {
     /// no such extension.
     pub eye_gaze: Option<EyeGaze>,
 }
+
+/// The foveation centres (left, right; NDC) the native XR_META_foveation_eye_tracked answers
+/// ([`SimConfig::native_meta_eye_tracked`]).
+pub const META_NATIVE_CENTRES: [[f32; 2]; 2] = [[0.125, -0.375], [-0.125, -0.375]];
 
 /// The simulated eye tracker: what the runtime says of it and where the eye looks.
 #[derive(Clone, Debug, PartialEq)]
@@ -114,6 +124,7 @@ impl Default for SimConfig {
             refresh_hz: headset.refresh_hz,
             native_swapchain_update_state: false,
             native_foveation: false,
+            native_meta_eye_tracked: false,
             view_configuration_fov: false,
             realtime: false,
             exit_after_frames: None,
@@ -138,7 +149,7 @@ impl SimConfig {
     }
 
     /// Reads `FOVEA_SIM_HEADSET`, `FOVEA_SIM_REFRESH_HZ`, `FOVEA_SIM_NATIVE_UPDATE_STATE`,
-    /// `FOVEA_SIM_NATIVE_FOVEATION`, `FOVEA_SIM_VIEW_CONFIGURATION_FOV`,
+    /// `FOVEA_SIM_NATIVE_FOVEATION`, `FOVEA_SIM_META_EYE_TRACKED`, `FOVEA_SIM_VIEW_CONFIGURATION_FOV`,
     /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_JOURNAL`, `FOVEA_SIM_SUMMARY`, `FOVEA_SIM_LOG_REFUSALS`,
     /// `FOVEA_SIM_EXIT_AFTER_FRAMES`,
     /// `FOVEA_SIM_FAULT`, `FOVEA_SIM_LOAD`, and the eye tracker's `FOVEA_SIM_EYE_GAZE` (`on`,
@@ -176,6 +187,7 @@ impl SimConfig {
         }
         cfg.native_swapchain_update_state = flag(&var, "FOVEA_SIM_NATIVE_UPDATE_STATE")?;
         cfg.native_foveation = flag(&var, "FOVEA_SIM_NATIVE_FOVEATION")?;
+        cfg.native_meta_eye_tracked = flag(&var, "FOVEA_SIM_META_EYE_TRACKED")?;
         cfg.view_configuration_fov = flag(&var, "FOVEA_SIM_VIEW_CONFIGURATION_FOV")?;
         cfg.realtime = flag(&var, "FOVEA_SIM_REALTIME")?;
         cfg.summary = flag(&var, "FOVEA_SIM_SUMMARY")?;

@@ -6,7 +6,7 @@
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
-pub use crate::config::{set_thread_config, EyeGaze, Fault, Load, SimConfig};
+pub use crate::config::{set_thread_config, EyeGaze, Fault, Load, SimConfig, META_NATIVE_CENTRES};
 pub use crate::objects::{Call, CreatedInstance, FoveationParams, SubmittedView};
 use crate::state::world;
 

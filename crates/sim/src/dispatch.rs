@@ -354,6 +354,11 @@ fn commands() -> &'static [Command] {
                 fov,
                 foveation::destroy_foveation_profile_fb as DestroyFoveationProfileFB
             ),
+            command!(
+                "xrGetFoveationEyeTrackedStateMETA",
+                Some(crate::extensions::META_FOVEATION_EYE_TRACKED),
+                foveation::get_foveation_eye_tracked_state_meta as GetFoveationEyeTrackedStateMETA
+            ),
         ]
     })
 }

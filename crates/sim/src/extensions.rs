@@ -10,6 +10,7 @@ pub(crate) const FB_SWAPCHAIN_UPDATE_STATE: &str = "XR_FB_swapchain_update_state
 pub(crate) const FB_FOVEATION: &str = "XR_FB_foveation";
 pub(crate) const EXT_EYE_GAZE_INTERACTION: &str = "XR_EXT_eye_gaze_interaction";
 pub(crate) const FB_FOVEATION_CONFIGURATION: &str = "XR_FB_foveation_configuration";
+pub(crate) const META_FOVEATION_EYE_TRACKED: &str = "XR_META_foveation_eye_tracked";
 pub(crate) const EPIC_VIEW_CONFIGURATION_FOV: &str = "XR_EPIC_view_configuration_fov";
 
 /// The extensions this runtime offers under `cfg`, with their spec versions.
@@ -27,6 +28,9 @@ pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
     if cfg.native_foveation {
         list.push((FB_FOVEATION, 1));
         list.push((FB_FOVEATION_CONFIGURATION, 1));
+        if cfg.native_meta_eye_tracked {
+            list.push((META_FOVEATION_EYE_TRACKED, 1));
+        }
     }
     if cfg.view_configuration_fov {
         list.push((EPIC_VIEW_CONFIGURATION_FOV, 2));

@@ -1,6 +1,7 @@
 //! Native XR_FB_foveation and XR_FB_foveation_configuration, offered only with
 //! [`SimConfig::native_foveation`](crate::config::SimConfig::native_foveation): the runtime a layer
-//! must pass through rather than shadow.
+//! must pass through rather than shadow; and with it, native XR_META_foveation_eye_tracked
+//! ([`SimConfig::native_meta_eye_tracked`](crate::config::SimConfig::native_meta_eye_tracked)).
 //!
 //! Honest and minimal: profiles are created, destroyed and applied with the spec's checks
 //! (https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#XR_FB_foveation), and each
@@ -54,7 +55,21 @@ pub(crate) unsafe extern "system" fn create_foveation_profile_fb(
                 }
             }
         };
-        ctx.detail = format!("{params:?}");
+        // Native XR_META_foveation_eye_tracked: its struct extends the level struct, flags 0.
+        let eye_tracked = w.instances[&instance]
+            .has_extension(crate::extensions::META_FOVEATION_EYE_TRACKED)
+            .then(|| {
+                ffi::find_in_chain(
+                    info.next,
+                    xr::StructureType::FOVEATION_EYE_TRACKED_PROFILE_CREATE_INFO_META,
+                )
+            })
+            .flatten()
+            .map(|p| &*(p as *const xr::FoveationEyeTrackedProfileCreateInfoMETA));
+        if eye_tracked.is_some_and(|e| !e.flags.is_empty()) {
+            return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+        }
+        ctx.detail = format!("{params:?} eye_tracked={}", eye_tracked.is_some());
         let id = w.alloc_handle();
         w.profiles.insert(id, Profile { session, params });
         *profile = xr::FoveationProfileFB::from_raw(id);
@@ -75,6 +90,29 @@ pub(crate) unsafe extern "system" fn destroy_foveation_profile_fb(
             .session;
         w.enter_session(ctx, xr::Session::from_raw(session))?;
         w.profiles.remove(&profile.into_raw());
+        Ok(xr::Result::SUCCESS)
+    })
+}
+
+/// Native `xrGetFoveationEyeTrackedStateMETA`: the session and the struct checked as the spec's
+/// valid usage says, then the fixed answer [`META_NATIVE_CENTRES`](crate::config::META_NATIVE_CENTRES),
+/// VALID.
+pub(crate) unsafe extern "system" fn get_foveation_eye_tracked_state_meta(
+    session: xr::Session,
+    state: *mut xr::FoveationEyeTrackedStateMETA,
+) -> xr::Result {
+    entry("xrGetFoveationEyeTrackedStateMETA", |ctx| {
+        let mut w = world();
+        w.enter_session(ctx, session)?;
+        let st = ffi::output(state, xr::StructureType::FOVEATION_EYE_TRACKED_STATE_META)?;
+        for (c, [x, y]) in (*st)
+            .foveation_center
+            .iter_mut()
+            .zip(crate::config::META_NATIVE_CENTRES)
+        {
+            *c = xr::Vector2f { x, y };
+        }
+        (*st).flags = xr::FoveationEyeTrackedStateFlagsMETA::VALID;
         Ok(xr::Result::SUCCESS)
     })
 }

@@ -3,7 +3,9 @@
 
 use openxr_sys as xr;
 
-use crate::extensions::{EPIC_VIEW_CONFIGURATION_FOV, EXT_EYE_GAZE_INTERACTION};
+use crate::extensions::{
+    EPIC_VIEW_CONFIGURATION_FOV, EXT_EYE_GAZE_INTERACTION, META_FOVEATION_EYE_TRACKED,
+};
 use crate::ffi;
 use crate::state::{entry, world};
 
@@ -75,6 +77,13 @@ pub(crate) unsafe extern "system" fn get_system_properties(
                 let e = e as *mut xr::SystemEyeGazeInteractionPropertiesEXT;
                 let supported = inst.config.eye_gaze.as_ref().is_some_and(|g| g.supported);
                 (*e).supports_eye_gaze_interaction = supported.into();
+            }
+        }
+        if inst.has_extension(META_FOVEATION_EYE_TRACKED) {
+            let ty = xr::StructureType::SYSTEM_FOVEATION_EYE_TRACKED_PROPERTIES_META;
+            if let Some(e) = ffi::find_in_chain((*p).next, ty) {
+                let e = e as *mut xr::SystemFoveationEyeTrackedPropertiesMETA;
+                (*e).supports_foveation_eye_tracked = xr::TRUE;
             }
         }
         Ok(xr::Result::SUCCESS)

@@ -19,16 +19,57 @@ use crate::xr::registry::{check_lost, session, swapchain};
 use crate::xr::registry::{registry, Profile};
 
 /// Reads the profile parameters from a create info's nested chain
-/// (XrFoveationProfileCreateInfoFB -> XrFoveationLevelProfileCreateInfoFB). No level struct means
-/// no foveation; unknown structs are ignored, as the spec requires.
-fn profile_params(info: In<xr::FoveationProfileCreateInfoFB>) -> HookResult<ProfileParams> {
+/// (XrFoveationProfileCreateInfoFB -> XrFoveationLevelProfileCreateInfoFB ->
+/// XrFoveationEyeTrackedProfileCreateInfoMETA). No level struct means no foveation; unknown structs
+/// are ignored, as the spec requires. `eye_tracked_enabled`: the application enabled
+/// XR_META_foveation_eye_tracked, without which its struct is not one fovea reads.
+fn profile_params(
+    info: In<xr::FoveationProfileCreateInfoFB>,
+    eye_tracked_enabled: bool,
+) -> HookResult<ProfileParams> {
+    let invalid = |_| xr::Result::ERROR_VALIDATION_FAILURE;
     let level = info
         .chained::<xr::FoveationLevelProfileCreateInfoFB>()
-        .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
-    let Some(l) = level else {
-        return Ok(ProfileParams::default());
+        .map_err(invalid)?;
+    let eye_tracked = if eye_tracked_enabled {
+        info.chained::<xr::FoveationEyeTrackedProfileCreateInfoMETA>()
+            .map_err(invalid)?
+    } else {
+        None
     };
-    validate_level(l.level.into_raw(), l.dynamic.into_raw(), l.vertical_offset)
+    let Some(l) = level else {
+        // XrFoveationEyeTrackedProfileCreateInfoMETA extends the level struct only (xr.xml
+        // `structextends`): without one it is in a chain it cannot be in.
+        return match eye_tracked {
+            Some(_) => Err(xr::Result::ERROR_VALIDATION_FAILURE),
+            None => Ok(ProfileParams::default()),
+        };
+    };
+    let mut params = validate_level(l.level.into_raw(), l.dynamic.into_raw(), l.vertical_offset)?;
+    if let Some(e) = eye_tracked {
+        // SAFETY: `l` is a struct of the application's valid chain, so its own next chain is valid
+        // for the call.
+        let after_level = unsafe { In::new(l as *const xr::FoveationLevelProfileCreateInfoFB) }
+            .chained::<xr::FoveationEyeTrackedProfileCreateInfoMETA>()
+            .map_err(invalid)?;
+        params.eye_tracked = validate_eye_tracked(e, after_level.is_some())?;
+    }
+    Ok(params)
+}
+
+/// The checks of XrFoveationEyeTrackedProfileCreateInfoMETA
+/// (https://registry.khronos.org/OpenXR/specs/1.0/man/html/XrFoveationEyeTrackedProfileCreateInfoMETA.html):
+/// it follows the level struct it extends, and its flags are 0 (no bit is defined). Whether the
+/// system has a gaze source does not matter here: `xrCreateFoveationProfileFB` has no result for
+/// it, and a profile without gaze foveates as a fixed one.
+pub fn validate_eye_tracked(
+    info: &xr::FoveationEyeTrackedProfileCreateInfoMETA,
+    follows_level: bool,
+) -> HookResult<bool> {
+    if !follows_level || !info.flags.is_empty() {
+        return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+    }
+    Ok(true)
 }
 
 /// The enum and range checks of XrFoveationLevelProfileCreateInfoFB: level NONE..HIGH, dynamic
@@ -57,7 +98,11 @@ pub fn create_profile(
     if out.is_null() {
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     }
-    let params = profile_params(info)?;
+    let exts = &s.instance.extensions;
+    let params = profile_params(info, exts.enabled.contains(Ext::MetaFoveationEyeTracked))?;
+    if params.eye_tracked && s.gaze.is_none() {
+        tracing::debug!("an eye-tracked profile without a gaze source foveates as a fixed one");
+    }
     let handle = registry().mint_profile_handle();
     let profile = Profile {
         handle,
@@ -182,6 +227,23 @@ pub fn get_swapchain_state(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn eye_tracked_validation() {
+        let info = |flags| xr::FoveationEyeTrackedProfileCreateInfoMETA {
+            ty: xr::FoveationEyeTrackedProfileCreateInfoMETA::TYPE,
+            next: std::ptr::null(),
+            flags: xr::FoveationEyeTrackedProfileCreateFlagsMETA::from_raw(flags),
+        };
+        assert_eq!(validate_eye_tracked(&info(0), true), Ok(true));
+        for (flags, after_level) in [(1, true), (1 << 63, true), (0, false)] {
+            assert_eq!(
+                validate_eye_tracked(&info(flags), after_level),
+                Err(xr::Result::ERROR_VALIDATION_FAILURE),
+                "{flags:#x} {after_level}"
+            );
+        }
+    }
 
     #[test]
     fn level_validation() {

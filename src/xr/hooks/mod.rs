@@ -12,6 +12,7 @@
 //! the log says why.
 
 pub mod actions;
+pub mod eye_tracked;
 pub mod foveation;
 pub mod frame;
 pub mod instance;

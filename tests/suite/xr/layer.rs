@@ -12,11 +12,12 @@ use fovea_harness::{
 use openxr_sys as xr;
 use xr::Handle;
 
-const FB_ALL: [&str; 5] = [
+const FB_ALL: [&str; 6] = [
     "XR_FB_swapchain_update_state",
     "XR_FB_foveation",
     "XR_FB_foveation_configuration",
     "XR_FB_foveation_vulkan",
+    "XR_META_foveation_eye_tracked",
     "XR_META_vulkan_swapchain_create_info",
 ];
 
@@ -197,20 +198,20 @@ fn the_layer_lists_its_own_extensions() {
         next: std::ptr::null_mut(),
         extension_name: [0; xr::MAX_EXTENSION_NAME_SIZE],
         extension_version: 0,
-    }; 5];
+    }; 6];
     assert_eq!(
         unsafe { f(std::ptr::null(), 2, &mut n, props.as_mut_ptr()) },
         xr::Result::ERROR_SIZE_INSUFFICIENT
     );
-    assert_eq!(n, 5);
+    assert_eq!(n, 6);
     assert_eq!(
-        unsafe { f(std::ptr::null(), 5, &mut n, props.as_mut_ptr()) },
+        unsafe { f(std::ptr::null(), 6, &mut n, props.as_mut_ptr()) },
         xr::Result::SUCCESS
     );
-    assert_eq!(props.map(|p| p.extension_version), [3, 1, 1, 1, 1]);
+    assert_eq!(props.map(|p| p.extension_version), [3, 1, 1, 1, 1, 1]);
     props[0].ty = xr::StructureType::SYSTEM_GET_INFO;
     assert_eq!(
-        unsafe { f(std::ptr::null(), 5, &mut n, props.as_mut_ptr()) },
+        unsafe { f(std::ptr::null(), 6, &mut n, props.as_mut_ptr()) },
         xr::Result::ERROR_VALIDATION_FAILURE
     );
 }
@@ -229,6 +230,7 @@ fn provided_extensions_are_stripped_before_the_runtime() {
         c"xrGetSwapchainStateFB",
         c"xrCreateFoveationProfileFB",
         c"xrDestroyFoveationProfileFB",
+        c"xrGetFoveationEyeTrackedStateMETA",
     ] {
         assert_eq!(
             raw_lookup(app.chain.gipa(), app.instance, name),
@@ -262,6 +264,7 @@ fn functions_of_extensions_not_enabled_are_unsupported() {
     for name in [
         c"xrCreateFoveationProfileFB",
         c"xrDestroyFoveationProfileFB",
+        c"xrGetFoveationEyeTrackedStateMETA",
     ] {
         assert_eq!(
             raw_lookup(app.chain.gipa(), app.instance, name),
