@@ -459,6 +459,10 @@ pub struct Swapchain {
     pub density: Option<DensityImages>,
     /// The views the application last submitted into this swapchain (xrEndFrame).
     pub submitted: Mutex<Submitted>,
+    /// Created with `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` in
+    /// `XrVulkanSwapchainCreateInfoMETA`: the application moves the fovea itself with density-map
+    /// offsets, so fovea keeps its maps fixed (docs/eye-tracking.md#what-moves-when).
+    pub app_offsets: bool,
 }
 
 /// A foveation profile fovea created.
