@@ -336,6 +336,21 @@ impl Session {
             crate::bridge::inject::set_pattern(pattern, dynamic, max_fragment);
         }
     }
+
+    /// Publishes where each view's fovea is for injected maps (docs/eye-tracking.md#what-moves-when):
+    /// the gaze's centres while `eyes` follows it, fixed foveation otherwise. Per frame one record
+    /// lock for the copy and a comparison; the bridge publishes only a move of half a texel or more.
+    pub fn publish_injected_centres(&self) {
+        if self.instance.inject.is_none() {
+            return;
+        }
+        let eyes = *self.eyes.lock();
+        let mut centres = [None; fovea_model::maps::MAX_VIEWS];
+        for (i, c) in centres.iter_mut().enumerate() {
+            *c = eyes.of(i);
+        }
+        crate::bridge::inject::set_centres(&centres);
+    }
 }
 
 /// What the layer tracks of a session's frame loop between `xrWaitFrame`, `xrBeginFrame` and
