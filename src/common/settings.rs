@@ -12,6 +12,7 @@ use std::time::SystemTime;
 use crate::common::lock::{Mutex, Rank};
 
 use fovea_model::density::Level;
+use fovea_model::gaze::GazeParams;
 
 /// `FOVEA_SYMMETRIC_FOV=1`: report one shared symmetric FOV for both eyes (Quest's recommended mode,
 /// docs/headsets.md#symmetric-fov) and give pixels outside each eye's true FOV the lowest density.
@@ -334,7 +335,35 @@ pub struct Settings {
     pub identity: fovea_config::Identity,
     /// The configuration file, when there is one to watch.
     pub config: Option<PathBuf>,
+    /// The gaze source (docs/eye-tracking.md#settings).
+    pub gaze: GazeSettings,
 }
+
+/// What the gaze source does; settings (`fovea.toml`, the environment: docs/settings.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GazeSettings {
+    /// Use the runtime's eye gaze at all.
+    pub on: bool,
+    /// The filter, the hold and the fixation distance.
+    pub params: GazeParams,
+    /// Seconds of display time after the session's first frame before fovea attaches its set alone
+    /// in a session whose application has not attached any; `None`: never.
+    pub attach_after_s: Option<f32>,
+}
+
+impl Default for GazeSettings {
+    fn default() -> GazeSettings {
+        GazeSettings {
+            on: true,
+            params: GazeParams::default(),
+            attach_after_s: Some(DEFAULT_ATTACH_AFTER_S),
+        }
+    }
+}
+
+/// The default grace period before fovea attaches alone (docs/eye-tracking.md#apps-that-never-attach): long enough for an application that attaches
+/// after a loading screen, short enough that one that never does still gets gaze within a minute.
+pub const DEFAULT_ATTACH_AFTER_S: f32 = 30.0;
 
 /// The level injection uses when `inject` is on and `inject_level` is not given: medium, a level
 /// whose full-rate centre covers what the eye resolves sharply (docs/density-model.md#floors), so
@@ -408,6 +437,7 @@ impl Settings {
             log_file: r.text(Key::LogFile).map(String::from),
             identity: id.clone(),
             config: None,
+            gaze: GazeSettings::default(),
         }
     }
 }

@@ -82,6 +82,15 @@ macro_rules! with_commands {
                 hooks::vulkan_enable::get_vulkan_graphics_device2, Owner::Below,
                 (instance: val xr::Instance, info: in xr::VulkanGraphicsDeviceGetInfoKHR,
                  physical_device: out xr::platform::VkPhysicalDevice);
+            c"xrSuggestInteractionProfileBindings" => suggest_interaction_profile_bindings: SuggestInteractionProfileBindings =
+                hooks::actions::suggest_bindings, Owner::Below,
+                (instance: val xr::Instance, info: in xr::InteractionProfileSuggestedBinding);
+            c"xrAttachSessionActionSets" => attach_session_action_sets: AttachSessionActionSets =
+                hooks::actions::attach_action_sets, Owner::Below,
+                (session: val xr::Session, info: in xr::SessionActionSetsAttachInfo);
+            c"xrSyncActions" => sync_actions: SyncActions =
+                hooks::actions::sync_actions, Owner::Below,
+                (session: val xr::Session, info: in xr::ActionsSyncInfo);
             c"xrUpdateSwapchainFB" => update_swapchain: UpdateSwapchainFB =
                 hooks::foveation::update_swapchain, Owner::Layer(Ext::SwapchainUpdateState),
                 (swapchain: val xr::Swapchain, state: in xr::SwapchainStateBaseHeaderFB);

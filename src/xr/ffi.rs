@@ -165,6 +165,7 @@ macro_rules! typed {
 }
 
 typed!(
+    xr::ActionsSyncInfo,
     xr::ApiLayerProperties,
     xr::CompositionLayerProjection,
     xr::ExtensionProperties,
@@ -176,6 +177,9 @@ typed!(
     xr::FrameWaitInfo,
     xr::GraphicsBindingVulkanKHR,
     xr::InstanceCreateInfo,
+    xr::InteractionProfileSuggestedBinding,
+    xr::SessionActionSetsAttachInfo,
+    xr::SessionBeginInfo,
     xr::SessionCreateInfo,
     xr::SwapchainCreateInfo,
     xr::SwapchainCreateInfoFoveationFB,

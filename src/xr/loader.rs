@@ -5,6 +5,7 @@
 //! loader's api_layer.adoc (docs/openxr-layer.md#loader-negotiation).
 
 use std::ffi::{c_char, CStr};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use openxr_sys as xr;
@@ -15,10 +16,14 @@ use crate::xr::below;
 use crate::xr::dispatch::{self, Owner};
 use crate::xr::extensions::{self, Ext, Extensions, EXTENSIONS};
 use crate::xr::ffi::{self, shim, HookResult, In, Out, OutArray};
+use crate::xr::gaze;
 use crate::xr::next_layer::{self, Next};
 use crate::xr::registry::{registry, Instance, InstanceFovs};
 use crate::xr::symmetric;
 use fovea_abi::LAYER_NAME;
+
+/// The once-per-process line that the runtime offers no eye gaze was written.
+static GAZE_ABSENT_SAID: AtomicBool = AtomicBool::new(false);
 
 /// The interface version fovea speaks (the only one that exists).
 const INTERFACE_VERSION: u32 = 1;
@@ -208,6 +213,18 @@ fn create_instance_inner(
     let settings = settings::Settings::from_env(id.clone());
     crate::common::log::configure(settings.log.as_deref(), settings.log_file.as_deref());
     let epic = symmetric::enable_epic(settings.symmetric_fov, &names, &below, &mut kept);
+    let gaze_settings = settings.gaze;
+    let app_gaze = gaze::listed(names.iter().copied());
+    let gaze_below = gaze_settings.on && (app_gaze || gaze::listed(&below));
+    if gaze_below && !app_gaze {
+        kept.push(gaze::name_ptr());
+    } else if gaze_settings.on && !gaze_below && !GAZE_ABSENT_SAID.swap(true, Ordering::Relaxed) {
+        tracing::info!(
+            target: fovea_abi::log_target::GAZE,
+            "the runtime does not offer XR_EXT_eye_gaze_interaction: fixed foveation (said once \
+             for this process)"
+        );
+    }
     let mut down = *app;
     down.enabled_extension_count = kept.len() as u32;
     down.enabled_extension_names = if kept.is_empty() {
@@ -228,7 +245,21 @@ fn create_instance_inner(
     let Some(handle) = instance.read() else {
         return result;
     };
+    let gaze = gaze_below.then(|| {
+        // SAFETY: the next layer's xrGetInstanceProcAddr and the instance it just created.
+        unsafe { gaze::InstanceGaze::new(next_gipa, handle, gaze_settings, app_gaze) }
+    });
+    let gaze = match gaze {
+        Some(Err(why)) => {
+            tracing::warn!(target: fovea_abi::log_target::GAZE, why, "no eye gaze: fixed foveation");
+            None
+        }
+        Some(Ok(g)) => Some(g),
+        None => None,
+    };
     let state = Instance {
+        gaze,
+        gaze_on: gaze_settings.on,
         handle,
         next_gipa,
         // SAFETY: the next layer's xrGetInstanceProcAddr and the instance it just created.

@@ -20,11 +20,12 @@
 //! | 1 | `eye_centres.rs` | where each view's fovea is this frame: what the gaze source leaves for the maps, injection and `XR_META_foveation_eye_tracked` |
 //! | 1 | `values.rs` | value conversions: OpenXR's result codes and FOVs as plain values and back |
 //! | 2 | `density_images.rs` | fovea's own Vulkan objects: density images on the application's device, filled from the model |
+//! | 2 | `gaze.rs` | fovea's own gaze source: the layer's eye gaze action set, its spaces, the filter; where each view's fovea is, once a frame |
 //! | 2 | `next_layer.rs` | the next layer's table (expanded from the command list) and its loading; how a hook goes down |
 //! | 3 | `registry.rs` | per-instance, per-session, per-swapchain and per-profile records (the FOV records among them), their look-ups and the losses the runtime reported |
 //! | 4 | `below.rs` | what lies below: the instance extensions the layers and runtime under fovea offer |
 //! | 4 | `symmetric.rs` | symmetric-FOV mode: learning each eye's FOV and enlarging the recommended sizes |
-//! | 5 | `hooks/` (mod, foveation, frame, instance, session, swapchain, vulkan_enable, vulkan_layer) | the hook bodies, one file per function group: look up, do the layer's work, go down. A hook never imports another hook; `mod.rs` only lists them |
+//! | 5 | `hooks/` (mod, actions, foveation, frame, instance, session, swapchain, vulkan_enable, vulkan_layer) | the hook bodies, one file per function group: look up, do the layer's work, go down. A hook never imports another hook; `mod.rs` only lists them |
 //! | 6 | `dispatch.rs` | the exported entry points and the hook table `xrGetInstanceProcAddr` answers from, expanded from the command list |
 //! | 7 | `loader.rs` | negotiation, `xrCreateApiLayerInstance`, `xrGetInstanceProcAddr`, the layer's own enumerations |
 
@@ -35,6 +36,7 @@ pub mod dispatch;
 pub mod extensions;
 pub mod eye_centres;
 pub mod ffi;
+pub mod gaze;
 pub mod hooks;
 pub mod loader;
 pub mod next_layer;

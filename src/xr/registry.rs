@@ -39,6 +39,7 @@ use crate::common::settings::Overrides;
 use crate::xr::density_images::DensityImages;
 use crate::xr::extensions::Extensions;
 use crate::xr::eye_centres::EyeCentres;
+use crate::xr::gaze::{InstanceGaze, SessionGaze};
 use crate::xr::next_layer::Next;
 use crate::xr::session_gpu::{SessionGpu, VulkanBinding};
 use fovea_model::density::Pattern;
@@ -71,6 +72,12 @@ pub struct Instance {
     /// The level injected into the application's eye passes, where injection applies to it
     /// (docs/injection.md); the Vulkan side reads the published state ([`crate::bridge::inject`]).
     pub inject: Option<fovea_model::density::Level>,
+    /// The gaze source's per-instance part, where gaze is on and XR_EXT_eye_gaze_interaction is
+    /// enabled below ([`crate::xr::gaze`]).
+    pub gaze: Option<InstanceGaze>,
+    /// Gaze is switched on for the instance (whether or not the runtime has any): the stats line
+    /// tells `off` from `fixed` by it.
+    pub gaze_on: bool,
 }
 
 impl Instance {
@@ -254,6 +261,9 @@ pub struct Session {
     /// Where each view's fovea is this frame, as the gaze source last left it
     /// ([`crate::xr::eye_centres`]); fixed foveation until a gaze is located.
     pub eyes: SpinMutex<EyeCentres>,
+    /// The gaze source's per-session part, where the system has an eye tracker
+    /// ([`crate::xr::gaze`]); it writes `eyes`.
+    pub gaze: Option<SessionGaze>,
 }
 
 impl Session {
@@ -279,6 +289,7 @@ impl Session {
             lost: AtomicBool::new(false),
             fovs: Default::default(),
             eyes: SpinMutex::spin(EyeCentres::FIXED),
+            gaze: None,
         }
     }
 

@@ -144,4 +144,7 @@ pub mod log_target {
     pub const INSTANCE: &str = "fovea::instance";
     /// One line per VkInstance created through the Vulkan layer: the layer is loaded there.
     pub const VK_INSTANCE: &str = "fovea::vk_instance";
+    /// The gaze source: why it falls back to fixed foveation (one line per cause), and at `trace`
+    /// the gaze located for each frame.
+    pub const GAZE: &str = "fovea::gaze";
 }

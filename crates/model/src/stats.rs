@@ -15,6 +15,7 @@
 use std::fmt;
 
 use crate::density::Level;
+use crate::gaze::Tracking;
 
 /// One window of display time between two lines.
 pub const WINDOW_NS: i64 = 1_000_000_000;
@@ -107,6 +108,51 @@ pub struct Line {
     /// In injection mode (docs/injection.md#stats): the passes per frame that got injected shading
     /// rates, and all passes begun per frame, as means over the window rounded to whole passes.
     pub injected: Option<(u64, u64)>,
+    /// Where the gaze puts the fovea now (docs/eye-tracking.md#stats).
+    pub gaze: GazeShown,
+}
+
+/// The gaze as the stats line shows it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GazeShown {
+    /// Gaze is switched off: fixed foveation by choice (`Gaze=off`).
+    Off,
+    /// No gaze (none on this runtime or system, never active, or lost and back): fixed foveation
+    /// (`Gaze=fixed`).
+    Fixed,
+    /// The fovea follows the gaze: how far it is trusted, and the centre of the first two views in
+    /// normalised device coordinates, y up (`Gaze=tracked@-0.12,+0.30/+0.05,+0.30`).
+    Follows {
+        tracking: Tracking,
+        ndc: [[f32; 2]; 2],
+        views: u8,
+    },
+}
+
+impl fmt::Display for GazeShown {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            GazeShown::Off => write!(f, "off"),
+            GazeShown::Follows {
+                tracking,
+                ndc,
+                views,
+            } if tracking != Tracking::Fixed && views > 0 => {
+                let name = match tracking {
+                    Tracking::Tracked => "tracked",
+                    Tracking::Held => "held",
+                    _ => "returning",
+                };
+                write!(f, "{name}@")?;
+                for (i, [x, y]) in ndc.iter().take(usize::from(views)).enumerate() {
+                    let sep = if i == 0 { "" } else { "/" };
+                    write!(f, "{sep}{x:+.2},{y:+.2}")?;
+                }
+                Ok(())
+            }
+            _ => write!(f, "fixed"),
+        }
+    }
 }
 
 impl Line {
@@ -136,8 +182,8 @@ impl fmt::Display for Line {
         }
         write!(
             f,
-            " Maps={}/{} Cpu={:.2}us",
-            self.maps_built, self.maps_uploaded, w.cpu_us
+            " Gaze={} Maps={}/{} Cpu={:.2}us",
+            self.gaze, self.maps_built, self.maps_uploaded, w.cpu_us
         )
     }
 }
@@ -194,13 +240,42 @@ mod tests {
             maps_built: 2,
             maps_uploaded: 4,
             injected: None,
+            gaze: GazeShown::Off,
         };
         let text = line.to_string();
         assert!(
             text.starts_with(&format!("FPS={}/90 App=6.00ms Int=", w.frames)),
             "{text}"
         );
-        assert!(text.ends_with("Fov=3D Maps=2/4 Cpu=0.40us"), "{text}");
+        assert!(
+            text.ends_with("Fov=3D Gaze=off Maps=2/4 Cpu=0.40us"),
+            "{text}"
+        );
+        let follows = |tracking, views| {
+            Line {
+                gaze: GazeShown::Follows {
+                    tracking,
+                    ndc: [[-0.121, 0.3], [0.05, 0.3]],
+                    views,
+                },
+                ..line
+            }
+            .to_string()
+        };
+        assert!(
+            follows(Tracking::Tracked, 2).contains(" Gaze=tracked@-0.12,+0.30/+0.05,+0.30 "),
+            "{}",
+            follows(Tracking::Tracked, 2)
+        );
+        assert!(follows(Tracking::Held, 1).contains(" Gaze=held@-0.12,+0.30 "));
+        assert!(follows(Tracking::Returning, 2).contains(" Gaze=returning@"));
+        assert!(follows(Tracking::Fixed, 2).contains(" Gaze=fixed "));
+        assert!(follows(Tracking::Tracked, 0).contains(" Gaze=fixed "));
+        let fixed = Line {
+            gaze: GazeShown::Fixed,
+            ..line
+        };
+        assert!(fixed.to_string().contains(" Gaze=fixed "), "{fixed}");
         let none = Line {
             level: None,
             ..line
@@ -213,7 +288,10 @@ mod tests {
             ..line
         }
         .to_string();
-        assert!(injected.contains("Fov=2 Inj=2/6 Maps="), "{injected}");
+        assert!(
+            injected.contains("Fov=2 Inj=2/6 Gaze=off Maps="),
+            "{injected}"
+        );
         assert_eq!(Line::per_frame(5, 9, 0), (5, 9), "no frames: the counts");
     }
 }

@@ -9,6 +9,7 @@ use xr::Handle;
 
 use crate::xr::ffi::HookResult;
 use crate::xr::ffi::{In, Out, OutArray};
+use crate::xr::gaze::Due;
 use crate::xr::next_layer::next;
 use crate::xr::registry::{observed, session_for_call};
 use crate::xr::registry::{registry, Instance, Session};
@@ -16,10 +17,12 @@ use crate::xr::values::{fov_from_xr, fov_to_xr, succeeded};
 use fovea_model::density::Rect;
 use fovea_model::dynamic::LADDER;
 use fovea_model::maps::{SubmittedView, MAX_VIEWS};
-use fovea_model::stats::{Line, Window};
+use fovea_model::stats::{GazeShown, Line, Window};
 
 /// `xrWaitFrame`: the predicted display time and period tell how many display periods the previous
-/// frame missed, the dynamic controller's and the stats' input.
+/// frame missed, the dynamic controller's and the stats' input; the gaze is located at that time
+/// ([`crate::xr::gaze`]), and the gaze source attaches or syncs its set alone where the
+/// application does not.
 pub fn wait_frame(
     sess: xr::Session,
     info: In<xr::FrameWaitInfo>,
@@ -34,6 +37,18 @@ pub fn wait_frame(
             state.predicted_display_time.as_nanos(),
             state.predicted_display_period.as_nanos(),
         );
+        if let (Some(g), Some(ig)) = (&s.gaze, &s.instance.gaze) {
+            match g.waited(state.predicted_display_time.as_nanos()) {
+                Due::Nothing => {}
+                Due::AttachAlone => ig.attach_alone(g),
+                Due::SyncAlone => {
+                    ig.sync_alone(g);
+                    if let Some(centres) = g.update() {
+                        *s.eyes.lock() = centres;
+                    }
+                }
+            }
+        }
     }
     Ok(r)
 }
@@ -310,8 +325,25 @@ fn report(s: &Session, window: Window, period_ns: i64) {
         maps_built: s.maps_built.load(Ordering::Relaxed),
         maps_uploaded: s.maps_uploaded.load(Ordering::Relaxed),
         injected: passes,
+        gaze: gaze_shown(s),
     };
     tracing::info!(target: fovea_abi::log_target::STATS, "{line}");
+}
+
+/// The gaze for the stats line: where the gaze source put each view's fovea last.
+fn gaze_shown(s: &Session) -> GazeShown {
+    if !s.instance.gaze_on {
+        return GazeShown::Off;
+    }
+    let eyes = *s.eyes.lock();
+    if !eyes.follows() {
+        return GazeShown::Fixed;
+    }
+    GazeShown::Follows {
+        tracking: eyes.tracking,
+        ndc: [0, 1].map(|i| eyes.of(i).unwrap_or_default()),
+        views: eyes.views.min(2),
+    }
 }
 
 /// `xrLocateViews`: the FOVs the application gets are recorded, since the density maps
@@ -349,6 +381,11 @@ pub fn locate_views(
     };
     let symmetric = crate::xr::symmetric::active(&s);
     learn_stereo_views(&s.instance, symmetric, info, n, located);
+    if let Some(g) = &s.gaze {
+        if located.iter().all(|v| v.ty == xr::StructureType::VIEW) {
+            g.app_located(located.iter().map(|v| fov_from_xr(v.fov)));
+        }
+    }
     if s.instance.inject.is_some() && located.iter().all(|v| v.ty == xr::StructureType::VIEW) {
         // The FOVs the application renders with (after symmetric-FOV mode's change), at most
         // MAX_VIEWS, in a fixed array: this runs every frame.

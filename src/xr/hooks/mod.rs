@@ -11,6 +11,7 @@
 //! Where the layer cannot do its own work, the application's call still goes down (fail open) and
 //! the log says why.
 
+pub mod actions;
 pub mod foveation;
 pub mod frame;
 pub mod instance;

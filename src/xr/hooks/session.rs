@@ -48,7 +48,8 @@ fn session_gpu(instance: &Instance, binding: &VulkanBinding) -> Option<Arc<Sessi
 }
 
 /// `xrCreateSession`: records the Vulkan binding (XrGraphicsBindingVulkanKHR; the enable2 type is an
-/// alias with the same value) so density images can be made on the application's device.
+/// alias with the same value) so density images can be made on the application's device, and sets
+/// up the gaze source where the system has an eye tracker ([`crate::xr::gaze`]).
 pub fn create_session(
     inst: xr::Instance,
     info: In<xr::SessionCreateInfo>,
@@ -80,7 +81,17 @@ pub fn create_session(
         let gpu = binding
             .filter(|_| state.extensions.provided(Ext::FoveationVulkan))
             .and_then(|b| session_gpu(&state, &b));
-        let record = Arc::new(Session::new(handle, state, binding, gpu));
+        // The system the application's session runs on: its eye tracker, if it has one.
+        let system = info.get().map(|i| i.system_id);
+        let gaze = state
+            .gaze
+            .as_ref()
+            .zip(system)
+            .and_then(|(g, system)| g.session(handle, system));
+        let record = Arc::new(Session {
+            gaze,
+            ..Session::new(handle, state, binding, gpu)
+        });
         registry()
             .sessions
             .write()
@@ -131,6 +142,9 @@ pub fn begin_session(
     if succeeded(r) {
         // SAFETY: the application's XrSessionBeginInfo, which the runtime just accepted.
         unsafe { symmetric::session_began(&s, info.raw()) };
+        if let (Some(g), Some(i)) = (&s.gaze, info.get()) {
+            g.began(i.primary_view_configuration_type);
+        }
     }
     Ok(r)
 }
@@ -143,6 +157,9 @@ pub fn end_session(handle: xr::Session) -> HookResult<xr::Result> {
     let r = observed(&s, unsafe { f(handle) });
     if succeeded(r) {
         symmetric::session_ended(&s);
+        if let Some(g) = &s.gaze {
+            g.ended();
+        }
     }
     Ok(r)
 }

@@ -455,7 +455,8 @@ const VK_FLOORS: &[Place] = &[
 ];
 const XR_FLOORS: &[Place] = &[
     // 1: the FFI edge, the command list, extension names, handle records, the session's GPU,
-    // value conversions; then what is built on them: the next layer's table, density images.
+    // value conversions; then what is built on them: the next layer's table, density images, the
+    // gaze source.
     at(11, "ffi.rs"),
     at(11, "commands.rs"),
     at(11, "extensions.rs"),
@@ -465,6 +466,7 @@ const XR_FLOORS: &[Place] = &[
     at(11, "eye_centres.rs"),
     at(12, "next_layer.rs"),
     at(12, "density_images.rs"),
+    at(12, "gaze.rs"),
     // 3: the registry of instances, sessions, swapchains and their FOV records.
     at(30, "registry.rs"),
     // 4: what lies below (probing the runtime) and symmetric FOVs.

@@ -6,6 +6,7 @@ pub mod faults;
 pub mod foveation_state;
 pub mod frame_pipeline;
 pub mod fuzz;
+pub mod gaze;
 pub mod khronos_loader;
 pub mod layer;
 pub mod settings_file;

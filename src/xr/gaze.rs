@@ -1,0 +1,947 @@
+//! fovea's own gaze source: where the eye looks, from the runtime's `XR_EXT_eye_gaze_interaction`
+//! through an action set of the layer's own, filtered and projected into each view
+//! (docs/eye-tracking.md#where-gaze-comes-from).
+//!
+//! How it survives real runtimes and applications
+//! (<https://registry.khronos.org/OpenXR/specs/1.1/html/xrspec.html#XR_EXT_eye_gaze_interaction>,
+//! the spec's "Input and Haptics" chapter):
+//! - the extension is enabled on the copy of the create info only where the runtime offers it
+//!   (`loader.rs`); an application that did not enable it still gets `XR_ERROR_PATH_UNSUPPORTED`
+//!   for the profile, as without fovea;
+//! - one action set and pose action per instance, made at the first session whose system reports
+//!   `supportsEyeGazeInteraction` (asked with fovea's own `xrGetSystemProperties`);
+//! - a suggestion replaces the previous one for the same profile, so fovea's binding is merged into
+//!   a copy of every suggestion the application makes for the eye gaze profile, and suggested
+//!   (with the application's last one, if any) just before the application's attach goes down;
+//! - fovea's set goes down appended to a copy of the application's attach list; an application
+//!   that never attaches gets fovea's set attached alone after a grace period
+//!   ([`GazeSettings::attach_after_s`](crate::common::settings::GazeSettings));
+//! - the gaze action space and a VIEW reference space are made only after the attach (some runtimes
+//!   refuse a gaze space before);
+//! - fovea's set is added to a copy of every `xrSyncActions`; an application that attached but has
+//!   never synced gets fovea's set synced alone once a frame; fovea never polls events;
+//! - the gaze is located in VIEW space at the predicted display time of the last `xrWaitFrame` and
+//!   used only while the action is active and the orientation valid and tracked; each view's pose
+//!   in VIEW space comes from fovea's own `xrLocateViews`, made again only when the FOVs the
+//!   application locates change.
+//!
+//! Every way this fails falls back to fixed foveation with one log line saying why.
+//!
+//! The calls go straight to the next layer through pointers loaded once per instance ([`Calls`]);
+//! no lock is held while they run. Per frame: two or three calls down, one record lock, no
+//! allocation.
+
+use std::ffi::{c_char, c_void, CStr};
+use std::sync::atomic::Ordering::{AcqRel, Acquire, Relaxed, Release};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicI64, AtomicU32, AtomicU64, AtomicU8};
+
+use glam::{Quat, Vec3};
+use openxr_sys as xr;
+use xr::Handle;
+
+use crate::common::lock::{Mutex, SpinMutex};
+use crate::common::settings::GazeSettings;
+use crate::xr::eye_centres::EyeCentres;
+use crate::xr::ffi;
+use crate::xr::values::{fov_from_xr, succeeded};
+use fovea_model::gaze::{eye_centre, EyeView, GazeFilter, Sample};
+use fovea_model::maps::MAX_VIEWS;
+use fovea_model::Fov;
+
+/// The extension the gaze comes through.
+pub const EXTENSION: &CStr = c"XR_EXT_eye_gaze_interaction";
+/// Its interaction profile and the one input fovea binds.
+const PROFILE: &CStr = c"/interaction_profiles/ext/eye_gaze_interaction";
+const GAZE_POSE: &CStr = c"/user/eyes_ext/input/gaze_ext/pose";
+
+/// The log target of every gaze line.
+const TARGET: &str = fovea_abi::log_target::GAZE;
+
+/// Display time after an attach without a single active gaze sample before fovea says so.
+const NEVER_ACTIVE_NS: i64 = 5_000_000_000;
+
+/// The runtime's functions the gaze source calls, loaded from the next layer once per instance.
+#[derive(Clone, Copy)]
+struct Calls {
+    string_to_path: xr::pfn::StringToPath,
+    get_system_properties: xr::pfn::GetSystemProperties,
+    create_action_set: xr::pfn::CreateActionSet,
+    create_action: xr::pfn::CreateAction,
+    suggest: xr::pfn::SuggestInteractionProfileBindings,
+    attach: xr::pfn::AttachSessionActionSets,
+    sync: xr::pfn::SyncActions,
+    create_action_space: xr::pfn::CreateActionSpace,
+    create_reference_space: xr::pfn::CreateReferenceSpace,
+    get_action_state_pose: xr::pfn::GetActionStatePose,
+    locate_space: xr::pfn::LocateSpace,
+    locate_views: xr::pfn::LocateViews,
+}
+
+/// Asks `gipa` for `name` as the function type `F`; `None` where it is not offered.
+///
+/// # Safety
+/// `gipa` must be the next layer's `xrGetInstanceProcAddr` and `instance` its instance; `F` the
+/// function type the name implies.
+unsafe fn load<F: Copy>(
+    gipa: xr::pfn::GetInstanceProcAddr,
+    instance: xr::Instance,
+    name: &CStr,
+) -> Option<F> {
+    let mut f = None;
+    // SAFETY: the caller's contract; the name is NUL-terminated and `f` a live local.
+    let r = unsafe { gipa(instance, name.as_ptr(), &mut f) };
+    let f: xr::pfn::VoidFunction = f.filter(|_| succeeded(r))?;
+    debug_assert_eq!(std::mem::size_of::<F>(), std::mem::size_of_val(&f));
+    // SAFETY: the next layer answered for `name`, so the pointer has the signature the spec gives
+    // that name, which the caller names as `F`.
+    Some(unsafe { std::mem::transmute_copy::<xr::pfn::VoidFunction, F>(&f) })
+}
+
+impl Calls {
+    /// # Safety
+    /// As [`load`].
+    unsafe fn load(gipa: xr::pfn::GetInstanceProcAddr, i: xr::Instance) -> Option<Calls> {
+        // SAFETY: the caller's contract; each name's type is the field's.
+        unsafe {
+            Some(Calls {
+                string_to_path: load(gipa, i, c"xrStringToPath")?,
+                get_system_properties: load(gipa, i, c"xrGetSystemProperties")?,
+                create_action_set: load(gipa, i, c"xrCreateActionSet")?,
+                create_action: load(gipa, i, c"xrCreateAction")?,
+                suggest: load(gipa, i, c"xrSuggestInteractionProfileBindings")?,
+                attach: load(gipa, i, c"xrAttachSessionActionSets")?,
+                sync: load(gipa, i, c"xrSyncActions")?,
+                create_action_space: load(gipa, i, c"xrCreateActionSpace")?,
+                create_reference_space: load(gipa, i, c"xrCreateReferenceSpace")?,
+                get_action_state_pose: load(gipa, i, c"xrGetActionStatePose")?,
+                locate_space: load(gipa, i, c"xrLocateSpace")?,
+                locate_views: load(gipa, i, c"xrLocateViews")?,
+            })
+        }
+    }
+}
+
+/// Whether the runtime answered a call fovea made with success; the log says which call failed.
+fn ok(call: &'static str, r: xr::Result) -> Result<(), xr::Result> {
+    crate::common::lock::assert_none_held(call);
+    if succeeded(r) {
+        Ok(())
+    } else {
+        Err(r)
+    }
+}
+
+/// The gaze source's per-instance part: the runtime's functions, the profile's paths, and fovea's
+/// action set once made.
+pub struct InstanceGaze {
+    pub settings: GazeSettings,
+    /// The application enabled XR_EXT_eye_gaze_interaction itself (else fovea did, on the copy).
+    pub app_enabled: bool,
+    instance: xr::Instance,
+    calls: Calls,
+    profile: xr::Path,
+    pose_path: xr::Path,
+    own: Mutex<Own>,
+}
+
+/// What the instance's suggestions and attaches left, under the instance's record lock.
+#[derive(Default)]
+struct Own {
+    /// fovea's action set and its gaze action, once made.
+    set: Option<(xr::ActionSet, xr::Action)>,
+    /// The application's last suggestion for the eye gaze profile (it is replaced by the next).
+    app_bindings: Vec<xr::ActionSuggestedBinding>,
+    /// The suggestion in force for the profile binds fovea's action.
+    ours_in_force: bool,
+    /// A session of the instance has action sets attached: suggestions are refused from now on.
+    attached: bool,
+}
+
+impl InstanceGaze {
+    /// The per-instance part for a new instance on which the extension is enabled, or why not.
+    ///
+    /// # Safety
+    /// `gipa` must be the next layer's `xrGetInstanceProcAddr` and `instance` its live instance.
+    pub unsafe fn new(
+        gipa: xr::pfn::GetInstanceProcAddr,
+        instance: xr::Instance,
+        settings: GazeSettings,
+        app_enabled: bool,
+    ) -> Result<InstanceGaze, &'static str> {
+        // SAFETY: the caller's contract.
+        let calls = unsafe { Calls::load(gipa, instance) }
+            .ok_or("the runtime lacks a function of the action system")?;
+        let path = |s: &CStr| {
+            let mut p = xr::Path::NULL;
+            // SAFETY: a live instance, a NUL-terminated well-formed path and a live output.
+            let r = unsafe { (calls.string_to_path)(instance, s.as_ptr(), &mut p) };
+            ok("xrStringToPath", r).ok()?;
+            (p != xr::Path::NULL).then_some(p)
+        };
+        let (Some(profile), Some(pose_path)) = (path(PROFILE), path(GAZE_POSE)) else {
+            return Err("the runtime refused the eye gaze profile's paths");
+        };
+        Ok(InstanceGaze {
+            settings,
+            app_enabled,
+            instance,
+            calls,
+            profile,
+            pose_path,
+            own: Mutex::new(Own::default()),
+        })
+    }
+
+    /// The interaction profile's path.
+    pub fn profile(&self) -> xr::Path {
+        self.profile
+    }
+
+    /// Whether `system` has an eye tracker (`supportsEyeGazeInteraction`), from fovea's own
+    /// `xrGetSystemProperties`.
+    fn supported(&self, system: xr::SystemId) -> Result<bool, xr::Result> {
+        let mut eye = xr::SystemEyeGazeInteractionPropertiesEXT {
+            ty: xr::StructureType::SYSTEM_EYE_GAZE_INTERACTION_PROPERTIES_EXT,
+            next: std::ptr::null_mut(),
+            supports_eye_gaze_interaction: xr::FALSE,
+        };
+        let mut props = xr::SystemProperties {
+            ty: xr::StructureType::SYSTEM_PROPERTIES,
+            next: &mut eye as *mut _ as *mut c_void,
+            system_id: xr::SystemId::NULL,
+            vendor_id: 0,
+            system_name: [0; xr::MAX_SYSTEM_NAME_SIZE],
+            graphics_properties: xr::SystemGraphicsProperties {
+                max_swapchain_image_height: 0,
+                max_swapchain_image_width: 0,
+                max_layer_count: 0,
+            },
+            tracking_properties: xr::SystemTrackingProperties {
+                orientation_tracking: xr::FALSE,
+                position_tracking: xr::FALSE,
+            },
+        };
+        // SAFETY: a live instance, the system the application's session was created for, and
+        // fovea's own output structs, chained as the extension defines.
+        let r = unsafe { (self.calls.get_system_properties)(self.instance, system, &mut props) };
+        ok("xrGetSystemProperties", r)?;
+        Ok(eye.supports_eye_gaze_interaction != xr::FALSE)
+    }
+
+    /// fovea's action set and gaze action, made at the first call.
+    fn own_action(&self) -> Result<(xr::ActionSet, xr::Action), xr::Result> {
+        if let Some(set) = self.own.lock().set {
+            return Ok(set);
+        }
+        let mut info = xr::ActionSetCreateInfo {
+            ty: xr::StructureType::ACTION_SET_CREATE_INFO,
+            next: std::ptr::null(),
+            action_set_name: [0; xr::MAX_ACTION_SET_NAME_SIZE],
+            localized_action_set_name: [0; xr::MAX_LOCALIZED_ACTION_SET_NAME_SIZE],
+            priority: 0,
+        };
+        ffi::write_fixed(&mut info.action_set_name, "fovea_layer_eye_gaze");
+        ffi::write_fixed(&mut info.localized_action_set_name, "fovea eye gaze");
+        let mut set = xr::ActionSet::NULL;
+        // SAFETY: a live instance, fovea's own create info with well-formed names, a live output.
+        let r = unsafe { (self.calls.create_action_set)(self.instance, &info, &mut set) };
+        ok("xrCreateActionSet", r)?;
+        let mut info = xr::ActionCreateInfo {
+            ty: xr::StructureType::ACTION_CREATE_INFO,
+            next: std::ptr::null(),
+            action_name: [0; xr::MAX_ACTION_NAME_SIZE],
+            action_type: xr::ActionType::POSE_INPUT,
+            count_subaction_paths: 0,
+            subaction_paths: std::ptr::null(),
+            localized_action_name: [0; xr::MAX_LOCALIZED_ACTION_NAME_SIZE],
+        };
+        ffi::write_fixed(&mut info.action_name, "gaze");
+        ffi::write_fixed(&mut info.localized_action_name, "fovea gaze");
+        let mut action = xr::Action::NULL;
+        // SAFETY: fovea's own live set and create info, a live output.
+        let r = unsafe { (self.calls.create_action)(set, &info, &mut action) };
+        ok("xrCreateAction", r)?;
+        // Sessions are made one at a time in practice; a second thread racing here would only make
+        // a second set, which the first one stored wins over (the loser stays unused until the
+        // instance goes).
+        Ok(*self.own.lock().set.get_or_insert((set, action)))
+    }
+
+    /// The gaze source of a new session on `system`, or `None` (logged once) where it cannot be had.
+    pub fn session(&self, session: xr::Session, system: xr::SystemId) -> Option<SessionGaze> {
+        match self.supported(system) {
+            Ok(true) => {}
+            Ok(false) => {
+                tracing::info!(
+                    target: TARGET,
+                    "the runtime offers XR_EXT_eye_gaze_interaction but this system has no eye \
+                     tracker (supportsEyeGazeInteraction is false): fixed foveation"
+                );
+                return None;
+            }
+            Err(r) => {
+                tracing::warn!(
+                    target: TARGET,
+                    ?r,
+                    "the runtime refused fovea's xrGetSystemProperties for eye gaze: fixed foveation"
+                );
+                return None;
+            }
+        }
+        match self.own_action() {
+            Ok((_, action)) => Some(SessionGaze::new(session, self.calls, action, self.settings)),
+            Err(r) => {
+                tracing::warn!(
+                    target: TARGET,
+                    ?r,
+                    "the runtime refused fovea's eye gaze action: fixed foveation"
+                );
+                None
+            }
+        }
+    }
+
+    /// `xrSuggestInteractionProfileBindings` for the eye gaze profile: remembers the application's
+    /// bindings and sends down a copy with fovea's own added, where fovea has its action and no set
+    /// is attached yet; else the application's as they are. `down` makes the next layer's call.
+    ///
+    /// # Safety
+    /// `info` must be the application's valid suggestion for [`InstanceGaze::profile`].
+    pub unsafe fn suggest(
+        &self,
+        info: &xr::InteractionProfileSuggestedBinding,
+        down: impl Fn(&xr::InteractionProfileSuggestedBinding) -> xr::Result,
+    ) -> xr::Result {
+        let app: &[xr::ActionSuggestedBinding] = match info.count_suggested_bindings {
+            0 => &[],
+            _ if info.suggested_bindings.is_null() => return down(info),
+            // SAFETY: the caller's contract: a valid suggestion has `countSuggestedBindings`
+            // bindings at `suggestedBindings`.
+            n => unsafe { std::slice::from_raw_parts(info.suggested_bindings, n as usize) },
+        };
+        let merged = {
+            let mut own = self.own.lock();
+            own.app_bindings = app.to_vec();
+            own.ours_in_force = false;
+            match own.set {
+                Some((_, action)) if !own.attached => Some(self.with_ours(app, action)),
+                _ => None,
+            }
+        };
+        let Some(merged) = merged else {
+            return down(info);
+        };
+        let copy = xr::InteractionProfileSuggestedBinding {
+            count_suggested_bindings: merged.len() as u32,
+            suggested_bindings: merged.as_ptr(),
+            ..*info
+        };
+        let r = down(&copy);
+        if succeeded(r) {
+            self.own.lock().ours_in_force = true;
+            return r;
+        }
+        // Refused with fovea's binding: the application's own call decides.
+        let again = down(info);
+        if succeeded(again) {
+            tracing::warn!(
+                target: TARGET,
+                ?r,
+                "the runtime refused fovea's eye gaze binding merged into the application's: \
+                 fixed foveation"
+            );
+        }
+        again
+    }
+
+    /// `app` with fovea's binding added.
+    fn with_ours(
+        &self,
+        app: &[xr::ActionSuggestedBinding],
+        action: xr::Action,
+    ) -> Vec<xr::ActionSuggestedBinding> {
+        let mut list = Vec::with_capacity(app.len() + 1);
+        list.extend_from_slice(app);
+        list.push(xr::ActionSuggestedBinding {
+            action,
+            binding: self.pose_path,
+        });
+        list
+    }
+
+    /// Makes sure the suggestion in force binds fovea's action: suggests the application's last
+    /// bindings with fovea's, unless that is already so.
+    fn suggest_ours(&self, action: xr::Action) -> Result<(), xr::Result> {
+        let list = {
+            let own = self.own.lock();
+            if own.ours_in_force {
+                return Ok(());
+            }
+            self.with_ours(&own.app_bindings, action)
+        };
+        let info = xr::InteractionProfileSuggestedBinding {
+            ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
+            next: std::ptr::null(),
+            interaction_profile: self.profile,
+            count_suggested_bindings: list.len() as u32,
+            suggested_bindings: list.as_ptr(),
+        };
+        // SAFETY: a live instance and fovea's own suggestion of live actions.
+        let r = unsafe { (self.calls.suggest)(self.instance, &info) };
+        ok("xrSuggestInteractionProfileBindings", r)?;
+        self.own.lock().ours_in_force = true;
+        Ok(())
+    }
+
+    /// `xrAttachSessionActionSets` by the application: suggests fovea's binding if needed, then
+    /// sends down a copy of the application's list with fovea's set appended, and makes the
+    /// session's gaze spaces once it is attached. `down` makes the next layer's call.
+    ///
+    /// # Safety
+    /// `info` must be the application's valid attach info.
+    pub unsafe fn attach(
+        &self,
+        g: &SessionGaze,
+        info: &xr::SessionActionSetsAttachInfo,
+        down: impl Fn(&xr::SessionActionSetsAttachInfo) -> xr::Result,
+    ) -> xr::Result {
+        g.app_attached.store(true, Relaxed);
+        let app: &[xr::ActionSet] = match info.count_action_sets {
+            _ if info.action_sets.is_null() => return down(info),
+            // SAFETY: the caller's contract: `countActionSets` sets at `actionSets`.
+            n => unsafe { std::slice::from_raw_parts(info.action_sets, n as usize) },
+        };
+        if g.phase.load(Acquire) != WAITING || app.is_empty() {
+            return down(info);
+        }
+        let Ok((set, action)) = self.own_action() else {
+            return down(info);
+        };
+        if let Err(r) = self.suggest_ours(action) {
+            g.fail(r, "the runtime refused fovea's eye gaze binding");
+            return down(info);
+        }
+        let mut sets = Vec::with_capacity(app.len() + 1);
+        sets.extend_from_slice(app);
+        sets.push(set);
+        let copy = xr::SessionActionSetsAttachInfo {
+            count_action_sets: sets.len() as u32,
+            action_sets: sets.as_ptr(),
+            ..*info
+        };
+        let r = down(&copy);
+        if succeeded(r) {
+            self.own.lock().attached = true;
+            g.attached();
+        }
+        r
+    }
+
+    /// Attaches fovea's set alone, for an application that has not attached any in the grace
+    /// period.
+    pub fn attach_alone(&self, g: &SessionGaze) {
+        if g.phase.load(Acquire) != WAITING {
+            return;
+        }
+        let Ok((set, action)) = self.own_action() else {
+            return;
+        };
+        if let Err(r) = self.suggest_ours(action) {
+            g.fail(r, "the runtime refused fovea's eye gaze binding");
+            return;
+        }
+        let info = xr::SessionActionSetsAttachInfo {
+            ty: xr::StructureType::SESSION_ACTION_SETS_ATTACH_INFO,
+            next: std::ptr::null(),
+            count_action_sets: 1,
+            action_sets: &set,
+        };
+        // SAFETY: a live session and fovea's own set.
+        let r = unsafe { (self.calls.attach)(g.session, &info) };
+        if let Err(r) = ok("xrAttachSessionActionSets", r) {
+            g.fail(
+                r,
+                "the runtime refused to attach fovea's eye gaze action set",
+            );
+            return;
+        }
+        tracing::info!(
+            target: TARGET,
+            after_s = ?self.settings.attach_after_s,
+            "the application attached no action set in the grace period; fovea attached its own \
+             for eye gaze (an attach by the application from now on fails: see \
+             docs/eye-tracking.md#apps-that-never-attach)"
+        );
+        self.own.lock().attached = true;
+        g.attached();
+    }
+
+    /// fovea's set, while it is attached to `g`'s session.
+    fn attached_set(&self, g: &SessionGaze) -> Option<xr::ActionSet> {
+        if g.phase.load(Acquire) != ATTACHED {
+            return None;
+        }
+        self.own.lock().set.map(|(set, _)| set)
+    }
+
+    /// The active set fovea adds to the application's `xrSyncActions`, while it is attached.
+    pub fn active_set(&self, g: &SessionGaze) -> Option<xr::ActiveActionSet> {
+        g.app_synced.store(true, Relaxed);
+        self.attached_set(g).map(|action_set| xr::ActiveActionSet {
+            action_set,
+            subaction_path: xr::Path::NULL,
+        })
+    }
+
+    /// Syncs fovea's set alone, for an application that attached but has never synced.
+    pub fn sync_alone(&self, g: &SessionGaze) {
+        let Some(action_set) = self.attached_set(g) else {
+            return;
+        };
+        let active = xr::ActiveActionSet {
+            action_set,
+            subaction_path: xr::Path::NULL,
+        };
+        let info = xr::ActionsSyncInfo {
+            ty: xr::StructureType::ACTIONS_SYNC_INFO,
+            next: std::ptr::null(),
+            count_active_action_sets: 1,
+            active_action_sets: &active,
+        };
+        // SAFETY: a live session and fovea's own attached set.
+        let r = unsafe { (self.calls.sync)(g.session, &info) };
+        if let Err(r) = ok("xrSyncActions", r) {
+            g.fail(r, "the runtime refused to sync fovea's eye gaze action set");
+        }
+    }
+}
+
+/// The session's gaze source is waiting for an attach.
+const WAITING: u8 = 0;
+/// fovea's set is attached and its spaces made: the gaze is located every frame.
+const ATTACHED: u8 = 1;
+/// Something was refused: fixed foveation for the rest of the session (logged once).
+const FAILED: u8 = 2;
+
+/// What the frame loop's `xrWaitFrame` should do for the gaze this frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Due {
+    Nothing,
+    /// The application attached nothing in the grace period: attach fovea's set alone.
+    AttachAlone,
+    /// The application attached but never synced: sync fovea's set alone and locate the gaze.
+    SyncAlone,
+}
+
+/// The gaze source's per-session part.
+pub struct SessionGaze {
+    session: xr::Session,
+    calls: Calls,
+    action: xr::Action,
+    attach_after_ns: Option<i64>,
+    phase: AtomicU8,
+    gaze_space: AtomicU64,
+    view_space: AtomicU64,
+    app_attached: AtomicBool,
+    app_synced: AtomicBool,
+    /// The view configuration the session began with (0: not running).
+    view_config: AtomicI32,
+    /// The predicted display time of the last `xrWaitFrame`, and of the first.
+    display_ns: AtomicI64,
+    first_display_ns: AtomicI64,
+    /// The display time of the first update after fovea's set was attached, and whether the action was ever active since.
+    attached_ns: AtomicI64,
+    ever_active: AtomicBool,
+    /// `xrWaitFrame` calls since the attach while the application has never synced.
+    waits_unsynced: AtomicU32,
+    /// The bits of the FOVs the application last located (two `f32` per word), how many views,
+    /// and whether they changed since fovea located the views itself.
+    app_fov_bits: [AtomicU64; 2 * MAX_VIEWS],
+    app_views: AtomicU32,
+    views_stale: AtomicBool,
+    /// Once-lines said (one bit per cause).
+    said: AtomicU32,
+    track: SpinMutex<Track>,
+}
+
+/// The filter and the views it projects into.
+struct Track {
+    filter: GazeFilter,
+    views: [EyeView; MAX_VIEWS],
+    count: usize,
+}
+
+const NO_VIEW: EyeView = EyeView {
+    fov: fovea_model::maps::FALLBACK_FOV,
+    position: Vec3::ZERO,
+    orientation: Quat::IDENTITY,
+};
+
+/// The once-lines of a session.
+const SAID_NEVER_ACTIVE: u32 = 1;
+const SAID_VIEWS: u32 = 2;
+const SAID_LOCATE: u32 = 4;
+
+impl SessionGaze {
+    fn new(
+        session: xr::Session,
+        calls: Calls,
+        action: xr::Action,
+        settings: GazeSettings,
+    ) -> SessionGaze {
+        SessionGaze {
+            session,
+            calls,
+            action,
+            attach_after_ns: settings
+                .attach_after_s
+                .map(|s| (f64::from(s.max(0.0)) * 1e9) as i64),
+            phase: AtomicU8::new(WAITING),
+            gaze_space: AtomicU64::new(0),
+            view_space: AtomicU64::new(0),
+            app_attached: AtomicBool::new(false),
+            app_synced: AtomicBool::new(false),
+            view_config: AtomicI32::new(0),
+            display_ns: AtomicI64::new(0),
+            first_display_ns: AtomicI64::new(0),
+            attached_ns: AtomicI64::new(0),
+            ever_active: AtomicBool::new(false),
+            waits_unsynced: AtomicU32::new(0),
+            app_fov_bits: Default::default(),
+            app_views: AtomicU32::new(0),
+            views_stale: AtomicBool::new(true),
+            said: AtomicU32::new(0),
+            track: SpinMutex::spin(Track {
+                filter: GazeFilter::new(settings.params),
+                views: [NO_VIEW; MAX_VIEWS],
+                count: 0,
+            }),
+        }
+    }
+
+    /// Whether the line for `cause` is still to be said (and marks it said).
+    fn first(&self, cause: u32) -> bool {
+        self.said.fetch_or(cause, AcqRel) & cause == 0
+    }
+
+    /// A refusal: fixed foveation for the rest of the session, said once.
+    fn fail(&self, r: xr::Result, why: &'static str) {
+        if self.phase.swap(FAILED, AcqRel) != FAILED {
+            tracing::warn!(target: TARGET, ?r, "{why}: fixed foveation for this session");
+        }
+    }
+
+    /// fovea's set is attached: make the gaze space and the VIEW space (only now: some runtimes
+    /// refuse a gaze space before).
+    fn attached(&self) {
+        let info = xr::ActionSpaceCreateInfo {
+            ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
+            next: std::ptr::null(),
+            action: self.action,
+            subaction_path: xr::Path::NULL,
+            pose_in_action_space: xr::Posef::IDENTITY,
+        };
+        let mut gaze = xr::Space::NULL;
+        // SAFETY: a live session, fovea's own attached action and a live output.
+        let r = unsafe { (self.calls.create_action_space)(self.session, &info, &mut gaze) };
+        if let Err(r) = ok("xrCreateActionSpace", r) {
+            return self.fail(r, "the runtime refused fovea's eye gaze space");
+        }
+        let info = xr::ReferenceSpaceCreateInfo {
+            ty: xr::StructureType::REFERENCE_SPACE_CREATE_INFO,
+            next: std::ptr::null(),
+            reference_space_type: xr::ReferenceSpaceType::VIEW,
+            pose_in_reference_space: xr::Posef::IDENTITY,
+        };
+        let mut view = xr::Space::NULL;
+        // SAFETY: a live session, fovea's own create info and a live output.
+        let r = unsafe { (self.calls.create_reference_space)(self.session, &info, &mut view) };
+        if let Err(r) = ok("xrCreateReferenceSpace", r) {
+            return self.fail(r, "the runtime refused fovea's VIEW space");
+        }
+        self.gaze_space.store(gaze.into_raw(), Relaxed);
+        self.view_space.store(view.into_raw(), Relaxed);
+        self.phase.store(ATTACHED, Release);
+    }
+
+    /// `xrBeginSession` succeeded with this primary view configuration.
+    pub fn began(&self, config: xr::ViewConfigurationType) {
+        self.view_config.store(config.into_raw(), Relaxed);
+        self.views_stale.store(true, Relaxed);
+    }
+
+    /// `xrEndSession` succeeded: no views to locate until the next begin.
+    pub fn ended(&self) {
+        self.view_config.store(0, Relaxed);
+    }
+
+    /// `xrWaitFrame` returned this predicted display time: what the gaze source should do now.
+    pub fn waited(&self, display_ns: i64) -> Due {
+        self.display_ns.store(display_ns, Relaxed);
+        let first = match self.first_display_ns.load(Relaxed) {
+            0 => {
+                self.first_display_ns.store(display_ns, Relaxed);
+                display_ns
+            }
+            t => t,
+        };
+        match self.phase.load(Acquire) {
+            WAITING if !self.app_attached.load(Relaxed) => match self.attach_after_ns {
+                Some(grace) if display_ns - first >= grace => Due::AttachAlone,
+                _ => Due::Nothing,
+            },
+            // The application's own first sync comes after its first xrWaitFrame: a whole frame
+            // without one is an application that does not sync.
+            ATTACHED if !self.app_synced.load(Relaxed) => {
+                if self.waits_unsynced.fetch_add(1, Relaxed) >= 1 {
+                    Due::SyncAlone
+                } else {
+                    Due::Nothing
+                }
+            }
+            _ => Due::Nothing,
+        }
+    }
+
+    /// The FOVs the application just located (after fovea's own changes to them): fovea locates
+    /// the views again at the next update where they changed. Compares bits, takes no lock.
+    pub fn app_located(&self, fovs: impl Iterator<Item = Fov>) {
+        let mut n = 0;
+        let mut changed = false;
+        for (i, f) in fovs.take(MAX_VIEWS).enumerate() {
+            let words = [
+                u64::from(f.left.to_bits()) << 32 | u64::from(f.right.to_bits()),
+                u64::from(f.up.to_bits()) << 32 | u64::from(f.down.to_bits()),
+            ];
+            for (slot, w) in self.app_fov_bits[2 * i..2 * i + 2].iter().zip(words) {
+                if slot.swap(w, Relaxed) != w {
+                    changed = true;
+                }
+            }
+            n = i + 1;
+        }
+        if self.app_views.swap(n as u32, Relaxed) != n as u32 {
+            changed = true;
+        }
+        if changed {
+            self.views_stale.store(true, Release);
+        }
+    }
+
+    /// The application's located FOV of view `i`.
+    fn app_fov(&self, i: usize) -> Fov {
+        let [a, b] = [0, 1].map(|k| self.app_fov_bits[2 * i + k].load(Relaxed));
+        Fov {
+            left: f32::from_bits((a >> 32) as u32),
+            right: f32::from_bits(a as u32),
+            up: f32::from_bits((b >> 32) as u32),
+            down: f32::from_bits(b as u32),
+        }
+    }
+
+    /// Locates the views in fovea's VIEW space at `time`: each eye's pose there, with the FOV the
+    /// application renders with where it located the same views.
+    fn locate_views(&self, config: xr::ViewConfigurationType, time: i64, view: xr::Space) {
+        let empty = xr::View {
+            ty: xr::StructureType::VIEW,
+            next: std::ptr::null_mut(),
+            pose: xr::Posef::IDENTITY,
+            fov: xr::Fovf {
+                angle_left: 0.0,
+                angle_right: 0.0,
+                angle_up: 0.0,
+                angle_down: 0.0,
+            },
+        };
+        let mut views = [empty; MAX_VIEWS];
+        let mut state = xr::ViewState {
+            ty: xr::StructureType::VIEW_STATE,
+            next: std::ptr::null_mut(),
+            view_state_flags: xr::ViewStateFlags::EMPTY,
+        };
+        let info = xr::ViewLocateInfo {
+            ty: xr::StructureType::VIEW_LOCATE_INFO,
+            next: std::ptr::null(),
+            view_configuration_type: config,
+            display_time: xr::Time::from_nanos(time),
+            space: view,
+        };
+        let mut n = 0;
+        // SAFETY: a running session, fovea's own VIEW space and outputs for MAX_VIEWS views.
+        let r = unsafe {
+            (self.calls.locate_views)(
+                self.session,
+                &info,
+                &mut state,
+                MAX_VIEWS as u32,
+                &mut n,
+                views.as_mut_ptr(),
+            )
+        };
+        if let Err(r) = ok("xrLocateViews", r) {
+            if self.first(SAID_VIEWS) {
+                tracing::warn!(
+                    target: TARGET,
+                    ?r,
+                    "the runtime refused fovea's xrLocateViews; the fovea keeps the views it knew"
+                );
+            }
+            return;
+        }
+        let n = (n as usize).min(MAX_VIEWS);
+        let app_views = self.app_views.load(Acquire) as usize;
+        let mut located = [NO_VIEW; MAX_VIEWS];
+        for (i, (slot, v)) in located.iter_mut().zip(&views[..n]).enumerate() {
+            let (p, o) = (v.pose.position, v.pose.orientation);
+            *slot = EyeView {
+                fov: if app_views == n {
+                    self.app_fov(i)
+                } else {
+                    fov_from_xr(v.fov)
+                },
+                position: Vec3::new(p.x, p.y, p.z),
+                orientation: Quat::from_xyzw(o.x, o.y, o.z, o.w).normalize(),
+            };
+        }
+        let mut t = self.track.lock();
+        t.views = located;
+        t.count = n;
+    }
+
+    /// This frame's sample: the gaze action's pose in VIEW space at `time`, where the action is
+    /// active and the orientation valid and tracked.
+    fn sample(&self, time: i64, gaze: xr::Space, view: xr::Space) -> Option<Sample> {
+        let get = xr::ActionStateGetInfo {
+            ty: xr::StructureType::ACTION_STATE_GET_INFO,
+            next: std::ptr::null(),
+            action: self.action,
+            subaction_path: xr::Path::NULL,
+        };
+        let mut state = xr::ActionStatePose {
+            ty: xr::StructureType::ACTION_STATE_POSE,
+            next: std::ptr::null_mut(),
+            is_active: xr::FALSE,
+        };
+        // SAFETY: a live session, fovea's own attached action and a live output.
+        let r = unsafe { (self.calls.get_action_state_pose)(self.session, &get, &mut state) };
+        if let Err(r) = ok("xrGetActionStatePose", r) {
+            if self.first(SAID_LOCATE) {
+                tracing::warn!(target: TARGET, ?r, "the runtime refused fovea's gaze action state");
+            }
+            return None;
+        }
+        if state.is_active == xr::FALSE {
+            return None;
+        }
+        self.ever_active.store(true, Relaxed);
+        let mut sampled = xr::EyeGazeSampleTimeEXT {
+            ty: xr::StructureType::EYE_GAZE_SAMPLE_TIME_EXT,
+            next: std::ptr::null_mut(),
+            time: xr::Time::from_nanos(0),
+        };
+        let mut location = xr::SpaceLocation {
+            ty: xr::StructureType::SPACE_LOCATION,
+            next: &mut sampled as *mut _ as *mut c_void,
+            location_flags: xr::SpaceLocationFlags::EMPTY,
+            pose: xr::Posef::IDENTITY,
+        };
+        let at = xr::Time::from_nanos(time);
+        // SAFETY: fovea's own live spaces of this session, a valid time, its own outputs.
+        let r = unsafe { (self.calls.locate_space)(gaze, view, at, &mut location) };
+        if let Err(r) = ok("xrLocateSpace", r) {
+            if self.first(SAID_LOCATE) {
+                tracing::warn!(target: TARGET, ?r, "the runtime refused to locate fovea's gaze");
+            }
+            return None;
+        }
+        let need =
+            xr::SpaceLocationFlags::ORIENTATION_VALID | xr::SpaceLocationFlags::ORIENTATION_TRACKED;
+        if !location.location_flags.contains(need) {
+            return None;
+        }
+        let o = location.pose.orientation;
+        let direction = Quat::from_xyzw(o.x, o.y, o.z, o.w) * Vec3::NEG_Z;
+        let t = sampled.time.as_nanos();
+        Some(Sample {
+            time_ns: if t > 0 { t } else { time },
+            direction,
+        })
+    }
+
+    /// Locates the gaze for the frame of the last `xrWaitFrame` (after a sync) and answers where
+    /// each view's fovea is; `None` where the source has nothing to say (not attached, not running,
+    /// no views).
+    pub fn update(&self) -> Option<EyeCentres> {
+        if self.phase.load(Acquire) != ATTACHED {
+            return None;
+        }
+        let config = self.view_config.load(Relaxed);
+        let time = self.display_ns.load(Relaxed);
+        if config == 0 || time <= 0 {
+            return None;
+        }
+        let gaze = xr::Space::from_raw(self.gaze_space.load(Relaxed));
+        let view = xr::Space::from_raw(self.view_space.load(Relaxed));
+        if self.views_stale.swap(false, AcqRel) {
+            self.locate_views(xr::ViewConfigurationType::from_raw(config), time, view);
+        }
+        let sample = self.sample(time, gaze, view);
+        let attached_ns = match self.attached_ns.load(Relaxed) {
+            0 => {
+                self.attached_ns.store(time, Relaxed);
+                time
+            }
+            t => t,
+        };
+        if sample.is_none()
+            && !self.ever_active.load(Relaxed)
+            && time - attached_ns >= NEVER_ACTIVE_NS
+            && self.first(SAID_NEVER_ACTIVE)
+        {
+            tracing::info!(
+                target: TARGET,
+                "the runtime's eye gaze has not been active for 5 s since fovea's action set was \
+                 attached (no permission, tracker off, or the session not focused): fixed \
+                 foveation until it is"
+            );
+        }
+        let mut t = self.track.lock();
+        if t.count == 0 {
+            return None;
+        }
+        let g = t.filter.update(sample, time);
+        let fixation = t.filter.params().fixation_m;
+        let mut ndc = [[0.0; 2]; MAX_VIEWS];
+        for (c, eye) in ndc.iter_mut().zip(&t.views[..t.count]) {
+            *c = eye_centre(&g, eye, fixation);
+        }
+        let centres = EyeCentres {
+            ndc,
+            views: t.count as u8,
+            tracking: g.tracking,
+            time_ns: time,
+        };
+        drop(t);
+        tracing::trace!(
+            target: TARGET,
+            time_ns = time,
+            tracking = ?centres.tracking,
+            yaw = g.angles[0],
+            pitch = g.angles[1],
+            weight = g.weight,
+            ndc = ?&centres.ndc[..usize::from(centres.views)],
+            "gaze"
+        );
+        Some(centres)
+    }
+}
+
+/// Whether an extension list names XR_EXT_eye_gaze_interaction.
+pub fn listed(names: impl IntoIterator<Item = impl AsRef<CStr>>) -> bool {
+    names.into_iter().any(|n| n.as_ref() == EXTENSION)
+}
+
+/// The name to add to the copy of the create info.
+pub fn name_ptr() -> *const c_char {
+    EXTENSION.as_ptr()
+}

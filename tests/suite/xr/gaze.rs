@@ -1,0 +1,519 @@
+//! fovea's gaze source on the simulated runtime's eye tracker, through the real layer: where each
+//! view's fovea goes follows the scripted gaze (fixation, a saccade that resets the filter, a blink
+//! held then followed again, a loss eased back to fixed foveation, smooth pursuit); runtimes and
+//! systems without eye gaze give fixed foveation and one line saying why; a runtime that refuses
+//! the gaze space before attach, an application that never attaches, one that never syncs, and one
+//! that uses eye gaze itself all work; no call reaches the runtime that it refuses.
+//!
+//! The layer writes the gaze it located for each frame at `trace` on `fovea::gaze` and the stats
+//! line once a second; the tests read both from the log file. Each test runs in a process of its
+//! own, since the log is set up once per process from the environment.
+
+use std::path::{Path, PathBuf};
+
+use fovea_harness::app::API_1_0;
+use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
+use fovea_harness::{sim, App, Chain};
+use fovea_model::gaze::{eye_centre, EyeView, Gaze, Tracking};
+use glam::{Quat, Vec3};
+use openxr_sys as xr;
+use xr::Handle;
+
+use crate::support::in_own_process;
+
+/// The eye gaze extension, its profile and its pose.
+const EXT: &str = "XR_EXT_eye_gaze_interaction";
+const PROFILE: &std::ffi::CStr = c"/interaction_profiles/ext/eye_gaze_interaction";
+const GAZE_POSE: &std::ffi::CStr = c"/user/eyes_ext/input/gaze_ext/pose";
+
+/// A log file of this process's own, with the gaze at `trace` and the stats line on.
+fn log_here(label: &str, extra_env: &[(&str, &str)]) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fovea-gaze-{label}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("fovea.log");
+    std::fs::remove_file(&log).ok();
+    std::env::set_var(
+        "FOVEA_LOG",
+        format!(
+            "warn,{}=trace,{}=info",
+            fovea_abi::log_target::GAZE,
+            fovea_abi::log_target::STATS
+        ),
+    );
+    std::env::set_var("FOVEA_LOG_FILE", &log);
+    for (k, v) in extra_env {
+        std::env::set_var(k, v);
+    }
+    log
+}
+
+fn log_lines(log: &Path) -> Vec<String> {
+    std::fs::read_to_string(log)
+        .unwrap_or_default()
+        .lines()
+        .map(String::from)
+        .collect()
+}
+
+/// The gaze the layer located for one frame, from its `trace` line.
+#[derive(Clone, Debug)]
+struct Located {
+    tracking: Tracking,
+    angles: [f32; 2],
+    weight: f32,
+    ndc: Vec<[f32; 2]>,
+}
+
+fn field<'a>(line: &'a str, name: &str) -> &'a str {
+    let at = line
+        .find(&format!(" {name}="))
+        .unwrap_or_else(|| panic!("{name}= in {line}"))
+        + name.len()
+        + 2;
+    let rest = &line[at..];
+    if rest.starts_with('[') {
+        let end = rest.find("]]").map_or(rest.len(), |e| e + 2);
+        &rest[..end]
+    } else {
+        rest.split(' ').next().unwrap()
+    }
+}
+
+fn located(lines: &[String]) -> Vec<Located> {
+    lines
+        .iter()
+        .filter(|l| l.contains(fovea_abi::log_target::GAZE) && l.contains(" time_ns="))
+        .map(|l| {
+            let tracking = match field(l, "tracking") {
+                "Tracked" => Tracking::Tracked,
+                "Held" => Tracking::Held,
+                "Returning" => Tracking::Returning,
+                "Fixed" => Tracking::Fixed,
+                other => panic!("tracking {other:?} in {l}"),
+            };
+            let num = |n: &str| field(l, n).parse::<f32>().unwrap();
+            let ndc = field(l, "ndc")
+                .trim_matches(|c| c == '[' || c == ']')
+                .split("], [")
+                .map(|p| {
+                    let v: Vec<f32> = p.split(", ").map(|x| x.parse().unwrap()).collect();
+                    [v[0], v[1]]
+                })
+                .collect();
+            Located {
+                tracking,
+                angles: [num("yaw"), num("pitch")],
+                weight: num("weight"),
+                ndc,
+            }
+        })
+        .collect()
+}
+
+fn stats(lines: &[String]) -> Vec<&String> {
+    lines
+        .iter()
+        .filter(|l| l.contains(fovea_abi::log_target::STATS))
+        .collect()
+}
+
+/// The simulated Quest 3 with an eye tracker following `script`.
+fn eye_tracker(supported: bool, space_after_attach: bool, script: &str) -> sim::control::SimConfig {
+    let mut cfg =
+        sim::control::SimConfig::for_headset(fovea_model::headsets::by_id("quest3").unwrap());
+    cfg.eye_gaze = Some(sim::control::EyeGaze {
+        supported,
+        space_after_attach,
+        script: sim::gaze_script::GazeScript::parse(script).unwrap(),
+    });
+    cfg
+}
+
+fn running(cfg: sim::control::SimConfig, extensions: &[&str]) -> HeadlessLoop {
+    sim::control::set_thread_config(Some(cfg));
+    let mut exts: Vec<&str> = FOVEATION_EXTENSIONS.to_vec();
+    exts.extend_from_slice(extensions);
+    let app = App::new(Chain::fovea().unwrap(), &exts, API_1_0).unwrap();
+    HeadlessLoop::new(
+        app,
+        SwapchainSpec {
+            foveation: true,
+            array_size: 2,
+        },
+    )
+    .unwrap()
+}
+
+/// The application's own input: an action set with one pose action, bound to a controller (or,
+/// `gaze`, to the eye tracker, which the application then locates itself).
+struct AppInput {
+    set: xr::ActionSet,
+    action: xr::Action,
+    space: xr::Space,
+    sync: xr::pfn::SyncActions,
+    get_pose: xr::pfn::GetActionStatePose,
+    locate: xr::pfn::LocateSpace,
+}
+
+fn path(lp: &HeadlessLoop, s: &std::ffi::CStr) -> xr::Path {
+    // SAFETY: the type matches the name; the string is NUL-terminated.
+    unsafe {
+        let f: xr::pfn::StringToPath = lp.func(c"xrStringToPath");
+        let mut p = xr::Path::NULL;
+        assert_eq!(f(lp.app.instance, s.as_ptr(), &mut p), xr::Result::SUCCESS);
+        p
+    }
+}
+
+fn fixed<const N: usize>(s: &str) -> [std::ffi::c_char; N] {
+    let mut a = [0; N];
+    for (d, b) in a.iter_mut().zip(s.bytes()) {
+        *d = b as std::ffi::c_char;
+    }
+    a
+}
+
+impl AppInput {
+    /// Creates the set and action and suggests their binding; `attach` attaches the set.
+    fn new(lp: &HeadlessLoop, gaze: bool, attach: bool) -> AppInput {
+        // SAFETY: every name's type matches; the structs live across their calls.
+        unsafe {
+            let create_set: xr::pfn::CreateActionSet = lp.func(c"xrCreateActionSet");
+            let create_action: xr::pfn::CreateAction = lp.func(c"xrCreateAction");
+            let suggest: xr::pfn::SuggestInteractionProfileBindings =
+                lp.func(c"xrSuggestInteractionProfileBindings");
+            let attach_fn: xr::pfn::AttachSessionActionSets = lp.func(c"xrAttachSessionActionSets");
+            let info = xr::ActionSetCreateInfo {
+                ty: xr::StructureType::ACTION_SET_CREATE_INFO,
+                next: std::ptr::null(),
+                action_set_name: fixed("gameplay"),
+                localized_action_set_name: fixed("Gameplay"),
+                priority: 0,
+            };
+            let mut set = xr::ActionSet::NULL;
+            assert_eq!(
+                create_set(lp.app.instance, &info, &mut set),
+                xr::Result::SUCCESS
+            );
+            let info = xr::ActionCreateInfo {
+                ty: xr::StructureType::ACTION_CREATE_INFO,
+                next: std::ptr::null(),
+                action_name: fixed("aim"),
+                action_type: xr::ActionType::POSE_INPUT,
+                count_subaction_paths: 0,
+                subaction_paths: std::ptr::null(),
+                localized_action_name: fixed("Aim"),
+            };
+            let mut action = xr::Action::NULL;
+            assert_eq!(create_action(set, &info, &mut action), xr::Result::SUCCESS);
+            let (profile, binding) = if gaze {
+                (PROFILE, GAZE_POSE)
+            } else {
+                (
+                    c"/interaction_profiles/khr/simple_controller",
+                    c"/user/hand/left/input/aim/pose",
+                )
+            };
+            let bindings = [xr::ActionSuggestedBinding {
+                action,
+                binding: path(lp, binding),
+            }];
+            let suggested = xr::InteractionProfileSuggestedBinding {
+                ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
+                next: std::ptr::null(),
+                interaction_profile: path(lp, profile),
+                count_suggested_bindings: 1,
+                suggested_bindings: bindings.as_ptr(),
+            };
+            assert_eq!(suggest(lp.app.instance, &suggested), xr::Result::SUCCESS);
+            assert_eq!(
+                bindings[0].action, action,
+                "the application's struct is untouched"
+            );
+            assert_eq!(suggested.count_suggested_bindings, 1);
+            if attach {
+                let sets = [set];
+                let info = xr::SessionActionSetsAttachInfo {
+                    ty: xr::StructureType::SESSION_ACTION_SETS_ATTACH_INFO,
+                    next: std::ptr::null(),
+                    count_action_sets: 1,
+                    action_sets: sets.as_ptr(),
+                };
+                assert_eq!(attach_fn(lp.session, &info), xr::Result::SUCCESS);
+                assert_eq!(
+                    info.count_action_sets, 1,
+                    "the application's struct is untouched"
+                );
+            }
+            let mut space = xr::Space::NULL;
+            if attach {
+                let create_space: xr::pfn::CreateActionSpace = lp.func(c"xrCreateActionSpace");
+                let info = xr::ActionSpaceCreateInfo {
+                    ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
+                    next: std::ptr::null(),
+                    action,
+                    subaction_path: xr::Path::NULL,
+                    pose_in_action_space: xr::Posef::IDENTITY,
+                };
+                assert_eq!(
+                    create_space(lp.session, &info, &mut space),
+                    xr::Result::SUCCESS
+                );
+            }
+            AppInput {
+                set,
+                action,
+                space,
+                sync: lp.func(c"xrSyncActions"),
+                get_pose: lp.func(c"xrGetActionStatePose"),
+                locate: lp.func(c"xrLocateSpace"),
+            }
+        }
+    }
+
+    /// The application's xrSyncActions of its own set.
+    fn sync(&self, lp: &HeadlessLoop) {
+        let active = [xr::ActiveActionSet {
+            action_set: self.set,
+            subaction_path: xr::Path::NULL,
+        }];
+        let info = xr::ActionsSyncInfo {
+            ty: xr::StructureType::ACTIONS_SYNC_INFO,
+            next: std::ptr::null(),
+            count_active_action_sets: 1,
+            active_action_sets: active.as_ptr(),
+        };
+        // SAFETY: a live session and set; the struct lives across the call.
+        let r = unsafe { (self.sync)(lp.session, &info) };
+        // Unfocused (the first frames) is a success code: input goes to the focused session only.
+        assert!(
+            [xr::Result::SUCCESS, xr::Result::SESSION_NOT_FOCUSED].contains(&r),
+            "{r:?}"
+        );
+        assert_eq!(info.count_active_action_sets, 1, "untouched");
+    }
+
+    /// Whether the application's own action is active, and its space's pose in `base` at the last
+    /// frame's display time where it is located.
+    fn own_pose(&self, lp: &HeadlessLoop) -> (bool, Option<xr::Posef>) {
+        // SAFETY: live handles; the structs live across the calls.
+        unsafe {
+            let get = xr::ActionStateGetInfo {
+                ty: xr::StructureType::ACTION_STATE_GET_INFO,
+                next: std::ptr::null(),
+                action: self.action,
+                subaction_path: xr::Path::NULL,
+            };
+            let mut state = xr::ActionStatePose {
+                ty: xr::StructureType::ACTION_STATE_POSE,
+                next: std::ptr::null_mut(),
+                is_active: xr::FALSE,
+            };
+            assert_eq!(
+                (self.get_pose)(lp.session, &get, &mut state),
+                xr::Result::SUCCESS
+            );
+            let mut loc = xr::SpaceLocation {
+                ty: xr::StructureType::SPACE_LOCATION,
+                next: std::ptr::null_mut(),
+                location_flags: xr::SpaceLocationFlags::EMPTY,
+                pose: xr::Posef::IDENTITY,
+            };
+            let r = (self.locate)(
+                self.space,
+                lp.space,
+                lp.last_frame_state.predicted_display_time,
+                &mut loc,
+            );
+            assert_eq!(r, xr::Result::SUCCESS);
+            let valid = loc
+                .location_flags
+                .contains(xr::SpaceLocationFlags::ORIENTATION_VALID);
+            (state.is_active != xr::FALSE, valid.then_some(loc.pose))
+        }
+    }
+}
+
+/// Where the fovea of the left view goes for a gaze at (yaw, pitch), by the model, with the
+/// simulated headset's left eye (Quest 3's FOV, 31.5 mm left of the head's centre).
+fn left_eye_ndc(yaw: f32, pitch: f32) -> [f32; 2] {
+    let headset = fovea_model::headsets::by_id("quest3").unwrap();
+    let eye = EyeView {
+        fov: headset.fovs()[0],
+        position: Vec3::new(-0.0315, 0.0, 0.0),
+        orientation: Quat::IDENTITY,
+    };
+    let gaze = Gaze {
+        angles: [yaw, pitch],
+        weight: 1.0,
+        tracking: Tracking::Tracked,
+    };
+    eye_centre(&gaze, &eye, 1.0)
+}
+
+/// No call fovea made was refused by the runtime (nor any other).
+fn assert_no_refusals(instance: xr::Instance) {
+    assert_eq!(sim::control::refusals(instance), vec![], "refused calls");
+    assert_eq!(sim::control::errors(instance), vec![], "failed calls");
+}
+
+const SCRIPT: &str = "fix 10,0 for 600ms; saccade -10,5 in 1ms; fix for 600ms; blink 150ms; \
+                      fix for 600ms; lost 1500ms; fix for 500ms; pursue 10,5 at 20; fix for 1s";
+
+#[test]
+fn the_fovea_follows_the_scripted_gaze() {
+    in_own_process(
+        module_path!(),
+        "the_fovea_follows_the_scripted_gaze",
+        the_fovea_follows_the_scripted_gaze_here,
+    );
+}
+
+fn the_fovea_follows_the_scripted_gaze_here() {
+    let log = log_here("follows", &[]);
+    let mut lp = running(eye_tracker(true, false, SCRIPT), &[]);
+    let input = AppInput::new(&lp, false, true);
+    for _ in 0..600 {
+        lp.frame().unwrap();
+        input.sync(&lp);
+    }
+    let instance = lp.app.instance;
+    let lines = log_lines(&log);
+    let got = located(&lines);
+    assert!(got.len() >= 590, "a located gaze per frame: {}", got.len());
+
+    // Fixation at (10, 0): tracked, on the point, and the left view's fovea where the model puts it.
+    let first = &got[10];
+    assert_eq!(first.tracking, Tracking::Tracked, "{first:?}");
+    assert!((first.angles[0] - 10.0).abs() < 0.1, "{first:?}");
+    let want = left_eye_ndc(10.0, 0.0);
+    assert!(
+        (first.ndc[0][0] - want[0]).abs() < 0.01 && (first.ndc[0][1] - want[1]).abs() < 0.01,
+        "{first:?} vs {want:?}"
+    );
+    assert!(first.ndc[0][0] > 0.2, "right of centre: {first:?}");
+
+    // The saccade resets the filter: the fovea is on the new point at most a frame after the eye.
+    let start = 10
+        + got[10..]
+            .iter()
+            .position(|g| g.angles[0] < 9.0)
+            .expect("a saccade");
+    let arrived = got[start..]
+        .iter()
+        .position(|g| (g.angles[0] + 10.0).abs() < 0.1 && (g.angles[1] - 5.0).abs() < 0.1)
+        .expect("the fovea reaches the saccade's target");
+    // The jump falls between two of the tracker's samples (120 Hz). Without the reset, a one-euro
+    // filter at rest (cutoff 1 Hz) would take tens of frames to get there.
+    assert!(arrived <= 1, "the saccade took {arrived} frames");
+
+    // The blink: held where the eye was, then followed again.
+    let held = got
+        .iter()
+        .position(|g| g.tracking == Tracking::Held)
+        .unwrap();
+    let held_run = got[held..]
+        .iter()
+        .take_while(|g| g.tracking == Tracking::Held)
+        .count();
+    assert!((12..=15).contains(&held_run), "150 ms held: {held_run}");
+    assert!(got[held..held + held_run]
+        .iter()
+        .all(|g| (g.angles[0] + 10.0).abs() < 0.1 && g.weight == 1.0));
+    assert_eq!(got[held + held_run].tracking, Tracking::Tracked);
+
+    // The loss: held for 0.3 s, eased back over 0.3 s, then fixed foveation.
+    let lost = held
+        + held_run
+        + got[held + held_run..]
+            .iter()
+            .position(|g| g.tracking == Tracking::Held)
+            .unwrap();
+    let run = |t: Tracking, from: usize| got[from..].iter().take_while(|g| g.tracking == t).count();
+    let held2 = run(Tracking::Held, lost);
+    let back = run(Tracking::Returning, lost + held2);
+    let fixed = run(Tracking::Fixed, lost + held2 + back);
+    assert!((25..=29).contains(&held2), "0.3 s held: {held2}");
+    assert!((25..=29).contains(&back), "0.3 s returning: {back}");
+    assert!(fixed >= 70, "fixed until the tracker is back: {fixed}");
+    let weights: Vec<f32> = got[lost + held2..lost + held2 + back]
+        .iter()
+        .map(|g| g.weight)
+        .collect();
+    assert!(weights.windows(2).all(|w| w[1] <= w[0]), "{weights:?}");
+    let centre = fovea_model::headsets::by_id("quest3").unwrap().fovs()[0].projection_center_ndc();
+    let f = &got[lost + held2 + back];
+    assert!(
+        (f.ndc[0][0] - centre[0]).abs() < 1e-4 && (f.ndc[0][1] - centre[1]).abs() < 1e-4,
+        "fixed foveation's centre: {f:?} vs {centre:?}"
+    );
+
+    // Pursuit from (-10, 5) to (10, 5) at 20°/s: the fovea moves right every frame, close behind.
+    let pursuit_from = lost + held2 + back + fixed;
+    let pursuit: Vec<&Located> = got[pursuit_from..]
+        .iter()
+        .skip(50)
+        .take_while(|g| g.angles[0] < 9.0)
+        .collect();
+    assert!(
+        pursuit.len() >= 60,
+        "a second of pursuit: {}",
+        pursuit.len()
+    );
+    assert!(
+        pursuit.windows(2).all(|w| w[1].angles[0] > w[0].angles[0]),
+        "pursuit moves on every frame"
+    );
+
+    // The stats line says where the fovea is.
+    let st = stats(&lines);
+    assert!(st.iter().any(|l| l.contains(" Gaze=tracked@+")), "{st:#?}");
+    assert!(st.iter().any(|l| l.contains(" Gaze=fixed ")), "{st:#?}");
+    drop(lp);
+    assert_no_refusals(instance);
+}
+
+/// The yaw and pitch (degrees) a pose's −Z points at.
+fn pose_angles(p: xr::Posef) -> [f32; 2] {
+    let o = p.orientation;
+    let d = Quat::from_xyzw(o.x, o.y, o.z, o.w) * Vec3::NEG_Z;
+    fovea_model::gaze::angles_of(d).unwrap()
+}
+
+#[test]
+fn an_app_with_its_own_eye_gaze_binding_keeps_getting_it() {
+    in_own_process(
+        module_path!(),
+        "an_app_with_its_own_eye_gaze_binding_keeps_getting_it",
+        an_app_with_its_own_eye_gaze_binding_keeps_getting_it_here,
+    );
+}
+
+fn an_app_with_its_own_eye_gaze_binding_keeps_getting_it_here() {
+    let log = log_here("own", &[]);
+    let mut lp = running(eye_tracker(true, false, "fix 8,-3 for 10s"), &[EXT]);
+    let input = AppInput::new(&lp, true, true);
+    let mut own = Vec::new();
+    for _ in 0..120 {
+        lp.frame().unwrap();
+        input.sync(&lp);
+        own.push(input.own_pose(&lp));
+    }
+    // From the third frame on the session is focused: the application's own gaze is active, and
+    // points where the eye looks.
+    for (active, pose) in &own[5..] {
+        assert!(*active, "the application's gaze action is active");
+        let [yaw, pitch] = pose_angles(pose.expect("the application's gaze is located"));
+        assert!(
+            (yaw - 8.0).abs() < 0.01 && (pitch + 3.0).abs() < 0.01,
+            "{yaw} {pitch}"
+        );
+    }
+    let got = located(&log_lines(&log));
+    let last = got.last().expect("fovea located the gaze too");
+    assert_eq!(last.tracking, Tracking::Tracked);
+    assert!((last.angles[0] - 8.0).abs() < 0.05 && (last.angles[1] + 3.0).abs() < 0.05);
+    let instance = lp.app.instance;
+    drop(lp);
+    assert_no_refusals(instance);
+}
