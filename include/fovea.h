@@ -42,6 +42,16 @@
 #define FOVEA_ENV_MAX_FRAGMENT "FOVEA_MAX_FRAGMENT" /* 1, 2 or 4: the largest fragment a map asks for */
 #define FOVEA_ENV_INJECT "FOVEA_INJECT"             /* 0/1: foveate apps that never ask (shading rates in eye passes) */
 #define FOVEA_ENV_INJECT_LEVEL "FOVEA_INJECT_LEVEL" /* 0-4 or a level name: the level injection uses */
+/* The gaze source (docs/eye-tracking.md#settings); each also a fovea.toml key in lower case without FOVEA_. */
+#define FOVEA_ENV_GAZE "FOVEA_GAZE"                 /* 0/1: follow the eyes where the runtime has eye gaze (default 1) */
+#define FOVEA_ENV_GAZE_MIN_CUTOFF_HZ "FOVEA_GAZE_MIN_CUTOFF_HZ" /* the one-euro filter's cutoff at rest, Hz */
+#define FOVEA_ENV_GAZE_BETA "FOVEA_GAZE_BETA"       /* how fast the cutoff rises with the gaze's speed */
+#define FOVEA_ENV_GAZE_D_CUTOFF_HZ "FOVEA_GAZE_D_CUTOFF_HZ" /* the cutoff of the speed estimate, Hz */
+#define FOVEA_ENV_GAZE_SACCADE_DEG "FOVEA_GAZE_SACCADE_DEG" /* a jump of this many degrees resets the filter */
+#define FOVEA_ENV_GAZE_HOLD_S "FOVEA_GAZE_HOLD_S"   /* seconds the last good gaze is held */
+#define FOVEA_ENV_GAZE_RETURN_S "FOVEA_GAZE_RETURN_S" /* seconds of easing back to fixed foveation */
+#define FOVEA_ENV_GAZE_FIXATION_M "FOVEA_GAZE_FIXATION_M" /* metres to the plane the gaze ray meets */
+#define FOVEA_ENV_GAZE_ATTACH_AFTER_S "FOVEA_GAZE_ATTACH_AFTER_S" /* seconds, or "never": attach alone for apps that never attach */
 /* Where fovea.toml (XDG_CONFIG_HOME/fovea) and the log (XDG_STATE_HOME/fovea) are by default. */
 #define FOVEA_ENV_XDG_CONFIG_HOME "XDG_CONFIG_HOME"
 #define FOVEA_ENV_XDG_STATE_HOME "XDG_STATE_HOME"
@@ -64,6 +74,15 @@
     X(FOVEA_ENV_MAX_FRAGMENT)                    \
     X(FOVEA_ENV_INJECT)                          \
     X(FOVEA_ENV_INJECT_LEVEL)                    \
+    X(FOVEA_ENV_GAZE)                            \
+    X(FOVEA_ENV_GAZE_MIN_CUTOFF_HZ)              \
+    X(FOVEA_ENV_GAZE_BETA)                       \
+    X(FOVEA_ENV_GAZE_D_CUTOFF_HZ)                \
+    X(FOVEA_ENV_GAZE_SACCADE_DEG)                \
+    X(FOVEA_ENV_GAZE_HOLD_S)                     \
+    X(FOVEA_ENV_GAZE_RETURN_S)                   \
+    X(FOVEA_ENV_GAZE_FIXATION_M)                 \
+    X(FOVEA_ENV_GAZE_ATTACH_AFTER_S)             \
     X(FOVEA_ENV_XDG_CONFIG_HOME)                 \
     X(FOVEA_ENV_XDG_STATE_HOME)                  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL)    \

@@ -339,7 +339,8 @@ pub struct Settings {
     pub gaze: GazeSettings,
 }
 
-/// What the gaze source does; settings (`fovea.toml`, the environment: docs/settings.md).
+/// What the gaze source does (`gaze`, `gaze_*` in `fovea.toml` or `FOVEA_GAZE*`:
+/// docs/eye-tracking.md#settings), read when the instance is created.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GazeSettings {
     /// Use the runtime's eye gaze at all.
@@ -351,19 +352,41 @@ pub struct GazeSettings {
     pub attach_after_s: Option<f32>,
 }
 
+impl GazeSettings {
+    /// From the resolved keys: each one set replaces its default.
+    fn from_resolved(r: &fovea_config::Resolved) -> GazeSettings {
+        use fovea_config::Key;
+        let d = GazeSettings::default();
+        let n = |k: Key, default: f32| r.number(k).unwrap_or(default);
+        GazeSettings {
+            on: r.flag(Key::Gaze).unwrap_or(d.on),
+            params: GazeParams {
+                min_cutoff_hz: n(Key::GazeMinCutoff, d.params.min_cutoff_hz),
+                beta: n(Key::GazeBeta, d.params.beta),
+                d_cutoff_hz: n(Key::GazeDCutoff, d.params.d_cutoff_hz),
+                saccade_deg: n(Key::GazeSaccade, d.params.saccade_deg),
+                hold_s: n(Key::GazeHold, d.params.hold_s),
+                return_s: n(Key::GazeReturn, d.params.return_s),
+                fixation_m: n(Key::GazeFixation, d.params.fixation_m),
+            },
+            attach_after_s: match r.get(Key::GazeAttachAfter) {
+                Some(fovea_config::Value::Never) => None,
+                Some(fovea_config::Value::Number(s)) => Some(*s),
+                _ => d.attach_after_s,
+            },
+        }
+    }
+}
+
 impl Default for GazeSettings {
     fn default() -> GazeSettings {
         GazeSettings {
             on: true,
             params: GazeParams::default(),
-            attach_after_s: Some(DEFAULT_ATTACH_AFTER_S),
+            attach_after_s: Some(fovea_config::DEFAULT_GAZE_ATTACH_AFTER_S),
         }
     }
 }
-
-/// The default grace period before fovea attaches alone (docs/eye-tracking.md#apps-that-never-attach): long enough for an application that attaches
-/// after a loading screen, short enough that one that never does still gets gaze within a minute.
-pub const DEFAULT_ATTACH_AFTER_S: f32 = 30.0;
 
 /// The level injection uses when `inject` is on and `inject_level` is not given: medium, a level
 /// whose full-rate centre covers what the eye resolves sharply (docs/density-model.md#floors), so
@@ -437,7 +460,7 @@ impl Settings {
             log_file: r.text(Key::LogFile).map(String::from),
             identity: id.clone(),
             config: None,
-            gaze: GazeSettings::default(),
+            gaze: GazeSettings::from_resolved(&r),
         }
     }
 }
@@ -476,6 +499,53 @@ mod tests {
         assert!(!s(Some("0")).symmetric_fov);
         assert!(!s(Some("yes")).symmetric_fov);
         assert!(!s(None).symmetric_fov);
+    }
+
+    #[test]
+    fn gaze_settings_come_from_the_environment() {
+        let s = |pairs: &'static [(&'static str, &'static str)]| {
+            Settings::from_lookup(move |k| pairs.iter().find(|p| p.0 == k).map(|p| p.1.to_string()))
+                .gaze
+        };
+        assert_eq!(s(&[]), GazeSettings::default());
+        assert!(s(&[]).on, "on by default");
+        assert!(!s(&[("FOVEA_GAZE", "0")]).on);
+        let g = s(&[
+            ("FOVEA_GAZE_MIN_CUTOFF_HZ", "2.5"),
+            ("FOVEA_GAZE_BETA", "0.2"),
+            ("FOVEA_GAZE_D_CUTOFF_HZ", "0.5"),
+            ("FOVEA_GAZE_SACCADE_DEG", "6"),
+            ("FOVEA_GAZE_HOLD_S", "0.1"),
+            ("FOVEA_GAZE_RETURN_S", "0"),
+            ("FOVEA_GAZE_FIXATION_M", "2"),
+            ("FOVEA_GAZE_ATTACH_AFTER_S", "never"),
+        ]);
+        assert_eq!(
+            g.params,
+            GazeParams {
+                min_cutoff_hz: 2.5,
+                beta: 0.2,
+                d_cutoff_hz: 0.5,
+                saccade_deg: 6.0,
+                hold_s: 0.1,
+                return_s: 0.0,
+                fixation_m: 2.0,
+            }
+        );
+        assert_eq!(g.attach_after_s, None);
+        assert_eq!(
+            s(&[("FOVEA_GAZE_ATTACH_AFTER_S", "2")]).attach_after_s,
+            Some(2.0)
+        );
+        let bad = s(&[
+            ("FOVEA_GAZE_MIN_CUTOFF_HZ", "0"),
+            ("FOVEA_GAZE_HOLD_S", "-1"),
+        ]);
+        assert_eq!(
+            bad.params,
+            GazeParams::default(),
+            "out of range: the defaults"
+        );
     }
 
     #[test]

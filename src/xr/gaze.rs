@@ -432,7 +432,7 @@ impl InstanceGaze {
         let r = down(&copy);
         if succeeded(r) {
             self.own.lock().attached = true;
-            g.attached();
+            g.attached(set);
         }
         r
     }
@@ -470,49 +470,10 @@ impl InstanceGaze {
             after_s = ?self.settings.attach_after_s,
             "the application attached no action set in the grace period; fovea attached its own \
              for eye gaze (an attach by the application from now on fails: see \
-             docs/eye-tracking.md#apps-that-never-attach)"
+             docs/eye-tracking.md#applications-that-do-not-cooperate)"
         );
         self.own.lock().attached = true;
-        g.attached();
-    }
-
-    /// fovea's set, while it is attached to `g`'s session.
-    fn attached_set(&self, g: &SessionGaze) -> Option<xr::ActionSet> {
-        if g.phase.load(Acquire) != ATTACHED {
-            return None;
-        }
-        self.own.lock().set.map(|(set, _)| set)
-    }
-
-    /// The active set fovea adds to the application's `xrSyncActions`, while it is attached.
-    pub fn active_set(&self, g: &SessionGaze) -> Option<xr::ActiveActionSet> {
-        g.app_synced.store(true, Relaxed);
-        self.attached_set(g).map(|action_set| xr::ActiveActionSet {
-            action_set,
-            subaction_path: xr::Path::NULL,
-        })
-    }
-
-    /// Syncs fovea's set alone, for an application that attached but has never synced.
-    pub fn sync_alone(&self, g: &SessionGaze) {
-        let Some(action_set) = self.attached_set(g) else {
-            return;
-        };
-        let active = xr::ActiveActionSet {
-            action_set,
-            subaction_path: xr::Path::NULL,
-        };
-        let info = xr::ActionsSyncInfo {
-            ty: xr::StructureType::ACTIONS_SYNC_INFO,
-            next: std::ptr::null(),
-            count_active_action_sets: 1,
-            active_action_sets: &active,
-        };
-        // SAFETY: a live session and fovea's own attached set.
-        let r = unsafe { (self.calls.sync)(g.session, &info) };
-        if let Err(r) = ok("xrSyncActions", r) {
-            g.fail(r, "the runtime refused to sync fovea's eye gaze action set");
-        }
+        g.attached(set);
     }
 }
 
@@ -542,6 +503,8 @@ pub struct SessionGaze {
     phase: AtomicU8,
     gaze_space: AtomicU64,
     view_space: AtomicU64,
+    /// fovea's set, once attached to this session.
+    set: AtomicU64,
     app_attached: AtomicBool,
     app_synced: AtomicBool,
     /// The view configuration the session began with (0: not running).
@@ -599,6 +562,7 @@ impl SessionGaze {
             phase: AtomicU8::new(WAITING),
             gaze_space: AtomicU64::new(0),
             view_space: AtomicU64::new(0),
+            set: AtomicU64::new(0),
             app_attached: AtomicBool::new(false),
             app_synced: AtomicBool::new(false),
             view_config: AtomicI32::new(0),
@@ -633,7 +597,7 @@ impl SessionGaze {
 
     /// fovea's set is attached: make the gaze space and the VIEW space (only now: some runtimes
     /// refuse a gaze space before).
-    fn attached(&self) {
+    fn attached(&self, set: xr::ActionSet) {
         let info = xr::ActionSpaceCreateInfo {
             ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
             next: std::ptr::null(),
@@ -661,7 +625,45 @@ impl SessionGaze {
         }
         self.gaze_space.store(gaze.into_raw(), Relaxed);
         self.view_space.store(view.into_raw(), Relaxed);
+        self.set.store(set.into_raw(), Relaxed);
         self.phase.store(ATTACHED, Release);
+    }
+
+    /// fovea's set, while it is attached to the session (atomics only: this runs every frame).
+    fn attached_set(&self) -> Option<xr::ActionSet> {
+        (self.phase.load(Acquire) == ATTACHED)
+            .then(|| xr::ActionSet::from_raw(self.set.load(Relaxed)))
+    }
+
+    /// The active set fovea adds to the application's `xrSyncActions`, while it is attached.
+    pub fn active_set(&self) -> Option<xr::ActiveActionSet> {
+        self.app_synced.store(true, Relaxed);
+        self.attached_set().map(|action_set| xr::ActiveActionSet {
+            action_set,
+            subaction_path: xr::Path::NULL,
+        })
+    }
+
+    /// Syncs fovea's set alone, for an application that attached but has never synced.
+    pub fn sync_alone(&self) {
+        let Some(action_set) = self.attached_set() else {
+            return;
+        };
+        let active = xr::ActiveActionSet {
+            action_set,
+            subaction_path: xr::Path::NULL,
+        };
+        let info = xr::ActionsSyncInfo {
+            ty: xr::StructureType::ACTIONS_SYNC_INFO,
+            next: std::ptr::null(),
+            count_active_action_sets: 1,
+            active_action_sets: &active,
+        };
+        // SAFETY: a live session and fovea's own attached set.
+        let r = unsafe { (self.calls.sync)(self.session, &info) };
+        if let Err(r) = ok("xrSyncActions", r) {
+            self.fail(r, "the runtime refused to sync fovea's eye gaze action set");
+        }
     }
 
     /// `xrBeginSession` succeeded with this primary view configuration.

@@ -113,6 +113,26 @@ pub mod env {
     pub const INJECT: &str = "FOVEA_INJECT";
     /// The level injection uses (0-4 or a level name); above the file's `inject_level`.
     pub const INJECT_LEVEL: &str = "FOVEA_INJECT_LEVEL";
+    /// `FOVEA_GAZE=0` switches the gaze source off (default on: the fovea follows the eyes where
+    /// the runtime has eye gaze; docs/eye-tracking.md); above the file's `gaze`.
+    pub const GAZE: &str = "FOVEA_GAZE";
+    /// The gaze filter's cutoff at rest, in Hz (`gaze_min_cutoff_hz`).
+    pub const GAZE_MIN_CUTOFF_HZ: &str = "FOVEA_GAZE_MIN_CUTOFF_HZ";
+    /// How fast the filter's cutoff rises with the gaze's speed (`gaze_beta`).
+    pub const GAZE_BETA: &str = "FOVEA_GAZE_BETA";
+    /// The cutoff of the filter's speed estimate, in Hz (`gaze_d_cutoff_hz`).
+    pub const GAZE_D_CUTOFF_HZ: &str = "FOVEA_GAZE_D_CUTOFF_HZ";
+    /// A jump of at least this many degrees is a saccade, taken as it is (`gaze_saccade_deg`).
+    pub const GAZE_SACCADE_DEG: &str = "FOVEA_GAZE_SACCADE_DEG";
+    /// How long the last good gaze is held while it is invalid, in seconds (`gaze_hold_s`).
+    pub const GAZE_HOLD_S: &str = "FOVEA_GAZE_HOLD_S";
+    /// How long the fovea then eases back to fixed foveation, in seconds (`gaze_return_s`).
+    pub const GAZE_RETURN_S: &str = "FOVEA_GAZE_RETURN_S";
+    /// Distance of the fixation plane the gaze ray meets, in metres (`gaze_fixation_m`).
+    pub const GAZE_FIXATION_M: &str = "FOVEA_GAZE_FIXATION_M";
+    /// Seconds before fovea attaches its gaze action set alone for an application that attached
+    /// none, or `never` (`gaze_attach_after_s`).
+    pub const GAZE_ATTACH_AFTER_S: &str = "FOVEA_GAZE_ATTACH_AFTER_S";
     /// Names a hook that panics on purpose, to prove panics never cross the FFI boundary.
     pub const INJECT_PANIC: &str = "FOVEA_INJECT_PANIC";
     /// `FOVEA_VK_LAYER=1`: the `enable_environment` of the implicit Vulkan layer manifest that

@@ -36,6 +36,11 @@ pub fn locate(vars: &BTreeMap<String, String>) -> Located {
     }
 }
 
+/// A gaze parameter's default ([`fovea_model::gaze::GazeParams`]).
+fn gaze_default(field: impl Fn(&fovea_model::gaze::GazeParams) -> f32) -> String {
+    field(&fovea_model::gaze::GazeParams::default()).to_string()
+}
+
 /// What applies when nothing sets `key`.
 fn default_of(key: Key, vars: &BTreeMap<String, String>) -> String {
     match key {
@@ -44,6 +49,15 @@ fn default_of(key: Key, vars: &BTreeMap<String, String>) -> String {
         Key::InjectLevel => "none".into(),
         Key::MaxFragment => format!("{0}x{0}", fovea_config::DEFAULT_MAX_FRAGMENT),
         Key::Log => "\"warn\"".into(),
+        Key::Gaze => "on".into(),
+        Key::GazeMinCutoff => gaze_default(|p| p.min_cutoff_hz),
+        Key::GazeBeta => gaze_default(|p| p.beta),
+        Key::GazeDCutoff => gaze_default(|p| p.d_cutoff_hz),
+        Key::GazeSaccade => gaze_default(|p| p.saccade_deg),
+        Key::GazeHold => gaze_default(|p| p.hold_s),
+        Key::GazeReturn => gaze_default(|p| p.return_s),
+        Key::GazeFixation => gaze_default(|p| p.fixation_m),
+        Key::GazeAttachAfter => fovea_config::DEFAULT_GAZE_ATTACH_AFTER_S.to_string(),
         Key::LogFile => fovea_config::default_log_path(|k| vars.get(k).map(OsString::from))
             .map_or("none (no home folder)".into(), |p| {
                 format!("{:?}", p.display().to_string())

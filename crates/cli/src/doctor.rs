@@ -1,7 +1,8 @@
 //! `fovea doctor`: what the Khronos loader would find on Linux ([`crate::found`]: the active runtime,
 //! the explicit and implicit layer manifests, which layers it enables and in which order) and the
-//! misconfigurations that keep fovea from loading or load it twice; then what [`crate::vk_doctor`]
-//! finds of the Vulkan layer and each GPU.
+//! misconfigurations that keep fovea from loading or load it twice; whether the runtime has eye
+//! gaze ([`crate::xr_doctor`]); then what [`crate::vk_doctor`] finds of the Vulkan layer and each
+//! GPU.
 //!
 //! [`problems`] takes what was found as an argument, so tests drive it without the real home
 //! directory or `/etc`.
@@ -11,6 +12,7 @@ use std::path::{Path, PathBuf};
 use crate::discovery::{process_vars, Environment, Kind};
 use crate::found::{discover, Discovery, Manifest, Skip};
 use crate::vk_doctor;
+use crate::xr_doctor;
 
 /// The misconfigurations, one line each.
 pub fn problems(d: &Discovery) -> Vec<String> {
@@ -276,7 +278,16 @@ pub fn run(args: &crate::args::DoctorArgs) -> Result<(), String> {
     for n in &container {
         println!("note: {n}");
     }
+    // The runtime's eye gaze: information, never a problem (fixed foveation works everywhere).
+    let gaze = match d.runtime.as_ref().map(|rt| &rt.read) {
+        Some(Ok((_, library))) => match xr_doctor::eye_gaze(library) {
+            Ok(g) => g.describe(),
+            Err(e) => format!("eye gaze: cannot ask the runtime ({e})"),
+        },
+        _ => "eye gaze: no usable runtime to ask".into(),
+    };
     let mut vk = vk_doctor::Report::default();
+    vk.lines.push(gaze);
     vk.lines
         .push(format!("Vulkan layer {}:", fovea_abi::VK_LAYER_NAME));
     let openxr_found = d.implicit.iter().chain(&d.explicit).any(Manifest::is_fovea);

@@ -17,6 +17,7 @@
 //! | 2 | `install.rs` | `fovea install`, `fovea uninstall` |
 //! | 2 | `found.rs` | what the OpenXR loader would find: the active runtime, each layer manifest, the load order |
 //! | 2 | `vk_doctor.rs` | `fovea doctor`'s Vulkan half: each GPU, and where the Vulkan layer is installed |
+//! | 2 | `xr_doctor.rs` | `fovea doctor`'s eye gaze line: whether the runtime offers eye gaze and its system has an eye tracker |
 //! | 2 | `demo/setup.rs` | what both ways of running the demo share |
 //! | 3 | `maps.rs` | `fovea maps` |
 //! | 3 | `report.rs` | `fovea report` |
@@ -41,6 +42,7 @@ mod maps;
 mod report;
 mod target;
 mod vk_doctor;
+mod xr_doctor;
 
 use clap::Parser;
 

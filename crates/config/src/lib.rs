@@ -39,7 +39,9 @@ use toml::de::{DeTable, DeValue};
 /// Environment variables this crate reads.
 pub mod env {
     pub use fovea_abi::env::{
-        CONFIG, INJECT, INJECT_LEVEL, LOG, LOG_FILE, MAX_FRAGMENT, SYMMETRIC_FOV,
+        CONFIG, GAZE, GAZE_ATTACH_AFTER_S, GAZE_BETA, GAZE_D_CUTOFF_HZ, GAZE_FIXATION_M,
+        GAZE_HOLD_S, GAZE_MIN_CUTOFF_HZ, GAZE_RETURN_S, GAZE_SACCADE_DEG, INJECT, INJECT_LEVEL,
+        LOG, LOG_FILE, MAX_FRAGMENT, SYMMETRIC_FOV,
     };
     /// Quest's `debug.oculus.foveation.level` as a variable.
     pub const LEVEL: &str = "DEBUG_OCULUS_FOVEATION_LEVEL";
@@ -69,10 +71,25 @@ pub enum Key {
     InjectLevel,
     Log,
     LogFile,
+    Gaze,
+    GazeMinCutoff,
+    GazeBeta,
+    GazeDCutoff,
+    GazeSaccade,
+    GazeHold,
+    GazeReturn,
+    GazeFixation,
+    GazeAttachAfter,
 }
 
 /// How many keys there are.
-pub const KEYS: usize = 9;
+pub const KEYS: usize = 18;
+
+/// Seconds of display time before fovea attaches its own eye gaze action set in a session whose
+/// application attached none (`gaze_attach_after_s`; docs/eye-tracking.md#applications-that-do-not-cooperate):
+/// long enough for an application that attaches after a loading screen, short enough that one
+/// that never does still gets gaze within a minute.
+pub const DEFAULT_GAZE_ATTACH_AFTER_S: f32 = 30.0;
 
 impl Key {
     pub const ALL: [Key; KEYS] = [
@@ -85,6 +102,15 @@ impl Key {
         Key::InjectLevel,
         Key::Log,
         Key::LogFile,
+        Key::Gaze,
+        Key::GazeMinCutoff,
+        Key::GazeBeta,
+        Key::GazeDCutoff,
+        Key::GazeSaccade,
+        Key::GazeHold,
+        Key::GazeReturn,
+        Key::GazeFixation,
+        Key::GazeAttachAfter,
     ];
 
     /// The key as written in the file.
@@ -99,6 +125,29 @@ impl Key {
             Key::InjectLevel => "inject_level",
             Key::Log => "log",
             Key::LogFile => "log_file",
+            Key::Gaze => "gaze",
+            Key::GazeMinCutoff => "gaze_min_cutoff_hz",
+            Key::GazeBeta => "gaze_beta",
+            Key::GazeDCutoff => "gaze_d_cutoff_hz",
+            Key::GazeSaccade => "gaze_saccade_deg",
+            Key::GazeHold => "gaze_hold_s",
+            Key::GazeReturn => "gaze_return_s",
+            Key::GazeFixation => "gaze_fixation_m",
+            Key::GazeAttachAfter => "gaze_attach_after_s",
+        }
+    }
+
+    /// The range a numeric key accepts (inclusive; a lower bound of 0 for the cutoffs and the
+    /// saccade threshold is exclusive).
+    pub fn range(self) -> Option<(f32, f32)> {
+        match self {
+            Key::GazeMinCutoff | Key::GazeDCutoff => Some((0.0, 100.0)),
+            Key::GazeBeta => Some((0.0, 10.0)),
+            Key::GazeSaccade => Some((0.0, 90.0)),
+            Key::GazeHold | Key::GazeReturn => Some((0.0, 10.0)),
+            Key::GazeFixation => Some((0.1, 100.0)),
+            Key::GazeAttachAfter => Some((0.0, 3600.0)),
+            _ => None,
         }
     }
 
@@ -108,9 +157,15 @@ impl Key {
             Key::Level | Key::InjectLevel => {
                 "\"none\", \"low\", \"medium\", \"high\", \"high-top\" or 0-4"
             }
-            Key::Dynamic | Key::SymmetricFov | Key::Inject => {
+            Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::Gaze => {
                 "true or false (also \"on\"/\"off\", 1/0)"
             }
+            Key::GazeMinCutoff | Key::GazeDCutoff => "hertz above 0, at most 100, e.g. 1.0",
+            Key::GazeBeta => "a number from 0 to 10, e.g. 0.1",
+            Key::GazeSaccade => "degrees above 0, at most 90, e.g. 4.5",
+            Key::GazeHold | Key::GazeReturn => "seconds from 0 to 10, e.g. 0.3",
+            Key::GazeFixation => "metres from 0.1 to 100, e.g. 1.0",
+            Key::GazeAttachAfter => "seconds from 0 to 3600, or \"never\"",
             Key::VerticalOffset => "degrees from -55 to 55, e.g. -5.5",
             Key::MaxFragment => "1, 2 or 4",
             Key::Log => "a tracing filter string, e.g. \"info\" or \"warn,fovea::stats=info\"",
@@ -129,6 +184,15 @@ impl Key {
             Key::LogFile => Some(env::LOG_FILE),
             Key::Inject => Some(env::INJECT),
             Key::InjectLevel => Some(env::INJECT_LEVEL),
+            Key::Gaze => Some(env::GAZE),
+            Key::GazeMinCutoff => Some(env::GAZE_MIN_CUTOFF_HZ),
+            Key::GazeBeta => Some(env::GAZE_BETA),
+            Key::GazeDCutoff => Some(env::GAZE_D_CUTOFF_HZ),
+            Key::GazeSaccade => Some(env::GAZE_SACCADE_DEG),
+            Key::GazeHold => Some(env::GAZE_HOLD_S),
+            Key::GazeReturn => Some(env::GAZE_RETURN_S),
+            Key::GazeFixation => Some(env::GAZE_FIXATION_M),
+            Key::GazeAttachAfter => Some(env::GAZE_ATTACH_AFTER_S),
             Key::VerticalOffset => None,
         }
     }
@@ -145,6 +209,10 @@ pub enum Value {
     Bool(bool),
     Degrees(f32),
     Fragment(u32),
+    /// A gaze parameter, in the unit its key names.
+    Number(f32),
+    /// `gaze_attach_after_s = "never"`.
+    Never,
     Text(String),
 }
 
@@ -155,6 +223,8 @@ impl fmt::Display for Value {
             Value::Bool(b) => f.write_str(if *b { "on" } else { "off" }),
             Value::Degrees(d) => write!(f, "{d}°"),
             Value::Fragment(n) => write!(f, "{n}x{n}"),
+            Value::Number(n) => write!(f, "{n}"),
+            Value::Never => f.write_str("never"),
             Value::Text(t) => write!(f, "{t:?}"),
         }
     }
@@ -176,7 +246,35 @@ fn parse_value(key: Key, raw: Raw<'_>) -> Option<Value> {
             Raw::Str(s) | Raw::Int(s) => s.parse::<Level>().ok().map(Value::Level),
             _ => None,
         },
-        Key::Dynamic | Key::SymmetricFov | Key::Inject => match raw {
+        Key::GazeAttachAfter if matches!(raw, Raw::Str(s) if s.trim().eq_ignore_ascii_case("never")) => {
+            Some(Value::Never)
+        }
+        Key::GazeMinCutoff
+        | Key::GazeBeta
+        | Key::GazeDCutoff
+        | Key::GazeSaccade
+        | Key::GazeHold
+        | Key::GazeReturn
+        | Key::GazeFixation
+        | Key::GazeAttachAfter => {
+            let (low, high) = key.range()?;
+            // The cutoffs and the saccade threshold must be above 0; the others may be 0.
+            let open = matches!(
+                key,
+                Key::GazeMinCutoff | Key::GazeDCutoff | Key::GazeSaccade
+            );
+            match raw {
+                Raw::Int(s) | Raw::Float(s) | Raw::Str(s) => s
+                    .trim()
+                    .replace('_', "")
+                    .parse::<f32>()
+                    .ok()
+                    .filter(|v| v.is_finite() && *v <= high && (*v > low || (!open && *v == low)))
+                    .map(Value::Number),
+                _ => None,
+            }
+        }
+        Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::Gaze => match raw {
             Raw::Bool(b) => Some(Value::Bool(b)),
             Raw::Int("0") => Some(Value::Bool(false)),
             Raw::Int("1") => Some(Value::Bool(true)),
@@ -584,6 +682,14 @@ impl Resolved {
         match self.get(Key::MaxFragment) {
             Some(Value::Fragment(n)) => *n,
             _ => DEFAULT_MAX_FRAGMENT,
+        }
+    }
+
+    /// A gaze parameter's value, where set.
+    pub fn number(&self, key: Key) -> Option<f32> {
+        match self.get(key) {
+            Some(Value::Number(n)) => Some(*n),
+            _ => None,
         }
     }
 

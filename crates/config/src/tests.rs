@@ -246,3 +246,58 @@ fn paths_follow_xdg() {
         Some(PathBuf::from("/s/fovea/fovea.log"))
     );
 }
+
+#[test]
+fn gaze_keys_parse_per_app_with_their_ranges() {
+    let c = parsed(
+        r#"
+gaze = false
+gaze_hold_s = 0.5
+[app."hello_xr"]
+gaze = "on"
+gaze_min_cutoff_hz = 2
+gaze_beta = 0.05
+gaze_d_cutoff_hz = 1.5
+gaze_saccade_deg = 5.0
+gaze_return_s = 0
+gaze_fixation_m = 2.5
+gaze_attach_after_s = "never"
+[app."other"]
+gaze_attach_after_s = 5
+gaze_min_cutoff_hz = 0
+gaze_fixation_m = 0.05
+gaze_hold_s = "long"
+"#,
+    );
+    let (r, _) = resolve(Some(&c), &id(Some("hello_xr"), None, None), no_env);
+    assert_eq!(r.flag(Key::Gaze), Some(true));
+    assert_eq!(r.number(Key::GazeMinCutoff), Some(2.0));
+    assert_eq!(r.number(Key::GazeBeta), Some(0.05));
+    assert_eq!(r.number(Key::GazeDCutoff), Some(1.5));
+    assert_eq!(r.number(Key::GazeSaccade), Some(5.0));
+    assert_eq!(
+        r.number(Key::GazeHold),
+        Some(0.5),
+        "from the global section"
+    );
+    assert_eq!(r.number(Key::GazeReturn), Some(0.0));
+    assert_eq!(r.number(Key::GazeFixation), Some(2.5));
+    assert_eq!(r.get(Key::GazeAttachAfter), Some(&Value::Never));
+    let (o, _) = resolve(Some(&c), &id(Some("other"), None, None), no_env);
+    assert_eq!(o.flag(Key::Gaze), Some(false));
+    assert_eq!(o.number(Key::GazeAttachAfter), Some(5.0));
+    assert_eq!(o.number(Key::GazeMinCutoff), None, "0 Hz is refused");
+    assert_eq!(o.number(Key::GazeFixation), None, "below 0.1 m is refused");
+    let bad: Vec<&str> = c.problems.iter().map(|p| p.key.as_str()).collect();
+    assert_eq!(
+        bad,
+        ["gaze_min_cutoff_hz", "gaze_fixation_m", "gaze_hold_s"],
+        "{:?}",
+        c.problems
+    );
+    let (e, wrong) = resolve(None, &id(None, None, None), |k| {
+        (k == "FOVEA_GAZE_BETA").then(|| "-1".to_string())
+    });
+    assert_eq!(e.number(Key::GazeBeta), None);
+    assert_eq!(wrong.len(), 1, "a bad variable is reported");
+}

@@ -66,10 +66,10 @@ pub fn sync_actions(sess: xr::Session, info: In<xr::ActionsSyncInfo>) -> HookRes
     let f = next(s.instance.next.sync_actions)?;
     // SAFETY: the next layer's function, with the application's arguments or fovea's copy of them.
     let down = |i: *const xr::ActionsSyncInfo| unsafe { f(sess, i) };
-    let (Some(ig), Some(sg), Some(app)) = (&s.instance.gaze, &s.gaze, info.get()) else {
+    let (Some(sg), Some(app)) = (&s.gaze, info.get()) else {
         return Ok(observed(&s, down(info.raw())));
     };
-    let Some(ours) = ig.active_set(sg) else {
+    let Some(ours) = sg.active_set() else {
         return Ok(observed(&s, down(info.raw())));
     };
     let n = app.count_active_action_sets as usize;

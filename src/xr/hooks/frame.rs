@@ -42,7 +42,7 @@ pub fn wait_frame(
                 Due::Nothing => {}
                 Due::AttachAlone => ig.attach_alone(g),
                 Due::SyncAlone => {
-                    ig.sync_alone(g);
+                    g.sync_alone();
                     if let Some(centres) = g.update() {
                         *s.eyes.lock() = centres;
                     }

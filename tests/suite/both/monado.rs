@@ -16,6 +16,9 @@
 //!   map it read back is fovea's model at the FOVs Monado located for it, texel for texel; in
 //!   symmetric-FOV mode the FOVs it located are the model's symmetric FOV of Monado's and the maps
 //!   the model's for those, with Monado's own FOVs as what is visible; with injection on, the same.
+//! - Eye gaze: Monado's simulated headset lists XR_EXT_eye_gaze_interaction without an eye tracker;
+//!   fovea's gaze source (on by default) falls back to fixed foveation with one line, and hello_xr
+//!   runs clean.
 //!
 //! Monado is not packaged for Debian 12: the tests print why they skip where it is absent, and fail
 //! instead under `FOVEA_REQUIRE_MONADO=1`, which `.ci/trixie` sets in its Debian 13 root
@@ -497,6 +500,50 @@ fn hello_xr_vulkan2_through_fovea_on_monado_is_clean() {
 #[test]
 fn hello_xr_vulkan_through_fovea_on_monado_ends_as_without_fovea() {
     hello_xr_on_monado("Vulkan");
+}
+
+/// Monado's simulated headset lists XR_EXT_eye_gaze_interaction and reports no eye tracker
+/// (`supportsEyeGazeInteraction` false). With fovea's gaze on (the default), hello_xr (which uses
+/// actions of its own) runs as before: fovea enables the extension, asks the system, says once why
+/// the foveation stays fixed, and neither Monado nor a validation layer says anything.
+#[test]
+fn eye_gaze_on_monado_falls_back_to_fixed_foveation_cleanly() {
+    let Some(m) = monado() else { return };
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let (run, passed, transcript) = hello_xr_run(&m, "Vulkan2", true);
+    assert!(passed, "no frames through fovea\n{transcript}");
+    assert_eq!(run.code, Some(0), "{transcript}");
+    let gaze: Vec<&str> = run
+        .stderr
+        .lines()
+        .filter(|l| l.contains(log_target::GAZE))
+        .collect();
+    assert_eq!(
+        gaze.len(),
+        1,
+        "one line about the gaze: {gaze:#?}\n{transcript}"
+    );
+    assert!(
+        gaze[0].contains("INFO") && gaze[0].contains("no eye tracker"),
+        "{}\n{transcript}",
+        gaze[0]
+    );
+    let stats: Vec<&str> = run
+        .stderr
+        .lines()
+        .filter(|l| l.contains("fovea::stats: FPS="))
+        .collect();
+    assert!(
+        !stats.is_empty() && stats.iter().all(|l| l.contains(" Gaze=fixed ")),
+        "{stats:#?}\n{transcript}"
+    );
+    let messages = hello_xr_messages(&run);
+    assert!(
+        messages.is_empty(),
+        "{} messages:\n{}\n\n{transcript}",
+        messages.len(),
+        messages.join("\n")
+    );
 }
 
 /// What one example run printed and read back.

@@ -490,6 +490,7 @@ const CLI_FLOORS: &[Place] = &[
     at(20, "install.rs"),
     at(20, "found.rs"),
     at(20, "vk_doctor.rs"),
+    at(20, "xr_doctor.rs"),
     at(20, "demo/setup.rs"),
     at(30, "maps.rs"),
     at(30, "report.rs"),

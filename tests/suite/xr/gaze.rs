@@ -517,3 +517,281 @@ fn an_app_with_its_own_eye_gaze_binding_keeps_getting_it_here() {
     drop(lp);
     assert_no_refusals(instance);
 }
+
+/// The lines of `target`'s at `level` that contain `text`.
+fn said<'a>(lines: &'a [String], level: &str, text: &str) -> Vec<&'a String> {
+    lines
+        .iter()
+        .filter(|l| {
+            l.contains(level) && l.contains(fovea_abi::log_target::GAZE) && l.contains(text)
+        })
+        .collect()
+}
+
+/// Runs `frames` frames of an application that attaches and syncs its own set.
+fn attach_and_sync(lp: &mut HeadlessLoop, frames: usize) {
+    let input = AppInput::new(lp, false, true);
+    for _ in 0..frames {
+        lp.frame().unwrap();
+        input.sync(lp);
+    }
+}
+
+#[test]
+fn without_eye_gaze_the_foveation_stays_fixed_with_one_line_saying_why() {
+    in_own_process(
+        module_path!(),
+        "without_eye_gaze_the_foveation_stays_fixed_with_one_line_saying_why",
+        without_eye_gaze_here,
+    );
+}
+
+fn without_eye_gaze_here() {
+    let log = log_here("without", &[]);
+    // A runtime without the extension, twice: one line for the process.
+    let mut instances = Vec::new();
+    for _ in 0..2 {
+        let mut cfg =
+            sim::control::SimConfig::for_headset(fovea_model::headsets::by_id("quest3").unwrap());
+        cfg.eye_gaze = None;
+        let mut lp = running(cfg, &[]);
+        attach_and_sync(&mut lp, 200);
+        assert!(
+            !sim::control::enabled_extensions(lp.app.instance).contains(&EXT.to_string()),
+            "nothing enabled that the runtime does not offer"
+        );
+        instances.push(lp.app.instance);
+    }
+    // A runtime that lists the extension on a system without an eye tracker (Monado's simulated
+    // headset): enabled, asked, and not used.
+    let mut lp = running(eye_tracker(false, false, ""), &[]);
+    attach_and_sync(&mut lp, 200);
+    assert!(sim::control::enabled_extensions(lp.app.instance).contains(&EXT.to_string()));
+    instances.push(lp.app.instance);
+    drop(lp);
+    let lines = log_lines(&log);
+    assert!(located(&lines).is_empty(), "no gaze located");
+    let st = stats(&lines);
+    assert!(st.len() >= 6, "{st:#?}");
+    assert!(st.iter().all(|l| l.contains(" Gaze=fixed ")), "{st:#?}");
+    assert_eq!(
+        said(&lines, "INFO", "does not offer XR_EXT_eye_gaze_interaction").len(),
+        1,
+        "{lines:#?}"
+    );
+    assert_eq!(
+        said(&lines, "INFO", "no eye tracker").len(),
+        1,
+        "{lines:#?}"
+    );
+    let gaze_lines = lines
+        .iter()
+        .filter(|l| l.contains(fovea_abi::log_target::GAZE))
+        .count();
+    assert_eq!(gaze_lines, 2, "one line per cause: {lines:#?}");
+    for i in instances {
+        assert_no_refusals(i);
+    }
+}
+
+#[test]
+fn gaze_switched_off_is_off() {
+    in_own_process(module_path!(), "gaze_switched_off_is_off", || {
+        let log = log_here("off", &[("FOVEA_GAZE", "0")]);
+        let mut lp = running(eye_tracker(true, false, "fix 10,0 for 10s"), &[]);
+        attach_and_sync(&mut lp, 200);
+        assert!(
+            !sim::control::enabled_extensions(lp.app.instance).contains(&EXT.to_string()),
+            "fovea enables nothing with gaze off"
+        );
+        let lines = log_lines(&log);
+        assert!(located(&lines).is_empty());
+        let st = stats(&lines);
+        assert!(
+            !st.is_empty() && st.iter().all(|l| l.contains(" Gaze=off ")),
+            "{st:#?}"
+        );
+    });
+}
+
+#[test]
+fn a_runtime_that_refuses_the_gaze_space_before_attach_works() {
+    in_own_process(
+        module_path!(),
+        "a_runtime_that_refuses_the_gaze_space_before_attach_works",
+        || {
+            let log = log_here("after-attach", &[]);
+            let mut lp = running(eye_tracker(true, true, "fix -6,4 for 10s"), &[]);
+            attach_and_sync(&mut lp, 60);
+            let got = located(&log_lines(&log));
+            let last = got.last().expect("located");
+            assert_eq!(last.tracking, Tracking::Tracked);
+            assert!((last.angles[0] + 6.0).abs() < 0.05 && (last.angles[1] - 4.0).abs() < 0.05);
+            let instance = lp.app.instance;
+            drop(lp);
+            assert_no_refusals(instance);
+        },
+    );
+}
+
+#[test]
+fn an_app_that_never_attaches_gets_gaze_after_the_grace_period() {
+    in_own_process(
+        module_path!(),
+        "an_app_that_never_attaches_gets_gaze_after_the_grace_period",
+        || {
+            let log = log_here("never-attaches", &[("FOVEA_GAZE_ATTACH_AFTER_S", "1")]);
+            let mut lp = running(eye_tracker(true, true, "fix 5,5 for 10s"), &[]);
+            for _ in 0..200 {
+                lp.frame().unwrap();
+            }
+            let lines = log_lines(&log);
+            let got = located(&lines);
+            // Attached after 1 s (90 frames), then synced alone every frame.
+            assert!((100..=112).contains(&got.len()), "{}", got.len());
+            let last = got.last().unwrap();
+            assert_eq!(last.tracking, Tracking::Tracked);
+            assert!((last.angles[0] - 5.0).abs() < 0.05 && (last.angles[1] - 5.0).abs() < 0.05);
+            assert_eq!(said(&lines, "INFO", "attached its own").len(), 1);
+            let instance = lp.app.instance;
+            drop(lp);
+            assert_no_refusals(instance);
+        },
+    );
+}
+
+#[test]
+fn never_attaching_alone_is_a_setting() {
+    in_own_process(module_path!(), "never_attaching_alone_is_a_setting", || {
+        let log = log_here("never", &[("FOVEA_GAZE_ATTACH_AFTER_S", "never")]);
+        let mut lp = running(eye_tracker(true, false, "fix 5,5 for 10s"), &[]);
+        // 35 s of virtual display time: past the default grace period.
+        for _ in 0..3150 {
+            lp.frame().unwrap();
+        }
+        // The application attaches late, and still can.
+        let input = AppInput::new(&lp, false, true);
+        for _ in 0..20 {
+            lp.frame().unwrap();
+            input.sync(&lp);
+        }
+        let lines = log_lines(&log);
+        assert!(said(&lines, "INFO", "attached its own").is_empty());
+        assert_eq!(located(&lines).last().unwrap().tracking, Tracking::Tracked);
+        let instance = lp.app.instance;
+        drop(lp);
+        assert_no_refusals(instance);
+    });
+}
+
+#[test]
+fn an_app_that_attaches_but_never_syncs_gets_gaze() {
+    in_own_process(
+        module_path!(),
+        "an_app_that_attaches_but_never_syncs_gets_gaze",
+        || {
+            let log = log_here("never-syncs", &[]);
+            let mut lp = running(eye_tracker(true, false, "fix 0,-8 for 10s"), &[]);
+            let _input = AppInput::new(&lp, false, true);
+            // The profile exists only for applications that enabled the extension, as without fovea.
+            // SAFETY: the type matches the name; the struct lives across the call.
+            let r = unsafe {
+                let suggest: xr::pfn::SuggestInteractionProfileBindings =
+                    lp.func(c"xrSuggestInteractionProfileBindings");
+                let binding = [xr::ActionSuggestedBinding {
+                    action: _input.action,
+                    binding: path(&lp, GAZE_POSE),
+                }];
+                let info = xr::InteractionProfileSuggestedBinding {
+                    ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
+                    next: std::ptr::null(),
+                    interaction_profile: path(&lp, PROFILE),
+                    count_suggested_bindings: 1,
+                    suggested_bindings: binding.as_ptr(),
+                };
+                suggest(lp.app.instance, &info)
+            };
+            assert_eq!(r, xr::Result::ERROR_PATH_UNSUPPORTED);
+            for _ in 0..60 {
+                lp.frame().unwrap();
+            }
+            let got = located(&log_lines(&log));
+            assert!(got.len() >= 55, "synced alone every frame: {}", got.len());
+            let last = got.last().unwrap();
+            assert_eq!(last.tracking, Tracking::Tracked);
+            assert!((last.angles[1] + 8.0).abs() < 0.05, "{last:?}");
+            let instance = lp.app.instance;
+            drop(lp);
+            assert_no_refusals(instance);
+        },
+    );
+}
+
+#[test]
+fn a_refused_call_falls_back_to_fixed_foveation_with_one_line() {
+    in_own_process(
+        module_path!(),
+        "a_refused_call_falls_back_to_fixed_foveation_with_one_line",
+        || {
+            let log = log_here("refused", &[]);
+            let mut cfg = eye_tracker(true, false, "fix 3,3 for 10s");
+            // fovea makes its gaze space inside the application's attach, before the application
+            // makes its own.
+            cfg.faults.push(sim::control::Fault {
+                function: "xrCreateActionSpace".into(),
+                result: xr::Result::ERROR_RUNTIME_FAILURE,
+                nth: 1,
+            });
+            let mut lp = running(cfg, &[]);
+            attach_and_sync(&mut lp, 200);
+            let lines = log_lines(&log);
+            assert!(located(&lines).is_empty());
+            assert_eq!(
+                said(&lines, "WARN", "refused fovea's eye gaze space").len(),
+                1,
+                "{lines:#?}"
+            );
+            assert!(stats(&lines).iter().all(|l| l.contains(" Gaze=fixed ")));
+            let instance = lp.app.instance;
+            drop(lp);
+            assert_eq!(
+                sim::control::refusals(instance),
+                vec![],
+                "only the injected fault"
+            );
+        },
+    );
+}
+
+#[test]
+fn a_gaze_that_never_becomes_active_is_said_once() {
+    in_own_process(
+        module_path!(),
+        "a_gaze_that_never_becomes_active_is_said_once",
+        || {
+            let log = log_here("never-active", &[]);
+            let mut cfg = eye_tracker(true, false, "fix 3,3 for 20s");
+            // Every sync answers XR_SESSION_NOT_FOCUSED and activates nothing, as a runtime does for
+            // a session that never gets the focus.
+            cfg.faults.push(sim::control::Fault {
+                function: "xrSyncActions".into(),
+                result: xr::Result::SESSION_NOT_FOCUSED,
+                nth: 0,
+            });
+            let mut lp = running(cfg, &[]);
+            attach_and_sync(&mut lp, 700);
+            let lines = log_lines(&log);
+            let got = located(&lines);
+            assert!(got.len() >= 690, "{}", got.len());
+            assert!(got.iter().all(|g| g.tracking == Tracking::Fixed));
+            assert_eq!(
+                said(&lines, "INFO", "has not been active for 5 s").len(),
+                1,
+                "{lines:#?}"
+            );
+            let instance = lp.app.instance;
+            drop(lp);
+            assert_eq!(sim::control::refusals(instance), vec![]);
+        },
+    );
+}

@@ -833,3 +833,39 @@ fn doctor_says_a_shading_rate_gpu_gets_them_emulated() {
         .problem("needs fovea's Vulkan layer")
         .starts_with("llvmpipe"));
 }
+
+#[test]
+fn doctor_says_whether_the_runtime_has_eye_gaze() {
+    let sb = Sandbox::new("doctor-gaze");
+    let sim = fovea_harness::artifact("libfovea_sim.so").expect("libfovea_sim.so: cargo build");
+    let manifest = sb.dir.join("sim.json");
+    std::fs::write(
+        &manifest,
+        format!(
+            r#"{{"file_format_version": "1.0.0", "runtime": {{"name": "sim", "library_path": "{}"}}}}"#,
+            sim.display()
+        ),
+    )
+    .unwrap();
+    let manifest = manifest.to_str().unwrap();
+    for (tracker, want) in [
+        (
+            None,
+            "eye gaze: the runtime does not offer XR_EXT_eye_gaze_interaction",
+        ),
+        (Some("unsupported"), "the system reports no eye tracker"),
+        (Some("on"), "and the system has an eye tracker"),
+    ] {
+        let mut env = vec![("XR_RUNTIME_JSON", manifest)];
+        env.extend(tracker.map(|t| ("FOVEA_SIM_EYE_GAZE", t)));
+        let r = sb.doctor(&env);
+        assert!(r.out.contains(want), "{tracker:?}: {}{}", r.out, r.err);
+    }
+    // A runtime manifest naming a library that is no runtime: said, and not a problem.
+    let r = sb.doctor(&[("XR_RUNTIME_JSON", &sb.runtime())]);
+    assert!(
+        r.out.contains("eye gaze: cannot ask the runtime") && !r.out.contains("problem: eye"),
+        "{}",
+        r.out
+    );
+}
