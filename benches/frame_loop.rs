@@ -255,7 +255,9 @@ impl AppGaze {
                     &xr::InteractionProfileSuggestedBinding {
                         ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
                         next: std::ptr::null(),
-                        interaction_profile: path(c"/interaction_profiles/ext/eye_gaze_interaction"),
+                        interaction_profile: path(
+                            c"/interaction_profiles/ext/eye_gaze_interaction"
+                        ),
                         count_suggested_bindings: 1,
                         suggested_bindings: binding.as_ptr(),
                     }

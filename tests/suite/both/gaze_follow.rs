@@ -138,6 +138,7 @@ fn run(mode: Mode, script: &str, frames: usize, dir: &std::path::Path) -> Option
             "XR_FB_foveation",
             "XR_FB_foveation_configuration",
             "XR_FB_foveation_vulkan",
+            "XR_META_foveation_eye_tracked",
             "XR_META_vulkan_swapchain_create_info",
         ]);
     }
