@@ -142,6 +142,8 @@ pub struct InstanceGaze {
     profile: xr::Path,
     pose_path: xr::Path,
     own: Mutex<Own>,
+    /// A thread is making fovea's action set now, or the runtime refused it.
+    creating: AtomicBool,
 }
 
 /// What the instance's suggestions and attaches left, under the instance's record lock.
@@ -189,6 +191,7 @@ impl InstanceGaze {
             profile,
             pose_path,
             own: Mutex::new(Own::default()),
+            creating: AtomicBool::new(false),
         })
     }
 
@@ -233,6 +236,24 @@ impl InstanceGaze {
         if let Some(set) = self.own.lock().set {
             return Ok(set);
         }
+        // Sessions of one instance are made one at a time in practice; should two threads get
+        // here at once, only one makes the set (a second set of the same name would be refused),
+        // and the other session goes without gaze.
+        if self.creating.swap(true, AcqRel) {
+            return Err(xr::Result::ERROR_CALL_ORDER_INVALID);
+        }
+        let made = self.make_action();
+        if let Ok(set) = made {
+            self.own.lock().set = Some(set);
+            self.creating.store(false, Release);
+        }
+        // After a refusal `creating` stays set: the instance is not asked again (a set the runtime
+        // made before refusing the action would make a second one of the same name fail).
+        made
+    }
+
+    /// Creates fovea's action set and its gaze action.
+    fn make_action(&self) -> Result<(xr::ActionSet, xr::Action), xr::Result> {
         let mut info = xr::ActionSetCreateInfo {
             ty: xr::StructureType::ACTION_SET_CREATE_INFO,
             next: std::ptr::null(),
@@ -261,10 +282,7 @@ impl InstanceGaze {
         // SAFETY: fovea's own live set and create info, a live output.
         let r = unsafe { (self.calls.create_action)(set, &info, &mut action) };
         ok("xrCreateAction", r)?;
-        // Sessions are made one at a time in practice; a second thread racing here would only make
-        // a second set, which the first one stored wins over (the loser stays unused until the
-        // instance goes).
-        Ok(*self.own.lock().set.get_or_insert((set, action)))
+        Ok((set, action))
     }
 
     /// The gaze source of a new session on `system`, or `None` (logged once) where it cannot be had.
@@ -312,46 +330,55 @@ impl InstanceGaze {
         info: &xr::InteractionProfileSuggestedBinding,
         down: impl Fn(&xr::InteractionProfileSuggestedBinding) -> xr::Result,
     ) -> xr::Result {
+        // An empty or NULL list is the application's error: it goes down as it is.
         let app: &[xr::ActionSuggestedBinding] = match info.count_suggested_bindings {
-            0 => &[],
             _ if info.suggested_bindings.is_null() => return down(info),
+            0 => return down(info),
             // SAFETY: the caller's contract: a valid suggestion has `countSuggestedBindings`
             // bindings at `suggestedBindings`.
             n => unsafe { std::slice::from_raw_parts(info.suggested_bindings, n as usize) },
         };
         let merged = {
-            let mut own = self.own.lock();
-            own.app_bindings = app.to_vec();
-            own.ours_in_force = false;
+            let own = self.own.lock();
             match own.set {
                 Some((_, action)) if !own.attached => Some(self.with_ours(app, action)),
                 _ => None,
             }
         };
-        let Some(merged) = merged else {
-            return down(info);
+        let (r, ours) = match merged {
+            Some(merged) => {
+                let copy = xr::InteractionProfileSuggestedBinding {
+                    count_suggested_bindings: merged.len() as u32,
+                    suggested_bindings: merged.as_ptr(),
+                    ..*info
+                };
+                match down(&copy) {
+                    r if succeeded(r) => (r, true),
+                    refused => {
+                        // Refused with fovea's binding: the application's own call decides.
+                        let again = down(info);
+                        if succeeded(again) {
+                            tracing::warn!(
+                                target: TARGET,
+                                r = ?refused,
+                                "the runtime refused fovea's eye gaze binding merged into the \
+                                 application's: fixed foveation"
+                            );
+                        }
+                        (again, false)
+                    }
+                }
+            }
+            None => (down(info), false),
         };
-        let copy = xr::InteractionProfileSuggestedBinding {
-            count_suggested_bindings: merged.len() as u32,
-            suggested_bindings: merged.as_ptr(),
-            ..*info
-        };
-        let r = down(&copy);
+        // Only a suggestion the runtime took replaces the one in force, and is suggested again with
+        // fovea's binding at the attach.
         if succeeded(r) {
-            self.own.lock().ours_in_force = true;
-            return r;
+            let mut own = self.own.lock();
+            own.app_bindings = app.to_vec();
+            own.ours_in_force = ours;
         }
-        // Refused with fovea's binding: the application's own call decides.
-        let again = down(info);
-        if succeeded(again) {
-            tracing::warn!(
-                target: TARGET,
-                ?r,
-                "the runtime refused fovea's eye gaze binding merged into the application's: \
-                 fixed foveation"
-            );
-        }
-        again
+        r
     }
 
     /// `app` with fovea's binding added.

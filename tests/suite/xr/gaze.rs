@@ -155,12 +155,12 @@ struct AppInput {
     locate: xr::pfn::LocateSpace,
 }
 
-fn path(lp: &HeadlessLoop, s: &std::ffi::CStr) -> xr::Path {
+fn path(app: &App, s: &std::ffi::CStr) -> xr::Path {
     // SAFETY: the type matches the name; the string is NUL-terminated.
     unsafe {
-        let f: xr::pfn::StringToPath = lp.func(c"xrStringToPath");
+        let f: xr::pfn::StringToPath = app.func(c"xrStringToPath");
         let mut p = xr::Path::NULL;
-        assert_eq!(f(lp.app.instance, s.as_ptr(), &mut p), xr::Result::SUCCESS);
+        assert_eq!(f(app.instance, s.as_ptr(), &mut p), xr::Result::SUCCESS);
         p
     }
 }
@@ -173,64 +173,79 @@ fn fixed<const N: usize>(s: &str) -> [std::ffi::c_char; N] {
     a
 }
 
+/// The application's own set with one pose action, its binding suggested: to a controller, or
+/// (`gaze`) to the eye tracker.
+fn declare(app: &App, gaze: bool) -> (xr::ActionSet, xr::Action) {
+    // SAFETY: every name's type matches; the structs live across their calls.
+    unsafe {
+        let create_set: xr::pfn::CreateActionSet = app.func(c"xrCreateActionSet");
+        let create_action: xr::pfn::CreateAction = app.func(c"xrCreateAction");
+        let suggest: xr::pfn::SuggestInteractionProfileBindings =
+            app.func(c"xrSuggestInteractionProfileBindings");
+        let info = xr::ActionSetCreateInfo {
+            ty: xr::StructureType::ACTION_SET_CREATE_INFO,
+            next: std::ptr::null(),
+            action_set_name: fixed("gameplay"),
+            localized_action_set_name: fixed("Gameplay"),
+            priority: 0,
+        };
+        let mut set = xr::ActionSet::NULL;
+        assert_eq!(
+            create_set(app.instance, &info, &mut set),
+            xr::Result::SUCCESS
+        );
+        let info = xr::ActionCreateInfo {
+            ty: xr::StructureType::ACTION_CREATE_INFO,
+            next: std::ptr::null(),
+            action_name: fixed("aim"),
+            action_type: xr::ActionType::POSE_INPUT,
+            count_subaction_paths: 0,
+            subaction_paths: std::ptr::null(),
+            localized_action_name: fixed("Aim"),
+        };
+        let mut action = xr::Action::NULL;
+        assert_eq!(create_action(set, &info, &mut action), xr::Result::SUCCESS);
+        let (profile, binding) = if gaze {
+            (PROFILE, GAZE_POSE)
+        } else {
+            (
+                c"/interaction_profiles/khr/simple_controller",
+                c"/user/hand/left/input/aim/pose",
+            )
+        };
+        let bindings = [xr::ActionSuggestedBinding {
+            action,
+            binding: path(app, binding),
+        }];
+        let suggested = xr::InteractionProfileSuggestedBinding {
+            ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
+            next: std::ptr::null(),
+            interaction_profile: path(app, profile),
+            count_suggested_bindings: 1,
+            suggested_bindings: bindings.as_ptr(),
+        };
+        assert_eq!(suggest(app.instance, &suggested), xr::Result::SUCCESS);
+        assert_eq!(
+            bindings[0].action, action,
+            "the application's struct is untouched"
+        );
+        assert_eq!(suggested.count_suggested_bindings, 1);
+        (set, action)
+    }
+}
+
 impl AppInput {
-    /// Creates the set and action and suggests their binding; `attach` attaches the set.
+    /// Declares the application's set and action ([`declare`]); `attach` attaches the set.
     fn new(lp: &HeadlessLoop, gaze: bool, attach: bool) -> AppInput {
+        let (set, action) = declare(&lp.app, gaze);
+        AppInput::with(lp, set, action, attach)
+    }
+
+    /// The application's input with a set and action declared already; `attach` attaches the set.
+    fn with(lp: &HeadlessLoop, set: xr::ActionSet, action: xr::Action, attach: bool) -> AppInput {
         // SAFETY: every name's type matches; the structs live across their calls.
         unsafe {
-            let create_set: xr::pfn::CreateActionSet = lp.func(c"xrCreateActionSet");
-            let create_action: xr::pfn::CreateAction = lp.func(c"xrCreateAction");
-            let suggest: xr::pfn::SuggestInteractionProfileBindings =
-                lp.func(c"xrSuggestInteractionProfileBindings");
             let attach_fn: xr::pfn::AttachSessionActionSets = lp.func(c"xrAttachSessionActionSets");
-            let info = xr::ActionSetCreateInfo {
-                ty: xr::StructureType::ACTION_SET_CREATE_INFO,
-                next: std::ptr::null(),
-                action_set_name: fixed("gameplay"),
-                localized_action_set_name: fixed("Gameplay"),
-                priority: 0,
-            };
-            let mut set = xr::ActionSet::NULL;
-            assert_eq!(
-                create_set(lp.app.instance, &info, &mut set),
-                xr::Result::SUCCESS
-            );
-            let info = xr::ActionCreateInfo {
-                ty: xr::StructureType::ACTION_CREATE_INFO,
-                next: std::ptr::null(),
-                action_name: fixed("aim"),
-                action_type: xr::ActionType::POSE_INPUT,
-                count_subaction_paths: 0,
-                subaction_paths: std::ptr::null(),
-                localized_action_name: fixed("Aim"),
-            };
-            let mut action = xr::Action::NULL;
-            assert_eq!(create_action(set, &info, &mut action), xr::Result::SUCCESS);
-            let (profile, binding) = if gaze {
-                (PROFILE, GAZE_POSE)
-            } else {
-                (
-                    c"/interaction_profiles/khr/simple_controller",
-                    c"/user/hand/left/input/aim/pose",
-                )
-            };
-            let bindings = [xr::ActionSuggestedBinding {
-                action,
-                binding: path(lp, binding),
-            }];
-            let suggested = xr::InteractionProfileSuggestedBinding {
-                ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
-                next: std::ptr::null(),
-                interaction_profile: path(lp, profile),
-                count_suggested_bindings: 1,
-                suggested_bindings: bindings.as_ptr(),
-            };
-            assert_eq!(suggest(lp.app.instance, &suggested), xr::Result::SUCCESS);
-            assert_eq!(
-                bindings[0].action, action,
-                "the application's struct is untouched"
-            );
-            assert_eq!(suggested.count_suggested_bindings, 1);
             if attach {
                 let sets = [set];
                 let info = xr::SessionActionSetsAttachInfo {
@@ -700,12 +715,12 @@ fn an_app_that_attaches_but_never_syncs_gets_gaze() {
                     lp.func(c"xrSuggestInteractionProfileBindings");
                 let binding = [xr::ActionSuggestedBinding {
                     action: _input.action,
-                    binding: path(&lp, GAZE_POSE),
+                    binding: path(&lp.app, GAZE_POSE),
                 }];
                 let info = xr::InteractionProfileSuggestedBinding {
                     ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
                     next: std::ptr::null(),
-                    interaction_profile: path(&lp, PROFILE),
+                    interaction_profile: path(&lp.app, PROFILE),
                     count_suggested_bindings: 1,
                     suggested_bindings: binding.as_ptr(),
                 };
@@ -792,6 +807,49 @@ fn a_gaze_that_never_becomes_active_is_said_once() {
             let instance = lp.app.instance;
             drop(lp);
             assert_eq!(sim::control::refusals(instance), vec![]);
+        },
+    );
+}
+
+#[test]
+fn an_eye_gaze_suggestion_made_before_the_session_still_binds_both() {
+    in_own_process(
+        module_path!(),
+        "an_eye_gaze_suggestion_made_before_the_session_still_binds_both",
+        || {
+            let log = log_here("early-suggestion", &[]);
+            sim::control::set_thread_config(Some(eye_tracker(true, false, "fix -4,2 for 10s")));
+            let mut exts: Vec<&str> = FOVEATION_EXTENSIONS.to_vec();
+            exts.push(EXT);
+            let app = App::new(Chain::fovea().unwrap(), &exts, API_1_0).unwrap();
+            // Suggested before any session: fovea has no action yet, and suggests the
+            // application's binding again with its own at the attach.
+            let (set, action) = declare(&app, true);
+            let mut lp = HeadlessLoop::new(
+                app,
+                SwapchainSpec {
+                    foveation: true,
+                    array_size: 2,
+                },
+            )
+            .unwrap();
+            let input = AppInput::with(&lp, set, action, true);
+            for _ in 0..30 {
+                lp.frame().unwrap();
+                input.sync(&lp);
+            }
+            let (active, pose) = input.own_pose(&lp);
+            assert!(active, "the application's gaze action is active");
+            let [yaw, pitch] = pose_angles(pose.expect("located"));
+            assert!((yaw + 4.0).abs() < 0.01 && (pitch - 2.0).abs() < 0.01);
+            let last = located(&log_lines(&log))
+                .pop()
+                .expect("fovea located the gaze");
+            assert_eq!(last.tracking, Tracking::Tracked);
+            assert!((last.angles[0] + 4.0).abs() < 0.05);
+            let instance = lp.app.instance;
+            drop(lp);
+            assert_no_refusals(instance);
         },
     );
 }
