@@ -44,7 +44,14 @@ pub struct Injection {
     /// How many views the application renders (2 for stereo).
     pub views: u8,
     pub swapchains: Vec<EyeSwapchain>,
-    /// Bumped when the pattern, the FOVs or `max_fragment` change: what a map holds.
+    /// Per view, where its fovea is while a gaze is followed (NDC of its own FOV, y up); `None`:
+    /// the fixed map's place (docs/eye-tracking.md#what-moves-when). Published only when a fovea
+    /// moved by half a texel or more ([`set_centres`]).
+    pub centres: [Option<[f32; 2]>; MAX_VIEWS],
+    /// Bumped when the pattern, the FOVs or `max_fragment` change: what the fixed maps hold, which
+    /// a gaze only shifts.
+    pub fixed: u64,
+    /// Bumped when anything a map holds changes: what [`Injection::fixed`] counts, and the centres.
     pub maps: u64,
 }
 
@@ -60,6 +67,8 @@ impl Injection {
             fovs: [None; MAX_VIEWS],
             views: 2,
             swapchains: Vec::new(),
+            centres: [None; MAX_VIEWS],
+            fixed: 0,
             maps: 0,
         }
     }
@@ -248,6 +257,7 @@ pub fn set_pattern(pattern: Pattern, dynamic: bool, max_fragment: u32) {
             s.pattern = pattern;
             s.dynamic = dynamic;
             s.max_fragment = max_fragment;
+            s.fixed += 1;
             s.maps += 1;
         }
     });
@@ -265,9 +275,77 @@ pub fn set_fovs(fovs: &[Fov]) {
     update(|s| {
         if s.fovs != new {
             s.fovs = new;
+            s.fixed += 1;
             s.maps += 1;
         }
         s.views = fovs.len().min(MAX_VIEWS) as u8;
+    });
+}
+
+/// The finest shading-rate texel of the injecting devices, packed (width << 32 | height); 0 before
+/// the first: half of it is how far a fovea must move before it is published again.
+static TEXEL: AtomicU64 = AtomicU64::new(0);
+
+/// The texel assumed before an injecting device said its own: 8×8, the finest shading-rate texel
+/// drivers report, so no move that matters on any device is held back.
+const FALLBACK_TEXEL: [u32; 2] = [8, 8];
+
+/// The Vulkan side made an injecting device whose shading-rate attachments have texels of `texel`
+/// pixels: the centres are published in steps of half the finest of them.
+pub fn set_texel(texel: [u32; 2]) {
+    let packed = |t: [u32; 2]| u64::from(t[0]) << 32 | u64::from(t[1]);
+    let _ = TEXEL.fetch_update(Ordering::AcqRel, Ordering::Acquire, |old| {
+        let old = [(old >> 32) as u32, old as u32];
+        let new = if old == [0, 0] {
+            texel
+        } else {
+            [old[0].min(texel[0]), old[1].min(texel[1])]
+        };
+        Some(packed(new))
+    });
+}
+
+fn texel() -> [u32; 2] {
+    let t = TEXEL.load(Ordering::Acquire);
+    match [(t >> 32) as u32, t as u32] {
+        [0, _] | [_, 0] => FALLBACK_TEXEL,
+        t => t,
+    }
+}
+
+/// Whether `now` differs from the published centres by enough to publish: a view starts or stops
+/// following, or its fovea moved by half a texel or more in the pixels of the eye swapchains'
+/// views ([`fovea_model::shift::moved_enough`]); before any eye swapchain is known, any change.
+fn centres_moved(s: &Injection, now: &[Option<[f32; 2]>; MAX_VIEWS]) -> bool {
+    let Some(extent) = s.swapchains.first().map(|e| e.shape.view_extent()) else {
+        return s.centres != *now;
+    };
+    let grid = fovea_model::density::Grid::new(extent, texel());
+    let px = |c: [f32; 2]| {
+        [
+            (c[0] + 1.0) * 0.5 * extent[0] as f32,
+            (1.0 - c[1]) * 0.5 * extent[1] as f32,
+        ]
+    };
+    s.centres.iter().zip(now).any(|(a, b)| match (a, b) {
+        (None, None) => false,
+        (Some(a), Some(b)) => fovea_model::shift::moved_enough(&grid, px(*a), px(*b)),
+        _ => true,
+    })
+}
+
+/// Where each view's fovea is now (`None`: fixed foveation), from the OpenXR side every frame: a
+/// comparison in steady state, published only when a fovea moved by half a texel or more, so the
+/// generation does not move with a trembling gaze.
+pub fn set_centres(now: &[Option<[f32; 2]>; MAX_VIEWS]) {
+    if with_current(|s| s.is_none_or(|s| !centres_moved(s, now))) {
+        return;
+    }
+    update(|s| {
+        if centres_moved(s, now) {
+            s.centres = *now;
+            s.maps += 1;
+        }
     });
 }
 
@@ -399,6 +477,47 @@ pub(crate) mod tests {
         reader.join().unwrap();
         stop();
         assert_eq!(level(), None, "off is seen too");
+    }
+
+    #[test]
+    fn centres_are_published_per_half_texel_and_keep_the_fixed_maps() {
+        let _one = STATE_TESTS.lock();
+        stop();
+        start(Level::High);
+        set_swapchain(
+            9,
+            inject::Swapchain {
+                extent: [1600, 1600],
+                layers: 2,
+                holds: Holds::Layers,
+            },
+        );
+        set_texel([16, 16]);
+        let mut c = [None; MAX_VIEWS];
+        c[0] = Some([0.1, 0.0]);
+        c[1] = Some([0.1, 0.0]);
+        let fixed = current().unwrap().fixed;
+        set_centres(&c);
+        let s = current().unwrap();
+        assert_eq!(s.centres, c);
+        assert_eq!(s.fixed, fixed, "a move keeps the fixed maps");
+        let (g, key) = (GENERATION.load(Ordering::Acquire), s.key());
+        // A texel of 16 px on 1600 px is 0.02 in NDC: half of it is 0.01.
+        let mut tremble = c;
+        tremble[0] = Some([0.1 + 0.0099, -0.0099]);
+        set_centres(&tremble);
+        assert_eq!(GENERATION.load(Ordering::Acquire), g, "inside half a texel");
+        assert_eq!(current().unwrap().key(), key);
+        let mut moved = c;
+        moved[1] = Some([0.1, 0.011]);
+        set_centres(&moved);
+        assert!(current().unwrap().key() > key, "half a texel: published");
+        assert_eq!(current().unwrap().centres, moved);
+        let key = current().unwrap().key();
+        set_centres(&[None; MAX_VIEWS]);
+        assert!(current().unwrap().key() > key, "back to fixed foveation");
+        assert_eq!(current().unwrap().fixed, fixed);
+        stop();
     }
 
     #[test]

@@ -33,8 +33,9 @@ use ash::vk;
 use ash::vk::Handle as _;
 
 use fovea_model::density::Grid;
-use fovea_model::maps::{fill_layers, Inputs};
+use fovea_model::maps::{fill_layers, Inputs, MAX_VIEWS};
 use fovea_model::shading_rate;
+use fovea_model::shift::{self, Filled, Placed};
 
 use crate::bridge::MapKey;
 use crate::xr::session_gpu::{final_layout, memory_type, step, SessionGpu, VkError, FORMAT};
@@ -50,6 +51,44 @@ pub enum Refreshed {
     Built,
 }
 
+/// What one image holds: the key of its map's inputs, and per view whether its fovea was moved
+/// to a gaze and where (docs/eye-tracking.md#moving-the-fovea-one-shift-for-every-path).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Held {
+    key: MapKey,
+    foveas: [Option<Filled>; MAX_VIEWS],
+}
+
+/// Where the fovea of each view of a swapchain's maps is to be: per view its centre in NDC of its
+/// own FOV (`None`: the fixed map's, the projection centre), and where each view lies in the map.
+#[derive(Clone, Copy, Debug)]
+pub struct Foveas {
+    pub centres: [Option<[f32; 2]>; MAX_VIEWS],
+    pub placed: [Option<Placed>; MAX_VIEWS],
+}
+
+impl Foveas {
+    /// Fixed foveation: every view's fovea at its projection centre.
+    pub const FIXED: Foveas = Foveas {
+        centres: [None; MAX_VIEWS],
+        placed: [None; MAX_VIEWS],
+    };
+
+    /// Per view, where its fovea is (pixels) and the shift that puts it there.
+    fn filled(&self, grid: &Grid) -> [Option<Filled>; MAX_VIEWS] {
+        let mut out = [None; MAX_VIEWS];
+        for ((o, c), p) in out.iter_mut().zip(&self.centres).zip(&self.placed) {
+            if let (Some(c), Some(p)) = (c, p) {
+                *o = Some(Filled {
+                    at: shift::pixel_of(&p.view, *c),
+                    shift: shift::texel_shift(grid, &p.view, *c),
+                });
+            }
+        }
+        out
+    }
+}
+
 /// A persistently mapped host pointer. It is only used under the `Fill` mutex.
 struct Mapped(*mut u8);
 
@@ -59,8 +98,8 @@ unsafe impl Send for Mapped {}
 
 /// The mutable half of [`DensityImages`].
 struct Fill {
-    /// Per image: the key it was last filled for (`None`: never, its contents are undefined).
-    filled: Vec<Option<MapKey>>,
+    /// Per image: what it was last filled with (`None`: never, its contents are undefined).
+    filled: Vec<Option<Held>>,
     /// The inputs of the bytes in `bytes` (and in the staging buffer), once computed.
     cached: Option<Inputs>,
     /// The last computed map, all layers: the cache, so images with unchanged inputs are only
@@ -69,6 +108,19 @@ struct Fill {
     /// The shading-rate codes of `bytes` for the images' shadows (empty where there are none),
     /// computed with the map. Allocated once.
     codes: Vec<u8>,
+    /// Where the codes are merged into one layer: the fixed map's codes one layer per density
+    /// layer, so each view's can move alone before they are merged again; computed at the first
+    /// move after a build (`layer_codes_current`). Allocated once, at the first move.
+    layer_codes: Vec<u8>,
+    layer_codes_current: bool,
+    /// The cached map with its views' foveas moved, and its codes (and, merged, its codes per
+    /// layer): the scratch a move is written into. Allocated once, at the first move.
+    moved: Vec<u8>,
+    moved_codes: Vec<u8>,
+    moved_layer_codes: Vec<u8>,
+    /// The per-view shifts of the map in the staging buffer (all `None`: the fixed map); `None`
+    /// while it holds no map of the cached inputs.
+    staged: Option<[Option<[i32; 2]>; MAX_VIEWS]>,
     mapped: Mapped,
 }
 
@@ -191,6 +243,12 @@ impl DensityImages {
                         cached: None,
                         bytes: vec![0; density_bytes as usize],
                         codes: Vec::new(),
+                        layer_codes: Vec::new(),
+                        layer_codes_current: false,
+                        moved: Vec::new(),
+                        moved_codes: Vec::new(),
+                        moved_layer_codes: Vec::new(),
+                        staged: None,
                         mapped: Mapped(std::ptr::null_mut()),
                     },
                 ),
@@ -332,9 +390,14 @@ impl DensityImages {
         self.images.len()
     }
 
-    /// Makes image `index` hold the map for `key`: nothing when it already does; otherwise the map
-    /// is computed from `inputs()` (unless the cached map has the same inputs) and uploaded on the
-    /// binding's queue, waited for before returning. Returns whether an upload happened.
+    /// Makes image `index` hold the map for `key` with each view's fovea where `foveas` puts it:
+    /// nothing when it already does (a fovea that moved by less than half a texel since the image
+    /// was filled counts as there, `shift::must_refill`); otherwise the fixed map is computed from
+    /// `inputs()` (unless the cached map has the same inputs), shifted per view where a fovea
+    /// follows a gaze (`shift::shift_layers`: a clamped copy, no map evaluation; on an emulating
+    /// device the codes move the same way) and uploaded on the binding's queue, waited for before
+    /// returning. A fovea that moved by half a texel onto the same whole-texel shift is recorded
+    /// without an upload.
     ///
     /// # Safety
     /// Call only where the spec lets the runtime use the binding's queue (the application
@@ -343,52 +406,154 @@ impl DensityImages {
         &self,
         index: u32,
         key: MapKey,
+        foveas: &Foveas,
         inputs: impl FnOnce() -> Inputs,
     ) -> Result<Refreshed, VkError> {
         let mut fill = self.fill.lock();
         let i = index as usize;
-        if i >= self.images.len() || fill.filled[i] == Some(key) {
+        if i >= self.images.len() {
             return Ok(Refreshed::Nothing);
         }
-        let inputs = inputs();
-        let mut done = Refreshed::Uploaded;
-        if fill.cached.as_ref() != Some(&inputs) {
-            done = Refreshed::Built;
-            let f = &mut *fill;
-            fill_layers(&self.grid, &inputs, &mut f.bytes);
-            // SAFETY: the staging memory is mapped for the record's lifetime and is as large as
-            // `bytes` (both sized from the map extent and layers); the fill lock serialises writes,
-            // and the GPU last read it in an upload that was waited for.
-            unsafe { std::ptr::copy_nonoverlapping(f.bytes.as_ptr(), f.mapped.0, f.bytes.len()) };
-            if let Some(r) = &self.rates {
-                let texels = (self.extent[0] * self.extent[1]) as usize;
-                let merged = r.layers < self.layers;
-                shading_rate::fill_codes(
-                    &f.bytes,
-                    texels,
-                    merged,
-                    r.max_fragment,
-                    &r.supported,
-                    &mut f.codes,
-                );
-                // SAFETY: as above; the staging buffer was sized for the codes at `offset`, after
-                // the density bytes (`codes` holds texels × the shadows' layers).
-                unsafe {
-                    std::ptr::copy_nonoverlapping(
-                        f.codes.as_ptr(),
-                        f.mapped.0.add(r.offset as usize),
-                        f.codes.len(),
-                    )
-                };
+        let held = fill.filled[i];
+        let same_key = held.is_some_and(|h| h.key == key);
+        let at = |f: &[Option<Filled>; MAX_VIEWS]| f.map(|f| f.map(|f| f.at));
+        let filled = foveas.filled(&self.grid);
+        if same_key {
+            let h = held.map(|h| h.foveas).unwrap_or_default();
+            if !shift::must_refill(&self.grid, &h, &at(&filled)) {
+                return Ok(Refreshed::Nothing);
             }
-            f.cached = Some(inputs);
+            if h.iter()
+                .map(shift::held_shift)
+                .eq(filled.iter().map(shift::held_shift))
+            {
+                // Moved by half a texel onto the same whole-texel shift: the image already holds
+                // that map; only where it was filled moves on.
+                fill.filled[i] = Some(Held {
+                    key,
+                    foveas: filled,
+                });
+                return Ok(Refreshed::Nothing);
+            }
         }
+        let mut done = Refreshed::Uploaded;
+        if !same_key {
+            let inputs = inputs();
+            if fill.cached.as_ref() != Some(&inputs) {
+                done = Refreshed::Built;
+                let f = &mut *fill;
+                fill_layers(&self.grid, &inputs, &mut f.bytes);
+                if let Some(r) = &self.rates {
+                    let texels = (self.extent[0] * self.extent[1]) as usize;
+                    let merged = r.layers < self.layers;
+                    shading_rate::fill_codes(
+                        &f.bytes,
+                        texels,
+                        merged,
+                        r.max_fragment,
+                        &r.supported,
+                        &mut f.codes,
+                    );
+                }
+                f.cached = Some(inputs);
+                f.layer_codes_current = false;
+                f.staged = None;
+            }
+        }
+        let shifts = filled.map(|f| shift::held_shift(&f));
+        self.stage(&mut fill, &foveas.placed, shifts);
         // Until the upload succeeds the image counts as undefined.
         fill.filled[i] = None;
         // SAFETY: the caller's contract: the binding's queue may be used here.
         unsafe { self.upload(i)? };
-        fill.filled[i] = Some(key);
+        fill.filled[i] = Some(Held {
+            key,
+            foveas: filled,
+        });
         Ok(done)
+    }
+
+    /// Makes the staging buffer hold the cached map with each view shifted by `shifts` (all
+    /// `None`: the fixed map itself), and its codes where the images have shadows; nothing when it
+    /// already does. The scratch buffers are allocated at the first move and reused.
+    fn stage(
+        &self,
+        f: &mut Fill,
+        placed: &[Option<Placed>; MAX_VIEWS],
+        shifts: [Option<[i32; 2]>; MAX_VIEWS],
+    ) {
+        if f.staged == Some(shifts) {
+            return;
+        }
+        let texels = (self.extent[0] * self.extent[1]) as usize;
+        let fixed = shifts.iter().all(Option::is_none);
+        if !fixed {
+            f.moved.resize(f.bytes.len(), 0);
+            shift::shift_layers::<2>(&self.grid, placed, &shifts, &f.bytes, &mut f.moved);
+            if let Some(r) = &self.rates {
+                f.moved_codes.resize(f.codes.len(), 0);
+                if r.layers < self.layers {
+                    // One merged layer holds every view: each view's codes move in their own
+                    // layer, which are then merged again.
+                    let n = texels * self.layers as usize;
+                    if !f.layer_codes_current {
+                        f.layer_codes.resize(n, 0);
+                        shading_rate::fill_codes(
+                            &f.bytes,
+                            texels,
+                            false,
+                            r.max_fragment,
+                            &r.supported,
+                            &mut f.layer_codes,
+                        );
+                        f.layer_codes_current = true;
+                    }
+                    f.moved_layer_codes.resize(n, 0);
+                    shift::shift_layers::<1>(
+                        &self.grid,
+                        placed,
+                        &shifts,
+                        &f.layer_codes,
+                        &mut f.moved_layer_codes,
+                    );
+                    shading_rate::merge_codes(
+                        &f.moved_layer_codes,
+                        texels,
+                        &r.supported,
+                        &mut f.moved_codes,
+                    );
+                } else {
+                    shift::shift_layers::<1>(
+                        &self.grid,
+                        placed,
+                        &shifts,
+                        &f.codes,
+                        &mut f.moved_codes,
+                    );
+                }
+            }
+        }
+        let (bytes, codes) = if fixed {
+            (&f.bytes, &f.codes)
+        } else {
+            (&f.moved, &f.moved_codes)
+        };
+        // SAFETY: the staging memory is mapped for the record's lifetime and is as large as the
+        // density bytes (both sized from the map extent and layers); the fill lock serialises
+        // writes, and the GPU last read it in an upload that was waited for.
+        unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), f.mapped.0, bytes.len()) };
+        if let Some(r) = &self.rates {
+            // SAFETY: as above; the staging buffer was sized for the codes at `offset`, after the
+            // density bytes (`codes` holds texels × the shadows' layers).
+            unsafe {
+                std::ptr::copy_nonoverlapping(
+                    codes.as_ptr(),
+                    f.mapped.0.add(r.offset as usize),
+                    codes.len(),
+                )
+            };
+        }
+        f.staged = Some(shifts);
     }
 
     /// Records and submits the staging buffer's copy into image `i` and waits for it.

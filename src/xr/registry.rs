@@ -351,6 +351,21 @@ impl Session {
             crate::bridge::inject::set_pattern(pattern, dynamic, max_fragment);
         }
     }
+
+    /// Publishes where each view's fovea is for injected maps (docs/eye-tracking.md#what-moves-when):
+    /// the gaze's centres while `eyes` follows it, fixed foveation otherwise. Per frame one record
+    /// lock for the copy and a comparison; the bridge publishes only a move of half a texel or more.
+    pub fn publish_injected_centres(&self) {
+        if self.instance.inject.is_none() {
+            return;
+        }
+        let eyes = *self.eyes.lock();
+        let mut centres = [None; fovea_model::maps::MAX_VIEWS];
+        for (i, c) in centres.iter_mut().enumerate() {
+            *c = eyes.of(i);
+        }
+        crate::bridge::inject::set_centres(&centres);
+    }
 }
 
 /// What the layer tracks of a session's frame loop between `xrWaitFrame`, `xrBeginFrame` and
@@ -474,6 +489,10 @@ pub struct Swapchain {
     pub density: Option<DensityImages>,
     /// The views the application last submitted into this swapchain (xrEndFrame).
     pub submitted: Mutex<Submitted>,
+    /// Created with `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` in
+    /// `XrVulkanSwapchainCreateInfoMETA`: the application moves the fovea itself with density-map
+    /// offsets, so fovea keeps its maps fixed (docs/eye-tracking.md#what-moves-when).
+    pub app_offsets: bool,
 }
 
 /// A foveation profile fovea created.

@@ -21,6 +21,7 @@ use crate::density::{self, Grid, Pattern, Rect, View};
 use crate::fov::Fov;
 use crate::maps::{FALLBACK_FOV, MAX_VIEWS};
 use crate::shading_rate;
+use crate::shift::{self, Placed};
 
 /// How far a target's aspect ratio (width / height) may be from a view's, relative: 1 %.
 pub const ASPECT_TOLERANCE: f64 = 0.01;
@@ -268,29 +269,154 @@ pub fn codes(
     pattern: Pattern,
     max_fragment: u32,
 ) -> ([u32; 2], u32, Vec<u8>) {
-    let grid = Grid::new(extent, device.texel).capped(max_fragment);
-    let [mw, mh] = grid.map_extent();
-    let texels = (mw * mh) as usize;
-    let (layers, merged) = map_layers(views, extent, fovs);
-    let merge = merged || (!device.layered && layers.len() > 1);
-    let mut density_bytes = vec![0u8; texels * 2 * layers.len()];
-    for (views, out) in layers
-        .iter()
-        .zip(density_bytes.chunks_exact_mut(texels * 2))
-    {
-        density::fill(&grid, views, pattern, out);
+    let fixed = FixedCodes::new(device, views, extent, fovs, pattern, max_fragment);
+    let mut out = Vec::new();
+    fixed.codes_into(&[None; MAX_VIEWS], &mut Vec::new(), &mut out);
+    (fixed.texels, fixed.out_layers(), out)
+}
+
+/// An injected map's fixed codes, kept so that a gaze moves its views' foveas by shifting them
+/// (docs/eye-tracking.md#moving-the-fovea-one-shift-for-every-path): one layer of codes per view
+/// layer of [`map_layers`], not merged yet, and where each view lies.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FixedCodes {
+    pub grid: Grid,
+    /// The map's extent in texels.
+    pub texels: [u32; 2],
+    /// One layer per layer of [`map_layers`], each `texels` codes.
+    pub codes: Vec<u8>,
+    /// Whether the output is those layers merged into one (finer rate per texel).
+    pub merge: bool,
+    /// Per view (by index), its layer and place.
+    pub placed: [Option<Placed>; MAX_VIEWS],
+    supported: Vec<[u32; 2]>,
+}
+
+impl FixedCodes {
+    /// The fixed map's codes, as [`codes`] describes.
+    pub fn new(
+        device: &Device,
+        views: Views,
+        extent: [u32; 2],
+        fovs: &[Option<Fov>; MAX_VIEWS],
+        pattern: Pattern,
+        max_fragment: u32,
+    ) -> FixedCodes {
+        let grid = Grid::new(extent, device.texel).capped(max_fragment);
+        let [mw, mh] = grid.map_extent();
+        let texels = (mw * mh) as usize;
+        let (layers, merged) = map_layers(views, extent, fovs);
+        let merge = merged || (!device.layered && layers.len() > 1);
+        let mut density_bytes = vec![0u8; texels * 2 * layers.len()];
+        for (views, out) in layers
+            .iter()
+            .zip(density_bytes.chunks_exact_mut(texels * 2))
+        {
+            density::fill(&grid, views, pattern, out);
+        }
+        let mut codes = vec![0u8; texels * layers.len()];
+        shading_rate::fill_codes(
+            &density_bytes,
+            texels,
+            false,
+            device.max_fragment,
+            &device.rates,
+            &mut codes,
+        );
+        FixedCodes {
+            grid,
+            texels: [mw, mh],
+            codes,
+            merge,
+            placed: placed(views, extent, fovs),
+            supported: device.rates.clone(),
+        }
     }
-    let out_layers = if merge { 1 } else { layers.len().max(1) };
-    let mut out = vec![0u8; texels * out_layers];
-    shading_rate::fill_codes(
-        &density_bytes,
-        texels,
-        merge,
-        device.max_fragment,
-        &device.rates,
-        &mut out,
-    );
-    ([mw, mh], out_layers as u32, out)
+
+    /// The output's layers: 1 where merged.
+    pub fn out_layers(&self) -> u32 {
+        let n = self.codes.len() / self.texel_count().max(1);
+        if self.merge {
+            1
+        } else {
+            n.max(1) as u32
+        }
+    }
+
+    fn texel_count(&self) -> usize {
+        (self.texels[0] * self.texels[1]) as usize
+    }
+
+    /// The codes with each view's fovea at `centres` (NDC of its own FOV, y up; `None`: the fixed
+    /// map's) in `out`, as many layers as [`FixedCodes::out_layers`]: each view's codes shifted
+    /// ([`crate::shift::shift_layers`], no map evaluation), then merged where the output is one
+    /// layer. `scratch` and `out` are resized, and keep their allocation from one call to the next.
+    pub fn codes_into(
+        &self,
+        centres: &[Option<[f32; 2]>; MAX_VIEWS],
+        scratch: &mut Vec<u8>,
+        out: &mut Vec<u8>,
+    ) {
+        let mut shifts = [None; MAX_VIEWS];
+        for ((s, c), p) in shifts.iter_mut().zip(centres).zip(&self.placed) {
+            if let (Some(c), Some(p)) = (c, p) {
+                *s = Some(shift::texel_shift(&self.grid, &p.view, *c));
+            }
+        }
+        let texels = self.texel_count();
+        let moved: &[u8] = if shifts.iter().any(|s| s.is_some_and(|s| s != [0, 0])) {
+            scratch.resize(self.codes.len(), 0);
+            shift::shift_layers::<1>(&self.grid, &self.placed, &shifts, &self.codes, scratch);
+            scratch
+        } else {
+            &self.codes
+        };
+        if self.merge {
+            out.resize(texels, 0);
+            shading_rate::merge_codes(moved, texels, &self.supported, out);
+        } else {
+            out.resize(moved.len().max(texels), 0);
+            out[..moved.len()].copy_from_slice(moved);
+        }
+    }
+}
+
+/// Where each view of [`map_layers`]'s layers lies: the layer (of the unmerged layers) and its
+/// place there, by view index.
+pub fn placed(
+    views: Views,
+    extent: [u32; 2],
+    fovs: &[Option<Fov>; MAX_VIEWS],
+) -> [Option<Placed>; MAX_VIEWS] {
+    let (layers, _) = map_layers(views, extent, fovs);
+    let mut out = [None; MAX_VIEWS];
+    let mut put = |v: usize, layer: usize, view: View| {
+        if let Some(slot) = out.get_mut(v) {
+            *slot = Some(Placed { layer, view });
+        }
+    };
+    match views {
+        Views::Layers { first, .. } => {
+            for (i, l) in layers.iter().enumerate() {
+                put(usize::from(first) + i, i, l[0]);
+            }
+        }
+        Views::Halves => {
+            for (v, view) in layers[0].iter().enumerate() {
+                put(v, 0, *view);
+            }
+        }
+        Views::Merged => {
+            let known: Vec<usize> = (0..MAX_VIEWS).filter(|&v| fovs[v].is_some()).collect();
+            if known.is_empty() {
+                put(0, 0, layers[0][0]);
+            }
+            for (i, v) in known.into_iter().enumerate() {
+                put(v, i, layers[i][0]);
+            }
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -623,6 +749,122 @@ mod tests {
                 wide[row * 180 + 90..row * 180 + 180],
                 both[texels + row * 90..texels + row * 90 + 90],
                 "right half, row {row}"
+            );
+        }
+    }
+
+    /// The centre, in texels, of the full-rate codes of `layer` in `map` (`mw` texels wide), over
+    /// columns `cols`.
+    fn full_rate_centre(map: &[u8], mw: usize, cols: std::ops::Range<usize>) -> [f32; 2] {
+        let (mut sum, mut n) = ([0.0f32; 2], 0.0f32);
+        for (i, &c) in map.iter().enumerate() {
+            if c == 0 && cols.contains(&(i % mw)) {
+                sum[0] += (i % mw) as f32 + 0.5;
+                sum[1] += (i / mw) as f32 + 0.5;
+                n += 1.0;
+            }
+        }
+        assert!(n > 0.0, "no full-rate texel");
+        sum.map(|s| s / n)
+    }
+
+    /// A gaze moves each view's codes by that view's whole-texel shift, as the FB path moves its
+    /// density: per eye layer, each half of a double-wide map, and both eyes before they merge.
+    #[test]
+    fn a_gaze_shifts_each_views_codes() {
+        let dev = nvidia();
+        let pattern = Pattern {
+            level: Level::High,
+            vertical_offset_deg: 0.0,
+        };
+        let extent = [1440, 1600];
+        let mut scratch = Vec::new();
+        let mut out = Vec::new();
+        // The right eye's swapchain: view 1 moves, view 0's centre means nothing here.
+        let right = FixedCodes::new(
+            &dev,
+            Views::Layers { first: 1, count: 1 },
+            extent,
+            &fovs(),
+            pattern,
+            4,
+        );
+        let fixed = codes(
+            &dev,
+            Views::Layers { first: 1, count: 1 },
+            extent,
+            &fovs(),
+            pattern,
+            4,
+        )
+        .2;
+        right.codes_into(&[None; MAX_VIEWS], &mut scratch, &mut out);
+        assert_eq!(out, fixed, "no gaze: the fixed codes");
+        right.codes_into(
+            &[Some([0.9, 0.9]), None, None, None],
+            &mut scratch,
+            &mut out,
+        );
+        assert_eq!(out, fixed, "another view's gaze moves nothing");
+        let centre = [-0.3, 0.25];
+        right.codes_into(&[None, Some(centre), None, None], &mut scratch, &mut out);
+        let p = right.placed[1].expect("view 1 placed");
+        assert_eq!(p.layer, 0);
+        let s = shift::texel_shift(&right.grid, &p.view, centre);
+        assert!(s[0] < 0 && s[1] < 0, "left and up: {s:?}");
+        let (a, b) = (
+            full_rate_centre(&fixed, 90, 0..90),
+            full_rate_centre(&out, 90, 0..90),
+        );
+        for i in 0..2 {
+            assert!(
+                (b[i] - a[i] - s[i] as f32).abs() < 1e-3,
+                "{a:?} → {b:?} by {s:?}"
+            );
+        }
+        // Double-wide: only the left half moves for view 0.
+        let wide = FixedCodes::new(&dev, Views::Halves, [2880, 1600], &fovs(), pattern, 4);
+        let before = codes(&dev, Views::Halves, [2880, 1600], &fovs(), pattern, 4).2;
+        wide.codes_into(&[Some(centre), None, None, None], &mut scratch, &mut out);
+        for row in 0..100usize {
+            assert_eq!(
+                out[row * 180 + 90..(row + 1) * 180],
+                before[row * 180 + 90..(row + 1) * 180]
+            );
+        }
+        assert_ne!(out, before);
+        // Merged: each eye's layer moves, then the finer rate of both.
+        let merged = FixedCodes::new(&dev, Views::Merged, extent, &fovs(), pattern, 4);
+        merged.codes_into(
+            &[Some(centre), Some(centre), None, None],
+            &mut scratch,
+            &mut out,
+        );
+        assert_eq!(out.len(), 90 * 100);
+        let layer = |v: usize| {
+            let f = FixedCodes::new(
+                &dev,
+                Views::Layers {
+                    first: v as u8,
+                    count: 1,
+                },
+                extent,
+                &fovs(),
+                pattern,
+                4,
+            );
+            let mut o = Vec::new();
+            let mut c = [None; MAX_VIEWS];
+            c[v] = Some(centre);
+            f.codes_into(&c, &mut Vec::new(), &mut o);
+            o
+        };
+        let (l, r) = (layer(0), layer(1));
+        for i in 0..out.len() {
+            assert_eq!(
+                out[i],
+                shading_rate::finer(l[i], r[i], &dev.rates),
+                "texel {i}"
             );
         }
     }

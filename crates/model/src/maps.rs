@@ -7,6 +7,7 @@
 
 use crate::density::{self, Grid, Pattern, Rect, View};
 use crate::fov::Fov;
+use crate::shift::Placed;
 
 /// Most views a session has (quad views is the largest view configuration there is).
 pub const MAX_VIEWS: usize = 4;
@@ -101,6 +102,52 @@ impl Inputs {
             ..self
         }
     }
+}
+
+/// Where each view (by its index in the projection layer, the eye) lies in the map
+/// [`Inputs::new`] builds from the same arguments: the layer and the view there. A gaze moves each
+/// view's fovea by its own shift ([`crate::shift::shift_layers`]).
+pub fn placed(
+    extent: [u32; 2],
+    layers: u32,
+    submitted: &[Option<SubmittedView>; MAX_VIEWS],
+    located: &[Option<Fov>; MAX_VIEWS],
+    visible: Option<[Fov; 2]>,
+) -> [Option<Placed>; MAX_VIEWS] {
+    let visible_for = |eye: usize| visible.and_then(|v| v.get(eye).copied());
+    let mut out = [None; MAX_VIEWS];
+    if submitted.iter().any(Option::is_some) {
+        for v in submitted.iter().flatten() {
+            if v.layer < layers && v.eye < MAX_VIEWS {
+                out[v.eye] = Some(Placed {
+                    layer: v.layer as usize,
+                    view: View {
+                        fov: v.fov,
+                        rect: v.rect,
+                        visible: visible_for(v.eye),
+                    },
+                });
+            }
+        }
+    } else {
+        let rect = Rect {
+            x: 0,
+            y: 0,
+            width: extent[0],
+            height: extent[1],
+        };
+        for (i, slot) in out.iter_mut().enumerate().take(layers as usize) {
+            *slot = Some(Placed {
+                layer: i,
+                view: View {
+                    fov: located.get(i).copied().flatten().unwrap_or(FALLBACK_FOV),
+                    rect,
+                    visible: visible_for(i),
+                },
+            });
+        }
+    }
+    out
 }
 
 /// The largest fragment a map asks for unless capped lower: 4×4, as on Quest.
@@ -318,5 +365,35 @@ mod tests {
         let row = (mh / 2 * mw * 2) as usize;
         let half = (mw as usize / 2) * 2;
         assert_ne!(out[row..row + half], out[row + half..row + 2 * half]);
+        // Each eye is placed where its inputs draw it: both in layer 0, each in its half.
+        let p = placed(
+            [640, 500],
+            1,
+            &submitted,
+            &[Some(r), Some(l), None, None],
+            visible,
+        );
+        for (eye, v) in i.layers[0].iter().enumerate() {
+            assert_eq!(
+                p[eye].map(|p| (p.layer, p.view)),
+                Some((0, *v)),
+                "eye {eye}"
+            );
+        }
+        assert_eq!(p[2], None);
+        // Before any submission, layer i holds view i over the whole image.
+        let p = placed(
+            [64, 32],
+            2,
+            &[None; MAX_VIEWS],
+            &[Some(l), None, None, None],
+            None,
+        );
+        assert_eq!(
+            p[0].map(|p| (p.layer, p.view.fov, p.view.rect.width)),
+            Some((0, l, 64))
+        );
+        assert_eq!(p[1].map(|p| (p.layer, p.view.fov)), Some((1, FALLBACK_FOV)));
+        assert_eq!(p[2], None, "only as many views as layers");
     }
 }

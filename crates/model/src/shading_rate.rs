@@ -106,6 +106,24 @@ pub fn fill_codes(
     }
 }
 
+/// Merges `layers` layers of `texels` codes each (`codes`) into one (`out`, `texels` codes): per
+/// texel the [`finer`] code of all layers, as [`fill_codes`] does with `merged`. Shifted per-view
+/// layers become one merged layer this way without converting density again.
+pub fn merge_codes(codes: &[u8], texels: usize, supported: &[[u32; 2]], out: &mut [u8]) {
+    if texels == 0 || out.len() < texels {
+        return;
+    }
+    for (layer, src) in codes.chunks_exact(texels).enumerate() {
+        if layer == 0 {
+            out[..texels].copy_from_slice(src);
+        } else {
+            for (c, n) in out.iter_mut().zip(src) {
+                *c = finer(*c, *n, supported);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -122,6 +140,21 @@ mod tests {
             }
         }
         out
+    }
+
+    #[test]
+    fn merging_layers_of_codes_is_the_merged_conversion() {
+        let supported = rates(4);
+        let texels = 64;
+        let density: Vec<u8> = (0..texels * 2 * 2).map(|i| (i * 37 % 256) as u8).collect();
+        let mut layered = vec![0; texels * 2];
+        fill_codes(&density, texels, false, [4, 4], &supported, &mut layered);
+        let mut want = vec![0; texels];
+        fill_codes(&density, texels, true, [4, 4], &supported, &mut want);
+        let mut got = vec![0xff; texels];
+        merge_codes(&layered, texels, &supported, &mut got);
+        assert_eq!(got, want);
+        assert_ne!(layered[..texels], want[..], "the second layer counts");
     }
 
     #[test]

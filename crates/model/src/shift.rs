@@ -56,6 +56,34 @@ pub fn moved_enough(grid: &Grid, filled: [f32; 2], now: [f32; 2]) -> bool {
     (0..2).any(|i| (now[i] - filled[i]).abs() >= grid.texel[i].max(1) as f32 * 0.5)
 }
 
+/// Where one view's fovea was, in framebuffer pixels, when a map was filled for it, and the
+/// whole-texel shift that map holds ([`texel_shift`] then).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Filled {
+    pub at: [f32; 2],
+    pub shift: [i32; 2],
+}
+
+/// Whether a map whose views were filled for `held` (per view; `None`: the fixed map) must be
+/// looked at again for the foveas `now` (per view, pixels; `None`: fixed foveation): where a view
+/// changes between following and fixed, or its fovea [`moved_enough`]. A gaze that trembles inside
+/// half a texel of where the map was filled never asks, wherever that is on the grid, so it costs
+/// nothing; one that crosses a texel's edge back and forth asks at most once per half texel.
+pub fn must_refill(grid: &Grid, held: &[Option<Filled>], now: &[Option<[f32; 2]>]) -> bool {
+    held.iter().zip(now).any(|(h, n)| match (h, n) {
+        (None, None) => false,
+        (Some(h), Some(n)) => moved_enough(grid, h.at, *n),
+        _ => true,
+    })
+}
+
+/// The shift a map's view holds, `None` for the fixed map (no shift): two maps with the same
+/// shifts hold the same bytes, so an image asked to refill for the shifts it already holds needs
+/// no upload.
+pub fn held_shift(f: &Option<Filled>) -> Option<[i32; 2]> {
+    f.map(|f| f.shift).filter(|s| *s != [0, 0])
+}
+
 /// Writes one layer of `src` (R8G8, row-major, [`Grid::map_extent`] texels) into `dst` shifted by
 /// `shift` texels inside `view`'s texels: `dst[x] = src[clamp(x − shift)]`, clamped to the texels
 /// the view covers, so that side-by-side views never read each other's texels. Texels outside the
@@ -64,11 +92,31 @@ pub fn moved_enough(grid: &Grid, filled: [f32; 2], now: [f32; 2]) -> bool {
 /// # Panics
 /// If `src` or `dst` is not `map_extent` texels of two bytes.
 pub fn shift_into(grid: &Grid, view: &View, shift: [i32; 2], src: &[u8], dst: &mut [u8]) {
+    shift_texels_into::<2>(grid, view, shift, src, dst);
+}
+
+/// [`shift_into`] for one layer of shading-rate codes (R8_UINT, one byte per texel): the codes of
+/// a map move exactly as its density texels do, since each code is a function of its texel alone.
+///
+/// # Panics
+/// If `src` or `dst` is not `map_extent` texels of one byte.
+pub fn shift_codes_into(grid: &Grid, view: &View, shift: [i32; 2], src: &[u8], dst: &mut [u8]) {
+    shift_texels_into::<1>(grid, view, shift, src, dst);
+}
+
+/// [`shift_into`] for texels of `B` bytes.
+fn shift_texels_into<const B: usize>(
+    grid: &Grid,
+    view: &View,
+    shift: [i32; 2],
+    src: &[u8],
+    dst: &mut [u8],
+) {
     let [mw, mh] = grid.map_extent().map(|v| v as usize);
     assert_eq!(
         src.len(),
-        mw * mh * 2,
-        "source is {mw}x{mh} texels, 2 bytes each"
+        mw * mh * B,
+        "source is {mw}x{mh} texels, {B} bytes each"
     );
     assert_eq!(dst.len(), src.len(), "destination is the source's size");
     let Some((cols, rows)) = texels_of(grid, view) else {
@@ -86,24 +134,74 @@ pub fn shift_into(grid: &Grid, view: &View, shift: [i32; 2], src: &[u8], dst: &m
     for y in rows.0..rows.1 {
         let sy = pick(y, shift[1], rows);
         let (src_row, dst_row) = (
-            &src[sy * mw * 2..][..mw * 2],
-            &mut dst[y * mw * 2..][..mw * 2],
+            &src[sy * mw * B..][..mw * B],
+            &mut dst[y * mw * B..][..mw * B],
         );
-        let texel = |x: usize| [src_row[x * 2], src_row[x * 2 + 1]];
-        let first = texel(cols.0);
-        let last = texel(cols.1 - 1);
-        for d in dst_row[cols.0 * 2..head_end * 2].chunks_exact_mut(2) {
+        let mut first = [0u8; B];
+        first.copy_from_slice(&src_row[cols.0 * B..][..B]);
+        let mut last = [0u8; B];
+        last.copy_from_slice(&src_row[(cols.1 - 1) * B..][..B]);
+        for d in dst_row[cols.0 * B..head_end * B].chunks_exact_mut(B) {
             d.copy_from_slice(&first);
         }
         if head_end < tail_start {
             let from = (head_end as i64 - sx) as usize;
             let n = tail_start - head_end;
-            dst_row[head_end * 2..tail_start * 2]
-                .copy_from_slice(&src_row[from * 2..(from + n) * 2]);
+            dst_row[head_end * B..tail_start * B]
+                .copy_from_slice(&src_row[from * B..(from + n) * B]);
         }
-        for d in dst_row[tail_start.max(head_end) * 2..cols.1 * 2].chunks_exact_mut(2) {
+        for d in dst_row[tail_start.max(head_end) * B..cols.1 * B].chunks_exact_mut(B) {
             d.copy_from_slice(&last);
         }
+    }
+}
+
+/// Where one view lies in a map of several layers: the layer it is drawn into, and its rect and
+/// FOV there. Indexed by the view's index in the projection layer (the eye), as the gaze's
+/// per-view centres are.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Placed {
+    pub layer: usize,
+    pub view: View,
+}
+
+/// Writes `src` (layers of `B`-byte texels, [`Grid::map_extent`] each, one after the other) into
+/// `dst` with each placed view's texels shifted by its shift (`None`: not moved, the view's texels
+/// copied as they are); texels outside every placed view are copied unchanged. Views without a
+/// place, or placed in a layer `src` does not have, are left out.
+///
+/// # Panics
+/// If `dst` is not `src`'s size, or `src` is not whole layers.
+pub fn shift_layers<const B: usize>(
+    grid: &Grid,
+    placed: &[Option<Placed>],
+    shifts: &[Option<[i32; 2]>],
+    src: &[u8],
+    dst: &mut [u8],
+) {
+    let [mw, mh] = grid.map_extent().map(|v| v as usize);
+    let layer = mw * mh * B;
+    assert_eq!(dst.len(), src.len(), "destination is the source's size");
+    assert!(
+        layer > 0 && src.len() % layer == 0,
+        "whole layers of {mw}x{mh} texels"
+    );
+    dst.copy_from_slice(src);
+    for (p, s) in placed.iter().zip(shifts) {
+        let (Some(p), Some(s)) = (p, s) else {
+            continue;
+        };
+        let at = p.layer * layer;
+        if at + layer > src.len() || *s == [0, 0] {
+            continue;
+        }
+        shift_texels_into::<B>(
+            grid,
+            &p.view,
+            *s,
+            &src[at..at + layer],
+            &mut dst[at..at + layer],
+        );
     }
 }
 
@@ -296,6 +394,119 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn bookkeeping_refills_once_per_half_texel_and_on_following_or_not() {
+        let grid = Grid::new([2064, 2240], [16, 16]);
+        let held = |at: [f32; 2]| Some(Filled { at, shift: [0, 0] });
+        // Trembling around where the map was filled, even across a texel's edge: nothing.
+        let filled = [held([103.9, 200.0]), None];
+        for x in [100.0, 104.1, 96.5, 111.8] {
+            assert!(
+                !must_refill(&grid, &filled, &[Some([x, 201.0]), None]),
+                "{x}"
+            );
+        }
+        assert!(must_refill(&grid, &filled, &[Some([111.9, 200.0]), None]));
+        assert!(
+            must_refill(&grid, &filled, &[None, None]),
+            "back to fixed foveation"
+        );
+        assert!(
+            must_refill(&grid, &filled, &[Some([103.9, 200.0]), Some([0.0, 0.0])]),
+            "the second view starts following"
+        );
+        assert!(!must_refill(&grid, &[None, None], &[None, None]));
+        assert_eq!(
+            held_shift(&held([0.0, 0.0])),
+            None,
+            "no shift is the fixed map"
+        );
+        let moved = Some(Filled {
+            at: [0.0, 0.0],
+            shift: [2, -1],
+        });
+        assert_eq!(held_shift(&moved), Some([2, -1]));
+    }
+
+    #[test]
+    fn layers_shift_per_view_and_codes_as_density() {
+        // Two views side by side in layer 0 and one view over the whole of layer 1.
+        let grid = Grid::new([128, 32], [16, 16]);
+        let fov = Fov::from_tangents(1.0, 1.0, 1.0, 1.0);
+        let rect = |x, width| Rect {
+            x,
+            y: 0,
+            width,
+            height: 32,
+        };
+        let place = |layer, r| {
+            Some(Placed {
+                layer,
+                view: View {
+                    fov,
+                    rect: r,
+                    visible: None,
+                },
+            })
+        };
+        let placed = [
+            place(0, rect(0, 64)),
+            place(0, rect(64, 64)),
+            place(1, rect(0, 128)),
+        ];
+        let texels = 8 * 2;
+        let src: Vec<u8> = (0..texels * 2).map(|i| i as u8).collect();
+        let mut dst = vec![0; src.len()];
+        shift_layers::<1>(
+            &grid,
+            &placed,
+            &[Some([1, 0]), None, Some([-2, 0])],
+            &src,
+            &mut dst,
+        );
+        let code = |m: &[u8], layer: usize, x: usize, y: usize| m[layer * texels + y * 8 + x];
+        for y in 0..2 {
+            assert_eq!(code(&dst, 0, 0, y), code(&src, 0, 0, y));
+            assert_eq!(
+                code(&dst, 0, 3, y),
+                code(&src, 0, 2, y),
+                "the left view moved right"
+            );
+            for x in 4..8 {
+                assert_eq!(
+                    code(&dst, 0, x, y),
+                    code(&src, 0, x, y),
+                    "the right view stays"
+                );
+            }
+            assert_eq!(
+                code(&dst, 1, 0, y),
+                code(&src, 1, 2, y),
+                "layer 1 moved left"
+            );
+            assert_eq!(code(&dst, 1, 7, y), code(&src, 1, 7, y));
+        }
+        // Density (two bytes a texel) shifted, then converted, is the conversion shifted.
+        let view = quest3_left();
+        let grid = Grid::new([2064, 2240], [16, 16]);
+        let fixed = map(&grid, &view, Level::High);
+        let n = fixed.len() / 2;
+        let rates = [[1, 1], [1, 2], [2, 1], [2, 2], [2, 4], [4, 2], [4, 4]];
+        let convert = |d: &[u8]| {
+            let mut c = vec![0; n];
+            crate::shading_rate::fill_codes(d, n, false, [4, 4], &rates, &mut c);
+            c
+        };
+        let placed = [Some(Placed { layer: 0, view })];
+        let shift = [Some(texel_shift(&grid, &view, [0.4, -0.3]))];
+        let mut moved = vec![0; fixed.len()];
+        shift_layers::<2>(&grid, &placed, &shift, &fixed, &mut moved);
+        let mut moved_codes = vec![0; n];
+        shift_layers::<1>(&grid, &placed, &shift, &convert(&fixed), &mut moved_codes);
+        assert_eq!(moved_codes, convert(&moved));
+        assert_ne!(moved, fixed, "it moved");
     }
 
     #[test]

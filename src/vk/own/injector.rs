@@ -36,7 +36,7 @@ use crate::bridge::inject::Injection;
 use crate::bridge::FdmEmulation;
 use crate::vk::own::calls::Own;
 use crate::vk::translate::formats::SHADOW_FORMAT;
-use fovea_model::inject::{Pass, Views};
+use fovea_model::inject::{FixedCodes, Pass, Views};
 
 /// What the layer knows of a colour image: its extent and array layers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -62,6 +62,12 @@ struct Map {
     key: u64,
     /// `None` where it could not be made: the shape renders at full rate, not retried.
     objects: Option<InjectedMap>,
+    /// The fixed map's codes, per view layer, and the published fixed-map generation they were
+    /// computed for ([`Injection::fixed`]): a gaze shifts them, and only a new pattern or FOV
+    /// computes them again (docs/eye-tracking.md#what-moves-when).
+    fixed: Option<(u64, FixedCodes)>,
+    /// Scratch for the shifted per-view codes, kept between refills.
+    scratch: Vec<u8>,
 }
 
 #[derive(Clone, Copy)]
@@ -121,6 +127,7 @@ pub struct Injector {
 impl Injector {
     /// Nothing tracked yet, on a device with `fdm`'s shading-rate attachments.
     pub fn new(fdm: FdmEmulation) -> Injector {
+        crate::bridge::inject::set_texel(fdm.texel);
         let model = fovea_model::inject::Device {
             texel: fdm.texel,
             layered: fdm.layered,
@@ -379,23 +386,45 @@ impl Injector {
             if m.key != key {
                 // Whatever happens below, not again for this key: nothing per command.
                 m.key = key;
-                let (texels, layers, codes) = self.codes(state, extent, views);
+                let refilled = m.fixed.as_ref().is_none_or(|(f, _)| *f != state.fixed);
+                if refilled {
+                    m.fixed = Some((state.fixed, self.fixed_codes(state, extent, views)));
+                }
+                let Some((_, fixed)) = &m.fixed else {
+                    return Some(o.view);
+                };
+                let mut codes = Vec::new();
+                fixed.codes_into(&state.centres, &mut m.scratch, &mut codes);
                 // A shape's texels and layers follow from its extent, views and the device alone,
                 // so the image always fits; checked all the same, never written past.
-                if texels == o.texels && layers == o.layers {
-                    own.clears.upload(o.image, texels, layers, codes);
-                    tracing::info!(
-                        width = extent[0],
-                        height = extent[1],
-                        ?views,
-                        level = state.pattern.level.name(),
-                        "injected shading-rate map refilled"
-                    );
+                if fixed.texels == o.texels && fixed.out_layers() == o.layers {
+                    own.clears.upload(o.image, o.texels, o.layers, codes);
+                    if refilled {
+                        tracing::info!(
+                            width = extent[0],
+                            height = extent[1],
+                            ?views,
+                            level = state.pattern.level.name(),
+                            "injected shading-rate map refilled"
+                        );
+                    } else {
+                        tracing::debug!(
+                            width = extent[0],
+                            height = extent[1],
+                            ?views,
+                            centres = ?state.centres,
+                            "injected shading-rate map's fovea moved"
+                        );
+                    }
                 }
             }
             return Some(o.view);
         }
-        let (texels, layers, codes) = self.codes(state, extent, views);
+        let fixed = self.fixed_codes(state, extent, views);
+        let (texels, layers) = (fixed.texels, fixed.out_layers());
+        let mut scratch = Vec::new();
+        let mut codes = Vec::new();
+        fixed.codes_into(&state.centres, &mut scratch, &mut codes);
         // SAFETY: as the caller promised.
         let made = unsafe { make(own, texels, layers) };
         let objects = match made {
@@ -430,12 +459,15 @@ impl Injector {
             views,
             key,
             objects,
+            fixed: Some((state.fixed, fixed)),
+            scratch,
         });
         objects.map(|o| o.view)
     }
 
-    fn codes(&self, state: &Injection, extent: [u32; 2], views: Views) -> ([u32; 2], u32, Vec<u8>) {
-        fovea_model::inject::codes(
+    /// The fixed map's codes (no gaze) for a target of `extent` holding `views`.
+    fn fixed_codes(&self, state: &Injection, extent: [u32; 2], views: Views) -> FixedCodes {
+        FixedCodes::new(
             &self.model,
             views,
             extent,

@@ -127,6 +127,7 @@ pub fn end_frame(sess: xr::Session, info: In<xr::FrameEndInfo>) -> HookResult<xr
         s.refresh_dynamic_max();
     }
     s.publish_injected_pattern();
+    s.publish_injected_centres();
     let f = next(s.instance.next.end_frame)?;
     // SAFETY: the next layer's xrEndFrame, with the application's arguments as it passed them.
     Ok(observed(&s, unsafe { f(sess, info.raw()) }))
@@ -394,6 +395,7 @@ pub fn locate_views(
             *slot = fov_from_xr(v.fov);
         }
         crate::bridge::inject::set_fovs(&fovs[..n]);
+        s.publish_injected_centres();
     }
     if s.gpu.is_some() && capacity > 0 {
         if located.iter().any(|v| v.ty != xr::StructureType::VIEW) {

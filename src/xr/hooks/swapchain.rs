@@ -10,7 +10,7 @@ use xr::Handle;
 use crate::common::lock::Mutex;
 
 use crate::bridge::{FoveationState, MapSources};
-use crate::xr::density_images::{DensityImages, Refreshed};
+use crate::xr::density_images::{DensityImages, Foveas, Refreshed};
 use crate::xr::extensions::Ext;
 use crate::xr::ffi::HookResult;
 use crate::xr::ffi::{self, In, Out, OutArray};
@@ -45,11 +45,28 @@ pub enum Subsampled {
     CannotForce,
 }
 
+/// The create flags fovea accepts in `XrVulkanSwapchainCreateInfoMETA`: SUBSAMPLED (dropped, or
+/// forced off) and FRAGMENT_DENSITY_MAP_OFFSET, which says the application moves the fovea itself
+/// with density-map offsets (fovea keeps its maps fixed, docs/eye-tracking.md#what-moves-when).
+const META_CREATE_FLAGS: vk::ImageCreateFlags = vk::ImageCreateFlags::from_raw(
+    vk::ImageCreateFlags::SUBSAMPLED_EXT.as_raw()
+        | vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM.as_raw(),
+);
+
+/// Whether a request's `XrVulkanSwapchainCreateInfoMETA` asks for
+/// `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` (the QCOM name's value).
+pub fn asks_for_offsets(req: FoveationRequest) -> bool {
+    req.meta.is_some_and(|(create, _)| {
+        create.contains(vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM)
+    })
+}
+
 /// Checks a request against what fovea can honour without runtime support for the structs:
 /// SCALED_BIN is a GLES flag (QCOM_texture_foveated) and a Vulkan or headless session cannot use it;
 /// the runtime allocates the images, so additional Vulkan flags cannot be honoured, except
 /// SUBSAMPLED, which Quest's runtime also drops when unsupported (docs/openxr-layer.md#subsampled-images) and
-/// which `debug.oculus.foveation.subsampled` forces on or off.
+/// which `debug.oculus.foveation.subsampled` forces on or off, and FRAGMENT_DENSITY_MAP_OFFSET,
+/// which changes what fovea does with its maps, not the images ([`asks_for_offsets`]).
 pub fn check_request(req: FoveationRequest, forced: Option<bool>) -> HookResult<Subsampled> {
     use xr::SwapchainCreateFoveationFlagsFB as F;
     if !(F::SCALED_BIN | F::FRAGMENT_DENSITY_MAP).contains(req.flags) {
@@ -61,7 +78,7 @@ pub fn check_request(req: FoveationRequest, forced: Option<bool>) -> HookResult<
     }
     let mut asked = false;
     if let Some((create, usage)) = req.meta {
-        if !usage.is_empty() || !vk::ImageCreateFlags::SUBSAMPLED_EXT.contains(create) {
+        if !usage.is_empty() || !META_CREATE_FLAGS.contains(create) {
             tracing::warn!(
                 ?create,
                 ?usage,
@@ -69,7 +86,7 @@ pub fn check_request(req: FoveationRequest, forced: Option<bool>) -> HookResult<
             );
             return Err(xr::Result::ERROR_FEATURE_UNSUPPORTED);
         }
-        asked = !create.is_empty();
+        asked = create.contains(vk::ImageCreateFlags::SUBSAMPLED_EXT);
     }
     Ok(match (asked, forced) {
         (true, Some(false)) => Subsampled::Off,
@@ -170,7 +187,14 @@ pub fn create_swapchain(
         foveation: req.foveation.then(|| Mutex::new(FoveationState::default())),
         density,
         submitted: Mutex::default(),
+        app_offsets: asks_for_offsets(req),
     };
+    if record.app_offsets {
+        tracing::info!(
+            "the application applies density-map offsets to this swapchain itself: its maps stay \
+             fixed"
+        );
+    }
     let injected = record.session.instance.inject.is_some();
     let info = record.info;
     registry()
@@ -395,6 +419,7 @@ fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32) {
         submitted,
     };
     let key = sources.key();
+    let foveas = foveas(state, &sources, density.layers);
     // Read before the fill lock is taken: the FOVs sit behind a record lock, which ranks outside
     // it (crate::common::lock::Rank).
     let visible = crate::xr::symmetric::active(session)
@@ -415,7 +440,7 @@ fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32) {
     };
     // SAFETY: called from xrAcquireSwapchainImage, where the application synchronises the
     // binding's queue for the runtime (`DensityImages::refresh`'s contract).
-    match unsafe { density.refresh(index, key, inputs) } {
+    match unsafe { density.refresh(index, key, &foveas, inputs) } {
         Ok(Refreshed::Nothing) => {}
         Ok(done) => {
             if done == Refreshed::Built {
@@ -426,6 +451,36 @@ fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32) {
         }
         Err(e) => tracing::warn!(error = %e, index, "density image not refreshed"),
     }
+}
+
+/// Where the fovea of each view of a swapchain's maps goes this frame: to the gaze
+/// (`Session::eyes`) where the swapchain's current profile is eye-tracked
+/// (XR_META_foveation_eye_tracked), the gaze is followed, and the application does not move the
+/// fovea itself with density-map offsets; the fixed map's place otherwise. Each view's centre is in
+/// NDC of its own FOV, so it is placed with the views the maps are drawn from (submitted, else
+/// located). No allocation, one record lock (the gaze's copy) where the profile is eye-tracked.
+fn foveas(state: &Swapchain, sources: &MapSources, layers: u32) -> Foveas {
+    if !sources.foveation.params.eye_tracked || state.app_offsets {
+        return Foveas::FIXED;
+    }
+    let eyes = *state.session.eyes.lock();
+    if !eyes.follows() {
+        return Foveas::FIXED;
+    }
+    let placed = fovea_model::maps::placed(
+        [state.info.width, state.info.height],
+        layers,
+        &sources.submitted.views,
+        &sources.located.fovs,
+        None,
+    );
+    let mut centres = [None; fovea_model::maps::MAX_VIEWS];
+    for (eye, (c, p)) in centres.iter_mut().zip(&placed).enumerate() {
+        if p.is_some() {
+            *c = eyes.of(eye);
+        }
+    }
+    Foveas { centres, placed }
 }
 
 /// The density images for a new FRAGMENT_DENSITY_MAP swapchain on a session with fovea's Vulkan
@@ -584,6 +639,27 @@ mod tests {
         );
         assert_eq!(
             ok(fdm, Some((C::SPARSE_BINDING, U::empty()))),
+            Err(xr::Result::ERROR_FEATURE_UNSUPPORTED)
+        );
+        // Density-map offsets: accepted, remembered, and not taken for SUBSAMPLED.
+        let offsets = Some((C::FRAGMENT_DENSITY_MAP_OFFSET_QCOM, U::empty()));
+        assert_eq!(ok(fdm, offsets), Ok(Subsampled::No));
+        assert!(asks_for_offsets(req(fdm, offsets)));
+        let both = Some((
+            C::FRAGMENT_DENSITY_MAP_OFFSET_QCOM | C::SUBSAMPLED_EXT,
+            U::empty(),
+        ));
+        assert_eq!(ok(fdm, both), Ok(Subsampled::Dropped));
+        assert!(!asks_for_offsets(req(fdm, sub)));
+        assert!(!asks_for_offsets(req(fdm, None)));
+        assert_eq!(
+            ok(
+                fdm,
+                Some((
+                    C::FRAGMENT_DENSITY_MAP_OFFSET_QCOM | C::SPARSE_BINDING,
+                    U::empty()
+                ))
+            ),
             Err(xr::Result::ERROR_FEATURE_UNSUPPORTED)
         );
     }

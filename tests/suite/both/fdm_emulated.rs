@@ -56,7 +56,7 @@ const VIEW_MASK: u32 = 0b11;
 
 /// How the application lays its two eyes out in the swapchain.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Layout {
+pub(crate) enum Layout {
     /// Two array layers, eye `i` in layer `i` over the whole image, drawn in one multiview pass.
     Multiview,
     /// One layer, the left eye in the left half and the right eye in the right half, drawn in
@@ -65,7 +65,7 @@ enum Layout {
 }
 
 impl Layout {
-    fn layers(self) -> u32 {
+    pub(crate) fn layers(self) -> u32 {
         match self {
             Layout::Multiview => 2,
             Layout::DoubleWide => 1,
@@ -73,7 +73,7 @@ impl Layout {
     }
 
     /// Where the application draws eye `eye`: its array layer and rectangle.
-    fn place(self, eye: usize) -> (u32, Rect) {
+    pub(crate) fn place(self, eye: usize) -> (u32, Rect) {
         let whole = Rect {
             x: 0,
             y: 0,
@@ -96,7 +96,7 @@ impl Layout {
     /// Per density-map layer, the views the map of an image acquired now is made for: those the
     /// application submitted into the swapchain, or before its first submission, view `i` over
     /// the whole of layer `i` (docs/ARCHITECTURE.md, crates/model/src/maps.rs).
-    fn views(self, fovs: [Fov; 2], submitted: bool) -> Vec<Vec<View>> {
+    pub(crate) fn views(self, fovs: [Fov; 2], submitted: bool) -> Vec<Vec<View>> {
         let mut out = vec![Vec::new(); self.layers() as usize];
         for (eye, fov) in fovs.into_iter().enumerate() {
             let (layer, rect) = if submitted {
@@ -141,7 +141,7 @@ fn each_profile(layout: Layout) {
 /// The application's objects for one swapchain: a pass with the density map (multiview where the
 /// layout has a layer per eye), one framebuffer per swapchain image, a pipeline, and a command
 /// buffer with its fence.
-struct Renderer {
+pub(crate) struct Renderer {
     pass: vk::RenderPass,
     views: Vec<vk::ImageView>,
     framebuffers: Vec<vk::Framebuffer>,
@@ -176,8 +176,14 @@ fn whole_view(d: &ash::Device, layout: Layout, image: u64, format: vk::Format) -
 }
 
 impl Renderer {
-    /// `color` and `density`: the swapchain's images and their density images, by index.
-    fn new(v: &Vulkan, layout: Layout, color: &[u64], density: &[u64]) -> Renderer {
+    /// `color` and `density`: the swapchain's images and their density images, by index; without
+    /// density images, a pass with the colour attachment alone.
+    pub(crate) fn new(
+        v: &Vulkan,
+        layout: Layout,
+        color: &[u64],
+        density: Option<&[u64]>,
+    ) -> Renderer {
         let d = &v.device;
         let atts = [
             vk::AttachmentDescription::default()
@@ -212,9 +218,11 @@ impl Renderer {
                 layout: FDM_LAYOUT,
             });
         let mut info = vk::RenderPassCreateInfo::default()
-            .attachments(&atts)
-            .subpasses(&subpass)
-            .push_next(&mut fdm);
+            .attachments(&atts[..1 + usize::from(density.is_some())])
+            .subpasses(&subpass);
+        if density.is_some() {
+            info = info.push_next(&mut fdm);
+        }
         if layout == Layout::Multiview {
             info = info.push_next(&mut multiview);
         }
@@ -226,12 +234,12 @@ impl Renderer {
                 .expect("vkCreateRenderPass");
             let mut views = Vec::new();
             let mut framebuffers = Vec::new();
-            for (&c, &f) in color.iter().zip(density) {
-                let pair = [
-                    whole_view(d, layout, c, COLOR),
-                    whole_view(d, layout, f, DENSITY),
-                ];
-                views.extend(pair);
+            for (i, &c) in color.iter().enumerate() {
+                let mut pair = vec![whole_view(d, layout, c, COLOR)];
+                if let Some(&f) = density.and_then(|d| d.get(i)) {
+                    pair.push(whole_view(d, layout, f, DENSITY));
+                }
+                views.extend(pair.iter().copied());
                 framebuffers.push(
                     d.create_framebuffer(
                         &vk::FramebufferCreateInfo::default()
@@ -300,7 +308,7 @@ impl Renderer {
     /// Records and submits one full-screen draw into swapchain image `index` through its density
     /// map, and waits for it. Called between acquire and release, where the application owns the
     /// image and its queue.
-    fn draw(&self, d: &ash::Device, index: u32) {
+    pub(crate) fn draw(&self, d: &ash::Device, index: u32) {
         let area = vk::Rect2D {
             offset: vk::Offset2D::default(),
             extent: vk::Extent2D {
@@ -362,7 +370,7 @@ impl Renderer {
         }
     }
 
-    fn destroy(self, d: &ash::Device) {
+    pub(crate) fn destroy(self, d: &ash::Device) {
         // SAFETY: the device is idle; each object is destroyed once.
         unsafe {
             d.device_wait_idle().unwrap();
@@ -385,7 +393,7 @@ impl Renderer {
 }
 
 /// The swapchain's own VkImages, by index.
-fn color_images(app: &App, swapchain: xr::Swapchain) -> Vec<u64> {
+pub(crate) fn color_images(app: &App, swapchain: xr::Swapchain) -> Vec<u64> {
     let f: xr::pfn::EnumerateSwapchainImages = func(app, "xrEnumerateSwapchainImages");
     let mut n = 0;
     // SAFETY: the two-call idiom with a buffer of the reported size.
@@ -410,7 +418,7 @@ fn color_images(app: &App, swapchain: xr::Swapchain) -> Vec<u64> {
 /// What the density model and the rate conversion give on `profile`'s device for a map whose
 /// layers hold `views`: per shading-rate layer (one per map layer, or with `merged` one layer with
 /// the finer rate of all), the codes of every texel.
-fn expected_codes(
+pub(crate) fn expected_codes(
     profile: Profile,
     views: &[Vec<View>],
     pattern: Pattern,
@@ -440,7 +448,13 @@ fn expected_codes(
 /// double plays computes it from the pipeline's rate state and the attachment the pass read. Each
 /// view reads its own layer where `layers` is 2 (layered attachment, multiview), else layer 0:
 /// then every view must get the same rates. The double recorded no misuse meanwhile.
-fn rates_drawn(env: &Env, case: &str, layout: Layout, layers: u32, extent: [u32; 2]) -> Vec<u8> {
+pub(crate) fn rates_drawn(
+    env: &Env,
+    case: &str,
+    layout: Layout,
+    layers: u32,
+    extent: [u32; 2],
+) -> Vec<u8> {
     assert_eq!(env.double.errors(), Vec::<String>::new(), "{case}");
     let draws = env.double.draws();
     assert_eq!(draws.len(), 1, "{case}: {draws:?}");
@@ -515,7 +529,7 @@ fn plausible(
 
 /// Releases the image and ends the frame with one projection layer: both eyes where `layout`
 /// draws them, with the FOVs they were located with.
-fn release(
+pub(crate) fn release(
     frame: &Frame,
     layout: Layout,
     swapchain: xr::Swapchain,
@@ -654,7 +668,7 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
 
     let color = color_images(&app, swapchain);
     let density: Vec<u64> = density_images.iter().map(|d| d.image).collect();
-    let renderer = Renderer::new(&v, layout, &color, &density);
+    let renderer = Renderer::new(&v, layout, &color, Some(&density));
     // The pass reached the driver with a shading-rate attachment of the device's texel.
     let passes = env.double.events("render_pass");
     assert_eq!(passes.len(), 1, "{what}: {passes:?}");

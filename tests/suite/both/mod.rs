@@ -4,6 +4,7 @@
 pub mod example_modes;
 pub mod fdm_emulated;
 pub mod fdm_vulkan;
+pub mod gaze_follow;
 pub mod hello_xr;
 pub mod monado;
 pub mod vulkan_enable;
