@@ -239,7 +239,8 @@ impl Scene {
     }
 
     /// Records the upload of the map (ending in the density layout) and the colour image's move
-    /// into `COLOR_ATTACHMENT_OPTIMAL`.
+    /// into `COLOR_ATTACHMENT_OPTIMAL`, after any earlier submission's colour writes (several
+    /// command buffers render into the one colour image, and the move is a write).
     fn prepare(&self, cb: vk::CommandBuffer) {
         let staging = self.staging.as_ref().expect("staging");
         self.dev
@@ -249,6 +250,7 @@ impl Scene {
             .subresource_range(range(0, self.layers))
             .old_layout(vk::ImageLayout::UNDEFINED)
             .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            .src_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
             .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
             .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
             .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED);
@@ -256,7 +258,7 @@ impl Scene {
         unsafe {
             self.dev.d.cmd_pipeline_barrier(
                 cb,
-                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
                 vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
                 vk::DependencyFlags::empty(),
                 &[],
