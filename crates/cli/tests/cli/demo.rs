@@ -72,20 +72,21 @@ fn left_gaze(text: &str) -> Vec<Option<[f32; 2]>> {
 }
 
 /// The gaze script (`fovea demo`'s `GAZE`) looks ahead, 15° right and 8° up, then 15° left and 6°
-/// down: the fovea is tracked on every stats line after the first (the gaze source starts with the
-/// session) and goes both ways by well over a tenth of the view, which a centred fovea never does.
+/// down: the fovea follows the gaze (`tracked@`, or `held@` through the blink) on every stats line
+/// after the first (the gaze source starts with the session), and moves both ways by well over a
+/// tenth of the view, which a centred fovea never does.
 fn assert_fovea_follows(text: &str) {
     let gaze = left_gaze(text);
     assert!(gaze.len() >= 5, "{gaze:?}\n{text}");
-    let tracked: Vec<[f32; 2]> = gaze[1..].iter().map_while(|g| *g).collect();
-    assert_eq!(tracked.len(), gaze.len() - 1, "{gaze:?}\n{text}");
-    let xs = tracked.iter().map(|c| c[0]);
+    let following: Vec<[f32; 2]> = gaze[1..].iter().map_while(|g| *g).collect();
+    assert_eq!(following.len(), gaze.len() - 1, "{gaze:?}\n{text}");
+    let xs = following.iter().map(|c| c[0]);
     let (lo, hi) = (
         xs.clone().fold(f32::INFINITY, f32::min),
         xs.fold(f32::NEG_INFINITY, f32::max),
     );
     assert!(hi - lo > 0.25, "the fovea stayed put: {gaze:?}\n{text}");
-    let ys = tracked.iter().map(|c| c[1]);
+    let ys = following.iter().map(|c| c[1]);
     assert!(
         ys.clone().fold(f32::NEG_INFINITY, f32::max) - ys.fold(f32::INFINITY, f32::min) > 0.1,
         "the fovea never moved vertically: {gaze:?}\n{text}"
