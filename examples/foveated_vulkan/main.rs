@@ -2026,7 +2026,8 @@ mod tests {
             (o.levels.as_slice(), o.dynamic, o.frames),
             (&[3][..], true, 10)
         );
-        assert!(o.capture && o.dump == Some(PathBuf::from("d")));
+        assert!(o.capture && o.dump == Some(PathBuf::from("d")) && !o.eye_tracked);
+        assert!(parse("--levels high --eye-tracked").unwrap().eye_tracked);
         let o = parse("--no-fb --double-wide --offscreen --dynamic-rendering").unwrap();
         assert!(o.no_fb && o.offscreen && o.dynamic_rendering);
         assert_eq!(
@@ -2037,6 +2038,7 @@ mod tests {
             ("--double-wide", "add --no-fb"),
             ("--no-fb --levels high", "--no-fb has none"),
             ("--no-fb --dynamic", "--no-fb has none"),
+            ("--no-fb --eye-tracked", "--no-fb has none"),
             ("--levels ultra", "\"ultra\" is not one of"),
             ("--frames 0", "positive count"),
             ("--frames", "takes a value"),
