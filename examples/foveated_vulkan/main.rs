@@ -25,7 +25,15 @@
 //! any message), `--vk-layer NAME` (one more Vulkan layer for the VkInstance, after validation;
 //! repeatable), `--heavy` (a fill-bound fragment shader, for timing eye passes), `--check-rates`
 //! (with `--heavy`: the fragment size each density-map texel was shaded at, read from the pixels
-//! of frames read back, against what the map allows), `--help`.
+//! of frames read back, against what the map allows), `--eye-tracked` (below), `--help`.
+//!
+//! `--eye-tracked` makes it an app whose fovea follows the eyes, as Quest Pro apps do
+//! (docs/eye-tracking.md#xr_meta_foveation_eye_tracked): it enables `XR_META_foveation_eye_tracked`,
+//! chains `XrFoveationEyeTrackedProfileCreateInfoMETA` on every level profile, and, as an app with
+//! input does, attaches an action set of its own (a controller's aim pose) and syncs it every frame.
+//! The runtime (or fovea) then moves the fovea in the density maps; with `--dump`, a changed map is
+//! read back at most every [`EYE_TRACKED_CAPTURE_FRAMES`] frames, not on every move, and a frame
+//! every [`EYE_TRACKED_READ_FRAMES`].
 //!
 //! The options below make the example a test subject for fovea's injection (docs/injection.md),
 //! which foveates applications that never ask, by their eye passes:
@@ -83,6 +91,12 @@ const TINTS: [[f32; 4]; 4] = [
     [0.7, 0.7, 0.1, 1.0],
     [0.8, 0.2, 0.1, 1.0],
 ];
+/// With `--eye-tracked`, the fewest frames between two density maps read back: the maps change
+/// whenever the fovea moves by half a texel, which smooth pursuit does every few frames.
+const EYE_TRACKED_CAPTURE_FRAMES: u64 = 30;
+/// With `--eye-tracked` and `--dump`, a frame is also read back every this many frames (2 s at
+/// 90 Hz), so that the frames show the fovea at a few places.
+const EYE_TRACKED_READ_FRAMES: u64 = 180;
 /// Long enough at 90 Hz for a level to be seen in a headset, short enough for a test.
 const FRAMES_PER_LEVEL: u64 = 30;
 
@@ -113,6 +127,8 @@ struct Options {
     layout: Layout,
     /// `vkCmdBeginRenderingKHR` instead of render passes (`--dynamic-rendering`).
     dynamic_rendering: bool,
+    /// Eye-tracked profiles and an attached action set (`--eye-tracked`).
+    eye_tracked: bool,
 }
 
 impl Options {
@@ -132,6 +148,7 @@ impl Options {
             offscreen: false,
             layout: Layout::Array,
             dynamic_rendering: false,
+            eye_tracked: false,
         };
         let mut frames = None;
         let mut levels_given = false;
@@ -180,15 +197,18 @@ impl Options {
                 "--offscreen" => o.offscreen = true,
                 "--double-wide" => o.layout = Layout::DoubleWide,
                 "--dynamic-rendering" => o.dynamic_rendering = true,
+                "--eye-tracked" => o.eye_tracked = true,
                 other => return Err(format!("unknown option {other:?} (--help lists them)")),
             }
         }
         if o.no_fb {
             // Levels and profiles are the FB API's; without it the stripes keep level NONE's tint
             // and every eye pass is timed under it.
-            if levels_given || o.dynamic {
+            if levels_given || o.dynamic || o.eye_tracked {
                 return Err(
-                    "--levels and --dynamic choose FB foveation profiles; --no-fb has none".into(),
+                    "--levels, --dynamic and --eye-tracked choose FB foveation profiles; --no-fb \
+                     has none"
+                        .into(),
                 );
             }
             o.levels = vec![0];
@@ -272,6 +292,9 @@ usage: foveated_vulkan [options]   (run through an OpenXR runtime; see the file'
   --double-wide           (with --no-fb) one swapchain twice a view wide, one pass with a viewport
                           per eye, submitted as two views with the halves as image rects
   --dynamic-rendering     begin passes with vkCmdBeginRenderingKHR instead of render passes
+  --eye-tracked           eye-tracked profiles (XR_META_foveation_eye_tracked) and an action set
+                          attached and synced each frame, as apps with input do; with --dump, a
+                          changed map is written at most every 30 frames and a frame every 180
   -h, --help              this text";
 
 fn main() {
@@ -435,6 +458,12 @@ fn run(options: &Options) -> Result<Outcome, String> {
     extensions.fb_foveation = !options.no_fb;
     extensions.fb_foveation_configuration = !options.no_fb;
     extensions.fb_foveation_vulkan = !options.no_fb;
+    if options.eye_tracked && !available.meta_foveation_eye_tracked {
+        return Err(
+            "--eye-tracked: the runtime (or a layer) lacks XR_META_foveation_eye_tracked".into(),
+        );
+    }
+    extensions.meta_foveation_eye_tracked = options.eye_tracked;
     let instance = entry
         .create_instance(
             &xr::ApplicationInfo {
@@ -869,15 +898,24 @@ unsafe fn session_loop(
         .iter()
         .filter(|_| !options.no_fb)
         .map(|&i| {
-            session
-                .create_foveation_profile(Some(xr::FoveationLevelProfile {
-                    level: LEVELS[i],
-                    vertical_offset: 0.0,
-                    dynamic,
-                }))
-                .map_err(|e| format!("xrCreateFoveationProfileFB({:?}): {e}", LEVELS[i]))
+            let level = xr::FoveationLevelProfile {
+                level: LEVELS[i],
+                vertical_offset: 0.0,
+                dynamic,
+            };
+            if options.eye_tracked {
+                eye_tracked_profile(instance, &session, level)
+            } else {
+                session.create_foveation_profile(Some(level))
+            }
+            .map_err(|e| format!("xrCreateFoveationProfileFB({:?}): {e}", LEVELS[i]))
         })
         .collect::<Result<Vec<_>, String>>()?;
+    let input = if options.eye_tracked {
+        Some(attach_input(instance, &session)?)
+    } else {
+        None
+    };
     let update_state = instance.exts().fb_swapchain_update_state;
     if update_state.is_none() && !options.no_fb {
         return Err("XR_FB_swapchain_update_state was enabled but has no functions".into());
@@ -1007,6 +1045,11 @@ unsafe fn session_loop(
         frame_stream
             .begin()
             .map_err(|e| format!("xrBeginFrame: {e}"))?;
+        if let Some((set, _)) = &input {
+            session
+                .sync_actions(&[set.into()])
+                .map_err(|e| format!("xrSyncActions: {e}"))?;
+        }
         if !state.should_render {
             frame_stream
                 .end(state.predicted_display_time, blend_mode, &[])
@@ -1023,14 +1066,22 @@ unsafe fn session_loop(
             .wait_image(xr::Duration::INFINITE)
             .map_err(|e| format!("xrWaitSwapchainImage: {e}"))?;
         let read = Read {
-            eyes: read_eyes || (options.capture && frames + 1 == options.frames),
+            eyes: read_eyes
+                || (options.capture && frames + 1 == options.frames)
+                || (options.capture
+                    && options.eye_tracked
+                    && frames > 0
+                    && frames % EYE_TRACKED_READ_FRAMES == 0),
             density: options.capture,
         };
         eye_ms[level].extend(renderer.draw(index, TINTS[level], read)?);
         read_eyes = false;
         if options.capture {
             let map = renderer.density(index).unwrap_or_default();
-            let changed = captures.last().is_none_or(|c| c.density != map);
+            let changed = captures.last().is_none_or(|c| {
+                c.density != map
+                    && (!options.eye_tracked || frames >= c.frame + EYE_TRACKED_CAPTURE_FRAMES)
+            });
             if changed || read.eyes {
                 captures.push(Capture {
                     frame: frames,
@@ -1086,6 +1137,7 @@ unsafe fn session_loop(
     };
     renderer.destroy();
     drop((
+        input,
         profiles,
         swapchain,
         stage,
@@ -1108,6 +1160,78 @@ unsafe fn session_loop(
         eye_ms,
         submitted,
     })
+}
+
+/// A profile of `level` created with `XrFoveationEyeTrackedProfileCreateInfoMETA` chained on its
+/// level struct: the `openxr` crate's `create_foveation_profile` takes no chain there, so the raw
+/// call makes it and the handle is wrapped.
+fn eye_tracked_profile(
+    instance: &xr::Instance,
+    session: &xr::Session<xr::Vulkan>,
+    level: xr::FoveationLevelProfile,
+) -> xr::Result<xr::FoveationProfileFB> {
+    let fp = instance
+        .exts()
+        .fb_foveation
+        .ok_or(xr::sys::Result::ERROR_EXTENSION_NOT_PRESENT)?;
+    let tracked = xr::sys::FoveationEyeTrackedProfileCreateInfoMETA {
+        ty: xr::sys::FoveationEyeTrackedProfileCreateInfoMETA::TYPE,
+        next: ptr::null(),
+        flags: xr::sys::FoveationEyeTrackedProfileCreateFlagsMETA::EMPTY,
+    };
+    let level_info = xr::sys::FoveationLevelProfileCreateInfoFB {
+        ty: xr::sys::FoveationLevelProfileCreateInfoFB::TYPE,
+        next: &tracked as *const _ as *mut c_void,
+        level: level.level,
+        vertical_offset: level.vertical_offset,
+        dynamic: level.dynamic,
+    };
+    let info = xr::sys::FoveationProfileCreateInfoFB {
+        ty: xr::sys::FoveationProfileCreateInfoFB::TYPE,
+        next: &level_info as *const _ as *mut c_void,
+    };
+    let mut profile = xr::sys::FoveationProfileFB::NULL;
+    // SAFETY: a live session; `info` and its chain outlive the call.
+    let r = unsafe { (fp.create_foveation_profile)(session.as_raw(), &info, &mut profile) };
+    if r.into_raw() < 0 {
+        return Err(r);
+    }
+    // SAFETY: a profile just made on this instance, owned by the wrapper from here on.
+    Ok(unsafe { xr::FoveationProfileFB::from_raw(instance.clone(), profile) })
+}
+
+/// An action set with a controller's aim pose, bound for the simple controller and attached to
+/// `session`: what an app with input has, and what fovea's gaze action set rides along with
+/// (docs/eye-tracking.md#applications-that-do-not-cooperate: an app that attaches nothing gets
+/// fovea's set attached alone only after a grace period).
+fn attach_input(
+    instance: &xr::Instance,
+    session: &xr::Session<xr::Vulkan>,
+) -> Result<(xr::ActionSet, xr::Action<xr::Posef>), String> {
+    let set = instance
+        .create_action_set("gameplay", "Gameplay", 0)
+        .map_err(|e| format!("xrCreateActionSet: {e}"))?;
+    let aim = set
+        .create_action::<xr::Posef>("aim", "Aim", &[])
+        .map_err(|e| format!("xrCreateAction: {e}"))?;
+    let path = |p: &str| {
+        instance
+            .string_to_path(p)
+            .map_err(|e| format!("xrStringToPath({p}): {e}"))
+    };
+    instance
+        .suggest_interaction_profile_bindings(
+            path("/interaction_profiles/khr/simple_controller")?,
+            &[xr::Binding::new(
+                &aim,
+                path("/user/hand/left/input/aim/pose")?,
+            )],
+        )
+        .map_err(|e| format!("xrSuggestInteractionProfileBindings: {e}"))?;
+    session
+        .attach_action_sets(&[&set])
+        .map_err(|e| format!("xrAttachSessionActionSets: {e}"))?;
+    Ok((set, aim))
 }
 
 /// Writes the captures as PNGs, named for the frame and the app's level:
@@ -1289,6 +1413,7 @@ mod tests {
             vec!["--offscreen"],
             vec!["--double-wide", "--no-fb"],
             vec!["--dynamic-rendering"],
+            vec!["--eye-tracked"],
             vec!["--check-rates", "--heavy"],
         ];
         for args in &taken {
@@ -1901,7 +2026,8 @@ mod tests {
             (o.levels.as_slice(), o.dynamic, o.frames),
             (&[3][..], true, 10)
         );
-        assert!(o.capture && o.dump == Some(PathBuf::from("d")));
+        assert!(o.capture && o.dump == Some(PathBuf::from("d")) && !o.eye_tracked);
+        assert!(parse("--levels high --eye-tracked").unwrap().eye_tracked);
         let o = parse("--no-fb --double-wide --offscreen --dynamic-rendering").unwrap();
         assert!(o.no_fb && o.offscreen && o.dynamic_rendering);
         assert_eq!(
@@ -1912,6 +2038,7 @@ mod tests {
             ("--double-wide", "add --no-fb"),
             ("--no-fb --levels high", "--no-fb has none"),
             ("--no-fb --dynamic", "--no-fb has none"),
+            ("--no-fb --eye-tracked", "--no-fb has none"),
             ("--levels ultra", "\"ultra\" is not one of"),
             ("--frames 0", "positive count"),
             ("--frames", "takes a value"),

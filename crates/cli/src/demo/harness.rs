@@ -1,6 +1,12 @@
 //! The demo through fovea's fake loader harness: a small headless application runs its frame loop
 //! through the layer and the simulated headset in-process, paced in real time. No system component
 //! is needed, and no Vulkan: the maps it writes are the model's.
+//!
+//! The simulated headset has an eye tracker following [`GAZE`], and the app's profile is
+//! eye-tracked (`XrFoveationEyeTrackedProfileCreateInfoMETA` on the level profile,
+//! docs/eye-tracking.md#xr_meta_foveation_eye_tracked). The loop has no input of its own to attach,
+//! so fovea is told to attach its gaze action set at once (`FOVEA_GAZE_ATTACH_AFTER_S=0`, where an
+//! app that never attaches waits 30 s, docs/eye-tracking.md#applications-that-do-not-cooperate).
 
 use std::time::Instant;
 
@@ -8,10 +14,11 @@ use fovea_harness::app::API_1_0;
 use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
+use xr::Handle as _;
 
 use fovea_model::density::{Level, Pattern};
 
-use super::setup::{cargo_build, load_description, Setup, LOAD};
+use super::setup::{cargo_build, gaze_description, load_description, Setup, GAZE, LOAD};
 use crate::maps::render;
 use crate::target::Target;
 
@@ -20,6 +27,7 @@ pub fn run(setup: &Setup) -> Result<(), String> {
     // The layer reads these when it is loaded, so they are set before the harness opens it.
     std::env::set_var("FOVEA_LOG", &setup.log);
     std::env::set_var("FOVEA_PROPS", props);
+    std::env::set_var(fovea_abi::env::GAZE_ATTACH_AFTER_S, "0");
 
     let mut cfg = sim::control::SimConfig::for_headset(setup.headset);
     cfg.realtime = true;
@@ -27,18 +35,26 @@ pub fn run(setup: &Setup) -> Result<(), String> {
     cfg.load = sim::control::Load {
         gpu_ms: LOAD.to_vec(),
     };
+    cfg.eye_gaze = Some(sim::control::EyeGaze {
+        supported: true,
+        space_after_attach: false,
+        script: sim::gaze_script::GazeScript::parse(GAZE)?,
+    });
     println!(
-        "fovea demo: {} (simulated, {} Hz), {seconds} s in real time; GPU load {}",
+        "fovea demo: {} (simulated, {} Hz), {seconds} s in real time; GPU load {}; eye tracker {}",
         cfg.headset.name,
         cfg.refresh_hz,
-        load_description()
+        load_description(),
+        gaze_description()
     );
     sim::control::set_thread_config(Some(cfg.clone()));
     ensure_layer_built()?;
     let chain = Chain::fovea()?;
     println!("layer: {}", chain.layers[0].spec.path.display());
-    let app = App::new(chain, &FOVEATION_EXTENSIONS, API_1_0)
-        .map_err(|r| format!("xrCreateInstance: {r:?}"))?;
+    let mut extensions = FOVEATION_EXTENSIONS.to_vec();
+    extensions.push(EYE_TRACKED);
+    let app =
+        App::new(chain, &extensions, API_1_0).map_err(|r| format!("xrCreateInstance: {r:?}"))?;
     let mut lp = HeadlessLoop::new(
         app,
         SwapchainSpec {
@@ -50,11 +66,8 @@ pub fn run(setup: &Setup) -> Result<(), String> {
         "swapchain: {}x{}, 2 layers (multiview)",
         lp.eye_size[0], lp.eye_size[1]
     );
-    match lp.apply_profile(
-        xr::FoveationLevelFB::HIGH,
-        xr::FoveationDynamicFB::LEVEL_ENABLED,
-    ) {
-        Ok(()) => println!("profile: level HIGH, dynamic on"),
+    match apply_eye_tracked_profile(&lp) {
+        Ok(()) => println!("profile: level HIGH, dynamic on, eye-tracked"),
         // The frame loop still runs through the layer; the line says exactly what failed.
         Err(e) => println!("profile not applied: {e}"),
     }
@@ -74,7 +87,8 @@ pub fn run(setup: &Setup) -> Result<(), String> {
         start.elapsed().as_secs_f64()
     );
     // The session is headless (no Vulkan device, so no density images to read back): the maps the
-    // layer builds for this swapchain at the levels the run went through come from the same model.
+    // layer builds for this swapchain at the levels the run went through come from the same model,
+    // with the fovea straight ahead (where the gaze put it, the stats lines' `Gaze=` says).
     for (level, name) in [
         (Level::High, "dynamic maximum (HIGH)"),
         (Level::Medium, "the override (MEDIUM)"),
@@ -88,6 +102,58 @@ pub fn run(setup: &Setup) -> Result<(), String> {
             render(&Target::preset(setup.headset), eye, 32, pattern).write_png(&path)?;
             println!("map, {name}, {side} eye: {}", path.display());
         }
+    }
+    Ok(())
+}
+
+const EYE_TRACKED: &str = "XR_META_foveation_eye_tracked";
+
+/// Applies a HIGH dynamic profile created with `XrFoveationEyeTrackedProfileCreateInfoMETA` chained
+/// on its level struct to the loop's swapchain, then destroys the profile (the swapchain keeps its
+/// state). `Err` names the call that failed.
+fn apply_eye_tracked_profile(lp: &HeadlessLoop) -> Result<(), String> {
+    let tracked = xr::FoveationEyeTrackedProfileCreateInfoMETA {
+        ty: xr::FoveationEyeTrackedProfileCreateInfoMETA::TYPE,
+        next: std::ptr::null(),
+        flags: xr::FoveationEyeTrackedProfileCreateFlagsMETA::EMPTY,
+    };
+    let level = xr::FoveationLevelProfileCreateInfoFB {
+        ty: xr::FoveationLevelProfileCreateInfoFB::TYPE,
+        next: &tracked as *const _ as *mut _,
+        level: xr::FoveationLevelFB::HIGH,
+        vertical_offset: 0.0,
+        dynamic: xr::FoveationDynamicFB::LEVEL_ENABLED,
+    };
+    let info = xr::FoveationProfileCreateInfoFB {
+        ty: xr::FoveationProfileCreateInfoFB::TYPE,
+        next: &level as *const _ as *mut _,
+    };
+    // SAFETY: the names' types match the functions; the structs live across the calls.
+    let create: xr::pfn::CreateFoveationProfileFB =
+        unsafe { lp.func(c"xrCreateFoveationProfileFB") };
+    // SAFETY: as above.
+    let update: xr::pfn::UpdateSwapchainFB = unsafe { lp.func(c"xrUpdateSwapchainFB") };
+    // SAFETY: as above.
+    let destroy: xr::pfn::DestroyFoveationProfileFB =
+        unsafe { lp.func(c"xrDestroyFoveationProfileFB") };
+    let mut profile = xr::FoveationProfileFB::NULL;
+    // SAFETY: a live session; `info` and its chain outlive the call.
+    let r = unsafe { create(lp.session, &info, &mut profile) };
+    if r != xr::Result::SUCCESS {
+        return Err(format!("xrCreateFoveationProfileFB: {r:?}"));
+    }
+    let state = xr::SwapchainStateFoveationFB {
+        ty: xr::SwapchainStateFoveationFB::TYPE,
+        next: std::ptr::null_mut(),
+        flags: xr::SwapchainStateFoveationFlagsFB::EMPTY,
+        profile,
+    };
+    // SAFETY: a live swapchain; `state` outlives the call.
+    let r = unsafe { update(lp.swapchain, &state as *const _ as *const _) };
+    // SAFETY: the profile was made above and is not used after this.
+    unsafe { destroy(profile) };
+    if r != xr::Result::SUCCESS {
+        return Err(format!("xrUpdateSwapchainFB: {r:?}"));
     }
     Ok(())
 }

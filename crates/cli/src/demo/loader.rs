@@ -10,6 +10,10 @@
 //! eye passes foveated instead of sampling the maps into its debug overlay. Elsewhere (lavapipe, or
 //! a GPU with native density maps) nothing about Vulkan is set.
 //!
+//! The example runs with `--eye-tracked` (eye-tracked profiles, an action set of its own attached
+//! and synced) on a simulated headset whose eye tracker follows [`GAZE`]: fovea moves the fovea in
+//! the density maps it hands the example, and the maps read back show it travel.
+//!
 //! The display clock is not paced: it advances one frame period per frame however long the device
 //! takes to draw, so the GPU load script (simulated GPU time added to each frame) tells the same
 //! story on a CPU renderer as on a GPU, and the stats lines count display seconds.
@@ -20,7 +24,7 @@ use std::process::{Command, Stdio};
 
 use ash::vk;
 
-use super::setup::{build_dir, cargo_build, load_description, Setup, LOAD};
+use super::setup::{build_dir, cargo_build, gaze_description, load_description, Setup, GAZE, LOAD};
 use crate::discovery::{Kind, VK_ADD_LAYER_PATH};
 use crate::install::{manifest_text, vk_explicit_manifest_text};
 use crate::vk_doctor::Fdm;
@@ -221,9 +225,10 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
     );
     println!(
         "{frames} frames ({seconds} s at {} Hz without misses), as fast as the device draws; \
-         GPU load {}",
+         GPU load {}; eye tracker {}",
         headset.refresh_hz,
-        load_description()
+        load_description(),
+        gaze_description()
     );
     println!(
         "{}: {}",
@@ -244,7 +249,7 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
     );
     let mut child = Command::new(system.dir.join("examples").join(EXAMPLE))
         .envs(vk_env.iter().map(|(k, v)| (k, v)))
-        .args(["--levels", "high", "--dynamic", "--dump"])
+        .args(["--levels", "high", "--dynamic", "--eye-tracked", "--dump"])
         .arg(&frames_dir)
         .args(["--frames", &frames.to_string()])
         .args(["--frames-per-level", &frames.to_string()])
@@ -255,6 +260,8 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
         .env("FOVEA_PROPS", &setup.props)
         .env("FOVEA_SIM_HEADSET", headset.id)
         .env("FOVEA_SIM_LOAD", script.join(","))
+        .env("FOVEA_SIM_EYE_GAZE", "on")
+        .env("FOVEA_SIM_GAZE", GAZE)
         .env_remove("FOVEA_SIM_REALTIME")
         .env_remove("FOVEA_SIM_EXIT_AFTER_FRAMES")
         .stderr(Stdio::piped())

@@ -1,7 +1,10 @@
 //! `fovea demo`: an application applies a HIGH profile with dynamic foveation on the simulated
 //! headset; the simulated GPU load rises past the frame budget and falls back (the dynamic level
 //! follows), and four fifths through, a Quest debug property file fixes the level at MEDIUM while
-//! the app runs. The layer's once-a-second stats lines (target `fovea_model::stats`) show what it does.
+//! the app runs. The simulated headset has an eye tracker whose scripted gaze ([`setup::GAZE`])
+//! fixates, jumps, pursues and blinks, and the app's profile is eye-tracked
+//! (`XR_META_foveation_eye_tracked`), so the fovea follows the eye. The layer's once-a-second stats
+//! lines (target `fovea_model::stats`) show what it does, the gaze in their `Gaze=` field.
 //!
 //! Where the system's Khronos loader is installed and Vulkan has a device, the application is
 //! `examples/foveated_vulkan` running through that loader, fovea and the simulated runtime, and the

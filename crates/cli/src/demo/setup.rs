@@ -10,6 +10,15 @@ use crate::args::DemoArgs;
 /// The load script, in frames at 90 Hz: light, then past the 11.1 ms budget, then light again.
 pub(super) const LOAD: [(u64, f32); 3] = [(0, 6.0), (270, 14.0), (630, 6.0)];
 
+/// Where the simulated eye tracker says the eye looks (`FOVEA_SIM_GAZE`, the grammar in
+/// `crates/sim/src/gaze_script.rs`), a loop of about 4.7 s: a fixation ahead, a 40 ms saccade up and right
+/// (saccades take 20–80 ms), a fixation there, smooth pursuit down and left at 20°/s (pursuit
+/// reaches about 30°/s), a 300 ms blink (the fovea holds where it was), a fixation, and a saccade
+/// back. 15° moves the fovea about a third of a Quest 3 or Rift CV1 view: several density-map
+/// texels at any level.
+pub(super) const GAZE: &str = "fix 0,0 for 1s; saccade 15,8 in 40ms; fix for 1s; \
+     pursue -15,-6 at 20; blink 300ms; fix for 700ms; saccade 0,0 in 40ms; loop";
+
 /// What the override writes, four fifths through.
 const OVERRIDE: &str = "debug.oculus.foveation.level=2\ndebug.oculus.foveation.dynamic=0\n";
 
@@ -65,6 +74,11 @@ impl Setup {
     pub(super) fn seconds_or(&self, default: u64) -> u64 {
         self.seconds.unwrap_or(default)
     }
+}
+
+/// The gaze script as the first lines print it.
+pub(super) fn gaze_description() -> String {
+    format!("FOVEA_SIM_GAZE=\"{GAZE}\"")
 }
 
 pub(super) fn load_description() -> String {
