@@ -39,8 +39,7 @@ fn session_gpu(instance: &Instance, binding: &VulkanBinding) -> Option<Arc<Sessi
     let offsets = crate::bridge::device_offsets(<ash::vk::Device as ash::vk::Handle>::from_raw(
         binding.device,
     ))
-    .or(recorded.map(|d| d.offsets_enabled))
-    .unwrap_or(false);
+    .or(recorded.map(|d| d.offsets_enabled));
     let fdm_enabled = recorded.map(|d| d.fdm_enabled).unwrap_or_else(|| {
         instance
             .vulkan

@@ -543,24 +543,31 @@ fn density_images(
 /// (`device_offsets`, [`crate::xr::session_gpu::SessionGpu::offsets`]):
 /// `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT`, without which the offsets its passes end
 /// with do not apply to them (and are invalid on a driver that has the extension). Where the
-/// device did not enable an offset extension, the images are made as for any swapchain, and the
-/// log says once why the application's offsets cannot move them
-/// (docs/eye-tracking.md#what-moves-when).
-fn offset_flags(app_offsets: bool, device_offsets: bool) -> vk::ImageCreateFlags {
-    static SAID: AtomicBool = AtomicBool::new(false);
+/// device did not enable an offset extension, or fovea cannot tell (the flag without the feature is
+/// invalid), the images are made as for any swapchain, and the log says once why the application's
+/// offsets cannot move them (docs/eye-tracking.md#what-moves-when).
+fn offset_flags(app_offsets: bool, device_offsets: Option<bool>) -> vk::ImageCreateFlags {
+    static NOT_ENABLED_SAID: AtomicBool = AtomicBool::new(false);
+    static UNKNOWN_SAID: AtomicBool = AtomicBool::new(false);
     if !app_offsets {
         return vk::ImageCreateFlags::empty();
     }
-    if device_offsets {
-        return vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM;
-    }
-    if !SAID.swap(true, Ordering::Relaxed) {
-        tracing::warn!(
+    match device_offsets {
+        Some(true) => return vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM,
+        Some(false) if !NOT_ENABLED_SAID.swap(true, Ordering::Relaxed) => tracing::warn!(
             "the application applies density-map offsets to a swapchain, but its VkDevice did \
              not enable VK_EXT_fragment_density_map_offset or VK_QCOM_fragment_density_map_offset \
              with fragmentDensityMapOffset: fovea's density images cannot take offsets there, \
              and its fovea stays where the fixed maps put it"
-        );
+        ),
+        None if !UNKNOWN_SAID.swap(true, Ordering::Relaxed) => tracing::warn!(
+            "the application applies density-map offsets to a swapchain, but fovea cannot tell \
+             whether its VkDevice enabled VK_EXT_fragment_density_map_offset (it was created \
+             without fovea's Vulkan layer and outside xrCreateVulkanDeviceKHR): fovea's density \
+             images are made without VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT, so \
+             offsets cannot apply to them, and their fovea stays where the fixed maps put it"
+        ),
+        Some(false) | None => {}
     }
     vk::ImageCreateFlags::empty()
 }
@@ -590,6 +597,20 @@ pub fn release_swapchain_image(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// fovea's density images take offsets only for an application that applies them, on a
+    /// device known to take them.
+    #[test]
+    fn density_images_take_offsets_where_the_device_does() {
+        let flag = vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM;
+        assert_eq!(offset_flags(true, Some(true)), flag);
+        for device in [Some(false), None] {
+            assert_eq!(offset_flags(true, device), vk::ImageCreateFlags::empty());
+        }
+        for device in [Some(true), Some(false), None] {
+            assert_eq!(offset_flags(false, device), vk::ImageCreateFlags::empty());
+        }
+    }
 
     #[test]
     fn what_a_new_swapchain_holds_is_guessed_from_its_shape() {
