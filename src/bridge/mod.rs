@@ -190,6 +190,32 @@ pub fn device_fdm(device: ash::vk::Device) -> Option<FdmEmulation> {
     DEVICE_FDM.read().get(&device.as_raw()).cloned()
 }
 
+/// Devices the Vulkan layer saw created, by `VkDevice` handle: whether density-map offsets reach
+/// density maps on them, because the application enabled `VK_EXT_fragment_density_map_offset` or
+/// `VK_QCOM_fragment_density_map_offset` with the `fragmentDensityMapOffset` feature, and the layer
+/// emulates them (docs/vulkan-layer.md#density-map-offsets) or the driver has them itself. fovea
+/// creates its own density images with `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` for
+/// applications that apply offsets only there (docs/eye-tracking.md#what-moves-when).
+static DEVICE_OFFSETS: crate::common::lock::MapLock<std::collections::BTreeMap<u64, bool>> =
+    crate::common::lock::MapLock::new("bridge device offsets", std::collections::BTreeMap::new());
+
+/// Records (or, with `None`, forgets) whether density-map offsets reach density maps on `device`.
+pub fn set_device_offsets(device: ash::vk::Device, offsets: Option<bool>) {
+    use ash::vk::Handle as _;
+    let mut map = DEVICE_OFFSETS.write();
+    match offsets {
+        Some(o) => map.insert(device.as_raw(), o),
+        None => map.remove(&device.as_raw()),
+    };
+}
+
+/// Whether density-map offsets reach density maps on `device`; `None` for a device the Vulkan
+/// layer did not see created.
+pub fn device_offsets(device: ash::vk::Device) -> Option<bool> {
+    use ash::vk::Handle as _;
+    DEVICE_OFFSETS.read().get(&device.as_raw()).copied()
+}
+
 /// A layer-owned shading-rate image that stands in for an application's density-map image on an
 /// emulating device (see docs/vulkan-fdm-on-fsr.md#shadows). Render passes, framebuffers and
 /// dynamic rendering read the shadow, never the application's image; whoever converts density into

@@ -365,6 +365,7 @@ pub unsafe fn remove_device(handle: vk::Device) -> Option<Arc<Device>> {
     set_own(k, None);
     if d.is_some() {
         crate::bridge::set_device_fdm(handle, None);
+        crate::bridge::set_device_offsets(handle, None);
     }
     d
 }

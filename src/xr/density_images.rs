@@ -177,7 +177,9 @@ pub struct DensityImages {
 impl DensityImages {
     /// Creates `count` density images for a swapchain of `extent` pixels and `layers` array
     /// layers, with device-local memory, the staging buffer (host-visible and coherent, mapped for
-    /// good) and a command buffer per image. On error, whatever was made is destroyed.
+    /// good) and a command buffer per image. On error, whatever was made is destroyed. `flags`:
+    /// the images' create flags (`VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` where the
+    /// application applies density-map offsets to them, docs/eye-tracking.md#what-moves-when).
     ///
     /// # Safety
     /// The session's device must be live.
@@ -186,6 +188,7 @@ impl DensityImages {
         extent: [u32; 2],
         layers: u32,
         count: u32,
+        flags: vk::ImageCreateFlags,
     ) -> Result<DensityImages, VkError> {
         // SAFETY: the caller's contract: the session's device (and its instance and physical device)
         // are live. Every object made here is fovea's own and recorded in `out` as soon as it exists, so
@@ -204,7 +207,7 @@ impl DensityImages {
                     vk::ImageType::TYPE_2D,
                     vk::ImageTiling::OPTIMAL,
                     gpu.usage,
-                    vk::ImageCreateFlags::empty(),
+                    flags,
                 )
                 .map_err(step("vkGetPhysicalDeviceImageFormatProperties"))?;
             if props.max_extent.width < mw
@@ -256,6 +259,7 @@ impl DensityImages {
             // From here on, an early return drops `out`, which destroys what exists so far.
             for _ in 0..count {
                 let create = vk::ImageCreateInfo::default()
+                    .flags(flags)
                     .image_type(vk::ImageType::TYPE_2D)
                     .format(FORMAT)
                     .extent(vk::Extent3D {

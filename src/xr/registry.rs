@@ -231,6 +231,9 @@ pub struct VulkanDevice {
     pub instance: u64,
     /// VK_EXT_fragment_density_map and its `fragmentDensityMap` feature are both enabled.
     pub fdm_enabled: bool,
+    /// A density-map offset extension and its `fragmentDensityMapOffset` feature are both enabled
+    /// (where fovea's Vulkan layer did not see the device, the only word on it).
+    pub offsets_enabled: bool,
 }
 
 /// A session and its graphics binding.

@@ -269,6 +269,12 @@ pub struct SessionGpu {
     pub texel: [u32; 2],
     /// Usage of the density images.
     pub usage: vk::ImageUsageFlags,
+    /// Whether the device takes density-map offsets on density maps
+    /// (docs/vulkan-layer.md#density-map-offsets); `None` where fovea cannot tell (neither its
+    /// Vulkan layer nor `xrCreateVulkanDeviceKHR` saw the device created). Where it does, fovea's
+    /// density images for swapchains whose application applies offsets are made with
+    /// `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` (docs/eye-tracking.md#what-moves-when).
+    pub offsets: Option<bool>,
     pub(crate) memory: vk::PhysicalDeviceMemoryProperties,
     pub(crate) physical_device: vk::PhysicalDevice,
     pub(crate) submit: Mutex<Submit>,
@@ -278,11 +284,17 @@ impl SessionGpu {
     /// Sets up for a session: reads what the device supports, creates the command pool on the
     /// binding's queue family and the fence. `fdm_enabled`: the application's device has
     /// VK_EXT_fragment_density_map enabled (known from xrCreateVulkanDeviceKHR or the extension
-    /// list fovea handed out, see `hooks::vulkan`).
+    /// list fovea handed out, see `hooks::vulkan`). `offsets`: whether it enabled a density-map
+    /// offset extension with its feature and offsets reach density maps there (`None`: unknown);
+    /// they count only where the images are density maps.
     ///
     /// # Safety
     /// The binding's handles must be live objects of the system Vulkan loader.
-    pub unsafe fn new(binding: &VulkanBinding, fdm_enabled: bool) -> Result<SessionGpu, VkError> {
+    pub unsafe fn new(
+        binding: &VulkanBinding,
+        fdm_enabled: bool,
+        offsets: Option<bool>,
+    ) -> Result<SessionGpu, VkError> {
         let no_loader = VkError {
             step: "loading the Vulkan loader",
             result: vk::Result::ERROR_INITIALIZATION_FAILED,
@@ -339,6 +351,7 @@ impl SessionGpu {
             fdm_extension = support.extension,
             fdm_feature = support.feature,
             fdm_enabled,
+            ?offsets,
             "density images for this session"
         );
         // The log file's session line (after the instance header): which GPU, and how its density
@@ -363,6 +376,7 @@ impl SessionGpu {
             device,
             texel: support.texel(),
             usage,
+            offsets: offsets.map(|o| o && fdm),
             physical_device,
             submit: Mutex::ranked(Rank::GpuSubmit, "gpu submit", Submit { queue, pool, fence }),
         })

@@ -335,6 +335,42 @@ unsafe fn plan(
     Plan::Inject(fdm.clone(), rewrite, stripped)
 }
 
+/// Whether a device create info enables density-map offsets: `VK_EXT_fragment_density_map_offset`
+/// or `VK_QCOM_fragment_density_map_offset` named, and `fragmentDensityMapOffset` true in its
+/// features struct, which images with `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` need
+/// (VUID-VkImageCreateInfo-fragmentDensityMapOffset-06514).
+///
+/// # Safety
+/// `ci` must be a valid create info.
+unsafe fn enables_offsets(ci: &vk::DeviceCreateInfo<'_>) -> bool {
+    let names: &[*const c_char] = if ci.pp_enabled_extension_names.is_null() {
+        &[]
+    } else {
+        // SAFETY: as the caller promised.
+        unsafe {
+            std::slice::from_raw_parts(
+                ci.pp_enabled_extension_names,
+                ci.enabled_extension_count as usize,
+            )
+        }
+    };
+    let named = names.iter().any(|&n| {
+        // SAFETY: the application's names, NUL-terminated.
+        let n = unsafe { name(n) };
+        n == Some(offset::EXT_NAME) || n == Some(offset::QCOM_NAME)
+    });
+    let ty = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_FEATURES_QCOM;
+    // SAFETY: as the caller promised; found by its sType, read only.
+    let feature = unsafe {
+        chain::find::<vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM<'_>>(ci.p_next, ty)
+    }
+    .ok()
+    .flatten()
+    // SAFETY: as above.
+    .is_some_and(|f| unsafe { (*f).fragment_density_map_offset } == vk::TRUE);
+    named && feature
+}
+
 /// The create info's extensions (`names`) with `VK_KHR_fragment_shading_rate` and what it needs,
 /// and a `VkPhysicalDeviceFragmentShadingRateFeaturesKHR` in front of `chain` enabling the
 /// attachment feature and, from `app` (the application's own struct, left out of `chain`), the
@@ -447,6 +483,9 @@ unsafe fn create_device_impl(
     // SAFETY: as the caller promised.
     let plan = unsafe { plan(&inst, physical, ci) };
     let inject = matches!(plan, Plan::Inject(..));
+    // SAFETY: as the caller promised.
+    let app_offsets = unsafe { enables_offsets(ci) };
+    let untouched = matches!(plan, Plan::Untouched(_));
     /// The create info `rewrite` describes: the caller's, with its chain and names.
     fn rewritten<'a>(
         ci: &vk::DeviceCreateInfo<'a>,
@@ -617,6 +656,13 @@ unsafe fn create_device_impl(
         } else {
             None
         };
+        // Offsets reach density maps where the layer emulates them, or where the driver got the
+        // application's request as it was (so it has the extension); elsewhere the layer left the
+        // offset extensions out.
+        crate::bridge::set_device_offsets(
+            handle,
+            Some(app_offsets && (untouched || fdm.is_some())),
+        );
         registry::add_device(registry::Device {
             handle,
             gdpa,
@@ -659,4 +705,33 @@ pub unsafe extern "system" fn destroy_device(
             unsafe { destroy(device, alloc) };
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Offsets count as enabled with either name and the feature on, not with either alone.
+    #[test]
+    fn offsets_need_a_name_and_the_feature() {
+        let enables = |names: &[&CStr], feature: Option<bool>| {
+            let ptrs: Vec<*const c_char> = names.iter().map(|n| n.as_ptr()).collect();
+            let mut f = vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM::default()
+                .fragment_density_map_offset(feature.unwrap_or(false));
+            let mut multiview = vk::PhysicalDeviceMultiviewFeatures::default().multiview(true);
+            let mut info = vk::DeviceCreateInfo::default()
+                .enabled_extension_names(&ptrs)
+                .push_next(&mut multiview);
+            if feature.is_some() {
+                info = info.push_next(&mut f);
+            }
+            // SAFETY: a valid create info whose names and chain live across the call.
+            unsafe { enables_offsets(&info) }
+        };
+        assert!(enables(&[offset::EXT_NAME], Some(true)));
+        assert!(enables(&[offset::QCOM_NAME], Some(true)));
+        assert!(!enables(&[offset::EXT_NAME], Some(false)));
+        assert!(!enables(&[offset::EXT_NAME], None));
+        assert!(!enables(&[], Some(true)));
+    }
 }

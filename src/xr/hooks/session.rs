@@ -21,7 +21,9 @@ use crate::xr::values::succeeded;
 ///
 /// Whether VK_EXT_fragment_density_map is enabled on the device is known where fovea saw the device
 /// created (xrCreateVulkanDeviceKHR, enable2) or told the application to enable it
-/// (xrGetVulkanDeviceExtensionsKHR, enable); the application's own vkCreateDevice cannot be seen.
+/// (xrGetVulkanDeviceExtensionsKHR, enable); the application's own vkCreateDevice cannot be seen
+/// from here. Whether density-map offsets reach density maps on it, fovea's Vulkan layer tells
+/// through [`crate::bridge::device_offsets`].
 ///
 /// The binding's handles are live: the runtime accepted the session, and the application must keep
 /// its Vulkan objects alive while the session exists.
@@ -30,8 +32,15 @@ fn session_gpu(instance: &Instance, binding: &VulkanBinding) -> Option<Arc<Sessi
         .vulkan_devices
         .lock()
         .get(&binding.device)
-        .map(|d| d.fdm_enabled);
-    let fdm_enabled = recorded.unwrap_or_else(|| {
+        .copied();
+    // Whether offsets reach density maps: fovea's Vulkan layer knows for every device it saw
+    // created (it may have left the offset extensions out); where it did not see it, what
+    // xrCreateVulkanDeviceKHR's create info enabled.
+    let offsets = crate::bridge::device_offsets(<ash::vk::Device as ash::vk::Handle>::from_raw(
+        binding.device,
+    ))
+    .or(recorded.map(|d| d.offsets_enabled));
+    let fdm_enabled = recorded.map(|d| d.fdm_enabled).unwrap_or_else(|| {
         instance
             .vulkan
             .lock()
@@ -39,7 +48,7 @@ fn session_gpu(instance: &Instance, binding: &VulkanBinding) -> Option<Arc<Sessi
     });
     // SAFETY: the handles of an accepted session's binding are live (see above), and they are
     // objects of the system Vulkan loader, as XR_KHR_vulkan_enable requires of the application.
-    match unsafe { SessionGpu::new(binding, fdm_enabled) } {
+    match unsafe { SessionGpu::new(binding, fdm_enabled, offsets) } {
         Ok(gpu) => Some(Arc::new(gpu)),
         Err(e) => {
             tracing::warn!(error = %e, "no density images for this session");

@@ -1,6 +1,6 @@
 //! Swapchain lifetime and image access.
 
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use ash::vk;
@@ -162,12 +162,13 @@ pub fn create_swapchain(
     let Some(handle) = out.read().filter(|_| succeeded(r)) else {
         return Ok(r);
     };
+    let app_offsets = asks_for_offsets(req);
     let density = if req
         .flags
         .contains(xr::SwapchainCreateFoveationFlagsFB::FRAGMENT_DENSITY_MAP)
         && exts.provided(Ext::FoveationVulkan)
     {
-        density_images(&state, handle, i)
+        density_images(&state, handle, i, app_offsets)
     } else {
         None
     };
@@ -187,7 +188,7 @@ pub fn create_swapchain(
         foveation: req.foveation.then(|| Mutex::new(FoveationState::default())),
         density,
         submitted: Mutex::default(),
-        app_offsets: asks_for_offsets(req),
+        app_offsets,
     };
     if record.app_offsets {
         tracing::info!(
@@ -492,6 +493,7 @@ fn density_images(
     session: &Session,
     handle: xr::Swapchain,
     info: &xr::SwapchainCreateInfo,
+    app_offsets: bool,
 ) -> Option<DensityImages> {
     let Some(gpu) = &session.gpu else {
         if session.vulkan.is_some() {
@@ -499,6 +501,7 @@ fn density_images(
         }
         return None;
     };
+    let flags = offset_flags(app_offsets, gpu.offsets);
     let enumerate = session.instance.next.enumerate_swapchain_images?;
     let mut count = 0;
     // SAFETY: the next layer's function on a swapchain it just created; capacity 0 writes only
@@ -509,12 +512,21 @@ fn density_images(
         return None;
     }
     // SAFETY: the session's device outlives it (the application must keep it alive).
-    match unsafe { DensityImages::new(gpu, [info.width, info.height], info.array_size, count) } {
+    match unsafe {
+        DensityImages::new(
+            gpu,
+            [info.width, info.height],
+            info.array_size,
+            count,
+            flags,
+        )
+    } {
         Ok(d) => {
             tracing::info!(
                 count,
                 extent = ?d.extent,
                 layers = d.layers,
+                ?flags,
                 "density images created"
             );
             Some(d)
@@ -524,6 +536,40 @@ fn density_images(
             None
         }
     }
+}
+
+/// The create flags of fovea's density images for a swapchain whose application applies
+/// density-map offsets itself (`app_offsets`) on a device where offsets reach density maps
+/// (`device_offsets`, [`crate::xr::session_gpu::SessionGpu::offsets`]):
+/// `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT`, without which the offsets its passes end
+/// with do not apply to them (and are invalid on a driver that has the extension). Where the
+/// device did not enable an offset extension, or fovea cannot tell (the flag without the feature is
+/// invalid), the images are made as for any swapchain, and the log says once why the application's
+/// offsets cannot move them (docs/eye-tracking.md#what-moves-when).
+fn offset_flags(app_offsets: bool, device_offsets: Option<bool>) -> vk::ImageCreateFlags {
+    static NOT_ENABLED_SAID: AtomicBool = AtomicBool::new(false);
+    static UNKNOWN_SAID: AtomicBool = AtomicBool::new(false);
+    if !app_offsets {
+        return vk::ImageCreateFlags::empty();
+    }
+    match device_offsets {
+        Some(true) => return vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM,
+        Some(false) if !NOT_ENABLED_SAID.swap(true, Ordering::Relaxed) => tracing::warn!(
+            "the application applies density-map offsets to a swapchain, but its VkDevice did \
+             not enable VK_EXT_fragment_density_map_offset or VK_QCOM_fragment_density_map_offset \
+             with fragmentDensityMapOffset: fovea's density images cannot take offsets there, \
+             and its fovea stays where the fixed maps put it"
+        ),
+        None if !UNKNOWN_SAID.swap(true, Ordering::Relaxed) => tracing::warn!(
+            "the application applies density-map offsets to a swapchain, but fovea cannot tell \
+             whether its VkDevice enabled VK_EXT_fragment_density_map_offset (it was created \
+             without fovea's Vulkan layer and outside xrCreateVulkanDeviceKHR): fovea's density \
+             images are made without VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT, so \
+             offsets cannot apply to them, and their fovea stays where the fixed maps put it"
+        ),
+        Some(false) | None => {}
+    }
+    vk::ImageCreateFlags::empty()
 }
 
 /// `xrWaitSwapchainImage`: passed on.
@@ -551,6 +597,20 @@ pub fn release_swapchain_image(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// fovea's density images take offsets only for an application that applies them, on a
+    /// device known to take them.
+    #[test]
+    fn density_images_take_offsets_where_the_device_does() {
+        let flag = vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM;
+        assert_eq!(offset_flags(true, Some(true)), flag);
+        for device in [Some(false), None] {
+            assert_eq!(offset_flags(true, device), vk::ImageCreateFlags::empty());
+        }
+        for device in [Some(true), Some(false), None] {
+            assert_eq!(offset_flags(false, device), vk::ImageCreateFlags::empty());
+        }
+    }
 
     #[test]
     fn what_a_new_swapchain_holds_is_guessed_from_its_shape() {

@@ -209,6 +209,10 @@ pub struct AppDeviceRequest {
     pub extension: bool,
     /// `Some(enabled)` when its pNext holds VkPhysicalDeviceFragmentDensityMapFeaturesEXT.
     pub feature_struct: Option<bool>,
+    /// VK_EXT_fragment_density_map_offset or VK_QCOM_fragment_density_map_offset is named and
+    /// `fragmentDensityMapOffset` enabled: density maps made with
+    /// `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` are valid on the device.
+    pub offsets: bool,
 }
 
 /// What fovea adds to a device create info: (add the extension name, chain a features struct), and
@@ -228,6 +232,7 @@ pub fn device_plan(support: session_gpu::FdmSupport, app: AppDeviceRequest) -> (
 /// `info` must be a valid VkDeviceCreateInfo.
 unsafe fn app_request(info: &vk::DeviceCreateInfo) -> AppDeviceRequest {
     let mut req = AppDeviceRequest::default();
+    let mut offsets_named = false;
     if !info.pp_enabled_extension_names.is_null() {
         // SAFETY: a valid VkDeviceCreateInfo (the caller's contract) has that many names, each
         // NUL-terminated
@@ -244,27 +249,42 @@ unsafe fn app_request(info: &vk::DeviceCreateInfo) -> AppDeviceRequest {
             if name == Some(ash::ext::fragment_density_map::NAME) {
                 req.extension = true;
             }
+            offsets_named |= name.is_some_and(|n| OFFSET_NAMES.contains(&n));
         }
     }
+    let mut offsets_feature = false;
     let mut node = info.p_next as *const vk::BaseInStructure;
     let mut seen = 0;
     while !node.is_null() && seen < crate::xr::ffi::MAX_CHAIN_LENGTH {
         // SAFETY: the pNext chain of a valid VkDeviceCreateInfo is a chain of valid structs, each
-        // starting with sType and pNext; a node of the FDM features type is that struct.
+        // starting with sType and pNext; a node of one of the features types read here is that
+        // struct.
         unsafe {
-            if (*node).s_type
-                == vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT
+            let ty = (*node).s_type;
+            if ty == vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT
+                && req.feature_struct.is_none()
             {
                 let f = &*(node as *const vk::PhysicalDeviceFragmentDensityMapFeaturesEXT);
                 req.feature_struct = Some(f.fragment_density_map == vk::TRUE);
-                break;
+            } else if ty
+                == vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_FEATURES_QCOM
+            {
+                let f = &*(node as *const vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM);
+                offsets_feature = f.fragment_density_map_offset == vk::TRUE;
             }
             node = (*node).p_next;
         }
         seen += 1;
     }
+    req.offsets = offsets_named && offsets_feature;
     req
 }
+
+/// The density-map offset extension and the name it was promoted from.
+const OFFSET_NAMES: [&CStr; 2] = [
+    c"VK_EXT_fragment_density_map_offset",
+    ash::qcom::fragment_density_map_offset::NAME,
+];
 
 /// `xrCreateVulkanDeviceKHR` (enable2): where fovea provides XR_FB_foveation_vulkan and the physical
 /// device supports VK_EXT_fragment_density_map, a copy of the XrVulkanDeviceCreateInfoKHR and of its
@@ -383,6 +403,7 @@ fn create_vulkan_device_marked(
             VulkanDevice {
                 instance: inst.into_raw(),
                 fdm_enabled,
+                offsets_enabled: request.offsets,
             },
         );
     }
@@ -418,6 +439,36 @@ mod tests {
         assert_eq!(extensions_to_add(None), [fdm]);
     }
 
+    /// Offsets count as enabled with a name of the extension and its feature on, not with either
+    /// alone; the FDM feature struct is read wherever it sits in the chain.
+    #[test]
+    fn offsets_are_read_from_the_device_create_info() {
+        let read = |names: &[&CStr], offsets: Option<bool>| {
+            let ptrs: Vec<*const c_char> = names.iter().map(|n| n.as_ptr()).collect();
+            let mut fdm = vk::PhysicalDeviceFragmentDensityMapFeaturesEXT::default()
+                .fragment_density_map(true);
+            let mut feature = vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM::default()
+                .fragment_density_map_offset(offsets.unwrap_or(false));
+            let mut info = vk::DeviceCreateInfo::default()
+                .enabled_extension_names(&ptrs)
+                .push_next(&mut fdm);
+            if offsets.is_some() {
+                info = info.push_next(&mut feature);
+            }
+            // SAFETY: a valid create info whose names and chain live across the call.
+            unsafe { app_request(&info) }
+        };
+        let [ext, qcom] = OFFSET_NAMES;
+        let fdm = ash::ext::fragment_density_map::NAME;
+        let on = read(&[fdm, ext], Some(true));
+        assert!(on.offsets && on.extension);
+        assert_eq!(on.feature_struct, Some(true), "behind the offsets struct");
+        assert!(read(&[qcom], Some(true)).offsets, "the QCOM name");
+        assert!(!read(&[fdm, ext], Some(false)).offsets, "the feature off");
+        assert!(!read(&[fdm, ext], None).offsets, "no feature struct");
+        assert!(!read(&[fdm], Some(true)).offsets, "no name");
+    }
+
     #[test]
     fn device_plans() {
         let none = session_gpu::FdmSupport::default();
@@ -437,11 +488,13 @@ mod tests {
         let has_both = AppDeviceRequest {
             extension: true,
             feature_struct: Some(true),
+            ..app
         };
         assert_eq!(device_plan(full, has_both), (false, false, true));
         let turned_off = AppDeviceRequest {
             extension: true,
             feature_struct: Some(false),
+            ..app
         };
         assert_eq!(device_plan(full, turned_off), (false, false, false));
     }

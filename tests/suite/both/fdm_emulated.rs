@@ -309,6 +309,18 @@ impl Renderer {
     /// map, and waits for it. Called between acquire and release, where the application owns the
     /// image and its queue.
     pub(crate) fn draw(&self, d: &ash::Device, index: u32) {
+        self.draw_ending_with(d, index, None);
+    }
+
+    /// As [`Renderer::draw`]; with `offsets`, the pass ends with `vkCmdEndRenderPass2` (the
+    /// device must have Vulkan 1.2) carrying them in a
+    /// `VkRenderPassFragmentDensityMapOffsetEndInfoEXT`, one per view.
+    pub(crate) fn draw_ending_with(
+        &self,
+        d: &ash::Device,
+        index: u32,
+        offsets: Option<&[vk::Offset2D]>,
+    ) {
         let area = vk::Rect2D {
             offset: vk::Offset2D::default(),
             extent: vk::Extent2D {
@@ -356,7 +368,17 @@ impl Renderer {
             );
             d.cmd_set_scissor(self.cb, 0, &[area]);
             d.cmd_draw(self.cb, 3, 1, 0, 0);
-            d.cmd_end_render_pass(self.cb);
+            match offsets {
+                Some(o) => {
+                    let mut end = vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default()
+                        .fragment_density_offsets(o);
+                    d.cmd_end_render_pass2(
+                        self.cb,
+                        &vk::SubpassEndInfo::default().push_next(&mut end),
+                    );
+                }
+                None => d.cmd_end_render_pass(self.cb),
+            }
             d.end_command_buffer(self.cb).unwrap();
             let cbs = [self.cb];
             d.queue_submit(

@@ -17,7 +17,12 @@
 //!   fovea moves the fovea in them;
 //! - **app offsets**: the same, the swapchain created with `FRAGMENT_DENSITY_MAP_OFFSET_BIT` in
 //!   `XrVulkanSwapchainCreateInfoMETA`: the application moves the fovea itself, fovea's maps stay
-//!   fixed;
+//!   fixed. Its device enables `VK_EXT_fragment_density_map_offset` (which fovea's Vulkan layer
+//!   emulates) with its feature; each frame it reads `xrGetFoveationEyeTrackedStateMETA` and ends
+//!   its pass with `vkCmdEndRenderPass2` and each view's offset, a multiple of
+//!   `fragmentDensityOffsetGranularity` (`fovea_model::shift::pixel_offset`, META's +y down turned
+//!   up): the rates are the fixed map shifted by exactly those offsets, not twice. On a device
+//!   without the extension it sends none, and the maps stay fixed;
 //! - **injection**: an application that never asks for foveation, `FOVEA_INJECT=1` at HIGH: the
 //!   injected maps follow the gaze.
 //!
@@ -46,7 +51,7 @@ use fovea_harness::{skip, App, Chain};
 use fovea_model::density::{Grid, Level, Pattern, Rect, View};
 use fovea_model::gaze::Tracking;
 use fovea_model::shading_rate;
-use fovea_model::shift::{pixel_of, shift_codes_into};
+use fovea_model::shift::{pixel_of, pixel_offset, shift_codes_into};
 use fovea_model::Fov;
 use fovea_vkdouble::Profile;
 use openxr_sys as xr;
@@ -72,9 +77,18 @@ const FDM_OFFSET_BIT: u64 = 0x8000;
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Mode {
     Maps,
-    AppOffsets,
+    /// The swapchain asks for `FDM_OFFSET_BIT`; `enabled`: the device enables
+    /// `VK_EXT_fragment_density_map_offset` with its feature, and the application ends each pass
+    /// with the offsets that put the fovea on each view's centre from
+    /// `xrGetFoveationEyeTrackedStateMETA`.
+    AppOffsets {
+        enabled: bool,
+    },
     Inject,
 }
+
+/// `VK_EXT_fragment_density_map_offset`, which fovea's Vulkan layer offers on the double.
+const OFFSET_EXT: &std::ffi::CStr = c"VK_EXT_fragment_density_map_offset";
 
 /// What one frame drew.
 struct Seen {
@@ -85,6 +99,8 @@ struct Seen {
     /// Per shading-rate layer, the rates the draw shaded at (codes, one per texel): one layer per
     /// view on `nvidia`, one merged layer for both on `amd`.
     codes: Vec<Vec<u8>>,
+    /// Per view, the density-map offset the application ended its pass with, in pixels.
+    applied: [[i32; 2]; 2],
 }
 
 /// What a run left: every frame and the log.
@@ -153,10 +169,30 @@ fn run(
     let app = App::new(Chain::fovea().unwrap(), &exts, API_1_0).expect("the instance");
     let sys = app.system();
     let layers = [vulkan::VALIDATION_LAYER, fovea_vkdouble::LAYER_NAME];
-    let options = vulkan::Options {
-        layers: &layers,
-        multiview: true,
+    let mut offset_feature = ash::vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM::default()
+        .fragment_density_map_offset(true);
+    let multiview = ash::vk::PhysicalDeviceMultiviewFeatures {
+        multiview: ash::vk::TRUE,
+        p_next: &mut offset_feature as *mut _ as *mut c_void,
         ..Default::default()
+    };
+    let applies = mode == Mode::AppOffsets { enabled: true };
+    let extensions = [OFFSET_EXT];
+    let options = if applies {
+        // `vkCmdEndRenderPass2` is Vulkan 1.2's.
+        vulkan::Options {
+            layers: &layers,
+            api_version: ash::vk::API_VERSION_1_2,
+            device_extensions: &extensions,
+            device_next: &multiview as *const _ as *const c_void,
+            ..Default::default()
+        }
+    } else {
+        vulkan::Options {
+            layers: &layers,
+            multiview: true,
+            ..Default::default()
+        }
     };
     let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
     {
@@ -178,7 +214,7 @@ fn run(
     };
     let fdm_flag = xr::SwapchainCreateInfoFoveationFB {
         ty: xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
-        next: if mode == Mode::AppOffsets {
+        next: if matches!(mode, Mode::AppOffsets { .. }) {
             &offsets as *const _ as *mut c_void
         } else {
             null_mut()
@@ -187,7 +223,7 @@ fn run(
     };
     let next = match mode {
         Mode::Inject => null(),
-        Mode::Maps | Mode::AppOffsets => &fdm_flag as *const _ as *const c_void,
+        Mode::Maps | Mode::AppOffsets { .. } => &fdm_flag as *const _ as *const c_void,
     };
     let info = swapchain_info(next);
     let mut swapchain = xr::Swapchain::NULL;
@@ -209,13 +245,25 @@ fn run(
     let t = profile.texel();
     let extent = [WIDTH.div_ceil(t.width), HEIGHT.div_ceil(t.height)];
     let texels = (extent[0] * extent[1]) as usize;
+    let granularity = applies.then(|| {
+        let g = offset_granularity(&v);
+        assert_eq!(
+            [g.width, g.height],
+            [t.width, t.height],
+            "the shading-rate texel"
+        );
+        g
+    });
     let mut seen = Vec::new();
     for n in 0..frames {
         let case = format!("{mode:?} {} frame {n}", profile.name());
         crate::support::device::assert_no_double_errors(env);
         env.double.clear();
         let (index, fovs, time) = frame.acquire(swapchain);
-        renderer.draw(&v.device, index);
+        let applied =
+            granularity.map_or([[0; 2]; 2], |g| offsets_from_state(&app, session, fovs, g));
+        let ends_with = applied.map(|[x, y]| ash::vk::Offset2D { x, y });
+        renderer.draw_ending_with(&v.device, index, applies.then_some(&ends_with[..]));
         release(&frame, Layout::Multiview, swapchain, time, fovs);
         let layers = if profile.layered() { 2 } else { 1 };
         let got = rates_drawn(env, &case, Layout::Multiview, layers, extent);
@@ -224,6 +272,7 @@ fn run(
             t_ns: time.as_nanos() - CLOCK_START_NS,
             fovs,
             codes: got.chunks_exact(texels).map(<[u8]>::to_vec).collect(),
+            applied,
         });
     }
     assert_eq!(env.double.errors(), Vec::<String>::new(), "{mode:?}");
@@ -243,6 +292,60 @@ fn run(
     Some(Run {
         frames: seen,
         log: std::fs::read_to_string(dir.join("fovea.log")).unwrap_or_default(),
+    })
+}
+
+/// `fragmentDensityOffsetGranularity`, as the device reports it.
+fn offset_granularity(v: &Vulkan) -> ash::vk::Extent2D {
+    let mut offsets = ash::vk::PhysicalDeviceFragmentDensityMapOffsetPropertiesQCOM::default();
+    let mut props = ash::vk::PhysicalDeviceProperties2::default().push_next(&mut offsets);
+    // SAFETY: the physical device is the instance's; the structs live across the call.
+    unsafe {
+        v.instance
+            .get_physical_device_properties2(v.physical_device, &mut props)
+    };
+    offsets.fragment_density_offset_granularity
+}
+
+/// What an application that applies `XR_META_foveation_eye_tracked` with density-map offsets does
+/// each frame, as Godot does: each view's centre from `xrGetFoveationEyeTrackedStateMETA` (NDC of
+/// the view's FOV, +y down, META's default) turned into the offset, a whole number of
+/// `granularity` per axis, that carries the fixed map's fovea there
+/// (`fovea_model::shift::pixel_offset`). A view whose state is not `VALID` still gets the centre
+/// fovea reports (where it holds the gaze, or the fixed map's).
+fn offsets_from_state(
+    app: &App,
+    session: xr::Session,
+    fovs: [Fov; 2],
+    granularity: ash::vk::Extent2D,
+) -> [[i32; 2]; 2] {
+    let get_state: xr::pfn::GetFoveationEyeTrackedStateMETA =
+        func(app, "xrGetFoveationEyeTrackedStateMETA");
+    let mut state = xr::FoveationEyeTrackedStateMETA {
+        ty: xr::StructureType::FOVEATION_EYE_TRACKED_STATE_META,
+        next: null_mut(),
+        foveation_center: [xr::Vector2f { x: 0.0, y: 0.0 }; 2],
+        flags: xr::FoveationEyeTrackedStateFlagsMETA::EMPTY,
+    };
+    // SAFETY: the struct lives across the call.
+    assert_eq!(
+        unsafe { get_state(session, &mut state) },
+        xr::Result::SUCCESS
+    );
+    let grid = Grid::new([WIDTH, HEIGHT], [granularity.width, granularity.height]);
+    [0, 1].map(|eye| {
+        let view = View {
+            fov: fovs[eye],
+            rect: Rect {
+                x: 0,
+                y: 0,
+                width: WIDTH,
+                height: HEIGHT,
+            },
+            visible: None,
+        };
+        let c = state.foveation_center[eye];
+        pixel_offset(&grid, &view, [c.x, -c.y])
     })
 }
 
@@ -512,6 +615,54 @@ fn check_frame(case: &str, profile: Profile, f: &Seen, want: &Want) -> [[i32; 2]
     fail("the merged rates are")
 }
 
+/// What a draw through the fixed map for `fovs` shades at with each view's map shifted by `shifts`
+/// whole texels: a layer per view, or on a device with one layer for both views the finer of the
+/// two per texel (docs/vulkan-fdm-on-fsr.md#multiview).
+fn fixed_shifted(profile: Profile, fovs: [Fov; 2], shifts: [[i32; 2]; 2]) -> Vec<Vec<u8>> {
+    let t = profile.texel();
+    let grid = Grid::new([WIDTH, HEIGHT], [t.width, t.height]);
+    let pattern = Pattern {
+        level: Level::High,
+        vertical_offset_deg: 0.0,
+    };
+    let fixed = expected_codes(
+        profile,
+        &Layout::Multiview.views(fovs, true),
+        pattern,
+        false,
+    );
+    let layer = fixed.len() / 2;
+    let views: Vec<Vec<u8>> = (0..2)
+        .map(|eye| {
+            let view = View {
+                fov: fovs[eye],
+                rect: Rect {
+                    x: 0,
+                    y: 0,
+                    width: WIDTH,
+                    height: HEIGHT,
+                },
+                visible: None,
+            };
+            let fixed = &fixed[eye * layer..(eye + 1) * layer];
+            let mut out = fixed.to_vec();
+            shift_codes_into(&grid, &view, shifts[eye], fixed, &mut out);
+            out
+        })
+        .collect();
+    if profile.layered() {
+        return views;
+    }
+    let rates: Vec<[u32; 2]> = profile
+        .rates()
+        .iter()
+        .map(|(e, _)| [e.width, e.height])
+        .collect();
+    let mut merged = vec![0u8; layer];
+    shading_rate::merge_codes(&views.concat(), layer, &rates, &mut merged);
+    vec![merged]
+}
+
 /// The script of the following tests: fixations joined by jumps (saccades, which reset the filter),
 /// a blink held through, smooth pursuit, and a loss long enough to go back to fixed foveation.
 const SCRIPT: &str = "hz=120; fix 0,0 for 300ms; fix 12,6 for 500ms; fix -10,-5 for 500ms; \
@@ -536,6 +687,31 @@ fn the_fovea_follows_the_gaze_in_fovea_s_merged_maps() {
         module_path!(),
         "the_fovea_follows_the_gaze_in_fovea_s_merged_maps",
         Mode::Maps,
+        Profile::Amd,
+    );
+}
+
+/// The application moves the fovea itself: it ends each pass with the density-map offsets it
+/// computes from `xrGetFoveationEyeTrackedStateMETA`, on fovea's density images, which fovea makes
+/// with `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` and keeps fixed, so the emulated
+/// offsets apply to them and the fovea moves once.
+#[test]
+fn the_fovea_follows_the_gaze_by_the_app_s_offsets() {
+    follows(
+        module_path!(),
+        "the_fovea_follows_the_gaze_by_the_app_s_offsets",
+        Mode::AppOffsets { enabled: true },
+        Profile::Nvidia,
+    );
+}
+
+/// The same with one shading-rate layer for both views.
+#[test]
+fn the_fovea_follows_the_gaze_by_the_app_s_offsets_in_merged_maps() {
+    follows(
+        module_path!(),
+        "the_fovea_follows_the_gaze_by_the_app_s_offsets_in_merged_maps",
+        Mode::AppOffsets { enabled: true },
         Profile::Amd,
     );
 }
@@ -570,11 +746,15 @@ fn follows(module: &str, name: &str, mode: Mode, profile: Profile) {
             return;
         };
         let gaze = located(&run.log);
+        let mut moved_once = 0;
         let mut shifts: Vec<(&Located, [[i32; 2]; 2])> = Vec::new();
         for (n, f) in run.frames.iter().enumerate() {
             let case = format!("{mode:?} {} frame {n}", profile.name());
             let want = gaze_for(&gaze, f.t_ns).map_or(Want::Fixed, Want::of);
             let s = check_frame(&case, profile, f, &want);
+            if mode == (Mode::AppOffsets { enabled: true }) {
+                moved_once += usize::from(moved_once_by_the_app(&case, profile, f));
+            }
             if let Some(g) = gaze_for(&gaze, f.t_ns) {
                 shifts.push((g, s));
             }
@@ -584,6 +764,17 @@ fn follows(module: &str, name: &str, mode: Mode, profile: Profile) {
             "{mode:?}: a gaze a frame: {}",
             shifts.len()
         );
+        if mode == (Mode::AppOffsets { enabled: true }) {
+            assert!(
+                moved_once > 200,
+                "frames the app moved the fovea: {moved_once}"
+            );
+            assert!(
+                run.log.contains("FRAGMENT_DENSITY_MAP_OFFSET"),
+                "fovea's density images take offsets: {}",
+                run.log
+            );
+        }
         let at = |yaw: f32, pitch: f32| {
             move |g: &Located| {
                 g.tracking == Tracking::Tracked
@@ -643,14 +834,18 @@ fn follows(module: &str, name: &str, mode: Mode, profile: Profile) {
     });
 }
 
+/// The same application on a device that did not enable the offset extension: fovea's density
+/// images cannot take offsets there, so they are made as for any swapchain and stay fixed, and the
+/// log says why once.
 #[test]
-fn an_app_that_applies_offsets_gets_fixed_maps() {
+fn an_app_without_the_offset_extension_gets_fixed_maps() {
     in_own_process(
         module_path!(),
-        "an_app_that_applies_offsets_gets_fixed_maps",
+        "an_app_without_the_offset_extension_gets_fixed_maps",
         || {
             let dir = set_up("offsets", false);
-            let Some(run) = run(Mode::AppOffsets, Profile::Nvidia, SCRIPT, 200, &dir) else {
+            let mode = Mode::AppOffsets { enabled: false };
+            let Some(run) = run(mode, Profile::Nvidia, SCRIPT, 200, &dir) else {
                 return;
             };
             let gaze = located(&run.log);
@@ -674,8 +869,39 @@ fn an_app_that_applies_offsets_gets_fixed_maps() {
                 "{}",
                 run.log
             );
+            let why = "did not enable VK_EXT_fragment_density_map_offset or \
+                       VK_QCOM_fragment_density_map_offset with fragmentDensityMapOffset";
+            assert_eq!(run.log.matches(why).count(), 1, "{}", run.log);
         },
     );
+}
+
+/// The rates drawn are the fixed map with each view shifted by exactly the offsets the application
+/// ended the pass with; where those are not zero, not by twice them (what fovea moving its own map
+/// to the gaze as well would give). Returns whether the application moved a view's fovea.
+fn moved_once_by_the_app(case: &str, profile: Profile, f: &Seen) -> bool {
+    let t = profile.texel();
+    let shifts = f.applied.map(|[x, y]| {
+        assert_eq!(
+            [x % t.width as i32, y % t.height as i32],
+            [0, 0],
+            "{case}: whole texels"
+        );
+        [x / t.width as i32, y / t.height as i32]
+    });
+    assert!(
+        fixed_shifted(profile, f.fovs, shifts) == f.codes,
+        "{case}: the fixed map shifted by the application's {shifts:?} texels"
+    );
+    let moved = shifts != [[0, 0]; 2];
+    if moved {
+        let twice = shifts.map(|s| s.map(|v| 2 * v));
+        assert!(
+            fixed_shifted(profile, f.fovs, twice) != f.codes,
+            "{case}: not shifted twice"
+        );
+    }
+    moved
 }
 
 /// The `Maps=built/uploaded` pairs of the stats lines, in order.
