@@ -441,12 +441,24 @@ impl Dev {
         layers: u32,
         usage: vk::ImageUsageFlags,
     ) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
+        self.image_with_flags(format, side, layers, usage, vk::ImageCreateFlags::empty())
+    }
+
+    /// [`Dev::image`] created with `flags`.
+    pub fn image_with_flags(
+        &self,
+        format: vk::Format,
+        side: u32,
+        layers: u32,
+        usage: vk::ImageUsageFlags,
+        flags: vk::ImageCreateFlags,
+    ) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
         // SAFETY: the device is alive; structs live across the calls.
         unsafe {
             let d = &self.d;
             let image = d
-                .create_image(&image_info(format, side, layers, usage), None)
-                .expect("vkCreateImage");
+                .create_image(&image_info(format, side, layers, usage).flags(flags), None)
+                .unwrap_or_else(|e| panic!("vkCreateImage: {e}; {:?}", take_messages()));
             let req = d.get_image_memory_requirements(image);
             let memory = d
                 .allocate_memory(

@@ -29,10 +29,10 @@ use ash::vk::Handle as _;
 use fovea_vkdouble::Profile;
 use serde_json::Value;
 
-use crate::support::device::{env, take_messages, Dev, Env, Features, Vk};
+use crate::support::device::{env, take_messages, with_fovea, Dev, Env, Features, Serial, Vk};
 use crate::support::vulkan::{
-    allocate_info, attachments2, draw_fullscreen, image_info, range, spv, stages, Fixed, AREA,
-    CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+    attachments2, draw_fullscreen, range, spv, stages, Fixed, AREA, CLEAR, COLOR, DENSITY,
+    FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk::convert::{model_codes, Buffer};
 
@@ -422,20 +422,95 @@ impl Scene {
         }
     }
 
-    fn submit(&self, cb: vk::CommandBuffer) {
-        // SAFETY: `cb` is executable on this device; the queue is this thread's.
+    /// Submits the executable `cbs` in one submit and waits for the queue.
+    fn submit(&self, cbs: &[vk::CommandBuffer]) {
+        // SAFETY: `cbs` are executable on this device (pending more than once only with
+        // simultaneous use); the queue is this thread's.
         unsafe {
-            let cbs = [cb];
             self.dev
                 .d
                 .queue_submit(
                     self.dev.queue,
-                    &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                    &[vk::SubmitInfo::default().command_buffers(cbs)],
                     vk::Fence::null(),
                 )
                 .expect("vkQueueSubmit");
             self.dev.d.queue_wait_idle(self.dev.queue).expect("idle");
         }
+    }
+
+    /// Records one pass on `path` ended with `end` in a new command buffer (after [`Scene::prepare`]),
+    /// submits it and asserts its draw shades as the map seen through `want`; the command buffer.
+    fn shade(
+        &self,
+        env: &Env,
+        path: Path,
+        end: End<'_>,
+        want: &[vk::Offset2D],
+        what: &str,
+    ) -> vk::CommandBuffer {
+        let cb = self.dev.begin();
+        self.prepare(cb);
+        self.pass(cb, path, vk::RenderingFlags::empty(), end);
+        self.dev.submit(cb);
+        self.assert_shifted(env, cb, &[want], what);
+        cb
+    }
+
+    /// A secondary command buffer from the pool, begun with `flags` and `inheritance`.
+    fn secondary(
+        &self,
+        flags: vk::CommandBufferUsageFlags,
+        inheritance: &vk::CommandBufferInheritanceInfo<'_>,
+    ) -> vk::CommandBuffer {
+        let d = &self.dev.d;
+        // SAFETY: the pool is this device's; every struct lives across its call.
+        unsafe {
+            let s = d
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(self.dev.pool)
+                        .level(vk::CommandBufferLevel::SECONDARY)
+                        .command_buffer_count(1),
+                )
+                .expect("vkAllocateCommandBuffers")[0];
+            d.begin_command_buffer(
+                s,
+                &vk::CommandBufferBeginInfo::default()
+                    .flags(flags)
+                    .inheritance_info(inheritance),
+            )
+            .expect("vkBeginCommandBuffer");
+            s
+        }
+    }
+
+    /// Asserts that the one draw `primary` ran (itself or through `secondary`) shaded as the map
+    /// seen through `offsets`, which must shift it.
+    fn assert_one_draw(
+        &self,
+        env: &Env,
+        primary: vk::CommandBuffer,
+        secondary: vk::CommandBuffer,
+        offsets: &[vk::Offset2D],
+        what: &str,
+    ) {
+        let draws: Vec<_> = env
+            .double
+            .draws()
+            .into_iter()
+            .filter(|dr| {
+                dr.command_buffer == primary.as_raw() || dr.command_buffer == secondary.as_raw()
+            })
+            .collect();
+        assert_eq!(draws.len(), 1, "{draws:?}");
+        let want = &self.want(offsets)[0];
+        assert!(
+            &draws[0].views[0].codes == want,
+            "{what}: shaded {:?}, want {want:?}",
+            draws[0].views[0].codes
+        );
+        assert_ne!(want, &self.want(&[])[0]);
     }
 
     /// Destroys everything and checks what reached the driver: no offset name, struct or flag
@@ -531,39 +606,14 @@ fn image(
     usage: vk::ImageUsageFlags,
 ) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
     let usage = usage | vk::ImageUsageFlags::TRANSFER_DST;
-    // SAFETY: every struct lives across its call.
-    unsafe {
-        let d = &dev.d;
-        let image = d
-            .create_image(
-                &image_info(format, side, layers, usage).flags(OFFSET_BIT),
-                None,
-            )
-            .unwrap_or_else(|e| panic!("vkCreateImage: {e}; {:?}", take_messages()));
-        let req = d.get_image_memory_requirements(image);
-        let memory = d
-            .allocate_memory(
-                &allocate_info(&dev.memory, req, vk::MemoryPropertyFlags::DEVICE_LOCAL),
-                None,
-            )
-            .expect("vkAllocateMemory");
-        d.bind_image_memory(image, memory, 0).expect("bind");
-        let view = d
-            .create_image_view(
-                &vk::ImageViewCreateInfo::default()
-                    .image(image)
-                    .view_type(if layers > 1 {
-                        vk::ImageViewType::TYPE_2D_ARRAY
-                    } else {
-                        vk::ImageViewType::TYPE_2D
-                    })
-                    .format(format)
-                    .subresource_range(range(0, layers)),
-                None,
-            )
-            .expect("vkCreateImageView");
-        (image, memory, view)
-    }
+    dev.image_with_flags(format, side, layers, usage, OFFSET_BIT)
+}
+
+/// The stack on `nvidia` with fovea ([`with_fovea`]) and a one-view [`Scene`] with `name`.
+fn nvidia(name: &CStr) -> Option<(Serial, &'static Env, Vk, Scene)> {
+    let (serial, env, vk) = with_fovea(Profile::Nvidia)?;
+    let scene = Scene::new(&vk, Profile::Nvidia, name);
+    Some((serial, env, vk, scene))
 }
 
 fn at(x: i32, y: i32) -> vk::Offset2D {
@@ -595,11 +645,7 @@ fn passes_ended_with_offsets_shade_as_the_shifted_map() {
             ];
             for (end, o) in cases {
                 let what = format!("{profile:?} {path:?} {end:?}");
-                let cb = scene.dev.begin();
-                scene.prepare(cb);
-                scene.pass(cb, path, vk::RenderingFlags::empty(), end);
-                scene.dev.submit(cb);
-                scene.assert_shifted(env, cb, &[&[o]], &what);
+                scene.shade(env, path, end, &[o], &what);
             }
         }
         scene.finish(env, vk);
@@ -609,23 +655,18 @@ fn passes_ended_with_offsets_shade_as_the_shifted_map() {
 /// The QCOM name does the same (it has render passes only): the device gets offsets under it.
 #[test]
 fn the_qcom_name_shifts_render_passes_alike() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk, scene)) = nvidia(QCOM) else {
         return;
     };
-    let scene = Scene::new(&vk, Profile::Nvidia, QCOM);
     let t = scene.texel as i32;
     for o in [at(2 * t, t), at(-t, -t), at(0, 0)] {
-        let cb = scene.dev.begin();
-        scene.prepare(cb);
-        scene.pass(
-            cb,
+        scene.shade(
+            env,
             Path::RenderPass,
-            vk::RenderingFlags::empty(),
             End::With(&[o]),
+            &[o],
+            &format!("QCOM {o:?}"),
         );
-        scene.dev.submit(cb);
-        scene.assert_shifted(env, cb, &[&[o]], &format!("QCOM {o:?}"));
     }
     scene.finish(env, vk);
 }
@@ -637,27 +678,17 @@ fn the_qcom_name_shifts_render_passes_alike() {
 /// together, each shade with their own; so do two passes of one recording.
 #[test]
 fn offsets_are_fixed_per_recording_and_per_command_buffer() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
         return;
     };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
     let t = scene.texel as i32;
     let (a, b, c) = (at(t, 0), at(0, -2 * t), at(-3 * t, t));
     for path in [Path::RenderPass, Path::Rendering] {
         let what = format!("{path:?}");
-        let first = scene.dev.begin();
-        scene.prepare(first);
-        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[a]));
-        scene.dev.submit(first);
-        scene.assert_shifted(env, first, &[&[a]], &format!("{what}: first"));
-        let other = scene.dev.begin();
-        scene.prepare(other);
-        scene.pass(other, path, vk::RenderingFlags::empty(), End::With(&[b]));
-        scene.dev.submit(other);
-        scene.assert_shifted(env, other, &[&[b]], &format!("{what}: other"));
+        let first = scene.shade(env, path, End::With(&[a]), &[a], &format!("{what}: first"));
+        let other = scene.shade(env, path, End::With(&[b]), &[b], &format!("{what}: other"));
         // Submitted again, unchanged: its own offsets, not the other's.
-        scene.submit(first);
+        scene.submit(&[first]);
         scene.assert_shifted(env, first, &[&[a]], &format!("{what}: first again"));
         // Recorded again with new offsets, two passes of which the second has other offsets.
         scene.record_again(&[first]);
@@ -679,20 +710,13 @@ fn offsets_are_fixed_per_recording_and_per_command_buffer() {
         scene.between(other);
         scene.prepare(other);
         scene.pass(other, path, vk::RenderingFlags::empty(), End::With(&[c]));
-        // SAFETY: both are recording on this device; the queue is this thread's.
+        // SAFETY: both are recording on this device.
         unsafe {
             let d = &scene.dev.d;
             d.end_command_buffer(first).expect("end");
             d.end_command_buffer(other).expect("end");
-            let cbs = [first, other];
-            d.queue_submit(
-                scene.dev.queue,
-                &[vk::SubmitInfo::default().command_buffers(&cbs)],
-                vk::Fence::null(),
-            )
-            .expect("vkQueueSubmit");
-            d.queue_wait_idle(scene.dev.queue).expect("idle");
         }
+        scene.submit(&[first, other]);
         scene.assert_shifted(env, first, &[&[a]], &format!("{what}: together, first"));
         scene.assert_shifted(env, other, &[&[c]], &format!("{what}: together, other"));
     }
@@ -704,11 +728,9 @@ fn offsets_are_fixed_per_recording_and_per_command_buffer() {
 /// says, and both parts' draws shade alike.
 #[test]
 fn a_suspended_and_resumed_instance_shifts_once_by_its_last_end() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
         return;
     };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
     let t = scene.texel as i32;
     let (ignored, last) = (at(2 * t, 2 * t), at(-t, t));
     let cb = scene.dev.begin();
@@ -737,32 +759,16 @@ fn a_suspended_and_resumed_instance_shifts_once_by_its_last_end() {
 /// a primary: the draw shades with the secondary's offsets.
 #[test]
 fn a_secondary_that_begins_and_ends_rendering_applies_its_offsets() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
         return;
     };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
     let t = scene.texel as i32;
     let o = at(t, -t);
     let d = &scene.dev.d;
-    // SAFETY: the pool is this device's; every struct lives across its call.
-    let secondary = unsafe {
-        let s = d
-            .allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(scene.dev.pool)
-                    .level(vk::CommandBufferLevel::SECONDARY)
-                    .command_buffer_count(1),
-            )
-            .expect("vkAllocateCommandBuffers")[0];
-        let inheritance = vk::CommandBufferInheritanceInfo::default();
-        d.begin_command_buffer(
-            s,
-            &vk::CommandBufferBeginInfo::default().inheritance_info(&inheritance),
-        )
-        .expect("vkBeginCommandBuffer");
-        s
-    };
+    let secondary = scene.secondary(
+        vk::CommandBufferUsageFlags::empty(),
+        &vk::CommandBufferInheritanceInfo::default(),
+    );
     scene.pass(
         secondary,
         Path::Rendering,
@@ -777,22 +783,7 @@ fn a_secondary_that_begins_and_ends_rendering_applies_its_offsets() {
         d.cmd_execute_commands(primary, &[secondary]);
     }
     scene.dev.submit(primary);
-    let draws: Vec<_> = env
-        .double
-        .draws()
-        .into_iter()
-        .filter(|dr| {
-            dr.command_buffer == primary.as_raw() || dr.command_buffer == secondary.as_raw()
-        })
-        .collect();
-    assert_eq!(draws.len(), 1, "{draws:?}");
-    let want = &scene.want(&[o])[0];
-    assert!(
-        &draws[0].views[0].codes == want,
-        "secondary: shaded {:?}, want {want:?}",
-        draws[0].views[0].codes
-    );
-    assert_ne!(want, &scene.want(&[])[0]);
+    scene.assert_one_draw(env, primary, secondary, &[o], "secondary");
     scene.finish(env, vk);
 }
 
@@ -816,11 +807,7 @@ fn each_view_is_shifted_by_its_own_offset() {
             ];
             for offsets in ends {
                 let what = format!("{profile:?} {path:?} {offsets:?}");
-                let cb = scene.dev.begin();
-                scene.prepare(cb);
-                scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
-                scene.dev.submit(cb);
-                scene.assert_shifted(env, cb, &[offsets], &what);
+                scene.shade(env, path, End::With(offsets), offsets, &what);
             }
         }
         scene.finish(env, vk);
@@ -833,11 +820,9 @@ fn each_view_is_shifted_by_its_own_offset() {
 /// centre says; offsets beyond the views are ignored.
 #[test]
 fn invalid_offsets_shade_as_the_lookup_at_each_texel_centre() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
         return;
     };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
     let t = scene.texel as i32;
     let cases: [&[vk::Offset2D]; 5] = [
         &[at(t / 2 + 1, -t / 2)],
@@ -849,11 +834,7 @@ fn invalid_offsets_shade_as_the_lookup_at_each_texel_centre() {
     for path in [Path::RenderPass, Path::Rendering] {
         for offsets in cases {
             let what = format!("{path:?} {offsets:?}");
-            let cb = scene.dev.begin();
-            scene.prepare(cb);
-            scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
-            scene.dev.submit(cb);
-            scene.assert_shifted(env, cb, &[&offsets[..1]], &what);
+            scene.shade(env, path, End::With(offsets), &offsets[..1], &what);
         }
     }
     scene.finish(env, vk);
@@ -864,11 +845,9 @@ fn invalid_offsets_shade_as_the_lookup_at_each_texel_centre() {
 /// apply to the whole pass, both subpasses' draws.
 #[test]
 fn only_the_last_subpass_end_carries_offsets() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
         return;
     };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
     let t = scene.texel as i32;
     let (ignored, last) = (at(3 * t, 3 * t), at(-t, 2 * t));
     let d = &scene.dev.d;
@@ -1002,39 +981,24 @@ fn only_the_last_subpass_end_carries_offsets() {
 /// secondary's draw shades with them.
 #[test]
 fn draws_of_a_secondary_inside_the_pass_take_the_primarys_offsets() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
         return;
     };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
     let t = scene.texel as i32;
     let o = [at(-2 * t, -t)];
     let d = &scene.dev.d;
-    // SAFETY: the pool is this device's; every struct lives across its call.
-    let secondary = unsafe {
-        let s = d
-            .allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(scene.dev.pool)
-                    .level(vk::CommandBufferLevel::SECONDARY)
-                    .command_buffer_count(1),
-            )
-            .expect("vkAllocateCommandBuffers")[0];
-        let inheritance = vk::CommandBufferInheritanceInfo::default()
+    let secondary = scene.secondary(
+        vk::CommandBufferUsageFlags::RENDER_PASS_CONTINUE,
+        &vk::CommandBufferInheritanceInfo::default()
             .render_pass(scene.pass)
             .subpass(0)
-            .framebuffer(scene.framebuffer);
-        d.begin_command_buffer(
-            s,
-            &vk::CommandBufferBeginInfo::default()
-                .flags(vk::CommandBufferUsageFlags::RENDER_PASS_CONTINUE)
-                .inheritance_info(&inheritance),
-        )
-        .expect("vkBeginCommandBuffer");
-        draw_fullscreen(d, s, scene.pass_pipeline);
-        d.end_command_buffer(s).expect("end");
-        s
-    };
+            .framebuffer(scene.framebuffer),
+    );
+    // SAFETY: the secondary is recording inside the pass it inherits.
+    unsafe {
+        draw_fullscreen(d, secondary, scene.pass_pipeline);
+        d.end_command_buffer(secondary).expect("end");
+    }
     let primary = scene.dev.begin();
     scene.prepare(primary);
     let mut end =
@@ -1055,22 +1019,7 @@ fn draws_of_a_secondary_inside_the_pass_take_the_primarys_offsets() {
         d.cmd_end_render_pass2(primary, &vk::SubpassEndInfo::default().push_next(&mut end));
     }
     scene.dev.submit(primary);
-    let draws: Vec<_> = env
-        .double
-        .draws()
-        .into_iter()
-        .filter(|dr| {
-            dr.command_buffer == primary.as_raw() || dr.command_buffer == secondary.as_raw()
-        })
-        .collect();
-    assert_eq!(draws.len(), 1, "{draws:?}");
-    let want = &scene.want(&o)[0];
-    assert!(
-        &draws[0].views[0].codes == want,
-        "secondary inside the pass: shaded {:?}, want {want:?}",
-        draws[0].views[0].codes
-    );
-    assert_ne!(want, &scene.want(&[])[0]);
+    scene.assert_one_draw(env, primary, secondary, &o, "secondary inside the pass");
     scene.finish(env, vk);
 }
 
@@ -1080,11 +1029,9 @@ fn draws_of_a_secondary_inside_the_pass_take_the_primarys_offsets() {
 /// them per command buffer, nothing shared is written while recording or running).
 #[test]
 fn threads_and_simultaneous_use_keep_their_own_offsets() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
         return;
     };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
     let t = scene.texel as i32;
     let (oa, ob) = ([at(t, t)], [at(-2 * t, 0)]);
     let record = |offsets: &[vk::Offset2D], flags: vk::CommandBufferUsageFlags, path: Path| {
@@ -1124,17 +1071,8 @@ fn threads_and_simultaneous_use_keep_their_own_offsets() {
         let d = &scene.dev.d;
         // Handles of the first path's command buffers may come back: only this submit's draws.
         let before = env.double.draws().len();
-        // SAFETY: both are executable on this device; `a` may be pending twice (simultaneous use).
-        unsafe {
-            let cbs = [a, b, a];
-            d.queue_submit(
-                scene.dev.queue,
-                &[vk::SubmitInfo::default().command_buffers(&cbs)],
-                vk::Fence::null(),
-            )
-            .expect("vkQueueSubmit");
-            d.queue_wait_idle(scene.dev.queue).expect("idle");
-        }
+        // `a` may be pending twice: it was recorded with simultaneous use.
+        scene.submit(&[a, b, a]);
         for (cb, offsets, runs) in [(a, &oa, 2), (b, &ob, 1)] {
             let draws: Vec<_> = env
                 .double
