@@ -164,19 +164,9 @@ impl Scene {
         let d = &dev.d;
         // SAFETY: every struct lives across its call; the objects are destroyed in `finish`.
         unsafe {
-            let pass = render_pass(d, mask);
-            let views = [color.2, map.2];
-            let framebuffer = d
-                .create_framebuffer(
-                    &vk::FramebufferCreateInfo::default()
-                        .render_pass(pass)
-                        .attachments(&views)
-                        .width(SIZE)
-                        .height(SIZE)
-                        .layers(1),
-                    None,
-                )
-                .expect("vkCreateFramebuffer");
+            // Two passes of one recording write the colour attachment in order.
+            let pass = render_pass(d, mask, 1, &[color_dependency(vk::SUBPASS_EXTERNAL, 0)]);
+            let framebuffer = framebuffer(d, pass, &[color.2, map.2]);
             let layout = d
                 .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
                 .expect("vkCreatePipelineLayout");
@@ -558,30 +548,27 @@ impl Scene {
     }
 }
 
-/// The render pass: colour attachment 0 (cleared, from `UNDEFINED`) and density map 1, as
-/// [`attachments2`] has them, and a dependency on earlier colour writes, so that two passes of one
-/// recording write the colour attachment in order.
+/// A render pass of `subpasses` alike subpasses of view mask `view_mask`: colour attachment 0
+/// (cleared, from `UNDEFINED`) and density map 1, as [`attachments2`] has them, ordered by
+/// `deps`.
 ///
 /// # Safety
 /// `d` must be alive.
-unsafe fn render_pass(d: &ash::Device, view_mask: u32) -> vk::RenderPass {
+unsafe fn render_pass(
+    d: &ash::Device,
+    view_mask: u32,
+    subpasses: usize,
+    deps: &[vk::SubpassDependency2<'_>],
+) -> vk::RenderPass {
     let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
     let color_ref = [vk::AttachmentReference2::default()
         .attachment(0)
         .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-    let subpass = [vk::SubpassDescription2::default()
+    let subpass = vk::SubpassDescription2::default()
         .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
         .view_mask(view_mask)
-        .color_attachments(&color_ref)];
-    let color = vk::AccessFlags::COLOR_ATTACHMENT_WRITE;
-    let stage = vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT;
-    let deps = [vk::SubpassDependency2::default()
-        .src_subpass(vk::SUBPASS_EXTERNAL)
-        .dst_subpass(0)
-        .src_stage_mask(stage)
-        .dst_stage_mask(stage)
-        .src_access_mask(color)
-        .dst_access_mask(color)];
+        .color_attachments(&color_ref);
+    let subpasses = vec![subpass; subpasses];
     let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
         .fragment_density_map_attachment(vk::AttachmentReference {
             attachment: 1,
@@ -589,12 +576,44 @@ unsafe fn render_pass(d: &ash::Device, view_mask: u32) -> vk::RenderPass {
         });
     let info = vk::RenderPassCreateInfo2::default()
         .attachments(&atts)
-        .subpasses(&subpass)
-        .dependencies(&deps)
+        .subpasses(&subpasses)
+        .dependencies(deps)
         .push_next(&mut fdm);
     // SAFETY: the caller's promise; the structs live across the call.
     unsafe { d.create_render_pass2(&info, None) }
         .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()))
+}
+
+/// A dependency of subpass `dst`'s colour writes on `src`'s.
+fn color_dependency(src: u32, dst: u32) -> vk::SubpassDependency2<'static> {
+    let color = vk::AccessFlags::COLOR_ATTACHMENT_WRITE;
+    let stage = vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT;
+    vk::SubpassDependency2::default()
+        .src_subpass(src)
+        .dst_subpass(dst)
+        .src_stage_mask(stage)
+        .dst_stage_mask(stage)
+        .src_access_mask(color)
+        .dst_access_mask(color)
+}
+
+/// A framebuffer of `pass` on `views` (colour, then map), [`SIZE`] square.
+///
+/// # Safety
+/// `d` must be alive; `pass` and `views` its.
+unsafe fn framebuffer(
+    d: &ash::Device,
+    pass: vk::RenderPass,
+    views: &[vk::ImageView],
+) -> vk::Framebuffer {
+    let info = vk::FramebufferCreateInfo::default()
+        .render_pass(pass)
+        .attachments(views)
+        .width(SIZE)
+        .height(SIZE)
+        .layers(1);
+    // SAFETY: the caller's promise; the struct lives across the call.
+    unsafe { d.create_framebuffer(&info, None) }.expect("vkCreateFramebuffer")
 }
 
 /// A `side`×`side` image of `layers` layers with the offset flag and a view of every layer.
@@ -853,51 +872,13 @@ fn only_the_last_subpass_end_carries_offsets() {
     let d = &scene.dev.d;
     // SAFETY: every struct lives across its call; the objects are destroyed below.
     let (pass, framebuffer, pipelines) = unsafe {
-        let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
-        let color_ref = [vk::AttachmentReference2::default()
-            .attachment(0)
-            .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-        let subpass = vk::SubpassDescription2::default()
-            .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-            .color_attachments(&color_ref);
-        let subpasses = [subpass, subpass];
-        let color = vk::AccessFlags::COLOR_ATTACHMENT_WRITE;
-        let stage = vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT;
-        let deps = [vk::SubpassDependency2::default()
-            .src_subpass(0)
-            .dst_subpass(1)
-            .src_stage_mask(stage)
-            .dst_stage_mask(stage)
-            .src_access_mask(color)
-            .dst_access_mask(color)
-            .dependency_flags(vk::DependencyFlags::BY_REGION)];
-        let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
-            .fragment_density_map_attachment(vk::AttachmentReference {
-                attachment: 1,
-                layout: FDM_LAYOUT,
-            });
-        let pass = d
-            .create_render_pass2(
-                &vk::RenderPassCreateInfo2::default()
-                    .attachments(&atts)
-                    .subpasses(&subpasses)
-                    .dependencies(&deps)
-                    .push_next(&mut fdm),
-                None,
-            )
-            .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()));
-        let views = [scene.color().1, scene.map().1];
-        let framebuffer = d
-            .create_framebuffer(
-                &vk::FramebufferCreateInfo::default()
-                    .render_pass(pass)
-                    .attachments(&views)
-                    .width(SIZE)
-                    .height(SIZE)
-                    .layers(1),
-                None,
-            )
-            .expect("vkCreateFramebuffer");
+        let pass = render_pass(
+            d,
+            0,
+            2,
+            &[color_dependency(0, 1).dependency_flags(vk::DependencyFlags::BY_REGION)],
+        );
+        let framebuffer = framebuffer(d, pass, &[scene.color().1, scene.map().1]);
         let module = |bytes: &[u8]| {
             let words = spv(bytes);
             d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
