@@ -29,7 +29,7 @@ use ash::vk::Handle as _;
 use fovea_vkdouble::Profile;
 use serde_json::Value;
 
-use crate::support::device::{env, take_messages, with_fovea, Dev, Env, Features, Serial, Vk};
+use crate::support::device::{env, take_messages, with_fovea, Dev, Env, Features, Vk};
 use crate::support::vulkan::{
     attachments2, draw_fullscreen, range, spv, stages, Fixed, AREA, CLEAR, COLOR, DENSITY,
     FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
@@ -628,11 +628,16 @@ fn image(
     dev.image_with_flags(format, side, layers, usage, OFFSET_BIT)
 }
 
-/// The stack on `nvidia` with fovea ([`with_fovea`]) and a one-view [`Scene`] with `name`.
-fn nvidia(name: &CStr) -> Option<(Serial, &'static Env, Vk, Scene)> {
-    let (serial, env, vk) = with_fovea(Profile::Nvidia)?;
+/// Runs `test` on the stack on `nvidia` with fovea ([`with_fovea`]; skipped where a piece is
+/// missing) with a one-view [`Scene`] with `name` and its texel size in pixels, then finishes the
+/// scene ([`Scene::finish`]).
+fn on_nvidia(name: &CStr, test: impl FnOnce(&Env, &Scene, i32)) {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
+        return;
+    };
     let scene = Scene::new(&vk, Profile::Nvidia, name);
-    Some((serial, env, vk, scene))
+    test(env, &scene, scene.texel as i32);
+    scene.finish(env, vk);
 }
 
 fn at(x: i32, y: i32) -> vk::Offset2D {
@@ -674,20 +679,17 @@ fn passes_ended_with_offsets_shade_as_the_shifted_map() {
 /// The QCOM name does the same (it has render passes only): the device gets offsets under it.
 #[test]
 fn the_qcom_name_shifts_render_passes_alike() {
-    let Some((_serial, env, vk, scene)) = nvidia(QCOM) else {
-        return;
-    };
-    let t = scene.texel as i32;
-    for o in [at(2 * t, t), at(-t, -t), at(0, 0)] {
-        scene.shade(
-            env,
-            Path::RenderPass,
-            End::With(&[o]),
-            &[o],
-            &format!("QCOM {o:?}"),
-        );
-    }
-    scene.finish(env, vk);
+    on_nvidia(QCOM, |env, scene, t| {
+        for o in [at(2 * t, t), at(-t, -t), at(0, 0)] {
+            scene.shade(
+                env,
+                Path::RenderPass,
+                End::With(&[o]),
+                &[o],
+                &format!("QCOM {o:?}"),
+            );
+        }
+    });
 }
 
 /// Offsets are fixed per recording, as on a native driver: a command buffer submitted again keeps
@@ -697,49 +699,46 @@ fn the_qcom_name_shifts_render_passes_alike() {
 /// together, each shade with their own; so do two passes of one recording.
 #[test]
 fn offsets_are_fixed_per_recording_and_per_command_buffer() {
-    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
-        return;
-    };
-    let t = scene.texel as i32;
-    let (a, b, c) = (at(t, 0), at(0, -2 * t), at(-3 * t, t));
-    for path in [Path::RenderPass, Path::Rendering] {
-        let what = format!("{path:?}");
-        let first = scene.shade(env, path, End::With(&[a]), &[a], &format!("{what}: first"));
-        let other = scene.shade(env, path, End::With(&[b]), &[b], &format!("{what}: other"));
-        // Submitted again, unchanged: its own offsets, not the other's.
-        scene.submit(&[first]);
-        scene.assert_shifted(env, first, &[&[a]], &format!("{what}: first again"));
-        // Recorded again with new offsets, two passes of which the second has other offsets.
-        scene.record_again(&[first]);
-        scene.prepare(first);
-        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[c]));
-        scene.between(first);
-        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[b]));
-        scene.dev.submit(first);
-        scene.assert_shifted(
-            env,
-            first,
-            &[&[c], &[b]],
-            &format!("{what}: first recorded again"),
-        );
-        // Both in one submit: each its own.
-        scene.record_again(&[first, other]);
-        scene.prepare(first);
-        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[a]));
-        scene.between(other);
-        scene.prepare(other);
-        scene.pass(other, path, vk::RenderingFlags::empty(), End::With(&[c]));
-        // SAFETY: both are recording on this device.
-        unsafe {
-            let d = &scene.dev.d;
-            d.end_command_buffer(first).expect("end");
-            d.end_command_buffer(other).expect("end");
+    on_nvidia(EXT, |env, scene, t| {
+        let (a, b, c) = (at(t, 0), at(0, -2 * t), at(-3 * t, t));
+        for path in [Path::RenderPass, Path::Rendering] {
+            let what = format!("{path:?}");
+            let first = scene.shade(env, path, End::With(&[a]), &[a], &format!("{what}: first"));
+            let other = scene.shade(env, path, End::With(&[b]), &[b], &format!("{what}: other"));
+            // Submitted again, unchanged: its own offsets, not the other's.
+            scene.submit(&[first]);
+            scene.assert_shifted(env, first, &[&[a]], &format!("{what}: first again"));
+            // Recorded again with new offsets, two passes of which the second has other offsets.
+            scene.record_again(&[first]);
+            scene.prepare(first);
+            scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[c]));
+            scene.between(first);
+            scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[b]));
+            scene.dev.submit(first);
+            scene.assert_shifted(
+                env,
+                first,
+                &[&[c], &[b]],
+                &format!("{what}: first recorded again"),
+            );
+            // Both in one submit: each its own.
+            scene.record_again(&[first, other]);
+            scene.prepare(first);
+            scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[a]));
+            scene.between(other);
+            scene.prepare(other);
+            scene.pass(other, path, vk::RenderingFlags::empty(), End::With(&[c]));
+            // SAFETY: both are recording on this device.
+            unsafe {
+                let d = &scene.dev.d;
+                d.end_command_buffer(first).expect("end");
+                d.end_command_buffer(other).expect("end");
+            }
+            scene.submit(&[first, other]);
+            scene.assert_shifted(env, first, &[&[a]], &format!("{what}: together, first"));
+            scene.assert_shifted(env, other, &[&[c]], &format!("{what}: together, other"));
         }
-        scene.submit(&[first, other]);
-        scene.assert_shifted(env, first, &[&[a]], &format!("{what}: together, first"));
-        scene.assert_shifted(env, other, &[&[c]], &format!("{what}: together, other"));
-    }
-    scene.finish(env, vk);
+    });
 }
 
 /// A dynamic render pass instance suspended and resumed shifts once, by the offsets of the end
@@ -747,63 +746,57 @@ fn offsets_are_fixed_per_recording_and_per_command_buffer() {
 /// says, and both parts' draws shade alike.
 #[test]
 fn a_suspended_and_resumed_instance_shifts_once_by_its_last_end() {
-    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
-        return;
-    };
-    let t = scene.texel as i32;
-    let (ignored, last) = (at(2 * t, 2 * t), at(-t, t));
-    let cb = scene.dev.begin();
-    scene.prepare(cb);
-    let flags = vk::RenderingFlags::SUSPENDING;
-    scene.pass(cb, Path::Rendering, flags, End::With(&[ignored]));
-    let flags = vk::RenderingFlags::RESUMING | vk::RenderingFlags::SUSPENDING;
-    scene.pass(cb, Path::Rendering, flags, End::With(&[ignored]));
-    scene.pass(
-        cb,
-        Path::Rendering,
-        vk::RenderingFlags::RESUMING,
-        End::With(&[last]),
-    );
-    scene.dev.submit(cb);
-    scene.assert_shifted(
-        env,
-        cb,
-        &[&[last], &[last], &[last]],
-        "suspended and resumed",
-    );
-    scene.finish(env, vk);
+    on_nvidia(EXT, |env, scene, t| {
+        let (ignored, last) = (at(2 * t, 2 * t), at(-t, t));
+        let cb = scene.dev.begin();
+        scene.prepare(cb);
+        let flags = vk::RenderingFlags::SUSPENDING;
+        scene.pass(cb, Path::Rendering, flags, End::With(&[ignored]));
+        let flags = vk::RenderingFlags::RESUMING | vk::RenderingFlags::SUSPENDING;
+        scene.pass(cb, Path::Rendering, flags, End::With(&[ignored]));
+        scene.pass(
+            cb,
+            Path::Rendering,
+            vk::RenderingFlags::RESUMING,
+            End::With(&[last]),
+        );
+        scene.dev.submit(cb);
+        scene.assert_shifted(
+            env,
+            cb,
+            &[&[last], &[last], &[last]],
+            "suspended and resumed",
+        );
+    });
 }
 
 /// A secondary command buffer that begins and ends rendering itself, with offsets, executed from
 /// a primary: the draw shades with the secondary's offsets.
 #[test]
 fn a_secondary_that_begins_and_ends_rendering_applies_its_offsets() {
-    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
-        return;
-    };
-    let t = scene.texel as i32;
-    let o = at(t, -t);
-    let d = &scene.dev.d;
-    let secondary = scene.secondary(
-        vk::CommandBufferUsageFlags::empty(),
-        &vk::CommandBufferInheritanceInfo::default(),
-    );
-    scene.pass(
-        secondary,
-        Path::Rendering,
-        vk::RenderingFlags::empty(),
-        End::With(&[o]),
-    );
-    let primary = scene.dev.begin();
-    scene.prepare(primary);
-    // SAFETY: both are this device's; the secondary is executable.
-    unsafe {
-        d.end_command_buffer(secondary).expect("end");
-        d.cmd_execute_commands(primary, &[secondary]);
-    }
-    scene.dev.submit(primary);
-    scene.assert_one_draw(env, primary, secondary, &[o], "secondary");
-    scene.finish(env, vk);
+    on_nvidia(EXT, |env, scene, t| {
+        let o = at(t, -t);
+        let d = &scene.dev.d;
+        let secondary = scene.secondary(
+            vk::CommandBufferUsageFlags::empty(),
+            &vk::CommandBufferInheritanceInfo::default(),
+        );
+        scene.pass(
+            secondary,
+            Path::Rendering,
+            vk::RenderingFlags::empty(),
+            End::With(&[o]),
+        );
+        let primary = scene.dev.begin();
+        scene.prepare(primary);
+        // SAFETY: both are this device's; the secondary is executable.
+        unsafe {
+            d.end_command_buffer(secondary).expect("end");
+            d.cmd_execute_commands(primary, &[secondary]);
+        }
+        scene.dev.submit(primary);
+        scene.assert_one_draw(env, primary, secondary, &[o], "secondary");
+    });
 }
 
 /// Multiview (a two-layer map, view mask 0b11), both paths: each view is shifted by its own
@@ -839,24 +832,21 @@ fn each_view_is_shifted_by_its_own_offset() {
 /// centre says; offsets beyond the views are ignored.
 #[test]
 fn invalid_offsets_shade_as_the_lookup_at_each_texel_centre() {
-    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
-        return;
-    };
-    let t = scene.texel as i32;
-    let cases: [&[vk::Offset2D]; 5] = [
-        &[at(t / 2 + 1, -t / 2)],
-        &[at(t + 3, 2 * t - 5)],
-        &[at(-t / 2 - 1, t / 2)],
-        &[at(-7, 9)],
-        &[at(t, 0), at(5 * t, 5 * t), at(-t, 0)],
-    ];
-    for path in [Path::RenderPass, Path::Rendering] {
-        for offsets in cases {
-            let what = format!("{path:?} {offsets:?}");
-            scene.shade(env, path, End::With(offsets), &offsets[..1], &what);
+    on_nvidia(EXT, |env, scene, t| {
+        let cases: [&[vk::Offset2D]; 5] = [
+            &[at(t / 2 + 1, -t / 2)],
+            &[at(t + 3, 2 * t - 5)],
+            &[at(-t / 2 - 1, t / 2)],
+            &[at(-7, 9)],
+            &[at(t, 0), at(5 * t, 5 * t), at(-t, 0)],
+        ];
+        for path in [Path::RenderPass, Path::Rendering] {
+            for offsets in cases {
+                let what = format!("{path:?} {offsets:?}");
+                scene.shade(env, path, End::With(offsets), &offsets[..1], &what);
+            }
         }
-    }
-    scene.finish(env, vk);
+    });
 }
 
 /// A render pass of two subpasses: offsets at the end of the first (`vkCmdNextSubpass2`) are
@@ -864,97 +854,94 @@ fn invalid_offsets_shade_as_the_lookup_at_each_texel_centre() {
 /// apply to the whole pass, both subpasses' draws.
 #[test]
 fn only_the_last_subpass_end_carries_offsets() {
-    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
-        return;
-    };
-    let t = scene.texel as i32;
-    let (ignored, last) = (at(3 * t, 3 * t), at(-t, 2 * t));
-    let d = &scene.dev.d;
-    // SAFETY: every struct lives across its call; the objects are destroyed below.
-    let (pass, framebuffer, pipelines) = unsafe {
-        let pass = render_pass(
-            d,
-            0,
-            2,
-            &[color_dependency(0, 1).dependency_flags(vk::DependencyFlags::BY_REGION)],
-        );
-        let framebuffer = framebuffer(d, pass, &[scene.color().1, scene.map().1]);
-        let module = |bytes: &[u8]| {
-            let words = spv(bytes);
-            d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
-                .expect("vkCreateShaderModule")
+    on_nvidia(EXT, |env, scene, t| {
+        let (ignored, last) = (at(3 * t, 3 * t), at(-t, 2 * t));
+        let d = &scene.dev.d;
+        // SAFETY: every struct lives across its call; the objects are destroyed below.
+        let (pass, framebuffer, pipelines) = unsafe {
+            let pass = render_pass(
+                d,
+                0,
+                2,
+                &[color_dependency(0, 1).dependency_flags(vk::DependencyFlags::BY_REGION)],
+            );
+            let framebuffer = framebuffer(d, pass, &[scene.color().1, scene.map().1]);
+            let module = |bytes: &[u8]| {
+                let words = spv(bytes);
+                d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+                    .expect("vkCreateShaderModule")
+            };
+            let modules = [module(VERTEX), module(FRAGMENT)];
+            let stages = stages(modules);
+            let fixed = Fixed::new();
+            let infos = [
+                fixed
+                    .info(&stages, scene.layout)
+                    .render_pass(pass)
+                    .subpass(0),
+                fixed
+                    .info(&stages, scene.layout)
+                    .render_pass(pass)
+                    .subpass(1),
+            ];
+            let pipelines = d
+                .create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
+                .unwrap_or_else(|e| panic!("pipelines: {:?}; {:?}", e.1, take_messages()));
+            for m in modules {
+                d.destroy_shader_module(m, None);
+            }
+            (pass, framebuffer, pipelines)
         };
-        let modules = [module(VERTEX), module(FRAGMENT)];
-        let stages = stages(modules);
-        let fixed = Fixed::new();
-        let infos = [
-            fixed
-                .info(&stages, scene.layout)
-                .render_pass(pass)
-                .subpass(0),
-            fixed
-                .info(&stages, scene.layout)
-                .render_pass(pass)
-                .subpass(1),
-        ];
-        let pipelines = d
-            .create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
-            .unwrap_or_else(|e| panic!("pipelines: {:?}; {:?}", e.1, take_messages()));
-        for m in modules {
-            d.destroy_shader_module(m, None);
+        let cb = scene.dev.begin();
+        scene.prepare(cb);
+        let first = [ignored];
+        let second = [last];
+        let mut first_end = vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default()
+            .fragment_density_offsets(&first);
+        let mut last_end = vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default()
+            .fragment_density_offsets(&second);
+        // SAFETY: `cb` is recording on this device; every struct lives across its call.
+        unsafe {
+            d.cmd_begin_render_pass2(
+                cb,
+                &vk::RenderPassBeginInfo::default()
+                    .render_pass(pass)
+                    .framebuffer(framebuffer)
+                    .render_area(AREA)
+                    .clear_values(&CLEAR),
+                &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+            );
+            draw_fullscreen(d, cb, pipelines[0]);
+            d.cmd_next_subpass2(
+                cb,
+                &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+                &vk::SubpassEndInfo::default().push_next(&mut first_end),
+            );
+            draw_fullscreen(d, cb, pipelines[1]);
+            d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default().push_next(&mut last_end));
         }
-        (pass, framebuffer, pipelines)
-    };
-    let cb = scene.dev.begin();
-    scene.prepare(cb);
-    let first = [ignored];
-    let second = [last];
-    let mut first_end =
-        vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&first);
-    let mut last_end =
-        vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&second);
-    // SAFETY: `cb` is recording on this device; every struct lives across its call.
-    unsafe {
-        d.cmd_begin_render_pass2(
-            cb,
-            &vk::RenderPassBeginInfo::default()
-                .render_pass(pass)
-                .framebuffer(framebuffer)
-                .render_area(AREA)
-                .clear_values(&CLEAR),
-            &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-        );
-        draw_fullscreen(d, cb, pipelines[0]);
-        d.cmd_next_subpass2(
-            cb,
-            &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-            &vk::SubpassEndInfo::default().push_next(&mut first_end),
-        );
-        draw_fullscreen(d, cb, pipelines[1]);
-        d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default().push_next(&mut last_end));
-    }
-    scene.dev.submit(cb);
-    let want = &scene.want(&[last])[0];
-    for draw in 0..2 {
-        let got = env
-            .double
-            .effective_rates(cb.as_raw(), 0, draw)
-            .unwrap_or_else(|| panic!("no draw {draw}"));
-        assert!(
-            &got[0].codes == want,
-            "draw {draw} (subpass {draw}): shaded {:?}, want {want:?}",
-            got[0].codes
-        );
-    }
-    // SAFETY: the queue is idle; each object is destroyed once.
-    unsafe {
-        for p in pipelines {
-            d.destroy_pipeline(p, None);
+        scene.dev.submit(cb);
+        let want = &scene.want(&[last])[0];
+        for draw in 0..2 {
+            let got = env
+                .double
+                .effective_rates(cb.as_raw(), 0, draw)
+                .unwrap_or_else(|| panic!("no draw {draw}"));
+            assert!(
+                &got[0].codes == want,
+                "draw {draw} (subpass {draw}): shaded {:?}, want {want:?}",
+                got[0].codes
+            );
         }
-        d.destroy_framebuffer(framebuffer, None);
-        d.destroy_render_pass(pass, None);
-    }
-    scene.finish(env, vk);
+        // SAFETY: the queue is idle; each object is destroyed once.
+        unsafe {
+            for p in pipelines {
+                d.destroy_pipeline(p, None);
+            }
+            d.destroy_framebuffer(framebuffer, None);
+            d.destroy_render_pass(pass, None);
+        }
+    });
 }
 
 /// A render pass begun and ended in a primary whose draws a secondary records
@@ -962,46 +949,43 @@ fn only_the_last_subpass_end_carries_offsets() {
 /// secondary's draw shades with them.
 #[test]
 fn draws_of_a_secondary_inside_the_pass_take_the_primarys_offsets() {
-    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
-        return;
-    };
-    let t = scene.texel as i32;
-    let o = [at(-2 * t, -t)];
-    let d = &scene.dev.d;
-    let secondary = scene.secondary(
-        vk::CommandBufferUsageFlags::RENDER_PASS_CONTINUE,
-        &vk::CommandBufferInheritanceInfo::default()
-            .render_pass(scene.pass)
-            .subpass(0)
-            .framebuffer(scene.framebuffer),
-    );
-    // SAFETY: the secondary is recording inside the pass it inherits.
-    unsafe {
-        draw_fullscreen(d, secondary, scene.pass_pipeline);
-        d.end_command_buffer(secondary).expect("end");
-    }
-    let primary = scene.dev.begin();
-    scene.prepare(primary);
-    let mut end =
-        vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&o);
-    // SAFETY: both are this device's; every struct lives across its call.
-    unsafe {
-        d.cmd_begin_render_pass2(
-            primary,
-            &vk::RenderPassBeginInfo::default()
+    on_nvidia(EXT, |env, scene, t| {
+        let o = [at(-2 * t, -t)];
+        let d = &scene.dev.d;
+        let secondary = scene.secondary(
+            vk::CommandBufferUsageFlags::RENDER_PASS_CONTINUE,
+            &vk::CommandBufferInheritanceInfo::default()
                 .render_pass(scene.pass)
-                .framebuffer(scene.framebuffer)
-                .render_area(AREA)
-                .clear_values(&CLEAR),
-            &vk::SubpassBeginInfo::default()
-                .contents(vk::SubpassContents::SECONDARY_COMMAND_BUFFERS),
+                .subpass(0)
+                .framebuffer(scene.framebuffer),
         );
-        d.cmd_execute_commands(primary, &[secondary]);
-        d.cmd_end_render_pass2(primary, &vk::SubpassEndInfo::default().push_next(&mut end));
-    }
-    scene.dev.submit(primary);
-    scene.assert_one_draw(env, primary, secondary, &o, "secondary inside the pass");
-    scene.finish(env, vk);
+        // SAFETY: the secondary is recording inside the pass it inherits.
+        unsafe {
+            draw_fullscreen(d, secondary, scene.pass_pipeline);
+            d.end_command_buffer(secondary).expect("end");
+        }
+        let primary = scene.dev.begin();
+        scene.prepare(primary);
+        let mut end =
+            vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&o);
+        // SAFETY: both are this device's; every struct lives across its call.
+        unsafe {
+            d.cmd_begin_render_pass2(
+                primary,
+                &vk::RenderPassBeginInfo::default()
+                    .render_pass(scene.pass)
+                    .framebuffer(scene.framebuffer)
+                    .render_area(AREA)
+                    .clear_values(&CLEAR),
+                &vk::SubpassBeginInfo::default()
+                    .contents(vk::SubpassContents::SECONDARY_COMMAND_BUFFERS),
+            );
+            d.cmd_execute_commands(primary, &[secondary]);
+            d.cmd_end_render_pass2(primary, &vk::SubpassEndInfo::default().push_next(&mut end));
+        }
+        scene.dev.submit(primary);
+        scene.assert_one_draw(env, primary, secondary, &o, "secondary inside the pass");
+    });
 }
 
 /// Two threads record at once, each from a pool of its own, passes on the same map ended with
@@ -1010,73 +994,70 @@ fn draws_of_a_secondary_inside_the_pass_take_the_primarys_offsets() {
 /// them per command buffer, nothing shared is written while recording or running).
 #[test]
 fn threads_and_simultaneous_use_keep_their_own_offsets() {
-    let Some((_serial, env, vk, scene)) = nvidia(EXT) else {
-        return;
-    };
-    let t = scene.texel as i32;
-    let (oa, ob) = ([at(t, t)], [at(-2 * t, 0)]);
-    let record = |offsets: &[vk::Offset2D], flags: vk::CommandBufferUsageFlags, path: Path| {
-        let d = &scene.dev.d;
-        // SAFETY: the pool is this thread's own; every struct lives across its call.
-        unsafe {
-            let pool = d
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default().queue_family_index(0),
-                    None,
-                )
-                .expect("vkCreateCommandPool");
-            let cb = d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .expect("vkAllocateCommandBuffers")[0];
-            d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(flags))
-                .expect("vkBeginCommandBuffer");
-            scene.prepare(cb);
-            scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
-            scene.between(cb);
-            d.end_command_buffer(cb).expect("vkEndCommandBuffer");
-            (pool, cb)
-        }
-    };
-    for path in [Path::RenderPass, Path::Rendering] {
-        let simultaneous = vk::CommandBufferUsageFlags::SIMULTANEOUS_USE;
-        let ((pool_a, a), (pool_b, b)) = std::thread::scope(|s| {
-            let ta = s.spawn(|| record(&oa, simultaneous, path));
-            let tb = s.spawn(|| record(&ob, vk::CommandBufferUsageFlags::empty(), path));
-            (ta.join().expect("thread a"), tb.join().expect("thread b"))
-        });
-        let d = &scene.dev.d;
-        // Handles of the first path's command buffers may come back: only this submit's draws.
-        let before = env.double.draws().len();
-        // `a` may be pending twice: it was recorded with simultaneous use.
-        scene.submit(&[a, b, a]);
-        for (cb, offsets, runs) in [(a, &oa, 2), (b, &ob, 1)] {
-            let draws: Vec<_> = env
-                .double
-                .draws()
-                .into_iter()
-                .skip(before)
-                .filter(|dr| dr.command_buffer == cb.as_raw())
-                .collect();
-            assert_eq!(draws.len(), runs, "{path:?}: {draws:?}");
-            let want = &scene.want(offsets)[0];
-            for dr in &draws {
-                assert!(
-                    &dr.views[0].codes == want,
-                    "{path:?} {offsets:?}: shaded {:?}, want {want:?}",
-                    dr.views[0].codes
-                );
+    on_nvidia(EXT, |env, scene, t| {
+        let (oa, ob) = ([at(t, t)], [at(-2 * t, 0)]);
+        let record = |offsets: &[vk::Offset2D], flags: vk::CommandBufferUsageFlags, path: Path| {
+            let d = &scene.dev.d;
+            // SAFETY: the pool is this thread's own; every struct lives across its call.
+            unsafe {
+                let pool = d
+                    .create_command_pool(
+                        &vk::CommandPoolCreateInfo::default().queue_family_index(0),
+                        None,
+                    )
+                    .expect("vkCreateCommandPool");
+                let cb = d
+                    .allocate_command_buffers(
+                        &vk::CommandBufferAllocateInfo::default()
+                            .command_pool(pool)
+                            .level(vk::CommandBufferLevel::PRIMARY)
+                            .command_buffer_count(1),
+                    )
+                    .expect("vkAllocateCommandBuffers")[0];
+                d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(flags))
+                    .expect("vkBeginCommandBuffer");
+                scene.prepare(cb);
+                scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
+                scene.between(cb);
+                d.end_command_buffer(cb).expect("vkEndCommandBuffer");
+                (pool, cb)
+            }
+        };
+        for path in [Path::RenderPass, Path::Rendering] {
+            let simultaneous = vk::CommandBufferUsageFlags::SIMULTANEOUS_USE;
+            let ((pool_a, a), (pool_b, b)) = std::thread::scope(|s| {
+                let ta = s.spawn(|| record(&oa, simultaneous, path));
+                let tb = s.spawn(|| record(&ob, vk::CommandBufferUsageFlags::empty(), path));
+                (ta.join().expect("thread a"), tb.join().expect("thread b"))
+            });
+            let d = &scene.dev.d;
+            // Handles of the first path's command buffers may come back: only this submit's draws.
+            let before = env.double.draws().len();
+            // `a` may be pending twice: it was recorded with simultaneous use.
+            scene.submit(&[a, b, a]);
+            for (cb, offsets, runs) in [(a, &oa, 2), (b, &ob, 1)] {
+                let draws: Vec<_> = env
+                    .double
+                    .draws()
+                    .into_iter()
+                    .skip(before)
+                    .filter(|dr| dr.command_buffer == cb.as_raw())
+                    .collect();
+                assert_eq!(draws.len(), runs, "{path:?}: {draws:?}");
+                let want = &scene.want(offsets)[0];
+                for dr in &draws {
+                    assert!(
+                        &dr.views[0].codes == want,
+                        "{path:?} {offsets:?}: shaded {:?}, want {want:?}",
+                        dr.views[0].codes
+                    );
+                }
+            }
+            // SAFETY: the queue is idle; the pools' command buffers go with them.
+            unsafe {
+                d.destroy_command_pool(pool_a, None);
+                d.destroy_command_pool(pool_b, None);
             }
         }
-        // SAFETY: the queue is idle; the pools' command buffers go with them.
-        unsafe {
-            d.destroy_command_pool(pool_a, None);
-            d.destroy_command_pool(pool_b, None);
-        }
-    }
-    scene.finish(env, vk);
+    });
 }
