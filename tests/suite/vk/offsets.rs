@@ -170,31 +170,22 @@ impl Scene {
             let layout = d
                 .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
                 .expect("vkCreatePipelineLayout");
-            let module = |bytes: &[u8]| {
-                let words = spv(bytes);
-                d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
-                    .expect("vkCreateShaderModule")
-            };
-            let modules = [module(VERTEX), module(FRAGMENT)];
-            let stages = stages(modules);
-            let fixed = Fixed::new();
-            let formats = [COLOR];
-            let mut rendering = vk::PipelineRenderingCreateInfo::default()
-                .color_attachment_formats(&formats)
-                .view_mask(mask);
-            let infos = [
-                fixed.info(&stages, layout).render_pass(pass).subpass(0),
-                fixed
-                    .info(&stages, layout)
-                    .flags(vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT)
-                    .push_next(&mut rendering),
-            ];
-            let pipelines = d
-                .create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
-                .unwrap_or_else(|e| panic!("pipelines: {:?}; {:?}", e.1, take_messages()));
-            for m in modules {
-                d.destroy_shader_module(m, None);
-            }
+            let pipelines = pipelines(d, |stages, fixed| {
+                let formats = [COLOR];
+                let mut rendering = vk::PipelineRenderingCreateInfo::default()
+                    .color_attachment_formats(&formats)
+                    .view_mask(mask);
+                let infos = [
+                    fixed.info(stages, layout).render_pass(pass).subpass(0),
+                    fixed
+                        .info(stages, layout)
+                        .flags(
+                            vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT,
+                        )
+                        .push_next(&mut rendering),
+                ];
+                d.create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
+            });
             let f = (vk.instance.fp_v1_0().get_device_proc_addr)(
                 d.handle(),
                 c"vkCmdEndRendering2EXT".as_ptr(),
@@ -597,6 +588,33 @@ fn color_dependency(src: u32, dst: u32) -> vk::SubpassDependency2<'static> {
         .dst_access_mask(color)
 }
 
+/// The pipelines `create` makes of the suite's full-screen shaders' stages ([`VERTEX`],
+/// [`FRAGMENT`]) and the fixed state ([`Fixed`]); the shader modules go again after.
+///
+/// # Safety
+/// `d` must be alive.
+unsafe fn pipelines(
+    d: &ash::Device,
+    create: impl FnOnce(
+        &[vk::PipelineShaderStageCreateInfo<'static>; 2],
+        &Fixed,
+    ) -> Result<Vec<vk::Pipeline>, (Vec<vk::Pipeline>, vk::Result)>,
+) -> Vec<vk::Pipeline> {
+    let module = |bytes: &[u8]| {
+        let words = spv(bytes);
+        // SAFETY: the caller's promise; the struct lives across the call.
+        unsafe { d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None) }
+            .expect("vkCreateShaderModule")
+    };
+    let modules = [module(VERTEX), module(FRAGMENT)];
+    let made = create(&stages(modules), &Fixed::new());
+    for m in modules {
+        // SAFETY: made above, used by nothing once the pipelines are made.
+        unsafe { d.destroy_shader_module(m, None) };
+    }
+    made.unwrap_or_else(|e| panic!("pipelines: {:?}; {:?}", e.1, take_messages()))
+}
+
 /// A framebuffer of `pass` on `views` (colour, then map), [`SIZE`] square.
 ///
 /// # Safety
@@ -866,30 +884,15 @@ fn only_the_last_subpass_end_carries_offsets() {
                 &[color_dependency(0, 1).dependency_flags(vk::DependencyFlags::BY_REGION)],
             );
             let framebuffer = framebuffer(d, pass, &[scene.color().1, scene.map().1]);
-            let module = |bytes: &[u8]| {
-                let words = spv(bytes);
-                d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
-                    .expect("vkCreateShaderModule")
-            };
-            let modules = [module(VERTEX), module(FRAGMENT)];
-            let stages = stages(modules);
-            let fixed = Fixed::new();
-            let infos = [
-                fixed
-                    .info(&stages, scene.layout)
-                    .render_pass(pass)
-                    .subpass(0),
-                fixed
-                    .info(&stages, scene.layout)
-                    .render_pass(pass)
-                    .subpass(1),
-            ];
-            let pipelines = d
-                .create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
-                .unwrap_or_else(|e| panic!("pipelines: {:?}; {:?}", e.1, take_messages()));
-            for m in modules {
-                d.destroy_shader_module(m, None);
-            }
+            let pipelines = pipelines(d, |stages, fixed| {
+                let infos = [0, 1].map(|subpass| {
+                    fixed
+                        .info(stages, scene.layout)
+                        .render_pass(pass)
+                        .subpass(subpass)
+                });
+                d.create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
+            });
             (pass, framebuffer, pipelines)
         };
         let cb = scene.dev.begin();
