@@ -1000,31 +1000,14 @@ fn threads_and_simultaneous_use_keep_their_own_offsets() {
     on_nvidia(EXT, |env, scene, t| {
         let (oa, ob) = ([at(t, t)], [at(-2 * t, 0)]);
         let record = |offsets: &[vk::Offset2D], flags: vk::CommandBufferUsageFlags, path: Path| {
-            let d = &scene.dev.d;
-            // SAFETY: the pool is this thread's own; every struct lives across its call.
-            unsafe {
-                let pool = d
-                    .create_command_pool(
-                        &vk::CommandPoolCreateInfo::default().queue_family_index(0),
-                        None,
-                    )
-                    .expect("vkCreateCommandPool");
-                let cb = d
-                    .allocate_command_buffers(
-                        &vk::CommandBufferAllocateInfo::default()
-                            .command_pool(pool)
-                            .level(vk::CommandBufferLevel::PRIMARY)
-                            .command_buffer_count(1),
-                    )
-                    .expect("vkAllocateCommandBuffers")[0];
-                d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(flags))
-                    .expect("vkBeginCommandBuffer");
-                scene.prepare(cb);
-                scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
-                scene.between(cb);
-                d.end_command_buffer(cb).expect("vkEndCommandBuffer");
-                (pool, cb)
-            }
+            let pool = scene.dev.command_pool();
+            let cb = scene.dev.begin_in(pool, flags);
+            scene.prepare(cb);
+            scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
+            scene.between(cb);
+            // SAFETY: `cb` is recording on this device, from this thread's own pool.
+            unsafe { scene.dev.d.end_command_buffer(cb) }.expect("vkEndCommandBuffer");
+            (pool, cb)
         };
         for path in [Path::RenderPass, Path::Rendering] {
             let simultaneous = vk::CommandBufferUsageFlags::SIMULTANEOUS_USE;
