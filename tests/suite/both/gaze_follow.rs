@@ -64,6 +64,7 @@ use crate::both::fdm_vulkan::{
     enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT, VALIDATED, WIDTH,
 };
 use crate::support::device::env;
+use crate::support::gaze_log::{located, Located};
 use crate::support::{in_own_process, level_info};
 
 const MS: i64 = 1_000_000;
@@ -403,62 +404,6 @@ fn attach_a_set(app: &App, session: xr::Session) {
     }
 }
 
-/// The gaze the layer located for one frame, from its `trace` line on `fovea::gaze`.
-#[derive(Clone, Debug, PartialEq)]
-struct Located {
-    time_ns: i64,
-    tracking: Tracking,
-    angles: [f32; 2],
-    ndc: Vec<[f32; 2]>,
-}
-
-/// The value of `name=` in a log line (a bracketed list whole).
-fn field<'a>(line: &'a str, name: &str) -> &'a str {
-    let at = line
-        .find(&format!(" {name}="))
-        .unwrap_or_else(|| panic!("{name}= in {line}"))
-        + name.len()
-        + 2;
-    let rest = &line[at..];
-    if rest.starts_with('[') {
-        let end = rest.find("]]").map_or(rest.len(), |e| e + 2);
-        &rest[..end]
-    } else {
-        rest.split(' ').next().unwrap()
-    }
-}
-
-/// Every located gaze in the log, in order.
-fn located(log: &str) -> Vec<Located> {
-    log.lines()
-        .filter(|l| l.contains(fovea_abi::log_target::GAZE) && l.contains(" time_ns="))
-        .map(|l| {
-            let tracking = match field(l, "tracking") {
-                "Tracked" => Tracking::Tracked,
-                "Held" => Tracking::Held,
-                "Returning" => Tracking::Returning,
-                "Fixed" => Tracking::Fixed,
-                other => panic!("tracking {other:?} in {l}"),
-            };
-            let num = |n: &str| field(l, n).parse::<f32>().unwrap();
-            let ndc = field(l, "ndc")
-                .trim_matches(|c| c == '[' || c == ']')
-                .split("], [")
-                .map(|p| {
-                    let v: Vec<f32> = p.split(", ").map(|x| x.parse().unwrap()).collect();
-                    [v[0], v[1]]
-                })
-                .collect();
-            Located {
-                time_ns: field(l, "time_ns").parse().unwrap(),
-                tracking,
-                angles: [num("yaw"), num("pitch")],
-                ndc,
-            }
-        })
-        .collect()
-}
-
 /// The gaze located for the frame shown at `t_ns` (from the script's start), if any.
 fn gaze_for(gaze: &[Located], t_ns: i64) -> Option<&Located> {
     gaze.iter()
@@ -745,7 +690,7 @@ fn follows(module: &str, name: &str, mode: Mode, profile: Profile) {
         let Some(run) = run(mode, profile, SCRIPT, 450, &dir) else {
             return;
         };
-        let gaze = located(&run.log);
+        let gaze = located(run.log.lines());
         let mut moved_once = 0;
         let mut shifts: Vec<(&Located, [[i32; 2]; 2])> = Vec::new();
         for (n, f) in run.frames.iter().enumerate() {
@@ -848,7 +793,7 @@ fn an_app_without_the_offset_extension_gets_fixed_maps() {
             let Some(run) = run(mode, Profile::Nvidia, SCRIPT, 200, &dir) else {
                 return;
             };
-            let gaze = located(&run.log);
+            let gaze = located(run.log.lines());
             let mut tracked = 0;
             for (n, f) in run.frames.iter().enumerate() {
                 // Every frame, whatever the gaze: the fixed map.
@@ -967,7 +912,7 @@ fn a_trembling_gaze_moves_no_injected_map() {
                 (2..=3).contains(&moves.len()),
                 "one move to the fixation, one for the saccade: {moves:#?}"
             );
-            let gaze = located(&run.log);
+            let gaze = located(run.log.lines());
             for f in &run.frames {
                 if let Some(g) = gaze_for(&gaze, f.t_ns) {
                     check_frame("trembling", Profile::Nvidia, f, &Want::of(g));

@@ -19,6 +19,7 @@ use glam::{Quat, Vec3};
 use openxr_sys as xr;
 use xr::Handle;
 
+use crate::support::gaze_log::{located, Located};
 use crate::support::in_own_process;
 
 /// The eye gaze extension, its profile and its pose.
@@ -52,61 +53,6 @@ fn log_lines(log: &Path) -> Vec<String> {
         .unwrap_or_default()
         .lines()
         .map(String::from)
-        .collect()
-}
-
-/// The gaze the layer located for one frame, from its `trace` line.
-#[derive(Clone, Debug)]
-struct Located {
-    tracking: Tracking,
-    angles: [f32; 2],
-    weight: f32,
-    ndc: Vec<[f32; 2]>,
-}
-
-fn field<'a>(line: &'a str, name: &str) -> &'a str {
-    let at = line
-        .find(&format!(" {name}="))
-        .unwrap_or_else(|| panic!("{name}= in {line}"))
-        + name.len()
-        + 2;
-    let rest = &line[at..];
-    if rest.starts_with('[') {
-        let end = rest.find("]]").map_or(rest.len(), |e| e + 2);
-        &rest[..end]
-    } else {
-        rest.split(' ').next().unwrap()
-    }
-}
-
-fn located(lines: &[String]) -> Vec<Located> {
-    lines
-        .iter()
-        .filter(|l| l.contains(fovea_abi::log_target::GAZE) && l.contains(" time_ns="))
-        .map(|l| {
-            let tracking = match field(l, "tracking") {
-                "Tracked" => Tracking::Tracked,
-                "Held" => Tracking::Held,
-                "Returning" => Tracking::Returning,
-                "Fixed" => Tracking::Fixed,
-                other => panic!("tracking {other:?} in {l}"),
-            };
-            let num = |n: &str| field(l, n).parse::<f32>().unwrap();
-            let ndc = field(l, "ndc")
-                .trim_matches(|c| c == '[' || c == ']')
-                .split("], [")
-                .map(|p| {
-                    let v: Vec<f32> = p.split(", ").map(|x| x.parse().unwrap()).collect();
-                    [v[0], v[1]]
-                })
-                .collect();
-            Located {
-                tracking,
-                angles: [num("yaw"), num("pitch")],
-                weight: num("weight"),
-                ndc,
-            }
-        })
         .collect()
 }
 
@@ -524,7 +470,7 @@ fn an_app_with_its_own_eye_gaze_binding_keeps_getting_it_here() {
             "{yaw} {pitch}"
         );
     }
-    let got = located(&log_lines(&log));
+    let got = located(log_lines(&log));
     let last = got.last().expect("fovea located the gaze too");
     assert_eq!(last.tracking, Tracking::Tracked);
     assert!((last.angles[0] - 8.0).abs() < 0.05 && (last.angles[1] + 3.0).abs() < 0.05);
@@ -638,7 +584,7 @@ fn a_runtime_that_refuses_the_gaze_space_before_attach_works() {
             let log = log_here("after-attach", &[]);
             let mut lp = running(eye_tracker(true, true, "fix -6,4 for 10s"), &[]);
             attach_and_sync(&mut lp, 60);
-            let got = located(&log_lines(&log));
+            let got = located(log_lines(&log));
             let last = got.last().expect("located");
             assert_eq!(last.tracking, Tracking::Tracked);
             assert!((last.angles[0] + 6.0).abs() < 0.05 && (last.angles[1] - 4.0).abs() < 0.05);
@@ -730,7 +676,7 @@ fn an_app_that_attaches_but_never_syncs_gets_gaze() {
             for _ in 0..60 {
                 lp.frame().unwrap();
             }
-            let got = located(&log_lines(&log));
+            let got = located(log_lines(&log));
             assert!(got.len() >= 55, "synced alone every frame: {}", got.len());
             let last = got.last().unwrap();
             assert_eq!(last.tracking, Tracking::Tracked);
@@ -887,7 +833,7 @@ fn an_eye_gaze_suggestion_made_before_the_session_still_binds_both() {
             assert!(active, "the application's gaze action is active");
             let [yaw, pitch] = pose_angles(pose.expect("located"));
             assert!((yaw + 4.0).abs() < 0.01 && (pitch - 2.0).abs() < 0.01);
-            let last = located(&log_lines(&log))
+            let last = located(log_lines(&log))
                 .pop()
                 .expect("fovea located the gaze");
             assert_eq!(last.tracking, Tracking::Tracked);
