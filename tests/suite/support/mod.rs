@@ -1,6 +1,7 @@
 //! What several of the suite's modules share: the repository's root and its Rust files, running a
-//! test in a process of its own, manifests pointed at this build, the system's OpenXR layer folder,
-//! the gaze the layer logged, and the foveation structs most tests fill in.
+//! test in a process of its own, an application's own OpenXR actions, manifests pointed at this
+//! build, the system's OpenXR layer folder, the gaze the layer logged, and the foveation structs
+//! most tests fill in.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -8,6 +9,7 @@ use std::process::Command;
 use fovea_harness::artifact;
 use openxr_sys as xr;
 
+pub mod actions;
 pub mod device;
 pub mod gaze_log;
 pub mod process;

@@ -19,13 +19,14 @@ use glam::{Quat, Vec3};
 use openxr_sys as xr;
 use xr::Handle;
 
+use crate::support::actions::{
+    attach_set, declare, path, sync_set, EYE_GAZE_POSE, EYE_GAZE_PROFILE,
+};
 use crate::support::gaze_log::{located, Located};
 use crate::support::in_own_process;
 
-/// The eye gaze extension, its profile and its pose.
+/// The eye gaze extension.
 const EXT: &str = "XR_EXT_eye_gaze_interaction";
-const PROFILE: &std::ffi::CStr = c"/interaction_profiles/ext/eye_gaze_interaction";
-const GAZE_POSE: &std::ffi::CStr = c"/user/eyes_ext/input/gaze_ext/pose";
 
 /// A log file of this process's own, with the gaze at `trace` and the stats line on.
 fn log_here(label: &str, extra_env: &[(&str, &str)]) -> PathBuf {
@@ -101,85 +102,6 @@ struct AppInput {
     locate: xr::pfn::LocateSpace,
 }
 
-fn path(app: &App, s: &std::ffi::CStr) -> xr::Path {
-    // SAFETY: the type matches the name; the string is NUL-terminated.
-    unsafe {
-        let f: xr::pfn::StringToPath = app.func(c"xrStringToPath");
-        let mut p = xr::Path::NULL;
-        assert_eq!(f(app.instance, s.as_ptr(), &mut p), xr::Result::SUCCESS);
-        p
-    }
-}
-
-fn fixed<const N: usize>(s: &str) -> [std::ffi::c_char; N] {
-    let mut a = [0; N];
-    for (d, b) in a.iter_mut().zip(s.bytes()) {
-        *d = b as std::ffi::c_char;
-    }
-    a
-}
-
-/// The application's own set with one pose action, its binding suggested: to a controller, or
-/// (`gaze`) to the eye tracker.
-fn declare(app: &App, gaze: bool) -> (xr::ActionSet, xr::Action) {
-    // SAFETY: every name's type matches; the structs live across their calls.
-    unsafe {
-        let create_set: xr::pfn::CreateActionSet = app.func(c"xrCreateActionSet");
-        let create_action: xr::pfn::CreateAction = app.func(c"xrCreateAction");
-        let suggest: xr::pfn::SuggestInteractionProfileBindings =
-            app.func(c"xrSuggestInteractionProfileBindings");
-        let info = xr::ActionSetCreateInfo {
-            ty: xr::StructureType::ACTION_SET_CREATE_INFO,
-            next: std::ptr::null(),
-            action_set_name: fixed("gameplay"),
-            localized_action_set_name: fixed("Gameplay"),
-            priority: 0,
-        };
-        let mut set = xr::ActionSet::NULL;
-        assert_eq!(
-            create_set(app.instance, &info, &mut set),
-            xr::Result::SUCCESS
-        );
-        let info = xr::ActionCreateInfo {
-            ty: xr::StructureType::ACTION_CREATE_INFO,
-            next: std::ptr::null(),
-            action_name: fixed("aim"),
-            action_type: xr::ActionType::POSE_INPUT,
-            count_subaction_paths: 0,
-            subaction_paths: std::ptr::null(),
-            localized_action_name: fixed("Aim"),
-        };
-        let mut action = xr::Action::NULL;
-        assert_eq!(create_action(set, &info, &mut action), xr::Result::SUCCESS);
-        let (profile, binding) = if gaze {
-            (PROFILE, GAZE_POSE)
-        } else {
-            (
-                c"/interaction_profiles/khr/simple_controller",
-                c"/user/hand/left/input/aim/pose",
-            )
-        };
-        let bindings = [xr::ActionSuggestedBinding {
-            action,
-            binding: path(app, binding),
-        }];
-        let suggested = xr::InteractionProfileSuggestedBinding {
-            ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
-            next: std::ptr::null(),
-            interaction_profile: path(app, profile),
-            count_suggested_bindings: 1,
-            suggested_bindings: bindings.as_ptr(),
-        };
-        assert_eq!(suggest(app.instance, &suggested), xr::Result::SUCCESS);
-        assert_eq!(
-            bindings[0].action, action,
-            "the application's struct is untouched"
-        );
-        assert_eq!(suggested.count_suggested_bindings, 1);
-        (set, action)
-    }
-}
-
 impl AppInput {
     /// Declares the application's set and action ([`declare`]); `attach` attaches the set.
     fn new(lp: &HeadlessLoop, gaze: bool, attach: bool) -> AppInput {
@@ -191,23 +113,9 @@ impl AppInput {
     fn with(lp: &HeadlessLoop, set: xr::ActionSet, action: xr::Action, attach: bool) -> AppInput {
         // SAFETY: every name's type matches; the structs live across their calls.
         unsafe {
-            let attach_fn: xr::pfn::AttachSessionActionSets = lp.func(c"xrAttachSessionActionSets");
-            if attach {
-                let sets = [set];
-                let info = xr::SessionActionSetsAttachInfo {
-                    ty: xr::StructureType::SESSION_ACTION_SETS_ATTACH_INFO,
-                    next: std::ptr::null(),
-                    count_action_sets: 1,
-                    action_sets: sets.as_ptr(),
-                };
-                assert_eq!(attach_fn(lp.session, &info), xr::Result::SUCCESS);
-                assert_eq!(
-                    info.count_action_sets, 1,
-                    "the application's struct is untouched"
-                );
-            }
             let mut space = xr::Space::NULL;
             if attach {
+                attach_set(lp, set);
                 let create_space: xr::pfn::CreateActionSpace = lp.func(c"xrCreateActionSpace");
                 let info = xr::ActionSpaceCreateInfo {
                     ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
@@ -234,24 +142,7 @@ impl AppInput {
 
     /// The application's xrSyncActions of its own set.
     fn sync(&self, lp: &HeadlessLoop) {
-        let active = [xr::ActiveActionSet {
-            action_set: self.set,
-            subaction_path: xr::Path::NULL,
-        }];
-        let info = xr::ActionsSyncInfo {
-            ty: xr::StructureType::ACTIONS_SYNC_INFO,
-            next: std::ptr::null(),
-            count_active_action_sets: 1,
-            active_action_sets: active.as_ptr(),
-        };
-        // SAFETY: a live session and set; the struct lives across the call.
-        let r = unsafe { (self.sync)(lp.session, &info) };
-        // Unfocused (the first frames) is a success code: input goes to the focused session only.
-        assert!(
-            [xr::Result::SUCCESS, xr::Result::SESSION_NOT_FOCUSED].contains(&r),
-            "{r:?}"
-        );
-        assert_eq!(info.count_active_action_sets, 1, "untouched");
+        sync_set(lp, self.sync, self.set);
     }
 
     /// Whether the application's own action is active, and its space's pose in `base` at the last
@@ -661,12 +552,12 @@ fn an_app_that_attaches_but_never_syncs_gets_gaze() {
                     lp.func(c"xrSuggestInteractionProfileBindings");
                 let binding = [xr::ActionSuggestedBinding {
                     action: _input.action,
-                    binding: path(&lp.app, GAZE_POSE),
+                    binding: path(&lp.app, EYE_GAZE_POSE),
                 }];
                 let info = xr::InteractionProfileSuggestedBinding {
                     ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
                     next: std::ptr::null(),
-                    interaction_profile: path(&lp.app, PROFILE),
+                    interaction_profile: path(&lp.app, EYE_GAZE_PROFILE),
                     count_suggested_bindings: 1,
                     suggested_bindings: binding.as_ptr(),
                 };
