@@ -335,18 +335,8 @@ fn offsets_from_state(
     );
     let grid = Grid::new([WIDTH, HEIGHT], [granularity.width, granularity.height]);
     [0, 1].map(|eye| {
-        let view = View {
-            fov: fovs[eye],
-            rect: Rect {
-                x: 0,
-                y: 0,
-                width: WIDTH,
-                height: HEIGHT,
-            },
-            visible: None,
-        };
         let c = state.foveation_center[eye];
-        pixel_offset(&grid, &view, [c.x, -c.y])
+        pixel_offset(&grid, &whole_view(fovs[eye]), [c.x, -c.y])
     })
 }
 
@@ -401,6 +391,20 @@ fn attach_a_set(app: &App, session: xr::Session) {
             action_sets: sets.as_ptr(),
         };
         assert_eq!(attach(session, &info), xr::Result::SUCCESS);
+    }
+}
+
+/// A view of `fov` over the whole `WIDTH`×`HEIGHT` image, every pixel visible.
+fn whole_view(fov: Fov) -> View {
+    View {
+        fov,
+        rect: Rect {
+            x: 0,
+            y: 0,
+            width: WIDTH,
+            height: HEIGHT,
+        },
+        visible: None,
     }
 }
 
@@ -490,21 +494,11 @@ fn check_frame(case: &str, profile: Profile, f: &Seen, want: &Want) -> [[i32; 2]
         level: Level::High,
         vertical_offset_deg: 0.0,
     };
-    let whole = Rect {
-        x: 0,
-        y: 0,
-        width: WIDTH,
-        height: HEIGHT,
-    };
     let fovs = f.fovs;
     let views = Layout::Multiview.views(fovs, true);
     let fixed = expected_codes(profile, &views, pattern, false);
     let layer = fixed.len() / 2;
-    let view = |eye: usize| View {
-        fov: fovs[eye],
-        rect: whole,
-        visible: None,
-    };
+    let view = |eye: usize| whole_view(fovs[eye]);
     let exact = |eye: usize| match want {
         Want::Fixed => [0.0; 2],
         Want::At(ndc) => {
@@ -579,19 +573,9 @@ fn fixed_shifted(profile: Profile, fovs: [Fov; 2], shifts: [[i32; 2]; 2]) -> Vec
     let layer = fixed.len() / 2;
     let views: Vec<Vec<u8>> = (0..2)
         .map(|eye| {
-            let view = View {
-                fov: fovs[eye],
-                rect: Rect {
-                    x: 0,
-                    y: 0,
-                    width: WIDTH,
-                    height: HEIGHT,
-                },
-                visible: None,
-            };
             let fixed = &fixed[eye * layer..(eye + 1) * layer];
             let mut out = fixed.to_vec();
-            shift_codes_into(&grid, &view, shifts[eye], fixed, &mut out);
+            shift_codes_into(&grid, &whole_view(fovs[eye]), shifts[eye], fixed, &mut out);
             out
         })
         .collect();
