@@ -61,7 +61,8 @@ use crate::both::fdm_emulated::{
     color_images, expected_codes, rates_drawn, release, Layout, Renderer,
 };
 use crate::both::fdm_vulkan::{
-    enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT, VALIDATED, WIDTH,
+    apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
+    VALIDATED, WIDTH,
 };
 use crate::support::device::env;
 use crate::support::gaze_log::{located, Located};
@@ -417,10 +418,6 @@ fn gaze_for(gaze: &[Located], t_ns: i64) -> Option<&Located> {
 
 /// Applies a HIGH profile created with `XrFoveationEyeTrackedProfileCreateInfoMETA` to `swapchain`.
 fn apply_eye_tracked_high(app: &App, session: xr::Session, swapchain: xr::Swapchain) {
-    let create_profile: xr::pfn::CreateFoveationProfileFB = func(app, "xrCreateFoveationProfileFB");
-    let destroy_profile: xr::pfn::DestroyFoveationProfileFB =
-        func(app, "xrDestroyFoveationProfileFB");
-    let update: xr::pfn::UpdateSwapchainFB = func(app, "xrUpdateSwapchainFB");
     let tracked = xr::FoveationEyeTrackedProfileCreateInfoMETA {
         ty: xr::StructureType::FOVEATION_EYE_TRACKED_PROFILE_CREATE_INFO_META,
         next: null(),
@@ -428,24 +425,7 @@ fn apply_eye_tracked_high(app: &App, session: xr::Session, swapchain: xr::Swapch
     };
     let mut level = level_info(3, 0, 0.0);
     level.next = &tracked as *const _ as *mut c_void;
-    let pi = xr::FoveationProfileCreateInfoFB {
-        ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
-        next: &level as *const _ as *mut c_void,
-    };
-    let mut profile = xr::FoveationProfileFB::NULL;
-    // SAFETY: the structs live across the calls.
-    unsafe {
-        assert_eq!(
-            create_profile(session, &pi, &mut profile),
-            xr::Result::SUCCESS
-        );
-        let state = crate::support::foveation_state(profile, 0);
-        assert_eq!(
-            update(swapchain, &state as *const _ as *const _),
-            xr::Result::SUCCESS
-        );
-        assert_eq!(destroy_profile(profile), xr::Result::SUCCESS);
-    }
+    apply_profile(app, session, swapchain, &level);
 }
 
 /// What fovea must show in a frame.
