@@ -357,12 +357,9 @@ pub(crate) fn fov_of(v: &xr::View) -> Fov {
     }
 }
 
-/// What the density model gives for one layer of a WIDTH×HEIGHT swapchain drawn with `fov`.
-fn model(fov: Fov, pattern: Pattern) -> Vec<u8> {
-    let grid = Grid::new([WIDTH, HEIGHT], TEXEL);
-    let [mw, mh] = grid.map_extent();
-    let mut out = vec![0u8; (mw * mh * 2) as usize];
-    let view = View {
+/// A view of `fov` over the whole `WIDTH`×`HEIGHT` image, every pixel visible.
+pub(crate) fn whole_view(fov: Fov) -> View {
+    View {
         fov,
         rect: Rect {
             x: 0,
@@ -371,8 +368,15 @@ fn model(fov: Fov, pattern: Pattern) -> Vec<u8> {
             height: HEIGHT,
         },
         visible: None,
-    };
-    density::fill(&grid, &[view], pattern, &mut out);
+    }
+}
+
+/// What the density model gives for one layer of a WIDTH×HEIGHT swapchain drawn with `fov`.
+fn model(fov: Fov, pattern: Pattern) -> Vec<u8> {
+    let grid = Grid::new([WIDTH, HEIGHT], TEXEL);
+    let [mw, mh] = grid.map_extent();
+    let mut out = vec![0u8; (mw * mh * 2) as usize];
+    density::fill(&grid, &[whole_view(fov)], pattern, &mut out);
     out
 }
 

@@ -48,7 +48,7 @@ use fovea_harness::sim::control::{EyeGaze, SimConfig};
 use fovea_harness::sim::gaze_script::GazeScript;
 use fovea_harness::vulkan::{self, pick_lavapipe, take_messages, Vulkan};
 use fovea_harness::{skip, App, Chain};
-use fovea_model::density::{Grid, Level, Pattern, Rect, View};
+use fovea_model::density::{Grid, Level, Pattern};
 use fovea_model::gaze::Tracking;
 use fovea_model::shading_rate;
 use fovea_model::shift::{pixel_of, pixel_offset, shift_codes_into};
@@ -61,8 +61,8 @@ use crate::both::fdm_emulated::{
     color_images, expected_codes, rates_drawn, release, Layout, Renderer,
 };
 use crate::both::fdm_vulkan::{
-    apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
-    VALIDATED, WIDTH,
+    apply_profile, enumerate, func, running_session, swapchain_info, whole_view, Frame, FDM_BIT,
+    HEIGHT, VALIDATED, WIDTH,
 };
 use crate::support::device::env;
 use crate::support::gaze_log::{located, Located};
@@ -392,20 +392,6 @@ fn attach_a_set(app: &App, session: xr::Session) {
             action_sets: sets.as_ptr(),
         };
         assert_eq!(attach(session, &info), xr::Result::SUCCESS);
-    }
-}
-
-/// A view of `fov` over the whole `WIDTH`×`HEIGHT` image, every pixel visible.
-fn whole_view(fov: Fov) -> View {
-    View {
-        fov,
-        rect: Rect {
-            x: 0,
-            y: 0,
-            width: WIDTH,
-            height: HEIGHT,
-        },
-        visible: None,
     }
 }
 
