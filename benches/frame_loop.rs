@@ -87,21 +87,18 @@ fn running_loop_with(chain: Chain, gaze: Option<&str>) -> HeadlessLoop {
     lp
 }
 
+/// `s` in a C string array of `N` (NUL-padded): an action or set name.
+fn fixed<const N: usize>(s: &str) -> [std::ffi::c_char; N] {
+    let mut out = [0; N];
+    for (o, b) in out.iter_mut().zip(s.bytes()) {
+        *o = b as std::ffi::c_char;
+    }
+    out
+}
+
 /// Attaches an action set of the application's own with one boolean action, as an application with
 /// input does.
 fn attach_a_set(lp: &HeadlessLoop) {
-    let name = |s: &str| {
-        let mut out = [0 as std::ffi::c_char; 128];
-        for (o, b) in out.iter_mut().zip(s.bytes()) {
-            *o = b as std::ffi::c_char;
-        }
-        out
-    };
-    let short = |s: &str| {
-        let mut out = [0 as std::ffi::c_char; 64];
-        out.copy_from_slice(&name(s)[..64]);
-        out
-    };
     // SAFETY: every name's type matches; every struct lives across its call.
     unsafe {
         let create_set: xr::pfn::CreateActionSet = lp.app.func(c"xrCreateActionSet");
@@ -110,8 +107,8 @@ fn attach_a_set(lp: &HeadlessLoop) {
         let set_info = xr::ActionSetCreateInfo {
             ty: xr::StructureType::ACTION_SET_CREATE_INFO,
             next: std::ptr::null(),
-            action_set_name: short("menu"),
-            localized_action_set_name: name("Menu"),
+            action_set_name: fixed("menu"),
+            localized_action_set_name: fixed("Menu"),
             priority: 0,
         };
         let mut set = xr::ActionSet::NULL;
@@ -122,11 +119,11 @@ fn attach_a_set(lp: &HeadlessLoop) {
         let action_info = xr::ActionCreateInfo {
             ty: xr::StructureType::ACTION_CREATE_INFO,
             next: std::ptr::null(),
-            action_name: short("select"),
+            action_name: fixed("select"),
             action_type: xr::ActionType::BOOLEAN_INPUT,
             count_subaction_paths: 0,
             subaction_paths: std::ptr::null(),
-            localized_action_name: name("Select"),
+            localized_action_name: fixed("Select"),
         };
         let mut action = xr::Action::NULL;
         assert_eq!(
@@ -181,18 +178,6 @@ impl AppGaze {
             array_size: 2,
         };
         let lp = HeadlessLoop::new(app, spec).expect("session");
-        let name = |s: &str| {
-            let mut out = [0 as std::ffi::c_char; 128];
-            for (o, b) in out.iter_mut().zip(s.bytes()) {
-                *o = b as std::ffi::c_char;
-            }
-            out
-        };
-        let short = |s: &str| {
-            let mut out = [0 as std::ffi::c_char; 64];
-            out.copy_from_slice(&name(s)[..64]);
-            out
-        };
         // SAFETY: every name's type matches; every struct lives across its call.
         unsafe {
             let path_of: xr::pfn::StringToPath = lp.app.func(c"xrStringToPath");
@@ -220,8 +205,8 @@ impl AppGaze {
                     &xr::ActionSetCreateInfo {
                         ty: xr::StructureType::ACTION_SET_CREATE_INFO,
                         next: std::ptr::null(),
-                        action_set_name: short("gaze"),
-                        localized_action_set_name: name("Gaze"),
+                        action_set_name: fixed("gaze"),
+                        localized_action_set_name: fixed("Gaze"),
                         priority: 0,
                     },
                     &mut set
@@ -235,11 +220,11 @@ impl AppGaze {
                     &xr::ActionCreateInfo {
                         ty: xr::StructureType::ACTION_CREATE_INFO,
                         next: std::ptr::null(),
-                        action_name: short("gaze"),
+                        action_name: fixed("gaze"),
                         action_type: xr::ActionType::POSE_INPUT,
                         count_subaction_paths: 0,
                         subaction_paths: std::ptr::null(),
-                        localized_action_name: name("Gaze"),
+                        localized_action_name: fixed("Gaze"),
                     },
                     &mut action
                 ),
