@@ -4,13 +4,13 @@
 //! implements the extension itself passed through (docs/eye-tracking.md#xr_meta_foveation_eye_tracked).
 
 use fovea_harness::app::API_1_0;
-use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
+use fovea_harness::frame_loop::{HeadlessLoop, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 use xr::Handle;
 
 use crate::support::actions::{attach_set, declare, sync_set};
-use crate::support::{in_own_process, level_info};
+use crate::support::{foveated_loop, in_own_process, level_info};
 
 const META: &str = "XR_META_foveation_eye_tracked";
 const EYE_GAZE: &str = "XR_EXT_eye_gaze_interaction";
@@ -153,14 +153,7 @@ fn the_extension_is_listed_and_needs_the_fb_foveation_pair() {
 /// A running headless loop with the given runtime configuration and extensions.
 fn running(vars: &[(&str, &str)], more: &[&str]) -> HeadlessLoop {
     let app = app(vars, more);
-    HeadlessLoop::new(
-        app,
-        SwapchainSpec {
-            foveation: true,
-            array_size: 2,
-        },
-    )
-    .unwrap()
+    foveated_loop(app)
 }
 
 fn create_profile(

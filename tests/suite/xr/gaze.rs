@@ -12,7 +12,7 @@
 use std::path::{Path, PathBuf};
 
 use fovea_harness::app::API_1_0;
-use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
+use fovea_harness::frame_loop::{HeadlessLoop, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use fovea_model::gaze::{eye_centre, EyeView, Gaze, Tracking};
 use glam::{Quat, Vec3};
@@ -23,7 +23,7 @@ use crate::support::actions::{
     attach_set, declare, path, sync_set, EYE_GAZE_POSE, EYE_GAZE_PROFILE,
 };
 use crate::support::gaze_log::{located, Located};
-use crate::support::in_own_process;
+use crate::support::{foveated_loop, in_own_process};
 
 /// The eye gaze extension.
 const EXT: &str = "XR_EXT_eye_gaze_interaction";
@@ -81,14 +81,7 @@ fn running(cfg: sim::control::SimConfig, extensions: &[&str]) -> HeadlessLoop {
     let mut exts: Vec<&str> = FOVEATION_EXTENSIONS.to_vec();
     exts.extend_from_slice(extensions);
     let app = App::new(Chain::fovea().unwrap(), &exts, API_1_0).unwrap();
-    HeadlessLoop::new(
-        app,
-        SwapchainSpec {
-            foveation: true,
-            array_size: 2,
-        },
-    )
-    .unwrap()
+    foveated_loop(app)
 }
 
 /// The application's own input: an action set with one pose action, bound to a controller (or,
@@ -707,14 +700,7 @@ fn an_eye_gaze_suggestion_made_before_the_session_still_binds_both() {
             // Suggested before any session: fovea has no action yet, and suggests the
             // application's binding again with its own at the attach.
             let (set, action) = declare(&app, true);
-            let mut lp = HeadlessLoop::new(
-                app,
-                SwapchainSpec {
-                    foveation: true,
-                    array_size: 2,
-                },
-            )
-            .unwrap();
+            let mut lp = foveated_loop(app);
             let input = AppInput::with(&lp, set, action, true);
             for _ in 0..30 {
                 lp.frame().unwrap();
