@@ -37,6 +37,8 @@ use xr::Handle;
 
 #[path = "support/alloc.rs"]
 mod alloc;
+#[path = "support/layer_allocs.rs"]
+mod layer_allocs;
 
 fn running_loop(chain: Chain) -> HeadlessLoop {
     running_loop_with(chain, None)
@@ -459,29 +461,6 @@ fn timed(lp: &mut HeadlessLoop, n: u32) -> (f64, f64) {
     (ns, allocs)
 }
 
-/// The allocation counter must see allocations made inside the dlopened layer, or "zero added
-/// allocations" would prove nothing: the layer's xrEnumerateInstanceExtensionProperties builds a Vec.
-fn check_counter_sees_the_layer() {
-    let chain = Chain::fovea().expect("libfovea.so is built");
-    // SAFETY: the name's type matches; the count pointer is valid.
-    let before = alloc::allocations();
-    unsafe {
-        let f: xr::pfn::EnumerateInstanceExtensionProperties = fovea_harness::lookup(
-            chain.gipa(),
-            xr::Instance::NULL,
-            c"xrEnumerateInstanceExtensionProperties",
-        )
-        .unwrap();
-        let mut n = 0;
-        f(std::ptr::null(), 0, &mut n, std::ptr::null_mut());
-    }
-    let seen = alloc::allocations() - before;
-    assert!(
-        seen > 0,
-        "the malloc interposer does not see the layer's allocations"
-    );
-}
-
 /// Interleaved rounds of the loops in the same run (bare, the baseline when named, fovea); the tenth
 /// percentile round of each. Many short rounds (2,000 of 250 frames, under a millisecond each) and a
 /// low percentile rather than a few long rounds and their median: on a shared machine other work
@@ -557,7 +536,7 @@ const ROUND_FRAMES: u32 = 250;
 criterion_group!(benches, bench_frames);
 
 fn main() {
-    check_counter_sees_the_layer();
+    layer_allocs::check_counter_sees_the_layer(&Chain::fovea().expect("libfovea.so is built"));
     check_gaze_is_followed();
     benches();
     summary();
