@@ -15,37 +15,17 @@ use fovea_harness::app::API_1_0;
 use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
-use xr::Handle;
 
 #[path = "support/alloc.rs"]
 mod alloc;
+#[path = "support/layer_allocs.rs"]
+mod layer_allocs;
 
 const ROUNDS: usize = 2_000;
 const CALLS: u32 = 1_000;
 
-/// The counter must see allocations made inside the dlopened layer, or "no allocation" would prove
-/// nothing: the layer's xrEnumerateInstanceExtensionProperties builds a Vec.
-fn check_counter_sees_the_layer(chain: &Chain) {
-    let before = alloc::allocations();
-    // SAFETY: the name's type matches; the count pointer is valid.
-    unsafe {
-        let f: xr::pfn::EnumerateInstanceExtensionProperties = fovea_harness::lookup(
-            chain.gipa(),
-            xr::Instance::NULL,
-            c"xrEnumerateInstanceExtensionProperties",
-        )
-        .unwrap();
-        let mut n = 0;
-        f(std::ptr::null(), 0, &mut n, std::ptr::null_mut());
-    }
-    assert!(
-        alloc::allocations() > before,
-        "the malloc interposer does not see the layer's allocations"
-    );
-}
-
 fn main() {
-    check_counter_sees_the_layer(&Chain::fovea().expect("libfovea.so is built"));
+    layer_allocs::check_counter_sees_the_layer(&Chain::fovea().expect("libfovea.so is built"));
     let mut cfg = sim::control::SimConfig::from_vars(|k| match k {
         "FOVEA_SIM_EYE_GAZE" => Some("on".into()),
         "FOVEA_SIM_GAZE" => Some("fix 8,4 for 1000s".into()),

@@ -37,6 +37,8 @@ use xr::Handle;
 
 #[path = "support/alloc.rs"]
 mod alloc;
+#[path = "support/layer_allocs.rs"]
+mod layer_allocs;
 
 fn running_loop(chain: Chain) -> HeadlessLoop {
     running_loop_with(chain, None)
@@ -87,21 +89,18 @@ fn running_loop_with(chain: Chain, gaze: Option<&str>) -> HeadlessLoop {
     lp
 }
 
+/// `s` in a C string array of `N` (NUL-padded): an action or set name.
+fn fixed<const N: usize>(s: &str) -> [std::ffi::c_char; N] {
+    let mut out = [0; N];
+    for (o, b) in out.iter_mut().zip(s.bytes()) {
+        *o = b as std::ffi::c_char;
+    }
+    out
+}
+
 /// Attaches an action set of the application's own with one boolean action, as an application with
 /// input does.
 fn attach_a_set(lp: &HeadlessLoop) {
-    let name = |s: &str| {
-        let mut out = [0 as std::ffi::c_char; 128];
-        for (o, b) in out.iter_mut().zip(s.bytes()) {
-            *o = b as std::ffi::c_char;
-        }
-        out
-    };
-    let short = |s: &str| {
-        let mut out = [0 as std::ffi::c_char; 64];
-        out.copy_from_slice(&name(s)[..64]);
-        out
-    };
     // SAFETY: every name's type matches; every struct lives across its call.
     unsafe {
         let create_set: xr::pfn::CreateActionSet = lp.app.func(c"xrCreateActionSet");
@@ -110,8 +109,8 @@ fn attach_a_set(lp: &HeadlessLoop) {
         let set_info = xr::ActionSetCreateInfo {
             ty: xr::StructureType::ACTION_SET_CREATE_INFO,
             next: std::ptr::null(),
-            action_set_name: short("menu"),
-            localized_action_set_name: name("Menu"),
+            action_set_name: fixed("menu"),
+            localized_action_set_name: fixed("Menu"),
             priority: 0,
         };
         let mut set = xr::ActionSet::NULL;
@@ -122,11 +121,11 @@ fn attach_a_set(lp: &HeadlessLoop) {
         let action_info = xr::ActionCreateInfo {
             ty: xr::StructureType::ACTION_CREATE_INFO,
             next: std::ptr::null(),
-            action_name: short("select"),
+            action_name: fixed("select"),
             action_type: xr::ActionType::BOOLEAN_INPUT,
             count_subaction_paths: 0,
             subaction_paths: std::ptr::null(),
-            localized_action_name: name("Select"),
+            localized_action_name: fixed("Select"),
         };
         let mut action = xr::Action::NULL;
         assert_eq!(
@@ -181,18 +180,6 @@ impl AppGaze {
             array_size: 2,
         };
         let lp = HeadlessLoop::new(app, spec).expect("session");
-        let name = |s: &str| {
-            let mut out = [0 as std::ffi::c_char; 128];
-            for (o, b) in out.iter_mut().zip(s.bytes()) {
-                *o = b as std::ffi::c_char;
-            }
-            out
-        };
-        let short = |s: &str| {
-            let mut out = [0 as std::ffi::c_char; 64];
-            out.copy_from_slice(&name(s)[..64]);
-            out
-        };
         // SAFETY: every name's type matches; every struct lives across its call.
         unsafe {
             let path_of: xr::pfn::StringToPath = lp.app.func(c"xrStringToPath");
@@ -220,8 +207,8 @@ impl AppGaze {
                     &xr::ActionSetCreateInfo {
                         ty: xr::StructureType::ACTION_SET_CREATE_INFO,
                         next: std::ptr::null(),
-                        action_set_name: short("gaze"),
-                        localized_action_set_name: name("Gaze"),
+                        action_set_name: fixed("gaze"),
+                        localized_action_set_name: fixed("Gaze"),
                         priority: 0,
                     },
                     &mut set
@@ -235,11 +222,11 @@ impl AppGaze {
                     &xr::ActionCreateInfo {
                         ty: xr::StructureType::ACTION_CREATE_INFO,
                         next: std::ptr::null(),
-                        action_name: short("gaze"),
+                        action_name: fixed("gaze"),
                         action_type: xr::ActionType::POSE_INPUT,
                         count_subaction_paths: 0,
                         subaction_paths: std::ptr::null(),
-                        localized_action_name: name("Gaze"),
+                        localized_action_name: fixed("Gaze"),
                     },
                     &mut action
                 ),
@@ -474,29 +461,6 @@ fn timed(lp: &mut HeadlessLoop, n: u32) -> (f64, f64) {
     (ns, allocs)
 }
 
-/// The allocation counter must see allocations made inside the dlopened layer, or "zero added
-/// allocations" would prove nothing: the layer's xrEnumerateInstanceExtensionProperties builds a Vec.
-fn check_counter_sees_the_layer() {
-    let chain = Chain::fovea().expect("libfovea.so is built");
-    // SAFETY: the name's type matches; the count pointer is valid.
-    let before = alloc::allocations();
-    unsafe {
-        let f: xr::pfn::EnumerateInstanceExtensionProperties = fovea_harness::lookup(
-            chain.gipa(),
-            xr::Instance::NULL,
-            c"xrEnumerateInstanceExtensionProperties",
-        )
-        .unwrap();
-        let mut n = 0;
-        f(std::ptr::null(), 0, &mut n, std::ptr::null_mut());
-    }
-    let seen = alloc::allocations() - before;
-    assert!(
-        seen > 0,
-        "the malloc interposer does not see the layer's allocations"
-    );
-}
-
 /// Interleaved rounds of the loops in the same run (bare, the baseline when named, fovea); the tenth
 /// percentile round of each. Many short rounds (2,000 of 250 frames, under a millisecond each) and a
 /// low percentile rather than a few long rounds and their median: on a shared machine other work
@@ -572,7 +536,7 @@ const ROUND_FRAMES: u32 = 250;
 criterion_group!(benches, bench_frames);
 
 fn main() {
-    check_counter_sees_the_layer();
+    layer_allocs::check_counter_sees_the_layer(&Chain::fovea().expect("libfovea.so is built"));
     check_gaze_is_followed();
     benches();
     summary();

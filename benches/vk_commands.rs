@@ -182,19 +182,8 @@ impl Side {
                 vk::ImageUsageFlags::COLOR_ATTACHMENT,
             );
             let (pass, framebuffer) = pass_and_framebuffer(&device, color.view, None, SIZE);
-            let fdm = (kind == Kind::Fdm).then(|| {
-                let density = Target::new(
-                    &instance,
-                    physical,
-                    &device,
-                    vk::Format::R8G8_UNORM,
-                    [DENSITY, DENSITY],
-                    vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
-                );
-                let (p, f) = pass_and_framebuffer(&device, color.view, Some(density.view), SIZE);
-                (density, p, f)
-            });
-            let offsets = (kind == Kind::Fdm).then(|| {
+            // A density map created with `flags`, and a pass and framebuffer reading it.
+            let density_pass = |flags| {
                 let density = Target::with_flags(
                     &instance,
                     physical,
@@ -202,9 +191,15 @@ impl Side {
                     vk::Format::R8G8_UNORM,
                     [DENSITY, DENSITY],
                     vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT,
-                    vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM,
+                    flags,
                 );
                 let (p, f) = pass_and_framebuffer(&device, color.view, Some(density.view), SIZE);
+                (density, p, f)
+            };
+            let fdm = (kind == Kind::Fdm).then(|| density_pass(vk::ImageCreateFlags::empty()));
+            let offsets = (kind == Kind::Fdm).then(|| {
+                let (density, p, f) =
+                    density_pass(vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM);
                 let end = (instance.fp_v1_0().get_device_proc_addr)(
                     device.handle(),
                     c"vkCmdEndRendering2EXT".as_ptr(),

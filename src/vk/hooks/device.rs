@@ -23,7 +23,7 @@ use ash::vk;
 
 use crate::bridge::FdmEmulation;
 use crate::vk::base::chain::{self, ChainCopy};
-use crate::vk::base::ffi::{guard, key, name, offset, raw};
+use crate::vk::base::ffi::{guard, key, name, offset, raw, slice};
 use crate::vk::base::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
 use crate::vk::base::next::DeviceNext;
 use crate::vk::own::calls::Own;
@@ -156,17 +156,8 @@ unsafe fn plan(
     let Decision::Emulate { fdm, api_version } = &*decision else {
         return Plan::Untouched(injection_impossible(&decision));
     };
-    let names: &[*const c_char] = if ci.pp_enabled_extension_names.is_null() {
-        &[]
-    } else {
-        // SAFETY: as the caller promised.
-        unsafe {
-            std::slice::from_raw_parts(
-                ci.pp_enabled_extension_names,
-                ci.enabled_extension_count as usize,
-            )
-        }
-    };
+    // SAFETY: as the caller promised.
+    let names = unsafe { slice(ci.pp_enabled_extension_names, ci.enabled_extension_count) };
     // SAFETY: the application's names, NUL-terminated.
     let enabled = |want: &CStr| names.iter().any(|&n| unsafe { name(n) } == Some(want));
     // SAFETY: as the caller promised.
@@ -343,17 +334,8 @@ unsafe fn plan(
 /// # Safety
 /// `ci` must be a valid create info.
 unsafe fn enables_offsets(ci: &vk::DeviceCreateInfo<'_>) -> bool {
-    let names: &[*const c_char] = if ci.pp_enabled_extension_names.is_null() {
-        &[]
-    } else {
-        // SAFETY: as the caller promised.
-        unsafe {
-            std::slice::from_raw_parts(
-                ci.pp_enabled_extension_names,
-                ci.enabled_extension_count as usize,
-            )
-        }
-    };
+    // SAFETY: as the caller promised.
+    let names = unsafe { slice(ci.pp_enabled_extension_names, ci.enabled_extension_count) };
     let named = names.iter().any(|&n| {
         // SAFETY: the application's names, NUL-terminated.
         let n = unsafe { name(n) };

@@ -44,6 +44,41 @@ fn texel_of(dev: &Device) -> Option<vk::Extent2D> {
     })
 }
 
+/// The body of a command-buffer hook under [`guard`]: `body` gets the command buffer's device;
+/// a command buffer the layer does not know is left alone.
+///
+/// # Safety
+/// `cb` must be the caller's command buffer, valid as the command requires.
+unsafe fn on_device(which: &'static str, cb: vk::CommandBuffer, body: impl FnOnce(&Device)) {
+    guard(which, (), || {
+        // SAFETY: as the caller promised.
+        if let Some(dev) = unsafe { registry::device_ref(cb) } {
+            body(&dev)
+        }
+    })
+}
+
+/// [`on_device`] where `body` also gets the next layer's function (`next` picks it from the
+/// device's table); without one the command goes nowhere.
+///
+/// # Safety
+/// As [`on_device`].
+unsafe fn with_next<F>(
+    which: &'static str,
+    cb: vk::CommandBuffer,
+    next: impl FnOnce(&Device) -> Option<F>,
+    body: impl FnOnce(&Device, F),
+) {
+    // SAFETY: as the caller promised.
+    unsafe {
+        on_device(which, cb, |dev| {
+            if let Some(down) = next(dev) {
+                body(dev, down)
+            }
+        })
+    }
+}
+
 /// Creates `pass` below, with the shading-rate attachment where `density` names one; on success
 /// records the pass as rewritten.
 ///
@@ -519,20 +554,22 @@ pub unsafe extern "system" fn cmd_begin_render_pass(
     begin: *const vk::RenderPassBeginInfo<'_>,
     contents: vk::SubpassContents,
 ) {
-    guard("vkCmdBeginRenderPass", (), || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
-            return;
-        };
-        let Some(next) = dev.next.cmd_begin_render_pass else {
-            return;
-        };
+    let body = |dev: &Device, next: vk::PFN_vkCmdBeginRenderPass| {
         // SAFETY: as the caller promised; recorded before the pass begins.
-        unsafe { convert::before_render_pass(&dev, cb, begin) };
+        unsafe { convert::before_render_pass(dev, cb, begin) };
         // SAFETY: the next layer's function, with the caller's arguments or a copy that lives
         // across the call.
-        unsafe { begin_pass(&dev, begin, |b| next(cb, b, contents)) }
-    })
+        unsafe { begin_pass(dev, begin, |b| next(cb, b, contents)) }
+    };
+    // SAFETY: as the caller promised.
+    unsafe {
+        with_next(
+            "vkCmdBeginRenderPass",
+            cb,
+            |d| d.next.cmd_begin_render_pass,
+            body,
+        )
+    }
 }
 
 /// # Safety
@@ -544,19 +581,14 @@ unsafe fn cmd_begin_render_pass2_with(
     begin: *const vk::RenderPassBeginInfo<'_>,
     subpass: *const vk::SubpassBeginInfo<'_>,
 ) {
-    guard(which, (), || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
-            return;
-        };
-        let Some(next) = next(&dev) else {
-            return;
-        };
+    let body = |dev: &Device, next: vk::PFN_vkCmdBeginRenderPass2| {
         // SAFETY: as the caller promised; recorded before the pass begins.
-        unsafe { convert::before_render_pass(&dev, cb, begin) };
+        unsafe { convert::before_render_pass(dev, cb, begin) };
         // SAFETY: as in cmd_begin_render_pass.
-        unsafe { begin_pass(&dev, begin, |b| next(cb, b, subpass)) }
-    })
+        unsafe { begin_pass(dev, begin, |b| next(cb, b, subpass)) }
+    };
+    // SAFETY: as the caller promised.
+    unsafe { with_next(which, cb, next, body) }
 }
 
 hook_and_khr_alias! {
@@ -578,16 +610,9 @@ unsafe fn cmd_begin_rendering_with(
     cb: vk::CommandBuffer,
     info: *const vk::RenderingInfo<'_>,
 ) {
-    guard(which, (), || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
-            return;
-        };
-        let Some(next) = next(&dev) else {
-            return;
-        };
+    let body = |dev: &Device, next: vk::PFN_vkCmdBeginRendering| {
         // SAFETY: as the caller promised; recorded before rendering begins.
-        unsafe { convert::before_rendering(&dev, cb, info) };
+        unsafe { convert::before_rendering(dev, cb, info) };
         if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
             // SAFETY: the caller's arguments; `own` is the device's.
             return unsafe { injection::begin_injected(inj, own, next, cb, info) };
@@ -603,7 +628,7 @@ unsafe fn cmd_begin_rendering_with(
         let found = unsafe {
             chain::find::<vk::RenderingFragmentDensityMapAttachmentInfoEXT>(ri.p_next, ty)
         };
-        let (Ok(Some(found)), Some(texel)) = (found, texel_of(&dev)) else {
+        let (Ok(Some(found)), Some(texel)) = (found, texel_of(dev)) else {
             // SAFETY: as above.
             return unsafe { next(cb, info) };
         };
@@ -652,7 +677,9 @@ unsafe fn cmd_begin_rendering_with(
                 },
             )
         }
-    })
+    };
+    // SAFETY: as the caller promised.
+    unsafe { with_next(which, cb, next, body) }
 }
 
 hook_and_khr_alias! {
@@ -727,14 +754,7 @@ unsafe fn cmd_end_render_pass2_with(
     cb: vk::CommandBuffer,
     end: *const vk::SubpassEndInfo<'_>,
 ) {
-    guard(which, (), || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
-            return;
-        };
-        let Some(down) = next(&dev) else {
-            return;
-        };
+    let body = |_: &Device, down: vk::PFN_vkCmdEndRenderPass2| {
         // SAFETY: the caller's end info, read only.
         let Some(e) = (unsafe { end.as_ref() }).filter(|e| !e.p_next.is_null()) else {
             convert::ended(cb, &[]);
@@ -752,7 +772,9 @@ unsafe fn cmd_end_render_pass2_with(
                 down(cb, &copy)
             })
         }
-    })
+    };
+    // SAFETY: as the caller promised.
+    unsafe { with_next(which, cb, next, body) }
 }
 
 hook_and_khr_alias! {
@@ -775,14 +797,7 @@ unsafe fn cmd_next_subpass2_with(
     begin: *const vk::SubpassBeginInfo<'_>,
     end: *const vk::SubpassEndInfo<'_>,
 ) {
-    guard(which, (), || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
-            return;
-        };
-        let Some(down) = next(&dev) else {
-            return;
-        };
+    let body = |_: &Device, down: vk::PFN_vkCmdNextSubpass2| {
         // SAFETY: the caller's end info, read only.
         let Some(e) = (unsafe { end.as_ref() }).filter(|e| !e.p_next.is_null()) else {
             // SAFETY: the next layer's function, with the caller's arguments.
@@ -796,7 +811,9 @@ unsafe fn cmd_next_subpass2_with(
                 down(cb, begin, &copy)
             })
         }
-    })
+    };
+    // SAFETY: as the caller promised.
+    unsafe { with_next(which, cb, next, body) }
 }
 
 hook_and_khr_alias! {
@@ -826,13 +843,9 @@ unsafe fn cmd_end_rendering2_with(
     cb: vk::CommandBuffer,
     info: *const offset::RenderingEndInfo,
 ) {
-    guard(which, (), || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device_ref(cb) }) else {
-            return;
-        };
+    let body = |dev: &Device| {
         if dev.fdm.is_none() {
-            if let Some(down) = own(&dev) {
+            if let Some(down) = own(dev) {
                 // SAFETY: the next layer's function, with the caller's arguments.
                 unsafe { down(cb, info) };
             }
@@ -862,7 +875,9 @@ unsafe fn cmd_end_rendering2_with(
             // SAFETY: the next layer's function, on the caller's command buffer.
             unsafe { down(cb) };
         }
-    })
+    };
+    // SAFETY: as the caller promised.
+    unsafe { on_device(which, cb, body) }
 }
 
 /// `vkCmdEndRendering2EXT`: see [`cmd_end_rendering2_with`].

@@ -298,29 +298,48 @@ impl Own {
         unsafe {
             let image = d.create_image(&info, None)?;
             let req = d.get_image_memory_requirements(image);
-            let Some(ty) = self.memory_type(req.memory_type_bits) else {
+            let bound = self.bound_memory(
+                req,
+                Self::memory_type,
+                vk::Result::ERROR_OUT_OF_DEVICE_MEMORY,
+                |memory| d.bind_image_memory(image, memory, 0),
+            );
+            if bound.is_err() {
                 d.destroy_image(image, None);
-                return Err(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY);
-            };
-            let memory = match d.allocate_memory(
+            }
+            Ok((image, bound?))
+        }
+    }
+
+    /// Memory for `req` of the type `pick` finds among the allowed ones (`lacking` where there
+    /// is none), bound by `bind`; freed again where binding fails, so that the caller has only
+    /// its own object to destroy on failure.
+    ///
+    /// # Safety
+    /// The device must be live; `bind` must bind the object `req` was asked for.
+    pub unsafe fn bound_memory(
+        &self,
+        req: vk::MemoryRequirements,
+        pick: fn(&Self, u32) -> Option<u32>,
+        lacking: vk::Result,
+        bind: impl FnOnce(vk::DeviceMemory) -> Result<(), vk::Result>,
+    ) -> Result<vk::DeviceMemory, vk::Result> {
+        let ty = pick(self, req.memory_type_bits).ok_or(lacking)?;
+        // SAFETY: a live device (the caller's promise); the memory is freed again on failure.
+        let memory = unsafe {
+            self.fns.allocate_memory(
                 &vk::MemoryAllocateInfo::default()
                     .allocation_size(req.size)
                     .memory_type_index(ty),
                 None,
-            ) {
-                Ok(m) => m,
-                Err(e) => {
-                    d.destroy_image(image, None);
-                    return Err(e);
-                }
-            };
-            if let Err(e) = d.bind_image_memory(image, memory, 0) {
-                d.destroy_image(image, None);
-                d.free_memory(memory, None);
-                return Err(e);
-            }
-            Ok((image, memory))
+            )
+        }?;
+        if let Err(e) = bind(memory) {
+            // SAFETY: just allocated, bound to nothing.
+            unsafe { self.fns.free_memory(memory, None) };
+            return Err(e);
         }
+        Ok(memory)
     }
 
     pub fn memory_type(&self, bits: u32) -> Option<u32> {

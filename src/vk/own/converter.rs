@@ -331,38 +331,14 @@ impl Converter {
         let size = codes.div_ceil(4).max(1) * 4;
         // SAFETY: the layer's own objects on a live device; each is destroyed again on failure.
         unsafe {
-            let buffer = d.create_buffer(
-                &vk::BufferCreateInfo::default()
-                    .size(size)
-                    .usage(
-                        vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC,
-                    )
-                    .sharing_mode(vk::SharingMode::EXCLUSIVE),
-                None,
+            let (buffer, memory) = bound_buffer(
+                &self.own,
+                size,
+                vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC,
+                Own::memory_type,
+                vk::Result::ERROR_OUT_OF_DEVICE_MEMORY,
             )?;
-            let req = d.get_buffer_memory_requirements(buffer);
-            let memory = match self
-                .own
-                .memory_type(req.memory_type_bits)
-                .ok_or(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY)
-                .and_then(|ty| {
-                    d.allocate_memory(
-                        &vk::MemoryAllocateInfo::default()
-                            .allocation_size(req.size)
-                            .memory_type_index(ty),
-                        None,
-                    )
-                }) {
-                Ok(m) => m,
-                Err(e) => {
-                    d.destroy_buffer(buffer, None);
-                    return Err(e);
-                }
-            };
-            let shifts = match d
-                .bind_buffer_memory(buffer, memory, 0)
-                .and_then(|()| self.shifts_buffer())
-            {
+            let shifts = match self.shifts_buffer() {
                 Ok(s) => s,
                 Err(e) => {
                     d.destroy_buffer(buffer, None);
@@ -440,37 +416,14 @@ impl Converter {
         let d = &self.own.fns;
         // SAFETY: the layer's own objects on a live device; each is destroyed again on failure.
         unsafe {
-            let buffer = d.create_buffer(
-                &vk::BufferCreateInfo::default()
-                    .size(SHIFT_BYTES)
-                    .usage(vk::BufferUsageFlags::STORAGE_BUFFER)
-                    .sharing_mode(vk::SharingMode::EXCLUSIVE),
-                None,
+            let (buffer, memory) = bound_buffer(
+                &self.own,
+                SHIFT_BYTES,
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                Own::host_memory_type,
+                vk::Result::ERROR_OUT_OF_HOST_MEMORY,
             )?;
-            let req = d.get_buffer_memory_requirements(buffer);
-            let made = self
-                .own
-                .host_memory_type(req.memory_type_bits)
-                .ok_or(vk::Result::ERROR_OUT_OF_HOST_MEMORY)
-                .and_then(|ty| {
-                    d.allocate_memory(
-                        &vk::MemoryAllocateInfo::default()
-                            .allocation_size(req.size)
-                            .memory_type_index(ty),
-                        None,
-                    )
-                });
-            let memory = match made {
-                Ok(m) => m,
-                Err(e) => {
-                    d.destroy_buffer(buffer, None);
-                    return Err(e);
-                }
-            };
-            let mapped = d.bind_buffer_memory(buffer, memory, 0).and_then(|()| {
-                d.map_memory(memory, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty())
-            });
-            match mapped {
+            match d.map_memory(memory, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty()) {
                 Ok(p) => Ok((buffer, memory, p.cast())),
                 Err(e) => {
                     d.destroy_buffer(buffer, None);
@@ -508,5 +461,39 @@ impl Converter {
                 d.free_memory(s.shifts_memory, None);
             }
         }
+    }
+}
+
+/// A buffer of `size` bytes for `usage`, bound to memory of the type `pick` finds among those the
+/// buffer allows (`lacking` where there is none): a slot's code buffer and its shifts buffer.
+/// Nothing is left behind on failure.
+///
+/// # Safety
+/// `own` must belong to a live device.
+unsafe fn bound_buffer(
+    own: &Own,
+    size: vk::DeviceSize,
+    usage: vk::BufferUsageFlags,
+    pick: fn(&Own, u32) -> Option<u32>,
+    lacking: vk::Result,
+) -> Result<(vk::Buffer, vk::DeviceMemory), vk::Result> {
+    let d = &own.fns;
+    // SAFETY: the layer's own objects on a live device; each is destroyed again on failure.
+    unsafe {
+        let buffer = d.create_buffer(
+            &vk::BufferCreateInfo::default()
+                .size(size)
+                .usage(usage)
+                .sharing_mode(vk::SharingMode::EXCLUSIVE),
+            None,
+        )?;
+        let req = d.get_buffer_memory_requirements(buffer);
+        let bound = own.bound_memory(req, pick, lacking, |memory| {
+            d.bind_buffer_memory(buffer, memory, 0)
+        });
+        if bound.is_err() {
+            d.destroy_buffer(buffer, None);
+        }
+        Ok((buffer, bound?))
     }
 }

@@ -145,67 +145,57 @@ mod tests {
         use vk::{
             Format, ImageCreateFlags as F, ImageTiling as T, ImageType, ImageUsageFlags as U,
         };
-        let t2 = ImageType::TYPE_2D;
-        assert_eq!(
-            translate_image(
+        let cases = [
+            (
                 Format::R8G8_UNORM,
-                t2,
                 T::OPTIMAL,
                 U::FRAGMENT_DENSITY_MAP_EXT,
-                F::empty()
+                F::empty(),
+                Some((U::SAMPLED, F::empty())),
             ),
-            Some((U::SAMPLED, F::empty()))
-        );
-        assert_eq!(
-            translate_image(
+            (
                 Format::R8G8_UNORM,
-                t2,
                 T::OPTIMAL,
                 U::FRAGMENT_DENSITY_MAP_EXT | U::TRANSFER_DST,
-                F::empty()
+                F::empty(),
+                Some((U::TRANSFER_DST | U::SAMPLED, F::empty())),
             ),
-            Some((U::TRANSFER_DST | U::SAMPLED, F::empty()))
-        );
-        assert_eq!(
-            translate_image(
+            (
                 Format::R8G8B8A8_SRGB,
-                t2,
                 T::OPTIMAL,
                 U::COLOR_ATTACHMENT,
-                F::SUBSAMPLED_EXT
+                F::SUBSAMPLED_EXT,
+                Some((U::COLOR_ATTACHMENT, F::empty())),
             ),
-            Some((U::COLOR_ATTACHMENT, F::empty()))
-        );
-        assert_eq!(
-            translate_image(
+            (
                 Format::R8_UINT,
-                t2,
                 T::OPTIMAL,
                 U::FRAGMENT_DENSITY_MAP_EXT,
-                F::empty()
+                F::empty(),
+                None,
             ),
-            None
-        );
-        assert_eq!(
-            translate_image(
+            (
                 Format::R8G8_UNORM,
-                t2,
                 T::LINEAR,
                 U::FRAGMENT_DENSITY_MAP_EXT,
-                F::empty()
+                F::empty(),
+                None,
             ),
-            None
-        );
-        assert_eq!(
-            translate_image(
+            (
                 Format::R8G8B8A8_SRGB,
-                t2,
                 T::OPTIMAL,
                 U::COLOR_ATTACHMENT,
-                F::FRAGMENT_DENSITY_MAP_OFFSET_QCOM | F::MUTABLE_FORMAT
+                F::FRAGMENT_DENSITY_MAP_OFFSET_QCOM | F::MUTABLE_FORMAT,
+                Some((U::COLOR_ATTACHMENT, F::MUTABLE_FORMAT)),
             ),
-            Some((U::COLOR_ATTACHMENT, F::MUTABLE_FORMAT))
-        );
+        ];
+        for (format, tiling, usage, flags, want) in cases {
+            assert_eq!(
+                translate_image(format, ImageType::TYPE_2D, tiling, usage, flags),
+                want,
+                "{format:?} {tiling:?} {usage:?} {flags:?}"
+            );
+        }
         assert!(needs_translation(
             U::COLOR_ATTACHMENT,
             F::FRAGMENT_DENSITY_MAP_OFFSET_QCOM

@@ -41,7 +41,8 @@ use openxr_sys as xr;
 use xr::Handle as _;
 
 use crate::both::fdm_vulkan::{
-    app, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT, VALIDATED, WIDTH,
+    app, apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
+    VALIDATED, WIDTH,
 };
 use crate::support::device::{env, Env};
 use crate::support::level_info;
@@ -700,11 +701,6 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
         "{what}: {passes:?}"
     );
 
-    let create_profile: xr::pfn::CreateFoveationProfileFB =
-        func(&app, "xrCreateFoveationProfileFB");
-    let destroy_profile: xr::pfn::DestroyFoveationProfileFB =
-        func(&app, "xrDestroyFoveationProfileFB");
-    let update: xr::pfn::UpdateSwapchainFB = func(&app, "xrUpdateSwapchainFB");
     let frame = Frame {
         app: &app,
         session,
@@ -716,25 +712,7 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
     // NONE, LOW, MEDIUM, HIGH, then HIGH lowered by 7.5° (XrFoveationLevelProfileCreateInfoFB's
     // verticalOffset).
     for (level, offset) in [(0, 0.0), (1, 0.0), (2, 0.0), (3, 0.0), (3, -7.5)] {
-        let li = level_info(level, 0, offset);
-        let pi = xr::FoveationProfileCreateInfoFB {
-            ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
-            next: &li as *const _ as *mut c_void,
-        };
-        let mut fb_profile = xr::FoveationProfileFB::NULL;
-        // SAFETY: the structs live across the calls.
-        unsafe {
-            assert_eq!(
-                create_profile(session, &pi, &mut fb_profile),
-                xr::Result::SUCCESS
-            );
-            let state = crate::support::foveation_state(fb_profile, 0);
-            assert_eq!(
-                update(swapchain, &state as *const _ as *const _),
-                xr::Result::SUCCESS
-            );
-            assert_eq!(destroy_profile(fb_profile), xr::Result::SUCCESS);
-        }
+        apply_profile(&app, session, swapchain, &level_info(level, 0, offset));
         let pattern = Pattern {
             level: Level::from_index(level as u32).expect("a level"),
             vertical_offset_deg: offset,

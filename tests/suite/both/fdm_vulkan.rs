@@ -47,6 +47,38 @@ pub(crate) fn func<T: Copy>(app: &App, name: &str) -> T {
     unsafe { app.func(&c) }
 }
 
+/// Creates a foveation profile of `level` (an `XrFoveationLevelProfileCreateInfoFB` and its
+/// chain), applies it to `swapchain` with `xrUpdateSwapchainFB` and destroys it again.
+pub(crate) fn apply_profile(
+    app: &App,
+    session: xr::Session,
+    swapchain: xr::Swapchain,
+    level: &xr::FoveationLevelProfileCreateInfoFB,
+) {
+    let create_profile: xr::pfn::CreateFoveationProfileFB = func(app, "xrCreateFoveationProfileFB");
+    let destroy_profile: xr::pfn::DestroyFoveationProfileFB =
+        func(app, "xrDestroyFoveationProfileFB");
+    let update: xr::pfn::UpdateSwapchainFB = func(app, "xrUpdateSwapchainFB");
+    let pi = xr::FoveationProfileCreateInfoFB {
+        ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
+        next: level as *const _ as *mut c_void,
+    };
+    let mut profile = xr::FoveationProfileFB::NULL;
+    // SAFETY: the structs live across the calls.
+    unsafe {
+        assert_eq!(
+            create_profile(session, &pi, &mut profile),
+            xr::Result::SUCCESS
+        );
+        let state = crate::support::foveation_state(profile, 0);
+        assert_eq!(
+            update(swapchain, &state as *const _ as *const _),
+            xr::Result::SUCCESS
+        );
+        assert_eq!(destroy_profile(profile), xr::Result::SUCCESS);
+    }
+}
+
 const FOVEATION_VULKAN: [&str; 4] = [
     "XR_FB_swapchain_update_state",
     "XR_FB_foveation",
@@ -325,12 +357,9 @@ pub(crate) fn fov_of(v: &xr::View) -> Fov {
     }
 }
 
-/// What the density model gives for one layer of a WIDTH×HEIGHT swapchain drawn with `fov`.
-fn model(fov: Fov, pattern: Pattern) -> Vec<u8> {
-    let grid = Grid::new([WIDTH, HEIGHT], TEXEL);
-    let [mw, mh] = grid.map_extent();
-    let mut out = vec![0u8; (mw * mh * 2) as usize];
-    let view = View {
+/// A view of `fov` over the whole `WIDTH`×`HEIGHT` image, every pixel visible.
+pub(crate) fn whole_view(fov: Fov) -> View {
+    View {
         fov,
         rect: Rect {
             x: 0,
@@ -339,8 +368,15 @@ fn model(fov: Fov, pattern: Pattern) -> Vec<u8> {
             height: HEIGHT,
         },
         visible: None,
-    };
-    density::fill(&grid, &[view], pattern, &mut out);
+    }
+}
+
+/// What the density model gives for one layer of a WIDTH×HEIGHT swapchain drawn with `fov`.
+fn model(fov: Fov, pattern: Pattern) -> Vec<u8> {
+    let grid = Grid::new([WIDTH, HEIGHT], TEXEL);
+    let [mw, mh] = grid.map_extent();
+    let mut out = vec![0u8; (mw * mh * 2) as usize];
+    density::fill(&grid, &[whole_view(fov)], pattern, &mut out);
     out
 }
 

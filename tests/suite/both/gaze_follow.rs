@@ -48,7 +48,7 @@ use fovea_harness::sim::control::{EyeGaze, SimConfig};
 use fovea_harness::sim::gaze_script::GazeScript;
 use fovea_harness::vulkan::{self, pick_lavapipe, take_messages, Vulkan};
 use fovea_harness::{skip, App, Chain};
-use fovea_model::density::{Grid, Level, Pattern, Rect, View};
+use fovea_model::density::{Grid, Level, Pattern};
 use fovea_model::gaze::Tracking;
 use fovea_model::shading_rate;
 use fovea_model::shift::{pixel_of, pixel_offset, shift_codes_into};
@@ -61,9 +61,11 @@ use crate::both::fdm_emulated::{
     color_images, expected_codes, rates_drawn, release, Layout, Renderer,
 };
 use crate::both::fdm_vulkan::{
-    enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT, VALIDATED, WIDTH,
+    apply_profile, enumerate, func, running_session, swapchain_info, whole_view, Frame, FDM_BIT,
+    HEIGHT, VALIDATED, WIDTH,
 };
 use crate::support::device::env;
+use crate::support::gaze_log::{located, Located};
 use crate::support::{in_own_process, level_info};
 
 const MS: i64 = 1_000_000;
@@ -334,18 +336,8 @@ fn offsets_from_state(
     );
     let grid = Grid::new([WIDTH, HEIGHT], [granularity.width, granularity.height]);
     [0, 1].map(|eye| {
-        let view = View {
-            fov: fovs[eye],
-            rect: Rect {
-                x: 0,
-                y: 0,
-                width: WIDTH,
-                height: HEIGHT,
-            },
-            visible: None,
-        };
         let c = state.foveation_center[eye];
-        pixel_offset(&grid, &view, [c.x, -c.y])
+        pixel_offset(&grid, &whole_view(fovs[eye]), [c.x, -c.y])
     })
 }
 
@@ -403,62 +395,6 @@ fn attach_a_set(app: &App, session: xr::Session) {
     }
 }
 
-/// The gaze the layer located for one frame, from its `trace` line on `fovea::gaze`.
-#[derive(Clone, Debug, PartialEq)]
-struct Located {
-    time_ns: i64,
-    tracking: Tracking,
-    angles: [f32; 2],
-    ndc: Vec<[f32; 2]>,
-}
-
-/// The value of `name=` in a log line (a bracketed list whole).
-fn field<'a>(line: &'a str, name: &str) -> &'a str {
-    let at = line
-        .find(&format!(" {name}="))
-        .unwrap_or_else(|| panic!("{name}= in {line}"))
-        + name.len()
-        + 2;
-    let rest = &line[at..];
-    if rest.starts_with('[') {
-        let end = rest.find("]]").map_or(rest.len(), |e| e + 2);
-        &rest[..end]
-    } else {
-        rest.split(' ').next().unwrap()
-    }
-}
-
-/// Every located gaze in the log, in order.
-fn located(log: &str) -> Vec<Located> {
-    log.lines()
-        .filter(|l| l.contains(fovea_abi::log_target::GAZE) && l.contains(" time_ns="))
-        .map(|l| {
-            let tracking = match field(l, "tracking") {
-                "Tracked" => Tracking::Tracked,
-                "Held" => Tracking::Held,
-                "Returning" => Tracking::Returning,
-                "Fixed" => Tracking::Fixed,
-                other => panic!("tracking {other:?} in {l}"),
-            };
-            let num = |n: &str| field(l, n).parse::<f32>().unwrap();
-            let ndc = field(l, "ndc")
-                .trim_matches(|c| c == '[' || c == ']')
-                .split("], [")
-                .map(|p| {
-                    let v: Vec<f32> = p.split(", ").map(|x| x.parse().unwrap()).collect();
-                    [v[0], v[1]]
-                })
-                .collect();
-            Located {
-                time_ns: field(l, "time_ns").parse().unwrap(),
-                tracking,
-                angles: [num("yaw"), num("pitch")],
-                ndc,
-            }
-        })
-        .collect()
-}
-
 /// The gaze located for the frame shown at `t_ns` (from the script's start), if any.
 fn gaze_for(gaze: &[Located], t_ns: i64) -> Option<&Located> {
     gaze.iter()
@@ -468,10 +404,6 @@ fn gaze_for(gaze: &[Located], t_ns: i64) -> Option<&Located> {
 
 /// Applies a HIGH profile created with `XrFoveationEyeTrackedProfileCreateInfoMETA` to `swapchain`.
 fn apply_eye_tracked_high(app: &App, session: xr::Session, swapchain: xr::Swapchain) {
-    let create_profile: xr::pfn::CreateFoveationProfileFB = func(app, "xrCreateFoveationProfileFB");
-    let destroy_profile: xr::pfn::DestroyFoveationProfileFB =
-        func(app, "xrDestroyFoveationProfileFB");
-    let update: xr::pfn::UpdateSwapchainFB = func(app, "xrUpdateSwapchainFB");
     let tracked = xr::FoveationEyeTrackedProfileCreateInfoMETA {
         ty: xr::StructureType::FOVEATION_EYE_TRACKED_PROFILE_CREATE_INFO_META,
         next: null(),
@@ -479,24 +411,7 @@ fn apply_eye_tracked_high(app: &App, session: xr::Session, swapchain: xr::Swapch
     };
     let mut level = level_info(3, 0, 0.0);
     level.next = &tracked as *const _ as *mut c_void;
-    let pi = xr::FoveationProfileCreateInfoFB {
-        ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
-        next: &level as *const _ as *mut c_void,
-    };
-    let mut profile = xr::FoveationProfileFB::NULL;
-    // SAFETY: the structs live across the calls.
-    unsafe {
-        assert_eq!(
-            create_profile(session, &pi, &mut profile),
-            xr::Result::SUCCESS
-        );
-        let state = crate::support::foveation_state(profile, 0);
-        assert_eq!(
-            update(swapchain, &state as *const _ as *const _),
-            xr::Result::SUCCESS
-        );
-        assert_eq!(destroy_profile(profile), xr::Result::SUCCESS);
-    }
+    apply_profile(app, session, swapchain, &level);
 }
 
 /// What fovea must show in a frame.
@@ -545,21 +460,11 @@ fn check_frame(case: &str, profile: Profile, f: &Seen, want: &Want) -> [[i32; 2]
         level: Level::High,
         vertical_offset_deg: 0.0,
     };
-    let whole = Rect {
-        x: 0,
-        y: 0,
-        width: WIDTH,
-        height: HEIGHT,
-    };
     let fovs = f.fovs;
     let views = Layout::Multiview.views(fovs, true);
     let fixed = expected_codes(profile, &views, pattern, false);
     let layer = fixed.len() / 2;
-    let view = |eye: usize| View {
-        fov: fovs[eye],
-        rect: whole,
-        visible: None,
-    };
+    let view = |eye: usize| whole_view(fovs[eye]);
     let exact = |eye: usize| match want {
         Want::Fixed => [0.0; 2],
         Want::At(ndc) => {
@@ -634,19 +539,9 @@ fn fixed_shifted(profile: Profile, fovs: [Fov; 2], shifts: [[i32; 2]; 2]) -> Vec
     let layer = fixed.len() / 2;
     let views: Vec<Vec<u8>> = (0..2)
         .map(|eye| {
-            let view = View {
-                fov: fovs[eye],
-                rect: Rect {
-                    x: 0,
-                    y: 0,
-                    width: WIDTH,
-                    height: HEIGHT,
-                },
-                visible: None,
-            };
             let fixed = &fixed[eye * layer..(eye + 1) * layer];
             let mut out = fixed.to_vec();
-            shift_codes_into(&grid, &view, shifts[eye], fixed, &mut out);
+            shift_codes_into(&grid, &whole_view(fovs[eye]), shifts[eye], fixed, &mut out);
             out
         })
         .collect();
@@ -745,7 +640,7 @@ fn follows(module: &str, name: &str, mode: Mode, profile: Profile) {
         let Some(run) = run(mode, profile, SCRIPT, 450, &dir) else {
             return;
         };
-        let gaze = located(&run.log);
+        let gaze = located(run.log.lines());
         let mut moved_once = 0;
         let mut shifts: Vec<(&Located, [[i32; 2]; 2])> = Vec::new();
         for (n, f) in run.frames.iter().enumerate() {
@@ -848,7 +743,7 @@ fn an_app_without_the_offset_extension_gets_fixed_maps() {
             let Some(run) = run(mode, Profile::Nvidia, SCRIPT, 200, &dir) else {
                 return;
             };
-            let gaze = located(&run.log);
+            let gaze = located(run.log.lines());
             let mut tracked = 0;
             for (n, f) in run.frames.iter().enumerate() {
                 // Every frame, whatever the gaze: the fixed map.
@@ -967,7 +862,7 @@ fn a_trembling_gaze_moves_no_injected_map() {
                 (2..=3).contains(&moves.len()),
                 "one move to the fixation, one for the saccade: {moves:#?}"
             );
-            let gaze = located(&run.log);
+            let gaze = located(run.log.lines());
             for f in &run.frames {
                 if let Some(g) = gaze_for(&gaze, f.t_ns) {
                     check_frame("trembling", Profile::Nvidia, f, &Want::of(g));

@@ -414,12 +414,7 @@ impl Dev {
         // SAFETY: `d` is alive and has a queue of family 0.
         unsafe {
             let queue = d.get_device_queue(0, 0);
-            let pool = d
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default().queue_family_index(0),
-                    None,
-                )
-                .expect("vkCreateCommandPool");
+            let pool = command_pool(&d);
             let memory = vk
                 .instance
                 .get_physical_device_memory_properties(vk.physical);
@@ -441,12 +436,24 @@ impl Dev {
         layers: u32,
         usage: vk::ImageUsageFlags,
     ) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
+        self.image_with_flags(format, side, layers, usage, vk::ImageCreateFlags::empty())
+    }
+
+    /// [`Dev::image`] created with `flags`.
+    pub fn image_with_flags(
+        &self,
+        format: vk::Format,
+        side: u32,
+        layers: u32,
+        usage: vk::ImageUsageFlags,
+        flags: vk::ImageCreateFlags,
+    ) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
         // SAFETY: the device is alive; structs live across the calls.
         unsafe {
             let d = &self.d;
             let image = d
-                .create_image(&image_info(format, side, layers, usage), None)
-                .expect("vkCreateImage");
+                .create_image(&image_info(format, side, layers, usage).flags(flags), None)
+                .unwrap_or_else(|e| panic!("vkCreateImage: {e}; {:?}", take_messages()));
             let req = d.get_image_memory_requirements(image);
             let memory = d
                 .allocate_memory(
@@ -557,19 +564,35 @@ impl Dev {
 
     /// A primary command buffer from the pool, recording.
     pub fn begin(&self) -> vk::CommandBuffer {
+        self.begin_in(self.pool, vk::CommandBufferUsageFlags::empty())
+    }
+
+    /// Another command pool on the queue's family, for a thread of its own; the caller destroys
+    /// it.
+    pub fn command_pool(&self) -> vk::CommandPool {
+        command_pool(&self.d)
+    }
+
+    /// A primary command buffer from `pool` (this device's, used by this thread only), recording
+    /// with `flags`.
+    pub fn begin_in(
+        &self,
+        pool: vk::CommandPool,
+        flags: vk::CommandBufferUsageFlags,
+    ) -> vk::CommandBuffer {
         // SAFETY: the pool is this device's and used by this thread only.
         unsafe {
             let cb = self
                 .d
                 .allocate_command_buffers(
                     &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(self.pool)
+                        .command_pool(pool)
                         .level(vk::CommandBufferLevel::PRIMARY)
                         .command_buffer_count(1),
                 )
                 .expect("vkAllocateCommandBuffers")[0];
             self.d
-                .begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+                .begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(flags))
                 .expect("vkBeginCommandBuffer");
             cb
         }
@@ -613,6 +636,18 @@ impl Dev {
             self.d.destroy_device(None);
         }
     }
+}
+
+/// A command pool on queue family 0 of `d`.
+fn command_pool(d: &ash::Device) -> vk::CommandPool {
+    // SAFETY: `d` is alive (a borrowed device); the struct lives across the call.
+    unsafe {
+        d.create_command_pool(
+            &vk::CommandPoolCreateInfo::default().queue_family_index(0),
+            None,
+        )
+    }
+    .expect("vkCreateCommandPool")
 }
 
 /// A compute pipeline entered at `main`, with one descriptor set (from a pool of its own) of one

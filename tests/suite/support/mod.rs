@@ -1,14 +1,19 @@
 //! What several of the suite's modules share: the repository's root and its Rust files, running a
-//! test in a process of its own, manifests pointed at this build, the system's OpenXR layer folder,
-//! and the foveation structs most tests fill in.
+//! test in a process of its own, an application's own OpenXR actions, manifests pointed at this
+//! build, a running headless loop, the system's OpenXR layer folder, the gaze the layer logged, and
+//! the foveation structs most tests fill in.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use fovea_harness::artifact;
+use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec};
+use fovea_harness::App;
 use openxr_sys as xr;
 
+pub mod actions;
 pub mod device;
+pub mod gaze_log;
 pub mod process;
 pub mod vulkan;
 
@@ -95,6 +100,18 @@ pub fn level_info(level: i32, dynamic: i32, offset: f32) -> xr::FoveationLevelPr
         vertical_offset: offset,
         dynamic: xr::FoveationDynamicFB::from_raw(dynamic),
     }
+}
+
+/// A running headless loop of `app` with a foveated two-layer swapchain (one layer per eye).
+pub fn foveated_loop(app: App) -> HeadlessLoop {
+    HeadlessLoop::new(
+        app,
+        SwapchainSpec {
+            foveation: true,
+            array_size: 2,
+        },
+    )
+    .unwrap()
 }
 
 /// An `XrSwapchainStateFoveationFB` naming `profile`, with raw `flags`.

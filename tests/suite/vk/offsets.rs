@@ -29,10 +29,10 @@ use ash::vk::Handle as _;
 use fovea_vkdouble::Profile;
 use serde_json::Value;
 
-use crate::support::device::{env, take_messages, Dev, Env, Features, Vk};
+use crate::support::device::{env, take_messages, with_fovea, Dev, Env, Features, Vk};
 use crate::support::vulkan::{
-    allocate_info, attachments2, draw_fullscreen, image_info, range, spv, stages, Fixed, AREA,
-    CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+    attachments2, draw_fullscreen, range, spv, stages, Fixed, AREA, CLEAR, COLOR, DENSITY,
+    FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk::convert::{model_codes, Buffer};
 
@@ -164,47 +164,28 @@ impl Scene {
         let d = &dev.d;
         // SAFETY: every struct lives across its call; the objects are destroyed in `finish`.
         unsafe {
-            let pass = render_pass(d, mask);
-            let views = [color.2, map.2];
-            let framebuffer = d
-                .create_framebuffer(
-                    &vk::FramebufferCreateInfo::default()
-                        .render_pass(pass)
-                        .attachments(&views)
-                        .width(SIZE)
-                        .height(SIZE)
-                        .layers(1),
-                    None,
-                )
-                .expect("vkCreateFramebuffer");
+            // Two passes of one recording write the colour attachment in order.
+            let pass = render_pass(d, mask, 1, &[color_dependency(vk::SUBPASS_EXTERNAL, 0)]);
+            let framebuffer = framebuffer(d, pass, &[color.2, map.2]);
             let layout = d
                 .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
                 .expect("vkCreatePipelineLayout");
-            let module = |bytes: &[u8]| {
-                let words = spv(bytes);
-                d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
-                    .expect("vkCreateShaderModule")
-            };
-            let modules = [module(VERTEX), module(FRAGMENT)];
-            let stages = stages(modules);
-            let fixed = Fixed::new();
-            let formats = [COLOR];
-            let mut rendering = vk::PipelineRenderingCreateInfo::default()
-                .color_attachment_formats(&formats)
-                .view_mask(mask);
-            let infos = [
-                fixed.info(&stages, layout).render_pass(pass).subpass(0),
-                fixed
-                    .info(&stages, layout)
-                    .flags(vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT)
-                    .push_next(&mut rendering),
-            ];
-            let pipelines = d
-                .create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
-                .unwrap_or_else(|e| panic!("pipelines: {:?}; {:?}", e.1, take_messages()));
-            for m in modules {
-                d.destroy_shader_module(m, None);
-            }
+            let pipelines = pipelines(d, |stages, fixed| {
+                let formats = [COLOR];
+                let mut rendering = vk::PipelineRenderingCreateInfo::default()
+                    .color_attachment_formats(&formats)
+                    .view_mask(mask);
+                let infos = [
+                    fixed.info(stages, layout).render_pass(pass).subpass(0),
+                    fixed
+                        .info(stages, layout)
+                        .flags(
+                            vk::PipelineCreateFlags::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_EXT,
+                        )
+                        .push_next(&mut rendering),
+                ];
+                d.create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
+            });
             let f = (vk.instance.fp_v1_0().get_device_proc_addr)(
                 d.handle(),
                 c"vkCmdEndRendering2EXT".as_ptr(),
@@ -422,20 +403,95 @@ impl Scene {
         }
     }
 
-    fn submit(&self, cb: vk::CommandBuffer) {
-        // SAFETY: `cb` is executable on this device; the queue is this thread's.
+    /// Submits the executable `cbs` in one submit and waits for the queue.
+    fn submit(&self, cbs: &[vk::CommandBuffer]) {
+        // SAFETY: `cbs` are executable on this device (pending more than once only with
+        // simultaneous use); the queue is this thread's.
         unsafe {
-            let cbs = [cb];
             self.dev
                 .d
                 .queue_submit(
                     self.dev.queue,
-                    &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                    &[vk::SubmitInfo::default().command_buffers(cbs)],
                     vk::Fence::null(),
                 )
                 .expect("vkQueueSubmit");
             self.dev.d.queue_wait_idle(self.dev.queue).expect("idle");
         }
+    }
+
+    /// Records one pass on `path` ended with `end` in a new command buffer (after [`Scene::prepare`]),
+    /// submits it and asserts its draw shades as the map seen through `want`; the command buffer.
+    fn shade(
+        &self,
+        env: &Env,
+        path: Path,
+        end: End<'_>,
+        want: &[vk::Offset2D],
+        what: &str,
+    ) -> vk::CommandBuffer {
+        let cb = self.dev.begin();
+        self.prepare(cb);
+        self.pass(cb, path, vk::RenderingFlags::empty(), end);
+        self.dev.submit(cb);
+        self.assert_shifted(env, cb, &[want], what);
+        cb
+    }
+
+    /// A secondary command buffer from the pool, begun with `flags` and `inheritance`.
+    fn secondary(
+        &self,
+        flags: vk::CommandBufferUsageFlags,
+        inheritance: &vk::CommandBufferInheritanceInfo<'_>,
+    ) -> vk::CommandBuffer {
+        let d = &self.dev.d;
+        // SAFETY: the pool is this device's; every struct lives across its call.
+        unsafe {
+            let s = d
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(self.dev.pool)
+                        .level(vk::CommandBufferLevel::SECONDARY)
+                        .command_buffer_count(1),
+                )
+                .expect("vkAllocateCommandBuffers")[0];
+            d.begin_command_buffer(
+                s,
+                &vk::CommandBufferBeginInfo::default()
+                    .flags(flags)
+                    .inheritance_info(inheritance),
+            )
+            .expect("vkBeginCommandBuffer");
+            s
+        }
+    }
+
+    /// Asserts that the one draw `primary` ran (itself or through `secondary`) shaded as the map
+    /// seen through `offsets`, which must shift it.
+    fn assert_one_draw(
+        &self,
+        env: &Env,
+        primary: vk::CommandBuffer,
+        secondary: vk::CommandBuffer,
+        offsets: &[vk::Offset2D],
+        what: &str,
+    ) {
+        let draws: Vec<_> = env
+            .double
+            .draws()
+            .into_iter()
+            .filter(|dr| {
+                dr.command_buffer == primary.as_raw() || dr.command_buffer == secondary.as_raw()
+            })
+            .collect();
+        assert_eq!(draws.len(), 1, "{draws:?}");
+        let want = &self.want(offsets)[0];
+        assert!(
+            &draws[0].views[0].codes == want,
+            "{what}: shaded {:?}, want {want:?}",
+            draws[0].views[0].codes
+        );
+        assert_ne!(want, &self.want(&[])[0]);
     }
 
     /// Destroys everything and checks what reached the driver: no offset name, struct or flag
@@ -483,30 +539,27 @@ impl Scene {
     }
 }
 
-/// The render pass: colour attachment 0 (cleared, from `UNDEFINED`) and density map 1, as
-/// [`attachments2`] has them, and a dependency on earlier colour writes, so that two passes of one
-/// recording write the colour attachment in order.
+/// A render pass of `subpasses` alike subpasses of view mask `view_mask`: colour attachment 0
+/// (cleared, from `UNDEFINED`) and density map 1, as [`attachments2`] has them, ordered by
+/// `deps`.
 ///
 /// # Safety
 /// `d` must be alive.
-unsafe fn render_pass(d: &ash::Device, view_mask: u32) -> vk::RenderPass {
+unsafe fn render_pass(
+    d: &ash::Device,
+    view_mask: u32,
+    subpasses: usize,
+    deps: &[vk::SubpassDependency2<'_>],
+) -> vk::RenderPass {
     let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
     let color_ref = [vk::AttachmentReference2::default()
         .attachment(0)
         .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-    let subpass = [vk::SubpassDescription2::default()
+    let subpass = vk::SubpassDescription2::default()
         .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
         .view_mask(view_mask)
-        .color_attachments(&color_ref)];
-    let color = vk::AccessFlags::COLOR_ATTACHMENT_WRITE;
-    let stage = vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT;
-    let deps = [vk::SubpassDependency2::default()
-        .src_subpass(vk::SUBPASS_EXTERNAL)
-        .dst_subpass(0)
-        .src_stage_mask(stage)
-        .dst_stage_mask(stage)
-        .src_access_mask(color)
-        .dst_access_mask(color)];
+        .color_attachments(&color_ref);
+    let subpasses = vec![subpass; subpasses];
     let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
         .fragment_density_map_attachment(vk::AttachmentReference {
             attachment: 1,
@@ -514,12 +567,71 @@ unsafe fn render_pass(d: &ash::Device, view_mask: u32) -> vk::RenderPass {
         });
     let info = vk::RenderPassCreateInfo2::default()
         .attachments(&atts)
-        .subpasses(&subpass)
-        .dependencies(&deps)
+        .subpasses(&subpasses)
+        .dependencies(deps)
         .push_next(&mut fdm);
     // SAFETY: the caller's promise; the structs live across the call.
     unsafe { d.create_render_pass2(&info, None) }
         .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()))
+}
+
+/// A dependency of subpass `dst`'s colour writes on `src`'s.
+fn color_dependency(src: u32, dst: u32) -> vk::SubpassDependency2<'static> {
+    let color = vk::AccessFlags::COLOR_ATTACHMENT_WRITE;
+    let stage = vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT;
+    vk::SubpassDependency2::default()
+        .src_subpass(src)
+        .dst_subpass(dst)
+        .src_stage_mask(stage)
+        .dst_stage_mask(stage)
+        .src_access_mask(color)
+        .dst_access_mask(color)
+}
+
+/// The pipelines `create` makes of the suite's full-screen shaders' stages ([`VERTEX`],
+/// [`FRAGMENT`]) and the fixed state ([`Fixed`]); the shader modules go again after.
+///
+/// # Safety
+/// `d` must be alive.
+unsafe fn pipelines(
+    d: &ash::Device,
+    create: impl FnOnce(
+        &[vk::PipelineShaderStageCreateInfo<'static>; 2],
+        &Fixed,
+    ) -> Result<Vec<vk::Pipeline>, (Vec<vk::Pipeline>, vk::Result)>,
+) -> Vec<vk::Pipeline> {
+    let module = |bytes: &[u8]| {
+        let words = spv(bytes);
+        // SAFETY: the caller's promise; the struct lives across the call.
+        unsafe { d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None) }
+            .expect("vkCreateShaderModule")
+    };
+    let modules = [module(VERTEX), module(FRAGMENT)];
+    let made = create(&stages(modules), &Fixed::new());
+    for m in modules {
+        // SAFETY: made above, used by nothing once the pipelines are made.
+        unsafe { d.destroy_shader_module(m, None) };
+    }
+    made.unwrap_or_else(|e| panic!("pipelines: {:?}; {:?}", e.1, take_messages()))
+}
+
+/// A framebuffer of `pass` on `views` (colour, then map), [`SIZE`] square.
+///
+/// # Safety
+/// `d` must be alive; `pass` and `views` its.
+unsafe fn framebuffer(
+    d: &ash::Device,
+    pass: vk::RenderPass,
+    views: &[vk::ImageView],
+) -> vk::Framebuffer {
+    let info = vk::FramebufferCreateInfo::default()
+        .render_pass(pass)
+        .attachments(views)
+        .width(SIZE)
+        .height(SIZE)
+        .layers(1);
+    // SAFETY: the caller's promise; the struct lives across the call.
+    unsafe { d.create_framebuffer(&info, None) }.expect("vkCreateFramebuffer")
 }
 
 /// A `side`×`side` image of `layers` layers with the offset flag and a view of every layer.
@@ -531,39 +643,19 @@ fn image(
     usage: vk::ImageUsageFlags,
 ) -> (vk::Image, vk::DeviceMemory, vk::ImageView) {
     let usage = usage | vk::ImageUsageFlags::TRANSFER_DST;
-    // SAFETY: every struct lives across its call.
-    unsafe {
-        let d = &dev.d;
-        let image = d
-            .create_image(
-                &image_info(format, side, layers, usage).flags(OFFSET_BIT),
-                None,
-            )
-            .unwrap_or_else(|e| panic!("vkCreateImage: {e}; {:?}", take_messages()));
-        let req = d.get_image_memory_requirements(image);
-        let memory = d
-            .allocate_memory(
-                &allocate_info(&dev.memory, req, vk::MemoryPropertyFlags::DEVICE_LOCAL),
-                None,
-            )
-            .expect("vkAllocateMemory");
-        d.bind_image_memory(image, memory, 0).expect("bind");
-        let view = d
-            .create_image_view(
-                &vk::ImageViewCreateInfo::default()
-                    .image(image)
-                    .view_type(if layers > 1 {
-                        vk::ImageViewType::TYPE_2D_ARRAY
-                    } else {
-                        vk::ImageViewType::TYPE_2D
-                    })
-                    .format(format)
-                    .subresource_range(range(0, layers)),
-                None,
-            )
-            .expect("vkCreateImageView");
-        (image, memory, view)
-    }
+    dev.image_with_flags(format, side, layers, usage, OFFSET_BIT)
+}
+
+/// Runs `test` on the stack on `nvidia` with fovea ([`with_fovea`]; skipped where a piece is
+/// missing) with a one-view [`Scene`] with `name` and its texel size in pixels, then finishes the
+/// scene ([`Scene::finish`]).
+fn on_nvidia(name: &CStr, test: impl FnOnce(&Env, &Scene, i32)) {
+    let Some((_serial, env, vk)) = with_fovea(Profile::Nvidia) else {
+        return;
+    };
+    let scene = Scene::new(&vk, Profile::Nvidia, name);
+    test(env, &scene, scene.texel as i32);
+    scene.finish(env, vk);
 }
 
 fn at(x: i32, y: i32) -> vk::Offset2D {
@@ -595,11 +687,7 @@ fn passes_ended_with_offsets_shade_as_the_shifted_map() {
             ];
             for (end, o) in cases {
                 let what = format!("{profile:?} {path:?} {end:?}");
-                let cb = scene.dev.begin();
-                scene.prepare(cb);
-                scene.pass(cb, path, vk::RenderingFlags::empty(), end);
-                scene.dev.submit(cb);
-                scene.assert_shifted(env, cb, &[&[o]], &what);
+                scene.shade(env, path, end, &[o], &what);
             }
         }
         scene.finish(env, vk);
@@ -609,25 +697,17 @@ fn passes_ended_with_offsets_shade_as_the_shifted_map() {
 /// The QCOM name does the same (it has render passes only): the device gets offsets under it.
 #[test]
 fn the_qcom_name_shifts_render_passes_alike() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
-        return;
-    };
-    let scene = Scene::new(&vk, Profile::Nvidia, QCOM);
-    let t = scene.texel as i32;
-    for o in [at(2 * t, t), at(-t, -t), at(0, 0)] {
-        let cb = scene.dev.begin();
-        scene.prepare(cb);
-        scene.pass(
-            cb,
-            Path::RenderPass,
-            vk::RenderingFlags::empty(),
-            End::With(&[o]),
-        );
-        scene.dev.submit(cb);
-        scene.assert_shifted(env, cb, &[&[o]], &format!("QCOM {o:?}"));
-    }
-    scene.finish(env, vk);
+    on_nvidia(QCOM, |env, scene, t| {
+        for o in [at(2 * t, t), at(-t, -t), at(0, 0)] {
+            scene.shade(
+                env,
+                Path::RenderPass,
+                End::With(&[o]),
+                &[o],
+                &format!("QCOM {o:?}"),
+            );
+        }
+    });
 }
 
 /// Offsets are fixed per recording, as on a native driver: a command buffer submitted again keeps
@@ -637,66 +717,46 @@ fn the_qcom_name_shifts_render_passes_alike() {
 /// together, each shade with their own; so do two passes of one recording.
 #[test]
 fn offsets_are_fixed_per_recording_and_per_command_buffer() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
-        return;
-    };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
-    let t = scene.texel as i32;
-    let (a, b, c) = (at(t, 0), at(0, -2 * t), at(-3 * t, t));
-    for path in [Path::RenderPass, Path::Rendering] {
-        let what = format!("{path:?}");
-        let first = scene.dev.begin();
-        scene.prepare(first);
-        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[a]));
-        scene.dev.submit(first);
-        scene.assert_shifted(env, first, &[&[a]], &format!("{what}: first"));
-        let other = scene.dev.begin();
-        scene.prepare(other);
-        scene.pass(other, path, vk::RenderingFlags::empty(), End::With(&[b]));
-        scene.dev.submit(other);
-        scene.assert_shifted(env, other, &[&[b]], &format!("{what}: other"));
-        // Submitted again, unchanged: its own offsets, not the other's.
-        scene.submit(first);
-        scene.assert_shifted(env, first, &[&[a]], &format!("{what}: first again"));
-        // Recorded again with new offsets, two passes of which the second has other offsets.
-        scene.record_again(&[first]);
-        scene.prepare(first);
-        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[c]));
-        scene.between(first);
-        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[b]));
-        scene.dev.submit(first);
-        scene.assert_shifted(
-            env,
-            first,
-            &[&[c], &[b]],
-            &format!("{what}: first recorded again"),
-        );
-        // Both in one submit: each its own.
-        scene.record_again(&[first, other]);
-        scene.prepare(first);
-        scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[a]));
-        scene.between(other);
-        scene.prepare(other);
-        scene.pass(other, path, vk::RenderingFlags::empty(), End::With(&[c]));
-        // SAFETY: both are recording on this device; the queue is this thread's.
-        unsafe {
-            let d = &scene.dev.d;
-            d.end_command_buffer(first).expect("end");
-            d.end_command_buffer(other).expect("end");
-            let cbs = [first, other];
-            d.queue_submit(
-                scene.dev.queue,
-                &[vk::SubmitInfo::default().command_buffers(&cbs)],
-                vk::Fence::null(),
-            )
-            .expect("vkQueueSubmit");
-            d.queue_wait_idle(scene.dev.queue).expect("idle");
+    on_nvidia(EXT, |env, scene, t| {
+        let (a, b, c) = (at(t, 0), at(0, -2 * t), at(-3 * t, t));
+        for path in [Path::RenderPass, Path::Rendering] {
+            let what = format!("{path:?}");
+            let first = scene.shade(env, path, End::With(&[a]), &[a], &format!("{what}: first"));
+            let other = scene.shade(env, path, End::With(&[b]), &[b], &format!("{what}: other"));
+            // Submitted again, unchanged: its own offsets, not the other's.
+            scene.submit(&[first]);
+            scene.assert_shifted(env, first, &[&[a]], &format!("{what}: first again"));
+            // Recorded again with new offsets, two passes of which the second has other offsets.
+            scene.record_again(&[first]);
+            scene.prepare(first);
+            scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[c]));
+            scene.between(first);
+            scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[b]));
+            scene.dev.submit(first);
+            scene.assert_shifted(
+                env,
+                first,
+                &[&[c], &[b]],
+                &format!("{what}: first recorded again"),
+            );
+            // Both in one submit: each its own.
+            scene.record_again(&[first, other]);
+            scene.prepare(first);
+            scene.pass(first, path, vk::RenderingFlags::empty(), End::With(&[a]));
+            scene.between(other);
+            scene.prepare(other);
+            scene.pass(other, path, vk::RenderingFlags::empty(), End::With(&[c]));
+            // SAFETY: both are recording on this device.
+            unsafe {
+                let d = &scene.dev.d;
+                d.end_command_buffer(first).expect("end");
+                d.end_command_buffer(other).expect("end");
+            }
+            scene.submit(&[first, other]);
+            scene.assert_shifted(env, first, &[&[a]], &format!("{what}: together, first"));
+            scene.assert_shifted(env, other, &[&[c]], &format!("{what}: together, other"));
         }
-        scene.assert_shifted(env, first, &[&[a]], &format!("{what}: together, first"));
-        scene.assert_shifted(env, other, &[&[c]], &format!("{what}: together, other"));
-    }
-    scene.finish(env, vk);
+    });
 }
 
 /// A dynamic render pass instance suspended and resumed shifts once, by the offsets of the end
@@ -704,96 +764,57 @@ fn offsets_are_fixed_per_recording_and_per_command_buffer() {
 /// says, and both parts' draws shade alike.
 #[test]
 fn a_suspended_and_resumed_instance_shifts_once_by_its_last_end() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
-        return;
-    };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
-    let t = scene.texel as i32;
-    let (ignored, last) = (at(2 * t, 2 * t), at(-t, t));
-    let cb = scene.dev.begin();
-    scene.prepare(cb);
-    let flags = vk::RenderingFlags::SUSPENDING;
-    scene.pass(cb, Path::Rendering, flags, End::With(&[ignored]));
-    let flags = vk::RenderingFlags::RESUMING | vk::RenderingFlags::SUSPENDING;
-    scene.pass(cb, Path::Rendering, flags, End::With(&[ignored]));
-    scene.pass(
-        cb,
-        Path::Rendering,
-        vk::RenderingFlags::RESUMING,
-        End::With(&[last]),
-    );
-    scene.dev.submit(cb);
-    scene.assert_shifted(
-        env,
-        cb,
-        &[&[last], &[last], &[last]],
-        "suspended and resumed",
-    );
-    scene.finish(env, vk);
+    on_nvidia(EXT, |env, scene, t| {
+        let (ignored, last) = (at(2 * t, 2 * t), at(-t, t));
+        let cb = scene.dev.begin();
+        scene.prepare(cb);
+        let flags = vk::RenderingFlags::SUSPENDING;
+        scene.pass(cb, Path::Rendering, flags, End::With(&[ignored]));
+        let flags = vk::RenderingFlags::RESUMING | vk::RenderingFlags::SUSPENDING;
+        scene.pass(cb, Path::Rendering, flags, End::With(&[ignored]));
+        scene.pass(
+            cb,
+            Path::Rendering,
+            vk::RenderingFlags::RESUMING,
+            End::With(&[last]),
+        );
+        scene.dev.submit(cb);
+        scene.assert_shifted(
+            env,
+            cb,
+            &[&[last], &[last], &[last]],
+            "suspended and resumed",
+        );
+    });
 }
 
 /// A secondary command buffer that begins and ends rendering itself, with offsets, executed from
 /// a primary: the draw shades with the secondary's offsets.
 #[test]
 fn a_secondary_that_begins_and_ends_rendering_applies_its_offsets() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
-        return;
-    };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
-    let t = scene.texel as i32;
-    let o = at(t, -t);
-    let d = &scene.dev.d;
-    // SAFETY: the pool is this device's; every struct lives across its call.
-    let secondary = unsafe {
-        let s = d
-            .allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(scene.dev.pool)
-                    .level(vk::CommandBufferLevel::SECONDARY)
-                    .command_buffer_count(1),
-            )
-            .expect("vkAllocateCommandBuffers")[0];
-        let inheritance = vk::CommandBufferInheritanceInfo::default();
-        d.begin_command_buffer(
-            s,
-            &vk::CommandBufferBeginInfo::default().inheritance_info(&inheritance),
-        )
-        .expect("vkBeginCommandBuffer");
-        s
-    };
-    scene.pass(
-        secondary,
-        Path::Rendering,
-        vk::RenderingFlags::empty(),
-        End::With(&[o]),
-    );
-    let primary = scene.dev.begin();
-    scene.prepare(primary);
-    // SAFETY: both are this device's; the secondary is executable.
-    unsafe {
-        d.end_command_buffer(secondary).expect("end");
-        d.cmd_execute_commands(primary, &[secondary]);
-    }
-    scene.dev.submit(primary);
-    let draws: Vec<_> = env
-        .double
-        .draws()
-        .into_iter()
-        .filter(|dr| {
-            dr.command_buffer == primary.as_raw() || dr.command_buffer == secondary.as_raw()
-        })
-        .collect();
-    assert_eq!(draws.len(), 1, "{draws:?}");
-    let want = &scene.want(&[o])[0];
-    assert!(
-        &draws[0].views[0].codes == want,
-        "secondary: shaded {:?}, want {want:?}",
-        draws[0].views[0].codes
-    );
-    assert_ne!(want, &scene.want(&[])[0]);
-    scene.finish(env, vk);
+    on_nvidia(EXT, |env, scene, t| {
+        let o = at(t, -t);
+        let d = &scene.dev.d;
+        let secondary = scene.secondary(
+            vk::CommandBufferUsageFlags::empty(),
+            &vk::CommandBufferInheritanceInfo::default(),
+        );
+        scene.pass(
+            secondary,
+            Path::Rendering,
+            vk::RenderingFlags::empty(),
+            End::With(&[o]),
+        );
+        let primary = scene.dev.begin();
+        scene.prepare(primary);
+        // SAFETY: both are this device's; the secondary is executable.
+        unsafe {
+            d.end_command_buffer(secondary).expect("end");
+            d.cmd_execute_commands(primary, &[secondary]);
+        }
+        scene.dev.submit(primary);
+        scene.assert_one_draw(env, primary, secondary, &[o], "secondary");
+    });
 }
 
 /// Multiview (a two-layer map, view mask 0b11), both paths: each view is shifted by its own
@@ -816,11 +837,7 @@ fn each_view_is_shifted_by_its_own_offset() {
             ];
             for offsets in ends {
                 let what = format!("{profile:?} {path:?} {offsets:?}");
-                let cb = scene.dev.begin();
-                scene.prepare(cb);
-                scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
-                scene.dev.submit(cb);
-                scene.assert_shifted(env, cb, &[offsets], &what);
+                scene.shade(env, path, End::With(offsets), offsets, &what);
             }
         }
         scene.finish(env, vk);
@@ -833,30 +850,21 @@ fn each_view_is_shifted_by_its_own_offset() {
 /// centre says; offsets beyond the views are ignored.
 #[test]
 fn invalid_offsets_shade_as_the_lookup_at_each_texel_centre() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
-        return;
-    };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
-    let t = scene.texel as i32;
-    let cases: [&[vk::Offset2D]; 5] = [
-        &[at(t / 2 + 1, -t / 2)],
-        &[at(t + 3, 2 * t - 5)],
-        &[at(-t / 2 - 1, t / 2)],
-        &[at(-7, 9)],
-        &[at(t, 0), at(5 * t, 5 * t), at(-t, 0)],
-    ];
-    for path in [Path::RenderPass, Path::Rendering] {
-        for offsets in cases {
-            let what = format!("{path:?} {offsets:?}");
-            let cb = scene.dev.begin();
-            scene.prepare(cb);
-            scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
-            scene.dev.submit(cb);
-            scene.assert_shifted(env, cb, &[&offsets[..1]], &what);
+    on_nvidia(EXT, |env, scene, t| {
+        let cases: [&[vk::Offset2D]; 5] = [
+            &[at(t / 2 + 1, -t / 2)],
+            &[at(t + 3, 2 * t - 5)],
+            &[at(-t / 2 - 1, t / 2)],
+            &[at(-7, 9)],
+            &[at(t, 0), at(5 * t, 5 * t), at(-t, 0)],
+        ];
+        for path in [Path::RenderPass, Path::Rendering] {
+            for offsets in cases {
+                let what = format!("{path:?} {offsets:?}");
+                scene.shade(env, path, End::With(offsets), &offsets[..1], &what);
+            }
         }
-    }
-    scene.finish(env, vk);
+    });
 }
 
 /// A render pass of two subpasses: offsets at the end of the first (`vkCmdNextSubpass2`) are
@@ -864,137 +872,79 @@ fn invalid_offsets_shade_as_the_lookup_at_each_texel_centre() {
 /// apply to the whole pass, both subpasses' draws.
 #[test]
 fn only_the_last_subpass_end_carries_offsets() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
-        return;
-    };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
-    let t = scene.texel as i32;
-    let (ignored, last) = (at(3 * t, 3 * t), at(-t, 2 * t));
-    let d = &scene.dev.d;
-    // SAFETY: every struct lives across its call; the objects are destroyed below.
-    let (pass, framebuffer, pipelines) = unsafe {
-        let atts = attachments2(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
-        let color_ref = [vk::AttachmentReference2::default()
-            .attachment(0)
-            .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-        let subpass = vk::SubpassDescription2::default()
-            .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-            .color_attachments(&color_ref);
-        let subpasses = [subpass, subpass];
-        let color = vk::AccessFlags::COLOR_ATTACHMENT_WRITE;
-        let stage = vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT;
-        let deps = [vk::SubpassDependency2::default()
-            .src_subpass(0)
-            .dst_subpass(1)
-            .src_stage_mask(stage)
-            .dst_stage_mask(stage)
-            .src_access_mask(color)
-            .dst_access_mask(color)
-            .dependency_flags(vk::DependencyFlags::BY_REGION)];
-        let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
-            .fragment_density_map_attachment(vk::AttachmentReference {
-                attachment: 1,
-                layout: FDM_LAYOUT,
+    on_nvidia(EXT, |env, scene, t| {
+        let (ignored, last) = (at(3 * t, 3 * t), at(-t, 2 * t));
+        let d = &scene.dev.d;
+        // SAFETY: every struct lives across its call; the objects are destroyed below.
+        let (pass, framebuffer, pipelines) = unsafe {
+            let pass = render_pass(
+                d,
+                0,
+                2,
+                &[color_dependency(0, 1).dependency_flags(vk::DependencyFlags::BY_REGION)],
+            );
+            let framebuffer = framebuffer(d, pass, &[scene.color().1, scene.map().1]);
+            let pipelines = pipelines(d, |stages, fixed| {
+                let infos = [0, 1].map(|subpass| {
+                    fixed
+                        .info(stages, scene.layout)
+                        .render_pass(pass)
+                        .subpass(subpass)
+                });
+                d.create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
             });
-        let pass = d
-            .create_render_pass2(
-                &vk::RenderPassCreateInfo2::default()
-                    .attachments(&atts)
-                    .subpasses(&subpasses)
-                    .dependencies(&deps)
-                    .push_next(&mut fdm),
-                None,
-            )
-            .unwrap_or_else(|e| panic!("vkCreateRenderPass2: {e}; {:?}", take_messages()));
-        let views = [scene.color().1, scene.map().1];
-        let framebuffer = d
-            .create_framebuffer(
-                &vk::FramebufferCreateInfo::default()
-                    .render_pass(pass)
-                    .attachments(&views)
-                    .width(SIZE)
-                    .height(SIZE)
-                    .layers(1),
-                None,
-            )
-            .expect("vkCreateFramebuffer");
-        let module = |bytes: &[u8]| {
-            let words = spv(bytes);
-            d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
-                .expect("vkCreateShaderModule")
+            (pass, framebuffer, pipelines)
         };
-        let modules = [module(VERTEX), module(FRAGMENT)];
-        let stages = stages(modules);
-        let fixed = Fixed::new();
-        let infos = [
-            fixed
-                .info(&stages, scene.layout)
-                .render_pass(pass)
-                .subpass(0),
-            fixed
-                .info(&stages, scene.layout)
-                .render_pass(pass)
-                .subpass(1),
-        ];
-        let pipelines = d
-            .create_graphics_pipelines(vk::PipelineCache::null(), &infos, None)
-            .unwrap_or_else(|e| panic!("pipelines: {:?}; {:?}", e.1, take_messages()));
-        for m in modules {
-            d.destroy_shader_module(m, None);
+        let cb = scene.dev.begin();
+        scene.prepare(cb);
+        let first = [ignored];
+        let second = [last];
+        let mut first_end = vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default()
+            .fragment_density_offsets(&first);
+        let mut last_end = vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default()
+            .fragment_density_offsets(&second);
+        // SAFETY: `cb` is recording on this device; every struct lives across its call.
+        unsafe {
+            d.cmd_begin_render_pass2(
+                cb,
+                &vk::RenderPassBeginInfo::default()
+                    .render_pass(pass)
+                    .framebuffer(framebuffer)
+                    .render_area(AREA)
+                    .clear_values(&CLEAR),
+                &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+            );
+            draw_fullscreen(d, cb, pipelines[0]);
+            d.cmd_next_subpass2(
+                cb,
+                &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+                &vk::SubpassEndInfo::default().push_next(&mut first_end),
+            );
+            draw_fullscreen(d, cb, pipelines[1]);
+            d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default().push_next(&mut last_end));
         }
-        (pass, framebuffer, pipelines)
-    };
-    let cb = scene.dev.begin();
-    scene.prepare(cb);
-    let first = [ignored];
-    let second = [last];
-    let mut first_end =
-        vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&first);
-    let mut last_end =
-        vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&second);
-    // SAFETY: `cb` is recording on this device; every struct lives across its call.
-    unsafe {
-        d.cmd_begin_render_pass2(
-            cb,
-            &vk::RenderPassBeginInfo::default()
-                .render_pass(pass)
-                .framebuffer(framebuffer)
-                .render_area(AREA)
-                .clear_values(&CLEAR),
-            &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-        );
-        draw_fullscreen(d, cb, pipelines[0]);
-        d.cmd_next_subpass2(
-            cb,
-            &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-            &vk::SubpassEndInfo::default().push_next(&mut first_end),
-        );
-        draw_fullscreen(d, cb, pipelines[1]);
-        d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default().push_next(&mut last_end));
-    }
-    scene.dev.submit(cb);
-    let want = &scene.want(&[last])[0];
-    for draw in 0..2 {
-        let got = env
-            .double
-            .effective_rates(cb.as_raw(), 0, draw)
-            .unwrap_or_else(|| panic!("no draw {draw}"));
-        assert!(
-            &got[0].codes == want,
-            "draw {draw} (subpass {draw}): shaded {:?}, want {want:?}",
-            got[0].codes
-        );
-    }
-    // SAFETY: the queue is idle; each object is destroyed once.
-    unsafe {
-        for p in pipelines {
-            d.destroy_pipeline(p, None);
+        scene.dev.submit(cb);
+        let want = &scene.want(&[last])[0];
+        for draw in 0..2 {
+            let got = env
+                .double
+                .effective_rates(cb.as_raw(), 0, draw)
+                .unwrap_or_else(|| panic!("no draw {draw}"));
+            assert!(
+                &got[0].codes == want,
+                "draw {draw} (subpass {draw}): shaded {:?}, want {want:?}",
+                got[0].codes
+            );
         }
-        d.destroy_framebuffer(framebuffer, None);
-        d.destroy_render_pass(pass, None);
-    }
-    scene.finish(env, vk);
+        // SAFETY: the queue is idle; each object is destroyed once.
+        unsafe {
+            for p in pipelines {
+                d.destroy_pipeline(p, None);
+            }
+            d.destroy_framebuffer(framebuffer, None);
+            d.destroy_render_pass(pass, None);
+        }
+    });
 }
 
 /// A render pass begun and ended in a primary whose draws a secondary records
@@ -1002,76 +952,43 @@ fn only_the_last_subpass_end_carries_offsets() {
 /// secondary's draw shades with them.
 #[test]
 fn draws_of_a_secondary_inside_the_pass_take_the_primarys_offsets() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
-        return;
-    };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
-    let t = scene.texel as i32;
-    let o = [at(-2 * t, -t)];
-    let d = &scene.dev.d;
-    // SAFETY: the pool is this device's; every struct lives across its call.
-    let secondary = unsafe {
-        let s = d
-            .allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(scene.dev.pool)
-                    .level(vk::CommandBufferLevel::SECONDARY)
-                    .command_buffer_count(1),
-            )
-            .expect("vkAllocateCommandBuffers")[0];
-        let inheritance = vk::CommandBufferInheritanceInfo::default()
-            .render_pass(scene.pass)
-            .subpass(0)
-            .framebuffer(scene.framebuffer);
-        d.begin_command_buffer(
-            s,
-            &vk::CommandBufferBeginInfo::default()
-                .flags(vk::CommandBufferUsageFlags::RENDER_PASS_CONTINUE)
-                .inheritance_info(&inheritance),
-        )
-        .expect("vkBeginCommandBuffer");
-        draw_fullscreen(d, s, scene.pass_pipeline);
-        d.end_command_buffer(s).expect("end");
-        s
-    };
-    let primary = scene.dev.begin();
-    scene.prepare(primary);
-    let mut end =
-        vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&o);
-    // SAFETY: both are this device's; every struct lives across its call.
-    unsafe {
-        d.cmd_begin_render_pass2(
-            primary,
-            &vk::RenderPassBeginInfo::default()
+    on_nvidia(EXT, |env, scene, t| {
+        let o = [at(-2 * t, -t)];
+        let d = &scene.dev.d;
+        let secondary = scene.secondary(
+            vk::CommandBufferUsageFlags::RENDER_PASS_CONTINUE,
+            &vk::CommandBufferInheritanceInfo::default()
                 .render_pass(scene.pass)
-                .framebuffer(scene.framebuffer)
-                .render_area(AREA)
-                .clear_values(&CLEAR),
-            &vk::SubpassBeginInfo::default()
-                .contents(vk::SubpassContents::SECONDARY_COMMAND_BUFFERS),
+                .subpass(0)
+                .framebuffer(scene.framebuffer),
         );
-        d.cmd_execute_commands(primary, &[secondary]);
-        d.cmd_end_render_pass2(primary, &vk::SubpassEndInfo::default().push_next(&mut end));
-    }
-    scene.dev.submit(primary);
-    let draws: Vec<_> = env
-        .double
-        .draws()
-        .into_iter()
-        .filter(|dr| {
-            dr.command_buffer == primary.as_raw() || dr.command_buffer == secondary.as_raw()
-        })
-        .collect();
-    assert_eq!(draws.len(), 1, "{draws:?}");
-    let want = &scene.want(&o)[0];
-    assert!(
-        &draws[0].views[0].codes == want,
-        "secondary inside the pass: shaded {:?}, want {want:?}",
-        draws[0].views[0].codes
-    );
-    assert_ne!(want, &scene.want(&[])[0]);
-    scene.finish(env, vk);
+        // SAFETY: the secondary is recording inside the pass it inherits.
+        unsafe {
+            draw_fullscreen(d, secondary, scene.pass_pipeline);
+            d.end_command_buffer(secondary).expect("end");
+        }
+        let primary = scene.dev.begin();
+        scene.prepare(primary);
+        let mut end =
+            vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default().fragment_density_offsets(&o);
+        // SAFETY: both are this device's; every struct lives across its call.
+        unsafe {
+            d.cmd_begin_render_pass2(
+                primary,
+                &vk::RenderPassBeginInfo::default()
+                    .render_pass(scene.pass)
+                    .framebuffer(scene.framebuffer)
+                    .render_area(AREA)
+                    .clear_values(&CLEAR),
+                &vk::SubpassBeginInfo::default()
+                    .contents(vk::SubpassContents::SECONDARY_COMMAND_BUFFERS),
+            );
+            d.cmd_execute_commands(primary, &[secondary]);
+            d.cmd_end_render_pass2(primary, &vk::SubpassEndInfo::default().push_next(&mut end));
+        }
+        scene.dev.submit(primary);
+        scene.assert_one_draw(env, primary, secondary, &o, "secondary inside the pass");
+    });
 }
 
 /// Two threads record at once, each from a pool of its own, passes on the same map ended with
@@ -1080,84 +997,53 @@ fn draws_of_a_secondary_inside_the_pass_take_the_primarys_offsets() {
 /// them per command buffer, nothing shared is written while recording or running).
 #[test]
 fn threads_and_simultaneous_use_keep_their_own_offsets() {
-    let Some((_serial, env)) = env() else { return };
-    let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
-        return;
-    };
-    let scene = Scene::new(&vk, Profile::Nvidia, EXT);
-    let t = scene.texel as i32;
-    let (oa, ob) = ([at(t, t)], [at(-2 * t, 0)]);
-    let record = |offsets: &[vk::Offset2D], flags: vk::CommandBufferUsageFlags, path: Path| {
-        let d = &scene.dev.d;
-        // SAFETY: the pool is this thread's own; every struct lives across its call.
-        unsafe {
-            let pool = d
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default().queue_family_index(0),
-                    None,
-                )
-                .expect("vkCreateCommandPool");
-            let cb = d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .expect("vkAllocateCommandBuffers")[0];
-            d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(flags))
-                .expect("vkBeginCommandBuffer");
+    on_nvidia(EXT, |env, scene, t| {
+        let (oa, ob) = ([at(t, t)], [at(-2 * t, 0)]);
+        let record = |offsets: &[vk::Offset2D], flags: vk::CommandBufferUsageFlags, path: Path| {
+            let pool = scene.dev.command_pool();
+            let cb = scene.dev.begin_in(pool, flags);
             scene.prepare(cb);
             scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(offsets));
             scene.between(cb);
-            d.end_command_buffer(cb).expect("vkEndCommandBuffer");
+            // SAFETY: `cb` is recording on this device, from this thread's own pool.
+            unsafe { scene.dev.d.end_command_buffer(cb) }.expect("vkEndCommandBuffer");
             (pool, cb)
-        }
-    };
-    for path in [Path::RenderPass, Path::Rendering] {
-        let simultaneous = vk::CommandBufferUsageFlags::SIMULTANEOUS_USE;
-        let ((pool_a, a), (pool_b, b)) = std::thread::scope(|s| {
-            let ta = s.spawn(|| record(&oa, simultaneous, path));
-            let tb = s.spawn(|| record(&ob, vk::CommandBufferUsageFlags::empty(), path));
-            (ta.join().expect("thread a"), tb.join().expect("thread b"))
-        });
-        let d = &scene.dev.d;
-        // Handles of the first path's command buffers may come back: only this submit's draws.
-        let before = env.double.draws().len();
-        // SAFETY: both are executable on this device; `a` may be pending twice (simultaneous use).
-        unsafe {
-            let cbs = [a, b, a];
-            d.queue_submit(
-                scene.dev.queue,
-                &[vk::SubmitInfo::default().command_buffers(&cbs)],
-                vk::Fence::null(),
-            )
-            .expect("vkQueueSubmit");
-            d.queue_wait_idle(scene.dev.queue).expect("idle");
-        }
-        for (cb, offsets, runs) in [(a, &oa, 2), (b, &ob, 1)] {
-            let draws: Vec<_> = env
-                .double
-                .draws()
-                .into_iter()
-                .skip(before)
-                .filter(|dr| dr.command_buffer == cb.as_raw())
-                .collect();
-            assert_eq!(draws.len(), runs, "{path:?}: {draws:?}");
-            let want = &scene.want(offsets)[0];
-            for dr in &draws {
-                assert!(
-                    &dr.views[0].codes == want,
-                    "{path:?} {offsets:?}: shaded {:?}, want {want:?}",
-                    dr.views[0].codes
-                );
+        };
+        for path in [Path::RenderPass, Path::Rendering] {
+            let simultaneous = vk::CommandBufferUsageFlags::SIMULTANEOUS_USE;
+            let ((pool_a, a), (pool_b, b)) = std::thread::scope(|s| {
+                let ta = s.spawn(|| record(&oa, simultaneous, path));
+                let tb = s.spawn(|| record(&ob, vk::CommandBufferUsageFlags::empty(), path));
+                (ta.join().expect("thread a"), tb.join().expect("thread b"))
+            });
+            let d = &scene.dev.d;
+            // Handles of the first path's command buffers may come back: only this submit's draws.
+            let before = env.double.draws().len();
+            // `a` may be pending twice: it was recorded with simultaneous use.
+            scene.submit(&[a, b, a]);
+            for (cb, offsets, runs) in [(a, &oa, 2), (b, &ob, 1)] {
+                let draws: Vec<_> = env
+                    .double
+                    .draws()
+                    .into_iter()
+                    .skip(before)
+                    .filter(|dr| dr.command_buffer == cb.as_raw())
+                    .collect();
+                assert_eq!(draws.len(), runs, "{path:?}: {draws:?}");
+                let want = &scene.want(offsets)[0];
+                for dr in &draws {
+                    assert!(
+                        &dr.views[0].codes == want,
+                        "{path:?} {offsets:?}: shaded {:?}, want {want:?}",
+                        dr.views[0].codes
+                    );
+                }
+            }
+            // SAFETY: the queue is idle; the pools' command buffers go with them.
+            unsafe {
+                d.destroy_command_pool(pool_a, None);
+                d.destroy_command_pool(pool_b, None);
             }
         }
-        // SAFETY: the queue is idle; the pools' command buffers go with them.
-        unsafe {
-            d.destroy_command_pool(pool_a, None);
-            d.destroy_command_pool(pool_b, None);
-        }
-    }
-    scene.finish(env, vk);
+    });
 }

@@ -8,12 +8,12 @@
 //! simulated runtime's count of instances are process-wide.
 
 use fovea_harness::app::{with_create_info, API_1_0};
-use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
+use fovea_harness::frame_loop::FOVEATION_EXTENSIONS;
 use fovea_harness::{open_library, sim, App, Chain, LayerSpec};
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::support::in_own_process;
+use crate::support::{foveated_loop, in_own_process};
 
 /// The refusing layer under another name: to fovea, a different stack below.
 const OTHER_REFUSER: &str = "XR_APILAYER_FOVEA_test_refuse_null_lookups_too";
@@ -42,14 +42,7 @@ fn run(native: bool, below: &str) -> (Vec<String>, bool, Vec<(&'static str, u64)
     sim::control::set_thread_config(None);
     let instance = app.instance;
     let enabled = sim::control::enabled_extensions(instance);
-    let mut lp = HeadlessLoop::new(
-        app,
-        SwapchainSpec {
-            foveation: true,
-            array_size: 2,
-        },
-    )
-    .unwrap();
+    let mut lp = foveated_loop(app);
     lp.apply_profile(xr::FoveationLevelFB::HIGH, xr::FoveationDynamicFB::DISABLED)
         .unwrap();
     for _ in 0..3 {

@@ -4,12 +4,13 @@
 //! implements the extension itself passed through (docs/eye-tracking.md#xr_meta_foveation_eye_tracked).
 
 use fovea_harness::app::API_1_0;
-use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
+use fovea_harness::frame_loop::{HeadlessLoop, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::support::{in_own_process, level_info};
+use crate::support::actions::{attach_set, declare, sync_set};
+use crate::support::{foveated_loop, in_own_process, level_info};
 
 const META: &str = "XR_META_foveation_eye_tracked";
 const EYE_GAZE: &str = "XR_EXT_eye_gaze_interaction";
@@ -152,14 +153,7 @@ fn the_extension_is_listed_and_needs_the_fb_foveation_pair() {
 /// A running headless loop with the given runtime configuration and extensions.
 fn running(vars: &[(&str, &str)], more: &[&str]) -> HeadlessLoop {
     let app = app(vars, more);
-    HeadlessLoop::new(
-        app,
-        SwapchainSpec {
-            foveation: true,
-            array_size: 2,
-        },
-    )
-    .unwrap()
+    foveated_loop(app)
 }
 
 fn create_profile(
@@ -397,83 +391,19 @@ struct AppInput {
 }
 
 impl AppInput {
+    /// The application's set and action ([`declare`], bound to a controller), attached.
     fn attach(lp: &HeadlessLoop) -> AppInput {
-        let name = |s: &str, a: &mut [std::ffi::c_char]| {
-            for (d, b) in a.iter_mut().zip(s.bytes()) {
-                *d = b as std::ffi::c_char;
-            }
-        };
-        unsafe {
-            let path = |s: &std::ffi::CStr| {
-                let f: xr::pfn::StringToPath = lp.func(c"xrStringToPath");
-                let mut p = xr::Path::NULL;
-                assert_eq!(f(lp.app.instance, s.as_ptr(), &mut p), xr::Result::SUCCESS);
-                p
-            };
-            let mut info: xr::ActionSetCreateInfo = std::mem::zeroed();
-            info.ty = xr::ActionSetCreateInfo::TYPE;
-            name("gameplay", &mut info.action_set_name);
-            name("Gameplay", &mut info.localized_action_set_name);
-            let mut set = xr::ActionSet::NULL;
-            let create_set: xr::pfn::CreateActionSet = lp.func(c"xrCreateActionSet");
-            assert_eq!(
-                create_set(lp.app.instance, &info, &mut set),
-                xr::Result::SUCCESS
-            );
-            let mut info: xr::ActionCreateInfo = std::mem::zeroed();
-            info.ty = xr::ActionCreateInfo::TYPE;
-            info.action_type = xr::ActionType::POSE_INPUT;
-            name("aim", &mut info.action_name);
-            name("Aim", &mut info.localized_action_name);
-            let mut action = xr::Action::NULL;
-            let create_action: xr::pfn::CreateAction = lp.func(c"xrCreateAction");
-            assert_eq!(create_action(set, &info, &mut action), xr::Result::SUCCESS);
-            let bindings = [xr::ActionSuggestedBinding {
-                action,
-                binding: path(c"/user/hand/left/input/aim/pose"),
-            }];
-            let suggested = xr::InteractionProfileSuggestedBinding {
-                ty: xr::InteractionProfileSuggestedBinding::TYPE,
-                next: std::ptr::null(),
-                interaction_profile: path(c"/interaction_profiles/khr/simple_controller"),
-                count_suggested_bindings: 1,
-                suggested_bindings: bindings.as_ptr(),
-            };
-            let suggest: xr::pfn::SuggestInteractionProfileBindings =
-                lp.func(c"xrSuggestInteractionProfileBindings");
-            assert_eq!(suggest(lp.app.instance, &suggested), xr::Result::SUCCESS);
-            let sets = [set];
-            let attach = xr::SessionActionSetsAttachInfo {
-                ty: xr::SessionActionSetsAttachInfo::TYPE,
-                next: std::ptr::null(),
-                count_action_sets: 1,
-                action_sets: sets.as_ptr(),
-            };
-            let attach_fn: xr::pfn::AttachSessionActionSets = lp.func(c"xrAttachSessionActionSets");
-            assert_eq!(attach_fn(lp.session, &attach), xr::Result::SUCCESS);
-            AppInput {
-                set,
-                sync: lp.func(c"xrSyncActions"),
-            }
+        let (set, _) = declare(&lp.app, false);
+        attach_set(lp, set);
+        AppInput {
+            set,
+            // SAFETY: the type matches the name.
+            sync: unsafe { lp.func(c"xrSyncActions") },
         }
     }
 
     fn sync(&self, lp: &HeadlessLoop) {
-        let active = [xr::ActiveActionSet {
-            action_set: self.set,
-            subaction_path: xr::Path::NULL,
-        }];
-        let info = xr::ActionsSyncInfo {
-            ty: xr::ActionsSyncInfo::TYPE,
-            next: std::ptr::null(),
-            count_active_action_sets: 1,
-            active_action_sets: active.as_ptr(),
-        };
-        let r = unsafe { (self.sync)(lp.session, &info) };
-        assert!(
-            [xr::Result::SUCCESS, xr::Result::SESSION_NOT_FOCUSED].contains(&r),
-            "{r:?}"
-        );
+        sync_set(lp, self.sync, self.set);
     }
 }
 

@@ -7,11 +7,11 @@
 use std::path::Path;
 
 use fovea_harness::app::API_1_0;
-use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
+use fovea_harness::frame_loop::{HeadlessLoop, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 
-use crate::support::in_own_process;
+use crate::support::{foveated_loop, in_own_process};
 
 fn running(load: &[(u64, f32)]) -> HeadlessLoop {
     let mut cfg =
@@ -22,14 +22,7 @@ fn running(load: &[(u64, f32)]) -> HeadlessLoop {
     };
     sim::control::set_thread_config(Some(cfg));
     let app = App::new(Chain::fovea().unwrap(), &FOVEATION_EXTENSIONS, API_1_0).unwrap();
-    HeadlessLoop::new(
-        app,
-        SwapchainSpec {
-            foveation: true,
-            array_size: 2,
-        },
-    )
-    .unwrap()
+    foveated_loop(app)
 }
 
 /// The log lines after `from` bytes.

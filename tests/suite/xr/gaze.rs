@@ -12,19 +12,21 @@
 use std::path::{Path, PathBuf};
 
 use fovea_harness::app::API_1_0;
-use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
+use fovea_harness::frame_loop::{HeadlessLoop, FOVEATION_EXTENSIONS};
 use fovea_harness::{sim, App, Chain};
 use fovea_model::gaze::{eye_centre, EyeView, Gaze, Tracking};
 use glam::{Quat, Vec3};
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::support::in_own_process;
+use crate::support::actions::{
+    attach_set, declare, path, sync_set, EYE_GAZE_POSE, EYE_GAZE_PROFILE,
+};
+use crate::support::gaze_log::{located, Located};
+use crate::support::{foveated_loop, in_own_process};
 
-/// The eye gaze extension, its profile and its pose.
+/// The eye gaze extension.
 const EXT: &str = "XR_EXT_eye_gaze_interaction";
-const PROFILE: &std::ffi::CStr = c"/interaction_profiles/ext/eye_gaze_interaction";
-const GAZE_POSE: &std::ffi::CStr = c"/user/eyes_ext/input/gaze_ext/pose";
 
 /// A log file of this process's own, with the gaze at `trace` and the stats line on.
 fn log_here(label: &str, extra_env: &[(&str, &str)]) -> PathBuf {
@@ -55,61 +57,6 @@ fn log_lines(log: &Path) -> Vec<String> {
         .collect()
 }
 
-/// The gaze the layer located for one frame, from its `trace` line.
-#[derive(Clone, Debug)]
-struct Located {
-    tracking: Tracking,
-    angles: [f32; 2],
-    weight: f32,
-    ndc: Vec<[f32; 2]>,
-}
-
-fn field<'a>(line: &'a str, name: &str) -> &'a str {
-    let at = line
-        .find(&format!(" {name}="))
-        .unwrap_or_else(|| panic!("{name}= in {line}"))
-        + name.len()
-        + 2;
-    let rest = &line[at..];
-    if rest.starts_with('[') {
-        let end = rest.find("]]").map_or(rest.len(), |e| e + 2);
-        &rest[..end]
-    } else {
-        rest.split(' ').next().unwrap()
-    }
-}
-
-fn located(lines: &[String]) -> Vec<Located> {
-    lines
-        .iter()
-        .filter(|l| l.contains(fovea_abi::log_target::GAZE) && l.contains(" time_ns="))
-        .map(|l| {
-            let tracking = match field(l, "tracking") {
-                "Tracked" => Tracking::Tracked,
-                "Held" => Tracking::Held,
-                "Returning" => Tracking::Returning,
-                "Fixed" => Tracking::Fixed,
-                other => panic!("tracking {other:?} in {l}"),
-            };
-            let num = |n: &str| field(l, n).parse::<f32>().unwrap();
-            let ndc = field(l, "ndc")
-                .trim_matches(|c| c == '[' || c == ']')
-                .split("], [")
-                .map(|p| {
-                    let v: Vec<f32> = p.split(", ").map(|x| x.parse().unwrap()).collect();
-                    [v[0], v[1]]
-                })
-                .collect();
-            Located {
-                tracking,
-                angles: [num("yaw"), num("pitch")],
-                weight: num("weight"),
-                ndc,
-            }
-        })
-        .collect()
-}
-
 fn stats(lines: &[String]) -> Vec<&String> {
     lines
         .iter()
@@ -134,14 +81,7 @@ fn running(cfg: sim::control::SimConfig, extensions: &[&str]) -> HeadlessLoop {
     let mut exts: Vec<&str> = FOVEATION_EXTENSIONS.to_vec();
     exts.extend_from_slice(extensions);
     let app = App::new(Chain::fovea().unwrap(), &exts, API_1_0).unwrap();
-    HeadlessLoop::new(
-        app,
-        SwapchainSpec {
-            foveation: true,
-            array_size: 2,
-        },
-    )
-    .unwrap()
+    foveated_loop(app)
 }
 
 /// The application's own input: an action set with one pose action, bound to a controller (or,
@@ -155,85 +95,6 @@ struct AppInput {
     locate: xr::pfn::LocateSpace,
 }
 
-fn path(app: &App, s: &std::ffi::CStr) -> xr::Path {
-    // SAFETY: the type matches the name; the string is NUL-terminated.
-    unsafe {
-        let f: xr::pfn::StringToPath = app.func(c"xrStringToPath");
-        let mut p = xr::Path::NULL;
-        assert_eq!(f(app.instance, s.as_ptr(), &mut p), xr::Result::SUCCESS);
-        p
-    }
-}
-
-fn fixed<const N: usize>(s: &str) -> [std::ffi::c_char; N] {
-    let mut a = [0; N];
-    for (d, b) in a.iter_mut().zip(s.bytes()) {
-        *d = b as std::ffi::c_char;
-    }
-    a
-}
-
-/// The application's own set with one pose action, its binding suggested: to a controller, or
-/// (`gaze`) to the eye tracker.
-fn declare(app: &App, gaze: bool) -> (xr::ActionSet, xr::Action) {
-    // SAFETY: every name's type matches; the structs live across their calls.
-    unsafe {
-        let create_set: xr::pfn::CreateActionSet = app.func(c"xrCreateActionSet");
-        let create_action: xr::pfn::CreateAction = app.func(c"xrCreateAction");
-        let suggest: xr::pfn::SuggestInteractionProfileBindings =
-            app.func(c"xrSuggestInteractionProfileBindings");
-        let info = xr::ActionSetCreateInfo {
-            ty: xr::StructureType::ACTION_SET_CREATE_INFO,
-            next: std::ptr::null(),
-            action_set_name: fixed("gameplay"),
-            localized_action_set_name: fixed("Gameplay"),
-            priority: 0,
-        };
-        let mut set = xr::ActionSet::NULL;
-        assert_eq!(
-            create_set(app.instance, &info, &mut set),
-            xr::Result::SUCCESS
-        );
-        let info = xr::ActionCreateInfo {
-            ty: xr::StructureType::ACTION_CREATE_INFO,
-            next: std::ptr::null(),
-            action_name: fixed("aim"),
-            action_type: xr::ActionType::POSE_INPUT,
-            count_subaction_paths: 0,
-            subaction_paths: std::ptr::null(),
-            localized_action_name: fixed("Aim"),
-        };
-        let mut action = xr::Action::NULL;
-        assert_eq!(create_action(set, &info, &mut action), xr::Result::SUCCESS);
-        let (profile, binding) = if gaze {
-            (PROFILE, GAZE_POSE)
-        } else {
-            (
-                c"/interaction_profiles/khr/simple_controller",
-                c"/user/hand/left/input/aim/pose",
-            )
-        };
-        let bindings = [xr::ActionSuggestedBinding {
-            action,
-            binding: path(app, binding),
-        }];
-        let suggested = xr::InteractionProfileSuggestedBinding {
-            ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
-            next: std::ptr::null(),
-            interaction_profile: path(app, profile),
-            count_suggested_bindings: 1,
-            suggested_bindings: bindings.as_ptr(),
-        };
-        assert_eq!(suggest(app.instance, &suggested), xr::Result::SUCCESS);
-        assert_eq!(
-            bindings[0].action, action,
-            "the application's struct is untouched"
-        );
-        assert_eq!(suggested.count_suggested_bindings, 1);
-        (set, action)
-    }
-}
-
 impl AppInput {
     /// Declares the application's set and action ([`declare`]); `attach` attaches the set.
     fn new(lp: &HeadlessLoop, gaze: bool, attach: bool) -> AppInput {
@@ -245,23 +106,9 @@ impl AppInput {
     fn with(lp: &HeadlessLoop, set: xr::ActionSet, action: xr::Action, attach: bool) -> AppInput {
         // SAFETY: every name's type matches; the structs live across their calls.
         unsafe {
-            let attach_fn: xr::pfn::AttachSessionActionSets = lp.func(c"xrAttachSessionActionSets");
-            if attach {
-                let sets = [set];
-                let info = xr::SessionActionSetsAttachInfo {
-                    ty: xr::StructureType::SESSION_ACTION_SETS_ATTACH_INFO,
-                    next: std::ptr::null(),
-                    count_action_sets: 1,
-                    action_sets: sets.as_ptr(),
-                };
-                assert_eq!(attach_fn(lp.session, &info), xr::Result::SUCCESS);
-                assert_eq!(
-                    info.count_action_sets, 1,
-                    "the application's struct is untouched"
-                );
-            }
             let mut space = xr::Space::NULL;
             if attach {
+                attach_set(lp, set);
                 let create_space: xr::pfn::CreateActionSpace = lp.func(c"xrCreateActionSpace");
                 let info = xr::ActionSpaceCreateInfo {
                     ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
@@ -288,24 +135,7 @@ impl AppInput {
 
     /// The application's xrSyncActions of its own set.
     fn sync(&self, lp: &HeadlessLoop) {
-        let active = [xr::ActiveActionSet {
-            action_set: self.set,
-            subaction_path: xr::Path::NULL,
-        }];
-        let info = xr::ActionsSyncInfo {
-            ty: xr::StructureType::ACTIONS_SYNC_INFO,
-            next: std::ptr::null(),
-            count_active_action_sets: 1,
-            active_action_sets: active.as_ptr(),
-        };
-        // SAFETY: a live session and set; the struct lives across the call.
-        let r = unsafe { (self.sync)(lp.session, &info) };
-        // Unfocused (the first frames) is a success code: input goes to the focused session only.
-        assert!(
-            [xr::Result::SUCCESS, xr::Result::SESSION_NOT_FOCUSED].contains(&r),
-            "{r:?}"
-        );
-        assert_eq!(info.count_active_action_sets, 1, "untouched");
+        sync_set(lp, self.sync, self.set);
     }
 
     /// Whether the application's own action is active, and its space's pose in `base` at the last
@@ -524,7 +354,7 @@ fn an_app_with_its_own_eye_gaze_binding_keeps_getting_it_here() {
             "{yaw} {pitch}"
         );
     }
-    let got = located(&log_lines(&log));
+    let got = located(log_lines(&log));
     let last = got.last().expect("fovea located the gaze too");
     assert_eq!(last.tracking, Tracking::Tracked);
     assert!((last.angles[0] - 8.0).abs() < 0.05 && (last.angles[1] + 3.0).abs() < 0.05);
@@ -638,7 +468,7 @@ fn a_runtime_that_refuses_the_gaze_space_before_attach_works() {
             let log = log_here("after-attach", &[]);
             let mut lp = running(eye_tracker(true, true, "fix -6,4 for 10s"), &[]);
             attach_and_sync(&mut lp, 60);
-            let got = located(&log_lines(&log));
+            let got = located(log_lines(&log));
             let last = got.last().expect("located");
             assert_eq!(last.tracking, Tracking::Tracked);
             assert!((last.angles[0] + 6.0).abs() < 0.05 && (last.angles[1] - 4.0).abs() < 0.05);
@@ -715,12 +545,12 @@ fn an_app_that_attaches_but_never_syncs_gets_gaze() {
                     lp.func(c"xrSuggestInteractionProfileBindings");
                 let binding = [xr::ActionSuggestedBinding {
                     action: _input.action,
-                    binding: path(&lp.app, GAZE_POSE),
+                    binding: path(&lp.app, EYE_GAZE_POSE),
                 }];
                 let info = xr::InteractionProfileSuggestedBinding {
                     ty: xr::StructureType::INTERACTION_PROFILE_SUGGESTED_BINDING,
                     next: std::ptr::null(),
-                    interaction_profile: path(&lp.app, PROFILE),
+                    interaction_profile: path(&lp.app, EYE_GAZE_PROFILE),
                     count_suggested_bindings: 1,
                     suggested_bindings: binding.as_ptr(),
                 };
@@ -730,7 +560,7 @@ fn an_app_that_attaches_but_never_syncs_gets_gaze() {
             for _ in 0..60 {
                 lp.frame().unwrap();
             }
-            let got = located(&log_lines(&log));
+            let got = located(log_lines(&log));
             assert!(got.len() >= 55, "synced alone every frame: {}", got.len());
             let last = got.last().unwrap();
             assert_eq!(last.tracking, Tracking::Tracked);
@@ -870,14 +700,7 @@ fn an_eye_gaze_suggestion_made_before_the_session_still_binds_both() {
             // Suggested before any session: fovea has no action yet, and suggests the
             // application's binding again with its own at the attach.
             let (set, action) = declare(&app, true);
-            let mut lp = HeadlessLoop::new(
-                app,
-                SwapchainSpec {
-                    foveation: true,
-                    array_size: 2,
-                },
-            )
-            .unwrap();
+            let mut lp = foveated_loop(app);
             let input = AppInput::with(&lp, set, action, true);
             for _ in 0..30 {
                 lp.frame().unwrap();
@@ -887,7 +710,7 @@ fn an_eye_gaze_suggestion_made_before_the_session_still_binds_both() {
             assert!(active, "the application's gaze action is active");
             let [yaw, pitch] = pose_angles(pose.expect("located"));
             assert!((yaw + 4.0).abs() < 0.01 && (pitch - 2.0).abs() < 0.01);
-            let last = located(&log_lines(&log))
+            let last = located(log_lines(&log))
                 .pop()
                 .expect("fovea located the gaze");
             assert_eq!(last.tracking, Tracking::Tracked);

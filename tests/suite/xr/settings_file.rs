@@ -6,11 +6,11 @@
 //! process of its own: the log and the XDG folders are process-wide.
 
 use fovea_harness::app::API_1_0;
-use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
+use fovea_harness::frame_loop::FOVEATION_EXTENSIONS;
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 
-use crate::support::in_own_process;
+use crate::support::{foveated_loop, in_own_process};
 
 fn fov_values(text: &str) -> Vec<String> {
     text.lines()
@@ -61,14 +61,7 @@ fn per_app_sections_here() {
     cfg.journal = false;
     sim::control::set_thread_config(Some(cfg));
     let app = App::new(Chain::fovea().unwrap(), &FOVEATION_EXTENSIONS, API_1_0).unwrap();
-    let mut lp = HeadlessLoop::new(
-        app,
-        SwapchainSpec {
-            foveation: true,
-            array_size: 2,
-        },
-    )
-    .unwrap();
+    let mut lp = foveated_loop(app);
     // The application asks for HIGH; the file's section for it says MEDIUM.
     lp.apply_profile(xr::FoveationLevelFB::HIGH, xr::FoveationDynamicFB::DISABLED)
         .unwrap();

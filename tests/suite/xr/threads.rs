@@ -20,14 +20,14 @@ use std::sync::{Arc, Barrier};
 use std::time::{Duration, Instant};
 
 use fovea_harness::app::API_1_0;
-use fovea_harness::frame_loop::{HeadlessLoop, SwapchainSpec, FOVEATION_EXTENSIONS};
+use fovea_harness::frame_loop::FOVEATION_EXTENSIONS;
 use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 // parking_lot rather than std: ThreadSanitizer sees its atomics (std is not instrumented).
 use parking_lot::Mutex;
 use xr::Handle;
 
-use crate::support::{foveation_state, level_info};
+use crate::support::{foveated_loop, foveation_state, level_info};
 
 const WORKERS: usize = 4;
 /// The whole run must end within this (debug build, two shared cores, or valgrind).
@@ -129,14 +129,7 @@ fn four_threads_of_profiles_and_updates_beside_the_frame_loop() {
 
     sim::control::set_thread_config(None);
     let app = App::new(Chain::fovea().unwrap(), &FOVEATION_EXTENSIONS, API_1_0).unwrap();
-    let mut lp = HeadlessLoop::new(
-        app,
-        SwapchainSpec {
-            foveation: true,
-            array_size: 2,
-        },
-    )
-    .unwrap();
+    let mut lp = foveated_loop(app);
     let f = unsafe {
         Fns {
             create_profile: lp.func(c"xrCreateFoveationProfileFB"),
