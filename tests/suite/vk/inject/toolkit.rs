@@ -1,0 +1,48 @@
+//! Applications that ask for foveation as Qt 6.8's Quick 3D XR does: the FB foveation extensions
+//! without `XR_FB_foveation_vulkan`, a swapchain without `XrSwapchainCreateInfoFoveationFB`, a
+//! HIGH profile applied with `xrUpdateSwapchainFB` (docs/injection.md#applications-that-apply-profiles).
+//! Their eye passes are foveated by injection at the profile's level, with `inject` off and on.
+
+use fovea_model::density::Level;
+use fovea_vkdouble::Profile;
+
+use crate::support::in_own_process;
+
+use super::app::*;
+use super::outcome::*;
+
+/// fovea's line when it takes a profile for a swapchain without density images.
+const ACCEPTED: &str = "a foveation profile applied to a swapchain without density images: its \
+                        eye passes are foveated by injection at its level level=3";
+
+/// `xrUpdateSwapchainFB` succeeds (the application asserts it), and what reaches the driver is
+/// what injection at HIGH gives a multiview application ([`assert_outcome`]): the device with the
+/// attachment feature, both views of the swapchain's rendering and of the eye-shaped target of
+/// its own shading at the model's HIGH codes, texel for texel, the small target at full rate;
+/// with injection off, and on at `low` (the application's HIGH wins), on both driver profiles.
+#[test]
+fn a_profile_applied_to_a_swapchain_without_foveation_info_is_injected_at_its_level() {
+    in_own_process(
+        module_path!(),
+        "a_profile_applied_to_a_swapchain_without_foveation_info_is_injected_at_its_level",
+        || {
+            let mut first = true;
+            for inject in [None, Some(Level::Low)] {
+                for profile in [Profile::Nvidia, Profile::Amd] {
+                    let setup = Setup::Toolkit(inject);
+                    let dir = set_up(&format!("toolkit-{inject:?}-{profile:?}"), setup);
+                    let Some(out) = run(profile, setup, Api::Multiview, &dir) else {
+                        return;
+                    };
+                    assert_outcome(profile, setup, Api::Multiview, &out);
+                    if first {
+                        // The process's log file is the first run's.
+                        assert_eq!(out.log.matches(ACCEPTED).count(), 1, "{}", out.log);
+                        assert!(!out.log.contains("not injecting"), "{}", out.log);
+                        first = false;
+                    }
+                }
+            }
+        },
+    );
+}
