@@ -244,9 +244,23 @@ pub fn device_gets_maps() -> bool {
     CREATING_XR_DEVICE.with(|c| c.get()) || LEGACY_ENABLE.load(Ordering::Acquire)
 }
 
-/// Switches injection on at `level` (at `xrCreateInstance`).
-pub fn start(level: Level) {
+/// Set with [`WANTED`] where `inject` is on for the application; clear where injection is on only
+/// for the profiles it applies to swapchains without density images
+/// (docs/injection.md#applications-that-apply-profiles).
+static FOR_EVERY_APP: AtomicBool = AtomicBool::new(false);
+
+/// Whether `inject` is on for this process's application (not only for the profiles it applies):
+/// the Vulkan side says why a device cannot take maps only then, since an application that uses
+/// the FB API with density maps would otherwise read that its eye passes render at full rate.
+pub fn for_every_app() -> bool {
+    FOR_EVERY_APP.load(Ordering::Acquire)
+}
+
+/// Switches injection on at `level` (at `xrCreateInstance`); `every_app`: `inject` is on
+/// ([`for_every_app`]).
+pub fn start(level: Level, every_app: bool) {
     *STATE.write() = Some(Arc::new(Injection::new(level)));
+    FOR_EVERY_APP.store(every_app, Ordering::Release);
     WANTED.store(true, Ordering::Release);
     GENERATION.fetch_add(1, Ordering::AcqRel);
 }
@@ -255,6 +269,7 @@ pub fn start(level: Level) {
 pub fn stop() {
     *STATE.write() = None;
     WANTED.store(false, Ordering::Release);
+    FOR_EVERY_APP.store(false, Ordering::Release);
     LEGACY_ENABLE.store(false, Ordering::Release);
     GENERATION.fetch_add(1, Ordering::AcqRel);
 }
@@ -326,6 +341,11 @@ pub fn set_texel(texel: [u32; 2]) {
         };
         Some(packed(new))
     });
+}
+
+/// Whether an injecting device exists in this process (one made its injector, [`set_texel`]).
+pub fn injecting_device() -> bool {
+    TEXEL.load(Ordering::Acquire) != 0
 }
 
 fn texel() -> [u32; 2] {
@@ -454,7 +474,7 @@ pub(crate) mod tests {
     fn readers_see_each_change_and_take_no_lock_in_steady_state() {
         let _one = STATE_TESTS.lock();
         stop();
-        start(Level::High);
+        start(Level::High, true);
         let level = || with_current(|s| s.map(|s| s.pattern.level));
         assert_eq!(level(), Some(Level::High));
         set_pattern(
@@ -511,7 +531,7 @@ pub(crate) mod tests {
     fn centres_are_published_per_half_texel_and_keep_the_fixed_maps() {
         let _one = STATE_TESTS.lock();
         stop();
-        start(Level::High);
+        start(Level::High, true);
         set_swapchain(
             9,
             inject::Swapchain {
@@ -562,7 +582,7 @@ pub(crate) mod tests {
         );
         assert!(current().is_none() && !wanted());
 
-        start(Level::High);
+        start(Level::High, true);
         assert!(wanted());
         let on = GENERATION.load(Ordering::Acquire);
         assert_eq!(current().unwrap().pattern.level, Level::High);

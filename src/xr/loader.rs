@@ -596,6 +596,7 @@ fn injection(
     let asks = exts.enabled.contains(Ext::Foveation)
         && exts.provided(Ext::Foveation)
         && (exts.vulkan_enable || exts.vulkan_enable2);
+    let every_app = matches!(settings.injection(), settings::Injection::On(_));
     let level = match settings.injection() {
         settings::Injection::On(level) => {
             tracing::info!(
@@ -614,6 +615,6 @@ fn injection(
         }
         settings::Injection::Off => return None,
     };
-    crate::bridge::inject::start(level);
+    crate::bridge::inject::start(level, every_app);
     Some(level)
 }

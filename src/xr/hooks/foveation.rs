@@ -181,10 +181,28 @@ pub fn update_swapchain(
             "a foveation profile applied to a swapchain without density images: its eye passes \
              are foveated by injection at its level"
         );
+        if !crate::bridge::inject::injecting_device() {
+            no_injecting_device_once();
+        }
     }
     sc.session.refresh_dynamic_max();
     sc.session.publish_injected_pattern();
     Ok(xr::Result::SUCCESS)
+}
+
+/// The log line, once per process, for a profile fovea takes but cannot apply: no device of the
+/// process takes injected maps (the GPU has no shading-rate attachments, has density maps of its
+/// own, or the application renders with density maps there), so the swapchain renders at full rate.
+fn no_injecting_device_once() {
+    static SAID: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+    if !SAID.swap(true, std::sync::atomic::Ordering::Relaxed) {
+        tracing::info!(
+            "a foveation profile applied to a swapchain without density images, but no Vulkan \
+             device of this process takes injected shading-rate maps (no shading-rate \
+             attachments, density maps of the driver's own or the application's, or fovea's \
+             Vulkan layer not loaded): it renders at full rate"
+        );
+    }
 }
 
 /// The log line for a profile fovea refuses to apply, once per process: the application asked for
