@@ -310,11 +310,13 @@ pub fn set_fovs(fovs: &[Fov]) {
             // Each view's left,right,up,down in radians, exactly (the shortest text that reads
             // back the same f32): what the injected maps are drawn for, which a test of a real
             // application compares what its passes shaded at with.
-            let text: Vec<String> = fovs
-                .iter()
-                .map(|f| format!("{},{},{},{}", f.left, f.right, f.up, f.down))
-                .collect();
-            tracing::debug!(fovs = text.join(" "), "injection: the views' FOVs changed");
+            if tracing::enabled!(tracing::Level::DEBUG) {
+                let text: Vec<String> = fovs
+                    .iter()
+                    .map(|f| format!("{},{},{},{}", f.left, f.right, f.up, f.down))
+                    .collect();
+                tracing::debug!(fovs = text.join(" "), "injection: the views' FOVs changed");
+            }
         }
         s.views = fovs.len().min(MAX_VIEWS) as u8;
     });
