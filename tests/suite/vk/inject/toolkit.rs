@@ -46,3 +46,45 @@ fn a_profile_applied_to_a_swapchain_without_foveation_info_is_injected_at_its_le
         },
     );
 }
+
+/// On a device without shading-rate attachments (the double's `none` profile) the profile is still
+/// accepted, but nothing can foveate it: one info line says so, once however often it happens,
+/// the device reaches the driver as the application asked, no map is made, and the Vulkan side's
+/// line for `inject = true` ("injection is on, but ...") is not written, since it is
+/// not on.
+#[test]
+fn a_profile_no_device_can_take_is_said_once() {
+    in_own_process(
+        module_path!(),
+        "a_profile_no_device_can_take_is_said_once",
+        || {
+            let setup = Setup::Toolkit(None);
+            let said = "a foveation profile applied to a swapchain without density images, but no \
+                        Vulkan device of this process takes injected shading-rate maps";
+            let dir = set_up("toolkit-no-device", setup);
+            for run_ in 0..2 {
+                let Some(out) = run(Profile::None, setup, Api::Multiview, &dir) else {
+                    return;
+                };
+                // (The double records a device only where shading rates are in play.)
+                for d in out.of("device") {
+                    assert_ne!(d["features"]["attachment"], true, "{d}");
+                }
+                assert!(
+                    !out.log.contains("injected shading-rate map made"),
+                    "{}",
+                    out.log
+                );
+                // Both runs log into the process's one file.
+                assert_eq!(out.log.matches(said).count(), 1, "{run_}:\n{}", out.log);
+                assert_eq!(out.log.matches(ACCEPTED).count(), run_ + 1, "{}", out.log);
+                assert!(
+                    !out.log
+                        .contains("injection is on, but this device cannot take"),
+                    "{}",
+                    out.log
+                );
+            }
+        },
+    );
+}
