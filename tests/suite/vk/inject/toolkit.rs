@@ -88,3 +88,45 @@ fn a_profile_no_device_can_take_is_said_once() {
         },
     );
 }
+
+/// Quest's debug properties apply to the applied profile as to any: `debug.oculus.foveation.level`
+/// written to the property file while the application runs replaces its HIGH, and the map is
+/// refilled in place, once, with the new level's codes.
+#[test]
+fn the_debug_level_replaces_the_applied_profiles_level() {
+    in_own_process(
+        module_path!(),
+        "the_debug_level_replaces_the_applied_profiles_level",
+        || {
+            let then = Level::Low;
+            let profile = Profile::Nvidia;
+            let setup = Setup::Toolkit(None);
+            let dir = set_up("toolkit-props", setup);
+            let Some(out) = run_with(profile, setup, Api::Dynamic, &dir, Some(then)) else {
+                return;
+            };
+            assert_outcome(profile, setup, Api::Dynamic, &out);
+            let cb2 = out.second.expect("a second command buffer");
+            let view = out.rates(Api::Dynamic)[0]["view"].clone();
+            let image = out.image_of(&view);
+            let views = fovea_model::inject::Views::Layers { first: 0, count: 1 };
+            let new = out.codes_in(cb2, &image);
+            assert!(
+                new.2 == expected(profile, views, out.fovs, then).2,
+                "the property's level"
+            );
+            assert!(
+                out.codes_of(&image).2 == expected(profile, views, out.fovs, TOOLKIT_LEVEL).2,
+                "the profile's level before"
+            );
+            assert_eq!(
+                out.log
+                    .matches("injected shading-rate map refilled")
+                    .count(),
+                1,
+                "{}",
+                out.log
+            );
+        },
+    );
+}
