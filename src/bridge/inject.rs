@@ -27,6 +27,10 @@ pub struct EyeSwapchain {
     /// Its `VkImage`s as raw handles, once the application enumerated them.
     pub images: Vec<u64>,
     pub shape: inject::Swapchain,
+    /// The application foveates it itself, with density images fovea gave it
+    /// (XR_FB_foveation_vulkan): passes into its images are not injected into, and its shape
+    /// makes no target an eye-shaped one (docs/injection.md#switching-it-on).
+    pub own: bool,
 }
 
 /// Everything the Vulkan side needs to decide and fill an injected pass.
@@ -79,11 +83,6 @@ impl Injection {
         self.maps
     }
 
-    /// The swapchains' shapes, in the order [`Target::swapchain`] indexes them.
-    fn shapes(&self) -> impl Iterator<Item = inject::Swapchain> + '_ {
-        self.swapchains.iter().map(|s| s.shape)
-    }
-
     /// Which swapchain `image` belongs to, if any.
     pub fn swapchain_of(&self, image: u64) -> Option<usize> {
         self.swapchains
@@ -92,8 +91,10 @@ impl Injection {
     }
 
     /// What a pass whose colour target is `image` (`extent`, rendering `layers` layers from
-    /// `base_layer` of an image with `image_layers`) is. At most [`MAX_SWAPCHAINS`] swapchains are
-    /// looked at, with no allocation: this may run when a pass begins.
+    /// `base_layer` of an image with `image_layers`) is: `Other` for an image of a swapchain the
+    /// application foveates itself ([`EyeSwapchain::own`]), else as the other swapchains say. At
+    /// most [`MAX_SWAPCHAINS`] swapchains are looked at, with no allocation: this may run when a
+    /// pass begins.
     pub fn classify(
         &self,
         image: u64,
@@ -108,8 +109,22 @@ impl Injection {
             holds: Holds::Layers,
         }; MAX_SWAPCHAINS];
         let mut n = 0;
-        for (slot, s) in shapes.iter_mut().zip(self.shapes()) {
-            *slot = s;
+        let mut swapchain = None;
+        for s in &self.swapchains {
+            let holds_image = s.images.contains(&image);
+            if s.own {
+                if holds_image {
+                    return Pass::Other;
+                }
+                continue;
+            }
+            if n == MAX_SWAPCHAINS {
+                break;
+            }
+            if holds_image && swapchain.is_none() {
+                swapchain = Some(n);
+            }
+            shapes[n] = s.shape;
             n += 1;
         }
         let target = Target {
@@ -117,7 +132,7 @@ impl Injection {
             base_layer,
             layers,
             image_layers,
-            swapchain: self.swapchain_of(image).filter(|&i| i < n),
+            swapchain,
         };
         inject::classify(&shapes[..n], self.views, &target)
     }
@@ -229,9 +244,23 @@ pub fn device_gets_maps() -> bool {
     CREATING_XR_DEVICE.with(|c| c.get()) || LEGACY_ENABLE.load(Ordering::Acquire)
 }
 
-/// Switches injection on at `level` (at `xrCreateInstance`).
-pub fn start(level: Level) {
+/// Set with [`WANTED`] where `inject` is on for the application; clear where injection is on only
+/// for the profiles it applies to swapchains without density images
+/// (docs/injection.md#applications-that-apply-profiles).
+static FOR_EVERY_APP: AtomicBool = AtomicBool::new(false);
+
+/// Whether `inject` is on for this process's application (not only for the profiles it applies):
+/// the Vulkan side says why a device cannot take maps only then, since an application that uses
+/// the FB API with density maps would otherwise read that its eye passes render at full rate.
+pub fn for_every_app() -> bool {
+    FOR_EVERY_APP.load(Ordering::Acquire)
+}
+
+/// Switches injection on at `level` (at `xrCreateInstance`); `every_app`: `inject` is on
+/// ([`for_every_app`]).
+pub fn start(level: Level, every_app: bool) {
     *STATE.write() = Some(Arc::new(Injection::new(level)));
+    FOR_EVERY_APP.store(every_app, Ordering::Release);
     WANTED.store(true, Ordering::Release);
     GENERATION.fetch_add(1, Ordering::AcqRel);
 }
@@ -240,6 +269,7 @@ pub fn start(level: Level) {
 pub fn stop() {
     *STATE.write() = None;
     WANTED.store(false, Ordering::Release);
+    FOR_EVERY_APP.store(false, Ordering::Release);
     LEGACY_ENABLE.store(false, Ordering::Release);
     GENERATION.fetch_add(1, Ordering::AcqRel);
 }
@@ -277,6 +307,16 @@ pub fn set_fovs(fovs: &[Fov]) {
             s.fovs = new;
             s.fixed += 1;
             s.maps += 1;
+            // Each view's left,right,up,down in radians, exactly (the shortest text that reads
+            // back the same f32): what the injected maps are drawn for, which a test of a real
+            // application compares what its passes shaded at with.
+            if tracing::enabled!(tracing::Level::DEBUG) {
+                let text: Vec<String> = fovs
+                    .iter()
+                    .map(|f| format!("{},{},{},{}", f.left, f.right, f.up, f.down))
+                    .collect();
+                tracing::debug!(fovs = text.join(" "), "injection: the views' FOVs changed");
+            }
         }
         s.views = fovs.len().min(MAX_VIEWS) as u8;
     });
@@ -303,6 +343,11 @@ pub fn set_texel(texel: [u32; 2]) {
         };
         Some(packed(new))
     });
+}
+
+/// Whether an injecting device exists in this process (one made its injector, [`set_texel`]).
+pub fn injecting_device() -> bool {
+    TEXEL.load(Ordering::Acquire) != 0
 }
 
 fn texel() -> [u32; 2] {
@@ -349,15 +394,20 @@ pub fn set_centres(now: &[Option<[f32; 2]>; MAX_VIEWS]) {
     });
 }
 
-/// A swapchain that holds views was created (or what it holds was learned anew).
-pub fn set_swapchain(handle: u64, shape: inject::Swapchain) {
+/// A swapchain that holds views was created (or what it holds was learned anew); `own`: the
+/// application foveates it itself ([`EyeSwapchain::own`]).
+pub fn set_swapchain(handle: u64, shape: inject::Swapchain, own: bool) {
     update(
         |s| match s.swapchains.iter_mut().find(|e| e.handle == handle) {
-            Some(e) => e.shape = shape,
+            Some(e) => {
+                e.shape = shape;
+                e.own = own;
+            }
             None => s.swapchains.push(EyeSwapchain {
                 handle,
                 images: Vec::new(),
                 shape,
+                own,
             }),
         },
     );
@@ -426,7 +476,7 @@ pub(crate) mod tests {
     fn readers_see_each_change_and_take_no_lock_in_steady_state() {
         let _one = STATE_TESTS.lock();
         stop();
-        start(Level::High);
+        start(Level::High, true);
         let level = || with_current(|s| s.map(|s| s.pattern.level));
         assert_eq!(level(), Some(Level::High));
         set_pattern(
@@ -483,7 +533,7 @@ pub(crate) mod tests {
     fn centres_are_published_per_half_texel_and_keep_the_fixed_maps() {
         let _one = STATE_TESTS.lock();
         stop();
-        start(Level::High);
+        start(Level::High, true);
         set_swapchain(
             9,
             inject::Swapchain {
@@ -491,6 +541,7 @@ pub(crate) mod tests {
                 layers: 2,
                 holds: Holds::Layers,
             },
+            false,
         );
         set_texel([16, 16]);
         let mut c = [None; MAX_VIEWS];
@@ -533,7 +584,7 @@ pub(crate) mod tests {
         );
         assert!(current().is_none() && !wanted());
 
-        start(Level::High);
+        start(Level::High, true);
         assert!(wanted());
         let on = GENERATION.load(Ordering::Acquire);
         assert_eq!(current().unwrap().pattern.level, Level::High);
@@ -564,7 +615,7 @@ pub(crate) mod tests {
             layers: 1,
             holds: Holds::View(1),
         };
-        set_swapchain(7, shape);
+        set_swapchain(7, shape, false);
         set_images(7, &[70, 71, 72]);
         let s = current().unwrap();
         assert_eq!(s.swapchain_of(71), Some(0));
@@ -580,6 +631,35 @@ pub(crate) mod tests {
             "an eye-shaped target of its own"
         );
         assert_eq!(s.classify(99, [256, 256], 0, 1, 1), Pass::Other);
+        // A swapchain with density images of its own (the application foveates it itself): its
+        // images are no eye pass, and its shape makes no target an eye-shaped one; the others'
+        // images and shapes still count.
+        let own = inject::Swapchain {
+            extent: [2000, 1000],
+            layers: 2,
+            holds: Holds::Layers,
+        };
+        set_swapchain(8, own, true);
+        set_images(8, &[80, 81]);
+        let s = current().unwrap();
+        assert_eq!(s.classify(80, [2000, 1000], 0, 2, 2), Pass::Other);
+        assert_eq!(s.classify(98, [2000, 1000], 0, 2, 2), Pass::Other);
+        assert_eq!(
+            s.classify(72, [1440, 1600], 0, 1, 1),
+            Pass::Eye(Views::Layers { first: 1, count: 1 }),
+            "the other swapchain's images are still its eye's"
+        );
+        assert_eq!(
+            s.classify(99, [1440, 1600], 0, 1, 1),
+            Pass::Eye(Views::Merged)
+        );
+        set_swapchain(8, own, false);
+        assert_eq!(
+            current().unwrap().classify(80, [2000, 1000], 0, 2, 2),
+            Pass::Eye(Views::Layers { first: 0, count: 2 }),
+            "without density images it is injected into"
+        );
+        remove_swapchain(8);
         let before = current().unwrap().key();
         remove_swapchain(7);
         assert!(current().unwrap().swapchains.is_empty());

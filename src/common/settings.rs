@@ -401,21 +401,19 @@ pub const DEFAULT_INJECT_LEVEL: Level = Level::Medium;
 pub enum Injection {
     /// `inject` is off.
     Off,
-    /// `inject` is on, but the application uses the FB foveation API itself: its own maps count,
-    /// and fovea never adds a second source of shading rates.
-    AppFoveates,
-    /// On, at this level (before the debug properties and the dynamic controller apply).
+    /// On, at this level (before the debug properties and the dynamic controller apply). An
+    /// application that uses the FB foveation API gets it too: whether it foveates a swapchain
+    /// itself is told per swapchain, by its density images (docs/injection.md#switching-it-on).
     On(Level),
 }
 
 impl Settings {
-    /// Whether injection applies to an application that enabled (`uses_fb`) or did not enable
-    /// any of the FB foveation extensions.
-    pub fn injection(&self, uses_fb: bool) -> Injection {
-        match (self.inject, uses_fb) {
-            (false, _) => Injection::Off,
-            (true, true) => Injection::AppFoveates,
-            (true, false) => Injection::On(self.inject_level.unwrap_or(DEFAULT_INJECT_LEVEL)),
+    /// Whether `inject` is on, and at which level.
+    pub fn injection(&self) -> Injection {
+        if self.inject {
+            Injection::On(self.inject_level.unwrap_or(DEFAULT_INJECT_LEVEL))
+        } else {
+            Injection::Off
         }
     }
 
@@ -553,23 +551,22 @@ mod tests {
     }
 
     #[test]
-    fn injection_is_off_by_default_and_never_for_fb_apps() {
+    fn injection_is_off_by_default() {
         let s = |pairs: &'static [(&'static str, &'static str)]| {
             Settings::from_lookup(move |k| pairs.iter().find(|p| p.0 == k).map(|p| p.1.to_string()))
         };
-        assert_eq!(s(&[]).injection(false), Injection::Off);
+        assert_eq!(s(&[]).injection(), Injection::Off);
         assert_eq!(
-            s(&[("FOVEA_INJECT_LEVEL", "3")]).injection(false),
+            s(&[("FOVEA_INJECT_LEVEL", "3")]).injection(),
             Injection::Off,
             "a level alone does not switch it on"
         );
         let on = s(&[("FOVEA_INJECT", "1")]);
-        assert_eq!(on.injection(false), Injection::On(DEFAULT_INJECT_LEVEL));
-        assert_eq!(on.injection(true), Injection::AppFoveates);
+        assert_eq!(on.injection(), Injection::On(DEFAULT_INJECT_LEVEL));
         let high = s(&[("FOVEA_INJECT", "1"), ("FOVEA_INJECT_LEVEL", "high")]);
-        assert_eq!(high.injection(false), Injection::On(Level::High));
+        assert_eq!(high.injection(), Injection::On(Level::High));
         assert_eq!(
-            s(&[("FOVEA_INJECT", "0"), ("FOVEA_INJECT_LEVEL", "2")]).injection(false),
+            s(&[("FOVEA_INJECT", "0"), ("FOVEA_INJECT_LEVEL", "2")]).injection(),
             Injection::Off
         );
     }
@@ -585,13 +582,13 @@ mod tests {
             ..Default::default()
         };
         let game = Settings::resolve(Some(&file), &id("game"), |_| None);
-        assert_eq!(game.injection(false), Injection::On(Level::Low));
+        assert_eq!(game.injection(), Injection::On(Level::Low));
         let other = Settings::resolve(Some(&file), &id("other"), |_| None);
-        assert_eq!(other.injection(false), Injection::Off);
+        assert_eq!(other.injection(), Injection::Off);
         let env_wins = Settings::resolve(Some(&file), &id("game"), |k| {
             (k == "FOVEA_INJECT_LEVEL").then(|| "4".to_string())
         });
-        assert_eq!(env_wins.injection(false), Injection::On(Level::HighTop));
+        assert_eq!(env_wins.injection(), Injection::On(Level::HighTop));
     }
 
     #[test]

@@ -579,35 +579,42 @@ fn api_layer_properties(
     Ok(ffi::two_call(&[p], count_out, properties))
 }
 
-/// Whether injection applies to a new instance (docs/injection.md#switching-it-on), and if so,
-/// publishes it for the Vulkan side before the application creates its `VkDevice`. An application
-/// that enabled an FB foveation extension foveates itself and is never injected into.
+/// Whether injection applies to a new instance (docs/injection.md#switching-it-on), and at which
+/// level for swapchains the application applies no profile to; if so, publishes it for the Vulkan
+/// side before the application creates its `VkDevice`.
+///
+/// With `inject` on, every application. With it off, a Vulkan application that enabled
+/// `XR_FB_foveation` where fovea provides it, at level `none`: the device must get the shading-rate
+/// attachment feature at `vkCreateDevice`, before the application can apply a profile to a
+/// swapchain without density images (Qt 6.8's Quick 3D XR does, docs/openxr-layer.md#swapchains-without-foveation-info),
+/// and until it does, its passes get maps of rate 1×1 everywhere. Whether the application
+/// foveates a swapchain itself is told per swapchain, by its density images.
 fn injection(
     settings: &settings::Settings,
     exts: Extensions,
 ) -> Option<fovea_model::density::Level> {
-    let uses_fb = [
-        Ext::Foveation,
-        Ext::FoveationConfiguration,
-        Ext::FoveationVulkan,
-    ]
-    .into_iter()
-    .any(|e| exts.enabled.contains(e));
-    match settings.injection(uses_fb) {
-        settings::Injection::Off => None,
-        settings::Injection::AppFoveates => {
-            tracing::info!(
-                "inject is on, but the application uses XR_FB_foveation itself: not injecting"
-            );
-            None
-        }
+    let asks = exts.enabled.contains(Ext::Foveation)
+        && exts.provided(Ext::Foveation)
+        && (exts.vulkan_enable || exts.vulkan_enable2);
+    let every_app = matches!(settings.injection(), settings::Injection::On(_));
+    let level = match settings.injection() {
         settings::Injection::On(level) => {
             tracing::info!(
                 level = level.name(),
                 "injecting shading rates into eye passes"
             );
-            crate::bridge::inject::start(level);
-            Some(level)
+            level
         }
-    }
+        settings::Injection::Off if asks => {
+            tracing::info!(
+                "the application enabled XR_FB_foveation: swapchains it applies a profile to \
+                 without density images are foveated by injecting shading rates into their eye \
+                 passes"
+            );
+            fovea_model::density::Level::None
+        }
+        settings::Injection::Off => return None,
+    };
+    crate::bridge::inject::start(level, every_app);
+    Some(level)
 }

@@ -271,6 +271,30 @@ pub struct Session {
     /// The gaze source's per-session part, where the system has an eye tracker
     /// ([`crate::xr::gaze`]); it writes `eyes`.
     pub gaze: Option<SessionGaze>,
+    /// The profile last applied to one of the session's swapchains without density images, which
+    /// injection foveates at its level ([`Session::injected_pattern_at`]), packed by
+    /// [`pack_request`]; 0 before any. An atomic: the frame loop reads it every frame.
+    pub inject_request: AtomicU64,
+}
+
+/// [`Session::inject_request`]'s packing of a profile's parameters: bit 63 set, the level in bits
+/// 32–39, dynamic in bit 40, eye-tracked in bit 41, the vertical offset's bits below.
+pub fn pack_request(p: ProfileParams) -> u64 {
+    1 << 63
+        | u64::from(p.level.min(0xFF)) << 32
+        | u64::from(p.dynamic) << 40
+        | u64::from(p.eye_tracked) << 41
+        | u64::from(p.vertical_offset_deg.to_bits())
+}
+
+/// The parameters [`pack_request`] packed; `None` for 0.
+pub fn unpack_request(v: u64) -> Option<ProfileParams> {
+    (v >> 63 == 1).then(|| ProfileParams {
+        level: (v >> 32 & 0xFF) as u32,
+        vertical_offset_deg: f32::from_bits(v as u32),
+        dynamic: v >> 40 & 1 == 1,
+        eye_tracked: v >> 41 & 1 == 1,
+    })
 }
 
 impl Session {
@@ -297,6 +321,7 @@ impl Session {
             fovs: Default::default(),
             eyes: SpinMutex::spin(EyeCentres::FIXED),
             gaze: None,
+            inject_request: AtomicU64::new(0),
         }
     }
 
@@ -330,17 +355,20 @@ impl Session {
         self.dynamic_max.store(max, Ordering::Relaxed);
     }
 
-    /// The injected pattern at dynamic step `step`, and whether it is dynamic: the injected level
-    /// as if an application had asked for it, under the debug overrides with Quest's meaning
+    /// The injected pattern at dynamic step `step`, and whether it is dynamic: the profile the
+    /// application last applied to a swapchain without density images
+    /// (docs/injection.md#applications-that-apply-profiles), else the injected level as if an
+    /// application had asked for it, under the debug overrides with Quest's meaning
     /// ([`effective`]). `None` where injection does not apply to this instance.
     pub fn injected_pattern_at(&self, step: usize) -> Option<(Pattern, bool)> {
         let level = self.instance.inject?;
-        let params = ProfileParams {
-            level: level as u32,
-            vertical_offset_deg: 0.0,
-            dynamic: false,
-            eye_tracked: false,
-        };
+        let params =
+            unpack_request(self.inject_request.load(Ordering::Relaxed)).unwrap_or(ProfileParams {
+                level: level as u32,
+                vertical_offset_deg: 0.0,
+                dynamic: false,
+                eye_tracked: false,
+            });
         Some(effective(params, self.instance.overrides.current(), step))
     }
 
@@ -812,6 +840,28 @@ mod tests {
         assert_eq!(s.get(), Some(moved));
         s.set([f(0.5), f(0.6)]);
         assert_eq!(s.get(), Some([f(0.5), f(0.6)]));
+    }
+
+    #[test]
+    fn an_applied_profile_packs_and_unpacks_whole() {
+        assert_eq!(unpack_request(0), None);
+        for p in [
+            ProfileParams::default(),
+            ProfileParams {
+                level: 3,
+                vertical_offset_deg: -7.5,
+                dynamic: true,
+                eye_tracked: true,
+            },
+            ProfileParams {
+                level: 1,
+                vertical_offset_deg: 0.25,
+                dynamic: false,
+                eye_tracked: true,
+            },
+        ] {
+            assert_eq!(unpack_request(pack_request(p)), Some(p), "{p:?}");
+        }
     }
 
     #[test]

@@ -119,7 +119,9 @@ fn cannot_strip(e: chain::ChainError) -> String {
 /// the OpenXR session renders with but the layer does not emulate on it: without that line the
 /// only sign is the stats line's `Inj=0/0` (docs/injection.md#which-devices-get-the-feature).
 fn injection_impossible(decision: &Decision) -> Option<String> {
-    if !crate::bridge::inject::wanted() || !crate::bridge::inject::device_gets_maps() {
+    // Only where `inject` is on: an application that applies FB profiles has its own word on
+    // this from the OpenXR side (docs/injection.md#applications-that-apply-profiles).
+    if !crate::bridge::inject::for_every_app() || !crate::bridge::inject::device_gets_maps() {
         return None;
     }
     let why = match decision {

@@ -16,7 +16,7 @@ use crate::xr::extensions::Ext;
 use crate::xr::ffi::HookResult;
 use crate::xr::ffi::{In, Out};
 use crate::xr::registry::{check_lost, session, swapchain};
-use crate::xr::registry::{registry, Profile};
+use crate::xr::registry::{pack_request, registry, Profile};
 
 /// Reads the profile parameters from a create info's nested chain
 /// (XrFoveationProfileCreateInfoFB -> XrFoveationLevelProfileCreateInfoFB ->
@@ -126,8 +126,13 @@ pub fn destroy_profile(profile: xr::FoveationProfileFB) -> HookResult<xr::Result
 }
 
 /// `xrUpdateSwapchainFB`: XrSwapchainStateFoveationFB copies the profile's parameters into the
-/// swapchain. Other state types go to the runtime where it implements XR_FB_swapchain_update_state,
-/// and are invalid otherwise.
+/// swapchain. On a swapchain without density images of an instance fovea injects into, injection
+/// foveates its eye passes at the profile's level from then on (docs/injection.md#applications-that-apply-profiles):
+/// Qt 6.8's Quick 3D XR applies a profile to swapchains it created without foveation info, and
+/// that is how fovea honours it. Where fovea cannot (a swapchain created without foveation info on
+/// a session that is not Vulkan), XR_ERROR_VALIDATION_FAILURE, as a Monado-derived runtime answers,
+/// and one log line says so. Other state types go to the runtime where it implements
+/// XR_FB_swapchain_update_state, and are invalid otherwise.
 pub fn update_swapchain(
     handle: xr::Swapchain,
     state: In<xr::SwapchainStateBaseHeaderFB>,
@@ -143,9 +148,10 @@ pub fn update_swapchain(
     if !st.flags.is_empty() {
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     }
-    // The spec gives no rule for a swapchain created without foveation; a Monado-derived
-    // runtime answers validation failure, and so does fovea.
+    // The spec gives no rule for a swapchain created without foveation; where fovea cannot
+    // foveate it (it takes profiles wherever injection can), a Monado-derived runtime's answer.
     let Some(foveation) = &sc.foveation else {
+        refused_once();
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     };
     let profile = registry()
@@ -163,8 +169,54 @@ pub fn update_swapchain(
         // runtime: https://registry.khronos.org/OpenXR/specs/1.0/html/xrspec.html#XR_KHR_vulkan_enable).
         f.generation += 1;
     }
+    if sc.density.is_none() && sc.session.instance.inject.is_some() {
+        // No density images: injection foveates it, at this profile's level.
+        sc.session.inject_request.store(
+            pack_request(profile.params),
+            std::sync::atomic::Ordering::Relaxed,
+        );
+        tracing::info!(
+            level = profile.params.level,
+            dynamic = profile.params.dynamic,
+            "a foveation profile applied to a swapchain without density images: its eye passes \
+             are foveated by injection at its level"
+        );
+        if !crate::bridge::inject::injecting_device() {
+            no_injecting_device_once();
+        }
+    }
     sc.session.refresh_dynamic_max();
+    sc.session.publish_injected_pattern();
     Ok(xr::Result::SUCCESS)
+}
+
+/// The log line, once per process, for a profile fovea takes but cannot apply: no device of the
+/// process takes injected maps (the GPU has no shading-rate attachments, has density maps of its
+/// own, or the application renders with density maps there), so the swapchain renders at full rate.
+fn no_injecting_device_once() {
+    static SAID: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+    if !SAID.swap(true, std::sync::atomic::Ordering::Relaxed) {
+        tracing::info!(
+            "a foveation profile applied to a swapchain without density images, but no Vulkan \
+             device of this process takes injected shading-rate maps (no shading-rate \
+             attachments, density maps of the driver's own or the application's, or fovea's \
+             Vulkan layer not loaded): it renders at full rate"
+        );
+    }
+}
+
+/// The log line for a profile fovea refuses to apply, once per process: the application asked for
+/// foveation and gets none, which a result code alone (that toolkits ignore) does not tell a user.
+fn refused_once() {
+    static SAID: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+    if !SAID.swap(true, std::sync::atomic::Ordering::Relaxed) {
+        tracing::info!(
+            "xrUpdateSwapchainFB: a foveation profile for a swapchain created without \
+             XrSwapchainCreateInfoFoveationFB on a session fovea cannot inject shading rates \
+             into (not Vulkan): refused with XR_ERROR_VALIDATION_FAILURE, the swapchain renders at \
+             full rate"
+        );
+    }
 }
 
 fn pass_down_update(

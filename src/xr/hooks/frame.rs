@@ -288,6 +288,7 @@ fn learn_from(published: &crate::bridge::inject::Injection, info: In<xr::FrameEn
                     holds: h,
                     ..e.shape
                 },
+                e.own,
             ),
             Some(_) => {}
             None => crate::bridge::inject::remove_swapchain(e.handle),

@@ -172,6 +172,7 @@ pub fn create_swapchain(
     } else {
         None
     };
+    let takes = takes_profiles(&state, req);
     let record = Swapchain {
         handle,
         session: state,
@@ -185,7 +186,7 @@ pub fn create_swapchain(
             array_size: i.array_size,
             mip_count: i.mip_count,
         },
-        foveation: req.foveation.then(|| Mutex::new(FoveationState::default())),
+        foveation: takes.then(|| Mutex::new(FoveationState::default())),
         density,
         submitted: Mutex::default(),
         app_offsets,
@@ -198,14 +199,32 @@ pub fn create_swapchain(
     }
     let injected = record.session.instance.inject.is_some();
     let info = record.info;
+    let own = record.density.is_some();
     registry()
         .swapchains
         .write()
         .insert(handle.into_raw(), Arc::new(record));
     if injected {
-        publish_eye_swapchain(handle, &info);
+        publish_eye_swapchain(handle, &info, own);
     }
     Ok(r)
+}
+
+/// Whether profiles may be applied to a new swapchain: one created with
+/// `XrSwapchainCreateInfoFoveationFB`, and on a Vulkan session of an instance fovea injects into
+/// (docs/openxr-layer.md#swapchains-without-foveation-info), any swapchain where the application
+/// enabled XR_FB_foveation: XR_FB_foveation's create flags only ask for the swapchain to be created
+/// with foveation support ("explicitly create the swapchain with ... support",
+/// https://registry.khronos.org/OpenXR/specs/1.1/man/html/XrSwapchainCreateFoveationFlagBitsFB.html),
+/// and nothing forbids a runtime to foveate a swapchain made without them in its own way, which on
+/// Vulkan is fovea's injection.
+fn takes_profiles(session: &Session, req: FoveationRequest) -> bool {
+    let exts = &session.instance.extensions;
+    req.foveation
+        || (exts.enabled.contains(Ext::Foveation)
+            && exts.provided(Ext::Foveation)
+            && session.vulkan.is_some()
+            && session.instance.inject.is_some())
 }
 
 /// `XR_SWAPCHAIN_USAGE_COLOR_ATTACHMENT_BIT`.
@@ -237,8 +256,9 @@ pub fn guess_holds(
     Some(Holds::View(eye.min(usize::from(u8::MAX)) as u8))
 }
 
-/// Publishes a new swapchain for injection where it may hold views.
-fn publish_eye_swapchain(handle: xr::Swapchain, info: &SwapchainInfo) {
+/// Publishes a new swapchain for injection where it may hold views; `own`: it has density images,
+/// and the application foveates it itself.
+fn publish_eye_swapchain(handle: xr::Swapchain, info: &SwapchainInfo, own: bool) {
     let earlier: Vec<_> = crate::bridge::inject::current()
         .map(|s| s.swapchains.iter().map(|e| e.shape).collect())
         .unwrap_or_default();
@@ -250,6 +270,7 @@ fn publish_eye_swapchain(handle: xr::Swapchain, info: &SwapchainInfo) {
                 layers: info.array_size,
                 holds,
             },
+            own,
         );
     }
 }

@@ -46,17 +46,17 @@ use crate::support::{root, Manifests, CORE_VALIDATION_MANIFEST, DEBIAN_LAYERS};
 const RUNTIME_JSON: &str = "/usr/share/openxr/1/openxr_monado.json";
 const VALIDATION: &str = "/usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json";
 /// Set to 1 where Monado must be there (the Debian 13 root): absent, the tests fail.
-const REQUIRE: &str = "FOVEA_REQUIRE_MONADO";
+pub(super) const REQUIRE: &str = "FOVEA_REQUIRE_MONADO";
 /// How long Monado may take to serve, and an application to finish; past it the test fails.
-const TIMEOUT: Duration = Duration::from_secs(300);
+pub(super) const TIMEOUT: Duration = Duration::from_secs(300);
 /// Frames per level of the example, and its frames in all (every level, each read back).
 const FRAMES_PER_LEVEL: u64 = 2;
 const FRAMES: u64 = 4 * FRAMES_PER_LEVEL;
 /// One Monado and one lavapipe application at a time.
-static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+pub(super) static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// What the tests need from the system.
-struct Monado {
+pub(super) struct Monado {
     service: PathBuf,
     hello_xr: PathBuf,
     lavapipe: PathBuf,
@@ -98,7 +98,7 @@ fn find() -> Result<Monado, String> {
 
 /// Monado, or `None` after printing why the test skips; under `FOVEA_REQUIRE_MONADO=1` a missing
 /// piece fails the test.
-fn monado() -> Option<Monado> {
+pub(super) fn monado() -> Option<Monado> {
     match find() {
         Ok(m) => Some(m),
         Err(reason) if std::env::var(REQUIRE).is_ok_and(|v| v == "1") => {
@@ -144,7 +144,7 @@ fn drain(mut pipe: impl Read + Send + 'static) -> JoinHandle<String> {
 }
 
 /// A running `monado-service` in a folder of its own.
-struct Service {
+pub(super) struct Service {
     child: Child,
     dir: PathBuf,
     output: Option<(JoinHandle<String>, JoinHandle<String>)>,
@@ -153,7 +153,7 @@ struct Service {
 
 impl Service {
     /// Starts Monado and waits until it serves (its socket exists).
-    fn start(m: &Monado, label: &str) -> Service {
+    pub(super) fn start(m: &Monado, label: &str) -> Service {
         let dir = std::env::temp_dir().join(format!("fovea-monado-{label}-{}", std::process::id()));
         std::fs::remove_dir_all(&dir).ok();
         let xdg = dir.join("xdg");
@@ -203,7 +203,7 @@ impl Service {
     }
 
     /// Kills Monado; whether it was still running, and what it printed.
-    fn stop(&mut self) -> (bool, String) {
+    pub(super) fn stop(&mut self) -> (bool, String) {
         let running = self.child.try_wait().unwrap().is_none();
         self.child.kill().ok();
         self.child.wait().ok();
@@ -230,7 +230,7 @@ impl Drop for Service {
 /// layer findable (`implicit`: its implicit manifest in the per-user folder, for
 /// XR_KHR_vulkan_enable, where the application makes the VkInstance; otherwise the explicit one on
 /// `VK_ADD_LAYER_PATH`), per-user folders of the run's own.
-fn app_env(
+pub(super) fn app_env(
     cmd: &mut Command,
     m: &Monado,
     service: &Service,
@@ -286,7 +286,7 @@ fn app_env(
 /// The lines of a run that are messages: validation (the example prints each as
 /// `foveated_vulkan: Vulkan ...`; hello_xr's are picked by [`hello_xr::messages`]), warnings and
 /// errors of fovea, anything else on stderr but fovea's info lines.
-fn example_messages(stderr: &str) -> Vec<&str> {
+pub(super) fn example_messages(stderr: &str) -> Vec<&str> {
     stderr
         .lines()
         .filter(|l| {
@@ -299,7 +299,7 @@ fn example_messages(stderr: &str) -> Vec<&str> {
 
 /// `text` less the info records Monado's client library prints to stderr (`LOG in xrFoo: ...`,
 /// then lines indented with a tab); its warnings and errors (`WARNING in`, `ERROR in`) stay.
-fn without_monado_info(text: &str) -> String {
+pub(super) fn without_monado_info(text: &str) -> String {
     let mut out = String::new();
     let mut in_log = false;
     for line in text.lines() {

@@ -172,6 +172,34 @@ fn a_swapchain_without_foveation_refuses_profiles() {
     );
 }
 
+/// Where fovea still refuses a profile an application applied (a swapchain created without
+/// foveation info on a session fovea cannot inject into: headless here), one info line says so,
+/// once however often the application tries: toolkits ignore the result code.
+#[test]
+fn a_refused_profile_is_logged_once() {
+    crate::support::in_own_process(module_path!(), "a_refused_profile_is_logged_once", || {
+        let dir = std::env::temp_dir().join(format!("fovea-refused-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("fovea.log");
+        std::env::set_var("FOVEA_LOG", "info");
+        std::env::set_var("FOVEA_LOG_FILE", &log);
+        let (lp, f) = running(false);
+        let p = create(&f, lp.session, Some(&level_info(3, 0, 0.0))).unwrap();
+        for _ in 0..3 {
+            assert_eq!(
+                update(&f, lp.swapchain, &foveation_state(p, 0)),
+                xr::Result::ERROR_VALIDATION_FAILURE
+            );
+        }
+        let text = std::fs::read_to_string(&log).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        let said = "xrUpdateSwapchainFB: a foveation profile for a swapchain created without \
+                    XrSwapchainCreateInfoFoveationFB on a session fovea cannot inject shading \
+                    rates into (not Vulkan)";
+        assert_eq!(text.matches(said).count(), 1, "{text}");
+    });
+}
+
 #[test]
 fn a_profile_of_another_session_is_an_invalid_handle() {
     let (a, fa) = running(true);

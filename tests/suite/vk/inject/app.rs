@@ -85,7 +85,16 @@ pub(super) enum Setup {
     /// a null view in every rendering, and an R8_UINT image with the shading-rate usage it never
     /// attaches.
     Vkd3d(Option<Level>),
+    /// As Qt 6.8's Quick 3D XR: the application enables `XR_FB_foveation`,
+    /// `XR_FB_foveation_configuration` and `XR_FB_swapchain_update_state` (not
+    /// `XR_FB_foveation_vulkan`), creates its swapchain without `XrSwapchainCreateInfoFoveationFB`
+    /// and applies a HIGH profile to it with `xrUpdateSwapchainFB`, which must succeed; injection
+    /// off, or on at this level (the profile's HIGH wins).
+    Toolkit(Option<Level>),
 }
+
+/// What a [`Setup::Toolkit`] application applies to its swapchain.
+pub(super) const TOOLKIT_LEVEL: Level = Level::High;
 
 impl Setup {
     /// The injected level, where injection is on for an application fovea injects into.
@@ -94,6 +103,7 @@ impl Setup {
             Setup::Inject(level) => Some(level),
             Setup::SetsRates(level) | Setup::Vkd3d(level) => level,
             Setup::AppRates => Some(Level::High),
+            Setup::Toolkit(_) => Some(TOOLKIT_LEVEL),
             Setup::Off => None,
         }
     }
@@ -134,7 +144,7 @@ pub(super) fn set_up(label: &str, setup: Setup) -> PathBuf {
             std::env::set_var("FOVEA_INJECT", "1");
             std::env::set_var("FOVEA_INJECT_LEVEL", (level as u8).to_string());
         }
-        Setup::SetsRates(Some(level)) | Setup::Vkd3d(Some(level)) => {
+        Setup::SetsRates(Some(level)) | Setup::Vkd3d(Some(level)) | Setup::Toolkit(Some(level)) => {
             std::env::set_var("FOVEA_INJECT", "1");
             std::env::set_var("FOVEA_INJECT_LEVEL", (level as u8).to_string());
         }
@@ -142,7 +152,7 @@ pub(super) fn set_up(label: &str, setup: Setup) -> PathBuf {
             std::env::set_var("FOVEA_INJECT", "1");
             std::env::set_var("FOVEA_INJECT_LEVEL", (Level::High as u8).to_string());
         }
-        Setup::Off | Setup::SetsRates(None) | Setup::Vkd3d(None) => {
+        Setup::Off | Setup::SetsRates(None) | Setup::Vkd3d(None) | Setup::Toolkit(None) => {
             std::env::remove_var("FOVEA_INJECT")
         }
     }
@@ -389,6 +399,34 @@ pub(super) fn framebuffer(
     unsafe { d.create_framebuffer(&info, None) }.unwrap()
 }
 
+/// Creates a profile of `level` and applies it to `swapchain` (created without foveation info), as
+/// Qt does; fovea must accept it.
+pub(super) fn apply_profile(
+    app: &App,
+    session: xr::Session,
+    swapchain: xr::Swapchain,
+    level: Level,
+) {
+    let create: xr::pfn::CreateFoveationProfileFB = func(app, "xrCreateFoveationProfileFB");
+    let update: xr::pfn::UpdateSwapchainFB = func(app, "xrUpdateSwapchainFB");
+    let level_info = crate::support::level_info(level as i32, 0, 0.0);
+    let info = xr::FoveationProfileCreateInfoFB {
+        ty: xr::StructureType::FOVEATION_PROFILE_CREATE_INFO_FB,
+        next: &level_info as *const _ as *mut c_void,
+    };
+    let mut profile = xr::FoveationProfileFB::NULL;
+    // SAFETY: the structs live across the calls.
+    unsafe {
+        assert_eq!(create(session, &info, &mut profile), xr::Result::SUCCESS);
+        let state = crate::support::foveation_state(profile, 0);
+        assert_eq!(
+            update(swapchain, &state as *const _ as *const _),
+            xr::Result::SUCCESS,
+            "a profile applied to a swapchain created without foveation info"
+        );
+    }
+}
+
 /// The swapchain's `VkImage`s.
 pub(super) fn swapchain_images(app: &App, swapchain: xr::Swapchain) -> Vec<vk::Image> {
     let images_fn: xr::pfn::EnumerateSwapchainImages = func(app, "xrEnumerateSwapchainImages");
@@ -448,7 +486,18 @@ pub(super) fn run_with(
     crate::support::device::assert_no_double_errors(env);
     env.double.clear();
     vulkan::take_messages();
-    let app = App::new(Chain::fovea().unwrap(), &["XR_KHR_vulkan_enable2"], API_1_0).unwrap();
+    let toolkit = matches!(setup, Setup::Toolkit(_));
+    let extensions: &[&str] = if toolkit {
+        &[
+            "XR_KHR_vulkan_enable2",
+            "XR_FB_foveation",
+            "XR_FB_foveation_configuration",
+            "XR_FB_swapchain_update_state",
+        ]
+    } else {
+        &["XR_KHR_vulkan_enable2"]
+    };
+    let app = App::new(Chain::fovea().unwrap(), extensions, API_1_0).unwrap();
     let sys = app.system();
     let ours = std::ffi::CString::new(fovea_abi::VK_LAYER_NAME).unwrap();
     let layers = [
@@ -513,6 +562,9 @@ pub(super) fn run_with(
         unsafe { create_swapchain(session, &info, &mut swapchain) },
         xr::Result::SUCCESS
     );
+    if toolkit {
+        apply_profile(&app, session, swapchain, TOOLKIT_LEVEL);
+    }
     let images = swapchain_images(&app, swapchain);
     let frame = Frame {
         app: &app,

@@ -39,10 +39,12 @@
 //! The application is [`app`], what it left and what must reach the driver [`outcome`]; the
 //! tests are by subject: [`eye_passes`] (what eye and other passes get, at each level, and with
 //! injection off), [`apps_rates`] (applications that set shading rates or attachments of their
-//! own) and [`devices`] (only the session's device is injected into).
+//! own), [`devices`] (only the session's device is injected into) and [`toolkit`] (an
+//! application that applies a profile to a swapchain without foveation info, as Qt does).
 
 mod app;
 mod apps_rates;
 mod devices;
 mod eye_passes;
 mod outcome;
+mod toolkit;
