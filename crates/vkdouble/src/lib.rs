@@ -93,6 +93,7 @@
 
 #![deny(unsafe_op_in_unsafe_fn)]
 
+pub mod blocks;
 mod chain;
 mod ffi;
 mod layer;
