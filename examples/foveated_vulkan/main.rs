@@ -23,7 +23,8 @@
 //! `--dump DIR` (read back each new density map and the frames where a level starts, and the last
 //! frame, as PNGs), `--validate` (the Vulkan validation layer with a messenger; the run fails on
 //! any message), `--vk-layer NAME` (one more Vulkan layer for the VkInstance, after validation;
-//! repeatable), `--heavy` (a fill-bound fragment shader, for timing eye passes), `--check-rates`
+//! repeatable), `--heavy` (a fill-bound fragment shader, for timing eye passes), `--scene room`
+//! (instead of the stripes, a room like VR apps draw: `shaders/scene.frag`), `--check-rates`
 //! (with `--heavy`: the fragment size each density-map texel was shaded at, read from the pixels
 //! of frames read back, against what the map allows), `--eye-tracked` (below), `--help`.
 //!
@@ -117,6 +118,8 @@ struct Options {
     vk_layers: Vec<std::ffi::CString>,
     /// The fill-bound fragment shader: a loop of arithmetic per fragment.
     heavy: bool,
+    /// The room of `shaders/scene.frag` instead of the stripes (`--scene room`).
+    room: bool,
     /// Read the fragment sizes the GPU shaded at from the frames' pixels (`--check-rates`).
     check_rates: bool,
     /// No XR_FB_foveation* extension and no density maps (`--no-fb`).
@@ -143,6 +146,7 @@ impl Options {
             validate: false,
             vk_layers: Vec::new(),
             heavy: false,
+            room: false,
             check_rates: false,
             no_fb: false,
             offscreen: false,
@@ -189,6 +193,15 @@ impl Options {
                         .map_err(|_| format!("{arg}: a layer name has no NUL"))?,
                 ),
                 "--heavy" => o.heavy = true,
+                "--scene" => {
+                    o.room = match value()?.as_str() {
+                        "stripes" => false,
+                        "room" => true,
+                        other => {
+                            return Err(format!("--scene: {other:?} is not stripes or room"))
+                        }
+                    }
+                }
                 "--check-rates" => {
                     o.check_rates = true;
                     o.capture = true;
@@ -215,6 +228,9 @@ impl Options {
         } else if o.layout == Layout::DoubleWide {
             // The FB path's density maps, overlay and read-back are per layer of an array.
             return Err("--double-wide renders without the FB API: add --no-fb".into());
+        }
+        if o.room && o.heavy {
+            return Err("--scene room and --heavy are two different scenes: pick one".into());
         }
         if o.check_rates && (!o.heavy || o.no_fb) {
             // Only the heavy shader gives every pixel its own colour, which is what tells a
@@ -283,6 +299,9 @@ usage: foveated_vulkan [options]   (run through an OpenXR runtime; see the file'
   --vk-layer NAME         one more Vulkan layer for the VkInstance, after validation (repeatable)
   --heavy                 a fill-bound fragment shader (a loop of arithmetic per fragment), for
                           timing eye passes on a real GPU
+  --scene stripes|room    what the eyes show: diagonal stripes in the level's tint (default), or
+                          a room like VR apps draw (textured wall and floor, hard edges, small
+                          text at several eccentricities, a slow pan), the same at every level
   --check-rates           (with --heavy) read the fragment size each density-map texel was shaded
                           at from the frames read back, and compare it with what the map allows
   --no-fb                 no XR_FB_foveation* extension, profile or density map: plain passes, as
@@ -977,6 +996,7 @@ unsafe fn session_loop(
         Setup {
             readback: options.capture,
             heavy: options.heavy,
+            room: options.room,
             offscreen: options.offscreen,
             dynamic_rendering: options.dynamic_rendering,
         },
@@ -1074,7 +1094,13 @@ unsafe fn session_loop(
                     && frames % EYE_TRACKED_READ_FRAMES == 0),
             density: options.capture,
         };
-        eye_ms[level].extend(renderer.draw(index, TINTS[level], read)?);
+        // The room is the same at every level; its push constant's w is the frame, for the pan.
+        let push = if options.room {
+            [0.0, 0.0, 0.0, frames as f32]
+        } else {
+            TINTS[level]
+        };
+        eye_ms[level].extend(renderer.draw(index, push, read)?);
         read_eyes = false;
         if options.capture {
             let map = renderer.density(index).unwrap_or_default();
@@ -1409,6 +1435,7 @@ mod tests {
             vec!["--validate"],
             vec!["--vk-layer", "VK_LAYER_X"],
             vec!["--heavy"],
+            vec!["--scene", "room"],
             vec!["--no-fb"],
             vec!["--offscreen"],
             vec!["--double-wide", "--no-fb"],
@@ -1431,6 +1458,12 @@ mod tests {
         assert!(err.contains("--help"), "{err}");
         let err = Options::parse(&["--check-rates".to_string()]).unwrap_err();
         assert!(err.contains("--heavy"), "{err}");
+        let args = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let err = Options::parse(&args(&["--scene", "room", "--heavy"])).unwrap_err();
+        assert!(err.contains("pick one"), "{err}");
+        let err = Options::parse(&args(&["--scene", "forest"])).unwrap_err();
+        assert!(err.contains("stripes or room"), "{err}");
+        assert!(!Options::parse(&args(&["--scene", "stripes"])).unwrap().room);
     }
 
     /// The shaded size of a tile is read from its pixels: blocks of one colour as large as the
@@ -1992,6 +2025,8 @@ mod tests {
                 render::HEAVY_OVERLAY,
             ),
             ("composite.frag", &[], render::COMPOSITE),
+            ("scene.frag", &[], render::SCENE),
+            ("scene.frag", &["-DOVERLAY"], render::SCENE_OVERLAY),
         ] {
             let spv = out.join("out.spv");
             let run = std::process::Command::new("glslangValidator")
