@@ -197,9 +197,7 @@ impl Options {
                     o.room = match value()?.as_str() {
                         "stripes" => false,
                         "room" => true,
-                        other => {
-                            return Err(format!("--scene: {other:?} is not stripes or room"))
-                        }
+                        other => return Err(format!("--scene: {other:?} is not stripes or room")),
                     }
                 }
                 "--check-rates" => {

@@ -2,7 +2,7 @@
 // A room like the ones VR apps draw (`--scene room`), procedural so the example needs no assets:
 // a brick wall and a receding checkered floor, both textured down to the pixel (so that a block
 // of pixels is uniform only where coarse fragments made it so), high-contrast edges (mortar,
-// tiles, thin dark poles), and panels of small text (glyphs of 3×5 cells, about 7×11 pixels at
+// tiles, thin dark poles), and panels of small text (glyphs of 3×5 cells, about 7×12 pixels at
 // Quest 3's resolution) at several distances from the view's centre. The camera pans slowly to
 // the right (push constant `w`: the frame number), for temporal artefacts. Everything is laid out
 // in the view's uv, so each headset sees the same angles. The level's tint is not used: every
