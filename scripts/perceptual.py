@@ -146,6 +146,8 @@ def analyse(frames_dir, models_dir):
                     "frame": path.name,
                     "size": [int(ref.shape[1]), int(ref.shape[0])],
                     "flip_mean": float(error.mean()),
+                    # Degrees from the gaze of the nearest pixel that differs from full rate.
+                    "nearest_change_deg": float(ecc[~same].min()) if (~same).any() else None,
                     "bands": bands,
                 }
             )
@@ -167,8 +169,10 @@ def table(rows):
         ("identical", "Pixels identical to full rate per band"),
     ]:
         out.append(f"**{title}**\n")
-        out.append(f"| headset | gaze | level | shaded | {heads} | reconstructed |")
-        out.append("|---|---|---|---|" + "---|" * len(BANDS) + "---|")
+        near = key == "identical"
+        extra = " nearest change |" if near else ""
+        out.append(f"| headset | gaze | level | shaded | {heads} |{extra} reconstructed |")
+        out.append("|---|---|---|---|" + "---|" * (len(BANDS) + near) + "---|")
         for r in rows:
             if key != "blocky" and r["level"] == "none":
                 continue
@@ -182,6 +186,9 @@ def table(rows):
             else:
                 cells = [cell(b, key) for b in r["bands"]]
             frac = "–" if r["shaded_fraction"] is None else f"{r['shaded_fraction']:.3f}"
+            if near:
+                n = r["nearest_change_deg"]
+                cells.append("–" if n is None else f"{n:.1f}°")
             out.append(
                 f"| {r['headset']} | {r['gaze']} | {r['level']} | {frac} | "
                 + " | ".join(cells)
