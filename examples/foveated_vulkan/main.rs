@@ -23,7 +23,8 @@
 //! `--dump DIR` (read back each new density map and the frames where a level starts, and the last
 //! frame, as PNGs), `--validate` (the Vulkan validation layer with a messenger; the run fails on
 //! any message), `--vk-layer NAME` (one more Vulkan layer for the VkInstance, after validation;
-//! repeatable), `--heavy` (a fill-bound fragment shader, for timing eye passes), `--check-rates`
+//! repeatable), `--heavy` (a fill-bound fragment shader, for timing eye passes), `--scene room`
+//! (instead of the stripes, a room like VR apps draw: `shaders/scene.frag`), `--check-rates`
 //! (with `--heavy`: the fragment size each density-map texel was shaded at, read from the pixels
 //! of frames read back, against what the map allows), `--eye-tracked` (below), `--help`.
 //!
@@ -117,6 +118,8 @@ struct Options {
     vk_layers: Vec<std::ffi::CString>,
     /// The fill-bound fragment shader: a loop of arithmetic per fragment.
     heavy: bool,
+    /// The room of `shaders/scene.frag` instead of the stripes (`--scene room`).
+    room: bool,
     /// Read the fragment sizes the GPU shaded at from the frames' pixels (`--check-rates`).
     check_rates: bool,
     /// No XR_FB_foveation* extension and no density maps (`--no-fb`).
@@ -143,6 +146,7 @@ impl Options {
             validate: false,
             vk_layers: Vec::new(),
             heavy: false,
+            room: false,
             check_rates: false,
             no_fb: false,
             offscreen: false,
@@ -189,6 +193,13 @@ impl Options {
                         .map_err(|_| format!("{arg}: a layer name has no NUL"))?,
                 ),
                 "--heavy" => o.heavy = true,
+                "--scene" => {
+                    o.room = match value()?.as_str() {
+                        "stripes" => false,
+                        "room" => true,
+                        other => return Err(format!("--scene: {other:?} is not stripes or room")),
+                    }
+                }
                 "--check-rates" => {
                     o.check_rates = true;
                     o.capture = true;
@@ -215,6 +226,9 @@ impl Options {
         } else if o.layout == Layout::DoubleWide {
             // The FB path's density maps, overlay and read-back are per layer of an array.
             return Err("--double-wide renders without the FB API: add --no-fb".into());
+        }
+        if o.room && o.heavy {
+            return Err("--scene room and --heavy are two different scenes: pick one".into());
         }
         if o.check_rates && (!o.heavy || o.no_fb) {
             // Only the heavy shader gives every pixel its own colour, which is what tells a
@@ -283,6 +297,9 @@ usage: foveated_vulkan [options]   (run through an OpenXR runtime; see the file'
   --vk-layer NAME         one more Vulkan layer for the VkInstance, after validation (repeatable)
   --heavy                 a fill-bound fragment shader (a loop of arithmetic per fragment), for
                           timing eye passes on a real GPU
+  --scene stripes|room    what the eyes show: diagonal stripes in the level's tint (default), or
+                          a room like VR apps draw (textured wall and floor, hard edges, small
+                          text at several eccentricities, a slow pan), the same at every level
   --check-rates           (with --heavy) read the fragment size each density-map texel was shaded
                           at from the frames read back, and compare it with what the map allows
   --no-fb                 no XR_FB_foveation* extension, profile or density map: plain passes, as
@@ -977,6 +994,7 @@ unsafe fn session_loop(
         Setup {
             readback: options.capture,
             heavy: options.heavy,
+            room: options.room,
             offscreen: options.offscreen,
             dynamic_rendering: options.dynamic_rendering,
         },
@@ -1074,7 +1092,13 @@ unsafe fn session_loop(
                     && frames % EYE_TRACKED_READ_FRAMES == 0),
             density: options.capture,
         };
-        eye_ms[level].extend(renderer.draw(index, TINTS[level], read)?);
+        // The room is the same at every level; its push constant's w is the frame, for the pan.
+        let push = if options.room {
+            [0.0, 0.0, 0.0, frames as f32]
+        } else {
+            TINTS[level]
+        };
+        eye_ms[level].extend(renderer.draw(index, push, read)?);
         read_eyes = false;
         if options.capture {
             let map = renderer.density(index).unwrap_or_default();
@@ -1409,6 +1433,7 @@ mod tests {
             vec!["--validate"],
             vec!["--vk-layer", "VK_LAYER_X"],
             vec!["--heavy"],
+            vec!["--scene", "room"],
             vec!["--no-fb"],
             vec!["--offscreen"],
             vec!["--double-wide", "--no-fb"],
@@ -1431,6 +1456,12 @@ mod tests {
         assert!(err.contains("--help"), "{err}");
         let err = Options::parse(&["--check-rates".to_string()]).unwrap_err();
         assert!(err.contains("--heavy"), "{err}");
+        let args = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let err = Options::parse(&args(&["--scene", "room", "--heavy"])).unwrap_err();
+        assert!(err.contains("pick one"), "{err}");
+        let err = Options::parse(&args(&["--scene", "forest"])).unwrap_err();
+        assert!(err.contains("stripes or room"), "{err}");
+        assert!(!Options::parse(&args(&["--scene", "stripes"])).unwrap().room);
     }
 
     /// The shaded size of a tile is read from its pixels: blocks of one colour as large as the
@@ -1902,7 +1933,11 @@ mod tests {
     }
 
     /// The frame as the shaders drew it: outside the overlay the level's tinted stripes, inside it
-    /// each view's own layer of the density map, one texel per (nearest-sampled) pixel.
+    /// each view's own layer of the density map, one texel per (nearest-sampled) pixel. With the
+    /// map attached (a GPU with shading-rate attachments, or the double playing one, which leaves
+    /// each pass's colour as coarse fragments shade it), a pixel may hold its fragment's value
+    /// instead of its own: that of the fragment's top-left pixel, in a fragment no larger than
+    /// its density texel allows; where the map allows only 1×1 it is its own.
     fn check_frame(o: &Outcome, c: &Capture) {
         let (w, h) = (o.view_size.0 as usize, o.view_size.1 as usize);
         let (dw, dh) = (
@@ -1927,7 +1962,9 @@ mod tests {
             let t = ((2 * p + 1 - shift) as f64 / size as f64) * n as f64;
             (t - t.round()).abs().gt(&0.01).then_some(t as usize)
         };
-        let (mut overlay, mut stripe) = (0, 0);
+        let stripe_at = |x: usize, y: usize| stripes[usize::from((x + y + 1) % 8 >= 4)];
+        let density_texel = w.div_ceil(dw).max(h.div_ceil(dh));
+        let (mut overlay, mut stripe, mut coarse) = (0, 0, 0);
         for layer in 0..2 {
             let image = &eyes[layer * w * h * 4..][..w * h * 4];
             let map = &c.density[layer * dw * dh * 2..][..dw * dh * 2];
@@ -1945,8 +1982,26 @@ mod tests {
                         assert!(close(px, want), "{at}: {px:?}, map texel {t:?}");
                         overlay += 1;
                     } else {
-                        let want = stripes[usize::from((x + y + 1) % 8 >= 4)];
-                        assert!(close(px, want), "{at}: {px:?}, stripe {want:?}");
+                        let want = stripe_at(x, y);
+                        if o.mode == Mode::Attachment && !close(px, want) {
+                            let (tx, ty) = (x / density_texel, y / density_texel);
+                            let t = &map[(ty.min(dh - 1) * dw + tx.min(dw - 1)) * 2..][..2];
+                            let allow =
+                                [t[0], t[1]].map(|v| fovea_model::shading_rate::axis_size(v, 4));
+                            let sizes = [1, 2, 4];
+                            let shaded = sizes.iter().any(|&fw| {
+                                sizes.iter().any(|&fh| {
+                                    fw <= allow[0] as usize
+                                        && fh <= allow[1] as usize
+                                        && close(px, stripe_at(x - x % fw, y - y % fh))
+                                })
+                            });
+                            assert!(
+                                shaded,
+                                "{at}: {px:?}, stripe {want:?}, no fragment within {allow:?}"
+                            );
+                            coarse += 1;
+                        }
                         stripe += 1;
                     }
                 }
@@ -1956,6 +2011,14 @@ mod tests {
             assert!(overlay > w * h / 3 && stripe > w * h, "{overlay} {stripe}");
         } else {
             assert_eq!((overlay, stripe), (0, 2 * w * h));
+        }
+        if o.mode == Mode::Attachment && c.level == 3 {
+            // HIGH's quarter resolution beyond 30°: many pixels hold a neighbour's stripe.
+            assert!(
+                coarse > w * h / 10,
+                "frame {}: {coarse} coarse pixels",
+                c.frame
+            );
         }
     }
 
@@ -1992,6 +2055,8 @@ mod tests {
                 render::HEAVY_OVERLAY,
             ),
             ("composite.frag", &[], render::COMPOSITE),
+            ("scene.frag", &[], render::SCENE),
+            ("scene.frag", &["-DOVERLAY"], render::SCENE_OVERLAY),
         ] {
             let spv = out.join("out.spv");
             let run = std::process::Command::new("glslangValidator")

@@ -26,6 +26,8 @@ pub(crate) const OVERLAY: &[u8] = include_bytes!("shaders/overlay.frag.spv");
 pub(crate) const HEAVY: &[u8] = include_bytes!("shaders/heavy.frag.spv");
 pub(crate) const HEAVY_OVERLAY: &[u8] = include_bytes!("shaders/heavy_overlay.frag.spv");
 pub(crate) const COMPOSITE: &[u8] = include_bytes!("shaders/composite.frag.spv");
+pub(crate) const SCENE: &[u8] = include_bytes!("shaders/scene.frag.spv");
+pub(crate) const SCENE_OVERLAY: &[u8] = include_bytes!("shaders/scene_overlay.frag.spv");
 
 /// GPU timestamps around each eye pass: a query pool of two per pass, and nanoseconds per tick.
 struct Timer {
@@ -113,6 +115,8 @@ pub struct Setup {
     pub readback: bool,
     /// The fill-bound fragment shader (`--heavy`).
     pub heavy: bool,
+    /// The room of `scene.frag` instead of the stripes (`--scene room`); not with `heavy`.
+    pub room: bool,
     /// The offscreen passes of [`OFFSCREEN`] before the eye passes (`--offscreen`).
     pub offscreen: bool,
     /// `vkCmdBeginRenderingKHR` instead of render passes (`--dynamic-rendering`); the device has
@@ -369,11 +373,13 @@ impl<'d> Renderer<'d> {
             )
             .map_err(e("vkCreatePipelineLayout"))?;
         self.pipeline = self.create_pipeline(
-            match (overlay, self.setup.heavy) {
-                (false, false) => PATTERN,
-                (true, false) => OVERLAY,
-                (false, true) => HEAVY,
-                (true, true) => HEAVY_OVERLAY,
+            match (overlay, self.setup.heavy, self.setup.room) {
+                (false, _, true) => SCENE,
+                (true, _, true) => SCENE_OVERLAY,
+                (false, false, false) => PATTERN,
+                (true, false, false) => OVERLAY,
+                (false, true, false) => HEAVY,
+                (true, true, false) => HEAVY_OVERLAY,
             },
             Target::Eye,
         )?;

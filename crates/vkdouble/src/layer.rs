@@ -26,6 +26,8 @@ use crate::record::{self, error, event};
 use crate::shade::PipelineRate;
 use crate::Profile;
 
+mod coarse;
+
 type Key = usize;
 
 /// The loader's dispatch pointer in a dispatchable handle.
@@ -1969,6 +1971,7 @@ unsafe fn note_begin_render_pass(
     }
     PassRec {
         colours,
+        suspending: false,
         rendering: false,
         area: vk::Extent2D {
             width: a.offset.x.max(0) as u32 + a.extent.width,
@@ -2133,6 +2136,7 @@ unsafe extern "system" fn cmd_begin_rendering(
                 cb,
                 PassRec {
                     colours,
+                    suspending: ri.flags.contains(vk::RenderingFlags::SUSPENDING),
                     rendering: true,
                     area: vk::Extent2D {
                         width: a.offset.x.max(0) as u32 + a.extent.width,
@@ -2401,6 +2405,11 @@ unsafe extern "system" fn cmd_execute_commands(
                         .extend(loose.into_iter().map(|dr| Draw { subpass, ..dr }));
                 }
                 r.passes.extend(passes);
+                r.ends.extend(
+                    slice(secondaries, count)
+                        .iter()
+                        .map(|s| coarse::End::Secondary(s.as_raw())),
+                );
             }
             (d.fns.fp_v1_0().cmd_execute_commands)(cb, count, secondaries);
         }
@@ -2581,10 +2590,7 @@ unsafe fn note_submit(d: &DeviceData, queue: vk::Queue, cbs: Vec<u64>) {
         // SAFETY: the caller's promise: the queue is ours to wait on.
         match unsafe { d.fns.queue_wait_idle(queue) } {
             // SAFETY: the submit's work is complete.
-            Ok(()) => unsafe {
-                let jobs = report_draws(d, &cbs);
-                coarsen(d, queue, jobs);
-            },
+            Ok(()) => unsafe { report_draws(d, &cbs) },
             Err(e) => error(format!("waiting for a submit failed: {e:?}")),
         }
     }
@@ -2636,13 +2642,17 @@ unsafe extern "system" fn queue_submit(
                     c
                 })
                 .collect();
+            let cbs: Vec<u64> = subs
+                .iter()
+                .flat_map(|s| slice(s.p_command_buffers, s.command_buffer_count))
+                .map(|c| c.as_raw())
+                .collect();
+            let worker = coarse::start(&d, &cbs);
             let r = (d.fns.fp_v1_0().queue_submit)(queue, count, copies.as_ptr(), fence);
+            if let Some(w) = worker {
+                coarse::finish(w, r == vk::Result::SUCCESS);
+            }
             if r == vk::Result::SUCCESS {
-                let cbs = subs
-                    .iter()
-                    .flat_map(|s| slice(s.p_command_buffers, s.command_buffer_count))
-                    .map(|c| c.as_raw())
-                    .collect();
                 note_submit(&d, queue, cbs);
             }
             r
@@ -2714,13 +2724,17 @@ unsafe extern "system" fn queue_submit2(
                     c
                 })
                 .collect();
+            let cbs: Vec<u64> = slice(submits, count)
+                .iter()
+                .flat_map(|s| slice(s.p_command_buffer_infos, s.command_buffer_info_count))
+                .map(|c| c.command_buffer.as_raw())
+                .collect();
+            let worker = coarse::start(&d, &cbs);
             let r = (d.fns.fp_v1_3().queue_submit2)(queue, count, copies.as_ptr(), fence);
+            if let Some(w) = worker {
+                coarse::finish(w, r == vk::Result::SUCCESS);
+            }
             if r == vk::Result::SUCCESS {
-                let cbs = slice(submits, count)
-                    .iter()
-                    .flat_map(|s| slice(s.p_command_buffer_infos, s.command_buffer_info_count))
-                    .map(|c| c.command_buffer.as_raw())
-                    .collect();
                 note_submit(&d, queue, cbs);
             }
             r
@@ -2920,6 +2934,8 @@ struct PassRec {
     draws: Vec<Draw>,
     /// The colour attachments its subpasses write.
     colours: Vec<ColourTarget>,
+    /// A rendering with `VK_RENDERING_SUSPENDING_BIT`: its pass instance goes on in the next.
+    suspending: bool,
 }
 
 #[derive(Default)]
@@ -2937,6 +2953,9 @@ struct Recording {
     loose: Vec<Draw>,
     /// The snapshots this recording owns (freed when it is recorded anew).
     snapshots: Vec<Snapshot>,
+    /// What the double recorded after each pass instance to leave its colour coarse, and the
+    /// secondaries executed, in order ([`coarse`]).
+    ends: Vec<coarse::End>,
 }
 
 /// What poisons a shading-rate attachment after `storeOp = DONT_CARE`: the code of 4×4, the
@@ -2949,6 +2968,12 @@ pub const POISON: u8 = 0b1010;
 /// # Safety
 /// The snapshots' command buffer must not be pending.
 unsafe fn drop_recording(d: &DeviceData, r: Recording) {
+    for e in r.ends {
+        if let coarse::End::Own(e) = e {
+            // SAFETY: the caller's promise.
+            unsafe { coarse::free(d, e) };
+        }
+    }
     for s in r.snapshots {
         // SAFETY: the double's own objects, no longer in use (the caller's promise).
         unsafe {
@@ -3189,11 +3214,13 @@ unsafe fn open_pass(d: &DeviceData, cb: vk::CommandBuffer, mut pass: PassRec, re
     r.subpass = 0;
 }
 
-/// Closes the open pass; poisons what it left undefined.
+/// Closes the open pass; poisons what it left undefined; leaves its colour as coarse fragments
+/// shade it ([`coarse`]).
 ///
 /// # Safety
 /// `cb` must be recording on `d`, the pass's end just forwarded.
 unsafe fn close_pass(d: &DeviceData, cb: vk::CommandBuffer) {
+    let mut ended: Option<PassRec> = None;
     let poisoned: Vec<Attach> = {
         let mut st = lock(&d.state);
         let Some(r) = st.recordings.get_mut(&cb.as_raw()) else {
@@ -3201,6 +3228,16 @@ unsafe fn close_pass(d: &DeviceData, cb: vk::CommandBuffer) {
         };
         let Some(open) = r.open.take() else { return };
         r.subpass = 0;
+        if !r.passes[open].suspending {
+            // A pass instance ends here; a rendering it resumed adds its suspended parts' draws.
+            let mut whole = r.passes[open].clone();
+            let mut k = open;
+            while k > 0 && r.passes[k].rendering && r.passes[k - 1].suspending {
+                k -= 1;
+                whole.draws.extend(r.passes[k].draws.iter().copied());
+            }
+            ended = Some(whole);
+        }
         let mut out: Vec<Attach> = Vec::new();
         for (a, _) in &r.passes[open].subpasses {
             if let Some(a) = a.filter(|a| a.dont_care) {
@@ -3217,6 +3254,12 @@ unsafe fn close_pass(d: &DeviceData, cb: vk::CommandBuffer) {
     for a in &poisoned {
         // SAFETY: the caller's promise.
         unsafe { poison(d, cb, a) };
+    }
+    // SAFETY: the caller's promise.
+    if let Some(end) = ended.and_then(|p| unsafe { coarse::end_pass(d, cb, p) }) {
+        let mut st = lock(&d.state);
+        let r = st.recordings.entry(cb.as_raw()).or_default();
+        r.ends.push(coarse::End::Own(end));
     }
 }
 
@@ -3256,7 +3299,7 @@ struct Codes<'a> {
 ///
 /// # Safety
 /// The submit's work must be complete.
-unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) -> Vec<CoarseJob> {
+unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) {
     let rates: Vec<[u32; 2]> = d
         .instance
         .profile
@@ -3266,8 +3309,6 @@ unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) -> Vec<CoarseJob> {
         .collect();
     let st = lock(&d.state);
     let mut read: BTreeMap<u64, Vec<u8>> = BTreeMap::new();
-    // Per (command buffer, pass, view): the texel size, the columns and the finest size per texel.
-    let mut finest: BTreeMap<(u64, usize, u32), Finest> = BTreeMap::new();
     for &cb in cbs {
         let Some(r) = st.recordings.get(&cb) else {
             continue;
@@ -3281,31 +3322,8 @@ unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) -> Vec<CoarseJob> {
                     .unwrap_or((None, 0));
                 let bytes = attach.and_then(|a| a.snapshot).map(|s| {
                     read.entry(s.buffer.as_raw())
-                        .or_insert_with(|| {
-                            // SAFETY: the double's own memory; the copy into it completed.
-                            unsafe {
-                                match d.fns.map_memory(
-                                    s.memory,
-                                    0,
-                                    s.size,
-                                    vk::MemoryMapFlags::empty(),
-                                ) {
-                                    Ok(p) => {
-                                        let v = std::slice::from_raw_parts(
-                                            p as *const u8,
-                                            s.size as usize,
-                                        )
-                                        .to_vec();
-                                        d.fns.unmap_memory(s.memory);
-                                        v
-                                    }
-                                    Err(e) => {
-                                        error(format!("mapping a snapshot failed: {e:?}"));
-                                        Vec::new()
-                                    }
-                                }
-                            }
-                        })
+                        // SAFETY: the double's own memory; the copy into it completed.
+                        .or_insert_with(|| unsafe { read_snapshot(d, s) })
                         .clone()
                 });
                 let views: Vec<u32> = if mask == 0 {
@@ -3334,15 +3352,6 @@ unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) -> Vec<CoarseJob> {
                             };
                             let (columns, rows, grid) =
                                 view_rates(&codes, a.texel, pass.area, draw.rate, &rates);
-                            let f = finest
-                                .entry((cb, pi, v))
-                                .or_insert_with(|| (a.texel, columns, grid.clone()));
-                            for (o, &g) in f.2.iter_mut().zip(&grid) {
-                                let (oa, ga) = (crate::shade::decode(*o), crate::shade::decode(g));
-                                if ga[0] * ga[1] < oa[0] * oa[1] {
-                                    *o = g;
-                                }
-                            }
                             json!({
                                 "view": v,
                                 "layer": layer,
@@ -3379,45 +3388,30 @@ unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) -> Vec<CoarseJob> {
             }
         }
     }
-    // Per colour attachment layer, what the last pass of the submit that wrote it leaves.
-    let mut jobs: BTreeMap<(u64, u32), CoarseJob> = BTreeMap::new();
-    for &cb in cbs {
-        let Some(r) = st.recordings.get(&cb) else {
-            continue;
-        };
-        for (pi, pass) in r.passes.iter().enumerate() {
-            let mask = pass.subpasses.iter().fold(0, |m, s| m | s.1);
-            let views: Vec<u32> = if mask == 0 {
-                vec![0]
-            } else {
-                (0..32).filter(|v| mask & (1 << v) != 0).collect()
-            };
-            for target in &pass.colours {
-                for &v in &views {
-                    let layer = target.base_layer + if mask == 0 { 0 } else { v };
-                    match finest.get(&(cb, pi, v)) {
-                        Some((texel, columns, codes)) => {
-                            jobs.insert(
-                                (target.image, layer),
-                                CoarseJob {
-                                    target: *target,
-                                    layer,
-                                    texel: *texel,
-                                    area: pass.area,
-                                    columns: *columns,
-                                    codes: codes.clone(),
-                                },
-                            );
-                        }
-                        None => {
-                            jobs.remove(&(target.image, layer));
-                        }
-                    }
-                }
+}
+
+/// A snapshot's bytes.
+///
+/// # Safety
+/// The copy into it must have completed.
+unsafe fn read_snapshot(d: &DeviceData, s: Snapshot) -> Vec<u8> {
+    // SAFETY: the double's own memory (the caller's promise).
+    unsafe {
+        match d
+            .fns
+            .map_memory(s.memory, 0, s.size, vk::MemoryMapFlags::empty())
+        {
+            Ok(p) => {
+                let v = std::slice::from_raw_parts(p as *const u8, s.size as usize).to_vec();
+                d.fns.unmap_memory(s.memory);
+                v
+            }
+            Err(e) => {
+                error(format!("mapping a snapshot failed: {e:?}"));
+                Vec::new()
             }
         }
     }
-    jobs.into_values().collect()
 }
 
 /// One view's effective sizes over the attachment texels the render area covers, as codes in
@@ -3458,21 +3452,6 @@ fn hex(codes: &[u8]) -> String {
         .collect()
 }
 
-/// Per view of a pass: the attachment texel size, the columns of the grid and, per texel, the
-/// finest effective size any of its draws got.
-type Finest = (vk::Extent2D, u32, Vec<u8>);
-
-/// What [`coarsen`] does to one layer of one colour attachment after a submit.
-struct CoarseJob {
-    target: ColourTarget,
-    layer: u32,
-    texel: vk::Extent2D,
-    area: vk::Extent2D,
-    columns: u32,
-    /// Per attachment texel, the finest effective size any draw of the pass got there.
-    codes: Vec<u8>,
-}
-
 /// The pixel size of the colour formats the double coarsens (8-bit and 16-bit RGBA, 32-bit
 /// packed, 32-bit float RGBA); others are left alone.
 fn pixel_bytes(format: vk::Format) -> Option<u64> {
@@ -3489,191 +3468,6 @@ fn pixel_bytes(format: vk::Format) -> Option<u64> {
         F::R32G32B32A32_SFLOAT => Some(16),
         _ => None,
     }
-}
-
-/// Draws the effect of coarse fragments: in each layer of a colour attachment that the last pass
-/// of the submit writing it drew with fragments larger than 1×1, every fragment-sized block of
-/// pixels of an attachment texel gets the value of its top-left pixel, one shaded value per
-/// fragment as on a GPU with shading-rate attachments. Done on the host after the submit
-/// completed: the double copies the layer out, replicates, and copies it back, with command
-/// buffers of its own (validation never sees them).
-///
-/// # Safety
-/// `queue` must be idle and belong to `d`.
-unsafe fn coarsen(d: &DeviceData, queue: vk::Queue, jobs: Vec<CoarseJob>) {
-    for job in jobs {
-        let Some(bpp) = pixel_bytes(job.target.format) else {
-            continue;
-        };
-        if !job.codes.iter().any(|&c| c != 0) {
-            continue;
-        }
-        let e = job.target.extent;
-        let size = e.width as u64 * e.height as u64 * bpp;
-        let usage = vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
-        // SAFETY: the caller's promise; every object is the double's own.
-        unsafe {
-            let buffer = match host_buffer(d, size, usage) {
-                Ok(b) => b,
-                Err(e) => {
-                    error(format!("coarse shading: no buffer: {e:?}"));
-                    continue;
-                }
-            };
-            let region = vk::BufferImageCopy::default()
-                .image_subresource(subresource(job.layer, 1))
-                .image_extent(vk::Extent3D {
-                    width: e.width,
-                    height: e.height,
-                    depth: 1,
-                });
-            let image = vk::Image::from_raw(job.target.image);
-            let done = once(d, queue, |cb| {
-                full_barrier(d, cb);
-                (d.fns.fp_v1_0().cmd_copy_image_to_buffer)(
-                    cb,
-                    image,
-                    vk::ImageLayout::GENERAL,
-                    buffer.buffer,
-                    1,
-                    &region,
-                );
-                full_barrier(d, cb);
-            })
-            .and_then(|()| {
-                let p = d
-                    .fns
-                    .map_memory(buffer.memory, 0, size, vk::MemoryMapFlags::empty())?;
-                let pixels = std::slice::from_raw_parts_mut(p as *mut u8, size as usize);
-                replicate(&job, pixels, bpp as usize);
-                d.fns.unmap_memory(buffer.memory);
-                once(d, queue, |cb| {
-                    full_barrier(d, cb);
-                    (d.fns.fp_v1_0().cmd_copy_buffer_to_image)(
-                        cb,
-                        buffer.buffer,
-                        image,
-                        vk::ImageLayout::GENERAL,
-                        1,
-                        &region,
-                    );
-                    full_barrier(d, cb);
-                })
-            });
-            if let Err(e) = done {
-                error(format!("coarse shading failed: {e:?}"));
-            }
-            d.fns.destroy_buffer(buffer.buffer, None);
-            d.fns.free_memory(buffer.memory, None);
-        }
-        event(json!({
-            "kind": "coarsened",
-            "image": job.target.image,
-            "layer": job.layer,
-        }));
-    }
-}
-
-/// Replicates each block's top-left pixel over the block, per attachment texel.
-fn replicate(job: &CoarseJob, pixels: &mut [u8], bpp: usize) {
-    let e = job.target.extent;
-    let right = job.area.width.min(e.width);
-    let bottom = job.area.height.min(e.height);
-    let row = e.width as usize * bpp;
-    for (i, &code) in job.codes.iter().enumerate() {
-        if code == 0 {
-            continue;
-        }
-        let [w, h] = crate::shade::decode(code);
-        let (tx, ty) = (i as u32 % job.columns, i as u32 / job.columns);
-        let x0 = tx * job.texel.width;
-        let y0 = ty * job.texel.height;
-        let x1 = (x0 + job.texel.width).min(right);
-        let y1 = (y0 + job.texel.height).min(bottom);
-        for by in (y0..y1).step_by(h as usize) {
-            for bx in (x0..x1).step_by(w as usize) {
-                let src = by as usize * row + bx as usize * bpp;
-                let mut value = [0u8; 16];
-                value[..bpp].copy_from_slice(&pixels[src..src + bpp]);
-                for y in by..(by + h).min(y1) {
-                    for x in bx..(bx + w).min(x1) {
-                        let at = y as usize * row + x as usize * bpp;
-                        pixels[at..at + bpp].copy_from_slice(&value[..bpp]);
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// Records `f` into a command buffer of the double's own on `queue`'s family, submits it and
-/// waits.
-///
-/// # Safety
-/// `queue` must belong to `d` and be externally synchronised by the current call.
-unsafe fn once(
-    d: &DeviceData,
-    queue: vk::Queue,
-    f: impl FnOnce(vk::CommandBuffer),
-) -> Result<(), vk::Result> {
-    let fns = &d.fns;
-    // SAFETY: the caller's promise; the pool and command buffer are the double's own.
-    unsafe {
-        let pool = pool_for(d, queue)?;
-        let cbs = fns.allocate_command_buffers(
-            &vk::CommandBufferAllocateInfo::default()
-                .command_pool(pool)
-                .level(vk::CommandBufferLevel::PRIMARY)
-                .command_buffer_count(1),
-        )?;
-        let cb = cbs[0];
-        if let Some(set) = d.set_loader_data {
-            set(d.handle, cb.as_raw() as usize as *mut c_void).result()?;
-        }
-        fns.begin_command_buffer(
-            cb,
-            &vk::CommandBufferBeginInfo::default()
-                .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
-        )?;
-        f(cb);
-        fns.end_command_buffer(cb)?;
-        let r = fns
-            .queue_submit(
-                queue,
-                &[vk::SubmitInfo::default().command_buffers(&cbs)],
-                vk::Fence::null(),
-            )
-            .and_then(|()| fns.queue_wait_idle(queue));
-        fns.free_command_buffers(pool, &cbs);
-        r
-    }
-}
-
-/// The double's command pool for `queue`'s family, made on first use.
-///
-/// # Safety
-/// `queue` must belong to `d`.
-unsafe fn pool_for(d: &DeviceData, queue: vk::Queue) -> Result<vk::CommandPool, vk::Result> {
-    let family = lock(&d.state)
-        .queues
-        .get(&queue.as_raw())
-        .copied()
-        .unwrap_or(0);
-    let existing = lock(&d.state).pools.get(&family).copied();
-    if let Some(p) = existing {
-        return Ok(p);
-    }
-    // SAFETY: a plain creation on a live device.
-    let p = unsafe {
-        d.fns.create_command_pool(
-            &vk::CommandPoolCreateInfo::default()
-                .queue_family_index(family)
-                .flags(vk::CommandPoolCreateFlags::TRANSIENT),
-            None,
-        )
-    }?;
-    lock(&d.state).pools.insert(family, p);
-    Ok(p)
 }
 
 /// The colour attachment indices of a subpass.

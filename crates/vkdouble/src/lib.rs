@@ -67,19 +67,23 @@
 //! errors, as is a shading-rate attachment (image usage, render pass, rendering) on a device that
 //! did not enable `attachmentFragmentShadingRate`.
 //!
-//! Drawing the effect (`coarsened` {image, layer} records): lavapipe shades every pixel, so once a
-//! submit has completed the double makes its colour attachments look as a GPU with shading-rate
-//! attachments leaves them. For each layer of each colour attachment (a 2D image with the
-//! colour-attachment usage, in an 8-, 16- or 32-bit-per-channel RGBA or 32-bit packed format),
-//! the last pass instance or rendering of the submit that wrote it decides: per shading-rate
-//! attachment texel, the finest effective fragment size any of its draws got there; every block
-//! of that size gets the value of its top-left pixel, one shaded value per fragment. It is done on
-//! the host (the layer copied out, replicated, copied back, with command buffers of the double's
-//! own), so frames read after the submit (the compositor's, a test's later read-back) show it.
-//! Approximations, where a GPU differs: the whole block is replaced, so edges of geometry become
-//! blocky where a GPU keeps per-pixel coverage; the value is the top-left pixel's, where a GPU
-//! shades at the fragment's centre; pixels no draw wrote (a cleared background, loaded contents)
-//! are coarsened too; reads of the attachment within the same submit see it at full rate.
+//! Drawing the effect (`coarsened` {image, layer} records): lavapipe shades every pixel, so the
+//! double makes colour attachments look as a GPU with shading-rate attachments leaves them, where
+//! a GPU leaves them: at the end of each pass instance (a suspended rendering's at its last
+//! part), in the command buffer, so that every later command (a read-back recorded right after
+//! the pass, a later pass, a layer's own work on the colour) sees it. For each layer of each
+//! colour attachment (a 2D image with the colour-attachment usage, in an 8-, 16- or
+//! 32-bit-per-channel RGBA or 32-bit packed format) of a pass with a draw that can shade coarser
+//! than 1×1: per shading-rate attachment texel, the finest effective fragment size any of the
+//! pass's draws got there; every block of that size gets the value of its top-left pixel, one
+//! shaded value per fragment. The double records after the pass copies of those layers into
+//! buffers of its own, an event it sets, a wait on an event the host sets, and copies back; at
+//! submit a thread of the double replicates between the two events (`layer/coarse.rs`). Passes
+//! whose draws can only shade 1×1 get nothing recorded. Approximations, where a GPU differs: the
+//! whole block is replaced, so edges of geometry become blocky where a GPU keeps per-pixel
+//! coverage; the value is the top-left pixel's, where a GPU shades at the fragment's centre;
+//! pixels no draw wrote (a cleared background, loaded contents) are coarsened too.
+//! [`blocks::uniform_share`] measures the result from pixels read back.
 //!
 //! Strictness: after a render pass whose shading-rate attachment has `storeOp = DONT_CARE`, the
 //! double overwrites the layers the pass used with [`POISON`] (4×4, the coarsest rate), as the
@@ -93,6 +97,7 @@
 
 #![deny(unsafe_op_in_unsafe_fn)]
 
+pub mod blocks;
 mod chain;
 mod ffi;
 mod layer;

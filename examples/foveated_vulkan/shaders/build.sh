@@ -9,3 +9,5 @@ glslangValidator -V --target-env vulkan1.1 -DOVERLAY -o overlay.frag.spv pattern
 glslangValidator -V --target-env vulkan1.1 -DHEAVY -o heavy.frag.spv pattern.frag
 glslangValidator -V --target-env vulkan1.1 -DHEAVY -DOVERLAY -o heavy_overlay.frag.spv pattern.frag
 glslangValidator -V --target-env vulkan1.1 -o composite.frag.spv composite.frag
+glslangValidator -V --target-env vulkan1.1 -o scene.frag.spv scene.frag
+glslangValidator -V --target-env vulkan1.1 -DOVERLAY -o scene_overlay.frag.spv scene.frag

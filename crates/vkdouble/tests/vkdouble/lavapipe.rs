@@ -1943,17 +1943,32 @@ fn load_store_op_none_is_offered_as_desktop_drivers_do_and_a_device_gets_it() {
     });
 }
 
+/// Where a GPU leaves coarse fragments: at the end of the pass instance, so a copy recorded in
+/// the same command buffer right after the pass (the example's `--dump`) reads the blocks, and so
+/// does a later submit. Codes: 1×1 on the left half, 4×4 on the right (the AMD profile clamps it
+/// to 2×2); the reference is the same gradient drawn without a shading-rate attachment.
 #[test]
-fn coarse_fragments_are_visible_in_a_later_read_back() {
-    for (profile, texel) in [(Profile::Nvidia, 16), (Profile::Amd, 8)] {
+fn a_read_back_in_the_same_command_buffer_sees_the_blocks() {
+    for (profile, texel, block) in [(Profile::Nvidia, 16, 4), (Profile::Amd, 8, 2)] {
         for path in [Path::RenderPass, Path::Dynamic] {
             with_vk(profile, |env, vk| {
                 let dev = vk.device(true);
-                // 1x1 on the left half, 2x2 on the right.
+                let n = SIZE / texel;
+                let codes = (0..n * n)
+                    .map(|i| if i % n < n / 2 { 0 } else { 0b1010 })
+                    .collect();
+                let full = draw_case(
+                    &dev,
+                    &Case {
+                        gradient: true,
+                        ..Case::new(Path::Plain, texel)
+                    },
+                );
                 let drawn = draw_case(
                     &dev,
                     &Case {
                         gradient: true,
+                        codes,
                         ..Case::new(path, texel)
                     },
                 );
@@ -1963,20 +1978,34 @@ fn coarse_fragments_are_visible_in_a_later_read_back() {
                 };
                 for y in 0..SIZE {
                     for x in 0..SIZE {
-                        let (got, drawn_px) = (px(&drawn.after, x, y), px(&drawn.pixels, x, y));
-                        if x < SIZE / 2 {
-                            // Full rate: every pixel shaded on its own, as lavapipe drew it.
-                            assert_eq!(got, drawn_px, "{profile:?} {path:?} ({x},{y})");
+                        let want = if x < SIZE / 2 {
+                            px(&full.pixels, x, y)
                         } else {
-                            // 2x2: one shaded value per fragment, its top-left pixel's.
-                            let want = px(&drawn.pixels, x & !1, y & !1);
-                            assert_eq!(got, want, "{profile:?} {path:?} ({x},{y})");
-                        }
+                            px(&full.pixels, x / block * block, y / block * block)
+                        };
+                        let what = format!("{profile:?} {path:?} ({x},{y})");
+                        assert_eq!(px(&drawn.pixels, x, y), want, "same command buffer {what}");
+                        assert_eq!(px(&drawn.after, x, y), want, "later submit {what}");
                     }
                 }
                 // The gradient differs between neighbours, so the comparison shows something.
-                assert_ne!(px(&drawn.after, 40, 40), px(&drawn.after, 42, 40));
-                assert_ne!(px(&drawn.pixels, 40, 40), px(&drawn.pixels, 41, 40));
+                assert_ne!(px(&full.pixels, 40, 40), px(&full.pixels, 41, 40));
+                let blocks = fovea_vkdouble::blocks::uniform_share(
+                    &drawn.pixels,
+                    [SIZE, SIZE],
+                    4,
+                    block,
+                    |x, _| x >= SIZE / 2,
+                );
+                assert_eq!(blocks, Some(1.0), "{profile:?} {path:?}");
+                let plain = fovea_vkdouble::blocks::uniform_share(
+                    &full.pixels,
+                    [SIZE, SIZE],
+                    4,
+                    block,
+                    |x, _| x >= SIZE / 2,
+                );
+                assert_eq!(plain, Some(0.0), "{profile:?} {path:?}");
                 drop(dev);
                 drop_ok(env, profile);
             });

@@ -1,0 +1,216 @@
+#!/usr/bin/env python3
+"""What each foveation level costs the eye, from frames the example read back (scripts/perceptual.sh).
+
+For one eye's frame at each level and the same frame at level NONE (full rate, the reference), per
+band of eccentricity (degrees from where the eye looks: the projection centre for fixed foveation,
+the scripted gaze for eye-tracked foveation):
+
+- FLIP (NVIDIA's perceptual difference metric, `flip-evaluator`, BSD-3-Clause; Andersson et al.,
+  "FLIP: A Difference Evaluator for Alternating Images", HPG 2020): the mean of its per-pixel error
+  (0 identical, 1 the largest difference), at the pixels per degree of the eye buffer's centre;
+- identical: the share of pixels equal to the reference's (the fovea must be 1.000);
+- blocky: the share of 2×2 pixel blocks (aligned to the image's origin, as fragments are) whose four
+  pixels are all identical: what coarse fragments leave (a 2×2 or larger fragment makes every such
+  block inside it uniform), against the reference's own share (the scene is textured down to the
+  pixel, so at full rate few are). The same measure as `fovea_vkdouble::blocks::uniform_share`.
+
+Usage: perceptual.py FRAMES_DIR MODEL_JSON_DIR OUT_DIR, where FRAMES_DIR holds one folder per run
+named HEADSET-GAZE-LEVEL with the example's PNGs and a `run.txt` of its stdout (the located FOVs),
+and MODEL_JSON_DIR holds `fovea report --headset H --json` as H.json. Writes OUT_DIR/table.md and
+OUT_DIR/table.json.
+
+It is a measuring tool, run from a script: nothing of fovea links it.
+"""
+
+import json
+import math
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+import flip_evaluator as flip
+
+# The levels' floors change at 15° (HIGH), 20° (MEDIUM) and 30° (HIGH): docs/density-model.md#floors.
+BANDS = [(0, 10), (10, 15), (15, 20), (20, 30), (30, 45), (45, 180)]
+LEVELS = ["low", "medium", "high"]
+# Where the scripted gaze looks (perceptual.sh's FOVEA_SIM_GAZE): yaw right, pitch up, degrees.
+GAZE = {"fixed": (0.0, 0.0), "gaze": (15.0, 8.0)}
+
+
+def fovs(run_txt):
+    """The left view's located FOV (left, right, up, down radians) from the example's stdout."""
+    m = re.search(r"located FOVs in radians \(left,right,up,down per view\) (\S+)", run_txt)
+    return [float(v) for v in m.group(1).split(",")]
+
+
+def last_left_frame(folder, level):
+    frames = sorted(folder.glob(f"f*_{level}_left.png"))
+    if not frames:
+        raise SystemExit(f"{folder}: no frame of the left eye at {level}")
+    return frames[-1]
+
+
+def load(path):
+    return np.asarray(Image.open(path).convert("RGB"))
+
+
+def eccentricity(shape, fov, gaze_deg):
+    """Degrees between each pixel's ray and the gaze's."""
+    h, w = shape
+    l, r, u, d = (math.tan(a) for a in fov)
+    tx = l + (np.arange(w) + 0.5) / w * (r - l)
+    ty = u - (np.arange(h) + 0.5) / h * (u - d)
+    x, y = np.meshgrid(tx, ty)
+    yaw, pitch = (math.radians(a) for a in gaze_deg)
+    gx, gy = math.tan(yaw), math.tan(pitch) / math.cos(yaw)
+    dot = x * gx + y * gy + 1.0
+    norm = np.sqrt(x * x + y * y + 1.0) * math.sqrt(gx * gx + gy * gy + 1.0)
+    return np.degrees(np.arccos(np.clip(dot / norm, -1.0, 1.0)))
+
+
+def uniform_2x2(img):
+    """Per 2×2 block: all four pixels identical."""
+    h, w = img.shape[0] // 2 * 2, img.shape[1] // 2 * 2
+    a = img[:h:2, :w:2]
+    same = (img[:h:2, 1:w:2] == a).all(-1) & (img[1:h:2, :w:2] == a).all(-1)
+    return same & (img[1:h:2, 1:w:2] == a).all(-1)
+
+
+def centre_ppd(shape, fov):
+    """Pixels per degree at the projection centre: pixels per unit tangent, per radian there."""
+    l, r = math.tan(fov[0]), math.tan(fov[1])
+    return shape[1] / (r - l) * math.pi / 180.0
+
+
+def analyse(frames_dir, models_dir):
+    rows = []
+    for ref_dir in sorted(frames_dir.glob("*-*-none")):
+        headset, gaze, _ = ref_dir.name.split("-")
+        fov = fovs((ref_dir / "run.txt").read_text())
+        ref_path = last_left_frame(ref_dir, "none")
+        ref = load(ref_path)
+        ecc = eccentricity(ref.shape[:2], fov, GAZE[gaze])
+        ecc_blocks = ecc[: ecc.shape[0] // 2 * 2 : 2, : ecc.shape[1] // 2 * 2 : 2]
+        ppd = centre_ppd(ref.shape[:2], fov)
+        model = json.loads((models_dir / f"{headset}.json").read_text())
+        fractions = {lv["level"]: lv["shaded_fraction"] for lv in model["levels"]}
+        ref_blocks = uniform_2x2(ref)
+        for level in ["none"] + LEVELS:
+            run = frames_dir / f"{headset}-{gaze}-{level}"
+            if not run.is_dir():
+                continue
+            path = last_left_frame(run, level)
+            if path.name.split("_")[0] != ref_path.name.split("_")[0]:
+                raise SystemExit(f"{path} and {ref_path} are not the same frame")
+            img = load(path)
+            if level == "none":
+                error = np.zeros(ecc.shape, np.float32)
+            else:
+                error, _, _ = flip.evaluate(
+                    ref.astype(np.float32) / 255.0,
+                    img.astype(np.float32) / 255.0,
+                    "LDR",
+                    inputsRGB=True,
+                    applyMagma=False,
+                    computeMeanError=True,
+                    parameters={"ppd": ppd},
+                )
+            error = np.asarray(error).reshape(ecc.shape)
+            same = (img == ref).all(-1)
+            blocks = uniform_2x2(img)
+            bands = []
+            for lo, hi in BANDS:
+                m = (ecc >= lo) & (ecc < hi)
+                mb = (ecc_blocks >= lo) & (ecc_blocks < hi)
+                if not m.any():
+                    bands.append(None)
+                    continue
+                bands.append(
+                    {
+                        "flip": float(error[m].mean()),
+                        "identical": float(same[m].mean()),
+                        "blocky": float(blocks[mb].mean()) if mb.any() else None,
+                        "blocky_full_rate": float(ref_blocks[mb].mean()) if mb.any() else None,
+                        "pixels": int(m.sum()),
+                    }
+                )
+            rows.append(
+                {
+                    "headset": headset,
+                    "gaze": gaze,
+                    "level": level,
+                    "shaded_fraction": fractions.get(level),
+                    "ppd": ppd,
+                    "frame": path.name,
+                    "size": [int(ref.shape[1]), int(ref.shape[0])],
+                    "flip_mean": float(error.mean()),
+                    # Degrees from the gaze of the nearest pixel that differs from full rate.
+                    "nearest_change_deg": float(ecc[~same].min()) if (~same).any() else None,
+                    "bands": bands,
+                }
+            )
+    return rows
+
+
+def cell(band, key):
+    if band is None or band.get(key) is None:
+        return "–"
+    return f"{band[key]:.3f}"
+
+
+def table(rows):
+    heads = " | ".join(f"{lo}–{hi}°" if hi < 180 else f"≥{lo}°" for lo, hi in BANDS)
+    out = []
+    for key, title in [
+        ("flip", "FLIP mean error per eccentricity band (0 = identical to full rate)"),
+        ("blocky", "Uniform 2×2 blocks per band (full rate's own share in brackets)"),
+        ("identical", "Pixels identical to full rate per band"),
+    ]:
+        out.append(f"**{title}**\n")
+        near = key == "identical"
+        extra = " nearest change |" if near else ""
+        out.append(f"| headset | gaze | level | shaded | {heads} |{extra} reconstructed |")
+        out.append("|---|---|---|---|" + "---|" * (len(BANDS) + near) + "---|")
+        for r in rows:
+            if key != "blocky" and r["level"] == "none":
+                continue
+            if key == "blocky":
+                cells = [
+                    "–"
+                    if b is None or b["blocky"] is None
+                    else f"{b['blocky']:.3f} ({b['blocky_full_rate']:.3f})"
+                    for b in r["bands"]
+                ]
+            else:
+                cells = [cell(b, key) for b in r["bands"]]
+            frac = "–" if r["shaded_fraction"] is None else f"{r['shaded_fraction']:.3f}"
+            if near:
+                n = r["nearest_change_deg"]
+                cells.append("–" if n is None else f"{n:.1f}°")
+            out.append(
+                f"| {r['headset']} | {r['gaze']} | {r['level']} | {frac} | "
+                + " | ".join(cells)
+                + " | not yet |"
+            )
+        out.append("")
+    return "\n".join(out)
+
+
+def main():
+    if len(sys.argv) != 4:
+        raise SystemExit(__doc__)
+    frames_dir, models_dir, out = (Path(a) for a in sys.argv[1:])
+    rows = analyse(frames_dir, models_dir)
+    if not rows:
+        raise SystemExit(f"{frames_dir}: no runs")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "table.json").write_text(json.dumps(rows, indent=1))
+    text = table(rows)
+    (out / "table.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

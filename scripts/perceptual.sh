@@ -1,0 +1,84 @@
+#!/bin/sh
+# What each foveation level costs the eye, measured with a published perceptual metric (NVIDIA's
+# FLIP) per eccentricity band, and how blocky the periphery is, from frames read back.
+#
+# The example (examples/foveated_vulkan) draws its room scene (--scene room: textured wall and
+# floor, hard edges, small text at several eccentricities, a slow pan) on the simulated headset
+# through the system's Khronos OpenXR loader, fovea's OpenXR layer and fovea's Vulkan layer, over
+# the shading-rate double (crates/vkdouble: lavapipe made to look like an NVIDIA GPU with
+# shading-rate attachments, which leaves each pass's colour as such a GPU shades it). Each level
+# (none, low, medium, high) runs alone for the same frames, so the last frame of each is the same
+# image at a different level; level NONE is the full-rate reference. It runs for each headset
+# (Quest 3 and Valve Index geometry) with fixed foveation and with an eye-tracked profile whose
+# fovea follows a scripted gaze (15° right, 8° up), and scripts/perceptual.py writes the table.
+#
+# Usage: scripts/perceptual.sh [OUT_DIR]   (default: target/perceptual)
+# Variables: HEADSETS (default "quest3 index"), FRAMES per run (default 3; 12 with the gaze, so
+# the eye-tracked fovea has settled), NO_BUILD=1 (use what target/release holds).
+# The metric's own environment (flip-evaluator, numpy, Pillow) is a virtual environment in
+# OUT_DIR/venv, made on first use from PyPI. Nothing of it is shipped or linked.
+set -eu
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+OUT=${1:-target/perceptual}
+HEADSETS=${HEADSETS:-quest3 index}
+FRAMES=${FRAMES:-3}
+REL=$ROOT/target/release
+mkdir -p "$OUT"
+OUT=$(cd "$OUT" && pwd)
+
+if [ ! -x "$OUT/venv/bin/python" ]; then
+    python3 -m venv "$OUT/venv"
+    "$OUT/venv/bin/pip" install --quiet flip-evaluator==1.7 numpy pillow
+fi
+if [ "${NO_BUILD:-0}" != 1 ]; then
+    cargo build --release -p fovea -p fovea-sim -p fovea-cli -p fovea-vkdouble --lib --bins \
+        --example foveated_vulkan
+fi
+
+LVP=$(ls /usr/share/vulkan/icd.d/lvp_icd*.json 2>/dev/null | head -n 1)
+[ -n "$LVP" ] || { echo "lavapipe (mesa-vulkan-drivers) is not installed" >&2; exit 1; }
+# The double's manifest, as fovea_vkdouble::manifest_json writes it.
+mkdir -p "$OUT/vk"
+cat >"$OUT/vk/VkLayer_fovea_shading_rate_double.json" <<EOF
+{"file_format_version":"1.1.2","layer":{"name":"VK_LAYER_FOVEA_shading_rate_double",
+"type":"GLOBAL","library_path":"$REL/libfovea_vkdouble.so","api_version":"1.4.359",
+"implementation_version":"1","description":"fovea test double",
+"device_extensions":[{"name":"VK_KHR_fragment_shading_rate","spec_version":"2",
+"entrypoints":["vkCmdSetFragmentShadingRateKHR"]},{"name":"VK_EXT_load_store_op_none","spec_version":"1"}]}}
+EOF
+RUNTIME=$OUT/fovea_sim_runtime.json
+printf '{"file_format_version":"1.0.0","runtime":{"name":"fovea simulated headset","library_path":"%s"}}\n' \
+    "$REL/libfovea_sim.so" >"$RUNTIME"
+
+rm -rf "$OUT/frames"
+mkdir -p "$OUT/frames" "$OUT/model"
+for headset in $HEADSETS; do
+    "$REL/fovea" report --headset "$headset" --json >"$OUT/model/$headset.json"
+    for gaze in fixed gaze; do
+        for level in none low medium high; do
+            dir=$OUT/frames/$headset-$gaze-$level
+            mkdir -p "$dir"
+            if [ "$gaze" = gaze ]; then
+                set -- --eye-tracked --frames "$((FRAMES + 9))"
+                export FOVEA_SIM_EYE_GAZE=on FOVEA_SIM_GAZE="fix 15,8 for 1000s"
+            else
+                set -- --frames "$FRAMES"
+                unset FOVEA_SIM_EYE_GAZE FOVEA_SIM_GAZE
+            fi
+            env VK_DRIVER_FILES="$LVP" VK_ADD_LAYER_PATH="$ROOT/manifest/vulkan:$OUT/vk" \
+                XR_RUNTIME_JSON="$RUNTIME" XR_API_LAYER_PATH="$ROOT/manifest" \
+                XR_ENABLE_API_LAYERS=XR_APILAYER_FOVEA_foveation DISABLE_FOVEA_VK_LAYER=1 \
+                FOVEA_SIM_HEADSET="$headset" \
+                "$REL/examples/foveated_vulkan" --scene room --levels "$level" "$@" \
+                --frames-per-level 1000 --vk-layer VK_LAYER_FOVEA_shading_rate_double \
+                --dump "$dir" >"$dir/run.txt" 2>"$dir/run.log" || {
+                echo "the example failed ($headset, $gaze, $level): see $dir/run.log" >&2
+                exit 1
+            }
+            echo "$headset $gaze $level: $(grep -c . "$dir/run.txt") lines, $(ls "$dir" | grep -c 'left.png') left frames"
+        done
+    done
+done
+"$OUT/venv/bin/python" scripts/perceptual.py "$OUT/frames" "$OUT/model" "$OUT"
+echo "table: $OUT/table.md"
