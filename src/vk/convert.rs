@@ -33,8 +33,10 @@
 //! persist across passes (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#pipelines-bindpoint-commands>,
 //! <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#descriptorsets-compatibility>).
 //! So on emulating devices the layer records per command buffer what the application bound at the
-//! compute bind point and every push-constant update ([`Bound`](crate::vk::own::bindings::Bound), fixed size, made at
-//! `vkBeginCommandBuffer`), and binds it all again after the conversion. Where it cannot (push
+//! compute bind point and the push-constant updates of the compute stage that no later push
+//! covered ([`Bound`](crate::vk::own::bindings::Bound), fixed size, made at
+//! `vkBeginCommandBuffer`), and binds it all again after the conversion: a compute dispatch
+//! disturbs nothing of the graphics stages, so engines' per-draw graphics pushes are not kept. Where it cannot (push
 //! descriptors, more sets or dynamic offsets than a record holds), that pass's map is not converted
 //! and renders at full rate, and the log says so once. Devices with commands that bind compute
 //! state the layer does not intercept (Vulkan 1.4, `VK_KHR_maintenance6`, descriptor buffers,
