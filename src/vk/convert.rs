@@ -57,6 +57,7 @@ use std::sync::Arc;
 use ash::vk;
 use ash::vk::Handle as _;
 
+use crate::common::lock::SharedRwLock;
 use crate::vk::base::chain;
 use crate::vk::base::ffi::{key, raw, AddressHasher, Key};
 use crate::vk::own::bindings::restore;
@@ -402,9 +403,8 @@ fn filter_slot(fb: u64) -> (usize, u64) {
 /// Framebuffers of rewritten passes on converting devices → (device key, density view). One
 /// table for all devices, looked up first at every render-pass begin whose framebuffer passes
 /// [`FRAMEBUFFER_FILTER`], before any per-device look-up. A leaf lock.
-static FRAMEBUFFERS: parking_lot::RwLock<
-    HashMap<u64, (Key, u64), BuildHasherDefault<AddressHasher>>,
-> = parking_lot::RwLock::new(HashMap::with_hasher(BuildHasherDefault::new()));
+static FRAMEBUFFERS: SharedRwLock<HashMap<u64, (Key, u64), BuildHasherDefault<AddressHasher>>> =
+    SharedRwLock::new(HashMap::with_hasher(BuildHasherDefault::new()));
 
 /// A filter of render passes that write or order density maps (see [`MAP_EPOCH`]): one bit per
 /// hash slot, never cleared; a stale or shared bit only costs a conversion.
@@ -449,6 +449,11 @@ pub unsafe fn before_render_pass(
     cb: vk::CommandBuffer,
     begin: *const vk::RenderPassBeginInfo<'_>,
 ) {
+    // Only emulating devices convert (`device_created`): on an injecting one no table of this
+    // module is looked at, however the pass is begun.
+    if dev.fdm.is_none() {
+        return;
+    }
     // SAFETY: as the caller promised.
     let (Some(k), Some(b)) = (unsafe { key(cb) }, unsafe { begin.as_ref() }) else {
         return;
@@ -549,10 +554,14 @@ pub fn ended(cb: vk::CommandBuffer, offsets: &[vk::Offset2D]) {
 /// # Safety
 /// `cb` must be recording on `dev`; `info` NULL or valid.
 pub unsafe fn before_rendering(
-    _dev: &Device,
+    dev: &Device,
     cb: vk::CommandBuffer,
     info: *const vk::RenderingInfo<'_>,
 ) {
+    // As in `before_render_pass`.
+    if dev.fdm.is_none() {
+        return;
+    }
     // SAFETY: as the caller promised.
     let Some(ri) = (unsafe { info.as_ref() }) else {
         return;

@@ -27,7 +27,7 @@
 //! only the next layer's commands on its own objects, which never call back into fovea.
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use ash::vk;
 use ash::vk::Handle as _;
@@ -37,6 +37,22 @@ use crate::bridge::FdmEmulation;
 use crate::vk::own::calls::Own;
 use crate::vk::translate::formats::SHADOW_FORMAT;
 use fovea_model::inject::{FixedCodes, Pass, Views};
+
+/// Advanced by every change to what a pass begin's decision on any injecting device reads (a view
+/// or framebuffer noted or forgotten, a map made) and by every injector made or destroyed: a
+/// decision a thread made after loading this value stays good while it is unchanged
+/// ([`crate::vk::injection`] caches them per thread). All of these happen at object creation and
+/// destruction, never per command.
+static TABLES: AtomicU64 = AtomicU64::new(0);
+
+/// The generation of every injector's tables (see [`TABLES`]).
+pub fn tables_generation() -> u64 {
+    TABLES.load(Ordering::Acquire)
+}
+
+fn tables_changed() {
+    TABLES.fetch_add(1, Ordering::AcqRel);
+}
 
 /// What the layer knows of a colour image: its extent and array layers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -128,6 +144,7 @@ impl Injector {
     /// Nothing tracked yet, on a device with `fdm`'s shading-rate attachments.
     pub fn new(fdm: FdmEmulation) -> Injector {
         crate::bridge::inject::set_texel(fdm.texel);
+        tables_changed();
         let model = fovea_model::inject::Device {
             texel: fdm.texel,
             layered: fdm.layered,
@@ -219,12 +236,15 @@ impl Injector {
         };
         if let Some(v) = view_facts(image, facts.extent, facts.layers, &ci.subresource_range) {
             self.views.lock().insert(view.as_raw(), v);
+            tables_changed();
         }
     }
 
     /// Forgets a destroyed view.
     pub fn view_destroyed(&self, view: vk::ImageView) {
-        self.views.lock().remove(&view.as_raw());
+        if self.views.lock().remove(&view.as_raw()).is_some() {
+            tables_changed();
+        }
     }
 
     /// What the layer knows of `view`.
@@ -310,6 +330,7 @@ impl Injector {
             }
         };
         list.push((texels, made));
+        tables_changed();
         made.map(|o| o.view)
     }
 
@@ -342,6 +363,7 @@ impl Injector {
     /// Notes a framebuffer of an injected pass.
     pub fn framebuffer_created(&self, fb: vk::Framebuffer, f: InjectedFramebuffer) {
         self.framebuffers.lock().insert(fb.as_raw(), f);
+        tables_changed();
     }
 
     /// The framebuffer `fb` of an injected pass, if it is one.
@@ -351,7 +373,9 @@ impl Injector {
 
     /// Forgets a destroyed framebuffer.
     pub fn framebuffer_destroyed(&self, fb: vk::Framebuffer) {
-        self.framebuffers.lock().remove(&fb.as_raw());
+        if self.framebuffers.lock().remove(&fb.as_raw()).is_some() {
+            tables_changed();
+        }
     }
 
     /// The map for a target of `extent` holding `views`, refilled where the published maps moved
@@ -462,6 +486,7 @@ impl Injector {
             fixed: Some((state.fixed, fixed)),
             scratch,
         });
+        tables_changed();
         objects.map(|o| o.view)
     }
 
@@ -477,11 +502,43 @@ impl Injector {
         )
     }
 
+    /// Enters a made, current map of a shape (and a full-rate map of `texels`) with the view
+    /// `view`, as the first begin of that shape would have made it: for tests that drive the begin
+    /// hooks on a device without a driver.
+    #[cfg(test)]
+    pub fn seed(
+        &self,
+        state: &Injection,
+        extent: [u32; 2],
+        views: Views,
+        view: vk::ImageView,
+        texels: [u32; 2],
+    ) {
+        let objects = Some(InjectedMap {
+            image: vk::Image::null(),
+            memory: vk::DeviceMemory::null(),
+            view,
+            texels,
+            layers: 1,
+        });
+        self.maps.lock().push(Map {
+            extent,
+            views,
+            key: state.key(),
+            objects,
+            fixed: None,
+            scratch: Vec::new(),
+        });
+        self.neutral.lock().push((texels, objects));
+        tables_changed();
+    }
+
     /// Destroys every map of a device about to be destroyed.
     ///
     /// # Safety
     /// `own` must belong to this injector's live device, idle, its uploads done or dropped.
     pub unsafe fn destroy(&self, own: &Own) {
+        tables_changed();
         let maps: Vec<Map> = self.maps.lock().drain(..).collect();
         let neutral: Vec<InjectedMap> = self
             .neutral
