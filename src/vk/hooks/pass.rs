@@ -1166,7 +1166,7 @@ mod tests {
         let taken = shared_taken() - before;
         // A new published pattern: the next begins decide again, and the eye map is refilled
         // (its bytes staged for the next submit) before it goes down again.
-        let uploads = || own.clears.state.lock().uploads.len();
+        let uploads = || own.clears.state.lock().dirty_uploads();
         assert_eq!(uploads(), 0);
         inject::set_pattern(
             fovea_model::density::Pattern {
