@@ -384,14 +384,12 @@ pub unsafe fn begin_injected_pass(
                 })
                 // The framebuffer describes a one-layer map of exactly its texels.
                 .filter(|&(_, e, v)| inj.map_size(e, v) == Some((texels, 1)));
-            match eye {
-                Some((v, _, _)) => (v.as_raw(), true),
-                // SAFETY: as the caller promised.
-                None => (
-                    unsafe { inj.neutral(own, texels) }.map_or(0, |v| v.as_raw()),
-                    false,
-                ),
+            if let Some((v, _, _)) = eye {
+                return (v.as_raw(), true);
             }
+            // SAFETY: as the caller promised.
+            let neutral = unsafe { inj.neutral(own, texels) };
+            (neutral.map_or(0, |v| v.as_raw()), false)
         },
     );
     if rate == 0 {

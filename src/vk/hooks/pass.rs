@@ -958,11 +958,9 @@ mod tests {
         let found = unsafe {
             chain::find::<vk::RenderingFragmentShadingRateAttachmentInfoKHR<'_>>((*info).p_next, ty)
         };
+        let found = found.ok().flatten();
         // SAFETY: found by its sType.
-        let view = found
-            .ok()
-            .flatten()
-            .map_or(0, |f| unsafe { (*f).image_view.as_raw() });
+        let view = found.map_or(0, |f| unsafe { (*f).image_view.as_raw() });
         WENT_DOWN_WITH.with(|w| w.set(view));
     }
 
@@ -975,8 +973,9 @@ mod tests {
     ) {
         let ty = vk::StructureType::RENDER_PASS_ATTACHMENT_BEGIN_INFO;
         // SAFETY: the layer's valid copy of the begin info.
-        let found =
-            unsafe { chain::find::<vk::RenderPassAttachmentBeginInfo<'_>>((*begin).p_next, ty) };
+        let next = unsafe { (*begin).p_next };
+        // SAFETY: as above.
+        let found = unsafe { chain::find::<vk::RenderPassAttachmentBeginInfo<'_>>(next, ty) };
         let view = match found.ok().flatten() {
             // SAFETY: found by its sType; its array of `attachment_count` views.
             Some(f) => unsafe { slice((*f).p_attachments, (*f).attachment_count) }
@@ -1088,9 +1087,9 @@ mod tests {
                 eye: None,
             },
         );
+        let device = vk::Device::from_raw(handle);
         // SAFETY: a table of functions that are never called (the loader's would return none).
-        let fns =
-            unsafe { ash::Device::load_with(|_| std::ptr::null(), vk::Device::from_raw(handle)) };
+        let fns = unsafe { ash::Device::load_with(|_| std::ptr::null(), device) };
         let own = Own {
             fns,
             memory: vk::PhysicalDeviceMemoryProperties::default(),

@@ -736,9 +736,9 @@ mod tests {
             non_trivial_combiners: true,
         };
         let inj = Injector::new(fdm);
+        let device = vk::Device::from_raw(0x7711);
         // SAFETY: a table of functions that are never called: the map exists, so nothing is made.
-        let fns =
-            unsafe { ash::Device::load_with(|_| std::ptr::null(), vk::Device::from_raw(0x7711)) };
+        let fns = unsafe { ash::Device::load_with(|_| std::ptr::null(), device) };
         unsafe extern "system" fn loader_data(
             _: vk::Device,
             _: *mut std::ffi::c_void,
