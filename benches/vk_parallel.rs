@@ -12,7 +12,12 @@
 //! devices: `bare` (the shading-rate test double only) and `fovea` (fovea's layer above it,
 //! emulating density maps). The double drops the commands ([`fovea_vkdouble::NULL_COMMANDS_ENV`]),
 //! so `bare` costs a call into an empty function and `fovea - bare` is the layer's own cost, as in
-//! `benches/vk_commands.rs`.
+//! `benches/vk_commands.rs`. A second comparison records only `vkCmdBeginRendering` + End into an
+//! eye target, on the bare device and on a third, injecting one (docs/injection.md), made through
+//! `xrCreateVulkanDeviceKHR` of an OpenXR instance with `FOVEA_INJECT=1` on the simulated runtime
+//! with its eye swapchain published, as `benches/vk_commands.rs` makes its injecting side: fovea's
+//! map is chained onto each such begin, the hot path of DXVK and vkd3d-proton, which render with
+//! dynamic rendering only. The run fails where that device does not inject.
 //!
 //! **What the figure is.** Each thread's recording loop is timed with its own CPU clock
 //! (`CLOCK_THREAD_CPUTIME_ID`), and criterion's time per iteration is the mean over threads of CPU
@@ -35,8 +40,8 @@
 //! one thread's figure, at most 30 ns added on one thread) are reported, not asserted: timings on
 //! a shared machine are not pass/fail.
 //!
-//! Run: `cargo build --release -p fovea -p fovea-vkdouble && cargo bench --bench vk_parallel --
-//! --warm-up-time 1 --measurement-time 2` (needs the Vulkan loader and lavapipe; skips otherwise).
+//! Run: `cargo build --release --workspace && cargo bench --bench vk_parallel -- --warm-up-time 1
+//! --measurement-time 2` (needs the Vulkan loader and lavapipe; skips otherwise).
 
 use std::sync::{Arc, Barrier, Mutex};
 use std::time::{Duration, Instant};
