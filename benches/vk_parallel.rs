@@ -12,7 +12,12 @@
 //! devices: `bare` (the shading-rate test double only) and `fovea` (fovea's layer above it,
 //! emulating density maps). The double drops the commands ([`fovea_vkdouble::NULL_COMMANDS_ENV`]),
 //! so `bare` costs a call into an empty function and `fovea - bare` is the layer's own cost, as in
-//! `benches/vk_commands.rs`.
+//! `benches/vk_commands.rs`. A second comparison records only `vkCmdBeginRendering` + End into an
+//! eye target, on the bare device and on a third, injecting one (docs/injection.md), made through
+//! `xrCreateVulkanDeviceKHR` of an OpenXR instance with `FOVEA_INJECT=1` on the simulated runtime
+//! with its eye swapchain published, as `benches/vk_commands.rs` makes its injecting side: fovea's
+//! map is chained onto each such begin, the hot path of DXVK and vkd3d-proton, which render with
+//! dynamic rendering only. The run fails where that device does not inject.
 //!
 //! **What the figure is.** Each thread's recording loop is timed with its own CPU clock
 //! (`CLOCK_THREAD_CPUTIME_ID`), and criterion's time per iteration is the mean over threads of CPU
@@ -35,8 +40,8 @@
 //! one thread's figure, at most 30 ns added on one thread) are reported, not asserted: timings on
 //! a shared machine are not pass/fail.
 //!
-//! Run: `cargo build --release -p fovea -p fovea-vkdouble && cargo bench --bench vk_parallel --
-//! --warm-up-time 1 --measurement-time 2` (needs the Vulkan loader and lavapipe; skips otherwise).
+//! Run: `cargo build --release --workspace && cargo bench --bench vk_parallel -- --warm-up-time 1
+//! --measurement-time 2` (needs the Vulkan loader and lavapipe; skips otherwise).
 
 use std::sync::{Arc, Barrier, Mutex};
 use std::time::{Duration, Instant};
@@ -50,6 +55,10 @@ use vulkan::{colour_range, compute_pipeline, median, pass_and_framebuffer, Targe
 
 #[path = "support/alloc.rs"]
 mod alloc;
+
+#[path = "support/xr_inject.rs"]
+mod xr_inject;
+use xr_inject::{injects, Xr};
 
 extern "C" {
     fn clock_gettime(clock: i32, out: *mut Timespec) -> i32;
@@ -80,6 +89,19 @@ const SIZE: u32 = 64;
 const ROUND: usize = 24_000;
 /// The mix, in recording order.
 const MIX: usize = 6;
+/// The eye swapchain's size, and the injecting side's colour target's (an eye-shaped target).
+const EYE: [u32; 2] = [640, 500];
+
+/// What a run records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mix {
+    /// The [`MIX`] commands in turn.
+    All,
+    /// `vkCmdBeginRendering` + `vkCmdEndRendering` into the side's colour target only: on the
+    /// injecting side an eye target, whose rendering gets fovea's map chained on, the hot path of
+    /// DXVK and vkd3d-proton, which render with dynamic rendering only.
+    Rendering,
+}
 
 /// One instance and device (bare or through fovea) with what every thread records into.
 struct Side {
@@ -92,20 +114,59 @@ struct Side {
     pipeline: vk::Pipeline,
     /// One pool and command buffer per thread.
     buffers: Vec<(vk::CommandPool, vk::CommandBuffer)>,
+    /// Whether the side destroys its device and instance (not where they were made through
+    /// OpenXR: the injecting side's go with their [`fovea_harness::vulkan::Vulkan`]).
+    owned: bool,
 }
 
 impl Side {
     fn new(entry: &ash::Entry, with_fovea: bool) -> Result<Side, String> {
         let (instance, physical) = vulkan::instance_on_lavapipe(entry, with_fovea)?;
-        // SAFETY: every struct lives across its call; handles are used while alive.
+        // SAFETY: `physical` is the instance's.
+        let device = unsafe { vulkan::device(&instance, physical, with_fovea, false) }?;
+        // SAFETY: the device is the instance's and the side's alone.
+        Ok(unsafe { Side::on(instance, physical, device, [SIZE, SIZE], true) })
+    }
+
+    /// The injecting side: its instance and device made through OpenXR
+    /// ([`xr_inject::Xr::vulkan`]), the session on it and its eye swapchain published, and a
+    /// colour target of the eye's size; with what destroys its device and instance after it.
+    fn injecting(
+        entry: &ash::Entry,
+        xr: &Xr,
+    ) -> Result<(Side, fovea_harness::vulkan::Vulkan), String> {
+        let v = xr.vulkan(entry)?;
+        xr.publish_eye(&v, EYE)?;
+        let (instance, physical, device) =
+            (v.instance.clone(), v.physical_device, v.device.clone());
+        // SAFETY: the device is the instance's and the side's alone; `v` destroys both.
+        Ok((
+            unsafe { Side::on(instance, physical, device, EYE, false) },
+            v,
+        ))
+    }
+
+    /// What a side records with, made on `device`, its colour target of `extent`.
+    ///
+    /// # Safety
+    /// `device` must be live and made from `instance`'s `physical`; the side destroys both where
+    /// `owned`.
+    unsafe fn on(
+        instance: ash::Instance,
+        physical: vk::PhysicalDevice,
+        device: ash::Device,
+        extent: [u32; 2],
+        owned: bool,
+    ) -> Side {
+        // SAFETY: as the caller promised; every struct lives across its call; handles are used
+        // while alive.
         unsafe {
-            let device = vulkan::device(&instance, physical, with_fovea, false)?;
             let color = Target::new(
                 &instance,
                 physical,
                 &device,
                 vk::Format::R8G8B8A8_UNORM,
-                [SIZE, SIZE],
+                extent,
                 vk::ImageUsageFlags::COLOR_ATTACHMENT,
             );
             let (pass, framebuffer) = pass_and_framebuffer(&device, color.view, None, SIZE);
@@ -113,7 +174,7 @@ impl Side {
             let buffers = (0..THREADS)
                 .map(|_| vulkan::command_buffer(&device))
                 .collect();
-            Ok(Side {
+            Side {
                 instance,
                 device,
                 color,
@@ -122,12 +183,13 @@ impl Side {
                 layout,
                 pipeline,
                 buffers,
-            })
+                owned,
+            }
         }
     }
 
-    /// Records command `i` of the mix into thread `t`'s command buffer.
-    fn record(&self, t: usize, i: usize) {
+    /// Records command `i` of `mix` into thread `t`'s command buffer.
+    fn record(&self, t: usize, i: usize, mix: Mix) {
         let d = &self.device;
         let cb = self.buffers[t].1;
         let whole = vk::Rect2D {
@@ -139,7 +201,11 @@ impl Side {
         };
         // SAFETY: thread `t`'s own command buffer, recording; every struct lives across its call.
         unsafe {
-            match i % MIX {
+            let which = match mix {
+                Mix::All => i % MIX,
+                Mix::Rendering => MIX - 1,
+            };
+            match which {
                 0 => {
                     let barrier = [vk::ImageMemoryBarrier::default()
                         .src_access_mask(vk::AccessFlags::SHADER_READ)
@@ -246,8 +312,10 @@ impl Drop for Side {
             d.destroy_framebuffer(self.framebuffer, None);
             d.destroy_render_pass(self.pass, None);
             self.color.destroy(d);
-            d.destroy_device(None);
-            self.instance.destroy_instance(None);
+            if self.owned {
+                d.destroy_device(None);
+                self.instance.destroy_instance(None);
+            }
         }
     }
 }
@@ -267,6 +335,7 @@ struct Run {
 struct Job {
     side: Arc<Side>,
     per_thread: usize,
+    mix: Mix,
 }
 
 /// Where every thread of a run (the workers and the caller) meets, per round: every command buffer
@@ -314,7 +383,7 @@ impl Workers {
                         g.go.wait();
                         let c = thread_cpu();
                         for i in 0..n {
-                            job.side.record(t, i);
+                            job.side.record(t, i, job.mix);
                         }
                         cpu += thread_cpu() - c;
                         g.done.wait();
@@ -336,7 +405,7 @@ impl Workers {
     }
 
     /// Records `per_thread` commands on each of `threads` workers into `side`.
-    fn run(&self, side: &Arc<Side>, threads: usize, per_thread: usize) -> Run {
+    fn run(&self, side: &Arc<Side>, threads: usize, per_thread: usize, mix: Mix) -> Run {
         let g = Arc::new(Gates {
             begun: Barrier::new(threads + 1),
             go: Barrier::new(threads + 1),
@@ -349,6 +418,7 @@ impl Workers {
         let job = Arc::new(Job {
             side: Arc::clone(side),
             per_thread,
+            mix,
         });
         for tx in &self.jobs[..threads] {
             tx.send(Some(Arc::clone(&job))).expect("worker");
@@ -384,33 +454,62 @@ impl Drop for Workers {
     }
 }
 
-/// Both sides on the null bottom, or why not.
-fn sides() -> Result<(Arc<Side>, Arc<Side>), String> {
-    vulkan::layers_on_search_path("vkparallel")?;
+/// The bare, emulating and injecting sides on the null bottom, what keeps injection on (dropped
+/// after the sides: the session's swapchain images live on the injecting device), or why not.
+/// Panics where the injecting side does not inject: its rows would measure nothing.
+#[allow(clippy::type_complexity)]
+fn sides() -> Result<
+    (
+        Arc<Side>,
+        Arc<Side>,
+        Arc<Side>,
+        fovea_harness::vulkan::Vulkan,
+        Xr,
+    ),
+    String,
+> {
+    let double_lib = vulkan::layers_on_search_path("vkparallel")?;
+    let double = fovea_vkdouble::Loaded::open(&double_lib)?;
     // Read by the double at vkCreateDevice.
     std::env::set_var(fovea_vkdouble::NULL_COMMANDS_ENV, "1");
     // SAFETY: loading libvulkan runs its initialisers, as any Vulkan application does.
     let entry = unsafe { ash::Entry::load() }.map_err(|e| format!("no Vulkan loader ({e})"))?;
     let bare = Side::new(&entry, false)?;
     let fovea = Side::new(&entry, true)?;
-    // The entry (the loader library) must outlive every instance: keep it for the process.
+    let xr = Xr::new()?;
+    double.clear();
+    let (inject, v) = Side::injecting(&entry, &xr)?;
+    if let Err(e) = injects(&double, ash::vk::Handle::as_raw(inject.framebuffer), EYE) {
+        panic!(
+            "vk_parallel: the injecting device does not inject, so its rows would say nothing: {e}"
+        );
+    }
+    // The entry (the loader library) must outlive every instance: keep it for the process; the
+    // double's too (its records live there).
     std::mem::forget(entry);
-    Ok((Arc::new(bare), Arc::new(fovea)))
+    std::mem::forget(double);
+    Ok((Arc::new(bare), Arc::new(fovea), Arc::new(inject), v, xr))
 }
 
 /// Criterion's time for `iters` commands per thread: the mean over threads of their CPU time.
-fn timed(workers: &Workers, side: &Arc<Side>, threads: usize, iters: u64) -> Duration {
-    workers.run(side, threads, iters as usize).cpu / threads as u32
+fn timed(workers: &Workers, side: &Arc<Side>, threads: usize, iters: u64, mix: Mix) -> Duration {
+    workers.run(side, threads, iters as usize, mix).cpu / threads as u32
 }
 
 /// Per command, from interleaved runs: (CPU ns, scaled wall ns, allocations per command; fewest
 /// in a run).
-fn figures(workers: &Workers, side: &Arc<Side>, threads: usize, runs: usize) -> (f64, f64, f64) {
+fn figures(
+    workers: &Workers,
+    side: &Arc<Side>,
+    threads: usize,
+    runs: usize,
+    mix: Mix,
+) -> (f64, f64, f64) {
     let per_thread = ROUND;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let (mut cpu, mut wall, mut alloc) = (Vec::new(), Vec::new(), u64::MAX);
     for _ in 0..runs {
-        let r = workers.run(side, threads, per_thread);
+        let r = workers.run(side, threads, per_thread, mix);
         let commands = (threads * per_thread) as f64;
         cpu.push(r.cpu.as_nanos() as f64 / commands);
         wall.push(r.wall.as_nanos() as f64 * threads.min(cores) as f64 / commands);
@@ -423,42 +522,22 @@ fn figures(workers: &Workers, side: &Arc<Side>, threads: usize, runs: usize) -> 
     )
 }
 
-fn benches() {
-    let (bare, fovea) = match sides() {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("vk_parallel: skipped: {e}");
-            return;
-        }
-    };
-    let workers = Workers::new();
-    // Warm up: every thread's command buffer reaches its steady size, the layer's scratch too.
-    for side in [&bare, &fovea] {
-        workers.run(side, THREADS, ROUND);
-    }
-    let mut c = Criterion::default()
-        .sample_size(20)
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(2))
-        .configure_from_args();
-    let mut g = c.benchmark_group("vk_parallel/null");
-    for threads in [1, THREADS] {
-        for (label, side) in [("bare", &bare), ("fovea", &fovea)] {
-            g.bench_function(format!("{threads} thread(s)/{label}"), |b| {
-                b.iter_custom(|iters| timed(&workers, side, threads, iters))
-            });
-        }
-    }
-    g.finish();
-    c.final_summary();
-
+/// The summary of one comparison (`what`: the commands `mix` records, on `bare` and through
+/// fovea on `fovea`) from interleaved runs; where the layer allocates, why.
+fn summary(
+    workers: &Workers,
+    what: &str,
+    mix: Mix,
+    bare: &Arc<Side>,
+    fovea: &Arc<Side>,
+) -> Vec<String> {
     const RUNS: usize = 60;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut rows = Vec::new();
     for _ in 0..RUNS / 10 {
         for threads in [1, THREADS] {
-            for (i, side) in [&bare, &fovea].into_iter().enumerate() {
-                rows.push((threads, i, figures(&workers, side, threads, 10)));
+            for (i, side) in [bare, fovea].into_iter().enumerate() {
+                rows.push((threads, i, figures(workers, side, threads, 10, mix)));
             }
         }
     }
@@ -471,9 +550,8 @@ fn benches() {
         )
     };
     println!(
-        "\nvk_parallel summary, null bottom, {cores} core(s): median ns per command (mix of \
-         barrier, barrier2, compute bind, push constants, render pass begin+end, rendering \
-         begin+end) over {RUNS} interleaved runs of {} commands per thread",
+        "\nvk_parallel summary, null bottom, {cores} core(s): median ns per command ({what}) over \
+         {RUNS} interleaved runs of {} commands per thread",
         ROUND
     );
     println!(
@@ -501,7 +579,8 @@ fn benches() {
             );
             if av > ab {
                 allocates.push(format!(
-                    "{threads} thread(s): {av} allocations per command, {ab} without the layer"
+                    "{what}, {threads} thread(s): {av} allocations per command, {ab} without the \
+                     layer"
                 ));
             }
         }
@@ -525,12 +604,74 @@ fn benches() {
         "",
         (wall(THREADS, 1) / wall(1, 1)) / (wall(THREADS, 0) / wall(1, 0)),
     );
+    allocates
+}
+
+fn benches() {
+    let (bare, fovea, inject, v, xr) = match sides() {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("vk_parallel: skipped: {e}");
+            return;
+        }
+    };
+    let workers = Workers::new();
+    let comparisons = [
+        (
+            "vk_parallel/null",
+            "mix of barrier, barrier2, compute bind, push constants, render pass begin+end, \
+             rendering begin+end",
+            Mix::All,
+            &bare,
+            &fovea,
+        ),
+        (
+            "vk_parallel/null/injected eye rendering",
+            "vkCmdBeginRendering+End into an eye target, fovea's map chained on, on the \
+             injecting device",
+            Mix::Rendering,
+            &bare,
+            &inject,
+        ),
+    ];
+    // Warm up: every thread's command buffer reaches its steady size, the layer's scratch and
+    // every thread's look-ups too.
+    for (_, _, mix, b, f) in comparisons {
+        for side in [b, f] {
+            workers.run(side, THREADS, ROUND, mix);
+        }
+    }
+    let mut c = Criterion::default()
+        .sample_size(20)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(2))
+        .configure_from_args();
+    for (group, _, mix, b, f) in comparisons {
+        let mut g = c.benchmark_group(group);
+        for threads in [1, THREADS] {
+            for (label, side) in [("bare", b), ("fovea", f)] {
+                g.bench_function(format!("{threads} thread(s)/{label}"), |bench| {
+                    bench.iter_custom(|iters| timed(&workers, side, threads, iters, mix))
+                });
+            }
+        }
+        g.finish();
+    }
+    c.final_summary();
+    let mut allocates = Vec::new();
+    for (_, what, mix, b, f) in comparisons {
+        allocates.extend(summary(&workers, what, mix, b, f));
+    }
     assert!(
         allocates.is_empty(),
         "the layer allocates while recording:\n{}",
         allocates.join("\n")
     );
     drop(workers);
+    // The session's swapchain images are on the injecting device: the session goes first.
+    drop(xr);
+    drop((bare, fovea, inject));
+    v.destroy();
 }
 
 fn main() {

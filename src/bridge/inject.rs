@@ -148,7 +148,8 @@ static WANTED: AtomicBool = AtomicBool::new(false);
 /// Bumped by every change to [`STATE`].
 static GENERATION: AtomicU64 = AtomicU64::new(0);
 
-static STATE: parking_lot::RwLock<Option<Arc<Injection>>> = parking_lot::RwLock::new(None);
+static STATE: crate::common::lock::SharedRwLock<Option<Arc<Injection>>> =
+    crate::common::lock::SharedRwLock::new(None);
 
 /// Eye passes injected and all passes begun since the last [`take_counts`], for the stats line.
 static EYE_PASSES: AtomicU64 = AtomicU64::new(0);
@@ -163,6 +164,13 @@ pub fn wanted() -> bool {
 /// caller holds it. For the paths that run per frame or per pass, [`with_current`].
 pub fn current() -> Option<Arc<Injection>> {
     STATE.read().clone()
+}
+
+/// The generation of the published state: a decision a thread made from the state it read after
+/// loading this value is good for as long as the value stays the same (the Vulkan side's per-thread
+/// cache of begin decisions, `crate::vk::injection`).
+pub fn generation() -> u64 {
+    GENERATION.load(Ordering::Acquire)
 }
 
 thread_local! {

@@ -248,8 +248,8 @@ pub struct Shadow {
 /// it is held, so it may be taken under any other lock (fovea's own uploads record their barriers
 /// under their fill and submit locks, and those barriers pass through the Vulkan layer, which asks
 /// here).
-static SHADOWS: parking_lot::RwLock<std::collections::BTreeMap<u64, Shadow>> =
-    parking_lot::RwLock::new(std::collections::BTreeMap::new());
+static SHADOWS: crate::common::lock::SharedRwLock<std::collections::BTreeMap<u64, Shadow>> =
+    crate::common::lock::SharedRwLock::new(std::collections::BTreeMap::new());
 
 /// Records (or, with `None`, forgets) the shadow of the application's density-map image `app`.
 pub fn set_shadow(app: ash::vk::Image, shadow: Option<Shadow>) {

@@ -240,6 +240,65 @@ impl<T, R: RawMutex> Drop for MutexGuard<'_, T, R> {
     }
 }
 
+/// How many process-wide locks (the registries' maps, [`MapLock`], and the tables every thread
+/// shares, [`SharedMutex`] and [`SharedRwLock`]) this thread has taken so far: the unit tests
+/// check the claim that a recording path takes none
+/// (docs/ARCHITECTURE.md#recording-without-locks) against it, the way the benches' `malloc`
+/// counter checks that it allocates nothing. Counted in test builds only (a thread-local
+/// increment); the library itself compiles to the plain locks.
+#[cfg(test)]
+pub fn shared_taken() -> u64 {
+    SHARED_TAKEN.try_with(std::cell::Cell::get).unwrap_or(0)
+}
+
+#[cfg(test)]
+thread_local! {
+    static SHARED_TAKEN: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+}
+
+#[inline(always)]
+fn count_shared() {
+    #[cfg(test)]
+    let _ = SHARED_TAKEN.try_with(|c| c.set(c.get().wrapping_add(1)));
+}
+
+/// A process-wide mutex outside [`Rank`]'s order (a leaf: nothing is taken under it that could
+/// wait for another lock of the layer's), whose acquisitions are counted ([`shared_taken`]).
+pub struct SharedMutex<T>(parking_lot::Mutex<T>);
+
+impl<T> SharedMutex<T> {
+    pub const fn new(value: T) -> SharedMutex<T> {
+        SharedMutex(parking_lot::Mutex::new(value))
+    }
+
+    #[inline]
+    pub fn lock(&self) -> parking_lot::MutexGuard<'_, T> {
+        count_shared();
+        self.0.lock()
+    }
+}
+
+/// A process-wide reader-writer lock, a leaf like [`SharedMutex`], counted alike.
+pub struct SharedRwLock<T>(parking_lot::RwLock<T>);
+
+impl<T> SharedRwLock<T> {
+    pub const fn new(value: T) -> SharedRwLock<T> {
+        SharedRwLock(parking_lot::RwLock::new(value))
+    }
+
+    #[inline]
+    pub fn read(&self) -> parking_lot::RwLockReadGuard<'_, T> {
+        count_shared();
+        self.0.read()
+    }
+
+    #[inline]
+    pub fn write(&self) -> parking_lot::RwLockWriteGuard<'_, T> {
+        count_shared();
+        self.0.write()
+    }
+}
+
 /// The lock of rank [`Rank::Map`] around each of the registry's handle maps.
 ///
 /// An exclusive lock, though the maps are read far more often than written: a map lock is held
@@ -275,6 +334,7 @@ impl<T> MapLock<T> {
     #[inline]
     fn lock(&self) -> MapGuard<'_, parking_lot::MutexGuard<'_, T>> {
         check::acquire(Rank::Map, self.what);
+        count_shared();
         MapGuard {
             _lock: std::marker::PhantomData,
             what: self.what,

@@ -33,8 +33,10 @@
 //! persist across passes (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#pipelines-bindpoint-commands>,
 //! <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#descriptorsets-compatibility>).
 //! So on emulating devices the layer records per command buffer what the application bound at the
-//! compute bind point and every push-constant update ([`Bound`](crate::vk::own::bindings::Bound), fixed size, made at
-//! `vkBeginCommandBuffer`), and binds it all again after the conversion. Where it cannot (push
+//! compute bind point and the push-constant updates of the compute stage that no later push
+//! covered ([`Bound`](crate::vk::own::bindings::Bound), fixed size, made at
+//! `vkBeginCommandBuffer`), and binds it all again after the conversion: a compute dispatch
+//! disturbs nothing of the graphics stages, so engines' per-draw graphics pushes are not kept. Where it cannot (push
 //! descriptors, more sets or dynamic offsets than a record holds), that pass's map is not converted
 //! and renders at full rate, and the log says so once. Devices with commands that bind compute
 //! state the layer does not intercept (Vulkan 1.4, `VK_KHR_maintenance6`, descriptor buffers,
@@ -55,6 +57,7 @@ use std::sync::Arc;
 use ash::vk;
 use ash::vk::Handle as _;
 
+use crate::common::lock::SharedRwLock;
 use crate::vk::base::chain;
 use crate::vk::base::ffi::{key, raw, AddressHasher, Key};
 use crate::vk::own::bindings::restore;
@@ -400,9 +403,8 @@ fn filter_slot(fb: u64) -> (usize, u64) {
 /// Framebuffers of rewritten passes on converting devices → (device key, density view). One
 /// table for all devices, looked up first at every render-pass begin whose framebuffer passes
 /// [`FRAMEBUFFER_FILTER`], before any per-device look-up. A leaf lock.
-static FRAMEBUFFERS: parking_lot::RwLock<
-    HashMap<u64, (Key, u64), BuildHasherDefault<AddressHasher>>,
-> = parking_lot::RwLock::new(HashMap::with_hasher(BuildHasherDefault::new()));
+static FRAMEBUFFERS: SharedRwLock<HashMap<u64, (Key, u64), BuildHasherDefault<AddressHasher>>> =
+    SharedRwLock::new(HashMap::with_hasher(BuildHasherDefault::new()));
 
 /// A filter of render passes that write or order density maps (see [`MAP_EPOCH`]): one bit per
 /// hash slot, never cleared; a stale or shared bit only costs a conversion.
@@ -447,6 +449,11 @@ pub unsafe fn before_render_pass(
     cb: vk::CommandBuffer,
     begin: *const vk::RenderPassBeginInfo<'_>,
 ) {
+    // Only emulating devices convert (`device_created`): on an injecting one no table of this
+    // module is looked at, however the pass is begun.
+    if dev.fdm.is_none() {
+        return;
+    }
     // SAFETY: as the caller promised.
     let (Some(k), Some(b)) = (unsafe { key(cb) }, unsafe { begin.as_ref() }) else {
         return;
@@ -547,10 +554,14 @@ pub fn ended(cb: vk::CommandBuffer, offsets: &[vk::Offset2D]) {
 /// # Safety
 /// `cb` must be recording on `dev`; `info` NULL or valid.
 pub unsafe fn before_rendering(
-    _dev: &Device,
+    dev: &Device,
     cb: vk::CommandBuffer,
     info: *const vk::RenderingInfo<'_>,
 ) {
+    // As in `before_render_pass`.
+    if dev.fdm.is_none() {
+        return;
+    }
     // SAFETY: as the caller promised.
     let Some(ri) = (unsafe { info.as_ref() }) else {
         return;

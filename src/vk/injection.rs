@@ -5,6 +5,7 @@
 use std::ffi::c_void;
 
 use ash::vk;
+use ash::vk::Handle as _;
 
 use crate::vk::base::chain::{self, ChainCopy};
 use crate::vk::base::ffi::{raw, slice};
@@ -224,6 +225,81 @@ pub unsafe fn create_injected_framebuffer(
     r
 }
 
+/// A begin's decision on an injecting device, as one thread made it: for `injector` (its
+/// address), what kind of begin (`kind`) naming `what` and `extra`, made when the published
+/// state's generation was `state` and the injectors' tables' was `tables`: `out`.
+#[derive(Clone, Copy)]
+struct Decided {
+    injector: usize,
+    kind: u8,
+    what: u64,
+    extra: u64,
+    state: u64,
+    tables: u64,
+    out: (u64, bool),
+}
+
+/// Decisions a thread keeps: the few targets and framebuffers of the passes it records.
+const DECIDED: usize = 8;
+
+thread_local! {
+    static DECISIONS: std::cell::Cell<[Option<Decided>; DECIDED]> =
+        const { std::cell::Cell::new([None; DECIDED]) };
+}
+
+/// Kinds of [`Decided`]: a dynamic rendering's colour view (with its rendered layers), a
+/// framebuffer, an imageless framebuffer's colour view.
+const RENDERING: u8 = 1;
+const FRAMEBUFFER: u8 = 2;
+const IMAGELESS: u8 = 3;
+
+/// What a begin on an injecting device decides (whether its target is an eye target, which map it
+/// gets) depends only on the published state ([`crate::bridge::inject::generation`]) and the
+/// injectors' tables ([`crate::vk::own::injector::tables_generation`]), which change at object
+/// creation, never per command. So each thread keeps its latest decisions and makes one again
+/// only when either generation moved: in steady state a begin takes no lock, per-device or
+/// process-wide, and counts no reference (docs/ARCHITECTURE.md#recording-without-locks), where
+/// it used to take the published state's lock and two or three of the device's. A miss runs
+/// `decide`, which may take them and refill a map whose published key moved.
+fn decided(
+    inj: &crate::vk::own::injector::Injector,
+    kind: u8,
+    what: u64,
+    extra: u64,
+    decide: impl FnOnce() -> (u64, bool),
+) -> (u64, bool) {
+    let state = crate::bridge::inject::generation();
+    let tables = crate::vk::own::injector::tables_generation();
+    let injector = inj as *const _ as usize;
+    let hit = |d: &Decided| {
+        (d.injector, d.kind, d.what, d.extra, d.state, d.tables)
+            == (injector, kind, what, extra, state, tables)
+    };
+    let cached = DECISIONS
+        .try_with(|c| c.get().iter().flatten().find(|d| hit(d)).map(|d| d.out))
+        .ok()
+        .flatten();
+    if let Some(out) = cached {
+        return out;
+    }
+    let out = decide();
+    let _ = DECISIONS.try_with(|c| {
+        let mut v = c.get();
+        v.rotate_right(1);
+        v[0] = Some(Decided {
+            injector,
+            kind,
+            what,
+            extra,
+            state,
+            tables,
+            out,
+        });
+        c.set(v);
+    });
+    out
+}
+
 /// Views a begin names inline, before a longer list takes the heap.
 pub const INLINE_VIEWS: usize = 16;
 
@@ -244,20 +320,29 @@ pub unsafe fn begin_injected_pass(
     let Some(b) = (unsafe { begin.as_ref() }) else {
         return f(begin);
     };
-    let Some(fb) = inj.framebuffer(b.framebuffer) else {
-        crate::bridge::inject::count_pass(false);
-        return f(begin);
-    };
-    if !fb.imageless {
-        if let Some((extent, views)) = fb.eye {
-            crate::bridge::inject::with_current(|state| {
-                if let Some(state) = state {
-                    // SAFETY: as the caller promised.
-                    unsafe { inj.refresh(own, state, extent, views) };
-                }
-            });
+    // What the framebuffer is: 0 not one of an injected pass, 1 with views of its own, 2 with an
+    // eye map of its own (refilled here where the published maps moved on), 3 + the colour
+    // attachment's index + 1 imageless.
+    let (class, _) = decided(inj, FRAMEBUFFER, b.framebuffer.as_raw(), 0, || {
+        let Some(fb) = inj.framebuffer(b.framebuffer) else {
+            return (0, false);
+        };
+        if fb.imageless {
+            return (3 + fb.pass.colour.map_or(0, |c| u64::from(c) + 1), false);
         }
-        crate::bridge::inject::count_pass(fb.eye.is_some());
+        let Some((extent, views)) = fb.eye else {
+            return (1, false);
+        };
+        crate::bridge::inject::with_current(|state| {
+            if let Some(state) = state {
+                // SAFETY: as the caller promised.
+                unsafe { inj.refresh(own, state, extent, views) };
+            }
+        });
+        (2, false)
+    });
+    if class < 3 {
+        crate::bridge::inject::count_pass(class == 2);
         return f(begin);
     }
     let ty = vk::StructureType::RENDER_PASS_ATTACHMENT_BEGIN_INFO;
@@ -271,29 +356,47 @@ pub unsafe fn begin_injected_pass(
     let found = unsafe { &*found };
     // SAFETY: the caller's array.
     let app = unsafe { slice(found.p_attachments, found.attachment_count) };
-    let texels = inj.texels_for(fb.extent);
-    let layers = if fb.pass.view_mask != 0 {
-        crate::vk::own::injector::rendered_layers(fb.pass.view_mask, 0)
-    } else {
-        None
-    };
-    let colour = fb.pass.colour.and_then(|c| app.get(c as usize).copied());
-    let eye = colour
-        .and_then(|v| {
-            crate::bridge::inject::with_current(|state| {
-                // SAFETY: as the caller promised.
-                state.and_then(|state| unsafe { inj.eye_map(own, state, v, layers) })
-            })
-        })
-        // The framebuffer describes a one-layer map of exactly its texels.
-        .filter(|&(_, e, v)| inj.map_size(e, v) == Some((texels, 1)));
-    let Some(rate) = eye.map(|e| e.0).or_else(|| {
-        // SAFETY: as the caller promised.
-        unsafe { inj.neutral(own, texels) }
-    }) else {
+    let colour = (class - 3)
+        .checked_sub(1)
+        .and_then(|c| app.get(c as usize).copied());
+    // The map this begin's colour view gets (0: none), and whether it is an eye map.
+    let (rate, eye) = decided(
+        inj,
+        IMAGELESS,
+        b.framebuffer.as_raw(),
+        colour.map_or(0, |v| v.as_raw()),
+        || {
+            let Some(fb) = inj.framebuffer(b.framebuffer) else {
+                return (0, false);
+            };
+            let texels = inj.texels_for(fb.extent);
+            let layers = if fb.pass.view_mask != 0 {
+                crate::vk::own::injector::rendered_layers(fb.pass.view_mask, 0)
+            } else {
+                None
+            };
+            let eye = colour
+                .and_then(|v| {
+                    crate::bridge::inject::with_current(|state| {
+                        // SAFETY: as the caller promised.
+                        state.and_then(|state| unsafe { inj.eye_map(own, state, v, layers) })
+                    })
+                })
+                // The framebuffer describes a one-layer map of exactly its texels.
+                .filter(|&(_, e, v)| inj.map_size(e, v) == Some((texels, 1)));
+            if let Some((v, _, _)) = eye {
+                return (v.as_raw(), true);
+            }
+            // SAFETY: as the caller promised.
+            let neutral = unsafe { inj.neutral(own, texels) };
+            (neutral.map_or(0, |v| v.as_raw()), false)
+        },
+    );
+    if rate == 0 {
         return f(begin);
-    };
-    crate::bridge::inject::count_pass(eye.is_some());
+    }
+    let rate = vk::ImageView::from_raw(rate);
+    crate::bridge::inject::count_pass(eye);
     let mut inline = [vk::ImageView::null(); INLINE_VIEWS];
     let heap: Vec<vk::ImageView>;
     let views: &[vk::ImageView] = if app.len() < INLINE_VIEWS {
@@ -355,8 +458,10 @@ pub unsafe fn begin_injected(
     info: *const vk::RenderingInfo<'_>,
 ) {
     // SAFETY: the caller's rendering info, read only.
-    let (Some(ri), Some(state)) = (unsafe { info.as_ref() }, crate::bridge::inject::current())
-    else {
+    let ri = unsafe { info.as_ref() };
+    // Injection switched off (its instance gone): the rendering goes down as it came. A
+    // thread-local look, no lock (`with_current`).
+    let Some(ri) = ri.filter(|_| crate::bridge::inject::with_current(|s| s.is_some())) else {
         // SAFETY: the next layer's function, with the caller's arguments.
         return unsafe { next(cb, info) };
     };
@@ -385,8 +490,22 @@ pub unsafe fn begin_injected(
         .map(|a| a.image_view)
         .filter(|v| *v != vk::ImageView::null());
     let layers = crate::vk::own::injector::rendered_layers(ri.view_mask, ri.layer_count);
-    // SAFETY: `own` is the device's, as the caller promised.
-    let map = colour.and_then(|v| unsafe { inj.eye_view(own, &state, v, layers) });
+    let map = colour.and_then(|v| {
+        let (map, _) = decided(
+            inj,
+            RENDERING,
+            v.as_raw(),
+            layers.map_or(0, |l| u64::from(l) + 1),
+            || {
+                crate::bridge::inject::with_current(|state| {
+                    // SAFETY: `own` is the device's, as the caller promised.
+                    let map = state.and_then(|s| unsafe { inj.eye_view(own, s, v, layers) });
+                    (map.map_or(0, |m| m.as_raw()), false)
+                })
+            },
+        );
+        (map != 0).then(|| vk::ImageView::from_raw(map))
+    });
     crate::bridge::inject::count_pass(map.is_some());
     let Some(map) = map else {
         // SAFETY: the next layer's function, with the caller's arguments.

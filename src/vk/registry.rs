@@ -18,7 +18,7 @@ use ash::vk;
 use ash::vk::Handle as _;
 
 use crate::bridge::FdmEmulation;
-use crate::common::lock::{MapLock, Mutex, Rank};
+use crate::common::lock::{MapLock, Mutex, Rank, SharedMutex, SharedRwLock};
 use crate::vk::base::ffi::{key, AddressHasher, Key};
 use crate::vk::base::next::{DeviceNext, InstanceNext};
 use crate::vk::own::bindings::Bound;
@@ -407,13 +407,13 @@ const BUFFER_SLOTS: usize = 4096;
 /// is made). Written when pools and buffers are made, read only for an ownership transfer of a
 /// density image: a leaf lock, never taken per command on the common path.
 struct Families {
-    pools: parking_lot::Mutex<[(u64, u32); POOL_SLOTS]>,
-    buffers: parking_lot::Mutex<[(u64, u32); BUFFER_SLOTS]>,
+    pools: SharedMutex<[(u64, u32); POOL_SLOTS]>,
+    buffers: SharedMutex<[(u64, u32); BUFFER_SLOTS]>,
 }
 
 static FAMILIES: Families = Families {
-    pools: parking_lot::Mutex::new([(0, 0); POOL_SLOTS]),
-    buffers: parking_lot::Mutex::new([(0, 0); BUFFER_SLOTS]),
+    pools: SharedMutex::new([(0, 0); POOL_SLOTS]),
+    buffers: SharedMutex::new([(0, 0); BUFFER_SLOTS]),
 };
 
 fn slot(raw: u64, slots: usize) -> usize {
@@ -477,7 +477,7 @@ pub fn pool_created(pool: u64, family: u32) {
 /// outside [`crate::common::lock::Rank`]'s order, like the recording table
 /// ([`recording`]): held for a scan and an `Arc` clone only, so it may be taken under
 /// fovea's own upload locks, whose submits pass through the layer.
-static OWNS: parking_lot::RwLock<Vec<(Key, Arc<Own>)>> = parking_lot::RwLock::new(Vec::new());
+static OWNS: SharedRwLock<Vec<(Key, Arc<Own>)>> = SharedRwLock::new(Vec::new());
 
 /// Records (or, with `None`, forgets) the device `k`'s own calls.
 pub fn set_own(k: Key, own: Option<Arc<Own>>) {
@@ -505,8 +505,7 @@ pub unsafe fn own_of(handle: impl vk::Handle) -> Option<Arc<Own>> {
 // Each converting device's converter, and every command buffer's record.
 
 /// Each converting device's [`Converter`], by dispatch key; a leaf lock like [`OWNS`].
-pub static CONVERTERS: parking_lot::RwLock<Vec<(Key, Arc<Converter>)>> =
-    parking_lot::RwLock::new(Vec::new());
+pub static CONVERTERS: SharedRwLock<Vec<(Key, Arc<Converter>)>> = SharedRwLock::new(Vec::new());
 
 /// The converter of a device's dispatch key.
 pub fn converter_by_key(k: Key) -> Option<Arc<Converter>> {
@@ -558,8 +557,8 @@ type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<AddressHasher>>;
 /// pool or device destruction), and on a thread's first look-up of a command buffer since any of
 /// these: recording threads find their command buffers' records in their own [`CB_CACHE`]
 /// without it. A leaf lock.
-pub static CB_RECORDS: parking_lot::Mutex<Records> =
-    parking_lot::Mutex::new(HashMap::with_hasher(BuildHasherDefault::new()));
+pub static CB_RECORDS: SharedMutex<Records> =
+    SharedMutex::new(HashMap::with_hasher(BuildHasherDefault::new()));
 
 /// Advanced (under [`CB_RECORDS`]) whenever a record is added or dropped: a cached look-up is good
 /// only while the generation it was made in is current, so a handle value the driver reuses for a
@@ -578,7 +577,8 @@ thread_local! {
 }
 
 /// `cb`'s record, for the length of a call on `cb`: from this thread's cache where it is current,
-/// else from [`CB_RECORDS`], then cached.
+/// else from [`CB_RECORDS`], then cached; a command buffer without a record is cached as such
+/// (a null record), so that asking again takes no lock either.
 ///
 /// Sound because a record leaves [`CB_RECORDS`] (and may be freed) only when its command buffer is
 /// freed, its pool or its device destroyed, which the application synchronises with every call on
@@ -601,7 +601,7 @@ pub fn record_of<R>(cb: vk::CommandBuffer, f: impl FnOnce(&CbRecord) -> R) -> Op
         Some(p) => p,
         None => {
             let map = CB_RECORDS.lock();
-            let p = Arc::as_ptr(map.get(&raw)?);
+            let p = map.get(&raw).map_or(std::ptr::null(), Arc::as_ptr);
             let _ = CB_CACHE.try_with(|c| {
                 let mut v = c.get();
                 v.rotate_right(1);
@@ -611,8 +611,8 @@ pub fn record_of<R>(cb: vk::CommandBuffer, f: impl FnOnce(&CbRecord) -> R) -> Op
             p
         }
     };
-    // SAFETY: the record is alive for this call on `cb` (see above).
-    Some(f(unsafe { &*ptr }))
+    // SAFETY: the record is alive for this call on `cb` (see above); null: none.
+    unsafe { ptr.as_ref() }.map(f)
 }
 
 /// Runs `f` on `cb`'s bindings, if it has a record.

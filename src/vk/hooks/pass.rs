@@ -917,3 +917,274 @@ pub unsafe extern "system" fn cmd_end_rendering2_khr(
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::cell::Cell;
+    use std::sync::Arc;
+
+    use ash::vk::Handle as _;
+
+    use super::*;
+    use crate::bridge::inject;
+    use crate::common::lock::{shared_taken, Mutex, Rank};
+    use crate::vk::own::calls::{Clears, Own};
+    use crate::vk::own::injector::{InjectedFramebuffer, InjectedPass, Injector};
+    use fovea_model::inject::Views;
+
+    thread_local! {
+        /// The shading-rate view the last begin went down with (0: none).
+        static WENT_DOWN_WITH: Cell<u64> = const { Cell::new(0) };
+    }
+
+    unsafe extern "system" fn no_gdpa(
+        _: vk::Device,
+        _: *const std::ffi::c_char,
+    ) -> vk::PFN_vkVoidFunction {
+        None
+    }
+
+    unsafe extern "system" fn set_loader_data(_: vk::Device, _: *mut c_void) -> vk::Result {
+        vk::Result::SUCCESS
+    }
+
+    /// The driver's `vkCmdBeginRendering`: notes the shading-rate view chained on.
+    unsafe extern "system" fn rendering_below(
+        _: vk::CommandBuffer,
+        info: *const vk::RenderingInfo<'_>,
+    ) {
+        let ty = vk::StructureType::RENDERING_FRAGMENT_SHADING_RATE_ATTACHMENT_INFO_KHR;
+        // SAFETY: the layer's valid copy of the begin info.
+        let found = unsafe {
+            chain::find::<vk::RenderingFragmentShadingRateAttachmentInfoKHR<'_>>((*info).p_next, ty)
+        };
+        let found = found.ok().flatten();
+        // SAFETY: found by its sType.
+        let view = found.map_or(0, |f| unsafe { (*f).image_view.as_raw() });
+        WENT_DOWN_WITH.with(|w| w.set(view));
+    }
+
+    /// The driver's `vkCmdBeginRenderPass2`: notes the last attachment view a begin names (the
+    /// injected one of an imageless framebuffer), or 1 for a framebuffer with views of its own.
+    unsafe extern "system" fn pass_below(
+        _: vk::CommandBuffer,
+        begin: *const vk::RenderPassBeginInfo<'_>,
+        _: *const vk::SubpassBeginInfo<'_>,
+    ) {
+        let ty = vk::StructureType::RENDER_PASS_ATTACHMENT_BEGIN_INFO;
+        // SAFETY: the layer's valid copy of the begin info.
+        let next = unsafe { (*begin).p_next };
+        // SAFETY: as above.
+        let found = unsafe { chain::find::<vk::RenderPassAttachmentBeginInfo<'_>>(next, ty) };
+        let view = match found.ok().flatten() {
+            // SAFETY: found by its sType; its array of `attachment_count` views.
+            Some(f) => unsafe { slice((*f).p_attachments, (*f).attachment_count) }
+                .last()
+                .map_or(0, |v| v.as_raw()),
+            None => 1,
+        };
+        WENT_DOWN_WITH.with(|w| w.set(view));
+    }
+
+    /// Every begin an injecting device's recording threads make (DXVK's and vkd3d-proton's
+    /// dynamic rendering into an eye target and into another target, vkd3d-proton's null-view
+    /// shading-rate struct, a render pass with an eye framebuffer and one with an imageless
+    /// framebuffer) takes no process-wide lock once its eye map exists: the count of this
+    /// thread's process-wide lock acquisitions does not move over 100 rounds of them, while each
+    /// begin still goes down with the map it must have.
+    #[test]
+    fn injecting_begins_take_no_process_wide_lock_in_steady_state() {
+        let _one = inject::tests::STATE_TESTS.lock();
+        let key_word = Box::new(0x7701usize);
+        let handle = &*key_word as *const usize as u64;
+        let cb = vk::CommandBuffer::from_raw(handle);
+        let (eye_image, eye_view, other_view) = (0x5e1u64, 0x5e2u64, 0x5e3u64);
+        let (map_view, eye_fb, imageless_fb, pass) = (0x3a9u64, 0xfb1u64, 0xfb2u64, 0xa55u64);
+        let extent = [64, 64];
+        inject::start(fovea_model::density::Level::High);
+        let fov = fovea_model::Fov {
+            left: -0.8,
+            right: 0.8,
+            up: 0.8,
+            down: -0.8,
+        };
+        inject::set_fovs(&[fov, fov]);
+        inject::set_swapchain(
+            1,
+            fovea_model::inject::Swapchain {
+                extent,
+                layers: 1,
+                holds: fovea_model::inject::Holds::View(0),
+            },
+        );
+        inject::set_images(1, &[eye_image]);
+        let fdm = crate::bridge::FdmEmulation {
+            texel: [16, 16],
+            layered: true,
+            max_fragment: [4, 4],
+            rates: vec![[1, 1], [2, 2], [4, 4]],
+            non_trivial_combiners: true,
+        };
+        let inj = Injector::new(fdm);
+        let colour = |image: u64, extent: [u32; 2]| {
+            inj.image_created(
+                vk::Image::from_raw(image),
+                &vk::ImageCreateInfo::default()
+                    .image_type(vk::ImageType::TYPE_2D)
+                    .extent(vk::Extent3D {
+                        width: extent[0],
+                        height: extent[1],
+                        depth: 1,
+                    })
+                    .array_layers(1)
+                    .usage(vk::ImageUsageFlags::COLOR_ATTACHMENT),
+            );
+        };
+        colour(eye_image, extent);
+        // Not eye-shaped: another pass.
+        colour(0x5e4, [100, 30]);
+        let range = vk::ImageSubresourceRange {
+            aspect_mask: vk::ImageAspectFlags::COLOR,
+            base_mip_level: 0,
+            level_count: 1,
+            base_array_layer: 0,
+            layer_count: 1,
+        };
+        for (view, image) in [(eye_view, eye_image), (other_view, 0x5e4)] {
+            inj.view_created(
+                vk::ImageView::from_raw(view),
+                &vk::ImageViewCreateInfo::default()
+                    .image(vk::Image::from_raw(image))
+                    .subresource_range(range),
+            );
+        }
+        let views = Views::Layers { first: 0, count: 1 };
+        inject::with_current(|s| {
+            let s = s.expect("injection is on");
+            inj.seed(s, extent, views, vk::ImageView::from_raw(map_view), [4, 4]);
+        });
+        let injected = InjectedPass {
+            rate: 1,
+            colour: Some(0),
+            view_mask: 0,
+        };
+        inj.pass_created(vk::RenderPass::from_raw(pass), injected);
+        inj.framebuffer_created(
+            vk::Framebuffer::from_raw(eye_fb),
+            InjectedFramebuffer {
+                pass: injected,
+                extent,
+                imageless: false,
+                eye: Some((extent, views)),
+            },
+        );
+        inj.framebuffer_created(
+            vk::Framebuffer::from_raw(imageless_fb),
+            InjectedFramebuffer {
+                pass: injected,
+                extent,
+                imageless: true,
+                eye: None,
+            },
+        );
+        let device = vk::Device::from_raw(handle);
+        // SAFETY: a table of functions that are never called (the loader's would return none).
+        let fns = unsafe { ash::Device::load_with(|_| std::ptr::null(), device) };
+        let own = Own {
+            fns,
+            memory: vk::PhysicalDeviceMemoryProperties::default(),
+            set_loader_data,
+            clears: Clears::new(Vec::new()),
+            fallbacks: Mutex::ranked(Rank::Record, "test fallbacks", Vec::new()),
+        };
+        let next = crate::vk::base::next::DeviceNext {
+            cmd_begin_rendering: Some(rendering_below),
+            cmd_begin_render_pass2: Some(pass_below),
+            ..Default::default()
+        };
+        let own = Arc::new(own);
+        // SAFETY: the handle points at a word holding its key, alive for the test.
+        unsafe {
+            registry::add_device(Device {
+                handle: vk::Device::from_raw(handle),
+                gdpa: no_gdpa,
+                next,
+                end_rendering: None,
+                fdm: None,
+                inject: Some(inj),
+                api_version: vk::API_VERSION_1_3,
+                attachments: registry::Attachments::new(Some(Arc::clone(&own))),
+            });
+        }
+
+        let colour_att = |view: u64| {
+            [vk::RenderingAttachmentInfo::default().image_view(vk::ImageView::from_raw(view))]
+        };
+        let (eye_att, other_att) = (colour_att(eye_view), colour_att(other_view));
+        let null_rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default();
+        let rendering = |att: &[vk::RenderingAttachmentInfo<'_>], vkd3d: bool| {
+            let mut info = vk::RenderingInfo::default()
+                .layer_count(1)
+                .color_attachments(att);
+            if vkd3d {
+                info.p_next = &null_rate as *const _ as *const c_void;
+            }
+            // SAFETY: a valid rendering info on the test's command buffer.
+            unsafe { cmd_begin_rendering(cb, &info) };
+            WENT_DOWN_WITH.with(Cell::get)
+        };
+        let begin_views = [vk::ImageView::from_raw(eye_view)];
+        let attachments = vk::RenderPassAttachmentBeginInfo::default().attachments(&begin_views);
+        let render_pass = |fb: u64, imageless: bool| {
+            let mut begin = vk::RenderPassBeginInfo::default()
+                .render_pass(vk::RenderPass::from_raw(pass))
+                .framebuffer(vk::Framebuffer::from_raw(fb));
+            if imageless {
+                begin.p_next = &attachments as *const _ as *const c_void;
+            }
+            let subpass = vk::SubpassBeginInfo::default();
+            // SAFETY: a valid begin info on the test's command buffer.
+            unsafe { cmd_begin_render_pass2(cb, &begin, &subpass) };
+            WENT_DOWN_WITH.with(Cell::get)
+        };
+        let round = || {
+            [
+                rendering(&eye_att, false),
+                rendering(&other_att, false),
+                rendering(&eye_att, true),
+                render_pass(eye_fb, false),
+                render_pass(imageless_fb, true),
+            ]
+        };
+        let want = [map_view, 0, map_view, 1, map_view];
+        assert_eq!(round(), want, "the first begins (their look-ups made)");
+        let before = shared_taken();
+        for i in 0..100 {
+            assert_eq!(round(), want, "round {i}");
+        }
+        let taken = shared_taken() - before;
+        // A new published pattern: the next begins decide again, and the eye map is refilled
+        // (its bytes staged for the next submit) before it goes down again.
+        let uploads = || own.clears.state.lock().dirty_uploads();
+        assert_eq!(uploads(), 0);
+        inject::set_pattern(
+            fovea_model::density::Pattern {
+                level: fovea_model::density::Level::Low,
+                vertical_offset_deg: 0.0,
+            },
+            false,
+            4,
+        );
+        assert_eq!(round(), want, "after the pattern changed");
+        assert_eq!(uploads(), 1, "the eye map is refilled for the new pattern");
+        // SAFETY: nothing is in flight; the device is the test's.
+        unsafe { own.clears.destroy(&own.fns) };
+        // SAFETY: no call on the device runs.
+        drop(unsafe { registry::remove_device(vk::Device::from_raw(handle)) });
+        inject::stop();
+        assert_eq!(
+            taken, 0,
+            "process-wide locks taken by 500 begins on an injecting device in steady state"
+        );
+    }
+}

@@ -296,7 +296,8 @@ pub unsafe extern "system" fn cmd_bind_descriptor_sets(
     })
 }
 
-/// `vkCmdPushConstants`: the bytes and the range are noted.
+/// `vkCmdPushConstants`: the bytes and the range are noted where the conversion's compute
+/// dispatch would disturb them ([`Bound::push`]).
 ///
 /// # Safety
 /// The caller's arguments, valid as the command requires.

@@ -12,7 +12,8 @@ pub const DYNAMIC: usize = 8;
 /// Push-constant bytes a record holds (`maxPushConstantsSize` is at least 128, 256 on desktop
 /// drivers).
 pub const PUSH_BYTES: usize = 256;
-/// Distinct push-constant updates (layout, stages, range) a record holds.
+/// Push-constant updates with the compute stage that no later push covers (layout, stages,
+/// range) a record holds ([`Bound::push`]).
 pub const PUSHES: usize = 8;
 
 #[derive(Clone, Copy, Default)]
@@ -126,26 +127,51 @@ impl Bound {
         }
     }
 
+    /// Notes a `vkCmdPushConstants`. Only what the conversion's own dispatch disturbs is kept: it
+    /// pushes constants for the compute stage alone, so a push that names no compute stage leaves
+    /// nothing to give back (a graphics pipeline's push constants are untouched by a compute push,
+    /// <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#descriptorsets-push-constants>),
+    /// and a record that a later push covers (its whole range, for every stage it names) is
+    /// dropped: pushing it again would be overwritten by the later one. So an engine's per-draw
+    /// graphics pushes and its per-shader compute layouts over one range keep the record at a
+    /// range or two, where it used to fill up and give up. The one case the record cannot give
+    /// back is a push that overwrites some, not all, of the stages of a recorded range: after it
+    /// those stages hold different bytes, and one push cannot restore both (`lost`).
     pub fn push(&mut self, range: PushRange, values: &[u8]) {
-        let end = range.offset as usize + values.len();
-        if end > PUSH_BYTES {
+        let end = range.offset as u64 + values.len() as u64;
+        let n = self.push_count as usize;
+        let overlaps = |p: &PushRange| {
+            u64::from(p.offset) < end && range.offset < p.offset.saturating_add(p.size)
+        };
+        if self.pushes[..n].iter().any(|p| {
+            overlaps(p) && p.stages.intersects(range.stages) && !range.stages.contains(p.stages)
+        }) {
             self.lost = true;
             return;
         }
-        self.push[range.offset as usize..end].copy_from_slice(values);
-        self.seq = self.seq.wrapping_add(1).max(1);
-        let seq = self.seq;
-        let known = &mut self.pushes[..self.push_count as usize];
-        if let Some(p) = known.iter_mut().find(|p| {
-            p.layout == range.layout
-                && p.stages == range.stages
-                && p.offset == range.offset
-                && p.size == range.size
-        }) {
-            p.seq = seq;
+        if !range.stages.contains(vk::ShaderStageFlags::COMPUTE) {
             return;
         }
-        match self.pushes.get_mut(self.push_count as usize) {
+        if end > PUSH_BYTES as u64 {
+            self.lost = true;
+            return;
+        }
+        let end = end as u32;
+        self.push[range.offset as usize..end as usize].copy_from_slice(values);
+        self.seq = self.seq.wrapping_add(1).max(1);
+        let seq = self.seq;
+        let covered = |p: &PushRange| {
+            range.stages.contains(p.stages) && range.offset <= p.offset && p.offset + p.size <= end
+        };
+        let mut kept = 0;
+        for i in 0..n {
+            if !covered(&self.pushes[i]) {
+                self.pushes[kept] = self.pushes[i];
+                kept += 1;
+            }
+        }
+        self.push_count = kept as u32;
+        match self.pushes.get_mut(kept) {
             Some(slot) => {
                 *slot = PushRange { seq, ..range };
                 self.push_count += 1;
@@ -248,23 +274,79 @@ mod tests {
         assert!(b.lost, "more ranges than the record holds");
     }
 
+    /// What an engine records before its eye pass: a pipeline layout per shader and a push per
+    /// draw, graphics and compute. Graphics pushes leave nothing to give back, a compute push that
+    /// covers an earlier one replaces it, and only a push that overwrites part of a recorded
+    /// range's stages gives up.
+    #[test]
+    fn only_compute_pushes_no_later_push_covers_are_kept() {
+        let layout = vk::PipelineLayout::from_raw;
+        let r = |l: u64, stages, offset, size| PushRange {
+            layout: layout(l),
+            stages,
+            offset,
+            size,
+            seq: 0,
+        };
+        let graphics = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
+        let compute = vk::ShaderStageFlags::COMPUTE;
+        let mut b = Bound::default();
+        for draw in 0..64u64 {
+            b.push(r(100 + draw, graphics, 0, 16), &[draw as u8; 16]);
+        }
+        assert_eq!(
+            b.push_count, 0,
+            "graphics pushes are not the conversion's to give back"
+        );
+        assert_eq!(b.push, [0; PUSH_BYTES], "nor are their bytes");
+        for shader in 0..20u64 {
+            b.push(r(200 + shader, compute, 0, 8), &[shader as u8; 8]);
+        }
+        assert!(!b.lost);
+        assert_eq!(b.push_count, 1, "each compute push covers the one before");
+        assert_eq!(
+            b.pushes[0].layout,
+            layout(219),
+            "the last layout pushed with"
+        );
+        assert_eq!(&b.push[..8], &[19; 8]);
+        // A larger range with more stages covers a smaller one; a smaller one does not cover it.
+        b.push(r(300, vk::ShaderStageFlags::ALL, 0, 32), &[7; 32]);
+        assert_eq!(b.push_count, 1);
+        b.push(r(301, vk::ShaderStageFlags::ALL, 8, 4), &[9; 4]);
+        assert_eq!(b.push_count, 2);
+        assert!(!b.lost);
+        // A graphics push over part of the stages of a range the record gives back with all of
+        // them: one push can no longer restore both.
+        b.push(r(302, graphics, 0, 4), &[1; 4]);
+        assert!(b.lost, "stages of one recorded range now differ");
+        // Nor can a compute-only push over a range recorded with graphics stages too.
+        let mut b = Bound::default();
+        b.push(r(1, vk::ShaderStageFlags::VERTEX | compute, 0, 8), &[1; 8]);
+        b.push(r(1, graphics, 16, 8), &[2; 8]);
+        assert!(!b.lost, "disjoint bytes");
+        b.push(r(1, compute, 4, 4), &[3; 4]);
+        assert!(b.lost);
+    }
+
     /// Ranges come back in the order of their latest push, not the order first seen: after
-    /// pushes with layouts A, B, A the last layout pushed with is A again.
+    /// pushes with layouts A, B, A (of ranges that do not cover each other) the last layout pushed
+    /// with is A again.
     #[test]
     fn push_constants_come_back_in_the_order_last_pushed() {
         let a = vk::PipelineLayout::from_raw(1);
         let b = vk::PipelineLayout::from_raw(2);
-        let r = |layout| PushRange {
+        let r = |layout, offset| PushRange {
             layout,
             stages: vk::ShaderStageFlags::COMPUTE,
-            offset: 0,
+            offset,
             size: 4,
             seq: 0,
         };
         let mut bound = Bound::default();
-        bound.push(r(a), &[1; 4]);
-        bound.push(r(b), &[2; 4]);
-        bound.push(r(a), &[3; 4]);
+        bound.push(r(a, 0), &[1; 4]);
+        bound.push(r(b, 4), &[2; 4]);
+        bound.push(r(a, 0), &[3; 4]);
         let mut order = bound.pushes[..bound.push_count as usize].to_vec();
         order.sort_by_key(|p| p.seq);
         let layouts: Vec<_> = order.iter().map(|p| p.layout).collect();

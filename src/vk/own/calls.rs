@@ -17,7 +17,7 @@
 //! same call: both are in the queue's submission order, and the clear's last barrier has every
 //! later command in its second scope
 //! (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#synchronization-submission-order>).
-//! Its own fence tells when the command buffer may be freed; the application's fences of later
+//! Its own fence tells when the command buffer may be recorded again; the application's fences of later
 //! submissions cover it too ("fence signal operations … include … all commands that occur earlier
 //! in submission order", <https://registry.khronos.org/vulkan/specs/latest/man/html/vkQueueSubmit.html>),
 //! so an application that waits for its own work before `vkDestroyDevice` has waited for the clear.
@@ -40,8 +40,15 @@
 //! stages them, and the next submit on a graphics queue copies them from a host-visible staging
 //! buffer of the layer's own into the image, from `UNDEFINED` (every texel is written) after an
 //! execution dependency on everything earlier on that queue (a pass that still reads the image's
-//! old content), ending in the shading-rate layout. The staging buffer is freed with the command
-//! buffer, once its fence has signalled.
+//! old content), ending in the shading-rate layout.
+//!
+//! Nothing per move. A gaze that moves refills a map every frame, so the submission's objects are
+//! kept ([`Batch`]: its command buffer, fence and mapped staging buffer, per queue family) and
+//! recorded again once their fence has signalled; an image's bytes wait in a slot of their own
+//! ([`Upload`]), overwritten by newer ones. In steady state a move allocates nothing, host or
+//! device. Recording threads hand their clears and uploads over under [`Clears::state`], held for
+//! a list update or a copy of bytes; the submit runs under [`Clears::submits`], which no recording
+//! path takes.
 
 use std::ffi::c_void;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -380,54 +387,96 @@ pub unsafe fn loader_data_callback(ci: &vk::DeviceCreateInfo<'_>) -> Option<SetD
     None
 }
 
-/// Pending clears in the whole process: what the submit hooks' fast path reads.
+/// Pending clears and uploads in the whole process: what the submit hooks' fast path reads.
 pub static PENDING: AtomicUsize = AtomicUsize::new(0);
 
 /// How long `vkDestroyDevice` waits for a clear still in flight (the application must have waited
 /// for its work, and the clear precedes it on the queue; this bounds a misbehaving one).
 pub const DESTROY_WAIT_NS: u64 = 1_000_000_000;
 
-/// One submitted clear.
-pub struct InFlight {
-    pub pool: vk::CommandPool,
-    pub cb: vk::CommandBuffer,
-    pub fence: vk::Fence,
-    /// The shadows it clears.
-    pub shadows: Vec<vk::Image>,
-    /// Shadows destroyed by the application meanwhile, destroyed when `fence` has signalled.
-    pub retired: Vec<(vk::Image, vk::DeviceMemory)>,
-    /// The uploads' staging buffer, freed when `fence` has signalled.
-    pub staging: Option<(vk::Buffer, vk::DeviceMemory)>,
+/// A host-visible staging buffer, mapped for its lifetime.
+pub struct Staging {
+    pub buffer: vk::Buffer,
+    pub memory: vk::DeviceMemory,
+    pub ptr: *mut u8,
+    pub size: u64,
 }
 
-/// Bytes waiting to be copied into a layer-owned shading-rate image: `layers` layers of
-/// `extent` texels, one byte each, layer after layer.
+/// One of the layer's submissions of clears and uploads, with everything it owns: made at the
+/// first flush on its queue family that finds no idle one, and kept (its command buffer recorded
+/// again, its fence reset, its staging written again, its lists cleared to their capacity) for
+/// every later flush once its fence has signalled. A moving gaze refills a map every frame, so
+/// this is what keeps the uploads from allocating per move.
+pub struct Batch {
+    pub family: u32,
+    pub cb: vk::CommandBuffer,
+    pub fence: vk::Fence,
+    /// Grown (made again, larger) only when a flush needs more bytes than it holds.
+    pub staging: Option<Staging>,
+    /// The shadows it clears, with their layers.
+    pub clears: Vec<(vk::Image, u32)>,
+    /// The copies it makes: image, extent, layers, offset of their bytes in `staging`.
+    pub copies: Vec<(vk::Image, [u32; 2], u32, u64)>,
+    /// Shadows destroyed by the application while it was in flight, destroyed when `fence` has
+    /// signalled.
+    pub retired: Vec<(vk::Image, vk::DeviceMemory)>,
+}
+
+// SAFETY: `Staging::ptr` is the mapping of the batch's own memory, written only under the
+// submit lock of its device's `Clears`.
+unsafe impl Send for Batch {}
+
+/// The newest bytes for a layer-owned shading-rate image: `layers` layers of `extent` texels, one
+/// byte each, layer after layer; `dirty` until a flush copies them. One slot per image, kept
+/// with its bytes' allocation while the image lives.
 pub struct Upload {
     pub image: vk::Image,
     pub extent: [u32; 2],
     pub layers: u32,
     pub bytes: Vec<u8>,
+    pub dirty: bool,
 }
 
+/// What recording threads hand to the next flush.
 #[derive(Default)]
 pub struct State {
     /// Shadows waiting for their clear, with their layers.
     pub pending: Vec<(vk::Image, u32)>,
-    /// Images waiting for their upload (at most one per image: the newest bytes).
+    /// Each layer-owned image's newest bytes ([`Upload`]).
     pub uploads: Vec<Upload>,
-    /// A command pool per graphics family the layer submitted on, made at its first clear there.
-    pub pools: Vec<(u32, vk::CommandPool)>,
-    pub in_flight: Vec<InFlight>,
 }
 
-/// One device's shadow clears.
+impl State {
+    /// Uploads waiting for a flush.
+    pub fn dirty_uploads(&self) -> usize {
+        self.uploads.iter().filter(|u| u.dirty).count()
+    }
+}
+
+/// The layer's own submissions on a device.
+#[derive(Default)]
+pub struct Submits {
+    /// A command pool per graphics family the layer submitted on, made at its first clear there.
+    pub pools: Vec<(u32, vk::CommandPool)>,
+    pub in_flight: Vec<Batch>,
+    /// Batches whose fences have signalled, ready to be recorded again.
+    pub idle: Vec<Batch>,
+}
+
+/// One device's shadow clears and map uploads.
 pub struct Clears {
     /// The application's queues of graphics families (handle, family), from the device create info.
     pub queues: Vec<(u64, u32)>,
-    /// A leaf lock outside [`crate::common::lock::Rank`]'s order: under it the layer calls only the
-    /// next layer's commands on its own objects (which never call back into fovea), and it may be
-    /// taken under fovea's own upload locks, whose submits pass through this layer.
+    /// What recording threads (a pass begin refilling a map, a shadow made) write: a leaf lock
+    /// outside [`crate::common::lock::Rank`]'s order, held for a list update or a copy of a map's
+    /// bytes, never across a call to the driver.
     pub state: parking_lot::Mutex<State>,
+    /// The layer's submissions: taken by the submit hooks, the destruction of shadows and maps and
+    /// `vkDestroyDevice`, never by a recording path, and held across the layer's own submit (so a
+    /// shadow destroyed meanwhile is either still pending or in a batch in flight, never in
+    /// between). Taken before [`Clears::state`] where both are, so a recording thread waits for
+    /// no submit. A leaf like it otherwise.
+    pub submits: parking_lot::Mutex<Submits>,
 }
 
 impl Clears {
@@ -436,6 +485,7 @@ impl Clears {
         Clears {
             queues,
             state: parking_lot::Mutex::new(State::default()),
+            submits: parking_lot::Mutex::new(Submits::default()),
         }
     }
 
@@ -454,37 +504,51 @@ impl Clears {
     }
 
     /// Notes that `image` (of `layers` layers of `extent` texels) must hold `bytes` before its next
-    /// use; replaces an upload of the same image still pending, whose bytes are out of date.
-    pub fn upload(&self, image: vk::Image, extent: [u32; 2], layers: u32, bytes: Vec<u8>) {
+    /// use; replaces bytes of the same image not yet copied, which are out of date. The bytes go
+    /// into the image's slot: no allocation once it has held as many.
+    pub fn upload(&self, image: vk::Image, extent: [u32; 2], layers: u32, bytes: &[u8]) {
         let mut st = self.state.lock();
-        let new = Upload {
-            image,
-            extent,
-            layers,
-            bytes,
-        };
-        match st.uploads.iter_mut().find(|u| u.image == image) {
-            Some(u) => *u = new,
+        let at = match st.uploads.iter().position(|u| u.image == image) {
+            Some(i) => i,
             None => {
-                st.uploads.push(new);
-                PENDING.fetch_add(1, Ordering::Release);
+                st.uploads.push(Upload {
+                    image,
+                    extent,
+                    layers,
+                    bytes: Vec::new(),
+                    dirty: false,
+                });
+                st.uploads.len() - 1
             }
+        };
+        let u = &mut st.uploads[at];
+        u.extent = extent;
+        u.layers = layers;
+        u.bytes.clear();
+        u.bytes.extend_from_slice(bytes);
+        if !u.dirty {
+            u.dirty = true;
+            PENDING.fetch_add(1, Ordering::Release);
         }
     }
 
-    /// Drops a pending upload of `image`, which is about to be destroyed; waits for everything in
+    /// Drops the upload slot of `image`, which is about to be destroyed; waits for everything in
     /// flight, which may copy into it.
     ///
     /// # Safety
     /// `d` must be the live device of these uploads.
     pub unsafe fn forget_upload(&self, d: &ash::Device, image: vk::Image) {
-        let mut st = self.state.lock();
-        if let Some(i) = st.uploads.iter().position(|u| u.image == image) {
-            st.uploads.swap_remove(i);
-            PENDING.fetch_sub(1, Ordering::Release);
+        let mut sub = self.submits.lock();
+        {
+            let mut st = self.state.lock();
+            if let Some(i) = st.uploads.iter().position(|u| u.image == image) {
+                if st.uploads.swap_remove(i).dirty {
+                    PENDING.fetch_sub(1, Ordering::Release);
+                }
+            }
         }
         // SAFETY: the layer's own objects on a live device.
-        unsafe { reclaim(d, &mut st, true) };
+        unsafe { reclaim(d, &mut sub, true) };
     }
 
     /// Destroys a shadow whose application image is being destroyed: at once where its clear is
@@ -493,21 +557,24 @@ impl Clears {
     /// # Safety
     /// `s` must be a live shadow of `d`'s device that nothing of the application's uses any more.
     pub unsafe fn forget(&self, d: &ash::Device, s: &ShadowImage) {
-        let mut st = self.state.lock();
+        let mut sub = self.submits.lock();
         // SAFETY: the layer's own objects on a live device.
-        unsafe { reclaim(d, &mut st, false) };
-        if let Some(i) = st.pending.iter().position(|(i, _)| *i == s.image) {
-            st.pending.swap_remove(i);
-            PENDING.fetch_sub(1, Ordering::Release);
-        } else if let Some(f) = st
-            .in_flight
-            .iter_mut()
-            .find(|f| f.shadows.contains(&s.image))
+        unsafe { reclaim(d, &mut sub, false) };
         {
-            f.retired.push((s.image, s.memory));
-            return;
+            let mut st = self.state.lock();
+            if let Some(i) = st.pending.iter().position(|(i, _)| *i == s.image) {
+                st.pending.swap_remove(i);
+                PENDING.fetch_sub(1, Ordering::Release);
+            } else if let Some(b) = sub
+                .in_flight
+                .iter_mut()
+                .find(|b| b.clears.iter().any(|(i, _)| *i == s.image))
+            {
+                b.retired.push((s.image, s.memory));
+                return;
+            }
         }
-        drop(st);
+        drop(sub);
         // SAFETY: as the caller promised; no clear of it is pending or in flight.
         unsafe {
             d.destroy_image(s.image, None);
@@ -515,8 +582,9 @@ impl Clears {
         }
     }
 
-    /// Submits the pending clears on `queue` ahead of the application's submission, where it is a
-    /// graphics queue of the application's.
+    /// Submits the pending clears and uploads on `queue` ahead of the application's submission,
+    /// where it is a graphics queue of the application's. In steady state (a batch of this family
+    /// idle, its staging large enough) nothing is allocated: the batch is recorded again.
     ///
     /// # Safety
     /// Called inside the application's submit on `queue`, of `own`'s live device.
@@ -525,122 +593,94 @@ impl Clears {
             return Ok(());
         };
         let d = &own.fns;
-        // Held across the layer's own submit, so a shadow destroyed meanwhile is either still
-        // pending or already in flight, never in between.
-        let mut st = self.state.lock();
+        let mut sub = self.submits.lock();
         // SAFETY: the layer's own objects on a live device.
-        unsafe { reclaim(d, &mut st, false) };
-        if st.pending.is_empty() && st.uploads.is_empty() {
-            return Ok(());
-        }
-        // SAFETY: a buffer of the layer's own on a live device, freed again on failure.
-        let staging = unsafe { stage_uploads(own, &st.uploads) }?;
-        let free_staging = |d: &ash::Device| {
-            if let Some((b, m)) = staging {
-                // SAFETY: the layer's own buffer, not in use (its copy was never submitted).
-                unsafe {
-                    d.destroy_buffer(b, None);
-                    d.free_memory(m, None);
-                }
+        unsafe { reclaim(d, &mut sub, false) };
+        {
+            let st = self.state.lock();
+            if st.pending.is_empty() && !st.uploads.iter().any(|u| u.dirty) {
+                return Ok(());
             }
+        }
+        let mut batch = match sub.idle.iter().position(|b| b.family == family) {
+            Some(i) => sub.idle.swap_remove(i),
+            // SAFETY: a live device; the new objects are the layer's own.
+            None => unsafe { new_batch(own, &mut sub, family) }?,
         };
-        let pool = match st.pools.iter().find(|(f, _)| *f == family) {
-            Some(&(_, p)) => Ok(p),
-            None => {
-                // SAFETY: a pool of the layer's own on a live device.
-                match unsafe {
-                    d.create_command_pool(
-                        &vk::CommandPoolCreateInfo::default()
-                            .queue_family_index(family)
-                            .flags(vk::CommandPoolCreateFlags::TRANSIENT),
-                        None,
-                    )
-                } {
-                    Ok(p) => {
-                        st.pools.push((family, p));
-                        Ok(p)
+        // Take what is pending, under the recording threads' lock for the copies only.
+        let taken = {
+            let mut st = self.state.lock();
+            let size: u64 = st
+                .uploads
+                .iter()
+                .filter(|u| u.dirty)
+                .map(|u| u.bytes.len() as u64)
+                .sum();
+            // SAFETY: the batch's own staging on a live device, not in flight (the batch is idle).
+            match unsafe { ensure_staging(own, &mut batch, size) } {
+                Ok(()) => {
+                    batch.clears.append(&mut st.pending);
+                    let mut at = 0u64;
+                    let mut n = 0;
+                    for u in st.uploads.iter_mut().filter(|u| u.dirty) {
+                        if let Some(s) = &batch.staging {
+                            // SAFETY: `at + len` ≤ `size` ≤ the mapping's size.
+                            unsafe {
+                                std::ptr::copy_nonoverlapping(
+                                    u.bytes.as_ptr(),
+                                    s.ptr.add(at as usize),
+                                    u.bytes.len(),
+                                );
+                            }
+                        }
+                        batch.copies.push((u.image, u.extent, u.layers, at));
+                        at += u.bytes.len() as u64;
+                        u.dirty = false;
+                        n += 1;
                     }
-                    Err(e) => Err(e),
+                    PENDING.fetch_sub(batch.clears.len() + n, Ordering::Release);
+                    Ok(())
                 }
+                Err(e) => Err(e),
             }
         };
-        let pool = match pool {
-            Ok(p) => p,
-            Err(e) => {
-                free_staging(d);
-                return Err(e);
+        // SAFETY: the batch's own command buffer and fence; the images are live (a pending
+        // shadow is removed from its list before it is destroyed, and maps wait for their
+        // batches at destruction).
+        let submitted = taken.and_then(|()| unsafe { record_and_submit(own, &batch, queue) });
+        if let Err(e) = submitted {
+            // What it would have done stays pending: the application's work would read shadows in
+            // an undefined layout otherwise.
+            let mut st = self.state.lock();
+            let n = batch.clears.len();
+            st.pending.append(&mut batch.clears);
+            let mut again = 0;
+            for (image, ..) in batch.copies.drain(..) {
+                if let Some(u) = st.uploads.iter_mut().find(|u| u.image == image && !u.dirty) {
+                    u.dirty = true;
+                    again += 1;
+                }
             }
-        };
-        // SAFETY: a command buffer and fence of the layer's own, freed again on failure; the
-        // shadows are live (pending ones are removed from the list before they are destroyed).
-        unsafe {
-            let cb = match d.allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(pool)
-                    .level(vk::CommandBufferLevel::PRIMARY)
-                    .command_buffer_count(1),
-            ) {
-                Ok(cbs) => cbs[0],
-                Err(e) => {
-                    free_staging(d);
-                    return Err(e);
-                }
-            };
-            let fence = std::cell::Cell::new(vk::Fence::null());
-            let submitted = (|| -> Result<(), vk::Result> {
-                own.set_loader_data(cb)?;
-                d.begin_command_buffer(
-                    cb,
-                    &vk::CommandBufferBeginInfo::default()
-                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
-                )?;
-                record(d, cb, &st.pending);
-                if let Some((buffer, _)) = staging {
-                    record_uploads(d, cb, buffer, &st.uploads);
-                }
-                d.end_command_buffer(cb)?;
-                fence.set(d.create_fence(&vk::FenceCreateInfo::default(), None)?);
-                let cbs = [cb];
-                d.queue_submit(
-                    queue,
-                    &[vk::SubmitInfo::default().command_buffers(&cbs)],
-                    fence.get(),
-                )
-            })();
-            if let Err(e) = submitted {
-                // A failed submit may leave the command buffer and fence counted as in use (the
-                // validation layer does): drain the queue, which the layer may use here, inside
-                // the application's submit, before freeing them, whatever that answers
-                // (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkFreeCommandBuffers.html>).
-                if fence.get() != vk::Fence::null() {
-                    let _ = d.queue_wait_idle(queue);
-                }
-                d.free_command_buffers(pool, &[cb]);
-                if fence.get() != vk::Fence::null() {
-                    d.destroy_fence(fence.get(), None);
-                }
-                free_staging(d);
-                return Err(e);
-            }
-            let shadows: Vec<vk::Image> = st.pending.drain(..).map(|(i, _)| i).collect();
-            let uploads = st.uploads.len();
-            st.uploads.clear();
-            PENDING.fetch_sub(shadows.len() + uploads, Ordering::Release);
-            tracing::debug!(
-                queue = raw(queue),
-                shadows = shadows.len(),
-                uploads,
-                "shadow clears and shading-rate uploads submitted ahead of the application's submit"
-            );
-            st.in_flight.push(InFlight {
-                pool,
-                cb,
-                fence: fence.get(),
-                shadows,
-                retired: Vec::new(),
-                staging,
-            });
+            PENDING.fetch_add(n + again, Ordering::Release);
+            drop(st);
+            // A failed submit may leave the command buffer and fence counted as in use (the
+            // validation layer does): drain the queue, which the layer may use here, inside the
+            // application's submit, before they are recorded again
+            // (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkFreeCommandBuffers.html>).
+            // SAFETY: as the caller promised.
+            let _ = unsafe { d.queue_wait_idle(queue) };
+            // SAFETY: the batch's own fence, not pending after the wait.
+            let _ = unsafe { d.reset_fences(&[batch.fence]) };
+            sub.idle.push(batch);
+            return Err(e);
         }
+        tracing::debug!(
+            queue = raw(queue),
+            shadows = batch.clears.len(),
+            uploads = batch.copies.len(),
+            "shadow clears and shading-rate uploads submitted ahead of the application's submit"
+        );
+        sub.in_flight.push(batch);
         Ok(())
     }
 
@@ -649,39 +689,206 @@ impl Clears {
     /// # Safety
     /// The device must be live and about to be destroyed, the application done with it.
     pub unsafe fn destroy(&self, d: &ash::Device) {
-        let mut st = self.state.lock();
-        PENDING.fetch_sub(st.pending.len() + st.uploads.len(), Ordering::Release);
-        st.pending.clear();
-        st.uploads.clear();
+        let mut sub = self.submits.lock();
+        {
+            let mut st = self.state.lock();
+            let dirty = st.dirty_uploads();
+            PENDING.fetch_sub(st.pending.len() + dirty, Ordering::Release);
+            st.pending.clear();
+            st.uploads.clear();
+        }
         // SAFETY: the layer's own objects; the application's work (after the clears on each
         // queue) is done.
         unsafe {
-            reclaim(d, &mut st, true);
-            for (_, p) in st.pools.drain(..) {
+            reclaim(d, &mut sub, true);
+            for b in sub.idle.drain(..) {
+                d.destroy_fence(b.fence, None);
+                if let Some(s) = b.staging {
+                    destroy_staging(d, s);
+                }
+            }
+            for (_, p) in sub.pools.drain(..) {
                 d.destroy_command_pool(p, None);
             }
         }
     }
 }
 
-/// Frees the clears whose fences have signalled (all of them, after waiting, with `all`).
+/// A new batch on `family`: its command buffer (from the family's pool, made here the first
+/// time) and fence; its staging comes with its first upload.
 ///
 /// # Safety
-/// The objects in `st` must belong to `d`'s live device.
-pub unsafe fn reclaim(d: &ash::Device, st: &mut State, all: bool) {
-    if st.in_flight.is_empty() {
+/// `own` must belong to a live device; `sub` is its.
+unsafe fn new_batch(own: &Own, sub: &mut Submits, family: u32) -> Result<Batch, vk::Result> {
+    let d = &own.fns;
+    let pool = match sub.pools.iter().find(|(f, _)| *f == family) {
+        Some(&(_, p)) => p,
+        None => {
+            // SAFETY: a pool of the layer's own on a live device; its command buffers are
+            // recorded again, so each may be reset alone.
+            let p = unsafe {
+                d.create_command_pool(
+                    &vk::CommandPoolCreateInfo::default()
+                        .queue_family_index(family)
+                        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER),
+                    None,
+                )
+            }?;
+            sub.pools.push((family, p));
+            p
+        }
+    };
+    // SAFETY: a command buffer and fence of the layer's own, freed again on failure.
+    unsafe {
+        let cb = d.allocate_command_buffers(
+            &vk::CommandBufferAllocateInfo::default()
+                .command_pool(pool)
+                .level(vk::CommandBufferLevel::PRIMARY)
+                .command_buffer_count(1),
+        )?[0];
+        let made = own
+            .set_loader_data(cb)
+            .and_then(|()| d.create_fence(&vk::FenceCreateInfo::default(), None));
+        match made {
+            Ok(fence) => Ok(Batch {
+                family,
+                cb,
+                fence,
+                staging: None,
+                clears: Vec::new(),
+                copies: Vec::new(),
+                retired: Vec::new(),
+            }),
+            Err(e) => {
+                d.free_command_buffers(pool, &[cb]);
+                Err(e)
+            }
+        }
+    }
+}
+
+/// Makes `batch`'s staging hold at least `size` bytes: kept where it does, else made again
+/// (twice the size, so that a growing map does not make it again at every move).
+///
+/// # Safety
+/// `own` must belong to a live device; `batch` is idle.
+unsafe fn ensure_staging(own: &Own, batch: &mut Batch, size: u64) -> Result<(), vk::Result> {
+    if size == 0 || batch.staging.as_ref().is_some_and(|s| s.size >= size) {
+        return Ok(());
+    }
+    let want = size.max(batch.staging.as_ref().map_or(0, |s| s.size * 2));
+    if let Some(s) = batch.staging.take() {
+        // SAFETY: the batch is idle: nothing reads its staging.
+        unsafe { destroy_staging(&own.fns, s) };
+    }
+    // SAFETY: as the caller promised.
+    batch.staging = Some(unsafe { make_staging(own, want) }?);
+    Ok(())
+}
+
+/// Records `batch` (its clears, then its copies from its staging) into its command buffer and
+/// submits it on `queue` with its fence.
+///
+/// # Safety
+/// `batch` idle, its images live; inside the application's submit on `queue`.
+unsafe fn record_and_submit(own: &Own, batch: &Batch, queue: vk::Queue) -> Result<(), vk::Result> {
+    let d = &own.fns;
+    // SAFETY: as the caller promised; beginning the command buffer resets it (its pool allows).
+    unsafe {
+        d.begin_command_buffer(
+            batch.cb,
+            &vk::CommandBufferBeginInfo::default()
+                .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+        )?;
+        for &(image, layers) in &batch.clears {
+            // New shadows have no earlier use to wait for.
+            write_shading_rate_image(
+                d,
+                batch.cb,
+                vk::PipelineStageFlags::TOP_OF_PIPE,
+                image,
+                layers,
+                || {
+                    d.cmd_clear_color_image(
+                        batch.cb,
+                        image,
+                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                        &vk::ClearColorValue { uint32: [0; 4] },
+                        &[color_range(layers)],
+                    );
+                },
+            );
+        }
+        if let Some(s) = &batch.staging {
+            for &(image, extent, layers, at) in &batch.copies {
+                // ALL_COMMANDS first: passes submitted earlier on this queue may still read the
+                // old map (a write-after-read hazard needs only this execution dependency).
+                write_shading_rate_image(
+                    d,
+                    batch.cb,
+                    vk::PipelineStageFlags::ALL_COMMANDS,
+                    image,
+                    layers,
+                    || {
+                        let layer_bytes = u64::from(extent[0]) * u64::from(extent[1]);
+                        for l in 0..layers {
+                            d.cmd_copy_buffer_to_image(
+                                batch.cb,
+                                s.buffer,
+                                image,
+                                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                                &[vk::BufferImageCopy {
+                                    buffer_offset: at + u64::from(l) * layer_bytes,
+                                    buffer_row_length: 0,
+                                    buffer_image_height: 0,
+                                    image_subresource: vk::ImageSubresourceLayers {
+                                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                                        mip_level: 0,
+                                        base_array_layer: l,
+                                        layer_count: 1,
+                                    },
+                                    image_offset: vk::Offset3D::default(),
+                                    image_extent: vk::Extent3D {
+                                        width: extent[0],
+                                        height: extent[1],
+                                        depth: 1,
+                                    },
+                                }],
+                            );
+                        }
+                    },
+                );
+            }
+        }
+        d.end_command_buffer(batch.cb)?;
+        let cbs = [batch.cb];
+        d.queue_submit(
+            queue,
+            &[vk::SubmitInfo::default().command_buffers(&cbs)],
+            batch.fence,
+        )
+    }
+}
+
+/// Makes the batches whose fences have signalled (all of them, after waiting, with `all`) idle
+/// again, destroying the shadows retired meanwhile.
+///
+/// # Safety
+/// The objects in `sub` must belong to `d`'s live device.
+pub unsafe fn reclaim(d: &ash::Device, sub: &mut Submits, all: bool) {
+    if sub.in_flight.is_empty() {
         return;
     }
     if all {
-        let fences: Vec<vk::Fence> = st.in_flight.iter().map(|f| f.fence).collect();
+        let fences: Vec<vk::Fence> = sub.in_flight.iter().map(|b| b.fence).collect();
         // SAFETY: the layer's own fences.
         if let Err(e) = unsafe { d.wait_for_fences(&fences, true, DESTROY_WAIT_NS) } {
             tracing::warn!(result = ?e, "shadow clears still in flight at vkDestroyDevice");
         }
     }
     let mut i = 0;
-    while i < st.in_flight.len() {
-        let fence = st.in_flight[i].fence;
+    while i < sub.in_flight.len() {
+        let fence = sub.in_flight[i].fence;
         // SAFETY: the layer's own fence.
         let status = (!all).then(|| unsafe { d.get_fence_status(fence) });
         let done = matches!(
@@ -692,47 +899,77 @@ pub unsafe fn reclaim(d: &ash::Device, st: &mut State, all: bool) {
             i += 1;
             continue;
         }
-        let f = st.in_flight.swap_remove(i);
-        // SAFETY: the clear has completed; these are the layer's own objects.
+        let mut b = sub.in_flight.swap_remove(i);
+        // SAFETY: the batch has completed; these are the layer's own objects.
         unsafe {
-            d.free_command_buffers(f.pool, &[f.cb]);
-            d.destroy_fence(f.fence, None);
-            for (image, memory) in f.retired {
+            let _ = d.reset_fences(&[b.fence]);
+            for (image, memory) in b.retired.drain(..) {
                 d.destroy_image(image, None);
                 d.free_memory(memory, None);
             }
-            if let Some((buffer, memory)) = f.staging {
+        }
+        b.clears.clear();
+        b.copies.clear();
+        sub.idle.push(b);
+    }
+}
+
+/// A mapped host-visible, host-coherent staging buffer of `size` bytes.
+///
+/// # Safety
+/// `own` must belong to a live device.
+unsafe fn make_staging(own: &Own, size: u64) -> Result<Staging, vk::Result> {
+    let d = &own.fns;
+    // SAFETY: the layer's own buffer and memory on a live device, each freed again on failure.
+    unsafe {
+        let buffer = d.create_buffer(
+            &vk::BufferCreateInfo::default()
+                .size(size)
+                .usage(vk::BufferUsageFlags::TRANSFER_SRC)
+                .sharing_mode(vk::SharingMode::EXCLUSIVE),
+            None,
+        )?;
+        let req = d.get_buffer_memory_requirements(buffer);
+        let memory = own.bound_memory(
+            req,
+            Own::host_memory_type,
+            vk::Result::ERROR_OUT_OF_DEVICE_MEMORY,
+            |m| d.bind_buffer_memory(buffer, m, 0),
+        );
+        let memory = match memory {
+            Ok(m) => m,
+            Err(e) => {
+                d.destroy_buffer(buffer, None);
+                return Err(e);
+            }
+        };
+        // Host-coherent memory ([`Own::host_memory_type`]): no flush needed, and the submit makes
+        // the host's writes visible to the device.
+        match d.map_memory(memory, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty()) {
+            Ok(p) => Ok(Staging {
+                buffer,
+                memory,
+                ptr: p as *mut u8,
+                size,
+            }),
+            Err(e) => {
                 d.destroy_buffer(buffer, None);
                 d.free_memory(memory, None);
+                Err(e)
             }
         }
     }
 }
 
-/// Records the clear of every shadow in `pending` to rate code 0, ending in [`SHADOW_LAYOUT`].
+/// Destroys a staging buffer and its memory (unmapped with it).
 ///
 /// # Safety
-/// `cb` must be recording on `d`; the shadows live.
-pub unsafe fn record(d: &ash::Device, cb: vk::CommandBuffer, pending: &[(vk::Image, u32)]) {
-    // SAFETY: as the caller promised; new shadows have no earlier use to wait for.
+/// Nothing may use it any more.
+unsafe fn destroy_staging(d: &ash::Device, s: Staging) {
+    // SAFETY: as the caller promised.
     unsafe {
-        write_shading_rate_images(
-            d,
-            cb,
-            vk::PipelineStageFlags::TOP_OF_PIPE,
-            pending.iter().copied(),
-            || {
-                for &(image, layers) in pending {
-                    d.cmd_clear_color_image(
-                        cb,
-                        image,
-                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                        &vk::ClearColorValue { uint32: [0; 4] },
-                        &[color_range(layers)],
-                    );
-                }
-            },
-        )
+        d.destroy_buffer(s.buffer, None);
+        d.free_memory(s.memory, None);
     }
 }
 
@@ -747,43 +984,36 @@ pub fn color_range(layers: u32) -> vk::ImageSubresourceRange {
     }
 }
 
-/// Records `write` (transfer writes covering every image in `images`, each with its layers)
-/// between a barrier that takes each image from `UNDEFINED` to `TRANSFER_DST_OPTIMAL` after the
-/// `after` stage of earlier work, and one that moves it to [`SHADOW_LAYOUT`] for every later
-/// command. ALL_COMMANDS stands for the shading-rate stage: some validation-layer releases take
-/// that stage's bit for NVIDIA's shading-rate-image stage, which shares it, and refuse it without
-/// that feature.
+/// Records `write` (transfer writes covering `layers` layers of `image`) between a barrier that
+/// takes the image from `UNDEFINED` to `TRANSFER_DST_OPTIMAL` after the `after` stage of earlier
+/// work, and one that moves it to [`SHADOW_LAYOUT`] for every later command. ALL_COMMANDS stands
+/// for the shading-rate stage: some validation-layer releases take that stage's bit for NVIDIA's
+/// shading-rate-image stage, which shares it, and refuse it without that feature. One image at a
+/// time: no list to allocate.
 ///
 /// # Safety
-/// `cb` must be recording on `d`; the images live; `write` records only transfer writes to them.
-pub unsafe fn write_shading_rate_images(
+/// `cb` must be recording on `d`; the image live; `write` records only transfer writes to it.
+pub unsafe fn write_shading_rate_image(
     d: &ash::Device,
     cb: vk::CommandBuffer,
     after: vk::PipelineStageFlags,
-    images: impl Iterator<Item = (vk::Image, u32)>,
+    image: vk::Image,
+    layers: u32,
     write: impl FnOnce(),
 ) {
-    let to_dst: Vec<vk::ImageMemoryBarrier<'_>> = images
-        .map(|(image, layers)| {
-            vk::ImageMemoryBarrier::default()
-                .image(image)
-                .subresource_range(color_range(layers))
-                .old_layout(vk::ImageLayout::UNDEFINED)
-                .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-        })
-        .collect();
-    let to_rate: Vec<vk::ImageMemoryBarrier<'_>> = to_dst
-        .iter()
-        .map(|b| {
-            b.old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                .new_layout(SHADOW_LAYOUT)
-                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::MEMORY_READ)
-        })
-        .collect();
+    let to_dst = vk::ImageMemoryBarrier::default()
+        .image(image)
+        .subresource_range(color_range(layers))
+        .old_layout(vk::ImageLayout::UNDEFINED)
+        .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+        .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED);
+    let to_rate = to_dst
+        .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+        .new_layout(SHADOW_LAYOUT)
+        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(vk::AccessFlags::MEMORY_READ);
     // SAFETY: as the caller promised.
     unsafe {
         d.cmd_pipeline_barrier(
@@ -793,7 +1023,7 @@ pub unsafe fn write_shading_rate_images(
             vk::DependencyFlags::empty(),
             &[],
             &[],
-            &to_dst,
+            &[to_dst],
         );
         write();
         d.cmd_pipeline_barrier(
@@ -803,130 +1033,8 @@ pub unsafe fn write_shading_rate_images(
             vk::DependencyFlags::empty(),
             &[],
             &[],
-            &to_rate,
+            &[to_rate],
         );
-    }
-}
-
-/// A host-visible staging buffer holding every upload's bytes, one after the other (`None` where
-/// there are none).
-///
-/// # Safety
-/// `own` must belong to a live device.
-pub unsafe fn stage_uploads(
-    own: &Own,
-    uploads: &[Upload],
-) -> Result<Option<(vk::Buffer, vk::DeviceMemory)>, vk::Result> {
-    let size: usize = uploads.iter().map(|u| u.bytes.len()).sum();
-    if size == 0 {
-        return Ok(None);
-    }
-    let d = &own.fns;
-    // SAFETY: the layer's own buffer and memory on a live device, each freed again on failure;
-    // the mapping covers `size` bytes.
-    unsafe {
-        let buffer = d.create_buffer(
-            &vk::BufferCreateInfo::default()
-                .size(size as u64)
-                .usage(vk::BufferUsageFlags::TRANSFER_SRC)
-                .sharing_mode(vk::SharingMode::EXCLUSIVE),
-            None,
-        )?;
-        let req = d.get_buffer_memory_requirements(buffer);
-        let filled = (|| -> Result<vk::DeviceMemory, vk::Result> {
-            let ty = own
-                .host_memory_type(req.memory_type_bits)
-                .ok_or(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY)?;
-            let memory = d.allocate_memory(
-                &vk::MemoryAllocateInfo::default()
-                    .allocation_size(req.size)
-                    .memory_type_index(ty),
-                None,
-            )?;
-            let mapped = d.bind_buffer_memory(buffer, memory, 0).and_then(|()| {
-                d.map_memory(memory, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty())
-            });
-            let ptr = match mapped {
-                Ok(p) => p as *mut u8,
-                Err(e) => {
-                    d.free_memory(memory, None);
-                    return Err(e);
-                }
-            };
-            let mut at = 0;
-            for u in uploads {
-                std::ptr::copy_nonoverlapping(u.bytes.as_ptr(), ptr.add(at), u.bytes.len());
-                at += u.bytes.len();
-            }
-            // Host-coherent memory is asked for ([`Own::host_memory_type`]): no flush needed, and
-            // the submit makes host writes visible to the device.
-            d.unmap_memory(memory);
-            Ok(memory)
-        })();
-        match filled {
-            Ok(memory) => Ok(Some((buffer, memory))),
-            Err(e) => {
-                d.destroy_buffer(buffer, None);
-                Err(e)
-            }
-        }
-    }
-}
-
-/// Records the copies of every upload from `buffer` (their bytes one after the other, as
-/// [`stage_uploads`] wrote them), each image from `UNDEFINED` to [`SHADOW_LAYOUT`].
-///
-/// # Safety
-/// `cb` must be recording on `d`; the images and `buffer` live.
-pub unsafe fn record_uploads(
-    d: &ash::Device,
-    cb: vk::CommandBuffer,
-    buffer: vk::Buffer,
-    uploads: &[Upload],
-) {
-    // SAFETY: as the caller promised. ALL_COMMANDS first: passes submitted earlier on this queue
-    // may still read the old map (a write-after-read hazard needs only this execution
-    // dependency).
-    unsafe {
-        write_shading_rate_images(
-            d,
-            cb,
-            vk::PipelineStageFlags::ALL_COMMANDS,
-            uploads.iter().map(|u| (u.image, u.layers)),
-            || {
-                let mut at = 0u64;
-                for u in uploads {
-                    let layer_bytes = u64::from(u.extent[0]) * u64::from(u.extent[1]);
-                    let regions: Vec<vk::BufferImageCopy> = (0..u.layers)
-                        .map(|l| vk::BufferImageCopy {
-                            buffer_offset: at + u64::from(l) * layer_bytes,
-                            buffer_row_length: 0,
-                            buffer_image_height: 0,
-                            image_subresource: vk::ImageSubresourceLayers {
-                                aspect_mask: vk::ImageAspectFlags::COLOR,
-                                mip_level: 0,
-                                base_array_layer: l,
-                                layer_count: 1,
-                            },
-                            image_offset: vk::Offset3D::default(),
-                            image_extent: vk::Extent3D {
-                                width: u.extent[0],
-                                height: u.extent[1],
-                                depth: 1,
-                            },
-                        })
-                        .collect();
-                    d.cmd_copy_buffer_to_image(
-                        cb,
-                        buffer,
-                        u.image,
-                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                        &regions,
-                    );
-                    at += u.bytes.len() as u64;
-                }
-            },
-        )
     }
 }
 

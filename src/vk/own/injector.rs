@@ -27,7 +27,7 @@
 //! only the next layer's commands on its own objects, which never call back into fovea.
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use ash::vk;
 use ash::vk::Handle as _;
@@ -37,6 +37,22 @@ use crate::bridge::FdmEmulation;
 use crate::vk::own::calls::Own;
 use crate::vk::translate::formats::SHADOW_FORMAT;
 use fovea_model::inject::{FixedCodes, Pass, Views};
+
+/// Advanced by every change to what a pass begin's decision on any injecting device reads (a view
+/// or framebuffer noted or forgotten, a map made) and by every injector made or destroyed: a
+/// decision a thread made after loading this value stays good while it is unchanged
+/// ([`crate::vk::injection`] caches them per thread). All of these happen at object creation and
+/// destruction, never per command.
+static TABLES: AtomicU64 = AtomicU64::new(0);
+
+/// The generation of every injector's tables (see [`TABLES`]).
+pub fn tables_generation() -> u64 {
+    TABLES.load(Ordering::Acquire)
+}
+
+fn tables_changed() {
+    TABLES.fetch_add(1, Ordering::AcqRel);
+}
 
 /// What the layer knows of a colour image: its extent and array layers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -68,6 +84,9 @@ struct Map {
     fixed: Option<(u64, FixedCodes)>,
     /// Scratch for the shifted per-view codes, kept between refills.
     scratch: Vec<u8>,
+    /// The codes of the latest refill, kept between refills: a moving gaze refills the map every
+    /// frame, and this keeps that from allocating.
+    codes: Vec<u8>,
 }
 
 #[derive(Clone, Copy)]
@@ -128,6 +147,7 @@ impl Injector {
     /// Nothing tracked yet, on a device with `fdm`'s shading-rate attachments.
     pub fn new(fdm: FdmEmulation) -> Injector {
         crate::bridge::inject::set_texel(fdm.texel);
+        tables_changed();
         let model = fovea_model::inject::Device {
             texel: fdm.texel,
             layered: fdm.layered,
@@ -219,12 +239,15 @@ impl Injector {
         };
         if let Some(v) = view_facts(image, facts.extent, facts.layers, &ci.subresource_range) {
             self.views.lock().insert(view.as_raw(), v);
+            tables_changed();
         }
     }
 
     /// Forgets a destroyed view.
     pub fn view_destroyed(&self, view: vk::ImageView) {
-        self.views.lock().remove(&view.as_raw());
+        if self.views.lock().remove(&view.as_raw()).is_some() {
+            tables_changed();
+        }
     }
 
     /// What the layer knows of `view`.
@@ -310,6 +333,7 @@ impl Injector {
             }
         };
         list.push((texels, made));
+        tables_changed();
         made.map(|o| o.view)
     }
 
@@ -342,6 +366,7 @@ impl Injector {
     /// Notes a framebuffer of an injected pass.
     pub fn framebuffer_created(&self, fb: vk::Framebuffer, f: InjectedFramebuffer) {
         self.framebuffers.lock().insert(fb.as_raw(), f);
+        tables_changed();
     }
 
     /// The framebuffer `fb` of an injected pass, if it is one.
@@ -351,7 +376,9 @@ impl Injector {
 
     /// Forgets a destroyed framebuffer.
     pub fn framebuffer_destroyed(&self, fb: vk::Framebuffer) {
-        self.framebuffers.lock().remove(&fb.as_raw());
+        if self.framebuffers.lock().remove(&fb.as_raw()).is_some() {
+            tables_changed();
+        }
     }
 
     /// The map for a target of `extent` holding `views`, refilled where the published maps moved
@@ -393,12 +420,11 @@ impl Injector {
                 let Some((_, fixed)) = &m.fixed else {
                     return Some(o.view);
                 };
-                let mut codes = Vec::new();
-                fixed.codes_into(&state.centres, &mut m.scratch, &mut codes);
+                fixed.codes_into(&state.centres, &mut m.scratch, &mut m.codes);
                 // A shape's texels and layers follow from its extent, views and the device alone,
                 // so the image always fits; checked all the same, never written past.
                 if fixed.texels == o.texels && fixed.out_layers() == o.layers {
-                    own.clears.upload(o.image, o.texels, o.layers, codes);
+                    own.clears.upload(o.image, o.texels, o.layers, &m.codes);
                     if refilled {
                         tracing::info!(
                             width = extent[0],
@@ -429,7 +455,7 @@ impl Injector {
         let made = unsafe { make(own, texels, layers) };
         let objects = match made {
             Ok(o) => {
-                own.clears.upload(o.image, texels, layers, codes);
+                own.clears.upload(o.image, texels, layers, &codes);
                 tracing::info!(
                     width = extent[0],
                     height = extent[1],
@@ -461,7 +487,9 @@ impl Injector {
             objects,
             fixed: Some((state.fixed, fixed)),
             scratch,
+            codes,
         });
+        tables_changed();
         objects.map(|o| o.view)
     }
 
@@ -477,11 +505,44 @@ impl Injector {
         )
     }
 
+    /// Enters a made, current map of a shape (and a full-rate map of `texels`) with the view
+    /// `view`, as the first begin of that shape would have made it: for tests that drive the begin
+    /// hooks on a device without a driver.
+    #[cfg(test)]
+    pub fn seed(
+        &self,
+        state: &Injection,
+        extent: [u32; 2],
+        views: Views,
+        view: vk::ImageView,
+        texels: [u32; 2],
+    ) {
+        let objects = Some(InjectedMap {
+            image: vk::Image::null(),
+            memory: vk::DeviceMemory::null(),
+            view,
+            texels,
+            layers: 1,
+        });
+        self.maps.lock().push(Map {
+            extent,
+            views,
+            key: state.key(),
+            objects,
+            fixed: None,
+            scratch: Vec::new(),
+            codes: Vec::new(),
+        });
+        self.neutral.lock().push((texels, objects));
+        tables_changed();
+    }
+
     /// Destroys every map of a device about to be destroyed.
     ///
     /// # Safety
     /// `own` must belong to this injector's live device, idle, its uploads done or dropped.
     pub unsafe fn destroy(&self, own: &Own) {
+        tables_changed();
         let maps: Vec<Map> = self.maps.lock().drain(..).collect();
         let neutral: Vec<InjectedMap> = self
             .neutral
@@ -616,6 +677,137 @@ mod tests {
         assert_eq!(rendered_layers(0b10, 1), Some(2));
         assert_eq!(rendered_layers(0, 1), Some(1));
         assert_eq!(rendered_layers(0, 0), None);
+    }
+
+    /// Heap allocations this thread made, counted by the test binary's allocator.
+    struct Counting;
+
+    thread_local! {
+        static ALLOCATIONS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+    }
+
+    // SAFETY: the system allocator's contract, handed on; the count is a thread-local word.
+    unsafe impl std::alloc::GlobalAlloc for Counting {
+        unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
+            // SAFETY: as the caller promised.
+            unsafe { std::alloc::System.alloc(layout) }
+        }
+
+        unsafe fn dealloc(&self, p: *mut u8, layout: std::alloc::Layout) {
+            // SAFETY: as the caller promised.
+            unsafe { std::alloc::System.dealloc(p, layout) }
+        }
+
+        unsafe fn realloc(&self, p: *mut u8, layout: std::alloc::Layout, size: usize) -> *mut u8 {
+            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
+            // SAFETY: as the caller promised.
+            unsafe { std::alloc::System.realloc(p, layout, size) }
+        }
+    }
+
+    #[global_allocator]
+    static COUNTING: Counting = Counting;
+
+    fn allocations() -> u64 {
+        ALLOCATIONS.with(std::cell::Cell::get)
+    }
+
+    /// A gaze that moves every frame refills an eye map at every move: in steady state the refill
+    /// (the shifted codes, and their bytes handed to the next submit's upload) allocates nothing,
+    /// and what the upload will copy is the map for the newest gaze.
+    #[test]
+    fn refills_for_a_moving_gaze_allocate_nothing() {
+        use crate::bridge::inject;
+        let _one = inject::tests::STATE_TESTS.lock();
+        inject::start(fovea_model::density::Level::High);
+        let fov = fovea_model::Fov {
+            left: -0.8,
+            right: 0.8,
+            up: 0.8,
+            down: -0.8,
+        };
+        inject::set_fovs(&[fov, fov]);
+        let fdm = FdmEmulation {
+            texel: [16, 16],
+            layered: true,
+            max_fragment: [4, 4],
+            rates: vec![[1, 1], [2, 2], [4, 4]],
+            non_trivial_combiners: true,
+        };
+        let inj = Injector::new(fdm);
+        let device = vk::Device::from_raw(0x7711);
+        // SAFETY: a table of functions that are never called: the map exists, so nothing is made.
+        let fns = unsafe { ash::Device::load_with(|_| std::ptr::null(), device) };
+        unsafe extern "system" fn loader_data(
+            _: vk::Device,
+            _: *mut std::ffi::c_void,
+        ) -> vk::Result {
+            vk::Result::SUCCESS
+        }
+        let own = Own {
+            fns,
+            memory: vk::PhysicalDeviceMemoryProperties::default(),
+            set_loader_data: loader_data,
+            clears: crate::vk::own::calls::Clears::new(Vec::new()),
+            fallbacks: crate::common::lock::Mutex::new(Vec::new()),
+        };
+        let (extent, views) = ([512, 512], Views::Layers { first: 0, count: 1 });
+        let image = vk::Image::from_raw(0x1a6e);
+        inject::with_current(|s| {
+            inj.seed(
+                s.unwrap(),
+                extent,
+                views,
+                vk::ImageView::from_raw(0x1a6f),
+                [32, 32],
+            );
+        });
+        inj.maps.lock()[0].objects.as_mut().unwrap().image = image;
+        let mut counts = Vec::new();
+        for frame in 0..40u32 {
+            // Smooth pursuit across the view, far enough each frame to be published.
+            let x = (frame as f32 * 0.05).sin() * 0.6;
+            let mut centres = [None; fovea_model::maps::MAX_VIEWS];
+            centres[0] = Some([x, 0.1]);
+            inject::set_centres(&centres);
+            let before = allocations();
+            inject::with_current(|s| {
+                // SAFETY: the map exists, so no call reaches the (absent) driver.
+                unsafe { inj.refresh(&own, s.unwrap(), extent, views) };
+            });
+            counts.push(allocations() - before);
+            let want = inject::with_current(|s| {
+                let s = s.unwrap();
+                let mut scratch = Vec::new();
+                let mut codes = Vec::new();
+                inj.fixed_codes(s, extent, views)
+                    .codes_into(&s.centres, &mut scratch, &mut codes);
+                codes
+            });
+            let st = own.clears.state.lock();
+            let u = st
+                .uploads
+                .iter()
+                .find(|u| u.image == image)
+                .expect("staged");
+            assert!(
+                u.dirty && u.bytes == want,
+                "frame {frame}: the newest gaze's map"
+            );
+        }
+        // SAFETY: nothing is in flight.
+        unsafe { own.clears.destroy(&own.fns) };
+        inject::stop();
+        assert!(
+            counts[..2].iter().any(|&n| n > 0),
+            "the first refills allocate: {counts:?}"
+        );
+        assert_eq!(
+            &counts[2..],
+            &[0; 38],
+            "allocations per move in steady state"
+        );
     }
 
     #[test]

@@ -1047,3 +1047,53 @@ fn threads_and_simultaneous_use_keep_their_own_offsets() {
         }
     });
 }
+
+/// An engine's recording in front of its eye pass: a pipeline layout per shader, a graphics push
+/// per draw (more layouts and ranges than the layer's record of what a conversion must give back
+/// holds) and compute shaders with layouts of their own pushing one range. The eye pass still gets
+/// its map converted and its offsets applied, on both paths: a conversion gives back only what its
+/// compute dispatch disturbs (src/vk/own/bindings.rs, `Bound::push`), where the record used to
+/// fill up at the ninth push and leave every map of the recording at full rate.
+#[test]
+fn engines_per_draw_push_constants_keep_maps_converted_and_offsets_applied() {
+    on_nvidia(EXT, |env, scene, t| {
+        let d = &scene.dev.d;
+        let graphics = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
+        let compute = vk::ShaderStageFlags::COMPUTE;
+        let layout = |stages, size| {
+            let ranges = [vk::PushConstantRange {
+                stage_flags: stages,
+                offset: 0,
+                size,
+            }];
+            let info = vk::PipelineLayoutCreateInfo::default().push_constant_ranges(&ranges);
+            // SAFETY: the device is alive; the struct lives across the call.
+            unsafe { d.create_pipeline_layout(&info, None) }.expect("vkCreatePipelineLayout")
+        };
+        let shaders: Vec<vk::PipelineLayout> = (0..12).map(|_| layout(graphics, 16)).collect();
+        let kernels: Vec<vk::PipelineLayout> = (0..12).map(|_| layout(compute, 8)).collect();
+        for path in [Path::RenderPass, Path::Rendering] {
+            let cb = scene.dev.begin();
+            scene.prepare(cb);
+            // SAFETY: `cb` is recording; the layouts are alive and name these ranges.
+            unsafe {
+                for draw in 0..48u8 {
+                    let l = shaders[usize::from(draw) % shaders.len()];
+                    d.cmd_push_constants(cb, l, graphics, 0, &[draw; 16]);
+                }
+                for (i, &l) in kernels.iter().enumerate() {
+                    d.cmd_push_constants(cb, l, compute, 0, &[i as u8; 8]);
+                }
+            }
+            let offsets = [at(t, -2 * t)];
+            scene.pass(cb, path, vk::RenderingFlags::empty(), End::With(&offsets));
+            scene.dev.submit(cb);
+            let what = format!("{path:?} after 12 graphics and 12 compute layouts' pushes");
+            scene.assert_shifted(env, cb, &[&offsets], &what);
+        }
+        for l in shaders.into_iter().chain(kernels) {
+            // SAFETY: the queue is idle; each layout is destroyed once.
+            unsafe { d.destroy_pipeline_layout(l, None) };
+        }
+    });
+}
