@@ -215,10 +215,18 @@ fn create_instance_inner(
     let epic = symmetric::enable_epic(settings.symmetric_fov, &names, &below, &mut kept);
     let gaze_settings = settings.gaze;
     let app_gaze = gaze::listed(names.iter().copied());
-    let gaze_below = gaze_settings.on && (app_gaze || gaze::listed(&below));
+    // Gaze only where something of fovea's uses it (docs/eye-tracking.md#who-uses-the-gaze): an
+    // application that enables nothing that follows the eyes gets no extension enabled below, no
+    // action set and no input call from fovea.
+    let injects = matches!(
+        settings.injection(uses_fb(exts)),
+        settings::Injection::On(_)
+    );
+    let gaze_used = gaze_settings.on && gaze::used(exts.provided(Ext::MetaFoveationEyeTracked), injects);
+    let gaze_below = gaze_used && (app_gaze || gaze::listed(&below));
     if gaze_below && !app_gaze {
         kept.push(gaze::name_ptr());
-    } else if gaze_settings.on && !gaze_below && !GAZE_ABSENT_SAID.swap(true, Ordering::Relaxed) {
+    } else if gaze_used && !gaze_below && !GAZE_ABSENT_SAID.swap(true, Ordering::Relaxed) {
         tracing::info!(
             target: fovea_abi::log_target::GAZE,
             "the runtime does not offer XR_EXT_eye_gaze_interaction: fixed foveation (said once \
@@ -259,7 +267,7 @@ fn create_instance_inner(
     };
     let state = Instance {
         gaze,
-        gaze_on: gaze_settings.on,
+        gaze_on: gaze_used,
         handle,
         next_gipa,
         // SAFETY: the next layer's xrGetInstanceProcAddr and the instance it just created.
@@ -439,6 +447,7 @@ fn resolve(
         None => false,
         Some(h) => match h.owner {
             Owner::Below => (h.offered_below)(&state.next),
+            Owner::Gaze => state.gaze.is_some() && (h.offered_below)(&state.next),
             Owner::Layer(ext) if exts.provided(ext) => true,
             // The runtime has XR_FB_swapchain_update_state but not XR_FB_foveation: fovea handles the
             // foveation state type and passes every other one down.
@@ -579,6 +588,17 @@ fn api_layer_properties(
     Ok(ffi::two_call(&[p], count_out, properties))
 }
 
+/// Whether the application enabled an FB foveation extension: it foveates itself.
+fn uses_fb(exts: Extensions) -> bool {
+    [
+        Ext::Foveation,
+        Ext::FoveationConfiguration,
+        Ext::FoveationVulkan,
+    ]
+    .into_iter()
+    .any(|e| exts.enabled.contains(e))
+}
+
 /// Whether injection applies to a new instance (docs/injection.md#switching-it-on), and if so,
 /// publishes it for the Vulkan side before the application creates its `VkDevice`. An application
 /// that enabled an FB foveation extension foveates itself and is never injected into.
@@ -586,14 +606,7 @@ fn injection(
     settings: &settings::Settings,
     exts: Extensions,
 ) -> Option<fovea_model::density::Level> {
-    let uses_fb = [
-        Ext::Foveation,
-        Ext::FoveationConfiguration,
-        Ext::FoveationVulkan,
-    ]
-    .into_iter()
-    .any(|e| exts.enabled.contains(e));
-    match settings.injection(uses_fb) {
+    match settings.injection(uses_fb(exts)) {
         settings::Injection::Off => None,
         settings::Injection::AppFoveates => {
             tracing::info!(
