@@ -2,6 +2,7 @@
 //! (fake loader, simulated runtime) or the Khronos loader.
 
 pub mod below;
+pub mod bystander;
 pub mod eye_tracked;
 pub mod faults;
 pub mod foveation_state;
