@@ -10,7 +10,10 @@
 //! - `blink T`, `lost T`: no valid gaze for T, the eye where it was;
 //! - `loop`: as the last step, start again from the first;
 //! - settings anywhere: `hz=N` (sample rate, default 120), `latency=T` (default 0), `noise=D`
-//!   (uniform jitter of ±D degrees per sample, deterministic, default 0).
+//!   (uniform jitter of ±D degrees per sample, deterministic, default 0), `tracked=no` (every
+//!   sample sub-nominal: orientation VALID without TRACKED, as trackers report a degraded fix),
+//!   `permission=T` (the user grants eye tracking T after the session starts: until then the gaze
+//!   action stays inactive, as on runtimes that ask for the permission).
 //!
 //! Example: `hz=120; latency=20ms; fix 0,0 for 500ms; saccade 12,4 in 40ms; fix for 300ms;
 //! pursue -10,4 at 30; blink 150ms; lost 1s; loop`. Before the first step and after the last (no
@@ -38,6 +41,10 @@ pub struct GazeScript {
     hz: f32,
     latency_ns: i64,
     noise_deg: f32,
+    /// Samples are VALID without TRACKED (`tracked=no`).
+    pub sub_nominal: bool,
+    /// Time from the session's start until eye tracking is permitted (`permission=T`).
+    pub permission_ns: i64,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -90,6 +97,7 @@ impl GazeScript {
     pub fn parse(text: &str) -> Result<GazeScript, String> {
         let mut steps = Vec::new();
         let (mut hz, mut latency_ns, mut noise_deg, mut looped) = (120.0f32, 0i64, 0.0f32, false);
+        let (mut sub_nominal, mut permission_ns) = (false, 0i64);
         let parts: Vec<&str> = text
             .split(';')
             .map(str::trim)
@@ -114,6 +122,16 @@ impl GazeScript {
                         if !(noise_deg.is_finite() && noise_deg >= 0.0) {
                             return Err(bad());
                         }
+                    }
+                    "tracked" => {
+                        sub_nominal = match value.trim() {
+                            "yes" => false,
+                            "no" => true,
+                            _ => return Err(bad() + ": tracked is yes or no"),
+                        }
+                    }
+                    "permission" => {
+                        permission_ns = time_ns(value.trim()).map_err(|e| bad() + ": " + &e)?
                     }
                     _ => return Err(bad() + ": unknown setting"),
                 }
@@ -176,6 +194,8 @@ impl GazeScript {
             hz,
             latency_ns,
             noise_deg,
+            sub_nominal,
+            permission_ns,
         })
     }
 

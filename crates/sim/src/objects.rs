@@ -70,6 +70,9 @@ pub(crate) enum Event {
         state: xr::SessionState,
         time: i64,
     },
+    /// A top-level user path of the session got another interaction profile (at attach, as
+    /// Monado queues one for each bound top-level path).
+    InteractionProfileChanged { session: u64 },
 }
 
 pub(crate) struct InstanceState {
@@ -132,6 +135,11 @@ pub(crate) struct Session {
     pub synced_sets: Vec<u64>,
     /// The virtual time the session was created at: the eye tracker's script starts there.
     pub gaze_origin_ns: i64,
+    /// The current interaction profile of each top-level user path that has one (set at attach).
+    pub current_profiles: Vec<(String, String)>,
+    /// The runtime asked the user to calibrate the eye tracker (at the first sync of a set bound to
+    /// it, as XR_EXT_eye_gaze_interaction says a runtime should).
+    pub calibration_requested: bool,
 }
 
 pub(crate) enum SpaceKind {

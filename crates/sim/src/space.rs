@@ -274,7 +274,19 @@ pub(crate) unsafe extern "system" fn locate_space(
         ) {
             (Some((s, sampled)), Some((b, _))) => {
                 (*location).pose = compose(inverse(b), s);
-                (*location).location_flags = tracked();
+                // A sub-nominal tracker (the script's `tracked=no`) gives its gaze VALID only.
+                let sub_nominal = sampled.is_some()
+                    && w.instances[&w.sessions[&space.session].instance]
+                        .config
+                        .eye_gaze
+                        .as_ref()
+                        .is_some_and(|g| g.script.sub_nominal);
+                (*location).location_flags = if sub_nominal {
+                    xr::SpaceLocationFlags::ORIENTATION_VALID
+                        | xr::SpaceLocationFlags::POSITION_VALID
+                } else {
+                    tracked()
+                };
                 let ty = xr::StructureType::EYE_GAZE_SAMPLE_TIME_EXT;
                 if let (Some(t), Some(e)) = (sampled, ffi::find_in_chain((*location).next, ty)) {
                     (*(e as *mut xr::EyeGazeSampleTimeEXT)).time = xr::Time::from_nanos(t);

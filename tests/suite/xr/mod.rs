@@ -9,6 +9,7 @@ pub mod foveation_state;
 pub mod frame_pipeline;
 pub mod fuzz;
 pub mod gaze;
+pub mod gaze_spec;
 pub mod khronos_loader;
 pub mod layer;
 pub mod settings_file;
