@@ -54,7 +54,7 @@ use crate::common::settings::GazeSettings;
 use crate::xr::eye_centres::EyeCentres;
 use crate::xr::ffi;
 use crate::xr::values::{fov_from_xr, succeeded};
-use fovea_model::gaze::{eye_centre, EyeView, GazeFilter, Sample};
+use fovea_model::gaze::{centre_in, EyeProjection, EyeView, GazeFilter, Sample};
 use fovea_model::maps::MAX_VIEWS;
 use fovea_model::Fov;
 
@@ -655,10 +655,11 @@ pub struct SessionGaze {
     track: SpinMutex<Track>,
 }
 
-/// The filter and the views it projects into.
+/// The filter and the views it projects into, each with its projection computed when the views
+/// were located (not every frame).
 struct Track {
     filter: GazeFilter,
-    views: [EyeView; MAX_VIEWS],
+    views: [EyeProjection; MAX_VIEWS],
     count: usize,
 }
 
@@ -706,7 +707,7 @@ impl SessionGaze {
             said: AtomicU32::new(0),
             track: SpinMutex::spin(Track {
                 filter: GazeFilter::new(settings.params),
-                views: [NO_VIEW; MAX_VIEWS],
+                views: [NO_VIEW.projection(); MAX_VIEWS],
                 count: 0,
             }),
         }
@@ -932,7 +933,7 @@ impl SessionGaze {
         }
         let n = (n as usize).min(MAX_VIEWS);
         let app_views = self.app_views.load(Acquire) as usize;
-        let mut located = [NO_VIEW; MAX_VIEWS];
+        let mut located = [NO_VIEW.projection(); MAX_VIEWS];
         for (i, (slot, v)) in located.iter_mut().zip(&views[..n]).enumerate() {
             let (p, o) = (v.pose.position, v.pose.orientation);
             *slot = EyeView {
@@ -943,7 +944,8 @@ impl SessionGaze {
                 },
                 position: Vec3::new(p.x, p.y, p.z),
                 orientation: Quat::from_xyzw(o.x, o.y, o.z, o.w).normalize(),
-            };
+            }
+            .projection();
         }
         let mut t = self.track.lock();
         t.views = located;
@@ -1059,7 +1061,7 @@ impl SessionGaze {
         let fixation = t.filter.params().fixation_m;
         let mut ndc = [[0.0; 2]; MAX_VIEWS];
         for (c, eye) in ndc.iter_mut().zip(&t.views[..t.count]) {
-            *c = eye_centre(&g, eye, fixation);
+            *c = centre_in(&g, eye, fixation);
         }
         let centres = EyeCentres {
             ndc,

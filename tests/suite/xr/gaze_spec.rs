@@ -429,6 +429,7 @@ fn fovea_s_own_attach_causes_no_event_and_no_profile() {
                 1,
                 "the runtime queued one, for /user/eyes_ext"
             );
+            assert_eq!(sim::control::refusals(instance), vec![]);
         },
     );
 }
