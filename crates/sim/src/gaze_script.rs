@@ -13,7 +13,11 @@
 //!   (uniform jitter of ±D degrees per sample, deterministic, default 0), `tracked=no` (every
 //!   sample sub-nominal: orientation VALID without TRACKED, as trackers report a degraded fix),
 //!   `permission=T` (the user grants eye tracking T after the session starts: until then the gaze
-//!   action stays inactive, as on runtimes that ask for the permission).
+//!   action stays inactive, as on runtimes that ask for the permission), `head=V` (the head turns
+//!   right at V degrees per second from the session's start, and the script's angles are then
+//!   directions in LOCAL space: the eye holds its target in the world while the head turns, as the
+//!   vestibulo-ocular reflex does, so in VIEW space the gaze turns the other way at V, and a gaze
+//!   located for the wrong time is off by V times the error).
 //!
 //! Example: `hz=120; latency=20ms; fix 0,0 for 500ms; saccade 12,4 in 40ms; fix for 300ms;
 //! pursue -10,4 at 30; blink 150ms; lost 1s; loop`. Before the first step and after the last (no
@@ -45,6 +49,8 @@ pub struct GazeScript {
     pub sub_nominal: bool,
     /// Time from the session's start until eye tracking is permitted (`permission=T`).
     pub permission_ns: i64,
+    /// How fast the head turns right, degrees per second (`head=V`).
+    pub head_deg_per_s: f32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -97,7 +103,7 @@ impl GazeScript {
     pub fn parse(text: &str) -> Result<GazeScript, String> {
         let mut steps = Vec::new();
         let (mut hz, mut latency_ns, mut noise_deg, mut looped) = (120.0f32, 0i64, 0.0f32, false);
-        let (mut sub_nominal, mut permission_ns) = (false, 0i64);
+        let (mut sub_nominal, mut permission_ns, mut head_deg_per_s) = (false, 0i64, 0.0f32);
         let parts: Vec<&str> = text
             .split(';')
             .map(str::trim)
@@ -128,6 +134,12 @@ impl GazeScript {
                             "yes" => false,
                             "no" => true,
                             _ => return Err(bad() + ": tracked is yes or no"),
+                        }
+                    }
+                    "head" => {
+                        head_deg_per_s = value.trim().parse().map_err(|_| bad())?;
+                        if !head_deg_per_s.is_finite() {
+                            return Err(bad());
                         }
                     }
                     "permission" => {
@@ -196,6 +208,7 @@ impl GazeScript {
             noise_deg,
             sub_nominal,
             permission_ns,
+            head_deg_per_s,
         })
     }
 

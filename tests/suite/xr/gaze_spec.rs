@@ -595,3 +595,112 @@ fn the_gaze_waits_for_the_permission_and_calibration_is_asked_once() {
         },
     );
 }
+
+#[test]
+fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time() {
+    in_own_process(
+        module_path!(),
+        "with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time",
+        || {
+            // Every sample taken as it is (a saccade threshold below any step between frames), so
+            // each view's fovea is exactly the projection of the gaze fovea located.
+            std::env::set_var("FOVEA_GAZE_SACCADE_DEG", "0.001");
+            // The head turns right at 60°/s while the eye holds a point straight ahead in the
+            // world: in VIEW space the gaze turns left at 60°/s, 0.67° a frame at 90 Hz.
+            let mut lp = running(
+                Chain::fovea().unwrap(),
+                "hz=1000; head=60; fix 0,0 for 20s",
+                true,
+                &[EYE_GAZE],
+            );
+            let (set, action) = declare(&lp.app, true);
+            assert_eq!(attach(&lp, &[set]), xr::Result::SUCCESS);
+            // SAFETY: every name's type matches; the structs live across their calls.
+            let (sync, gaze, view, locate) = unsafe {
+                let create: xr::pfn::CreateActionSpace = lp.func(c"xrCreateActionSpace");
+                let info = xr::ActionSpaceCreateInfo {
+                    ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
+                    next: std::ptr::null(),
+                    action,
+                    subaction_path: xr::Path::NULL,
+                    pose_in_action_space: xr::Posef::IDENTITY,
+                };
+                let mut gaze = xr::Space::NULL;
+                assert_eq!(create(lp.session, &info, &mut gaze), xr::Result::SUCCESS);
+                let reference: xr::pfn::CreateReferenceSpace = lp.func(c"xrCreateReferenceSpace");
+                let info = xr::ReferenceSpaceCreateInfo {
+                    ty: xr::StructureType::REFERENCE_SPACE_CREATE_INFO,
+                    next: std::ptr::null(),
+                    reference_space_type: xr::ReferenceSpaceType::VIEW,
+                    pose_in_reference_space: xr::Posef::IDENTITY,
+                };
+                let mut view = xr::Space::NULL;
+                assert_eq!(
+                    reference(lp.session, &info, &mut view),
+                    xr::Result::SUCCESS
+                );
+                let sync: xr::pfn::SyncActions = lp.func(c"xrSyncActions");
+                let locate: xr::pfn::LocateSpace = lp.func(c"xrLocateSpace");
+                (sync, gaze, view, locate)
+            };
+            let headset = fovea_model::headsets::by_id("quest3").unwrap();
+            let left = fovea_model::gaze::EyeView {
+                fov: headset.fovs()[0],
+                position: glam::Vec3::new(-0.0315, 0.0, 0.0),
+                orientation: glam::Quat::IDENTITY,
+            };
+            let mut compared = 0;
+            let mut moved = 0.0f32;
+            let mut last = None;
+            for n in 0..45 {
+                // hello_xr's order: events, input, then the frame.
+                lp.poll_events();
+                sync_set(&lp, sync, set);
+                lp.frame().unwrap();
+                let mut loc = xr::SpaceLocation {
+                    ty: xr::StructureType::SPACE_LOCATION,
+                    next: std::ptr::null_mut(),
+                    location_flags: xr::SpaceLocationFlags::EMPTY,
+                    pose: xr::Posef::IDENTITY,
+                };
+                // SAFETY: live spaces; the struct lives across the call.
+                let r = unsafe {
+                    locate(gaze, view, lp.last_frame_state.predicted_display_time, &mut loc)
+                };
+                assert_eq!(r, xr::Result::SUCCESS);
+                let (centres, valid) = meta_state(&lp);
+                if n < 5 || !valid {
+                    continue;
+                }
+                // Where the eye looks, in VIEW space, when this frame is shown.
+                let o = loc.pose.orientation;
+                let dir = glam::Quat::from_xyzw(o.x, o.y, o.z, o.w) * glam::Vec3::NEG_Z;
+                let angles = fovea_model::gaze::angles_of(dir).unwrap();
+                let want = fovea_model::gaze::eye_centre(
+                    &fovea_model::gaze::Gaze {
+                        angles,
+                        weight: 1.0,
+                        tracking: fovea_model::gaze::Tracking::Tracked,
+                    },
+                    &left,
+                    1.0,
+                );
+                // META's y points down.
+                let got = [centres[0][0], -centres[0][1]];
+                assert!(
+                    (got[0] - want[0]).abs() < 0.003 && (got[1] - want[1]).abs() < 0.003,
+                    "frame {n}: the fovea is at {got:?}, the gaze for this frame's display time at \
+                     {want:?} (yaw {:.2}°)",
+                    angles[0]
+                );
+                if let Some(prev) = last {
+                    moved += (got[0] - prev) as f32;
+                }
+                last = Some(got[0]);
+                compared += 1;
+            }
+            assert!(compared > 30, "frames compared: {compared}");
+            assert!(moved < -0.3, "the gaze turned left in VIEW space: {moved}");
+        },
+    );
+}
