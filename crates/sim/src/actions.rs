@@ -14,7 +14,7 @@ use std::ffi::c_char;
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
-use crate::extensions::EXT_EYE_GAZE_INTERACTION;
+use crate::extensions::{EXT_ACTIVE_ACTION_SET_PRIORITY, EXT_EYE_GAZE_INTERACTION};
 use crate::ffi::{self, check_pose};
 use crate::objects::{Action, ActionSet, Event, Space, SpaceKind};
 use crate::state::{entry, world, World};
@@ -78,6 +78,7 @@ pub(crate) unsafe extern "system" fn create_action_set(
                 instance: inst,
                 name,
                 attached: false,
+                priority: info.priority,
             },
         );
         *action_set = xr::ActionSet::from_raw(id);
@@ -342,6 +343,50 @@ pub(crate) unsafe extern "system" fn sync_actions(
         let state = s.state;
         ctx.detail = format!("state={state:?}");
         let focused = state == xr::SessionState::FOCUSED;
+        // Priorities (XrActionSetCreateInfo::priority, overridden per sync by
+        // XR_EXT_active_action_set_priority where enabled): of the active sets with actions bound
+        // to the gaze, only those of the highest priority get it.
+        let inst = &w.instances[&s.instance];
+        let overrides: Vec<(u64, u32)> = match ffi::find_in_chain(
+            info.next,
+            xr::StructureType::ACTIVE_ACTION_SET_PRIORITIES_EXT,
+        ) {
+            Some(p) if inst.has_extension(EXT_ACTIVE_ACTION_SET_PRIORITY) => {
+                let p = &*(p as *const xr::ActiveActionSetPrioritiesEXT);
+                if p.action_set_priority_count > 0 {
+                    ffi::non_null(p.action_set_priorities)?;
+                }
+                (0..p.action_set_priority_count as usize)
+                    .map(|i| {
+                        let e = &*p.action_set_priorities.add(i);
+                        (e.action_set.into_raw(), e.priority_override)
+                    })
+                    .collect()
+            }
+            _ => Vec::new(),
+        };
+        ctx.next_types = ffi::chain_types(info.next);
+        let priority = |set: u64| {
+            overrides
+                .iter()
+                .find(|(s, _)| *s == set)
+                .map_or(w.action_sets[&set].priority, |(_, p)| *p)
+        };
+        let bound: Vec<u64> = active
+            .iter()
+            .copied()
+            .filter(|set| {
+                s.gaze_actions
+                    .iter()
+                    .any(|a| w.actions.get(a).is_some_and(|a| a.set == *set))
+            })
+            .collect();
+        let top = bound.iter().map(|set| priority(*set)).max();
+        let gaze_sets: Vec<u64> = bound
+            .iter()
+            .copied()
+            .filter(|set| Some(priority(*set)) == top)
+            .collect();
         // XR_EXT_eye_gaze_interaction: "the runtime should request eye tracker calibration from
         // the user" at the first sync of a set bound to the tracker; the journal records it.
         let gaze_bound = s
@@ -354,6 +399,7 @@ pub(crate) unsafe extern "system" fn sync_actions(
             ctx.detail.push_str(" eye tracker calibration requested");
         }
         s.synced_sets = if focused { active } else { Vec::new() };
+        s.gaze_sets = if focused { gaze_sets } else { Vec::new() };
         if !focused {
             return Ok(xr::Result::SESSION_NOT_FOCUSED);
         }
@@ -382,7 +428,8 @@ unsafe fn check_action(
 }
 
 /// Whether `action` gets gaze in `session` now: an eye tracker that is supported and permitted
-/// (the script's `permission`), its extension enabled, the session focused, the action bound to the gaze pose at attach and its set active
+/// (the script's `permission`), its extension enabled, the session focused, the action bound to the
+/// gaze pose at attach and its set active, of the highest priority among those bound to the gaze,
 /// since the last sync.
 pub(crate) fn gaze_active(w: &World, session: u64, action: u64) -> bool {
     let s = &w.sessions[&session];
@@ -396,7 +443,7 @@ pub(crate) fn gaze_active(w: &World, session: u64, action: u64) -> bool {
         && s.gaze_actions.contains(&action)
         && w.actions
             .get(&action)
-            .is_some_and(|a| s.synced_sets.contains(&a.set))
+            .is_some_and(|a| s.synced_sets.contains(&a.set) && s.gaze_sets.contains(&a.set))
 }
 
 macro_rules! action_state_getter {

@@ -13,6 +13,7 @@ pub(crate) const FB_FOVEATION_CONFIGURATION: &str = "XR_FB_foveation_configurati
 pub(crate) const META_FOVEATION_EYE_TRACKED: &str = "XR_META_foveation_eye_tracked";
 pub(crate) const EPIC_VIEW_CONFIGURATION_FOV: &str = "XR_EPIC_view_configuration_fov";
 pub(crate) const KHR_BINDING_MODIFICATION: &str = "XR_KHR_binding_modification";
+pub(crate) const EXT_ACTIVE_ACTION_SET_PRIORITY: &str = "XR_EXT_active_action_set_priority";
 
 /// The extensions this runtime offers under `cfg`, with their spec versions.
 pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
@@ -22,6 +23,8 @@ pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
         (MND_HEADLESS, 2),
         // As Monado: suggestions may chain XrBindingModificationsKHR (the journal records it).
         (KHR_BINDING_MODIFICATION, 1),
+        // As Monado: a sync may override the active sets' priorities.
+        (EXT_ACTIVE_ACTION_SET_PRIORITY, 1),
     ];
     // XR_FB_foveation depends on XR_FB_swapchain_update_state (its xrUpdateSwapchainFB applies
     // profiles), so native foveation brings it along.

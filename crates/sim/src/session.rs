@@ -120,6 +120,7 @@ pub(crate) unsafe extern "system" fn create_session(
                 action_sets_attached: Vec::new(),
                 gaze_actions: Vec::new(),
                 synced_sets: Vec::new(),
+                gaze_sets: Vec::new(),
                 gaze_origin_ns,
                 current_profiles: Vec::new(),
                 calibration_requested: false,

@@ -704,3 +704,83 @@ fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time(
         },
     );
 }
+
+#[test]
+fn an_app_s_higher_priority_gaze_set_keeps_the_gaze() {
+    in_own_process(
+        module_path!(),
+        "an_app_s_higher_priority_gaze_set_keeps_the_gaze",
+        || {
+            // The application binds the gaze itself and raises its set's priority for each sync
+            // (XR_EXT_active_action_set_priority): the runtime gives the gaze only to the highest
+            // priority. fovea's set has the lowest (0), so it never takes the application's input;
+            // here it gets none, and fovea keeps fixed foveation.
+            let mut lp = running(
+                Chain::fovea().unwrap(),
+                "fix 8,0 for 10s",
+                true,
+                &[EYE_GAZE, "XR_EXT_active_action_set_priority"],
+            );
+            let (set, action) = declare(&lp.app, true);
+            assert_eq!(attach(&lp, &[set]), xr::Result::SUCCESS);
+            let sync: xr::pfn::SyncActions = unsafe { lp.func(c"xrSyncActions") };
+            let get: xr::pfn::GetActionStatePose = unsafe { lp.func(c"xrGetActionStatePose") };
+            let raised = [xr::ActiveActionSetPriorityEXT {
+                action_set: set,
+                priority_override: 5,
+            }];
+            let priorities = xr::ActiveActionSetPrioritiesEXT {
+                ty: xr::StructureType::ACTIVE_ACTION_SET_PRIORITIES_EXT,
+                next: std::ptr::null(),
+                action_set_priority_count: 1,
+                action_set_priorities: raised.as_ptr(),
+            };
+            let active = [xr::ActiveActionSet {
+                action_set: set,
+                subaction_path: xr::Path::NULL,
+            }];
+            let info = xr::ActionsSyncInfo {
+                ty: xr::StructureType::ACTIONS_SYNC_INFO,
+                next: (&priorities as *const xr::ActiveActionSetPrioritiesEXT).cast(),
+                count_active_action_sets: 1,
+                active_action_sets: active.as_ptr(),
+            };
+            let mut own_active = 0;
+            let mut followed = 0;
+            for _ in 0..40 {
+                lp.poll_events();
+                // SAFETY: live handles; the structs live across the calls.
+                let r = unsafe { sync(lp.session, &info) };
+                assert!(r.into_raw() >= 0, "{r:?}");
+                lp.frame().unwrap();
+                let mut state = xr::ActionStatePose {
+                    ty: xr::StructureType::ACTION_STATE_POSE,
+                    next: std::ptr::null_mut(),
+                    is_active: xr::FALSE,
+                };
+                let get_info = xr::ActionStateGetInfo {
+                    ty: xr::StructureType::ACTION_STATE_GET_INFO,
+                    next: std::ptr::null(),
+                    action,
+                    subaction_path: xr::Path::NULL,
+                };
+                // SAFETY: as above.
+                assert_eq!(
+                    unsafe { get(lp.session, &get_info, &mut state) },
+                    xr::Result::SUCCESS
+                );
+                own_active += usize::from(state.is_active == xr::TRUE);
+                followed += usize::from(meta_state(&lp).1);
+            }
+            assert!(own_active > 30, "the application's gaze stays its own: {own_active}");
+            assert_eq!(followed, 0, "fovea's lower-priority action gets no gaze");
+            let instance = lp.app.instance;
+            drop(lp);
+            let journal = sim::control::journal(instance);
+            assert!(calls(&journal, "xrSyncActions").iter().any(|c| c
+                .next_types
+                .contains(&xr::StructureType::ACTIVE_ACTION_SET_PRIORITIES_EXT)));
+            assert_eq!(sim::control::refusals(instance), vec![]);
+        },
+    );
+}
