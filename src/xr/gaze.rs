@@ -387,9 +387,7 @@ impl InstanceGaze {
         let merged = {
             let own = self.own.lock();
             match action {
-                Some(action) if !own.attached && !own.refused => {
-                    Some(self.with_ours(app, action))
-                }
+                Some(action) if !own.attached && !own.refused => Some(self.with_ours(app, action)),
                 _ => None,
             }
         };
@@ -559,7 +557,10 @@ impl InstanceGaze {
             return;
         }
         // The claim (see `attach`): an application attach in flight or done wins.
-        if g.claim.compare_exchange(OPEN, BY_FOVEA, AcqRel, Acquire).is_err() {
+        if g.claim
+            .compare_exchange(OPEN, BY_FOVEA, AcqRel, Acquire)
+            .is_err()
+        {
             return;
         }
         let Ok((set, action)) = self.own_action() else {

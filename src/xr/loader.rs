@@ -222,7 +222,8 @@ fn create_instance_inner(
         settings.injection(uses_fb(exts)),
         settings::Injection::On(_)
     );
-    let gaze_used = gaze_settings.on && gaze::used(exts.provided(Ext::MetaFoveationEyeTracked), injects);
+    let gaze_used =
+        gaze_settings.on && gaze::used(exts.provided(Ext::MetaFoveationEyeTracked), injects);
     let gaze_below = gaze_used && (app_gaze || gaze::listed(&below));
     if gaze_below && !app_gaze {
         kept.push(gaze::name_ptr());

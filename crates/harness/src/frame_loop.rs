@@ -216,10 +216,13 @@ impl HeadlessLoop {
             if r != xr::Result::SUCCESS {
                 return got;
             }
-            let state = (event.ty == xr::StructureType::EVENT_DATA_SESSION_STATE_CHANGED).then(|| {
-                // SAFETY: the type says what the buffer holds.
-                unsafe { (*(&event as *const _ as *const xr::EventDataSessionStateChanged)).state }
-            });
+            let state =
+                (event.ty == xr::StructureType::EVENT_DATA_SESSION_STATE_CHANGED).then(|| {
+                    // SAFETY: the type says what the buffer holds.
+                    unsafe {
+                        (*(&event as *const _ as *const xr::EventDataSessionStateChanged)).state
+                    }
+                });
             got.push((event.ty, state));
         }
     }

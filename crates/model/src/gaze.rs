@@ -250,7 +250,6 @@ pub struct EyeView {
     pub orientation: Quat,
 }
 
-
 /// What projecting into one eye takes, computed once for a located view rather than every frame:
 /// the inverse of its orientation, its position, its FOV's tangents and its projection centre (a
 /// view's tangents cost eight `tan` a frame otherwise).

@@ -289,8 +289,7 @@ pub(crate) unsafe extern "system" fn get_current_interaction_profile(
             return Err(xr::Result::ERROR_ACTIONSET_NOT_ATTACHED);
         }
         if !TOP_LEVEL_PATHS.contains(&user.as_str())
-            || (user == EYES
-                && !w.instances[&instance].has_extension(EXT_EYE_GAZE_INTERACTION))
+            || (user == EYES && !w.instances[&instance].has_extension(EXT_EYE_GAZE_INTERACTION))
         {
             return Err(xr::Result::ERROR_PATH_UNSUPPORTED);
         }
@@ -300,7 +299,10 @@ pub(crate) unsafe extern "system" fn get_current_interaction_profile(
             .find(|(u, _)| *u == user)
             .map(|(_, p)| p.clone());
         // The profile's path, as xrStringToPath gives it.
-        let inst = w.instances.get_mut(&instance).expect("session's instance exists");
+        let inst = w
+            .instances
+            .get_mut(&instance)
+            .expect("session's instance exists");
         (*p).interaction_profile = match current {
             None => xr::Path::NULL,
             Some(profile) => {

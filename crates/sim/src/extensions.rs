@@ -21,10 +21,6 @@ pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
         (KHR_VULKAN_ENABLE, 8),
         (KHR_VULKAN_ENABLE2, 2),
         (MND_HEADLESS, 2),
-        // As Monado: suggestions may chain XrBindingModificationsKHR (the journal records it).
-        (KHR_BINDING_MODIFICATION, 1),
-        // As Monado: a sync may override the active sets' priorities.
-        (EXT_ACTIVE_ACTION_SET_PRIORITY, 1),
     ];
     // XR_FB_foveation depends on XR_FB_swapchain_update_state (its xrUpdateSwapchainFB applies
     // profiles), so native foveation brings it along.
@@ -43,6 +39,11 @@ pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
     }
     if cfg.eye_gaze.is_some() {
         list.push((EXT_EYE_GAZE_INTERACTION, 2));
+        // With the one input device, the input extensions Monado offers: suggestions may chain
+        // XrBindingModificationsKHR (the journal records it), a sync may override the active
+        // sets' priorities.
+        list.push((KHR_BINDING_MODIFICATION, 1));
+        list.push((EXT_ACTIVE_ACTION_SET_PRIORITY, 1));
     }
     list
 }

@@ -262,6 +262,20 @@ impl GazeScript {
 mod tests {
     use super::*;
 
+    #[test]
+    fn tracker_settings() {
+        let s = GazeScript::parse("tracked=no; permission=2s; head=60; fix 1,2 for 1s").unwrap();
+        assert!(s.sub_nominal);
+        assert_eq!(s.permission_ns, 2_000_000_000);
+        assert_eq!(s.head_deg_per_s, 60.0);
+        let d = GazeScript::parse("fix 1,2 for 1s").unwrap();
+        assert!(!d.sub_nominal && d.permission_ns == 0 && d.head_deg_per_s == 0.0);
+        assert!(!GazeScript::parse("tracked=yes").unwrap().sub_nominal);
+        for bad in ["tracked=maybe", "permission=2", "head=fast", "head=inf"] {
+            assert!(GazeScript::parse(bad).is_err(), "{bad}");
+        }
+    }
+
     const MS: i64 = 1_000_000;
 
     #[test]

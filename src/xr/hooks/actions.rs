@@ -128,8 +128,8 @@ pub fn poll_event(inst: xr::Instance, buffer: Out<xr::EventDataBuffer>) -> HookR
     // The application's header, to restore before asking again for the event after one dropped
     // (the runtime wrote its event's over it; the call wants an XrEventDataBuffer).
     // SAFETY: a non-NULL buffer is the application's XrEventDataBuffer, valid for the call.
-    let header = (!buffer.is_null())
-        .then(|| unsafe { *buffer.raw().cast::<xr::BaseOutStructure>() });
+    let header =
+        (!buffer.is_null()).then(|| unsafe { *buffer.raw().cast::<xr::BaseOutStructure>() });
     loop {
         // SAFETY: the next layer's xrPollEvent with the application's arguments as it passed them.
         let r = observed_instance(&state, unsafe { f(inst, buffer.raw()) });
@@ -152,7 +152,11 @@ pub fn poll_event(inst: xr::Instance, buffer: Out<xr::EventDataBuffer>) -> HookR
             }
             xr::StructureType::EVENT_DATA_INTERACTION_PROFILE_CHANGED if !app_enabled => {
                 // SAFETY: as above.
-                let e = unsafe { &*buffer.raw().cast::<xr::EventDataInteractionProfileChanged>() };
+                let e = unsafe {
+                    &*buffer
+                        .raw()
+                        .cast::<xr::EventDataInteractionProfileChanged>()
+                };
                 let ours = registry()
                     .session(e.session)
                     .is_some_and(|s| s.gaze.as_ref().is_some_and(|g| g.attached_alone()));

@@ -119,9 +119,11 @@ fn same_journal(input: Input) {
 
 #[test]
 fn an_app_without_input_sees_the_same_runtime() {
-    in_own_process(module_path!(), "an_app_without_input_sees_the_same_runtime", || {
-        same_journal(Input::None)
-    });
+    in_own_process(
+        module_path!(),
+        "an_app_without_input_sees_the_same_runtime",
+        || same_journal(Input::None),
+    );
 }
 
 #[test]

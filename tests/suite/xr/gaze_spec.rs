@@ -142,9 +142,11 @@ fn late_attach(eye_tracked: bool) {
 
 #[test]
 fn an_app_that_attaches_after_31_s_succeeds() {
-    in_own_process(module_path!(), "an_app_that_attaches_after_31_s_succeeds", || {
-        late_attach(false)
-    });
+    in_own_process(
+        module_path!(),
+        "an_app_that_attaches_after_31_s_succeeds",
+        || late_attach(false),
+    );
 }
 
 #[test]
@@ -204,7 +206,12 @@ fn each_frame_renders_with_the_gaze_of_its_own_display_time() {
                 };
                 // SAFETY: live spaces; the struct lives across the call.
                 let r = unsafe {
-                    locate(space, lp.space, lp.last_frame_state.predicted_display_time, &mut loc)
+                    locate(
+                        space,
+                        lp.space,
+                        lp.last_frame_state.predicted_display_time,
+                        &mut loc,
+                    )
                 };
                 assert_eq!(r, xr::Result::SUCCESS);
                 let o = loc.pose.orientation;
@@ -255,7 +262,11 @@ fn the_app_s_eye_gaze_properties_are_left_alone() {
                 f(app.instance, app.system(), &mut props)
             };
             assert_eq!(r, xr::Result::SUCCESS);
-            assert_eq!(props.system_id, app.system(), "the runtime answered the rest");
+            assert_eq!(
+                props.system_id,
+                app.system(),
+                "the runtime answered the rest"
+            );
             assert_eq!(
                 gaze.supports_eye_gaze_interaction.into_raw(),
                 7,
@@ -403,7 +414,11 @@ fn fovea_s_own_attach_causes_no_event_and_no_profile() {
             // none and never enabled XR_EXT_eye_gaze_interaction.
             std::env::set_var("FOVEA_GAZE_ATTACH_AFTER_S", "0");
             let mut lp = running(Chain::fovea().unwrap(), "fix 4,4 for 10s", true, &[]);
-            assert_eq!(profile_events(&mut lp, 40), 0, "no event reached the application");
+            assert_eq!(
+                profile_events(&mut lp, 40),
+                0,
+                "no event reached the application"
+            );
             let (_, valid) = meta_state(&lp);
             assert!(valid, "fovea follows the gaze");
             assert_eq!(
@@ -483,7 +498,8 @@ fn the_app_s_own_errors_reach_the_runtime_once() {
                     localized_action_set_name: [0; xr::MAX_LOCALIZED_ACTION_SET_NAME_SIZE],
                     priority: 0,
                 };
-                info.action_set_name[..5].copy_from_slice(&[b'm', b'e', b'n', b'u', 0].map(|b| b as _));
+                info.action_set_name[..5]
+                    .copy_from_slice(&[b'm', b'e', b'n', b'u', 0].map(|b| b as _));
                 info.localized_action_set_name[..5]
                     .copy_from_slice(&[b'M', b'e', b'n', b'u', 0].map(|b| b as _));
                 let mut s = xr::ActionSet::NULL;
@@ -495,10 +511,7 @@ fn the_app_s_own_errors_reach_the_runtime_once() {
             };
             // An attach naming a handle that is no set: the application's error.
             let bogus = xr::ActionSet::from_raw(0xdead);
-            assert_eq!(
-                attach(&lp, &[set, bogus]),
-                xr::Result::ERROR_HANDLE_INVALID
-            );
+            assert_eq!(attach(&lp, &[set, bogus]), xr::Result::ERROR_HANDLE_INVALID);
             attach_set(&lp, set);
             for _ in 0..5 {
                 lp.poll_events();
@@ -580,7 +593,10 @@ fn the_gaze_waits_for_the_permission_and_calibration_is_asked_once() {
                 valid.push(meta_state(&lp).1);
             }
             // 90 Hz: nothing in the first 1.5 s, the gaze followed from 2.5 s on.
-            assert!(valid[..135].iter().all(|v| !v), "no gaze before the permission");
+            assert!(
+                valid[..135].iter().all(|v| !v),
+                "no gaze before the permission"
+            );
             assert!(valid[225..].iter().all(|v| *v), "followed once permitted");
             let instance = lp.app.instance;
             drop(lp);
@@ -635,10 +651,7 @@ fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time(
                     pose_in_reference_space: xr::Posef::IDENTITY,
                 };
                 let mut view = xr::Space::NULL;
-                assert_eq!(
-                    reference(lp.session, &info, &mut view),
-                    xr::Result::SUCCESS
-                );
+                assert_eq!(reference(lp.session, &info, &mut view), xr::Result::SUCCESS);
                 let sync: xr::pfn::SyncActions = lp.func(c"xrSyncActions");
                 let locate: xr::pfn::LocateSpace = lp.func(c"xrLocateSpace");
                 (sync, gaze, view, locate)
@@ -665,7 +678,12 @@ fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time(
                 };
                 // SAFETY: live spaces; the struct lives across the call.
                 let r = unsafe {
-                    locate(gaze, view, lp.last_frame_state.predicted_display_time, &mut loc)
+                    locate(
+                        gaze,
+                        view,
+                        lp.last_frame_state.predicted_display_time,
+                        &mut loc,
+                    )
                 };
                 assert_eq!(r, xr::Result::SUCCESS);
                 let (centres, valid) = meta_state(&lp);
@@ -772,7 +790,10 @@ fn an_app_s_higher_priority_gaze_set_keeps_the_gaze() {
                 own_active += usize::from(state.is_active == xr::TRUE);
                 followed += usize::from(meta_state(&lp).1);
             }
-            assert!(own_active > 30, "the application's gaze stays its own: {own_active}");
+            assert!(
+                own_active > 30,
+                "the application's gaze stays its own: {own_active}"
+            );
             assert_eq!(followed, 0, "fovea's lower-priority action gets no gaze");
             let instance = lp.app.instance;
             drop(lp);
