@@ -127,9 +127,10 @@ pub fn poll_event(inst: xr::Instance, buffer: Out<xr::EventDataBuffer>) -> HookR
     let app_enabled = state.gaze.as_ref().is_none_or(|g| g.app_enabled);
     // The application's header, to restore before asking again for the event after one dropped
     // (the runtime wrote its event's over it; the call wants an XrEventDataBuffer).
-    // SAFETY: a non-NULL buffer is the application's XrEventDataBuffer, valid for the call.
-    let header =
-        (!buffer.is_null()).then(|| unsafe { *buffer.raw().cast::<xr::BaseOutStructure>() });
+    let header = (!buffer.is_null()).then(|| {
+        // SAFETY: a non-NULL buffer is the application's XrEventDataBuffer, valid for the call.
+        unsafe { *buffer.raw().cast::<xr::BaseOutStructure>() }
+    });
     loop {
         // SAFETY: the next layer's xrPollEvent with the application's arguments as it passed them.
         let r = observed_instance(&state, unsafe { f(inst, buffer.raw()) });

@@ -712,7 +712,7 @@ fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time(
                     angles[0]
                 );
                 if let Some(prev) = last {
-                    moved += (got[0] - prev) as f32;
+                    moved += got[0] - prev;
                 }
                 last = Some(got[0]);
                 compared += 1;
