@@ -75,6 +75,9 @@ pub fn run(setup: &Setup) -> Result<(), String> {
     let start = Instant::now();
     let mut override_written = false;
     while start.elapsed().as_secs() < seconds {
+        // Events first, as applications poll them: fovea syncs its gaze set alone only once the
+        // session it saw polled is FOCUSED.
+        lp.poll_events();
         lp.frame().map_err(|(f, r)| format!("{f}: {r:?}"))?;
         if !override_written && start.elapsed().as_secs() >= seconds * 4 / 5 {
             setup.write_override()?;
