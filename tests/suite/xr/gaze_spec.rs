@@ -805,3 +805,62 @@ fn an_app_s_higher_priority_gaze_set_keeps_the_gaze() {
         },
     );
 }
+
+#[test]
+fn the_app_s_attach_and_fovea_s_own_claim_a_session_once() {
+    in_own_process(
+        module_path!(),
+        "the_app_s_attach_and_fovea_s_own_claim_a_session_once",
+        || {
+            // The opt-in at once: fovea attaches alone in the first xrWaitFrame, while the
+            // application attaches on another thread at the same moment. Exactly one wins: the
+            // runtime never sees fovea's attach refused (a second attach after the application's),
+            // and the application gets SUCCESS or, where fovea won, the second attach's answer.
+            std::env::set_var("FOVEA_GAZE_ATTACH_AFTER_S", "0");
+            let (mut app_won, mut fovea_won) = (0, 0);
+            for _ in 0..60 {
+                let mut lp = running(Chain::fovea().unwrap(), "fix 4,4 for 10s", true, &[]);
+                let (set, _) = declare(&lp.app, false);
+                let session = lp.session;
+                let f: xr::pfn::AttachSessionActionSets =
+                    unsafe { lp.func(c"xrAttachSessionActionSets") };
+                let go = std::sync::Arc::new(std::sync::Barrier::new(2));
+                let other = std::sync::Arc::clone(&go);
+                let app = std::thread::spawn(move || {
+                    let sets = [set];
+                    let info = xr::SessionActionSetsAttachInfo {
+                        ty: xr::StructureType::SESSION_ACTION_SETS_ATTACH_INFO,
+                        next: std::ptr::null(),
+                        count_action_sets: 1,
+                        action_sets: sets.as_ptr(),
+                    };
+                    other.wait();
+                    // SAFETY: a live session and set; the struct lives across the call.
+                    unsafe { f(session, &info) }
+                });
+                go.wait();
+                lp.frame().unwrap();
+                let r = app.join().unwrap();
+                let instance = lp.app.instance;
+                drop(lp);
+                let refusals = sim::control::refusals(instance);
+                match r {
+                    xr::Result::SUCCESS => {
+                        app_won += 1;
+                        assert_eq!(refusals, vec![], "the application won");
+                    }
+                    xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED => {
+                        fovea_won += 1;
+                        assert_eq!(
+                            refusals,
+                            vec![("xrAttachSessionActionSets", 1)],
+                            "fovea won: only the application's attach was refused"
+                        );
+                    }
+                    other => panic!("the application's attach: {other:?}"),
+                }
+            }
+            assert_eq!(app_won + fovea_won, 60);
+        },
+    );
+}
