@@ -10,9 +10,11 @@
 //! see its allocations, but ELF symbol interposition routes its `malloc` calls through these.
 //!
 //! Following a gaze, side by side in the same run: `fovea+gaze` is the `fovea` loop on a runtime with
-//! an eye tracker whose gaze moves every frame (smooth pursuit), its application attaching an action
-//! set of its own, so fovea's gaze source syncs, locates and filters a gaze and each view's fovea
-//! moves every frame; `fixed` foveation is the `fovea` loop. The summary's `gaze:` line gives what
+//! an eye tracker whose gaze moves every frame (smooth pursuit), its application enabling
+//! `XR_META_foveation_eye_tracked` (fovea uses the gaze only where something follows it:
+//! docs/eye-tracking.md#who-uses-the-gaze), attaching an action set of its own and polling its
+//! events until the session is FOCUSED, so fovea's gaze source syncs, locates and filters a gaze and
+//! each view's fovea moves every frame; `fixed` foveation is the `fovea` loop. The summary's `gaze:` line gives what
 //! the moving gaze adds, and subtracts the runtime's share of it: an application on the bare runtime
 //! making the same three calls per frame ([`AppGaze`]).
 //!
@@ -49,8 +51,9 @@ fn running_loop(chain: Chain) -> HeadlessLoop {
 const MOVING_GAZE: &str = "hz=120; pursue 15,5 at 30; pursue -15,-5 at 30; loop";
 
 /// A running loop; with `gaze`, the simulated runtime has an eye tracker following that script and
-/// the application attaches an action set of its own, so fovea's gaze source locates a gaze every
-/// frame (fovea's set goes down with the application's attach and is synced alone each frame).
+/// the application enables `XR_META_foveation_eye_tracked` and attaches an action set of its own,
+/// so fovea's gaze source locates a gaze every frame (fovea's set goes down with the application's
+/// attach and is synced alone each frame once the session polled is FOCUSED).
 fn running_loop_with(chain: Chain, gaze: Option<&str>) -> HeadlessLoop {
     let mut cfg = sim::control::SimConfig::from_env().expect("simulated runtime configuration");
     cfg.journal = false;
@@ -62,12 +65,15 @@ fn running_loop_with(chain: Chain, gaze: Option<&str>) -> HeadlessLoop {
     sim::control::set_thread_config(Some(cfg));
     // The bare runtime offers none of the foveation extensions: its loop is the same without them.
     let layered = !chain.layers.is_empty();
-    let extensions: &[&str] = if layered {
-        &FOVEATION_EXTENSIONS
+    let mut extensions: Vec<&str> = if layered {
+        FOVEATION_EXTENSIONS.to_vec()
     } else {
-        &["XR_MND_headless"]
+        vec!["XR_MND_headless"]
     };
-    let app = App::new(chain, extensions, API_1_0).expect("instance");
+    if layered && gaze.is_some() {
+        extensions.push(EYE_TRACKED);
+    }
+    let app = App::new(chain, &extensions, API_1_0).expect("instance");
     let spec = SwapchainSpec {
         foveation: layered,
         array_size: 2,
@@ -84,10 +90,14 @@ fn running_loop_with(chain: Chain, gaze: Option<&str>) -> HeadlessLoop {
         .expect("HIGH dynamic profile");
     }
     for _ in 0..300 {
+        lp.poll_events();
         lp.frame().expect("warm-up frame");
     }
     lp
 }
+
+/// What makes fovea follow the gaze in the `fovea+gaze` loop.
+const EYE_TRACKED: &str = "XR_META_foveation_eye_tracked";
 
 /// `s` in a C string array of `N` (NUL-padded): an action or set name.
 fn fixed<const N: usize>(s: &str) -> [std::ffi::c_char; N] {
@@ -393,9 +403,11 @@ fn check_gaze_is_followed() {
         script: sim::gaze_script::GazeScript::parse(MOVING_GAZE).expect("a gaze script"),
     });
     sim::control::set_thread_config(Some(cfg));
+    let mut extensions = FOVEATION_EXTENSIONS.to_vec();
+    extensions.push(EYE_TRACKED);
     let app = App::new(
         Chain::fovea().expect("libfovea.so is built"),
-        &FOVEATION_EXTENSIONS,
+        &extensions,
         API_1_0,
     )
     .expect("instance");
@@ -405,7 +417,8 @@ fn check_gaze_is_followed() {
     };
     let mut lp = HeadlessLoop::new(app, spec).expect("session");
     attach_a_set(&lp);
-    for _ in 0..10 {
+    for _ in 0..20 {
+        lp.poll_events();
         lp.frame().expect("frame");
     }
     let located = sim::control::journal(lp.app.instance)
@@ -413,8 +426,8 @@ fn check_gaze_is_followed() {
         .filter(|c| c.function == "xrLocateSpace" && c.result == xr::Result::SUCCESS)
         .count();
     assert!(
-        located >= 8,
-        "the gaze source locates the gaze every frame: {located} in 10 frames"
+        located >= 15,
+        "the gaze source locates the gaze every frame once focused: {located} in 20 frames"
     );
 }
 

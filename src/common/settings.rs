@@ -386,7 +386,7 @@ impl Default for GazeSettings {
         GazeSettings {
             on: true,
             params: GazeParams::default(),
-            attach_after_s: Some(fovea_config::DEFAULT_GAZE_ATTACH_AFTER_S),
+            attach_after_s: fovea_config::DEFAULT_GAZE_ATTACH_AFTER_S,
         }
     }
 }

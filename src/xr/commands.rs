@@ -86,14 +86,20 @@ macro_rules! with_commands {
                 (instance: val xr::Instance, info: in xr::VulkanGraphicsDeviceGetInfoKHR,
                  physical_device: out xr::platform::VkPhysicalDevice);
             c"xrSuggestInteractionProfileBindings" => suggest_interaction_profile_bindings: SuggestInteractionProfileBindings =
-                hooks::actions::suggest_bindings, Owner::Below,
+                hooks::actions::suggest_bindings, Owner::Gaze,
                 (instance: val xr::Instance, info: in xr::InteractionProfileSuggestedBinding);
             c"xrAttachSessionActionSets" => attach_session_action_sets: AttachSessionActionSets =
-                hooks::actions::attach_action_sets, Owner::Below,
+                hooks::actions::attach_action_sets, Owner::Gaze,
                 (session: val xr::Session, info: in xr::SessionActionSetsAttachInfo);
             c"xrSyncActions" => sync_actions: SyncActions =
-                hooks::actions::sync_actions, Owner::Below,
+                hooks::actions::sync_actions, Owner::Gaze,
                 (session: val xr::Session, info: in xr::ActionsSyncInfo);
+            c"xrGetCurrentInteractionProfile" => get_current_interaction_profile: GetCurrentInteractionProfile =
+                hooks::actions::get_current_interaction_profile, Owner::Gaze,
+                (session: val xr::Session, path: val xr::Path, profile: out xr::InteractionProfileState);
+            c"xrPollEvent" => poll_event: PollEvent =
+                hooks::actions::poll_event, Owner::Gaze,
+                (instance: val xr::Instance, buffer: out xr::EventDataBuffer);
             c"xrUpdateSwapchainFB" => update_swapchain: UpdateSwapchainFB =
                 hooks::foveation::update_swapchain, Owner::Layer(Ext::SwapchainUpdateState),
                 (swapchain: val xr::Swapchain, state: in xr::SwapchainStateBaseHeaderFB);

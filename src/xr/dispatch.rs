@@ -21,6 +21,10 @@ pub enum Owner {
     Below,
     /// One of the extensions fovea provides.
     Layer(Ext),
+    /// Core OpenXR the gaze source joins (input, events): hooked only in an instance with a gaze
+    /// source ([`crate::xr::gaze::used`]) and where the next layer offers it; every other instance
+    /// gets the next layer's function.
+    Gaze,
 }
 
 /// One intercepted function.
@@ -84,7 +88,8 @@ mod tests {
             );
             assert!(std::ptr::eq(hook(h.name).unwrap(), h));
         }
-        assert!(hook(c"xrPollEvent").is_none());
+        assert_eq!(hook(c"xrPollEvent").unwrap().owner, Owner::Gaze);
+        assert!(hook(c"xrGetActionStatePose").is_none());
         assert!(!(HOOKS[0].offered_below)(&Next::default()));
     }
 }

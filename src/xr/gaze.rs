@@ -5,25 +5,35 @@
 //! How it survives real runtimes and applications
 //! (<https://registry.khronos.org/OpenXR/specs/1.1/html/xrspec.html#XR_EXT_eye_gaze_interaction>,
 //! the spec's "Input and Haptics" chapter):
+//! - only in an instance where something of fovea's follows the eyes ([`used`]): everywhere else
+//!   fovea enables nothing, makes no action set and no input call;
 //! - the extension is enabled on the copy of the create info only where the runtime offers it
 //!   (`loader.rs`); an application that did not enable it still gets `XR_ERROR_PATH_UNSUPPORTED`
-//!   for the profile, as without fovea;
-//! - one action set and pose action per instance, made at the first session whose system reports
+//!   for the profile, its `XrSystemEyeGazeInteractionPropertiesEXT` left alone, as without fovea;
+//! - one action set and pose action per instance, made at the application's first suggestion for
+//!   the eye gaze profile or at the first session whose system reports
 //!   `supportsEyeGazeInteraction` (asked with fovea's own `xrGetSystemProperties`);
 //! - a suggestion replaces the previous one for the same profile, so fovea's binding is merged into
-//!   a copy of every suggestion the application makes for the eye gaze profile, and suggested
-//!   (with the application's last one, if any) just before the application's attach goes down;
-//! - fovea's set goes down appended to a copy of the application's attach list; an application
-//!   that never attaches gets fovea's set attached alone after a grace period
-//!   ([`GazeSettings::attach_after_s`](crate::common::settings::GazeSettings));
+//!   a copy of every suggestion the application makes for the eye gaze profile (its `next` chain,
+//!   `XR_KHR_binding_modification` included, goes with it); fovea suggests alone only where the
+//!   application made none, just before the application's attach goes down;
+//! - fovea's set goes down appended to a copy of the application's attach list; fovea attaches its
+//!   set alone only where a setting asks for it
+//!   ([`GazeSettings::attach_after_s`](crate::common::settings::GazeSettings), never by default),
+//!   and exactly one of the two attaches wins a session (an atomic claim);
 //! - the gaze action space and a VIEW reference space are made only after the attach (some runtimes
 //!   refuse a gaze space before);
 //! - fovea's set is added to a copy of every `xrSyncActions`; an application that attached but has
-//!   never synced gets fovea's set synced alone once a frame; fovea never polls events;
-//! - the gaze is located in VIEW space at the predicted display time of the last `xrWaitFrame` and
-//!   used only while the action is active and the orientation valid and tracked; each view's pose
-//!   in VIEW space comes from fovea's own `xrLocateViews`, made again only when the FOVs the
-//!   application locates change.
+//!   never synced gets fovea's set synced alone once a frame, and only while the session is
+//!   FOCUSED (fovea reads the state changes the application polls);
+//! - the gaze is located in VIEW space right after each `xrWaitFrame`, at that frame's predicted
+//!   display time (the action state of the last sync stays valid until the next), and used while
+//!   the action is active and the orientation valid (tracked or not, as OpenXR Toolkit and
+//!   Quad-Views-Foveated use it); each view's pose in VIEW space comes from fovea's own
+//!   `xrLocateViews`, made again only when the FOVs the application locates change;
+//! - a call refused with fovea's part added goes down again as the application made it only where
+//!   fovea's part could have caused the refusal ([`app_caused`]), so the application's own errors
+//!   reach the runtime once.
 //!
 //! Every way this fails falls back to fixed foveation with one log line saying why.
 //!
@@ -44,7 +54,7 @@ use crate::common::settings::GazeSettings;
 use crate::xr::eye_centres::EyeCentres;
 use crate::xr::ffi;
 use crate::xr::values::{fov_from_xr, succeeded};
-use fovea_model::gaze::{eye_centre, EyeView, GazeFilter, Sample};
+use fovea_model::gaze::{centre_in, EyeProjection, EyeView, GazeFilter, Sample};
 use fovea_model::maps::MAX_VIEWS;
 use fovea_model::Fov;
 
@@ -121,6 +131,32 @@ impl Calls {
     }
 }
 
+/// Whether anything of fovea's follows the eyes in an instance (docs/eye-tracking.md#who-uses-the-gaze):
+/// `XR_META_foveation_eye_tracked` as fovea provides it (its state and eye-tracked profiles), or
+/// injection (its maps follow the gaze). Decided at `xrCreateInstance`; where neither, fovea adds
+/// nothing of eye gaze to the instance.
+pub fn used(meta_eye_tracked_provided: bool, injects: bool) -> bool {
+    meta_eye_tracked_provided || injects
+}
+
+/// Whether a refusal of a call that went down with fovea's part added is one the application's own
+/// part caused whatever fovea added: fovea's part is its own live, well-formed handles and paths,
+/// so invalid handles or structs, a wrong call order, a lost session or instance are the
+/// application's. Such a refusal is the application's answer, and its call does not go down a
+/// second time.
+pub fn app_caused(r: xr::Result) -> bool {
+    [
+        xr::Result::ERROR_HANDLE_INVALID,
+        xr::Result::ERROR_VALIDATION_FAILURE,
+        xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED,
+        xr::Result::ERROR_ACTIONSET_NOT_ATTACHED,
+        xr::Result::ERROR_PATH_INVALID,
+        xr::Result::ERROR_SESSION_LOST,
+        xr::Result::ERROR_INSTANCE_LOST,
+    ]
+    .contains(&r)
+}
+
 /// Whether the runtime answered a call fovea made with success; the log says which call failed.
 fn ok(call: &'static str, r: xr::Result) -> Result<(), xr::Result> {
     crate::common::lock::assert_none_held(call);
@@ -157,6 +193,9 @@ struct Own {
     ours_in_force: bool,
     /// A session of the instance has action sets attached: suggestions are refused from now on.
     attached: bool,
+    /// The runtime refused fovea's binding merged into the application's suggestion: fovea does
+    /// not suggest again (that would drop what the application chained to its own).
+    refused: bool,
 }
 
 impl InstanceGaze {
@@ -338,10 +377,17 @@ impl InstanceGaze {
             // bindings at `suggestedBindings`.
             n => unsafe { std::slice::from_raw_parts(info.suggested_bindings, n as usize) },
         };
+        // The application suggests for the eye gaze profile: fovea's action is made now if it is
+        // not yet, so its binding joins this suggestion with the application's own chain.
+        let action = if self.own.lock().set.is_none() {
+            self.own_action().ok().map(|(_, a)| a)
+        } else {
+            self.own.lock().set.map(|(_, a)| a)
+        };
         let merged = {
             let own = self.own.lock();
-            match own.set {
-                Some((_, action)) if !own.attached => Some(self.with_ours(app, action)),
+            match action {
+                Some(action) if !own.attached && !own.refused => Some(self.with_ours(app, action)),
                 _ => None,
             }
         };
@@ -354,10 +400,12 @@ impl InstanceGaze {
                 };
                 match down(&copy) {
                     r if succeeded(r) => (r, true),
+                    r if app_caused(r) => (r, false),
                     refused => {
                         // Refused with fovea's binding: the application's own call decides.
                         let again = down(info);
                         if succeeded(again) {
+                            self.own.lock().refused = true;
                             tracing::warn!(
                                 target: TARGET,
                                 r = ?refused,
@@ -404,6 +452,11 @@ impl InstanceGaze {
             if own.ours_in_force {
                 return Ok(());
             }
+            if own.refused {
+                return Err(xr::Result::ERROR_PATH_UNSUPPORTED);
+            }
+            // Only where the application suggested nothing for the profile (else its suggestion
+            // carried fovea's binding): nothing of the application's is replaced.
             self.with_ours(&own.app_bindings, action)
         };
         let info = xr::InteractionProfileSuggestedBinding {
@@ -432,13 +485,32 @@ impl InstanceGaze {
         info: &xr::SessionActionSetsAttachInfo,
         down: impl Fn(&xr::SessionActionSetsAttachInfo) -> xr::Result,
     ) -> xr::Result {
-        g.app_attached.store(true, Relaxed);
         let app: &[xr::ActionSet] = match info.count_action_sets {
             _ if info.action_sets.is_null() => return down(info),
             // SAFETY: the caller's contract: `countActionSets` sets at `actionSets`.
             n => unsafe { std::slice::from_raw_parts(info.action_sets, n as usize) },
         };
-        if g.phase.load(Acquire) != WAITING || app.is_empty() {
+        if app.is_empty() {
+            return down(info);
+        }
+        // The claim: the application's attach and fovea's alone race for one session; exactly
+        // one wins. Lost to fovea's alone attach (an opt-in), the application's goes down as it
+        // made it, and the runtime answers it as it answers a second attach.
+        match g.claim.compare_exchange(OPEN, BY_APP, AcqRel, Acquire) {
+            Ok(_) => {}
+            Err(BY_FOVEA) => {
+                tracing::warn!(
+                    target: TARGET,
+                    "the application attaches its action sets after fovea attached its own alone \
+                     (gaze_attach_after_s): the runtime refuses a second attach; set \
+                     gaze_attach_after_s = \"never\" for this application \
+                     (docs/eye-tracking.md#applications-that-do-not-cooperate)"
+                );
+                return down(info);
+            }
+            Err(_) => return down(info),
+        }
+        if g.phase.load(Acquire) != WAITING {
             return down(info);
         }
         let Ok((set, action)) = self.own_action() else {
@@ -462,6 +534,11 @@ impl InstanceGaze {
             g.attached(set);
             return r;
         }
+        if app_caused(r) {
+            // Refused for the application's own part: it may attach again, with fovea's set.
+            g.claim.store(OPEN, Release);
+            return r;
+        }
         // Refused with fovea's set: the application's own list decides what it gets.
         let again = down(info);
         if succeeded(again) {
@@ -477,6 +554,13 @@ impl InstanceGaze {
     /// period.
     pub fn attach_alone(&self, g: &SessionGaze) {
         if g.phase.load(Acquire) != WAITING {
+            return;
+        }
+        // The claim (see `attach`): an application attach in flight or done wins.
+        if g.claim
+            .compare_exchange(OPEN, BY_FOVEA, AcqRel, Acquire)
+            .is_err()
+        {
             return;
         }
         let Ok((set, action)) = self.own_action() else {
@@ -504,9 +588,9 @@ impl InstanceGaze {
         tracing::info!(
             target: TARGET,
             after_s = ?self.settings.attach_after_s,
-            "the application attached no action set in the grace period; fovea attached its own \
-             for eye gaze (an attach by the application from now on fails: see \
-             docs/eye-tracking.md#applications-that-do-not-cooperate)"
+            "the application attached no action set in the grace period (gaze_attach_after_s); \
+             fovea attached its own for eye gaze (an attach by the application from now on fails: \
+             see docs/eye-tracking.md#applications-that-do-not-cooperate)"
         );
         self.own.lock().attached = true;
         g.attached(set);
@@ -520,11 +604,17 @@ const ATTACHED: u8 = 1;
 /// Something was refused: fixed foveation for the rest of the session (logged once).
 const FAILED: u8 = 2;
 
+/// Who attached the session's action sets ([`SessionGaze::claim`]): nobody yet, the application
+/// (with fovea's set appended), or fovea alone.
+const OPEN: u8 = 0;
+const BY_APP: u8 = 1;
+const BY_FOVEA: u8 = 2;
+
 /// What the frame loop's `xrWaitFrame` should do for the gaze this frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Due {
     Nothing,
-    /// The application attached nothing in the grace period: attach fovea's set alone.
+    /// The application attached nothing in the grace period (an opt-in): attach fovea's set alone.
     AttachAlone,
     /// The application attached but never synced: sync fovea's set alone and locate the gaze.
     SyncAlone,
@@ -541,8 +631,11 @@ pub struct SessionGaze {
     view_space: AtomicU64,
     /// fovea's set, once attached to this session.
     set: AtomicU64,
-    app_attached: AtomicBool,
+    /// Who attached the session's sets (`OPEN`, `BY_APP`, `BY_FOVEA`), claimed atomically.
+    claim: AtomicU8,
     app_synced: AtomicBool,
+    /// The last session state the application polled is FOCUSED: only then does fovea sync alone.
+    focused: AtomicBool,
     /// The view configuration the session began with (0: not running).
     view_config: AtomicI32,
     /// The predicted display time of the last `xrWaitFrame`, and of the first.
@@ -563,10 +656,11 @@ pub struct SessionGaze {
     track: SpinMutex<Track>,
 }
 
-/// The filter and the views it projects into.
+/// The filter and the views it projects into, each with its projection computed when the views
+/// were located (not every frame).
 struct Track {
     filter: GazeFilter,
-    views: [EyeView; MAX_VIEWS],
+    views: [EyeProjection; MAX_VIEWS],
     count: usize,
 }
 
@@ -599,8 +693,9 @@ impl SessionGaze {
             gaze_space: AtomicU64::new(0),
             view_space: AtomicU64::new(0),
             set: AtomicU64::new(0),
-            app_attached: AtomicBool::new(false),
+            claim: AtomicU8::new(OPEN),
             app_synced: AtomicBool::new(false),
+            focused: AtomicBool::new(false),
             view_config: AtomicI32::new(0),
             display_ns: AtomicI64::new(0),
             first_display_ns: AtomicI64::new(0),
@@ -613,7 +708,7 @@ impl SessionGaze {
             said: AtomicU32::new(0),
             track: SpinMutex::spin(Track {
                 filter: GazeFilter::new(settings.params),
-                views: [NO_VIEW; MAX_VIEWS],
+                views: [NO_VIEW.projection(); MAX_VIEWS],
                 count: 0,
             }),
         }
@@ -702,6 +797,17 @@ impl SessionGaze {
         }
     }
 
+    /// The application polled a session state change: fovea syncs alone only while FOCUSED.
+    pub fn state_changed(&self, state: xr::SessionState) {
+        self.focused
+            .store(state == xr::SessionState::FOCUSED, Relaxed);
+    }
+
+    /// fovea attached its set alone (an opt-in): the session holds no set of the application's.
+    pub fn attached_alone(&self) -> bool {
+        self.claim.load(Relaxed) == BY_FOVEA
+    }
+
     /// `xrBeginSession` succeeded with this primary view configuration.
     pub fn began(&self, config: xr::ViewConfigurationType) {
         self.view_config.store(config.into_raw(), Relaxed);
@@ -724,13 +830,13 @@ impl SessionGaze {
             t => t,
         };
         match self.phase.load(Acquire) {
-            WAITING if !self.app_attached.load(Relaxed) => match self.attach_after_ns {
+            WAITING if self.claim.load(Relaxed) == OPEN => match self.attach_after_ns {
                 Some(grace) if display_ns - first >= grace => Due::AttachAlone,
                 _ => Due::Nothing,
             },
             // The application's own first sync comes after its first xrWaitFrame: a whole frame
             // without one is an application that does not sync.
-            ATTACHED if !self.app_synced.load(Relaxed) => {
+            ATTACHED if !self.app_synced.load(Relaxed) && self.focused.load(Relaxed) => {
                 if self.waits_unsynced.fetch_add(1, Relaxed) >= 1 {
                     Due::SyncAlone
                 } else {
@@ -828,7 +934,7 @@ impl SessionGaze {
         }
         let n = (n as usize).min(MAX_VIEWS);
         let app_views = self.app_views.load(Acquire) as usize;
-        let mut located = [NO_VIEW; MAX_VIEWS];
+        let mut located = [NO_VIEW.projection(); MAX_VIEWS];
         for (i, (slot, v)) in located.iter_mut().zip(&views[..n]).enumerate() {
             let (p, o) = (v.pose.position, v.pose.orientation);
             *slot = EyeView {
@@ -839,7 +945,8 @@ impl SessionGaze {
                 },
                 position: Vec3::new(p.x, p.y, p.z),
                 orientation: Quat::from_xyzw(o.x, o.y, o.z, o.w).normalize(),
-            };
+            }
+            .projection();
         }
         let mut t = self.track.lock();
         t.views = located;
@@ -847,7 +954,7 @@ impl SessionGaze {
     }
 
     /// This frame's sample: the gaze action's pose in VIEW space at `time`, where the action is
-    /// active and the orientation valid and tracked.
+    /// active and the orientation valid.
     fn sample(&self, time: i64, gaze: xr::Space, view: xr::Space) -> Option<Sample> {
         let get = xr::ActionStateGetInfo {
             ty: xr::StructureType::ACTION_STATE_GET_INFO,
@@ -892,9 +999,13 @@ impl SessionGaze {
             }
             return None;
         }
-        let need =
-            xr::SpaceLocationFlags::ORIENTATION_VALID | xr::SpaceLocationFlags::ORIENTATION_TRACKED;
-        if !location.location_flags.contains(need) {
+        // VALID is enough: a sub-nominal gaze (VALID without TRACKED) is still the runtime's best
+        // estimate, and OpenXR Toolkit and Quad-Views-Foveated use it too
+        // (docs/eye-tracking.md#where-gaze-comes-from).
+        if !location
+            .location_flags
+            .contains(xr::SpaceLocationFlags::ORIENTATION_VALID)
+        {
             return None;
         }
         let o = location.pose.orientation;
@@ -906,7 +1017,7 @@ impl SessionGaze {
         })
     }
 
-    /// Locates the gaze for the frame of the last `xrWaitFrame` (after a sync) and answers where
+    /// Locates the gaze for the frame of the last `xrWaitFrame` (right after it) and answers where
     /// each view's fovea is; `None` where the source has nothing to say (not attached, not running,
     /// no views).
     pub fn update(&self) -> Option<EyeCentres> {
@@ -951,7 +1062,7 @@ impl SessionGaze {
         let fixation = t.filter.params().fixation_m;
         let mut ndc = [[0.0; 2]; MAX_VIEWS];
         for (c, eye) in ndc.iter_mut().zip(&t.views[..t.count]) {
-            *c = eye_centre(&g, eye, fixation);
+            *c = centre_in(&g, eye, fixation);
         }
         let centres = EyeCentres {
             ndc,

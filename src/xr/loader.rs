@@ -215,10 +215,19 @@ fn create_instance_inner(
     let epic = symmetric::enable_epic(settings.symmetric_fov, &names, &below, &mut kept);
     let gaze_settings = settings.gaze;
     let app_gaze = gaze::listed(names.iter().copied());
-    let gaze_below = gaze_settings.on && (app_gaze || gaze::listed(&below));
+    // Gaze only where something of fovea's uses it (docs/eye-tracking.md#who-uses-the-gaze): an
+    // application that enables nothing that follows the eyes gets no extension enabled below, no
+    // action set and no input call from fovea.
+    // `inject` on for this application; not the injection an FB application gets for the
+    // profiles it applies (docs/injection.md#applications-that-apply-profiles): those profiles
+    // are fixed, nothing of theirs follows the eyes.
+    let injects = matches!(settings.injection(), settings::Injection::On(_));
+    let gaze_used =
+        gaze_settings.on && gaze::used(exts.provided(Ext::MetaFoveationEyeTracked), injects);
+    let gaze_below = gaze_used && (app_gaze || gaze::listed(&below));
     if gaze_below && !app_gaze {
         kept.push(gaze::name_ptr());
-    } else if gaze_settings.on && !gaze_below && !GAZE_ABSENT_SAID.swap(true, Ordering::Relaxed) {
+    } else if gaze_used && !gaze_below && !GAZE_ABSENT_SAID.swap(true, Ordering::Relaxed) {
         tracing::info!(
             target: fovea_abi::log_target::GAZE,
             "the runtime does not offer XR_EXT_eye_gaze_interaction: fixed foveation (said once \
@@ -259,7 +268,7 @@ fn create_instance_inner(
     };
     let state = Instance {
         gaze,
-        gaze_on: gaze_settings.on,
+        gaze_on: gaze_used,
         handle,
         next_gipa,
         // SAFETY: the next layer's xrGetInstanceProcAddr and the instance it just created.
@@ -439,6 +448,7 @@ fn resolve(
         None => false,
         Some(h) => match h.owner {
             Owner::Below => (h.offered_below)(&state.next),
+            Owner::Gaze => state.gaze.is_some() && (h.offered_below)(&state.next),
             Owner::Layer(ext) if exts.provided(ext) => true,
             // The runtime has XR_FB_swapchain_update_state but not XR_FB_foveation: fovea handles the
             // foveation state type and passes every other one down.

@@ -79,8 +79,9 @@ pub struct Instance {
     /// The gaze source's per-instance part, where gaze is on and XR_EXT_eye_gaze_interaction is
     /// enabled below ([`crate::xr::gaze`]).
     pub gaze: Option<InstanceGaze>,
-    /// Gaze is switched on for the instance (whether or not the runtime has any): the stats line
-    /// tells `off` from `fixed` by it.
+    /// Gaze is switched on for the instance and something of fovea's uses it
+    /// ([`crate::xr::gaze::used`]), whether or not the runtime has any: the stats line tells `off`
+    /// from `fixed` by it.
     pub gaze_on: bool,
 }
 

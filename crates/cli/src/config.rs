@@ -57,7 +57,9 @@ fn default_of(key: Key, vars: &BTreeMap<String, String>) -> String {
         Key::GazeHold => gaze_default(|p| p.hold_s),
         Key::GazeReturn => gaze_default(|p| p.return_s),
         Key::GazeFixation => gaze_default(|p| p.fixation_m),
-        Key::GazeAttachAfter => fovea_config::DEFAULT_GAZE_ATTACH_AFTER_S.to_string(),
+        Key::GazeAttachAfter => {
+            fovea_config::DEFAULT_GAZE_ATTACH_AFTER_S.map_or("\"never\"".into(), |s| s.to_string())
+        }
         Key::LogFile => fovea_config::default_log_path(|k| vars.get(k).map(OsString::from))
             .map_or("none (no home folder)".into(), |p| {
                 format!("{:?}", p.display().to_string())

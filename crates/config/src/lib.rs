@@ -90,9 +90,10 @@ pub const KEYS: usize = 19;
 
 /// Seconds of display time before fovea attaches its own eye gaze action set in a session whose
 /// application attached none (`gaze_attach_after_s`; docs/eye-tracking.md#applications-that-do-not-cooperate):
-/// long enough for an application that attaches after a loading screen, short enough that one
-/// that never does still gets gaze within a minute.
-pub const DEFAULT_GAZE_ATTACH_AFTER_S: f32 = 30.0;
+/// never by default. A session's sets attach once, so an attach of fovea's alone makes every later
+/// attach of the application fail (`XR_ERROR_ACTIONSETS_ALREADY_ATTACHED`); an application that sets
+/// up its input after a long loading screen must not pay for an opt-in it never made.
+pub const DEFAULT_GAZE_ATTACH_AFTER_S: Option<f32> = None;
 
 impl Key {
     pub const ALL: [Key; KEYS] = [

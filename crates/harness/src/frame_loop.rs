@@ -201,6 +201,32 @@ impl HeadlessLoop {
         Err(format!("session never reached {state:?}"))
     }
 
+    /// Polls every queued event, as an application does once a frame: each event's type and, for a
+    /// session state change, the new state.
+    pub fn poll_events(&mut self) -> Vec<(xr::StructureType, Option<xr::SessionState>)> {
+        let mut got = Vec::new();
+        loop {
+            let mut event = xr::EventDataBuffer {
+                ty: xr::StructureType::EVENT_DATA_BUFFER,
+                next: std::ptr::null(),
+                varying: [0; 4000],
+            };
+            // SAFETY: the buffer is valid for the call.
+            let r = unsafe { (self.fns.poll_event)(self.app.instance, &mut event) };
+            if r != xr::Result::SUCCESS {
+                return got;
+            }
+            let state =
+                (event.ty == xr::StructureType::EVENT_DATA_SESSION_STATE_CHANGED).then(|| {
+                    // SAFETY: the type says what the buffer holds.
+                    unsafe {
+                        (*(&event as *const _ as *const xr::EventDataSessionStateChanged)).state
+                    }
+                });
+            got.push((event.ty, state));
+        }
+    }
+
     /// One frame. Returns the first failing call's name and result.
     pub fn frame(&mut self) -> Result<(), (&'static str, xr::Result)> {
         let f = &self.fns;

@@ -250,15 +250,39 @@ pub struct EyeView {
     pub orientation: Quat,
 }
 
-/// Where a VIEW-space point lands in `eye`'s normalised device coordinates (y up), unclamped;
+/// What projecting into one eye takes, computed once for a located view rather than every frame:
+/// the inverse of its orientation, its position, its FOV's tangents and its projection centre (a
+/// view's tangents cost eight `tan` a frame otherwise).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EyeProjection {
+    inverse: Quat,
+    position: Vec3,
+    /// left, right, up, down.
+    tangents: [f32; 4],
+    fixed: [f32; 2],
+}
+
+impl EyeView {
+    /// The view's projection, for [`centre_in`].
+    pub fn projection(&self) -> EyeProjection {
+        EyeProjection {
+            inverse: self.orientation.inverse(),
+            position: self.position,
+            tangents: self.fov.tangents().map(|t| t as f32),
+            fixed: self.fov.projection_center_ndc(),
+        }
+    }
+}
+
+/// Where a VIEW-space point lands in the eye's normalised device coordinates (y up), unclamped;
 /// `None` for points at or behind the eye.
-fn ndc_of(point: Vec3, eye: &EyeView) -> Option<[f32; 2]> {
-    let p = eye.orientation.inverse() * (point - eye.position);
+fn ndc_in(point: Vec3, eye: &EyeProjection) -> Option<[f32; 2]> {
+    let p = eye.inverse * (point - eye.position);
     if p.z >= -1e-6 {
         return None;
     }
     let (tx, ty) = (p.x / -p.z, p.y / -p.z);
-    let [l, r, u, d] = eye.fov.tangents().map(|t| t as f32);
+    let [l, r, u, d] = eye.tangents;
     Some([
         (2.0 * tx - (r - l)) / (l + r),
         (2.0 * ty - (u - d)) / (u + d),
@@ -269,12 +293,18 @@ fn ndc_of(point: Vec3, eye: &EyeView) -> Option<[f32; 2]> {
 /// where the gaze meets the fixation plane, as that eye sees it, blended towards the projection
 /// centre (fixed foveation's fovea) as the gaze's weight falls.
 pub fn eye_centre(gaze: &Gaze, eye: &EyeView, fixation_m: f32) -> [f32; 2] {
-    let fixed = eye.fov.projection_center_ndc();
+    centre_in(gaze, &eye.projection(), fixation_m)
+}
+
+/// [`eye_centre`] with the view's projection computed beforehand ([`EyeView::projection`]): what
+/// a frame loop calls, the same answer to the bit.
+pub fn centre_in(gaze: &Gaze, eye: &EyeProjection, fixation_m: f32) -> [f32; 2] {
+    let fixed = eye.fixed;
     if gaze.weight <= 0.0 {
         return fixed;
     }
     let point = gaze.direction() * fixation_m.max(0.01);
-    let Some(g) = ndc_of(point, eye) else {
+    let Some(g) = ndc_in(point, eye) else {
         return fixed;
     };
     let w = gaze.weight.min(1.0);

@@ -14,14 +14,28 @@ use std::ffi::c_char;
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
-use crate::extensions::EXT_EYE_GAZE_INTERACTION;
+use crate::extensions::{EXT_ACTIVE_ACTION_SET_PRIORITY, EXT_EYE_GAZE_INTERACTION};
 use crate::ffi::{self, check_pose};
-use crate::objects::{Action, ActionSet, Space, SpaceKind};
+use crate::objects::{Action, ActionSet, Event, Space, SpaceKind};
 use crate::state::{entry, world, World};
 
 /// The eye gaze interaction profile and its one input.
 pub(crate) const EYE_GAZE_PROFILE: &str = "/interaction_profiles/ext/eye_gaze_interaction";
 pub(crate) const GAZE_POSE: &str = "/user/eyes_ext/input/gaze_ext/pose";
+/// The eye tracker's top-level user path.
+const EYES: &str = "/user/eyes_ext";
+
+/// The top-level user paths of the spec's interaction profiles and the eye tracker's (Monado
+/// answers XR_ERROR_PATH_UNSUPPORTED for any other path in xrGetCurrentInteractionProfile).
+const TOP_LEVEL_PATHS: [&str; 7] = [
+    "/user/hand/left",
+    "/user/hand/right",
+    "/user/head",
+    "/user/gamepad",
+    "/user/treadmill",
+    "/user/eyes_ext",
+    "/user/vendor",
+];
 
 /// Action and action set names follow path-component rules (spec "Well-Formed Path Strings").
 fn check_names(name: &[c_char], localized: &[c_char]) -> Result<String, xr::Result> {
@@ -64,6 +78,7 @@ pub(crate) unsafe extern "system" fn create_action_set(
                 instance: inst,
                 name,
                 attached: false,
+                priority: info.priority,
             },
         );
         *action_set = xr::ActionSet::from_raw(id);
@@ -151,6 +166,7 @@ pub(crate) unsafe extern "system" fn suggest_interaction_profile_bindings(
             .path(info.interaction_profile)
             .ok_or(xr::Result::ERROR_PATH_INVALID)?;
         ctx.detail = profile.to_string();
+        ctx.next_types = ffi::chain_types(info.next);
         if info.count_suggested_bindings == 0 {
             return Err(xr::Result::ERROR_VALIDATION_FAILURE);
         }
@@ -229,9 +245,27 @@ pub(crate) unsafe extern "system" fn attach_session_action_sets(
             .map(|(a, _)| *a)
             .filter(|a| w.actions.get(a).is_some_and(|a| sets.contains(&a.set)))
             .collect();
+        // The eye tracker is the one device: /user/eyes_ext gets the eye gaze profile where an
+        // attached action is bound to it and the tracker is there, and, as Monado does for each
+        // top-level path whose profile changes at attach, an event says so.
+        let tracker = w.instances[&instance]
+            .config
+            .eye_gaze
+            .as_ref()
+            .is_some_and(|g| g.supported);
         let s = w.sessions.get_mut(&id).expect("entered session exists");
         s.action_sets_attached = sets;
+        let bound = tracker && !gaze_actions.is_empty();
         s.gaze_actions = gaze_actions;
+        if bound {
+            s.current_profiles
+                .push((EYES.to_owned(), EYE_GAZE_PROFILE.to_owned()));
+            w.instances
+                .get_mut(&instance)
+                .expect("session's instance exists")
+                .events
+                .push_back(Event::InteractionProfileChanged { session: id });
+        }
         Ok(xr::Result::SUCCESS)
     })
 }
@@ -246,13 +280,42 @@ pub(crate) unsafe extern "system" fn get_current_interaction_profile(
         let id = w.enter_session(ctx, session)?;
         let p = ffi::output(profile, xr::StructureType::INTERACTION_PROFILE_STATE)?;
         let instance = w.sessions[&id].instance;
-        w.instances[&instance]
+        let user = w.instances[&instance]
             .path(top_level_user_path)
-            .ok_or(xr::Result::ERROR_PATH_INVALID)?;
+            .ok_or(xr::Result::ERROR_PATH_INVALID)?
+            .to_owned();
+        ctx.detail = user.clone();
         if w.sessions[&id].action_sets_attached.is_empty() {
             return Err(xr::Result::ERROR_ACTIONSET_NOT_ATTACHED);
         }
-        (*p).interaction_profile = xr::Path::NULL;
+        if !TOP_LEVEL_PATHS.contains(&user.as_str())
+            || (user == EYES && !w.instances[&instance].has_extension(EXT_EYE_GAZE_INTERACTION))
+        {
+            return Err(xr::Result::ERROR_PATH_UNSUPPORTED);
+        }
+        let current = w.sessions[&id]
+            .current_profiles
+            .iter()
+            .find(|(u, _)| *u == user)
+            .map(|(_, p)| p.clone());
+        // The profile's path, as xrStringToPath gives it.
+        let inst = w
+            .instances
+            .get_mut(&instance)
+            .expect("session's instance exists");
+        (*p).interaction_profile = match current {
+            None => xr::Path::NULL,
+            Some(profile) => {
+                let index = match inst.paths.iter().position(|p| *p == profile) {
+                    Some(i) => i,
+                    None => {
+                        inst.paths.push(profile);
+                        inst.paths.len() - 1
+                    }
+                };
+                xr::Path::from_raw(index as u64 + 1)
+            }
+        };
         Ok(xr::Result::SUCCESS)
     })
 }
@@ -278,10 +341,67 @@ pub(crate) unsafe extern "system" fn sync_actions(
             }
         }
         // Spec: input is only delivered to the focused session, and a sync activates only the
-        // sets it lists.
-        let focused = s.state == xr::SessionState::FOCUSED;
+        // sets it lists. The journal says the state each sync came in.
+        let state = s.state;
+        ctx.detail = format!("state={state:?}");
+        let focused = state == xr::SessionState::FOCUSED;
+        // Priorities (XrActionSetCreateInfo::priority, overridden per sync by
+        // XR_EXT_active_action_set_priority where enabled): of the active sets with actions bound
+        // to the gaze, only those of the highest priority get it.
+        let inst = &w.instances[&s.instance];
+        let overrides: Vec<(u64, u32)> = match ffi::find_in_chain(
+            info.next,
+            xr::StructureType::ACTIVE_ACTION_SET_PRIORITIES_EXT,
+        ) {
+            Some(p) if inst.has_extension(EXT_ACTIVE_ACTION_SET_PRIORITY) => {
+                let p = &*(p as *const xr::ActiveActionSetPrioritiesEXT);
+                if p.action_set_priority_count > 0 {
+                    ffi::non_null(p.action_set_priorities)?;
+                }
+                (0..p.action_set_priority_count as usize)
+                    .map(|i| {
+                        let e = &*p.action_set_priorities.add(i);
+                        (e.action_set.into_raw(), e.priority_override)
+                    })
+                    .collect()
+            }
+            _ => Vec::new(),
+        };
+        ctx.next_types = ffi::chain_types(info.next);
+        let priority = |set: u64| {
+            overrides
+                .iter()
+                .find(|(s, _)| *s == set)
+                .map_or(w.action_sets[&set].priority, |(_, p)| *p)
+        };
+        let bound: Vec<u64> = active
+            .iter()
+            .copied()
+            .filter(|set| {
+                s.gaze_actions
+                    .iter()
+                    .any(|a| w.actions.get(a).is_some_and(|a| a.set == *set))
+            })
+            .collect();
+        let top = bound.iter().map(|set| priority(*set)).max();
+        let gaze_sets: Vec<u64> = bound
+            .iter()
+            .copied()
+            .filter(|set| Some(priority(*set)) == top)
+            .collect();
+        // XR_EXT_eye_gaze_interaction: "the runtime should request eye tracker calibration from
+        // the user" at the first sync of a set bound to the tracker; the journal records it.
+        let gaze_bound = s
+            .gaze_actions
+            .iter()
+            .any(|a| w.actions.get(a).is_some_and(|a| active.contains(&a.set)));
         let s = w.sessions.get_mut(&id).expect("entered session exists");
+        if gaze_bound && !s.calibration_requested {
+            s.calibration_requested = true;
+            ctx.detail.push_str(" eye tracker calibration requested");
+        }
         s.synced_sets = if focused { active } else { Vec::new() };
+        s.gaze_sets = if focused { gaze_sets } else { Vec::new() };
         if !focused {
             return Ok(xr::Result::SESSION_NOT_FOCUSED);
         }
@@ -309,19 +429,23 @@ unsafe fn check_action(
     Ok(())
 }
 
-/// Whether `action` gets gaze in `session` now: an eye tracker that is supported, its extension
-/// enabled, the session focused, the action bound to the gaze pose at attach and its set active
+/// Whether `action` gets gaze in `session` now: an eye tracker that is supported and permitted
+/// (the script's `permission`), its extension enabled, the session focused, the action bound to the
+/// gaze pose at attach and its set active, of the highest priority among those bound to the gaze,
 /// since the last sync.
 pub(crate) fn gaze_active(w: &World, session: u64, action: u64) -> bool {
     let s = &w.sessions[&session];
     let inst = &w.instances[&s.instance];
-    inst.config.eye_gaze.as_ref().is_some_and(|g| g.supported)
+    inst.config
+        .eye_gaze
+        .as_ref()
+        .is_some_and(|g| g.supported && inst.now_ns - s.gaze_origin_ns >= g.script.permission_ns)
         && inst.has_extension(EXT_EYE_GAZE_INTERACTION)
         && s.state == xr::SessionState::FOCUSED
         && s.gaze_actions.contains(&action)
         && w.actions
             .get(&action)
-            .is_some_and(|a| s.synced_sets.contains(&a.set))
+            .is_some_and(|a| s.synced_sets.contains(&a.set) && s.gaze_sets.contains(&a.set))
 }
 
 macro_rules! action_state_getter {

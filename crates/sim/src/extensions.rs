@@ -12,6 +12,8 @@ pub(crate) const EXT_EYE_GAZE_INTERACTION: &str = "XR_EXT_eye_gaze_interaction";
 pub(crate) const FB_FOVEATION_CONFIGURATION: &str = "XR_FB_foveation_configuration";
 pub(crate) const META_FOVEATION_EYE_TRACKED: &str = "XR_META_foveation_eye_tracked";
 pub(crate) const EPIC_VIEW_CONFIGURATION_FOV: &str = "XR_EPIC_view_configuration_fov";
+pub(crate) const KHR_BINDING_MODIFICATION: &str = "XR_KHR_binding_modification";
+pub(crate) const EXT_ACTIVE_ACTION_SET_PRIORITY: &str = "XR_EXT_active_action_set_priority";
 
 /// The extensions this runtime offers under `cfg`, with their spec versions.
 pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
@@ -37,6 +39,11 @@ pub(crate) fn extensions(cfg: &SimConfig) -> Vec<(&'static str, u32)> {
     }
     if cfg.eye_gaze.is_some() {
         list.push((EXT_EYE_GAZE_INTERACTION, 2));
+        // With the one input device, the input extensions Monado offers: suggestions may chain
+        // XrBindingModificationsKHR (the journal records it), a sync may override the active
+        // sets' priorities.
+        list.push((KHR_BINDING_MODIFICATION, 1));
+        list.push((EXT_ACTIVE_ACTION_SET_PRIORITY, 1));
     }
     list
 }

@@ -10,7 +10,14 @@
 //! - `blink T`, `lost T`: no valid gaze for T, the eye where it was;
 //! - `loop`: as the last step, start again from the first;
 //! - settings anywhere: `hz=N` (sample rate, default 120), `latency=T` (default 0), `noise=D`
-//!   (uniform jitter of ±D degrees per sample, deterministic, default 0).
+//!   (uniform jitter of ±D degrees per sample, deterministic, default 0), `tracked=no` (every
+//!   sample sub-nominal: orientation VALID without TRACKED, as trackers report a degraded fix),
+//!   `permission=T` (the user grants eye tracking T after the session starts: until then the gaze
+//!   action stays inactive, as on runtimes that ask for the permission), `head=V` (the head turns
+//!   right at V degrees per second from the session's start, and the script's angles are then
+//!   directions in LOCAL space: the eye holds its target in the world while the head turns, as the
+//!   vestibulo-ocular reflex does, so in VIEW space the gaze turns the other way at V, and a gaze
+//!   located for the wrong time is off by V times the error).
 //!
 //! Example: `hz=120; latency=20ms; fix 0,0 for 500ms; saccade 12,4 in 40ms; fix for 300ms;
 //! pursue -10,4 at 30; blink 150ms; lost 1s; loop`. Before the first step and after the last (no
@@ -38,6 +45,12 @@ pub struct GazeScript {
     hz: f32,
     latency_ns: i64,
     noise_deg: f32,
+    /// Samples are VALID without TRACKED (`tracked=no`).
+    pub sub_nominal: bool,
+    /// Time from the session's start until eye tracking is permitted (`permission=T`).
+    pub permission_ns: i64,
+    /// How fast the head turns right, degrees per second (`head=V`).
+    pub head_deg_per_s: f32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -90,6 +103,7 @@ impl GazeScript {
     pub fn parse(text: &str) -> Result<GazeScript, String> {
         let mut steps = Vec::new();
         let (mut hz, mut latency_ns, mut noise_deg, mut looped) = (120.0f32, 0i64, 0.0f32, false);
+        let (mut sub_nominal, mut permission_ns, mut head_deg_per_s) = (false, 0i64, 0.0f32);
         let parts: Vec<&str> = text
             .split(';')
             .map(str::trim)
@@ -114,6 +128,22 @@ impl GazeScript {
                         if !(noise_deg.is_finite() && noise_deg >= 0.0) {
                             return Err(bad());
                         }
+                    }
+                    "tracked" => {
+                        sub_nominal = match value.trim() {
+                            "yes" => false,
+                            "no" => true,
+                            _ => return Err(bad() + ": tracked is yes or no"),
+                        }
+                    }
+                    "head" => {
+                        head_deg_per_s = value.trim().parse().map_err(|_| bad())?;
+                        if !head_deg_per_s.is_finite() {
+                            return Err(bad());
+                        }
+                    }
+                    "permission" => {
+                        permission_ns = time_ns(value.trim()).map_err(|e| bad() + ": " + &e)?
                     }
                     _ => return Err(bad() + ": unknown setting"),
                 }
@@ -176,6 +206,9 @@ impl GazeScript {
             hz,
             latency_ns,
             noise_deg,
+            sub_nominal,
+            permission_ns,
+            head_deg_per_s,
         })
     }
 
@@ -228,6 +261,20 @@ impl GazeScript {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tracker_settings() {
+        let s = GazeScript::parse("tracked=no; permission=2s; head=60; fix 1,2 for 1s").unwrap();
+        assert!(s.sub_nominal);
+        assert_eq!(s.permission_ns, 2_000_000_000);
+        assert_eq!(s.head_deg_per_s, 60.0);
+        let d = GazeScript::parse("fix 1,2 for 1s").unwrap();
+        assert!(!d.sub_nominal && d.permission_ns == 0 && d.head_deg_per_s == 0.0);
+        assert!(!GazeScript::parse("tracked=yes").unwrap().sub_nominal);
+        for bad in ["tracked=maybe", "permission=2", "head=fast", "head=inf"] {
+            assert!(GazeScript::parse(bad).is_err(), "{bad}");
+        }
+    }
 
     const MS: i64 = 1_000_000;
 

@@ -271,6 +271,16 @@ pub(crate) unsafe extern "system" fn poll_event(
                     },
                 );
             }
+            Event::InteractionProfileChanged { session } => {
+                ctx.detail = "interaction profile changed".into();
+                (buffer as *mut xr::EventDataInteractionProfileChanged).write(
+                    xr::EventDataInteractionProfileChanged {
+                        ty: xr::StructureType::EVENT_DATA_INTERACTION_PROFILE_CHANGED,
+                        next: std::ptr::null(),
+                        session: xr::Session::from_raw(session),
+                    },
+                );
+            }
         }
         Ok(xr::Result::SUCCESS)
     })

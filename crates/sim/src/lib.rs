@@ -22,8 +22,14 @@
 //!
 //! Optionally (`FOVEA_SIM_EYE_GAZE`) it has an eye tracker behind `XR_EXT_eye_gaze_interaction`
 //! whose gaze follows a script ([`gaze_script`]), as strict as real runtimes: inactive without
-//! focus or without a synced set bound to it, a second suggestion for its profile replacing the
-//! first, optionally no gaze space before attach, or listed without support as Monado does.
+//! focus or without a synced set bound to it, or before the user's permission (`permission=T`); a
+//! second suggestion for its profile replacing the first; optionally no gaze space before attach,
+//! or listed without support as Monado does. As Monado, an attach that binds the tracker queues
+//! `XR_TYPE_EVENT_DATA_INTERACTION_PROFILE_CHANGED` and gives `/user/eyes_ext` its profile in
+//! `xrGetCurrentInteractionProfile` (`XR_ERROR_ACTIONSET_NOT_ATTACHED` before any attach); the
+//! first sync of a set bound to it journals a calibration request; its samples can be sub-nominal
+//! (`tracked=no`: VALID without TRACKED), and the head can turn (`head=V`) while the eye holds a
+//! point in the world. Each `xrSyncActions` journals the session state it came in.
 //!
 //! The files stand in floors: each imports only files on floors below its own. The objects are
 //! plain data that the state holds (`objects.rs`, `state.rs`); the modules of the spec's chapters

@@ -70,6 +70,9 @@ pub(crate) enum Event {
         state: xr::SessionState,
         time: i64,
     },
+    /// A top-level user path of the session got another interaction profile (at attach, as
+    /// Monado queues one for each bound top-level path).
+    InteractionProfileChanged { session: u64 },
 }
 
 pub(crate) struct InstanceState {
@@ -130,8 +133,17 @@ pub(crate) struct Session {
     pub gaze_actions: Vec<u64>,
     /// The sets the last focused xrSyncActions made active (none while unfocused).
     pub synced_sets: Vec<u64>,
+    /// Of those, the sets whose gaze actions get the gaze: the highest priority among the active
+    /// sets bound to it (XrActionSetCreateInfo::priority, or the sync's
+    /// XrActiveActionSetPrioritiesEXT override).
+    pub gaze_sets: Vec<u64>,
     /// The virtual time the session was created at: the eye tracker's script starts there.
     pub gaze_origin_ns: i64,
+    /// The current interaction profile of each top-level user path that has one (set at attach).
+    pub current_profiles: Vec<(String, String)>,
+    /// The runtime asked the user to calibrate the eye tracker (at the first sync of a set bound to
+    /// it, as XR_EXT_eye_gaze_interaction says a runtime should).
+    pub calibration_requested: bool,
 }
 
 pub(crate) enum SpaceKind {
@@ -177,6 +189,9 @@ pub(crate) struct ActionSet {
     pub(crate) name: String,
     /// Attached to a session: no more actions may be added (XR_ERROR_ACTIONSETS_ALREADY_ATTACHED).
     pub(crate) attached: bool,
+    /// `XrActionSetCreateInfo::priority`: of the active sets with actions bound to one input, only
+    /// those of the highest priority get it.
+    pub(crate) priority: u32,
 }
 
 pub(crate) struct Action {

@@ -120,7 +120,10 @@ pub(crate) unsafe extern "system" fn create_session(
                 action_sets_attached: Vec::new(),
                 gaze_actions: Vec::new(),
                 synced_sets: Vec::new(),
+                gaze_sets: Vec::new(),
                 gaze_origin_ns,
+                current_profiles: Vec::new(),
+                calibration_requested: false,
             },
         );
         set_state(&mut w, id, xr::SessionState::IDLE);
@@ -138,9 +141,10 @@ pub(crate) fn destroy_session_objects(w: &mut World, session: u64) {
     w.profiles.retain(|_, p| p.session != session);
     let instance = w.sessions[&session].instance;
     if let Some(inst) = w.instances.get_mut(&instance) {
-        inst.events.retain(
-            |e| !matches!(e, Event::SessionStateChanged { session: s, .. } if *s == session),
-        );
+        inst.events.retain(|e| {
+            !matches!(e, Event::SessionStateChanged { session: s, .. }
+                | Event::InteractionProfileChanged { session: s } if *s == session)
+        });
     }
 }
 

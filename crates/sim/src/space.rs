@@ -1,7 +1,9 @@
 //! Spaces and view location (spec chapters "Spaces", "View Configurations": xrLocateViews).
 //!
-//! The simulated head does not move: the VIEW space coincides with LOCAL, and STAGE's origin lies on
-//! the floor 1.6 m below. Eyes sit ±31.5 mm (IPD 63 mm) along the head's x axis and look down −z
+//! The simulated head stays at LOCAL's origin, and STAGE's origin lies on the floor 1.6 m below. It
+//! does not turn (VIEW coincides with LOCAL) unless the eye tracker's script turns it (`head=V`,
+//! [`crate::gaze_script`]): then VIEW turns right about LOCAL's vertical at V degrees per second
+//! from the session's start, and the views turn with it. Eyes sit ±31.5 mm (IPD 63 mm) along the head's x axis and look down −z
 //! with the headset preset's per-eye FOV.
 
 use openxr_sys as xr;
@@ -15,6 +17,32 @@ use crate::system::VIEW_COUNT;
 const EYE_HEIGHT_M: f32 = 1.6;
 pub(crate) const IPD_M: f32 = 0.063;
 
+/// The head's pose in LOCAL at `time` in `session`: turned right by the script's head speed since
+/// the session started (identity without a turning head).
+fn head_in_local(w: &World, session: u64, time: i64) -> xr::Posef {
+    let s = &w.sessions[&session];
+    let speed = w.instances[&s.instance]
+        .config
+        .eye_gaze
+        .as_ref()
+        .map_or(0.0, |g| g.script.head_deg_per_s);
+    if speed == 0.0 {
+        return IDENTITY;
+    }
+    let yaw = speed * ((time - s.gaze_origin_ns) as f32 * 1e-9);
+    // Turning right is a negative rotation about +y.
+    let half = -yaw.to_radians() / 2.0;
+    xr::Posef {
+        orientation: xr::Quaternionf {
+            x: 0.0,
+            y: half.sin(),
+            z: 0.0,
+            w: half.cos(),
+        },
+        ..IDENTITY
+    }
+}
+
 impl Space {
     /// The space's pose in LOCAL at `time`, or `None` when untracked; for a gaze space also the
     /// time its sample was taken (`XrEyeGazeSampleTimeEXT`).
@@ -22,6 +50,9 @@ impl Space {
         let (origin, sampled) = match self.kind {
             SpaceKind::Reference(xr::ReferenceSpaceType::STAGE) => {
                 (translation(0.0, -EYE_HEIGHT_M, 0.0), None)
+            }
+            SpaceKind::Reference(xr::ReferenceSpaceType::VIEW) => {
+                (head_in_local(w, self.session, time), None)
             }
             SpaceKind::Reference(_) => (IDENTITY, None),
             SpaceKind::Action(action) => {
@@ -31,8 +62,9 @@ impl Space {
                 let s = &w.sessions[&self.session];
                 let gaze = w.instances[&s.instance].config.eye_gaze.as_ref()?;
                 let ([yaw, pitch], at) = gaze.script.sample_at(time - s.gaze_origin_ns)?;
-                // The head does not move, so VIEW is LOCAL: the gaze pose sits between the eyes,
-                // −Z turned right by the yaw and up by the pitch.
+                // The gaze pose sits between the eyes, −Z turned right by the yaw and up by the
+                // pitch: in VIEW space, or, with a turning head (`head=V`), in LOCAL space, where
+                // the eye holds its target while the head turns.
                 let half = |deg: f32| deg.to_radians() / 2.0;
                 let turn = xr::Quaternionf {
                     x: 0.0,
@@ -274,7 +306,19 @@ pub(crate) unsafe extern "system" fn locate_space(
         ) {
             (Some((s, sampled)), Some((b, _))) => {
                 (*location).pose = compose(inverse(b), s);
-                (*location).location_flags = tracked();
+                // A sub-nominal tracker (the script's `tracked=no`) gives its gaze VALID only.
+                let sub_nominal = sampled.is_some()
+                    && w.instances[&w.sessions[&space.session].instance]
+                        .config
+                        .eye_gaze
+                        .as_ref()
+                        .is_some_and(|g| g.script.sub_nominal);
+                (*location).location_flags = if sub_nominal {
+                    xr::SpaceLocationFlags::ORIENTATION_VALID
+                        | xr::SpaceLocationFlags::POSITION_VALID
+                } else {
+                    tracked()
+                };
                 let ty = xr::StructureType::EYE_GAZE_SAMPLE_TIME_EXT;
                 if let (Some(t), Some(e)) = (sampled, ffi::find_in_chain((*location).next, ty)) {
                     (*(e as *mut xr::EyeGazeSampleTimeEXT)).time = xr::Time::from_nanos(t);
@@ -347,7 +391,10 @@ pub(crate) unsafe extern "system" fn locate_views(
         ffi::two_call(capacity, count_out, views, VIEW_COUNT, |i, p| {
             let p = ffi::output(p, xr::StructureType::VIEW)?;
             let x = if i == 0 { -IPD_M / 2.0 } else { IPD_M / 2.0 };
-            (*p).pose = base.map_or(IDENTITY, |b| compose(inverse(b), translation(x, 0.0, 0.0)));
+            let head = head_in_local(&w, session, info.display_time.as_nanos());
+            (*p).pose = base.map_or(IDENTITY, |b| {
+                compose(inverse(b), compose(head, translation(x, 0.0, 0.0)))
+            });
             (*p).fov = fovs[i];
             Ok(())
         })?;

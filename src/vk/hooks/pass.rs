@@ -1001,7 +1001,7 @@ mod tests {
         let (eye_image, eye_view, other_view) = (0x5e1u64, 0x5e2u64, 0x5e3u64);
         let (map_view, eye_fb, imageless_fb, pass) = (0x3a9u64, 0xfb1u64, 0xfb2u64, 0xa55u64);
         let extent = [64, 64];
-        inject::start(fovea_model::density::Level::High);
+        inject::start(fovea_model::density::Level::High, true);
         let fov = fovea_model::Fov {
             left: -0.8,
             right: 0.8,
@@ -1016,6 +1016,7 @@ mod tests {
                 layers: 1,
                 holds: fovea_model::inject::Holds::View(0),
             },
+            false,
         );
         inject::set_images(1, &[eye_image]);
         let fdm = crate::bridge::FdmEmulation {

@@ -720,7 +720,7 @@ mod tests {
     fn refills_for_a_moving_gaze_allocate_nothing() {
         use crate::bridge::inject;
         let _one = inject::tests::STATE_TESTS.lock();
-        inject::start(fovea_model::density::Level::High);
+        inject::start(fovea_model::density::Level::High, true);
         let fov = fovea_model::Fov {
             left: -0.8,
             right: 0.8,

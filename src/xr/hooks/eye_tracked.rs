@@ -25,12 +25,16 @@ use fovea_model::Fov;
 
 const META_PROPERTIES: xr::StructureType =
     xr::StructureType::SYSTEM_FOVEATION_EYE_TRACKED_PROPERTIES_META;
+const EYE_GAZE_PROPERTIES: xr::StructureType =
+    xr::StructureType::SYSTEM_EYE_GAZE_INTERACTION_PROPERTIES_EXT;
 
 /// `xrGetSystemProperties`: where fovea provides XR_META_foveation_eye_tracked and the application
 /// chained `XrSystemFoveationEyeTrackedPropertiesMETA`, the call goes down with a copy of the chain
 /// without it (the runtime was not asked for the extension), what the runtime wrote is handed back
 /// to the application's structs, and fovea fills `supportsFoveationEyeTracked` itself: true where
-/// the system has a gaze source ([`has_gaze_source`]).
+/// the system has a gaze source ([`has_gaze_source`]). Where fovea enabled XR_EXT_eye_gaze_interaction
+/// below for itself, the application's `XrSystemEyeGazeInteractionPropertiesEXT` is left out of
+/// the copy the same way and left as the application passed it.
 pub fn get_system_properties(
     inst: xr::Instance,
     system: xr::SystemId,
@@ -48,7 +52,12 @@ pub fn get_system_properties(
     let app = properties
         .read()
         .filter(|p| p.ty == xr::SystemProperties::TYPE);
-    let Some(app) = app.filter(|_| state.extensions.provided(Ext::MetaFoveationEyeTracked)) else {
+    // The eye gaze struct of an application that did not enable XR_EXT_eye_gaze_interaction (fovea
+    // enabled it below for itself) stays out of the runtime's reach: without fovea the runtime
+    // would not know it, so fovea neither passes it down nor fills it.
+    let hide_eye_gaze = state.gaze.as_ref().is_some_and(|g| !g.app_enabled);
+    let provides_meta = state.extensions.provided(Ext::MetaFoveationEyeTracked);
+    let Some(app) = app.filter(|_| provides_meta || hide_eye_gaze) else {
         return Ok(down(properties.raw()));
     };
     let next_chain = app.next as *const c_void;
@@ -57,12 +66,22 @@ pub fn get_system_properties(
     let meta = unsafe {
         find_in_chain::<xr::SystemFoveationEyeTrackedPropertiesMETA>(next_chain, META_PROPERTIES)
     }
-    .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
-    let Some(meta) = meta else {
+    .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?
+    .filter(|_| provides_meta);
+    // SAFETY: as above.
+    let eye_gaze = unsafe {
+        find_in_chain::<xr::SystemEyeGazeInteractionPropertiesEXT>(next_chain, EYE_GAZE_PROPERTIES)
+    }
+    .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?
+    .filter(|_| hide_eye_gaze);
+    if meta.is_none() && eye_gaze.is_none() {
         return Ok(down(properties.raw()));
+    }
+    let hidden = |t: xr::StructureType| {
+        (t == META_PROPERTIES && meta.is_some()) || (t == EYE_GAZE_PROPERTIES && eye_gaze.is_some())
     };
     // SAFETY: as above; the copy shares only the chain's tail, which goes down within this call.
-    let chain = unsafe { ChainCopy::without(next_chain, |t| t == META_PROPERTIES) }
+    let chain = unsafe { ChainCopy::without(next_chain, hidden) }
         .map_err(|_| xr::Result::ERROR_VALIDATION_FAILURE)?;
     let mut copy = app;
     copy.next = chain.head() as *mut c_void;
@@ -72,11 +91,13 @@ pub fn get_system_properties(
     }
     // SAFETY: the chain copied is the application's output chain of this call.
     unsafe { chain.write_back() };
-    let supported = has_gaze_source(&state, system);
-    // SAFETY: `meta` is the application's XrSystemFoveationEyeTrackedPropertiesMETA in its output
-    // chain, valid for writes; only its output member is written.
-    unsafe {
-        (*meta.cast_mut()).supports_foveation_eye_tracked = supported.into();
+    if let Some(meta) = meta {
+        let supported = has_gaze_source(&state, system);
+        // SAFETY: `meta` is the application's XrSystemFoveationEyeTrackedPropertiesMETA in its
+        // output chain, valid for writes; only its output member is written.
+        unsafe {
+            (*meta.cast_mut()).supports_foveation_eye_tracked = supported.into();
+        }
     }
     let Some(out) = properties.into_mut() else {
         return Ok(r);

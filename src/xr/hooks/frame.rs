@@ -21,8 +21,8 @@ use fovea_model::stats::{GazeShown, Line, Window};
 
 /// `xrWaitFrame`: the predicted display time and period tell how many display periods the previous
 /// frame missed, the dynamic controller's and the stats' input; the gaze is located at that time
-/// ([`crate::xr::gaze`]), and the gaze source attaches or syncs its set alone where the
-/// application does not.
+/// for this frame ([`crate::xr::gaze`]), after the gaze source attached or synced its set alone
+/// where the application does not (and a setting or the session's focus allows it).
 pub fn wait_frame(
     sess: xr::Session,
     info: In<xr::FrameWaitInfo>,
@@ -41,12 +41,12 @@ pub fn wait_frame(
             match g.waited(state.predicted_display_time.as_nanos()) {
                 Due::Nothing => {}
                 Due::AttachAlone => ig.attach_alone(g),
-                Due::SyncAlone => {
-                    g.sync_alone();
-                    if let Some(centres) = g.update() {
-                        *s.eyes.lock() = centres;
-                    }
-                }
+                Due::SyncAlone => g.sync_alone(),
+            }
+            // The gaze of the frame the application renders now: located at this frame's
+            // predicted display time, with the action state of the last sync.
+            if let Some(centres) = g.update() {
+                *s.eyes.lock() = centres;
             }
         }
     }

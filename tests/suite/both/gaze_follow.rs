@@ -258,6 +258,7 @@ fn run(
     });
     let mut seen = Vec::new();
     for n in 0..frames {
+        poll_events(&app);
         let case = format!("{mode:?} {} frame {n}", profile.name());
         crate::support::device::assert_no_double_errors(env);
         env.double.clear();
@@ -339,6 +340,23 @@ fn offsets_from_state(
         let c = state.foveation_center[eye];
         pixel_offset(&grid, &whole_view(fovs[eye]), [c.x, -c.y])
     })
+}
+
+/// Polls every queued event, as applications do once a frame (fovea syncs its set alone for this
+/// application, which never syncs, only once the session it polled is FOCUSED).
+fn poll_events(app: &App) {
+    let poll: xr::pfn::PollEvent = func(app, "xrPollEvent");
+    loop {
+        let mut event = xr::EventDataBuffer {
+            ty: xr::StructureType::EVENT_DATA_BUFFER,
+            next: null(),
+            varying: [0; 4000],
+        };
+        // SAFETY: the buffer lives across the call.
+        if unsafe { poll(app.instance, &mut event) } != xr::Result::SUCCESS {
+            return;
+        }
+    }
 }
 
 /// Attaches an action set of the application's own (with one boolean action, bound to nothing),

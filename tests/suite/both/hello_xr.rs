@@ -395,13 +395,10 @@ fn vulkan_under_core_validation_has_no_messages() {
     hello_xr_passes("Vulkan", &[CORE_VALIDATION_LAYER, FOVEA_LAYER]);
 }
 
-/// hello_xr has input of its own (action sets, suggestions for controllers, a sync every frame):
-/// with the simulated headset's eye tracker on, fovea's gaze set rides along with hello_xr's, the
-/// stats line shows the gaze tracked where the script looks (right of centre in the left eye), and
-/// nothing is refused or said, under core validation.
-#[test]
-fn vulkan2_with_an_eye_tracker_the_gaze_is_tracked_and_nothing_is_said() {
-    let env = [
+/// hello_xr with the simulated headset's eye tracker on: its stats lines, and whether the runtime
+/// refused anything (under core validation). `inject` turns injection on, which uses the gaze.
+fn hello_xr_with_an_eye_tracker(inject: bool) -> Option<(Vec<String>, Run)> {
+    let mut env = vec![
         ("FOVEA_SIM_EYE_GAZE", OsString::from("on")),
         ("FOVEA_SIM_GAZE", OsString::from("fix 12,0 for 60s")),
         ("FOVEA_SIM_LOG_REFUSALS", OsString::from("1")),
@@ -410,24 +407,47 @@ fn vulkan2_with_an_eye_tracker_the_gaze_is_tracked_and_nothing_is_said() {
             OsString::from(format!("warn,{}=info", log_target::STATS)),
         ),
     ];
-    let Some(run) = hello_xr_passes_with("Vulkan2", &[CORE_VALIDATION_LAYER, FOVEA_LAYER], &env)
-    else {
-        return;
-    };
-    let stats: Vec<&str> = run
+    if inject {
+        env.push(("FOVEA_INJECT", OsString::from("1")));
+    }
+    let run = hello_xr_passes_with("Vulkan2", &[CORE_VALIDATION_LAYER, FOVEA_LAYER], &env)?;
+    let stats: Vec<String> = run
         .stderr
         .lines()
         .filter(|l| l.contains("fovea::stats: FPS="))
+        .map(String::from)
         .collect();
     assert!(stats.len() >= 2, "{}", run.transcript());
-    assert!(
-        stats[1..].iter().all(|l| l.contains(" Gaze=tracked@+")),
-        "{stats:#?}"
-    );
     assert!(
         !run.stderr.contains("fovea-sim: refused"),
         "{}",
         run.transcript()
+    );
+    Some((stats, run))
+}
+
+/// hello_xr has input of its own (action sets, suggestions for controllers, a sync every frame) but
+/// enables nothing of fovea's: with the simulated headset's eye tracker on, fovea touches no eye
+/// gaze (docs/eye-tracking.md#who-uses-the-gaze), and the stats line says the gaze is off.
+#[test]
+fn vulkan2_with_an_eye_tracker_and_nothing_that_uses_it_the_gaze_is_off() {
+    let Some((stats, _)) = hello_xr_with_an_eye_tracker(false) else {
+        return;
+    };
+    assert!(stats.iter().all(|l| l.contains(" Gaze=off")), "{stats:#?}");
+}
+
+/// With injection on (which follows the gaze), fovea's gaze set rides along with hello_xr's, the
+/// stats line shows the gaze tracked where the script looks (right of centre in the left eye), and
+/// nothing is refused or said, under core validation.
+#[test]
+fn vulkan2_with_an_eye_tracker_and_injection_the_gaze_is_tracked_and_nothing_is_said() {
+    let Some((stats, _)) = hello_xr_with_an_eye_tracker(true) else {
+        return;
+    };
+    assert!(
+        stats[1..].iter().all(|l| l.contains(" Gaze=tracked@+")),
+        "{stats:#?}"
     );
 }
 

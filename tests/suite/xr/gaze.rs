@@ -27,6 +27,9 @@ use crate::support::{foveated_loop, in_own_process};
 
 /// The eye gaze extension.
 const EXT: &str = "XR_EXT_eye_gaze_interaction";
+/// What makes fovea use the gaze in these applications (docs/eye-tracking.md#who-uses-the-gaze):
+/// `XR_META_foveation_eye_tracked`, which fovea provides on the simulated runtime.
+const EYE_TRACKED: &str = "XR_META_foveation_eye_tracked";
 
 /// A log file of this process's own, with the gaze at `trace` and the stats line on.
 fn log_here(label: &str, extra_env: &[(&str, &str)]) -> PathBuf {
@@ -79,6 +82,7 @@ fn eye_tracker(supported: bool, space_after_attach: bool, script: &str) -> sim::
 fn running(cfg: sim::control::SimConfig, extensions: &[&str]) -> HeadlessLoop {
     sim::control::set_thread_config(Some(cfg));
     let mut exts: Vec<&str> = FOVEATION_EXTENSIONS.to_vec();
+    exts.push(EYE_TRACKED);
     exts.extend_from_slice(extensions);
     let app = App::new(Chain::fovea().unwrap(), &exts, API_1_0).unwrap();
     foveated_loop(app)
@@ -488,6 +492,7 @@ fn an_app_that_never_attaches_gets_gaze_after_the_grace_period() {
             let log = log_here("never-attaches", &[("FOVEA_GAZE_ATTACH_AFTER_S", "1")]);
             let mut lp = running(eye_tracker(true, true, "fix 5,5 for 10s"), &[]);
             for _ in 0..200 {
+                lp.poll_events();
                 lp.frame().unwrap();
             }
             let lines = log_lines(&log);
@@ -558,6 +563,8 @@ fn an_app_that_attaches_but_never_syncs_gets_gaze() {
             };
             assert_eq!(r, xr::Result::ERROR_PATH_UNSUPPORTED);
             for _ in 0..60 {
+                // The application polls its events: fovea syncs alone only once it is FOCUSED.
+                lp.poll_events();
                 lp.frame().unwrap();
             }
             let got = located(log_lines(&log));
@@ -695,10 +702,10 @@ fn an_eye_gaze_suggestion_made_before_the_session_still_binds_both() {
             let log = log_here("early-suggestion", &[]);
             sim::control::set_thread_config(Some(eye_tracker(true, false, "fix -4,2 for 10s")));
             let mut exts: Vec<&str> = FOVEATION_EXTENSIONS.to_vec();
-            exts.push(EXT);
+            exts.extend([EXT, EYE_TRACKED]);
             let app = App::new(Chain::fovea().unwrap(), &exts, API_1_0).unwrap();
-            // Suggested before any session: fovea has no action yet, and suggests the
-            // application's binding again with its own at the attach.
+            // Suggested before any session: fovea makes its action then, and its binding goes
+            // down merged into the application's suggestion.
             let (set, action) = declare(&app, true);
             let mut lp = foveated_loop(app);
             let input = AppInput::with(&lp, set, action, true);

@@ -2,12 +2,14 @@
 //! (fake loader, simulated runtime) or the Khronos loader.
 
 pub mod below;
+pub mod bystander;
 pub mod eye_tracked;
 pub mod faults;
 pub mod foveation_state;
 pub mod frame_pipeline;
 pub mod fuzz;
 pub mod gaze;
+pub mod gaze_spec;
 pub mod khronos_loader;
 pub mod layer;
 pub mod settings_file;

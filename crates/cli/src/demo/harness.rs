@@ -5,8 +5,8 @@
 //! The simulated headset has an eye tracker following [`GAZE`], and the app's profile is
 //! eye-tracked (`XrFoveationEyeTrackedProfileCreateInfoMETA` on the level profile,
 //! docs/eye-tracking.md#xr_meta_foveation_eye_tracked). The loop has no input of its own to attach,
-//! so fovea is told to attach its gaze action set at once (`FOVEA_GAZE_ATTACH_AFTER_S=0`, where an
-//! app that never attaches waits 30 s, docs/eye-tracking.md#applications-that-do-not-cooperate).
+//! so fovea is told to attach its gaze action set at once (`FOVEA_GAZE_ATTACH_AFTER_S=0`; by default
+//! fovea never attaches alone, docs/eye-tracking.md#applications-that-do-not-cooperate).
 
 use std::time::Instant;
 
@@ -75,6 +75,9 @@ pub fn run(setup: &Setup) -> Result<(), String> {
     let start = Instant::now();
     let mut override_written = false;
     while start.elapsed().as_secs() < seconds {
+        // Events first, as applications poll them: fovea syncs its gaze set alone only once the
+        // session it saw polled is FOCUSED.
+        lp.poll_events();
         lp.frame().map_err(|(f, r)| format!("{f}: {r:?}"))?;
         if !override_written && start.elapsed().as_secs() >= seconds * 4 / 5 {
             setup.write_override()?;
