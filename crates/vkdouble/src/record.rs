@@ -99,8 +99,7 @@ fn trim(r: &mut Records) {
         .iter()
         .rev()
         .map(|e| {
-            lasting(e)
-                || definition(e).is_some_and(|d| !destroyed.contains(&d) && newest.insert(d))
+            lasting(e) || definition(e).is_some_and(|d| !destroyed.contains(&d) && newest.insert(d))
         })
         .collect::<Vec<_>>()
         .into_iter()
