@@ -804,6 +804,57 @@ mod tests {
         }
     }
 
+    /// An instance destroyed before its devices (VUID-vkDestroyInstance-instance-00629) takes
+    /// them with it: neither its device nor its command buffers' records are found any more, so
+    /// a command buffer of a later device with a recycled handle gets a record of its own and
+    /// frees nothing of the dead device's; another instance's device and command buffer stay.
+    #[test]
+    fn an_instance_destroyed_first_takes_its_devices() {
+        let keys = [0x4001usize, 0x5001];
+        let objects: Vec<Box<usize>> = keys.iter().map(|&k| object(k)).collect();
+        let handle = |i: usize| &*objects[i] as *const usize as u64;
+        let (dead, alive) = (0x0A00_0001usize, 0x0B00_0001usize);
+        // SAFETY: the handles point at words holding their keys, alive for the test.
+        unsafe {
+            for (i, instance) in [(0, dead), (1, alive)] {
+                let mut d = record(&objects[i], 1);
+                d.instance = instance;
+                add_device(d);
+            }
+        }
+        let cb = |i: u64| vk::CommandBuffer::from_raw(0xE0_0000 + i);
+        remember_command_buffer(cb(0), keys[0], 9, false);
+        remember_command_buffer(cb(1), keys[1], 9, false);
+        let of = |k: Key| {
+            CB_RECORDS
+                .lock()
+                .values()
+                .filter(|r| r.device == k)
+                .count()
+        };
+        assert_eq!((of(keys[0]), of(keys[1])), (1, 1));
+
+        assert_eq!(forget_devices_of(dead), vec![keys[0]]);
+        // What `vkDestroyInstance` does next for each forgotten device (`convert`'s
+        // `device_key_reused`): its command buffers' records go, without a driver call.
+        forget_command_buffers_where(|_, r| r.device == keys[0]);
+        // SAFETY: as above.
+        unsafe {
+            assert!(device_ref(vk::Device::from_raw(handle(0))).is_none());
+            assert!(device(vk::Device::from_raw(handle(0))).is_none());
+            assert!(device_ref(vk::Device::from_raw(handle(1))).is_some());
+        }
+        assert_eq!((of(keys[0]), of(keys[1])), (0, 1));
+        assert!(bound_of(cb(0)).is_none(), "no record, in this thread's cache either");
+        assert!(forget_devices_of(dead).is_empty(), "forgotten once");
+        // The dead device's command buffer handle, recycled by a later device.
+        remember_command_buffer(cb(0), keys[1], 10, false);
+        assert_eq!(record_of(cb(0), |r| (r.device, r.pool)), Some((keys[1], 10)));
+        forget_command_buffers_where(|_, r| r.device == keys[1]);
+        // SAFETY: as above.
+        unsafe { remove_device(vk::Device::from_raw(handle(1))) };
+    }
+
     #[test]
     fn release_halves_are_told_from_acquire_halves() {
         let ignored = vk::QUEUE_FAMILY_IGNORED;
