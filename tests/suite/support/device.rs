@@ -41,7 +41,6 @@ unsafe extern "system" fn on_message(
 ) -> vk::Bool32 {
     // SAFETY: the layer passes valid callback data with a NUL-terminated message.
     let text = unsafe { CStr::from_ptr((*data).p_message) }.to_string_lossy();
-    if text.contains("04441") { eprintln!("MSG04441 {text}"); }
     if let Ok(mut m) = MESSAGES.lock() {
         m.push(format!("{severity:?}: {text}"));
     }
