@@ -825,13 +825,7 @@ mod tests {
         let cb = |i: u64| vk::CommandBuffer::from_raw(0xE0_0000 + i);
         remember_command_buffer(cb(0), keys[0], 9, false);
         remember_command_buffer(cb(1), keys[1], 9, false);
-        let of = |k: Key| {
-            CB_RECORDS
-                .lock()
-                .values()
-                .filter(|r| r.device == k)
-                .count()
-        };
+        let of = |k: Key| CB_RECORDS.lock().values().filter(|r| r.device == k).count();
         assert_eq!((of(keys[0]), of(keys[1])), (1, 1));
 
         assert_eq!(forget_devices_of(dead), vec![keys[0]]);
@@ -845,11 +839,17 @@ mod tests {
             assert!(device_ref(vk::Device::from_raw(handle(1))).is_some());
         }
         assert_eq!((of(keys[0]), of(keys[1])), (0, 1));
-        assert!(bound_of(cb(0)).is_none(), "no record, in this thread's cache either");
+        assert!(
+            bound_of(cb(0)).is_none(),
+            "no record, in this thread's cache either"
+        );
         assert!(forget_devices_of(dead).is_empty(), "forgotten once");
         // The dead device's command buffer handle, recycled by a later device.
         remember_command_buffer(cb(0), keys[1], 10, false);
-        assert_eq!(record_of(cb(0), |r| (r.device, r.pool)), Some((keys[1], 10)));
+        assert_eq!(
+            record_of(cb(0), |r| (r.device, r.pool)),
+            Some((keys[1], 10))
+        );
         forget_command_buffers_where(|_, r| r.device == keys[1]);
         // SAFETY: as above.
         unsafe { remove_device(vk::Device::from_raw(handle(1))) };
