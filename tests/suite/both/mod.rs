@@ -7,4 +7,5 @@ pub mod fdm_vulkan;
 pub mod gaze_follow;
 pub mod hello_xr;
 pub mod monado;
+pub mod session_lifetimes;
 pub mod vulkan_enable;
