@@ -176,7 +176,7 @@ unsafe fn graphics_queues_compute(
 }
 
 /// Sets up conversion on a device just recorded in the registry, or logs why not (its
-/// application-written maps then render at full rate).
+/// application-written maps then render at full rate); whether the device converts.
 ///
 /// # Safety
 /// `ci` must be the application's create info of the live device `handle`, made on `physical`.
@@ -185,13 +185,13 @@ pub unsafe fn device_created(
     physical: vk::PhysicalDevice,
     ci: &vk::DeviceCreateInfo<'_>,
     handle: vk::Device,
-) {
+) -> bool {
     // SAFETY: as the caller promised.
     let Some(dev) = (unsafe { registry::device(handle) }) else {
-        return;
+        return false;
     };
     let (Some(fdm), Some(own)) = (&dev.fdm, &dev.attachments.own) else {
-        return;
+        return false;
     };
     // SAFETY: as the caller promised.
     let why = unsafe { untracked_binds(ci, dev.api_version) }.or_else(|| {
@@ -206,24 +206,31 @@ pub unsafe fn device_created(
             "density maps the application writes itself are not converted on this device: they \
              render at full rate, and density-map offsets are not applied"
         );
-        return;
+        return false;
     }
     // SAFETY: the layer's own objects on a live device.
     match unsafe { Converter::new(Arc::clone(own), fdm) } {
         Ok(c) => {
             // SAFETY: as the caller promised.
-            if let Some(k) = unsafe { key(handle) } {
-                let mut v = CONVERTERS.write();
-                v.retain(|(key, _)| *key != k);
-                v.push((k, Arc::new(c)));
-            }
+            let Some(k) = (unsafe { key(handle) }) else {
+                // SAFETY: made on this live device, used by nothing yet.
+                unsafe { c.destroy() };
+                return false;
+            };
+            let mut v = CONVERTERS.write();
+            v.retain(|(key, _)| *key != k);
+            v.push((k, Arc::new(c)));
+            true
         }
-        Err(e) => tracing::warn!(
-            device = raw(handle),
-            result = ?e,
-            "no density-map conversion on this device: maps the application writes itself \
-             render at full rate, and density-map offsets are not applied"
-        ),
+        Err(e) => {
+            tracing::warn!(
+                device = raw(handle),
+                result = ?e,
+                "no density-map conversion on this device: maps the application writes itself \
+                 render at full rate, and density-map offsets are not applied"
+            );
+            false
+        }
     }
 }
 
@@ -251,10 +258,11 @@ pub unsafe fn device_destroyed(handle: vk::Device) {
     FRAMEBUFFERS.write().retain(|_, (key, _)| *key != k);
 }
 
-/// Forgets, without a call to the driver, what the layer kept for a device whose dispatch key a
-/// new device now has: the application destroyed the old device's instance with the device still
-/// alive (VUID-vkDestroyInstance-instance-00629), the loader freed the device's dispatch table, and
-/// the new device got its address. The old device's objects are gone with it; destroying them
+/// Forgets, without a call to the driver, what the layer kept for a device that is gone without
+/// `vkDestroyDevice`: the application destroyed its instance with the device still alive
+/// (VUID-vkDestroyInstance-instance-00629), and the loader freed the device's dispatch table,
+/// whose address a new device may get. Called at that `vkDestroyInstance`, and where a new device
+/// has the dispatch key of one the layer still knows. The old device's objects are gone with it; destroying them
 /// now would call a driver that no longer has them, so its command buffers' records, its
 /// converter and its framebuffers are dropped as they are.
 pub fn device_key_reused(k: Key) {
@@ -314,15 +322,52 @@ pub unsafe fn map_destroyed(dev: &Device, app: vk::Image) {
         return;
     };
     let m = c.maps.lock().remove(&app.as_raw());
+    // Command buffers drop their slots of this map at their next begin ([`begun`]).
+    c.maps_destroyed.fetch_add(1, Ordering::Release);
     if let Some(MapEntry {
         objects: Some(m), ..
     }) = m
     {
         // SAFETY: every command buffer that used it used the application's image, which the
-        // application no longer uses; command buffers' sets naming it are rewritten before they
-        // convert another map with this image's handle (`Converter::slot`).
+        // application no longer uses; command buffers' sets naming it are never bound again
+        // (a slot is matched by its map's generation, `Converter::slot`) and go with their slots.
         unsafe { c.own.fns.destroy_image_view(m.view, None) };
     }
+}
+
+/// `vkBeginCommandBuffer` of a command buffer with record `r`: where one of its device's maps
+/// was destroyed since the command buffer was last checked, its slots of dead maps are destroyed
+/// (their sets name destroyed views, and a map recreated with the same handles gets slots of its
+/// own, [`Converter::slot`]), so that a command buffer re-recorded across many recreations keeps
+/// one slot per live map. The command buffer is not pending
+/// (VUID-vkBeginCommandBuffer-commandBuffer-00049), so none of its slots is in use. In steady
+/// state one atomic load.
+pub fn begun(r: &registry::CbRecord) {
+    let Some(c) = r.converter.as_deref() else {
+        return;
+    };
+    let now = c.maps_destroyed.load(Ordering::Acquire);
+    if r.swept.load(Ordering::Relaxed) == now {
+        return;
+    }
+    r.swept.store(now, Ordering::Relaxed);
+    let dead: Vec<Slot> = {
+        let mut slots = r.slots.lock();
+        if slots.is_empty() {
+            return;
+        }
+        let maps = c.maps.lock();
+        let live = |s: &Slot| {
+            maps.get(&s.image)
+                .and_then(|e| e.objects)
+                .is_some_and(|o| o.generation == s.generation)
+        };
+        let dead = slots.iter().filter(|s| !live(s)).copied().collect();
+        slots.retain(live);
+        dead
+    };
+    // SAFETY: the converter's own slots, of a command buffer that is not pending (above).
+    unsafe { c.destroy_slots(&dead) };
 }
 
 /// Notes an application view of a density image (`Some`) or its destruction (`None`).
@@ -656,7 +701,9 @@ impl Converter {
     /// `cb`'s slot for the map `m` of `image` in recording `recording`: one it converted the map
     /// with before (for a map that takes offsets, one that no conversion of this recording took
     /// yet, so that each pass instance has shifts of its own), or a new one (slots made for an
-    /// earlier image with the same handle are replaced).
+    /// earlier image with the same handle are replaced). A slot is the map's when it carries the
+    /// map's generation: the image's and the converter view's handles may both be a destroyed
+    /// map's, reused by the driver.
     ///
     /// # Safety
     /// As [`Converter::make_slot`]; `cb` recording on this device.
@@ -676,7 +723,9 @@ impl Converter {
             let start = b.next_slot.min(n);
             let at = (start..n).chain(0..start).find(|&i| {
                 let s = &slots[i];
-                s.image == image && s.view == m.view && (!m.offsets || s.used_in != recording)
+                s.image == image
+                    && s.generation == m.generation
+                    && (!m.offsets || s.used_in != recording)
             })?;
             b.next_slot = at + 1;
             slots[at].used_in = recording;
@@ -691,7 +740,7 @@ impl Converter {
                 slot.used_in = recording;
                 let stale = record_of(cb, |r| {
                     let mut slots = r.slots.lock();
-                    let gone = |s: &Slot| s.image == image && s.view != m.view;
+                    let gone = |s: &Slot| s.image == image && s.generation != m.generation;
                     let stale: Vec<Slot> = slots.iter().filter(|s| gone(s)).copied().collect();
                     slots.retain(|s| !gone(s));
                     slots.push(slot);

@@ -100,6 +100,9 @@ impl Instance {
 /// One `VkDevice` created through the layer.
 pub struct Device {
     pub handle: vk::Device,
+    /// The dispatch key of the instance it was made from, whose destruction forgets it
+    /// ([`forget_devices_of`]).
+    pub instance: Key,
     /// The next layer's `vkGetDeviceProcAddr`.
     pub gdpa: vk::PFN_vkGetDeviceProcAddr,
     pub next: DeviceNext,
@@ -370,6 +373,37 @@ pub unsafe fn remove_device(handle: vk::Device) -> Option<Arc<Device>> {
     d
 }
 
+/// Forgets, without a call to the driver, every device made from the instance with dispatch key
+/// `instance`, which the application destroys with them still alive (an application bug,
+/// VUID-vkDestroyInstance-instance-00629, that real applications have): the loader frees their
+/// dispatch tables with the instance, so their keys may come back for new devices, and their
+/// command buffers' handles for new command buffers. Returns the forgotten devices' keys: what
+/// the modes kept for them is dropped as it is (`crate::vk::convert::device_key_reused`).
+pub fn forget_devices_of(instance: Key) -> Vec<Key> {
+    let gone: Vec<(Key, Arc<Device>)> = {
+        let mut devices = DEVICES.write();
+        let keys: Vec<Key> = devices
+            .iter()
+            .filter(|(_, d)| d.instance == instance)
+            .map(|(&k, _)| k)
+            .collect();
+        keys.into_iter()
+            .filter_map(|k| {
+                fast_remove(k);
+                devices.remove(&k).map(|d| (k, d))
+            })
+            .collect()
+    };
+    gone.into_iter()
+        .map(|(k, d)| {
+            set_own(k, None);
+            crate::bridge::set_device_fdm(d.handle, None);
+            crate::bridge::set_device_offsets(d.handle, None);
+            k
+        })
+        .collect()
+}
+
 /// What a command-recording hook needs of its device: whether it emulates density maps, and the
 /// next layer's pointers, borrowed from the device's record (see [`device_ref`]).
 #[derive(Clone, Copy)]
@@ -546,6 +580,9 @@ pub struct CbRecord {
     pub bound: parking_lot::Mutex<Bound>,
     /// The command buffer's conversion objects, one per map it converted ([`Slot`]).
     pub slots: parking_lot::Mutex<Vec<Slot>>,
+    /// The converter's [`Converter::maps_destroyed`] when `slots` last lost their dead maps'
+    /// slots (`crate::vk::convert::begun`).
+    pub swept: std::sync::atomic::AtomicU64,
     /// The device's converter (`None` where it converts nothing), found once at allocation, so
     /// that a pass begin reaches it without the process-wide [`CONVERTERS`].
     pub converter: Option<Arc<Converter>>,
@@ -687,6 +724,7 @@ pub fn remember_command_buffer(cb: vk::CommandBuffer, device: Key, pool: u64, se
         secondary,
         bound: parking_lot::Mutex::new(Bound::default()),
         slots: parking_lot::Mutex::new(Vec::new()),
+        swept: std::sync::atomic::AtomicU64::new(0),
         converter: converter_by_key(device),
     });
     let old = {
@@ -722,6 +760,7 @@ mod tests {
     fn record(handle: &usize, api_version: u32) -> Device {
         Device {
             handle: vk::Device::from_raw(handle as *const usize as u64),
+            instance: 0,
             gdpa: no_gdpa,
             next: DeviceNext::default(),
             end_rendering: None,
@@ -763,6 +802,57 @@ mod tests {
                 assert!(device_ref(cb(i)).is_none());
             }
         }
+    }
+
+    /// An instance destroyed before its devices (VUID-vkDestroyInstance-instance-00629) takes
+    /// them with it: neither its device nor its command buffers' records are found any more, so
+    /// a command buffer of a later device with a recycled handle gets a record of its own and
+    /// frees nothing of the dead device's; another instance's device and command buffer stay.
+    #[test]
+    fn an_instance_destroyed_first_takes_its_devices() {
+        let keys = [0x4001usize, 0x5001];
+        let objects: Vec<Box<usize>> = keys.iter().map(|&k| object(k)).collect();
+        let handle = |i: usize| &*objects[i] as *const usize as u64;
+        let (dead, alive) = (0x0A00_0001usize, 0x0B00_0001usize);
+        // SAFETY: the handles point at words holding their keys, alive for the test.
+        unsafe {
+            for (i, instance) in [(0, dead), (1, alive)] {
+                let mut d = record(&objects[i], 1);
+                d.instance = instance;
+                add_device(d);
+            }
+        }
+        let cb = |i: u64| vk::CommandBuffer::from_raw(0xE0_0000 + i);
+        remember_command_buffer(cb(0), keys[0], 9, false);
+        remember_command_buffer(cb(1), keys[1], 9, false);
+        let of = |k: Key| CB_RECORDS.lock().values().filter(|r| r.device == k).count();
+        assert_eq!((of(keys[0]), of(keys[1])), (1, 1));
+
+        assert_eq!(forget_devices_of(dead), vec![keys[0]]);
+        // What `vkDestroyInstance` does next for each forgotten device (`convert`'s
+        // `device_key_reused`): its command buffers' records go, without a driver call.
+        forget_command_buffers_where(|_, r| r.device == keys[0]);
+        // SAFETY: as above.
+        unsafe {
+            assert!(device_ref(vk::Device::from_raw(handle(0))).is_none());
+            assert!(device(vk::Device::from_raw(handle(0))).is_none());
+            assert!(device_ref(vk::Device::from_raw(handle(1))).is_some());
+        }
+        assert_eq!((of(keys[0]), of(keys[1])), (0, 1));
+        assert!(
+            bound_of(cb(0)).is_none(),
+            "no record, in this thread's cache either"
+        );
+        assert!(forget_devices_of(dead).is_empty(), "forgotten once");
+        // The dead device's command buffer handle, recycled by a later device.
+        remember_command_buffer(cb(0), keys[1], 10, false);
+        assert_eq!(
+            record_of(cb(0), |r| (r.device, r.pool)),
+            Some((keys[1], 10))
+        );
+        forget_command_buffers_where(|_, r| r.device == keys[1]);
+        // SAFETY: as above.
+        unsafe { remove_device(vk::Device::from_raw(handle(1))) };
     }
 
     #[test]

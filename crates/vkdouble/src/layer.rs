@@ -560,7 +560,7 @@ unsafe extern "system" fn get_instance_proc_addr(
                 return Some(f);
             }
         }
-        if let Some(f) = faultable_commands(n) {
+        if let Some(f) = faultable_commands(n).or_else(|| counted_commands(n)) {
             return Some(f);
         }
         // SAFETY: the next layer's function, with the caller's arguments.
@@ -591,7 +591,7 @@ unsafe extern "system" fn get_device_proc_addr(
                 return Some(f);
             }
         }
-        if let Some(f) = faultable_commands(n) {
+        if let Some(f) = faultable_commands(n).or_else(|| counted_commands(n)) {
             return Some(f);
         }
         // SAFETY: the next layer's function, with the caller's arguments.
@@ -1226,15 +1226,21 @@ unsafe extern "system" fn get_device_queue2(
 }
 
 macro_rules! forgetting_destroy {
-    ($f:ident, $name:literal, $handle:ty, $next:ident, $($map:ident),+) => {
+    ($f:ident, $name:literal, $kind:literal, $handle:ty, $next:ident, $($map:ident),+) => {
         /// Forgets the object before the driver frees it: drivers reuse addresses as handles, so a
-        /// stale entry would make a later, unrelated object look like a shading-rate one.
+        /// stale entry would make a later, unrelated object look like a shading-rate one. Its
+        /// definition record may go once it is old ([`record::destroyed`]); the call is counted
+        /// ([`record::count`]).
         unsafe extern "system" fn $f(
             device: vk::Device,
             handle: $handle,
             alloc: *const vk::AllocationCallbacks<'_>,
         ) {
             guard($name, (), || {
+                record::count($name);
+                if handle.as_raw() != 0 {
+                    record::destroyed($kind, handle.as_raw());
+                }
                 // SAFETY: the caller's arguments, forwarded unchanged.
                 unsafe {
                     let d = device_of(device.as_raw());
@@ -1252,6 +1258,7 @@ macro_rules! forgetting_destroy {
 forgetting_destroy!(
     destroy_image,
     "vkDestroyImage",
+    "image",
     vk::Image,
     destroy_image,
     images,
@@ -1260,6 +1267,7 @@ forgetting_destroy!(
 forgetting_destroy!(
     destroy_image_view,
     "vkDestroyImageView",
+    "image_view",
     vk::ImageView,
     destroy_image_view,
     views,
@@ -1268,6 +1276,7 @@ forgetting_destroy!(
 forgetting_destroy!(
     destroy_render_pass,
     "vkDestroyRenderPass",
+    "render_pass",
     vk::RenderPass,
     destroy_render_pass,
     passes
@@ -1275,6 +1284,7 @@ forgetting_destroy!(
 forgetting_destroy!(
     destroy_pipeline,
     "vkDestroyPipeline",
+    "pipeline",
     vk::Pipeline,
     destroy_pipeline,
     pipelines
@@ -1282,6 +1292,7 @@ forgetting_destroy!(
 forgetting_destroy!(
     destroy_framebuffer,
     "vkDestroyFramebuffer",
+    "framebuffer",
     vk::Framebuffer,
     destroy_framebuffer,
     framebuffers
@@ -2871,6 +2882,53 @@ faultable! {
          timeout: u64);
     "vkResetFences" => fault_reset_fences as PFN_vkResetFences = fp_v1_0.reset_fences
         (device: vk::Device, count: u32, fences: *const vk::Fence);
+}
+
+macro_rules! counted {
+    ($($name:literal => $f:ident as $pfn:ident = $table:ident . $field:ident
+        ($first:ident: $ft:ty $(, $a:ident: $t:ty)*);)*) => {
+        $(
+            unsafe extern "system" fn $f($first: $ft $(, $a: $t)*) {
+                guard($name, (), || {
+                    record::count($name);
+                    // SAFETY: the caller's arguments, forwarded unchanged to the next layer.
+                    unsafe {
+                        let d = device_of($first.as_raw());
+                        (d.fns.$table().$field)($first $(, $a)*)
+                    }
+                })
+            }
+        )*
+
+        /// The counting wrapper for `name`.
+        fn counted_commands(name: &[u8]) -> vk::PFN_vkVoidFunction {
+            $(
+                if name == $name.as_bytes() {
+                    let f: vk::$pfn = $f;
+                    // SAFETY: the loader's generic function pointer type; the caller casts it back
+                    // to the type its name implies, which is `$pfn`.
+                    return Some(unsafe {
+                        std::mem::transmute::<vk::$pfn, unsafe extern "system" fn()>(f)
+                    });
+                }
+            )*
+            None
+        }
+
+        /// Commands that free what [`FAULTABLE`] ones made, counted whatever the profile, so that
+        /// a test can tell how many buffers and memory objects are alive below the layers above
+        /// (`vkCreateBuffer` − `vkDestroyBuffer`): a layer that leaks per recreation shows. With
+        /// `vkDestroyImageView` (counted on the shading-rate profiles), [`fovea_vkdouble_calls`]
+        /// counts them.
+        pub const COUNTED: &[&str] = &[$($name),*];
+    };
+}
+
+counted! {
+    "vkDestroyBuffer" => counted_destroy_buffer as PFN_vkDestroyBuffer = fp_v1_0.destroy_buffer
+        (device: vk::Device, buffer: vk::Buffer, alloc: *const vk::AllocationCallbacks<'_>);
+    "vkFreeMemory" => counted_free_memory as PFN_vkFreeMemory = fp_v1_0.free_memory
+        (device: vk::Device, memory: vk::DeviceMemory, alloc: *const vk::AllocationCallbacks<'_>);
 }
 
 /// Nulls `n` output handles.

@@ -109,7 +109,7 @@ mod strict;
 use std::ffi::{c_char, CStr};
 use std::path::{Path, PathBuf};
 
-pub use layer::{FAULTABLE, POISON};
+pub use layer::{COUNTED, FAULTABLE, POISON};
 pub use profile::Profile;
 pub use record::KEPT_EVENTS;
 use serde_json::Value;
@@ -182,7 +182,8 @@ pub unsafe extern "C" fn fovea_vkdouble_fail(name: *const c_char, nth: u64, resu
 }
 
 /// How often the command `name` reached the double since the last [`fovea_vkdouble_clear`]
-/// (counted for `vkCreateDevice` and [`FAULTABLE`] only).
+/// (counted for `vkCreateDevice`, [`FAULTABLE`] and [`COUNTED`], and on the shading-rate profiles
+/// for the destruction of images, views, render passes, pipelines and framebuffers).
 ///
 /// # Safety
 /// `name` must be null or a NUL-terminated string.

@@ -640,15 +640,10 @@ unsafe fn create_device_impl(
         } else {
             None
         };
-        // Offsets reach density maps where the layer emulates them, or where the driver got the
-        // application's request as it was (so it has the extension); elsewhere the layer left the
-        // offset extensions out.
-        crate::bridge::set_device_offsets(
-            handle,
-            Some(app_offsets && (untouched || fdm.is_some())),
-        );
+        let emulated = fdm.is_some();
         registry::add_device(registry::Device {
             handle,
+            instance: key(inst.handle).unwrap_or(0),
             gdpa,
             next,
             end_rendering,
@@ -657,7 +652,18 @@ unsafe fn create_device_impl(
             api_version,
             attachments: registry::Attachments::new(own),
         });
-        convert::device_created(&inst, physical, ci, handle);
+        let converts = convert::device_created(&inst, physical, ci, handle);
+        // Offsets reach density maps where the driver got the application's request as it was
+        // (so it has the extension), or where the layer emulates them and converts: an emulated
+        // map takes offsets only through its conversion in front of each pass
+        // (docs/vulkan-layer.md#density-map-offsets), and a device that cannot convert (Vulkan
+        // 1.4, maintenance6, descriptor buffers, ...) said why above. Published only now, after
+        // that decision: the OpenXR side makes fovea's own density images take offsets where
+        // this says they apply (docs/eye-tracking.md#what-moves-when).
+        crate::bridge::set_device_offsets(
+            handle,
+            Some(app_offsets && (untouched || (emulated && converts))),
+        );
     }
     r
 }

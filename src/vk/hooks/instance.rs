@@ -6,9 +6,10 @@ use std::ffi::c_char;
 use ash::vk;
 
 use crate::vk::base::chain;
-use crate::vk::base::ffi::{extension_enabled, guard, raw};
+use crate::vk::base::ffi::{extension_enabled, guard, key, raw};
 use crate::vk::base::link::{self, LayerInstanceCreateInfo, LayerInstanceLink};
 use crate::vk::base::next::InstanceNext;
+use crate::vk::convert;
 use crate::vk::registry;
 
 /// `vkCreateInstance`: finds the next layer in the loader's link info, advances the link for the
@@ -172,7 +173,9 @@ unsafe fn instance_link(ci: &vk::InstanceCreateInfo<'_>) -> Option<*mut LayerIns
     None
 }
 
-/// `vkDestroyInstance`: forgets the instance and destroys it below.
+/// `vkDestroyInstance`: forgets the instance, and any device of it the application did not
+/// destroy first (without a call to their driver, [`registry::forget_devices_of`]), and destroys
+/// it below.
 ///
 /// # Safety
 /// `instance` must be NULL or an instance created through the layer.
@@ -185,6 +188,22 @@ pub unsafe extern "system" fn destroy_instance(
         let Some(inst) = (unsafe { registry::remove_instance(instance) }) else {
             return;
         };
+        // SAFETY: as the caller promised.
+        if let Some(k) = unsafe { key(instance) } {
+            let devices = registry::forget_devices_of(k);
+            if !devices.is_empty() {
+                tracing::warn!(
+                    instance = raw(instance),
+                    devices = devices.len(),
+                    "the application destroys a VkInstance whose devices it has not destroyed \
+                     (VUID-vkDestroyInstance-instance-00629): the layer forgets them and their \
+                     command buffers without calling their driver"
+                );
+            }
+            for d in devices {
+                convert::device_key_reused(d);
+            }
+        }
         if let Some(destroy) = inst.next.destroy_instance {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { destroy(instance, alloc) };

@@ -9,6 +9,7 @@ use ash::vk::Handle as _;
 
 use crate::vk::base::chain;
 use crate::vk::base::ffi::{guard, key};
+use crate::vk::convert;
 use crate::vk::own::bindings::{Bound, PushRange};
 use crate::vk::registry::{
     self, command_pool_destroyed, forget_command_buffers, record_of, remember_command_buffer,
@@ -82,7 +83,8 @@ pub unsafe extern "system" fn destroy_command_pool(
 
 /// `vkBeginCommandBuffer`: the command buffer's bindings start empty
 /// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkBeginCommandBuffer.html>); its
-/// record is made (once per command buffer) or cleared.
+/// record is made (once per command buffer) or cleared, and its conversion slots of destroyed
+/// maps go ([`convert::begun`]).
 ///
 /// # Safety
 /// The caller's arguments, valid as the command requires.
@@ -103,12 +105,15 @@ pub unsafe extern "system" fn begin_command_buffer(
                 // SAFETY: the caller's begin info, read only; its inheritance info is read for
                 // secondary command buffers only, as the specification says.
                 let inherits = r.secondary && unsafe { inherits_conditional_rendering(info) };
-                let mut b = r.bound.lock();
-                *b = Bound {
-                    inherited_conditional: inherits,
-                    recording: b.recording + 1,
-                    ..Bound::default()
-                };
+                {
+                    let mut b = r.bound.lock();
+                    *b = Bound {
+                        inherited_conditional: inherits,
+                        recording: b.recording + 1,
+                        ..Bound::default()
+                    };
+                }
+                convert::begun(r);
             });
             if found.is_none() {
                 // Allocated before the layer saw it (not expected on an emulating device): a

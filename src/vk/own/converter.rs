@@ -4,7 +4,7 @@
 //! conversion records into the application's command buffer.
 
 use std::collections::HashMap;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::Arc;
 
 use ash::vk;
@@ -19,6 +19,10 @@ use crate::vk::own::shadows::ShadowImage;
 pub struct SourceAndShadow {
     /// A sampled 2D-array view of every layer of the application's image.
     pub view: vk::ImageView,
+    /// This map's number, unique in the process ([`MAP_GENERATION`]): drivers hand a destroyed
+    /// image's and view's handles to the next ones (lavapipe every second recreation), so a
+    /// command buffer's [`Slot`] is matched to its map by this, never by handles.
+    pub generation: u64,
     pub shadow: ShadowImage,
     /// The image was created with `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT`: passes
     /// with it may end with offsets ([`crate::vk::convert`]).
@@ -38,7 +42,9 @@ pub struct SourceAndShadow {
 #[derive(Clone, Copy, Debug)]
 pub struct Slot {
     pub image: u64,
-    pub view: vk::ImageView,
+    /// The [`SourceAndShadow::generation`] of the map whose view its set names and whose size its
+    /// code buffer has.
+    pub generation: u64,
     pub buffer: vk::Buffer,
     pub memory: vk::DeviceMemory,
     pub shifts: vk::Buffer,
@@ -85,6 +91,9 @@ pub unsafe fn write_shifts(at: *mut u8, shifts: &[[i32; 2]]) {
     unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), at, bytes.len()) };
 }
 
+/// The source of [`SourceAndShadow::generation`]: advanced for every map the converters make.
+static MAP_GENERATION: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
 /// One application density image.
 pub struct MapEntry {
     pub shadow: ShadowImage,
@@ -119,6 +128,10 @@ pub struct Converter {
     pub logged_layout: AtomicBool,
     pub logged_state: AtomicBool,
     pub logged_conditional: AtomicBool,
+    /// Advanced (after the entry is gone from [`Converter::maps`]) whenever one of the device's
+    /// maps is destroyed: a command buffer whose slots were checked at the current value holds
+    /// no slot of a dead map ([`crate::vk::convert::begun`]).
+    pub maps_destroyed: AtomicU64,
 }
 
 impl Converter {
@@ -210,6 +223,7 @@ impl Converter {
                 logged_layout: AtomicBool::new(false),
                 logged_state: AtomicBool::new(false),
                 logged_conditional: AtomicBool::new(false),
+                maps_destroyed: AtomicU64::new(0),
             })
         }
     }
@@ -313,6 +327,7 @@ impl Converter {
         }?;
         Ok(SourceAndShadow {
             view,
+            generation: MAP_GENERATION.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
             shadow: *shadow,
             offsets,
         })
@@ -391,7 +406,7 @@ impl Converter {
             d.update_descriptor_sets(&writes, &[]);
             let slot = Slot {
                 image,
-                view: m.view,
+                generation: m.generation,
                 buffer,
                 memory,
                 shifts: shifts.0,

@@ -564,8 +564,9 @@ fn density_images(
 /// (`device_offsets`, [`crate::xr::session_gpu::SessionGpu::offsets`]):
 /// `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT`, without which the offsets its passes end
 /// with do not apply to them (and are invalid on a driver that has the extension). Where the
-/// device did not enable an offset extension, or fovea cannot tell (the flag without the feature is
-/// invalid), the images are made as for any swapchain, and the log says once why the application's
+/// device did not enable an offset extension, fovea's Vulkan layer cannot apply offsets there (it
+/// emulates density maps on a device it cannot convert on), or fovea cannot tell (the flag
+/// without the feature is invalid), the images are made as for any swapchain, and the log says once why the application's
 /// offsets cannot move them (docs/eye-tracking.md#what-moves-when).
 fn offset_flags(app_offsets: bool, device_offsets: Option<bool>) -> vk::ImageCreateFlags {
     static NOT_ENABLED_SAID: AtomicBool = AtomicBool::new(false);
@@ -578,8 +579,9 @@ fn offset_flags(app_offsets: bool, device_offsets: Option<bool>) -> vk::ImageCre
         Some(false) if !NOT_ENABLED_SAID.swap(true, Ordering::Relaxed) => tracing::warn!(
             "the application applies density-map offsets to a swapchain, but its VkDevice did \
              not enable VK_EXT_fragment_density_map_offset or VK_QCOM_fragment_density_map_offset \
-             with fragmentDensityMapOffset: fovea's density images cannot take offsets there, \
-             and its fovea stays where the fixed maps put it"
+             with fragmentDensityMapOffset, or fovea's Vulkan layer cannot apply offsets on it \
+             (its log said why at vkCreateDevice): fovea's density images cannot take offsets \
+             there, and its fovea stays where the fixed maps put it"
         ),
         None if !UNKNOWN_SAID.swap(true, Ordering::Relaxed) => tracing::warn!(
             "the application applies density-map offsets to a swapchain, but fovea cannot tell \

@@ -322,6 +322,18 @@ impl Renderer {
         index: u32,
         offsets: Option<&[vk::Offset2D]>,
     ) {
+        self.draw_in(d, self.cb, index, offsets);
+    }
+
+    /// As [`Renderer::draw_ending_with`], recorded into the application's own `cb` (of the
+    /// device's queue family, not pending; a pool that lets it be begun again).
+    pub(crate) fn draw_in(
+        &self,
+        d: &ash::Device,
+        cb: vk::CommandBuffer,
+        index: u32,
+        offsets: Option<&[vk::Offset2D]>,
+    ) {
         let area = vk::Rect2D {
             offset: vk::Offset2D::default(),
             extent: vk::Extent2D {
@@ -340,13 +352,13 @@ impl Renderer {
         // SAFETY: the command buffer is idle (every submit is waited for); all objects are alive.
         unsafe {
             d.begin_command_buffer(
-                self.cb,
+                cb,
                 &vk::CommandBufferBeginInfo::default()
                     .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
             )
             .unwrap();
             d.cmd_begin_render_pass(
-                self.cb,
+                cb,
                 &vk::RenderPassBeginInfo::default()
                     .render_pass(self.pass)
                     .framebuffer(self.framebuffers[index as usize])
@@ -354,9 +366,9 @@ impl Renderer {
                     .clear_values(&clear),
                 vk::SubpassContents::INLINE,
             );
-            d.cmd_bind_pipeline(self.cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
+            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
             d.cmd_set_viewport(
-                self.cb,
+                cb,
                 0,
                 &[vk::Viewport {
                     x: 0.0,
@@ -367,21 +379,18 @@ impl Renderer {
                     max_depth: 1.0,
                 }],
             );
-            d.cmd_set_scissor(self.cb, 0, &[area]);
-            d.cmd_draw(self.cb, 3, 1, 0, 0);
+            d.cmd_set_scissor(cb, 0, &[area]);
+            d.cmd_draw(cb, 3, 1, 0, 0);
             match offsets {
                 Some(o) => {
                     let mut end = vk::SubpassFragmentDensityMapOffsetEndInfoQCOM::default()
                         .fragment_density_offsets(o);
-                    d.cmd_end_render_pass2(
-                        self.cb,
-                        &vk::SubpassEndInfo::default().push_next(&mut end),
-                    );
+                    d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default().push_next(&mut end));
                 }
-                None => d.cmd_end_render_pass(self.cb),
+                None => d.cmd_end_render_pass(cb),
             }
-            d.end_command_buffer(self.cb).unwrap();
-            let cbs = [self.cb];
+            d.end_command_buffer(cb).unwrap();
+            let cbs = [cb];
             d.queue_submit(
                 self.queue,
                 &[vk::SubmitInfo::default().command_buffers(&cbs)],

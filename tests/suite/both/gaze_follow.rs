@@ -134,6 +134,11 @@ fn set_up(label: &str, inject: bool) -> std::path::PathBuf {
     dir
 }
 
+/// Set in a test's own process: the device fovea's Vulkan layer emulates on gets no converter
+/// (its shader module fails to be made), so it converts nothing, and density-map offsets cannot
+/// be applied there.
+static NO_CONVERTER: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 /// `frames` frames of `mode` on `profile` with the eye following `script`; `None` after a skip.
 fn run(
     mode: Mode,
@@ -148,6 +153,14 @@ fn run(
     crate::support::device::assert_no_double_errors(env);
     env.double.clear();
     take_messages();
+    if NO_CONVERTER.load(std::sync::atomic::Ordering::Relaxed) {
+        // The first shader module made after this is the converter's, at vkCreateDevice.
+        env.double.fail(
+            "vkCreateShaderModule",
+            0,
+            ash::vk::Result::ERROR_OUT_OF_DEVICE_MEMORY,
+        );
+    }
     let cfg = SimConfig {
         eye_gaze: Some(EyeGaze {
             supported: true,
@@ -784,6 +797,51 @@ fn an_app_without_the_offset_extension_gets_fixed_maps() {
             );
             let why = "did not enable VK_EXT_fragment_density_map_offset or \
                        VK_QCOM_fragment_density_map_offset with fragmentDensityMapOffset";
+            assert_eq!(run.log.matches(why).count(), 1, "{}", run.log);
+        },
+    );
+}
+
+/// The same application with the offset extension enabled, on a device where fovea's Vulkan layer
+/// cannot convert (here its converter could not be made; elsewhere Vulkan 1.4, maintenance6 or
+/// descriptor buffers): offsets cannot apply there, so the device must not report them as
+/// applied. fovea's density images are made as for any swapchain and stay fixed, and the log says
+/// why once, at the device and at the swapchain. Before the device published whether offsets
+/// apply only after deciding whether it converts, the images were made to take offsets that
+/// nothing applied, and the log said nothing.
+#[test]
+fn an_app_whose_device_cannot_convert_gets_fixed_maps_and_a_reason() {
+    in_own_process(
+        module_path!(),
+        "an_app_whose_device_cannot_convert_gets_fixed_maps_and_a_reason",
+        || {
+            let dir = set_up("offsets-no-converter", false);
+            NO_CONVERTER.store(true, std::sync::atomic::Ordering::Relaxed);
+            let mode = Mode::AppOffsets { enabled: true };
+            let Some(run) = run(mode, Profile::Nvidia, SCRIPT, 200, &dir) else {
+                return;
+            };
+            let gaze = located(run.log.lines());
+            let mut tracked = 0;
+            for (n, f) in run.frames.iter().enumerate() {
+                check_frame(
+                    &format!("no converter, frame {n}"),
+                    Profile::Nvidia,
+                    f,
+                    &Want::Fixed,
+                );
+                tracked += usize::from(
+                    gaze_for(&gaze, f.t_ns).is_some_and(|g| g.tracking == Tracking::Tracked),
+                );
+            }
+            assert!(tracked > 50, "the gaze was followed meanwhile: {tracked}");
+            assert!(
+                run.frames.iter().any(|f| f.applied != [[0, 0]; 2]),
+                "the application ended its passes with offsets"
+            );
+            let device = "no density-map conversion on this device";
+            assert_eq!(run.log.matches(device).count(), 1, "{}", run.log);
+            let why = "or fovea's Vulkan layer cannot apply offsets on it";
             assert_eq!(run.log.matches(why).count(), 1, "{}", run.log);
         },
     );

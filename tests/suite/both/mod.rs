@@ -8,4 +8,5 @@ pub mod gaze_follow;
 pub mod hello_xr;
 pub mod monado;
 pub mod qt_xr;
+pub mod session_lifetimes;
 pub mod vulkan_enable;

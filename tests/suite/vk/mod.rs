@@ -10,6 +10,7 @@ pub mod faults;
 pub mod fuzz;
 pub mod inject;
 pub mod layer;
+pub mod lifetimes;
 pub mod offsets;
 pub mod passes;
 pub mod pipelines;
