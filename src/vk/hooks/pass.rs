@@ -1108,6 +1108,7 @@ mod tests {
         unsafe {
             registry::add_device(Device {
                 handle: vk::Device::from_raw(handle),
+                instance: 0,
                 gdpa: no_gdpa,
                 next,
                 end_rendering: None,
