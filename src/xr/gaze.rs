@@ -495,8 +495,16 @@ impl InstanceGaze {
         }
         // The claim: the application's attach and fovea's alone race for one session; exactly
         // one wins. Lost to fovea's alone attach (an opt-in), the application's goes down as it
-        // made it, and the runtime answers it as it answers a second attach.
-        match g.claim.compare_exchange(OPEN, BY_APP, AcqRel, Acquire) {
+        // made it once fovea's has reached the runtime (never before it: the runtime would then
+        // refuse fovea's instead), and the runtime answers it as it answers a second attach.
+        let claimed = loop {
+            match g.claim.compare_exchange(OPEN, BY_APP, AcqRel, Acquire) {
+                // fovea's attach is on its way down (a few runtime calls, once a session).
+                Err(FOVEA_ATTACHING) => std::thread::yield_now(),
+                other => break other,
+            }
+        };
+        match claimed {
             Ok(_) => {}
             Err(BY_FOVEA) => {
                 tracing::warn!(
@@ -556,18 +564,27 @@ impl InstanceGaze {
         if g.phase.load(Acquire) != WAITING {
             return;
         }
-        // The claim (see `attach`): an application attach in flight or done wins.
+        // The claim (see `attach`): an application attach in flight or done wins; one that
+        // comes while fovea's is on its way down waits for it.
         if g.claim
-            .compare_exchange(OPEN, BY_FOVEA, AcqRel, Acquire)
+            .compare_exchange(OPEN, FOVEA_ATTACHING, AcqRel, Acquire)
             .is_err()
         {
             return;
         }
-        let Ok((set, action)) = self.own_action() else {
-            return;
+        // Nothing of fovea's attached: the application's attach goes down as it made it.
+        let unclaim = || g.claim.store(OPEN, Release);
+        let (set, action) = match self.own_action() {
+            Ok(made) => made,
+            Err(r) => {
+                g.fail(r, "fovea could not make its eye gaze action set");
+                unclaim();
+                return;
+            }
         };
         if let Err(r) = self.suggest_ours(action) {
             g.fail(r, "the runtime refused fovea's eye gaze binding");
+            unclaim();
             return;
         }
         let info = xr::SessionActionSetsAttachInfo {
@@ -583,8 +600,10 @@ impl InstanceGaze {
                 r,
                 "the runtime refused to attach fovea's eye gaze action set",
             );
+            unclaim();
             return;
         }
+        g.claim.store(BY_FOVEA, Release);
         tracing::info!(
             target: TARGET,
             after_s = ?self.settings.attach_after_s,
@@ -609,6 +628,8 @@ const FAILED: u8 = 2;
 const OPEN: u8 = 0;
 const BY_APP: u8 = 1;
 const BY_FOVEA: u8 = 2;
+/// fovea has claimed the session and its attach is on its way down.
+const FOVEA_ATTACHING: u8 = 3;
 
 /// What the frame loop's `xrWaitFrame` should do for the gaze this frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -631,7 +652,8 @@ pub struct SessionGaze {
     view_space: AtomicU64,
     /// fovea's set, once attached to this session.
     set: AtomicU64,
-    /// Who attached the session's sets (`OPEN`, `BY_APP`, `BY_FOVEA`), claimed atomically.
+    /// Who attached the session's sets (`OPEN`, `BY_APP`, `FOVEA_ATTACHING`, `BY_FOVEA`),
+    /// claimed atomically.
     claim: AtomicU8,
     app_synced: AtomicBool,
     /// The last session state the application polled is FOCUSED: only then does fovea sync alone.
