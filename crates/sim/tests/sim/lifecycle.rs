@@ -300,6 +300,16 @@ fn system_and_recommended_sizes_come_from_the_preset() {
             unsafe { get(instance, &hand, &mut other) },
             xr::Result::ERROR_FORM_FACTOR_UNSUPPORTED
         );
+        // A form factor the runtime does not know is unsupported too (the CTS's xrGetSystem case
+        // passes XR_FORM_FACTOR_MAX_ENUM and requires this code).
+        let unknown = xr::SystemGetInfo {
+            form_factor: xr::FormFactor::from_raw(0x7FFF_FFFF),
+            ..hand
+        };
+        assert_eq!(
+            unsafe { get(instance, &unknown, &mut other) },
+            xr::Result::ERROR_FORM_FACTOR_UNSUPPORTED
+        );
 
         let views_fn = xrfn!(instance, EnumerateViewConfigurationViews);
         let stereo = xr::ViewConfigurationType::PRIMARY_STEREO;
