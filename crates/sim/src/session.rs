@@ -2,8 +2,9 @@
 //!
 //! States are announced with XrEventDataSessionStateChanged in the order a real runtime uses:
 //! IDLE→READY on create; SYNCHRONIZED at the first xrWaitFrame, VISIBLE after the first xrEndFrame,
-//! FOCUSED after the second; exit walks back down through VISIBLE and SYNCHRONIZED to STOPPING; and
-//! xrEndSession ends in IDLE→EXITING.
+//! FOCUSED after the second; exit walks back down through VISIBLE and SYNCHRONIZED to STOPPING (from
+//! READY too: a session begun but not yet waited goes READY→SYNCHRONIZED→STOPPING, the only path the
+//! spec's state diagram has); and xrEndSession ends in IDLE→EXITING.
 
 use std::sync::Arc;
 
@@ -49,10 +50,15 @@ pub(crate) fn request_exit(w: &mut World, session: u64) {
         xr::SessionState::VISIBLE,
         xr::SessionState::SYNCHRONIZED,
     ];
-    let start = ladder
-        .iter()
-        .position(|s| *s == from)
-        .map_or(ladder.len(), |i| i + 1);
+    // A running session that has not waited a frame yet is still READY; the spec's lifecycle (and
+    // the CTS's conformance layer) has no READY→STOPPING edge, only READY→SYNCHRONIZED→STOPPING.
+    let start = match from {
+        xr::SessionState::READY => ladder.len() - 1,
+        _ => ladder
+            .iter()
+            .position(|s| *s == from)
+            .map_or(ladder.len(), |i| i + 1),
+    };
     for state in &ladder[start..] {
         set_state(w, session, *state);
     }

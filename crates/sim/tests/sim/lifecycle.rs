@@ -641,6 +641,29 @@ fn session_lifecycle_announces_every_state() {
     destroy_instance(instance);
 }
 
+/// A session that exits before its first xrWaitFrame (the CTS's FrameSubmission and
+/// XR_EXT_debug_utils cases) still goes through SYNCHRONIZED: the spec's lifecycle has no
+/// READY→STOPPING edge, and the CTS's conformance layer fails the run on one.
+#[test]
+fn exit_before_the_first_frame_passes_through_synchronized() {
+    use xr::SessionState as S;
+    let instance = create_instance(config("quest3"), &["XR_MND_headless"]);
+    let session = create_session_with(instance, null()).unwrap();
+    assert_eq!(begin_session(instance, session), xr::Result::SUCCESS);
+    assert_eq!(poll_states(instance), [S::IDLE, S::READY]);
+    assert_eq!(
+        unsafe { xrfn!(instance, RequestExitSession)(session) },
+        xr::Result::SUCCESS
+    );
+    assert_eq!(poll_states(instance), [S::SYNCHRONIZED, S::STOPPING]);
+    assert_eq!(
+        unsafe { xrfn!(instance, EndSession)(session) },
+        xr::Result::SUCCESS
+    );
+    assert_eq!(poll_states(instance), [S::IDLE, S::EXITING]);
+    destroy_instance(instance);
+}
+
 #[test]
 fn the_runtime_requests_exit_after_the_configured_frames() {
     use xr::SessionState as S;
