@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
-use crate::ffi;
+use crate::ffi::{self, check_pose};
 use crate::objects::SubmittedView;
 use crate::session::{request_exit, set_state};
 use crate::state::{entry, world, World, XrResult};
@@ -205,6 +205,9 @@ unsafe fn read_layers(
                         xr::StructureType::COMPOSITION_LAYER_PROJECTION_VIEW,
                     )?;
                     check_sub_image(w, session, &view.sub_image)?;
+                    // Spec (xrEndFrame): a layer or projection view pose whose orientation is not
+                    // unit length within 1% is XR_ERROR_POSE_INVALID.
+                    check_pose(&view.pose)?;
                     let sub = view.sub_image;
                     let (o, e) = (sub.image_rect.offset, sub.image_rect.extent);
                     let f = view.fov;
@@ -236,6 +239,7 @@ unsafe fn read_layers(
             xr::StructureType::COMPOSITION_LAYER_QUAD => {
                 let quad = &*(layer as *const xr::CompositionLayerQuad);
                 check_sub_image(w, session, &quad.sub_image)?;
+                check_pose(&quad.pose)?;
                 let _ = write!(
                     detail,
                     " layer{i}=QUAD[swapchain={:#x}]",

@@ -1036,7 +1036,7 @@ fn headless_swapchains_cycle_and_frames_record_what_was_submitted() {
     let view = |i: u32, x: i32| xr::CompositionLayerProjectionView {
         ty: xr::CompositionLayerProjectionView::TYPE,
         next: null(),
-        pose: Default::default(),
+        pose: xr::Posef::IDENTITY,
         fov,
         sub_image: xr::SwapchainSubImage {
             swapchain: sc,
@@ -1106,6 +1106,58 @@ fn headless_swapchains_cycle_and_frames_record_what_was_submitted() {
     assert_eq!(
         end_frame(instance, session, t, &[null()]),
         xr::Result::ERROR_LAYER_INVALID
+    );
+    // A pose whose orientation is off unit length by more than 1% (the CTS's projection and quad
+    // cases): XR_ERROR_POSE_INVALID, in a projection view and in a quad layer.
+    let skewed = xr::Posef {
+        orientation: xr::Quaternionf {
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+            w: 0.98,
+        },
+        ..xr::Posef::IDENTITY
+    };
+    let bad_pose = [
+        view(0, 0),
+        xr::CompositionLayerProjectionView {
+            pose: skewed,
+            ..views[1]
+        },
+    ];
+    let bad_pose_layer = xr::CompositionLayerProjection {
+        views: bad_pose.as_ptr(),
+        ..layer
+    };
+    assert_eq!(
+        end_frame(
+            instance,
+            session,
+            t,
+            &[&bad_pose_layer as *const _ as *const _]
+        ),
+        xr::Result::ERROR_POSE_INVALID
+    );
+    let quad = xr::CompositionLayerQuad {
+        ty: xr::CompositionLayerQuad::TYPE,
+        next: null(),
+        layer_flags: xr::CompositionLayerFlags::EMPTY,
+        space,
+        eye_visibility: xr::EyeVisibility::BOTH,
+        sub_image: views[0].sub_image,
+        pose: xr::Posef::IDENTITY,
+        size: xr::Extent2Df {
+            width: 1.0,
+            height: 1.0,
+        },
+    };
+    let bad_quad = xr::CompositionLayerQuad {
+        pose: skewed,
+        ..quad
+    };
+    assert_eq!(
+        end_frame(instance, session, t, &[&bad_quad as *const _ as *const _]),
+        xr::Result::ERROR_POSE_INVALID
     );
     assert_eq!(
         end_frame(instance, session, t, &layers),
