@@ -16,7 +16,7 @@ use openxr_sys::Handle;
 use crate::ffi::{self, check_pose};
 use crate::objects::SubmittedView;
 use crate::session::{request_exit, set_state};
-use crate::state::{entry, world, World, XrResult};
+use crate::state::{entry, notify_frame_begun, wait_frame_begun, world, World, XrResult};
 use crate::system::{MAX_LAYER_COUNT, VIEW_COUNT};
 
 /// Whole display periods a frame of `gpu_ms` occupies (at least one).
@@ -24,6 +24,10 @@ pub(crate) fn periods_for(gpu_ms: f32, period_ns: i64) -> i64 {
     let gpu_ns = (f64::from(gpu_ms) * 1e6).round() as i64;
     ((gpu_ns + period_ns - 1) / period_ns).max(1)
 }
+
+/// How long an xrWaitFrame blocks on a previous frame that is not begun before the simulation
+/// gives up on it (a real runtime would block forever).
+const WAIT_BLOCK_LIMIT: Duration = Duration::from_secs(5);
 
 fn running(w: &World, session: u64) -> Result<(), xr::Result> {
     if w.sessions[&session].running {
@@ -49,6 +53,24 @@ pub(crate) unsafe extern "system" fn wait_frame(
         }
         let frame_state = ffi::output(frame_state, xr::StructureType::FRAME_STATE)?;
         running(&w, id)?;
+        // Spec (xrWaitFrame): "Subsequent xrWaitFrame calls must block until the previous frame
+        // has been begun with xrBeginFrame". Pipelining applications (the CTS's
+        // Timed_Pipelined_Frame_Submission) wait frame N+1 on one thread while another begins
+        // frame N; without the block the second wait's frame replaced the first and the later
+        // xrBeginFrame found no waited frame. A caller that could never unblock (one thread,
+        // waiting twice) is refused after WAIT_BLOCK_LIMIT instead of hanging forever.
+        let deadline = Instant::now() + WAIT_BLOCK_LIMIT;
+        while w.sessions[&id].frame.pending_wait.is_some() {
+            if !wait_frame_begun(&mut w, deadline) {
+                ctx.detail = "the previous waited frame was never begun".into();
+                return Err(xr::Result::ERROR_CALL_ORDER_INVALID);
+            }
+            // The session may have been destroyed or ended while the lock was released.
+            if !w.sessions.contains_key(&id) {
+                return Err(xr::Result::ERROR_HANDLE_INVALID);
+            }
+            running(&w, id)?;
+        }
         let World {
             sessions,
             instances,
@@ -119,6 +141,7 @@ pub(crate) unsafe extern "system" fn begin_frame(
             .pending_wait
             .take()
             .ok_or(xr::Result::ERROR_CALL_ORDER_INVALID)?;
+        notify_frame_begun();
         // Spec: beginning a frame while another one is begun discards the earlier one.
         let result = if frame.begun.is_some() {
             xr::Result::FRAME_DISCARDED

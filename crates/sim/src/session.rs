@@ -14,7 +14,7 @@ use openxr_sys::Handle;
 use crate::extensions::{KHR_VULKAN_ENABLE, KHR_VULKAN_ENABLE2, MND_HEADLESS};
 use crate::ffi;
 use crate::objects::{Event, FrameClock, Graphics, Session};
-use crate::state::{entry, world, World};
+use crate::state::{entry, notify_frame_begun, world, World};
 use crate::system::check_system;
 use crate::vulkan;
 
@@ -142,6 +142,8 @@ pub(crate) unsafe extern "system" fn create_session(
 /// Destroys a session's children (spec: child handles are destroyed with their parent) and drops its
 /// undelivered events.
 pub(crate) fn destroy_session_objects(w: &mut World, session: u64) {
+    // An xrWaitFrame blocked on this session's unbegun frame wakes and finds it gone.
+    notify_frame_begun();
     w.swapchains.retain(|_, s| s.session != session);
     w.spaces.retain(|_, s| s.session != session);
     w.profiles.retain(|_, p| p.session != session);
@@ -205,6 +207,7 @@ pub(crate) unsafe extern "system" fn end_session(session: xr::Session) -> xr::Re
         s.running = false;
         s.view_configuration = None;
         s.frame = FrameClock::default();
+        notify_frame_begun();
         let exiting = s.exit_requested;
         set_state(&mut w, id, xr::SessionState::IDLE);
         if exiting {

@@ -741,6 +741,42 @@ fn frame_calls_out_of_order_are_rejected() {
     destroy_instance(instance);
 }
 
+/// Pipelining (the CTS's Timed_Pipelined_Frame_Submission): one thread waits frames, another begins
+/// and ends them. The spec makes a wait block until the previous waited frame is begun, so each
+/// begin finds its own waited frame.
+#[test]
+fn a_wait_blocks_until_the_previous_frame_is_begun() {
+    use std::sync::mpsc;
+    use std::time::Duration;
+    let (instance, session) = headless(config("quest3"));
+    let first = wait_frame(instance, session).unwrap();
+    let (tx, rx) = mpsc::channel();
+    let waiter = std::thread::spawn(move || {
+        let state = wait_frame(instance, session).map(|s| s.predicted_display_time);
+        tx.send(state).unwrap();
+    });
+    // The second wait does not return while the first frame is not begun.
+    assert!(rx.recv_timeout(Duration::from_millis(300)).is_err());
+    assert_eq!(begin_frame(instance, session), xr::Result::SUCCESS);
+    let second = rx
+        .recv_timeout(Duration::from_secs(5))
+        .expect("the wait returns once the first frame is begun")
+        .unwrap();
+    waiter.join().unwrap();
+    assert!(second.as_nanos() > first.predicted_display_time.as_nanos());
+    assert_eq!(
+        end_frame(instance, session, first.predicted_display_time, &[]),
+        xr::Result::SUCCESS
+    );
+    // The second waited frame is still there to begin.
+    assert_eq!(begin_frame(instance, session), xr::Result::SUCCESS);
+    assert_eq!(
+        end_frame(instance, session, second, &[]),
+        xr::Result::SUCCESS
+    );
+    destroy_instance(instance);
+}
+
 #[test]
 fn the_display_clock_is_deterministic_and_load_misses_frames() {
     let run = |load: Load| {
