@@ -69,6 +69,7 @@ pub mod gaze_script;
 mod instance;
 mod negotiate;
 mod objects;
+mod profiles;
 mod session;
 mod space;
 mod state;
