@@ -25,10 +25,6 @@ pub(crate) fn periods_for(gpu_ms: f32, period_ns: i64) -> i64 {
     ((gpu_ns + period_ns - 1) / period_ns).max(1)
 }
 
-/// How long an xrWaitFrame blocks on a previous frame that is not begun before the simulation
-/// gives up on it (a real runtime would block forever).
-const WAIT_BLOCK_LIMIT: Duration = Duration::from_secs(5);
-
 fn running(w: &World, session: u64) -> Result<(), xr::Result> {
     if w.sessions[&session].running {
         Ok(())
@@ -58,8 +54,10 @@ pub(crate) unsafe extern "system" fn wait_frame(
         // Timed_Pipelined_Frame_Submission) wait frame N+1 on one thread while another begins
         // frame N; without the block the second wait's frame replaced the first and the later
         // xrBeginFrame found no waited frame. A caller that could never unblock (one thread,
-        // waiting twice) is refused after WAIT_BLOCK_LIMIT instead of hanging forever.
-        let deadline = Instant::now() + WAIT_BLOCK_LIMIT;
+        // waiting twice) is refused after the configured `wait_block_ms` instead of hanging
+        // forever.
+        let limit = w.instances[&w.sessions[&id].instance].config.wait_block_ms;
+        let deadline = Instant::now() + Duration::from_millis(limit);
         while w.sessions[&id].frame.pending_wait.is_some() {
             if !wait_frame_begun(&mut w, deadline) {
                 ctx.detail = "the previous waited frame was never begun".into();
