@@ -16,12 +16,12 @@ use openxr_sys::Handle;
 
 use crate::extensions::{EXT_ACTIVE_ACTION_SET_PRIORITY, EXT_EYE_GAZE_INTERACTION};
 use crate::ffi::{self, check_pose};
-use crate::objects::{Action, ActionSet, Event, Space, SpaceKind};
+use crate::objects::{Action, ActionSet, Event, InstanceState, Space, SpaceKind};
+use crate::profiles;
 use crate::state::{entry, world, World};
 
-/// The eye gaze interaction profile and its one input.
+/// The eye gaze interaction profile.
 pub(crate) const EYE_GAZE_PROFILE: &str = "/interaction_profiles/ext/eye_gaze_interaction";
-pub(crate) const GAZE_POSE: &str = "/user/eyes_ext/input/gaze_ext/pose";
 /// The eye tracker's top-level user path.
 const EYES: &str = "/user/eyes_ext";
 
@@ -37,20 +37,34 @@ const TOP_LEVEL_PATHS: [&str; 7] = [
     "/user/vendor",
 ];
 
-/// Action and action set names follow path-component rules (spec "Well-Formed Path Strings").
-fn check_names(name: &[c_char], localized: &[c_char]) -> Result<String, xr::Result> {
+/// Action and action set names (spec xrCreateActionSet, xrCreateAction): empty is
+/// XR_ERROR_NAME_INVALID; one that is not a well-formed path component (lower-case ASCII letters,
+/// digits, `-`, `_`, `.`, not only periods; "Well-Formed Path Strings") is
+/// XR_ERROR_PATH_FORMAT_INVALID; an empty localized name is XR_ERROR_LOCALIZED_NAME_INVALID.
+/// Returns the name and the localized name.
+fn check_names(name: &[c_char], localized: &[c_char]) -> Result<(String, String), xr::Result> {
     let name = ffi::fixed_str(name).ok_or(xr::Result::ERROR_NAME_INVALID)?;
-    let ok = !name.is_empty()
-        && name
-            .bytes()
-            .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b"-_.".contains(&b));
-    if !ok {
+    if name.is_empty() {
         return Err(xr::Result::ERROR_NAME_INVALID);
     }
+    let well_formed = name
+        .bytes()
+        .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b"-_.".contains(&b))
+        && !name.bytes().all(|b| b == b'.');
+    if !well_formed {
+        return Err(xr::Result::ERROR_PATH_FORMAT_INVALID);
+    }
     match ffi::fixed_str(localized) {
-        Some(l) if !l.is_empty() => Ok(name.to_string()),
+        Some(l) if !l.is_empty() => Ok((name.to_string(), l.to_string())),
         _ => Err(xr::Result::ERROR_LOCALIZED_NAME_INVALID),
     }
+}
+
+/// Whether `user` is a top-level user path this instance may use: the spec's, and the eye
+/// tracker's with its extension.
+fn top_level_path_supported(inst: &InstanceState, user: &str) -> bool {
+    TOP_LEVEL_PATHS.contains(&user)
+        && (user != EYES || inst.has_extension(EXT_EYE_GAZE_INTERACTION))
 }
 
 pub(crate) unsafe extern "system" fn create_action_set(
@@ -63,12 +77,14 @@ pub(crate) unsafe extern "system" fn create_action_set(
         let inst = w.enter_instance(ctx, instance)?;
         let info = ffi::input(create_info, xr::StructureType::ACTION_SET_CREATE_INFO)?;
         ffi::non_null(action_set)?;
-        let name = check_names(&info.action_set_name, &info.localized_action_set_name)?;
-        if w.action_sets
-            .values()
-            .any(|s| s.instance == inst && s.name == name)
-        {
+        let (name, localized_name) =
+            check_names(&info.action_set_name, &info.localized_action_set_name)?;
+        let mut sets = w.action_sets.values().filter(|s| s.instance == inst);
+        if sets.clone().any(|s| s.name == name) {
             return Err(xr::Result::ERROR_NAME_DUPLICATED);
+        }
+        if sets.any(|s| s.localized_name == localized_name) {
+            return Err(xr::Result::ERROR_LOCALIZED_NAME_DUPLICATED);
         }
         ctx.detail = name.clone();
         let id = w.alloc_handle();
@@ -77,6 +93,7 @@ pub(crate) unsafe extern "system" fn create_action_set(
             ActionSet {
                 instance: inst,
                 name,
+                localized_name,
                 attached: false,
                 priority: info.priority,
             },
@@ -107,7 +124,7 @@ pub(crate) unsafe extern "system" fn create_action(
         let set = w.enter_action_set(ctx, action_set)?;
         let info = ffi::input(create_info, xr::StructureType::ACTION_CREATE_INFO)?;
         ffi::non_null(action)?;
-        let name = check_names(&info.action_name, &info.localized_action_name)?;
+        let (name, localized_name) = check_names(&info.action_name, &info.localized_action_name)?;
         let known = [
             xr::ActionType::BOOLEAN_INPUT,
             xr::ActionType::FLOAT_INPUT,
@@ -121,11 +138,31 @@ pub(crate) unsafe extern "system" fn create_action(
         if w.action_sets[&set].attached {
             return Err(xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED);
         }
-        if w.actions.values().any(|a| a.set == set && a.name == name) {
+        let mut siblings = w.actions.values().filter(|a| a.set == set);
+        if siblings.clone().any(|a| a.name == name) {
             return Err(xr::Result::ERROR_NAME_DUPLICATED);
+        }
+        if siblings.any(|a| a.localized_name == localized_name) {
+            return Err(xr::Result::ERROR_LOCALIZED_NAME_DUPLICATED);
         }
         ctx.detail = name.clone();
         let instance = w.action_sets[&set].instance;
+        // Spec (xrCreateAction): each subaction path must be a valid path (XR_ERROR_PATH_INVALID),
+        // a top-level user path the runtime supports, and appear once (XR_ERROR_PATH_UNSUPPORTED).
+        let inst = &w.instances[&instance];
+        let mut subaction_paths = Vec::with_capacity(info.count_subaction_paths as usize);
+        if info.count_subaction_paths > 0 {
+            ffi::non_null(info.subaction_paths)?;
+        }
+        for i in 0..info.count_subaction_paths as usize {
+            let path = inst
+                .path(*info.subaction_paths.add(i))
+                .ok_or(xr::Result::ERROR_PATH_INVALID)?;
+            if !top_level_path_supported(inst, path) || subaction_paths.iter().any(|p| p == path) {
+                return Err(xr::Result::ERROR_PATH_UNSUPPORTED);
+            }
+            subaction_paths.push(path.to_owned());
+        }
         let id = w.alloc_handle();
         w.actions.insert(
             id,
@@ -133,7 +170,9 @@ pub(crate) unsafe extern "system" fn create_action(
                 instance,
                 set,
                 name,
+                localized_name,
                 ty: info.action_type,
+                subaction_paths,
             },
         );
         *action = xr::Action::from_raw(id);
@@ -171,9 +210,12 @@ pub(crate) unsafe extern "system" fn suggest_interaction_profile_bindings(
             return Err(xr::Result::ERROR_VALIDATION_FAILURE);
         }
         ffi::non_null(info.suggested_bindings)?;
-        let eye_gaze = profile == EYE_GAZE_PROFILE;
-        // The eye gaze profile exists only with its extension enabled.
-        if eye_gaze && !w.instances[&id].has_extension(EXT_EYE_GAZE_INTERACTION) {
+        // Only the spec's profiles, those of the instance's version and extensions
+        // ([`crate::profiles`]).
+        let inst = &w.instances[&id];
+        let minor = inst.api_version.minor();
+        let enabled = |e: &str| inst.has_extension(e);
+        if !profiles::is_known_profile(profile, minor, &enabled) {
             return Err(xr::Result::ERROR_PATH_UNSUPPORTED);
         }
         let profile = profile.to_string();
@@ -190,10 +232,8 @@ pub(crate) unsafe extern "system" fn suggest_interaction_profile_bindings(
             if w.action_sets[&action.set].attached {
                 return Err(xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED);
             }
-            let path = w.instances[&id]
-                .path(b.binding)
-                .ok_or(xr::Result::ERROR_PATH_INVALID)?;
-            if eye_gaze && path != GAZE_POSE {
+            let path = inst.path(b.binding).ok_or(xr::Result::ERROR_PATH_INVALID)?;
+            if !profiles::is_known_binding(&profile, path, minor, &enabled) {
                 return Err(xr::Result::ERROR_PATH_UNSUPPORTED);
             }
             bindings.push((b.action.into_raw(), path.to_string()));
@@ -288,9 +328,7 @@ pub(crate) unsafe extern "system" fn get_current_interaction_profile(
         if w.sessions[&id].action_sets_attached.is_empty() {
             return Err(xr::Result::ERROR_ACTIONSET_NOT_ATTACHED);
         }
-        if !TOP_LEVEL_PATHS.contains(&user.as_str())
-            || (user == EYES && !w.instances[&instance].has_extension(EXT_EYE_GAZE_INTERACTION))
-        {
+        if !top_level_path_supported(&w.instances[&instance], &user) {
             return Err(xr::Result::ERROR_PATH_UNSUPPORTED);
         }
         let current = w.sessions[&id]
@@ -410,10 +448,13 @@ pub(crate) unsafe extern "system" fn sync_actions(
 }
 
 /// Validates an XrActionStateGetInfo (or the equivalent haptic info) against the expected type.
+/// A non-null `subaction_path` must be a valid path (XR_ERROR_PATH_INVALID) and one the action was
+/// created with (XR_ERROR_PATH_UNSUPPORTED), as the spec's state and haptic commands require.
 unsafe fn check_action(
     w: &World,
     session: u64,
     action: xr::Action,
+    subaction_path: xr::Path,
     types: &[xr::ActionType],
 ) -> Result<(), xr::Result> {
     let a = w
@@ -425,6 +466,14 @@ unsafe fn check_action(
     }
     if !w.sessions[&session].action_sets_attached.contains(&a.set) {
         return Err(xr::Result::ERROR_ACTIONSET_NOT_ATTACHED);
+    }
+    if subaction_path != xr::Path::NULL {
+        let path = w.instances[&a.instance]
+            .path(subaction_path)
+            .ok_or(xr::Result::ERROR_PATH_INVALID)?;
+        if !a.subaction_paths.iter().any(|p| p == path) {
+            return Err(xr::Result::ERROR_PATH_UNSUPPORTED);
+        }
     }
     Ok(())
 }
@@ -460,7 +509,13 @@ macro_rules! action_state_getter {
                 let id = w.enter_session(ctx, session)?;
                 let info = ffi::input(get_info, xr::StructureType::ACTION_STATE_GET_INFO)?;
                 let p = ffi::output(state, xr::StructureType::$state_type)?;
-                check_action(&w, id, info.action, &[xr::ActionType::$action_type])?;
+                check_action(
+                    &w,
+                    id,
+                    info.action,
+                    info.subaction_path,
+                    &[xr::ActionType::$action_type],
+                )?;
                 // No controller: the action is inactive and every value is zero; a pose bound to
                 // a present eye tracker is active (its `isActive` follows the zeroed header).
                 let active = gaze_active(&w, id, info.action.into_raw());
@@ -547,7 +602,13 @@ pub(crate) unsafe extern "system" fn apply_haptic_feedback(
             feedback as *const xr::HapticVibration,
             xr::StructureType::HAPTIC_VIBRATION,
         )?;
-        check_action(&w, id, info.action, &[xr::ActionType::VIBRATION_OUTPUT])?;
+        check_action(
+            &w,
+            id,
+            info.action,
+            info.subaction_path,
+            &[xr::ActionType::VIBRATION_OUTPUT],
+        )?;
         Ok(xr::Result::SUCCESS)
     })
 }
@@ -560,7 +621,13 @@ pub(crate) unsafe extern "system" fn stop_haptic_feedback(
         let mut w = world();
         let id = w.enter_session(ctx, session)?;
         let info = ffi::input(info, xr::StructureType::HAPTIC_ACTION_INFO)?;
-        check_action(&w, id, info.action, &[xr::ActionType::VIBRATION_OUTPUT])?;
+        check_action(
+            &w,
+            id,
+            info.action,
+            info.subaction_path,
+            &[xr::ActionType::VIBRATION_OUTPUT],
+        )?;
         Ok(xr::Result::SUCCESS)
     })
 }
@@ -636,7 +703,7 @@ pub(crate) unsafe extern "system" fn enumerate_bound_sources_for_action(
             xr::ActionType::POSE_INPUT,
             xr::ActionType::VIBRATION_OUTPUT,
         ];
-        check_action(&w, id, info.action, &all)?;
+        check_action(&w, id, info.action, xr::Path::NULL, &all)?;
         ffi::two_call(capacity, count_out, sources, 0, |_, _| Ok(()))?;
         Ok(xr::Result::SUCCESS)
     })

@@ -41,6 +41,12 @@ pub struct SimConfig {
     pub realtime: bool,
     /// The runtime requests exit by itself after this many xrEndFrame calls.
     pub exit_after_frames: Option<u64>,
+    /// How long an xrWaitFrame blocks on a previous waited frame that no xrBeginFrame has begun
+    /// before it is refused with XR_ERROR_CALL_ORDER_INVALID (`FOVEA_SIM_WAIT_BLOCK_MS`, default
+    /// 5000). The spec makes it block until the begin; a real runtime would block forever, which
+    /// a single-threaded caller never escapes, so the simulation gives up instead. Random call
+    /// sequences set it short.
+    pub wait_block_ms: u64,
     /// Calls that fail on purpose.
     pub faults: Vec<Fault>,
     /// The application's simulated GPU time per frame.
@@ -128,6 +134,7 @@ impl Default for SimConfig {
             view_configuration_fov: false,
             realtime: false,
             exit_after_frames: None,
+            wait_block_ms: 5000,
             faults: Vec::new(),
             load: Load::default(),
             journal: true,
@@ -151,7 +158,7 @@ impl SimConfig {
     /// Reads `FOVEA_SIM_HEADSET`, `FOVEA_SIM_REFRESH_HZ`, `FOVEA_SIM_NATIVE_UPDATE_STATE`,
     /// `FOVEA_SIM_NATIVE_FOVEATION`, `FOVEA_SIM_META_EYE_TRACKED`, `FOVEA_SIM_VIEW_CONFIGURATION_FOV`,
     /// `FOVEA_SIM_REALTIME`, `FOVEA_SIM_JOURNAL`, `FOVEA_SIM_SUMMARY`, `FOVEA_SIM_LOG_REFUSALS`,
-    /// `FOVEA_SIM_EXIT_AFTER_FRAMES`,
+    /// `FOVEA_SIM_EXIT_AFTER_FRAMES`, `FOVEA_SIM_WAIT_BLOCK_MS`,
     /// `FOVEA_SIM_FAULT`, `FOVEA_SIM_LOAD`, and the eye tracker's `FOVEA_SIM_EYE_GAZE` (`on`,
     /// `unsupported` or `off`), `FOVEA_SIM_GAZE` (a script, [`GazeScript`]) and
     /// `FOVEA_SIM_GAZE_SPACE_AFTER_ATTACH`.
@@ -201,6 +208,11 @@ impl SimConfig {
                     "FOVEA_SIM_EXIT_AFTER_FRAMES={v:?}: expected a frame count (unsigned integer)"
                 )
             })?);
+        }
+        if let Some(v) = var("FOVEA_SIM_WAIT_BLOCK_MS") {
+            cfg.wait_block_ms = v.trim().parse::<u64>().map_err(|_| {
+                format!("FOVEA_SIM_WAIT_BLOCK_MS={v:?}: expected milliseconds (unsigned integer)")
+            })?;
         }
         if let Some(v) = var("FOVEA_SIM_FAULT") {
             cfg.faults = parse_faults(&v).map_err(|e| format!("FOVEA_SIM_FAULT={v:?}: {e}"))?;
@@ -347,6 +359,7 @@ mod tests {
             ("FOVEA_SIM_SUMMARY", "1"),
             ("FOVEA_SIM_LOG_REFUSALS", "1"),
             ("FOVEA_SIM_EXIT_AFTER_FRAMES", "30"),
+            ("FOVEA_SIM_WAIT_BLOCK_MS", "7"),
             ("FOVEA_SIM_FAULT", "xrCreateSwapchain:-2@2, xrEndFrame:-17"),
             ("FOVEA_SIM_LOAD", "8@0,14@100"),
             ("FOVEA_SIM_EYE_GAZE", "on"),
@@ -359,6 +372,7 @@ mod tests {
         assert!(cfg.native_swapchain_update_state && cfg.realtime && cfg.summary);
         assert!(cfg.log_refusals && cfg.native_foveation);
         assert_eq!(cfg.exit_after_frames, Some(30));
+        assert_eq!(cfg.wait_block_ms, 7);
         assert_eq!(
             cfg.faults,
             [

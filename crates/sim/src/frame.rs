@@ -13,10 +13,10 @@ use std::time::{Duration, Instant};
 use openxr_sys as xr;
 use openxr_sys::Handle;
 
-use crate::ffi;
+use crate::ffi::{self, check_pose};
 use crate::objects::SubmittedView;
 use crate::session::{request_exit, set_state};
-use crate::state::{entry, world, World, XrResult};
+use crate::state::{entry, notify_frame_begun, wait_frame_begun, world, World, XrResult};
 use crate::system::{MAX_LAYER_COUNT, VIEW_COUNT};
 
 /// Whole display periods a frame of `gpu_ms` occupies (at least one).
@@ -49,6 +49,26 @@ pub(crate) unsafe extern "system" fn wait_frame(
         }
         let frame_state = ffi::output(frame_state, xr::StructureType::FRAME_STATE)?;
         running(&w, id)?;
+        // Spec (xrWaitFrame): "Subsequent xrWaitFrame calls must block until the previous frame
+        // has been begun with xrBeginFrame". Pipelining applications (the CTS's
+        // Timed_Pipelined_Frame_Submission) wait frame N+1 on one thread while another begins
+        // frame N; without the block the second wait's frame replaced the first and the later
+        // xrBeginFrame found no waited frame. A caller that could never unblock (one thread,
+        // waiting twice) is refused after the configured `wait_block_ms` instead of hanging
+        // forever.
+        let limit = w.instances[&w.sessions[&id].instance].config.wait_block_ms;
+        let deadline = Instant::now() + Duration::from_millis(limit);
+        while w.sessions[&id].frame.pending_wait.is_some() {
+            if !wait_frame_begun(&mut w, deadline) {
+                ctx.detail = "the previous waited frame was never begun".into();
+                return Err(xr::Result::ERROR_CALL_ORDER_INVALID);
+            }
+            // The session may have been destroyed or ended while the lock was released.
+            if !w.sessions.contains_key(&id) {
+                return Err(xr::Result::ERROR_HANDLE_INVALID);
+            }
+            running(&w, id)?;
+        }
         let World {
             sessions,
             instances,
@@ -119,6 +139,7 @@ pub(crate) unsafe extern "system" fn begin_frame(
             .pending_wait
             .take()
             .ok_or(xr::Result::ERROR_CALL_ORDER_INVALID)?;
+        notify_frame_begun();
         // Spec: beginning a frame while another one is begun discards the earlier one.
         let result = if frame.begun.is_some() {
             xr::Result::FRAME_DISCARDED
@@ -205,6 +226,9 @@ unsafe fn read_layers(
                         xr::StructureType::COMPOSITION_LAYER_PROJECTION_VIEW,
                     )?;
                     check_sub_image(w, session, &view.sub_image)?;
+                    // Spec (xrEndFrame): a layer or projection view pose whose orientation is not
+                    // unit length within 1% is XR_ERROR_POSE_INVALID.
+                    check_pose(&view.pose)?;
                     let sub = view.sub_image;
                     let (o, e) = (sub.image_rect.offset, sub.image_rect.extent);
                     let f = view.fov;
@@ -236,6 +260,7 @@ unsafe fn read_layers(
             xr::StructureType::COMPOSITION_LAYER_QUAD => {
                 let quad = &*(layer as *const xr::CompositionLayerQuad);
                 check_sub_image(w, session, &quad.sub_image)?;
+                check_pose(&quad.pose)?;
                 let _ = write!(
                     detail,
                     " layer{i}=QUAD[swapchain={:#x}]",

@@ -122,6 +122,7 @@ pub(crate) unsafe extern "system" fn create_instance(
             call_counts: HashMap::from([("xrCreateInstance", 1)]),
             lost: false,
             events: VecDeque::new(),
+            api_version: v,
             paths: Vec::new(),
             now_ns: CLOCK_START_NS,
             graphics_requirements_queried: false,

@@ -13,9 +13,13 @@
 //!
 //! It is at least as strict as real runtimes (Monado) where the spec lets a runtime refuse a call:
 //! xrLocateViews only while the session runs and for the view configuration it began with, the
-//! frame-loop and swapchain call orders, the session state machine. Every refusal is counted apart
-//! from injected faults ([`control::refusals`], the `refused=` field of the summary line), so a
-//! test can assert that nothing a strict runtime refuses reached this one.
+//! frame-loop and swapchain call orders (a second xrWaitFrame blocks until the previous frame is
+//! begun), the session state machine (only the spec's transitions), layer poses, action and action
+//! set names and localized names, subaction paths, and only the spec's interaction profiles and
+//! binding paths for the instance's version and extensions ([`profiles`](crate::profiles)). The
+//! Khronos conformance suite's (CTS 1.1.41) non-interactive cases pass against it. Every refusal is
+//! counted apart from injected faults ([`control::refusals`], the `refused=` field of the summary
+//! line), so a test can assert that nothing a strict runtime refuses reached this one.
 //!
 //! Time is virtual and deterministic (see [`frame`](crate::frame) docs), every call is journaled, and
 //! faults and GPU load can be injected through [`control`].
@@ -43,6 +47,7 @@
 //! | 3 | `objects.rs` | the runtime's objects as data: what each handle holds, the journal's records |
 //! | 3 | `extensions.rs` | the extensions the runtime knows and which it offers under a configuration |
 //! | 4 | `state.rs` | the objects in one map-of-maps behind one lock; the per-call bookkeeping (`entry`) |
+//! | 4 | `profiles.rs` | the spec's interaction profiles and the binding paths each accepts, by version and extension |
 //! | 5 | `control.rs` | the test-facing control API |
 //! | 5 | `system.rs` | the one system and its view configuration |
 //! | 6 | `vulkan.rs` | XR_KHR_vulkan_enable(2) and the Vulkan side of sessions and swapchains |
@@ -69,6 +74,7 @@ pub mod gaze_script;
 mod instance;
 mod negotiate;
 mod objects;
+mod profiles;
 mod session;
 mod space;
 mod state;

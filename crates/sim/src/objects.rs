@@ -82,6 +82,9 @@ pub(crate) struct InstanceState {
     pub call_counts: HashMap<&'static str, u32>,
     pub lost: bool,
     pub events: VecDeque<Event>,
+    /// The apiVersion the application asked for: OpenXR 1.1's interaction profiles and paths are
+    /// there for 1.1 instances only.
+    pub api_version: xr::Version,
     /// Path strings; `XrPath` n is `paths[n - 1]`.
     pub paths: Vec<String>,
     /// The virtual clock: advanced by frame timing, never by wall time.
@@ -187,6 +190,8 @@ pub(crate) struct Swapchain {
 pub(crate) struct ActionSet {
     pub instance: u64,
     pub(crate) name: String,
+    /// Unique among the instance's sets too (XR_ERROR_LOCALIZED_NAME_DUPLICATED).
+    pub(crate) localized_name: String,
     /// Attached to a session: no more actions may be added (XR_ERROR_ACTIONSETS_ALREADY_ATTACHED).
     pub(crate) attached: bool,
     /// `XrActionSetCreateInfo::priority`: of the active sets with actions bound to one input, only
@@ -198,7 +203,12 @@ pub(crate) struct Action {
     pub instance: u64,
     pub set: u64,
     pub(crate) name: String,
+    /// Unique among the set's actions too (XR_ERROR_LOCALIZED_NAME_DUPLICATED).
+    pub(crate) localized_name: String,
     pub(crate) ty: xr::ActionType,
+    /// The top-level user paths the action was created with: the only non-null subaction paths
+    /// its state may be queried for (XR_ERROR_PATH_UNSUPPORTED otherwise).
+    pub(crate) subaction_paths: Vec<String>,
 }
 
 /// A foveation profile's parameters (XrFoveationLevelProfileCreateInfoFB; without it the spec

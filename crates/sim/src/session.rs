@@ -2,8 +2,9 @@
 //!
 //! States are announced with XrEventDataSessionStateChanged in the order a real runtime uses:
 //! IDLE→READY on create; SYNCHRONIZED at the first xrWaitFrame, VISIBLE after the first xrEndFrame,
-//! FOCUSED after the second; exit walks back down through VISIBLE and SYNCHRONIZED to STOPPING; and
-//! xrEndSession ends in IDLE→EXITING.
+//! FOCUSED after the second; exit walks back down through VISIBLE and SYNCHRONIZED to STOPPING (from
+//! READY too: a session begun but not yet waited goes READY→SYNCHRONIZED→STOPPING, the only path the
+//! spec's state diagram has); and xrEndSession ends in IDLE→EXITING.
 
 use std::sync::Arc;
 
@@ -13,7 +14,7 @@ use openxr_sys::Handle;
 use crate::extensions::{KHR_VULKAN_ENABLE, KHR_VULKAN_ENABLE2, MND_HEADLESS};
 use crate::ffi;
 use crate::objects::{Event, FrameClock, Graphics, Session};
-use crate::state::{entry, world, World};
+use crate::state::{entry, notify_frame_begun, world, World};
 use crate::system::check_system;
 use crate::vulkan;
 
@@ -49,10 +50,15 @@ pub(crate) fn request_exit(w: &mut World, session: u64) {
         xr::SessionState::VISIBLE,
         xr::SessionState::SYNCHRONIZED,
     ];
-    let start = ladder
-        .iter()
-        .position(|s| *s == from)
-        .map_or(ladder.len(), |i| i + 1);
+    // A running session that has not waited a frame yet is still READY; the spec's lifecycle (and
+    // the CTS's conformance layer) has no READY→STOPPING edge, only READY→SYNCHRONIZED→STOPPING.
+    let start = match from {
+        xr::SessionState::READY => ladder.len() - 1,
+        _ => ladder
+            .iter()
+            .position(|s| *s == from)
+            .map_or(ladder.len(), |i| i + 1),
+    };
     for state in &ladder[start..] {
         set_state(w, session, *state);
     }
@@ -136,6 +142,8 @@ pub(crate) unsafe extern "system" fn create_session(
 /// Destroys a session's children (spec: child handles are destroyed with their parent) and drops its
 /// undelivered events.
 pub(crate) fn destroy_session_objects(w: &mut World, session: u64) {
+    // An xrWaitFrame blocked on this session's unbegun frame wakes and finds it gone.
+    notify_frame_begun();
     w.swapchains.retain(|_, s| s.session != session);
     w.spaces.retain(|_, s| s.session != session);
     w.profiles.retain(|_, p| p.session != session);
@@ -199,6 +207,7 @@ pub(crate) unsafe extern "system" fn end_session(session: xr::Session) -> xr::Re
         s.running = false;
         s.view_configuration = None;
         s.frame = FrameClock::default();
+        notify_frame_begun();
         let exiting = s.exit_requested;
         set_state(&mut w, id, xr::SessionState::IDLE);
         if exiting {

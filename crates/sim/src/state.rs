@@ -12,7 +12,7 @@ use std::sync::LazyLock;
 
 use openxr_sys as xr;
 use openxr_sys::Handle;
-use parking_lot::{Mutex, MutexGuard};
+use parking_lot::{Condvar, Mutex, MutexGuard};
 
 use crate::objects::{
     Action, ActionSet, Call, CreatedInstance, InstanceState, Profile, Record, Session, Space,
@@ -47,6 +47,23 @@ static WORLD: LazyLock<Mutex<World>> = LazyLock::new(|| Mutex::new(World::defaul
 
 pub(crate) fn world() -> MutexGuard<'static, World> {
     WORLD.lock()
+}
+
+/// Signalled whenever a waited frame stops blocking the next xrWaitFrame (xrBeginFrame consumed it,
+/// or its session stopped running or went away); waited on with the [`world`] lock.
+static FRAME_BEGUN: Condvar = Condvar::new();
+
+/// Wakes the xrWaitFrame calls blocked on a frame that is not yet begun (see [`wait_frame_begun`]).
+pub(crate) fn notify_frame_begun() {
+    FRAME_BEGUN.notify_all();
+}
+
+/// Releases the world lock until [`notify_frame_begun`] or `deadline`; false on timeout.
+pub(crate) fn wait_frame_begun(
+    w: &mut MutexGuard<'static, World>,
+    deadline: std::time::Instant,
+) -> bool {
+    !FRAME_BEGUN.wait_until(w, deadline).timed_out()
 }
 
 /// One call in progress: which instance it belongs to (once the handle is resolved) and what it

@@ -69,8 +69,13 @@ pub(crate) unsafe fn open_session(
     state: &VulkanInstanceState,
     binding: &xr::GraphicsBindingVulkanKHR,
 ) -> Result<VulkanSession, xr::Result> {
-    if binding.instance.is_null() || binding.physical_device.is_null() || binding.device.is_null() {
+    if binding.instance.is_null() {
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+    }
+    // No device is no valid graphics device: XR_ERROR_GRAPHICS_DEVICE_INVALID, which the CTS's
+    // XR_KHR_vulkan_enable case requires for a VK_NULL_HANDLE device.
+    if binding.physical_device.is_null() || binding.device.is_null() {
+        return Err(xr::Result::ERROR_GRAPHICS_DEVICE_INVALID);
     }
     let physical_device = vk::PhysicalDevice::from_raw(binding.physical_device as u64);
     // Spec: the physical device must be the one xrGetVulkanGraphicsDevice(2)KHR returned.

@@ -507,6 +507,7 @@ const SIM_FLOORS: &[Place] = &[
     at(30, "objects.rs"),
     at(30, "extensions.rs"),
     at(40, "state.rs"),
+    at(40, "profiles.rs"),
     at(50, "control.rs"),
     at(50, "system.rs"),
     at(60, "vulkan.rs"),

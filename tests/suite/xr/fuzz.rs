@@ -1311,6 +1311,9 @@ fn random_call_sequences_match_the_reference_model_here() {
     if std::env::var_os("FOVEA_LOG").is_none() {
         std::env::set_var("FOVEA_LOG", "error");
     }
+    // A second xrWaitFrame before the first frame is begun blocks in the runtime until a begin
+    // that a single-threaded sequence never makes; the runtime refuses it after this long.
+    std::env::set_var("FOVEA_SIM_WAIT_BLOCK_MS", "1");
     sim::control::set_thread_config(None);
     // One chain for the whole run keeps libfovea.so loaded, so the function pointers stay valid.
     let chain = Chain::fovea().unwrap();

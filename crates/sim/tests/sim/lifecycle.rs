@@ -300,6 +300,16 @@ fn system_and_recommended_sizes_come_from_the_preset() {
             unsafe { get(instance, &hand, &mut other) },
             xr::Result::ERROR_FORM_FACTOR_UNSUPPORTED
         );
+        // A form factor the runtime does not know is unsupported too (the CTS's xrGetSystem case
+        // passes XR_FORM_FACTOR_MAX_ENUM and requires this code).
+        let unknown = xr::SystemGetInfo {
+            form_factor: xr::FormFactor::from_raw(0x7FFF_FFFF),
+            ..hand
+        };
+        assert_eq!(
+            unsafe { get(instance, &unknown, &mut other) },
+            xr::Result::ERROR_FORM_FACTOR_UNSUPPORTED
+        );
 
         let views_fn = xrfn!(instance, EnumerateViewConfigurationViews);
         let stereo = xr::ViewConfigurationType::PRIMARY_STEREO;
@@ -631,6 +641,29 @@ fn session_lifecycle_announces_every_state() {
     destroy_instance(instance);
 }
 
+/// A session that exits before its first xrWaitFrame (the CTS's FrameSubmission and
+/// XR_EXT_debug_utils cases) still goes through SYNCHRONIZED: the spec's lifecycle has no
+/// READY→STOPPING edge, and the CTS's conformance layer fails the run on one.
+#[test]
+fn exit_before_the_first_frame_passes_through_synchronized() {
+    use xr::SessionState as S;
+    let instance = create_instance(config("quest3"), &["XR_MND_headless"]);
+    let session = create_session_with(instance, null()).unwrap();
+    assert_eq!(begin_session(instance, session), xr::Result::SUCCESS);
+    assert_eq!(poll_states(instance), [S::IDLE, S::READY]);
+    assert_eq!(
+        unsafe { xrfn!(instance, RequestExitSession)(session) },
+        xr::Result::SUCCESS
+    );
+    assert_eq!(poll_states(instance), [S::SYNCHRONIZED, S::STOPPING]);
+    assert_eq!(
+        unsafe { xrfn!(instance, EndSession)(session) },
+        xr::Result::SUCCESS
+    );
+    assert_eq!(poll_states(instance), [S::IDLE, S::EXITING]);
+    destroy_instance(instance);
+}
+
 #[test]
 fn the_runtime_requests_exit_after_the_configured_frames() {
     use xr::SessionState as S;
@@ -704,6 +737,42 @@ fn frame_calls_out_of_order_are_rejected() {
     assert_eq!(
         end_frame(instance, session, state.predicted_display_time, &[]),
         xr::Result::ERROR_CALL_ORDER_INVALID
+    );
+    destroy_instance(instance);
+}
+
+/// Pipelining (the CTS's Timed_Pipelined_Frame_Submission): one thread waits frames, another begins
+/// and ends them. The spec makes a wait block until the previous waited frame is begun, so each
+/// begin finds its own waited frame.
+#[test]
+fn a_wait_blocks_until_the_previous_frame_is_begun() {
+    use std::sync::mpsc;
+    use std::time::Duration;
+    let (instance, session) = headless(config("quest3"));
+    let first = wait_frame(instance, session).unwrap();
+    let (tx, rx) = mpsc::channel();
+    let waiter = std::thread::spawn(move || {
+        let state = wait_frame(instance, session).map(|s| s.predicted_display_time);
+        tx.send(state).unwrap();
+    });
+    // The second wait does not return while the first frame is not begun.
+    assert!(rx.recv_timeout(Duration::from_millis(300)).is_err());
+    assert_eq!(begin_frame(instance, session), xr::Result::SUCCESS);
+    let second = rx
+        .recv_timeout(Duration::from_secs(5))
+        .expect("the wait returns once the first frame is begun")
+        .unwrap();
+    waiter.join().unwrap();
+    assert!(second.as_nanos() > first.predicted_display_time.as_nanos());
+    assert_eq!(
+        end_frame(instance, session, first.predicted_display_time, &[]),
+        xr::Result::SUCCESS
+    );
+    // The second waited frame is still there to begin.
+    assert_eq!(begin_frame(instance, session), xr::Result::SUCCESS);
+    assert_eq!(
+        end_frame(instance, session, second, &[]),
+        xr::Result::SUCCESS
     );
     destroy_instance(instance);
 }
@@ -1003,7 +1072,7 @@ fn headless_swapchains_cycle_and_frames_record_what_was_submitted() {
     let view = |i: u32, x: i32| xr::CompositionLayerProjectionView {
         ty: xr::CompositionLayerProjectionView::TYPE,
         next: null(),
-        pose: Default::default(),
+        pose: xr::Posef::IDENTITY,
         fov,
         sub_image: xr::SwapchainSubImage {
             swapchain: sc,
@@ -1073,6 +1142,58 @@ fn headless_swapchains_cycle_and_frames_record_what_was_submitted() {
     assert_eq!(
         end_frame(instance, session, t, &[null()]),
         xr::Result::ERROR_LAYER_INVALID
+    );
+    // A pose whose orientation is off unit length by more than 1% (the CTS's projection and quad
+    // cases): XR_ERROR_POSE_INVALID, in a projection view and in a quad layer.
+    let skewed = xr::Posef {
+        orientation: xr::Quaternionf {
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+            w: 0.98,
+        },
+        ..xr::Posef::IDENTITY
+    };
+    let bad_pose = [
+        view(0, 0),
+        xr::CompositionLayerProjectionView {
+            pose: skewed,
+            ..views[1]
+        },
+    ];
+    let bad_pose_layer = xr::CompositionLayerProjection {
+        views: bad_pose.as_ptr(),
+        ..layer
+    };
+    assert_eq!(
+        end_frame(
+            instance,
+            session,
+            t,
+            &[&bad_pose_layer as *const _ as *const _]
+        ),
+        xr::Result::ERROR_POSE_INVALID
+    );
+    let quad = xr::CompositionLayerQuad {
+        ty: xr::CompositionLayerQuad::TYPE,
+        next: null(),
+        layer_flags: xr::CompositionLayerFlags::EMPTY,
+        space,
+        eye_visibility: xr::EyeVisibility::BOTH,
+        sub_image: views[0].sub_image,
+        pose: xr::Posef::IDENTITY,
+        size: xr::Extent2Df {
+            width: 1.0,
+            height: 1.0,
+        },
+    };
+    let bad_quad = xr::CompositionLayerQuad {
+        pose: skewed,
+        ..quad
+    };
+    assert_eq!(
+        end_frame(instance, session, t, &[&bad_quad as *const _ as *const _]),
+        xr::Result::ERROR_POSE_INVALID
     );
     assert_eq!(
         end_frame(instance, session, t, &layers),

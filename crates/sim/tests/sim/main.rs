@@ -7,6 +7,7 @@ mod common;
 #[path = "../../../../tests/suite/support/process.rs"]
 mod process;
 
+mod actions;
 mod eye_gaze;
 mod khronos_loader;
 mod leaks;

@@ -294,7 +294,7 @@ fn end_frame_with_a_swapchain_never_released_is_layer_invalid() {
     let view = |i: u32| xr::CompositionLayerProjectionView {
         ty: xr::CompositionLayerProjectionView::TYPE,
         next: null(),
-        pose: Default::default(),
+        pose: xr::Posef::IDENTITY,
         fov: Default::default(),
         sub_image: xr::SwapchainSubImage {
             swapchain: sc,

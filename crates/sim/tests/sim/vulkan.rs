@@ -64,6 +64,23 @@ fn vulkan_session_on_lavapipe_is_validation_clean_here() {
     let (device, family) = (&v.device, v.family);
 
     let binding = v.binding();
+    // A binding without a device (or physical device) names no valid graphics device: the CTS's
+    // XR_KHR_vulkan_enable case requires XR_ERROR_GRAPHICS_DEVICE_INVALID for it.
+    for bad in [
+        xr::GraphicsBindingVulkanKHR {
+            device: null_mut(),
+            ..binding
+        },
+        xr::GraphicsBindingVulkanKHR {
+            physical_device: null_mut(),
+            ..binding
+        },
+    ] {
+        assert_eq!(
+            create_session_with(instance, &bad as *const _ as *const c_void),
+            Err(xr::Result::ERROR_GRAPHICS_DEVICE_INVALID)
+        );
+    }
     let session = create_session_with(instance, &binding as *const _ as *const c_void).unwrap();
     assert_eq!(begin_session(instance, session), xr::Result::SUCCESS);
     let space = reference_space(instance, session, xr::ReferenceSpaceType::LOCAL);
@@ -241,7 +258,7 @@ fn vulkan_session_on_lavapipe_is_validation_clean_here() {
         let view = |i: u32| xr::CompositionLayerProjectionView {
             ty: xr::CompositionLayerProjectionView::TYPE,
             next: null(),
-            pose: Default::default(),
+            pose: xr::Posef::IDENTITY,
             fov: Default::default(),
             sub_image: xr::SwapchainSubImage {
                 swapchain: color,
