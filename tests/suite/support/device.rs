@@ -580,17 +580,9 @@ impl Dev {
         pool: vk::CommandPool,
         flags: vk::CommandBufferUsageFlags,
     ) -> vk::CommandBuffer {
+        let cb = allocate(&self.d, pool);
         // SAFETY: the pool is this device's and used by this thread only.
         unsafe {
-            let cb = self
-                .d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .expect("vkAllocateCommandBuffers")[0];
             self.d
                 .begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(flags))
                 .expect("vkBeginCommandBuffer");
@@ -648,6 +640,35 @@ fn command_pool(d: &ash::Device) -> vk::CommandPool {
         )
     }
     .expect("vkCreateCommandPool")
+}
+
+/// A command pool on queue family 0 of `d` whose command buffers may be reset one by one
+/// (`VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT`); the caller destroys it.
+pub fn resettable_pool(d: &ash::Device) -> vk::CommandPool {
+    // SAFETY: `d` is alive (a borrowed device); the struct lives across the call.
+    unsafe {
+        d.create_command_pool(
+            &vk::CommandPoolCreateInfo::default()
+                .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
+                .queue_family_index(0),
+            None,
+        )
+    }
+    .expect("vkCreateCommandPool")
+}
+
+/// One primary command buffer from `pool` (`d`'s, used by this thread only).
+pub fn allocate(d: &ash::Device, pool: vk::CommandPool) -> vk::CommandBuffer {
+    // SAFETY: the pool is `d`'s and this thread's.
+    unsafe {
+        d.allocate_command_buffers(
+            &vk::CommandBufferAllocateInfo::default()
+                .command_pool(pool)
+                .level(vk::CommandBufferLevel::PRIMARY)
+                .command_buffer_count(1),
+        )
+    }
+    .expect("vkAllocateCommandBuffers")[0]
 }
 
 /// A compute pipeline entered at `main`, with one descriptor set (from a pool of its own) of one
