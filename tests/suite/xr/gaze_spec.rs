@@ -13,7 +13,9 @@ use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::support::actions::{attach_set, declare, path, sync_set, EYE_GAZE_PROFILE};
+use crate::support::actions::{
+    action_space, attach_set, declare, locate_at_display, path, sync_of, sync_set, EYE_GAZE_PROFILE,
+};
 use crate::support::{foveated_loop, in_own_process};
 
 const EYE_TRACKED: &str = "XR_META_foveation_eye_tracked";
@@ -176,44 +178,17 @@ fn each_frame_renders_with_the_gaze_of_its_own_display_time() {
             // eye is when the frame is shown.
             let (set, action) = declare(&lp.app, true);
             assert_eq!(attach(&lp, &[set]), xr::Result::SUCCESS);
-            // SAFETY: every name's type matches; the structs live across their calls.
-            let (sync, space, locate) = unsafe {
-                let create: xr::pfn::CreateActionSpace = lp.func(c"xrCreateActionSpace");
-                let info = xr::ActionSpaceCreateInfo {
-                    ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
-                    next: std::ptr::null(),
-                    action,
-                    subaction_path: xr::Path::NULL,
-                    pose_in_action_space: xr::Posef::IDENTITY,
-                };
-                let mut space = xr::Space::NULL;
-                assert_eq!(create(lp.session, &info, &mut space), xr::Result::SUCCESS);
-                let sync: xr::pfn::SyncActions = lp.func(c"xrSyncActions");
-                let locate: xr::pfn::LocateSpace = lp.func(c"xrLocateSpace");
-                (sync, space, locate)
-            };
+            let space = action_space(&lp, action);
+            // SAFETY: every name's type matches.
+            let (sync, locate): (xr::pfn::SyncActions, xr::pfn::LocateSpace) =
+                unsafe { (lp.func(c"xrSyncActions"), lp.func(c"xrLocateSpace")) };
             let mut seen = Vec::new();
             for _ in 0..200 {
                 // hello_xr's order: events, input, then the frame.
                 lp.poll_events();
                 sync_set(&lp, sync, set);
                 lp.frame().unwrap();
-                let mut loc = xr::SpaceLocation {
-                    ty: xr::StructureType::SPACE_LOCATION,
-                    next: std::ptr::null_mut(),
-                    location_flags: xr::SpaceLocationFlags::EMPTY,
-                    pose: xr::Posef::IDENTITY,
-                };
-                // SAFETY: live spaces; the struct lives across the call.
-                let r = unsafe {
-                    locate(
-                        space,
-                        lp.space,
-                        lp.last_frame_state.predicted_display_time,
-                        &mut loc,
-                    )
-                };
-                assert_eq!(r, xr::Result::SUCCESS);
+                let loc = locate_at_display(&lp, locate, space, lp.space);
                 let o = loc.pose.orientation;
                 let dir = glam::Quat::from_xyzw(o.x, o.y, o.z, o.w) * glam::Vec3::NEG_Z;
                 let yaw = dir.x.atan2(-dir.z).to_degrees();
@@ -518,19 +493,9 @@ fn the_app_s_own_errors_reach_the_runtime_once() {
                 lp.frame().unwrap();
             }
             // A sync naming a set never attached: the application's error.
-            let active = [xr::ActiveActionSet {
-                action_set: unattached,
-                subaction_path: xr::Path::NULL,
-            }];
-            let info = xr::ActionsSyncInfo {
-                ty: xr::StructureType::ACTIONS_SYNC_INFO,
-                next: std::ptr::null(),
-                count_active_action_sets: 1,
-                active_action_sets: active.as_ptr(),
-            };
             let sync: xr::pfn::SyncActions = unsafe { lp.func(c"xrSyncActions") };
             assert_eq!(
-                unsafe { sync(lp.session, &info) },
+                sync_of(&lp, sync, unattached),
                 xr::Result::ERROR_ACTIONSET_NOT_ATTACHED
             );
             let instance = lp.app.instance;
@@ -631,18 +596,9 @@ fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time(
             );
             let (set, action) = declare(&lp.app, true);
             assert_eq!(attach(&lp, &[set]), xr::Result::SUCCESS);
+            let gaze = action_space(&lp, action);
             // SAFETY: every name's type matches; the structs live across their calls.
-            let (sync, gaze, view, locate) = unsafe {
-                let create: xr::pfn::CreateActionSpace = lp.func(c"xrCreateActionSpace");
-                let info = xr::ActionSpaceCreateInfo {
-                    ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
-                    next: std::ptr::null(),
-                    action,
-                    subaction_path: xr::Path::NULL,
-                    pose_in_action_space: xr::Posef::IDENTITY,
-                };
-                let mut gaze = xr::Space::NULL;
-                assert_eq!(create(lp.session, &info, &mut gaze), xr::Result::SUCCESS);
+            let (sync, view, locate) = unsafe {
                 let reference: xr::pfn::CreateReferenceSpace = lp.func(c"xrCreateReferenceSpace");
                 let info = xr::ReferenceSpaceCreateInfo {
                     ty: xr::StructureType::REFERENCE_SPACE_CREATE_INFO,
@@ -654,7 +610,7 @@ fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time(
                 assert_eq!(reference(lp.session, &info, &mut view), xr::Result::SUCCESS);
                 let sync: xr::pfn::SyncActions = lp.func(c"xrSyncActions");
                 let locate: xr::pfn::LocateSpace = lp.func(c"xrLocateSpace");
-                (sync, gaze, view, locate)
+                (sync, view, locate)
             };
             let headset = fovea_model::headsets::by_id("quest3").unwrap();
             let left = fovea_model::gaze::EyeView {
@@ -670,22 +626,7 @@ fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time(
                 lp.poll_events();
                 sync_set(&lp, sync, set);
                 lp.frame().unwrap();
-                let mut loc = xr::SpaceLocation {
-                    ty: xr::StructureType::SPACE_LOCATION,
-                    next: std::ptr::null_mut(),
-                    location_flags: xr::SpaceLocationFlags::EMPTY,
-                    pose: xr::Posef::IDENTITY,
-                };
-                // SAFETY: live spaces; the struct lives across the call.
-                let r = unsafe {
-                    locate(
-                        gaze,
-                        view,
-                        lp.last_frame_state.predicted_display_time,
-                        &mut loc,
-                    )
-                };
-                assert_eq!(r, xr::Result::SUCCESS);
+                let loc = locate_at_display(&lp, locate, gaze, view);
                 let (centres, valid) = meta_state(&lp);
                 if n < 5 || !valid {
                     continue;
