@@ -16,7 +16,9 @@ use openxr_sys as xr;
 use xr::Handle as _;
 
 use crate::both::fdm_vulkan::{func, running_session, Frame};
-use crate::support::vulkan::{draw_fullscreen, range, spv, stages, Fixed, FRAGMENT, VERTEX};
+use crate::support::vulkan::{
+    draw_fullscreen, range, spv, stages, to_color_attachment, Fixed, FRAGMENT, VERTEX,
+};
 
 use super::outcome::Outcome;
 
@@ -684,28 +686,8 @@ pub(super) fn run_with(
         });
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .unwrap();
-        let to_colour: Vec<_> = targets
-            .iter()
-            .map(|&(i, _)| {
-                vk::ImageMemoryBarrier::default()
-                    .image(i)
-                    .subresource_range(range(0, target_layers))
-                    .old_layout(vk::ImageLayout::UNDEFINED)
-                    .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                    .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            })
-            .collect();
-        d.cmd_pipeline_barrier(
-            cb,
-            vk::PipelineStageFlags::TOP_OF_PIPE,
-            vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &to_colour,
-        );
+        let target_images: Vec<_> = targets.iter().map(|&(i, _)| i).collect();
+        to_color_attachment(d, cb, &target_images, target_layers);
         if let (Some((image, _, _)), Setup::AppRates) = (own_rate, setup) {
             d.cmd_pipeline_barrier(
                 cb,
@@ -835,15 +817,7 @@ pub(super) fn run_with(
                 .unwrap()[0];
             d.begin_command_buffer(cb2, &vk::CommandBufferBeginInfo::default())
                 .unwrap();
-            d.cmd_pipeline_barrier(
-                cb2,
-                vk::PipelineStageFlags::TOP_OF_PIPE,
-                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[],
-                &[to_colour[0].image(images[i as usize])],
-            );
+            to_color_attachment(d, cb2, &[images[i as usize]], target_layers);
             let colour = [vk::RenderingAttachmentInfo::default()
                 .image_view(target)
                 .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
