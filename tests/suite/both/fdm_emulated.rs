@@ -44,7 +44,7 @@ use crate::both::fdm_vulkan::{
     app, apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
     VALIDATED, WIDTH,
 };
-use crate::support::device::{env, Env};
+use crate::support::device::{allocate, env, resettable_pool, Env};
 use crate::support::level_info;
 use crate::support::vulkan::{spv, stages, Fixed, FRAGMENT, VERTEX};
 
@@ -272,22 +272,8 @@ impl Renderer {
                     None,
                 )
                 .expect("vkCreateGraphicsPipelines")[0];
-            let pool = d
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default()
-                        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                        .queue_family_index(v.family),
-                    None,
-                )
-                .expect("vkCreateCommandPool");
-            let cb = d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .expect("vkAllocateCommandBuffers")[0];
+            let pool = resettable_pool(d, v.family);
+            let cb = allocate(d, pool);
             let fence = d
                 .create_fence(&vk::FenceCreateInfo::default(), None)
                 .expect("vkCreateFence");

@@ -21,6 +21,7 @@ use openxr_sys as xr;
 use parking_lot::Mutex;
 use xr::Handle;
 
+use crate::support::device::{allocate, resettable_pool};
 use crate::support::level_info;
 
 /// Held by each test that creates a validated device, so the messages are that test's own.
@@ -108,22 +109,8 @@ impl Readback {
     fn new(v: &Vulkan, size: u64) -> Readback {
         let d = &v.device;
         unsafe {
-            let pool = d
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default()
-                        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                        .queue_family_index(v.family),
-                    None,
-                )
-                .unwrap();
-            let cb = d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .unwrap()[0];
+            let pool = resettable_pool(d, v.family);
+            let cb = allocate(d, pool);
             let buffer = d
                 .create_buffer(
                     &vk::BufferCreateInfo::default()

@@ -20,7 +20,6 @@
 use std::ffi::c_void;
 use std::ptr::null_mut;
 
-use ash::vk;
 use fovea_harness::skip;
 use fovea_harness::vulkan::{self, pick_lavapipe, take_messages, Vulkan};
 use fovea_model::density::{Level, Pattern};
@@ -35,7 +34,7 @@ use crate::both::fdm_vulkan::{
     app, apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
     VALIDATED, WIDTH,
 };
-use crate::support::device::{env, Env};
+use crate::support::device::{allocate, env, resettable_pool, Env};
 use crate::support::{in_own_process, level_info};
 
 /// Sessions per profile, and frames per session (three swapchain images: each drawn at least once).
@@ -84,27 +83,10 @@ fn sessions(env: &Env, profile: Profile, inject: bool) -> bool {
         }
     };
     let d = &v.device;
-    // The application's own pool and the one command buffer every session records into.
-    // SAFETY: the structs live across the calls; destroyed below, after the device is idle.
-    let (pool, cb) = unsafe {
-        let pool = d
-            .create_command_pool(
-                &vk::CommandPoolCreateInfo::default()
-                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                    .queue_family_index(v.family),
-                None,
-            )
-            .expect("vkCreateCommandPool");
-        let cb = d
-            .allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(pool)
-                    .level(vk::CommandBufferLevel::PRIMARY)
-                    .command_buffer_count(1),
-            )
-            .expect("vkAllocateCommandBuffers")[0];
-        (pool, cb)
-    };
+    // The application's own pool and the one command buffer every session records into; destroyed
+    // below, after the device is idle.
+    let pool = resettable_pool(d, v.family);
+    let cb = allocate(d, pool);
     let create_swapchain: xr::pfn::CreateSwapchain = func(&app, "xrCreateSwapchain");
     let destroy_swapchain: xr::pfn::DestroySwapchain = func(&app, "xrDestroySwapchain");
     let destroy_session: xr::pfn::DestroySession = func(&app, "xrDestroySession");

@@ -642,15 +642,15 @@ fn command_pool(d: &ash::Device) -> vk::CommandPool {
     .expect("vkCreateCommandPool")
 }
 
-/// A command pool on queue family 0 of `d` whose command buffers may be reset one by one
+/// A command pool on queue family `family` of `d` whose command buffers may be reset one by one
 /// (`VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT`); the caller destroys it.
-pub fn resettable_pool(d: &ash::Device) -> vk::CommandPool {
+pub fn resettable_pool(d: &ash::Device, family: u32) -> vk::CommandPool {
     // SAFETY: `d` is alive (a borrowed device); the struct lives across the call.
     unsafe {
         d.create_command_pool(
             &vk::CommandPoolCreateInfo::default()
                 .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                .queue_family_index(0),
+                .queue_family_index(family),
             None,
         )
     }

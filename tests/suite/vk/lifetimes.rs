@@ -129,7 +129,7 @@ fn cycles(env: &Env, vk: &Vk, profile: Profile, n: u32, passes: &[Pass], resets:
     );
     let (color, color_memory, color_view) =
         dev.image(COLOR, SIZE, 1, vk::ImageUsageFlags::COLOR_ATTACHMENT);
-    let pool = resettable_pool(d);
+    let pool = resettable_pool(d, 0);
     let mut cb = allocate(d, pool);
     let mut alive = Alive::default();
     alive.add_counted(env);
@@ -443,7 +443,7 @@ fn definitions_outlive_a_long_run() {
 
         // The long run: more barriers than twice the events the double keeps (it trims them
         // once there are twice as many).
-        let pool = resettable_pool(d);
+        let pool = resettable_pool(d, 0);
         let cb = allocate(d, pool);
         let barrier = [vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE)

@@ -15,7 +15,7 @@ const FSR_STAGE: vk::PipelineStageFlags =
 
 /// A resettable pool on queue family 0 and one primary command buffer from it.
 fn pool_and_buffer(d: &ash::Device) -> (vk::CommandPool, vk::CommandBuffer) {
-    let pool = resettable_pool(d);
+    let pool = resettable_pool(d, 0);
     (pool, allocate(d, pool))
 }
 
