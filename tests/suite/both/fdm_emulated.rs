@@ -33,7 +33,7 @@ use std::ptr::{null, null_mut};
 use ash::vk;
 use ash::vk::Handle as _;
 use fovea_harness::vulkan::{self, assert_no_messages, pick_lavapipe, take_messages, Vulkan};
-use fovea_harness::{skip, App};
+use fovea_harness::App;
 use fovea_model::density::{self, Grid, Level, Pattern, Rect, View};
 use fovea_model::{shading_rate, Fov};
 use fovea_vkdouble::Profile;
@@ -41,8 +41,8 @@ use openxr_sys as xr;
 use xr::Handle as _;
 
 use crate::both::fdm_vulkan::{
-    app, apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
-    VALIDATED, WIDTH,
+    app, apply_profile, enumerate, func, running_session, swapchain_info, vulkan_or_skip, Frame,
+    FDM_BIT, HEIGHT, VALIDATED, WIDTH,
 };
 use crate::support::device::{allocate, env, resettable_pool, Env};
 use crate::support::level_info;
@@ -621,14 +621,8 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
         multiview: true,
         ..Default::default()
     };
-    let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
-    {
-        Ok(v) => v,
-        Err(why) => {
-            assert_eq!(app.destroy(), xr::Result::SUCCESS);
-            skip(&why);
-            return false;
-        }
+    let Some((app, v)) = vulkan_or_skip(&env.entry, app, sys, &options) else {
+        return false;
     };
     // fovea's xrCreateVulkanDeviceKHR asked for density maps; the driver got shading rates.
     let devices = env.double.events("device");

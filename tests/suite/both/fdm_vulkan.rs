@@ -34,6 +34,25 @@ pub(crate) const HEIGHT: u32 = 500;
 /// lavapipe has no VK_EXT_fragment_density_map: fovea's documented default texel size.
 const TEXEL: [u32; 2] = fovea_model::maps::DEFAULT_TEXEL;
 
+/// The application's VkInstance and VkDevice made through `app`'s runtime
+/// (`XR_KHR_vulkan_enable2`) from `entry` as `options` says, with `app` handed back; `None` after a
+/// skip where the system cannot make them, with `app`'s instance destroyed first.
+pub(crate) fn vulkan_or_skip(
+    entry: &ash::Entry,
+    app: App,
+    sys: xr::SystemId,
+    options: &vulkan::Options<'_>,
+) -> Option<(App, Vulkan)> {
+    match Vulkan::through_xr_with(entry, app.chain.gipa(), app.instance, sys, options) {
+        Ok(v) => Some((app, v)),
+        Err(why) => {
+            assert_eq!(app.destroy(), xr::Result::SUCCESS);
+            skip(&why);
+            None
+        }
+    }
+}
+
 /// The application's VkInstance and VkDevice through the runtime, under the validation layer, or
 /// `None` after a skip.
 fn vulkan_through_xr(app: &App, sys: xr::SystemId) -> Option<Vulkan> {

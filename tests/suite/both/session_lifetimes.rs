@@ -20,8 +20,7 @@
 use std::ffi::c_void;
 use std::ptr::null_mut;
 
-use fovea_harness::skip;
-use fovea_harness::vulkan::{self, pick_lavapipe, take_messages, Vulkan};
+use fovea_harness::vulkan::{self, pick_lavapipe, take_messages};
 use fovea_model::density::{Level, Pattern};
 use fovea_vkdouble::Profile;
 use openxr_sys as xr;
@@ -31,8 +30,8 @@ use crate::both::fdm_emulated::{
     color_images, expected_codes, rates_drawn, release, Layout, Renderer,
 };
 use crate::both::fdm_vulkan::{
-    app, apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
-    VALIDATED, WIDTH,
+    app, apply_profile, enumerate, func, running_session, swapchain_info, vulkan_or_skip, Frame,
+    FDM_BIT, HEIGHT, VALIDATED, WIDTH,
 };
 use crate::support::device::{allocate, env, resettable_pool, Env};
 use crate::support::{in_own_process, level_info};
@@ -73,14 +72,8 @@ fn sessions(env: &Env, profile: Profile, inject: bool) -> bool {
         multiview: true,
         ..Default::default()
     };
-    let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
-    {
-        Ok(v) => v,
-        Err(why) => {
-            assert_eq!(app.destroy(), xr::Result::SUCCESS);
-            skip(&why);
-            return false;
-        }
+    let Some((app, v)) = vulkan_or_skip(&env.entry, app, sys, &options) else {
+        return false;
     };
     let d = &v.device;
     // The application's own pool and the one command buffer every session records into; destroyed
