@@ -398,6 +398,22 @@ pub fn fdm_features() -> vk::PhysicalDeviceFragmentDensityMapFeaturesEXT<'static
         .fragment_density_map_non_subsampled_images(true)
 }
 
+/// The double's device on `profile` as fovea's injection model takes it: the texel, whether its
+/// maps are layered, the largest fragment and the rates it offers for one sample.
+pub fn inject_device(profile: Profile) -> fovea_model::inject::Device {
+    fovea_model::inject::Device {
+        texel: [profile.texel().width, profile.texel().height],
+        layered: profile.layered(),
+        max_fragment: [profile.max_fragment(); 2],
+        rates: profile
+            .rates()
+            .iter()
+            .filter(|(_, s)| s.contains(vk::SampleCountFlags::TYPE_1))
+            .map(|(e, _)| [e.width, e.height])
+            .collect(),
+    }
+}
+
 /// A test device: one queue of family 0, a command pool on it, and the physical device's memory
 /// types. Made by [`Dev::new`]; torn down by [`Dev::destroy`].
 pub struct Dev {
