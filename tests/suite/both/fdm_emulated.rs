@@ -606,14 +606,20 @@ pub(crate) fn release(
     }
 }
 
-/// One profile end to end; false after a skip.
-fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
-    let what = format!("{} {layout:?}", profile.name());
+/// A run's start on `profile`: the double's records and validation's messages from before cleared,
+/// an application through fovea on `XR_KHR_vulkan_enable2` (with `foveation`, enabling the
+/// `XR_FB_foveation` extensions too), its system, and its multiview Vulkan under validation and the double;
+/// `None` after a skip.
+pub(crate) fn start(
+    env: &Env,
+    profile: Profile,
+    foveation: bool,
+) -> Option<(App, xr::SystemId, Vulkan)> {
     env.double.set_profile(Some(profile));
     crate::support::device::assert_no_double_errors(env);
     env.double.clear();
     take_messages();
-    let app = app("XR_KHR_vulkan_enable2", true);
+    let app = app("XR_KHR_vulkan_enable2", foveation);
     let sys = app.system();
     let layers = [vulkan::VALIDATION_LAYER, fovea_vkdouble::LAYER_NAME];
     let options = vulkan::Options {
@@ -621,7 +627,14 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
         multiview: true,
         ..Default::default()
     };
-    let Some((app, v)) = vulkan_or_skip(&env.entry, app, sys, &options) else {
+    let (app, v) = vulkan_or_skip(&env.entry, app, sys, &options)?;
+    Some((app, sys, v))
+}
+
+/// One profile end to end; false after a skip.
+fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
+    let what = format!("{} {layout:?}", profile.name());
+    let Some((app, sys, v)) = start(env, profile, true) else {
         return false;
     };
     // fovea's xrCreateVulkanDeviceKHR asked for density maps; the driver got shading rates.

@@ -20,18 +20,18 @@
 use std::ffi::c_void;
 use std::ptr::null_mut;
 
-use fovea_harness::vulkan::{self, pick_lavapipe, take_messages};
+use fovea_harness::vulkan::{self, pick_lavapipe};
 use fovea_model::density::{Level, Pattern};
 use fovea_vkdouble::Profile;
 use openxr_sys as xr;
 use xr::Handle as _;
 
 use crate::both::fdm_emulated::{
-    color_images, expected_codes, rates_drawn, release, Layout, Renderer,
+    color_images, expected_codes, rates_drawn, release, start, Layout, Renderer,
 };
 use crate::both::fdm_vulkan::{
-    app, apply_profile, enumerate, func, running_session, swapchain_info, vulkan_or_skip, Frame,
-    FDM_BIT, HEIGHT, VALIDATED, WIDTH,
+    apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
+    VALIDATED, WIDTH,
 };
 use crate::support::device::{allocate, env, resettable_pool, Env};
 use crate::support::{in_own_process, level_info};
@@ -60,19 +60,7 @@ fn sessions(env: &Env, profile: Profile, inject: bool) -> bool {
         profile.name(),
         if inject { " injected" } else { "" }
     );
-    env.double.set_profile(Some(profile));
-    crate::support::device::assert_no_double_errors(env);
-    env.double.clear();
-    take_messages();
-    let app = app("XR_KHR_vulkan_enable2", !inject);
-    let sys = app.system();
-    let layers = [vulkan::VALIDATION_LAYER, fovea_vkdouble::LAYER_NAME];
-    let options = vulkan::Options {
-        layers: &layers,
-        multiview: true,
-        ..Default::default()
-    };
-    let Some((app, v)) = vulkan_or_skip(&env.entry, app, sys, &options) else {
+    let Some((app, sys, v)) = start(env, profile, !inject) else {
         return false;
     };
     let d = &v.device;
