@@ -352,3 +352,14 @@ pub unsafe fn begin_pass(
         );
     }
 }
+
+/// A colour attachment of `view` for `vkCmdBeginRendering`, in `COLOR_ATTACHMENT_OPTIMAL`, cleared
+/// to [`CLEAR`] and stored.
+pub fn cleared_color(view: vk::ImageView) -> vk::RenderingAttachmentInfo<'static> {
+    vk::RenderingAttachmentInfo::default()
+        .image_view(view)
+        .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+        .load_op(vk::AttachmentLoadOp::CLEAR)
+        .store_op(vk::AttachmentStoreOp::STORE)
+        .clear_value(CLEAR[0])
+}

@@ -19,7 +19,7 @@ use fovea_vkdouble::Profile;
 use crate::support::device::{assert_only_stage_false_positives, env, Env, Vk};
 use crate::support::device::{ComputePipeline, Dev};
 use crate::support::vulkan::{
-    density_pass, framebuffer, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
+    cleared_color, density_pass, framebuffer, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
 };
 use crate::vk::convert::{codes_of, converting_device, model_codes, read_at_submit, Buffer};
 
@@ -766,12 +766,7 @@ fn a_secondary_executed_from_two_primaries_shades_with_each_primarys_map() {
                 .inheritance_info(&inheritance),
         )
         .expect("vkBeginCommandBuffer (secondary)");
-        let color_att = [vk::RenderingAttachmentInfo::default()
-            .image_view(app.color.2)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
-            .store_op(vk::AttachmentStoreOp::STORE)
-            .clear_value(CLEAR[0])];
+        let color_att = [cleared_color(app.color.2)];
         let mut density_att = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
             .image_view(app.map.2)
             .image_layout(FDM_LAYOUT);

@@ -22,8 +22,8 @@ use crate::support::device::{
     assert_only_stage_false_positives, env, with_fovea, ComputePipeline, Dev, Env, Features, Vk,
 };
 use crate::support::vulkan::{
-    allocate_info, density_pass, range, to_color_attachment, AREA, CLEAR, COLOR, DENSITY,
-    FDM_LAYOUT, SIZE,
+    allocate_info, cleared_color, density_pass, range, to_color_attachment, AREA, CLEAR, COLOR,
+    DENSITY, FDM_LAYOUT, SIZE,
 };
 
 /// The application's compute shader: `value[index] = word` (push constants `{word, index}`).
@@ -470,12 +470,7 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32, lose: b
                     made = Some((rp, fb));
                 }
                 Begin::Rendering => {
-                    let color_att = [vk::RenderingAttachmentInfo::default()
-                        .image_view(color_view)
-                        .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                        .load_op(vk::AttachmentLoadOp::CLEAR)
-                        .store_op(vk::AttachmentStoreOp::STORE)
-                        .clear_value(CLEAR[0])];
+                    let color_att = [cleared_color(color_view)];
                     let mut density_att =
                         vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
                             .image_view(map_view)

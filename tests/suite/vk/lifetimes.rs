@@ -21,8 +21,8 @@ use fovea_vkdouble::Profile;
 
 use crate::support::device::{allocate, env, resettable_pool, take_real_messages, Env, Vk};
 use crate::support::vulkan::{
-    begin_pass, density_pass, draw_fullscreen, framebuffer, spv, stages, to_color_attachment,
-    Fixed, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+    begin_pass, cleared_color, density_pass, draw_fullscreen, framebuffer, spv, stages,
+    to_color_attachment, Fixed, AREA, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk::convert::{codes_of, converting_device, model_codes, read_at_submit};
 
@@ -183,12 +183,7 @@ fn cycles(env: &Env, vk: &Vk, profile: Profile, n: u32, passes: &[Pass], resets:
         }
         let made = match pass {
             Pass::Rendering => {
-                let color_att = [vk::RenderingAttachmentInfo::default()
-                    .image_view(color_view)
-                    .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                    .load_op(vk::AttachmentLoadOp::CLEAR)
-                    .store_op(vk::AttachmentStoreOp::STORE)
-                    .clear_value(CLEAR[0])];
+                let color_att = [cleared_color(color_view)];
                 let mut density = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
                     .image_view(map_view)
                     .image_layout(FDM_LAYOUT);

@@ -17,7 +17,8 @@ use xr::Handle as _;
 
 use crate::both::fdm_vulkan::{func, running_session, Frame};
 use crate::support::vulkan::{
-    draw_fullscreen, range, spv, stages, to_color_attachment, Fixed, FRAGMENT, VERTEX,
+    cleared_color, draw_fullscreen, range, spv, stages, to_color_attachment, Fixed, FRAGMENT,
+    VERTEX,
 };
 
 use super::outcome::Outcome;
@@ -742,12 +743,7 @@ pub(super) fn run_with(
                 d.cmd_end_render_pass(cb);
                 continue;
             }
-            let colour = [vk::RenderingAttachmentInfo::default()
-                .image_view(view)
-                .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .clear_value(crate::support::vulkan::CLEAR[0])];
+            let colour = [cleared_color(view)];
             let mut ri = vk::RenderingInfo::default()
                 .render_area(vk::Rect2D {
                     offset: vk::Offset2D::default(),
@@ -818,12 +814,7 @@ pub(super) fn run_with(
             d.begin_command_buffer(cb2, &vk::CommandBufferBeginInfo::default())
                 .unwrap();
             to_color_attachment(d, cb2, &[images[i as usize]], target_layers);
-            let colour = [vk::RenderingAttachmentInfo::default()
-                .image_view(target)
-                .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .clear_value(crate::support::vulkan::CLEAR[0])];
+            let colour = [cleared_color(target)];
             let ri = vk::RenderingInfo::default()
                 .render_area(vk::Rect2D {
                     offset: vk::Offset2D::default(),

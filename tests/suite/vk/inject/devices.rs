@@ -27,7 +27,8 @@ use serde_json::{json, Value};
 
 use crate::support::in_own_process;
 use crate::support::vulkan::{
-    draw_fullscreen, range, spv, stages, to_color_attachment, Fixed, FRAGMENT, VERTEX,
+    cleared_color, draw_fullscreen, range, spv, stages, to_color_attachment, Fixed, FRAGMENT,
+    VERTEX,
 };
 
 const FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
@@ -128,12 +129,7 @@ unsafe fn render(
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .expect("begin");
         to_color_attachment(d, cb, &[image], 1);
-        let colour = [vk::RenderingAttachmentInfo::default()
-            .image_view(view)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
-            .store_op(vk::AttachmentStoreOp::STORE)
-            .clear_value(crate::support::vulkan::CLEAR[0])];
+        let colour = [cleared_color(view)];
         let ri = vk::RenderingInfo::default()
             .render_area(vk::Rect2D {
                 offset: vk::Offset2D::default(),
