@@ -33,7 +33,7 @@ use std::ptr::{null, null_mut};
 use ash::vk;
 use ash::vk::Handle as _;
 use fovea_harness::vulkan::{self, assert_no_messages, pick_lavapipe, take_messages, Vulkan};
-use fovea_harness::{skip, App};
+use fovea_harness::App;
 use fovea_model::density::{self, Grid, Level, Pattern, Rect, View};
 use fovea_model::{shading_rate, Fov};
 use fovea_vkdouble::Profile;
@@ -41,10 +41,10 @@ use openxr_sys as xr;
 use xr::Handle as _;
 
 use crate::both::fdm_vulkan::{
-    app, apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
-    VALIDATED, WIDTH,
+    app, apply_profile, enumerate, func, running_session, swapchain_info, vulkan_or_skip, Frame,
+    FDM_BIT, HEIGHT, VALIDATED, WIDTH,
 };
-use crate::support::device::{env, Env};
+use crate::support::device::{allocate, env, resettable_pool, Env};
 use crate::support::level_info;
 use crate::support::vulkan::{spv, stages, Fixed, FRAGMENT, VERTEX};
 
@@ -272,22 +272,8 @@ impl Renderer {
                     None,
                 )
                 .expect("vkCreateGraphicsPipelines")[0];
-            let pool = d
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default()
-                        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                        .queue_family_index(v.family),
-                    None,
-                )
-                .expect("vkCreateCommandPool");
-            let cb = d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .expect("vkAllocateCommandBuffers")[0];
+            let pool = resettable_pool(d, v.family);
+            let cb = allocate(d, pool);
             let fence = d
                 .create_fence(&vk::FenceCreateInfo::default(), None)
                 .expect("vkCreateFence");
@@ -620,14 +606,20 @@ pub(crate) fn release(
     }
 }
 
-/// One profile end to end; false after a skip.
-fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
-    let what = format!("{} {layout:?}", profile.name());
+/// A run's start on `profile`: the double's records and validation's messages from before cleared,
+/// an application through fovea on `XR_KHR_vulkan_enable2` (with `foveation`, enabling the
+/// `XR_FB_foveation` extensions too), its system, and its multiview Vulkan under validation and the double;
+/// `None` after a skip.
+pub(crate) fn start(
+    env: &Env,
+    profile: Profile,
+    foveation: bool,
+) -> Option<(App, xr::SystemId, Vulkan)> {
     env.double.set_profile(Some(profile));
     crate::support::device::assert_no_double_errors(env);
     env.double.clear();
     take_messages();
-    let app = app("XR_KHR_vulkan_enable2", true);
+    let app = app("XR_KHR_vulkan_enable2", foveation);
     let sys = app.system();
     let layers = [vulkan::VALIDATION_LAYER, fovea_vkdouble::LAYER_NAME];
     let options = vulkan::Options {
@@ -635,14 +627,15 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
         multiview: true,
         ..Default::default()
     };
-    let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
-    {
-        Ok(v) => v,
-        Err(why) => {
-            assert_eq!(app.destroy(), xr::Result::SUCCESS);
-            skip(&why);
-            return false;
-        }
+    let (app, v) = vulkan_or_skip(&env.entry, app, sys, &options)?;
+    Some((app, sys, v))
+}
+
+/// One profile end to end; false after a skip.
+fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
+    let what = format!("{} {layout:?}", profile.name());
+    let Some((app, sys, v)) = start(env, profile, true) else {
+        return false;
     };
     // fovea's xrCreateVulkanDeviceKHR asked for density maps; the driver got shading rates.
     let devices = env.double.events("device");

@@ -21,6 +21,7 @@ use openxr_sys as xr;
 use parking_lot::Mutex;
 use xr::Handle;
 
+use crate::support::device::{allocate, resettable_pool};
 use crate::support::level_info;
 
 /// Held by each test that creates a validated device, so the messages are that test's own.
@@ -32,6 +33,25 @@ pub(crate) const WIDTH: u32 = 640;
 pub(crate) const HEIGHT: u32 = 500;
 /// lavapipe has no VK_EXT_fragment_density_map: fovea's documented default texel size.
 const TEXEL: [u32; 2] = fovea_model::maps::DEFAULT_TEXEL;
+
+/// The application's VkInstance and VkDevice made through `app`'s runtime
+/// (`XR_KHR_vulkan_enable2`) from `entry` as `options` says, with `app` handed back; `None` after a
+/// skip where the system cannot make them, with `app`'s instance destroyed first.
+pub(crate) fn vulkan_or_skip(
+    entry: &ash::Entry,
+    app: App,
+    sys: xr::SystemId,
+    options: &vulkan::Options<'_>,
+) -> Option<(App, Vulkan)> {
+    match Vulkan::through_xr_with(entry, app.chain.gipa(), app.instance, sys, options) {
+        Ok(v) => Some((app, v)),
+        Err(why) => {
+            assert_eq!(app.destroy(), xr::Result::SUCCESS);
+            skip(&why);
+            None
+        }
+    }
+}
 
 /// The application's VkInstance and VkDevice through the runtime, under the validation layer, or
 /// `None` after a skip.
@@ -108,22 +128,8 @@ impl Readback {
     fn new(v: &Vulkan, size: u64) -> Readback {
         let d = &v.device;
         unsafe {
-            let pool = d
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default()
-                        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                        .queue_family_index(v.family),
-                    None,
-                )
-                .unwrap();
-            let cb = d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .unwrap()[0];
+            let pool = resettable_pool(d, v.family);
+            let cb = allocate(d, pool);
             let buffer = d
                 .create_buffer(
                     &vk::BufferCreateInfo::default()

@@ -47,7 +47,7 @@ use fovea_harness::app::API_1_0;
 use fovea_harness::sim::control::{EyeGaze, SimConfig};
 use fovea_harness::sim::gaze_script::GazeScript;
 use fovea_harness::vulkan::{self, pick_lavapipe, take_messages, Vulkan};
-use fovea_harness::{skip, App, Chain};
+use fovea_harness::{App, Chain};
 use fovea_model::density::{Grid, Level, Pattern};
 use fovea_model::gaze::Tracking;
 use fovea_model::shading_rate;
@@ -61,8 +61,8 @@ use crate::both::fdm_emulated::{
     color_images, expected_codes, rates_drawn, release, Layout, Renderer,
 };
 use crate::both::fdm_vulkan::{
-    apply_profile, enumerate, func, running_session, swapchain_info, whole_view, Frame, FDM_BIT,
-    HEIGHT, VALIDATED, WIDTH,
+    apply_profile, enumerate, func, running_session, swapchain_info, vulkan_or_skip, whole_view,
+    Frame, FDM_BIT, HEIGHT, VALIDATED, WIDTH,
 };
 use crate::support::device::env;
 use crate::support::gaze_log::{located, Located};
@@ -209,15 +209,7 @@ fn run(
             ..Default::default()
         }
     };
-    let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
-    {
-        Ok(v) => v,
-        Err(why) => {
-            assert_eq!(app.destroy(), xr::Result::SUCCESS);
-            skip(&why);
-            return None;
-        }
-    };
+    let (app, v) = vulkan_or_skip(&env.entry, app, sys, &options)?;
     let (session, space) = running_session(&app, sys, &v);
     attach_a_set(&app, session);
     let create_swapchain: xr::pfn::CreateSwapchain = func(&app, "xrCreateSwapchain");

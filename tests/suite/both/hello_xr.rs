@@ -36,6 +36,7 @@ use std::time::Duration;
 use fovea_abi::log_target;
 use fovea_harness::{skip, CORE_VALIDATION_LAYER, FOVEA_LAYER};
 
+use crate::support::device::inject_device;
 use crate::support::{root, Manifests, CORE_VALIDATION_MANIFEST, DEBIAN_LAYERS};
 
 /// Frames the runtime asks for before it requests exit (the "at least 300 frames").
@@ -695,17 +696,7 @@ fn hello_xr_eye_passes_carry_the_injected_maps(graphics: &str) {
         images.dedup();
         assert_eq!(images.len(), 2, "{level:?}: one map per eye: {images:?}");
         // The codes each map held when the last submit read it.
-        let device_model = fovea_model::inject::Device {
-            texel: [16, 16],
-            layered: true,
-            max_fragment: [4, 4],
-            rates: fovea_vkdouble::Profile::Nvidia
-                .rates()
-                .iter()
-                .filter(|(_, s)| s.contains(ash::vk::SampleCountFlags::TYPE_1))
-                .map(|(e, _)| [e.width, e.height])
-                .collect(),
-        };
+        let device_model = inject_device(fovea_vkdouble::Profile::Nvidia);
         let mut all = [None; fovea_model::maps::MAX_VIEWS];
         all[0] = Some(fovs[0]);
         all[1] = Some(fovs[1]);

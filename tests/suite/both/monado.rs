@@ -40,7 +40,7 @@ use fovea_model::projection::symmetric_fov;
 use fovea_model::Fov;
 
 use crate::both::hello_xr::{self, Run, SYNC_VALIDATION, VK_INSTANCE_LINE, VK_MANIFEST};
-use crate::support::{root, Manifests, CORE_VALIDATION_MANIFEST, DEBIAN_LAYERS};
+use crate::support::{fovs_of, root, Manifests, CORE_VALIDATION_MANIFEST, DEBIAN_LAYERS};
 
 /// Monado's runtime manifest (libopenxr1-monado).
 const RUNTIME_JSON: &str = "/usr/share/openxr/1/openxr_monado.json";
@@ -582,18 +582,7 @@ impl ExampleRun {
 
     /// The FOVs the example located (left, right, up, down), exactly.
     fn fovs(&self) -> Vec<Fov> {
-        self.field("per view) ", '\n')
-            .split_whitespace()
-            .map(|v| {
-                let a: Vec<f32> = v.split(',').map(|x| x.parse().unwrap()).collect();
-                Fov {
-                    left: a[0],
-                    right: a[1],
-                    up: a[2],
-                    down: a[3],
-                }
-            })
-            .collect()
+        fovs_of(self.field("per view) ", '\n'))
     }
 
     /// Each density map read back (level index, both layers as R8G8 in the model's layout), and the

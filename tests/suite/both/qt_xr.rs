@@ -32,7 +32,8 @@ use fovea_model::inject::Views;
 use fovea_model::Fov;
 
 use crate::both::monado::{self, Service};
-use crate::support::Manifests;
+use crate::support::device::inject_device;
+use crate::support::{fovs_of, Manifests};
 
 /// Debian 13's build of the example (qt6-quick3d-examples).
 const XR_SIMPLE: &str = "/usr/lib/x86_64-linux-gnu/qt6/examples/quick3d/xr_simple/bin/xr_simple";
@@ -133,19 +134,7 @@ impl QtRun {
             .rfind(|l| l.contains(key))
             .unwrap_or_else(|| panic!("no FOVs line\n{}", self.transcript()));
         let text = &line[line.find(key).unwrap() + key.len()..];
-        let fovs: Vec<Fov> = text
-            .trim_end_matches('"')
-            .split_whitespace()
-            .map(|v| {
-                let a: Vec<f32> = v.split(',').map(|x| x.parse().unwrap()).collect();
-                Fov {
-                    left: a[0],
-                    right: a[1],
-                    up: a[2],
-                    down: a[3],
-                }
-            })
-            .collect();
+        let fovs = fovs_of(text.trim_end_matches('"'));
         assert_eq!(fovs.len(), 2, "{line}");
         [fovs[0], fovs[1]]
     }
@@ -248,21 +237,6 @@ fn run(m: &monado::Monado, xvfb: &Path, gdb: &Path, label: &str, env: &[(&str, &
     }
 }
 
-/// The double's NVIDIA-like device as the model describes it.
-fn nvidia() -> fovea_model::inject::Device {
-    fovea_model::inject::Device {
-        texel: [16, 16],
-        layered: true,
-        max_fragment: [4, 4],
-        rates: fovea_vkdouble::Profile::Nvidia
-            .rates()
-            .iter()
-            .filter(|(_, s)| s.contains(ash::vk::SampleCountFlags::TYPE_1))
-            .map(|(e, _)| [e.width, e.height])
-            .collect(),
-    }
-}
-
 #[test]
 fn qt_xr_simple_on_monado_is_foveated_at_the_level_it_applied() {
     let Some(m) = monado::monado() else {
@@ -342,7 +316,7 @@ fn qt_xr_simple_on_monado_is_foveated_at_the_level_it_applied() {
             vertical_offset_deg: 0.0,
         };
         let (texels, layers, want) = fovea_model::inject::codes(
-            &nvidia(),
+            &inject_device(fovea_vkdouble::Profile::Nvidia),
             Views::Layers { first: 0, count: 2 },
             extent,
             &all,

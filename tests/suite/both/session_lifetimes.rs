@@ -20,22 +20,20 @@
 use std::ffi::c_void;
 use std::ptr::null_mut;
 
-use ash::vk;
-use fovea_harness::skip;
-use fovea_harness::vulkan::{self, pick_lavapipe, take_messages, Vulkan};
+use fovea_harness::vulkan::{self, pick_lavapipe};
 use fovea_model::density::{Level, Pattern};
 use fovea_vkdouble::Profile;
 use openxr_sys as xr;
 use xr::Handle as _;
 
 use crate::both::fdm_emulated::{
-    color_images, expected_codes, rates_drawn, release, Layout, Renderer,
+    color_images, expected_codes, rates_drawn, release, start, Layout, Renderer,
 };
 use crate::both::fdm_vulkan::{
-    app, apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
+    apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
     VALIDATED, WIDTH,
 };
-use crate::support::device::{env, Env};
+use crate::support::device::{allocate, env, resettable_pool, Env};
 use crate::support::{in_own_process, level_info};
 
 /// Sessions per profile, and frames per session (three swapchain images: each drawn at least once).
@@ -62,49 +60,14 @@ fn sessions(env: &Env, profile: Profile, inject: bool) -> bool {
         profile.name(),
         if inject { " injected" } else { "" }
     );
-    env.double.set_profile(Some(profile));
-    crate::support::device::assert_no_double_errors(env);
-    env.double.clear();
-    take_messages();
-    let app = app("XR_KHR_vulkan_enable2", !inject);
-    let sys = app.system();
-    let layers = [vulkan::VALIDATION_LAYER, fovea_vkdouble::LAYER_NAME];
-    let options = vulkan::Options {
-        layers: &layers,
-        multiview: true,
-        ..Default::default()
-    };
-    let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
-    {
-        Ok(v) => v,
-        Err(why) => {
-            assert_eq!(app.destroy(), xr::Result::SUCCESS);
-            skip(&why);
-            return false;
-        }
+    let Some((app, sys, v)) = start(env, profile, !inject) else {
+        return false;
     };
     let d = &v.device;
-    // The application's own pool and the one command buffer every session records into.
-    // SAFETY: the structs live across the calls; destroyed below, after the device is idle.
-    let (pool, cb) = unsafe {
-        let pool = d
-            .create_command_pool(
-                &vk::CommandPoolCreateInfo::default()
-                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                    .queue_family_index(v.family),
-                None,
-            )
-            .expect("vkCreateCommandPool");
-        let cb = d
-            .allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(pool)
-                    .level(vk::CommandBufferLevel::PRIMARY)
-                    .command_buffer_count(1),
-            )
-            .expect("vkAllocateCommandBuffers")[0];
-        (pool, cb)
-    };
+    // The application's own pool and the one command buffer every session records into; destroyed
+    // below, after the device is idle.
+    let pool = resettable_pool(d, v.family);
+    let cb = allocate(d, pool);
     let create_swapchain: xr::pfn::CreateSwapchain = func(&app, "xrCreateSwapchain");
     let destroy_swapchain: xr::pfn::DestroySwapchain = func(&app, "xrDestroySwapchain");
     let destroy_session: xr::pfn::DestroySession = func(&app, "xrDestroySession");

@@ -113,8 +113,9 @@ pub fn attach_set(lp: &HeadlessLoop, set: xr::ActionSet) {
     );
 }
 
-/// The application's xrSyncActions (`sync`, its own pointer) of its own `set`.
-pub fn sync_set(lp: &HeadlessLoop, sync: xr::pfn::SyncActions, set: xr::ActionSet) {
+/// The application's xrSyncActions (`sync`, its own pointer) of `set` alone, its result; the
+/// application's struct is untouched.
+pub fn sync_of(lp: &HeadlessLoop, sync: xr::pfn::SyncActions, set: xr::ActionSet) -> xr::Result {
     let active = [xr::ActiveActionSet {
         action_set: set,
         subaction_path: xr::Path::NULL,
@@ -125,12 +126,64 @@ pub fn sync_set(lp: &HeadlessLoop, sync: xr::pfn::SyncActions, set: xr::ActionSe
         count_active_action_sets: 1,
         active_action_sets: active.as_ptr(),
     };
-    // SAFETY: a live session and set; the struct lives across the call.
+    // SAFETY: a live session; the struct lives across the call.
     let r = unsafe { sync(lp.session, &info) };
+    assert_eq!(info.count_active_action_sets, 1, "untouched");
+    r
+}
+
+/// The application's xrSyncActions (`sync`, its own pointer) of its own `set`.
+pub fn sync_set(lp: &HeadlessLoop, sync: xr::pfn::SyncActions, set: xr::ActionSet) {
+    let r = sync_of(lp, sync, set);
     // Unfocused (the first frames) is a success code: input goes to the focused session only.
     assert!(
         [xr::Result::SUCCESS, xr::Result::SESSION_NOT_FOCUSED].contains(&r),
         "{r:?}"
     );
-    assert_eq!(info.count_active_action_sets, 1, "untouched");
+}
+
+/// The application's action space of its pose `action` (no subaction path, identity pose).
+pub fn action_space(lp: &HeadlessLoop, action: xr::Action) -> xr::Space {
+    let info = xr::ActionSpaceCreateInfo {
+        ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
+        next: std::ptr::null(),
+        action,
+        subaction_path: xr::Path::NULL,
+        pose_in_action_space: xr::Posef::IDENTITY,
+    };
+    let mut space = xr::Space::NULL;
+    // SAFETY: the type matches the name; a live session and action; the struct lives across the
+    // call.
+    unsafe {
+        let create: xr::pfn::CreateActionSpace = lp.func(c"xrCreateActionSpace");
+        assert_eq!(create(lp.session, &info, &mut space), xr::Result::SUCCESS);
+    }
+    space
+}
+
+/// The application's xrLocateSpace (`locate`, its own pointer) of `space` in `base` at the last
+/// frame's predicted display time, which succeeds.
+pub fn locate_at_display(
+    lp: &HeadlessLoop,
+    locate: xr::pfn::LocateSpace,
+    space: xr::Space,
+    base: xr::Space,
+) -> xr::SpaceLocation {
+    let mut loc = xr::SpaceLocation {
+        ty: xr::StructureType::SPACE_LOCATION,
+        next: std::ptr::null_mut(),
+        location_flags: xr::SpaceLocationFlags::EMPTY,
+        pose: xr::Posef::IDENTITY,
+    };
+    // SAFETY: live spaces; the struct lives across the call.
+    let r = unsafe {
+        locate(
+            space,
+            base,
+            lp.last_frame_state.predicted_display_time,
+            &mut loc,
+        )
+    };
+    assert_eq!(r, xr::Result::SUCCESS);
+    loc
 }

@@ -398,6 +398,22 @@ pub fn fdm_features() -> vk::PhysicalDeviceFragmentDensityMapFeaturesEXT<'static
         .fragment_density_map_non_subsampled_images(true)
 }
 
+/// The double's device on `profile` as fovea's injection model takes it: the texel, whether its
+/// maps are layered, the largest fragment and the rates it offers for one sample.
+pub fn inject_device(profile: Profile) -> fovea_model::inject::Device {
+    fovea_model::inject::Device {
+        texel: [profile.texel().width, profile.texel().height],
+        layered: profile.layered(),
+        max_fragment: [profile.max_fragment(); 2],
+        rates: profile
+            .rates()
+            .iter()
+            .filter(|(_, s)| s.contains(vk::SampleCountFlags::TYPE_1))
+            .map(|(e, _)| [e.width, e.height])
+            .collect(),
+    }
+}
+
 /// A test device: one queue of family 0, a command pool on it, and the physical device's memory
 /// types. Made by [`Dev::new`]; torn down by [`Dev::destroy`].
 pub struct Dev {
@@ -580,17 +596,9 @@ impl Dev {
         pool: vk::CommandPool,
         flags: vk::CommandBufferUsageFlags,
     ) -> vk::CommandBuffer {
+        let cb = allocate(&self.d, pool);
         // SAFETY: the pool is this device's and used by this thread only.
         unsafe {
-            let cb = self
-                .d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-                .expect("vkAllocateCommandBuffers")[0];
             self.d
                 .begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(flags))
                 .expect("vkBeginCommandBuffer");
@@ -648,6 +656,35 @@ fn command_pool(d: &ash::Device) -> vk::CommandPool {
         )
     }
     .expect("vkCreateCommandPool")
+}
+
+/// A command pool on queue family `family` of `d` whose command buffers may be reset one by one
+/// (`VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT`); the caller destroys it.
+pub fn resettable_pool(d: &ash::Device, family: u32) -> vk::CommandPool {
+    // SAFETY: `d` is alive (a borrowed device); the struct lives across the call.
+    unsafe {
+        d.create_command_pool(
+            &vk::CommandPoolCreateInfo::default()
+                .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
+                .queue_family_index(family),
+            None,
+        )
+    }
+    .expect("vkCreateCommandPool")
+}
+
+/// One primary command buffer from `pool` (`d`'s, used by this thread only).
+pub fn allocate(d: &ash::Device, pool: vk::CommandPool) -> vk::CommandBuffer {
+    // SAFETY: the pool is `d`'s and this thread's.
+    unsafe {
+        d.allocate_command_buffers(
+            &vk::CommandBufferAllocateInfo::default()
+                .command_pool(pool)
+                .level(vk::CommandBufferLevel::PRIMARY)
+                .command_buffer_count(1),
+        )
+    }
+    .expect("vkAllocateCommandBuffers")[0]
 }
 
 /// A compute pipeline entered at `main`, with one descriptor set (from a pool of its own) of one

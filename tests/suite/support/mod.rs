@@ -1,7 +1,7 @@
 //! What several of the suite's modules share: the repository's root and its Rust files, running a
 //! test in a process of its own, an application's own OpenXR actions, manifests pointed at this
-//! build, a running headless loop, the system's OpenXR layer folder, the gaze the layer logged, and
-//! the foveation structs most tests fill in.
+//! build, a running headless loop, the system's OpenXR layer folder, the gaze the layer logged, the
+//! FOVs a log line prints, and the foveation structs most tests fill in.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -18,6 +18,22 @@ pub mod process;
 pub mod vulkan;
 
 pub use process::in_own_process;
+
+/// The FOVs in `text`, separated by white space, each `left,right,up,down` in radians, as fovea's
+/// debug lines and the example print them.
+pub fn fovs_of(text: &str) -> Vec<fovea_model::Fov> {
+    text.split_whitespace()
+        .map(|v| {
+            let a: Vec<f32> = v.split(',').map(|x| x.parse().unwrap()).collect();
+            fovea_model::Fov {
+                left: a[0],
+                right: a[1],
+                up: a[2],
+                down: a[3],
+            }
+        })
+        .collect()
+}
 
 /// The repository's root (the layer package's folder).
 pub fn root() -> PathBuf {

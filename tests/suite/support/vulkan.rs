@@ -264,3 +264,102 @@ pub unsafe fn draw_fullscreen(d: &ash::Device, cb: vk::CommandBuffer, pipeline: 
         d.cmd_draw(cb, 3, 1, 0, 0);
     }
 }
+
+/// Records the barrier that takes each of `images` (`layers` layers, content undefined) to
+/// `COLOR_ATTACHMENT_OPTIMAL` before a pass clears and writes it.
+///
+/// # Safety
+/// `cb` must be recording on `d`; the images must be `d`'s.
+pub unsafe fn to_color_attachment(
+    d: &ash::Device,
+    cb: vk::CommandBuffer,
+    images: &[vk::Image],
+    layers: u32,
+) {
+    let barriers: Vec<_> = images
+        .iter()
+        .map(|&image| {
+            vk::ImageMemoryBarrier::default()
+                .image(image)
+                .subresource_range(range(0, layers))
+                .old_layout(vk::ImageLayout::UNDEFINED)
+                .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        })
+        .collect();
+    // SAFETY: the caller's promise; the barriers live across the call.
+    unsafe {
+        d.cmd_pipeline_barrier(
+            cb,
+            vk::PipelineStageFlags::TOP_OF_PIPE,
+            vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &barriers,
+        );
+    }
+}
+
+/// A framebuffer of `pass` over `views`, `side`×`side` and one layer.
+///
+/// # Safety
+/// `d` must be alive; `pass` and `views` must be `d`'s and fit each other.
+pub unsafe fn framebuffer(
+    d: &ash::Device,
+    pass: vk::RenderPass,
+    views: &[vk::ImageView],
+    side: u32,
+) -> vk::Framebuffer {
+    // SAFETY: the caller's promise; the struct lives across the call.
+    unsafe {
+        d.create_framebuffer(
+            &vk::FramebufferCreateInfo::default()
+                .render_pass(pass)
+                .attachments(views)
+                .width(side)
+                .height(side)
+                .layers(1),
+            None,
+        )
+    }
+    .expect("vkCreateFramebuffer")
+}
+
+/// Records `vkCmdBeginRenderPass2` of `pass` and `fb` over [`AREA`], clearing colour to [`CLEAR`],
+/// with the subpass's commands inline.
+///
+/// # Safety
+/// `cb` must be recording on `d` outside a pass; `pass` and `fb` must be `d`'s and fit [`AREA`].
+pub unsafe fn begin_pass(
+    d: &ash::Device,
+    cb: vk::CommandBuffer,
+    pass: vk::RenderPass,
+    fb: vk::Framebuffer,
+) {
+    // SAFETY: the caller's promise; the structs live across the call.
+    unsafe {
+        d.cmd_begin_render_pass2(
+            cb,
+            &vk::RenderPassBeginInfo::default()
+                .render_pass(pass)
+                .framebuffer(fb)
+                .render_area(AREA)
+                .clear_values(&CLEAR),
+            &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
+        );
+    }
+}
+
+/// A colour attachment of `view` for `vkCmdBeginRendering`, in `COLOR_ATTACHMENT_OPTIMAL`, cleared
+/// to [`CLEAR`] and stored.
+pub fn cleared_color(view: vk::ImageView) -> vk::RenderingAttachmentInfo<'static> {
+    vk::RenderingAttachmentInfo::default()
+        .image_view(view)
+        .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+        .load_op(vk::AttachmentLoadOp::CLEAR)
+        .store_op(vk::AttachmentStoreOp::STORE)
+        .clear_value(CLEAR[0])
+}

@@ -18,7 +18,9 @@ use fovea_vkdouble::Profile;
 
 use crate::support::device::{assert_only_stage_false_positives, env, Env, Vk};
 use crate::support::device::{ComputePipeline, Dev};
-use crate::support::vulkan::{density_pass, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE};
+use crate::support::vulkan::{
+    cleared_color, density_pass, framebuffer, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
+};
 use crate::vk::convert::{codes_of, converting_device, model_codes, read_at_submit, Buffer};
 
 /// `shaders/write_map.comp`: the application's compute path.
@@ -479,19 +481,7 @@ fn a_pass_that_moves_its_map_into_the_density_layout_keeps_the_apps_layouts() {
         dev.write(&staging, &bytes);
         let back: Buffer = dev.buffer(bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_DST);
         let reader = reader_pass(&dev, vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL);
-        let views = [app.color.2, app.map.2];
-        let fb = dev
-            .d
-            .create_framebuffer(
-                &vk::FramebufferCreateInfo::default()
-                    .render_pass(reader)
-                    .attachments(&views)
-                    .width(SIZE)
-                    .height(SIZE)
-                    .layers(1),
-                None,
-            )
-            .expect("vkCreateFramebuffer");
+        let fb = framebuffer(&dev.d, reader, &[app.color.2, app.map.2], SIZE);
         let d = &dev.d;
         let barrier = |old, new, src, dst| {
             vk::ImageMemoryBarrier::default()
@@ -776,12 +766,7 @@ fn a_secondary_executed_from_two_primaries_shades_with_each_primarys_map() {
                 .inheritance_info(&inheritance),
         )
         .expect("vkBeginCommandBuffer (secondary)");
-        let color_att = [vk::RenderingAttachmentInfo::default()
-            .image_view(app.color.2)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
-            .store_op(vk::AttachmentStoreOp::STORE)
-            .clear_value(CLEAR[0])];
+        let color_att = [cleared_color(app.color.2)];
         let mut density_att = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
             .image_view(app.map.2)
             .image_layout(FDM_LAYOUT);

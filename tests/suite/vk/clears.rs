@@ -16,7 +16,9 @@ use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
 use crate::support::device::{with_fovea, Dev, Env};
-use crate::support::vulkan::{density_pass, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE};
+use crate::support::vulkan::{
+    begin_pass, density_pass, framebuffer, range, COLOR, DENSITY, FDM_LAYOUT, SIZE,
+};
 
 /// The density map's side in texels (the `nvidia` profile's 16×16 texel).
 const N: u32 = SIZE / 16;
@@ -35,19 +37,7 @@ impl Dev {
                 vk::ImageLayout::UNDEFINED,
             )
             .expect("vkCreateRenderPass2");
-            let views = [color.view, density.view];
-            let fb = self
-                .d
-                .create_framebuffer(
-                    &vk::FramebufferCreateInfo::default()
-                        .render_pass(pass)
-                        .attachments(&views)
-                        .width(SIZE)
-                        .height(SIZE)
-                        .layers(1),
-                    None,
-                )
-                .expect("vkCreateFramebuffer");
+            let fb = framebuffer(&self.d, pass, &[color.view, density.view], SIZE);
             (pass, fb)
         }
     }
@@ -56,15 +46,7 @@ impl Dev {
     fn record_pass(&self, cb: vk::CommandBuffer, pass: vk::RenderPass, fb: vk::Framebuffer) {
         // SAFETY: `cb` is recording; the pass and framebuffer are alive.
         unsafe {
-            self.d.cmd_begin_render_pass2(
-                cb,
-                &vk::RenderPassBeginInfo::default()
-                    .render_pass(pass)
-                    .framebuffer(fb)
-                    .render_area(AREA)
-                    .clear_values(&CLEAR),
-                &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-            );
+            begin_pass(&self.d, cb, pass, fb);
             self.d
                 .cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
         }

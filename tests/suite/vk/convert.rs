@@ -22,7 +22,8 @@ use crate::support::device::{
     assert_only_stage_false_positives, env, with_fovea, ComputePipeline, Dev, Env, Features, Vk,
 };
 use crate::support::vulkan::{
-    allocate_info, density_pass, range, AREA, CLEAR, COLOR, DENSITY, FDM_LAYOUT, SIZE,
+    allocate_info, cleared_color, density_pass, range, to_color_attachment, AREA, CLEAR, COLOR,
+    DENSITY, FDM_LAYOUT, SIZE,
 };
 
 /// The application's compute shader: `value[index] = word` (push constants `{word, index}`).
@@ -407,23 +408,7 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32, lose: b
         // SAFETY: `cb` is recording; every struct lives across its call.
         unsafe {
             let d = &dev.d;
-            let barrier = vk::ImageMemoryBarrier::default()
-                .image(color)
-                .subresource_range(range(0, 1))
-                .old_layout(vk::ImageLayout::UNDEFINED)
-                .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED);
-            d.cmd_pipeline_barrier(
-                cb,
-                vk::PipelineStageFlags::TOP_OF_PIPE,
-                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[],
-                &[barrier],
-            );
+            to_color_attachment(d, cb, &[color], 1);
             match pass {
                 Begin::Framebuffer | Begin::Imageless => {
                     let rp = density_pass(d, vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL, FDM_LAYOUT)
@@ -485,12 +470,7 @@ fn frame(env: &Env, vk: &Vk, profile: Profile, pass: Begin, layers: u32, lose: b
                     made = Some((rp, fb));
                 }
                 Begin::Rendering => {
-                    let color_att = [vk::RenderingAttachmentInfo::default()
-                        .image_view(color_view)
-                        .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                        .load_op(vk::AttachmentLoadOp::CLEAR)
-                        .store_op(vk::AttachmentStoreOp::STORE)
-                        .clear_value(CLEAR[0])];
+                    let color_att = [cleared_color(color_view)];
                     let mut density_att =
                         vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
                             .image_view(map_view)

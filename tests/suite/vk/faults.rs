@@ -32,8 +32,8 @@ use crate::support::device::{
     assert_only_stage_false_positives, env, take_real_messages, Env, Features, Vk,
 };
 use crate::support::vulkan::{
-    allocate_info, density_pass, draw_fullscreen, image_info, range, spv, stages, Fixed, AREA,
-    CLEAR, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+    allocate_info, begin_pass, density_pass, draw_fullscreen, image_info, range, spv, stages,
+    Fixed, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 
 /// The calls fovea makes to clear new shadows ahead of the application's submit
@@ -399,15 +399,7 @@ unsafe fn record(
             &[],
             &[to_density],
         );
-        d.cmd_begin_render_pass2(
-            cb,
-            &vk::RenderPassBeginInfo::default()
-                .render_pass(pass)
-                .framebuffer(framebuffer)
-                .render_area(AREA)
-                .clear_values(&CLEAR),
-            &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-        );
+        begin_pass(d, cb, pass, framebuffer);
         draw_fullscreen(d, cb, pipeline);
         d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
     }

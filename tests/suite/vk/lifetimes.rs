@@ -19,10 +19,10 @@ use ash::vk;
 use ash::vk::Handle as _;
 use fovea_vkdouble::Profile;
 
-use crate::support::device::{env, take_real_messages, Env, Vk};
+use crate::support::device::{allocate, env, resettable_pool, take_real_messages, Env, Vk};
 use crate::support::vulkan::{
-    density_pass, draw_fullscreen, range, spv, stages, Fixed, AREA, CLEAR, COLOR, DENSITY,
-    FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+    begin_pass, cleared_color, density_pass, draw_fullscreen, framebuffer, spv, stages,
+    to_color_attachment, Fixed, AREA, COLOR, DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk::convert::{codes_of, converting_device, model_codes, read_at_submit};
 
@@ -100,20 +100,6 @@ fn bytes(side: u32, cycle: u32) -> Vec<u8> {
         .collect()
 }
 
-/// One command buffer from a pool that allows resetting it alone.
-fn allocate(d: &ash::Device, pool: vk::CommandPool) -> vk::CommandBuffer {
-    // SAFETY: the pool is this thread's.
-    unsafe {
-        d.allocate_command_buffers(
-            &vk::CommandBufferAllocateInfo::default()
-                .command_pool(pool)
-                .level(vk::CommandBufferLevel::PRIMARY)
-                .command_buffer_count(1),
-        )
-    }
-    .expect("vkAllocateCommandBuffers")[0]
-}
-
 /// What a run of [`cycles`] saw.
 struct Seen {
     /// Objects alive below the layers after each cycle.
@@ -143,16 +129,7 @@ fn cycles(env: &Env, vk: &Vk, profile: Profile, n: u32, passes: &[Pass], resets:
     );
     let (color, color_memory, color_view) =
         dev.image(COLOR, SIZE, 1, vk::ImageUsageFlags::COLOR_ATTACHMENT);
-    // SAFETY: the create info lives across the call.
-    let pool = unsafe {
-        d.create_command_pool(
-            &vk::CommandPoolCreateInfo::default()
-                .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                .queue_family_index(0),
-            None,
-        )
-    }
-    .expect("vkCreateCommandPool");
+    let pool = resettable_pool(d, 0);
     let mut cb = allocate(d, pool);
     let mut alive = Alive::default();
     alive.add_counted(env);
@@ -202,31 +179,11 @@ fn cycles(env: &Env, vk: &Vk, profile: Profile, n: u32, passes: &[Pass], resets:
             d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
                 .expect("vkBeginCommandBuffer");
             dev.upload(cb, &staging, map, map_side, 1);
-            d.cmd_pipeline_barrier(
-                cb,
-                vk::PipelineStageFlags::TOP_OF_PIPE,
-                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[],
-                &[vk::ImageMemoryBarrier::default()
-                    .image(color)
-                    .subresource_range(range(0, 1))
-                    .old_layout(vk::ImageLayout::UNDEFINED)
-                    .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                    .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)],
-            );
+            to_color_attachment(d, cb, &[color], 1);
         }
         let made = match pass {
             Pass::Rendering => {
-                let color_att = [vk::RenderingAttachmentInfo::default()
-                    .image_view(color_view)
-                    .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                    .load_op(vk::AttachmentLoadOp::CLEAR)
-                    .store_op(vk::AttachmentStoreOp::STORE)
-                    .clear_value(CLEAR[0])];
+                let color_att = [cleared_color(color_view)];
                 let mut density = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
                     .image_view(map_view)
                     .image_layout(FDM_LAYOUT);
@@ -247,27 +204,8 @@ fn cycles(env: &Env, vk: &Vk, profile: Profile, n: u32, passes: &[Pass], resets:
                 unsafe {
                     let rp = density_pass(d, vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL, FDM_LAYOUT)
                         .expect("vkCreateRenderPass2");
-                    let views = [color_view, map_view];
-                    let fb = d
-                        .create_framebuffer(
-                            &vk::FramebufferCreateInfo::default()
-                                .render_pass(rp)
-                                .attachments(&views)
-                                .width(SIZE)
-                                .height(SIZE)
-                                .layers(1),
-                            None,
-                        )
-                        .expect("vkCreateFramebuffer");
-                    d.cmd_begin_render_pass2(
-                        cb,
-                        &vk::RenderPassBeginInfo::default()
-                            .render_pass(rp)
-                            .framebuffer(fb)
-                            .render_area(AREA)
-                            .clear_values(&CLEAR),
-                        &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-                    );
+                    let fb = framebuffer(d, rp, &[color_view, map_view], SIZE);
+                    begin_pass(d, cb, rp, fb);
                     d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
                     Some((rp, fb))
                 }
@@ -473,18 +411,7 @@ fn definitions_outlive_a_long_run() {
         d.destroy_render_pass(gone, None);
         let rp = density_pass(d, vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL, FDM_LAYOUT)
             .expect("vkCreateRenderPass2");
-        let views = [color_view, map_view];
-        let fb = d
-            .create_framebuffer(
-                &vk::FramebufferCreateInfo::default()
-                    .render_pass(rp)
-                    .attachments(&views)
-                    .width(SIZE)
-                    .height(SIZE)
-                    .layers(1),
-                None,
-            )
-            .expect("vkCreateFramebuffer");
+        let fb = framebuffer(d, rp, &[color_view, map_view], SIZE);
         let layout = d
             .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
             .expect("vkCreatePipelineLayout");
@@ -511,14 +438,7 @@ fn definitions_outlive_a_long_run() {
 
         // The long run: more barriers than twice the events the double keeps (it trims them
         // once there are twice as many).
-        let pool = d
-            .create_command_pool(
-                &vk::CommandPoolCreateInfo::default()
-                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                    .queue_family_index(0),
-                None,
-            )
-            .expect("vkCreateCommandPool");
+        let pool = resettable_pool(d, 0);
         let cb = allocate(d, pool);
         let barrier = [vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE)
@@ -544,31 +464,8 @@ fn definitions_outlive_a_long_run() {
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .expect("vkBeginCommandBuffer");
         dev.upload(cb, &staging, map, side, 1);
-        d.cmd_pipeline_barrier(
-            cb,
-            vk::PipelineStageFlags::TOP_OF_PIPE,
-            vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &[vk::ImageMemoryBarrier::default()
-                .image(color)
-                .subresource_range(range(0, 1))
-                .old_layout(vk::ImageLayout::UNDEFINED)
-                .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)],
-        );
-        d.cmd_begin_render_pass2(
-            cb,
-            &vk::RenderPassBeginInfo::default()
-                .render_pass(rp)
-                .framebuffer(fb)
-                .render_area(AREA)
-                .clear_values(&CLEAR),
-            &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-        );
+        to_color_attachment(d, cb, &[color], 1);
+        begin_pass(d, cb, rp, fb);
         draw_fullscreen(d, cb, pipeline);
         d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
         dev.submit(cb);

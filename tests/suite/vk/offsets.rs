@@ -31,8 +31,8 @@ use serde_json::Value;
 
 use crate::support::device::{env, take_messages, with_fovea, Dev, Env, Features, Vk};
 use crate::support::vulkan::{
-    attachments2, draw_fullscreen, range, spv, stages, Fixed, AREA, CLEAR, COLOR, DENSITY,
-    FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
+    attachments2, begin_pass, draw_fullscreen, range, spv, stages, Fixed, AREA, CLEAR, COLOR,
+    DENSITY, FDM_LAYOUT, FRAGMENT, SIZE, VERTEX,
 };
 use crate::vk::convert::{model_codes, Buffer};
 
@@ -905,15 +905,7 @@ fn only_the_last_subpass_end_carries_offsets() {
             .fragment_density_offsets(&second);
         // SAFETY: `cb` is recording on this device; every struct lives across its call.
         unsafe {
-            d.cmd_begin_render_pass2(
-                cb,
-                &vk::RenderPassBeginInfo::default()
-                    .render_pass(pass)
-                    .framebuffer(framebuffer)
-                    .render_area(AREA)
-                    .clear_values(&CLEAR),
-                &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-            );
+            begin_pass(d, cb, pass, framebuffer);
             draw_fullscreen(d, cb, pipelines[0]);
             d.cmd_next_subpass2(
                 cb,

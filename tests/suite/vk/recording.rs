@@ -5,7 +5,9 @@
 use ash::vk;
 use fovea_vkdouble::Profile;
 
-use crate::support::device::{assert_only_stage_false_positives, take_messages, with_fovea};
+use crate::support::device::{
+    allocate, assert_only_stage_false_positives, resettable_pool, take_messages, with_fovea,
+};
 
 const FDM_STAGE: vk::PipelineStageFlags = vk::PipelineStageFlags::FRAGMENT_DENSITY_PROCESS_EXT;
 const FSR_STAGE: vk::PipelineStageFlags =
@@ -13,26 +15,8 @@ const FSR_STAGE: vk::PipelineStageFlags =
 
 /// A resettable pool on queue family 0 and one primary command buffer from it.
 fn pool_and_buffer(d: &ash::Device) -> (vk::CommandPool, vk::CommandBuffer) {
-    // SAFETY: create infos live across the calls.
-    unsafe {
-        let pool = d
-            .create_command_pool(
-                &vk::CommandPoolCreateInfo::default()
-                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER)
-                    .queue_family_index(0),
-                None,
-            )
-            .expect("vkCreateCommandPool");
-        let cb = d
-            .allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(pool)
-                    .level(vk::CommandBufferLevel::PRIMARY)
-                    .command_buffer_count(1),
-            )
-            .expect("vkAllocateCommandBuffers")[0];
-        (pool, cb)
-    }
+    let pool = resettable_pool(d, 0);
+    (pool, allocate(d, pool))
 }
 
 /// An application that records for hours, resetting its command buffer between frames, runs in

@@ -35,7 +35,7 @@ use crate::support::device::{
     assert_only_stage_false_positives, fdm_image_info, take_messages, with_fovea,
 };
 use crate::support::vulkan::{
-    allocate_info, density_pass, image_info, range, COLOR, DENSITY, FDM_LAYOUT, SIZE,
+    allocate_info, density_pass, framebuffer, image_info, range, COLOR, DENSITY, FDM_LAYOUT, SIZE,
 };
 
 const WORKERS: usize = 4;
@@ -152,18 +152,7 @@ impl Worker {
                 ),
             );
             let pass = render_pass(d);
-            let views = [color.view, density.view];
-            let framebuffer = d
-                .create_framebuffer(
-                    &vk::FramebufferCreateInfo::default()
-                        .render_pass(pass)
-                        .attachments(&views)
-                        .width(SIZE)
-                        .height(SIZE)
-                        .layers(1),
-                    None,
-                )
-                .expect("vkCreateFramebuffer");
+            let framebuffer = framebuffer(d, pass, &[color.view, density.view], SIZE);
             let pool = d
                 .create_command_pool(
                     &vk::CommandPoolCreateInfo::default().queue_family_index(0),

@@ -20,7 +20,8 @@ use openxr_sys as xr;
 use xr::Handle;
 
 use crate::support::actions::{
-    attach_set, declare, path, sync_set, EYE_GAZE_POSE, EYE_GAZE_PROFILE,
+    action_space, attach_set, declare, locate_at_display, path, sync_set, EYE_GAZE_POSE,
+    EYE_GAZE_PROFILE,
 };
 use crate::support::gaze_log::{located, Located};
 use crate::support::{foveated_loop, in_own_process};
@@ -113,18 +114,7 @@ impl AppInput {
             let mut space = xr::Space::NULL;
             if attach {
                 attach_set(lp, set);
-                let create_space: xr::pfn::CreateActionSpace = lp.func(c"xrCreateActionSpace");
-                let info = xr::ActionSpaceCreateInfo {
-                    ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
-                    next: std::ptr::null(),
-                    action,
-                    subaction_path: xr::Path::NULL,
-                    pose_in_action_space: xr::Posef::IDENTITY,
-                };
-                assert_eq!(
-                    create_space(lp.session, &info, &mut space),
-                    xr::Result::SUCCESS
-                );
+                space = action_space(lp, action);
             }
             AppInput {
                 set,
@@ -162,19 +152,7 @@ impl AppInput {
                 (self.get_pose)(lp.session, &get, &mut state),
                 xr::Result::SUCCESS
             );
-            let mut loc = xr::SpaceLocation {
-                ty: xr::StructureType::SPACE_LOCATION,
-                next: std::ptr::null_mut(),
-                location_flags: xr::SpaceLocationFlags::EMPTY,
-                pose: xr::Posef::IDENTITY,
-            };
-            let r = (self.locate)(
-                self.space,
-                lp.space,
-                lp.last_frame_state.predicted_display_time,
-                &mut loc,
-            );
-            assert_eq!(r, xr::Result::SUCCESS);
+            let loc = locate_at_display(lp, self.locate, self.space, lp.space);
             let valid = loc
                 .location_flags
                 .contains(xr::SpaceLocationFlags::ORIENTATION_VALID);

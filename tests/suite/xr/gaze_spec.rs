@@ -13,7 +13,9 @@ use fovea_harness::{sim, App, Chain};
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::support::actions::{attach_set, declare, path, sync_set, EYE_GAZE_PROFILE};
+use crate::support::actions::{
+    action_space, attach_set, declare, locate_at_display, path, sync_of, sync_set, EYE_GAZE_PROFILE,
+};
 use crate::support::{foveated_loop, in_own_process};
 
 const EYE_TRACKED: &str = "XR_META_foveation_eye_tracked";
@@ -56,6 +58,23 @@ fn running(chain: Chain, script: &str, eye_tracked: bool, exts: &[&str]) -> Head
         )
         .unwrap()
     }
+}
+
+/// An application with a pose action of its own bound to the eye gaze ([`declare`]; `exts` enabled
+/// besides the eye-tracked foveation's), its set attached, on a tracker following `script`, through fovea.
+fn gaze_app(script: &str, exts: &[&str]) -> (HeadlessLoop, xr::ActionSet, xr::Action) {
+    let lp = running(Chain::fovea().unwrap(), script, true, exts);
+    let (set, action) = declare(&lp.app, true);
+    assert_eq!(attach(&lp, &[set]), xr::Result::SUCCESS);
+    (lp, set, action)
+}
+
+/// [`running`] with the application's own controller set ([`declare`]) attached.
+fn attached(chain: Chain, script: &str, eye_tracked: bool) -> (HeadlessLoop, xr::ActionSet) {
+    let lp = running(chain, script, eye_tracked, &[]);
+    let (set, _) = declare(&lp.app, false);
+    attach_set(&lp, set);
+    (lp, set)
 }
 
 /// `xrGetFoveationEyeTrackedStateMETA`: each view's centre and whether VALID.
@@ -166,54 +185,23 @@ fn each_frame_renders_with_the_gaze_of_its_own_display_time() {
         || {
             // A saccade of 15° to the right, sampled at 1 kHz: the first frame displayed after it
             // must render with the new gaze, not with the gaze of the frame before.
-            let mut lp = running(
-                Chain::fovea().unwrap(),
-                "hz=1000; fix 0,0 for 1s; saccade 15,0 in 1ms; fix for 20s",
-                true,
-                &[EYE_GAZE],
-            );
             // The application's own gaze action, located at each frame's display time: where the
             // eye is when the frame is shown.
-            let (set, action) = declare(&lp.app, true);
-            assert_eq!(attach(&lp, &[set]), xr::Result::SUCCESS);
-            // SAFETY: every name's type matches; the structs live across their calls.
-            let (sync, space, locate) = unsafe {
-                let create: xr::pfn::CreateActionSpace = lp.func(c"xrCreateActionSpace");
-                let info = xr::ActionSpaceCreateInfo {
-                    ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
-                    next: std::ptr::null(),
-                    action,
-                    subaction_path: xr::Path::NULL,
-                    pose_in_action_space: xr::Posef::IDENTITY,
-                };
-                let mut space = xr::Space::NULL;
-                assert_eq!(create(lp.session, &info, &mut space), xr::Result::SUCCESS);
-                let sync: xr::pfn::SyncActions = lp.func(c"xrSyncActions");
-                let locate: xr::pfn::LocateSpace = lp.func(c"xrLocateSpace");
-                (sync, space, locate)
-            };
+            let (mut lp, set, action) = gaze_app(
+                "hz=1000; fix 0,0 for 1s; saccade 15,0 in 1ms; fix for 20s",
+                &[EYE_GAZE],
+            );
+            let space = action_space(&lp, action);
+            // SAFETY: every name's type matches.
+            let (sync, locate): (xr::pfn::SyncActions, xr::pfn::LocateSpace) =
+                unsafe { (lp.func(c"xrSyncActions"), lp.func(c"xrLocateSpace")) };
             let mut seen = Vec::new();
             for _ in 0..200 {
                 // hello_xr's order: events, input, then the frame.
                 lp.poll_events();
                 sync_set(&lp, sync, set);
                 lp.frame().unwrap();
-                let mut loc = xr::SpaceLocation {
-                    ty: xr::StructureType::SPACE_LOCATION,
-                    next: std::ptr::null_mut(),
-                    location_flags: xr::SpaceLocationFlags::EMPTY,
-                    pose: xr::Posef::IDENTITY,
-                };
-                // SAFETY: live spaces; the struct lives across the call.
-                let r = unsafe {
-                    locate(
-                        space,
-                        lp.space,
-                        lp.last_frame_state.predicted_display_time,
-                        &mut loc,
-                    )
-                };
-                assert_eq!(r, xr::Result::SUCCESS);
+                let loc = locate_at_display(&lp, locate, space, lp.space);
                 let o = loc.pose.orientation;
                 let dir = glam::Quat::from_xyzw(o.x, o.y, o.z, o.w) * glam::Vec3::NEG_Z;
                 let yaw = dir.x.atan2(-dir.z).to_degrees();
@@ -285,9 +273,7 @@ fn nothing_is_synced_before_the_session_is_focused() {
         || {
             // The application attaches its own set and never syncs: fovea syncs alone, and only
             // once the session the application polled is FOCUSED.
-            let mut lp = running(Chain::fovea().unwrap(), "fix 6,0 for 10s", true, &[]);
-            let (set, _) = declare(&lp.app, false);
-            attach_set(&lp, set);
+            let (mut lp, _) = attached(Chain::fovea().unwrap(), "fix 6,0 for 10s", true);
             for _ in 0..40 {
                 lp.poll_events();
                 lp.frame().unwrap();
@@ -465,9 +451,7 @@ fn an_event_fovea_cannot_tell_apart_is_delivered() {
             // The application's own paths still have the profile they would have without fovea.
             for chain in [Chain::bare(), Chain::fovea().unwrap()] {
                 let with = !chain.layers.is_empty();
-                let mut lp = running(chain, "fix 4,4 for 10s", with, &[]);
-                let (set, _) = declare(&lp.app, false);
-                attach_set(&lp, set);
+                let (mut lp, _) = attached(chain, "fix 4,4 for 10s", with);
                 let events = profile_events(&mut lp, 20);
                 assert_eq!(events, usize::from(with), "fovea: {with}");
                 assert_eq!(
@@ -518,19 +502,9 @@ fn the_app_s_own_errors_reach_the_runtime_once() {
                 lp.frame().unwrap();
             }
             // A sync naming a set never attached: the application's error.
-            let active = [xr::ActiveActionSet {
-                action_set: unattached,
-                subaction_path: xr::Path::NULL,
-            }];
-            let info = xr::ActionsSyncInfo {
-                ty: xr::StructureType::ACTIONS_SYNC_INFO,
-                next: std::ptr::null(),
-                count_active_action_sets: 1,
-                active_action_sets: active.as_ptr(),
-            };
             let sync: xr::pfn::SyncActions = unsafe { lp.func(c"xrSyncActions") };
             assert_eq!(
-                unsafe { sync(lp.session, &info) },
+                sync_of(&lp, sync, unattached),
                 xr::Result::ERROR_ACTIONSET_NOT_ATTACHED
             );
             let instance = lp.app.instance;
@@ -550,14 +524,11 @@ fn a_sub_nominal_gaze_is_followed() {
     in_own_process(module_path!(), "a_sub_nominal_gaze_is_followed", || {
         // VALID without TRACKED: the tracker's best estimate, which OpenXR Toolkit and
         // Quad-Views-Foveated use too.
-        let mut lp = running(
+        let (mut lp, set) = attached(
             Chain::fovea().unwrap(),
             "tracked=no; fix 12,0 for 10s",
             true,
-            &[],
         );
-        let (set, _) = declare(&lp.app, false);
-        attach_set(&lp, set);
         let sync: xr::pfn::SyncActions = unsafe { lp.func(c"xrSyncActions") };
         for _ in 0..30 {
             lp.poll_events();
@@ -576,14 +547,11 @@ fn the_gaze_waits_for_the_permission_and_calibration_is_asked_once() {
         module_path!(),
         "the_gaze_waits_for_the_permission_and_calibration_is_asked_once",
         || {
-            let mut lp = running(
+            let (mut lp, set) = attached(
                 Chain::fovea().unwrap(),
                 "permission=2s; fix 12,0 for 10s",
                 true,
-                &[],
             );
-            let (set, _) = declare(&lp.app, false);
-            attach_set(&lp, set);
             let sync: xr::pfn::SyncActions = unsafe { lp.func(c"xrSyncActions") };
             let mut valid = Vec::new();
             for _ in 0..360 {
@@ -623,26 +591,10 @@ fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time(
             std::env::set_var("FOVEA_GAZE_SACCADE_DEG", "0.001");
             // The head turns right at 60°/s while the eye holds a point straight ahead in the
             // world: in VIEW space the gaze turns left at 60°/s, 0.67° a frame at 90 Hz.
-            let mut lp = running(
-                Chain::fovea().unwrap(),
-                "hz=1000; head=60; fix 0,0 for 20s",
-                true,
-                &[EYE_GAZE],
-            );
-            let (set, action) = declare(&lp.app, true);
-            assert_eq!(attach(&lp, &[set]), xr::Result::SUCCESS);
+            let (mut lp, set, action) = gaze_app("hz=1000; head=60; fix 0,0 for 20s", &[EYE_GAZE]);
+            let gaze = action_space(&lp, action);
             // SAFETY: every name's type matches; the structs live across their calls.
-            let (sync, gaze, view, locate) = unsafe {
-                let create: xr::pfn::CreateActionSpace = lp.func(c"xrCreateActionSpace");
-                let info = xr::ActionSpaceCreateInfo {
-                    ty: xr::StructureType::ACTION_SPACE_CREATE_INFO,
-                    next: std::ptr::null(),
-                    action,
-                    subaction_path: xr::Path::NULL,
-                    pose_in_action_space: xr::Posef::IDENTITY,
-                };
-                let mut gaze = xr::Space::NULL;
-                assert_eq!(create(lp.session, &info, &mut gaze), xr::Result::SUCCESS);
+            let (sync, view, locate) = unsafe {
                 let reference: xr::pfn::CreateReferenceSpace = lp.func(c"xrCreateReferenceSpace");
                 let info = xr::ReferenceSpaceCreateInfo {
                     ty: xr::StructureType::REFERENCE_SPACE_CREATE_INFO,
@@ -654,7 +606,7 @@ fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time(
                 assert_eq!(reference(lp.session, &info, &mut view), xr::Result::SUCCESS);
                 let sync: xr::pfn::SyncActions = lp.func(c"xrSyncActions");
                 let locate: xr::pfn::LocateSpace = lp.func(c"xrLocateSpace");
-                (sync, gaze, view, locate)
+                (sync, view, locate)
             };
             let headset = fovea_model::headsets::by_id("quest3").unwrap();
             let left = fovea_model::gaze::EyeView {
@@ -670,22 +622,7 @@ fn with_a_turning_head_each_frame_renders_with_the_gaze_of_its_own_display_time(
                 lp.poll_events();
                 sync_set(&lp, sync, set);
                 lp.frame().unwrap();
-                let mut loc = xr::SpaceLocation {
-                    ty: xr::StructureType::SPACE_LOCATION,
-                    next: std::ptr::null_mut(),
-                    location_flags: xr::SpaceLocationFlags::EMPTY,
-                    pose: xr::Posef::IDENTITY,
-                };
-                // SAFETY: live spaces; the struct lives across the call.
-                let r = unsafe {
-                    locate(
-                        gaze,
-                        view,
-                        lp.last_frame_state.predicted_display_time,
-                        &mut loc,
-                    )
-                };
-                assert_eq!(r, xr::Result::SUCCESS);
+                let loc = locate_at_display(&lp, locate, gaze, view);
                 let (centres, valid) = meta_state(&lp);
                 if n < 5 || !valid {
                     continue;
@@ -733,14 +670,10 @@ fn an_app_s_higher_priority_gaze_set_keeps_the_gaze() {
             // (XR_EXT_active_action_set_priority): the runtime gives the gaze only to the highest
             // priority. fovea's set has the lowest (0), so it never takes the application's input;
             // here it gets none, and fovea keeps fixed foveation.
-            let mut lp = running(
-                Chain::fovea().unwrap(),
+            let (mut lp, set, action) = gaze_app(
                 "fix 8,0 for 10s",
-                true,
                 &[EYE_GAZE, "XR_EXT_active_action_set_priority"],
             );
-            let (set, action) = declare(&lp.app, true);
-            assert_eq!(attach(&lp, &[set]), xr::Result::SUCCESS);
             let sync: xr::pfn::SyncActions = unsafe { lp.func(c"xrSyncActions") };
             let get: xr::pfn::GetActionStatePose = unsafe { lp.func(c"xrGetActionStatePose") };
             let raised = [xr::ActiveActionSetPriorityEXT {

@@ -16,7 +16,10 @@ use openxr_sys as xr;
 use xr::Handle as _;
 
 use crate::both::fdm_vulkan::{func, running_session, Frame};
-use crate::support::vulkan::{draw_fullscreen, range, spv, stages, Fixed, FRAGMENT, VERTEX};
+use crate::support::vulkan::{
+    cleared_color, draw_fullscreen, range, spv, stages, to_color_attachment, Fixed, FRAGMENT,
+    VERTEX,
+};
 
 use super::outcome::Outcome;
 
@@ -684,28 +687,8 @@ pub(super) fn run_with(
         });
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .unwrap();
-        let to_colour: Vec<_> = targets
-            .iter()
-            .map(|&(i, _)| {
-                vk::ImageMemoryBarrier::default()
-                    .image(i)
-                    .subresource_range(range(0, target_layers))
-                    .old_layout(vk::ImageLayout::UNDEFINED)
-                    .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                    .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            })
-            .collect();
-        d.cmd_pipeline_barrier(
-            cb,
-            vk::PipelineStageFlags::TOP_OF_PIPE,
-            vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &to_colour,
-        );
+        let target_images: Vec<_> = targets.iter().map(|&(i, _)| i).collect();
+        to_color_attachment(d, cb, &target_images, target_layers);
         if let (Some((image, _, _)), Setup::AppRates) = (own_rate, setup) {
             d.cmd_pipeline_barrier(
                 cb,
@@ -760,12 +743,7 @@ pub(super) fn run_with(
                 d.cmd_end_render_pass(cb);
                 continue;
             }
-            let colour = [vk::RenderingAttachmentInfo::default()
-                .image_view(view)
-                .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .clear_value(crate::support::vulkan::CLEAR[0])];
+            let colour = [cleared_color(view)];
             let mut ri = vk::RenderingInfo::default()
                 .render_area(vk::Rect2D {
                     offset: vk::Offset2D::default(),
@@ -835,21 +813,8 @@ pub(super) fn run_with(
                 .unwrap()[0];
             d.begin_command_buffer(cb2, &vk::CommandBufferBeginInfo::default())
                 .unwrap();
-            d.cmd_pipeline_barrier(
-                cb2,
-                vk::PipelineStageFlags::TOP_OF_PIPE,
-                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[],
-                &[to_colour[0].image(images[i as usize])],
-            );
-            let colour = [vk::RenderingAttachmentInfo::default()
-                .image_view(target)
-                .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .clear_value(crate::support::vulkan::CLEAR[0])];
+            to_color_attachment(d, cb2, &[images[i as usize]], target_layers);
+            let colour = [cleared_color(target)];
             let ri = vk::RenderingInfo::default()
                 .render_area(vk::Rect2D {
                     offset: vk::Offset2D::default(),

@@ -26,7 +26,10 @@ use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
 use crate::support::in_own_process;
-use crate::support::vulkan::{draw_fullscreen, range, spv, stages, Fixed, FRAGMENT, VERTEX};
+use crate::support::vulkan::{
+    cleared_color, draw_fullscreen, range, spv, stages, to_color_attachment, Fixed, FRAGMENT,
+    VERTEX,
+};
 
 const FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
 const WIDTH: u32 = 640;
@@ -125,28 +128,8 @@ unsafe fn render(
             .expect("command buffer")[0];
         d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
             .expect("begin");
-        d.cmd_pipeline_barrier(
-            cb,
-            vk::PipelineStageFlags::TOP_OF_PIPE,
-            vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &[vk::ImageMemoryBarrier::default()
-                .image(image)
-                .subresource_range(range(0, 1))
-                .old_layout(vk::ImageLayout::UNDEFINED)
-                .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)],
-        );
-        let colour = [vk::RenderingAttachmentInfo::default()
-            .image_view(view)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
-            .store_op(vk::AttachmentStoreOp::STORE)
-            .clear_value(crate::support::vulkan::CLEAR[0])];
+        to_color_attachment(d, cb, &[image], 1);
+        let colour = [cleared_color(view)];
         let ri = vk::RenderingInfo::default()
             .render_area(vk::Rect2D {
                 offset: vk::Offset2D::default(),

@@ -9,6 +9,7 @@ use fovea_model::Fov;
 use fovea_vkdouble::Profile;
 use serde_json::{json, Value};
 
+use crate::support::device::inject_device;
 use crate::support::in_own_process;
 
 use super::app::*;
@@ -154,17 +155,7 @@ pub(super) fn expected(
     fovs: [Fov; 2],
     level: Level,
 ) -> ([u32; 2], u32, Vec<u8>) {
-    let device = fovea_model::inject::Device {
-        texel: [profile.texel().width, profile.texel().height],
-        layered: profile.layered(),
-        max_fragment: [profile.max_fragment(); 2],
-        rates: profile
-            .rates()
-            .iter()
-            .filter(|(_, s)| s.contains(vk::SampleCountFlags::TYPE_1))
-            .map(|(e, _)| [e.width, e.height])
-            .collect(),
-    };
+    let device = inject_device(profile);
     let mut all = [None; MAX_VIEWS];
     all[0] = Some(fovs[0]);
     all[1] = Some(fovs[1]);
