@@ -326,12 +326,23 @@ fn is_fovea_info(line: &str) -> bool {
 /// ends by itself. The run, whether frames passed (fovea's stats lines count them; without fovea,
 /// FOCUSED on its stdout), and the transcript with Monado's output.
 fn hello_xr_run(m: &Monado, graphics: &str, fovea: bool) -> (Run, bool, String) {
-    let label = format!("hello_xr -g {graphics} on Monado, fovea {fovea}");
+    hello_xr_run_with(m, graphics, fovea, &[])
+}
+
+/// [`hello_xr_run`] with these variables set for hello_xr (fovea's settings).
+fn hello_xr_run_with(
+    m: &Monado,
+    graphics: &str,
+    fovea: bool,
+    env: &[(&str, &str)],
+) -> (Run, bool, String) {
+    let label = format!("hello_xr -g {graphics} on Monado, fovea {fovea} {env:?}");
     let mut service = Service::start(m, &format!("hello-xr-{graphics}-{fovea}"));
     let manifests = Manifests::write(&format!("monado-hello-xr-{graphics}-{fovea}"));
     let mut cmd = Command::new(&m.hello_xr);
     cmd.args(["-g", graphics, "-v"]);
     app_env(&mut cmd, m, &service, &manifests, graphics == "Vulkan");
+    cmd.envs(env.iter().copied());
     if !fovea {
         cmd.env("XR_ENABLE_API_LAYERS", CORE_VALIDATION_LAYER)
             .env_remove("VK_ADD_LAYER_PATH")
@@ -503,47 +514,61 @@ fn hello_xr_vulkan_through_fovea_on_monado_ends_as_without_fovea() {
 }
 
 /// Monado's simulated headset lists XR_EXT_eye_gaze_interaction and reports no eye tracker
-/// (`supportsEyeGazeInteraction` false). With fovea's gaze on (the default), hello_xr (which uses
-/// actions of its own) runs as before: fovea enables the extension, asks the system, says once why
-/// the foveation stays fixed, and neither Monado nor a validation layer says anything.
+/// (`supportsEyeGazeInteraction` false). hello_xr (actions of its own, nothing of fovea's) gets no
+/// eye gaze from fovea at all: no line about it, `Gaze=off`. With injection on, whose maps follow
+/// the eyes (docs/eye-tracking.md#who-uses-the-gaze), fovea enables the extension, asks the
+/// system, says once why the foveation stays fixed, and neither Monado nor a validation layer says
+/// anything.
 #[test]
-fn eye_gaze_on_monado_falls_back_to_fixed_foveation_cleanly() {
+fn eye_gaze_on_monado_only_where_used_and_falls_back_to_fixed_foveation_cleanly() {
     let Some(m) = monado() else { return };
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let (run, passed, transcript) = hello_xr_run(&m, "Vulkan2", true);
-    assert!(passed, "no frames through fovea\n{transcript}");
-    assert_eq!(run.code, Some(0), "{transcript}");
-    let gaze: Vec<&str> = run
-        .stderr
-        .lines()
-        .filter(|l| l.contains(log_target::GAZE))
-        .collect();
-    assert_eq!(
-        gaze.len(),
-        1,
-        "one line about the gaze: {gaze:#?}\n{transcript}"
-    );
-    assert!(
-        gaze[0].contains("INFO") && gaze[0].contains("no eye tracker"),
-        "{}\n{transcript}",
-        gaze[0]
-    );
-    let stats: Vec<&str> = run
-        .stderr
-        .lines()
-        .filter(|l| l.contains("fovea::stats: FPS="))
-        .collect();
-    assert!(
-        !stats.is_empty() && stats.iter().all(|l| l.contains(" Gaze=fixed ")),
-        "{stats:#?}\n{transcript}"
-    );
-    let messages = hello_xr_messages(&run);
-    assert!(
-        messages.is_empty(),
-        "{} messages:\n{}\n\n{transcript}",
-        messages.len(),
-        messages.join("\n")
-    );
+    for (env, used) in [(&[][..], false), (&[("FOVEA_INJECT", "1")][..], true)] {
+        let (run, passed, transcript) = hello_xr_run_with(&m, "Vulkan2", true, env);
+        assert!(passed, "no frames through fovea\n{transcript}");
+        assert_eq!(run.code, Some(0), "{transcript}");
+        let gaze: Vec<&str> = run
+            .stderr
+            .lines()
+            .filter(|l| l.contains(log_target::GAZE))
+            .collect();
+        let stats: Vec<&str> = run
+            .stderr
+            .lines()
+            .filter(|l| l.contains("fovea::stats: FPS="))
+            .collect();
+        let shown = if used { " Gaze=fixed " } else { " Gaze=off " };
+        assert!(
+            !stats.is_empty() && stats.iter().all(|l| l.contains(shown)),
+            "{shown}: {stats:#?}\n{transcript}"
+        );
+        if used {
+            assert_eq!(
+                gaze.len(),
+                1,
+                "one line about the gaze: {gaze:#?}\n{transcript}"
+            );
+            assert!(
+                gaze[0].contains("INFO") && gaze[0].contains("no eye tracker"),
+                "{}\n{transcript}",
+                gaze[0]
+            );
+        } else {
+            assert_eq!(gaze, Vec::<&str>::new(), "{transcript}");
+        }
+        // With injection on, lavapipe's device (no shading-rate attachments) gets the one line
+        // that says its eye passes stay at full rate; nothing else may be said.
+        let messages: Vec<String> = hello_xr_messages(&run)
+            .into_iter()
+            .filter(|l| !(used && l.contains("cannot take injected maps")))
+            .collect();
+        assert!(
+            messages.is_empty(),
+            "{} messages:\n{}\n\n{transcript}",
+            messages.len(),
+            messages.join("\n")
+        );
+    }
 }
 
 /// What one example run printed and read back.
