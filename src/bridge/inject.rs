@@ -459,6 +459,19 @@ pub(crate) mod tests {
     /// The published state is process-wide; the tests that change it take this.
     pub(crate) static STATE_TESTS: parking_lot::Mutex<()> = parking_lot::Mutex::new(());
 
+    /// Injection on at HIGH for the application, both views with one square FOV (0.8 each way):
+    /// the published state the Vulkan side's injection tests start from (hold [`STATE_TESTS`]).
+    pub(crate) fn start_high_square() {
+        start(Level::High, true);
+        let fov = Fov {
+            left: -0.8,
+            right: 0.8,
+            up: 0.8,
+            down: -0.8,
+        };
+        set_fovs(&[fov, fov]);
+    }
+
     #[test]
     fn the_sessions_device_is_the_one_created_inside_xr_create_vulkan_device() {
         let _one = STATE_TESTS.lock();

@@ -169,6 +169,20 @@ pub struct FdmEmulation {
     pub non_trivial_combiners: bool,
 }
 
+#[cfg(test)]
+impl FdmEmulation {
+    /// The NVIDIA-like device of the unit tests: 16×16 layered texels, fragments up to 4×4.
+    pub(crate) fn nvidia_like() -> FdmEmulation {
+        FdmEmulation {
+            texel: [16, 16],
+            layered: true,
+            max_fragment: [4, 4],
+            rates: vec![[1, 1], [2, 2], [4, 4]],
+            non_trivial_combiners: true,
+        }
+    }
+}
+
 /// Emulating devices, by `VkDevice` handle.
 static DEVICE_FDM: crate::common::lock::MapLock<std::collections::BTreeMap<u64, FdmEmulation>> =
     crate::common::lock::MapLock::new("bridge device FDM", std::collections::BTreeMap::new());

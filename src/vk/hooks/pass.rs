@@ -1001,14 +1001,7 @@ mod tests {
         let (eye_image, eye_view, other_view) = (0x5e1u64, 0x5e2u64, 0x5e3u64);
         let (map_view, eye_fb, imageless_fb, pass) = (0x3a9u64, 0xfb1u64, 0xfb2u64, 0xa55u64);
         let extent = [64, 64];
-        inject::start(fovea_model::density::Level::High, true);
-        let fov = fovea_model::Fov {
-            left: -0.8,
-            right: 0.8,
-            up: 0.8,
-            down: -0.8,
-        };
-        inject::set_fovs(&[fov, fov]);
+        inject::tests::start_high_square();
         inject::set_swapchain(
             1,
             fovea_model::inject::Swapchain {
@@ -1019,14 +1012,7 @@ mod tests {
             false,
         );
         inject::set_images(1, &[eye_image]);
-        let fdm = crate::bridge::FdmEmulation {
-            texel: [16, 16],
-            layered: true,
-            max_fragment: [4, 4],
-            rates: vec![[1, 1], [2, 2], [4, 4]],
-            non_trivial_combiners: true,
-        };
-        let inj = Injector::new(fdm);
+        let inj = Injector::new(crate::bridge::FdmEmulation::nvidia_like());
         let colour = |image: u64, extent: [u32; 2]| {
             inj.image_created(
                 vk::Image::from_raw(image),

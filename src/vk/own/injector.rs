@@ -720,22 +720,8 @@ mod tests {
     fn refills_for_a_moving_gaze_allocate_nothing() {
         use crate::bridge::inject;
         let _one = inject::tests::STATE_TESTS.lock();
-        inject::start(fovea_model::density::Level::High, true);
-        let fov = fovea_model::Fov {
-            left: -0.8,
-            right: 0.8,
-            up: 0.8,
-            down: -0.8,
-        };
-        inject::set_fovs(&[fov, fov]);
-        let fdm = FdmEmulation {
-            texel: [16, 16],
-            layered: true,
-            max_fragment: [4, 4],
-            rates: vec![[1, 1], [2, 2], [4, 4]],
-            non_trivial_combiners: true,
-        };
-        let inj = Injector::new(fdm);
+        inject::tests::start_high_square();
+        let inj = Injector::new(FdmEmulation::nvidia_like());
         let device = vk::Device::from_raw(0x7711);
         // SAFETY: a table of functions that are never called: the map exists, so nothing is made.
         let fns = unsafe { ash::Device::load_with(|_| std::ptr::null(), device) };
