@@ -3358,13 +3358,7 @@ struct Codes<'a> {
 /// # Safety
 /// The submit's work must be complete.
 unsafe fn report_draws(d: &DeviceData, cbs: &[u64]) {
-    let rates: Vec<[u32; 2]> = d
-        .instance
-        .profile
-        .rates()
-        .iter()
-        .map(|(e, _)| [e.width, e.height])
-        .collect();
+    let rates = d.instance.profile.fragment_sizes();
     let st = lock(&d.state);
     let mut read: BTreeMap<u64, Vec<u8>> = BTreeMap::new();
     for &cb in cbs {

@@ -74,6 +74,15 @@ impl Profile {
         vk::SampleCountFlags::TYPE_1.as_raw() | vk::SampleCountFlags::TYPE_4.as_raw(),
     );
 
+    /// The fragment sizes of [`Profile::rates`], as `[width, height]`: what the double's shading
+    /// and coarsening look rates up in.
+    pub fn fragment_sizes(self) -> Vec<[u32; 2]> {
+        self.rates()
+            .iter()
+            .map(|(e, _)| [e.width, e.height])
+            .collect()
+    }
+
     /// The rates vkGetPhysicalDeviceFragmentShadingRatesKHR lists: every power-of-two size up to
     /// the maximum with an aspect ratio of at most 2, widest first and, for equal widths, tallest
     /// first, as

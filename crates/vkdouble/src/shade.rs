@@ -91,7 +91,7 @@ mod tests {
     use vk::FragmentShadingRateCombinerOpKHR as Op;
 
     fn rates(p: Profile) -> Vec<[u32; 2]> {
-        p.rates().iter().map(|(e, _)| [e.width, e.height]).collect()
+        p.fragment_sizes()
     }
 
     #[test]

@@ -90,13 +90,7 @@ pub(super) unsafe fn end_pass(
     cb: vk::CommandBuffer,
     pass: PassRec,
 ) -> Option<PassEnd> {
-    let rates: Vec<[u32; 2]> = d
-        .instance
-        .profile
-        .rates()
-        .iter()
-        .map(|(e, _)| [e.width, e.height])
-        .collect();
+    let rates = d.instance.profile.fragment_sizes();
     let coarse = pass.draws.iter().any(|dr| {
         pass.subpasses
             .get(dr.subpass as usize)
@@ -320,13 +314,7 @@ const PATIENCE: Duration = Duration::from_secs(120);
 /// # Safety
 /// As [`start`]'s thread.
 unsafe fn work(d: &DeviceData, jobs: &[Job], abort: &AtomicBool) {
-    let rates: Vec<[u32; 2]> = d
-        .instance
-        .profile
-        .rates()
-        .iter()
-        .map(|(e, _)| [e.width, e.height])
-        .collect();
+    let rates = d.instance.profile.fragment_sizes();
     for j in jobs {
         let since = Instant::now();
         loop {
