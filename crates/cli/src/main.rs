@@ -48,7 +48,23 @@ use clap::Parser;
 
 use args::{Cli, Command};
 
+/// Rust starts programs with SIGPIPE ignored, so a write into a pipe whose reader has gone
+/// (`fovea report --json | head -c1`) fails and `println!` panics. The default disposition ends
+/// `fovea` quietly there, as it ends `cat` and other tools (signal(7)).
+fn end_quietly_on_a_closed_pipe() {
+    extern "C" {
+        /// signal(2), from the C library the standard library links.
+        fn signal(signum: i32, handler: usize) -> usize;
+    }
+    const SIGPIPE: i32 = 13;
+    const SIG_DFL: usize = 0;
+    // SAFETY: sets one signal's disposition to its default before any other thread exists; no
+    // handler of ours is installed.
+    unsafe { signal(SIGPIPE, SIG_DFL) };
+}
+
 fn main() {
+    end_quietly_on_a_closed_pipe();
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Demo(a) => demo::run(a),

@@ -225,3 +225,30 @@ fn the_top_level_lists_the_commands() {
     assert_eq!(r.code, 2, "{}", r.text());
     assert!(r.err.contains("Usage: fovea <COMMAND>"), "{}", r.err);
 }
+
+/// `fovea report --json | head -c1`: a reader that closed its end is not an error of `fovea`'s,
+/// and the command ends quietly as other Unix tools do, instead of panicking on the broken pipe.
+/// The peer is closed before `fovea` starts, so its first write always meets a closed reader.
+#[test]
+fn output_into_a_closed_pipe_ends_quietly() {
+    use std::os::unix::net::UnixStream;
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+
+    let (ours, theirs) = UnixStream::pair().expect("socket pair");
+    drop(ours);
+    let out = crate::support::command()
+        .args(["report", "--headset", "quest3", "--json"])
+        .stdout(Stdio::from(std::os::fd::OwnedFd::from(theirs)))
+        .stderr(Stdio::piped())
+        .output()
+        .expect("run fovea");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(
+        out.status.signal(),
+        Some(13),
+        "ended by SIGPIPE: {:?} {err}",
+        out.status
+    );
+}
