@@ -362,7 +362,7 @@ impl GazeSettings {
         let d = GazeSettings::default();
         let n = |k: Key, default: f32| r.number(k).unwrap_or(default);
         GazeSettings {
-            on: r.flag(Key::Gaze).unwrap_or(d.on),
+            on: r.flag_or_default(Key::Gaze),
             params: GazeParams {
                 min_cutoff_hz: n(Key::GazeMinCutoff, d.params.min_cutoff_hz),
                 beta: n(Key::GazeBeta, d.params.beta),
@@ -384,17 +384,16 @@ impl GazeSettings {
 impl Default for GazeSettings {
     fn default() -> GazeSettings {
         GazeSettings {
-            on: true,
+            on: fovea_config::Key::Gaze.default_flag(),
             params: GazeParams::default(),
             attach_after_s: fovea_config::DEFAULT_GAZE_ATTACH_AFTER_S,
         }
     }
 }
 
-/// The level injection uses when `inject` is on and `inject_level` is not given: medium, a level
-/// whose full-rate centre covers what the eye resolves sharply (docs/density-model.md#floors), so
-/// switching injection on alone changes something visible without being drastic.
-pub const DEFAULT_INJECT_LEVEL: Level = Level::Medium;
+/// The level injection uses when `inject` is on and `inject_level` is not given (the table of keys'
+/// default, [`fovea_config::DEFAULT_INJECT_LEVEL`]).
+pub const DEFAULT_INJECT_LEVEL: Level = fovea_config::DEFAULT_INJECT_LEVEL;
 
 /// Whether an instance's eye passes get injected shading rates (docs/injection.md#switching-it-on).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -451,17 +450,17 @@ impl Settings {
         });
         let symmetric_fov = match env_symmetric {
             Some(v) => flag(Some(&v), SYMMETRIC_FOV_ENV),
-            None => r.flag(Key::SymmetricFov).unwrap_or(false),
+            None => r.flag_or_default(Key::SymmetricFov),
         };
         Settings {
             symmetric_fov,
-            inject: r.flag(Key::Inject).unwrap_or(false),
+            inject: r.flag_or_default(Key::Inject),
             inject_level: r.level(Key::InjectLevel),
             log: r.text(Key::Log).map(String::from),
             log_file: r.text(Key::LogFile).map(String::from),
             identity: id.clone(),
             config: None,
-            eye_tracked_y_up: r.flag(Key::EyeTrackedYUp).unwrap_or(false),
+            eye_tracked_y_up: r.flag_or_default(Key::EyeTrackedYUp),
             gaze: GazeSettings::from_resolved(&r),
         }
     }
