@@ -340,6 +340,9 @@ pub struct Settings {
     pub eye_tracked_y_up: bool,
     /// The gaze source (docs/eye-tracking.md#settings).
     pub gaze: GazeSettings,
+    /// `subsampled` (or `FOVEA_SUBSAMPLED`): the reconstruction of coarse blocks forced on or off
+    /// for this application; `None`: as the application asks, on for injected passes.
+    pub subsampled: Option<bool>,
 }
 
 /// What the gaze source does (`gaze`, `gaze_*` in `fovea.toml` or `FOVEA_GAZE*`:
@@ -462,6 +465,7 @@ impl Settings {
             config: None,
             eye_tracked_y_up: r.flag_or_default(Key::EyeTrackedYUp),
             gaze: GazeSettings::from_resolved(&r),
+            subsampled: r.flag(Key::Subsampled),
         }
     }
 }
@@ -588,6 +592,37 @@ mod tests {
             (k == "FOVEA_INJECT_LEVEL").then(|| "4".to_string())
         });
         assert_eq!(env_wins.injection(), Injection::On(Level::HighTop));
+    }
+
+    #[test]
+    fn subsampled_is_per_app_unset_by_default_and_the_variable_wins() {
+        let file = fovea_config::Config::parse(
+            "[app.\"game\"]\nsubsampled = \"off\"\n[app.\"other\"]\nsubsampled = \"maybe\"\n",
+            std::path::Path::new("fovea.toml"),
+        );
+        let id = |app: &str| fovea_config::Identity {
+            app: Some(app.into()),
+            ..Default::default()
+        };
+        let no_env = |_: &str| None;
+        assert_eq!(
+            Settings::resolve(Some(&file), &id("game"), no_env).subsampled,
+            Some(false)
+        );
+        assert_eq!(
+            Settings::resolve(Some(&file), &id("other"), no_env).subsampled,
+            None,
+            "a bad value is dropped"
+        );
+        assert_eq!(
+            Settings::resolve(None, &id("game"), no_env).subsampled,
+            None
+        );
+        let on = |k: &str| (k == "FOVEA_SUBSAMPLED").then(|| "on".to_string());
+        assert_eq!(
+            Settings::resolve(Some(&file), &id("game"), on).subsampled,
+            Some(true)
+        );
     }
 
     #[test]

@@ -308,6 +308,14 @@ keys! {
         default: Fallback::Switch(false),
         doc: "the direction of y in the centres `xrGetFoveationEyeTrackedStateMETA` returns: off is y down, as Quest's runtime answers and Godot reads; on is y up, OpenXR's NDC, for an app that reads them that way ([eye-tracking.md](eye-tracking.md#xr_meta_foveation_eye_tracked))",
     },
+    Subsampled {
+        name: "subsampled",
+        env: Some("FOVEA_SUBSAMPLED"),
+        kind: Kind::Switch,
+        accepted: SWITCH,
+        default: Fallback::Unset("as the application asks; on for injected passes"),
+        doc: "force the reconstruction of coarse blocks on or off for this application",
+    },
 }
 
 impl Key {
