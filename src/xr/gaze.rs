@@ -2,38 +2,10 @@
 //! through an action set of the layer's own, filtered and projected into each view
 //! (docs/eye-tracking.md#where-gaze-comes-from).
 //!
-//! How it survives real runtimes and applications
-//! (<https://registry.khronos.org/OpenXR/specs/1.1/html/xrspec.html#XR_EXT_eye_gaze_interaction>,
-//! the spec's "Input and Haptics" chapter):
-//! - only in an instance where something of fovea's follows the eyes ([`used`]): everywhere else
-//!   fovea enables nothing, makes no action set and no input call;
-//! - the extension is enabled on the copy of the create info only where the runtime offers it
-//!   (`loader.rs`); an application that did not enable it still gets `XR_ERROR_PATH_UNSUPPORTED`
-//!   for the profile, its `XrSystemEyeGazeInteractionPropertiesEXT` left alone, as without fovea;
-//! - one action set and pose action per instance, made at the application's first suggestion for
-//!   the eye gaze profile or at the first session whose system reports
-//!   `supportsEyeGazeInteraction` (asked with fovea's own `xrGetSystemProperties`);
-//! - a suggestion replaces the previous one for the same profile, so fovea's binding is merged into
-//!   a copy of every suggestion the application makes for the eye gaze profile (its `next` chain,
-//!   `XR_KHR_binding_modification` included, goes with it); fovea suggests alone only where the
-//!   application made none, just before the application's attach goes down;
-//! - fovea's set goes down appended to a copy of the application's attach list; fovea attaches its
-//!   set alone only where a setting asks for it
-//!   ([`GazeSettings::attach_after_s`](crate::common::settings::GazeSettings), never by default),
-//!   and exactly one of the two attaches wins a session (an atomic claim);
-//! - the gaze action space and a VIEW reference space are made only after the attach (some runtimes
-//!   refuse a gaze space before);
-//! - fovea's set is added to a copy of every `xrSyncActions`; an application that attached but has
-//!   never synced gets fovea's set synced alone once a frame, and only while the session is
-//!   FOCUSED (fovea reads the state changes the application polls);
-//! - the gaze is located in VIEW space right after each `xrWaitFrame`, at that frame's predicted
-//!   display time (the action state of the last sync stays valid until the next), and used while
-//!   the action is active and the orientation valid (tracked or not, as OpenXR Toolkit and
-//!   Quad-Views-Foveated use it); each view's pose in VIEW space comes from fovea's own
-//!   `xrLocateViews`, made again only when the FOVs the application locates change;
-//! - a call refused with fovea's part added goes down again as the application made it only where
-//!   fovea's part could have caused the refusal ([`app_caused`]), so the application's own errors
-//!   reach the runtime once.
+//! The steps it takes to survive real runtimes and applications, and why each, are
+//! docs/eye-tracking.md#the-steps-where-the-gaze-is-used; who uses the gaze at all ([`used`]) is
+//! docs/eye-tracking.md#who-uses-the-gaze, and which refused calls go down again as the application
+//! made them ([`app_caused`]) docs/eye-tracking.md#when-there-is-no-gaze.
 //!
 //! Every way this fails falls back to fixed foveation with one log line saying why.
 //!
