@@ -894,13 +894,12 @@ impl Items {
                     in_use = false;
                 }
                 "use" => in_use = true,
-                _ if in_use => {
-                    // What a `use` brings in is named from here too (re-exports).
-                    if !matches!(*w, "self" | "crate" | "super" | "as") {
-                        let path = [here(), vec![(*w).to_owned()]].concat();
-                        self.add_path(&path);
-                    }
+                // What a `use` brings in is named from here too (re-exports).
+                _ if in_use && !matches!(*w, "self" | "crate" | "super" | "as") => {
+                    let path = [here(), vec![(*w).to_owned()]].concat();
+                    self.add_path(&path);
                 }
+                _ if in_use => {}
                 "fn" | "struct" | "enum" | "trait" | "type" | "const" | "static" | "mod"
                 | "union" | "macro_rules!" => {
                     let Some(name) =
@@ -954,11 +953,10 @@ impl Items {
             None => (&parts[..], None),
         };
         let ty = module.last().copied().filter(|p| is_type(p));
-        if module.len() == 1 && ty.is_some() {
-            if first.starts_with("Xr") || first.starts_with("Vk") || OUTSIDE_TYPES.contains(&first)
-            {
-                return None;
-            }
+        let outside =
+            first.starts_with("Xr") || first.starts_with("Vk") || OUTSIDE_TYPES.contains(&first);
+        if module.len() == 1 && ty.is_some() && outside {
+            return None;
         }
         let joined = module.join("::");
         let found = if module.len() == 1 && ty.is_some() {
