@@ -463,10 +463,12 @@ const XR_FLOORS: &[Place] = &[
     at(11, "session_gpu.rs"),
     at(11, "values.rs"),
     at(11, "eye_centres.rs"),
-    // 2: what is built on them: the next layer's table, density images, the gaze source.
-    at(20, "next_layer.rs"),
-    at(20, "density_images.rs"),
-    at(20, "gaze.rs"),
+    // 2: what is built on them: the next layer's table, density images, the gaze source's
+    // sampling; then the gaze source's instance part, which makes the sampling's sessions.
+    at(21, "next_layer.rs"),
+    at(21, "density_images.rs"),
+    at(21, "gaze_sampling.rs"),
+    at(22, "gaze.rs"),
     // 3: the registry of instances, sessions, swapchains and their FOV records.
     at(30, "registry.rs"),
     // 4: what lies below (probing the runtime) and symmetric FOVs.
