@@ -11,7 +11,8 @@
 //!   repository named in inline code (`src/vk/convert.rs`: a path starting in one of its folders);
 //! - every Rust item path named in inline code (`bridge::inject::generation`, `Session::eyes`,
 //!   `crate::common::guard`, a test module `xr::gaze`) is declared in the workspace's sources, and
-//!   an item named beside a file (`` `src/x.rs` (`item`) ``) is in that file;
+//!   an item named beside a file (`` `src/x.rs` (`item`) ``, `` `item` in `x.rs` ``) is in that
+//!   file;
 //! - `docs/README.md` links every other document;
 //! - blocks marked ```` ```sh runnable ```` run, with `cargo run [--release] [-q] --` replaced by
 //!   the `fovea` binary of this build, in a temporary folder with its own XDG folders: quick,
@@ -1022,30 +1023,35 @@ fn item_paths(md: &str) -> Vec<String> {
     out
 }
 
-/// The items named beside a file: `` `src/xr/gaze.rs` (`used`) ``, whose name must be a word of
-/// that file. Returns (file, item).
+/// The items named beside a file, as (file, item): `` `src/xr/gaze.rs` (`used`) ``,
+/// `` `used` (`src/xr/gaze.rs`) `` and `` `used` in `gaze.rs` ``.
 fn file_items(md: &str) -> Vec<(String, String)> {
+    let is_item = |w: &str| {
+        !w.is_empty()
+            && w.starts_with(|c: char| c.is_alphabetic() || c == '_')
+            && w.chars().all(|c| c.is_alphanumeric() || c == '_')
+    };
+    let is_file =
+        |w: &str| w.ends_with(".rs") && w.chars().all(|c| c.is_alphanumeric() || "_./".contains(c));
     let mut out = Vec::new();
     for line in md.lines() {
-        let mut rest = line;
-        while let Some(at) = rest.find(".rs` (`") {
-            let before = &rest[..at];
-            let file = before.rsplit('`').next().unwrap_or("");
-            let after = &rest[at + ".rs` (`".len()..];
-            let item = after.split('`').next().unwrap_or("");
-            if !file.is_empty()
-                && item.chars().all(|c| c.is_alphanumeric() || c == '_')
-                && !item.is_empty()
-            {
-                out.push((format!("{file}.rs"), item.to_owned()));
+        // Inline code spans and the text between them, alternating.
+        let parts: Vec<&str> = line.split('`').collect();
+        for i in (1..parts.len()).step_by(2) {
+            let Some(next) = parts.get(i + 2) else { break };
+            let (a, between, b) = (parts[i], parts[i + 1], *next);
+            match between {
+                " (" if is_file(a) && is_item(b) => out.push((a.to_owned(), b.to_owned())),
+                " (" | " in " if is_item(a) && is_file(b) => out.push((b.to_owned(), a.to_owned())),
+                _ => {}
             }
-            rest = after;
         }
     }
     out
 }
 
-/// What a Markdown file names that the sources do not declare.
+/// What a Markdown file names that the sources do not declare. A file named by a path that does
+/// not start at the root (`lock.rs`, `hooks/session.rs`) is every Rust file whose path ends so.
 fn dead_items(root: &Path, items: &Items, file: &str, md: &str) -> Vec<String> {
     let mut out = Vec::new();
     for path in item_paths(md) {
@@ -1055,14 +1061,36 @@ fn dead_items(root: &Path, items: &Items, file: &str, md: &str) -> Vec<String> {
             ));
         }
     }
-    for (source, item) in file_items(md) {
-        let Ok(text) = std::fs::read_to_string(root.join(&source)) else {
-            continue; // a path that is gone is reported as such
+    let pairs = file_items(md);
+    let every: Vec<PathBuf> = if pairs.is_empty() {
+        Vec::new()
+    } else {
+        source_roots(root)
+            .into_iter()
+            .flat_map(|(d, _)| if d.is_file() { vec![d] } else { rust_files(&d) })
+            .collect()
+    };
+    for (source, item) in pairs {
+        let candidates: Vec<PathBuf> = if root.join(&source).is_file() {
+            vec![root.join(&source)]
+        } else {
+            let tail = format!("/{source}");
+            every
+                .iter()
+                .filter(|f| f.to_string_lossy().ends_with(&tail))
+                .cloned()
+                .collect()
         };
-        let word = text
-            .split(|c: char| !(c.is_alphanumeric() || c == '_'))
-            .any(|w| w == item);
-        if !word {
+        if candidates.is_empty() {
+            continue; // a path that is gone is reported as such
+        }
+        let named = candidates.iter().any(|f| {
+            std::fs::read_to_string(f)
+                .unwrap_or_default()
+                .split(|c: char| !(c.is_alphanumeric() || c == '_'))
+                .any(|w| w == item)
+        });
+        if !named {
             out.push(format!("{file}: `{source}` has no `{item}`"));
         }
     }
@@ -1418,13 +1446,14 @@ fn an_item_that_is_gone_fails() {
     let items = Items::read(&root);
     let md =
         "`common::ffi::guard`, `hooks::check_lost`, `Session::no_such_member`, `NoSuchType::x`, \
-              `crates/abi/src/lib.rs` (`NO_SUCH_NAME`)\n";
+              `crates/abi/src/lib.rs` (`NO_SUCH_NAME`), `gone_fn` (`src/xr/gaze.rs`), `Gone` in `lock.rs`\n";
     let p = dead_items(&root, &items, "docs/example.md", md);
-    assert_eq!(p.len(), 5, "{p:#?}");
+    assert_eq!(p.len(), 7, "{p:#?}");
     // Items that exist, in the forms the documents use, and other projects' names, pass.
     let md = "`common::guard`, `crate::bridge::MapKey`, `Session::eyes`, `Registry::{instances, sessions}`, \
               `DensityImages::refresh(index, key, inputs)`, `fovea_model::Fov`, `xr::gaze`, `fovea::stats`, \
-              `XrApplicationInfo::applicationName`, `std::env::var`, `crates/abi/src/lib.rs` (`EXTENSIONS`)\n\
+              `XrApplicationInfo::applicationName`, `std::env::var`, `crates/abi/src/lib.rs` (`EXTENSIONS`), \
+              `used` (`src/xr/gaze.rs`), `SpinMutex` in `lock.rs`, `session_gpu` in `hooks/session.rs`\n\
               ```rust\nlet x = gone::item();\n```\n";
     assert_eq!(
         dead_items(&root, &items, "docs/example.md", md),
