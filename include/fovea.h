@@ -54,6 +54,7 @@
 #define FOVEA_ENV_GAZE_ATTACH_AFTER_S "FOVEA_GAZE_ATTACH_AFTER_S" /* seconds, or "never": attach alone for apps that never attach */
 /* XR_META_foveation_eye_tracked. */
 #define FOVEA_ENV_EYE_TRACKED_Y_UP "FOVEA_EYE_TRACKED_Y_UP" /* 0/1: the eye-tracked centres with y up (default y down) */
+#define FOVEA_ENV_SUBSAMPLED "FOVEA_SUBSAMPLED"     /* 0/1: force the reconstruction of coarse blocks (default: as the app asks) */
 /* Where fovea.toml (XDG_CONFIG_HOME/fovea) and the log (XDG_STATE_HOME/fovea) are by default. */
 #define FOVEA_ENV_XDG_CONFIG_HOME "XDG_CONFIG_HOME"
 #define FOVEA_ENV_XDG_STATE_HOME "XDG_STATE_HOME"
@@ -86,6 +87,7 @@
     X(FOVEA_ENV_GAZE_FIXATION_M)                 \
     X(FOVEA_ENV_GAZE_ATTACH_AFTER_S)             \
     X(FOVEA_ENV_EYE_TRACKED_Y_UP)                \
+    X(FOVEA_ENV_SUBSAMPLED)                      \
     X(FOVEA_ENV_XDG_CONFIG_HOME)                 \
     X(FOVEA_ENV_XDG_STATE_HOME)                  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL)    \

@@ -141,7 +141,8 @@ fn open(path: &Path) -> Option<LogFile> {
 pub fn init() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
-        let filter = EnvFilter::try_from_env(LOG_ENV).unwrap_or_else(|_| EnvFilter::new("warn"));
+        let filter = EnvFilter::try_from_env(LOG_ENV)
+            .unwrap_or_else(|_| EnvFilter::new(fovea_config::DEFAULT_LOG));
         let path = initial_path();
         let file = Arc::new(Mutex::new(path.as_deref().and_then(open)));
         let builder = tracing_subscriber::fmt()

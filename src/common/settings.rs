@@ -340,6 +340,9 @@ pub struct Settings {
     pub eye_tracked_y_up: bool,
     /// The gaze source (docs/eye-tracking.md#settings).
     pub gaze: GazeSettings,
+    /// `subsampled` (or `FOVEA_SUBSAMPLED`): the reconstruction of coarse blocks forced on or off
+    /// for this application; `None`: as the application asks, on for injected passes.
+    pub subsampled: Option<bool>,
 }
 
 /// What the gaze source does (`gaze`, `gaze_*` in `fovea.toml` or `FOVEA_GAZE*`:
@@ -362,7 +365,7 @@ impl GazeSettings {
         let d = GazeSettings::default();
         let n = |k: Key, default: f32| r.number(k).unwrap_or(default);
         GazeSettings {
-            on: r.flag(Key::Gaze).unwrap_or(d.on),
+            on: r.flag_or_default(Key::Gaze),
             params: GazeParams {
                 min_cutoff_hz: n(Key::GazeMinCutoff, d.params.min_cutoff_hz),
                 beta: n(Key::GazeBeta, d.params.beta),
@@ -384,17 +387,16 @@ impl GazeSettings {
 impl Default for GazeSettings {
     fn default() -> GazeSettings {
         GazeSettings {
-            on: true,
+            on: fovea_config::Key::Gaze.default_flag(),
             params: GazeParams::default(),
             attach_after_s: fovea_config::DEFAULT_GAZE_ATTACH_AFTER_S,
         }
     }
 }
 
-/// The level injection uses when `inject` is on and `inject_level` is not given: medium, a level
-/// whose full-rate centre covers what the eye resolves sharply (docs/density-model.md#floors), so
-/// switching injection on alone changes something visible without being drastic.
-pub const DEFAULT_INJECT_LEVEL: Level = Level::Medium;
+/// The level injection uses when `inject` is on and `inject_level` is not given (the table of keys'
+/// default, [`fovea_config::DEFAULT_INJECT_LEVEL`]).
+pub const DEFAULT_INJECT_LEVEL: Level = fovea_config::DEFAULT_INJECT_LEVEL;
 
 /// Whether an instance's eye passes get injected shading rates (docs/injection.md#switching-it-on).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -451,18 +453,19 @@ impl Settings {
         });
         let symmetric_fov = match env_symmetric {
             Some(v) => flag(Some(&v), SYMMETRIC_FOV_ENV),
-            None => r.flag(Key::SymmetricFov).unwrap_or(false),
+            None => r.flag_or_default(Key::SymmetricFov),
         };
         Settings {
             symmetric_fov,
-            inject: r.flag(Key::Inject).unwrap_or(false),
+            inject: r.flag_or_default(Key::Inject),
             inject_level: r.level(Key::InjectLevel),
             log: r.text(Key::Log).map(String::from),
             log_file: r.text(Key::LogFile).map(String::from),
             identity: id.clone(),
             config: None,
-            eye_tracked_y_up: r.flag(Key::EyeTrackedYUp).unwrap_or(false),
+            eye_tracked_y_up: r.flag_or_default(Key::EyeTrackedYUp),
             gaze: GazeSettings::from_resolved(&r),
+            subsampled: r.flag(Key::Subsampled),
         }
     }
 }
@@ -589,6 +592,37 @@ mod tests {
             (k == "FOVEA_INJECT_LEVEL").then(|| "4".to_string())
         });
         assert_eq!(env_wins.injection(), Injection::On(Level::HighTop));
+    }
+
+    #[test]
+    fn subsampled_is_per_app_unset_by_default_and_the_variable_wins() {
+        let file = fovea_config::Config::parse(
+            "[app.\"game\"]\nsubsampled = \"off\"\n[app.\"other\"]\nsubsampled = \"maybe\"\n",
+            std::path::Path::new("fovea.toml"),
+        );
+        let id = |app: &str| fovea_config::Identity {
+            app: Some(app.into()),
+            ..Default::default()
+        };
+        let no_env = |_: &str| None;
+        assert_eq!(
+            Settings::resolve(Some(&file), &id("game"), no_env).subsampled,
+            Some(false)
+        );
+        assert_eq!(
+            Settings::resolve(Some(&file), &id("other"), no_env).subsampled,
+            None,
+            "a bad value is dropped"
+        );
+        assert_eq!(
+            Settings::resolve(None, &id("game"), no_env).subsampled,
+            None
+        );
+        let on = |k: &str| (k == "FOVEA_SUBSAMPLED").then(|| "on".to_string());
+        assert_eq!(
+            Settings::resolve(Some(&file), &id("game"), on).subsampled,
+            Some(true)
+        );
     }
 
     #[test]

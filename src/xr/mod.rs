@@ -20,7 +20,8 @@
 //! | 1 | `eye_centres.rs` | where each view's fovea is this frame: what the gaze source leaves for the maps, injection and `XR_META_foveation_eye_tracked` |
 //! | 1 | `values.rs` | value conversions: OpenXR's result codes and FOVs as plain values and back |
 //! | 2 | `density_images.rs` | fovea's own Vulkan objects: density images on the application's device, filled from the model |
-//! | 2 | `gaze.rs` | fovea's own gaze source: the layer's eye gaze action set, its spaces, the filter; where each view's fovea is, once a frame |
+//! | 2 | `gaze_sampling.rs` | fovea's own gaze source, per session: the attach state, the syncs alone, the gaze located after each `xrWaitFrame`, the filter; where each view's fovea is, once a frame |
+//! | 2 | `gaze.rs` | fovea's own gaze source, per instance (above `gaze_sampling.rs`, whose sessions it makes): who uses it, the eye gaze action set, fovea's binding merged into the application's suggestions, the attach with the application's sets or alone |
 //! | 2 | `next_layer.rs` | the next layer's table (expanded from the command list) and its loading; how a hook goes down |
 //! | 3 | `registry.rs` | per-instance, per-session, per-swapchain and per-profile records (the FOV records among them), their look-ups and the losses the runtime reported |
 //! | 4 | `below.rs` | what lies below: the instance extensions the layers and runtime under fovea offer |
@@ -37,6 +38,7 @@ pub mod extensions;
 pub mod eye_centres;
 pub mod ffi;
 pub mod gaze;
+pub mod gaze_sampling;
 pub mod hooks;
 pub mod loader;
 pub mod next_layer;

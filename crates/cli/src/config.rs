@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::ffi::OsString;
 use std::path::PathBuf;
 
-use fovea_config::{Config, Identity, Key, Source};
+use fovea_config::{Config, Fallback, Identity, Key, Source};
 
 use crate::args::ConfigArgs;
 
@@ -36,36 +36,15 @@ pub fn locate(vars: &BTreeMap<String, String>) -> Located {
     }
 }
 
-/// A gaze parameter's default ([`fovea_model::gaze::GazeParams`]).
-fn gaze_default(field: impl Fn(&fovea_model::gaze::GazeParams) -> f32) -> String {
-    field(&fovea_model::gaze::GazeParams::default()).to_string()
-}
-
-/// What applies when nothing sets `key`.
+/// What applies when nothing sets `key`: the table's default, with the log file's path as `vars`
+/// make it.
 fn default_of(key: Key, vars: &BTreeMap<String, String>) -> String {
-    match key {
-        Key::Level | Key::Dynamic | Key::VerticalOffset => "the application's profile".into(),
-        Key::SymmetricFov | Key::Inject => "off".into(),
-        Key::InjectLevel => "none".into(),
-        Key::MaxFragment => format!("{0}x{0}", fovea_config::DEFAULT_MAX_FRAGMENT),
-        Key::Log => "\"warn\"".into(),
-        Key::Gaze => "on".into(),
-        Key::GazeMinCutoff => gaze_default(|p| p.min_cutoff_hz),
-        Key::GazeBeta => gaze_default(|p| p.beta),
-        Key::GazeDCutoff => gaze_default(|p| p.d_cutoff_hz),
-        Key::GazeSaccade => gaze_default(|p| p.saccade_deg),
-        Key::GazeHold => gaze_default(|p| p.hold_s),
-        Key::GazeReturn => gaze_default(|p| p.return_s),
-        Key::GazeFixation => gaze_default(|p| p.fixation_m),
-        Key::GazeAttachAfter => {
-            fovea_config::DEFAULT_GAZE_ATTACH_AFTER_S.map_or("\"never\"".into(), |s| s.to_string())
-        }
-        Key::LogFile => fovea_config::default_log_path(|k| vars.get(k).map(OsString::from))
+    match key.default() {
+        Fallback::LogPath => fovea_config::default_log_path(|k| vars.get(k).map(OsString::from))
             .map_or("none (no home folder)".into(), |p| {
                 format!("{:?}", p.display().to_string())
             }),
-        // XR_META_foveation_eye_tracked: y down, as Quest and Godot read the centres.
-        Key::EyeTrackedYUp => "off (y down)".into(),
+        d => d.text(),
     }
 }
 
@@ -125,7 +104,8 @@ pub fn render(vars: &BTreeMap<String, String>, id: &Identity) -> String {
         ));
     }
     let (r, bad) = fovea_config::resolve(config, id, |k| vars.get(k).cloned());
-    line(format!("{:<19} {:<28} from", "setting", "value"));
+    let width = Key::ALL.iter().map(|k| k.name().len()).max().unwrap_or(0);
+    line(format!("{:<width$} {:<28} from", "setting", "value"));
     for key in Key::ALL {
         let value = r
             .get(key)
@@ -134,7 +114,7 @@ pub fn render(vars: &BTreeMap<String, String>, id: &Identity) -> String {
             Source::Default => "default".to_string(),
             s => s.to_string(),
         };
-        line(format!("{:<19} {:<28} {from}", key.name(), value));
+        line(format!("{:<width$} {:<28} {from}", key.name(), value));
     }
     line(
         "precedence: environment and Quest debug properties > [app] > [exe] > [engine] > global \

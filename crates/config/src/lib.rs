@@ -33,8 +33,15 @@ use std::ffi::OsString;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use fovea_model::density::{Level, MAX_VERTICAL_OFFSET_DEG};
+use fovea_model::density::Level;
 use toml::de::{DeTable, DeValue};
+
+mod keys;
+pub use keys::{
+    markdown_table, parse_env, Fallback, Key, Kind, Spec, DEFAULT_GAZE_ATTACH_AFTER_S,
+    DEFAULT_INJECT_LEVEL, DEFAULT_LOG, DEFAULT_MAX_FRAGMENT, KEYS, TABLE,
+};
+use keys::{parse_value, Raw};
 
 /// Environment variables this crate reads.
 pub mod env {
@@ -54,160 +61,8 @@ pub mod env {
     pub const XDG_STATE_HOME: &str = "XDG_STATE_HOME";
 }
 
-/// The largest fragment a map may ask for when nothing says otherwise: 4×4, as fovea always did.
-pub const DEFAULT_MAX_FRAGMENT: u32 = 4;
-
 /// The log file is renamed to `fovea.log.1` (replacing the previous one) once it reaches this size.
 pub const LOG_ROTATE_BYTES: u64 = 1 << 20;
-
-/// The file's keys.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Key {
-    Level,
-    Dynamic,
-    VerticalOffset,
-    SymmetricFov,
-    MaxFragment,
-    Inject,
-    InjectLevel,
-    Log,
-    LogFile,
-    Gaze,
-    GazeMinCutoff,
-    GazeBeta,
-    GazeDCutoff,
-    GazeSaccade,
-    GazeHold,
-    GazeReturn,
-    GazeFixation,
-    GazeAttachAfter,
-    // XR_META_foveation_eye_tracked.
-    EyeTrackedYUp,
-}
-
-/// How many keys there are.
-pub const KEYS: usize = 19;
-
-/// Seconds of display time before fovea attaches its own eye gaze action set in a session whose
-/// application attached none (`gaze_attach_after_s`; docs/eye-tracking.md#applications-that-do-not-cooperate):
-/// never by default. A session's sets attach once, so an attach of fovea's alone makes every later
-/// attach of the application fail (`XR_ERROR_ACTIONSETS_ALREADY_ATTACHED`); an application that sets
-/// up its input after a long loading screen must not pay for an opt-in it never made.
-pub const DEFAULT_GAZE_ATTACH_AFTER_S: Option<f32> = None;
-
-impl Key {
-    pub const ALL: [Key; KEYS] = [
-        Key::Level,
-        Key::Dynamic,
-        Key::VerticalOffset,
-        Key::SymmetricFov,
-        Key::MaxFragment,
-        Key::Inject,
-        Key::InjectLevel,
-        Key::Log,
-        Key::LogFile,
-        Key::Gaze,
-        Key::GazeMinCutoff,
-        Key::GazeBeta,
-        Key::GazeDCutoff,
-        Key::GazeSaccade,
-        Key::GazeHold,
-        Key::GazeReturn,
-        Key::GazeFixation,
-        Key::GazeAttachAfter,
-        Key::EyeTrackedYUp,
-    ];
-
-    /// The key as written in the file.
-    pub fn name(self) -> &'static str {
-        match self {
-            Key::Level => "level",
-            Key::Dynamic => "dynamic",
-            Key::VerticalOffset => "vertical_offset",
-            Key::SymmetricFov => "symmetric_fov",
-            Key::MaxFragment => "max_fragment",
-            Key::Inject => "inject",
-            Key::InjectLevel => "inject_level",
-            Key::Log => "log",
-            Key::LogFile => "log_file",
-            Key::EyeTrackedYUp => "eye_tracked_y_up",
-            Key::Gaze => "gaze",
-            Key::GazeMinCutoff => "gaze_min_cutoff_hz",
-            Key::GazeBeta => "gaze_beta",
-            Key::GazeDCutoff => "gaze_d_cutoff_hz",
-            Key::GazeSaccade => "gaze_saccade_deg",
-            Key::GazeHold => "gaze_hold_s",
-            Key::GazeReturn => "gaze_return_s",
-            Key::GazeFixation => "gaze_fixation_m",
-            Key::GazeAttachAfter => "gaze_attach_after_s",
-        }
-    }
-
-    /// The range a numeric key accepts (inclusive; a lower bound of 0 for the cutoffs and the
-    /// saccade threshold is exclusive).
-    pub fn range(self) -> Option<(f32, f32)> {
-        match self {
-            Key::GazeMinCutoff | Key::GazeDCutoff => Some((0.0, 100.0)),
-            Key::GazeBeta => Some((0.0, 10.0)),
-            Key::GazeSaccade => Some((0.0, 90.0)),
-            Key::GazeHold | Key::GazeReturn => Some((0.0, 10.0)),
-            Key::GazeFixation => Some((0.1, 100.0)),
-            Key::GazeAttachAfter => Some((0.0, 3600.0)),
-            _ => None,
-        }
-    }
-
-    /// What the key accepts, for problem lines.
-    pub fn accepted(self) -> &'static str {
-        match self {
-            Key::Level | Key::InjectLevel => {
-                "\"none\", \"low\", \"medium\", \"high\", \"high-top\" or 0-4"
-            }
-            Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::Gaze | Key::EyeTrackedYUp => {
-                "true or false (also \"on\"/\"off\", 1/0)"
-            }
-            Key::GazeMinCutoff | Key::GazeDCutoff => "hertz above 0, at most 100, e.g. 1.0",
-            Key::GazeBeta => "a number from 0 to 10, e.g. 0.1",
-            Key::GazeSaccade => "degrees above 0, at most 90, e.g. 4.5",
-            Key::GazeHold | Key::GazeReturn => "seconds from 0 to 10, e.g. 0.3",
-            Key::GazeFixation => "metres from 0.1 to 100, e.g. 1.0",
-            Key::GazeAttachAfter => "seconds from 0 to 3600, or \"never\"",
-            Key::VerticalOffset => "degrees from -55 to 55, e.g. -5.5",
-            Key::MaxFragment => "1, 2 or 4",
-            Key::Log => "a tracing filter string, e.g. \"info\" or \"warn,fovea::stats=info\"",
-            Key::LogFile => "a path in a string, \"\" for no log file",
-        }
-    }
-
-    /// The environment variable that wins over the file, if any.
-    pub fn env(self) -> Option<&'static str> {
-        match self {
-            Key::Level => Some(env::LEVEL),
-            Key::Dynamic => Some(env::DYNAMIC),
-            Key::SymmetricFov => Some(env::SYMMETRIC_FOV),
-            Key::MaxFragment => Some(env::MAX_FRAGMENT),
-            Key::Log => Some(env::LOG),
-            Key::LogFile => Some(env::LOG_FILE),
-            Key::Inject => Some(env::INJECT),
-            Key::InjectLevel => Some(env::INJECT_LEVEL),
-            Key::Gaze => Some(env::GAZE),
-            Key::GazeMinCutoff => Some(env::GAZE_MIN_CUTOFF_HZ),
-            Key::GazeBeta => Some(env::GAZE_BETA),
-            Key::GazeDCutoff => Some(env::GAZE_D_CUTOFF_HZ),
-            Key::GazeSaccade => Some(env::GAZE_SACCADE_DEG),
-            Key::GazeHold => Some(env::GAZE_HOLD_S),
-            Key::GazeReturn => Some(env::GAZE_RETURN_S),
-            Key::GazeFixation => Some(env::GAZE_FIXATION_M),
-            Key::GazeAttachAfter => Some(env::GAZE_ATTACH_AFTER_S),
-            Key::EyeTrackedYUp => Some(env::EYE_TRACKED_Y_UP),
-            Key::VerticalOffset => None,
-        }
-    }
-
-    fn by_name(name: &str) -> Option<Key> {
-        Key::ALL.into_iter().find(|k| k.name() == name)
-    }
-}
 
 /// A key's value.
 #[derive(Clone, Debug, PartialEq)]
@@ -234,97 +89,6 @@ impl fmt::Display for Value {
             Value::Never => f.write_str("never"),
             Value::Text(t) => write!(f, "{t:?}"),
         }
-    }
-}
-
-/// A scalar as the file or the environment wrote it.
-enum Raw<'a> {
-    Str(&'a str),
-    Int(&'a str),
-    Float(&'a str),
-    Bool(bool),
-    Other,
-}
-
-/// Parses a value for `key`; `None` when it is not one `key` accepts.
-fn parse_value(key: Key, raw: Raw<'_>) -> Option<Value> {
-    match key {
-        Key::Level | Key::InjectLevel => match raw {
-            Raw::Str(s) | Raw::Int(s) => s.parse::<Level>().ok().map(Value::Level),
-            _ => None,
-        },
-        Key::GazeAttachAfter if matches!(raw, Raw::Str(s) if s.trim().eq_ignore_ascii_case("never")) => {
-            Some(Value::Never)
-        }
-        Key::GazeMinCutoff
-        | Key::GazeBeta
-        | Key::GazeDCutoff
-        | Key::GazeSaccade
-        | Key::GazeHold
-        | Key::GazeReturn
-        | Key::GazeFixation
-        | Key::GazeAttachAfter => {
-            let (low, high) = key.range()?;
-            // The cutoffs and the saccade threshold must be above 0; the others may be 0.
-            let open = matches!(
-                key,
-                Key::GazeMinCutoff | Key::GazeDCutoff | Key::GazeSaccade
-            );
-            match raw {
-                Raw::Int(s) | Raw::Float(s) | Raw::Str(s) => s
-                    .trim()
-                    .replace('_', "")
-                    .parse::<f32>()
-                    .ok()
-                    .filter(|v| v.is_finite() && *v <= high && (*v > low || (!open && *v == low)))
-                    .map(Value::Number),
-                _ => None,
-            }
-        }
-        Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::Gaze | Key::EyeTrackedYUp => {
-            match raw {
-                Raw::Bool(b) => Some(Value::Bool(b)),
-                Raw::Int("0") => Some(Value::Bool(false)),
-                Raw::Int("1") => Some(Value::Bool(true)),
-                Raw::Str(s) => match s.trim().to_ascii_lowercase().as_str() {
-                    "on" | "true" | "1" => Some(Value::Bool(true)),
-                    "off" | "false" | "0" => Some(Value::Bool(false)),
-                    _ => None,
-                },
-                _ => None,
-            }
-        }
-        Key::VerticalOffset => match raw {
-            Raw::Int(s) | Raw::Float(s) | Raw::Str(s) => s
-                .trim()
-                .replace('_', "")
-                .parse::<f32>()
-                .ok()
-                .filter(|d| d.is_finite() && d.abs() <= MAX_VERTICAL_OFFSET_DEG)
-                .map(Value::Degrees),
-            _ => None,
-        },
-        Key::MaxFragment => match raw {
-            Raw::Int(s) | Raw::Str(s) => match s.trim() {
-                "1" => Some(Value::Fragment(1)),
-                "2" => Some(Value::Fragment(2)),
-                "4" => Some(Value::Fragment(4)),
-                _ => None,
-            },
-            _ => None,
-        },
-        Key::Log | Key::LogFile => match raw {
-            Raw::Str(s) => Some(Value::Text(s.to_owned())),
-            _ => None,
-        },
-    }
-}
-
-/// Parses an environment variable's value for `key` (text, as the file's strings).
-pub fn parse_env(key: Key, text: &str) -> Option<Value> {
-    match key {
-        Key::Log | Key::LogFile => Some(Value::Text(text.to_owned())),
-        _ => parse_value(key, Raw::Str(text)),
     }
 }
 
@@ -677,6 +441,11 @@ impl Resolved {
             Some(Value::Bool(b)) => Some(*b),
             _ => None,
         }
+    }
+
+    /// A switch in force: set, else the table's default (off for a switch without one).
+    pub fn flag_or_default(&self, key: Key) -> bool {
+        self.flag(key).unwrap_or(key.default_flag())
     }
 
     pub fn vertical_offset_deg(&self) -> Option<f32> {

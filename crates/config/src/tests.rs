@@ -301,3 +301,63 @@ gaze_hold_s = "long"
     assert_eq!(e.number(Key::GazeBeta), None);
     assert_eq!(wrong.len(), 1, "a bad variable is reported");
 }
+
+/// The table of keys in docs/settings.md: the lines from its header row to the first line that is
+/// not a table row.
+fn docs_table() -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/settings.md");
+    let md = std::fs::read_to_string(&path).unwrap();
+    let start = md
+        .find("| key | variable |")
+        .expect("docs/settings.md has the table of keys");
+    md[start..]
+        .lines()
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| format!("{l}\n"))
+        .collect()
+}
+
+#[test]
+fn the_docs_table_of_keys_is_the_table() {
+    let want = markdown_table();
+    assert!(
+        docs_table() == want,
+        "docs/settings.md's table of keys differs from crates/config/src/keys.rs; it should read:\n\n{want}"
+    );
+}
+
+#[test]
+fn every_key_has_one_row_and_its_default_is_a_value_it_accepts() {
+    let mut names = std::collections::BTreeSet::new();
+    let mut vars = std::collections::BTreeSet::new();
+    for (i, key) in Key::ALL.into_iter().enumerate() {
+        let s = key.spec();
+        assert_eq!((key as usize, s.key), (i, key), "{}", s.name);
+        assert!(names.insert(s.name), "{} twice", s.name);
+        assert_eq!(Key::by_name(s.name), Some(key));
+        assert!(
+            s.name
+                .chars()
+                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_'),
+            "{}",
+            s.name
+        );
+        if let Some(v) = s.env {
+            assert!(vars.insert(v), "{v} twice");
+        }
+        assert!(!s.doc.is_empty() && !s.accepted.is_empty(), "{}", s.name);
+        // A default that is a value reads back as itself: the table cannot default outside its
+        // own range.
+        if let Some(v) = s.default.value() {
+            let text = match &v {
+                Value::Text(t) => t.clone(),
+                Value::Fragment(n) => n.to_string(),
+                Value::Degrees(d) => d.to_string(),
+                Value::Level(l) => l.name().to_owned(),
+                other => other.to_string(),
+            };
+            assert_eq!(parse_env(key, &text), Some(v), "{}'s default", s.name);
+        }
+    }
+    assert_eq!(names.len(), KEYS);
+}

@@ -44,20 +44,25 @@ pub struct GazeParams {
     pub fixation_m: f32,
 }
 
-impl Default for GazeParams {
+impl GazeParams {
     /// Defaults chosen by the figures in this module's tests (docs/eye-tracking.md#defaults):
     /// pursuit at 30°/s lags under 1.5°, fixation noise of 0.5° shrinks to under a third, a blink
-    /// of 150 ms is held through, a lost tracker is back at fixed foveation within 0.6 s.
+    /// of 150 ms is held through, a lost tracker is back at fixed foveation within 0.6 s. A
+    /// constant, so `fovea-config`'s table of keys can name each as its key's default.
+    pub const DEFAULT: GazeParams = GazeParams {
+        min_cutoff_hz: 1.0,
+        beta: 0.1,
+        d_cutoff_hz: 1.0,
+        saccade_deg: 4.5,
+        hold_s: 0.3,
+        return_s: 0.3,
+        fixation_m: 1.0,
+    };
+}
+
+impl Default for GazeParams {
     fn default() -> GazeParams {
-        GazeParams {
-            min_cutoff_hz: 1.0,
-            beta: 0.1,
-            d_cutoff_hz: 1.0,
-            saccade_deg: 4.5,
-            hold_s: 0.3,
-            return_s: 0.3,
-            fixation_m: 1.0,
-        }
+        GazeParams::DEFAULT
     }
 }
 

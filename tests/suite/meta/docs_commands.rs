@@ -9,6 +9,10 @@
 //! - every relative link (Markdown or `<img src>`) names a file that exists, and a link into a
 //!   Markdown file with a `#fragment` names one of its headings; so does every file of this
 //!   repository named in inline code (`src/vk/convert.rs`: a path starting in one of its folders);
+//! - every Rust item path named in inline code (`bridge::inject::generation`, `Session::eyes`,
+//!   `crate::common::guard`, a test module `xr::gaze`) is declared in the workspace's sources, and
+//!   an item named beside a file (`` `src/x.rs` (`item`) ``, `` `item` in `x.rs` ``) is in that
+//!   file;
 //! - `docs/README.md` links every other document;
 //! - blocks marked ```` ```sh runnable ```` run, with `cargo run [--release] [-q] --` replaced by
 //!   the `fovea` binary of this build, in a temporary folder with its own XDG folders: quick,
@@ -749,6 +753,373 @@ fn check_cargo(ws: &Workspace, c: &Cargo) -> Vec<String> {
     problems
 }
 
+// ---------------------------------------------------------------------------------------------
+// Rust items named in the documents.
+
+/// Crates of other projects whose paths the documents quote (`std::env::var`, `ash::vk::Device`):
+/// not looked up.
+const OUTSIDE_CRATES: &[&str] = &[
+    "std",
+    "core",
+    "alloc",
+    "ash",
+    "openxr",
+    "openxr_sys",
+    "tracing",
+    "tracing_subscriber",
+    "toml",
+    "serde_json",
+    "glam",
+    "proptest",
+    "criterion",
+    "libc",
+    "libloading",
+    "png",
+];
+
+/// Types of other projects the documents name with a member (`Arc::drop_slow`); OpenXR's `Xr…`
+/// and Vulkan's `Vk…` are recognised by their prefix.
+const OUTSIDE_TYPES: &[&str] = &["Arc", "QCoreApplication"];
+
+/// What this repository's Rust sources declare, for looking up the item paths the documents name.
+struct Items {
+    /// Every path an item or module can be named by, and each suffix of it
+    /// (`fovea::xr::gaze::used`, `xr::gaze::used`, `gaze::used`, `used`).
+    paths: BTreeSet<String>,
+    /// Each type (struct, enum, trait, union, type alias) with the words of the files that declare
+    /// or implement it, where its members are.
+    types: BTreeMap<String, BTreeSet<String>>,
+    /// Every string literal that looks like a path (`"fovea::stats"`, a log target).
+    literals: BTreeSet<String>,
+}
+
+/// Each Rust source root of the workspace with the module path its files start from: the
+/// packages' `src` (named as their crate), `tests/`, `benches/` and `examples/` (named as their
+/// targets, `tests/suite/xr/gaze.rs` is `suite::xr::gaze`).
+fn source_roots(root: &Path) -> Vec<(PathBuf, Vec<String>)> {
+    let ws = Workspace::read(root);
+    let mut out = Vec::new();
+    for (name, dir) in &ws.packages {
+        let krate = name.replace('-', "_");
+        out.push((dir.join("src"), vec![krate]));
+        for kind in ["tests", "benches", "examples"] {
+            let Ok(entries) = std::fs::read_dir(dir.join(kind)) else {
+                continue;
+            };
+            for e in entries.flatten() {
+                let p = e.path();
+                let Some(stem) = p.file_stem().map(|s| s.to_string_lossy().into_owned()) else {
+                    continue;
+                };
+                if p.is_dir() || p.extension().is_some_and(|x| x == "rs") {
+                    out.push((p, vec![stem]));
+                }
+            }
+        }
+    }
+    out
+}
+
+impl Items {
+    fn read(root: &Path) -> Items {
+        let mut items = Items {
+            paths: BTreeSet::new(),
+            types: BTreeMap::new(),
+            literals: BTreeSet::new(),
+        };
+        for (dir, base) in source_roots(root) {
+            let files = if dir.is_file() {
+                vec![(dir.clone(), Vec::new())]
+            } else {
+                modules_under(&dir)
+            };
+            for (file, module) in files {
+                let text = std::fs::read_to_string(&file).unwrap();
+                let module: Vec<String> = base.iter().cloned().chain(module).collect();
+                items.add_file(&text, &module);
+            }
+        }
+        items
+    }
+
+    fn add_path(&mut self, path: &[String]) {
+        for i in 0..path.len() {
+            self.paths.insert(path[i..].join("::"));
+        }
+    }
+
+    fn add_file(&mut self, text: &str, module: &[String]) {
+        for lit in text.split('"').skip(1).step_by(2) {
+            if lit.contains("::") && lit.chars().all(|c| c.is_alphanumeric() || "_:".contains(c)) {
+                self.literals.insert(lit.to_owned());
+            }
+        }
+        let code = code_only(text);
+        let words: Vec<&str> = code
+            .split(|c: char| !(c.is_alphanumeric() || "_;!{}".contains(c)))
+            .flat_map(split_braces)
+            .filter(|w| !w.is_empty())
+            .collect();
+        let file_words: BTreeSet<String> = words
+            .iter()
+            .map(|w| w.trim_end_matches('!').to_owned())
+            .collect();
+        self.add_path(module);
+        // Inline modules (`mod check { .. }`) open with their brace and close with it.
+        let mut depth = 0usize;
+        let mut stack: Vec<(String, usize)> = Vec::new();
+        let mut pending_mod: Option<String> = None;
+        let mut in_use = false;
+        for (i, w) in words.iter().enumerate() {
+            let here = || -> Vec<String> {
+                let mut m = module.to_vec();
+                m.extend(stack.iter().map(|(n, _)| n.clone()));
+                m
+            };
+            let next = words.get(i + 1).copied();
+            match *w {
+                "{" => {
+                    depth += 1;
+                    if let Some(m) = pending_mod.take() {
+                        stack.push((m, depth));
+                    }
+                }
+                "}" => {
+                    if stack.last().is_some_and(|(_, d)| *d == depth) {
+                        stack.pop();
+                    }
+                    depth = depth.saturating_sub(1);
+                }
+                ";" => {
+                    pending_mod = None;
+                    in_use = false;
+                }
+                "use" => in_use = true,
+                // What a `use` brings in is named from here too (re-exports).
+                _ if in_use && !matches!(*w, "self" | "crate" | "super" | "as") => {
+                    let path = [here(), vec![(*w).to_owned()]].concat();
+                    self.add_path(&path);
+                }
+                _ if in_use => {}
+                "fn" | "struct" | "enum" | "trait" | "type" | "const" | "static" | "mod"
+                | "union" | "macro_rules!" => {
+                    let Some(name) =
+                        next.filter(|n| n.starts_with(|c: char| c.is_alphabetic() || c == '_'))
+                    else {
+                        continue;
+                    };
+                    let path = [here(), vec![name.to_owned()]].concat();
+                    self.add_path(&path);
+                    if *w == "mod" {
+                        pending_mod = Some(name.to_owned());
+                    }
+                    if matches!(*w, "struct" | "enum" | "trait" | "type" | "union") {
+                        self.types
+                            .entry(name.to_owned())
+                            .or_default()
+                            .extend(file_words.iter().cloned());
+                    }
+                }
+                "impl" => {
+                    // `impl<T> Trait for Type`, `impl Type`: the type's members are in this file.
+                    for (j, t) in words.iter().enumerate().skip(i + 1).take(8) {
+                        if matches!(*t, "{" | ";" | "where") {
+                            break;
+                        }
+                        if t.starts_with(char::is_uppercase) && words.get(j + 1) != Some(&"for") {
+                            self.types
+                                .entry((*t).to_owned())
+                                .or_default()
+                                .extend(file_words.iter().cloned());
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// Why `path` (`hooks::frame::wait_frame`, `Session::eyes`, `crate::bridge::MapKey`) names
+    /// nothing here; `None` when it does, or when it is another project's.
+    fn missing(&self, path: &str) -> Option<String> {
+        let parts: Vec<&str> = path.trim_start_matches("crate::").split("::").collect();
+        let first = parts[0];
+        if self.literals.contains(path) || OUTSIDE_CRATES.contains(&first) {
+            return None;
+        }
+        let is_type = |p: &str| p.starts_with(char::is_uppercase) && p.contains(char::is_lowercase);
+        // The part up to the first type, and the type's member after it.
+        let (module, member) = match parts.iter().position(|p| is_type(p)) {
+            Some(t) => (&parts[..=t], parts.get(t + 1).copied()),
+            None => (&parts[..], None),
+        };
+        let ty = module.last().copied().filter(|p| is_type(p));
+        let outside =
+            first.starts_with("Xr") || first.starts_with("Vk") || OUTSIDE_TYPES.contains(&first);
+        if module.len() == 1 && ty.is_some() && outside {
+            return None;
+        }
+        let joined = module.join("::");
+        let found = if module.len() == 1 && ty.is_some() {
+            self.types.contains_key(first)
+        } else {
+            self.paths.contains(&joined)
+        };
+        if !found {
+            return Some(format!("`{joined}` is declared nowhere"));
+        }
+        match (ty, member) {
+            (Some(t), Some(m)) => {
+                let known = self.types.get(t).is_some_and(|words| words.contains(m));
+                (!known).then(|| format!("`{t}` has no `{m}`"))
+            }
+            _ => None,
+        }
+    }
+}
+
+/// The Rust item paths a Markdown text names in inline code outside fenced blocks: spans of
+/// identifiers joined by `::` (`common::guard`, `Session::eyes`, `bridge::MapKey`), a trailing
+/// call (`()`, `(index, key)`) dropped and a trailing group (`Registry::{instances, sessions}`)
+/// expanded.
+fn item_paths(md: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut in_fence = false;
+    for line in md.lines() {
+        if line.trim_start().starts_with("```") {
+            in_fence = !in_fence;
+            continue;
+        }
+        if in_fence {
+            continue;
+        }
+        for span in line.split('`').skip(1).step_by(2) {
+            let span = span.split('(').next().unwrap_or("");
+            let (head, group) = match span.split_once("::{") {
+                Some((h, g)) => (h, g.strip_suffix('}').unwrap_or("")),
+                None => (span, ""),
+            };
+            let ident_path = |p: &str| {
+                p.contains("::")
+                    && p.split("::").all(|part| {
+                        part.starts_with(|c: char| c.is_alphabetic() || c == '_')
+                            && part.chars().all(|c| c.is_alphanumeric() || c == '_')
+                    })
+            };
+            if group.is_empty() {
+                if ident_path(head) {
+                    out.push(head.to_owned());
+                }
+            } else {
+                for member in group.split(',').map(str::trim) {
+                    let p = format!("{head}::{member}");
+                    if ident_path(&p) {
+                        out.push(p);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The items named beside a file, as (file, item): `` `src/xr/gaze.rs` (`used`) ``,
+/// `` `used` (`src/xr/gaze.rs`) `` and `` `used` in `gaze.rs` ``.
+fn file_items(md: &str) -> Vec<(String, String)> {
+    let is_item = |w: &str| {
+        !w.is_empty()
+            && w.starts_with(|c: char| c.is_alphabetic() || c == '_')
+            && w.chars().all(|c| c.is_alphanumeric() || c == '_')
+    };
+    let is_file =
+        |w: &str| w.ends_with(".rs") && w.chars().all(|c| c.is_alphanumeric() || "_./".contains(c));
+    let mut out = Vec::new();
+    for line in md.lines() {
+        // Inline code spans and the text between them, alternating.
+        let parts: Vec<&str> = line.split('`').collect();
+        for i in (1..parts.len()).step_by(2) {
+            let Some(next) = parts.get(i + 2) else { break };
+            let (a, between, b) = (parts[i], parts[i + 1], *next);
+            match between {
+                " (" if is_file(a) && is_item(b) => out.push((a.to_owned(), b.to_owned())),
+                " (" | " in " if is_item(a) && is_file(b) => out.push((b.to_owned(), a.to_owned())),
+                _ => {}
+            }
+        }
+    }
+    out
+}
+
+/// What a Markdown file names that the sources do not declare. A file named by a path that does
+/// not start at the root (`lock.rs`, `hooks/session.rs`) is every Rust file whose path ends so.
+fn dead_items(root: &Path, items: &Items, file: &str, md: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for path in item_paths(md) {
+        if let Some(why) = items.missing(&path) {
+            out.push(format!(
+                "{file}: `{path}` names no item of this repository: {why}"
+            ));
+        }
+    }
+    let pairs = file_items(md);
+    let every: Vec<PathBuf> = if pairs.is_empty() {
+        Vec::new()
+    } else {
+        source_roots(root)
+            .into_iter()
+            .flat_map(|(d, _)| if d.is_file() { vec![d] } else { rust_files(&d) })
+            .collect()
+    };
+    for (source, item) in pairs {
+        let candidates: Vec<PathBuf> = if root.join(&source).is_file() {
+            vec![root.join(&source)]
+        } else {
+            let tail = format!("/{source}");
+            every
+                .iter()
+                .filter(|f| f.to_string_lossy().ends_with(&tail))
+                .cloned()
+                .collect()
+        };
+        if candidates.is_empty() {
+            continue; // a path that is gone is reported as such
+        }
+        let named = candidates.iter().any(|f| {
+            std::fs::read_to_string(f)
+                .unwrap_or_default()
+                .split(|c: char| !(c.is_alphanumeric() || c == '_'))
+                .any(|w| w == item)
+        });
+        if !named {
+            out.push(format!("{file}: `{source}` has no `{item}`"));
+        }
+    }
+    out
+}
+
+#[test]
+fn every_rust_item_the_documents_name_exists() {
+    let root = root();
+    let items = Items::read(&root);
+    assert!(
+        items.missing("common::guard").is_none() && items.missing("Session::eyes").is_none(),
+        "the source scan finds nothing"
+    );
+    let mut problems = Vec::new();
+    let mut named = 0;
+    for (file, md) in documents() {
+        named += item_paths(&md).len();
+        problems.extend(dead_items(&root, &items, &file, &md));
+    }
+    assert!(named > 50, "only {named} item paths found in the documents");
+    assert!(
+        problems.is_empty(),
+        "{} item(s) the documents name do not exist:\n{}",
+        problems.len(),
+        problems.join("\n")
+    );
+}
+
 /// What is wrong with one Markdown file's commands and links: `file` is its path under `root`.
 fn check_markdown(root: &Path, file: &str, md: &str) -> Vec<String> {
     let ws = Workspace::read(root);
@@ -1067,4 +1438,25 @@ fn the_parsers_read_shell_rust_and_markdown_as_written() {
     assert_eq!(anchor(" No `static mut`"), "no-static-mut");
     assert!(anchors("# T\n## On a real GPU\n## On a real GPU\n").contains("on-a-real-gpu-1"));
     assert!(is_runnable("sh runnable") && !is_runnable("sh") && !is_runnable("text runnable"));
+}
+
+#[test]
+fn an_item_that_is_gone_fails() {
+    let root = root();
+    let items = Items::read(&root);
+    let md =
+        "`common::ffi::guard`, `hooks::check_lost`, `Session::no_such_member`, `NoSuchType::x`, \
+              `crates/abi/src/lib.rs` (`NO_SUCH_NAME`), `gone_fn` (`src/xr/gaze.rs`), `Gone` in `lock.rs`\n";
+    let p = dead_items(&root, &items, "docs/example.md", md);
+    assert_eq!(p.len(), 7, "{p:#?}");
+    // Items that exist, in the forms the documents use, and other projects' names, pass.
+    let md = "`common::guard`, `crate::bridge::MapKey`, `Session::eyes`, `Registry::{instances, sessions}`, \
+              `DensityImages::refresh(index, key, inputs)`, `fovea_model::Fov`, `xr::gaze`, `fovea::stats`, \
+              `XrApplicationInfo::applicationName`, `std::env::var`, `crates/abi/src/lib.rs` (`EXTENSIONS`), \
+              `used` (`src/xr/gaze.rs`), `SpinMutex` in `lock.rs`, `session_gpu` in `hooks/session.rs`\n\
+              ```rust\nlet x = gone::item();\n```\n";
+    assert_eq!(
+        dead_items(&root, &items, "docs/example.md", md),
+        Vec::<String>::new()
+    );
 }

@@ -455,8 +455,7 @@ const VK_FLOORS: &[Place] = &[
 ];
 const XR_FLOORS: &[Place] = &[
     // 1: the FFI edge, the command list, extension names, handle records, the session's GPU,
-    // value conversions; then what is built on them: the next layer's table, density images, the
-    // gaze source.
+    // value conversions, where each view's fovea is.
     at(11, "ffi.rs"),
     at(11, "commands.rs"),
     at(11, "extensions.rs"),
@@ -464,9 +463,12 @@ const XR_FLOORS: &[Place] = &[
     at(11, "session_gpu.rs"),
     at(11, "values.rs"),
     at(11, "eye_centres.rs"),
-    at(12, "next_layer.rs"),
-    at(12, "density_images.rs"),
-    at(12, "gaze.rs"),
+    // 2: what is built on them: the next layer's table, density images, the gaze source's
+    // sampling; then the gaze source's instance part, which makes the sampling's sessions.
+    at(21, "next_layer.rs"),
+    at(21, "density_images.rs"),
+    at(21, "gaze_sampling.rs"),
+    at(22, "gaze.rs"),
     // 3: the registry of instances, sessions, swapchains and their FOV records.
     at(30, "registry.rs"),
     // 4: what lies below (probing the runtime) and symmetric FOVs.
@@ -1046,6 +1048,155 @@ fn the_vulkan_and_openxr_sides_are_built_in_floors() {
     );
 }
 
+/// The rows of the floors table that follows `marker` in `text` (a Markdown file, or a module's
+/// `//!` doc): each file the row names, relative to the tree, with its floor and, where the row
+/// gives one (`3a`, `3b`), its order inside the floor's folder. A folder the row names without
+/// naming its files (`shaders/`) stands for every file in it. A path cell reads `` `own/`: 3a
+/// `bindings`, `shadows`; 3b `calls` ``, `` `hooks/` (mod, actions, frame) `` or `` `loader.rs` ``.
+fn prose_floors(text: &str, marker: &str) -> Vec<(String, u32, Option<u32>)> {
+    let at = text
+        .find(marker)
+        .unwrap_or_else(|| panic!("no `{marker}` to find the floors table after"));
+    let lines = text[at..]
+        .lines()
+        .map(|l| l.trim_start().trim_start_matches("//!").trim())
+        .skip_while(|l| !l.starts_with("| floor |"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'));
+    let mut out = Vec::new();
+    for row in lines {
+        let cells: Vec<&str> = row.split('|').collect();
+        let Some(floor) = cells.get(1).and_then(|c| c.trim().parse::<u32>().ok()) else {
+            panic!("a floors row without a floor: {row}");
+        };
+        let (mut folder, mut unit, mut named) = (String::new(), None, true);
+        let words = cells[2]
+            .split(|c: char| !(c.is_ascii_alphanumeric() || "_./".contains(c)))
+            .filter(|w| !w.is_empty());
+        for w in words {
+            let order = w
+                .strip_suffix(|c: char| c.is_ascii_lowercase())
+                .is_some_and(|d| !d.is_empty() && d.chars().all(|c| c.is_ascii_digit()));
+            if order {
+                unit = Some(u32::from(w.as_bytes()[w.len() - 1] - b'a') + 1);
+            } else if let Some(f) = w.strip_suffix('/') {
+                if !named {
+                    out.push((folder.trim_end_matches('/').to_owned(), floor, unit));
+                }
+                folder = format!("{f}/");
+                named = false;
+            } else {
+                let name = if w.ends_with(".rs") {
+                    w.to_owned()
+                } else {
+                    format!("{w}.rs")
+                };
+                out.push((format!("{folder}{name}"), floor, unit));
+                named = true;
+            }
+        }
+        if !named {
+            out.push((folder.trim_end_matches('/').to_owned(), floor, unit));
+        }
+    }
+    out
+}
+
+/// Where a prose floors table (`rows`, from [`prose_floors`]) differs from the tidy test's own
+/// `table` over the tree's `files` (paths relative to the tree): a file it leaves out (a folder's
+/// own `mod.rs` may be left out where the folder is named), a file or folder it names that is not
+/// there, a floor other than the table's tens or an order inside a folder other than its units.
+/// The tree's `mod.rs`, the door, is on no floor, and a row naming it is not read.
+fn prose_drift(
+    doc: &str,
+    rows: &[(String, u32, Option<u32>)],
+    files: &[String],
+    table: &[Place],
+) -> Vec<String> {
+    let mut out = Vec::new();
+    let rows: Vec<&(String, u32, Option<u32>)> =
+        rows.iter().filter(|(p, ..)| p != "mod.rs").collect();
+    for (path, ..) in &rows {
+        let there = files
+            .iter()
+            .any(|f| f == path || f.starts_with(&format!("{path}/")));
+        if !there {
+            out.push(format!(
+                "{doc}: the floors table names `{path}`, which is no Rust file there"
+            ));
+        }
+    }
+    for f in files.iter().filter(|f| *f != "mod.rs") {
+        let Ok(place) = place_of(f, table) else {
+            continue; // the floors test reports it
+        };
+        let covering: Vec<_> = rows
+            .iter()
+            .filter(|(p, ..)| p == f || f.starts_with(&format!("{p}/")))
+            .collect();
+        match covering[..] {
+            [] if f.ends_with("/mod.rs")
+                && rows
+                    .iter()
+                    .any(|(p, ..)| p.starts_with(f.trim_end_matches("mod.rs"))) => {}
+            [] => out.push(format!(
+                "{doc}: `{f}` is missing from the floors table (floor {})",
+                place.floor / 10
+            )),
+            [(_, floor, unit)] => {
+                if *floor != place.floor / 10 || unit.is_some_and(|u| u != place.floor % 10) {
+                    let given = match unit {
+                        Some(u) => format!("{floor}{}", char::from(b'a' + *u as u8 - 1)),
+                        None => floor.to_string(),
+                    };
+                    out.push(format!(
+                        "{doc}: `{f}` is on floor {given} there, {} in tidy.rs",
+                        place.floor
+                    ));
+                }
+            }
+            _ => out.push(format!(
+                "{doc}: `{f}` is on {} rows of the floors table",
+                covering.len()
+            )),
+        }
+    }
+    out
+}
+
+#[test]
+fn the_prose_floors_tables_are_the_tidy_tests() {
+    let architecture = read(&root().join("docs/ARCHITECTURE.md"));
+    let mut found = Vec::new();
+    for (name, table, heading) in [
+        ("vk", VK_FLOORS, "### The Vulkan layer, `src/vk/`"),
+        ("xr", XR_FLOORS, "### The OpenXR side, `src/xr/`"),
+    ] {
+        let files: Vec<String> = tree_files(name).into_iter().map(|(rel, _)| rel).collect();
+        let door = read(&root().join("src").join(name).join("mod.rs"));
+        for (doc, text, marker) in [
+            ("docs/ARCHITECTURE.md".to_owned(), &architecture, heading),
+            (format!("src/{name}/mod.rs"), &door, "| floor |"),
+        ] {
+            let mut rows = prose_floors(text, marker);
+            // A folder of other files (`shaders/`: GLSL and SPIR-V) is on its floor too, with no
+            // Rust file for tidy.rs to place.
+            rows.retain(|(p, ..)| {
+                let dir = root().join("src").join(name).join(p);
+                !(dir.is_dir() && rust_files(&dir).is_empty())
+            });
+            assert!(rows.len() > 5, "{doc}: no floors table read for src/{name}");
+            found.extend(prose_drift(&doc, &rows, &files, table));
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "{} difference(s) between the prose floors tables and tidy.rs's:\n{}",
+        found.len(),
+        found.join("\n")
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // Each checker, seen to fail and to pass.
 
@@ -1366,5 +1517,65 @@ fn floors_tables_hold_every_file_once() {
     assert_eq!(
         violations(&[], &stale),
         ["src/vk/gone.rs: a row of the floors table (floor 5) that holds no file"]
+    );
+}
+
+#[test]
+fn prose_floors_tables_are_read_and_their_drift_found() {
+    let doc = "### Tree\n\n| floor | path | job |\n|---|---|---|\n| 3 | `loader.rs` | top |\n\
+               | 2 | `hooks/` (mod, frame) | hooks |\n| 1 | `base/`: 1a `ffi`; 1b `chain` | base |\n";
+    let rows = prose_floors(doc, "### Tree");
+    let want: Vec<(String, u32, Option<u32>)> = vec![
+        ("loader.rs".into(), 3, None),
+        ("hooks/mod.rs".into(), 2, None),
+        ("hooks/frame.rs".into(), 2, None),
+        ("base/ffi.rs".into(), 1, Some(1)),
+        ("base/chain.rs".into(), 1, Some(2)),
+    ];
+    assert_eq!(rows, want);
+    let table = [
+        at(11, "base/mod.rs"),
+        at(11, "base/ffi.rs"),
+        at(12, "base/chain.rs"),
+        apart(20, "hooks"),
+        at(30, "loader.rs"),
+    ];
+    let files: Vec<String> = [
+        "mod.rs",
+        "base/mod.rs",
+        "base/ffi.rs",
+        "base/chain.rs",
+        "hooks/mod.rs",
+        "hooks/frame.rs",
+        "loader.rs",
+    ]
+    .map(String::from)
+    .to_vec();
+    assert_eq!(
+        prose_drift("d", &rows, &files, &table),
+        Vec::<String>::new()
+    );
+    // A file the prose leaves out, one it names that is gone, a floor and an order that differ.
+    let mut more = files.clone();
+    more.push("hooks/session.rs".into());
+    let stale = doc
+        .replace("1b `chain`", "1a `chain`")
+        .replace("| 3 |", "| 4 |")
+        .replace("frame)", "frame, gone)");
+    let found = prose_drift("d", &prose_floors(&stale, "### Tree"), &more, &table);
+    assert_eq!(
+        found,
+        [
+            "d: the floors table names `hooks/gone.rs`, which is no Rust file there",
+            "d: `base/chain.rs` is on floor 1a there, 12 in tidy.rs",
+            "d: `loader.rs` is on floor 4 there, 30 in tidy.rs",
+            "d: `hooks/session.rs` is missing from the floors table (floor 2)",
+        ]
+    );
+    // A folder named without its files stands for all of them.
+    let folder = doc.replace("(mod, frame)", "");
+    assert_eq!(
+        prose_drift("d", &prose_floors(&folder, "### Tree"), &more, &table),
+        Vec::<String>::new()
     );
 }
