@@ -42,6 +42,7 @@
 #define FOVEA_ENV_MAX_FRAGMENT "FOVEA_MAX_FRAGMENT" /* 1, 2 or 4: the largest fragment a map asks for */
 #define FOVEA_ENV_INJECT "FOVEA_INJECT"             /* 0/1: foveate apps that never ask (shading rates in eye passes) */
 #define FOVEA_ENV_INJECT_LEVEL "FOVEA_INJECT_LEVEL" /* 0-4 or a level name: the level injection uses */
+#define FOVEA_ENV_SUBSAMPLED "FOVEA_SUBSAMPLED"     /* 0/1: reconstruct coarse blocks as subsampled images look */
 /* The gaze source (docs/eye-tracking.md#settings); each also a fovea.toml key in lower case without FOVEA_. */
 #define FOVEA_ENV_GAZE "FOVEA_GAZE"                 /* 0/1: follow the eyes where the runtime has eye gaze (default 1) */
 #define FOVEA_ENV_GAZE_MIN_CUTOFF_HZ "FOVEA_GAZE_MIN_CUTOFF_HZ" /* the one-euro filter's cutoff at rest, Hz */
@@ -76,6 +77,7 @@
     X(FOVEA_ENV_MAX_FRAGMENT)                    \
     X(FOVEA_ENV_INJECT)                          \
     X(FOVEA_ENV_INJECT_LEVEL)                    \
+    X(FOVEA_ENV_SUBSAMPLED)                      \
     X(FOVEA_ENV_GAZE)                            \
     X(FOVEA_ENV_GAZE_MIN_CUTOFF_HZ)              \
     X(FOVEA_ENV_GAZE_BETA)                       \

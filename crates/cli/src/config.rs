@@ -47,6 +47,8 @@ fn default_of(key: Key, vars: &BTreeMap<String, String>) -> String {
         Key::Level | Key::Dynamic | Key::VerticalOffset => "the application's profile".into(),
         Key::SymmetricFov | Key::Inject => "off".into(),
         Key::InjectLevel => "none".into(),
+        // docs/openxr-layer.md#subsampled-images: why injected swapchains reconstruct by default.
+        Key::Subsampled => "as the application asks; on for injected swapchains".into(),
         Key::MaxFragment => format!("{0}x{0}", fovea_config::DEFAULT_MAX_FRAGMENT),
         Key::Log => "\"warn\"".into(),
         Key::Gaze => "on".into(),

@@ -42,7 +42,7 @@ pub mod env {
     pub use fovea_abi::env::{
         CONFIG, GAZE, GAZE_ATTACH_AFTER_S, GAZE_BETA, GAZE_D_CUTOFF_HZ, GAZE_FIXATION_M,
         GAZE_HOLD_S, GAZE_MIN_CUTOFF_HZ, GAZE_RETURN_S, GAZE_SACCADE_DEG, INJECT, INJECT_LEVEL,
-        LOG, LOG_FILE, MAX_FRAGMENT, SYMMETRIC_FOV,
+        LOG, LOG_FILE, MAX_FRAGMENT, SUBSAMPLED, SYMMETRIC_FOV,
     };
     /// Quest's `debug.oculus.foveation.level` as a variable.
     pub const LEVEL: &str = "DEBUG_OCULUS_FOVEATION_LEVEL";
@@ -70,6 +70,8 @@ pub enum Key {
     MaxFragment,
     Inject,
     InjectLevel,
+    /// Reconstruction of coarse blocks (docs/openxr-layer.md#subsampled-images).
+    Subsampled,
     Log,
     LogFile,
     Gaze,
@@ -86,7 +88,7 @@ pub enum Key {
 }
 
 /// How many keys there are.
-pub const KEYS: usize = 19;
+pub const KEYS: usize = 20;
 
 /// Seconds of display time before fovea attaches its own eye gaze action set in a session whose
 /// application attached none (`gaze_attach_after_s`; docs/eye-tracking.md#applications-that-do-not-cooperate):
@@ -104,6 +106,7 @@ impl Key {
         Key::MaxFragment,
         Key::Inject,
         Key::InjectLevel,
+        Key::Subsampled,
         Key::Log,
         Key::LogFile,
         Key::Gaze,
@@ -128,6 +131,7 @@ impl Key {
             Key::MaxFragment => "max_fragment",
             Key::Inject => "inject",
             Key::InjectLevel => "inject_level",
+            Key::Subsampled => "subsampled",
             Key::Log => "log",
             Key::LogFile => "log_file",
             Key::EyeTrackedYUp => "eye_tracked_y_up",
@@ -163,9 +167,12 @@ impl Key {
             Key::Level | Key::InjectLevel => {
                 "\"none\", \"low\", \"medium\", \"high\", \"high-top\" or 0-4"
             }
-            Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::Gaze | Key::EyeTrackedYUp => {
-                "true or false (also \"on\"/\"off\", 1/0)"
-            }
+            Key::Dynamic
+            | Key::SymmetricFov
+            | Key::Inject
+            | Key::Subsampled
+            | Key::Gaze
+            | Key::EyeTrackedYUp => "true or false (also \"on\"/\"off\", 1/0)",
             Key::GazeMinCutoff | Key::GazeDCutoff => "hertz above 0, at most 100, e.g. 1.0",
             Key::GazeBeta => "a number from 0 to 10, e.g. 0.1",
             Key::GazeSaccade => "degrees above 0, at most 90, e.g. 4.5",
@@ -190,6 +197,7 @@ impl Key {
             Key::LogFile => Some(env::LOG_FILE),
             Key::Inject => Some(env::INJECT),
             Key::InjectLevel => Some(env::INJECT_LEVEL),
+            Key::Subsampled => Some(env::SUBSAMPLED),
             Key::Gaze => Some(env::GAZE),
             Key::GazeMinCutoff => Some(env::GAZE_MIN_CUTOFF_HZ),
             Key::GazeBeta => Some(env::GAZE_BETA),
@@ -281,19 +289,22 @@ fn parse_value(key: Key, raw: Raw<'_>) -> Option<Value> {
                 _ => None,
             }
         }
-        Key::Dynamic | Key::SymmetricFov | Key::Inject | Key::Gaze | Key::EyeTrackedYUp => {
-            match raw {
-                Raw::Bool(b) => Some(Value::Bool(b)),
-                Raw::Int("0") => Some(Value::Bool(false)),
-                Raw::Int("1") => Some(Value::Bool(true)),
-                Raw::Str(s) => match s.trim().to_ascii_lowercase().as_str() {
-                    "on" | "true" | "1" => Some(Value::Bool(true)),
-                    "off" | "false" | "0" => Some(Value::Bool(false)),
-                    _ => None,
-                },
+        Key::Dynamic
+        | Key::SymmetricFov
+        | Key::Inject
+        | Key::Subsampled
+        | Key::Gaze
+        | Key::EyeTrackedYUp => match raw {
+            Raw::Bool(b) => Some(Value::Bool(b)),
+            Raw::Int("0") => Some(Value::Bool(false)),
+            Raw::Int("1") => Some(Value::Bool(true)),
+            Raw::Str(s) => match s.trim().to_ascii_lowercase().as_str() {
+                "on" | "true" | "1" => Some(Value::Bool(true)),
+                "off" | "false" | "0" => Some(Value::Bool(false)),
                 _ => None,
-            }
-        }
+            },
+            _ => None,
+        },
         Key::VerticalOffset => match raw {
             Raw::Int(s) | Raw::Float(s) | Raw::Str(s) => s
                 .trim()
