@@ -564,7 +564,15 @@ impl Swapchain {
     /// images' handles may come back for other images, which must not inherit its decision.
     pub fn forget_published(&self) {
         let images = std::mem::take(&mut *self.published.lock());
+        if images.is_empty() {
+            return;
+        }
         crate::bridge::subsampled::forget(&images);
+        tracing::debug!(
+            swapchain = self.handle.into_raw(),
+            ?images,
+            "reconstruction decision forgotten: the runtime destroyed the swapchain's images"
+        );
     }
 }
 
