@@ -48,7 +48,7 @@ fn default_of(key: Key, vars: &BTreeMap<String, String>) -> String {
         Key::SymmetricFov | Key::Inject => "off".into(),
         Key::InjectLevel => "none".into(),
         // docs/openxr-layer.md#subsampled-images: why injected swapchains reconstruct by default.
-        Key::Subsampled => "as the application asks; on for injected swapchains".into(),
+        Key::Subsampled => "as asked; injected: on".into(),
         Key::MaxFragment => format!("{0}x{0}", fovea_config::DEFAULT_MAX_FRAGMENT),
         Key::Log => "\"warn\"".into(),
         Key::Gaze => "on".into(),
@@ -143,6 +143,13 @@ pub fn render(vars: &BTreeMap<String, String>, id: &Identity) -> String {
          > the application's profile > defaults"
             .into(),
     );
+    if let Some(forced) = vars.get(fovea_config::env::DEBUG_SUBSAMPLED) {
+        line(format!(
+            "{}={forced}: debug.oculus.foveation.subsampled wins over subsampled \
+             (1 reconstructs every foveated swapchain, 0 none)",
+            fovea_config::env::DEBUG_SUBSAMPLED
+        ));
+    }
     if let Some(props) = vars.get("FOVEA_PROPS") {
         line(format!(
             "FOVEA_PROPS={props}: its debug.oculus.foveation.* lines win over all of the above"

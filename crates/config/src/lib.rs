@@ -48,6 +48,9 @@ pub mod env {
     pub const LEVEL: &str = "DEBUG_OCULUS_FOVEATION_LEVEL";
     /// Quest's `debug.oculus.foveation.dynamic` as a variable.
     pub const DYNAMIC: &str = "DEBUG_OCULUS_FOVEATION_DYNAMIC";
+    /// Quest's `debug.oculus.foveation.subsampled` as a variable: not the `subsampled` key's own
+    /// variable (`FOVEA_SUBSAMPLED`), but a debug override above it, as on Quest.
+    pub const DEBUG_SUBSAMPLED: &str = "DEBUG_OCULUS_FOVEATION_SUBSAMPLED";
     /// The XDG base directory for configuration (default `~/.config`).
     pub const XDG_CONFIG_HOME: &str = "XDG_CONFIG_HOME";
     /// The XDG base directory for state such as logs (default `~/.local/state`).
