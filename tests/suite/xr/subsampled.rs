@@ -4,7 +4,10 @@
 //! setting, who foveates the swapchain), what usage the simulated runtime's `xrCreateSwapchain` got
 //! (its call journal) and what fovea published for the images the application enumerated (the
 //! layer's log), on Vulkan sessions on lavapipe. An application that uses nothing of fovea's gets
-//! its usage unchanged and nothing published, whatever forces reconstruction on.
+//! its usage unchanged and nothing published, whatever forces reconstruction on. Under the Khronos
+//! validation layer, a copy out of one of the runtime's images into another (what reconstruction
+//! records) is valid exactly where fovea reconstructs, and invalid for the transfer usage the
+//! application's own request lacks elsewhere.
 //!
 //! All cases run in one child process of their own: the switches are environment variables read
 //! when each instance is created, and the log file is the process's.
@@ -13,14 +16,16 @@ use std::ffi::c_void;
 use std::path::{Path, PathBuf};
 use std::ptr::null_mut;
 
+use ash::vk;
 use fovea_harness::app::API_1_0;
 use fovea_harness::sim::control::{self, Fault};
-use fovea_harness::vulkan::{self, pick_lavapipe, Vulkan};
+use fovea_harness::vulkan::{self, pick_lavapipe, take_messages, Vulkan};
 use fovea_harness::{skip, App, Chain};
 use openxr_sys as xr;
 use xr::Handle;
 
 use crate::both::fdm_vulkan::{func, running_session, swapchain_info, FDM_BIT};
+use crate::support::device::{allocate, resettable_pool};
 use crate::support::in_own_process;
 
 /// `XrVulkanSwapchainCreateInfoMETA` as C lays it out (docs/openxr-layer.md: openxr-sys declares
@@ -227,6 +232,44 @@ fn images_in(text: &str, what: &str) -> Option<(Vec<u64>, String)> {
     Some((images, line.to_owned()))
 }
 
+/// Records (never submits) a copy from layer 0 of `src` to layer 0 of `dst`, as reconstruction
+/// copies a pass's colour out and back: the validation messages that recording drew.
+fn copy_messages(v: &Vulkan, src: u64, dst: u64) -> Vec<String> {
+    use ash::vk::Handle as _;
+    take_messages();
+    let d = &v.device;
+    let pool = resettable_pool(d, v.family);
+    let cb = allocate(d, pool);
+    let layer = vk::ImageSubresourceLayers::default()
+        .aspect_mask(vk::ImageAspectFlags::COLOR)
+        .layer_count(1);
+    let region = vk::ImageCopy::default()
+        .src_subresource(layer)
+        .dst_subresource(layer)
+        .extent(vk::Extent3D {
+            width: 16,
+            height: 16,
+            depth: 1,
+        });
+    // SAFETY: the pool, the command buffer and the images are this device's and alive; the
+    // command buffer is never submitted.
+    unsafe {
+        d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default())
+            .unwrap();
+        d.cmd_copy_image(
+            cb,
+            vk::Image::from_raw(src),
+            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+            vk::Image::from_raw(dst),
+            vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+            &[region],
+        );
+        d.end_command_buffer(cb).unwrap();
+        d.destroy_command_pool(pool, None);
+    }
+    take_messages()
+}
+
 /// How the case ends: the swapchain destroyed by itself, or with its instance.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Teardown {
@@ -351,6 +394,18 @@ fn run(
         xr::Result::SUCCESS
     );
     let mut raw: Vec<u64> = images.iter().map(|i| i.image).collect();
+    if case.app != AppKind::BystanderDepth {
+        let messages = copy_messages(&v, raw[0], raw[1]);
+        if case.usage & TRANSFER == TRANSFER {
+            assert!(messages.is_empty(), "{case:?}: {messages:#?}");
+        } else {
+            // The check can fail: without the usage, the validation layer refuses the copy.
+            assert!(
+                messages.iter().any(|m| m.contains("TRANSFER_SRC")),
+                "{case:?}: {messages:#?}"
+            );
+        }
+    }
     raw.sort_unstable();
     let text = log_since(log, from);
     match (case.published, images_in(&text, PUBLISHED)) {
@@ -408,6 +463,8 @@ fn run(
         ),
     }
     v.destroy();
+    let messages = take_messages();
+    assert!(messages.is_empty(), "{case:?}: {messages:#?}");
     Ok(())
 }
 
@@ -418,7 +475,7 @@ fn each_switch_decides_the_usage_asked_of_the_runtime_and_what_is_published() {
         "each_switch_decides_the_usage_asked_of_the_runtime_and_what_is_published",
         || {
             pick_lavapipe();
-            let entry = match vulkan::entry() {
+            let entry = match vulkan::validated_entry() {
                 Ok(e) => e,
                 Err(why) => {
                     skip(&why);
