@@ -78,6 +78,8 @@ pub enum Why {
     NotVulkanColour,
     /// The runtime refused the transfer usage reconstruction needs.
     UsageRefused,
+    /// Decided on only once the swapchain was made without the transfer usage it needs.
+    CreatedWithoutUsage,
 }
 
 /// The decision for one swapchain: reconstruct or not, and why.
@@ -145,6 +147,10 @@ impl Reconstruction {
             Why::Injected => "fovea injects shading rates into it (the default there)",
             Why::NotAsked => "the application did not ask for subsampled images",
             Why::UsageRefused => "the runtime refused the transfer usage it needs",
+            Why::CreatedWithoutUsage => {
+                "it was created without the transfer usage reconstruction needs (its density \
+                 images could not be made, and injection took it over)"
+            }
             Why::NotVulkanColour => {
                 "VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT asked for a swapchain that is not a colour \
                  swapchain of a Vulkan session"
@@ -174,8 +180,8 @@ fn reconstruction_usage() -> xr::SwapchainUsageFlags {
     xr::SwapchainUsageFlags::TRANSFER_SRC | xr::SwapchainUsageFlags::TRANSFER_DST
 }
 
-/// The create flags fovea accepts in `XrVulkanSwapchainCreateInfoMETA`: SUBSAMPLED (dropped, or
-/// forced off) and FRAGMENT_DENSITY_MAP_OFFSET, which says the application moves the fovea itself
+/// The create flags fovea accepts in `XrVulkanSwapchainCreateInfoMETA`: SUBSAMPLED (answered
+/// with reconstruction, [`decide`]) and FRAGMENT_DENSITY_MAP_OFFSET, which says the application moves the fovea itself
 /// with density-map offsets (fovea keeps its maps fixed, docs/eye-tracking.md#what-moves-when).
 const META_CREATE_FLAGS: vk::ImageCreateFlags = vk::ImageCreateFlags::from_raw(
     vk::ImageCreateFlags::SUBSAMPLED_EXT.as_raw()
@@ -340,10 +346,17 @@ pub fn create_swapchain(
             why: Why::UsageRefused,
         })
     } else {
-        decide(inputs(foveator)).map(|d| Reconstruction {
-            // On only where the runtime was asked for the usage it needs.
-            on: d.on && down.usage_flags.contains(reconstruction_usage()),
-            ..d
+        // On only where the runtime was asked for the usage it needs: the foretold decision can
+        // be off where this one is on (density images that could not be made leave the
+        // swapchain to injection).
+        decide(inputs(foveator)).map(|d| {
+            match d.on && !down.usage_flags.contains(reconstruction_usage()) {
+                true => Reconstruction {
+                    on: false,
+                    why: Why::CreatedWithoutUsage,
+                },
+                false => d,
+            }
         })
     };
     if let Some(d) = decision {
