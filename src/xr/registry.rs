@@ -219,9 +219,26 @@ pub struct VulkanSetup {
     pub fdm_listed: bool,
     /// The physical device it was listed for; `None` when it was listed before fovea knew the device.
     pub fdm_listed_for: Option<u64>,
+    /// VkDevices created through xrCreateVulkanDeviceKHR (enable2) with `imagelessFramebuffer`
+    /// enabled (0: a free slot), where reconstruction's added usage would break the application's
+    /// framebuffers (docs/openxr-layer.md#subsampled-images). An application has one or two.
+    pub imageless_devices: [u64; 4],
 }
 
 impl VulkanSetup {
+    /// Remembers a device created with `imagelessFramebuffer` (beyond four, the oldest goes).
+    pub fn imageless_created(&mut self, device: u64) {
+        if !self.imageless_devices.contains(&device) {
+            self.imageless_devices.rotate_right(1);
+            self.imageless_devices[0] = device;
+        }
+    }
+
+    /// Whether `device` was created through xrCreateVulkanDeviceKHR with `imagelessFramebuffer`.
+    pub fn imageless(&self, device: u64) -> bool {
+        device != 0 && self.imageless_devices.contains(&device)
+    }
+
     /// Whether the application was told to enable VK_EXT_fragment_density_map on a device of
     /// `physical_device`.
     pub fn fdm_listed_for(&self, physical_device: u64) -> bool {

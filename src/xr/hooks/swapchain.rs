@@ -58,6 +58,11 @@ pub struct SubsampledInputs {
     /// A colour swapchain of a Vulkan session: the only kind whose images fovea's Vulkan layer
     /// draws into and can reconstruct.
     pub vulkan_colour: bool,
+    /// The session's VkDevice enabled `imagelessFramebuffer`: the application names the usage it
+    /// expects of each image its framebuffers bind, which must equal the image's
+    /// (VUID-VkRenderPassBeginInfo-framebuffer-04627), so the usage reconstruction adds would
+    /// break its render passes.
+    pub imageless: bool,
 }
 
 /// What decided a swapchain's reconstruction, for its log line.
@@ -80,6 +85,9 @@ pub enum Why {
     UsageRefused,
     /// Decided on only once the swapchain was made without the transfer usage it needs.
     CreatedWithoutUsage,
+    /// On by a switch, but the application's device uses imageless framebuffers, which the added
+    /// usage would break.
+    Imageless,
 }
 
 /// The decision for one swapchain: reconstruct or not, and why.
@@ -108,27 +116,42 @@ pub fn decide(i: SubsampledInputs) -> Option<Reconstruction> {
     if i.foveator == Foveator::Nobody && !i.asked {
         return None;
     }
-    match (i.property, i.setting) {
-        (Some(p), _) => {
-            return Some(Reconstruction {
-                on: p,
-                why: Why::Property,
-            })
-        }
-        (None, Some(s)) => {
-            return Some(Reconstruction {
-                on: s,
-                why: Why::Setting,
-            })
-        }
-        (None, None) => {}
+    let switched = match (i.property, i.setting) {
+        (Some(p), _) => Some(Reconstruction {
+            on: p,
+            why: Why::Property,
+        }),
+        (None, Some(s)) => Some(Reconstruction {
+            on: s,
+            why: Why::Setting,
+        }),
+        (None, None) => None,
+    };
+    if switched.is_some() {
+        return switched_on_unless_imageless(switched, i.imageless);
     }
-    if i.asked {
+    let d = if i.asked {
         on(Why::Asked)
     } else if i.foveator == Foveator::Injected {
         on(Why::Injected)
     } else {
         off(Why::NotAsked)
+    };
+    switched_on_unless_imageless(d, i.imageless)
+}
+
+/// An "on" that the application's imageless framebuffers rule out becomes off, whatever switched
+/// it on: the added usage would make its render passes invalid (fail safe, not open).
+fn switched_on_unless_imageless(
+    d: Option<Reconstruction>,
+    imageless: bool,
+) -> Option<Reconstruction> {
+    match d {
+        Some(Reconstruction { on: true, .. }) if imageless => Some(Reconstruction {
+            on: false,
+            why: Why::Imageless,
+        }),
+        d => d,
     }
 }
 
@@ -147,6 +170,11 @@ impl Reconstruction {
             Why::Injected => "fovea injects shading rates into it (the default there)",
             Why::NotAsked => "the application did not ask for subsampled images",
             Why::UsageRefused => "the runtime refused the transfer usage it needs",
+            Why::Imageless => {
+                "the application's VkDevice enabled imagelessFramebuffer, and the transfer usage \
+                 reconstruction needs would make its framebuffers' attachment usage wrong \
+                 (VUID-VkRenderPassBeginInfo-framebuffer-04627)"
+            }
             Why::CreatedWithoutUsage => {
                 "it was created without the transfer usage reconstruction needs (its density \
                  images could not be made, and injection took it over)"
@@ -265,11 +293,16 @@ pub fn create_swapchain(
         .flags
         .contains(xr::SwapchainCreateFoveationFlagsFB::FRAGMENT_DENSITY_MAP)
         && exts.provided(Ext::FoveationVulkan);
+    let imageless = state
+        .vulkan
+        .as_ref()
+        .is_some_and(|b| state.instance.vulkan.lock().imageless(b.device));
     let inputs = |foveator| SubsampledInputs {
         asked,
         property: state.instance.overrides.current().subsampled,
         setting: state.instance.subsampled,
         foveator,
+        imageless,
         vulkan_colour: state.vulkan.is_some()
             && i.usage_flags
                 .contains(xr::SwapchainUsageFlags::COLOR_ATTACHMENT)
@@ -944,6 +977,7 @@ mod tests {
                             setting,
                             foveator,
                             vulkan_colour: true,
+                            imageless: false,
                         };
                         let got = decide(i);
                         let want = if foveator == Nobody && !asked {
@@ -961,6 +995,17 @@ mod tests {
                             Some((false, Why::NotAsked))
                         };
                         assert_eq!(got.map(|d| (d.on, d.why)), want, "{i:?}");
+                        // On a device with imageless framebuffers, every "on" is off, and says
+                        // why; every other answer stays.
+                        let imageless = decide(SubsampledInputs {
+                            imageless: true,
+                            ..i
+                        });
+                        let want = match want {
+                            Some((true, _)) => Some((false, Why::Imageless)),
+                            w => w,
+                        };
+                        assert_eq!(imageless.map(|d| (d.on, d.why)), want, "{i:?}");
                     }
                 }
             }
@@ -979,6 +1024,7 @@ mod tests {
                     setting: forced,
                     foveator,
                     vulkan_colour: false,
+                    imageless: false,
                 };
                 assert_eq!(decide(i), None, "{i:?}");
                 assert_eq!(

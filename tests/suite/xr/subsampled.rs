@@ -76,6 +76,8 @@ struct Case {
     config: Option<&'static str>,
     /// The runtime refuses the first xrCreateSwapchain with this.
     refuse: Option<xr::Result>,
+    /// The application's VkDevice enables Vulkan 1.2's `imagelessFramebuffer`.
+    imageless: bool,
     /// The usage the runtime's (last) xrCreateSwapchain got.
     usage: u64,
     /// What was published for the images: `None`, nothing.
@@ -93,6 +95,7 @@ impl Case {
             inject: false,
             config: None,
             refuse: None,
+            imageless: false,
             usage,
             published,
             line: None,
@@ -182,6 +185,20 @@ fn cases() -> Vec<Case> {
             inject: true,
             property: Some("1"),
             ..c(BystanderDepth, DEPTH_USAGE, None)
+        },
+        // An application with imageless framebuffers names the usage it expects of its images:
+        // nothing is added, whatever switches reconstruction on, and the line says why.
+        Case {
+            inject: true,
+            imageless: true,
+            line: Some("imagelessFramebuffer"),
+            ..c(Bystander, APP_USAGE, Some(false))
+        },
+        Case {
+            property: Some("1"),
+            imageless: true,
+            line: Some("VUID-VkRenderPassBeginInfo-framebuffer-04627"),
+            ..c(ProfilesAsking, APP_USAGE, Some(false))
         },
         // A runtime that refuses the usage: the application's swapchain as it asked, no
         // reconstruction.
@@ -302,7 +319,20 @@ fn run(
     let from = log_len(log);
     let app = App::new(Chain::fovea().unwrap(), &extensions(case.app), API_1_0).unwrap();
     let sys = app.system();
-    let v = match Vulkan::through_xr(entry, app.chain.gipa(), app.instance, sys) {
+    let features12 = vk::PhysicalDeviceVulkan12Features {
+        imageless_framebuffer: vk::TRUE,
+        ..Default::default()
+    };
+    let options = vulkan::Options {
+        api_version: vk::API_VERSION_1_2,
+        device_next: if case.imageless {
+            &features12 as *const _ as *const c_void
+        } else {
+            std::ptr::null()
+        },
+        ..vulkan::Options::default()
+    };
+    let v = match Vulkan::through_xr_with(entry, app.chain.gipa(), app.instance, sys, &options) {
         Ok(v) => v,
         Err(why) => {
             assert_eq!(app.destroy(), xr::Result::SUCCESS);
