@@ -310,14 +310,12 @@ pub fn create_vulkan_device(
             // SAFETY: a valid XrVulkanDeviceCreateInfoKHR points to a valid VkDeviceCreateInfo,
             // which the runtime just accepted; its sType is checked before anything else is read.
             let app_vk = unsafe { &*(i.vulkan_create_info as *const vk::DeviceCreateInfo) };
-            // SAFETY: as above.
-            if app_vk.s_type == vk::StructureType::DEVICE_CREATE_INFO
-                && unsafe { enables_imageless(app_vk) }
-            {
-                instance(inst)?
-                    .vulkan
-                    .lock()
-                    .imageless_created(created as u64);
+            let imageless = app_vk.s_type == vk::StructureType::DEVICE_CREATE_INFO
+                // SAFETY: a VkDeviceCreateInfo (its sType just checked), valid as above.
+                && unsafe { enables_imageless(app_vk) };
+            // The device exists: whatever happens here, the application's result stands.
+            if let (true, Ok(s)) = (imageless, instance(inst)) {
+                s.vulkan.lock().imageless_created(created as u64);
             }
         }
     }
