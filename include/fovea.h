@@ -42,6 +42,7 @@
 #define FOVEA_ENV_MAX_FRAGMENT "FOVEA_MAX_FRAGMENT" /* 1, 2 or 4: the largest fragment a map asks for */
 #define FOVEA_ENV_INJECT "FOVEA_INJECT"             /* 0/1: foveate apps that never ask (shading rates in eye passes) */
 #define FOVEA_ENV_INJECT_LEVEL "FOVEA_INJECT_LEVEL" /* 0-4 or a level name: the level injection uses */
+#define FOVEA_ENV_SUBSAMPLED "FOVEA_SUBSAMPLED"     /* 0/1: reconstruct coarse blocks as subsampled images look */
 /* The gaze source (docs/eye-tracking.md#settings); each also a fovea.toml key in lower case without FOVEA_. */
 #define FOVEA_ENV_GAZE "FOVEA_GAZE"                 /* 0/1: follow the eyes where the runtime has eye gaze (default 1) */
 #define FOVEA_ENV_GAZE_MIN_CUTOFF_HZ "FOVEA_GAZE_MIN_CUTOFF_HZ" /* the one-euro filter's cutoff at rest, Hz */
@@ -54,7 +55,6 @@
 #define FOVEA_ENV_GAZE_ATTACH_AFTER_S "FOVEA_GAZE_ATTACH_AFTER_S" /* seconds, or "never": attach alone for apps that never attach */
 /* XR_META_foveation_eye_tracked. */
 #define FOVEA_ENV_EYE_TRACKED_Y_UP "FOVEA_EYE_TRACKED_Y_UP" /* 0/1: the eye-tracked centres with y up (default y down) */
-#define FOVEA_ENV_SUBSAMPLED "FOVEA_SUBSAMPLED"     /* 0/1: force the reconstruction of coarse blocks (default: as the app asks) */
 /* Where fovea.toml (XDG_CONFIG_HOME/fovea) and the log (XDG_STATE_HOME/fovea) are by default. */
 #define FOVEA_ENV_XDG_CONFIG_HOME "XDG_CONFIG_HOME"
 #define FOVEA_ENV_XDG_STATE_HOME "XDG_STATE_HOME"
@@ -77,6 +77,7 @@
     X(FOVEA_ENV_MAX_FRAGMENT)                    \
     X(FOVEA_ENV_INJECT)                          \
     X(FOVEA_ENV_INJECT_LEVEL)                    \
+    X(FOVEA_ENV_SUBSAMPLED)                      \
     X(FOVEA_ENV_GAZE)                            \
     X(FOVEA_ENV_GAZE_MIN_CUTOFF_HZ)              \
     X(FOVEA_ENV_GAZE_BETA)                       \
@@ -87,7 +88,6 @@
     X(FOVEA_ENV_GAZE_FIXATION_M)                 \
     X(FOVEA_ENV_GAZE_ATTACH_AFTER_S)             \
     X(FOVEA_ENV_EYE_TRACKED_Y_UP)                \
-    X(FOVEA_ENV_SUBSAMPLED)                      \
     X(FOVEA_ENV_XDG_CONFIG_HOME)                 \
     X(FOVEA_ENV_XDG_STATE_HOME)                  \
     X(FOVEA_ENV_DEBUG_OCULUS_FOVEATION_LEVEL)    \

@@ -11,6 +11,7 @@
 //! the GPU side fills images from [`MapInputs`]. Neither imports the other.
 
 pub mod inject;
+pub mod subsampled;
 
 use fovea_model::density::{Level, Pattern};
 use fovea_model::dynamic::level_at;

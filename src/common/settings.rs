@@ -326,6 +326,11 @@ pub struct Settings {
     /// `inject_level` (or `FOVEA_INJECT_LEVEL`): the level injection uses before Quest's debug
     /// properties apply on top; [`DEFAULT_INJECT_LEVEL`] when not given.
     pub inject_level: Option<Level>,
+    /// `subsampled` (or `FOVEA_SUBSAMPLED`): reconstruct the coarse blocks of foveated swapchains
+    /// (`Some(true)`) or not (`Some(false)`) whatever the application asks; `None`: as it asks,
+    /// and on for injected swapchains (docs/openxr-layer.md#subsampled-images). Quest's
+    /// `debug.oculus.foveation.subsampled` wins over it.
+    pub subsampled: Option<bool>,
     /// The `log` filter from the file (`FOVEA_LOG` wins; the log is set up before the instance).
     pub log: Option<String>,
     /// The `log_file` from the file or `FOVEA_LOG_FILE`: `Some("")` turns the file off; `None`
@@ -340,9 +345,6 @@ pub struct Settings {
     pub eye_tracked_y_up: bool,
     /// The gaze source (docs/eye-tracking.md#settings).
     pub gaze: GazeSettings,
-    /// `subsampled` (or `FOVEA_SUBSAMPLED`): the reconstruction of coarse blocks forced on or off
-    /// for this application; `None`: as the application asks, on for injected passes.
-    pub subsampled: Option<bool>,
 }
 
 /// What the gaze source does (`gaze`, `gaze_*` in `fovea.toml` or `FOVEA_GAZE*`:
@@ -459,13 +461,13 @@ impl Settings {
             symmetric_fov,
             inject: r.flag_or_default(Key::Inject),
             inject_level: r.level(Key::InjectLevel),
+            subsampled: r.flag(Key::Subsampled),
             log: r.text(Key::Log).map(String::from),
             log_file: r.text(Key::LogFile).map(String::from),
             identity: id.clone(),
             config: None,
             eye_tracked_y_up: r.flag_or_default(Key::EyeTrackedYUp),
             gaze: GazeSettings::from_resolved(&r),
-            subsampled: r.flag(Key::Subsampled),
         }
     }
 }
@@ -572,6 +574,30 @@ mod tests {
             s(&[("FOVEA_INJECT", "0"), ("FOVEA_INJECT_LEVEL", "2")]).injection(),
             Injection::Off
         );
+    }
+
+    /// `subsampled` is per application, like `inject`: unset by default, `on`/`off` from the
+    /// matching section, `FOVEA_SUBSAMPLED` above the file.
+    #[test]
+    fn subsampled_comes_from_the_apps_section_and_the_environment() {
+        let file = fovea_config::Config::parse(
+            "subsampled = \"off\"\n[app.\"game\"]\nsubsampled = \"on\"\n",
+            std::path::Path::new("fovea.toml"),
+        );
+        assert!(file.problems.is_empty(), "{:?}", file.problems);
+        let id = |app: &str| fovea_config::Identity {
+            app: Some(app.into()),
+            ..Default::default()
+        };
+        assert_eq!(Settings::from_lookup(|_| None).subsampled, None);
+        let game = Settings::resolve(Some(&file), &id("game"), |_| None);
+        assert_eq!(game.subsampled, Some(true));
+        let other = Settings::resolve(Some(&file), &id("other"), |_| None);
+        assert_eq!(other.subsampled, Some(false));
+        let env_wins = Settings::resolve(Some(&file), &id("game"), |k| {
+            (k == "FOVEA_SUBSAMPLED").then(|| "0".to_string())
+        });
+        assert_eq!(env_wins.subsampled, Some(false));
     }
 
     #[test]

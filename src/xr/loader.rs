@@ -281,6 +281,7 @@ fn create_instance_inner(
         vulkan: Default::default(),
         lost: Default::default(),
         inject: injection(&settings, exts),
+        subsampled: settings.subsampled,
         eye_tracked_y_up: settings.eye_tracked_y_up,
     };
     let provided: Vec<Ext> = exts.enabled.iter().filter(|e| exts.provided(*e)).collect();

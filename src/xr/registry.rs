@@ -72,6 +72,10 @@ pub struct Instance {
     /// The level injected into the application's eye passes, where injection applies to it
     /// (docs/injection.md); the Vulkan side reads the published state ([`crate::bridge::inject`]).
     pub inject: Option<fovea_model::density::Level>,
+    /// The application's `subsampled` setting (fovea.toml or `FOVEA_SUBSAMPLED`), read when the
+    /// instance was created: one of the switches of reconstruction
+    /// (docs/openxr-layer.md#subsampled-images).
+    pub subsampled: Option<bool>,
     /// `eye_tracked_y_up` (fovea.toml or `FOVEA_EYE_TRACKED_Y_UP`): the centres
     /// `xrGetFoveationEyeTrackedStateMETA` returns have y up, OpenXR's NDC, instead of Quest's y
     /// down (docs/eye-tracking.md#xr_meta_foveation_eye_tracked).
@@ -215,9 +219,26 @@ pub struct VulkanSetup {
     pub fdm_listed: bool,
     /// The physical device it was listed for; `None` when it was listed before fovea knew the device.
     pub fdm_listed_for: Option<u64>,
+    /// VkDevices created through xrCreateVulkanDeviceKHR (enable2) with `imagelessFramebuffer`
+    /// enabled (0: a free slot), where reconstruction's added usage would break the application's
+    /// framebuffers (docs/openxr-layer.md#subsampled-images). An application has one or two.
+    pub imageless_devices: [u64; 4],
 }
 
 impl VulkanSetup {
+    /// Remembers a device created with `imagelessFramebuffer` (beyond four, the oldest goes).
+    pub fn imageless_created(&mut self, device: u64) {
+        if !self.imageless_devices.contains(&device) {
+            self.imageless_devices.rotate_right(1);
+            self.imageless_devices[0] = device;
+        }
+    }
+
+    /// Whether `device` was created through xrCreateVulkanDeviceKHR with `imagelessFramebuffer`.
+    pub fn imageless(&self, device: u64) -> bool {
+        device != 0 && self.imageless_devices.contains(&device)
+    }
+
     /// Whether the application was told to enable VK_EXT_fragment_density_map on a device of
     /// `physical_device`.
     pub fn fdm_listed_for(&self, physical_device: u64) -> bool {
@@ -525,6 +546,51 @@ pub struct Swapchain {
     /// `XrVulkanSwapchainCreateInfoMETA`: the application moves the fovea itself with density-map
     /// offsets, so fovea keeps its maps fixed (docs/eye-tracking.md#what-moves-when).
     pub app_offsets: bool,
+    /// Whether the Vulkan side reconstructs the coarse blocks of this swapchain's images
+    /// (docs/openxr-layer.md#subsampled-images), decided at creation; `None`: nothing is decided
+    /// for it (nobody foveates it as far as fovea knows, and the application asked nothing).
+    pub reconstruct: Option<bool>,
+    /// The `VkImage`s the decision was published for ([`crate::bridge::subsampled`]), forgotten
+    /// when the runtime has destroyed them ([`Swapchain::forget_published`]).
+    pub published: Mutex<Vec<u64>>,
+}
+
+impl Swapchain {
+    /// Publishes the reconstruction decision for the images the runtime's enumeration returned
+    /// (raw `VkImage`s); nothing where none was decided.
+    pub fn publish(&self, images: &[u64]) {
+        let Some(reconstruct) = self.reconstruct else {
+            return;
+        };
+        crate::bridge::subsampled::publish(images, reconstruct);
+        tracing::debug!(
+            swapchain = self.handle.into_raw(),
+            ?images,
+            reconstruct,
+            "reconstruction decision published for the swapchain's images"
+        );
+        let mut published = self.published.lock();
+        for i in images {
+            if !published.contains(i) {
+                published.push(*i);
+            }
+        }
+    }
+
+    /// The runtime destroyed the swapchain (directly, or with its session or instance): its
+    /// images' handles may come back for other images, which must not inherit its decision.
+    pub fn forget_published(&self) {
+        let images = std::mem::take(&mut *self.published.lock());
+        if images.is_empty() {
+            return;
+        }
+        crate::bridge::subsampled::forget(&images);
+        tracing::debug!(
+            swapchain = self.handle.into_raw(),
+            ?images,
+            "reconstruction decision forgotten: the runtime destroyed the swapchain's images"
+        );
+    }
 }
 
 /// A foveation profile fovea created.
@@ -555,6 +621,15 @@ pub struct Detached {
     pub swapchains: Vec<Arc<Swapchain>>,
     pub profiles: Vec<Arc<Profile>>,
     pub vulkan_devices: Vec<(u64, VulkanDevice)>,
+}
+
+impl Detached {
+    /// The runtime destroyed the detached session or instance, and with it the swapchains' images.
+    pub fn forget_published(&self) {
+        for s in &self.swapchains {
+            s.forget_published();
+        }
+    }
 }
 
 impl Default for Registry {

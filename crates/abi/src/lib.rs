@@ -122,6 +122,10 @@ pub mod env {
     pub const INJECT: &str = "FOVEA_INJECT";
     /// The level injection uses (0-4 or a level name); above the file's `inject_level`.
     pub const INJECT_LEVEL: &str = "FOVEA_INJECT_LEVEL";
+    /// `FOVEA_SUBSAMPLED=0|1`: reconstruct the coarse blocks of foveated swapchains as a subsampled
+    /// image sampled bilinearly would show them, or not (docs/openxr-layer.md#subsampled-images);
+    /// above the file's `subsampled`, below Quest's `debug.oculus.foveation.subsampled`.
+    pub const SUBSAMPLED: &str = "FOVEA_SUBSAMPLED";
     /// `FOVEA_GAZE=0` switches the gaze source off (default on: the fovea follows the eyes where
     /// the runtime has eye gaze; docs/eye-tracking.md); above the file's `gaze`.
     pub const GAZE: &str = "FOVEA_GAZE";

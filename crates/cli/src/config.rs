@@ -121,6 +121,13 @@ pub fn render(vars: &BTreeMap<String, String>, id: &Identity) -> String {
          > the application's profile > defaults"
             .into(),
     );
+    if let Some(forced) = vars.get(fovea_config::env::DEBUG_SUBSAMPLED) {
+        line(format!(
+            "{}={forced}: debug.oculus.foveation.subsampled wins over subsampled \
+             (1 reconstructs every foveated swapchain, 0 none)",
+            fovea_config::env::DEBUG_SUBSAMPLED
+        ));
+    }
     if let Some(props) = vars.get("FOVEA_PROPS") {
         line(format!(
             "FOVEA_PROPS={props}: its debug.oculus.foveation.* lines win over all of the above"

@@ -310,11 +310,11 @@ keys! {
     },
     Subsampled {
         name: "subsampled",
-        env: Some("FOVEA_SUBSAMPLED"),
+        env: Some(env::SUBSAMPLED),
         kind: Kind::Switch,
         accepted: SWITCH,
         default: Fallback::Unset("as the application asks; on for injected passes"),
-        doc: "force the reconstruction of coarse blocks on or off for this application",
+        doc: "force the reconstruction of coarse blocks on or off for this application: on, they are smoothed as a subsampled image sampled bilinearly shows them (what an app asks for with `VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT`), and the swapchain is created with transfer usage added; off, the blocks stay. Below Quest's `debug.oculus.foveation.subsampled`; a swapchain nobody foveates is never touched ([openxr-layer.md](openxr-layer.md#subsampled-images))",
     },
 }
 

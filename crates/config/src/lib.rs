@@ -49,12 +49,15 @@ pub mod env {
     pub use fovea_abi::env::{
         CONFIG, GAZE, GAZE_ATTACH_AFTER_S, GAZE_BETA, GAZE_D_CUTOFF_HZ, GAZE_FIXATION_M,
         GAZE_HOLD_S, GAZE_MIN_CUTOFF_HZ, GAZE_RETURN_S, GAZE_SACCADE_DEG, INJECT, INJECT_LEVEL,
-        LOG, LOG_FILE, MAX_FRAGMENT, SYMMETRIC_FOV,
+        LOG, LOG_FILE, MAX_FRAGMENT, SUBSAMPLED, SYMMETRIC_FOV,
     };
     /// Quest's `debug.oculus.foveation.level` as a variable.
     pub const LEVEL: &str = "DEBUG_OCULUS_FOVEATION_LEVEL";
     /// Quest's `debug.oculus.foveation.dynamic` as a variable.
     pub const DYNAMIC: &str = "DEBUG_OCULUS_FOVEATION_DYNAMIC";
+    /// Quest's `debug.oculus.foveation.subsampled` as a variable: not the `subsampled` key's own
+    /// variable (`FOVEA_SUBSAMPLED`), but a debug override above it, as on Quest.
+    pub const DEBUG_SUBSAMPLED: &str = "DEBUG_OCULUS_FOVEATION_SUBSAMPLED";
     /// The XDG base directory for configuration (default `~/.config`).
     pub const XDG_CONFIG_HOME: &str = "XDG_CONFIG_HOME";
     /// The XDG base directory for state such as logs (default `~/.local/state`).

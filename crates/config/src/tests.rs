@@ -361,3 +361,33 @@ fn every_key_has_one_row_and_its_default_is_a_value_it_accepts() {
     }
     assert_eq!(names.len(), KEYS);
 }
+
+/// `subsampled` reads like the other switches, per section, with `FOVEA_SUBSAMPLED` above the file;
+/// Quest's `DEBUG_OCULUS_FOVEATION_SUBSAMPLED` is not this key's variable (it is a debug override
+/// the layer applies above the key).
+#[test]
+fn subsampled_is_a_switch_per_app_below_its_variable() {
+    for (text, want) in [
+        ("\"on\"", true),
+        ("\"off\"", false),
+        ("true", true),
+        ("0", false),
+    ] {
+        let c = parsed(&format!("[app.\"game\"]\nsubsampled = {text}\n"));
+        assert!(c.problems.is_empty(), "{text}: {:?}", c.problems);
+        let (r, _) = resolve(Some(&c), &id(Some("game"), None, None), no_env);
+        assert_eq!(r.flag(Key::Subsampled), Some(want), "{text}");
+        let (r, _) = resolve(Some(&c), &id(Some("other"), None, None), no_env);
+        assert_eq!(r.flag(Key::Subsampled), None, "{text}");
+    }
+    let c = parsed("subsampled = \"maybe\"\n");
+    assert_eq!(c.problems.len(), 1);
+    assert_eq!(c.problems[0].key, "subsampled");
+    let c = parsed("subsampled = true\n");
+    let env = |k: &str| (k == "FOVEA_SUBSAMPLED").then(|| "0".to_string());
+    let (r, _) = resolve(Some(&c), &id(None, None, None), env);
+    assert_eq!(r.flag(Key::Subsampled), Some(false));
+    let debug = |k: &str| (k == env::DEBUG_SUBSAMPLED).then(|| "0".to_string());
+    let (r, _) = resolve(Some(&c), &id(None, None, None), debug);
+    assert_eq!(r.flag(Key::Subsampled), Some(true));
+}

@@ -26,8 +26,11 @@ pub fn destroy_instance(handle: xr::Instance) -> HookResult<xr::Result> {
             "the runtime refused xrDestroyInstance; the instance lives on"
         );
         registry().restore(detached);
-    } else if injected {
-        crate::bridge::inject::stop();
+    } else {
+        detached.forget_published();
+        if injected {
+            crate::bridge::inject::stop();
+        }
     }
     Ok(r)
 }

@@ -135,6 +135,8 @@ pub fn destroy_session(handle: xr::Session) -> HookResult<xr::Result> {
             "the runtime refused xrDestroySession; the session lives on"
         );
         registry().restore(detached);
+    } else {
+        detached.forget_published();
     }
     Ok(r)
 }

@@ -30,23 +30,186 @@ pub struct FoveationRequest {
     pub meta: Option<(vk::ImageCreateFlags, vk::ImageUsageFlags)>,
 }
 
-/// What becomes of VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT for a swapchain.
+/// Who foveates a new swapchain, as far as fovea can tell when it is created.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Subsampled {
-    /// Not asked for, not forced.
-    No,
-    /// Asked for; dropped because the runtime allocates the images (as Quest does where the
-    /// device cannot subsample).
-    Dropped,
-    /// Asked for; `debug.oculus.foveation.subsampled=0` turns it off.
-    Off,
-    /// `debug.oculus.foveation.subsampled=1` on a foveated swapchain: it cannot be forced on, for
-    /// the same reason.
-    CannotForce,
+pub enum Foveator {
+    /// Nobody fovea knows of: no density images of fovea's and no injection (an application that
+    /// asks for subsampled images foveates them with density maps of its own).
+    Nobody,
+    /// The application, with the FB profiles it applies and the density images fovea hands it
+    /// (`XR_FB_foveation_vulkan`'s `FRAGMENT_DENSITY_MAP`).
+    Profiles,
+    /// fovea, with the shading rates it injects into the eye passes of an application that never
+    /// asked (docs/injection.md).
+    Injected,
 }
 
-/// The create flags fovea accepts in `XrVulkanSwapchainCreateInfoMETA`: SUBSAMPLED (dropped, or
-/// forced off) and FRAGMENT_DENSITY_MAP_OFFSET, which says the application moves the fovea itself
+/// What decides whether a swapchain's coarse blocks are reconstructed
+/// (docs/openxr-layer.md#subsampled-images).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SubsampledInputs {
+    /// `VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT` in the application's `XrVulkanSwapchainCreateInfoMETA`.
+    pub asked: bool,
+    /// Quest's `debug.oculus.foveation.subsampled`: forced on or off.
+    pub property: Option<bool>,
+    /// The application's `subsampled` setting (fovea.toml or `FOVEA_SUBSAMPLED`).
+    pub setting: Option<bool>,
+    pub foveator: Foveator,
+    /// A colour swapchain of a Vulkan session: the only kind whose images fovea's Vulkan layer
+    /// draws into and can reconstruct.
+    pub vulkan_colour: bool,
+    /// The session's VkDevice enabled `imagelessFramebuffer`: the application names the usage it
+    /// expects of each image its framebuffers bind, which must equal the image's
+    /// (VUID-VkRenderPassBeginInfo-framebuffer-04627), so the usage reconstruction adds would
+    /// break its render passes.
+    pub imageless: bool,
+}
+
+/// What decided a swapchain's reconstruction, for its log line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Why {
+    /// `debug.oculus.foveation.subsampled`, which wins over everything (Quest's debug override).
+    Property,
+    /// The application's `subsampled` setting.
+    Setting,
+    /// The application asked for subsampled images.
+    Asked,
+    /// The default for an injected swapchain: on.
+    Injected,
+    /// The default for a swapchain the application foveates and asked nothing for: off, as the
+    /// application asks.
+    NotAsked,
+    /// Asked for, but not a colour swapchain of a Vulkan session.
+    NotVulkanColour,
+    /// The runtime refused the transfer usage reconstruction needs.
+    UsageRefused,
+    /// Decided on only once the swapchain was made without the transfer usage it needs.
+    CreatedWithoutUsage,
+    /// On by a switch, but the application's device uses imageless framebuffers, which the added
+    /// usage would break.
+    Imageless,
+}
+
+/// The decision for one swapchain: reconstruct or not, and why.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Reconstruction {
+    pub on: bool,
+    pub why: Why,
+}
+
+/// Whether a swapchain's coarse blocks are reconstructed (docs/openxr-layer.md#subsampled-images):
+/// Quest's debug property over the application's setting over its request over the default, which
+/// is the request for a swapchain the application foveates itself and on for an injected one.
+/// `None` where there is nothing to decide: nobody foveates the swapchain and the application asked
+/// nothing, or it asked nothing for a swapchain fovea's Vulkan layer does not draw into. Such a
+/// swapchain keeps what the application asked for, unchanged (docs/ARCHITECTURE.md: do no harm).
+pub fn decide(i: SubsampledInputs) -> Option<Reconstruction> {
+    let on = |why| Some(Reconstruction { on: true, why });
+    let off = |why| Some(Reconstruction { on: false, why });
+    if !i.vulkan_colour {
+        return if i.asked {
+            off(Why::NotVulkanColour)
+        } else {
+            None
+        };
+    }
+    if i.foveator == Foveator::Nobody && !i.asked {
+        return None;
+    }
+    let switched = match (i.property, i.setting) {
+        (Some(p), _) => Some(Reconstruction {
+            on: p,
+            why: Why::Property,
+        }),
+        (None, Some(s)) => Some(Reconstruction {
+            on: s,
+            why: Why::Setting,
+        }),
+        (None, None) => None,
+    };
+    if switched.is_some() {
+        return switched_on_unless_imageless(switched, i.imageless);
+    }
+    let d = if i.asked {
+        on(Why::Asked)
+    } else if i.foveator == Foveator::Injected {
+        on(Why::Injected)
+    } else {
+        off(Why::NotAsked)
+    };
+    switched_on_unless_imageless(d, i.imageless)
+}
+
+/// An "on" that the application's imageless framebuffers rule out becomes off, whatever switched
+/// it on: the added usage would make its render passes invalid (fail safe, not open).
+fn switched_on_unless_imageless(
+    d: Option<Reconstruction>,
+    imageless: bool,
+) -> Option<Reconstruction> {
+    match d {
+        Some(Reconstruction { on: true, .. }) if imageless => Some(Reconstruction {
+            on: false,
+            why: Why::Imageless,
+        }),
+        d => d,
+    }
+}
+
+impl Reconstruction {
+    /// The one line a swapchain's decision gets: what happens to its coarse blocks, and why.
+    fn log(self) {
+        let because = match self.why {
+            Why::Property if self.on => "debug.oculus.foveation.subsampled=1",
+            Why::Property => "debug.oculus.foveation.subsampled=0",
+            Why::Setting if self.on => "subsampled = on (fovea.toml or FOVEA_SUBSAMPLED)",
+            Why::Setting => "subsampled = off (fovea.toml or FOVEA_SUBSAMPLED)",
+            Why::Asked => {
+                "the application asked for VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT, which the runtime's \
+                 images cannot have"
+            }
+            Why::Injected => "fovea injects shading rates into it (the default there)",
+            Why::NotAsked => "the application did not ask for subsampled images",
+            Why::UsageRefused => "the runtime refused the transfer usage it needs",
+            Why::Imageless => {
+                "the application's VkDevice enabled imagelessFramebuffer, and the transfer usage \
+                 reconstruction needs would make its framebuffers' attachment usage wrong \
+                 (VUID-VkRenderPassBeginInfo-framebuffer-04627)"
+            }
+            Why::CreatedWithoutUsage => {
+                "it was created without the transfer usage reconstruction needs (its density \
+                 images could not be made, and injection took it over)"
+            }
+            Why::NotVulkanColour => {
+                "VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT asked for a swapchain that is not a colour \
+                 swapchain of a Vulkan session"
+            }
+        };
+        match (self.on, self.why) {
+            (true, _) => tracing::info!(
+                "coarse blocks reconstructed by fovea's Vulkan layer, as a subsampled image \
+                 sampled bilinearly shows them: {because}"
+            ),
+            (false, Why::NotAsked) => {
+                tracing::debug!("coarse blocks not reconstructed: {because}")
+            }
+            (false, _) => tracing::info!("coarse blocks not reconstructed: {because}"),
+        }
+    }
+}
+
+/// A loss the application must see as it is: no retry after it.
+fn is_loss(r: xr::Result) -> bool {
+    r == xr::Result::ERROR_SESSION_LOST || r == xr::Result::ERROR_INSTANCE_LOST
+}
+
+/// `XR_SWAPCHAIN_USAGE_TRANSFER_SRC_BIT | XR_SWAPCHAIN_USAGE_TRANSFER_DST_BIT`: reconstruction
+/// copies a pass's colour out and draws the result back (docs/openxr-layer.md#subsampled-images).
+fn reconstruction_usage() -> xr::SwapchainUsageFlags {
+    xr::SwapchainUsageFlags::TRANSFER_SRC | xr::SwapchainUsageFlags::TRANSFER_DST
+}
+
+/// The create flags fovea accepts in `XrVulkanSwapchainCreateInfoMETA`: SUBSAMPLED (answered
+/// with reconstruction, [`decide`]) and FRAGMENT_DENSITY_MAP_OFFSET, which says the application moves the fovea itself
 /// with density-map offsets (fovea keeps its maps fixed, docs/eye-tracking.md#what-moves-when).
 const META_CREATE_FLAGS: vk::ImageCreateFlags = vk::ImageCreateFlags::from_raw(
     vk::ImageCreateFlags::SUBSAMPLED_EXT.as_raw()
@@ -64,10 +227,11 @@ pub fn asks_for_offsets(req: FoveationRequest) -> bool {
 /// Checks a request against what fovea can honour without runtime support for the structs:
 /// SCALED_BIN is a GLES flag (QCOM_texture_foveated) and a Vulkan or headless session cannot use it;
 /// the runtime allocates the images, so additional Vulkan flags cannot be honoured, except
-/// SUBSAMPLED, which Quest's runtime also drops when unsupported (docs/openxr-layer.md#subsampled-images) and
-/// which `debug.oculus.foveation.subsampled` forces on or off, and FRAGMENT_DENSITY_MAP_OFFSET,
-/// which changes what fovea does with its maps, not the images ([`asks_for_offsets`]).
-pub fn check_request(req: FoveationRequest, forced: Option<bool>) -> HookResult<Subsampled> {
+/// SUBSAMPLED, which fovea answers with reconstruction instead ([`decide`],
+/// docs/openxr-layer.md#subsampled-images), and FRAGMENT_DENSITY_MAP_OFFSET, which changes what
+/// fovea does with its maps, not the images ([`asks_for_offsets`]). `Ok(asked)`: whether SUBSAMPLED
+/// was asked for.
+pub fn check_request(req: FoveationRequest) -> HookResult<bool> {
     use xr::SwapchainCreateFoveationFlagsFB as F;
     if !(F::SCALED_BIN | F::FRAGMENT_DENSITY_MAP).contains(req.flags) {
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
@@ -76,24 +240,18 @@ pub fn check_request(req: FoveationRequest, forced: Option<bool>) -> HookResult<
         tracing::warn!("XR_SWAPCHAIN_CREATE_FOVEATION_SCALED_BIN_BIT_FB needs OpenGL ES; this is not a GLES session");
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     }
-    let mut asked = false;
-    if let Some((create, usage)) = req.meta {
-        if !usage.is_empty() || !META_CREATE_FLAGS.contains(create) {
-            tracing::warn!(
-                ?create,
-                ?usage,
-                "additional Vulkan swapchain flags the runtime cannot honour"
-            );
-            return Err(xr::Result::ERROR_FEATURE_UNSUPPORTED);
-        }
-        asked = create.contains(vk::ImageCreateFlags::SUBSAMPLED_EXT);
+    let Some((create, usage)) = req.meta else {
+        return Ok(false);
+    };
+    if !usage.is_empty() || !META_CREATE_FLAGS.contains(create) {
+        tracing::warn!(
+            ?create,
+            ?usage,
+            "additional Vulkan swapchain flags the runtime cannot honour"
+        );
+        return Err(xr::Result::ERROR_FEATURE_UNSUPPORTED);
     }
-    Ok(match (asked, forced) {
-        (true, Some(false)) => Subsampled::Off,
-        (true, _) => Subsampled::Dropped,
-        (false, Some(true)) if req.foveation => Subsampled::CannotForce,
-        (false, _) => Subsampled::No,
-    })
+    Ok(create.contains(vk::ImageCreateFlags::SUBSAMPLED_EXT))
 }
 
 /// `xrCreateSwapchain`: takes the foveation structs fovea provides out of a copied chain, checks
@@ -130,20 +288,35 @@ pub fn create_swapchain(
             .map_err(invalid)?;
         req.meta = meta.map(|m| (m.additional_create_flags, m.additional_usage_flags));
     }
-    match check_request(req, state.instance.overrides.current().subsampled)? {
-        Subsampled::Dropped => tracing::warn!(
-            "VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT dropped: the runtime allocates the images \
-             and cannot make them subsampled"
-        ),
-        Subsampled::Off => tracing::info!(
-            "VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT off: debug.oculus.foveation.subsampled=0"
-        ),
-        Subsampled::CannotForce => tracing::warn!(
-            "debug.oculus.foveation.subsampled=1 cannot be honoured: the runtime \
-             allocates the images"
-        ),
-        Subsampled::No => {}
-    }
+    let asked = check_request(req)?;
+    let fdm_asked = req
+        .flags
+        .contains(xr::SwapchainCreateFoveationFlagsFB::FRAGMENT_DENSITY_MAP)
+        && exts.provided(Ext::FoveationVulkan);
+    let imageless = state
+        .vulkan
+        .as_ref()
+        .is_some_and(|b| state.instance.vulkan.lock().imageless(b.device));
+    let inputs = |foveator| SubsampledInputs {
+        asked,
+        property: state.instance.overrides.current().subsampled,
+        setting: state.instance.subsampled,
+        foveator,
+        imageless,
+        vulkan_colour: state.vulkan.is_some()
+            && i.usage_flags
+                .contains(xr::SwapchainUsageFlags::COLOR_ATTACHMENT)
+            && i.face_count == 1,
+    };
+    // Who will foveate it, foretold: density images are made once the runtime made the swapchain.
+    let foretold = if fdm_asked && state.gpu.is_some() {
+        Foveator::Profiles
+    } else if state.instance.inject.is_some() {
+        Foveator::Injected
+    } else {
+        Foveator::Nobody
+    };
+    let planned = decide(inputs(foretold));
     // Structs of extensions fovea provides are unknown below: take them out of a copy.
     let chain = info
         .chain_without(|t| {
@@ -156,22 +329,72 @@ pub fn create_swapchain(
     }
     let mut down = *i;
     down.next = chain.head();
+    // Reconstruction copies the colour out and back: the runtime is asked for transfer usage on a
+    // copy of the create info (the application's struct is never written).
+    let added = match planned {
+        Some(Reconstruction { on: true, .. }) => reconstruction_usage() & !i.usage_flags,
+        _ => xr::SwapchainUsageFlags::EMPTY,
+    };
+    down.usage_flags |= added;
     // SAFETY: the next layer's xrCreateSwapchain, with a copy of the application's create info
     // whose chain `chain` keeps alive, and the application's output pointer.
-    let r = observed(&state, unsafe { f(sess, &down, out.raw()) });
+    let mut r = observed(&state, unsafe { f(sess, &down, out.raw()) });
+    let mut refused = false;
+    if !succeeded(r) && added != xr::SwapchainUsageFlags::EMPTY && !is_loss(r) {
+        // A runtime that cannot give the usage refuses the swapchain (XR_ERROR_FEATURE_UNSUPPORTED
+        // in the spec, others in practice): the application gets its swapchain as it asked,
+        // without reconstruction (fail open).
+        tracing::warn!(
+            ?r,
+            ?added,
+            "the runtime refused the transfer usage reconstruction needs; the swapchain is \
+             created as the application asked, its coarse blocks not reconstructed"
+        );
+        down.usage_flags = i.usage_flags;
+        refused = true;
+        // SAFETY: as above, with the application's own usage.
+        r = observed(&state, unsafe { f(sess, &down, out.raw()) });
+    }
     let Some(handle) = out.read().filter(|_| succeeded(r)) else {
         return Ok(r);
     };
     let app_offsets = asks_for_offsets(req);
-    let density = if req
-        .flags
-        .contains(xr::SwapchainCreateFoveationFlagsFB::FRAGMENT_DENSITY_MAP)
-        && exts.provided(Ext::FoveationVulkan)
-    {
+    let density = if fdm_asked {
         density_images(&state, handle, i, app_offsets)
     } else {
         None
     };
+    // Who foveates it now that the density images are made or not: injection takes a swapchain
+    // without them.
+    let foveator = if density.is_some() {
+        Foveator::Profiles
+    } else if state.instance.inject.is_some() {
+        Foveator::Injected
+    } else {
+        Foveator::Nobody
+    };
+    let decision = if refused {
+        Some(Reconstruction {
+            on: false,
+            why: Why::UsageRefused,
+        })
+    } else {
+        // On only where the runtime was asked for the usage it needs: the foretold decision can
+        // be off where this one is on (density images that could not be made leave the
+        // swapchain to injection).
+        decide(inputs(foveator)).map(|d| {
+            match d.on && !down.usage_flags.contains(reconstruction_usage()) {
+                true => Reconstruction {
+                    on: false,
+                    why: Why::CreatedWithoutUsage,
+                },
+                false => d,
+            }
+        })
+    };
+    if let Some(d) = decision {
+        d.log();
+    }
     let takes = takes_profiles(&state, req);
     let record = Swapchain {
         handle,
@@ -190,6 +413,8 @@ pub fn create_swapchain(
         density,
         submitted: Mutex::default(),
         app_offsets,
+        reconstruct: decision.map(|d| d.on),
+        published: Mutex::default(),
     };
     if record.app_offsets {
         tracing::info!(
@@ -290,6 +515,7 @@ pub fn destroy_swapchain(handle: xr::Swapchain) -> HookResult<xr::Result> {
     // SAFETY: the next layer's xrDestroySwapchain, with the application's handle.
     let r = observed(&state.session, unsafe { f(handle) });
     if succeeded(r) {
+        state.forget_published();
         if state.foveation.is_some() {
             state.session.refresh_dynamic_max();
         }
@@ -322,8 +548,14 @@ pub fn enumerate_swapchain_images(
     // SAFETY: the next layer's function, with the application's arguments as it passed them.
     let r = unsafe { f(handle, capacity, count.raw(), images.raw()) };
     let r = observed(&state.session, r);
-    if state.session.instance.inject.is_some() && succeeded(r) && capacity > 0 {
-        publish_images(&state, capacity, &count, &images);
+    let injected = state.session.instance.inject.is_some();
+    if (injected || state.reconstruct.is_some()) && succeeded(r) && capacity > 0 {
+        if let Some(raw) = vulkan_images(&state, capacity, &count, &images) {
+            if injected {
+                crate::bridge::inject::set_images(state.handle.into_raw(), &raw);
+            }
+            state.publish(&raw);
+        }
     }
     let Some(density) = &state.density else {
         return Ok(r);
@@ -362,35 +594,29 @@ pub fn enumerate_swapchain_images(
     Ok(r)
 }
 
-/// Publishes the `VkImage`s a Vulkan swapchain's enumeration returned, so the Vulkan side knows
-/// passes into them (docs/injection.md#which-passes).
-fn publish_images(
+/// The `VkImage`s a Vulkan swapchain's enumeration returned, for the Vulkan side: injection knows
+/// passes into them (docs/injection.md#which-passes), reconstruction its decision for them
+/// (docs/openxr-layer.md#subsampled-images). `None` where the array does not hold
+/// `XrSwapchainImageVulkanKHR`s.
+fn vulkan_images(
     state: &Swapchain,
     capacity: u32,
     count: &Out<u32>,
     images: &OutArray<xr::SwapchainImageBaseHeader>,
-) {
-    if state.session.vulkan.is_none() {
-        return;
-    }
-    let Some(n) = count.read() else {
-        return;
-    };
-    let n = n.min(capacity) as usize;
+) -> Option<Vec<u64>> {
+    state.session.vulkan.as_ref()?;
+    let n = count.read()?.min(capacity) as usize;
     // SAFETY: the application's array as the caller's `OutArray` holds it (valid for `capacity`
     // elements for the call); this view of it ends before the caller uses its own again.
     let images = unsafe { OutArray::new(images.raw(), images.capacity()) };
-    let Some(elements) = images.cast_slice::<xr::SwapchainImageVulkanKHR>(n) else {
-        return;
-    };
+    let elements = images.cast_slice::<xr::SwapchainImageVulkanKHR>(n)?;
     if elements
         .iter()
         .any(|e| e.ty != xr::StructureType::SWAPCHAIN_IMAGE_VULKAN_KHR)
     {
-        return;
+        return None;
     }
-    let raw: Vec<u64> = elements.iter().map(|e| e.image).collect();
-    crate::bridge::inject::set_images(state.handle.into_raw(), &raw);
+    Some(elements.iter().map(|e| e.image).collect())
 }
 
 /// `xrAcquireSwapchainImage`: once the runtime has handed out the index, that index's density image
@@ -687,27 +913,15 @@ mod tests {
             flags,
             meta,
         };
-        let ok = |flags, meta| check_request(req(flags, meta), None);
+        let ok = |flags, meta| check_request(req(flags, meta));
         use vk::{ImageCreateFlags as C, ImageUsageFlags as U};
         use xr::SwapchainCreateFoveationFlagsFB as F;
         let fdm = F::FRAGMENT_DENSITY_MAP;
         let sub = Some((C::SUBSAMPLED_EXT, U::empty()));
-        assert_eq!(ok(fdm, None), Ok(Subsampled::No));
-        assert_eq!(ok(F::EMPTY, sub), Ok(Subsampled::Dropped));
-        assert_eq!(
-            check_request(req(fdm, sub), Some(false)),
-            Ok(Subsampled::Off)
-        );
-        assert_eq!(
-            check_request(req(fdm, sub), Some(true)),
-            Ok(Subsampled::Dropped)
-        );
-        assert_eq!(
-            check_request(req(fdm, None), Some(true)),
-            Ok(Subsampled::CannotForce)
-        );
-        let plain = FoveationRequest::default();
-        assert_eq!(check_request(plain, Some(true)), Ok(Subsampled::No));
+        assert_eq!(ok(fdm, None), Ok(false));
+        assert_eq!(ok(F::EMPTY, sub), Ok(true));
+        assert_eq!(ok(fdm, sub), Ok(true));
+        assert_eq!(check_request(FoveationRequest::default()), Ok(false));
         assert_eq!(
             ok(F::SCALED_BIN, None),
             Err(xr::Result::ERROR_VALIDATION_FAILURE)
@@ -726,13 +940,13 @@ mod tests {
         );
         // Density-map offsets: accepted, remembered, and not taken for SUBSAMPLED.
         let offsets = Some((C::FRAGMENT_DENSITY_MAP_OFFSET_QCOM, U::empty()));
-        assert_eq!(ok(fdm, offsets), Ok(Subsampled::No));
+        assert_eq!(ok(fdm, offsets), Ok(false));
         assert!(asks_for_offsets(req(fdm, offsets)));
         let both = Some((
             C::FRAGMENT_DENSITY_MAP_OFFSET_QCOM | C::SUBSAMPLED_EXT,
             U::empty(),
         ));
-        assert_eq!(ok(fdm, both), Ok(Subsampled::Dropped));
+        assert_eq!(ok(fdm, both), Ok(true));
         assert!(!asks_for_offsets(req(fdm, sub)));
         assert!(!asks_for_offsets(req(fdm, None)));
         assert_eq!(
@@ -745,5 +959,82 @@ mod tests {
             ),
             Err(xr::Result::ERROR_FEATURE_UNSUPPORTED)
         );
+    }
+
+    /// The whole table of docs/openxr-layer.md#subsampled-images: every foveator, request,
+    /// property and setting.
+    #[test]
+    fn reconstruction_is_decided_property_over_setting_over_request_over_default() {
+        use Foveator::{Injected, Nobody, Profiles};
+        let tri = [None, Some(false), Some(true)];
+        for foveator in [Nobody, Profiles, Injected] {
+            for asked in [false, true] {
+                for property in tri {
+                    for setting in tri {
+                        let i = SubsampledInputs {
+                            asked,
+                            property,
+                            setting,
+                            foveator,
+                            vulkan_colour: true,
+                            imageless: false,
+                        };
+                        let got = decide(i);
+                        let want = if foveator == Nobody && !asked {
+                            // Nobody foveates it and the app asked nothing: nothing at all.
+                            None
+                        } else if let Some(p) = property {
+                            Some((p, Why::Property))
+                        } else if let Some(s) = setting {
+                            Some((s, Why::Setting))
+                        } else if asked {
+                            Some((true, Why::Asked))
+                        } else if foveator == Injected {
+                            Some((true, Why::Injected))
+                        } else {
+                            Some((false, Why::NotAsked))
+                        };
+                        assert_eq!(got.map(|d| (d.on, d.why)), want, "{i:?}");
+                        // On a device with imageless framebuffers, every "on" is off, and says
+                        // why; every other answer stays.
+                        let imageless = decide(SubsampledInputs {
+                            imageless: true,
+                            ..i
+                        });
+                        let want = match want {
+                            Some((true, _)) => Some((false, Why::Imageless)),
+                            w => w,
+                        };
+                        assert_eq!(imageless.map(|d| (d.on, d.why)), want, "{i:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// A depth, cube or headless swapchain is never reconstructed: nothing is decided where the
+    /// application asked nothing, whatever forces it on; where it asked, the line says why not.
+    #[test]
+    fn only_colour_swapchains_of_vulkan_sessions_are_reconstructed() {
+        for foveator in [Foveator::Nobody, Foveator::Profiles, Foveator::Injected] {
+            for forced in [None, Some(true)] {
+                let i = SubsampledInputs {
+                    asked: false,
+                    property: forced,
+                    setting: forced,
+                    foveator,
+                    vulkan_colour: false,
+                    imageless: false,
+                };
+                assert_eq!(decide(i), None, "{i:?}");
+                assert_eq!(
+                    decide(SubsampledInputs { asked: true, ..i }),
+                    Some(Reconstruction {
+                        on: false,
+                        why: Why::NotVulkanColour
+                    })
+                );
+            }
+        }
     }
 }

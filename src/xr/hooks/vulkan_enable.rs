@@ -300,17 +300,68 @@ pub fn create_vulkan_device(
     device: Out<xr::platform::VkDevice>,
     vk_result: Out<xr::platform::VkResult>,
 ) -> HookResult<xr::Result> {
-    crate::bridge::inject::creating_xr_device(|| {
-        create_vulkan_device_marked(inst, info, device, vk_result)
-    })
+    let r = crate::bridge::inject::creating_xr_device(|| {
+        create_vulkan_device_marked(inst, info, &device, &vk_result)
+    })?;
+    let created = device.read().filter(|d| !d.is_null());
+    let vk_ok = vk_result.read().map(vk::Result::from_raw) == Some(vk::Result::SUCCESS);
+    if let (true, true, Some(created), Some(i)) = (succeeded(r), vk_ok, created, info.get()) {
+        if !i.vulkan_create_info.is_null() {
+            // SAFETY: a valid XrVulkanDeviceCreateInfoKHR points to a valid VkDeviceCreateInfo,
+            // which the runtime just accepted; its sType is checked before anything else is read.
+            let app_vk = unsafe { &*(i.vulkan_create_info as *const vk::DeviceCreateInfo) };
+            let imageless = app_vk.s_type == vk::StructureType::DEVICE_CREATE_INFO
+                // SAFETY: a VkDeviceCreateInfo (its sType just checked), valid as above.
+                && unsafe { enables_imageless(app_vk) };
+            // The device exists: whatever happens here, the application's result stands.
+            if let (true, Ok(s)) = (imageless, instance(inst)) {
+                s.vulkan.lock().imageless_created(created as u64);
+            }
+        }
+    }
+    Ok(r)
+}
+
+/// Whether a VkDeviceCreateInfo enables `imagelessFramebuffer` (Vulkan 1.2 or
+/// VK_KHR_imageless_framebuffer). Such an application names, for each framebuffer attachment, the
+/// usage it expects of the image it binds later, and that usage must equal the image's
+/// (VUID-VkRenderPassBeginInfo-framebuffer-04627): usage added to its swapchain's images breaks it.
+///
+/// # Safety
+/// `info` must be a valid VkDeviceCreateInfo.
+unsafe fn enables_imageless(info: &vk::DeviceCreateInfo) -> bool {
+    let mut node = info.p_next as *const vk::BaseInStructure;
+    let mut seen = 0;
+    while !node.is_null() && seen < crate::xr::ffi::MAX_CHAIN_LENGTH {
+        // SAFETY: the pNext chain of a valid VkDeviceCreateInfo is a chain of valid structs, each
+        // starting with sType and pNext; a node of one of the features types read here is that
+        // struct.
+        unsafe {
+            let ty = (*node).s_type;
+            if ty == vk::StructureType::PHYSICAL_DEVICE_IMAGELESS_FRAMEBUFFER_FEATURES {
+                let f = &*(node as *const vk::PhysicalDeviceImagelessFramebufferFeatures);
+                if f.imageless_framebuffer == vk::TRUE {
+                    return true;
+                }
+            } else if ty == vk::StructureType::PHYSICAL_DEVICE_VULKAN_1_2_FEATURES {
+                let f = &*(node as *const vk::PhysicalDeviceVulkan12Features);
+                if f.imageless_framebuffer == vk::TRUE {
+                    return true;
+                }
+            }
+            node = (*node).p_next;
+        }
+        seen += 1;
+    }
+    false
 }
 
 /// [`create_vulkan_device`]'s work.
 fn create_vulkan_device_marked(
     inst: xr::Instance,
     info: In<xr::VulkanDeviceCreateInfoKHR>,
-    device: Out<xr::platform::VkDevice>,
-    vk_result: Out<xr::platform::VkResult>,
+    device: &Out<xr::platform::VkDevice>,
+    vk_result: &Out<xr::platform::VkResult>,
 ) -> HookResult<xr::Result> {
     let s = instance(inst)?;
     let f = next(s.next.create_vulkan_device)?;

@@ -13,5 +13,6 @@ pub mod gaze_spec;
 pub mod khronos_loader;
 pub mod layer;
 pub mod settings_file;
+pub mod subsampled;
 pub mod symmetric_fov;
 pub mod threads;

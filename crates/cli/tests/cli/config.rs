@@ -12,6 +12,8 @@ fn with_file(name: &str, text: &str) -> (std::path::PathBuf, std::process::Comma
     let mut c = command();
     c.env("XDG_CONFIG_HOME", &dir)
         .env_remove("DEBUG_OCULUS_FOVEATION_LEVEL")
+        .env_remove("DEBUG_OCULUS_FOVEATION_SUBSAMPLED")
+        .env_remove("FOVEA_SUBSAMPLED")
         .env_remove("FOVEA_MAX_FRAGMENT")
         .env_remove("FOVEA_LOG");
     (file, c)
@@ -54,6 +56,61 @@ fn config_shows_each_value_and_its_source() {
         r.out
             .lines()
             .any(|l| l.starts_with("level ") && l.contains("low")),
+        "{}",
+        r.out
+    );
+}
+
+/// `subsampled` is per application like `inject`; Quest's `debug.oculus.foveation.subsampled`
+/// wins over it, and the output says so.
+#[test]
+fn config_shows_subsampled_per_app_and_the_property_over_it() {
+    let (file, mut c) = with_file(
+        "subsampled",
+        "subsampled = \"off\"\n[app.\"game\"]\nsubsampled = \"on\"\n",
+    );
+    let row = |out: &str| {
+        out.lines()
+            .find(|l| l.starts_with("subsampled "))
+            .unwrap_or_else(|| panic!("subsampled in {out}"))
+            .to_string()
+    };
+    let value = |out: &str| row(out).split_whitespace().nth(1).unwrap().to_string();
+    let r = run(c.args(["config", "--app", "game"]));
+    assert!(r.ok(), "{}", r.text());
+    let f = file.display().to_string();
+    assert!(
+        value(&r.out) == "on" && row(&r.out).contains(&format!("{f}:3 ([app.\"game\"])")),
+        "{}",
+        r.out
+    );
+    assert!(
+        !r.out.contains("DEBUG_OCULUS_FOVEATION_SUBSAMPLED"),
+        "{}",
+        r.out
+    );
+    let (_, mut c) = with_file("subsampled-env", "");
+    let r = run(c
+        .args(["config", "--app", "game"])
+        .env("FOVEA_SUBSAMPLED", "0")
+        .env("DEBUG_OCULUS_FOVEATION_SUBSAMPLED", "1"));
+    assert!(
+        value(&r.out) == "off" && row(&r.out).contains("environment FOVEA_SUBSAMPLED"),
+        "{}",
+        r.out
+    );
+    assert!(
+        r.out.contains(
+            "DEBUG_OCULUS_FOVEATION_SUBSAMPLED=1: debug.oculus.foveation.subsampled wins over \
+             subsampled"
+        ),
+        "{}",
+        r.out
+    );
+    let (_, mut c) = with_file("subsampled-default", "");
+    let r = run(c.args(["config"]));
+    assert!(
+        row(&r.out).contains("as asked; injected: on") && row(&r.out).contains("default"),
         "{}",
         r.out
     );
