@@ -111,6 +111,16 @@ pub struct DemoArgs {
     /// Where the property file and the PNGs go
     #[arg(long, value_name = "DIR", default_value = "target/demo")]
     pub out: PathBuf,
+    /// Through the loader on a device without shading-rate attachments: draw the stripes at full
+    /// rate with the density maps sampled into a debug overlay, instead of foveating the room on
+    /// the simulated desktop GPU
+    #[arg(long)]
+    pub overlay: bool,
+    /// Through the loader: run twice, the periphery's coarse blocks as they are
+    /// (FOVEA_SUBSAMPLED=off) and reconstructed (FOVEA_SUBSAMPLED=on), and write each frame side
+    /// by side
+    #[arg(long, conflicts_with = "overlay")]
+    pub compare: bool,
 }
 
 /// Which eye's map `fovea maps` draws.
