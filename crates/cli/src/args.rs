@@ -102,7 +102,8 @@ pub struct DemoArgs {
     /// How to run the app [default: the loader where it and Vulkan are there, else the harness]
     #[arg(long)]
     pub via: Option<Via>,
-    /// How long to run [default: 20, or 10 on a CPU renderer]
+    /// How long to run [default: 20, or 10 on a CPU renderer, 8 (at 30 Hz) on the simulated
+    /// desktop GPU]
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub seconds: Option<u64>,
     /// The simulated headset [default: quest3, or rift-cv1 on a CPU renderer]

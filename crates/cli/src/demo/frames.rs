@@ -189,10 +189,15 @@ pub(super) fn summary(
 }
 
 /// Each frame of `left` beside the frame of the same name in `right`, a 16-pixel black gap
-/// between them, written to `out`; the paths written.
-pub(super) fn side_by_side(left: &Path, right: &Path, out: &Path) -> Result<Vec<PathBuf>, String> {
+/// between them, written to `out`: how many were written, and how many of those pairs were
+/// identical.
+pub(super) fn side_by_side(
+    left: &Path,
+    right: &Path,
+    out: &Path,
+) -> Result<(usize, usize), String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let mut written = Vec::new();
+    let (mut written, mut identical) = (0, 0);
     for (_, a_path) in left_frames(left) {
         let name = a_path.file_name().unwrap_or_default();
         let b_path = right.join(name);
@@ -231,9 +236,10 @@ pub(super) fn side_by_side(left: &Path, right: &Path, out: &Path) -> Result<Vec<
                 data,
             },
         )?;
-        written.push(path);
+        written += 1;
+        identical += usize::from(a.data == b.data);
     }
-    Ok(written)
+    Ok((written, identical))
 }
 
 #[cfg(test)]
@@ -284,5 +290,30 @@ mod tests {
         // A map at full rate everywhere has no fovea to place.
         let none = image(4, 2, 3, |_, _| vec![255, 255, 0]);
         assert_eq!(fovea_centre(&none, 8), None);
+    }
+
+    #[test]
+    fn pairs_are_written_side_by_side_and_identical_ones_counted() {
+        let dir = std::env::temp_dir().join(format!("fovea-demo-pairs-{}", std::process::id()));
+        let (a, b, out) = (dir.join("a"), dir.join("b"), dir.join("out"));
+        for d in [&a, &b] {
+            std::fs::create_dir_all(d).unwrap();
+        }
+        let frame = |v: u8| image(4, 2, 4, move |x, _| vec![v, x as u8, 0, 255]);
+        write_png(&a.join("f00001_high_left.png"), &frame(10)).unwrap();
+        write_png(&b.join("f00001_high_left.png"), &frame(10)).unwrap();
+        write_png(&a.join("f00002_high_left.png"), &frame(10)).unwrap();
+        write_png(&b.join("f00002_high_left.png"), &frame(20)).unwrap();
+        // A density map is not a frame, and a frame with no partner is left out.
+        write_png(&a.join("f00002_high_density_left.png"), &frame(1)).unwrap();
+        write_png(&a.join("f00003_high_left.png"), &frame(1)).unwrap();
+        assert_eq!(side_by_side(&a, &b, &out).unwrap(), (2, 1));
+        let pair = read_png(&out.join("f00002_high_left.png")).unwrap();
+        assert_eq!((pair.width, pair.height, pair.channels), (4 + 16 + 4, 2, 4));
+        let px = |x: usize| &pair.data[x * 4..][..4];
+        assert_eq!(px(1), [10, 1, 0, 255]);
+        assert_eq!(px(10), [0, 0, 0, 255]);
+        assert_eq!(px(21), [20, 1, 0, 255]);
+        std::fs::remove_dir_all(&dir).ok();
     }
 }
