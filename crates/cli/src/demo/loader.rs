@@ -213,7 +213,15 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
             Render::Overlay
         }
         (Fdm::Unavailable, _) => Render::Overlay,
-        _ => Render::Device,
+        _ => {
+            if setup.overlay {
+                println!(
+                    "fovea demo: --overlay is for devices without shading-rate attachments; this \
+                     one renders the maps itself, so the frames are foveated"
+                );
+            }
+            Render::Device
+        }
     };
     if setup.compare && render == Render::Overlay {
         return Err("--compare needs foveated frames: a shading-rate GPU or the double".into());
