@@ -51,7 +51,7 @@ if [ "$DEVICE" = gpu ]; then
     VK_ENV="VK_ADD_LAYER_PATH=$ROOT/manifest/vulkan${VK_ADD_LAYER_PATH:+:$VK_ADD_LAYER_PATH}"
     DOUBLE=""
 else
-    LVP=$(ls /usr/share/vulkan/icd.d/lvp_icd*.json 2>/dev/null | head -n 1)
+    LVP=$(find /usr/share/vulkan/icd.d -name 'lvp_icd*.json' 2>/dev/null | sort | head -n 1)
     [ -n "$LVP" ] || { echo "lavapipe (mesa-vulkan-drivers) is not installed" >&2; exit 1; }
     VK_ENV="VK_DRIVER_FILES=$LVP VK_ADD_LAYER_PATH=$ROOT/manifest/vulkan:$OUT/vk"
     DOUBLE="--vk-layer VK_LAYER_FOVEA_shading_rate_double"
@@ -101,7 +101,7 @@ for headset in $HEADSETS; do
                 echo "the example failed ($headset, $gaze, $run): see $dir/run.log" >&2
                 exit 1
             }
-            echo "$headset $gaze $run: $(grep -c . "$dir/run.txt") lines, $(ls "$dir" | grep -c 'left.png') left frames"
+            echo "$headset $gaze $run: $(grep -c . "$dir/run.txt") lines, $(find "$dir" -name '*left.png' | grep -c .) left frames"
         done
     done
 done
