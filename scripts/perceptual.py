@@ -2,20 +2,31 @@
 """What each foveation level costs the eye, from frames the example read back (scripts/perceptual.sh).
 
 For one eye's frame at each level and the same frame at level NONE (full rate, the reference), per
-band of eccentricity (degrees from where the eye looks: the projection centre for fixed foveation,
-the scripted gaze for eye-tracked foveation):
+band of eccentricity (degrees from where the eye looks: the projection centre for fixed foveation;
+for eye-tracked foveation, the left eye's own line of sight to where the scripted gaze meets the
+fixation plane, as fovea's model places the fovea, docs/eye-tracking.md "Into each eye": the
+simulated tracker's gaze is the head's, and at 1 m the left eye, 31.5 mm to the left, looks 1.7°
+further right than the head's 15°):
 
 - FLIP (NVIDIA's perceptual difference metric, `flip-evaluator`, BSD-3-Clause; Andersson et al.,
   "FLIP: A Difference Evaluator for Alternating Images", HPG 2020): the mean of its per-pixel error
   (0 identical, 1 the largest difference), at the pixels per degree of the eye buffer's centre;
-- identical: the share of pixels equal to the reference's (the fovea must be 1.000);
+- identical: the share of pixels equal to the reference's (the fovea must be 1.000), and the
+  nearest pixel that differs, in degrees from the gaze, beside the nearest pixel whose texel in
+  the density map read back with the frame is below full rate (what the map asked for);
 - blocky: the share of 2×2 pixel blocks (aligned to the image's origin, as fragments are) whose four
   pixels are all identical: what coarse fragments leave (a 2×2 or larger fragment makes every such
   block inside it uniform), against the reference's own share (the scene is textured down to the
   pixel, so at full rate few are). The same measure as `fovea_vkdouble::blocks::uniform_share`.
 
+Each figure is given for the frame as shaded (coarse blocks: FOVEA_SUBSAMPLED=off) and, where a run
+with reconstruction exists (folder HEADSET-GAZE-LEVEL-smooth, FOVEA_SUBSAMPLED=on), for the
+reconstructed frame in the "reconstructed" rows; where that frame is identical to the blocky one
+(fovea without reconstruction ignores the setting) the rows say so instead of repeating figures.
+
 Usage: perceptual.py FRAMES_DIR MODEL_JSON_DIR OUT_DIR, where FRAMES_DIR holds one folder per run
-named HEADSET-GAZE-LEVEL with the example's PNGs and a `run.txt` of its stdout (the located FOVs),
+named HEADSET-GAZE-LEVEL (or HEADSET-GAZE-LEVEL-smooth) with the example's PNGs and a `run.txt` of
+its stdout (the located FOVs),
 and MODEL_JSON_DIR holds `fovea report --headset H --json` as H.json. Writes OUT_DIR/table.md and
 OUT_DIR/table.json.
 
@@ -37,6 +48,23 @@ BANDS = [(0, 10), (10, 15), (15, 20), (20, 30), (30, 45), (45, 180)]
 LEVELS = ["low", "medium", "high"]
 # Where the scripted gaze looks (perceptual.sh's FOVEA_SIM_GAZE): yaw right, pitch up, degrees.
 GAZE = {"fixed": (0.0, 0.0), "gaze": (15.0, 8.0)}
+# Where fovea's model puts the eyes' fixation (gaze_fixation_m's default) and the simulated
+# runtime's left eye (IPD 63 mm, crates/sim/src/space.rs), metres.
+FIXATION_M = 1.0
+LEFT_EYE_X_M = -0.0315
+
+
+def left_eye_gaze(gaze_deg):
+    """The left eye's line of sight, as tangents (right, up), to where the head's gaze (yaw, pitch:
+    the tracker's, as crates/model/src/gaze.rs turns it into a direction) meets the fixation
+    plane; straight ahead (fixed foveation) stays straight ahead."""
+    if gaze_deg == (0.0, 0.0):
+        return 0.0, 0.0
+    yaw, pitch = (math.radians(a) for a in gaze_deg)
+    x = math.cos(pitch) * math.sin(yaw) * FIXATION_M - LEFT_EYE_X_M
+    y = math.sin(pitch) * FIXATION_M
+    z = math.cos(pitch) * math.cos(yaw) * FIXATION_M
+    return x / z, y / z
 
 
 def fovs(run_txt):
@@ -56,15 +84,14 @@ def load(path):
     return np.asarray(Image.open(path).convert("RGB"))
 
 
-def eccentricity(shape, fov, gaze_deg):
-    """Degrees between each pixel's ray and the gaze's."""
+def eccentricity(shape, fov, gaze_tan):
+    """Degrees between each pixel's ray and the gaze's (tangents right and up)."""
     h, w = shape
     l, r, u, d = (math.tan(a) for a in fov)
     tx = l + (np.arange(w) + 0.5) / w * (r - l)
     ty = u - (np.arange(h) + 0.5) / h * (u - d)
     x, y = np.meshgrid(tx, ty)
-    yaw, pitch = (math.radians(a) for a in gaze_deg)
-    gx, gy = math.tan(yaw), math.tan(pitch) / math.cos(yaw)
+    gx, gy = gaze_tan
     dot = x * gx + y * gy + 1.0
     norm = np.sqrt(x * x + y * y + 1.0) * math.sqrt(gx * gx + gy * gy + 1.0)
     return np.degrees(np.arccos(np.clip(dot / norm, -1.0, 1.0)))
@@ -91,20 +118,29 @@ def analyse(frames_dir, models_dir):
         fov = fovs((ref_dir / "run.txt").read_text())
         ref_path = last_left_frame(ref_dir, "none")
         ref = load(ref_path)
-        ecc = eccentricity(ref.shape[:2], fov, GAZE[gaze])
+        ecc = eccentricity(ref.shape[:2], fov, left_eye_gaze(GAZE[gaze]))
         ecc_blocks = ecc[: ecc.shape[0] // 2 * 2 : 2, : ecc.shape[1] // 2 * 2 : 2]
         ppd = centre_ppd(ref.shape[:2], fov)
         model = json.loads((models_dir / f"{headset}.json").read_text())
         fractions = {lv["level"]: lv["shaded_fraction"] for lv in model["levels"]}
         ref_blocks = uniform_2x2(ref)
-        for level in ["none"] + LEVELS:
-            run = frames_dir / f"{headset}-{gaze}-{level}"
+        blocky_frames = {}
+        for level, smooth in [("none", False)] + [(lv, sm) for lv in LEVELS for sm in (False, True)]:
+            run = frames_dir / f"{headset}-{gaze}-{level}{'-smooth' if smooth else ''}"
             if not run.is_dir():
                 continue
             path = last_left_frame(run, level)
             if path.name.split("_")[0] != ref_path.name.split("_")[0]:
                 raise SystemExit(f"{path} and {ref_path} are not the same frame")
             img = load(path)
+            if not smooth:
+                blocky_frames[level] = img
+            elif level in blocky_frames and np.array_equal(img, blocky_frames[level]):
+                # FOVEA_SUBSAMPLED=on changed nothing: this fovea has no reconstruction.
+                rows.append(
+                    {"headset": headset, "gaze": gaze, "level": level, "reconstructed": None}
+                )
+                continue
             if level == "none":
                 error = np.zeros(ecc.shape, np.float32)
             else:
@@ -136,11 +172,27 @@ def analyse(frames_dir, models_dir):
                         "pixels": int(m.sum()),
                     }
                 )
+            # The same from the density map read back with the frame: the nearest pixel whose
+            # texel is below full rate, which tells the map's fovea from what the renderer did.
+            map_path = path.with_name(path.name.replace(f"_{level}_left", f"_{level}_density_left"))
+            map_nearest = None
+            if map_path.is_file() and level != "none":
+                m = np.asarray(Image.open(map_path).convert("RGB"))
+                texel = ref.shape[1] // m.shape[1]
+                full = (m[..., 0] == 255) & (m[..., 1] == 255)
+                full = np.repeat(np.repeat(full, texel, 0), texel, 1)
+                pad = np.ones(ecc.shape, bool)
+                h, w = min(full.shape[0], ecc.shape[0]), min(full.shape[1], ecc.shape[1])
+                pad[:h, :w] = full[:h, :w]
+                if (~pad).any():
+                    map_nearest = float(ecc[~pad].min())
             rows.append(
                 {
                     "headset": headset,
                     "gaze": gaze,
                     "level": level,
+                    "reconstructed": smooth,
+                    "map_nearest_change_deg": map_nearest,
                     "shaded_fraction": fractions.get(level),
                     "ppd": ppd,
                     "frame": path.name,
@@ -170,11 +222,18 @@ def table(rows):
     ]:
         out.append(f"**{title}**\n")
         near = key == "identical"
-        extra = " nearest change |" if near else ""
+        extra = " nearest change (map's) |" if near else ""
         out.append(f"| headset | gaze | level | shaded | {heads} |{extra} reconstructed |")
         out.append("|---|---|---|---|" + "---|" * (len(BANDS) + near) + "---|")
         for r in rows:
             if key != "blocky" and r["level"] == "none":
+                continue
+            if r["reconstructed"] is None:
+                blank = " | ".join("–" for _ in range(len(BANDS) + near))
+                out.append(
+                    f"| {r['headset']} | {r['gaze']} | {r['level']} | – | {blank} | "
+                    "no effect: FOVEA_SUBSAMPLED=on left the frame as shaded |"
+                )
                 continue
             if key == "blocky":
                 cells = [
@@ -187,12 +246,14 @@ def table(rows):
                 cells = [cell(b, key) for b in r["bands"]]
             frac = "–" if r["shaded_fraction"] is None else f"{r['shaded_fraction']:.3f}"
             if near:
-                n = r["nearest_change_deg"]
-                cells.append("–" if n is None else f"{n:.1f}°")
+                n, m = r["nearest_change_deg"], r.get("map_nearest_change_deg")
+                cells.append(
+                    ("–" if n is None else f"{n:.1f}°") + ("" if m is None else f" ({m:.1f}°)")
+                )
             out.append(
                 f"| {r['headset']} | {r['gaze']} | {r['level']} | {frac} | "
                 + " | ".join(cells)
-                + " | not yet |"
+                + (" | yes |" if r["reconstructed"] else " | no |")
             )
         out.append("")
     return "\n".join(out)
@@ -203,6 +264,9 @@ def main():
         raise SystemExit(__doc__)
     frames_dir, models_dir, out = (Path(a) for a in sys.argv[1:])
     rows = analyse(frames_dir, models_dir)
+    # Each level's blocky row, then its reconstructed one.
+    order = {"none": 0, "low": 1, "medium": 2, "high": 3}
+    rows.sort(key=lambda r: (r["headset"], r["gaze"], order[r["level"]], bool(r["reconstructed"])))
     if not rows:
         raise SystemExit(f"{frames_dir}: no runs")
     out.mkdir(parents=True, exist_ok=True)

@@ -11,10 +11,17 @@
 # image at a different level; level NONE is the full-rate reference. It runs for each headset
 # (Quest 3 and Valve Index geometry) with fixed foveation and with an eye-tracked profile whose
 # fovea follows a scripted gaze (15° right, 8° up), and scripts/perceptual.py writes the table.
+# Each level below NONE runs twice: its coarse blocks as shaded (FOVEA_SUBSAMPLED=off) and
+# reconstructed (FOVEA_SUBSAMPLED=on, docs/settings.md), for the table's "reconstructed" rows; a
+# fovea without reconstruction ignores the setting, and the table says so.
 #
 # Usage: scripts/perceptual.sh [OUT_DIR]   (default: target/perceptual)
 # Variables: HEADSETS (default "quest3 index"), FRAMES per run (default 3; 12 with the gaze, so
-# the eye-tracked fovea has settled), NO_BUILD=1 (use what target/release holds).
+# the eye-tracked fovea has settled), RECONSTRUCT=off (skip the reconstructed runs), NO_BUILD=1
+# (use what REL holds; REL defaults to target/release), DEVICE=gpu (render on the machine's own
+# GPU through fovea's Vulkan layer instead of lavapipe and the double: scripts/gpu-proof.sh),
+# FRAMES_ONLY=1 (write the frames and the model's figures, not the table: for a machine without
+# the metric's environment; run scripts/perceptual.py on OUT_DIR elsewhere).
 # The metric's own environment (flip-evaluator, numpy, Pillow) is a virtual environment in
 # OUT_DIR/venv, made on first use from PyPI. Nothing of it is shipped or linked.
 set -eu
@@ -23,11 +30,13 @@ ROOT=$(pwd)
 OUT=${1:-target/perceptual}
 HEADSETS=${HEADSETS:-quest3 index}
 FRAMES=${FRAMES:-3}
-REL=$ROOT/target/release
+RECONSTRUCT=${RECONSTRUCT:-on}
+DEVICE=${DEVICE:-double}
+REL=${REL:-$ROOT/target/release}
 mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
 
-if [ ! -x "$OUT/venv/bin/python" ]; then
+if [ "${FRAMES_ONLY:-0}" != 1 ] && [ ! -x "$OUT/venv/bin/python" ]; then
     python3 -m venv "$OUT/venv"
     "$OUT/venv/bin/pip" install --quiet flip-evaluator==1.7 numpy pillow
 fi
@@ -36,8 +45,17 @@ if [ "${NO_BUILD:-0}" != 1 ]; then
         --example foveated_vulkan
 fi
 
-LVP=$(ls /usr/share/vulkan/icd.d/lvp_icd*.json 2>/dev/null | head -n 1)
-[ -n "$LVP" ] || { echo "lavapipe (mesa-vulkan-drivers) is not installed" >&2; exit 1; }
+# The Vulkan side: lavapipe and the double below fovea's Vulkan layer, or the machine's GPU.
+# (Paths with spaces are not supported: VK_ENV is split into words.)
+if [ "$DEVICE" = gpu ]; then
+    VK_ENV="VK_ADD_LAYER_PATH=$ROOT/manifest/vulkan${VK_ADD_LAYER_PATH:+:$VK_ADD_LAYER_PATH}"
+    DOUBLE=""
+else
+    LVP=$(find /usr/share/vulkan/icd.d -name 'lvp_icd*.json' 2>/dev/null | sort | head -n 1)
+    [ -n "$LVP" ] || { echo "lavapipe (mesa-vulkan-drivers) is not installed" >&2; exit 1; }
+    VK_ENV="VK_DRIVER_FILES=$LVP VK_ADD_LAYER_PATH=$ROOT/manifest/vulkan:$OUT/vk"
+    DOUBLE="--vk-layer VK_LAYER_FOVEA_shading_rate_double"
+fi
 # The double's manifest, as fovea_vkdouble::manifest_json writes it.
 mkdir -p "$OUT/vk"
 cat >"$OUT/vk/VkLayer_fovea_shading_rate_double.json" <<EOF
@@ -56,8 +74,14 @@ mkdir -p "$OUT/frames" "$OUT/model"
 for headset in $HEADSETS; do
     "$REL/fovea" report --headset "$headset" --json >"$OUT/model/$headset.json"
     for gaze in fixed gaze; do
-        for level in none low medium high; do
-            dir=$OUT/frames/$headset-$gaze-$level
+        for run in none low low-smooth medium medium-smooth high high-smooth; do
+            level=${run%-smooth}
+            subsampled=off
+            if [ "$run" != "$level" ]; then
+                [ "$RECONSTRUCT" = on ] || continue
+                subsampled=on
+            fi
+            dir=$OUT/frames/$headset-$gaze-$run
             mkdir -p "$dir"
             if [ "$gaze" = gaze ]; then
                 set -- --eye-tracked --frames "$((FRAMES + 9))"
@@ -66,19 +90,24 @@ for headset in $HEADSETS; do
                 set -- --frames "$FRAMES"
                 unset FOVEA_SIM_EYE_GAZE FOVEA_SIM_GAZE
             fi
-            env VK_DRIVER_FILES="$LVP" VK_ADD_LAYER_PATH="$ROOT/manifest/vulkan:$OUT/vk" \
+            # shellcheck disable=SC2086 # $VK_ENV: assignments for env; $DOUBLE: empty or an option.
+            env $VK_ENV \
                 XR_RUNTIME_JSON="$RUNTIME" XR_API_LAYER_PATH="$ROOT/manifest" \
                 XR_ENABLE_API_LAYERS=XR_APILAYER_FOVEA_foveation DISABLE_FOVEA_VK_LAYER=1 \
-                FOVEA_SIM_HEADSET="$headset" \
+                FOVEA_SIM_HEADSET="$headset" FOVEA_SUBSAMPLED="$subsampled" \
                 "$REL/examples/foveated_vulkan" --scene room --levels "$level" "$@" \
-                --frames-per-level 1000 --vk-layer VK_LAYER_FOVEA_shading_rate_double \
+                --frames-per-level 1000 $DOUBLE \
                 --dump "$dir" >"$dir/run.txt" 2>"$dir/run.log" || {
-                echo "the example failed ($headset, $gaze, $level): see $dir/run.log" >&2
+                echo "the example failed ($headset, $gaze, $run): see $dir/run.log" >&2
                 exit 1
             }
-            echo "$headset $gaze $level: $(grep -c . "$dir/run.txt") lines, $(ls "$dir" | grep -c 'left.png') left frames"
+            echo "$headset $gaze $run: $(grep -c . "$dir/run.txt") lines, $(find "$dir" -name '*left.png' | grep -c .) left frames"
         done
     done
 done
+if [ "${FRAMES_ONLY:-0}" = 1 ]; then
+    echo "frames: $OUT/frames; the table: scripts/perceptual.py $OUT/frames $OUT/model $OUT"
+    exit 0
+fi
 "$OUT/venv/bin/python" scripts/perceptual.py "$OUT/frames" "$OUT/model" "$OUT"
 echo "table: $OUT/table.md"

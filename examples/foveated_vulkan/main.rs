@@ -34,7 +34,7 @@
 //! input does, attaches an action set of its own (a controller's aim pose) and syncs it every frame.
 //! The runtime (or fovea) then moves the fovea in the density maps; with `--dump`, a changed map is
 //! read back at most every [`EYE_TRACKED_CAPTURE_FRAMES`] frames, not on every move, and a frame
-//! every [`EYE_TRACKED_READ_FRAMES`].
+//! every [`EYE_TRACKED_READ_FRAMES`] (`--read-every N` chooses: `fovea demo` reads one a second).
 //!
 //! The options below make the example a test subject for fovea's injection (docs/injection.md),
 //! which foveates applications that never ask, by their eye passes:
@@ -132,6 +132,8 @@ struct Options {
     dynamic_rendering: bool,
     /// Eye-tracked profiles and an attached action set (`--eye-tracked`).
     eye_tracked: bool,
+    /// With `--eye-tracked` and `--dump`, frames between two frames read back (`--read-every`).
+    read_every: u64,
 }
 
 impl Options {
@@ -153,6 +155,7 @@ impl Options {
             layout: Layout::Array,
             dynamic_rendering: false,
             eye_tracked: false,
+            read_every: EYE_TRACKED_READ_FRAMES,
         };
         let mut frames = None;
         let mut levels_given = false;
@@ -209,6 +212,7 @@ impl Options {
                 "--double-wide" => o.layout = Layout::DoubleWide,
                 "--dynamic-rendering" => o.dynamic_rendering = true,
                 "--eye-tracked" => o.eye_tracked = true,
+                "--read-every" => o.read_every = count(value()?)?,
                 other => return Err(format!("unknown option {other:?} (--help lists them)")),
             }
         }
@@ -312,6 +316,7 @@ usage: foveated_vulkan [options]   (run through an OpenXR runtime; see the file'
   --eye-tracked           eye-tracked profiles (XR_META_foveation_eye_tracked) and an action set
                           attached and synced each frame, as apps with input do; with --dump, a
                           changed map is written at most every 30 frames and a frame every 180
+  --read-every N          (with --eye-tracked and --dump) a frame every N frames instead of 180
   -h, --help              this text";
 
 fn main() {
@@ -1089,7 +1094,7 @@ unsafe fn session_loop(
                 || (options.capture
                     && options.eye_tracked
                     && frames > 0
-                    && frames % EYE_TRACKED_READ_FRAMES == 0),
+                    && frames % options.read_every == 0),
             density: options.capture,
         };
         // The room is the same at every level; its push constant's w is the frame, for the pan.
@@ -1439,6 +1444,7 @@ mod tests {
             vec!["--double-wide", "--no-fb"],
             vec!["--dynamic-rendering"],
             vec!["--eye-tracked"],
+            vec!["--read-every", "30"],
             vec!["--check-rates", "--heavy"],
         ];
         for args in &taken {

@@ -102,7 +102,8 @@ pub struct DemoArgs {
     /// How to run the app [default: the loader where it and Vulkan are there, else the harness]
     #[arg(long)]
     pub via: Option<Via>,
-    /// How long to run [default: 20, or 10 on a CPU renderer]
+    /// How long to run [default: 20, or 10 on a CPU renderer, 8 (at 30 Hz) on the simulated
+    /// desktop GPU]
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub seconds: Option<u64>,
     /// The simulated headset [default: quest3, or rift-cv1 on a CPU renderer]
@@ -111,6 +112,16 @@ pub struct DemoArgs {
     /// Where the property file and the PNGs go
     #[arg(long, value_name = "DIR", default_value = "target/demo")]
     pub out: PathBuf,
+    /// Through the loader on a device without shading-rate attachments: draw the stripes at full
+    /// rate with the density maps sampled into a debug overlay, instead of foveating the room on
+    /// the simulated desktop GPU
+    #[arg(long)]
+    pub overlay: bool,
+    /// Through the loader: run twice, the periphery's coarse blocks as they are
+    /// (FOVEA_SUBSAMPLED=off) and reconstructed (FOVEA_SUBSAMPLED=on), and write each frame side
+    /// by side
+    #[arg(long, conflicts_with = "overlay")]
+    pub compare: bool,
 }
 
 /// Which eye's map `fovea maps` draws.

@@ -19,6 +19,7 @@
 //! | 2 | `vk_doctor.rs` | `fovea doctor`'s Vulkan half: each GPU, and where the Vulkan layer is installed |
 //! | 2 | `xr_doctor.rs` | `fovea doctor`'s eye gaze line: whether the runtime offers eye gaze and its system has an eye tracker |
 //! | 2 | `demo/setup.rs` | what both ways of running the demo share |
+//! | 2 | `demo/frames.rs` | what the demo says about the frames it read back, and `--compare`'s pairs |
 //! | 3 | `maps.rs` | `fovea maps` |
 //! | 3 | `report.rs` | `fovea report` |
 //! | 3 | `doctor_settings.rs` | `fovea doctor`'s checks of Steam installs, other layers and the configuration file |

@@ -494,6 +494,7 @@ const CLI_FLOORS: &[Place] = &[
     at(20, "vk_doctor.rs"),
     at(20, "xr_doctor.rs"),
     at(20, "demo/setup.rs"),
+    at(20, "demo/frames.rs"),
     at(30, "maps.rs"),
     at(30, "report.rs"),
     at(30, "doctor_settings.rs"),

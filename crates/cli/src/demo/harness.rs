@@ -44,7 +44,7 @@ pub fn run(setup: &Setup) -> Result<(), String> {
         "fovea demo: {} (simulated, {} Hz), {seconds} s in real time; GPU load {}; eye tracker {}",
         cfg.headset.name,
         cfg.refresh_hz,
-        load_description(),
+        load_description(&LOAD),
         gaze_description()
     );
     sim::control::set_thread_config(Some(cfg.clone()));

@@ -24,7 +24,9 @@ use std::process::{Command, Stdio};
 
 use ash::vk;
 
-use super::setup::{build_dir, cargo_build, gaze_description, load_description, Setup, GAZE, LOAD};
+use super::setup::{
+    build_dir, cargo_build, gaze_description, load_at, load_description, Setup, GAZE,
+};
 use crate::discovery::{Kind, VK_ADD_LAYER_PATH};
 use crate::install::{manifest_text, vk_explicit_manifest_text};
 use crate::vk_doctor::Fdm;
@@ -41,6 +43,8 @@ pub struct System {
     /// What the device's driver offers for density maps.
     fdm: Fdm,
     dir: PathBuf,
+    /// The shading-rate double's library, where it is built beside the rest.
+    double: Option<PathBuf>,
 }
 
 impl System {
@@ -58,6 +62,8 @@ impl System {
             "fovea",
             "-p",
             "fovea-sim",
+            "-p",
+            "fovea-vkdouble",
             "--lib",
             "--example",
             EXAMPLE,
@@ -81,11 +87,13 @@ impl System {
                 dir.display()
             ));
         }
+        let double = Some(dir.join(DOUBLE_LIBRARY)).filter(|d| d.is_file());
         Ok(System {
             device,
             cpu,
             fdm,
             dir,
+            double,
         })
     }
 }
@@ -137,8 +145,9 @@ fn driver_fdm(device: &str) -> Fdm {
         .map_or(Fdm::Unavailable, |(_, fdm)| fdm)
 }
 
-/// The environment the example gets so that fovea's Vulkan layer translates its density maps, for a
-/// device whose driver offers `fdm`: where it emulates them, `VK_ADD_LAYER_PATH` with `vulkan_dir`
+/// The environment the example gets so that fovea's Vulkan layer translates its density maps
+/// (`translate`: the device has shading-rate attachments and no density maps, or the double plays
+/// such a device): `VK_ADD_LAYER_PATH` with `vulkan_dir`
 /// (holding the layer's explicit manifest) before any folders already named (`existing`), and
 /// `DISABLE_FOVEA_VK_LAYER=1`, which keeps an installed implicit copy of the same layer from
 /// loading beside it (`disable_environment` applies to implicit layers only,
@@ -146,11 +155,11 @@ fn driver_fdm(device: &str) -> Fdm {
 /// where the driver has density maps itself or has no shading-rate attachments: the layer would
 /// pass everything through.
 pub fn vk_layer_env(
-    fdm: &Fdm,
+    translate: bool,
     vulkan_dir: &std::path::Path,
     existing: Option<std::ffi::OsString>,
 ) -> Vec<(&'static str, std::ffi::OsString)> {
-    if !matches!(fdm, Fdm::Emulated { .. }) {
+    if !translate {
         return Vec::new();
     }
     let mut paths = vec![vulkan_dir.to_path_buf()];
@@ -159,18 +168,85 @@ pub fn vk_layer_env(
     vec![(VK_ADD_LAYER_PATH, joined), (DISABLE_VK_LAYER, "1".into())]
 }
 
+/// What the example renders, and on what.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Render {
+    /// The room, foveated by the device itself (native density maps, or fovea's Vulkan layer on
+    /// its shading-rate attachments).
+    Device,
+    /// The room, foveated by fovea's Vulkan layer over the shading-rate double on a device that
+    /// has neither (lavapipe): what a desktop GPU shades, as a user would see it.
+    Double,
+    /// The stripes at full rate, the density maps sampled into a debug overlay (`--overlay`, or
+    /// no double built).
+    Overlay,
+}
+
+/// The display rate over the double on a CPU renderer: lavapipe draws the room's two Rift CV1 eye
+/// buffers in about half a second, so the story's 8 seconds are 240 frames instead of 720.
+const CPU_ROOM_HZ: f32 = 30.0;
+
+/// Seconds of display time before frame `n`, with `load` (frames, GPU ms) on a display at `hz`:
+/// the simulated runtime's clock advances a period per frame, or as many as a frame's GPU time
+/// needs (a miss).
+fn display_seconds(load: &[(u64, f32)], hz: f32, n: u64) -> f64 {
+    let load = fovea_harness::sim::control::Load {
+        gpu_ms: load.to_vec(),
+    };
+    let period_ms = 1000.0 / hz;
+    let periods: f32 = (0..n)
+        .map(|f| (load.gpu_ms_at(f) / period_ms).ceil().max(1.0))
+        .sum();
+    // An empty sum of floats is -0.0; adding 0.0 makes it 0.0.
+    (f64::from(periods) + 0.0) / f64::from(hz)
+}
+
 pub fn run(setup: &Setup, system: System) -> Result<(), String> {
-    // Lavapipe draws Quest 3's 2 × 2064×2240 at about 20 frames a second on two cores; Rift CV1's
-    // eye buffers take half as long.
+    let render = match (&system.fdm, &system.double) {
+        (Fdm::Unavailable, Some(_)) if !setup.overlay => Render::Double,
+        (Fdm::Unavailable, None) if !setup.overlay => {
+            println!(
+                "fovea demo: {} is not built, so the frames are not foveated: the maps are \
+                 sampled into an overlay instead (cargo build -p fovea-vkdouble)",
+                DOUBLE_LIBRARY
+            );
+            Render::Overlay
+        }
+        (Fdm::Unavailable, _) => Render::Overlay,
+        _ => {
+            if setup.overlay {
+                println!(
+                    "fovea demo: --overlay is for devices without shading-rate attachments; this \
+                     one renders the maps itself, so the frames are foveated"
+                );
+            }
+            Render::Device
+        }
+    };
+    if setup.compare && render == Render::Overlay {
+        return Err("--compare needs foveated frames: a shading-rate GPU or the double".into());
+    }
+    // Lavapipe draws Quest 3's 2 × 2064×2240 at about 20 frames a second on two cores (the room:
+    // 2 a second); Rift CV1's eye buffers take half as long.
     let headset = if system.cpu && !setup.headset_given {
         fovea_model::headsets::by_id("rift-cv1").expect("rift-cv1 preset exists")
     } else {
         setup.headset
     };
-    // Half the harness's 20 s where the CPU draws: the story (overload from frame 270, relief from
-    // 630, the override) still fits, in about 40 s instead of 80.
-    let seconds = setup.seconds_or(if system.cpu { 10 } else { 20 });
-    let frames = (seconds as f32 * headset.refresh_hz).round() as u64;
+    let hz = if system.cpu && render == Render::Double {
+        CPU_ROOM_HZ
+    } else {
+        headset.refresh_hz
+    };
+    let load = load_at(hz);
+    // Half the harness's 20 s where the CPU draws: the story (overload from 3 s, relief 4 s later,
+    // the override) still fits.
+    let seconds = setup.seconds_or(match (system.cpu, render) {
+        (true, Render::Double) => 8,
+        (true, _) => 10,
+        (false, _) => 20,
+    });
+    let frames = (seconds as f32 * hz).round() as u64;
     let manifests = setup.out.join("manifests");
     let layers = manifests.join("api_layers");
     std::fs::create_dir_all(&layers).map_err(|e| format!("{}: {e}", layers.display()))?;
@@ -194,11 +270,9 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
         .to_string(),
     )?;
     let vulkan_dir = manifests.join("vulkan");
-    let vk_env = vk_layer_env(
-        &system.fdm,
-        &vulkan_dir,
-        std::env::var_os(VK_ADD_LAYER_PATH),
-    );
+    let translate = matches!(system.fdm, Fdm::Emulated { .. }) || render == Render::Double;
+    let mut vk_env = vk_layer_env(translate, &vulkan_dir, std::env::var_os(VK_ADD_LAYER_PATH));
+    let mut example_args: Vec<String> = Vec::new();
     if !vk_env.is_empty() {
         std::fs::create_dir_all(&vulkan_dir)
             .map_err(|e| format!("{}: {e}", vulkan_dir.display()))?;
@@ -207,10 +281,28 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
             vk_explicit_manifest_text(&system.dir.join("libfovea.so"))?,
         )?;
     }
-    let frames_dir = setup.out.join("frames");
-    // Captures from an earlier run would be mistaken for this one's.
-    std::fs::remove_dir_all(&frames_dir).ok();
-    let script: Vec<String> = LOAD.iter().map(|(f, ms)| format!("{ms}@{f}")).collect();
+    if let (Render::Double, Some(double)) = (render, &system.double) {
+        write(
+            vulkan_dir.join(DOUBLE_MANIFEST),
+            double_manifest_text(double),
+        )?;
+        vk_env.push((DOUBLE_PROFILE_ENV, "nvidia".into()));
+        example_args.extend(["--vk-layer".into(), DOUBLE_LAYER.into()]);
+    }
+    if render != Render::Overlay {
+        // A frame read back each second of frames (each two on a GPU, whose eye buffers are
+        // larger and whose runs longer: the example holds what it reads back until it ends), so
+        // the frames show the fovea at each place the gaze script goes and the periphery at each
+        // level the run goes through.
+        let seconds_apart = if render == Render::Double { 1.0 } else { 2.0 };
+        example_args.extend([
+            "--scene".into(),
+            "room".into(),
+            "--read-every".into(),
+            ((hz * seconds_apart).round() as u64).max(1).to_string(),
+        ]);
+    }
+    let script: Vec<String> = load.iter().map(|(f, ms)| format!("{ms}@{f}")).collect();
 
     println!(
         "fovea demo: examples/{EXAMPLE} through the Khronos loader ({LOADER}), fovea and the \
@@ -224,62 +316,151 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
         }
     );
     println!(
-        "{frames} frames ({seconds} s at {} Hz without misses), as fast as the device draws; \
+        "{frames} frames ({seconds} s at {hz} Hz without misses), as fast as the device draws; \
          GPU load {}; eye tracker {}",
-        headset.refresh_hz,
-        load_description(),
+        load_description(&load),
         gaze_description()
     );
     println!(
         "{}: {}",
         system.device,
-        if vk_env.is_empty() {
-            format!(
-                "{}; the example samples the density maps into its debug overlay",
+        match render {
+            Render::Overlay => format!(
+                "{}; the example draws stripes at full rate and samples the density maps into its \
+                 debug overlay",
                 system.fdm.describe()
-            )
-        } else {
-            format!(
+            ),
+            Render::Double => format!(
+                "{}; the example renders its room on the simulated desktop GPU instead: fovea's \
+                 Vulkan layer over {DOUBLE_LAYER} (NVIDIA-like shading-rate attachments, 16×16 \
+                 texels, up to 4×4 fragments), so its eye passes are shaded at the maps' rates \
+                 and the frames read back show what a headset would: the fovea sharp where the \
+                 eye looks, the periphery in coarse blocks",
+                system.fdm.describe()
+            ),
+            Render::Device if vk_env.is_empty() => format!(
+                "{}; the example renders its room with them",
+                system.fdm.describe()
+            ),
+            Render::Device => format!(
                 "{}; fovea's Vulkan layer is enabled for the example (VK_ADD_LAYER_PATH={}), so \
                  its eye passes are shaded at the maps' rates",
                 system.fdm.describe(),
                 vulkan_dir.display()
-            )
+            ),
         }
     );
-    let mut child = Command::new(system.dir.join("examples").join(EXAMPLE))
-        .envs(vk_env.iter().map(|(k, v)| (k, v)))
-        .args(["--levels", "high", "--dynamic", "--eye-tracked", "--dump"])
-        .arg(&frames_dir)
-        .args(["--frames", &frames.to_string()])
-        .args(["--frames-per-level", &frames.to_string()])
-        .env("XR_RUNTIME_JSON", &runtime)
-        .env("XR_API_LAYER_PATH", &layers)
-        .env("XR_ENABLE_API_LAYERS", fovea_harness::FOVEA_LAYER)
-        .env("FOVEA_LOG", &setup.log)
-        .env("FOVEA_PROPS", &setup.props)
-        .env("FOVEA_SIM_HEADSET", headset.id)
-        .env("FOVEA_SIM_LOAD", script.join(","))
-        .env("FOVEA_SIM_EYE_GAZE", "on")
-        .env("FOVEA_SIM_GAZE", GAZE)
-        .env_remove("FOVEA_SIM_REALTIME")
-        .env_remove("FOVEA_SIM_EXIT_AFTER_FRAMES")
+    let frames_dir = setup.out.join("frames");
+    // Captures from an earlier run would be mistaken for this one's.
+    std::fs::remove_dir_all(&frames_dir).ok();
+    std::fs::remove_dir_all(setup.out.join("compare")).ok();
+    // `--compare`: the same frames twice, the coarse blocks as they are and reconstructed
+    // (docs/settings.md, `subsampled`); otherwise once, as the settings say.
+    let runs: Vec<(PathBuf, Option<&str>)> = if setup.compare {
+        vec![
+            (frames_dir.join("blocky"), Some("off")),
+            (frames_dir.join("smooth"), Some("on")),
+        ]
+    } else {
+        vec![(frames_dir.clone(), None)]
+    };
+    for (i, (dir, subsampled)) in runs.iter().enumerate() {
+        if i > 0 {
+            setup.reset_props()?;
+        }
+        if let Some(s) = subsampled {
+            println!("-- run {} of {}: {SUBSAMPLED_ENV}={s}", i + 1, runs.len());
+        }
+        let mut command = Command::new(system.dir.join("examples").join(EXAMPLE));
+        command
+            .envs(vk_env.iter().map(|(k, v)| (k, v)))
+            .args(["--levels", "high", "--dynamic", "--eye-tracked", "--dump"])
+            .arg(dir)
+            .args(["--frames", &frames.to_string()])
+            .args(["--frames-per-level", &frames.to_string()])
+            .args(&example_args)
+            .env("XR_RUNTIME_JSON", &runtime)
+            .env("XR_API_LAYER_PATH", &layers)
+            .env("XR_ENABLE_API_LAYERS", fovea_harness::FOVEA_LAYER)
+            .env("FOVEA_LOG", &setup.log)
+            .env("FOVEA_PROPS", &setup.props)
+            .env("FOVEA_SIM_HEADSET", headset.id)
+            .env("FOVEA_SIM_REFRESH_HZ", hz.to_string())
+            .env("FOVEA_SIM_LOAD", script.join(","))
+            .env("FOVEA_SIM_EYE_GAZE", "on")
+            .env("FOVEA_SIM_GAZE", GAZE)
+            .env_remove("FOVEA_SIM_REALTIME")
+            .env_remove("FOVEA_SIM_EXIT_AFTER_FRAMES");
+        if let Some(s) = subsampled {
+            command.env(SUBSAMPLED_ENV, s);
+        }
+        run_example(setup, command, &load, hz, frames)?;
+    }
+
+    if render == Render::Overlay {
+        println!(
+            "density maps (fNNNNN_high_density_*.png, one pixel per texel: red = horizontal \
+             density, green = vertical) and frames (fNNNNN_high_{{left,right}}.png, the maps in \
+             the overlay at the lower left) read back from the GPU: {}",
+            frames_dir.display()
+        );
+        return Ok(());
+    }
+    let gaze = fovea_harness::sim::gaze_script::GazeScript::parse(GAZE)?;
+    for (dir, subsampled) in &runs {
+        println!(
+            "frames read back from the GPU (fNNNNN_high_{{left,right}}.png; the density map each \
+             was drawn with beside it, fNNNNN_high_density_*.png: red = \
+             horizontal density, green = vertical){}: {}",
+            match subsampled {
+                Some("on") => ", coarse blocks reconstructed",
+                Some(_) => ", coarse blocks as shaded",
+                None => "",
+            },
+            dir.display()
+        );
+        for line in super::frames::summary(dir, &gaze, |n| display_seconds(&load, hz, n))? {
+            println!("{line}");
+        }
+    }
+    if setup.compare {
+        let out = setup.out.join("compare");
+        let (written, identical) = super::frames::side_by_side(&runs[0].0, &runs[1].0, &out)?;
+        println!(
+            "{written} frames side by side, coarse blocks on the left, reconstructed on the right: \
+             {}{}",
+            out.display(),
+            if written > 0 && identical == written {
+                format!(
+                    "\n(every pair is identical: {SUBSAMPLED_ENV}=on changed nothing, so this build \
+                     of fovea does not reconstruct coarse blocks)"
+                )
+            } else {
+                String::new()
+            }
+        );
+    }
+    Ok(())
+}
+
+/// Runs the example `command` to its end, its stderr (the layer's log) passed through, and writes
+/// the override four fifths through in display time, which misses stretch: a frame whose GPU time
+/// is over the period takes as many periods as it needs.
+fn run_example(
+    setup: &Setup,
+    mut command: Command,
+    load: &[(u64, f32)],
+    hz: f32,
+    frames: u64,
+) -> Result<(), String> {
+    let mut child = command
         .stderr(Stdio::piped())
         .spawn()
         .map_err(|e| format!("examples/{EXAMPLE}: {e}"))?;
     // The layer logs to stderr; its stats lines come once per display second, which is how the
     // demo knows when to write the override.
     let stderr = child.stderr.take().expect("piped");
-    // Four fifths through in display time, which misses stretch: a frame whose GPU time is over
-    // the period takes as many periods as it needs.
-    let period_ms = 1000.0 / headset.refresh_hz;
-    let load = fovea_harness::sim::control::Load {
-        gpu_ms: LOAD.to_vec(),
-    };
-    let periods: f32 = (0..frames)
-        .map(|f| (load.gpu_ms_at(f) / period_ms).ceil().max(1.0))
-        .sum();
-    let override_at = (periods / headset.refresh_hz * 0.8).round() as u64;
+    let override_at = (display_seconds(load, hz, frames) * 0.8).round() as u64;
     let mut seconds = 0;
     let mut result = Ok(());
     for line in BufReader::new(stderr).lines().map_while(Result::ok) {
@@ -298,12 +479,42 @@ pub fn run(setup: &Setup, system: System) -> Result<(), String> {
     if !status.success() {
         return Err(format!("examples/{EXAMPLE} failed: {status}"));
     }
-    println!(
-        "density maps (fNNNNN_high_density_*.png, one pixel per texel: red = horizontal density, \
-         green = vertical) and frames (fNNNNN_high_{{left,right}}.png) read back from the GPU: {}",
-        frames_dir.display()
-    );
     Ok(())
+}
+
+/// The shading-rate double's layer (`crates/vkdouble`), its library, manifest and profile
+/// variable, as `fovea_vkdouble` names them (the unit tests hold them to it).
+const DOUBLE_LAYER: &str = "VK_LAYER_FOVEA_shading_rate_double";
+const DOUBLE_LIBRARY: &str = "libfovea_vkdouble.so";
+const DOUBLE_MANIFEST: &str = "VkLayer_fovea_shading_rate_double.json";
+const DOUBLE_PROFILE_ENV: &str = "FOVEA_VKDOUBLE_PROFILE";
+/// The setting that switches reconstruction of coarse fragments (docs/settings.md).
+const SUBSAMPLED_ENV: &str = "FOVEA_SUBSAMPLED";
+
+/// The double's layer manifest for its library at `library`: the device extensions it adds are
+/// listed, since the loader refuses device extensions that neither the driver nor an enabled
+/// layer's manifest names.
+fn double_manifest_text(library: &std::path::Path) -> String {
+    serde_json::json!({
+        "file_format_version": "1.1.2",
+        "layer": {
+            "name": DOUBLE_LAYER,
+            "type": "GLOBAL",
+            "library_path": library.to_string_lossy(),
+            "api_version": "1.4.359",
+            "implementation_version": "1",
+            "description": "fovea test double: shading-rate attachments on a device without them",
+            "device_extensions": [{
+                "name": "VK_KHR_fragment_shading_rate",
+                "spec_version": "2",
+                "entrypoints": ["vkCmdSetFragmentShadingRateKHR"]
+            }, {
+                "name": "VK_EXT_load_store_op_none",
+                "spec_version": "1"
+            }]
+        }
+    })
+    .to_string()
 }
 
 #[cfg(test)]
@@ -313,12 +524,7 @@ mod tests {
     #[test]
     fn the_vulkan_layer_is_enabled_only_where_it_emulates() {
         let dir = std::path::Path::new("/out/manifests/vulkan");
-        let emulated = Fdm::Emulated {
-            texel: [16, 16],
-            layered: true,
-            largest: [4, 4],
-        };
-        let env = vk_layer_env(&emulated, dir, None);
+        let env = vk_layer_env(true, dir, None);
         assert_eq!(
             env,
             vec![
@@ -327,11 +533,36 @@ mod tests {
             ]
         );
         // Folders the user named stay, after the demo's own.
-        let env = vk_layer_env(&emulated, dir, Some("/a:/b".into()));
+        let env = vk_layer_env(true, dir, Some("/a:/b".into()));
         assert_eq!(env[0].1, "/out/manifests/vulkan:/a:/b");
         // lavapipe (no shading-rate attachments) and native density maps: as before.
-        assert!(vk_layer_env(&Fdm::Unavailable, dir, Some("/a".into())).is_empty());
-        assert!(vk_layer_env(&Fdm::Native, dir, None).is_empty());
+        assert!(vk_layer_env(false, dir, Some("/a".into())).is_empty());
+    }
+
+    /// The demo names the double as the double names itself.
+    #[test]
+    fn the_doubles_names_and_manifest_are_its_own() {
+        assert_eq!(DOUBLE_LAYER, fovea_vkdouble::LAYER_NAME.to_str().unwrap());
+        assert_eq!(DOUBLE_LIBRARY, fovea_vkdouble::LIBRARY_FILE);
+        assert_eq!(DOUBLE_PROFILE_ENV, fovea_vkdouble::PROFILE_ENV);
+        let dir = std::env::temp_dir().join(format!("fovea-demo-double-{}", std::process::id()));
+        let lib = std::path::Path::new("/t/debug/libfovea_vkdouble.so");
+        let written = fovea_vkdouble::write_manifest(&dir, lib).expect("manifest");
+        assert_eq!(written.file_name().unwrap(), DOUBLE_MANIFEST);
+        let theirs: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&written).unwrap()).unwrap();
+        let ours: serde_json::Value = serde_json::from_str(&double_manifest_text(lib)).unwrap();
+        assert_eq!(ours, theirs);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// Misses stretch the display clock: a frame over the period takes two.
+    #[test]
+    fn display_time_counts_the_periods_misses_take() {
+        let load = [(0, 6.0), (3, 14.0), (5, 6.0)];
+        // 3 light frames, 2 missed (2 periods each), 1 light: 8 periods at 90 Hz.
+        assert!((display_seconds(&load, 90.0, 6) - 8.0 / 90.0).abs() < 1e-9);
+        assert_eq!(display_seconds(&load, 90.0, 0), 0.0);
     }
 
     #[test]

@@ -7,11 +7,17 @@
 //! lines (target `fovea_model::stats`) show what it does, the gaze in their `Gaze=` field.
 //!
 //! Where the system's Khronos loader is installed and Vulkan has a device, the application is
-//! `examples/foveated_vulkan` running through that loader, fovea and the simulated runtime, and the
-//! density maps and frames it reads back from the GPU are written as PNGs ([`loader`]); otherwise it
-//! is a headless frame loop through fovea's fake loader harness ([`harness`]). `--via loader` or
-//! `--via harness` chooses instead.
+//! `examples/foveated_vulkan` drawing its room (`--scene room`) through that loader, fovea and the
+//! simulated runtime, and the density maps and frames it reads back from the GPU are written as
+//! PNGs ([`loader`]), with a line per frame on where the gaze was and how coarse each zone is
+//! ([`frames`]). On a device without shading-rate attachments (lavapipe) it renders on the
+//! simulated desktop GPU (fovea's Vulkan layer over the shading-rate double, `crates/vkdouble`), so
+//! the frames show foveation as a headset would; `--overlay` draws the stripes at full rate with
+//! the maps in a debug overlay instead, and `--compare` runs twice, coarse blocks as shaded and
+//! reconstructed (`FOVEA_SUBSAMPLED`), side by side. Otherwise it is a headless frame loop through
+//! fovea's fake loader harness ([`harness`]). `--via loader` or `--via harness` chooses instead.
 
+mod frames;
 mod harness;
 mod loader;
 mod setup;

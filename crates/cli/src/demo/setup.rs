@@ -10,6 +10,16 @@ use crate::args::DemoArgs;
 /// The load script, in frames at 90 Hz: light, then past the 11.1 ms budget, then light again.
 pub(super) const LOAD: [(u64, f32); 3] = [(0, 6.0), (270, 14.0), (630, 6.0)];
 
+/// [`LOAD`] for a display at `refresh_hz`: the same seconds and the same share of the frame
+/// budget (frames scaled by `refresh_hz / 90`, milliseconds by `90 / refresh_hz`), so the dynamic
+/// level tells the same story at any rate.
+pub(super) fn load_at(refresh_hz: f32) -> Vec<(u64, f32)> {
+    let k = refresh_hz / 90.0;
+    LOAD.iter()
+        .map(|&(f, ms)| ((f as f32 * k).round() as u64, ms / k))
+        .collect()
+}
+
 /// Where the simulated eye tracker says the eye looks (`FOVEA_SIM_GAZE`, the grammar in
 /// `crates/sim/src/gaze_script.rs`), a loop of about 4.7 s: a fixation ahead, a 40 ms saccade up and right
 /// (saccades take 20–80 ms), a fixation there, smooth pursuit down and left at 20°/s (pursuit
@@ -33,6 +43,10 @@ pub struct Setup {
     /// `--headset`, when given.
     pub(super) headset: &'static Headset,
     pub(super) headset_given: bool,
+    /// `--overlay`: the map sampled into the frames, not the frames foveated.
+    pub(super) overlay: bool,
+    /// `--compare`: blocky and reconstructed runs, side by side.
+    pub(super) compare: bool,
 }
 
 impl Setup {
@@ -41,15 +55,10 @@ impl Setup {
         std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
         let out = std::fs::canonicalize(out).map_err(|e| format!("{}: {e}", out.display()))?;
         let props = out.join("foveation.props");
-        std::fs::write(
-            &props,
-            "# Quest debug properties, re-read while the app runs\n",
-        )
-        .map_err(|e| format!("{}: {e}", props.display()))?;
         let headset = args.headset.unwrap_or_else(|| {
             fovea_model::headsets::by_id("quest3").expect("quest3 preset exists")
         });
-        Ok(Setup {
+        let setup = Setup {
             seconds: args.seconds,
             out,
             props,
@@ -57,7 +66,20 @@ impl Setup {
                 .unwrap_or_else(|_| format!("warn,{}=info", fovea_abi::log_target::STATS)),
             headset,
             headset_given: args.headset.is_some(),
-        })
+            overlay: args.overlay,
+            compare: args.compare,
+        };
+        setup.reset_props()?;
+        Ok(setup)
+    }
+
+    /// The property file as the run starts: no override yet (each run of `--compare` starts so).
+    pub(super) fn reset_props(&self) -> Result<(), String> {
+        std::fs::write(
+            &self.props,
+            "# Quest debug properties, re-read while the app runs\n",
+        )
+        .map_err(|e| format!("{}: {e}", self.props.display()))
     }
 
     pub(super) fn write_override(&self) -> Result<(), String> {
@@ -81,8 +103,8 @@ pub(super) fn gaze_description() -> String {
     format!("FOVEA_SIM_GAZE=\"{GAZE}\"")
 }
 
-pub(super) fn load_description() -> String {
-    LOAD.iter()
+pub(super) fn load_description(load: &[(u64, f32)]) -> String {
+    load.iter()
         .map(|(f, ms)| format!("{ms} ms from frame {f}"))
         .collect::<Vec<_>>()
         .join(", ")
