@@ -27,6 +27,10 @@ use crate::shade::PipelineRate;
 use crate::Profile;
 
 mod coarse;
+mod queues;
+
+pub use queues::set_wanted as set_queues;
+use queues::Down as _;
 
 type Key = usize;
 
@@ -317,6 +321,9 @@ table! { lifecycle:
 
 // Physical-device queries the double answers for a profile that offers shading rates.
 table! { instance_commands:
+    b"vkGetPhysicalDeviceQueueFamilyProperties" => get_queue_family_properties as PFN_vkGetPhysicalDeviceQueueFamilyProperties,
+    b"vkGetPhysicalDeviceQueueFamilyProperties2" => get_queue_family_properties2 as PFN_vkGetPhysicalDeviceQueueFamilyProperties2,
+    b"vkGetPhysicalDeviceQueueFamilyProperties2KHR" => get_queue_family_properties2 as PFN_vkGetPhysicalDeviceQueueFamilyProperties2,
     b"vkEnumerateDeviceExtensionProperties" => enumerate_device_extension_properties as PFN_vkEnumerateDeviceExtensionProperties,
     b"vkGetPhysicalDeviceFeatures2" => get_features2 as PFN_vkGetPhysicalDeviceFeatures2,
     b"vkGetPhysicalDeviceFeatures2KHR" => get_features2 as PFN_vkGetPhysicalDeviceFeatures2,
@@ -335,6 +342,7 @@ table! { instance_commands:
 table! { device_commands:
     b"vkGetDeviceQueue" => get_device_queue as PFN_vkGetDeviceQueue,
     b"vkGetDeviceQueue2" => get_device_queue2 as PFN_vkGetDeviceQueue2,
+    b"vkQueueBindSparse" => queue_bind_sparse as PFN_vkQueueBindSparse,
     b"vkCreateImage" => create_image as PFN_vkCreateImage,
     b"vkDestroyImage" => destroy_image as PFN_vkDestroyImage,
     b"vkDestroyImageView" => destroy_image_view as PFN_vkDestroyImageView,
@@ -837,11 +845,24 @@ unsafe extern "system" fn create_device(
                     copy.enabled_extension_count = exts.len() as u32;
                     copy.pp_enabled_extension_names = exts.as_ptr();
                 }
+                // The extra queues of family 0 are the double's: the driver gets its own count.
+                let driver = inst
+                    .fns
+                    .get_physical_device_queue_family_properties(physical)
+                    .first()
+                    .map_or(0, |f| f.queue_count);
+                let cut = queues::cut(ci, driver);
+                if let Some(c) = &cut {
+                    copy.p_queue_create_infos = c.as_ptr();
+                }
                 let r = create(physical, &copy, alloc, out);
                 if r != vk::Result::SUCCESS {
                     return r;
                 }
                 let handle = *out;
+                if cut.is_some() {
+                    queues::device_created(key(handle.as_raw()), driver);
+                }
                 // A core command the device's version lacks (render pass 2 below Vulkan 1.2,
                 // say) falls back to its KHR alias, which an application (or fovea) enables.
                 let fns = ash::Device::load_with(
@@ -886,6 +907,7 @@ unsafe extern "system" fn destroy_device(
         // SAFETY: a live device made through us; the pools are ours.
         unsafe {
             let k = key(device.as_raw());
+            queues::device_destroyed(k);
             let data = lock(&DEVICES).remove(&k);
             if let Some(d) = data {
                 for (_, pool) in std::mem::take(&mut lock(&d.state).pools) {
@@ -1187,8 +1209,64 @@ unsafe extern "system" fn get_image_format_properties2(
     )
 }
 
+unsafe extern "system" fn get_queue_family_properties(
+    physical: vk::PhysicalDevice,
+    n: *mut u32,
+    out: *mut vk::QueueFamilyProperties,
+) {
+    guard("vkGetPhysicalDeviceQueueFamilyProperties", (), || {
+        // SAFETY: the caller's arguments, forwarded; the output the driver filled is adjusted.
+        unsafe {
+            let inst = instance_of(physical.as_raw()).expect("instance");
+            (inst
+                .fns
+                .fp_v1_0()
+                .get_physical_device_queue_family_properties)(physical, n, out);
+            if !n.is_null() {
+                queues::fix_counts(out, *n);
+            }
+        }
+    })
+}
+
+unsafe extern "system" fn get_queue_family_properties2(
+    physical: vk::PhysicalDevice,
+    n: *mut u32,
+    out: *mut vk::QueueFamilyProperties2<'_>,
+) {
+    guard("vkGetPhysicalDeviceQueueFamilyProperties2", (), || {
+        // SAFETY: as above.
+        unsafe {
+            let inst = instance_of(physical.as_raw()).expect("instance");
+            (inst
+                .fns
+                .fp_v1_1()
+                .get_physical_device_queue_family_properties2)(physical, n, out);
+            if !n.is_null() && *n > 0 && !out.is_null() {
+                queues::fix_counts(&mut (*out).queue_family_properties, 1);
+            }
+        }
+    })
+}
+
 // ---------------------------------------------------------------------------------------------
 // Device commands.
+
+unsafe extern "system" fn queue_bind_sparse(
+    queue: vk::Queue,
+    count: u32,
+    info: *const vk::BindSparseInfo<'_>,
+    fence: vk::Fence,
+) -> vk::Result {
+    guard("vkQueueBindSparse", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's arguments, forwarded (an extra queue as the driver's).
+        unsafe {
+            let d = device_of(queue.as_raw());
+            let _shared = queue.serial();
+            (d.fns.fp_v1_0().queue_bind_sparse)(queue.down(), count, info, fence)
+        }
+    })
+}
 
 unsafe extern "system" fn get_device_queue(
     device: vk::Device,
@@ -1200,7 +1278,16 @@ unsafe extern "system" fn get_device_queue(
         // SAFETY: the caller's arguments, forwarded.
         unsafe {
             let d = device_of(device.as_raw());
-            (d.fns.fp_v1_0().get_device_queue)(device, family, index, out);
+            let k = key(device.as_raw());
+            match queues::driver_count(k) {
+                Some(driver) if family == 0 && index >= driver => {
+                    let mut real = vk::Queue::null();
+                    (d.fns.fp_v1_0().get_device_queue)(device, 0, 0, &mut real);
+                    lock(&d.state).queues.insert(real.as_raw(), 0);
+                    *out = queues::extra(k, k, index + 1 - driver, real);
+                }
+                _ => (d.fns.fp_v1_0().get_device_queue)(device, family, index, out),
+            }
             lock(&d.state).queues.insert((*out).as_raw(), family);
         }
     })
@@ -1215,6 +1302,14 @@ unsafe extern "system" fn get_device_queue2(
         // SAFETY: the caller's arguments, forwarded.
         unsafe {
             let d = device_of(device.as_raw());
+            let i = &*info;
+            if i.flags.is_empty()
+                && i.queue_family_index == 0
+                && queues::driver_count(key(device.as_raw())).is_some_and(|n| i.queue_index >= n)
+            {
+                get_device_queue(device, 0, i.queue_index, out);
+                return;
+            }
             (d.fns.fp_v1_1().get_device_queue2)(device, info, out);
             if !(*out).is_null() {
                 lock(&d.state)
@@ -2659,6 +2754,8 @@ unsafe extern "system" fn queue_submit(
                 .map(|c| c.as_raw())
                 .collect();
             let worker = coarse::start(&d, &cbs);
+            let _shared = queue.serial();
+            let queue = queue.down();
             let r = (d.fns.fp_v1_0().queue_submit)(queue, count, copies.as_ptr(), fence);
             if let Some(w) = worker {
                 coarse::finish(w, r == vk::Result::SUCCESS);
@@ -2741,6 +2838,8 @@ unsafe extern "system" fn queue_submit2(
                 .map(|c| c.command_buffer.as_raw())
                 .collect();
             let worker = coarse::start(&d, &cbs);
+            let _shared = queue.serial();
+            let queue = queue.down();
             let r = (d.fns.fp_v1_3().queue_submit2)(queue, count, copies.as_ptr(), fence);
             if let Some(w) = worker {
                 coarse::finish(w, r == vk::Result::SUCCESS);
@@ -2773,10 +2872,12 @@ macro_rules! faultable {
                         )?
                         return r;
                     }
-                    // SAFETY: the caller's arguments, forwarded unchanged to the next layer.
+                    // SAFETY: the caller's arguments, forwarded unchanged to the next layer (an
+                    // extra queue as the driver's queue it stands for).
                     unsafe {
                         let d = device_of($first.as_raw());
-                        (d.fns.$table().$field)($first $(, $a)*)
+                        let _shared = $first.serial();
+                        (d.fns.$table().$field)($first.down() $(, $a)*)
                     }
                 })
             }

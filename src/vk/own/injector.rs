@@ -643,7 +643,7 @@ pub fn rendered_layers(view_mask: u32, layer_count: u32) -> Option<u32> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn range(base_mip: u32, base: u32, count: u32) -> vk::ImageSubresourceRange {
@@ -709,7 +709,8 @@ mod tests {
     #[global_allocator]
     static COUNTING: Counting = Counting;
 
-    fn allocations() -> u64 {
+    /// Heap allocations this thread has made so far (the test binary's counting allocator).
+    pub(crate) fn allocations() -> u64 {
         ALLOCATIONS.with(std::cell::Cell::get)
     }
 
