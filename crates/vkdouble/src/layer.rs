@@ -343,6 +343,12 @@ table! { device_commands:
     b"vkGetDeviceQueue" => get_device_queue as PFN_vkGetDeviceQueue,
     b"vkGetDeviceQueue2" => get_device_queue2 as PFN_vkGetDeviceQueue2,
     b"vkQueueBindSparse" => queue_bind_sparse as PFN_vkQueueBindSparse,
+    b"vkDeviceWaitIdle" => device_wait_idle as PFN_vkDeviceWaitIdle,
+    b"vkGetFenceStatus" => get_fence_status as PFN_vkGetFenceStatus,
+    b"vkWaitSemaphores" => wait_semaphores as PFN_vkWaitSemaphores,
+    b"vkWaitSemaphoresKHR" => wait_semaphores as PFN_vkWaitSemaphores,
+    b"vkGetSemaphoreCounterValue" => get_semaphore_counter_value as PFN_vkGetSemaphoreCounterValue,
+    b"vkGetSemaphoreCounterValueKHR" => get_semaphore_counter_value as PFN_vkGetSemaphoreCounterValue,
     b"vkCreateImage" => create_image as PFN_vkCreateImage,
     b"vkDestroyImage" => destroy_image as PFN_vkDestroyImage,
     b"vkDestroyImageView" => destroy_image_view as PFN_vkDestroyImageView,
@@ -907,6 +913,9 @@ unsafe extern "system" fn destroy_device(
         // SAFETY: a live device made through us; the pools are ours.
         unsafe {
             let k = key(device.as_raw());
+            if let Some(d) = lock(&DEVICES).get(&k).cloned() {
+                queues::catch_up(&d);
+            }
             queues::device_destroyed(k);
             let data = lock(&DEVICES).remove(&k);
             if let Some(d) = data {
@@ -1252,6 +1261,63 @@ unsafe extern "system" fn get_queue_family_properties2(
 // ---------------------------------------------------------------------------------------------
 // Device commands.
 
+unsafe extern "system" fn device_wait_idle(device: vk::Device) -> vk::Result {
+    guard("vkDeviceWaitIdle", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's argument, forwarded after the extra queues' deferred work.
+        unsafe {
+            let d = device_of(device.as_raw());
+            queues::catch_up(&d);
+            let _shared = queues::device_serial(&d);
+            (d.fns.fp_v1_0().device_wait_idle)(device)
+        }
+    })
+}
+
+unsafe extern "system" fn get_fence_status(device: vk::Device, fence: vk::Fence) -> vk::Result {
+    guard("vkGetFenceStatus", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: as above.
+        unsafe {
+            let d = device_of(device.as_raw());
+            queues::catch_up(&d);
+            (d.fns.fp_v1_0().get_fence_status)(device, fence)
+        }
+    })
+}
+
+unsafe extern "system" fn wait_semaphores(
+    device: vk::Device,
+    info: *const vk::SemaphoreWaitInfo<'_>,
+    timeout: u64,
+) -> vk::Result {
+    guard("vkWaitSemaphores", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: as above.
+        unsafe {
+            let d = device_of(device.as_raw());
+            queues::catch_up(&d);
+            (d.fns.fp_v1_2().wait_semaphores)(device, info, timeout)
+        }
+    })
+}
+
+unsafe extern "system" fn get_semaphore_counter_value(
+    device: vk::Device,
+    semaphore: vk::Semaphore,
+    out: *mut u64,
+) -> vk::Result {
+    guard(
+        "vkGetSemaphoreCounterValue",
+        vk::Result::ERROR_UNKNOWN,
+        || {
+            // SAFETY: as above.
+            unsafe {
+                let d = device_of(device.as_raw());
+                queues::catch_up(&d);
+                (d.fns.fp_v1_2().get_semaphore_counter_value)(device, semaphore, out)
+            }
+        },
+    )
+}
+
 unsafe extern "system" fn queue_bind_sparse(
     queue: vk::Queue,
     count: u32,
@@ -1262,6 +1328,7 @@ unsafe extern "system" fn queue_bind_sparse(
         // SAFETY: the caller's arguments, forwarded (an extra queue as the driver's).
         unsafe {
             let d = device_of(queue.as_raw());
+            queues::catch_up(&d);
             let _shared = queue.serial();
             (d.fns.fp_v1_0().queue_bind_sparse)(queue.down(), count, info, fence)
         }
@@ -2753,19 +2820,72 @@ unsafe extern "system" fn queue_submit(
                 .flat_map(|s| slice(s.p_command_buffers, s.command_buffer_count))
                 .map(|c| c.as_raw())
                 .collect();
-            let worker = coarse::start(&d, &cbs);
-            let _shared = queue.serial();
-            let queue = queue.down();
-            let r = (d.fns.fp_v1_0().queue_submit)(queue, count, copies.as_ptr(), fence);
-            if let Some(w) = worker {
-                coarse::finish(w, r == vk::Result::SUCCESS);
+            let waits = subs.iter().any(|s| s.wait_semaphore_count > 0);
+            if queues::defer1(&d, queue, &copies, fence, &cbs) {
+                return vk::Result::SUCCESS;
             }
-            if r == vk::Result::SUCCESS {
-                note_submit(&d, queue, cbs);
+            // Held-back work goes first where this depends on it, and always on its own queue.
+            if waits || queues::real(queue) != queue {
+                queues::catch_up(&d);
             }
-            r
+            execute1(&d, queue, &copies, fence, cbs)
         }
     })
+}
+
+/// Submits `copies` (the application's batches, rewritten) on `queue` (an extra one as the
+/// driver's queue it stands for) and notes what they read.
+///
+/// # Safety
+/// `queue` must be `d`'s and externally synchronised by the current call; `copies` valid.
+unsafe fn execute1(
+    d: &Arc<DeviceData>,
+    queue: vk::Queue,
+    copies: &[vk::SubmitInfo<'_>],
+    fence: vk::Fence,
+    cbs: Vec<u64>,
+) -> vk::Result {
+    // SAFETY: as the caller promised.
+    unsafe {
+        let worker = coarse::start(d, &cbs);
+        let _shared = queue.serial();
+        let queue = queue.down();
+        let r = (d.fns.fp_v1_0().queue_submit)(queue, copies.len() as u32, copies.as_ptr(), fence);
+        if let Some(w) = worker {
+            coarse::finish(w, r == vk::Result::SUCCESS);
+        }
+        if r == vk::Result::SUCCESS {
+            note_submit(d, queue, cbs);
+        }
+        r
+    }
+}
+
+/// [`execute1`] for `vkQueueSubmit2`.
+///
+/// # Safety
+/// As [`execute1`].
+unsafe fn execute2(
+    d: &Arc<DeviceData>,
+    queue: vk::Queue,
+    copies: &[vk::SubmitInfo2<'_>],
+    fence: vk::Fence,
+    cbs: Vec<u64>,
+) -> vk::Result {
+    // SAFETY: as the caller promised.
+    unsafe {
+        let worker = coarse::start(d, &cbs);
+        let _shared = queue.serial();
+        let queue = queue.down();
+        let r = (d.fns.fp_v1_3().queue_submit2)(queue, copies.len() as u32, copies.as_ptr(), fence);
+        if let Some(w) = worker {
+            coarse::finish(w, r == vk::Result::SUCCESS);
+        }
+        if r == vk::Result::SUCCESS {
+            note_submit(d, queue, cbs);
+        }
+        r
+    }
 }
 
 /// Copies semaphore infos with shading-rate stage bits made fragment-shader bits.
@@ -2837,17 +2957,15 @@ unsafe extern "system" fn queue_submit2(
                 .flat_map(|s| slice(s.p_command_buffer_infos, s.command_buffer_info_count))
                 .map(|c| c.command_buffer.as_raw())
                 .collect();
-            let worker = coarse::start(&d, &cbs);
-            let _shared = queue.serial();
-            let queue = queue.down();
-            let r = (d.fns.fp_v1_3().queue_submit2)(queue, count, copies.as_ptr(), fence);
-            if let Some(w) = worker {
-                coarse::finish(w, r == vk::Result::SUCCESS);
+            let waits = subs.iter().any(|s| s.wait_semaphore_info_count > 0);
+            if queues::defer2(&d, queue, &copies, fence, &cbs) {
+                return vk::Result::SUCCESS;
             }
-            if r == vk::Result::SUCCESS {
-                note_submit(&d, queue, cbs);
+            // Held-back work goes first where this depends on it, and always on its own queue.
+            if waits || queues::real(queue) != queue {
+                queues::catch_up(&d);
             }
-            r
+            execute2(&d, queue, &copies, fence, cbs)
         }
     })
 }
@@ -2876,6 +2994,7 @@ macro_rules! faultable {
                     // extra queue as the driver's queue it stands for).
                     unsafe {
                         let d = device_of($first.as_raw());
+                        queues::catch_up(&d);
                         let _shared = $first.serial();
                         (d.fns.$table().$field)($first.down() $(, $a)*)
                     }

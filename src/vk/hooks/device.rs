@@ -108,7 +108,8 @@ impl Timeline {
 enum Timelines {
     /// One graphics queue at most: its submission order is enough.
     Unneeded,
-    Enable,
+    /// With `VK_KHR_timeline_semaphore` added to the names where `name`.
+    Enable { name: bool },
     /// Several graphics queues, and no timeline semaphores to order them with.
     Unsupported,
 }
@@ -121,7 +122,8 @@ fn timeline_struct(ty: vk::StructureType) -> bool {
 
 /// Decides [`Timelines`] for a device `ci` creates on `physical`, at the device version `version`
 /// the application may use: timeline semaphores are core (and required) from Vulkan 1.2; below,
-/// only where the application enables `VK_KHR_timeline_semaphore` itself.
+/// `VK_KHR_timeline_semaphore` where the application enables it or the driver has it (the layer
+/// adds it then).
 ///
 /// # Safety
 /// `ci` must be a valid create info; `physical` must belong to `inst`.
@@ -141,10 +143,20 @@ unsafe fn timelines(
     let readers: u32 = unsafe { calls::graphics_queues(ci, &families) }
         .map(|(_, n)| n)
         .sum();
+    let name = ash::khr::timeline_semaphore::NAME;
     if readers <= 1 {
         Timelines::Unneeded
-    } else if version >= vk::API_VERSION_1_2 || enabled(ash::khr::timeline_semaphore::NAME) {
-        Timelines::Enable
+    } else if version >= vk::API_VERSION_1_2 || enabled(name) {
+        Timelines::Enable { name: false }
+    } else if version >= vk::API_VERSION_1_1
+        // SAFETY: as the caller promised.
+        && unsafe { decide::driver_extensions(inst, physical) }
+            .is_ok_and(|e| decide::has(&e, name))
+    {
+        // The extension's one dependency, VK_KHR_get_physical_device_properties2, is core in
+        // Vulkan 1.1; a driver with the extension supports its feature (the extension's
+        // specification requires it).
+        Timelines::Enable { name: true }
     } else {
         Timelines::Unsupported
     }
@@ -308,7 +320,8 @@ unsafe fn plan(
     let version = inst.api_version.min(*api_version);
     // SAFETY: as the caller promised.
     let timelines = unsafe { timelines(inst, physical, ci, version, &enabled) };
-    let ordered = timelines == Timelines::Enable;
+    let ordered = matches!(timelines, Timelines::Enable { .. });
+    let add_name = timelines == Timelines::Enable { name: true };
     if timelines == Timelines::Unsupported {
         tracing::warn!(
             "the device has several graphics queues but no timeline semaphores (Vulkan 1.2 or \
@@ -319,6 +332,11 @@ unsafe fn plan(
     // SAFETY: as the caller promised.
     let timeline = ordered.then(|| unsafe { timeline_feature(ci) });
     let leaves_chain = |t| density_map_struct(t) || (ordered && timeline_struct(t));
+    let apps_kept = kept.clone();
+    let mut kept = kept;
+    if add_name {
+        kept.push(ash::khr::timeline_semaphore::NAME.as_ptr());
+    }
     if fdm_named && !own_rates {
         let fdm_features = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT;
         // SAFETY: as the caller promised.
@@ -357,7 +375,7 @@ unsafe fn plan(
         match unsafe { ChainCopy::without(ci.p_next, density_map_struct) } {
             Ok(chain) => Some(Rewrite {
                 chain,
-                names: kept.clone(),
+                names: apps_kept,
                 fsr: None,
                 timeline: None,
             }),

@@ -15,16 +15,27 @@
 //! them: `vkGetDeviceQueue(2)`, `vkQueueSubmit`, `vkQueueSubmit2(KHR)`, `vkQueueWaitIdle`,
 //! `vkQueueBindSparse`.
 //!
+//! Separate queues may run in any order the application's semaphores allow, and the double makes
+//! that visible instead of hiding it: work submitted on an extra queue is held back (the queue is
+//! "behind") and reaches the driver only when something depends on it or waits for it: a
+//! submission on any of the device's queues that waits on a semaphore, a fence or semaphore wait
+//! or query, `vkQueueWaitIdle`, `vkDeviceWaitIdle`, any other fault-injectable command, or
+//! `vkDestroyDevice`. A submission on queue 0 that waits on nothing overtakes it, as it may on
+//! hardware. So work on two queues that the application (or a layer) did not order runs in the
+//! order that exposes the missing dependency: a pass on queue 0 reads what an extra queue's
+//! earlier, unfinished work has not written yet. Submissions whose batches chain anything but a
+//! `VkTimelineSemaphoreSubmitInfo` go down at once, after the held-back work.
+//!
 //! Validation (above the double) sees the queues the double reports, so its synchronization
 //! validation checks hazards between them as between separate queues.
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use ash::vk::{self, Handle as _};
 
-use super::{key, lock, Key};
+use super::{execute1, execute2, key, lock, DeviceData, Key};
 
 /// The queues of family 0 the next devices get, where above the driver's count (0: the driver's).
 static WANTED: AtomicU32 = AtomicU32::new(0);
@@ -202,4 +213,257 @@ pub fn device_destroyed(device: Key) {
     if lock(&DEVICES).remove(&device).is_some() {
         lock(&EXTRA).retain(|_, e| e.device != device);
     }
+}
+
+/// A batch of `vkQueueSubmit` held back, with everything it points at owned.
+struct Held1 {
+    waits: Vec<vk::Semaphore>,
+    masks: Vec<vk::PipelineStageFlags>,
+    cbs: Vec<vk::CommandBuffer>,
+    signals: Vec<vk::Semaphore>,
+    /// The timeline values, where the batch chained them.
+    values: Option<(Vec<u64>, Vec<u64>)>,
+}
+
+/// A batch of `vkQueueSubmit2` held back.
+struct Held2 {
+    flags: vk::SubmitFlags,
+    waits: Vec<vk::SemaphoreSubmitInfo<'static>>,
+    cbs: Vec<vk::CommandBufferSubmitInfo<'static>>,
+    signals: Vec<vk::SemaphoreSubmitInfo<'static>>,
+}
+
+enum Held {
+    V1(Vec<Held1>),
+    V2(Vec<Held2>),
+}
+
+/// One held-back submission: its extra queue, batches, fence and command buffers.
+struct Deferred {
+    device: Key,
+    queue: vk::Queue,
+    held: Held,
+    fence: vk::Fence,
+    cbs: Vec<u64>,
+}
+
+// SAFETY: handles and owned arrays; the raw pointers in `Held2`'s structs are null (checked).
+unsafe impl Send for Deferred {}
+
+/// Submissions held back on extra queues, in submission order.
+static DEFERRED: Mutex<Vec<Deferred>> = Mutex::new(Vec::new());
+
+/// # Safety
+/// `p` null or valid for `n`.
+unsafe fn owned<T: Copy>(p: *const T, n: u32) -> Vec<T> {
+    if p.is_null() || n == 0 {
+        Vec::new()
+    } else {
+        // SAFETY: as the caller promised.
+        unsafe { std::slice::from_raw_parts(p, n as usize) }.to_vec()
+    }
+}
+
+/// Holds back a `vkQueueSubmit` of `subs` on `queue` where it is an extra queue and every batch
+/// chains nothing or a timeline-semaphore struct alone: `true` where it did.
+///
+/// # Safety
+/// `subs` valid as the command requires.
+pub unsafe fn defer1(
+    d: &DeviceData,
+    queue: vk::Queue,
+    subs: &[vk::SubmitInfo<'_>],
+    fence: vk::Fence,
+    cbs: &[u64],
+) -> bool {
+    if real(queue) == queue {
+        return false;
+    }
+    let mut held = Vec::with_capacity(subs.len());
+    for s in subs {
+        let mut values = None;
+        if !s.p_next.is_null() {
+            // SAFETY: a valid chain.
+            let b = unsafe { &*(s.p_next as *const vk::BaseInStructure<'_>) };
+            if b.s_type != vk::StructureType::TIMELINE_SEMAPHORE_SUBMIT_INFO || !b.p_next.is_null()
+            {
+                return false;
+            }
+            // SAFETY: found by its sType.
+            let t = unsafe { &*(s.p_next as *const vk::TimelineSemaphoreSubmitInfo<'_>) };
+            // SAFETY: the arrays, valid for their counts.
+            values = Some(unsafe {
+                (
+                    owned(t.p_wait_semaphore_values, t.wait_semaphore_value_count),
+                    owned(t.p_signal_semaphore_values, t.signal_semaphore_value_count),
+                )
+            });
+        }
+        // SAFETY: the batch's arrays, valid for their counts.
+        held.push(unsafe {
+            Held1 {
+                waits: owned(s.p_wait_semaphores, s.wait_semaphore_count),
+                masks: owned(s.p_wait_dst_stage_mask, s.wait_semaphore_count),
+                cbs: owned(s.p_command_buffers, s.command_buffer_count),
+                signals: owned(s.p_signal_semaphores, s.signal_semaphore_count),
+                values,
+            }
+        });
+    }
+    // SAFETY: a live device handle.
+    let device = unsafe { key(d.handle.as_raw()) };
+    lock(&DEFERRED).push(Deferred {
+        device,
+        queue,
+        held: Held::V1(held),
+        fence,
+        cbs: cbs.to_vec(),
+    });
+    true
+}
+
+/// [`defer1`] for `vkQueueSubmit2`: batches, semaphore and command-buffer infos chaining nothing.
+///
+/// # Safety
+/// As [`defer1`].
+pub unsafe fn defer2(
+    d: &DeviceData,
+    queue: vk::Queue,
+    subs: &[vk::SubmitInfo2<'_>],
+    fence: vk::Fence,
+    cbs: &[u64],
+) -> bool {
+    if real(queue) == queue {
+        return false;
+    }
+    let mut held = Vec::with_capacity(subs.len());
+    for s in subs {
+        if !s.p_next.is_null() {
+            return false;
+        }
+        // SAFETY: the batch's arrays, valid for their counts; their lifetimes are only made
+        // 'static for storage, every pointer in them checked null below.
+        let h = unsafe {
+            Held2 {
+                flags: s.flags,
+                waits: owned(
+                    s.p_wait_semaphore_infos as *const vk::SemaphoreSubmitInfo<'static>,
+                    s.wait_semaphore_info_count,
+                ),
+                cbs: owned(
+                    s.p_command_buffer_infos as *const vk::CommandBufferSubmitInfo<'static>,
+                    s.command_buffer_info_count,
+                ),
+                signals: owned(
+                    s.p_signal_semaphore_infos as *const vk::SemaphoreSubmitInfo<'static>,
+                    s.signal_semaphore_info_count,
+                ),
+            }
+        };
+        if h.waits
+            .iter()
+            .chain(&h.signals)
+            .any(|i| !i.p_next.is_null())
+            || h.cbs.iter().any(|i| !i.p_next.is_null())
+        {
+            return false;
+        }
+        held.push(h);
+    }
+    // SAFETY: a live device handle.
+    let device = unsafe { key(d.handle.as_raw()) };
+    lock(&DEFERRED).push(Deferred {
+        device,
+        queue,
+        held: Held::V2(held),
+        fence,
+        cbs: cbs.to_vec(),
+    });
+    true
+}
+
+/// Lets `d`'s held-back submissions reach the driver, in the order they were made.
+///
+/// # Safety
+/// `d` must be live; its queues externally synchronised by the caller's command as the
+/// specification requires of the command that depends on them.
+pub unsafe fn catch_up(d: &Arc<DeviceData>) {
+    if !ANY.load(Ordering::Acquire) {
+        return;
+    }
+    // SAFETY: a live device handle.
+    let device = unsafe { key(d.handle.as_raw()) };
+    let mine: Vec<Deferred> = {
+        let mut all = lock(&DEFERRED);
+        if all.iter().all(|h| h.device != device) {
+            return;
+        }
+        let (mine, rest) = std::mem::take(&mut *all)
+            .into_iter()
+            .partition(|h| h.device == device);
+        *all = rest;
+        mine
+    };
+    for h in mine {
+        let r = match &h.held {
+            Held::V1(batches) => {
+                let timelines: Vec<Option<vk::TimelineSemaphoreSubmitInfo<'_>>> = batches
+                    .iter()
+                    .map(|b| {
+                        b.values.as_ref().map(|(w, g)| {
+                            vk::TimelineSemaphoreSubmitInfo::default()
+                                .wait_semaphore_values(w)
+                                .signal_semaphore_values(g)
+                        })
+                    })
+                    .collect();
+                let infos: Vec<vk::SubmitInfo<'_>> = batches
+                    .iter()
+                    .zip(&timelines)
+                    .map(|(b, t)| vk::SubmitInfo {
+                        p_next: t
+                            .as_ref()
+                            .map_or(std::ptr::null(), |t| t as *const _ as *const _),
+                        wait_semaphore_count: b.waits.len() as u32,
+                        p_wait_semaphores: b.waits.as_ptr(),
+                        p_wait_dst_stage_mask: b.masks.as_ptr(),
+                        command_buffer_count: b.cbs.len() as u32,
+                        p_command_buffers: b.cbs.as_ptr(),
+                        signal_semaphore_count: b.signals.len() as u32,
+                        p_signal_semaphores: b.signals.as_ptr(),
+                        ..Default::default()
+                    })
+                    .collect();
+                // SAFETY: the owned batches live across the call.
+                unsafe { execute1(d, h.queue, &infos, h.fence, h.cbs) }
+            }
+            Held::V2(batches) => {
+                let infos: Vec<vk::SubmitInfo2<'_>> = batches
+                    .iter()
+                    .map(|b| {
+                        vk::SubmitInfo2::default()
+                            .flags(b.flags)
+                            .wait_semaphore_infos(&b.waits)
+                            .command_buffer_infos(&b.cbs)
+                            .signal_semaphore_infos(&b.signals)
+                    })
+                    .collect();
+                // SAFETY: as above.
+                unsafe { execute2(d, h.queue, &infos, h.fence, h.cbs) }
+            }
+        };
+        if r != vk::Result::SUCCESS {
+            crate::record::error(format!(
+                "a submission held back on an extra queue failed when it reached the driver: \
+                 {r:?}"
+            ));
+        }
+    }
+}
+
+/// The lock a device-wide call holds where the device has extra queues.
+pub fn device_serial(d: &DeviceData) -> Option<std::sync::MutexGuard<'static, ()>> {
+    // SAFETY: a live device handle.
+    let k = unsafe { key(d.handle.as_raw()) };
+    driver_count(k).map(|_| lock(&SHARED))
 }
