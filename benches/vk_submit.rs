@@ -25,6 +25,8 @@ use std::time::{Duration, Instant};
 use ash::vk;
 use criterion::Criterion;
 
+// Shared with vk_commands and vk_parallel, which use the rest of it.
+#[allow(dead_code)]
 #[path = "support/vulkan.rs"]
 mod vulkan;
 use vulkan::median;

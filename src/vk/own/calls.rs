@@ -701,11 +701,13 @@ impl Clears {
                 Err(e) => Err(e),
             }
         };
-        // SAFETY: the batch's own command buffer and fence; the images are live (a pending
-        // shadow is removed from its list before it is destroyed, and maps wait for their
-        // batches at destruction).
-        let submitted = taken
-            .and_then(|()| unsafe { record_and_submit(own, &batch, queue, self.order.as_ref()) });
+        let order = self.order.as_ref();
+        let submitted = taken.and_then(|()| {
+            // SAFETY: the batch's own command buffer and fence; the images are live (a pending
+            // shadow is removed from its list before it is destroyed, and maps wait for their
+            // batches at destruction).
+            unsafe { record_and_submit(own, &batch, queue, order) }
+        });
         if let Err(e) = submitted {
             // What it would have done stays pending: the application's work would read shadows in
             // an undefined layout otherwise.

@@ -256,7 +256,7 @@ impl Order {
             // stay the application's); only the lifetime parameter differs.
             let app = unsafe {
                 std::slice::from_raw_parts(
-                    submits as *const vk::SubmitInfo<'static>,
+                    submits.cast::<vk::SubmitInfo<'static>>(),
                     count as usize,
                 )
             };
@@ -321,7 +321,7 @@ impl Order {
             // SAFETY: as in [`Order::submit`].
             let app = unsafe {
                 std::slice::from_raw_parts(
-                    submits as *const vk::SubmitInfo2<'static>,
+                    submits.cast::<vk::SubmitInfo2<'static>>(),
                     count as usize,
                 )
             };
@@ -361,8 +361,8 @@ impl Order {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::common::alloc_count::allocations;
     use crate::common::lock::shared_taken;
-    use crate::vk::own::injector::tests::allocations;
 
     thread_local! {
         /// What the fake driver's last submit got: per batch, its waits (semaphore, value), its

@@ -102,7 +102,8 @@ pub unsafe fn cut(
     // SAFETY: as the caller promised.
     let infos = unsafe {
         std::slice::from_raw_parts(
-            ci.p_queue_create_infos as *const vk::DeviceQueueCreateInfo<'static>,
+            ci.p_queue_create_infos
+                .cast::<vk::DeviceQueueCreateInfo<'static>>(),
             ci.queue_create_info_count as usize,
         )
     };
@@ -347,15 +348,18 @@ pub unsafe fn defer2(
             Held2 {
                 flags: s.flags,
                 waits: owned(
-                    s.p_wait_semaphore_infos as *const vk::SemaphoreSubmitInfo<'static>,
+                    s.p_wait_semaphore_infos
+                        .cast::<vk::SemaphoreSubmitInfo<'static>>(),
                     s.wait_semaphore_info_count,
                 ),
                 cbs: owned(
-                    s.p_command_buffer_infos as *const vk::CommandBufferSubmitInfo<'static>,
+                    s.p_command_buffer_infos
+                        .cast::<vk::CommandBufferSubmitInfo<'static>>(),
                     s.command_buffer_info_count,
                 ),
                 signals: owned(
-                    s.p_signal_semaphore_infos as *const vk::SemaphoreSubmitInfo<'static>,
+                    s.p_signal_semaphore_infos
+                        .cast::<vk::SemaphoreSubmitInfo<'static>>(),
                     s.signal_semaphore_info_count,
                 ),
             }
