@@ -88,8 +88,25 @@ pub unsafe fn device(
     density_maps: bool,
     pipeline_rates: bool,
 ) -> Result<ash::Device, String> {
+    // SAFETY: as the caller promised.
+    unsafe { device_queues(instance, physical, density_maps, pipeline_rates, 1) }
+}
+
+/// [`device`] with `count` queues of family 0 (the double offers more than lavapipe's one where
+/// asked, `fovea_vkdouble::Loaded::set_queues`).
+///
+/// # Safety
+/// `physical` must be `instance`'s.
+#[allow(dead_code)] // Not every bench that includes this file makes several queues.
+pub unsafe fn device_queues(
+    instance: &ash::Instance,
+    physical: vk::PhysicalDevice,
+    density_maps: bool,
+    pipeline_rates: bool,
+    count: u32,
+) -> Result<ash::Device, String> {
     assert!(!(density_maps && pipeline_rates), "one extension at a time");
-    let prio = [1.0];
+    let prio = vec![1.0; count as usize];
     let queues = [vk::DeviceQueueCreateInfo::default()
         .queue_family_index(0)
         .queue_priorities(&prio)];

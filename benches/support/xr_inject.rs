@@ -58,6 +58,7 @@ impl Xr {
             dynamic_rendering: true,
             device_extensions: &extensions,
             device_next: &rates as *const _ as *const c_void,
+            queues: 1,
         };
         fovea_harness::vulkan::Vulkan::through_xr_with(
             entry,

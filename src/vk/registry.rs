@@ -129,7 +129,7 @@ pub struct Attachments {
     /// The layer's own device-level calls (creating, clearing and destroying shadows and injected
     /// maps); `None` where the device neither emulates nor injects, or the layer could not set them
     /// up (no shadows or maps then).
-    pub own: Option<Arc<crate::vk::own::calls::Own>>,
+    pub own: Option<Arc<Own>>,
     pub images: Mutex<HashMap<u64, ShadowImage>>,
     pub views: Mutex<HashMap<u64, ShadowView>>,
     pub passes: Mutex<HashMap<u64, u32>>,
@@ -140,7 +140,7 @@ pub struct Attachments {
 
 impl Attachments {
     /// No shadows yet.
-    pub fn new(own: Option<Arc<crate::vk::own::calls::Own>>) -> Attachments {
+    pub fn new(own: Option<Arc<Own>>) -> Attachments {
         Attachments {
             own,
             images: Mutex::ranked(Rank::Record, "vk shadow images", HashMap::new()),
@@ -337,7 +337,6 @@ pub unsafe fn add_device(data: Device) {
     crate::bridge::set_device_fdm(data.handle, data.fdm.clone());
     // SAFETY: as the caller promised.
     if let Some(k) = unsafe { key(data.handle) } {
-        set_own(k, data.attachments.own.clone());
         let d = Arc::new(data);
         let mut devices = DEVICES.write();
         // A key reused by a new device (the old one's gone, or the loader's tables are at
@@ -365,7 +364,6 @@ pub unsafe fn remove_device(handle: vk::Device) -> Option<Arc<Device>> {
         fast_remove(k);
         devices.remove(&k)
     };
-    set_own(k, None);
     if d.is_some() {
         crate::bridge::set_device_fdm(handle, None);
         crate::bridge::set_device_offsets(handle, None);
@@ -396,7 +394,6 @@ pub fn forget_devices_of(instance: Key) -> Vec<Key> {
     };
     gone.into_iter()
         .map(|(k, d)| {
-            set_own(k, None);
             crate::bridge::set_device_fdm(d.handle, None);
             crate::bridge::set_device_offsets(d.handle, None);
             k
@@ -410,6 +407,8 @@ pub fn forget_devices_of(instance: Key) -> Vec<Key> {
 pub struct Recording<'a> {
     pub emulated: bool,
     pub next: &'a DeviceNext,
+    /// The layer's own calls on the device, where it emulates or injects.
+    pub own: Option<&'a Own>,
 }
 
 /// The recording state of a command buffer's (or queue's) device: [`device_ref`], without a lock,
@@ -423,6 +422,7 @@ pub unsafe fn recording<'a>(handle: impl vk::Handle) -> Option<Recording<'a>> {
     unsafe { device_ref::<'a>(handle) }.map(|d| Recording {
         emulated: d.device.fdm.is_some(),
         next: &d.device.next,
+        own: d.device.attachments.own.as_deref(),
     })
 }
 
@@ -507,38 +507,11 @@ pub fn pool_created(pool: u64, family: u32) {
     FAMILIES.pools.lock()[slot(pool, POOL_SLOTS)] = (pool, family);
 }
 
-/// Each emulating device's [`Own`] by the loader's dispatch key, for the submit hooks. A leaf lock
-/// outside [`crate::common::lock::Rank`]'s order, like the recording table
-/// ([`recording`]): held for a scan and an `Arc` clone only, so it may be taken under
-/// fovea's own upload locks, whose submits pass through the layer.
-static OWNS: SharedRwLock<Vec<(Key, Arc<Own>)>> = SharedRwLock::new(Vec::new());
-
-/// Records (or, with `None`, forgets) the device `k`'s own calls.
-pub fn set_own(k: Key, own: Option<Arc<Own>>) {
-    let mut v = OWNS.write();
-    v.retain(|(key, _)| *key != k);
-    if let Some(o) = own {
-        v.push((k, o));
-    }
-}
-
-/// The own calls of a queue's (or any dispatchable handle's) device.
-///
-/// # Safety
-/// `handle` must be NULL or a live dispatchable handle made by the loader.
-pub unsafe fn own_of(handle: impl vk::Handle) -> Option<Arc<Own>> {
-    // SAFETY: as the caller promised.
-    let k = unsafe { key(handle) }?;
-    OWNS.read()
-        .iter()
-        .find(|(key, _)| *key == k)
-        .map(|(_, o)| Arc::clone(o))
-}
-
 // ---------------------------------------------------------------------------------------------
 // Each converting device's converter, and every command buffer's record.
 
-/// Each converting device's [`Converter`], by dispatch key; a leaf lock like [`OWNS`].
+/// Each converting device's [`Converter`], by dispatch key: a leaf lock outside
+/// [`crate::common::lock::Rank`]'s order, held for a scan and an `Arc` clone only.
 pub static CONVERTERS: SharedRwLock<Vec<(Key, Arc<Converter>)>> = SharedRwLock::new(Vec::new());
 
 /// The converter of a device's dispatch key.

@@ -130,6 +130,8 @@ pub struct Options<'a> {
     /// Chained in front of the device create info (`NULL` for none): the application's own
     /// feature structs. Must outlive the call.
     pub device_next: *const c_void,
+    /// Queues of the graphics family the device gets (1 where 0).
+    pub queues: u32,
 }
 
 impl Default for Options<'_> {
@@ -142,6 +144,7 @@ impl Default for Options<'_> {
             dynamic_rendering: false,
             device_extensions: &[],
             device_next: null(),
+            queues: 1,
         }
     }
 }
@@ -153,7 +156,7 @@ pub struct Vulkan {
     pub instance: ash::Instance,
     pub physical_device: vk::PhysicalDevice,
     pub device: ash::Device,
-    /// The graphics queue family; the device has one queue in it.
+    /// The graphics queue family; the device has [`Options::queues`] queues in it.
     pub family: u32,
     /// What xrGetVulkanGraphicsRequirements2KHR returned.
     pub requirements: xr::GraphicsRequirementsVulkanKHR,
@@ -290,7 +293,7 @@ impl Vulkan {
                 .iter()
                 .position(|q| q.queue_flags.contains(vk::QueueFlags::GRAPHICS))
                 .unwrap() as u32;
-            let priorities = [1.0];
+            let priorities = vec![1.0; options.queues.max(1) as usize];
             let queue_info = [vk::DeviceQueueCreateInfo::default()
                 .queue_family_index(family)
                 .queue_priorities(&priorities)];

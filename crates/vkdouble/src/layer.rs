@@ -27,6 +27,10 @@ use crate::shade::PipelineRate;
 use crate::Profile;
 
 mod coarse;
+mod queues;
+
+pub use queues::set_wanted as set_queues;
+use queues::Down as _;
 
 type Key = usize;
 
@@ -317,6 +321,9 @@ table! { lifecycle:
 
 // Physical-device queries the double answers for a profile that offers shading rates.
 table! { instance_commands:
+    b"vkGetPhysicalDeviceQueueFamilyProperties" => get_queue_family_properties as PFN_vkGetPhysicalDeviceQueueFamilyProperties,
+    b"vkGetPhysicalDeviceQueueFamilyProperties2" => get_queue_family_properties2 as PFN_vkGetPhysicalDeviceQueueFamilyProperties2,
+    b"vkGetPhysicalDeviceQueueFamilyProperties2KHR" => get_queue_family_properties2 as PFN_vkGetPhysicalDeviceQueueFamilyProperties2,
     b"vkEnumerateDeviceExtensionProperties" => enumerate_device_extension_properties as PFN_vkEnumerateDeviceExtensionProperties,
     b"vkGetPhysicalDeviceFeatures2" => get_features2 as PFN_vkGetPhysicalDeviceFeatures2,
     b"vkGetPhysicalDeviceFeatures2KHR" => get_features2 as PFN_vkGetPhysicalDeviceFeatures2,
@@ -335,6 +342,13 @@ table! { instance_commands:
 table! { device_commands:
     b"vkGetDeviceQueue" => get_device_queue as PFN_vkGetDeviceQueue,
     b"vkGetDeviceQueue2" => get_device_queue2 as PFN_vkGetDeviceQueue2,
+    b"vkQueueBindSparse" => queue_bind_sparse as PFN_vkQueueBindSparse,
+    b"vkDeviceWaitIdle" => device_wait_idle as PFN_vkDeviceWaitIdle,
+    b"vkGetFenceStatus" => get_fence_status as PFN_vkGetFenceStatus,
+    b"vkWaitSemaphores" => wait_semaphores as PFN_vkWaitSemaphores,
+    b"vkWaitSemaphoresKHR" => wait_semaphores as PFN_vkWaitSemaphores,
+    b"vkGetSemaphoreCounterValue" => get_semaphore_counter_value as PFN_vkGetSemaphoreCounterValue,
+    b"vkGetSemaphoreCounterValueKHR" => get_semaphore_counter_value as PFN_vkGetSemaphoreCounterValue,
     b"vkCreateImage" => create_image as PFN_vkCreateImage,
     b"vkDestroyImage" => destroy_image as PFN_vkDestroyImage,
     b"vkDestroyImageView" => destroy_image_view as PFN_vkDestroyImageView,
@@ -837,11 +851,24 @@ unsafe extern "system" fn create_device(
                     copy.enabled_extension_count = exts.len() as u32;
                     copy.pp_enabled_extension_names = exts.as_ptr();
                 }
+                // The extra queues of family 0 are the double's: the driver gets its own count.
+                let driver = inst
+                    .fns
+                    .get_physical_device_queue_family_properties(physical)
+                    .first()
+                    .map_or(0, |f| f.queue_count);
+                let cut = queues::cut(ci, driver);
+                if let Some(c) = &cut {
+                    copy.p_queue_create_infos = c.as_ptr();
+                }
                 let r = create(physical, &copy, alloc, out);
                 if r != vk::Result::SUCCESS {
                     return r;
                 }
                 let handle = *out;
+                if cut.is_some() {
+                    queues::device_created(key(handle.as_raw()), driver);
+                }
                 // A core command the device's version lacks (render pass 2 below Vulkan 1.2,
                 // say) falls back to its KHR alias, which an application (or fovea) enables.
                 let fns = ash::Device::load_with(
@@ -886,6 +913,10 @@ unsafe extern "system" fn destroy_device(
         // SAFETY: a live device made through us; the pools are ours.
         unsafe {
             let k = key(device.as_raw());
+            if let Some(d) = lock(&DEVICES).get(&k).cloned() {
+                queues::catch_up(&d);
+            }
+            queues::device_destroyed(k);
             let data = lock(&DEVICES).remove(&k);
             if let Some(d) = data {
                 for (_, pool) in std::mem::take(&mut lock(&d.state).pools) {
@@ -1187,8 +1218,122 @@ unsafe extern "system" fn get_image_format_properties2(
     )
 }
 
+unsafe extern "system" fn get_queue_family_properties(
+    physical: vk::PhysicalDevice,
+    n: *mut u32,
+    out: *mut vk::QueueFamilyProperties,
+) {
+    guard("vkGetPhysicalDeviceQueueFamilyProperties", (), || {
+        // SAFETY: the caller's arguments, forwarded; the output the driver filled is adjusted.
+        unsafe {
+            let inst = instance_of(physical.as_raw()).expect("instance");
+            (inst
+                .fns
+                .fp_v1_0()
+                .get_physical_device_queue_family_properties)(physical, n, out);
+            if !n.is_null() {
+                queues::fix_counts(out, *n);
+            }
+        }
+    })
+}
+
+unsafe extern "system" fn get_queue_family_properties2(
+    physical: vk::PhysicalDevice,
+    n: *mut u32,
+    out: *mut vk::QueueFamilyProperties2<'_>,
+) {
+    guard("vkGetPhysicalDeviceQueueFamilyProperties2", (), || {
+        // SAFETY: as above.
+        unsafe {
+            let inst = instance_of(physical.as_raw()).expect("instance");
+            (inst
+                .fns
+                .fp_v1_1()
+                .get_physical_device_queue_family_properties2)(physical, n, out);
+            if !n.is_null() && *n > 0 && !out.is_null() {
+                queues::fix_counts(&mut (*out).queue_family_properties, 1);
+            }
+        }
+    })
+}
+
 // ---------------------------------------------------------------------------------------------
 // Device commands.
+
+unsafe extern "system" fn device_wait_idle(device: vk::Device) -> vk::Result {
+    guard("vkDeviceWaitIdle", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's argument, forwarded after the extra queues' deferred work.
+        unsafe {
+            let d = device_of(device.as_raw());
+            queues::catch_up(&d);
+            let _shared = queues::device_serial(&d);
+            (d.fns.fp_v1_0().device_wait_idle)(device)
+        }
+    })
+}
+
+unsafe extern "system" fn get_fence_status(device: vk::Device, fence: vk::Fence) -> vk::Result {
+    guard("vkGetFenceStatus", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: as above.
+        unsafe {
+            let d = device_of(device.as_raw());
+            queues::catch_up(&d);
+            (d.fns.fp_v1_0().get_fence_status)(device, fence)
+        }
+    })
+}
+
+unsafe extern "system" fn wait_semaphores(
+    device: vk::Device,
+    info: *const vk::SemaphoreWaitInfo<'_>,
+    timeout: u64,
+) -> vk::Result {
+    guard("vkWaitSemaphores", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: as above.
+        unsafe {
+            let d = device_of(device.as_raw());
+            queues::catch_up(&d);
+            (d.fns.fp_v1_2().wait_semaphores)(device, info, timeout)
+        }
+    })
+}
+
+unsafe extern "system" fn get_semaphore_counter_value(
+    device: vk::Device,
+    semaphore: vk::Semaphore,
+    out: *mut u64,
+) -> vk::Result {
+    guard(
+        "vkGetSemaphoreCounterValue",
+        vk::Result::ERROR_UNKNOWN,
+        || {
+            // SAFETY: as above.
+            unsafe {
+                let d = device_of(device.as_raw());
+                queues::catch_up(&d);
+                (d.fns.fp_v1_2().get_semaphore_counter_value)(device, semaphore, out)
+            }
+        },
+    )
+}
+
+unsafe extern "system" fn queue_bind_sparse(
+    queue: vk::Queue,
+    count: u32,
+    info: *const vk::BindSparseInfo<'_>,
+    fence: vk::Fence,
+) -> vk::Result {
+    guard("vkQueueBindSparse", vk::Result::ERROR_UNKNOWN, || {
+        // SAFETY: the caller's arguments, forwarded (an extra queue as the driver's).
+        unsafe {
+            let d = device_of(queue.as_raw());
+            queues::catch_up(&d);
+            let _shared = queue.serial();
+            (d.fns.fp_v1_0().queue_bind_sparse)(queue.down(), count, info, fence)
+        }
+    })
+}
 
 unsafe extern "system" fn get_device_queue(
     device: vk::Device,
@@ -1200,7 +1345,16 @@ unsafe extern "system" fn get_device_queue(
         // SAFETY: the caller's arguments, forwarded.
         unsafe {
             let d = device_of(device.as_raw());
-            (d.fns.fp_v1_0().get_device_queue)(device, family, index, out);
+            let k = key(device.as_raw());
+            match queues::driver_count(k) {
+                Some(driver) if family == 0 && index >= driver => {
+                    let mut real = vk::Queue::null();
+                    (d.fns.fp_v1_0().get_device_queue)(device, 0, 0, &mut real);
+                    lock(&d.state).queues.insert(real.as_raw(), 0);
+                    *out = queues::extra(k, k, index + 1 - driver, real);
+                }
+                _ => (d.fns.fp_v1_0().get_device_queue)(device, family, index, out),
+            }
             lock(&d.state).queues.insert((*out).as_raw(), family);
         }
     })
@@ -1215,6 +1369,14 @@ unsafe extern "system" fn get_device_queue2(
         // SAFETY: the caller's arguments, forwarded.
         unsafe {
             let d = device_of(device.as_raw());
+            let i = &*info;
+            if i.flags.is_empty()
+                && i.queue_family_index == 0
+                && queues::driver_count(key(device.as_raw())).is_some_and(|n| i.queue_index >= n)
+            {
+                get_device_queue(device, 0, i.queue_index, out);
+                return;
+            }
             (d.fns.fp_v1_1().get_device_queue2)(device, info, out);
             if !(*out).is_null() {
                 lock(&d.state)
@@ -2658,17 +2820,72 @@ unsafe extern "system" fn queue_submit(
                 .flat_map(|s| slice(s.p_command_buffers, s.command_buffer_count))
                 .map(|c| c.as_raw())
                 .collect();
-            let worker = coarse::start(&d, &cbs);
-            let r = (d.fns.fp_v1_0().queue_submit)(queue, count, copies.as_ptr(), fence);
-            if let Some(w) = worker {
-                coarse::finish(w, r == vk::Result::SUCCESS);
+            let waits = subs.iter().any(|s| s.wait_semaphore_count > 0);
+            if queues::defer1(&d, queue, &copies, fence, &cbs) {
+                return vk::Result::SUCCESS;
             }
-            if r == vk::Result::SUCCESS {
-                note_submit(&d, queue, cbs);
+            // Held-back work goes first where this depends on it, and always on its own queue.
+            if waits || queues::real(queue) != queue {
+                queues::catch_up(&d);
             }
-            r
+            execute1(&d, queue, &copies, fence, cbs)
         }
     })
+}
+
+/// Submits `copies` (the application's batches, rewritten) on `queue` (an extra one as the
+/// driver's queue it stands for) and notes what they read.
+///
+/// # Safety
+/// `queue` must be `d`'s and externally synchronised by the current call; `copies` valid.
+unsafe fn execute1(
+    d: &Arc<DeviceData>,
+    queue: vk::Queue,
+    copies: &[vk::SubmitInfo<'_>],
+    fence: vk::Fence,
+    cbs: Vec<u64>,
+) -> vk::Result {
+    // SAFETY: as the caller promised.
+    unsafe {
+        let worker = coarse::start(d, &cbs);
+        let _shared = queue.serial();
+        let queue = queue.down();
+        let r = (d.fns.fp_v1_0().queue_submit)(queue, copies.len() as u32, copies.as_ptr(), fence);
+        if let Some(w) = worker {
+            coarse::finish(w, r == vk::Result::SUCCESS);
+        }
+        if r == vk::Result::SUCCESS {
+            note_submit(d, queue, cbs);
+        }
+        r
+    }
+}
+
+/// [`execute1`] for `vkQueueSubmit2`.
+///
+/// # Safety
+/// As [`execute1`].
+unsafe fn execute2(
+    d: &Arc<DeviceData>,
+    queue: vk::Queue,
+    copies: &[vk::SubmitInfo2<'_>],
+    fence: vk::Fence,
+    cbs: Vec<u64>,
+) -> vk::Result {
+    // SAFETY: as the caller promised.
+    unsafe {
+        let worker = coarse::start(d, &cbs);
+        let _shared = queue.serial();
+        let queue = queue.down();
+        let r = (d.fns.fp_v1_3().queue_submit2)(queue, copies.len() as u32, copies.as_ptr(), fence);
+        if let Some(w) = worker {
+            coarse::finish(w, r == vk::Result::SUCCESS);
+        }
+        if r == vk::Result::SUCCESS {
+            note_submit(d, queue, cbs);
+        }
+        r
+    }
 }
 
 /// Copies semaphore infos with shading-rate stage bits made fragment-shader bits.
@@ -2740,15 +2957,15 @@ unsafe extern "system" fn queue_submit2(
                 .flat_map(|s| slice(s.p_command_buffer_infos, s.command_buffer_info_count))
                 .map(|c| c.command_buffer.as_raw())
                 .collect();
-            let worker = coarse::start(&d, &cbs);
-            let r = (d.fns.fp_v1_3().queue_submit2)(queue, count, copies.as_ptr(), fence);
-            if let Some(w) = worker {
-                coarse::finish(w, r == vk::Result::SUCCESS);
+            let waits = subs.iter().any(|s| s.wait_semaphore_info_count > 0);
+            if queues::defer2(&d, queue, &copies, fence, &cbs) {
+                return vk::Result::SUCCESS;
             }
-            if r == vk::Result::SUCCESS {
-                note_submit(&d, queue, cbs);
+            // Held-back work goes first where this depends on it, and always on its own queue.
+            if waits || queues::real(queue) != queue {
+                queues::catch_up(&d);
             }
-            r
+            execute2(&d, queue, &copies, fence, cbs)
         }
     })
 }
@@ -2773,10 +2990,13 @@ macro_rules! faultable {
                         )?
                         return r;
                     }
-                    // SAFETY: the caller's arguments, forwarded unchanged to the next layer.
+                    // SAFETY: the caller's arguments, forwarded unchanged to the next layer (an
+                    // extra queue as the driver's queue it stands for).
                     unsafe {
                         let d = device_of($first.as_raw());
-                        (d.fns.$table().$field)($first $(, $a)*)
+                        queues::catch_up(&d);
+                        let _shared = $first.serial();
+                        (d.fns.$table().$field)($first.down() $(, $a)*)
                     }
                 })
             }

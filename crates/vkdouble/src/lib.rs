@@ -197,6 +197,13 @@ pub unsafe extern "C" fn fovea_vkdouble_calls(name: *const c_char) -> u64 {
     std::panic::catch_unwind(|| record::calls(&name)).unwrap_or(0)
 }
 
+/// Sets how many queues family 0 offers the next devices where the driver has fewer (0 or 1: as
+/// the driver says). The extra ones stand for the driver's queue 0 (`layer/queues.rs`).
+#[no_mangle]
+pub extern "C" fn fovea_vkdouble_set_queues(n: u32) {
+    let _ = std::panic::catch_unwind(|| layer::set_queues(n));
+}
+
 /// Sets the profile the next VkInstance gets (`nvidia`, `amd`, `none`), overriding
 /// [`PROFILE_ENV`]; null lifts the override. Returns 0, or -1 for an unknown name.
 ///
@@ -467,6 +474,19 @@ impl Loaded {
                 .get::<unsafe extern "C" fn(*const c_char) -> u64>(b"fovea_vkdouble_calls\0")
                 .expect("fovea_vkdouble_calls");
             f(name.as_ptr())
+        }
+    }
+
+    /// Offers `n` queues of family 0 to the next devices ([`fovea_vkdouble_set_queues`]).
+    pub fn set_queues(&self, n: u32) {
+        // SAFETY: the symbol has the signature declared here.
+        unsafe {
+            if let Ok(f) = self
+                .lib
+                .get::<extern "C" fn(u32)>(b"fovea_vkdouble_set_queues\0")
+            {
+                f(n);
+            }
         }
     }
 

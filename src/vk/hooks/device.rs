@@ -26,7 +26,7 @@ use crate::vk::base::chain::{self, ChainCopy};
 use crate::vk::base::ffi::{guard, key, name, offset, raw, slice};
 use crate::vk::base::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
 use crate::vk::base::next::DeviceNext;
-use crate::vk::own::calls::Own;
+use crate::vk::own::calls::{self, Own};
 use crate::vk::registry::{self, Decision, Instance};
 use crate::vk::{convert, decide, emulation};
 
@@ -61,6 +61,126 @@ struct Rewrite {
     /// The layer's feature struct in front of the chain; `None` where the application's own,
     /// enabling attachments, stays in it.
     fsr: Option<Box<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'static>>>,
+    /// The timeline-semaphore feature, where the layer orders its uploads against several
+    /// graphics queues ([`Timelines`]): between `fsr` and `chain`.
+    timeline: Option<Timeline>,
+}
+
+impl Rewrite {
+    /// The head of the rewritten chain.
+    fn head(&self) -> *const std::ffi::c_void {
+        match (&self.fsr, &self.timeline) {
+            (Some(fsr), _) => &**fsr as *const _ as *const _,
+            (None, Some(t)) => t.head(),
+            (None, None) => self.chain.head(),
+        }
+    }
+}
+
+/// The struct that enables `timelineSemaphore`: the application's Vulkan 1.2 features with it set
+/// (a chain may not hold both, VUID-VkDeviceCreateInfo-pNext-02830), or a struct of the layer's
+/// own, which stands in for the application's timeline-semaphore struct where it had one (that
+/// struct has no other member).
+enum Timeline {
+    V12(Box<vk::PhysicalDeviceVulkan12Features<'static>>),
+    Own(Box<vk::PhysicalDeviceTimelineSemaphoreFeatures<'static>>),
+}
+
+impl Timeline {
+    fn head(&self) -> *const std::ffi::c_void {
+        match self {
+            Timeline::V12(f) => &**f as *const _ as *const _,
+            Timeline::Own(f) => &**f as *const _ as *const _,
+        }
+    }
+
+    fn link(&mut self, next: *const std::ffi::c_void) {
+        match self {
+            Timeline::V12(f) => f.p_next = next as *mut _,
+            Timeline::Own(f) => f.p_next = next as *mut _,
+        }
+    }
+}
+
+/// Whether the layer orders its uploads against the application's graphics queues with timeline
+/// semaphores ([`crate::vk::own::order`]).
+#[derive(Clone, Copy, PartialEq)]
+enum Timelines {
+    /// One graphics queue at most: its submission order is enough.
+    Unneeded,
+    /// With `VK_KHR_timeline_semaphore` added to the names where `name`.
+    Enable { name: bool },
+    /// Several graphics queues, and no timeline semaphores to order them with.
+    Unsupported,
+}
+
+/// Whether `ty` is a struct that enables the timeline-semaphore feature.
+fn timeline_struct(ty: vk::StructureType) -> bool {
+    ty == vk::StructureType::PHYSICAL_DEVICE_VULKAN_1_2_FEATURES
+        || ty == vk::StructureType::PHYSICAL_DEVICE_TIMELINE_SEMAPHORE_FEATURES
+}
+
+/// Decides [`Timelines`] for a device `ci` creates on `physical`, at the device version `version`
+/// the application may use: timeline semaphores are core (and required) from Vulkan 1.2; below,
+/// `VK_KHR_timeline_semaphore` where the application enables it or the driver has it (the layer
+/// adds it then).
+///
+/// # Safety
+/// `ci` must be a valid create info; `physical` must belong to `inst`.
+unsafe fn timelines(
+    inst: &Instance,
+    physical: vk::PhysicalDevice,
+    ci: &vk::DeviceCreateInfo<'_>,
+    version: u32,
+    enabled: &dyn Fn(&CStr) -> bool,
+) -> Timelines {
+    // SAFETY: as the caller promised.
+    let Some(families) = (unsafe { calls::queue_families(inst.handle, inst.gipa, physical) })
+    else {
+        return Timelines::Unneeded;
+    };
+    // SAFETY: as the caller promised.
+    let readers: u32 = unsafe { calls::graphics_queues(ci, &families) }
+        .map(|(_, n)| n)
+        .sum();
+    let name = ash::khr::timeline_semaphore::NAME;
+    if readers <= 1 {
+        Timelines::Unneeded
+    } else if version >= vk::API_VERSION_1_2 || enabled(name) {
+        Timelines::Enable { name: false }
+    } else if version >= vk::API_VERSION_1_1
+        // SAFETY: as the caller promised.
+        && unsafe { decide::driver_extensions(inst, physical) }
+            .is_ok_and(|e| decide::has(&e, name))
+    {
+        // The extension's one dependency, VK_KHR_get_physical_device_properties2, is core in
+        // Vulkan 1.1; a driver with the extension supports its feature (the extension's
+        // specification requires it).
+        Timelines::Enable { name: true }
+    } else {
+        Timelines::Unsupported
+    }
+}
+
+/// The [`Timeline`] struct for `ci`'s chain, built from the application's Vulkan 1.2 features
+/// where it has them.
+///
+/// # Safety
+/// `ci` must be a valid create info.
+unsafe fn timeline_feature(ci: &vk::DeviceCreateInfo<'_>) -> Timeline {
+    let ty = vk::StructureType::PHYSICAL_DEVICE_VULKAN_1_2_FEATURES;
+    // SAFETY: as the caller promised; found by its sType, read only, copied.
+    match unsafe { chain::find::<vk::PhysicalDeviceVulkan12Features<'static>>(ci.p_next, ty) } {
+        Ok(Some(f)) => {
+            // SAFETY: as above.
+            let mut copy = unsafe { *f };
+            copy.timeline_semaphore = vk::TRUE;
+            Timeline::V12(Box::new(copy))
+        }
+        _ => Timeline::Own(Box::new(
+            vk::PhysicalDeviceTimelineSemaphoreFeatures::default().timeline_semaphore(true),
+        )),
+    }
 }
 
 /// What to do with one `vkCreateDevice`.
@@ -198,6 +318,25 @@ unsafe fn plan(
         .collect();
     let offset_named = enabled(offset::EXT_NAME) || enabled(offset::QCOM_NAME);
     let version = inst.api_version.min(*api_version);
+    // SAFETY: as the caller promised.
+    let timelines = unsafe { timelines(inst, physical, ci, version, &enabled) };
+    let ordered = matches!(timelines, Timelines::Enable { .. });
+    let add_name = timelines == Timelines::Enable { name: true };
+    if timelines == Timelines::Unsupported {
+        tracing::warn!(
+            "the device has several graphics queues but no timeline semaphores (Vulkan 1.2 or \
+             VK_KHR_timeline_semaphore): the layer's map uploads are not ordered against passes \
+             on other queues than the one they run on"
+        );
+    }
+    // SAFETY: as the caller promised.
+    let timeline = ordered.then(|| unsafe { timeline_feature(ci) });
+    let leaves_chain = |t| density_map_struct(t) || (ordered && timeline_struct(t));
+    let apps_kept = kept.clone();
+    let mut kept = kept;
+    if add_name {
+        kept.push(ash::khr::timeline_semaphore::NAME.as_ptr());
+    }
     if fdm_named && !own_rates {
         let fdm_features = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT;
         // SAFETY: as the caller promised.
@@ -213,7 +352,7 @@ unsafe fn plan(
             }
         }
         // SAFETY: as the caller promised.
-        let chain = match unsafe { ChainCopy::without(ci.p_next, density_map_struct) } {
+        let chain = match unsafe { ChainCopy::without(ci.p_next, leaves_chain) } {
             Ok(c) => c,
             Err(e) => return Plan::Refused(cannot_strip(e)),
         };
@@ -223,7 +362,7 @@ unsafe fn plan(
         );
         return Plan::Emulate(
             fdm.clone(),
-            with_shading_rates(&kept, &enabled, chain, version, None),
+            with_shading_rates(&kept, &enabled, chain, version, None, timeline),
         );
     }
     // Density maps are not emulated on this device: the application does not ask for them, or it
@@ -236,8 +375,9 @@ unsafe fn plan(
         match unsafe { ChainCopy::without(ci.p_next, density_map_struct) } {
             Ok(chain) => Some(Rewrite {
                 chain,
-                names: kept.clone(),
+                names: apps_kept,
                 fsr: None,
+                timeline: None,
             }),
             Err(e) => return Plan::Refused(cannot_strip(e)),
         }
@@ -293,7 +433,7 @@ unsafe fn plan(
     // and stands in the layer's copy in front, unless it enables attachments itself.
     let chain = match unsafe {
         ChainCopy::without(ci.p_next, |t| {
-            density_map_struct(t) || (!own_attachments && t == fsr_features)
+            leaves_chain(t) || (!own_attachments && t == fsr_features)
         })
     } {
         Ok(c) => c,
@@ -321,7 +461,8 @@ unsafe fn plan(
              combined with its rates"
         );
     }
-    let mut rewrite = with_shading_rates(&kept, &enabled, chain, version, app_fsr.as_ref());
+    let mut rewrite =
+        with_shading_rates(&kept, &enabled, chain, version, app_fsr.as_ref(), timeline);
     if own_attachments {
         rewrite.fsr = None;
     }
@@ -359,13 +500,15 @@ unsafe fn enables_offsets(ci: &vk::DeviceCreateInfo<'_>) -> bool {
 /// and a `VkPhysicalDeviceFragmentShadingRateFeaturesKHR` in front of `chain` enabling the
 /// attachment feature and, from `app` (the application's own struct, left out of `chain`), the
 /// features it enabled itself; the layer asks for no other: they would oblige every draw to set
-/// a rate (docs/vulkan-fdm-on-fsr.md#other-pipeline-paths).
+/// a rate (docs/vulkan-fdm-on-fsr.md#other-pipeline-paths). `timeline`, where the layer orders
+/// its uploads across queues, goes between that struct and `chain`.
 fn with_shading_rates(
     names: &[*const c_char],
     enabled: &dyn Fn(&CStr) -> bool,
     chain: ChainCopy,
     version: u32,
     app: Option<&vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'_>>,
+    mut timeline: Option<Timeline>,
 ) -> Rewrite {
     let mut new_names = names.to_vec();
     if !enabled(ash::khr::fragment_shading_rate::NAME) {
@@ -394,11 +537,18 @@ fn with_shading_rates(
             )
             .attachment_fragment_shading_rate(true),
     );
-    fsr.p_next = chain.head() as *mut _;
+    fsr.p_next = match &mut timeline {
+        Some(t) => {
+            t.link(chain.head());
+            t.head() as *mut _
+        }
+        None => chain.head() as *mut _,
+    };
     Rewrite {
         chain,
         names: new_names,
         fsr: Some(fsr),
+        timeline,
     }
 }
 
@@ -467,6 +617,10 @@ unsafe fn create_device_impl(
     // SAFETY: as the caller promised.
     let plan = unsafe { plan(&inst, physical, ci) };
     let inject = matches!(plan, Plan::Inject(..));
+    let timelines = matches!(
+        &plan,
+        Plan::Emulate(_, r) | Plan::Inject(_, r, _) if r.timeline.is_some()
+    );
     // SAFETY: as the caller promised.
     let app_offsets = unsafe { enables_offsets(ci) };
     let untouched = matches!(plan, Plan::Untouched(_));
@@ -476,10 +630,7 @@ unsafe fn create_device_impl(
         rewrite: &'a Rewrite,
     ) -> vk::DeviceCreateInfo<'a> {
         let mut copy = *ci;
-        copy.p_next = match &rewrite.fsr {
-            Some(fsr) => &**fsr as *const _ as *const _,
-            None => rewrite.chain.head(),
-        };
+        copy.p_next = rewrite.head();
         copy.enabled_extension_count = rewrite.names.len() as u32;
         copy.pp_enabled_extension_names = rewrite.names.as_ptr();
         copy
@@ -581,7 +732,15 @@ unsafe fn create_device_impl(
                 device = raw(handle),
                 "device emulates fragment density maps"
             );
-            match Own::new(inst.handle, inst.gipa, physical, ci, handle, gdpa) {
+            match Own::new(
+                inst.handle,
+                inst.gipa,
+                physical,
+                ci,
+                handle,
+                gdpa,
+                timelines,
+            ) {
                 Ok(o) => own = Some(std::sync::Arc::new(o)),
                 Err(why) => tracing::warn!(
                     device = raw(handle),
@@ -592,7 +751,15 @@ unsafe fn create_device_impl(
             }
         }
         let inject = inject.and_then(|facts| {
-            match Own::new(inst.handle, inst.gipa, physical, ci, handle, gdpa) {
+            match Own::new(
+                inst.handle,
+                inst.gipa,
+                physical,
+                ci,
+                handle,
+                gdpa,
+                timelines,
+            ) {
                 Ok(o) => {
                     own = Some(std::sync::Arc::new(o));
                     tracing::info!(

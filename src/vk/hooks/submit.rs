@@ -2,15 +2,20 @@
 //! ([`crate::vk::own::calls::Clears`]) run in front of the application's next submit on a graphics
 //! queue, and the density-map stage bits of semaphore waits become the shading-rate ones.
 //!
+//! On a device with more than one graphics queue where the layer acts, every submit on one of them
+//! goes down between the layer's wait on its last upload and its signal of the queue's timeline
+//! ([`crate::vk::own::order`]), so that a pass on any queue is ordered against the layer's writes.
+//!
 //! With nothing pending anywhere (the steady state) a submit costs one atomic load and a scan of
-//! its wait-stage masks before the call down.
+//! its wait-stage masks before the call down; on such a device, a shared lock of the device's own
+//! and the copy of its batch array into the queue's reused storage besides.
 
 use std::sync::atomic::Ordering;
 
 use ash::vk;
 
 use crate::vk::base::ffi::{guard, raw, slice};
-use crate::vk::own::calls::PENDING;
+use crate::vk::own::calls::{Own, PENDING};
 use crate::vk::registry::{self};
 use crate::vk::translate::sync::{stage, stage2};
 
@@ -25,21 +30,25 @@ fn submit_result(e: vk::Result) -> vk::Result {
     }
 }
 
-/// Runs the pending clears ahead of a submit on `queue`: `Err` with the result the application's
-/// submit must return instead of going down. One atomic load where nothing is pending.
+/// Runs the pending clears ahead of a submit on `queue` of the device whose own calls are `own`:
+/// `Err` with the result the application's submit must return instead of going down. One atomic
+/// load where nothing is pending.
 ///
 /// # Safety
 /// Called inside the application's submit on `queue`, a queue dispatched by the loader.
-unsafe fn before_submit(what: &'static str, queue: vk::Queue) -> Result<(), vk::Result> {
+unsafe fn before_submit(
+    what: &'static str,
+    queue: vk::Queue,
+    own: Option<&Own>,
+) -> Result<(), vk::Result> {
     if PENDING.load(Ordering::Acquire) == 0 {
         return Ok(());
     }
-    // SAFETY: as the caller promised.
-    let Some(own) = (unsafe { crate::vk::registry::own_of(queue) }) else {
+    let Some(own) = own else {
         return Ok(());
     };
     // SAFETY: as the caller promised.
-    unsafe { own.clears.flush(&own, queue) }.map_err(|e| {
+    unsafe { own.clears.flush(own, queue) }.map_err(|e| {
         tracing::warn!(
             queue = raw(queue),
             result = ?e,
@@ -72,9 +81,18 @@ pub unsafe extern "system" fn queue_submit(
                 return vk::Result::ERROR_INITIALIZATION_FAILED;
             };
             // SAFETY: inside the application's submit on `queue`.
-            if let Err(e) = unsafe { before_submit("vkQueueSubmit", queue) } {
+            if let Err(e) = unsafe { before_submit("vkQueueSubmit", queue, rec.own) } {
                 return e;
             }
+            let order = rec.own.and_then(|o| o.clears.order.as_ref());
+            // SAFETY: the next layer's function; the caller's arguments, or copies of them that
+            // live across the call.
+            let down = |count, submits| unsafe {
+                match order {
+                    Some(o) => o.submit(next, queue, count, submits, fence),
+                    None => next(queue, count, submits, fence),
+                }
+            };
             // SAFETY: the caller's array of `count` submits.
             let list = unsafe { slice(submits, count) };
             // SAFETY: each submit's masks, valid for its wait count.
@@ -82,8 +100,7 @@ pub unsafe extern "system" fn queue_submit(
                 slice(s.p_wait_dst_stage_mask, s.wait_semaphore_count)
             };
             if !list.iter().any(|s| masks(s).iter().any(|&m| stage(m) != m)) {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(queue, count, submits, fence) };
+                return down(count, submits);
             }
             let stages: Vec<Vec<vk::PipelineStageFlags>> = list
                 .iter()
@@ -100,8 +117,7 @@ pub unsafe extern "system" fn queue_submit(
                     c
                 })
                 .collect();
-            // SAFETY: the copies and their masks live across the call.
-            unsafe { next(queue, count, copies.as_ptr(), fence) }
+            down(count, copies.as_ptr())
         },
     )
 }
@@ -145,9 +161,18 @@ unsafe fn submit2(
             return vk::Result::ERROR_INITIALIZATION_FAILED;
         };
         // SAFETY: inside the application's submit on `queue`.
-        if let Err(e) = unsafe { before_submit(what, queue) } {
+        if let Err(e) = unsafe { before_submit(what, queue, rec.own) } {
             return e;
         }
+        let order = rec.own.and_then(|o| o.clears.order.as_ref());
+        // SAFETY: the next layer's function; the caller's arguments, or copies of them that live
+        // across the call.
+        let down = |count, submits| unsafe {
+            match order {
+                Some(o) => o.submit2(next, queue, count, submits, fence),
+                None => next(queue, count, submits, fence),
+            }
+        };
         // SAFETY: the caller's array of `count` submits.
         let list = unsafe { slice(submits, count) };
         fn waits<'a>(s: &vk::SubmitInfo2<'a>) -> &'a [vk::SemaphoreSubmitInfo<'a>] {
@@ -165,8 +190,7 @@ unsafe fn submit2(
             .iter()
             .any(|s| touched(waits(s)) || touched(signals(s)))
         {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { next(queue, count, submits, fence) };
+            return down(count, submits);
         }
         let arrays: Vec<_> = list
             .iter()
@@ -186,8 +210,7 @@ unsafe fn submit2(
                 c
             })
             .collect();
-        // SAFETY: the copies and their arrays live across the call.
-        unsafe { next(queue, count, copies.as_ptr(), fence) }
+        down(count, copies.as_ptr())
     })
 }
 

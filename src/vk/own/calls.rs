@@ -61,6 +61,7 @@ use crate::common::lock::{Mutex, Rank};
 use crate::vk::base::chain;
 use crate::vk::base::ffi::raw;
 use crate::vk::base::link::LayerDeviceCreateInfo;
+use crate::vk::own::order::Order;
 use crate::vk::own::shadows::ShadowImage;
 use crate::vk::translate::formats::{shadow_layers, SHADOW_FORMAT, SHADOW_LAYOUT, SHADOW_USAGE};
 
@@ -89,7 +90,9 @@ impl Own {
     /// # Safety
     /// `ci` must be the application's valid create info of `device`, made on `physical` of
     /// `instance`, whose next layer's `vkGetInstanceProcAddr` is `gipa`;
-    /// `gdpa` the next layer's `vkGetDeviceProcAddr`.
+    /// `gdpa` the next layer's `vkGetDeviceProcAddr`. With `timelines` (the device was created
+    /// with the timeline-semaphore feature for it) and more than one graphics queue, the layer's
+    /// uploads are ordered against every queue ([`Order`]).
     pub unsafe fn new(
         instance: vk::Instance,
         gipa: vk::PFN_vkGetInstanceProcAddr,
@@ -97,26 +100,15 @@ impl Own {
         ci: &vk::DeviceCreateInfo<'_>,
         device: vk::Device,
         gdpa: vk::PFN_vkGetDeviceProcAddr,
+        timelines: bool,
     ) -> Result<Own, String> {
         // SAFETY: a valid chain, as the caller promised.
         let set_loader_data = unsafe { loader_data_callback(ci) }
             .ok_or("the loader passed no vkSetDeviceLoaderData")?;
         // SAFETY: the next layer's instance commands, of the types their names imply.
         let (families, memory) = unsafe {
-            let f = gipa(
-                instance,
-                c"vkGetPhysicalDeviceQueueFamilyProperties".as_ptr(),
-            )
-            .ok_or("no vkGetPhysicalDeviceQueueFamilyProperties")?;
-            let f = std::mem::transmute::<
-                unsafe extern "system" fn(),
-                vk::PFN_vkGetPhysicalDeviceQueueFamilyProperties,
-            >(f);
-            let mut n = 0;
-            f(physical, &mut n, std::ptr::null_mut());
-            let mut families = vec![vk::QueueFamilyProperties::default(); n as usize];
-            f(physical, &mut n, families.as_mut_ptr());
-            families.truncate(n as usize);
+            let families = queue_families(instance, gipa, physical)
+                .ok_or("no vkGetPhysicalDeviceQueueFamilyProperties")?;
             let m = gipa(instance, c"vkGetPhysicalDeviceMemoryProperties".as_ptr())
                 .ok_or("no vkGetPhysicalDeviceMemoryProperties")?;
             let m = std::mem::transmute::<
@@ -126,17 +118,6 @@ impl Own {
             let mut memory = vk::PhysicalDeviceMemoryProperties::default();
             m(physical, &mut memory);
             (families, memory)
-        };
-        let infos = if ci.p_queue_create_infos.is_null() {
-            &[][..]
-        } else {
-            // SAFETY: as the caller promised.
-            unsafe {
-                std::slice::from_raw_parts(
-                    ci.p_queue_create_infos,
-                    ci.queue_create_info_count as usize,
-                )
-            }
         };
         // SAFETY: the next layer's commands for the live device, of the types their names imply.
         let fns = unsafe {
@@ -149,26 +130,41 @@ impl Own {
         // and so where their clears go. Protected-capable queues (created with flags) are left out:
         // they need vkGetDeviceQueue2, and a clear never needs one.
         let mut queues = Vec::new();
-        for q in infos.iter().filter(|q| {
-            q.flags.is_empty()
-                && families
-                    .get(q.queue_family_index as usize)
-                    .is_some_and(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
-        }) {
-            for i in 0..q.queue_count {
+        // SAFETY: as the caller promised.
+        for (family, count) in unsafe { graphics_queues(ci, &families) } {
+            for i in 0..count {
                 // SAFETY: a queue the application created; only its handle is kept.
-                let queue = unsafe { fns.get_device_queue(q.queue_family_index, i) };
-                queues.push((queue.as_raw(), q.queue_family_index));
+                let queue = unsafe { fns.get_device_queue(family, i) };
+                queues.push((queue.as_raw(), family));
             }
         }
         if queues.is_empty() {
             return Err("the device has no graphics queue the layer could clear shadows on".into());
         }
+        let mut clears = Clears::new(queues);
+        if timelines && clears.queues.len() > 1 {
+            // SAFETY: the live device, created with the timeline-semaphore feature.
+            match unsafe { Order::new(&fns, &clears.queues) } {
+                Ok(o) => {
+                    tracing::info!(
+                        queues = clears.queues.len(),
+                        "the layer's uploads are ordered against every graphics queue with \
+                         timeline semaphores"
+                    );
+                    clears.order = Some(o);
+                }
+                Err(e) => tracing::warn!(
+                    result = ?e,
+                    "no timeline semaphores for the layer's uploads: a pass on another graphics \
+                     queue than the one an upload runs on is not ordered against it"
+                ),
+            }
+        }
         Ok(Own {
             fns,
             memory,
             set_loader_data,
-            clears: Clears::new(queues),
+            clears,
             fallbacks: Mutex::ranked(Rank::Record, "vk full-rate shadows", Vec::new()),
         })
     }
@@ -387,6 +383,63 @@ pub unsafe fn loader_data_callback(ci: &vk::DeviceCreateInfo<'_>) -> Option<SetD
     None
 }
 
+/// The queue families of `physical`, from the next layer's
+/// `vkGetPhysicalDeviceQueueFamilyProperties`; `None` where it has none.
+///
+/// # Safety
+/// `gipa` must be the next layer's `vkGetInstanceProcAddr` of the live `instance` of `physical`.
+pub unsafe fn queue_families(
+    instance: vk::Instance,
+    gipa: vk::PFN_vkGetInstanceProcAddr,
+    physical: vk::PhysicalDevice,
+) -> Option<Vec<vk::QueueFamilyProperties>> {
+    // SAFETY: as the caller promised; the command of the type its name implies.
+    unsafe {
+        let f = gipa(
+            instance,
+            c"vkGetPhysicalDeviceQueueFamilyProperties".as_ptr(),
+        )?;
+        let f = std::mem::transmute::<
+            unsafe extern "system" fn(),
+            vk::PFN_vkGetPhysicalDeviceQueueFamilyProperties,
+        >(f);
+        let mut n = 0;
+        f(physical, &mut n, std::ptr::null_mut());
+        let mut families = vec![vk::QueueFamilyProperties::default(); n as usize];
+        f(physical, &mut n, families.as_mut_ptr());
+        families.truncate(n as usize);
+        Some(families)
+    }
+}
+
+/// The graphics-family queues `ci` creates without flags (family, count): where passes, and so
+/// the reads of the layer's shading-rate images, run.
+///
+/// # Safety
+/// `ci` must be a valid device create info.
+pub unsafe fn graphics_queues<'a>(
+    ci: &'a vk::DeviceCreateInfo<'_>,
+    families: &'a [vk::QueueFamilyProperties],
+) -> impl Iterator<Item = (u32, u32)> + 'a {
+    let infos = if ci.p_queue_create_infos.is_null() {
+        &[][..]
+    } else {
+        // SAFETY: as the caller promised.
+        unsafe {
+            std::slice::from_raw_parts(ci.p_queue_create_infos, ci.queue_create_info_count as usize)
+        }
+    };
+    infos
+        .iter()
+        .filter(|q| {
+            q.flags.is_empty()
+                && families
+                    .get(q.queue_family_index as usize)
+                    .is_some_and(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
+        })
+        .map(|q| (q.queue_family_index, q.queue_count))
+}
+
 /// Pending clears and uploads in the whole process: what the submit hooks' fast path reads.
 pub static PENDING: AtomicUsize = AtomicUsize::new(0);
 
@@ -477,6 +530,9 @@ pub struct Clears {
     /// between). Taken before [`Clears::state`] where both are, so a recording thread waits for
     /// no submit. A leaf like it otherwise.
     pub submits: parking_lot::Mutex<Submits>,
+    /// The ordering of the layer's submissions against the application's other graphics queues,
+    /// on a device with more than one ([`Order`]); `None` elsewhere.
+    pub order: Option<Order>,
 }
 
 impl Clears {
@@ -486,6 +542,7 @@ impl Clears {
             queues,
             state: parking_lot::Mutex::new(State::default()),
             submits: parking_lot::Mutex::new(Submits::default()),
+            order: None,
         }
     }
 
@@ -644,10 +701,13 @@ impl Clears {
                 Err(e) => Err(e),
             }
         };
-        // SAFETY: the batch's own command buffer and fence; the images are live (a pending
-        // shadow is removed from its list before it is destroyed, and maps wait for their
-        // batches at destruction).
-        let submitted = taken.and_then(|()| unsafe { record_and_submit(own, &batch, queue) });
+        let order = self.order.as_ref();
+        let submitted = taken.and_then(|()| {
+            // SAFETY: the batch's own command buffer and fence; the images are live (a pending
+            // shadow is removed from its list before it is destroyed, and maps wait for their
+            // batches at destruction).
+            unsafe { record_and_submit(own, &batch, queue, order) }
+        });
         if let Err(e) = submitted {
             // What it would have done stays pending: the application's work would read shadows in
             // an undefined layout otherwise.
@@ -709,6 +769,9 @@ impl Clears {
             }
             for (_, p) in sub.pools.drain(..) {
                 d.destroy_command_pool(p, None);
+            }
+            if let Some(o) = &self.order {
+                o.destroy(d);
             }
         }
     }
@@ -787,11 +850,17 @@ unsafe fn ensure_staging(own: &Own, batch: &mut Batch, size: u64) -> Result<(), 
 }
 
 /// Records `batch` (its clears, then its copies from its staging) into its command buffer and
-/// submits it on `queue` with its fence.
+/// submits it on `queue` with its fence; with `order`, after every other graphics queue's
+/// submitted work, and before every later submission there ([`Order::upload`]).
 ///
 /// # Safety
 /// `batch` idle, its images live; inside the application's submit on `queue`.
-unsafe fn record_and_submit(own: &Own, batch: &Batch, queue: vk::Queue) -> Result<(), vk::Result> {
+unsafe fn record_and_submit(
+    own: &Own,
+    batch: &Batch,
+    queue: vk::Queue,
+    order: Option<&Order>,
+) -> Result<(), vk::Result> {
     let d = &own.fns;
     // SAFETY: as the caller promised; beginning the command buffer resets it (its pool allows).
     unsafe {
@@ -862,11 +931,30 @@ unsafe fn record_and_submit(own: &Own, batch: &Batch, queue: vk::Queue) -> Resul
         }
         d.end_command_buffer(batch.cb)?;
         let cbs = [batch.cb];
-        d.queue_submit(
-            queue,
-            &[vk::SubmitInfo::default().command_buffers(&cbs)],
-            batch.fence,
-        )
+        let Some(order) = order else {
+            return d.queue_submit(
+                queue,
+                &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                batch.fence,
+            );
+        };
+        order.upload(queue, |w, value| {
+            let signal = [order.upload];
+            let values = [value];
+            let mut timeline = vk::TimelineSemaphoreSubmitInfo::default()
+                .wait_semaphore_values(&w.values)
+                .signal_semaphore_values(&values);
+            d.queue_submit(
+                queue,
+                &[vk::SubmitInfo::default()
+                    .wait_semaphores(&w.semaphores)
+                    .wait_dst_stage_mask(&w.stages)
+                    .command_buffers(&cbs)
+                    .signal_semaphores(&signal)
+                    .push_next(&mut timeline)],
+                batch.fence,
+            )
+        })
     }
 }
 

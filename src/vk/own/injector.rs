@@ -645,6 +645,7 @@ pub fn rendered_layers(view_mask: u32, layer_count: u32) -> Option<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::common::alloc_count::allocations;
 
     fn range(base_mip: u32, base: u32, count: u32) -> vk::ImageSubresourceRange {
         vk::ImageSubresourceRange {
@@ -677,40 +678,6 @@ mod tests {
         assert_eq!(rendered_layers(0b10, 1), Some(2));
         assert_eq!(rendered_layers(0, 1), Some(1));
         assert_eq!(rendered_layers(0, 0), None);
-    }
-
-    /// Heap allocations this thread made, counted by the test binary's allocator.
-    struct Counting;
-
-    thread_local! {
-        static ALLOCATIONS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
-    }
-
-    // SAFETY: the system allocator's contract, handed on; the count is a thread-local word.
-    unsafe impl std::alloc::GlobalAlloc for Counting {
-        unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
-            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
-            // SAFETY: as the caller promised.
-            unsafe { std::alloc::System.alloc(layout) }
-        }
-
-        unsafe fn dealloc(&self, p: *mut u8, layout: std::alloc::Layout) {
-            // SAFETY: as the caller promised.
-            unsafe { std::alloc::System.dealloc(p, layout) }
-        }
-
-        unsafe fn realloc(&self, p: *mut u8, layout: std::alloc::Layout, size: usize) -> *mut u8 {
-            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
-            // SAFETY: as the caller promised.
-            unsafe { std::alloc::System.realloc(p, layout, size) }
-        }
-    }
-
-    #[global_allocator]
-    static COUNTING: Counting = Counting;
-
-    fn allocations() -> u64 {
-        ALLOCATIONS.with(std::cell::Cell::get)
     }
 
     /// A gaze that moves every frame refills an eye map at every move: in steady state the refill

@@ -149,8 +149,8 @@ pub(crate) struct Renderer {
     modules: [vk::ShaderModule; 2],
     layout: vk::PipelineLayout,
     pipeline: vk::Pipeline,
-    pool: vk::CommandPool,
-    cb: vk::CommandBuffer,
+    pub(crate) pool: vk::CommandPool,
+    pub(crate) cb: vk::CommandBuffer,
     fence: vk::Fence,
     queue: vk::Queue,
 }
@@ -320,6 +320,20 @@ impl Renderer {
         index: u32,
         offsets: Option<&[vk::Offset2D]>,
     ) {
+        self.draw_after(d, cb, index, offsets, None);
+    }
+
+    /// As [`Renderer::draw_in`]; with `before`, once the draw is recorded, that command buffer
+    /// (executable, of the same family) is submitted on that other queue of the device first,
+    /// with nothing of the application's between the two submits, and waited for at the end.
+    pub(crate) fn draw_after(
+        &self,
+        d: &ash::Device,
+        cb: vk::CommandBuffer,
+        index: u32,
+        offsets: Option<&[vk::Offset2D]>,
+        before: Option<(vk::Queue, vk::CommandBuffer)>,
+    ) {
         let area = vk::Rect2D {
             offset: vk::Offset2D::default(),
             extent: vk::Extent2D {
@@ -376,6 +390,15 @@ impl Renderer {
                 None => d.cmd_end_render_pass(cb),
             }
             d.end_command_buffer(cb).unwrap();
+            if let Some((queue, other)) = before {
+                let cbs = [other];
+                d.queue_submit(
+                    queue,
+                    &[vk::SubmitInfo::default().command_buffers(&cbs)],
+                    vk::Fence::null(),
+                )
+                .expect("vkQueueSubmit on the other queue");
+            }
             let cbs = [cb];
             d.queue_submit(
                 self.queue,
@@ -385,6 +408,9 @@ impl Renderer {
             .expect("vkQueueSubmit");
             d.wait_for_fences(&[self.fence], true, u64::MAX).unwrap();
             d.reset_fences(&[self.fence]).unwrap();
+            if let Some((queue, _)) = before {
+                d.queue_wait_idle(queue).unwrap();
+            }
         }
     }
 

@@ -139,6 +139,13 @@ fn set_up(label: &str, inject: bool) -> std::path::PathBuf {
 /// be applied there.
 static NO_CONVERTER: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
+/// Set in a test's own process: the application's device has two graphics queues (the double
+/// offers a second, `crates/vkdouble/src/layer/queues.rs`), and each frame, once its pass is
+/// recorded, it submits an unrelated empty command buffer on queue 1 before the pass on queue 0.
+/// fovea's upload of the moved map goes ahead of the first of the two, on queue 1, whose work the
+/// double holds back until something depends on it: the pass on queue 0 must wait for it.
+static TWO_QUEUES: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 /// `frames` frames of `mode` on `profile` with the eye following `script`; `None` after a skip.
 fn run(
     mode: Mode,
@@ -149,6 +156,9 @@ fn run(
 ) -> Option<Run> {
     let (_serial, env) = env()?;
     let _validated = VALIDATED.lock();
+    let two_queues = TWO_QUEUES.load(std::sync::atomic::Ordering::Relaxed);
+    // Before the instance: validation reads the queue families when it sees the physical device.
+    env.double.set_queues(if two_queues { 2 } else { 0 });
     env.double.set_profile(Some(profile));
     crate::support::device::assert_no_double_errors(env);
     env.double.clear();
@@ -206,6 +216,7 @@ fn run(
         vulkan::Options {
             layers: &layers,
             multiview: true,
+            queues: if two_queues { 2 } else { 1 },
             ..Default::default()
         }
     };
@@ -241,6 +252,24 @@ fn run(
     let density: Option<Vec<u64>> = (mode != Mode::Inject)
         .then(|| enumerate(&app, swapchain).iter().map(|d| d.image).collect());
     let renderer = Renderer::new(&v, Layout::Multiview, &color, density.as_deref());
+    // The unrelated work submitted on queue 1 each frame (see [`TWO_QUEUES`]).
+    // SAFETY: the device is alive; the command buffer is the renderer's pool's, recorded once.
+    let other = two_queues.then(|| unsafe {
+        let cb = v
+            .device
+            .allocate_command_buffers(
+                &ash::vk::CommandBufferAllocateInfo::default()
+                    .command_pool(renderer.pool)
+                    .level(ash::vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            )
+            .expect("vkAllocateCommandBuffers")[0];
+        v.device
+            .begin_command_buffer(cb, &ash::vk::CommandBufferBeginInfo::default())
+            .expect("vkBeginCommandBuffer");
+        v.device.end_command_buffer(cb).expect("vkEndCommandBuffer");
+        (v.device.get_device_queue(v.family, 1), cb)
+    });
     if mode != Mode::Inject {
         apply_eye_tracked_high(&app, session, swapchain);
     }
@@ -271,7 +300,13 @@ fn run(
         let applied =
             granularity.map_or([[0; 2]; 2], |g| offsets_from_state(&app, session, fovs, g));
         let ends_with = applied.map(|[x, y]| ash::vk::Offset2D { x, y });
-        renderer.draw_ending_with(&v.device, index, applies.then_some(&ends_with[..]));
+        renderer.draw_after(
+            &v.device,
+            renderer.cb,
+            index,
+            applies.then_some(&ends_with[..]),
+            other,
+        );
         release(&frame, Layout::Multiview, swapchain, time, fovs);
         let layers = if profile.layered() { 2 } else { 1 };
         let got = rates_drawn(env, &case, Layout::Multiview, layers, extent);
@@ -285,6 +320,7 @@ fn run(
     }
     assert_eq!(env.double.errors(), Vec::<String>::new(), "{mode:?}");
     renderer.destroy(&v.device);
+    env.double.set_queues(0);
     let destroy_swapchain: xr::pfn::DestroySwapchain = func(&app, "xrDestroySwapchain");
     let destroy_session: xr::pfn::DestroySession = func(&app, "xrDestroySession");
     // SAFETY: the handles are live and used no more.
@@ -654,10 +690,31 @@ fn merged_injected_maps_follow_the_gaze() {
     );
 }
 
+/// The injected maps follow the gaze on an application that renders on one of two graphics
+/// queues and submits other work on the second first ([`TWO_QUEUES`]): each pass's rates are the
+/// map published for its frame, not the one before (issue 28 point 4: without fovea's timeline
+/// ordering the pass overtakes the upload on the other queue and draws with the last frame's map).
+#[test]
+fn injected_maps_follow_the_gaze_across_two_queues() {
+    follows_with(
+        module_path!(),
+        "injected_maps_follow_the_gaze_across_two_queues",
+        Mode::Inject,
+        Profile::Nvidia,
+        true,
+    );
+}
+
 /// Frame by frame through [`SCRIPT`]: each view's rates the fixed map shifted to within a texel of
 /// the gaze located for that frame; then what the script's events must look like.
 fn follows(module: &str, name: &str, mode: Mode, profile: Profile) {
+    follows_with(module, name, mode, profile, false);
+}
+
+/// [`follows`], on two queues with `two_queues` ([`TWO_QUEUES`]).
+fn follows_with(module: &str, name: &str, mode: Mode, profile: Profile, two_queues: bool) {
     in_own_process(module, name, || {
+        TWO_QUEUES.store(two_queues, std::sync::atomic::Ordering::Relaxed);
         let dir = set_up(name, mode == Mode::Inject);
         // 5 s of display time at the simulated headset's 90 Hz.
         let Some(run) = run(mode, profile, SCRIPT, 450, &dir) else {

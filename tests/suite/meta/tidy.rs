@@ -437,6 +437,7 @@ const VK_FLOORS: &[Place] = &[
     at(31, "own/bindings.rs"),
     at(31, "own/convert_shader.rs"),
     at(31, "own/shadows.rs"),
+    at(31, "own/order.rs"),
     at(32, "own/calls.rs"),
     at(33, "own/converter.rs"),
     at(33, "own/injector.rs"),

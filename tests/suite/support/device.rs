@@ -310,7 +310,19 @@ impl Vk {
         features: Features,
         extra: Option<&mut dyn vk::ExtendsDeviceCreateInfo>,
     ) -> Result<ash::Device, vk::Result> {
-        let prio = [1.0];
+        self.try_device_queues(exts, features, extra, 1)
+    }
+
+    /// [`Vk::try_device_with`] with `count` queues of family 0 (the double offers more than
+    /// lavapipe's one where a test asks it to, `fovea_vkdouble::Loaded::set_queues`).
+    pub fn try_device_queues(
+        &self,
+        exts: &[&CStr],
+        features: Features,
+        extra: Option<&mut dyn vk::ExtendsDeviceCreateInfo>,
+        count: u32,
+    ) -> Result<ash::Device, vk::Result> {
+        let prio = vec![1.0; count as usize];
         let queues = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(0)
             .queue_priorities(&prio)];

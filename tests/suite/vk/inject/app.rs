@@ -535,6 +535,7 @@ pub(super) fn run_with(
         dynamic_rendering: true,
         device_extensions: if app_rates { &exts } else { &[] },
         device_next: &v12 as *const _ as *const c_void,
+        queues: 1,
     };
     let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
     {

@@ -201,6 +201,7 @@ fn session_device(env: &crate::support::device::Env, profile: Profile) -> Option
         dynamic_rendering: true,
         device_extensions: &[],
         device_next: std::ptr::null(),
+        queues: 1,
     };
     match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options) {
         Ok(v) => Some((app, v)),
