@@ -24,6 +24,7 @@ use crate::vk::base::next::{DeviceNext, InstanceNext};
 use crate::vk::own::bindings::Bound;
 use crate::vk::own::calls::Own;
 use crate::vk::own::converter::{Converter, Slot};
+use crate::vk::own::reconstructor::{Plan, Reconstructor};
 use crate::vk::own::shadows::{ShadowImage, ShadowView};
 
 /// What the layer does for one physical device, decided once from what the driver offers.
@@ -541,6 +542,21 @@ pub unsafe fn own_of(handle: impl vk::Handle) -> Option<Arc<Own>> {
 /// Each converting device's [`Converter`], by dispatch key; a leaf lock like [`OWNS`].
 pub static CONVERTERS: SharedRwLock<Vec<(Key, Arc<Converter>)>> = SharedRwLock::new(Vec::new());
 
+/// Each reconstructing device's [`Reconstructor`] (docs/reconstruction.md), by dispatch key; a
+/// leaf lock like [`OWNS`], taken at device creation and destruction and at command-buffer
+/// allocation, never while recording.
+pub static RECONSTRUCTORS: SharedRwLock<Vec<(Key, Arc<Reconstructor>)>> =
+    SharedRwLock::new(Vec::new());
+
+/// The reconstructor of a device's dispatch key.
+pub fn reconstructor_by_key(k: Key) -> Option<Arc<Reconstructor>> {
+    RECONSTRUCTORS
+        .read()
+        .iter()
+        .find(|(key, _)| *key == k)
+        .map(|(_, c)| Arc::clone(c))
+}
+
 /// The converter of a device's dispatch key.
 pub fn converter_by_key(k: Key) -> Option<Arc<Converter>> {
     CONVERTERS
@@ -586,6 +602,12 @@ pub struct CbRecord {
     /// The device's converter (`None` where it converts nothing), found once at allocation, so
     /// that a pass begin reaches it without the process-wide [`CONVERTERS`].
     pub converter: Option<Arc<Converter>>,
+    /// The device's reconstructor (`None` where it reconstructs nothing), found once at
+    /// allocation like the converter.
+    pub reconstructor: Option<Arc<Reconstructor>>,
+    /// What the end of the render pass instance open in this command buffer reconstructs
+    /// (docs/reconstruction.md), set where it begins.
+    pub plan: parking_lot::Mutex<Option<Plan>>,
 }
 
 type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<AddressHasher>>;
@@ -726,6 +748,8 @@ pub fn remember_command_buffer(cb: vk::CommandBuffer, device: Key, pool: u64, se
         slots: parking_lot::Mutex::new(Vec::new()),
         swept: std::sync::atomic::AtomicU64::new(0),
         converter: converter_by_key(device),
+        reconstructor: reconstructor_by_key(device),
+        plan: parking_lot::Mutex::new(None),
     });
     let old = {
         let mut map = CB_RECORDS.lock();

@@ -35,7 +35,7 @@ use crate::vk::translate::render_pass::{
     shadow_attachment_info, v2_names_density, Pass2,
 };
 use crate::vk::translate::render_pass_v1::{v1_names_density, v1_to_v2};
-use crate::vk::{convert, emulation, injection};
+use crate::vk::{convert, emulation, injection, reconstruct};
 
 fn texel_of(dev: &Device) -> Option<vk::Extent2D> {
     dev.fdm.as_ref().map(|f| vk::Extent2D {
@@ -534,12 +534,13 @@ pub unsafe extern "system" fn destroy_framebuffer(
 /// `begin` must be NULL or valid.
 unsafe fn begin_pass(
     dev: &Device,
+    cb: vk::CommandBuffer,
     begin: *const vk::RenderPassBeginInfo<'_>,
     f: impl FnOnce(*const vk::RenderPassBeginInfo<'_>),
 ) {
     if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
         // SAFETY: as the caller promised; `own` is the device's.
-        return unsafe { injection::begin_injected_pass(inj, own, begin, f) };
+        return unsafe { injection::begin_injected_pass(inj, own, cb, begin, f) };
     }
     // SAFETY: as the caller promised.
     unsafe { emulation::with_swapped_begin(dev, begin, f) }
@@ -559,7 +560,7 @@ pub unsafe extern "system" fn cmd_begin_render_pass(
         unsafe { convert::before_render_pass(dev, cb, begin) };
         // SAFETY: the next layer's function, with the caller's arguments or a copy that lives
         // across the call.
-        unsafe { begin_pass(dev, begin, |b| next(cb, b, contents)) }
+        unsafe { begin_pass(dev, cb, begin, |b| next(cb, b, contents)) }
     };
     // SAFETY: as the caller promised.
     unsafe {
@@ -585,7 +586,7 @@ unsafe fn cmd_begin_render_pass2_with(
         // SAFETY: as the caller promised; recorded before the pass begins.
         unsafe { convert::before_render_pass(dev, cb, begin) };
         // SAFETY: as in cmd_begin_render_pass.
-        unsafe { begin_pass(dev, begin, |b| next(cb, b, subpass)) }
+        unsafe { begin_pass(dev, cb, begin, |b| next(cb, b, subpass)) }
     };
     // SAFETY: as the caller promised.
     unsafe { with_next(which, cb, next, body) }
@@ -759,7 +760,9 @@ unsafe fn cmd_end_render_pass2_with(
         let Some(e) = (unsafe { end.as_ref() }).filter(|e| !e.p_next.is_null()) else {
             convert::ended(cb, &[]);
             // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { down(cb, end) };
+            unsafe { down(cb, end) };
+            reconstruct::ended(cb);
+            return;
         };
         // SAFETY: the caller's chain, read only; the offsets live across the call.
         let offsets = unsafe { offsets_in(e.p_next) };
@@ -772,6 +775,7 @@ unsafe fn cmd_end_render_pass2_with(
                 down(cb, &copy)
             })
         }
+        reconstruct::ended(cb);
     };
     // SAFETY: as the caller promised.
     unsafe { with_next(which, cb, next, body) }
@@ -782,6 +786,51 @@ hook_and_khr_alias! {
     cmd_end_render_pass2, cmd_end_render_pass2_khr =
         cmd_end_render_pass2_with("vkCmdEndRenderPass2")
     (cb: vk::CommandBuffer, end: *const vk::SubpassEndInfo<'_>)
+}
+
+/// `vkCmdEndRenderPass`: the end goes down, then the reconstruction its begin planned
+/// ([`reconstruct::ended`], docs/reconstruction.md).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_end_render_pass(cb: vk::CommandBuffer) {
+    let body = |_: &Device, down: vk::PFN_vkCmdEndRenderPass| {
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { down(cb) };
+        reconstruct::ended(cb);
+    };
+    // SAFETY: as the caller promised.
+    unsafe {
+        with_next(
+            "vkCmdEndRenderPass",
+            cb,
+            |d| d.next.cmd_end_render_pass,
+            body,
+        )
+    }
+}
+
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn cmd_end_rendering_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkCmdEndRendering>,
+    cb: vk::CommandBuffer,
+) {
+    let body = |_: &Device, down: vk::PFN_vkCmdEndRendering| {
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { down(cb) };
+        reconstruct::ended(cb);
+    };
+    // SAFETY: as the caller promised.
+    unsafe { with_next(which, cb, next, body) }
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdEndRendering`: as [`cmd_end_render_pass`]; a suspending end reconstructs nothing,
+    /// the end after the instance's last resumption does.
+    cmd_end_rendering, cmd_end_rendering_khr = cmd_end_rendering_with("vkCmdEndRendering")
+    (cb: vk::CommandBuffer)
 }
 
 /// `vkCmdNextSubpass2(KHR)`: offsets at the end of a subpass other than the last are ignored
@@ -848,6 +897,7 @@ unsafe fn cmd_end_rendering2_with(
             if let Some(down) = own(dev) {
                 // SAFETY: the next layer's function, with the caller's arguments.
                 unsafe { down(cb, info) };
+                reconstruct::ended(cb);
             }
             return;
         }
@@ -858,22 +908,26 @@ unsafe fn cmd_end_rendering2_with(
         if let Some(down) = dev.next.cmd_end_rendering2_khr {
             if next.is_null() {
                 // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { down(cb, info) };
+                unsafe { down(cb, info) };
+            } else {
+                // SAFETY: the caller's chain, read only.
+                unsafe {
+                    without_offsets(which, next, |rest| {
+                        let copy = offset::RenderingEndInfo {
+                            s_type: offset::RENDERING_END_INFO,
+                            p_next: rest,
+                        };
+                        down(cb, &copy)
+                    })
+                };
             }
-            // SAFETY: the caller's chain, read only.
-            return unsafe {
-                without_offsets(which, next, |rest| {
-                    let copy = offset::RenderingEndInfo {
-                        s_type: offset::RENDERING_END_INFO,
-                        p_next: rest,
-                    };
-                    down(cb, &copy)
-                })
-            };
+            reconstruct::ended(cb);
+            return;
         }
         if let Some(down) = dev.end_rendering {
             // SAFETY: the next layer's function, on the caller's command buffer.
             unsafe { down(cb) };
+            reconstruct::ended(cb);
         }
     };
     // SAFETY: as the caller promised.
@@ -1054,6 +1108,8 @@ mod tests {
             rate: 1,
             colour: Some(0),
             view_mask: 0,
+            colour_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+            colour_kept: true,
         };
         inj.pass_created(vk::RenderPass::from_raw(pass), injected);
         inj.framebuffer_created(
@@ -1063,6 +1119,8 @@ mod tests {
                 extent,
                 imageless: false,
                 eye: Some((extent, views)),
+                colour: None,
+                layers: 1,
             },
         );
         inj.framebuffer_created(
