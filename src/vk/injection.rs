@@ -619,12 +619,12 @@ fn plan(
             image: vk::Image::from_raw(v.image),
             base_layer: v.base_layer,
             layers,
-            extent: v.extent,
             area,
             layout,
             kind,
             rate_image,
             rate_extent,
+            rate_base_layer: 0,
             rate_layers: if rate_layers <= 1 {
                 1
             } else {

@@ -655,7 +655,7 @@ unsafe fn create_device_impl(
             attachments: registry::Attachments::new(own),
         });
         let converts = convert::device_created(&inst, physical, ci, handle);
-        if injects {
+        if injects || emulated {
             let why = convert::dispatch_blocked(&inst, physical, ci, api_version);
             reconstruct::device_created(handle, why);
         }

@@ -137,6 +137,7 @@ unsafe fn create_rewritten(
             .insert(handle.as_raw(), density);
         // SAFETY: the device is live.
         unsafe { convert::pass_changed(dev, handle, layouts) };
+        reconstruct::pass_created(dev, handle, &pass, density);
         tracing::debug!(
             render_pass = raw(handle),
             density,
@@ -379,6 +380,8 @@ pub unsafe extern "system" fn destroy_render_pass(
         }
         // SAFETY: the device is live.
         unsafe { convert::pass_changed(&dev, pass, None) };
+        // SAFETY: the device is live.
+        unsafe { reconstruct::pass_destroyed(&dev, pass) };
         if let Some(next) = dev.next.destroy_render_pass {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, pass, alloc) };
@@ -494,6 +497,8 @@ pub unsafe extern "system" fn create_framebuffer(
             if r == vk::Result::SUCCESS && !out.is_null() {
                 // SAFETY: the framebuffer was just created on the live device.
                 unsafe { convert::framebuffer_changed(&dev, *out, app_view) };
+                // SAFETY: as above, from the application's create info.
+                unsafe { reconstruct::framebuffer_created(&dev, *out, ci) };
             }
             r
         },
@@ -517,6 +522,8 @@ pub unsafe extern "system" fn destroy_framebuffer(
         if let Some(inj) = &dev.inject {
             inj.framebuffer_destroyed(fb);
         }
+        // SAFETY: the device is live.
+        unsafe { reconstruct::framebuffer_destroyed(&dev, fb) };
         if let Some(next) = dev.next.destroy_framebuffer {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, fb, alloc) };
@@ -558,6 +565,8 @@ pub unsafe extern "system" fn cmd_begin_render_pass(
     let body = |dev: &Device, next: vk::PFN_vkCmdBeginRenderPass| {
         // SAFETY: as the caller promised; recorded before the pass begins.
         unsafe { convert::before_render_pass(dev, cb, begin) };
+        // SAFETY: as the caller promised.
+        unsafe { reconstruct::begin_render_pass(dev, cb, begin) };
         // SAFETY: the next layer's function, with the caller's arguments or a copy that lives
         // across the call.
         unsafe { begin_pass(dev, cb, begin, |b| next(cb, b, contents)) }
@@ -585,6 +594,8 @@ unsafe fn cmd_begin_render_pass2_with(
     let body = |dev: &Device, next: vk::PFN_vkCmdBeginRenderPass2| {
         // SAFETY: as the caller promised; recorded before the pass begins.
         unsafe { convert::before_render_pass(dev, cb, begin) };
+        // SAFETY: as the caller promised.
+        unsafe { reconstruct::begin_render_pass(dev, cb, begin) };
         // SAFETY: as in cmd_begin_render_pass.
         unsafe { begin_pass(dev, cb, begin, |b| next(cb, b, subpass)) }
     };
@@ -638,6 +649,10 @@ unsafe fn cmd_begin_rendering_with(
         let shadow = (view != vk::ImageView::null())
             .then(|| dev.attachments.shadow_view(view))
             .flatten();
+        if shadow.is_some() {
+            // SAFETY: the caller's rendering info.
+            unsafe { reconstruct::begin_rendering(dev, cb, ri, view) };
+        }
         // The edited chain is built in per-thread scratch storage: no heap allocation per
         // command (docs/ARCHITECTURE.md, "Nothing per frame that can be done at creation").
         // SAFETY: the caller's chain, read only.
@@ -1130,6 +1145,8 @@ mod tests {
                 extent,
                 imageless: true,
                 eye: None,
+                colour: None,
+                layers: 1,
             },
         );
         let device = vk::Device::from_raw(handle);

@@ -3,6 +3,7 @@
 //! made at the first pass of a target size and kept; and the commands recorded into the
 //! application's command buffer after a pass instance ends ([`Reconstructor::record`]).
 
+use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -27,8 +28,6 @@ pub struct Plan {
     /// The layers the pass rendered: the view's first layer and how many.
     pub base_layer: u32,
     pub layers: u32,
-    /// The image's extent (the scratch is sized for it, so every render area fits).
-    pub extent: [u32; 2],
     pub area: vk::Rect2D,
     /// The layout the pass leaves the image in, which the reconstruction restores.
     pub layout: vk::ImageLayout,
@@ -37,9 +36,45 @@ pub struct Plan {
     /// The rate image's extent in texels and the layers read: 1 (merged, every view reads it) or
     /// one per rendered layer.
     pub rate_extent: [u32; 2],
+    pub rate_base_layer: u32,
     pub rate_layers: u32,
     /// The instance was begun suspending: its end is not the instance's last.
     pub suspending: bool,
+}
+
+/// An application's colour view on an emulating device whose image is reconstructed
+/// (docs/reconstruction.md): decided when the view is made.
+#[derive(Clone, Copy, Debug)]
+pub struct Target {
+    pub image: vk::Image,
+    pub base_layer: u32,
+    pub layers: u32,
+    pub format: vk::Format,
+}
+
+/// A rewritten render pass's colour target (its first subpass's first colour attachment), as
+/// [`crate::vk::own::injector::InjectedPass`] has it for injection.
+#[derive(Clone, Copy, Debug)]
+pub struct PassTarget {
+    pub colour: u32,
+    pub density: u32,
+    pub layout: vk::ImageLayout,
+    pub kept: bool,
+    pub view_mask: u32,
+}
+
+/// What an emulating device's reconstruction knows of its objects, filled at their creation.
+#[derive(Default)]
+pub struct Tables {
+    /// Application images created with `VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT`, and their layers.
+    pub images: HashMap<u64, u32>,
+    /// Views whose image is reconstructed.
+    pub views: HashMap<u64, Target>,
+    /// Rewritten render passes' colour targets.
+    pub passes: HashMap<u64, PassTarget>,
+    /// Framebuffers of those passes with a reconstructed colour view: the colour view, the
+    /// density view, the layers rendered.
+    pub framebuffers: HashMap<u64, (u64, u64, u32)>,
 }
 
 /// One scratch buffer: raw texels in, texels out, rate codes, and the set naming them.
@@ -73,6 +108,11 @@ pub struct Reconstructor {
     logged_formats: parking_lot::Mutex<Vec<vk::Format>>,
     logged_state: AtomicBool,
     logged_scratch: AtomicBool,
+    /// An emulating device's tables ([`Tables`]); injection keeps its own in the injector.
+    pub tables: parking_lot::Mutex<Tables>,
+    /// Set once a view whose image is reconstructed was noted: until then a begin looks no
+    /// further.
+    pub any: AtomicBool,
 }
 
 impl Reconstructor {
@@ -157,6 +197,8 @@ impl Reconstructor {
                 logged_formats: parking_lot::Mutex::new(Vec::new()),
                 logged_state: AtomicBool::new(false),
                 logged_scratch: AtomicBool::new(false),
+                tables: parking_lot::Mutex::new(Tables::default()),
+                any: AtomicBool::new(false),
             })
         }
     }
@@ -331,7 +373,7 @@ impl Reconstructor {
         if w == 0 || h == 0 || plan.layers == 0 {
             return;
         }
-        let texels = u64::from(plan.extent[0]) * u64::from(plan.extent[1]) * u64::from(plan.layers);
+        let texels = u64::from(w) * u64::from(h) * u64::from(plan.layers);
         let rate_bytes = u64::from(plan.rate_extent[0])
             * u64::from(plan.rate_extent[1])
             * u64::from(plan.rate_layers);
@@ -381,7 +423,7 @@ impl Reconstructor {
                     aspect_mask: vk::ImageAspectFlags::COLOR,
                     base_mip_level: 0,
                     level_count: 1,
-                    base_array_layer: 0,
+                    base_array_layer: plan.rate_base_layer,
                     layer_count: plan.rate_layers,
                 })
         };
@@ -467,7 +509,7 @@ impl Reconstructor {
                     image_subresource: vk::ImageSubresourceLayers {
                         aspect_mask: vk::ImageAspectFlags::COLOR,
                         mip_level: 0,
-                        base_array_layer: 0,
+                        base_array_layer: plan.rate_base_layer,
                         layer_count: plan.rate_layers,
                     },
                     image_offset: vk::Offset3D::default(),

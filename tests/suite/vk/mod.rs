@@ -14,5 +14,6 @@ pub mod lifetimes;
 pub mod offsets;
 pub mod passes;
 pub mod pipelines;
+pub mod reconstruction;
 pub mod recording;
 pub mod threads;
