@@ -143,9 +143,8 @@ pub unsafe fn create_injected_framebuffer(
         None
     } else {
         // SAFETY: the caller's array.
-        p.colour
-            .and_then(|c| unsafe { slice(ci.p_attachments, ci.attachment_count) }.get(c as usize))
-            .copied()
+        let views = unsafe { slice(ci.p_attachments, ci.attachment_count) };
+        p.colour.and_then(|c| views.get(c as usize)).copied()
     };
     let fb_layers = if p.view_mask != 0 {
         crate::vk::own::injector::rendered_layers(p.view_mask, 0).unwrap_or(1)

@@ -196,7 +196,10 @@ mod tests {
         assert_eq!(neighbours(0, 4), ([-2, 2], 0.625));
         // A 1-wide axis takes the pixel itself.
         assert_eq!(neighbours(7, 1), ([7, 8], 0.0));
-        assert_eq!(neighbours(3, 2), ([3, 5], 0.0));
+        // 2-wide blocks: centres at 1, 3, 5 (the edge between a block's two pixels, stored as
+        // its right pixel); pixel 3's centre (3.5) is a quarter of the way from 3 to 5.
+        assert_eq!(neighbours(3, 2), ([3, 5], 0.25));
+        assert_eq!(neighbours(2, 2), ([1, 3], 0.75));
     }
 
     #[test]
