@@ -323,6 +323,7 @@ fn rendered(view_mask: u32, layers: u32) -> u32 {
 /// Notes in `r`'s command buffer record what the end of a pass begun on the colour target `t`
 /// and the density view `density` (its shadow is the pass's shading-rate attachment)
 /// reconstructs.
+#[allow(clippy::too_many_arguments)]
 fn plan(
     dev: &Device,
     rc: &Reconstructor,

@@ -34,6 +34,8 @@ struct Drawn {
     /// Every layer, tightly packed, 4 bytes a pixel.
     pixels: Vec<u8>,
     layers: u32,
+    /// Layer 1's map was mirrored (coarse on the right).
+    mirrored: bool,
 }
 
 /// Draws `case` once on `profile` into a `format` image, subsampled or not, on a device of its
@@ -43,7 +45,10 @@ fn draw(profile: Profile, case: Case, format: vk::Format, subsampled: bool) -> O
     let vk = Vk::new(env, profile, true)?;
     let device = vk.device_with(&[], Features::FDM_MULTIVIEW, None);
     let dev = Dev::new(&vk, device);
-    let drawn = draw_on(&vk, &dev, case, format, subsampled);
+    // A device with one rate layer per view gets a second layer mirrored; one that merges them
+    // (the finer rate of all views) the same map in both.
+    let mirrored = case == Case::Multiview && profile.layered();
+    let drawn = draw_on(&vk, &dev, case, format, subsampled, mirrored);
     dev.destroy();
     assert_only_stage_false_positives();
     drop(vk);
@@ -52,7 +57,14 @@ fn draw(profile: Profile, case: Case, format: vk::Format, subsampled: bool) -> O
 
 /// Draws `case` once on `dev` (made on `vk`): everything but the device is made and destroyed
 /// here.
-fn draw_on(vk: &Vk, dev: &Dev, case: Case, format: vk::Format, subsampled: bool) -> Drawn {
+fn draw_on(
+    vk: &Vk,
+    dev: &Dev,
+    case: Case,
+    format: vk::Format,
+    subsampled: bool,
+    mirrored: bool,
+) -> Drawn {
     let texel = vk
         .fdm_properties()
         .max_fragment_density_texel_size
@@ -260,7 +272,7 @@ fn draw_on(vk: &Vk, dev: &Dev, case: Case, format: vk::Format, subsampled: bool)
             )
             .unwrap();
         d.bind_buffer_memory(readback, readback_mem, 0).unwrap();
-        // The density map: coarse in the left half, full rate in the right, every layer.
+        // The density map: coarse in the left half, full rate in the right.
         let p = d
             .map_memory(readback_mem, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty())
             .unwrap() as *mut u8;
@@ -268,7 +280,14 @@ fn draw_on(vk: &Vk, dev: &Dev, case: Case, format: vk::Format, subsampled: bool)
         let bytes = std::slice::from_raw_parts_mut(p, texels * 2);
         for t in 0..texels {
             let x = t as u32 % n;
-            let b = if x < n / 2 { COARSE } else { FULL };
+            // Layer 1 mirrored where the device has a rate layer per view: a view that read
+            // layer 0's rates would be coarse in the wrong half.
+            let left = if mirrored && t as u32 / (n * n) == 1 {
+                x >= n / 2
+            } else {
+                x < n / 2
+            };
+            let b = if left { COARSE } else { FULL };
             bytes[2 * t] = b;
             bytes[2 * t + 1] = b;
         }
@@ -531,11 +550,21 @@ fn draw_on(vk: &Vk, dev: &Dev, case: Case, format: vk::Format, subsampled: bool)
             d.destroy_image(i, None);
             d.free_memory(m, None);
         }
-        Drawn { pixels, layers }
+        Drawn {
+            pixels,
+            layers,
+            mirrored,
+        }
     }
 }
 
-/// Per layer: the share of uniform `block`×`block` blocks in the left (coarse) half.
+/// Whether column `x` of layer `layer` of `d` lies in the coarse half (the left one, the right
+/// one in a mirrored layer 1).
+fn coarse_column(d: &Drawn, layer: usize, x: u32) -> bool {
+    (x < SIDE / 2) != (d.mirrored && layer == 1)
+}
+
+/// Per layer: the share of uniform `block`×`block` blocks in the coarse half.
 fn left_uniform(d: &Drawn, block: u32) -> Vec<f64> {
     let layer = (SIDE * SIDE * 4) as usize;
     (0..d.layers as usize)
@@ -545,20 +574,29 @@ fn left_uniform(d: &Drawn, block: u32) -> Vec<f64> {
                 [SIDE, SIDE],
                 4,
                 block,
-                |x, _| x + block <= SIDE / 2,
+                |x, _| coarse_column(d, l, x) && coarse_column(d, l, x + block - 1),
             )
             .unwrap()
         })
         .collect()
 }
 
-/// Whether the right (full-rate) halves of two frames are bit-identical, every layer.
+/// Whether the full-rate halves of two frames are bit-identical, every layer.
 fn right_identical(a: &Drawn, b: &Drawn) -> bool {
     let row = (SIDE * 4) as usize;
+    let rows = SIDE as usize;
     a.pixels
         .chunks_exact(row)
         .zip(b.pixels.chunks_exact(row))
-        .all(|(x, y)| x[row / 2..] == y[row / 2..])
+        .enumerate()
+        .all(|(i, (x, y))| {
+            let full = if coarse_column(a, i / rows, 0) {
+                row / 2..row
+            } else {
+                0..row / 2
+            };
+            x[full.clone()] == y[full]
+        })
 }
 
 fn check(profile: Profile, case: Case, format: vk::Format) {
@@ -601,18 +639,43 @@ fn a_subsampled_images_coarse_blocks_are_reconstructed_in_dynamic_rendering() {
     check(Profile::Nvidia, Case::Dynamic, vk::Format::R8G8B8A8_SRGB);
 }
 
-/// A format the shader does not decode (B10G11R11 floats) is left as the pass left it.
+/// A format the shader does not decode (B10G11R11 floats) is left as the pass left it, and fovea's
+/// log says so once for the device and format, however many passes render it.
 #[test]
-fn a_format_the_layer_cannot_decode_keeps_its_blocks() {
-    let format = vk::Format::B10G11R11_UFLOAT_PACK32;
-    let Some(blocky) = draw(Profile::Nvidia, Case::Pass, format, false) else {
-        return;
-    };
-    let smooth = draw(Profile::Nvidia, Case::Pass, format, true).expect("drawn once");
-    assert!(left_uniform(&blocky, 4)[0] >= 0.95);
-    assert!(
-        blocky.pixels == smooth.pixels,
-        "a format the layer cannot decode was changed"
+fn a_format_the_layer_cannot_decode_keeps_its_blocks_with_one_line() {
+    crate::support::in_own_process(
+        module_path!(),
+        "a_format_the_layer_cannot_decode_keeps_its_blocks_with_one_line",
+        || {
+            let dir =
+                std::env::temp_dir().join(format!("fovea-recon-format-{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&dir);
+            std::fs::create_dir_all(&dir).unwrap();
+            std::env::set_var("FOVEA_LOG", "info");
+            std::env::set_var("FOVEA_LOG_FILE", dir.join("fovea.log"));
+            let format = vk::Format::B10G11R11_UFLOAT_PACK32;
+            let Some(blocky) = draw(Profile::Nvidia, Case::Pass, format, false) else {
+                return;
+            };
+            let (_serial, env) = env().expect("drawn once");
+            let vk = Vk::new(env, Profile::Nvidia, true).expect("an instance");
+            let device = vk.device_with(&[], Features::FDM_MULTIVIEW, None);
+            let dev = Dev::new(&vk, device);
+            let smooth = draw_on(&vk, &dev, Case::Pass, format, true, false);
+            let again = draw_on(&vk, &dev, Case::Dynamic, format, true, false);
+            dev.destroy();
+            assert_only_stage_false_positives();
+            drop(vk);
+            assert!(left_uniform(&blocky, 4)[0] >= 0.95);
+            assert!(
+                blocky.pixels == smooth.pixels && again.pixels == smooth.pixels,
+                "a format the layer cannot decode was changed"
+            );
+            let log = std::fs::read_to_string(dir.join("fovea.log")).unwrap_or_default();
+            let line = "coarse blocks are not reconstructed in images of this format";
+            assert_eq!(log.matches(line).count(), 1, "one line:\n{log}");
+            assert!(log.contains("B10G11R11_UFLOAT_PACK32"), "{log}");
+        },
     );
 }
 
@@ -647,7 +710,14 @@ fn targets_recreated_a_thousand_times_with_reconstruction_on() {
         } else {
             Case::Dynamic
         };
-        let drawn = draw_on(&vk, &dev, case, vk::Format::R8G8B8A8_UNORM, subsampled);
+        let drawn = draw_on(
+            &vk,
+            &dev,
+            case,
+            vk::Format::R8G8B8A8_UNORM,
+            subsampled,
+            false,
+        );
         let share = left_uniform(&drawn, 4)[0];
         if subsampled {
             assert!(
