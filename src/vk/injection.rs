@@ -688,22 +688,27 @@ fn plan_rendering(
     else {
         return;
     };
-    // A multisampled attachment resolves elsewhere: left alone (docs/reconstruction.md).
-    let kept = a.resolve_mode == vk::ResolveModeFlags::NONE
-        && !matches!(
+    // A multisampled attachment resolves into the view that is read, which the resolve writes
+    // whatever the attachment's store operation (docs/reconstruction.md).
+    let (target, layout, kept) = if a.resolve_mode != vk::ResolveModeFlags::NONE {
+        (a.resolve_image_view, a.resolve_image_layout, true)
+    } else {
+        let stored = !matches!(
             a.store_op,
             vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
         );
+        (colour, a.image_layout, stored)
+    };
     let layers =
         crate::vk::own::injector::rendered_layers(ri.view_mask, ri.layer_count).unwrap_or(1);
     plan(
         inj,
         cb,
-        colour,
+        target,
         map,
         layers,
         ri.render_area,
-        a.image_layout,
+        layout,
         kept,
         suspending,
     );

@@ -240,12 +240,23 @@ pub fn pass_created(dev: &Device, handle: vk::RenderPass, pass: &Pass2, density:
             .first()
             .map(|a| a.attachment)
             .filter(|&a| a != vk::ATTACHMENT_UNUSED);
-        let Some(colour) = first else {
+        let Some(mut colour) = first else {
             return;
         };
-        let Some(a) = pass.attachments.get(colour as usize) else {
+        let Some(mut a) = pass.attachments.get(colour as usize) else {
             return;
         };
+        if a.samples != vk::SampleCountFlags::TYPE_1 {
+            // Multisampled: what is read is its resolve, the target reconstructed.
+            let resolve = (!s.p_resolve_attachments.is_null())
+                // SAFETY: the application's array, one per colour attachment.
+                .then(|| unsafe { *s.p_resolve_attachments }.attachment)
+                .filter(|&r| r != vk::ATTACHMENT_UNUSED);
+            let Some(r) = resolve.and_then(|r| Some((r, pass.attachments.get(r as usize)?))) else {
+                return;
+            };
+            (colour, a) = r;
+        }
         let kept = a.samples == vk::SampleCountFlags::TYPE_1
             && !matches!(
                 a.store_op,
@@ -467,13 +478,18 @@ pub unsafe fn begin_rendering(
         else {
             return;
         };
-        // A multisampled attachment resolves elsewhere: left alone (docs/reconstruction.md).
-        let kept = a.resolve_mode == vk::ResolveModeFlags::NONE
-            && !matches!(
+        // A multisampled attachment resolves into the view that is read, which the resolve
+        // writes whatever the attachment's store operation.
+        let (view, layout, kept) = if a.resolve_mode != vk::ResolveModeFlags::NONE {
+            (a.resolve_image_view, a.resolve_image_layout, true)
+        } else {
+            let stored = !matches!(
                 a.store_op,
                 vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
             );
-        let target = rc.tables.lock().views.get(&a.image_view.as_raw()).copied();
+            (a.image_view, a.image_layout, stored)
+        };
+        let target = rc.tables.lock().views.get(&view.as_raw()).copied();
         let (Some(target), true) = (target, kept) else {
             return;
         };
@@ -486,7 +502,7 @@ pub unsafe fn begin_rendering(
             density.as_raw(),
             layers,
             ri.render_area,
-            a.image_layout,
+            layout,
             suspending,
         );
     });

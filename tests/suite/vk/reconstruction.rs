@@ -28,6 +28,20 @@ enum Case {
     Pass,
     Multiview,
     Dynamic,
+    /// A render pass drawing 4 samples a pixel, resolved into the image read back.
+    Msaa,
+    /// Dynamic rendering drawing 4 samples a pixel, resolved into the image read back.
+    DynamicMsaa,
+}
+
+impl Case {
+    fn msaa(self) -> bool {
+        matches!(self, Case::Msaa | Case::DynamicMsaa)
+    }
+
+    fn dynamic(self) -> bool {
+        matches!(self, Case::Dynamic | Case::DynamicMsaa)
+    }
 }
 
 struct Drawn {
@@ -75,7 +89,7 @@ fn draw_on(
     // after the queue is idle; every struct lives across its call.
     unsafe {
         let d = &dev.d;
-        let image = |format, side, layers, usage, flags| {
+        let image = |format, side, layers, usage, flags, samples| {
             let info = vk::ImageCreateInfo::default()
                 .flags(flags)
                 .image_type(vk::ImageType::TYPE_2D)
@@ -87,7 +101,7 @@ fn draw_on(
                 })
                 .mip_levels(1)
                 .array_layers(layers)
-                .samples(vk::SampleCountFlags::TYPE_1)
+                .samples(samples)
                 .tiling(vk::ImageTiling::OPTIMAL)
                 .usage(usage);
             let i = d.create_image(&info, None).expect("vkCreateImage");
@@ -130,7 +144,22 @@ fn draw_on(
                 | vk::ImageUsageFlags::TRANSFER_SRC
                 | vk::ImageUsageFlags::TRANSFER_DST,
             flags,
+            vk::SampleCountFlags::TYPE_1,
         );
+        // Multisampled: the pass draws 4 samples a pixel into an image of its own and resolves
+        // into `colour`, which is read back.
+        let samples = vk::SampleCountFlags::TYPE_4;
+        let ms = case.msaa().then(|| {
+            let (i, m) = image(
+                format,
+                SIDE,
+                layers,
+                vk::ImageUsageFlags::COLOR_ATTACHMENT,
+                vk::ImageCreateFlags::empty(),
+                samples,
+            );
+            (i, m, view(i, format, layers))
+        });
         let n = SIDE / texel;
         let (density, density_mem) = image(
             vk::Format::R8G8_UNORM,
@@ -138,11 +167,12 @@ fn draw_on(
             layers,
             vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT | vk::ImageUsageFlags::TRANSFER_DST,
             vk::ImageCreateFlags::empty(),
+            vk::SampleCountFlags::TYPE_1,
         );
         let colour_view = view(colour, format, layers);
         let density_view = view(density, vk::Format::R8G8_UNORM, layers);
         let mask = if case == Case::Multiview { 0b11 } else { 0 };
-        let pass = (case != Case::Dynamic).then(|| {
+        let pass = (!case.dynamic()).then(|| {
             // Multiview: lavapipe 22.3 draws a multiview pass's second view as cleared only
             // (tests/suite/vk/passes.rs), so the pass loads a pattern copied in before it, which
             // the double leaves coarse at the pass's end in every view as in the first.
@@ -154,14 +184,26 @@ fn draw_on(
             } else {
                 (vk::AttachmentLoadOp::CLEAR, vk::ImageLayout::UNDEFINED)
             };
-            let atts = [
+            let resolved = vk::AttachmentDescription2::default()
+                .format(format)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(load)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .initial_layout(initial)
+                .final_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL);
+            let drawn = if case.msaa() {
                 vk::AttachmentDescription2::default()
                     .format(format)
-                    .samples(vk::SampleCountFlags::TYPE_1)
-                    .load_op(load)
-                    .store_op(vk::AttachmentStoreOp::STORE)
-                    .initial_layout(initial)
-                    .final_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL),
+                    .samples(samples)
+                    .load_op(vk::AttachmentLoadOp::CLEAR)
+                    .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                    .initial_layout(vk::ImageLayout::UNDEFINED)
+                    .final_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            } else {
+                resolved
+            };
+            let atts = [
+                drawn,
                 vk::AttachmentDescription2::default()
                     .format(vk::Format::R8G8_UNORM)
                     .samples(vk::SampleCountFlags::TYPE_1)
@@ -169,14 +211,22 @@ fn draw_on(
                     .store_op(vk::AttachmentStoreOp::DONT_CARE)
                     .initial_layout(FDM_LAYOUT)
                     .final_layout(FDM_LAYOUT),
+                resolved,
             ];
             let colour_ref = [vk::AttachmentReference2::default()
                 .attachment(0)
                 .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-            let subpass = [vk::SubpassDescription2::default()
+            let resolve_ref = [vk::AttachmentReference2::default()
+                .attachment(2)
+                .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
+            let mut subpass = [vk::SubpassDescription2::default()
                 .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
                 .view_mask(mask)
                 .color_attachments(&colour_ref)];
+            if case.msaa() {
+                subpass[0] = subpass[0].resolve_attachments(&resolve_ref);
+            }
+            let count = if case.msaa() { 3 } else { 2 };
             let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
                 .fragment_density_map_attachment(vk::AttachmentReference {
                     attachment: 1,
@@ -204,14 +254,17 @@ fn draw_on(
                     .dst_access_mask(vk::AccessFlags::TRANSFER_READ),
             ];
             let info = vk::RenderPassCreateInfo2::default()
-                .attachments(&atts)
+                .attachments(&atts[..count])
                 .subpasses(&subpass)
                 .dependencies(&out)
                 .push_next(&mut fdm);
             d.create_render_pass2(&info, None).unwrap()
         });
         let framebuffer = pass.map(|p| {
-            let list = [colour_view, density_view];
+            let list: Vec<vk::ImageView> = match ms {
+                Some((_, _, v)) => vec![v, density_view, colour_view],
+                None => vec![colour_view, density_view],
+            };
             d.create_framebuffer(
                 &vk::FramebufferCreateInfo::default()
                     .render_pass(p)
@@ -235,7 +288,10 @@ fn draw_on(
             .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default(), None)
             .unwrap();
         let st = stages([vert, frag]);
-        let fixed = Fixed::new();
+        let mut fixed = Fixed::new();
+        if case.msaa() {
+            fixed.multisample = fixed.multisample.rasterization_samples(samples);
+        }
         let formats = [format];
         let mut rendering = vk::PipelineRenderingCreateInfo::default()
             .color_attachment_formats(&formats)
@@ -404,11 +460,12 @@ fn draw_on(
                 height: SIDE,
             },
         };
+        // One per attachment: colour (or multisampled), density map, resolve.
         let clear = [vk::ClearValue {
             color: vk::ClearColorValue {
                 float32: [0.0, 0.0, 0.0, 1.0],
             },
-        }];
+        }; 3];
         let draw_it = || {
             d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
             d.cmd_set_viewport(
@@ -458,12 +515,36 @@ fn draw_on(
                         vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
                     )],
                 );
-                let colour_att = [vk::RenderingAttachmentInfo::default()
+                let mut colour_att = [vk::RenderingAttachmentInfo::default()
                     .image_view(colour_view)
                     .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                     .load_op(vk::AttachmentLoadOp::CLEAR)
                     .store_op(vk::AttachmentStoreOp::STORE)
                     .clear_value(clear[0])];
+                if let Some((ms, _, v)) = ms {
+                    d.cmd_pipeline_barrier(
+                        cb,
+                        all,
+                        vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+                        vk::DependencyFlags::empty(),
+                        &[],
+                        &[],
+                        &[barrier(
+                            ms,
+                            layers,
+                            vk::ImageLayout::UNDEFINED,
+                            vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                            vk::AccessFlags::empty(),
+                            vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
+                        )],
+                    );
+                    colour_att[0] = colour_att[0]
+                        .image_view(v)
+                        .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                        .resolve_mode(vk::ResolveModeFlags::AVERAGE)
+                        .resolve_image_view(colour_view)
+                        .resolve_image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
+                }
                 let mut density_att = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
                     .image_view(density_view)
                     .image_layout(FDM_LAYOUT);
@@ -545,6 +626,11 @@ fn draw_on(
             d.destroy_render_pass(p, None);
         }
         d.destroy_image_view(colour_view, None);
+        if let Some((i, m, v)) = ms {
+            d.destroy_image_view(v, None);
+            d.destroy_image(i, None);
+            d.free_memory(m, None);
+        }
         d.destroy_image_view(density_view, None);
         for (i, m) in [(colour, colour_mem), (density, density_mem)] {
             d.destroy_image(i, None);
@@ -744,4 +830,16 @@ fn targets_recreated_a_thousand_times_with_reconstruction_on() {
     dev.destroy();
     assert_only_stage_false_positives();
     drop(vk);
+}
+
+/// A multisampled pass resolves into the image that is read: that image is reconstructed (the
+/// multisampled attachment itself is left alone), in a render pass and in dynamic rendering.
+#[test]
+fn a_subsampled_resolve_targets_coarse_blocks_are_reconstructed() {
+    check(Profile::Nvidia, Case::Msaa, vk::Format::R8G8B8A8_UNORM);
+    check(
+        Profile::Nvidia,
+        Case::DynamicMsaa,
+        vk::Format::B8G8R8A8_SRGB,
+    );
 }
