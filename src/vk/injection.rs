@@ -614,23 +614,26 @@ fn plan(
         else {
             return;
         };
-        *r.plan.lock() = Some(Plan {
-            image: vk::Image::from_raw(v.image),
-            base_layer: v.base_layer,
-            layers,
-            area,
-            layout,
-            kind,
-            rate_image,
-            rate_extent,
-            rate_base_layer: 0,
-            rate_layers: if rate_layers <= 1 {
-                1
-            } else {
-                rate_layers.min(layers)
+        registry::set_plan(
+            r,
+            Plan {
+                image: vk::Image::from_raw(v.image),
+                base_layer: v.base_layer,
+                layers,
+                area,
+                layout,
+                kind,
+                rate_image,
+                rate_extent,
+                rate_base_layer: 0,
+                rate_layers: if rate_layers <= 1 {
+                    1
+                } else {
+                    rate_layers.min(layers)
+                },
+                suspending,
             },
-            suspending,
-        });
+        );
     });
 }
 

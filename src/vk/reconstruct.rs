@@ -8,8 +8,9 @@
 //!
 //! Objects: the pipeline and layouts at device creation ([`device_created`]); scratch buffers at
 //! the first pass of a target size, kept with the device. Per end of a pass that reconstructs
-//! nothing: the command buffer's record (this thread's cache) and one uncontended lock of its
-//! own; no allocation and no process-wide lock.
+//! nothing: one atomic load while no command buffer of the process has a plan open
+//! ([`registry::OPEN_PLANS`]), else the command buffer's record (this thread's cache) and one
+//! uncontended lock of its own; no allocation and no process-wide lock.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -99,19 +100,18 @@ pub fn device_key_reused(k: crate::vk::base::ffi::Key) {
 /// `vkCmdEndRendering(2)`): where its begin planned a reconstruction and the end is not a
 /// suspending one, it is recorded now.
 pub fn ended(cb: vk::CommandBuffer) {
+    if registry::OPEN_PLANS.load(Ordering::Acquire) == 0 {
+        return;
+    }
     record_of(cb, |r| {
         let Some(rc) = r.reconstructor.as_deref() else {
             return;
         };
-        let plan = {
-            let mut p = r.plan.lock();
-            match *p {
-                Some(plan) if !plan.suspending => {
-                    *p = None;
-                    plan
-                }
-                _ => return,
-            }
+        if r.plan.lock().is_none_or(|p| p.suspending) {
+            return;
+        }
+        let Some(plan) = registry::take_plan(r) else {
+            return;
         };
         let bound = Some(*r.bound.lock()).filter(|b| !b.lost);
         // SAFETY: `cb` is recording outside a render pass (its instance just ended), on the
@@ -353,23 +353,26 @@ fn plan(
         return;
     };
     let layers = layers.min(t.layers).max(1);
-    *record.plan.lock() = Some(Plan {
-        image: t.image,
-        base_layer: t.base_layer,
-        layers,
-        area,
-        layout,
-        kind,
-        rate_image: sv.image,
-        rate_extent: sv.texels,
-        rate_base_layer: sv.base_layer,
-        rate_layers: if sv.layers <= 1 {
-            1
-        } else {
-            sv.layers.min(layers)
+    registry::set_plan(
+        record,
+        Plan {
+            image: t.image,
+            base_layer: t.base_layer,
+            layers,
+            area,
+            layout,
+            kind,
+            rate_image: sv.image,
+            rate_extent: sv.texels,
+            rate_base_layer: sv.base_layer,
+            rate_layers: if sv.layers <= 1 {
+                1
+            } else {
+                sv.layers.min(layers)
+            },
+            suspending,
         },
-        suspending,
-    });
+    );
 }
 
 /// `vkCmdBeginRenderPass(2)` on an emulating device: where the pass renders a reconstructed

@@ -548,6 +548,27 @@ pub static CONVERTERS: SharedRwLock<Vec<(Key, Arc<Converter>)>> = SharedRwLock::
 pub static RECONSTRUCTORS: SharedRwLock<Vec<(Key, Arc<Reconstructor>)>> =
     SharedRwLock::new(Vec::new());
 
+/// Plans noted in command buffers' records and not yet taken by their pass's end (or dropped by a
+/// new recording): while none is, the end of a pass costs one atomic load
+/// ([`crate::vk::reconstruct`]'s `ended`).
+pub static OPEN_PLANS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// Notes `plan` in a command buffer's record, in place of any open one.
+pub fn set_plan(record: &CbRecord, plan: Plan) {
+    if record.plan.lock().replace(plan).is_none() {
+        OPEN_PLANS.fetch_add(1, Ordering::AcqRel);
+    }
+}
+
+/// Takes a command buffer's open plan, if any.
+pub fn take_plan(record: &CbRecord) -> Option<Plan> {
+    let p = record.plan.lock().take();
+    if p.is_some() {
+        OPEN_PLANS.fetch_sub(1, Ordering::AcqRel);
+    }
+    p
+}
+
 /// The reconstructor of a device's dispatch key.
 pub fn reconstructor_by_key(k: Key) -> Option<Arc<Reconstructor>> {
     RECONSTRUCTORS
