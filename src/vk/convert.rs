@@ -175,6 +175,26 @@ unsafe fn graphics_queues_compute(
     })
 }
 
+/// Why the layer cannot record compute dispatches into a device's command buffers and give the
+/// application its compute bindings back after them, or `None` where it can (the conversion's
+/// and the reconstruction's condition).
+///
+/// # Safety
+/// As [`device_created`].
+pub unsafe fn dispatch_blocked(
+    inst: &registry::Instance,
+    physical: vk::PhysicalDevice,
+    ci: &vk::DeviceCreateInfo<'_>,
+    api_version: u32,
+) -> Option<String> {
+    // SAFETY: as the caller promised.
+    unsafe { untracked_binds(ci, api_version) }.or_else(|| {
+        // SAFETY: as the caller promised.
+        (!unsafe { graphics_queues_compute(inst, physical, ci) })
+            .then(|| "a graphics queue family without compute".to_owned())
+    })
+}
+
 /// Sets up conversion on a device just recorded in the registry, or logs why not (its
 /// application-written maps then render at full rate); whether the device converts.
 ///
@@ -194,12 +214,7 @@ pub unsafe fn device_created(
         return false;
     };
     // SAFETY: as the caller promised.
-    let why = unsafe { untracked_binds(ci, dev.api_version) }.or_else(|| {
-        // SAFETY: as the caller promised.
-        (!unsafe { graphics_queues_compute(inst, physical, ci) })
-            .then(|| "a graphics queue family without compute".to_owned())
-    });
-    if let Some(why) = why {
+    if let Some(why) = unsafe { dispatch_blocked(inst, physical, ci, dev.api_version) } {
         tracing::warn!(
             device = raw(handle),
             why = why.as_str(),

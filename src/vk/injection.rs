@@ -9,7 +9,8 @@ use ash::vk::Handle as _;
 
 use crate::vk::base::chain::{self, ChainCopy};
 use crate::vk::base::ffi::{raw, slice};
-use crate::vk::registry::Device;
+use crate::vk::own::reconstructor::Plan;
+use crate::vk::registry::{self, Device};
 use crate::vk::translate::formats::{SHADOW_FORMAT, SHADOW_LAYOUT, SHADOW_USAGE};
 use crate::vk::translate::render_pass::{add_shading_rate, rate_store_op, Pass2};
 
@@ -56,6 +57,17 @@ pub unsafe fn create_injected(
         // SAFETY: the application's pass, its arrays alive across the call.
         return unsafe { create2(dev.handle, &info, alloc, out) };
     }
+    let (colour_layout, colour_kept) = first.and_then(|a| pass.attachments.get(a as usize)).map_or(
+        (vk::ImageLayout::UNDEFINED, false),
+        |a| {
+            let stored = !matches!(
+                a.store_op,
+                vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
+            );
+            let single = a.samples == vk::SampleCountFlags::TYPE_1;
+            (a.final_layout, stored && single)
+        },
+    );
     let rate = pass.attachments.len() as u32;
     pass.attachments.push(vk::AttachmentDescription2::default());
     add_shading_rate(&mut pass, rate, inj.texel(), rate_store_op(dev.api_version));
@@ -91,6 +103,8 @@ pub unsafe fn create_injected(
                 rate,
                 colour: first,
                 view_mask,
+                colour_layout,
+                colour_kept,
             },
         );
         tracing::debug!(
@@ -125,6 +139,18 @@ pub unsafe fn create_injected_framebuffer(
     let extent = [ci.width, ci.height];
     let texels = inj.texels_for(extent);
     let mut copy = *ci;
+    let colour_view = if ci.flags.contains(vk::FramebufferCreateFlags::IMAGELESS) {
+        None
+    } else {
+        // SAFETY: the caller's array.
+        let views = unsafe { slice(ci.p_attachments, ci.attachment_count) };
+        p.colour.and_then(|c| views.get(c as usize)).copied()
+    };
+    let fb_layers = if p.view_mask != 0 {
+        crate::vk::own::injector::rendered_layers(p.view_mask, 0).unwrap_or(1)
+    } else {
+        ci.layers.max(1)
+    };
     let record = |eye: Option<([u32; 2], fovea_model::inject::Views)>, imageless: bool| {
         // SAFETY: just created.
         let fb = unsafe { *out };
@@ -135,6 +161,8 @@ pub unsafe fn create_injected_framebuffer(
                 extent,
                 imageless,
                 eye,
+                colour: colour_view,
+                layers: fb_layers,
             },
         );
         tracing::debug!(
@@ -313,6 +341,7 @@ pub const INLINE_VIEWS: usize = 16;
 pub unsafe fn begin_injected_pass(
     inj: &crate::vk::own::injector::Injector,
     own: &crate::vk::own::calls::Own,
+    cb: vk::CommandBuffer,
     begin: *const vk::RenderPassBeginInfo<'_>,
     f: impl FnOnce(*const vk::RenderPassBeginInfo<'_>),
 ) {
@@ -343,6 +372,9 @@ pub unsafe fn begin_injected_pass(
     });
     if class < 3 {
         crate::bridge::inject::count_pass(class == 2);
+        if class == 2 && inj.reconstructs() {
+            plan_render_pass(inj, cb, b);
+        }
         return f(begin);
     }
     let ty = vk::StructureType::RENDER_PASS_ATTACHMENT_BEGIN_INFO;
@@ -507,6 +539,9 @@ pub unsafe fn begin_injected(
         (map != 0).then(|| vk::ImageView::from_raw(map))
     });
     crate::bridge::inject::count_pass(map.is_some());
+    if inj.reconstructs() {
+        plan_rendering(inj, cb, ri, colour, map);
+    }
     let Some(map) = map else {
         // SAFETY: the next layer's function, with the caller's arguments.
         return unsafe { next(cb, info) };
@@ -543,4 +578,141 @@ pub unsafe fn begin_injected(
             },
         )
     }
+}
+
+/// Notes in `cb`'s record what the end of the eye pass just begun with `colour` (a view the
+/// injector knows, rendering `layers` of it) and the map `map` reconstructs
+/// (docs/reconstruction.md): only where the view's image is reconstructed (decided when the view
+/// was made), the pass keeps its colour (`kept`) and the device has a reconstructor.
+#[allow(clippy::too_many_arguments)]
+fn plan(
+    inj: &crate::vk::own::injector::Injector,
+    cb: vk::CommandBuffer,
+    colour: vk::ImageView,
+    map: vk::ImageView,
+    layers: u32,
+    area: vk::Rect2D,
+    layout: vk::ImageLayout,
+    kept: bool,
+    suspending: bool,
+) {
+    let Some(v) = inj.view(colour).filter(|v| v.reconstruct) else {
+        return;
+    };
+    if !kept {
+        return;
+    }
+    let Some((rate_image, rate_extent, rate_layers)) = inj.map_image(map) else {
+        return;
+    };
+    let layers = layers.min(v.layers).max(1);
+    registry::record_of(cb, |r| {
+        let Some(kind) = r
+            .reconstructor
+            .as_deref()
+            .and_then(|rc| rc.handles(v.format))
+        else {
+            return;
+        };
+        registry::set_plan(
+            r,
+            Plan {
+                image: vk::Image::from_raw(v.image),
+                base_layer: v.base_layer,
+                layers,
+                area,
+                layout,
+                kind,
+                rate_image,
+                rate_extent,
+                rate_base_layer: 0,
+                rate_layers: if rate_layers <= 1 {
+                    1
+                } else {
+                    rate_layers.min(layers)
+                },
+                suspending,
+            },
+        );
+    });
+}
+
+/// [`plan`] for a render pass begun on a framebuffer with an eye map of its own.
+fn plan_render_pass(
+    inj: &crate::vk::own::injector::Injector,
+    cb: vk::CommandBuffer,
+    b: &vk::RenderPassBeginInfo<'_>,
+) {
+    let Some(fb) = inj.framebuffer(b.framebuffer) else {
+        return;
+    };
+    let (Some(colour), Some((extent, views))) = (fb.colour, fb.eye) else {
+        return;
+    };
+    let Some(map) = inj.map_view(extent, views) else {
+        return;
+    };
+    plan(
+        inj,
+        cb,
+        colour,
+        map,
+        fb.layers,
+        b.render_area,
+        fb.pass.colour_layout,
+        fb.pass.colour_kept,
+        false,
+    );
+}
+
+/// [`plan`] for a dynamic rendering whose first colour attachment got an eye map; a resuming
+/// rendering keeps the plan of the instance it continues.
+fn plan_rendering(
+    inj: &crate::vk::own::injector::Injector,
+    cb: vk::CommandBuffer,
+    ri: &vk::RenderingInfo<'_>,
+    colour: Option<vk::ImageView>,
+    map: Option<vk::ImageView>,
+) {
+    let suspending = ri.flags.contains(vk::RenderingFlags::SUSPENDING);
+    if ri.flags.contains(vk::RenderingFlags::RESUMING) {
+        registry::record_of(cb, |r| {
+            if let Some(p) = r.plan.lock().as_mut() {
+                p.suspending = suspending;
+            }
+        });
+        return;
+    }
+    let (Some(colour), Some(map)) = (colour, map) else {
+        return;
+    };
+    // SAFETY: the caller's colour attachments, `colorAttachmentCount` of them.
+    let Some(a) = (unsafe { slice(ri.p_color_attachments, ri.color_attachment_count) }).first()
+    else {
+        return;
+    };
+    // A multisampled attachment resolves into the view that is read, which the resolve writes
+    // whatever the attachment's store operation (docs/reconstruction.md).
+    let (target, layout, kept) = if a.resolve_mode != vk::ResolveModeFlags::NONE {
+        (a.resolve_image_view, a.resolve_image_layout, true)
+    } else {
+        let stored = !matches!(
+            a.store_op,
+            vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
+        );
+        (colour, a.image_layout, stored)
+    };
+    let layers =
+        crate::vk::own::injector::rendered_layers(ri.view_mask, ri.layer_count).unwrap_or(1);
+    plan(
+        inj,
+        cb,
+        target,
+        map,
+        layers,
+        ri.render_area,
+        layout,
+        kept,
+        suspending,
+    );
 }

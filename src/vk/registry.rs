@@ -24,6 +24,7 @@ use crate::vk::base::next::{DeviceNext, InstanceNext};
 use crate::vk::own::bindings::Bound;
 use crate::vk::own::calls::Own;
 use crate::vk::own::converter::{Converter, Slot};
+use crate::vk::own::reconstructor::{Plan, Reconstructor};
 use crate::vk::own::shadows::{ShadowImage, ShadowView};
 
 /// What the layer does for one physical device, decided once from what the driver offers.
@@ -514,6 +515,42 @@ pub fn pool_created(pool: u64, family: u32) {
 /// [`crate::common::lock::Rank`]'s order, held for a scan and an `Arc` clone only.
 pub static CONVERTERS: SharedRwLock<Vec<(Key, Arc<Converter>)>> = SharedRwLock::new(Vec::new());
 
+/// Each reconstructing device's [`Reconstructor`] (docs/reconstruction.md), by dispatch key; a
+/// leaf lock like [`OWNS`], taken at device creation and destruction and at command-buffer
+/// allocation, never while recording.
+pub static RECONSTRUCTORS: SharedRwLock<Vec<(Key, Arc<Reconstructor>)>> =
+    SharedRwLock::new(Vec::new());
+
+/// Plans noted in command buffers' records and not yet taken by their pass's end (or dropped by a
+/// new recording): while none is, the end of a pass costs one atomic load
+/// ([`crate::vk::reconstruct`]'s `ended`).
+pub static OPEN_PLANS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// Notes `plan` in a command buffer's record, in place of any open one.
+pub fn set_plan(record: &CbRecord, plan: Plan) {
+    if record.plan.lock().replace(plan).is_none() {
+        OPEN_PLANS.fetch_add(1, Ordering::AcqRel);
+    }
+}
+
+/// Takes a command buffer's open plan, if any.
+pub fn take_plan(record: &CbRecord) -> Option<Plan> {
+    let p = record.plan.lock().take();
+    if p.is_some() {
+        OPEN_PLANS.fetch_sub(1, Ordering::AcqRel);
+    }
+    p
+}
+
+/// The reconstructor of a device's dispatch key.
+pub fn reconstructor_by_key(k: Key) -> Option<Arc<Reconstructor>> {
+    RECONSTRUCTORS
+        .read()
+        .iter()
+        .find(|(key, _)| *key == k)
+        .map(|(_, c)| Arc::clone(c))
+}
+
 /// The converter of a device's dispatch key.
 pub fn converter_by_key(k: Key) -> Option<Arc<Converter>> {
     CONVERTERS
@@ -559,6 +596,12 @@ pub struct CbRecord {
     /// The device's converter (`None` where it converts nothing), found once at allocation, so
     /// that a pass begin reaches it without the process-wide [`CONVERTERS`].
     pub converter: Option<Arc<Converter>>,
+    /// The device's reconstructor (`None` where it reconstructs nothing), found once at
+    /// allocation like the converter.
+    pub reconstructor: Option<Arc<Reconstructor>>,
+    /// What the end of the render pass instance open in this command buffer reconstructs
+    /// (docs/reconstruction.md), set where it begins.
+    pub plan: parking_lot::Mutex<Option<Plan>>,
 }
 
 type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<AddressHasher>>;
@@ -699,6 +742,8 @@ pub fn remember_command_buffer(cb: vk::CommandBuffer, device: Key, pool: u64, se
         slots: parking_lot::Mutex::new(Vec::new()),
         swept: std::sync::atomic::AtomicU64::new(0),
         converter: converter_by_key(device),
+        reconstructor: reconstructor_by_key(device),
+        plan: parking_lot::Mutex::new(None),
     });
     let old = {
         let mut map = CB_RECORDS.lock();

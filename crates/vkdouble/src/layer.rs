@@ -1495,7 +1495,10 @@ unsafe extern "system" fn create_image(
                 let mut copy = *ci;
                 copy.usage |= vk::ImageUsageFlags::TRANSFER_SRC | vk::ImageUsageFlags::TRANSFER_DST;
                 let r = next(device, &copy, alloc, out);
-                if r == vk::Result::SUCCESS && ci.image_type == vk::ImageType::TYPE_2D {
+                if r == vk::Result::SUCCESS
+                    && ci.image_type == vk::ImageType::TYPE_2D
+                    && ci.samples == vk::SampleCountFlags::TYPE_1
+                {
                     lock(&d.state).colour_images.insert(
                         (*out).as_raw(),
                         ColourTarget {
@@ -2299,9 +2302,16 @@ unsafe extern "system" fn cmd_begin_rendering(
             let a = ri.render_area;
             let colours: Vec<ColourTarget> = {
                 let st = lock(&d.state);
-                slice(ri.p_color_attachments, ri.color_attachment_count)
+                let attachments = slice(ri.p_color_attachments, ri.color_attachment_count);
+                let resolves = attachments
                     .iter()
-                    .filter_map(|c| st.colour_views.get(&c.image_view.as_raw()).copied())
+                    .filter(|c| c.resolve_mode != vk::ResolveModeFlags::NONE)
+                    .map(|c| c.resolve_image_view);
+                attachments
+                    .iter()
+                    .map(|c| c.image_view)
+                    .chain(resolves)
+                    .filter_map(|v| st.colour_views.get(&v.as_raw()).copied())
                     .collect()
             };
             open_pass(
@@ -3742,14 +3752,25 @@ fn pixel_bytes(format: vk::Format) -> Option<u64> {
     }
 }
 
-/// The colour attachment indices of a subpass.
+/// The colour and resolve attachment indices of a subpass: a GPU's coarse fragments leave blocks
+/// in a multisampled attachment's resolve as in a single-sample attachment (every sample of a
+/// fragment's pixels gets its colour, so the pixels resolve alike). Multisampled images are not
+/// coarsened themselves (the double does not track them as colour targets, [`ColourTarget`]).
 ///
 /// # Safety
 /// `s` must be valid.
 unsafe fn colors_of(s: &vk::SubpassDescription2<'_>) -> Vec<u32> {
     // SAFETY: the caller's promise.
+    let resolves = if s.p_resolve_attachments.is_null() {
+        &[][..]
+    } else {
+        // SAFETY: as above: one per colour attachment.
+        unsafe { slice(s.p_resolve_attachments, s.color_attachment_count) }
+    };
+    // SAFETY: the caller's promise.
     unsafe { slice(s.p_color_attachments, s.color_attachment_count) }
         .iter()
+        .chain(resolves)
         .map(|r| r.attachment)
         .filter(|&a| a != vk::ATTACHMENT_UNUSED)
         .collect()

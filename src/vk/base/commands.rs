@@ -161,10 +161,18 @@ macro_rules! command_list {
                     pass::cmd_begin_rendering_khr, When::Injected;
                 // Density-map offsets arrive with the end of a pass; their structs never reach the
                 // driver (docs/vulkan-layer.md#density-map-offsets).
+                // Coarse blocks are reconstructed after the pass instance ends
+                // (docs/reconstruction.md).
+                c"vkCmdEndRenderPass" => cmd_end_render_pass: PFN_vkCmdEndRenderPass =
+                    pass::cmd_end_render_pass, When::Injected;
+                c"vkCmdEndRendering" => cmd_end_rendering: PFN_vkCmdEndRendering =
+                    pass::cmd_end_rendering, When::Injected;
+                c"vkCmdEndRenderingKHR" => cmd_end_rendering_khr: PFN_vkCmdEndRendering =
+                    pass::cmd_end_rendering_khr, When::Injected;
                 c"vkCmdEndRenderPass2" => cmd_end_render_pass2: PFN_vkCmdEndRenderPass2 =
-                    pass::cmd_end_render_pass2, When::Emulated;
+                    pass::cmd_end_render_pass2, When::Injected;
                 c"vkCmdEndRenderPass2KHR" => cmd_end_render_pass2_khr: PFN_vkCmdEndRenderPass2 =
-                    pass::cmd_end_render_pass2_khr, When::Emulated;
+                    pass::cmd_end_render_pass2_khr, When::Injected;
                 c"vkCmdNextSubpass2" => cmd_next_subpass2: PFN_vkCmdNextSubpass2 =
                     pass::cmd_next_subpass2, When::Emulated;
                 c"vkCmdNextSubpass2KHR" => cmd_next_subpass2_khr: PFN_vkCmdNextSubpass2 =
@@ -172,39 +180,40 @@ macro_rules! command_list {
                 c"vkCmdEndRendering2EXT" => cmd_end_rendering2_ext: PFN_vkCmdEndRendering2KHR =
                     pass::cmd_end_rendering2_ext, When::Provided;
                 c"vkCmdEndRendering2KHR" => cmd_end_rendering2_khr: PFN_vkCmdEndRendering2KHR =
-                    pass::cmd_end_rendering2_khr, When::Emulated;
+                    pass::cmd_end_rendering2_khr, When::Injected;
                 // The application's own rates meet the injected attachment.
                 c"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate:
                     PFN_vkCmdSetFragmentShadingRateKHR = pipeline::cmd_set_fragment_shading_rate,
                     When::Injecting;
-                // Density maps the application writes are converted at pass begin; the application's
-                // compute bindings are recorded so that they can be given back after the conversion.
+                // Density maps the application writes are converted at pass begin, and coarse blocks
+                // reconstructed at pass end (docs/reconstruction.md); the application's compute
+                // bindings are recorded so that they can be given back after either dispatch.
                 c"vkBeginCommandBuffer" => begin_command_buffer: PFN_vkBeginCommandBuffer =
-                    record::begin_command_buffer, When::Emulated;
+                    record::begin_command_buffer, When::Injected;
                 c"vkAllocateCommandBuffers" => allocate_command_buffers: PFN_vkAllocateCommandBuffers =
-                    record::allocate_command_buffers, When::Emulated;
+                    record::allocate_command_buffers, When::Injected;
                 c"vkFreeCommandBuffers" => free_command_buffers: PFN_vkFreeCommandBuffers =
-                    record::free_command_buffers, When::Emulated;
+                    record::free_command_buffers, When::Injected;
                 c"vkDestroyCommandPool" => destroy_command_pool: PFN_vkDestroyCommandPool =
-                    record::destroy_command_pool, When::Emulated;
+                    record::destroy_command_pool, When::Injected;
                 // Conversions run outside the application's conditional rendering.
                 c"vkCmdBeginConditionalRenderingEXT" => cmd_begin_conditional_rendering_ext:
                     PFN_vkCmdBeginConditionalRenderingEXT = record::cmd_begin_conditional_rendering,
-                    When::Emulated;
+                    When::Injected;
                 c"vkCmdEndConditionalRenderingEXT" => cmd_end_conditional_rendering_ext:
                     PFN_vkCmdEndConditionalRenderingEXT = record::cmd_end_conditional_rendering,
-                    When::Emulated;
+                    When::Injected;
                 c"vkCmdBindPipeline" => cmd_bind_pipeline: PFN_vkCmdBindPipeline =
-                    record::cmd_bind_pipeline, When::Emulated;
+                    record::cmd_bind_pipeline, When::Injected;
                 c"vkCmdBindDescriptorSets" => cmd_bind_descriptor_sets: PFN_vkCmdBindDescriptorSets =
-                    record::cmd_bind_descriptor_sets, When::Emulated;
+                    record::cmd_bind_descriptor_sets, When::Injected;
                 c"vkCmdPushConstants" => cmd_push_constants: PFN_vkCmdPushConstants =
-                    record::cmd_push_constants, When::Emulated;
+                    record::cmd_push_constants, When::Injected;
                 c"vkCmdPushDescriptorSetKHR" => cmd_push_descriptor_set_khr: PFN_vkCmdPushDescriptorSetKHR =
-                    record::cmd_push_descriptor_set_khr, When::Emulated;
+                    record::cmd_push_descriptor_set_khr, When::Injected;
                 c"vkCmdPushDescriptorSetWithTemplateKHR" => cmd_push_descriptor_set_with_template_khr:
                     PFN_vkCmdPushDescriptorSetWithTemplateKHR =
-                    record::cmd_push_descriptor_set_with_template_khr, When::Emulated;
+                    record::cmd_push_descriptor_set_with_template_khr, When::Injected;
             }
         }
     };

@@ -28,7 +28,7 @@ use crate::vk::base::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
 use crate::vk::base::next::DeviceNext;
 use crate::vk::own::calls::{self, Own};
 use crate::vk::registry::{self, Decision, Instance};
-use crate::vk::{convert, decide, emulation};
+use crate::vk::{convert, decide, emulation, reconstruct};
 
 /// The loader's `VK_LAYER_LINK_INFO` struct in a device create info.
 ///
@@ -788,6 +788,7 @@ unsafe fn create_device_impl(
                  was destroyed first): what the layer kept for the old one is forgotten"
             );
             convert::device_key_reused(k);
+            reconstruct::device_key_reused(k);
         }
         // `vkCmdEndRendering2EXT`, which the driver does not have, goes down as the plain end:
         // the core name from Vulkan 1.3, `VK_KHR_dynamic_rendering`'s below (a driver returns no
@@ -808,6 +809,7 @@ unsafe fn create_device_impl(
             None
         };
         let emulated = fdm.is_some();
+        let injects = inject.is_some();
         registry::add_device(registry::Device {
             handle,
             instance: key(inst.handle).unwrap_or(0),
@@ -820,6 +822,10 @@ unsafe fn create_device_impl(
             attachments: registry::Attachments::new(own),
         });
         let converts = convert::device_created(&inst, physical, ci, handle);
+        if injects || emulated {
+            let why = convert::dispatch_blocked(&inst, physical, ci, api_version);
+            reconstruct::device_created(handle, why);
+        }
         // Offsets reach density maps where the driver got the application's request as it was
         // (so it has the extension), or where the layer emulates them and converts: an emulated
         // map takes offsets only through its conversion in front of each pass
@@ -852,6 +858,7 @@ pub unsafe extern "system" fn destroy_device(
         // for the layer's clears and uploads in flight before the maps go).
         unsafe {
             convert::device_destroyed(device);
+            reconstruct::device_destroyed(device);
             emulation::destroy_all(&dev);
             if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
                 inj.destroy(own);

@@ -10,6 +10,7 @@ use ash::vk::Handle as _;
 use crate::bridge;
 use crate::vk::base::ffi::{guard, raw};
 use crate::vk::own::shadows::{shadow_view_info, ShadowView};
+use crate::vk::reconstruct;
 use crate::vk::registry::{self, Device};
 use crate::vk::translate::formats::{needs_translation, translate_image};
 use crate::vk::translate::rate_state::view_flags;
@@ -58,6 +59,8 @@ pub unsafe extern "system" fn create_image_view(
             }
             // SAFETY: the caller's create info, read only.
             let ci = unsafe { &*info };
+            // SAFETY: the view was just created on the live device.
+            unsafe { reconstruct::view_created(&dev, *out, ci) };
             if let Some(inj) = &dev.inject {
                 // SAFETY: the view was just created.
                 inj.view_created(unsafe { *out }, ci);
@@ -75,12 +78,21 @@ pub unsafe extern "system" fn create_image_view(
             // SAFETY: the view was just created.
             let app_view = unsafe { *out };
             // SAFETY: the layer's own view of its own live image.
-            match unsafe { own.fns.create_image_view(&shadow_view_info(&s, ci), None) } {
+            let shadow_info = shadow_view_info(&s, ci);
+            // SAFETY: as above.
+            match unsafe { own.fns.create_image_view(&shadow_info, None) } {
                 Ok(view) => {
-                    dev.attachments
-                        .views
-                        .lock()
-                        .insert(app_view.as_raw(), ShadowView { view });
+                    let r = shadow_info.subresource_range;
+                    dev.attachments.views.lock().insert(
+                        app_view.as_raw(),
+                        ShadowView {
+                            view,
+                            image: s.image,
+                            texels: [s.extent.width, s.extent.height],
+                            base_layer: r.base_array_layer,
+                            layers: r.layer_count,
+                        },
+                    );
                     // SAFETY: the device is live.
                     unsafe { convert::view_changed(&dev, app_view, Some(ci.image)) };
                 }
@@ -118,6 +130,8 @@ pub unsafe extern "system" fn destroy_image_view(
         if let Some(inj) = &dev.inject {
             inj.view_destroyed(view);
         }
+        // SAFETY: the device is live.
+        unsafe { reconstruct::view_destroyed(&dev, view) };
         let shadow = dev.attachments.views.lock().remove(&view.as_raw());
         // SAFETY: the device is live.
         unsafe { convert::view_changed(&dev, view, None) };
@@ -152,6 +166,8 @@ pub unsafe extern "system" fn destroy_image(
         if let Some(inj) = &dev.inject {
             inj.image_destroyed(image);
         }
+        // SAFETY: the device is live.
+        unsafe { reconstruct::image_destroyed(&dev, image) };
         let shadow = dev.attachments.images.lock().remove(&image.as_raw());
         if let Some(s) = shadow {
             bridge::set_shadow(image, None);
@@ -301,6 +317,13 @@ pub unsafe extern "system" fn create_image(
             }
             // SAFETY: the caller's create info, read only.
             let mut copy = unsafe { *info };
+            // An application's subsampled colour image gets the copies' usage its
+            // reconstruction needs (docs/reconstruction.md).
+            // SAFETY: as above.
+            let subsampled = unsafe { reconstruct::subsampled_usage(&dev, &copy) };
+            if let Some(usage) = subsampled {
+                copy.usage = usage;
+            }
             if !needs_translation(copy.usage, copy.flags) {
                 // SAFETY: as above.
                 return unsafe { next(device, info, alloc, out) };
@@ -329,6 +352,10 @@ pub unsafe extern "system" fn create_image(
             let r = unsafe { next(device, &copy, alloc, out) };
             // SAFETY: the caller's create info, read only.
             let app = unsafe { &*info };
+            if r == vk::Result::SUCCESS && !out.is_null() && subsampled.is_some() {
+                // SAFETY: the image was just created on the live device.
+                unsafe { reconstruct::image_created(&dev, *out, app) };
+            }
             if r == vk::Result::SUCCESS
                 && !out.is_null()
                 && app

@@ -35,7 +35,7 @@ use crate::vk::translate::render_pass::{
     shadow_attachment_info, v2_names_density, Pass2,
 };
 use crate::vk::translate::render_pass_v1::{v1_names_density, v1_to_v2};
-use crate::vk::{convert, emulation, injection};
+use crate::vk::{convert, emulation, injection, reconstruct};
 
 fn texel_of(dev: &Device) -> Option<vk::Extent2D> {
     dev.fdm.as_ref().map(|f| vk::Extent2D {
@@ -137,6 +137,7 @@ unsafe fn create_rewritten(
             .insert(handle.as_raw(), density);
         // SAFETY: the device is live.
         unsafe { convert::pass_changed(dev, handle, layouts) };
+        reconstruct::pass_created(dev, handle, &pass, density);
         tracing::debug!(
             render_pass = raw(handle),
             density,
@@ -379,6 +380,8 @@ pub unsafe extern "system" fn destroy_render_pass(
         }
         // SAFETY: the device is live.
         unsafe { convert::pass_changed(&dev, pass, None) };
+        // SAFETY: the device is live.
+        unsafe { reconstruct::pass_destroyed(&dev, pass) };
         if let Some(next) = dev.next.destroy_render_pass {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, pass, alloc) };
@@ -494,6 +497,8 @@ pub unsafe extern "system" fn create_framebuffer(
             if r == vk::Result::SUCCESS && !out.is_null() {
                 // SAFETY: the framebuffer was just created on the live device.
                 unsafe { convert::framebuffer_changed(&dev, *out, app_view) };
+                // SAFETY: as above, from the application's create info.
+                unsafe { reconstruct::framebuffer_created(&dev, *out, ci) };
             }
             r
         },
@@ -517,6 +522,8 @@ pub unsafe extern "system" fn destroy_framebuffer(
         if let Some(inj) = &dev.inject {
             inj.framebuffer_destroyed(fb);
         }
+        // SAFETY: the device is live.
+        unsafe { reconstruct::framebuffer_destroyed(&dev, fb) };
         if let Some(next) = dev.next.destroy_framebuffer {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, fb, alloc) };
@@ -534,12 +541,13 @@ pub unsafe extern "system" fn destroy_framebuffer(
 /// `begin` must be NULL or valid.
 unsafe fn begin_pass(
     dev: &Device,
+    cb: vk::CommandBuffer,
     begin: *const vk::RenderPassBeginInfo<'_>,
     f: impl FnOnce(*const vk::RenderPassBeginInfo<'_>),
 ) {
     if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
         // SAFETY: as the caller promised; `own` is the device's.
-        return unsafe { injection::begin_injected_pass(inj, own, begin, f) };
+        return unsafe { injection::begin_injected_pass(inj, own, cb, begin, f) };
     }
     // SAFETY: as the caller promised.
     unsafe { emulation::with_swapped_begin(dev, begin, f) }
@@ -557,9 +565,11 @@ pub unsafe extern "system" fn cmd_begin_render_pass(
     let body = |dev: &Device, next: vk::PFN_vkCmdBeginRenderPass| {
         // SAFETY: as the caller promised; recorded before the pass begins.
         unsafe { convert::before_render_pass(dev, cb, begin) };
+        // SAFETY: as the caller promised.
+        unsafe { reconstruct::begin_render_pass(dev, cb, begin) };
         // SAFETY: the next layer's function, with the caller's arguments or a copy that lives
         // across the call.
-        unsafe { begin_pass(dev, begin, |b| next(cb, b, contents)) }
+        unsafe { begin_pass(dev, cb, begin, |b| next(cb, b, contents)) }
     };
     // SAFETY: as the caller promised.
     unsafe {
@@ -584,8 +594,10 @@ unsafe fn cmd_begin_render_pass2_with(
     let body = |dev: &Device, next: vk::PFN_vkCmdBeginRenderPass2| {
         // SAFETY: as the caller promised; recorded before the pass begins.
         unsafe { convert::before_render_pass(dev, cb, begin) };
+        // SAFETY: as the caller promised.
+        unsafe { reconstruct::begin_render_pass(dev, cb, begin) };
         // SAFETY: as in cmd_begin_render_pass.
-        unsafe { begin_pass(dev, begin, |b| next(cb, b, subpass)) }
+        unsafe { begin_pass(dev, cb, begin, |b| next(cb, b, subpass)) }
     };
     // SAFETY: as the caller promised.
     unsafe { with_next(which, cb, next, body) }
@@ -637,6 +649,10 @@ unsafe fn cmd_begin_rendering_with(
         let shadow = (view != vk::ImageView::null())
             .then(|| dev.attachments.shadow_view(view))
             .flatten();
+        if shadow.is_some() {
+            // SAFETY: the caller's rendering info.
+            unsafe { reconstruct::begin_rendering(dev, cb, ri, view) };
+        }
         // The edited chain is built in per-thread scratch storage: no heap allocation per
         // command (docs/ARCHITECTURE.md, "Nothing per frame that can be done at creation").
         // SAFETY: the caller's chain, read only.
@@ -759,7 +775,9 @@ unsafe fn cmd_end_render_pass2_with(
         let Some(e) = (unsafe { end.as_ref() }).filter(|e| !e.p_next.is_null()) else {
             convert::ended(cb, &[]);
             // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { down(cb, end) };
+            unsafe { down(cb, end) };
+            reconstruct::ended(cb);
+            return;
         };
         // SAFETY: the caller's chain, read only; the offsets live across the call.
         let offsets = unsafe { offsets_in(e.p_next) };
@@ -772,6 +790,7 @@ unsafe fn cmd_end_render_pass2_with(
                 down(cb, &copy)
             })
         }
+        reconstruct::ended(cb);
     };
     // SAFETY: as the caller promised.
     unsafe { with_next(which, cb, next, body) }
@@ -782,6 +801,51 @@ hook_and_khr_alias! {
     cmd_end_render_pass2, cmd_end_render_pass2_khr =
         cmd_end_render_pass2_with("vkCmdEndRenderPass2")
     (cb: vk::CommandBuffer, end: *const vk::SubpassEndInfo<'_>)
+}
+
+/// `vkCmdEndRenderPass`: the end goes down, then the reconstruction its begin planned
+/// ([`reconstruct::ended`], docs/reconstruction.md).
+///
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+pub unsafe extern "system" fn cmd_end_render_pass(cb: vk::CommandBuffer) {
+    let body = |_: &Device, down: vk::PFN_vkCmdEndRenderPass| {
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { down(cb) };
+        reconstruct::ended(cb);
+    };
+    // SAFETY: as the caller promised.
+    unsafe {
+        with_next(
+            "vkCmdEndRenderPass",
+            cb,
+            |d| d.next.cmd_end_render_pass,
+            body,
+        )
+    }
+}
+
+/// # Safety
+/// The caller's arguments, valid as the command requires.
+unsafe fn cmd_end_rendering_with(
+    which: &'static str,
+    next: fn(&Device) -> Option<vk::PFN_vkCmdEndRendering>,
+    cb: vk::CommandBuffer,
+) {
+    let body = |_: &Device, down: vk::PFN_vkCmdEndRendering| {
+        // SAFETY: the next layer's function, with the caller's arguments.
+        unsafe { down(cb) };
+        reconstruct::ended(cb);
+    };
+    // SAFETY: as the caller promised.
+    unsafe { with_next(which, cb, next, body) }
+}
+
+hook_and_khr_alias! {
+    /// `vkCmdEndRendering`: as [`cmd_end_render_pass`]; a suspending end reconstructs nothing,
+    /// the end after the instance's last resumption does.
+    cmd_end_rendering, cmd_end_rendering_khr = cmd_end_rendering_with("vkCmdEndRendering")
+    (cb: vk::CommandBuffer)
 }
 
 /// `vkCmdNextSubpass2(KHR)`: offsets at the end of a subpass other than the last are ignored
@@ -848,6 +912,7 @@ unsafe fn cmd_end_rendering2_with(
             if let Some(down) = own(dev) {
                 // SAFETY: the next layer's function, with the caller's arguments.
                 unsafe { down(cb, info) };
+                reconstruct::ended(cb);
             }
             return;
         }
@@ -858,22 +923,26 @@ unsafe fn cmd_end_rendering2_with(
         if let Some(down) = dev.next.cmd_end_rendering2_khr {
             if next.is_null() {
                 // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { down(cb, info) };
+                unsafe { down(cb, info) };
+            } else {
+                // SAFETY: the caller's chain, read only.
+                unsafe {
+                    without_offsets(which, next, |rest| {
+                        let copy = offset::RenderingEndInfo {
+                            s_type: offset::RENDERING_END_INFO,
+                            p_next: rest,
+                        };
+                        down(cb, &copy)
+                    })
+                };
             }
-            // SAFETY: the caller's chain, read only.
-            return unsafe {
-                without_offsets(which, next, |rest| {
-                    let copy = offset::RenderingEndInfo {
-                        s_type: offset::RENDERING_END_INFO,
-                        p_next: rest,
-                    };
-                    down(cb, &copy)
-                })
-            };
+            reconstruct::ended(cb);
+            return;
         }
         if let Some(down) = dev.end_rendering {
             // SAFETY: the next layer's function, on the caller's command buffer.
             unsafe { down(cb) };
+            reconstruct::ended(cb);
         }
     };
     // SAFETY: as the caller promised.
@@ -1054,6 +1123,8 @@ mod tests {
             rate: 1,
             colour: Some(0),
             view_mask: 0,
+            colour_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+            colour_kept: true,
         };
         inj.pass_created(vk::RenderPass::from_raw(pass), injected);
         inj.framebuffer_created(
@@ -1063,6 +1134,8 @@ mod tests {
                 extent,
                 imageless: false,
                 eye: Some((extent, views)),
+                colour: None,
+                layers: 1,
             },
         );
         inj.framebuffer_created(
@@ -1072,6 +1145,8 @@ mod tests {
                 extent,
                 imageless: true,
                 eye: None,
+                colour: None,
+                layers: 1,
             },
         );
         let device = vk::Device::from_raw(handle);

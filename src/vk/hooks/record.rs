@@ -114,6 +114,8 @@ pub unsafe extern "system" fn begin_command_buffer(
                     };
                 }
                 convert::begun(r);
+                // A pass left open by the previous recording ends nowhere.
+                registry::take_plan(r);
             });
             if found.is_none() {
                 // Allocated before the layer saw it (not expected on an emulating device): a

@@ -69,6 +69,11 @@ pub struct ViewFacts {
     pub base_layer: u32,
     pub layers: u32,
     pub image_layers: u32,
+    /// The view's format, and whether its image's coarse blocks are reconstructed after the eye
+    /// passes that render it (`crate::bridge::subsampled`, read when the view is created;
+    /// docs/reconstruction.md).
+    pub format: vk::Format,
+    pub reconstruct: bool,
 }
 
 /// One injected map: the shape it is for, the key it was filled for, and the layer's objects.
@@ -108,6 +113,11 @@ pub struct InjectedPass {
     pub colour: Option<u32>,
     /// The first subpass's view mask.
     pub view_mask: u32,
+    /// The colour target's `finalLayout`, and whether the pass keeps what it renders there in a
+    /// single-sample attachment (stored, not `DONT_CARE` or `NONE`): only then is it
+    /// reconstructed (docs/reconstruction.md).
+    pub colour_layout: vk::ImageLayout,
+    pub colour_kept: bool,
 }
 
 /// What a framebuffer of an injected pass got.
@@ -120,6 +130,10 @@ pub struct InjectedFramebuffer {
     pub imageless: bool,
     /// The eye map it names (target extent and views), refreshed at each begin.
     pub eye: Option<([u32; 2], Views)>,
+    /// Its colour target's view (`None` for an imageless framebuffer).
+    pub colour: Option<vk::ImageView>,
+    /// The layers it renders (its `layers`, or the views of a multiview pass).
+    pub layers: u32,
 }
 
 /// One injecting device's state.
@@ -141,6 +155,9 @@ pub struct Injector {
     apps_passes: parking_lot::Mutex<std::collections::HashSet<u64>>,
     /// Set once the log has said that the application uses attachments of its own.
     own_logged: AtomicBool,
+    /// Set once a view whose image is reconstructed was noted: until then a begin looks no
+    /// further for a reconstruction (docs/reconstruction.md).
+    reconstructs: AtomicBool,
 }
 
 impl Injector {
@@ -166,6 +183,7 @@ impl Injector {
             failure_logged: AtomicBool::new(false),
             apps_passes: parking_lot::Mutex::new(std::collections::HashSet::new()),
             own_logged: AtomicBool::new(false),
+            reconstructs: AtomicBool::new(false),
         }
     }
 
@@ -237,7 +255,12 @@ impl Injector {
         let Some(facts) = known else {
             return;
         };
-        if let Some(v) = view_facts(image, facts.extent, facts.layers, &ci.subresource_range) {
+        if let Some(mut v) = view_facts(image, facts.extent, facts.layers, &ci.subresource_range) {
+            v.format = ci.format;
+            v.reconstruct = crate::bridge::subsampled::published(image) == Some(true);
+            if v.reconstruct {
+                self.reconstructs.store(true, Ordering::Release);
+            }
             self.views.lock().insert(view.as_raw(), v);
             tables_changed();
         }
@@ -248,6 +271,32 @@ impl Injector {
         if self.views.lock().remove(&view.as_raw()).is_some() {
             tables_changed();
         }
+    }
+
+    /// Whether any view of this device renders an image that is reconstructed.
+    pub fn reconstructs(&self) -> bool {
+        self.reconstructs.load(Ordering::Acquire)
+    }
+
+    /// The image behind the map view `view` (made by this injector), its extent in texels and its
+    /// layers.
+    pub fn map_image(&self, view: vk::ImageView) -> Option<(vk::Image, [u32; 2], u32)> {
+        self.maps
+            .lock()
+            .iter()
+            .filter_map(|m| m.objects)
+            .find(|o| o.view == view)
+            .map(|o| (o.image, o.texels, o.layers))
+    }
+
+    /// The map view a target of `extent` holding `views` has, where it exists.
+    pub fn map_view(&self, extent: [u32; 2], views: Views) -> Option<vk::ImageView> {
+        self.maps
+            .lock()
+            .iter()
+            .find(|m| m.extent == extent && m.views == views)
+            .and_then(|m| m.objects)
+            .map(|o| o.view)
     }
 
     /// What the layer knows of `view`.
@@ -583,6 +632,8 @@ fn view_facts(
         base_layer: r.base_array_layer,
         layers,
         image_layers,
+        format: vk::Format::UNDEFINED,
+        reconstruct: false,
     })
 }
 

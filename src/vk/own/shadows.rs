@@ -23,6 +23,11 @@ pub struct ShadowImage {
 #[derive(Clone, Copy, Debug)]
 pub struct ShadowView {
     pub view: vk::ImageView,
+    /// The shadow image it shows, its extent in texels, and the layers of it the view shows.
+    pub image: vk::Image,
+    pub texels: [u32; 2],
+    pub base_layer: u32,
+    pub layers: u32,
 }
 
 /// The shadow view's create info for an application view `ci` of an image shadowed by `s`: the

@@ -97,7 +97,8 @@ pub fn needs_translation(usage: vk::ImageUsageFlags, flags: vk::ImageCreateFlags
 /// The usage every shadow has.
 pub const SHADOW_USAGE: vk::ImageUsageFlags = vk::ImageUsageFlags::from_raw(
     vk::ImageUsageFlags::FRAGMENT_SHADING_RATE_ATTACHMENT_KHR.as_raw()
-        | vk::ImageUsageFlags::TRANSFER_DST.as_raw(),
+        | vk::ImageUsageFlags::TRANSFER_DST.as_raw()
+        | vk::ImageUsageFlags::TRANSFER_SRC.as_raw(),
 );
 /// The format every shadow has.
 pub const SHADOW_FORMAT: vk::Format = vk::Format::R8_UINT;

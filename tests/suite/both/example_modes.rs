@@ -496,6 +496,16 @@ fn dynamic_rendering_runs_validation_clean() {
 /// <https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>). Returns
 /// the run and the double's records.
 fn run_on_the_double(label: &str, args: &[&str], inject: bool) -> Option<(Run, serde_json::Value)> {
+    run_on_the_double_with(label, args, inject, &[])
+}
+
+/// [`run_on_the_double`] with more of the example's environment.
+fn run_on_the_double_with(
+    label: &str,
+    args: &[&str],
+    inject: bool,
+    more: &[(&'static str, &str)],
+) -> Option<(Run, serde_json::Value)> {
     let double = match fovea_vkdouble::find_library() {
         Ok(d) => d,
         Err(reason) => {
@@ -553,6 +563,7 @@ fn run_on_the_double(label: &str, args: &[&str], inject: bool) -> Option<(Run, s
         env.push(("FOVEA_INJECT", "1".into()));
         env.push(("FOVEA_INJECT_LEVEL", "high".into()));
     }
+    env.extend(more.iter().map(|(k, v)| (*k, OsString::from(v))));
     let run = run_example_with(label, args, &env)?;
     let text = std::fs::read_to_string(&records)
         .unwrap_or_else(|e| panic!("no records ({e})\n{}", run.transcript()));
@@ -661,7 +672,9 @@ fn on_a_desktop_gpu_the_rooms_periphery_is_coarse_blocks_and_its_fovea_full_rate
         "{}",
         full.transcript()
     );
-    let Some((high, records)) = run_on_the_double("room-high", &args, true) else {
+    // The blocks as they are: reconstruction off, whatever its default (docs/reconstruction.md).
+    let off = [("DEBUG_OCULUS_FOVEATION_SUBSAMPLED", "0")];
+    let Some((high, records)) = run_on_the_double_with("room-high", &args, true, &off) else {
         return;
     };
     assert_eq!(
@@ -710,4 +723,95 @@ fn on_a_desktop_gpu_the_rooms_periphery_is_coarse_blocks_and_its_fovea_full_rate
         "fovea pixels equal to full rate\n{}",
         high.transcript()
     );
+}
+
+/// The share of uniform 4×4 blocks beyond 40° from the fovea of the left eye's frame.
+fn periphery_uniform_share(tangents: [f64; 4], frame: &(usize, usize, Vec<u8>)) -> f64 {
+    let size = (frame.0, frame.1);
+    let block = 4;
+    fovea_vkdouble::blocks::uniform_share(
+        &frame.2,
+        [size.0 as u32, size.1 as u32],
+        4,
+        block,
+        |x, y| {
+            let c = (x + block / 2) as f64;
+            eccentricity(tangents, size, c, (y + block / 2) as f64) >= 40.0
+        },
+    )
+    .expect("blocks beyond 40°")
+}
+
+/// Issue 30's reconstruction, as a user of a desktop GPU sees it (docs/reconstruction.md): the room
+/// scene with injection at HIGH on the shading-rate double, read back in the frame's own command
+/// buffer (`--dump`, after the double left each eye pass's colour coarse at its end), with and
+/// without `debug.oculus.foveation.subsampled=1` (Quest's property, forcing the subsampled
+/// layout on, which fovea turns into reconstruction on desktop GPUs). Without it, beyond 40°
+/// nearly every 4×4 block is uniform; with it few are, and within 12° every pixel is the one
+/// the frame has without reconstruction: the fovea, shaded at full rate, is never touched. In a
+/// render pass (multiview, two layers) and in dynamic rendering; the swapchain is sRGB.
+#[test]
+fn on_a_desktop_gpu_reconstruction_smooths_the_rooms_periphery_and_keeps_its_fovea() {
+    for (label, extra) in [("rp", &[][..]), ("dynamic", &["--dynamic-rendering"][..])] {
+        let mut args = vec!["--no-fb", "--scene", "room"];
+        args.extend_from_slice(extra);
+        // Quest's property off: no reconstruction, whatever the default.
+        let off = [("DEBUG_OCULUS_FOVEATION_SUBSAMPLED", "0")];
+        let Some((blocky, records)) =
+            run_on_the_double_with(&format!("room-blocky-{label}"), &args, true, &off)
+        else {
+            return;
+        };
+        assert_eq!(
+            records["errors"],
+            serde_json::json!([]),
+            "{}",
+            blocky.transcript()
+        );
+        let recon_env = [("DEBUG_OCULUS_FOVEATION_SUBSAMPLED", "1")];
+        let Some((smooth, records)) =
+            run_on_the_double_with(&format!("room-smooth-{label}"), &args, true, &recon_env)
+        else {
+            return;
+        };
+        assert_eq!(
+            records["errors"],
+            serde_json::json!([]),
+            "{}",
+            smooth.transcript()
+        );
+        let tangents = left_tangents(&blocky);
+        let (b, r) = (blocky.frame("left"), smooth.frame("left"));
+        assert_eq!((b.0, b.1), (r.0, r.1));
+        let (before, after) = (
+            periphery_uniform_share(tangents, &b),
+            periphery_uniform_share(tangents, &r),
+        );
+        eprintln!(
+            "{label}: uniform 4×4 blocks beyond 40°: {before:.3} blocky, {after:.3} reconstructed"
+        );
+        assert!(
+            before >= 0.95 && after <= 0.2,
+            "{label}: uniform 4×4 blocks beyond 40°: {before:.3} without, {after:.3} with \
+             reconstruction\n{}",
+            smooth.transcript()
+        );
+        let size = (b.0, b.1);
+        let (mut fovea, mut same) = (0, 0);
+        for y in 0..size.1 {
+            for x in 0..size.0 {
+                if eccentricity(tangents, size, x as f64 + 0.5, y as f64 + 0.5) < 12.0 {
+                    fovea += 1;
+                    same += usize::from(pixel(&b, x, y) == pixel(&r, x, y));
+                }
+            }
+        }
+        assert!(fovea > 1000, "{fovea} pixels within 12°");
+        assert_eq!(
+            same,
+            fovea,
+            "{label}: fovea pixels kept\n{}",
+            smooth.transcript()
+        );
+    }
 }

@@ -436,11 +436,13 @@ const VK_FLOORS: &[Place] = &[
     at(31, "own/mod.rs"),
     at(31, "own/bindings.rs"),
     at(31, "own/convert_shader.rs"),
+    at(31, "own/recon_shader.rs"),
     at(31, "own/shadows.rs"),
     at(31, "own/order.rs"),
     at(32, "own/calls.rs"),
     at(33, "own/converter.rs"),
     at(33, "own/injector.rs"),
+    at(33, "own/reconstructor.rs"),
     // 4: per-instance and per-device records, every per-handle index.
     at(40, "registry.rs"),
     // 5: the modes, which never import each other.
@@ -448,6 +450,7 @@ const VK_FLOORS: &[Place] = &[
     at(50, "emulation.rs"),
     at(50, "convert.rs"),
     at(50, "injection.rs"),
+    at(50, "reconstruct.rs"),
     // 6: the hooks; a hook never imports another.
     apart(60, "hooks"),
     // 7: the hook tables; 8: the loader interface.

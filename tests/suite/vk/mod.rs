@@ -15,5 +15,6 @@ pub mod offsets;
 pub mod passes;
 pub mod pipelines;
 pub mod queues;
+pub mod reconstruction;
 pub mod recording;
 pub mod threads;

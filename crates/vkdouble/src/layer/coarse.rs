@@ -4,7 +4,9 @@
 //!
 //! Lavapipe shades every pixel. A GPU with shading-rate attachments shades one value per
 //! fragment and writes it to every covered pixel of the fragment, so when the pass instance ends
-//! its colour attachments hold blocks. The double cannot shade coarsely, and the rates each texel
+//! its colour attachments hold blocks, and so do the resolve targets of its multisampled ones
+//! (every sample of a fragment's pixels got the fragment's colour); the multisampled images
+//! themselves are not coarsened here (a buffer copy cannot read them). The double cannot shade coarsely, and the rates each texel
 //! gets depend on the shading-rate attachment's contents, which the command buffer may write
 //! itself before the pass (a layer's converter does), so they are known only when the commands
 //! run. So after each pass instance that could shade coarsely the double records, in the

@@ -1,0 +1,512 @@
+//! Reconstruction of coarse blocks (docs/reconstruction.md): after an eye pass on a device with
+//! shading-rate attachments from fovea, each coarse block of its colour target becomes what a
+//! compositor's bilinear sample of a subsampled image gives, and full-rate texels stay as they
+//! are. Where the pass begins, `crate::vk::injection` notes what its end reconstructs in the
+//! command buffer's record ([`Plan`](crate::vk::own::reconstructor::Plan)); the end hooks call
+//! [`ended`] after the end went down, which records the copies and the dispatch
+//! ([`Reconstructor::record`]).
+//!
+//! Objects: the pipeline and layouts at device creation ([`device_created`]); scratch buffers at
+//! the first pass of a target size, kept with the device. Per end of a pass that reconstructs
+//! nothing: one atomic load while no command buffer of the process has a plan open
+//! ([`registry::OPEN_PLANS`]), else the command buffer's record (this thread's cache) and one
+//! uncontended lock of its own; no allocation and no process-wide lock.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use ash::vk;
+use ash::vk::Handle as _;
+
+use crate::vk::base::chain;
+use crate::vk::base::ffi::{key, raw, slice};
+use crate::vk::own::reconstructor::{PassTarget, Plan, Reconstructor, Target};
+use crate::vk::registry::{self, record_of, Device, RECONSTRUCTORS};
+use crate::vk::translate::render_pass::Pass2;
+
+/// Sets up reconstruction on a device just recorded in the registry that injects shading-rate
+/// maps or emulates density maps, or logs why not. `why_not`: why the device cannot record compute dispatches into the
+/// application's command buffers and give its bindings back, as the converter found.
+///
+/// # Safety
+/// `handle` must be a live device just recorded.
+pub unsafe fn device_created(handle: vk::Device, why_not: Option<String>) {
+    // SAFETY: as the caller promised.
+    let Some(dev) = (unsafe { registry::device(handle) }) else {
+        return;
+    };
+    let Some(own) = &dev.attachments.own else {
+        return;
+    };
+    let Some(fdm) = dev.inject.as_ref().map(|i| &i.fdm).or(dev.fdm.as_ref()) else {
+        return;
+    };
+    if let Some(why) = why_not {
+        tracing::info!(
+            device = raw(handle),
+            why = why.as_str(),
+            "coarse blocks are not reconstructed on this device"
+        );
+        return;
+    }
+    // SAFETY: the layer's own objects on a live device.
+    match unsafe { Reconstructor::new(Arc::clone(own), fdm) } {
+        Ok(r) => {
+            // SAFETY: as the caller promised.
+            let Some(k) = (unsafe { key(handle) }) else {
+                // SAFETY: made on this live device, used by nothing yet.
+                unsafe { r.destroy() };
+                return;
+            };
+            let mut v = RECONSTRUCTORS.write();
+            v.retain(|(key, _)| *key != k);
+            v.push((k, Arc::new(r)));
+        }
+        Err(e) => tracing::warn!(
+            device = raw(handle),
+            result = ?e,
+            "coarse blocks are not reconstructed on this device: its objects could not be made"
+        ),
+    }
+}
+
+/// Destroys a device's reconstruction objects; the device is about to be destroyed, and its
+/// command buffers' records are gone.
+///
+/// # Safety
+/// `handle` must be live and idle.
+pub unsafe fn device_destroyed(handle: vk::Device) {
+    // SAFETY: as the caller promised.
+    let Some(k) = (unsafe { key(handle) }) else {
+        return;
+    };
+    let r = {
+        let mut v = RECONSTRUCTORS.write();
+        let at = v.iter().position(|(key, _)| *key == k);
+        at.map(|i| v.swap_remove(i).1)
+    };
+    if let Some(r) = r {
+        // SAFETY: as the caller promised.
+        unsafe { r.destroy() };
+    }
+}
+
+/// What the layer kept for a device gone without `vkDestroyDevice` is dropped without a call.
+pub fn device_key_reused(k: crate::vk::base::ffi::Key) {
+    RECONSTRUCTORS.write().retain(|(key, _)| *key != k);
+}
+
+/// The end of a render pass instance just went down in `cb` (`vkCmdEndRenderPass(2)`,
+/// `vkCmdEndRendering(2)`): where its begin planned a reconstruction and the end is not a
+/// suspending one, it is recorded now.
+pub fn ended(cb: vk::CommandBuffer) {
+    if registry::OPEN_PLANS.load(Ordering::Acquire) == 0 {
+        return;
+    }
+    record_of(cb, |r| {
+        let Some(rc) = r.reconstructor.as_deref() else {
+            return;
+        };
+        if r.plan.lock().is_none_or(|p| p.suspending) {
+            return;
+        }
+        let Some(plan) = registry::take_plan(r) else {
+            return;
+        };
+        let bound = Some(*r.bound.lock()).filter(|b| !b.lost);
+        // SAFETY: `cb` is recording outside a render pass (its instance just ended), on the
+        // reconstructor's device; `bound` is its bindings.
+        unsafe { rc.record(cb, &plan, bound.as_ref()) };
+    });
+}
+
+// ---------------------------------------------------------------------------------------------
+// Emulating devices: the application's subsampled images and the passes that render them.
+
+/// Runs `f` with the reconstructor of an emulating device, if it has one.
+fn with_reconstructor<R>(dev: &Device, f: impl FnOnce(&Reconstructor) -> R) -> Option<R> {
+    dev.fdm.as_ref()?;
+    // SAFETY: the device is live (the caller's hook is running on it).
+    let k = unsafe { key(dev.handle) }?;
+    let r = registry::reconstructor_by_key(k)?;
+    Some(f(&r))
+}
+
+/// The usage an application's colour image created with `VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT` on an
+/// emulating device gets on the copy of its create info that goes down: its own and the copies'
+/// (`TRANSFER_SRC`, `TRANSFER_DST`); `None` for any other image, and for one with external memory,
+/// whose usage must stay what the other side of the memory expects (said once).
+///
+/// # Safety
+/// `ci` must be a valid create info.
+pub unsafe fn subsampled_usage(
+    dev: &Device,
+    ci: &vk::ImageCreateInfo<'_>,
+) -> Option<vk::ImageUsageFlags> {
+    static LOGGED: AtomicBool = AtomicBool::new(false);
+    if !ci.flags.contains(vk::ImageCreateFlags::SUBSAMPLED_EXT)
+        || !ci.usage.contains(vk::ImageUsageFlags::COLOR_ATTACHMENT)
+    {
+        return None;
+    }
+    with_reconstructor(dev, |_| ())?;
+    let ty = vk::StructureType::EXTERNAL_MEMORY_IMAGE_CREATE_INFO;
+    // SAFETY: the caller's chain, read only.
+    let external = unsafe { chain::find::<vk::ExternalMemoryImageCreateInfo<'_>>(ci.p_next, ty) };
+    if !matches!(external, Ok(None)) {
+        if !LOGGED.swap(true, Ordering::Relaxed) {
+            tracing::warn!(
+                "a subsampled colour image with external memory (or a chain the layer cannot \
+                 read): its coarse blocks are not reconstructed, its usage stays the application's"
+            );
+        }
+        return None;
+    }
+    Some(ci.usage | vk::ImageUsageFlags::TRANSFER_SRC | vk::ImageUsageFlags::TRANSFER_DST)
+}
+
+/// An application's subsampled colour image was created with the copies' usage
+/// ([`subsampled_usage`]).
+///
+/// # Safety
+/// `dev` must be live.
+pub unsafe fn image_created(dev: &Device, image: vk::Image, ci: &vk::ImageCreateInfo<'_>) {
+    with_reconstructor(dev, |r| {
+        r.tables
+            .lock()
+            .images
+            .insert(image.as_raw(), ci.array_layers.max(1));
+    });
+}
+
+/// # Safety
+/// `dev` must be live.
+pub unsafe fn image_destroyed(dev: &Device, image: vk::Image) {
+    with_reconstructor(dev, |r| r.tables.lock().images.remove(&image.as_raw()));
+}
+
+/// A view was created on an emulating device: where its image is reconstructed (the OpenXR side
+/// published so for a swapchain image, or the application created it subsampled), it is noted
+/// with its layers and format.
+///
+/// # Safety
+/// `dev` must be live.
+pub unsafe fn view_created(dev: &Device, view: vk::ImageView, ci: &vk::ImageViewCreateInfo<'_>) {
+    with_reconstructor(dev, |r| {
+        let image = ci.image.as_raw();
+        let mut t = r.tables.lock();
+        let own_layers = t.images.get(&image).copied();
+        let reconstruct = match crate::bridge::subsampled::published(image) {
+            Some(decided) => decided,
+            None => own_layers.is_some(),
+        };
+        if !reconstruct {
+            return;
+        }
+        let range = ci.subresource_range;
+        let layers = if range.layer_count == vk::REMAINING_ARRAY_LAYERS {
+            own_layers.map_or(1, |l| l.saturating_sub(range.base_array_layer).max(1))
+        } else {
+            range.layer_count
+        };
+        t.views.insert(
+            view.as_raw(),
+            Target {
+                image: ci.image,
+                base_layer: range.base_array_layer,
+                layers,
+                format: ci.format,
+            },
+        );
+        r.any.store(true, Ordering::Release);
+    });
+}
+
+/// # Safety
+/// `dev` must be live.
+pub unsafe fn view_destroyed(dev: &Device, view: vk::ImageView) {
+    with_reconstructor(dev, |r| r.tables.lock().views.remove(&view.as_raw()));
+}
+
+/// A render pass rewritten for emulation was created from `pass` (its density attachment
+/// `density`): its colour target, the first subpass's first colour attachment, is noted.
+pub fn pass_created(dev: &Device, handle: vk::RenderPass, pass: &Pass2, density: u32) {
+    with_reconstructor(dev, |r| {
+        let Some(s) = pass.subpasses.first() else {
+            return;
+        };
+        // SAFETY: the application's array, alive while `pass` is.
+        let first = unsafe { slice(s.p_color_attachments, s.color_attachment_count) }
+            .first()
+            .map(|a| a.attachment)
+            .filter(|&a| a != vk::ATTACHMENT_UNUSED);
+        let Some(mut colour) = first else {
+            return;
+        };
+        let Some(mut a) = pass.attachments.get(colour as usize) else {
+            return;
+        };
+        if a.samples != vk::SampleCountFlags::TYPE_1 {
+            // Multisampled: what is read is its resolve, the target reconstructed.
+            let resolve = (!s.p_resolve_attachments.is_null())
+                // SAFETY: the application's array, one per colour attachment.
+                .then(|| unsafe { *s.p_resolve_attachments }.attachment)
+                .filter(|&r| r != vk::ATTACHMENT_UNUSED);
+            let Some(r) = resolve.and_then(|r| Some((r, pass.attachments.get(r as usize)?))) else {
+                return;
+            };
+            (colour, a) = r;
+        }
+        let kept = a.samples == vk::SampleCountFlags::TYPE_1
+            && !matches!(
+                a.store_op,
+                vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
+            );
+        r.tables.lock().passes.insert(
+            handle.as_raw(),
+            PassTarget {
+                colour,
+                density,
+                layout: a.final_layout,
+                kept,
+                view_mask: s.view_mask,
+            },
+        );
+    });
+}
+
+/// # Safety
+/// `dev` must be live.
+pub unsafe fn pass_destroyed(dev: &Device, pass: vk::RenderPass) {
+    with_reconstructor(dev, |r| r.tables.lock().passes.remove(&pass.as_raw()));
+}
+
+/// A framebuffer (with views) of a rewritten pass was created from `ci`: where its colour view is
+/// reconstructed, it is noted with its density view and rendered layers.
+///
+/// # Safety
+/// `dev` must be live; `ci` the application's valid create info.
+pub unsafe fn framebuffer_created(
+    dev: &Device,
+    fb: vk::Framebuffer,
+    ci: &vk::FramebufferCreateInfo<'_>,
+) {
+    with_reconstructor(dev, |r| {
+        if !r.any.load(Ordering::Acquire)
+            || ci.flags.contains(vk::FramebufferCreateFlags::IMAGELESS)
+        {
+            return;
+        }
+        let mut t = r.tables.lock();
+        let Some(p) = t.passes.get(&ci.render_pass.as_raw()).copied() else {
+            return;
+        };
+        // SAFETY: the caller's array.
+        let views = unsafe { slice(ci.p_attachments, ci.attachment_count) };
+        let (Some(c), Some(d)) = (views.get(p.colour as usize), views.get(p.density as usize))
+        else {
+            return;
+        };
+        if !t.views.contains_key(&c.as_raw()) {
+            return;
+        }
+        let layers = rendered(p.view_mask, ci.layers);
+        t.framebuffers
+            .insert(fb.as_raw(), (c.as_raw(), d.as_raw(), layers));
+    });
+}
+
+/// # Safety
+/// `dev` must be live.
+pub unsafe fn framebuffer_destroyed(dev: &Device, fb: vk::Framebuffer) {
+    with_reconstructor(dev, |r| r.tables.lock().framebuffers.remove(&fb.as_raw()));
+}
+
+/// The layers a pass renders: its views' (the highest view + 1) or `layers`.
+fn rendered(view_mask: u32, layers: u32) -> u32 {
+    if view_mask != 0 {
+        32 - view_mask.leading_zeros()
+    } else {
+        layers.max(1)
+    }
+}
+
+/// Notes in `r`'s command buffer record what the end of a pass begun on the colour target `t`
+/// and the density view `density` (its shadow is the pass's shading-rate attachment)
+/// reconstructs.
+#[allow(clippy::too_many_arguments)]
+fn plan(
+    dev: &Device,
+    rc: &Reconstructor,
+    record: &registry::CbRecord,
+    t: Target,
+    density: u64,
+    layers: u32,
+    area: vk::Rect2D,
+    layout: vk::ImageLayout,
+    suspending: bool,
+) {
+    let Some(sv) = dev.attachments.views.lock().get(&density).copied() else {
+        return;
+    };
+    let Some(kind) = rc.handles(t.format) else {
+        return;
+    };
+    let layers = layers.min(t.layers).max(1);
+    registry::set_plan(
+        record,
+        Plan {
+            image: t.image,
+            base_layer: t.base_layer,
+            layers,
+            area,
+            layout,
+            kind,
+            rate_image: sv.image,
+            rate_extent: sv.texels,
+            rate_base_layer: sv.base_layer,
+            rate_layers: if sv.layers <= 1 {
+                1
+            } else {
+                sv.layers.min(layers)
+            },
+            suspending,
+        },
+    );
+}
+
+/// `vkCmdBeginRenderPass(2)` on an emulating device: where the pass renders a reconstructed
+/// colour target, its end is planned. One atomic load where no view of the device is
+/// reconstructed.
+///
+/// # Safety
+/// `begin` must be NULL or valid.
+pub unsafe fn begin_render_pass(
+    dev: &Device,
+    cb: vk::CommandBuffer,
+    begin: *const vk::RenderPassBeginInfo<'_>,
+) {
+    if dev.fdm.is_none() {
+        return;
+    }
+    // SAFETY: as the caller promised.
+    let Some(b) = (unsafe { begin.as_ref() }) else {
+        return;
+    };
+    record_of(cb, |r| {
+        let Some(rc) = r.reconstructor.as_deref() else {
+            return;
+        };
+        if !rc.any.load(Ordering::Acquire) {
+            return;
+        }
+        let found = {
+            let t = rc.tables.lock();
+            t.passes
+                .get(&b.render_pass.as_raw())
+                .copied()
+                .and_then(|p| {
+                    let (colour, density, layers) = match t
+                        .framebuffers
+                        .get(&b.framebuffer.as_raw())
+                    {
+                        Some(&f) => f,
+                        None => {
+                            // An imageless framebuffer: the views are in the begin info.
+                            let ty = vk::StructureType::RENDER_PASS_ATTACHMENT_BEGIN_INFO;
+                            // SAFETY: the caller's chain, read only.
+                            let found = unsafe {
+                                chain::find::<vk::RenderPassAttachmentBeginInfo<'_>>(b.p_next, ty)
+                            };
+                            // SAFETY: found by its sType in a valid chain.
+                            let a = unsafe { found.ok().flatten()?.as_ref()? };
+                            // SAFETY: the caller's array.
+                            let views = unsafe { slice(a.p_attachments, a.attachment_count) };
+                            let c = views.get(p.colour as usize)?.as_raw();
+                            let d = views.get(p.density as usize)?.as_raw();
+                            (c, d, rendered(p.view_mask, 1))
+                        }
+                    };
+                    let target = t.views.get(&colour).copied()?;
+                    p.kept.then_some((p, target, density, layers))
+                })
+        };
+        if let Some((p, target, density, layers)) = found {
+            plan(
+                dev,
+                rc,
+                r,
+                target,
+                density,
+                layers,
+                b.render_area,
+                p.layout,
+                false,
+            );
+        }
+    });
+}
+
+/// `vkCmdBeginRendering` on an emulating device with the density view `density`: where its first
+/// colour attachment is a reconstructed target the rendering keeps, its end is planned; a
+/// resuming rendering keeps the plan of the instance it continues.
+///
+/// # Safety
+/// `ri` must be valid.
+pub unsafe fn begin_rendering(
+    dev: &Device,
+    cb: vk::CommandBuffer,
+    ri: &vk::RenderingInfo<'_>,
+    density: vk::ImageView,
+) {
+    if dev.fdm.is_none() {
+        return;
+    }
+    record_of(cb, |r| {
+        let Some(rc) = r.reconstructor.as_deref() else {
+            return;
+        };
+        if !rc.any.load(Ordering::Acquire) {
+            return;
+        }
+        let suspending = ri.flags.contains(vk::RenderingFlags::SUSPENDING);
+        if ri.flags.contains(vk::RenderingFlags::RESUMING) {
+            if let Some(p) = r.plan.lock().as_mut() {
+                p.suspending = suspending;
+            }
+            return;
+        }
+        // SAFETY: the caller's colour attachments, `colorAttachmentCount` of them.
+        let Some(a) = (unsafe { slice(ri.p_color_attachments, ri.color_attachment_count) }).first()
+        else {
+            return;
+        };
+        // A multisampled attachment resolves into the view that is read, which the resolve
+        // writes whatever the attachment's store operation.
+        let (view, layout, kept) = if a.resolve_mode != vk::ResolveModeFlags::NONE {
+            (a.resolve_image_view, a.resolve_image_layout, true)
+        } else {
+            let stored = !matches!(
+                a.store_op,
+                vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
+            );
+            (a.image_view, a.image_layout, stored)
+        };
+        let target = rc.tables.lock().views.get(&view.as_raw()).copied();
+        let (Some(target), true) = (target, kept) else {
+            return;
+        };
+        let layers = rendered(ri.view_mask, ri.layer_count);
+        plan(
+            dev,
+            rc,
+            r,
+            target,
+            density.as_raw(),
+            layers,
+            ri.render_area,
+            layout,
+            suspending,
+        );
+    });
+}
