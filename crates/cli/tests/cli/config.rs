@@ -110,7 +110,8 @@ fn config_shows_subsampled_per_app_and_the_property_over_it() {
     let (_, mut c) = with_file("subsampled-default", "");
     let r = run(c.args(["config"]));
     assert!(
-        row(&r.out).contains("as the application asks; on for injected passes") && row(&r.out).contains("default"),
+        row(&r.out).contains("as the application asks; on for injected passes")
+            && row(&r.out).contains("default"),
         "{}",
         r.out
     );
