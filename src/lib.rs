@@ -8,8 +8,9 @@
 //! - [`xr`] and [`vk`]: the OpenXR side (loader interface, dispatch, handle registry, hooks per
 //!   function group, fovea's density images; its own floors in its module doc) and the Vulkan layer.
 //!   Neither imports the other;
-//! - [`bridge`]: per-swapchain density-map state: the one place that decides when a map is stale
-//!   and what each image, view and map holds. Any API side meets the others only here;
+//! - [`bridge`]: what both sides read, and only that: each device's density-map emulation, the
+//!   shadows of density-map images, injection's published state, the reconstruction decisions.
+//!   The two API sides meet only here;
 //! - [`common`]: plumbing both sides use: ranked locks, logging, settings.
 //!
 //! The pure model (density, projection, dynamic levels, stats) is the `fovea-model` crate.

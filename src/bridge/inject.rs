@@ -37,7 +37,8 @@ pub struct EyeSwapchain {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Injection {
     /// The level and offset maps use now: the injected level under the debug properties and the
-    /// dynamic step ([`super::effective`]).
+    /// dynamic step (`xr::foveation::effective`, which the OpenXR side applies
+    /// before it publishes).
     pub pattern: Pattern,
     /// Whether the level is dynamic (for the stats line's `D`).
     pub dynamic: bool,

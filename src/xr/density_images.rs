@@ -37,7 +37,7 @@ use fovea_model::maps::{fill_layers, Inputs, MAX_VIEWS};
 use fovea_model::shading_rate;
 use fovea_model::shift::{self, Filled, Placed};
 
-use crate::bridge::MapKey;
+use crate::xr::foveation::MapKey;
 use crate::xr::session_gpu::{final_layout, memory_type, step, SessionGpu, VkError, FORMAT};
 
 /// What a refresh did.

@@ -34,16 +34,16 @@ use crate::xr::records::{Borrowed, Records};
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::bridge::{effective, FoveationState, ProfileParams, Submitted, ViewFovs};
 use crate::common::settings::Overrides;
 use crate::xr::density_images::DensityImages;
 use crate::xr::extensions::Extensions;
 use crate::xr::eye_centres::EyeCentres;
+use crate::xr::foveation::{FoveationState, ProfileParams, Submitted, ViewFovs};
 use crate::xr::gaze::{InstanceGaze, SessionGaze};
 use crate::xr::next_layer::Next;
 use crate::xr::session_gpu::{SessionGpu, VulkanBinding};
-use fovea_model::density::Pattern;
-use fovea_model::dynamic::{step_of, Controller};
+use fovea_model::density::Level;
+use fovea_model::dynamic::Controller;
 use fovea_model::projection::symmetric_fov;
 use fovea_model::stats::Stats;
 use fovea_model::Fov;
@@ -71,7 +71,7 @@ pub struct Instance {
     pub lost: AtomicBool,
     /// The level injected into the application's eye passes, where injection applies to it
     /// (docs/injection.md); the Vulkan side reads the published state ([`crate::bridge::inject`]).
-    pub inject: Option<fovea_model::density::Level>,
+    pub inject: Option<Level>,
     /// The application's `subsampled` setting (fovea.toml or `FOVEA_SUBSAMPLED`), read when the
     /// instance was created: one of the switches of reconstruction
     /// (docs/openxr-layer.md#subsampled-images).
@@ -294,29 +294,10 @@ pub struct Session {
     /// ([`crate::xr::gaze`]); it writes `eyes`.
     pub gaze: Option<SessionGaze>,
     /// The profile last applied to one of the session's swapchains without density images, which
-    /// injection foveates at its level ([`Session::injected_pattern_at`]), packed by
-    /// [`pack_request`]; 0 before any. An atomic: the frame loop reads it every frame.
+    /// injection foveates at its level ([`crate::xr::pattern::injected_pattern_at`]), packed by
+    /// [`crate::xr::foveation::pack_request`]; 0 before any. An atomic: the frame loop reads it
+    /// every frame.
     pub inject_request: AtomicU64,
-}
-
-/// [`Session::inject_request`]'s packing of a profile's parameters: bit 63 set, the level in bits
-/// 32–39, dynamic in bit 40, eye-tracked in bit 41, the vertical offset's bits below.
-pub fn pack_request(p: ProfileParams) -> u64 {
-    1 << 63
-        | u64::from(p.level.min(0xFF)) << 32
-        | u64::from(p.dynamic) << 40
-        | u64::from(p.eye_tracked) << 41
-        | u64::from(p.vertical_offset_deg.to_bits())
-}
-
-/// The parameters [`pack_request`] packed; `None` for 0.
-pub fn unpack_request(v: u64) -> Option<ProfileParams> {
-    (v >> 63 == 1).then(|| ProfileParams {
-        level: (v >> 32 & 0xFF) as u32,
-        vertical_offset_deg: f32::from_bits(v as u32),
-        dynamic: v >> 40 & 1 == 1,
-        eye_tracked: v >> 41 & 1 == 1,
-    })
 }
 
 impl Session {
@@ -345,79 +326,6 @@ impl Session {
             gaze: None,
             inject_request: AtomicU64::new(0),
         }
-    }
-
-    /// The pattern a foveated swapchain's maps use now, and whether it is dynamic: the
-    /// application's state under the debug overrides and the dynamic step.
-    pub fn pattern_for(&self, state: &FoveationState) -> (Pattern, bool) {
-        effective(
-            state.params,
-            self.instance.overrides.current(),
-            self.dynamic_step.load(Ordering::Relaxed),
-        )
-    }
-
-    /// Recomputes [`Session::dynamic_max`] after a swapchain's state or the overrides changed.
-    pub fn refresh_dynamic_max(&self) {
-        let over = self.instance.overrides.current();
-        let injected = self
-            .injected_pattern_at(usize::MAX)
-            .and_then(|(p, dynamic)| dynamic.then_some(step_of(p.level)));
-        let max = registry()
-            .foveated_swapchains_of(self.handle)
-            .iter()
-            .filter_map(|sc| {
-                let (p, dynamic) =
-                    effective(sc.foveation.as_ref()?.lock().params, over, usize::MAX);
-                dynamic.then_some(step_of(p.level))
-            })
-            .chain(injected)
-            .max()
-            .unwrap_or(0);
-        self.dynamic_max.store(max, Ordering::Relaxed);
-    }
-
-    /// The injected pattern at dynamic step `step`, and whether it is dynamic: the profile the
-    /// application last applied to a swapchain without density images
-    /// (docs/injection.md#applications-that-apply-profiles), else the injected level as if an
-    /// application had asked for it, under the debug overrides with Quest's meaning
-    /// ([`effective`]). `None` where injection does not apply to this instance.
-    pub fn injected_pattern_at(&self, step: usize) -> Option<(Pattern, bool)> {
-        let level = self.instance.inject?;
-        let params =
-            unpack_request(self.inject_request.load(Ordering::Relaxed)).unwrap_or(ProfileParams {
-                level: level as u32,
-                vertical_offset_deg: 0.0,
-                dynamic: false,
-                eye_tracked: false,
-            });
-        Some(effective(params, self.instance.overrides.current(), step))
-    }
-
-    /// Publishes the injected pattern in force now for the Vulkan side (a comparison when it did
-    /// not change).
-    pub fn publish_injected_pattern(&self) {
-        if let Some((pattern, dynamic)) =
-            self.injected_pattern_at(self.dynamic_step.load(Ordering::Relaxed))
-        {
-            let max_fragment = self.instance.overrides.current().max_fragment();
-            crate::bridge::inject::set_pattern(pattern, dynamic, max_fragment);
-        }
-    }
-
-    /// Publishes where each view's fovea is for injected maps (docs/eye-tracking.md#what-moves-when):
-    /// the gaze's centres while `eyes` follows it, fixed foveation otherwise. Per frame one record
-    /// lock for the copy and a comparison; the bridge publishes only a move of half a texel or more.
-    pub fn publish_injected_centres(&self) {
-        if self.instance.inject.is_none() {
-            return;
-        }
-        let eyes = *self.eyes.lock();
-        let mut centres = [None; fovea_model::maps::MAX_VIEWS];
-        for (i, c) in centres.iter_mut().enumerate() {
-            *c = eyes.of(i);
-        }
-        crate::bridge::inject::set_centres(&centres);
     }
 }
 
@@ -916,28 +824,6 @@ mod tests {
         assert_eq!(s.get(), Some(moved));
         s.set([f(0.5), f(0.6)]);
         assert_eq!(s.get(), Some([f(0.5), f(0.6)]));
-    }
-
-    #[test]
-    fn an_applied_profile_packs_and_unpacks_whole() {
-        assert_eq!(unpack_request(0), None);
-        for p in [
-            ProfileParams::default(),
-            ProfileParams {
-                level: 3,
-                vertical_offset_deg: -7.5,
-                dynamic: true,
-                eye_tracked: true,
-            },
-            ProfileParams {
-                level: 1,
-                vertical_offset_deg: 0.25,
-                dynamic: false,
-                eye_tracked: true,
-            },
-        ] {
-            assert_eq!(unpack_request(pack_request(p)), Some(p), "{p:?}");
-        }
     }
 
     #[test]

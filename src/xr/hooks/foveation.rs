@@ -11,12 +11,14 @@ use std::sync::Arc;
 use openxr_sys as xr;
 use xr::Handle;
 
-use crate::bridge::ProfileParams;
 use crate::xr::extensions::Ext;
 use crate::xr::ffi::HookResult;
 use crate::xr::ffi::{In, Out};
+use crate::xr::foveation::{pack_request, ProfileParams};
+use crate::xr::pattern::{publish_injected_pattern, refresh_dynamic_max};
 use crate::xr::registry::{check_lost, session, swapchain};
-use crate::xr::registry::{pack_request, registry, Profile};
+use crate::xr::registry::{registry, Profile};
+use fovea_model::density::Level;
 
 /// Reads the profile parameters from a create info's nested chain
 /// (XrFoveationProfileCreateInfoFB -> XrFoveationLevelProfileCreateInfoFB ->
@@ -45,7 +47,7 @@ fn profile_params(
             None => Ok(ProfileParams::default()),
         };
     };
-    let mut params = validate_level(l.level.into_raw(), l.dynamic.into_raw(), l.vertical_offset)?;
+    let mut params = validate_level(l.level, l.dynamic.into_raw(), l.vertical_offset)?;
     if let Some(e) = eye_tracked {
         // SAFETY: `l` is a struct of the application's valid chain, so its own next chain is valid
         // for the call.
@@ -74,12 +76,24 @@ pub fn validate_eye_tracked(
 
 /// The enum and range checks of XrFoveationLevelProfileCreateInfoFB: level NONE..HIGH, dynamic
 /// DISABLED or LEVEL_ENABLED, a finite verticalOffset.
-pub fn validate_level(level: i32, dynamic: i32, vertical_offset: f32) -> HookResult<ProfileParams> {
-    if !(0..=3).contains(&level) || !(0..=1).contains(&dynamic) || !vertical_offset.is_finite() {
+/// From here on the level is a [`Level`].
+pub fn validate_level(
+    level: xr::FoveationLevelFB,
+    dynamic: i32,
+    vertical_offset: f32,
+) -> HookResult<ProfileParams> {
+    let level = match level {
+        xr::FoveationLevelFB::NONE => Level::None,
+        xr::FoveationLevelFB::LOW => Level::Low,
+        xr::FoveationLevelFB::MEDIUM => Level::Medium,
+        xr::FoveationLevelFB::HIGH => Level::High,
+        _ => return Err(xr::Result::ERROR_VALIDATION_FAILURE),
+    };
+    if !(0..=1).contains(&dynamic) || !vertical_offset.is_finite() {
         return Err(xr::Result::ERROR_VALIDATION_FAILURE);
     }
     Ok(ProfileParams {
-        level: level as u32,
+        level,
         vertical_offset_deg: vertical_offset,
         dynamic: dynamic == 1,
         eye_tracked: false,
@@ -176,7 +190,8 @@ pub fn update_swapchain(
             std::sync::atomic::Ordering::Relaxed,
         );
         tracing::info!(
-            level = profile.params.level,
+            // As `XrFoveationLevelFB` numbers it.
+            level = profile.params.level as u32,
             dynamic = profile.params.dynamic,
             "a foveation profile applied to a swapchain without density images: its eye passes \
              are foveated by injection at its level"
@@ -185,8 +200,8 @@ pub fn update_swapchain(
             no_injecting_device_once();
         }
     }
-    sc.session.refresh_dynamic_max();
-    sc.session.publish_injected_pattern();
+    refresh_dynamic_max(&sc.session);
+    publish_injected_pattern(&sc.session);
     Ok(xr::Result::SUCCESS)
 }
 
@@ -300,9 +315,9 @@ mod tests {
     #[test]
     fn level_validation() {
         assert_eq!(
-            validate_level(3, 1, -5.0),
+            validate_level(xr::FoveationLevelFB::HIGH, 1, -5.0),
             Ok(ProfileParams {
-                level: 3,
+                level: Level::High,
                 vertical_offset_deg: -5.0,
                 dynamic: true,
                 eye_tracked: false,
@@ -316,7 +331,7 @@ mod tests {
             (1, 0, f32::INFINITY),
         ] {
             assert_eq!(
-                validate_level(l, d, v),
+                validate_level(xr::FoveationLevelFB::from_raw(l), d, v),
                 Err(xr::Result::ERROR_VALIDATION_FAILURE),
                 "{l} {d} {v}"
             );

@@ -11,6 +11,8 @@ use crate::xr::ffi::HookResult;
 use crate::xr::ffi::{In, Out, OutArray};
 use crate::xr::gaze::Due;
 use crate::xr::next_layer::next;
+use crate::xr::pattern::{injected_pattern_at, pattern_for, refresh_dynamic_max};
+use crate::xr::pattern::{publish_injected_centres, publish_injected_pattern};
 use crate::xr::registry::{observed, session_for_call};
 use crate::xr::registry::{registry, Instance, Session};
 use crate::xr::values::{fov_from_xr, fov_to_xr, succeeded};
@@ -124,10 +126,10 @@ pub fn end_frame(sess: xr::Session, info: In<xr::FrameEndInfo>) -> HookResult<xr
     };
     if overrides_changed {
         s.pattern_generation.fetch_add(1, Ordering::Relaxed);
-        s.refresh_dynamic_max();
+        refresh_dynamic_max(&s);
     }
-    s.publish_injected_pattern();
-    s.publish_injected_centres();
+    publish_injected_pattern(&s);
+    publish_injected_centres(&s);
     let f = next(s.instance.next.end_frame)?;
     // SAFETY: the next layer's xrEndFrame, with the application's arguments as it passed them.
     Ok(observed(&s, unsafe { f(sess, info.raw()) }))
@@ -301,13 +303,12 @@ fn report(s: &Session, window: Window, period_ns: i64) {
     if !stats_logged() {
         return;
     }
-    let injected = s
-        .injected_pattern_at(s.dynamic_step.load(Ordering::Relaxed))
+    let injected = injected_pattern_at(s, s.dynamic_step.load(Ordering::Relaxed))
         .map(|(p, dynamic)| (p.level, dynamic));
     let level = registry()
         .foveated_swapchains_of(s.handle)
         .iter()
-        .filter_map(|sc| Some(s.pattern_for(&sc.foveation.as_ref()?.lock())))
+        .filter_map(|sc| Some(pattern_for(s, &sc.foveation.as_ref()?.lock())))
         .map(|(p, dynamic)| (p.level, dynamic))
         .chain(injected)
         .max();
@@ -396,7 +397,7 @@ pub fn locate_views(
             *slot = fov_from_xr(v.fov);
         }
         crate::bridge::inject::set_fovs(&fovs[..n]);
-        s.publish_injected_centres();
+        publish_injected_centres(&s);
     }
     if s.gpu.is_some() && capacity > 0 {
         if located.iter().any(|v| v.ty != xr::StructureType::VIEW) {

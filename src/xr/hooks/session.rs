@@ -109,8 +109,8 @@ pub fn create_session(
         if record.instance.inject.is_some() {
             // An injected level made dynamic by the debug properties from the start (no change
             // to notice later) must still let the controller step up to it.
-            record.refresh_dynamic_max();
-            record.publish_injected_pattern();
+            crate::xr::pattern::refresh_dynamic_max(&record);
+            crate::xr::pattern::publish_injected_pattern(&record);
         }
     }
     Ok(r)

@@ -9,11 +9,11 @@ use xr::Handle;
 
 use crate::common::lock::Mutex;
 
-use crate::bridge::{FoveationState, MapSources};
 use crate::xr::density_images::{DensityImages, Foveas, Refreshed};
 use crate::xr::extensions::Ext;
 use crate::xr::ffi::HookResult;
 use crate::xr::ffi::{self, In, Out, OutArray};
+use crate::xr::foveation::{FoveationState, MapSources};
 use crate::xr::next_layer::next;
 use crate::xr::registry::{observed, session, swapchain, swapchain_for_call};
 use crate::xr::registry::{registry, Session, Swapchain, SwapchainInfo};
@@ -517,7 +517,7 @@ pub fn destroy_swapchain(handle: xr::Swapchain) -> HookResult<xr::Result> {
     if succeeded(r) {
         state.forget_published();
         if state.foveation.is_some() {
-            state.session.refresh_dynamic_max();
+            crate::xr::pattern::refresh_dynamic_max(&state.session);
         }
         if state.session.instance.inject.is_some() {
             crate::bridge::inject::remove_swapchain(handle.into_raw());
@@ -675,7 +675,7 @@ fn refresh_density(state: &Swapchain, density: &DensityImages, index: u32) {
         .flatten();
     let inputs = || {
         // Only when the image is stale: the debug properties rank below the fill lock.
-        let (pattern, _) = session.pattern_for(&sources.foveation);
+        let (pattern, _) = crate::xr::pattern::pattern_for(session, &sources.foveation);
         let cap = session.instance.overrides.current().max_fragment();
         sources
             .inputs(

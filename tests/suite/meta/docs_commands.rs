@@ -939,7 +939,7 @@ impl Items {
         }
     }
 
-    /// Why `path` (`hooks::frame::wait_frame`, `Session::eyes`, `crate::bridge::MapKey`) names
+    /// Why `path` (`hooks::frame::wait_frame`, `Session::eyes`, `xr::foveation::MapKey`) names
     /// nothing here; `None` when it does, or when it is another project's.
     fn missing(&self, path: &str) -> Option<String> {
         let parts: Vec<&str> = path.trim_start_matches("crate::").split("::").collect();
@@ -979,7 +979,7 @@ impl Items {
 }
 
 /// The Rust item paths a Markdown text names in inline code outside fenced blocks: spans of
-/// identifiers joined by `::` (`common::guard`, `Session::eyes`, `bridge::MapKey`), a trailing
+/// identifiers joined by `::` (`common::guard`, `Session::eyes`, `foveation::MapKey`), a trailing
 /// call (`()`, `(index, key)`) dropped and a trailing group (`Registry::{instances, sessions}`)
 /// expanded.
 fn item_paths(md: &str) -> Vec<String> {
@@ -1450,7 +1450,7 @@ fn an_item_that_is_gone_fails() {
     let p = dead_items(&root, &items, "docs/example.md", md);
     assert_eq!(p.len(), 7, "{p:#?}");
     // Items that exist, in the forms the documents use, and other projects' names, pass.
-    let md = "`common::guard`, `crate::bridge::MapKey`, `Session::eyes`, `Registry::{instances, sessions}`, \
+    let md = "`common::guard`, `crate::xr::foveation::MapKey`, `Session::eyes`, `Registry::{instances, sessions}`, \
               `DensityImages::refresh(index, key, inputs)`, `fovea_model::Fov`, `xr::gaze`, `fovea::stats`, \
               `XrApplicationInfo::applicationName`, `std::env::var`, `crates/abi/src/lib.rs` (`EXTENSIONS`), \
               `used` (`src/xr/gaze.rs`), `SpinMutex` in `lock.rs`, `session_gpu` in `hooks/session.rs`\n\

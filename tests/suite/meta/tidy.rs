@@ -459,7 +459,7 @@ const VK_FLOORS: &[Place] = &[
 ];
 const XR_FLOORS: &[Place] = &[
     // 1: the FFI edge, the command list, extension names, handle records, the session's GPU,
-    // value conversions, where each view's fovea is.
+    // value conversions, where each view's fovea is, what a map is made from (`MapKey`).
     at(11, "ffi.rs"),
     at(11, "commands.rs"),
     at(11, "extensions.rs"),
@@ -467,6 +467,7 @@ const XR_FLOORS: &[Place] = &[
     at(11, "session_gpu.rs"),
     at(11, "values.rs"),
     at(11, "eye_centres.rs"),
+    at(11, "foveation.rs"),
     // 2: what is built on them: the next layer's table, density images, the gaze source's
     // sampling; then the gaze source's instance part, which makes the sampling's sessions.
     at(21, "next_layer.rs"),
@@ -475,9 +476,10 @@ const XR_FLOORS: &[Place] = &[
     at(22, "gaze.rs"),
     // 3: the registry of instances, sessions, swapchains and their FOV records.
     at(30, "registry.rs"),
-    // 4: what lies below (probing the runtime) and symmetric FOVs.
+    // 4: what lies below (probing the runtime), symmetric FOVs, the session's pattern policy.
     at(40, "below.rs"),
     at(40, "symmetric.rs"),
+    at(40, "pattern.rs"),
     // 5: the hooks; 6: the dispatch table; 7: the loader interface.
     apart(50, "hooks"),
     at(60, "dispatch.rs"),
