@@ -9,10 +9,13 @@ use ash::vk::Handle as _;
 
 use crate::vk::base::chain::{self, ChainCopy};
 use crate::vk::base::ffi::{raw, slice};
-use crate::vk::own::reconstructor::Plan;
+use crate::vk::own::reconstructor::{rate_layers, Colour, Plan};
 use crate::vk::registry::{self, Device};
 use crate::vk::translate::formats::{SHADOW_FORMAT, SHADOW_LAYOUT, SHADOW_USAGE};
-use crate::vk::translate::render_pass::{add_shading_rate, rate_store_op, Pass2};
+use crate::vk::translate::render_pass::{
+    add_shading_rate, pass_colours, rate_store_op, rendering_target, too_many_targets, Pass2,
+    MAX_TARGETS,
+};
 
 /// On an injecting device (docs/injection.md#how-the-attachment-gets-in): creates `pass` below with
 /// a shading-rate attachment added after the application's, named by every subpass; whether a
@@ -57,17 +60,7 @@ pub unsafe fn create_injected(
         // SAFETY: the application's pass, its arrays alive across the call.
         return unsafe { create2(dev.handle, &info, alloc, out) };
     }
-    let (colour_layout, colour_kept) = first.and_then(|a| pass.attachments.get(a as usize)).map_or(
-        (vk::ImageLayout::UNDEFINED, false),
-        |a| {
-            let stored = !matches!(
-                a.store_op,
-                vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
-            );
-            let single = a.samples == vk::SampleCountFlags::TYPE_1;
-            (a.final_layout, stored && single)
-        },
-    );
+    let targets = pass_colours(&pass);
     let rate = pass.attachments.len() as u32;
     pass.attachments.push(vk::AttachmentDescription2::default());
     add_shading_rate(&mut pass, rate, inj.texel(), rate_store_op(dev.api_version));
@@ -103,8 +96,7 @@ pub unsafe fn create_injected(
                 rate,
                 colour: first,
                 view_mask,
-                colour_layout,
-                colour_kept,
+                targets,
             },
         );
         tracing::debug!(
@@ -139,11 +131,15 @@ pub unsafe fn create_injected_framebuffer(
     let extent = [ci.width, ci.height];
     let texels = inj.texels_for(extent);
     let mut copy = *ci;
+    let mut targets = [None; MAX_TARGETS];
     let colour_view = if ci.flags.contains(vk::FramebufferCreateFlags::IMAGELESS) {
         None
     } else {
         // SAFETY: the caller's array.
         let views = unsafe { slice(ci.p_attachments, ci.attachment_count) };
+        for (out, t) in targets.iter_mut().zip(&p.targets) {
+            *out = t.and_then(|(i, _)| views.get(i as usize)).copied();
+        }
         p.colour.and_then(|c| views.get(c as usize)).copied()
     };
     let fb_layers = if p.view_mask != 0 {
@@ -162,6 +158,7 @@ pub unsafe fn create_injected_framebuffer(
                 imageless,
                 eye,
                 colour: colour_view,
+                targets,
                 layers: fb_layers,
             },
         );
@@ -540,7 +537,7 @@ pub unsafe fn begin_injected(
     });
     crate::bridge::inject::count_pass(map.is_some());
     if inj.reconstructs() {
-        plan_rendering(inj, cb, ri, colour, map);
+        plan_rendering(inj, cb, ri, map);
     }
     let Some(map) = map else {
         // SAFETY: the next layer's function, with the caller's arguments.
@@ -580,60 +577,62 @@ pub unsafe fn begin_injected(
     }
 }
 
-/// Notes in `cb`'s record what the end of the eye pass just begun with `colour` (a view the
-/// injector knows, rendering `layers` of it) and the map `map` reconstructs
-/// (docs/reconstruction.md): only where the view's image is reconstructed (decided when the view
-/// was made), the pass keeps its colour (`kept`) and the device has a reconstructor.
-#[allow(clippy::too_many_arguments)]
+/// Notes in `cb`'s record what the end of the eye pass just begun with the map `map` reconstructs
+/// (docs/reconstruction.md): each of `targets` (a view the pass leaves what it renders in, with
+/// the layout it leaves it in, rendering `layers` of it) whose image is reconstructed (decided
+/// when the view was made), where the device has a reconstructor. The eye pass is judged by its
+/// first colour attachment (which in a multisampled pass is the multisampled image), the targets
+/// by their own images: a resolve target is reconstructed where its image is.
 fn plan(
     inj: &crate::vk::own::injector::Injector,
     cb: vk::CommandBuffer,
-    colour: vk::ImageView,
+    targets: impl Iterator<Item = (vk::ImageView, vk::ImageLayout)>,
     map: vk::ImageView,
     layers: u32,
     area: vk::Rect2D,
-    layout: vk::ImageLayout,
-    kept: bool,
     suspending: bool,
 ) {
-    let Some(v) = inj.view(colour).filter(|v| v.reconstruct) else {
-        return;
-    };
-    if !kept {
+    let mut found = [None; MAX_TARGETS];
+    let mut n = 0;
+    for (view, layout) in targets {
+        let Some(v) = inj.view(view).filter(|v| v.reconstruct) else {
+            continue;
+        };
+        if n == MAX_TARGETS {
+            too_many_targets();
+            break;
+        }
+        found[n] = Some((v, layout));
+        n += 1;
+    }
+    if n == 0 {
         return;
     }
-    let Some((rate_image, rate_extent, rate_layers)) = inj.map_image(map) else {
+    let Some((rate_image, rate_extent, map_layers)) = inj.map_image(map) else {
         return;
     };
-    let layers = layers.min(v.layers).max(1);
     registry::record_of(cb, |r| {
-        let Some(kind) = r
-            .reconstructor
-            .as_deref()
-            .and_then(|rc| rc.handles(v.format))
-        else {
+        let Some(rc) = r.reconstructor.as_deref() else {
             return;
         };
-        registry::set_plan(
-            r,
-            Plan {
+        let mut p = Plan::new(area, rate_image, rate_extent, 0, suspending);
+        for (v, layout) in found.into_iter().flatten() {
+            let Some(kind) = rc.handles(v.format) else {
+                continue;
+            };
+            let layers = layers.min(v.layers).max(1);
+            p.push(Colour {
                 image: vk::Image::from_raw(v.image),
                 base_layer: v.base_layer,
                 layers,
-                area,
                 layout,
                 kind,
-                rate_image,
-                rate_extent,
-                rate_base_layer: 0,
-                rate_layers: if rate_layers <= 1 {
-                    1
-                } else {
-                    rate_layers.min(layers)
-                },
-                suspending,
-            },
-        );
+                rate_layers: rate_layers(map_layers, layers),
+            });
+        }
+        if !p.is_empty() {
+            registry::set_plan(r, p);
+        }
     });
 }
 
@@ -646,32 +645,27 @@ fn plan_render_pass(
     let Some(fb) = inj.framebuffer(b.framebuffer) else {
         return;
     };
-    let (Some(colour), Some((extent, views))) = (fb.colour, fb.eye) else {
+    let Some((extent, views)) = fb.eye else {
         return;
     };
     let Some(map) = inj.map_view(extent, views) else {
         return;
     };
-    plan(
-        inj,
-        cb,
-        colour,
-        map,
-        fb.layers,
-        b.render_area,
-        fb.pass.colour_layout,
-        fb.pass.colour_kept,
-        false,
-    );
+    let targets = fb
+        .targets
+        .into_iter()
+        .zip(fb.pass.targets)
+        .filter_map(|(v, t)| Some((v?, t?.1)));
+    plan(inj, cb, targets, map, fb.layers, b.render_area, false);
 }
 
-/// [`plan`] for a dynamic rendering whose first colour attachment got an eye map; a resuming
-/// rendering keeps the plan of the instance it continues.
+/// [`plan`] for a dynamic rendering whose first colour attachment got an eye map: each colour
+/// attachment's view, or its resolve view where it is multisampled; a resuming rendering keeps
+/// the plan of the instance it continues.
 fn plan_rendering(
     inj: &crate::vk::own::injector::Injector,
     cb: vk::CommandBuffer,
     ri: &vk::RenderingInfo<'_>,
-    colour: Option<vk::ImageView>,
     map: Option<vk::ImageView>,
 ) {
     let suspending = ri.flags.contains(vk::RenderingFlags::SUSPENDING);
@@ -683,36 +677,20 @@ fn plan_rendering(
         });
         return;
     }
-    let (Some(colour), Some(map)) = (colour, map) else {
+    let Some(map) = map else {
         return;
     };
     // SAFETY: the caller's colour attachments, `colorAttachmentCount` of them.
-    let Some(a) = (unsafe { slice(ri.p_color_attachments, ri.color_attachment_count) }).first()
-    else {
-        return;
-    };
-    // A multisampled attachment resolves into the view that is read, which the resolve writes
-    // whatever the attachment's store operation (docs/reconstruction.md).
-    let (target, layout, kept) = if a.resolve_mode != vk::ResolveModeFlags::NONE {
-        (a.resolve_image_view, a.resolve_image_layout, true)
-    } else {
-        let stored = !matches!(
-            a.store_op,
-            vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
-        );
-        (colour, a.image_layout, stored)
-    };
+    let colours = unsafe { slice(ri.p_color_attachments, ri.color_attachment_count) };
     let layers =
         crate::vk::own::injector::rendered_layers(ri.view_mask, ri.layer_count).unwrap_or(1);
     plan(
         inj,
         cb,
-        target,
+        colours.iter().filter_map(rendering_target),
         map,
         layers,
         ri.render_area,
-        layout,
-        kept,
         suspending,
     );
 }

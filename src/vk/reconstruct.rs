@@ -20,9 +20,13 @@ use ash::vk::Handle as _;
 
 use crate::vk::base::chain;
 use crate::vk::base::ffi::{key, raw, slice};
-use crate::vk::own::reconstructor::{PassTarget, Plan, Reconstructor, Target};
+use crate::vk::own::reconstructor::{
+    rate_layers, Colour, FramebufferTargets, PassTarget, Plan, Reconstructor, Target,
+};
 use crate::vk::registry::{self, record_of, Device, RECONSTRUCTORS};
-use crate::vk::translate::render_pass::Pass2;
+use crate::vk::translate::render_pass::{
+    pass_colours, rendering_target, too_many_targets, Pass2, MAX_TARGETS,
+};
 
 /// Sets up reconstruction on a device just recorded in the registry that injects shading-rate
 /// maps or emulates density maps, or logs why not. `why_not`: why the device cannot record compute dispatches into the
@@ -229,47 +233,20 @@ pub unsafe fn view_destroyed(dev: &Device, view: vk::ImageView) {
 }
 
 /// A render pass rewritten for emulation was created from `pass` (its density attachment
-/// `density`): its colour target, the first subpass's first colour attachment, is noted.
+/// `density`): its colour targets ([`pass_colours`]) are noted.
 pub fn pass_created(dev: &Device, handle: vk::RenderPass, pass: &Pass2, density: u32) {
     with_reconstructor(dev, |r| {
-        let Some(s) = pass.subpasses.first() else {
+        let colours = pass_colours(pass);
+        if colours[0].is_none() {
             return;
-        };
-        // SAFETY: the application's array, alive while `pass` is.
-        let first = unsafe { slice(s.p_color_attachments, s.color_attachment_count) }
-            .first()
-            .map(|a| a.attachment)
-            .filter(|&a| a != vk::ATTACHMENT_UNUSED);
-        let Some(mut colour) = first else {
-            return;
-        };
-        let Some(mut a) = pass.attachments.get(colour as usize) else {
-            return;
-        };
-        if a.samples != vk::SampleCountFlags::TYPE_1 {
-            // Multisampled: what is read is its resolve, the target reconstructed.
-            let resolve = (!s.p_resolve_attachments.is_null())
-                // SAFETY: the application's array, one per colour attachment.
-                .then(|| unsafe { *s.p_resolve_attachments }.attachment)
-                .filter(|&r| r != vk::ATTACHMENT_UNUSED);
-            let Some(r) = resolve.and_then(|r| Some((r, pass.attachments.get(r as usize)?))) else {
-                return;
-            };
-            (colour, a) = r;
         }
-        let kept = a.samples == vk::SampleCountFlags::TYPE_1
-            && !matches!(
-                a.store_op,
-                vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
-            );
+        let view_mask = pass.subpasses.first().map_or(0, |s| s.view_mask);
         r.tables.lock().passes.insert(
             handle.as_raw(),
             PassTarget {
-                colour,
+                colours,
                 density,
-                layout: a.final_layout,
-                kept,
-                view_mask: s.view_mask,
+                view_mask,
             },
         );
     });
@@ -303,16 +280,27 @@ pub unsafe fn framebuffer_created(
         };
         // SAFETY: the caller's array.
         let views = unsafe { slice(ci.p_attachments, ci.attachment_count) };
-        let (Some(c), Some(d)) = (views.get(p.colour as usize), views.get(p.density as usize))
-        else {
+        let Some(d) = views.get(p.density as usize) else {
             return;
         };
-        if !t.views.contains_key(&c.as_raw()) {
+        let mut colours = [None; MAX_TARGETS];
+        for (out, c) in colours.iter_mut().zip(&p.colours) {
+            *out = c
+                .and_then(|(i, _)| views.get(i as usize))
+                .map(|v| v.as_raw())
+                .filter(|v| t.views.contains_key(v));
+        }
+        if colours.iter().all(Option::is_none) {
             return;
         }
-        let layers = rendered(p.view_mask, ci.layers);
-        t.framebuffers
-            .insert(fb.as_raw(), (c.as_raw(), d.as_raw(), layers));
+        t.framebuffers.insert(
+            fb.as_raw(),
+            FramebufferTargets {
+                colours,
+                density: d.as_raw(),
+                layers: rendered(p.view_mask, ci.layers),
+            },
+        );
     });
 }
 
@@ -331,52 +319,49 @@ fn rendered(view_mask: u32, layers: u32) -> u32 {
     }
 }
 
-/// Notes in `r`'s command buffer record what the end of a pass begun on the colour target `t`
-/// and the density view `density` (its shadow is the pass's shading-rate attachment)
-/// reconstructs.
+/// Notes in `r`'s command buffer record what the end of a pass begun on the colour targets
+/// `targets` (each with the layout the pass leaves it in) and the density view `density` (its
+/// shadow is the pass's shading-rate attachment) reconstructs.
 #[allow(clippy::too_many_arguments)]
 fn plan(
     dev: &Device,
     rc: &Reconstructor,
     record: &registry::CbRecord,
-    t: Target,
+    targets: impl Iterator<Item = (Target, vk::ImageLayout)>,
     density: u64,
     layers: u32,
     area: vk::Rect2D,
-    layout: vk::ImageLayout,
     suspending: bool,
 ) {
     let Some(sv) = dev.attachments.views.lock().get(&density).copied() else {
         return;
     };
-    let Some(kind) = rc.handles(t.format) else {
-        return;
-    };
-    let layers = layers.min(t.layers).max(1);
-    registry::set_plan(
-        record,
-        Plan {
+    let mut p = Plan::new(area, sv.image, sv.texels, sv.base_layer, suspending);
+    for (t, layout) in targets {
+        let Some(kind) = rc.handles(t.format) else {
+            continue;
+        };
+        let layers = layers.min(t.layers).max(1);
+        let c = Colour {
             image: t.image,
             base_layer: t.base_layer,
             layers,
-            area,
             layout,
             kind,
-            rate_image: sv.image,
-            rate_extent: sv.texels,
-            rate_base_layer: sv.base_layer,
-            rate_layers: if sv.layers <= 1 {
-                1
-            } else {
-                sv.layers.min(layers)
-            },
-            suspending,
-        },
-    );
+            rate_layers: rate_layers(sv.layers, layers),
+        };
+        if !p.push(c) {
+            too_many_targets();
+            break;
+        }
+    }
+    if !p.is_empty() {
+        registry::set_plan(record, p);
+    }
 }
 
-/// `vkCmdBeginRenderPass(2)` on an emulating device: where the pass renders a reconstructed
-/// colour target, its end is planned. One atomic load where no view of the device is
+/// `vkCmdBeginRenderPass(2)` on an emulating device: where the pass renders reconstructed
+/// colour targets, its end is planned. One atomic load where no view of the device is
 /// reconstructed.
 ///
 /// # Safety
@@ -400,16 +385,14 @@ pub unsafe fn begin_render_pass(
         if !rc.any.load(Ordering::Acquire) {
             return;
         }
+        let mut targets = [None; MAX_TARGETS];
         let found = {
             let t = rc.tables.lock();
             t.passes
                 .get(&b.render_pass.as_raw())
                 .copied()
                 .and_then(|p| {
-                    let (colour, density, layers) = match t
-                        .framebuffers
-                        .get(&b.framebuffer.as_raw())
-                    {
+                    let f = match t.framebuffers.get(&b.framebuffer.as_raw()) {
                         Some(&f) => f,
                         None => {
                             // An imageless framebuffer: the views are in the begin info.
@@ -422,34 +405,46 @@ pub unsafe fn begin_render_pass(
                             let a = unsafe { found.ok().flatten()?.as_ref()? };
                             // SAFETY: the caller's array.
                             let views = unsafe { slice(a.p_attachments, a.attachment_count) };
-                            let c = views.get(p.colour as usize)?.as_raw();
-                            let d = views.get(p.density as usize)?.as_raw();
-                            (c, d, rendered(p.view_mask, 1))
+                            let mut colours = [None; MAX_TARGETS];
+                            for (out, c) in colours.iter_mut().zip(&p.colours) {
+                                *out = c
+                                    .and_then(|(i, _)| views.get(i as usize))
+                                    .map(|v| v.as_raw());
+                            }
+                            FramebufferTargets {
+                                colours,
+                                density: views.get(p.density as usize)?.as_raw(),
+                                layers: rendered(p.view_mask, 1),
+                            }
                         }
                     };
-                    let target = t.views.get(&colour).copied()?;
-                    p.kept.then_some((p, target, density, layers))
+                    for ((out, view), c) in targets.iter_mut().zip(&f.colours).zip(&p.colours) {
+                        *out = view
+                            .and_then(|v| t.views.get(&v).copied())
+                            .zip(c.map(|(_, layout)| layout));
+                    }
+                    Some((f.density, f.layers))
                 })
         };
-        if let Some((p, target, density, layers)) = found {
+        if let Some((density, layers)) = found {
             plan(
                 dev,
                 rc,
                 r,
-                target,
+                targets.into_iter().flatten(),
                 density,
                 layers,
                 b.render_area,
-                p.layout,
                 false,
             );
         }
     });
 }
 
-/// `vkCmdBeginRendering` on an emulating device with the density view `density`: where its first
-/// colour attachment is a reconstructed target the rendering keeps, its end is planned; a
-/// resuming rendering keeps the plan of the instance it continues.
+/// `vkCmdBeginRendering` on an emulating device with the density view `density`: where its
+/// colour attachments (their resolve views, for multisampled ones) are reconstructed targets the
+/// rendering keeps, its end is planned; a resuming rendering keeps the plan of the instance it
+/// continues.
 ///
 /// # Safety
 /// `ri` must be valid.
@@ -477,35 +472,38 @@ pub unsafe fn begin_rendering(
             return;
         }
         // SAFETY: the caller's colour attachments, `colorAttachmentCount` of them.
-        let Some(a) = (unsafe { slice(ri.p_color_attachments, ri.color_attachment_count) }).first()
-        else {
+        let colours = unsafe { slice(ri.p_color_attachments, ri.color_attachment_count) };
+        let mut targets = [None; MAX_TARGETS];
+        {
+            let t = rc.tables.lock();
+            let mut n = 0;
+            for a in colours {
+                let Some((view, layout)) = rendering_target(a) else {
+                    continue;
+                };
+                let Some(target) = t.views.get(&view.as_raw()).copied() else {
+                    continue;
+                };
+                if n == MAX_TARGETS {
+                    too_many_targets();
+                    break;
+                }
+                targets[n] = Some((target, layout));
+                n += 1;
+            }
+        }
+        if targets[0].is_none() {
             return;
-        };
-        // A multisampled attachment resolves into the view that is read, which the resolve
-        // writes whatever the attachment's store operation.
-        let (view, layout, kept) = if a.resolve_mode != vk::ResolveModeFlags::NONE {
-            (a.resolve_image_view, a.resolve_image_layout, true)
-        } else {
-            let stored = !matches!(
-                a.store_op,
-                vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
-            );
-            (a.image_view, a.image_layout, stored)
-        };
-        let target = rc.tables.lock().views.get(&view.as_raw()).copied();
-        let (Some(target), true) = (target, kept) else {
-            return;
-        };
+        }
         let layers = rendered(ri.view_mask, ri.layer_count);
         plan(
             dev,
             rc,
             r,
-            target,
+            targets.into_iter().flatten(),
             density.as_raw(),
             layers,
             ri.render_area,
-            layout,
             suspending,
         );
     });

@@ -1123,8 +1123,7 @@ mod tests {
             rate: 1,
             colour: Some(0),
             view_mask: 0,
-            colour_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-            colour_kept: true,
+            targets: [None; crate::vk::translate::render_pass::MAX_TARGETS],
         };
         inj.pass_created(vk::RenderPass::from_raw(pass), injected);
         inj.framebuffer_created(
@@ -1135,6 +1134,7 @@ mod tests {
                 imageless: false,
                 eye: Some((extent, views)),
                 colour: None,
+                targets: [None; crate::vk::translate::render_pass::MAX_TARGETS],
                 layers: 1,
             },
         );
@@ -1146,6 +1146,7 @@ mod tests {
                 imageless: true,
                 eye: None,
                 colour: None,
+                targets: [None; crate::vk::translate::render_pass::MAX_TARGETS],
                 layers: 1,
             },
         );

@@ -36,6 +36,7 @@ use crate::bridge::inject::Injection;
 use crate::bridge::FdmEmulation;
 use crate::vk::own::calls::Own;
 use crate::vk::translate::formats::SHADOW_FORMAT;
+use crate::vk::translate::render_pass::MAX_TARGETS;
 use fovea_model::inject::{FixedCodes, Pass, Views};
 
 /// Advanced by every change to what a pass begin's decision on any injecting device reads (a view
@@ -113,11 +114,11 @@ pub struct InjectedPass {
     pub colour: Option<u32>,
     /// The first subpass's view mask.
     pub view_mask: u32,
-    /// The colour target's `finalLayout`, and whether the pass keeps what it renders there in a
-    /// single-sample attachment (stored, not `DONT_CARE` or `NONE`): only then is it
-    /// reconstructed (docs/reconstruction.md).
-    pub colour_layout: vk::ImageLayout,
-    pub colour_kept: bool,
+    /// The attachments reconstructed after an eye pass where their images are
+    /// (docs/reconstruction.md): each stored single-sample colour attachment and each stored
+    /// resolve attachment of a multisampled one, with its `finalLayout`
+    /// ([`crate::vk::translate::render_pass::pass_colours`]).
+    pub targets: [Option<(u32, vk::ImageLayout)>; MAX_TARGETS],
 }
 
 /// What a framebuffer of an injected pass got.
@@ -132,6 +133,9 @@ pub struct InjectedFramebuffer {
     pub eye: Option<([u32; 2], Views)>,
     /// Its colour target's view (`None` for an imageless framebuffer).
     pub colour: Option<vk::ImageView>,
+    /// The views of its pass's [`InjectedPass::targets`], entry for entry (`None` for an
+    /// imageless framebuffer).
+    pub targets: [Option<vk::ImageView>; MAX_TARGETS],
     /// The layers it renders (its `layers`, or the views of a multiview pass).
     pub layers: u32,
 }

@@ -15,31 +15,93 @@ use crate::vk::own::bindings::{restore, Bound};
 use crate::vk::own::calls::Own;
 use crate::vk::own::recon_shader::{table, Kind, Push, GROUP, PUSH_BYTES, SHADER};
 use crate::vk::translate::formats::SHADOW_LAYOUT;
+use crate::vk::translate::render_pass::MAX_TARGETS;
 
 /// Scratch buffers a device keeps at most (one per target size in use; a descriptor set each).
 pub const MAX_SCRATCH: u32 = 16;
 
-/// What one pass instance's end reconstructs: one colour target (layers of one image) and the
-/// shading-rate image the pass read. Plain data, made where the pass begins
-/// (`crate::vk::injection`), kept in the command buffer's record until its end.
+/// One colour target a pass's end reconstructs: layers of one image, and the layout the pass
+/// leaves them in.
 #[derive(Clone, Copy, Debug)]
-pub struct Plan {
+pub struct Colour {
     pub image: vk::Image,
     /// The layers the pass rendered: the view's first layer and how many.
     pub base_layer: u32,
     pub layers: u32,
-    pub area: vk::Rect2D,
     /// The layout the pass leaves the image in, which the reconstruction restores.
     pub layout: vk::ImageLayout,
     pub kind: Kind,
+    /// The rate image's layers read: 1 (merged, every view reads it) or one per rendered layer.
+    pub rate_layers: u32,
+}
+
+/// What one pass instance's end reconstructs: its colour targets (each stored single-sample
+/// colour attachment and each resolve target whose image is reconstructed, up to
+/// [`MAX_TARGETS`]) and the shading-rate image the pass read. Plain data, made where the pass
+/// begins (`crate::vk::injection`, `crate::vk::reconstruct`), kept in the command buffer's record
+/// until its end.
+#[derive(Clone, Copy, Debug)]
+pub struct Plan {
+    targets: [Option<Colour>; MAX_TARGETS],
+    pub area: vk::Rect2D,
     pub rate_image: vk::Image,
-    /// The rate image's extent in texels and the layers read: 1 (merged, every view reads it) or
-    /// one per rendered layer.
+    /// The rate image's extent in texels, and its first layer read.
     pub rate_extent: [u32; 2],
     pub rate_base_layer: u32,
-    pub rate_layers: u32,
     /// The instance was begun suspending: its end is not the instance's last.
     pub suspending: bool,
+}
+
+impl Plan {
+    /// A plan with no target yet.
+    pub fn new(
+        area: vk::Rect2D,
+        rate_image: vk::Image,
+        rate_extent: [u32; 2],
+        rate_base_layer: u32,
+        suspending: bool,
+    ) -> Plan {
+        Plan {
+            targets: [None; MAX_TARGETS],
+            area,
+            rate_image,
+            rate_extent,
+            rate_base_layer,
+            suspending,
+        }
+    }
+
+    /// Adds a target; `false` where the plan holds [`MAX_TARGETS`] already (the target is left
+    /// alone).
+    pub fn push(&mut self, c: Colour) -> bool {
+        match self.targets.iter_mut().find(|t| t.is_none()) {
+            Some(slot) => {
+                *slot = Some(c);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The targets, in the order the pass names them.
+    pub fn targets(&self) -> impl Iterator<Item = &Colour> {
+        self.targets.iter().flatten()
+    }
+
+    /// Whether the plan reconstructs anything.
+    pub fn is_empty(&self) -> bool {
+        self.targets[0].is_none()
+    }
+}
+
+/// The layers of a map of `map_layers` layers a target rendering `layers` layers reads: 1 where
+/// the map is merged, else one per rendered layer.
+pub fn rate_layers(map_layers: u32, layers: u32) -> u32 {
+    if map_layers <= 1 {
+        1
+    } else {
+        map_layers.min(layers)
+    }
 }
 
 /// An application's colour view on an emulating device whose image is reconstructed
@@ -52,15 +114,25 @@ pub struct Target {
     pub format: vk::Format,
 }
 
-/// A rewritten render pass's colour target (its first subpass's first colour attachment), as
-/// [`crate::vk::own::injector::InjectedPass`] has it for injection.
+/// A rewritten render pass's colour targets: of its first subpass's colour attachments, each
+/// stored single-sample one and each stored resolve attachment of a multisampled one (as
+/// [`crate::vk::own::injector::InjectedPass`] has them for injection), by attachment index with
+/// the layout the pass leaves it in.
 #[derive(Clone, Copy, Debug)]
 pub struct PassTarget {
-    pub colour: u32,
+    pub colours: [Option<(u32, vk::ImageLayout)>; MAX_TARGETS],
     pub density: u32,
-    pub layout: vk::ImageLayout,
-    pub kept: bool,
     pub view_mask: u32,
+}
+
+/// A framebuffer of a rewritten pass with a reconstructed colour view: per entry of its pass's
+/// [`PassTarget::colours`], the view there where it is reconstructed; the density view; the
+/// layers rendered.
+#[derive(Clone, Copy, Debug)]
+pub struct FramebufferTargets {
+    pub colours: [Option<u64>; MAX_TARGETS],
+    pub density: u64,
+    pub layers: u32,
 }
 
 /// What an emulating device's reconstruction knows of its objects, filled at their creation.
@@ -72,9 +144,8 @@ pub struct Tables {
     pub views: HashMap<u64, Target>,
     /// Rewritten render passes' colour targets.
     pub passes: HashMap<u64, PassTarget>,
-    /// Framebuffers of those passes with a reconstructed colour view: the colour view, the
-    /// density view, the layers rendered.
-    pub framebuffers: HashMap<u64, (u64, u64, u32)>,
+    /// Framebuffers of those passes with a reconstructed colour view.
+    pub framebuffers: HashMap<u64, FramebufferTargets>,
 }
 
 /// One scratch buffer: raw texels in, texels out, rate codes, and the set naming them.
@@ -345,22 +416,22 @@ impl Reconstructor {
         }
     }
 
-    /// Records, after the pass instance of `plan` ended in `cb`, the reconstruction of its colour
-    /// target: its render area's layers copied into the scratch, the shading-rate image's layers
-    /// too, a dispatch of the shader, the result copied back, the image left in the layout the
-    /// pass left it in, and the application's compute bindings given back. Barriers order it
-    /// after everything before it and before everything after it; the second scope of the last
-    /// covers all later commands.
+    /// Records, after the pass instance of `plan` ended in `cb`, the reconstruction of each of
+    /// its colour targets ([`Reconstructor::record_target`]), then gives the application's
+    /// compute bindings back.
     ///
     /// # Safety
     /// `cb` must be recording, outside a render pass, on this reconstructor's device; `bound` its
     /// bindings.
     pub unsafe fn record(&self, cb: vk::CommandBuffer, plan: &Plan, bound: Option<&Bound>) {
+        let Some(first) = plan.targets().next() else {
+            return;
+        };
         let Some(bound) = bound.filter(|b| b.conditional.is_none() && !b.inherited_conditional)
         else {
             if !self.logged_state.swap(true, Ordering::Relaxed) {
                 tracing::warn!(
-                    image = raw(plan.image),
+                    image = raw(first.image),
                     "a command buffer whose compute bindings the layer cannot give back (push \
                      descriptors, or more sets, dynamic offsets or push-constant ranges than it \
                      records, or conditional rendering, which would discard the dispatch and not the copies): its passes' coarse blocks \
@@ -369,28 +440,49 @@ impl Reconstructor {
             }
             return;
         };
-        let (w, h) = (plan.area.extent.width, plan.area.extent.height);
-        if w == 0 || h == 0 || plan.layers == 0 {
-            return;
+        let mut dispatched = false;
+        for t in plan.targets() {
+            // SAFETY: as the caller promised.
+            dispatched |= unsafe { self.record_target(cb, plan, t) };
         }
-        let texels = u64::from(w) * u64::from(h) * u64::from(plan.layers);
+        if dispatched {
+            // SAFETY: as the caller promised: `bound` is `cb`'s.
+            unsafe { restore(&self.own.fns, cb, bound) };
+        }
+    }
+
+    /// Records the reconstruction of one colour target `t` of `plan`: its render area's layers
+    /// copied into the scratch, the shading-rate image's layers too, a dispatch of the shader,
+    /// the result copied back, the image left in the layout the pass left it in. Barriers order
+    /// it after everything before it (an earlier target's reads of the scratch included) and
+    /// before everything after it; the second scope of the last covers all later commands.
+    /// Whether it dispatched (the compute bindings are then the layer's).
+    ///
+    /// # Safety
+    /// As [`Reconstructor::record`].
+    unsafe fn record_target(&self, cb: vk::CommandBuffer, plan: &Plan, t: &Colour) -> bool {
+        let (w, h) = (plan.area.extent.width, plan.area.extent.height);
+        if w == 0 || h == 0 || t.layers == 0 {
+            return false;
+        }
+        let texels = u64::from(w) * u64::from(h) * u64::from(t.layers);
         let rate_bytes = u64::from(plan.rate_extent[0])
             * u64::from(plan.rate_extent[1])
-            * u64::from(plan.rate_layers);
+            * u64::from(t.rate_layers);
         // SAFETY: the device is live while its command buffer records.
         let Some(s) = (unsafe {
             self.scratch(
-                texels.max(u64::from(w) * u64::from(h) * u64::from(plan.layers)),
+                texels.max(u64::from(w) * u64::from(h) * u64::from(t.layers)),
                 rate_bytes,
             )
         }) else {
             if !self.logged_scratch.swap(true, Ordering::Relaxed) {
                 tracing::warn!(
-                    image = raw(plan.image),
+                    image = raw(t.image),
                     "no scratch buffer for a reconstruction: this target keeps its coarse blocks"
                 );
             }
-            return;
+            return false;
         };
         let d = &self.own.fns;
         let colour = |old, new, src, dst| {
@@ -401,13 +493,13 @@ impl Reconstructor {
                 .new_layout(new)
                 .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                 .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .image(plan.image)
+                .image(t.image)
                 .subresource_range(vk::ImageSubresourceRange {
                     aspect_mask: vk::ImageAspectFlags::COLOR,
                     base_mip_level: 0,
                     level_count: 1,
-                    base_array_layer: plan.base_layer,
-                    layer_count: plan.layers,
+                    base_array_layer: t.base_layer,
+                    layer_count: t.layers,
                 })
         };
         let rate = |old, new, src, dst| {
@@ -424,7 +516,7 @@ impl Reconstructor {
                     base_mip_level: 0,
                     level_count: 1,
                     base_array_layer: plan.rate_base_layer,
-                    layer_count: plan.rate_layers,
+                    layer_count: t.rate_layers,
                 })
         };
         let region = vk::BufferImageCopy {
@@ -434,8 +526,8 @@ impl Reconstructor {
             image_subresource: vk::ImageSubresourceLayers {
                 aspect_mask: vk::ImageAspectFlags::COLOR,
                 mip_level: 0,
-                base_array_layer: plan.base_layer,
-                layer_count: plan.layers,
+                base_array_layer: t.base_layer,
+                layer_count: t.layers,
             },
             image_offset: vk::Offset3D {
                 x: plan.area.offset.x,
@@ -457,9 +549,9 @@ impl Reconstructor {
             ],
             rate_extent: plan.rate_extent,
             texel: self.texel,
-            kind: plan.kind as u32,
-            words: plan.kind.words(),
-            rate_layers: plan.rate_layers,
+            kind: t.kind as u32,
+            words: t.kind.words(),
+            rate_layers: t.rate_layers,
             table: self.table,
         };
         let all = vk::PipelineStageFlags::ALL_COMMANDS;
@@ -483,7 +575,7 @@ impl Reconstructor {
                 &[],
                 &[
                     colour(
-                        plan.layout,
+                        t.layout,
                         src,
                         vk::AccessFlags::MEMORY_WRITE,
                         vk::AccessFlags::TRANSFER_READ,
@@ -496,7 +588,7 @@ impl Reconstructor {
                     ),
                 ],
             );
-            d.cmd_copy_image_to_buffer(cb, plan.image, src, s.buffer, &[region]);
+            d.cmd_copy_image_to_buffer(cb, t.image, src, s.buffer, &[region]);
             d.cmd_copy_image_to_buffer(
                 cb,
                 plan.rate_image,
@@ -510,7 +602,7 @@ impl Reconstructor {
                         aspect_mask: vk::ImageAspectFlags::COLOR,
                         mip_level: 0,
                         base_array_layer: plan.rate_base_layer,
-                        layer_count: plan.rate_layers,
+                        layer_count: t.rate_layers,
                     },
                     image_offset: vk::Offset3D::default(),
                     image_extent: vk::Extent3D {
@@ -562,7 +654,7 @@ impl Reconstructor {
                 0,
                 &push.bytes(),
             );
-            d.cmd_dispatch(cb, w.div_ceil(GROUP), h.div_ceil(GROUP), plan.layers);
+            d.cmd_dispatch(cb, w.div_ceil(GROUP), h.div_ceil(GROUP), t.layers);
             // 3. The dispatch before the copy back.
             d.cmd_pipeline_barrier(
                 cb,
@@ -577,7 +669,7 @@ impl Reconstructor {
             );
             let mut back = region;
             back.buffer_offset = s.half();
-            d.cmd_copy_buffer_to_image(cb, s.buffer, plan.image, dst, &[back]);
+            d.cmd_copy_buffer_to_image(cb, s.buffer, t.image, dst, &[back]);
             // 4. The image in the pass's final layout, before everything after.
             d.cmd_pipeline_barrier(
                 cb,
@@ -588,12 +680,12 @@ impl Reconstructor {
                 &[],
                 &[colour(
                     dst,
-                    plan.layout,
+                    t.layout,
                     vk::AccessFlags::TRANSFER_WRITE,
                     vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE,
                 )],
             );
-            restore(d, cb, bound);
         }
+        true
     }
 }

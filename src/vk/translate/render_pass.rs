@@ -32,6 +32,7 @@
 //! says so.
 
 use std::ffi::c_void;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use ash::vk;
 
@@ -435,6 +436,91 @@ pub fn shadow_attachment_info(
         p_view_formats: formats.as_ptr(),
         ..Default::default()
     }
+}
+
+/// Colour targets one pass instance's end reconstructs at most: a pass with more has the rest
+/// left alone, with one line in the log (docs/reconstruction.md). A fixed array keeps the plan
+/// (`crate::vk::own::reconstructor::Plan`) plain data in the command buffer's record, with no allocation per pass.
+pub const MAX_TARGETS: usize = 8;
+
+/// Logs, once per process, that a pass names more colour targets than a plan holds.
+pub fn too_many_targets() {
+    static LOGGED: AtomicBool = AtomicBool::new(false);
+    if !LOGGED.swap(true, Ordering::Relaxed) {
+        tracing::warn!(
+            most = MAX_TARGETS,
+            "a pass with more colour attachments than the layer reconstructs: the ones after \
+             these keep their coarse blocks"
+        );
+    }
+}
+
+/// The attachments of `pass`'s first subpass that are reconstructed where their images are
+/// (docs/reconstruction.md): each stored single-sample colour attachment, and for a multisampled
+/// one its resolve attachment where that is stored (what is read; the multisampled attachment
+/// itself is left alone); with the layout the pass leaves each in. At most [`MAX_TARGETS`].
+pub fn pass_colours(pass: &Pass2) -> [Option<(u32, vk::ImageLayout)>; MAX_TARGETS] {
+    let mut out = [None; MAX_TARGETS];
+    let Some(s) = pass.subpasses.first() else {
+        return out;
+    };
+    // SAFETY: the application's array, alive while `pass` is.
+    let colours = unsafe { slice(s.p_color_attachments, s.color_attachment_count) };
+    let resolves = if s.p_resolve_attachments.is_null() {
+        &[]
+    } else {
+        // SAFETY: the application's array, one per colour attachment.
+        unsafe { slice(s.p_resolve_attachments, s.color_attachment_count) }
+    };
+    let mut n = 0;
+    for (i, c) in colours.iter().enumerate() {
+        let Some(a) = pass.attachments.get(c.attachment as usize) else {
+            continue;
+        };
+        let index = if a.samples == vk::SampleCountFlags::TYPE_1 {
+            c.attachment
+        } else {
+            match resolves.get(i).map(|r| r.attachment) {
+                Some(r) if r != vk::ATTACHMENT_UNUSED => r,
+                _ => continue,
+            }
+        };
+        let Some(a) = pass.attachments.get(index as usize) else {
+            continue;
+        };
+        let kept = a.samples == vk::SampleCountFlags::TYPE_1
+            && !matches!(
+                a.store_op,
+                vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
+            );
+        if !kept {
+            continue;
+        }
+        if n == MAX_TARGETS {
+            too_many_targets();
+            break;
+        }
+        out[n] = Some((index, a.final_layout));
+        n += 1;
+    }
+    out
+}
+
+/// The view a dynamic rendering's colour attachment `a` leaves what it renders in, and its
+/// layout: a multisampled attachment resolves into the view that is read, which the resolve
+/// writes whatever the attachment's store operation; a single-sample one where it is stored.
+pub fn rendering_target(
+    a: &vk::RenderingAttachmentInfo<'_>,
+) -> Option<(vk::ImageView, vk::ImageLayout)> {
+    if a.resolve_mode != vk::ResolveModeFlags::NONE {
+        return Some((a.resolve_image_view, a.resolve_image_layout))
+            .filter(|(v, _)| *v != vk::ImageView::null());
+    }
+    let stored = !matches!(
+        a.store_op,
+        vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
+    );
+    Some((a.image_view, a.image_layout)).filter(|(v, _)| stored && *v != vk::ImageView::null())
 }
 
 #[cfg(test)]
