@@ -32,6 +32,11 @@ enum Case {
     Msaa,
     /// Dynamic rendering drawing 4 samples a pixel, resolved into the image read back.
     DynamicMsaa,
+    /// A render pass with two colour attachments, both read back, both loading a pattern that
+    /// the draw leaves as it is (its write masks are empty).
+    Mrt,
+    /// The same in dynamic rendering.
+    DynamicMrt,
 }
 
 impl Case {
@@ -40,12 +45,16 @@ impl Case {
     }
 
     fn dynamic(self) -> bool {
-        matches!(self, Case::Dynamic | Case::DynamicMsaa)
+        matches!(self, Case::Dynamic | Case::DynamicMsaa | Case::DynamicMrt)
+    }
+
+    fn mrt(self) -> bool {
+        matches!(self, Case::Mrt | Case::DynamicMrt)
     }
 }
 
 struct Drawn {
-    /// Every layer, tightly packed, 4 bytes a pixel.
+    /// Every layer (of every colour attachment read back), tightly packed, 4 bytes a pixel.
     pixels: Vec<u8>,
     layers: u32,
     /// Layer 1's map was mirrored (coarse on the right).
@@ -160,6 +169,20 @@ fn draw_on(
             );
             (i, m, view(i, format, layers))
         });
+        // Two colour attachments: the second, `second`, as subsampled as the first.
+        let second = case.mrt().then(|| {
+            let (i, m) = image(
+                format,
+                SIDE,
+                layers,
+                vk::ImageUsageFlags::COLOR_ATTACHMENT
+                    | vk::ImageUsageFlags::TRANSFER_SRC
+                    | vk::ImageUsageFlags::TRANSFER_DST,
+                flags,
+                vk::SampleCountFlags::TYPE_1,
+            );
+            (i, m, view(i, format, layers))
+        });
         let n = SIDE / texel;
         let (density, density_mem) = image(
             vk::Format::R8G8_UNORM,
@@ -191,7 +214,16 @@ fn draw_on(
                 .store_op(vk::AttachmentStoreOp::STORE)
                 .initial_layout(initial)
                 .final_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL);
-            let drawn = if case.msaa() {
+            let loaded = vk::AttachmentDescription2::default()
+                .format(format)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .load_op(vk::AttachmentLoadOp::LOAD)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .initial_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .final_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL);
+            let drawn = if case.mrt() {
+                loaded
+            } else if case.msaa() {
                 vk::AttachmentDescription2::default()
                     .format(format)
                     .samples(samples)
@@ -211,22 +243,25 @@ fn draw_on(
                     .store_op(vk::AttachmentStoreOp::DONT_CARE)
                     .initial_layout(FDM_LAYOUT)
                     .final_layout(FDM_LAYOUT),
-                resolved,
+                if case.mrt() { loaded } else { resolved },
             ];
-            let colour_ref = [vk::AttachmentReference2::default()
-                .attachment(0)
-                .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
+            let colour_ref = [0, 2].map(|a| {
+                vk::AttachmentReference2::default()
+                    .attachment(a)
+                    .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            });
+            let colours = if case.mrt() { 2 } else { 1 };
             let resolve_ref = [vk::AttachmentReference2::default()
                 .attachment(2)
                 .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
             let mut subpass = [vk::SubpassDescription2::default()
                 .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
                 .view_mask(mask)
-                .color_attachments(&colour_ref)];
+                .color_attachments(&colour_ref[..colours])];
             if case.msaa() {
                 subpass[0] = subpass[0].resolve_attachments(&resolve_ref);
             }
-            let count = if case.msaa() { 3 } else { 2 };
+            let count = if case.msaa() || case.mrt() { 3 } else { 2 };
             let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
                 .fragment_density_map_attachment(vk::AttachmentReference {
                     attachment: 1,
@@ -261,9 +296,10 @@ fn draw_on(
             d.create_render_pass2(&info, None).unwrap()
         });
         let framebuffer = pass.map(|p| {
-            let list: Vec<vk::ImageView> = match ms {
-                Some((_, _, v)) => vec![v, density_view, colour_view],
-                None => vec![colour_view, density_view],
+            let list: Vec<vk::ImageView> = match (ms, second) {
+                (Some((_, _, v)), _) => vec![v, density_view, colour_view],
+                (_, Some((_, _, v))) => vec![colour_view, density_view, v],
+                _ => vec![colour_view, density_view],
             };
             d.create_framebuffer(
                 &vk::FramebufferCreateInfo::default()
@@ -292,9 +328,13 @@ fn draw_on(
         if case.msaa() {
             fixed.multisample = fixed.multisample.rasterization_samples(samples);
         }
-        let formats = [format];
+        if case.mrt() {
+            fixed.blend =
+                vk::PipelineColorBlendStateCreateInfo::default().attachments(&TWO_TARGETS);
+        }
+        let formats = [format; 2];
         let mut rendering = vk::PipelineRenderingCreateInfo::default()
-            .color_attachment_formats(&formats)
+            .color_attachment_formats(&formats[..if case.mrt() { 2 } else { 1 }])
             .view_mask(mask);
         let mut info = fixed.info(&st, layout);
         match pass {
@@ -308,11 +348,12 @@ fn draw_on(
         let pipeline = d
             .create_graphics_pipelines(vk::PipelineCache::null(), &[info], None)
             .unwrap()[0];
+        // Per colour attachment read back; the noise a pass loads lies after both.
         let size = u64::from(SIDE * SIDE * 4 * layers);
         let readback = d
             .create_buffer(
                 &vk::BufferCreateInfo::default()
-                    .size(2 * size)
+                    .size(3 * size)
                     .usage(vk::BufferUsageFlags::TRANSFER_DST | vk::BufferUsageFlags::TRANSFER_SRC),
                 None,
             )
@@ -347,8 +388,9 @@ fn draw_on(
             bytes[2 * t] = b;
             bytes[2 * t + 1] = b;
         }
-        // The pattern a multiview pass loads, after it: every byte its own.
-        let noise = std::slice::from_raw_parts_mut(p.add(size as usize), size as usize);
+        // The pattern a multiview pass (or a second colour attachment) loads, after it: every
+        // byte its own.
+        let noise = std::slice::from_raw_parts_mut(p.add(2 * size as usize), size as usize);
         for (i, b) in noise.iter_mut().enumerate() {
             let h = (i as u32).wrapping_mul(0x9e37_79b1);
             *b = if i % 4 == 3 { 255 } else { (h >> 24) as u8 };
@@ -416,7 +458,12 @@ fn draw_on(
                 vk::AccessFlags::FRAGMENT_DENSITY_MAP_READ_EXT,
             )],
         );
-        if case == Case::Multiview {
+        let loaded = match second {
+            Some((i, _, _)) => vec![colour, i],
+            None if case == Case::Multiview => vec![colour],
+            None => vec![],
+        };
+        for loaded in loaded {
             d.cmd_pipeline_barrier(
                 cb,
                 all,
@@ -425,7 +472,7 @@ fn draw_on(
                 &[],
                 &[],
                 &[barrier(
-                    colour,
+                    loaded,
                     layers,
                     vk::ImageLayout::UNDEFINED,
                     vk::ImageLayout::TRANSFER_DST_OPTIMAL,
@@ -436,10 +483,10 @@ fn draw_on(
             d.cmd_copy_buffer_to_image(
                 cb,
                 readback,
-                colour,
+                loaded,
                 vk::ImageLayout::TRANSFER_DST_OPTIMAL,
                 &[vk::BufferImageCopy::default()
-                    .buffer_offset(size)
+                    .buffer_offset(2 * size)
                     .image_subresource(vk::ImageSubresourceLayers {
                         aspect_mask: vk::ImageAspectFlags::COLOR,
                         mip_level: 0,
@@ -499,6 +546,27 @@ fn draw_on(
                 d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
             }
             _ => {
+                // Both attachments of a pass with two load the pattern copied in before it.
+                let old = if case.mrt() {
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL
+                } else {
+                    vk::ImageLayout::UNDEFINED
+                };
+                let to_attachment = |i| {
+                    barrier(
+                        i,
+                        layers,
+                        old,
+                        vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                        vk::AccessFlags::TRANSFER_WRITE,
+                        vk::AccessFlags::COLOR_ATTACHMENT_READ
+                            | vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
+                    )
+                };
+                let barriers = [
+                    to_attachment(colour),
+                    to_attachment(second.map_or(colour, |(i, _, _)| i)),
+                ];
                 d.cmd_pipeline_barrier(
                     cb,
                     all,
@@ -506,21 +574,20 @@ fn draw_on(
                     vk::DependencyFlags::empty(),
                     &[],
                     &[],
-                    &[barrier(
-                        colour,
-                        layers,
-                        vk::ImageLayout::UNDEFINED,
-                        vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-                        vk::AccessFlags::empty(),
-                        vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
-                    )],
+                    &barriers[..if case.mrt() { 2 } else { 1 }],
                 );
                 let mut colour_att = [vk::RenderingAttachmentInfo::default()
                     .image_view(colour_view)
                     .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                     .load_op(vk::AttachmentLoadOp::CLEAR)
                     .store_op(vk::AttachmentStoreOp::STORE)
-                    .clear_value(clear[0])];
+                    .clear_value(clear[0]); 2];
+                let mut attachments = 1;
+                if let Some((_, _, v)) = second {
+                    colour_att[0] = colour_att[0].load_op(vk::AttachmentLoadOp::LOAD);
+                    colour_att[1] = colour_att[0].image_view(v);
+                    attachments = 2;
+                }
                 if let Some((ms, _, v)) = ms {
                     d.cmd_pipeline_barrier(
                         cb,
@@ -552,11 +619,22 @@ fn draw_on(
                     .render_area(area)
                     .layer_count(1)
                     .view_mask(mask)
-                    .color_attachments(&colour_att)
+                    .color_attachments(&colour_att[..attachments])
                     .push_next(&mut density_att);
                 d.cmd_begin_rendering(cb, &info);
                 draw_it();
                 d.cmd_end_rendering(cb);
+                let read = |i| {
+                    barrier(
+                        i,
+                        layers,
+                        vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                        vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                        vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
+                        vk::AccessFlags::TRANSFER_READ,
+                    )
+                };
+                let reads = [read(colour), read(second.map_or(colour, |(i, _, _)| i))];
                 d.cmd_pipeline_barrier(
                     cb,
                     vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
@@ -564,35 +642,33 @@ fn draw_on(
                     vk::DependencyFlags::empty(),
                     &[],
                     &[],
-                    &[barrier(
-                        colour,
-                        layers,
-                        vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-                        vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                        vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
-                        vk::AccessFlags::TRANSFER_READ,
-                    )],
+                    &reads[..attachments],
                 );
             }
         }
-        d.cmd_copy_image_to_buffer(
-            cb,
-            colour,
-            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-            readback,
-            &[vk::BufferImageCopy::default()
-                .image_subresource(vk::ImageSubresourceLayers {
-                    aspect_mask: vk::ImageAspectFlags::COLOR,
-                    mip_level: 0,
-                    base_array_layer: 0,
-                    layer_count: layers,
-                })
-                .image_extent(vk::Extent3D {
-                    width: SIDE,
-                    height: SIDE,
-                    depth: 1,
-                })],
-        );
+        let targets = [Some(colour), second.map(|(i, _, _)| i)];
+        for (k, i) in targets.into_iter().flatten().enumerate() {
+            d.cmd_copy_image_to_buffer(
+                cb,
+                i,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                readback,
+                &[vk::BufferImageCopy::default()
+                    .buffer_offset(k as u64 * size)
+                    .image_subresource(vk::ImageSubresourceLayers {
+                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                        mip_level: 0,
+                        base_array_layer: 0,
+                        layer_count: layers,
+                    })
+                    .image_extent(vk::Extent3D {
+                        width: SIDE,
+                        height: SIDE,
+                        depth: 1,
+                    })],
+            );
+        }
+        let read_back = targets.iter().flatten().count() as u64;
         d.cmd_pipeline_barrier(
             cb,
             vk::PipelineStageFlags::TRANSFER,
@@ -609,7 +685,8 @@ fn draw_on(
         let p = d
             .map_memory(readback_mem, 0, vk::WHOLE_SIZE, vk::MemoryMapFlags::empty())
             .unwrap();
-        let pixels = std::slice::from_raw_parts(p as *const u8, size as usize).to_vec();
+        let pixels =
+            std::slice::from_raw_parts(p as *const u8, (read_back * size) as usize).to_vec();
         d.unmap_memory(readback_mem);
 
         d.free_command_buffers(dev.pool, &[cb]);
@@ -626,7 +703,7 @@ fn draw_on(
             d.destroy_render_pass(p, None);
         }
         d.destroy_image_view(colour_view, None);
-        if let Some((i, m, v)) = ms {
+        for (i, m, v) in ms.into_iter().chain(second) {
             d.destroy_image_view(v, None);
             d.destroy_image(i, None);
             d.free_memory(m, None);
@@ -638,11 +715,37 @@ fn draw_on(
         }
         Drawn {
             pixels,
-            layers,
+            layers: layers * read_back as u32,
             mirrored,
         }
     }
 }
+
+/// The blend state of a pass with two colour attachments: nothing written (identical for both,
+/// as a device without `independentBlend` requires), so each keeps the pattern it loads, and the
+/// double leaves it coarse where the draw's fragments are.
+static TWO_TARGETS: [vk::PipelineColorBlendAttachmentState; 2] = [
+    vk::PipelineColorBlendAttachmentState {
+        blend_enable: vk::FALSE,
+        src_color_blend_factor: vk::BlendFactor::ZERO,
+        dst_color_blend_factor: vk::BlendFactor::ZERO,
+        color_blend_op: vk::BlendOp::ADD,
+        src_alpha_blend_factor: vk::BlendFactor::ZERO,
+        dst_alpha_blend_factor: vk::BlendFactor::ZERO,
+        alpha_blend_op: vk::BlendOp::ADD,
+        color_write_mask: vk::ColorComponentFlags::empty(),
+    },
+    vk::PipelineColorBlendAttachmentState {
+        blend_enable: vk::FALSE,
+        src_color_blend_factor: vk::BlendFactor::ZERO,
+        dst_color_blend_factor: vk::BlendFactor::ZERO,
+        color_blend_op: vk::BlendOp::ADD,
+        src_alpha_blend_factor: vk::BlendFactor::ZERO,
+        dst_alpha_blend_factor: vk::BlendFactor::ZERO,
+        alpha_blend_op: vk::BlendOp::ADD,
+        color_write_mask: vk::ColorComponentFlags::empty(),
+    },
+];
 
 /// Whether column `x` of layer `layer` of `d` lies in the coarse half (the left one, the right
 /// one in a mirrored layer 1).
@@ -842,4 +945,13 @@ fn a_subsampled_resolve_targets_coarse_blocks_are_reconstructed() {
         Case::DynamicMsaa,
         vk::Format::B8G8R8A8_SRGB,
     );
+}
+
+/// A pass with two colour attachments into subsampled images: each is reconstructed, not only
+/// the first, in a render pass and in dynamic rendering (both read back, one after the other, as
+/// layers of the frame checked).
+#[test]
+fn every_subsampled_colour_attachment_of_a_pass_is_reconstructed() {
+    check(Profile::Nvidia, Case::Mrt, vk::Format::R8G8B8A8_UNORM);
+    check(Profile::Amd, Case::DynamicMrt, vk::Format::R8G8B8A8_SRGB);
 }

@@ -39,12 +39,15 @@
 //! The application is [`app`], what it left and what must reach the driver [`outcome`]; the
 //! tests are by subject: [`eye_passes`] (what eye and other passes get, at each level, and with
 //! injection off), [`apps_rates`] (applications that set shading rates or attachments of their
-//! own), [`devices`] (only the session's device is injected into) and [`toolkit`] (an
-//! application that applies a profile to a swapchain without foveation info, as Qt does).
+//! own), [`devices`] (only the session's device is injected into), [`toolkit`] (an
+//! application that applies a profile to a swapchain without foveation info, as Qt does) and
+//! [`resolve`] (a multisampled eye pass resolved into a swapchain image published for
+//! reconstruction: the resolve target's coarse blocks are reconstructed).
 
 mod app;
 mod apps_rates;
 mod devices;
 mod eye_passes;
 mod outcome;
+mod resolve;
 mod toolkit;
