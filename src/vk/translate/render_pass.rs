@@ -440,7 +440,8 @@ pub fn shadow_attachment_info(
 
 /// Colour targets one pass instance's end reconstructs at most: a pass with more has the rest
 /// left alone, with one line in the log (docs/reconstruction.md). A fixed array keeps the plan
-/// (`crate::vk::own::reconstructor::Plan`) plain data in the command buffer's record, with no allocation per pass.
+/// (`crate::vk::own::reconstructor::Plan`) plain data in the command buffer's record, with no
+/// allocation per pass.
 pub const MAX_TARGETS: usize = 8;
 
 /// Logs, once per process, that a pass names more colour targets than a plan holds.
@@ -526,6 +527,52 @@ pub fn rendering_target(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Of a first subpass's colour attachments, the reconstructed targets: each stored
+    /// single-sample one (not one stored `DONT_CARE`), the stored resolve of a multisampled one
+    /// (not the multisampled one, nor one without a resolve), in the subpass's order with their
+    /// final layouts; at most [`MAX_TARGETS`].
+    #[test]
+    fn a_passs_colour_targets_are_its_stored_single_sample_attachments_and_resolves() {
+        let att = |samples, store, layout| {
+            vk::AttachmentDescription2::default()
+                .format(vk::Format::R8G8B8A8_UNORM)
+                .samples(samples)
+                .store_op(store)
+                .final_layout(layout)
+        };
+        let one = vk::SampleCountFlags::TYPE_1;
+        let four = vk::SampleCountFlags::TYPE_4;
+        let store = vk::AttachmentStoreOp::STORE;
+        let src = vk::ImageLayout::TRANSFER_SRC_OPTIMAL;
+        let mut atts = vec![
+            att(one, store, vk::ImageLayout::GENERAL),
+            att(one, vk::AttachmentStoreOp::DONT_CARE, src),
+            att(four, vk::AttachmentStoreOp::DONT_CARE, src),
+            att(one, store, src),
+            att(four, store, src),
+        ];
+        // Ten more stored single-sample ones, beyond what a plan holds.
+        atts.extend((0..10).map(|_| att(one, store, src)));
+        let r = |a| vk::AttachmentReference2::default().attachment(a);
+        let unused = r(vk::ATTACHMENT_UNUSED);
+        let mut colours = vec![r(0), r(1), r(2), r(4), unused];
+        let mut resolves = vec![unused, unused, r(3), unused, unused];
+        colours.extend((5..15).map(r));
+        resolves.extend((5..15).map(|_| unused));
+        let subpasses = [vk::SubpassDescription2::default()
+            .color_attachments(&colours)
+            .resolve_attachments(&resolves)];
+        let ci = vk::RenderPassCreateInfo2::default()
+            .attachments(&atts)
+            .subpasses(&subpasses);
+        // SAFETY: the arrays live across the test.
+        let pass = unsafe { Pass2::from_v2(&ci) };
+        let got = pass_colours(&pass);
+        let mut want = vec![Some((0, vk::ImageLayout::GENERAL)), Some((3, src))];
+        want.extend((5..11).map(|a| Some((a, src))));
+        assert_eq!(got.to_vec(), want);
+    }
 
     /// A pass that writes a density map (no density-map struct): its attachment's final layout,
     /// a reference's layout, a dependency's masks and a `VkMemoryBarrier2` chained to another
