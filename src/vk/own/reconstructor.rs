@@ -485,7 +485,7 @@ impl Reconstructor {
             return false;
         };
         let d = &self.own.fns;
-        let colour = |old, new, src, dst| {
+        let barrier = |image, base_array_layer, layer_count, old, new, src, dst| {
             vk::ImageMemoryBarrier::default()
                 .src_access_mask(src)
                 .dst_access_mask(dst)
@@ -493,31 +493,27 @@ impl Reconstructor {
                 .new_layout(new)
                 .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                 .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .image(t.image)
+                .image(image)
                 .subresource_range(vk::ImageSubresourceRange {
                     aspect_mask: vk::ImageAspectFlags::COLOR,
                     base_mip_level: 0,
                     level_count: 1,
-                    base_array_layer: t.base_layer,
-                    layer_count: t.layers,
+                    base_array_layer,
+                    layer_count,
                 })
         };
+        let colour =
+            |old, new, src, dst| barrier(t.image, t.base_layer, t.layers, old, new, src, dst);
         let rate = |old, new, src, dst| {
-            vk::ImageMemoryBarrier::default()
-                .src_access_mask(src)
-                .dst_access_mask(dst)
-                .old_layout(old)
-                .new_layout(new)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .image(plan.rate_image)
-                .subresource_range(vk::ImageSubresourceRange {
-                    aspect_mask: vk::ImageAspectFlags::COLOR,
-                    base_mip_level: 0,
-                    level_count: 1,
-                    base_array_layer: plan.rate_base_layer,
-                    layer_count: t.rate_layers,
-                })
+            barrier(
+                plan.rate_image,
+                plan.rate_base_layer,
+                t.rate_layers,
+                old,
+                new,
+                src,
+                dst,
+            )
         };
         let region = vk::BufferImageCopy {
             buffer_offset: 0,
