@@ -72,11 +72,39 @@ pub fn assert_only_stage_false_positives() {
 }
 
 /// The messages so far, less validation 1.3.239's stage false positives (see
-/// [`assert_only_stage_false_positives`]).
+/// [`assert_only_stage_false_positives`]) and its threading checks' reports on a handle it says
+/// it lost ([`lost_handles`]).
 pub fn take_real_messages() -> Vec<String> {
-    take_messages()
-        .into_iter()
+    real(take_messages())
+}
+
+/// [`take_real_messages`]'s filter.
+fn real(all: Vec<String>) -> Vec<String> {
+    let lost = lost_handles(&all);
+    all.into_iter()
         .filter(|m| !m.contains("when the device does not have shadingRate feature enabled"))
+        .filter(|m| {
+            !lost
+                .iter()
+                .any(|h| m.contains("UNASSIGNED-Threading") && m.contains(h))
+        })
+        .collect()
+}
+
+/// Handles the threading checks report as unknown ("Couldn't find VkDeviceMemory Object 0x…").
+/// With unique handles off, as real drivers hand them out, a handle one thread frees is given
+/// again to another thread's allocation before the checks' record of the free has run, so the
+/// checks drop the new object and then report its uses as simultaneous with the old one's. That
+/// is the checks' own race, and validation says so in this message; a real simultaneous use of
+/// one live object is reported without it and still fails the test.
+fn lost_handles(messages: &[String]) -> Vec<String> {
+    messages
+        .iter()
+        .filter_map(|m| {
+            let rest = m.split("Couldn't find ").nth(1)?;
+            let handle = rest.split_whitespace().nth(2)?.trim_end_matches('.');
+            handle.starts_with("0x").then(|| handle.to_string())
+        })
         .collect()
 }
 
@@ -720,4 +748,18 @@ impl ComputePipeline {
             d.destroy_descriptor_set_layout(self.set_layout, None);
         }
     }
+}
+
+/// The threading checks' own race is dropped only for the handle validation says it lost: the
+/// messages of a run that met it (`vk::threads`, validation 1.3.239), and one real report kept.
+#[test]
+fn only_threading_reports_on_a_lost_handle_are_dropped() {
+    let lost = "0x7f99709d1b90";
+    let run = [
+        format!("ERROR: Validation Error: [ UNASSIGNED-Threading-MultipleThreads ] Object 0: handle = {lost}, type = VK_OBJECT_TYPE_DEVICE_MEMORY; | THREADING ERROR : vkMapMemory(): object of type VkDeviceMemory is simultaneously used in thread 1 and thread 2"),
+        format!("ERROR: Validation Error: [ UNASSIGNED-Threading-Info ] Object 0: handle = {lost}, type = VK_OBJECT_TYPE_DEVICE_MEMORY; | Couldn't find VkDeviceMemory Object {lost}. This should not happen and may indicate a bug in the application."),
+        "ERROR: Validation Error: [ UNASSIGNED-Threading-MultipleThreads ] Object 0: handle = 0x55, type = VK_OBJECT_TYPE_COMMAND_POOL; | THREADING ERROR : vkAllocateCommandBuffers(): object of type VkCommandPool is simultaneously used in thread 1 and thread 2".to_string(),
+    ];
+    assert_eq!(lost_handles(&run), vec![lost.to_string()]);
+    assert_eq!(real(run.to_vec()), vec![run[2].clone()]);
 }
