@@ -1,8 +1,10 @@
-//! The FFI edge every hook stands on: the panic guard, the caller's names and arrays, the two-call
-//! idiom, and a dispatchable handle's loader key.
+//! The FFI edge every hook stands on: the panic guard, the caller's names and arrays, typed views of
+//! the caller's pointers ([`In`], [`Arr`], [`Out`]) and what a hook body gets ([`Call`]), the
+//! two-call idiom, and a dispatchable handle's loader key.
 
 use std::ffi::{c_char, CStr};
 use std::hash::Hasher;
+use std::marker::PhantomData;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use ash::vk;
@@ -94,6 +96,154 @@ pub unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
     } else {
         // SAFETY: as the caller promised.
         unsafe { std::slice::from_raw_parts(p, n as usize) }
+    }
+}
+
+/// What a hook body gets besides the command's own arguments (the `hook!` chassis of
+/// `crate::vk::hooks`): the command's name for its log lines, the record its dispatchable handle
+/// was looked up in (a device, or an instance for a physical device), and the next layer's
+/// function, picked from that record's table.
+pub struct Call<'a, D, F> {
+    pub name: &'static str,
+    pub dev: &'a D,
+    pub next: F,
+}
+
+/// An input struct the application passes by pointer (`const T*`): NULL or valid, with a valid
+/// `pNext` chain, for the whole call, which the hook's caller promises and [`In::new`] takes on.
+/// Read through it without `unsafe`; the pointer goes down as it came ([`In::raw`]).
+pub struct In<'a, T> {
+    ptr: *const T,
+    _call: PhantomData<&'a T>,
+}
+
+impl<T> Clone for In<'_, T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<T> Copy for In<'_, T> {}
+
+impl<'a, T> In<'a, T> {
+    /// # Safety
+    /// `ptr` must be NULL or point at a valid `T` (its `pNext` chain valid too, where it has one)
+    /// that is not written while `'a` lasts.
+    #[inline(always)]
+    pub unsafe fn new(ptr: *const T) -> Self {
+        In {
+            ptr,
+            _call: PhantomData,
+        }
+    }
+
+    /// The pointer as the application passed it, to hand down.
+    #[inline(always)]
+    pub fn raw(self) -> *const T {
+        self.ptr
+    }
+
+    #[inline(always)]
+    pub fn is_null(self) -> bool {
+        self.ptr.is_null()
+    }
+
+    /// The struct, `None` for NULL.
+    #[inline(always)]
+    pub fn get(self) -> Option<&'a T> {
+        // SAFETY: NULL or valid for `'a` ([`In::new`]).
+        unsafe { self.ptr.as_ref() }
+    }
+}
+
+/// An input array the application passes as a count and a pointer: NULL, or valid for that many
+/// elements for the whole call ([`Arr::new`]).
+pub struct Arr<'a, T> {
+    ptr: *const T,
+    count: u32,
+    _call: PhantomData<&'a [T]>,
+}
+
+impl<T> Clone for Arr<'_, T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<T> Copy for Arr<'_, T> {}
+
+impl<'a, T> Arr<'a, T> {
+    /// # Safety
+    /// `ptr` must be NULL, or valid for reads of `count` elements not written while `'a` lasts.
+    #[inline(always)]
+    pub unsafe fn new(ptr: *const T, count: u32) -> Self {
+        Arr {
+            ptr,
+            count,
+            _call: PhantomData,
+        }
+    }
+
+    /// The pointer as the application passed it, to hand down with its count.
+    #[inline(always)]
+    pub fn raw(self) -> *const T {
+        self.ptr
+    }
+
+    /// The elements; empty for NULL or a zero count, as [`slice`] makes them.
+    #[inline(always)]
+    pub fn slice(self) -> &'a [T] {
+        // SAFETY: NULL or valid for `count` reads ([`Arr::new`]).
+        unsafe { slice(self.ptr, self.count) }
+    }
+}
+
+/// An output the application passes by pointer (`T*`), for the next layer to write: NULL or valid
+/// for reads and writes for the whole call ([`Out::new`]).
+pub struct Out<'a, T> {
+    ptr: *mut T,
+    _call: PhantomData<&'a mut T>,
+}
+
+impl<'a, T> Out<'a, T> {
+    /// # Safety
+    /// `ptr` must be NULL or valid for reads and writes of a `T` for `'a`, and not otherwise
+    /// borrowed meanwhile.
+    #[inline(always)]
+    pub unsafe fn new(ptr: *mut T) -> Self {
+        Out {
+            ptr,
+            _call: PhantomData,
+        }
+    }
+
+    /// The pointer as the application passed it, to hand down.
+    #[inline(always)]
+    pub fn raw(&self) -> *mut T {
+        self.ptr
+    }
+
+    #[inline(always)]
+    pub fn is_null(&self) -> bool {
+        self.ptr.is_null()
+    }
+
+    /// What it holds (what the next layer wrote, after a success); `None` for NULL.
+    #[inline(always)]
+    pub fn read(&self) -> Option<T>
+    where
+        T: Copy,
+    {
+        // SAFETY: NULL or valid for reads ([`Out::new`]).
+        (!self.ptr.is_null()).then(|| unsafe { self.ptr.read() })
+    }
+
+    /// The struct to fill in, `None` for NULL.
+    #[inline(always)]
+    pub fn into_mut(self) -> Option<&'a mut T> {
+        // SAFETY: NULL or valid for reads and writes for `'a`, borrowed by nothing else
+        // ([`Out::new`]); `self` is consumed, so this is the only reference made from it.
+        unsafe { self.ptr.as_mut() }
     }
 }
 

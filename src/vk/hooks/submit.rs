@@ -14,9 +14,9 @@ use std::sync::atomic::Ordering;
 
 use ash::vk;
 
-use crate::vk::base::ffi::{guard, raw, slice};
+use crate::vk::base::ffi::{raw, slice, Arr, Call};
 use crate::vk::own::calls::{Own, PENDING};
-use crate::vk::registry::{self};
+use crate::vk::registry::Device;
 use crate::vk::translate::sync::{stage, stage2};
 
 /// The result an application's submit returns where the layer's clear ahead of it failed: the
@@ -59,67 +59,66 @@ unsafe fn before_submit(
     })
 }
 
-/// `vkQueueSubmit`: pending clears first; wait-stage masks without the density-map stage, on a copy.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn queue_submit(
+hook! {
+    /// `vkQueueSubmit`: pending clears first; wait-stage masks without the density-map stage, on
+    /// a copy.
+    queue_submit = "vkQueueSubmit";
+    on device_ref(queue), next queue_submit,
+    fails(vk::Result::ERROR_INITIALIZATION_FAILED, panic vk::Result::ERROR_OUT_OF_HOST_MEMORY);
+    submit(
+        queue: val vk::Queue,
+        count: val u32,
+        submits: (array count) vk::SubmitInfo<'_>,
+        fence: val vk::Fence,
+    ) -> vk::Result
+}
+
+fn submit(
+    c: Call<'_, Device, vk::PFN_vkQueueSubmit>,
     queue: vk::Queue,
     count: u32,
-    submits: *const vk::SubmitInfo<'_>,
+    submits: Arr<'_, vk::SubmitInfo<'_>>,
     fence: vk::Fence,
 ) -> vk::Result {
-    guard(
-        "vkQueueSubmit",
-        vk::Result::ERROR_OUT_OF_HOST_MEMORY,
-        || {
-            // SAFETY: a queue dispatched by the loader (or NULL).
-            let Some(rec) = (unsafe { registry::recording(queue) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = rec.next.queue_submit else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            // SAFETY: inside the application's submit on `queue`.
-            if let Err(e) = unsafe { before_submit("vkQueueSubmit", queue, rec.own) } {
-                return e;
+    let own = c.dev.attachments.own.as_deref();
+    // SAFETY: inside the application's submit on `queue`, a queue the loader dispatched.
+    if let Err(e) = unsafe { before_submit(c.name, queue, own) } {
+        return e;
+    }
+    let order = own.and_then(|o| o.clears.order.as_ref());
+    let next = c.next;
+    // SAFETY: the next layer's `vkQueueSubmit` on the application's queue and fence, with its
+    // array of `count` submits or a copy of it whose masks arrays live across the call.
+    let down = |count, submits| unsafe {
+        match order {
+            Some(o) => o.submit(next, queue, count, submits, fence),
+            None => next(queue, count, submits, fence),
+        }
+    };
+    let list = submits.slice();
+    // SAFETY: the command's valid usage: each submit's `pWaitDstStageMask` holds
+    // `waitSemaphoreCount` masks.
+    let masks =
+        |s: &vk::SubmitInfo<'_>| unsafe { slice(s.p_wait_dst_stage_mask, s.wait_semaphore_count) };
+    if !list.iter().any(|s| masks(s).iter().any(|&m| stage(m) != m)) {
+        return down(count, submits.raw());
+    }
+    let stages: Vec<Vec<vk::PipelineStageFlags>> = list
+        .iter()
+        .map(|s| masks(s).iter().map(|&m| stage(m)).collect())
+        .collect();
+    let copies: Vec<vk::SubmitInfo<'_>> = list
+        .iter()
+        .zip(&stages)
+        .map(|(s, m)| {
+            let mut c = *s;
+            if !s.p_wait_dst_stage_mask.is_null() {
+                c.p_wait_dst_stage_mask = m.as_ptr();
             }
-            let order = rec.own.and_then(|o| o.clears.order.as_ref());
-            // SAFETY: the next layer's function; the caller's arguments, or copies of them that
-            // live across the call.
-            let down = |count, submits| unsafe {
-                match order {
-                    Some(o) => o.submit(next, queue, count, submits, fence),
-                    None => next(queue, count, submits, fence),
-                }
-            };
-            // SAFETY: the caller's array of `count` submits.
-            let list = unsafe { slice(submits, count) };
-            // SAFETY: each submit's masks, valid for its wait count.
-            let masks = |s: &vk::SubmitInfo<'_>| unsafe {
-                slice(s.p_wait_dst_stage_mask, s.wait_semaphore_count)
-            };
-            if !list.iter().any(|s| masks(s).iter().any(|&m| stage(m) != m)) {
-                return down(count, submits);
-            }
-            let stages: Vec<Vec<vk::PipelineStageFlags>> = list
-                .iter()
-                .map(|s| masks(s).iter().map(|&m| stage(m)).collect())
-                .collect();
-            let copies: Vec<vk::SubmitInfo<'_>> = list
-                .iter()
-                .zip(&stages)
-                .map(|(s, m)| {
-                    let mut c = *s;
-                    if !s.p_wait_dst_stage_mask.is_null() {
-                        c.p_wait_dst_stage_mask = m.as_ptr();
-                    }
-                    c
-                })
-                .collect();
-            down(count, copies.as_ptr())
-        },
-    )
+            c
+        })
+        .collect();
+    down(count, copies.as_ptr())
 }
 
 /// The semaphore infos of a submit with the density-map stage replaced, where any has it.
@@ -140,90 +139,82 @@ fn semaphores2<'a>(
         })
 }
 
-/// The shared body of `vkQueueSubmit2` and its KHR alias.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn submit2(
-    what: &'static str,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkQueueSubmit2>,
-    queue: vk::Queue,
-    count: u32,
-    submits: *const vk::SubmitInfo2<'_>,
-    fence: vk::Fence,
-) -> vk::Result {
-    guard(what, vk::Result::ERROR_OUT_OF_HOST_MEMORY, || {
-        // SAFETY: a queue dispatched by the loader (or NULL).
-        let Some(rec) = (unsafe { registry::recording(queue) }) else {
-            return vk::Result::ERROR_INITIALIZATION_FAILED;
-        };
-        let Some(next) = pick(&rec) else {
-            return vk::Result::ERROR_INITIALIZATION_FAILED;
-        };
-        // SAFETY: inside the application's submit on `queue`.
-        if let Err(e) = unsafe { before_submit(what, queue, rec.own) } {
-            return e;
-        }
-        let order = rec.own.and_then(|o| o.clears.order.as_ref());
-        // SAFETY: the next layer's function; the caller's arguments, or copies of them that live
-        // across the call.
-        let down = |count, submits| unsafe {
-            match order {
-                Some(o) => o.submit2(next, queue, count, submits, fence),
-                None => next(queue, count, submits, fence),
-            }
-        };
-        // SAFETY: the caller's array of `count` submits.
-        let list = unsafe { slice(submits, count) };
-        fn waits<'a>(s: &vk::SubmitInfo2<'a>) -> &'a [vk::SemaphoreSubmitInfo<'a>] {
-            // SAFETY: the caller's array, valid for its count (the command's valid usage).
-            unsafe { slice(s.p_wait_semaphore_infos, s.wait_semaphore_info_count) }
-        }
-        fn signals<'a>(s: &vk::SubmitInfo2<'a>) -> &'a [vk::SemaphoreSubmitInfo<'a>] {
-            // SAFETY: as above.
-            unsafe { slice(s.p_signal_semaphore_infos, s.signal_semaphore_info_count) }
-        }
-        let touched = |i: &[vk::SemaphoreSubmitInfo<'_>]| {
-            i.iter().any(|i| stage2(i.stage_mask) != i.stage_mask)
-        };
-        if !list
-            .iter()
-            .any(|s| touched(waits(s)) || touched(signals(s)))
-        {
-            return down(count, submits);
-        }
-        let arrays: Vec<_> = list
-            .iter()
-            .map(|s| (semaphores2(waits(s)), semaphores2(signals(s))))
-            .collect();
-        let copies: Vec<vk::SubmitInfo2<'_>> = list
-            .iter()
-            .zip(&arrays)
-            .map(|(s, (w, g))| {
-                let mut c = *s;
-                if let Some(w) = w {
-                    c.p_wait_semaphore_infos = w.as_ptr();
-                }
-                if let Some(g) = g {
-                    c.p_signal_semaphore_infos = g.as_ptr();
-                }
-                c
-            })
-            .collect();
-        down(count, copies.as_ptr())
-    })
-}
-
-hook_and_khr_alias! {
+hook! {
     /// `vkQueueSubmit2`: pending clears first; semaphore stage masks without the density-map
     /// stage, on copies.
-    queue_submit2, queue_submit2_khr = submit2("vkQueueSubmit2")
-    (
-        queue: vk::Queue,
-        count: u32,
-        submits: *const vk::SubmitInfo2<'_>,
-        fence: vk::Fence,
+    queue_submit2 = "vkQueueSubmit2", queue_submit2_khr = "vkQueueSubmit2KHR";
+    on device_ref(queue), next queue_submit2 / queue_submit2_khr,
+    fails(vk::Result::ERROR_INITIALIZATION_FAILED, panic vk::Result::ERROR_OUT_OF_HOST_MEMORY);
+    submit2(
+        queue: val vk::Queue,
+        count: val u32,
+        submits: (array count) vk::SubmitInfo2<'_>,
+        fence: val vk::Fence,
     ) -> vk::Result
+}
+
+/// The wait and the signal semaphores of a submit.
+fn waits_and_signals<'a>(s: &vk::SubmitInfo2<'a>) -> [&'a [vk::SemaphoreSubmitInfo<'a>]; 2] {
+    // SAFETY: the command's valid usage: each array holds its count of infos, alive for the call
+    // the submit came in.
+    unsafe {
+        [
+            slice(s.p_wait_semaphore_infos, s.wait_semaphore_info_count),
+            slice(s.p_signal_semaphore_infos, s.signal_semaphore_info_count),
+        ]
+    }
+}
+
+fn submit2(
+    c: Call<'_, Device, vk::PFN_vkQueueSubmit2>,
+    queue: vk::Queue,
+    count: u32,
+    submits: Arr<'_, vk::SubmitInfo2<'_>>,
+    fence: vk::Fence,
+) -> vk::Result {
+    let own = c.dev.attachments.own.as_deref();
+    // SAFETY: inside the application's submit on `queue`, a queue the loader dispatched.
+    if let Err(e) = unsafe { before_submit(c.name, queue, own) } {
+        return e;
+    }
+    let order = own.and_then(|o| o.clears.order.as_ref());
+    let next = c.next;
+    // SAFETY: the next layer's `vkQueueSubmit2` on the application's queue and fence, with its
+    // array of `count` submits or a copy whose semaphore arrays live across the call.
+    let down = |count, submits| unsafe {
+        match order {
+            Some(o) => o.submit2(next, queue, count, submits, fence),
+            None => next(queue, count, submits, fence),
+        }
+    };
+    let list = submits.slice();
+    let touched =
+        |i: &[vk::SemaphoreSubmitInfo<'_>]| i.iter().any(|i| stage2(i.stage_mask) != i.stage_mask);
+    if !list
+        .iter()
+        .any(|s| waits_and_signals(s).into_iter().any(touched))
+    {
+        return down(count, submits.raw());
+    }
+    let arrays: Vec<_> = list
+        .iter()
+        .map(|s| waits_and_signals(s).map(semaphores2))
+        .collect();
+    let copies: Vec<vk::SubmitInfo2<'_>> = list
+        .iter()
+        .zip(&arrays)
+        .map(|(s, [w, g])| {
+            let mut c = *s;
+            if let Some(w) = w {
+                c.p_wait_semaphore_infos = w.as_ptr();
+            }
+            if let Some(g) = g {
+                c.p_signal_semaphore_infos = g.as_ptr();
+            }
+            c
+        })
+        .collect();
+    down(count, copies.as_ptr())
 }
 
 #[cfg(test)]
