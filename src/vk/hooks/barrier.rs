@@ -10,8 +10,8 @@ use std::cell::RefCell;
 
 use ash::vk;
 
-use crate::vk::base::ffi::{guard, slice};
-use crate::vk::registry;
+use crate::vk::base::ffi::{slice, Arr, Call, In, Out};
+use crate::vk::registry::{self, Device};
 use crate::vk::translate::sync::{
     access, access2, image_barrier, image_barrier2, needs1, needs2, stage, stage2,
 };
@@ -31,40 +31,33 @@ fn shadow_unless(release: bool, image: vk::Image) -> Option<crate::bridge::Shado
     }
 }
 
-/// `vkCreateCommandPool`: its queue family is noted.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_command_pool(
+hook! {
+    /// `vkCreateCommandPool`: its queue family is noted.
+    create_command_pool = "vkCreateCommandPool";
+    on device_ref(device), next create_command_pool,
+    fails(vk::Result::ERROR_INITIALIZATION_FAILED);
+    create_pool(
+        device: val vk::Device,
+        info: in vk::CommandPoolCreateInfo<'_>,
+        alloc: val *const vk::AllocationCallbacks<'_>,
+        out: out vk::CommandPool,
+    ) -> vk::Result
+}
+
+fn create_pool(
+    c: Call<'_, Device, vk::PFN_vkCreateCommandPool>,
     device: vk::Device,
-    info: *const vk::CommandPoolCreateInfo<'_>,
+    info: In<'_, vk::CommandPoolCreateInfo<'_>>,
     alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::CommandPool,
+    out: Out<'_, vk::CommandPool>,
 ) -> vk::Result {
     use ash::vk::Handle as _;
-    guard(
-        "vkCreateCommandPool",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let Some(rec) = (unsafe { registry::recording(device) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = rec.next.create_command_pool else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            // SAFETY: the next layer's function, with the caller's arguments.
-            let r = unsafe { next(device, info, alloc, out) };
-            // SAFETY: the caller's create info.
-            let info = unsafe { info.as_ref() };
-            if let (vk::Result::SUCCESS, Some(i), false) = (r, info, out.is_null()) {
-                // SAFETY: on success `out` holds the new pool.
-                let raw = unsafe { *out }.as_raw();
-                registry::pool_created(raw, i.queue_family_index);
-            }
-            r
-        },
-    )
+    // SAFETY: the next layer's function, with the application's arguments.
+    let r = unsafe { (c.next)(device, info.raw(), alloc, out.raw()) };
+    if let (vk::Result::SUCCESS, Some(i), Some(pool)) = (r, info.get(), out.read()) {
+        registry::pool_created(pool.as_raw(), i.queue_family_index);
+    }
+    r
 }
 
 /// Per-thread arrays the translated barriers are built in, reused from call to call. They hold
@@ -226,425 +219,397 @@ unsafe fn translate2<'s>(
     &s.infos
 }
 
-/// `vkCmdPipelineBarrier`.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
+hook! {
+    /// `vkCmdPipelineBarrier`.
+    cmd_pipeline_barrier = "vkCmdPipelineBarrier";
+    on device_ref(cb), next cmd_pipeline_barrier, fails(());
+    pipeline_barrier(
+        cb: val vk::CommandBuffer,
+        src: val vk::PipelineStageFlags,
+        dst: val vk::PipelineStageFlags,
+        flags: val vk::DependencyFlags,
+        memory_count: val u32,
+        memory: (array memory_count) vk::MemoryBarrier<'_>,
+        buffer_count: val u32,
+        buffers: (array buffer_count) vk::BufferMemoryBarrier<'_>,
+        image_count: val u32,
+        images: (array image_count) vk::ImageMemoryBarrier<'_>,
+    ) -> ()
+}
+
+/// The three barrier arrays of a v1 barrier or event wait.
+type Barriers1<'a> = (
+    &'a [vk::MemoryBarrier<'a>],
+    &'a [vk::BufferMemoryBarrier<'a>],
+    &'a [vk::ImageMemoryBarrier<'a>],
+);
+
+/// The barriers of a v1 command, where they must be translated: on an emulating device, where
+/// any of them or the stages names the density map.
+fn to_translate1<'a>(
+    dev: &Device,
+    [src, dst]: [vk::PipelineStageFlags; 2],
+    memory: Arr<'a, vk::MemoryBarrier<'a>>,
+    buffers: Arr<'a, vk::BufferMemoryBarrier<'a>>,
+    images: Arr<'a, vk::ImageMemoryBarrier<'a>>,
+) -> Option<Barriers1<'a>> {
+    if dev.fdm.is_none() {
+        return None;
+    }
+    let (m, b, i) = (memory.slice(), buffers.slice(), images.slice());
+    // SAFETY: the application's barriers, valid as the command requires.
+    unsafe { needs1(src, dst, m, b, i) }.then_some((m, b, i))
+}
+
+/// Calls `down` with translated copies of a v1 command's stages and barriers, built in this
+/// thread's scratch.
+fn translated1(
+    cb: vk::CommandBuffer,
+    [src, dst]: [vk::PipelineStageFlags; 2],
+    (m, b, i): Barriers1<'_>,
+    down: impl FnOnce(
+        [vk::PipelineStageFlags; 2],
+        (u32, *const vk::MemoryBarrier<'_>),
+        (u32, *const vk::BufferMemoryBarrier<'_>),
+        (u32, *const vk::ImageMemoryBarrier<'_>),
+    ),
+) {
+    with_scratch(|s| {
+        // SAFETY: the copies live in the scratch across the call down only.
+        unsafe { translate1(s, cb, m, b, i) };
+        down(
+            [stage(src), stage(dst)],
+            (s.memory.len() as u32, s.memory.as_ptr()),
+            (s.buffers.len() as u32, s.buffers.as_ptr()),
+            (s.images.len() as u32, s.images.as_ptr()),
+        )
+    })
+}
+
 #[allow(clippy::too_many_arguments)]
-pub unsafe extern "system" fn cmd_pipeline_barrier(
+fn pipeline_barrier(
+    c: Call<'_, Device, vk::PFN_vkCmdPipelineBarrier>,
     cb: vk::CommandBuffer,
     src: vk::PipelineStageFlags,
     dst: vk::PipelineStageFlags,
     flags: vk::DependencyFlags,
     memory_count: u32,
-    memory: *const vk::MemoryBarrier<'_>,
+    memory: Arr<'_, vk::MemoryBarrier<'_>>,
     buffer_count: u32,
-    buffers: *const vk::BufferMemoryBarrier<'_>,
+    buffers: Arr<'_, vk::BufferMemoryBarrier<'_>>,
     image_count: u32,
-    images: *const vk::ImageMemoryBarrier<'_>,
+    images: Arr<'_, vk::ImageMemoryBarrier<'_>>,
 ) {
-    guard("vkCmdPipelineBarrier", (), || {
-        // SAFETY: a command buffer dispatched by the loader.
-        let Some(rec) = (unsafe { registry::recording(cb) }) else {
-            return;
-        };
-        let Some(next) = rec.next.cmd_pipeline_barrier else {
-            return;
-        };
-        // SAFETY: the caller's arrays, valid for their counts.
-        let (m, b, i) = unsafe {
-            (
-                slice(memory, memory_count),
-                slice(buffers, buffer_count),
-                slice(images, image_count),
+    let Some(given) = to_translate1(c.dev, [src, dst], memory, buffers, images) else {
+        // SAFETY: the next layer's function, with the application's arguments.
+        return unsafe {
+            (c.next)(
+                cb,
+                src,
+                dst,
+                flags,
+                memory_count,
+                memory.raw(),
+                buffer_count,
+                buffers.raw(),
+                image_count,
+                images.raw(),
             )
         };
-        // SAFETY: as above.
-        if !rec.emulated || !unsafe { needs1(src, dst, m, b, i) } {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe {
-                next(
-                    cb,
-                    src,
-                    dst,
-                    flags,
-                    memory_count,
-                    memory,
-                    buffer_count,
-                    buffers,
-                    image_count,
-                    images,
-                )
-            };
-        }
-        with_scratch(|s| {
-            // SAFETY: the next layer's function; the copies live across the call.
-            unsafe {
-                translate1(s, cb, m, b, i);
-                next(
-                    cb,
-                    stage(src),
-                    stage(dst),
-                    flags,
-                    s.memory.len() as u32,
-                    s.memory.as_ptr(),
-                    s.buffers.len() as u32,
-                    s.buffers.as_ptr(),
-                    s.images.len() as u32,
-                    s.images.as_ptr(),
-                )
-            }
-        })
+    };
+    translated1(cb, [src, dst], given, |[src, dst], m, b, i| {
+        // SAFETY: the next layer's function, with the application's arrays or copies that live
+        // across the call.
+        unsafe { (c.next)(cb, src, dst, flags, m.0, m.1, b.0, b.1, i.0, i.1) }
     })
 }
 
-/// The shared body of `vkCmdPipelineBarrier2` and its KHR alias.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn pipeline_barrier2(
-    what: &'static str,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdPipelineBarrier2>,
+/// Calls `down` with a v2 command's dependency infos: the application's where nothing in them
+/// names the density map (or the device does not emulate), else translated copies in this
+/// thread's scratch.
+fn with_dependencies(
+    dev: &Device,
     cb: vk::CommandBuffer,
-    info: *const vk::DependencyInfo<'_>,
+    infos: Arr<'_, vk::DependencyInfo<'_>>,
+    down: impl FnOnce(*const vk::DependencyInfo<'_>),
 ) {
-    guard(what, (), || {
-        // SAFETY: a command buffer dispatched by the loader.
-        let Some(rec) = (unsafe { registry::recording(cb) }) else {
-            return;
-        };
-        let Some(next) = pick(&rec) else { return };
-        // SAFETY: the caller's dependency info, read only.
-        if !rec.emulated || info.is_null() || !needs2(unsafe { &*info }) {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { next(cb, info) };
-        }
-        with_scratch(|s| {
-            // SAFETY: the caller's dependency info; the copies live across the call down.
-            unsafe {
-                let infos = translate2(s, cb, std::slice::from_ref(&*info));
-                next(cb, infos.as_ptr())
-            }
-        })
+    let list = infos.slice();
+    if dev.fdm.is_none() || !list.iter().any(needs2) {
+        return down(infos.raw());
+    }
+    with_scratch(|s| {
+        // SAFETY: the application's dependency infos, valid as the command requires; the copies
+        // live in the scratch across the call down only.
+        let copies = unsafe { translate2(s, cb, list) };
+        down(copies.as_ptr())
     })
 }
 
-hook_and_khr_alias! {
+hook! {
     /// `vkCmdPipelineBarrier2`.
-    cmd_pipeline_barrier2, cmd_pipeline_barrier2_khr = pipeline_barrier2("vkCmdPipelineBarrier2")
-    (cb: vk::CommandBuffer, info: *const vk::DependencyInfo<'_>)
+    cmd_pipeline_barrier2 = "vkCmdPipelineBarrier2",
+        cmd_pipeline_barrier2_khr = "vkCmdPipelineBarrier2KHR";
+    on device_ref(cb), next cmd_pipeline_barrier2 / cmd_pipeline_barrier2_khr, fails(());
+    pipeline_barrier2(cb: val vk::CommandBuffer, info: (array ONE) vk::DependencyInfo<'_>) -> ()
 }
 
-/// The shared body of `vkCmdSetEvent2` and its KHR alias: the dependency info is translated as a
-/// barrier's, so it stays identical to the one `vkCmdWaitEvents2` gets for the same event, as the
-/// spec requires
-/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdWaitEvents2.html>,
-/// VUID-vkCmdWaitEvents2-pEvents-03837).
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn set_event2(
-    what: &'static str,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdSetEvent2>,
+/// The one dependency info of `vkCmdPipelineBarrier2` and `vkCmdSetEvent2`, as an array.
+const ONE: u32 = 1;
+
+fn pipeline_barrier2(
+    c: Call<'_, Device, vk::PFN_vkCmdPipelineBarrier2>,
+    cb: vk::CommandBuffer,
+    info: Arr<'_, vk::DependencyInfo<'_>>,
+) {
+    // SAFETY: the next layer's function, with the application's dependency info or a copy that
+    // lives across the call.
+    with_dependencies(c.dev, cb, info, |i| unsafe { (c.next)(cb, i) })
+}
+
+hook! {
+    /// `vkCmdSetEvent2`: the dependency info is translated as a barrier's, so it stays identical
+    /// to the one `vkCmdWaitEvents2` gets for the same event, as the spec requires
+    /// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdWaitEvents2.html>,
+    /// VUID-vkCmdWaitEvents2-pEvents-03837).
+    cmd_set_event2 = "vkCmdSetEvent2", cmd_set_event2_khr = "vkCmdSetEvent2KHR";
+    on device_ref(cb), next cmd_set_event2 / cmd_set_event2_khr, fails(());
+    set_event2(
+        cb: val vk::CommandBuffer,
+        event: val vk::Event,
+        info: (array ONE) vk::DependencyInfo<'_>,
+    ) -> ()
+}
+
+fn set_event2(
+    c: Call<'_, Device, vk::PFN_vkCmdSetEvent2>,
     cb: vk::CommandBuffer,
     event: vk::Event,
-    info: *const vk::DependencyInfo<'_>,
+    info: Arr<'_, vk::DependencyInfo<'_>>,
 ) {
-    guard(what, (), || {
-        // SAFETY: a command buffer dispatched by the loader.
-        let Some(rec) = (unsafe { registry::recording(cb) }) else {
-            return;
-        };
-        let Some(next) = pick(&rec) else { return };
-        // SAFETY: the caller's dependency info, read only.
-        if !rec.emulated || info.is_null() || !needs2(unsafe { &*info }) {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { next(cb, event, info) };
-        }
-        with_scratch(|s| {
-            // SAFETY: the caller's dependency info; the copies live across the call down.
-            unsafe {
-                let infos = translate2(s, cb, std::slice::from_ref(&*info));
-                next(cb, event, infos.as_ptr())
-            }
-        })
-    })
+    // SAFETY: the next layer's function, with the application's dependency info or a copy that
+    // lives across the call.
+    with_dependencies(c.dev, cb, info, |i| unsafe { (c.next)(cb, event, i) })
 }
 
-hook_and_khr_alias! {
-    /// `vkCmdSetEvent2`.
-    cmd_set_event2, cmd_set_event2_khr = set_event2("vkCmdSetEvent2")
-    (cb: vk::CommandBuffer, event: vk::Event, info: *const vk::DependencyInfo<'_>)
+hook! {
+    /// `vkCmdWaitEvents`.
+    cmd_wait_events = "vkCmdWaitEvents";
+    on device_ref(cb), next cmd_wait_events, fails(());
+    wait_events(
+        cb: val vk::CommandBuffer,
+        event_count: val u32,
+        events: val *const vk::Event,
+        src: val vk::PipelineStageFlags,
+        dst: val vk::PipelineStageFlags,
+        memory_count: val u32,
+        memory: (array memory_count) vk::MemoryBarrier<'_>,
+        buffer_count: val u32,
+        buffers: (array buffer_count) vk::BufferMemoryBarrier<'_>,
+        image_count: val u32,
+        images: (array image_count) vk::ImageMemoryBarrier<'_>,
+    ) -> ()
 }
 
-/// `vkCmdWaitEvents`.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
 #[allow(clippy::too_many_arguments)]
-pub unsafe extern "system" fn cmd_wait_events(
+fn wait_events(
+    c: Call<'_, Device, vk::PFN_vkCmdWaitEvents>,
     cb: vk::CommandBuffer,
     event_count: u32,
     events: *const vk::Event,
     src: vk::PipelineStageFlags,
     dst: vk::PipelineStageFlags,
     memory_count: u32,
-    memory: *const vk::MemoryBarrier<'_>,
+    memory: Arr<'_, vk::MemoryBarrier<'_>>,
     buffer_count: u32,
-    buffers: *const vk::BufferMemoryBarrier<'_>,
+    buffers: Arr<'_, vk::BufferMemoryBarrier<'_>>,
     image_count: u32,
-    images: *const vk::ImageMemoryBarrier<'_>,
+    images: Arr<'_, vk::ImageMemoryBarrier<'_>>,
 ) {
-    guard("vkCmdWaitEvents", (), || {
-        // SAFETY: a command buffer dispatched by the loader.
-        let Some(rec) = (unsafe { registry::recording(cb) }) else {
-            return;
-        };
-        let Some(next) = rec.next.cmd_wait_events else {
-            return;
-        };
-        // SAFETY: the caller's arrays, valid for their counts.
-        let (m, b, i) = unsafe {
-            (
-                slice(memory, memory_count),
-                slice(buffers, buffer_count),
-                slice(images, image_count),
+    let Some(given) = to_translate1(c.dev, [src, dst], memory, buffers, images) else {
+        // SAFETY: the next layer's function, with the application's arguments.
+        return unsafe {
+            (c.next)(
+                cb,
+                event_count,
+                events,
+                src,
+                dst,
+                memory_count,
+                memory.raw(),
+                buffer_count,
+                buffers.raw(),
+                image_count,
+                images.raw(),
             )
         };
-        // SAFETY: as above.
-        if !rec.emulated || !unsafe { needs1(src, dst, m, b, i) } {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe {
-                next(
-                    cb,
-                    event_count,
-                    events,
-                    src,
-                    dst,
-                    memory_count,
-                    memory,
-                    buffer_count,
-                    buffers,
-                    image_count,
-                    images,
-                )
-            };
+    };
+    translated1(cb, [src, dst], given, |[src, dst], m, b, i| {
+        // SAFETY: the next layer's function, with the application's arrays or copies that live
+        // across the call.
+        unsafe {
+            (c.next)(
+                cb,
+                event_count,
+                events,
+                src,
+                dst,
+                m.0,
+                m.1,
+                b.0,
+                b.1,
+                i.0,
+                i.1,
+            )
         }
-        with_scratch(|s| {
-            // SAFETY: the next layer's function; the copies live across the call.
-            unsafe {
-                translate1(s, cb, m, b, i);
-                next(
-                    cb,
-                    event_count,
-                    events,
-                    stage(src),
-                    stage(dst),
-                    s.memory.len() as u32,
-                    s.memory.as_ptr(),
-                    s.buffers.len() as u32,
-                    s.buffers.as_ptr(),
-                    s.images.len() as u32,
-                    s.images.as_ptr(),
-                )
-            }
-        })
     })
 }
 
-/// The shared body of `vkCmdWaitEvents2` and its KHR alias: one dependency info per event.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn wait_events2(
-    what: &'static str,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdWaitEvents2>,
+hook! {
+    /// `vkCmdWaitEvents2`: one dependency info per event.
+    cmd_wait_events2 = "vkCmdWaitEvents2", cmd_wait_events2_khr = "vkCmdWaitEvents2KHR";
+    on device_ref(cb), next cmd_wait_events2 / cmd_wait_events2_khr, fails(());
+    wait_events2(
+        cb: val vk::CommandBuffer,
+        count: val u32,
+        events: val *const vk::Event,
+        infos: (array count) vk::DependencyInfo<'_>,
+    ) -> ()
+}
+
+fn wait_events2(
+    c: Call<'_, Device, vk::PFN_vkCmdWaitEvents2>,
     cb: vk::CommandBuffer,
     count: u32,
     events: *const vk::Event,
-    infos: *const vk::DependencyInfo<'_>,
+    infos: Arr<'_, vk::DependencyInfo<'_>>,
 ) {
-    guard(what, (), || {
-        // SAFETY: a command buffer dispatched by the loader.
-        let Some(rec) = (unsafe { registry::recording(cb) }) else {
-            return;
-        };
-        let Some(next) = pick(&rec) else { return };
-        // SAFETY: the caller's array of `count` dependency infos.
-        let list = unsafe { slice(infos, count) };
-        if !rec.emulated || !list.iter().any(needs2) {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { next(cb, count, events, infos) };
-        }
-        with_scratch(|s| {
-            // SAFETY: the caller's dependency infos; the copies live across the call down.
-            unsafe {
-                let infos = translate2(s, cb, list);
-                next(cb, count, events, infos.as_ptr())
-            }
-        })
+    // SAFETY: the next layer's function, with the application's dependency infos or copies that
+    // live across the call.
+    with_dependencies(c.dev, cb, infos, |i| unsafe {
+        (c.next)(cb, count, events, i)
     })
 }
 
-hook_and_khr_alias! {
-    /// `vkCmdWaitEvents2`.
-    cmd_wait_events2, cmd_wait_events2_khr = wait_events2("vkCmdWaitEvents2")
-    (
-        cb: vk::CommandBuffer,
-        count: u32,
-        events: *const vk::Event,
-        infos: *const vk::DependencyInfo<'_>,
-    )
-}
-
-/// Calls `f` with the next layer's function picked from `cb`'s device and, where the device
-/// emulates density maps, `translate` applied to the stage mask; nothing where the device is
-/// unknown or the next layer lacks the command.
-///
-/// # Safety
-/// `cb` must be a command buffer dispatched by the loader.
+/// A stage mask as the driver must get it: without the density-map stage on an emulating device.
 #[inline]
-unsafe fn with_stage<F: Copy, S: Copy>(
-    cb: vk::CommandBuffer,
-    pick: impl FnOnce(&registry::Recording) -> Option<F>,
-    stage: S,
-    translate: fn(S) -> S,
-    f: impl FnOnce(F, S),
-) {
-    // SAFETY: as the caller promised.
-    let Some(rec) = (unsafe { registry::recording(cb) }) else {
-        return;
-    };
-    let Some(next) = pick(&rec) else { return };
-    f(
-        next,
-        if rec.emulated {
-            translate(stage)
-        } else {
-            stage
-        },
-    )
+fn stage_on<S>(dev: &Device, mask: S, translate: fn(S) -> S) -> S {
+    if dev.fdm.is_some() {
+        translate(mask)
+    } else {
+        mask
+    }
 }
 
-/// `vkCmdSetEvent`: the stage mask without the density-map stage (the bits are invalid on the
-/// driver's device, VUID-vkCmdSetEvent-stageMask-04093 family,
-/// <https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdSetEvent.html>); it stays
-/// matched to the `vkCmdWaitEvents` source stages, which are translated alike.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_set_event(
+hook! {
+    /// `vkCmdSetEvent`: the stage mask without the density-map stage (the bits are invalid on the
+    /// driver's device, VUID-vkCmdSetEvent-stageMask-04093 family,
+    /// <https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdSetEvent.html>); it stays
+    /// matched to the `vkCmdWaitEvents` source stages, which are translated alike.
+    cmd_set_event = "vkCmdSetEvent";
+    on device_ref(cb), next cmd_set_event, fails(());
+    set_event(cb: val vk::CommandBuffer, event: val vk::Event, mask: val vk::PipelineStageFlags) -> ()
+}
+
+fn set_event(
+    c: Call<'_, Device, vk::PFN_vkCmdSetEvent>,
     cb: vk::CommandBuffer,
     event: vk::Event,
     mask: vk::PipelineStageFlags,
 ) {
-    guard("vkCmdSetEvent", (), || {
-        // SAFETY: the caller's arguments; the next layer's function.
-        unsafe {
-            with_stage(
-                cb,
-                |r| r.next.cmd_set_event,
-                mask,
-                stage,
-                |next, m| next(cb, event, m),
-            )
-        }
-    })
+    // SAFETY: the next layer's function, with the application's arguments (the mask translated).
+    unsafe { (c.next)(cb, event, stage_on(c.dev, mask, stage)) }
 }
 
-/// `vkCmdResetEvent`: as [`cmd_set_event`].
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_reset_event(
+hook! {
+    /// `vkCmdResetEvent`: as [`cmd_set_event`].
+    cmd_reset_event = "vkCmdResetEvent";
+    on device_ref(cb), next cmd_reset_event, fails(());
+    reset_event(
+        cb: val vk::CommandBuffer,
+        event: val vk::Event,
+        mask: val vk::PipelineStageFlags,
+    ) -> ()
+}
+
+fn reset_event(
+    c: Call<'_, Device, vk::PFN_vkCmdResetEvent>,
     cb: vk::CommandBuffer,
     event: vk::Event,
     mask: vk::PipelineStageFlags,
 ) {
-    guard("vkCmdResetEvent", (), || {
-        // SAFETY: the caller's arguments; the next layer's function.
-        unsafe {
-            with_stage(
-                cb,
-                |r| r.next.cmd_reset_event,
-                mask,
-                stage,
-                |next, m| next(cb, event, m),
-            )
-        }
-    })
+    // SAFETY: the next layer's function, with the application's arguments (the mask translated).
+    unsafe { (c.next)(cb, event, stage_on(c.dev, mask, stage)) }
 }
 
-/// The shared body of `vkCmdResetEvent2` and its KHR alias: as [`cmd_set_event`].
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn reset_event2(
-    what: &'static str,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdResetEvent2>,
+hook! {
+    /// `vkCmdResetEvent2`: as [`cmd_set_event`].
+    cmd_reset_event2 = "vkCmdResetEvent2", cmd_reset_event2_khr = "vkCmdResetEvent2KHR";
+    on device_ref(cb), next cmd_reset_event2 / cmd_reset_event2_khr, fails(());
+    reset_event2(
+        cb: val vk::CommandBuffer,
+        event: val vk::Event,
+        mask: val vk::PipelineStageFlags2,
+    ) -> ()
+}
+
+fn reset_event2(
+    c: Call<'_, Device, vk::PFN_vkCmdResetEvent2>,
     cb: vk::CommandBuffer,
     event: vk::Event,
     mask: vk::PipelineStageFlags2,
 ) {
-    guard(what, (), || {
-        // SAFETY: the caller's arguments; the next layer's function.
-        unsafe { with_stage(cb, pick, mask, stage2, |next, m| next(cb, event, m)) }
-    })
+    // SAFETY: the next layer's function, with the application's arguments (the mask translated).
+    unsafe { (c.next)(cb, event, stage_on(c.dev, mask, stage2)) }
 }
 
-hook_and_khr_alias! {
-    /// `vkCmdResetEvent2`.
-    cmd_reset_event2, cmd_reset_event2_khr = reset_event2("vkCmdResetEvent2")
-    (cb: vk::CommandBuffer, event: vk::Event, mask: vk::PipelineStageFlags2)
+hook! {
+    /// `vkCmdWriteTimestamp`: a timestamp after the density-map stage is one after the
+    /// shading-rate attachment stage, which takes its place on the driver's device.
+    cmd_write_timestamp = "vkCmdWriteTimestamp";
+    on device_ref(cb), next cmd_write_timestamp, fails(());
+    write_timestamp(
+        cb: val vk::CommandBuffer,
+        at: val vk::PipelineStageFlags,
+        pool: val vk::QueryPool,
+        query: val u32,
+    ) -> ()
 }
 
-/// `vkCmdWriteTimestamp`: a timestamp after the density-map stage is one after the shading-rate
-/// attachment stage, which takes its place on the driver's device.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_write_timestamp(
+fn write_timestamp(
+    c: Call<'_, Device, vk::PFN_vkCmdWriteTimestamp>,
     cb: vk::CommandBuffer,
     at: vk::PipelineStageFlags,
     pool: vk::QueryPool,
     query: u32,
 ) {
-    guard("vkCmdWriteTimestamp", (), || {
-        // SAFETY: the caller's arguments; the next layer's function.
-        unsafe {
-            with_stage(
-                cb,
-                |r| r.next.cmd_write_timestamp,
-                at,
-                stage,
-                |next, s| next(cb, s, pool, query),
-            )
-        }
-    })
+    // SAFETY: the next layer's function, with the application's arguments (the stage
+    // translated).
+    unsafe { (c.next)(cb, stage_on(c.dev, at, stage), pool, query) }
 }
 
-/// The shared body of `vkCmdWriteTimestamp2` and its KHR alias: as [`cmd_write_timestamp`].
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn write_timestamp2(
-    what: &'static str,
-    pick: fn(&registry::Recording) -> Option<vk::PFN_vkCmdWriteTimestamp2>,
+hook! {
+    /// `vkCmdWriteTimestamp2`: as [`cmd_write_timestamp`].
+    cmd_write_timestamp2 = "vkCmdWriteTimestamp2",
+        cmd_write_timestamp2_khr = "vkCmdWriteTimestamp2KHR";
+    on device_ref(cb), next cmd_write_timestamp2 / cmd_write_timestamp2_khr, fails(());
+    write_timestamp2(
+        cb: val vk::CommandBuffer,
+        at: val vk::PipelineStageFlags2,
+        pool: val vk::QueryPool,
+        query: val u32,
+    ) -> ()
+}
+
+fn write_timestamp2(
+    c: Call<'_, Device, vk::PFN_vkCmdWriteTimestamp2>,
     cb: vk::CommandBuffer,
     at: vk::PipelineStageFlags2,
     pool: vk::QueryPool,
     query: u32,
 ) {
-    guard(what, (), || {
-        // SAFETY: the caller's arguments; the next layer's function.
-        unsafe { with_stage(cb, pick, at, stage2, |next, s| next(cb, s, pool, query)) }
-    })
-}
-
-hook_and_khr_alias! {
-    /// `vkCmdWriteTimestamp2`.
-    cmd_write_timestamp2, cmd_write_timestamp2_khr = write_timestamp2("vkCmdWriteTimestamp2")
-    (cb: vk::CommandBuffer, at: vk::PipelineStageFlags2, pool: vk::QueryPool, query: u32)
+    // SAFETY: the next layer's function, with the application's arguments (the stage
+    // translated).
+    unsafe { (c.next)(cb, stage_on(c.dev, at, stage2), pool, query) }
 }
 
 #[cfg(test)]

@@ -36,7 +36,8 @@
 ///   as it is (handles, flags, counts, pointers passed down untouched); `in T`, a `const T*`, as
 ///   [`In<T>`](crate::vk::base::ffi::In); `out T`, a `T*`, as
 ///   [`Out<T>`](crate::vk::base::ffi::Out); `(array n) T`, a `const T*` of `n` elements, as
-///   [`Arr<T>`](crate::vk::base::ffi::Arr).
+///   [`Arr<T>`](crate::vk::base::ffi::Arr); `(bytes n) c_void`, a `const void*` of `n` bytes, as
+///   an `Arr<u8>`.
 /// - The body gets a [`Call`](crate::vk::base::ffi::Call) (the command's name, the record, the
 ///   next function) and the typed parameters.
 ///
@@ -136,6 +137,7 @@ macro_rules! hook {
     (@c in $ty:ty) => { *const $ty };
     (@c out $ty:ty) => { *mut $ty };
     (@c (array $count:ident) $ty:ty) => { *const $ty };
+    (@c (bytes $count:ident) $ty:ty) => { *const $ty };
     (@arg val $arg:ident) => {
         $arg
     };
@@ -150,9 +152,15 @@ macro_rules! hook {
         unsafe { $crate::vk::base::ffi::Out::new($arg) }
     };
     (@arg (array $count:ident) $arg:ident) => {
-        // SAFETY: the command's valid usage: NULL or valid for `$count` elements (declared
-        // before it, so still the application's value), unwritten during the call.
+        // SAFETY: the command's valid usage: NULL or valid for `$count` elements (a parameter
+        // declared before it, so the application's own count, or the one struct a command
+        // takes), unwritten during the call.
         unsafe { $crate::vk::base::ffi::Arr::new($arg, $count) }
+    };
+    (@arg (bytes $count:ident) $arg:ident) => {
+        // SAFETY: the command's valid usage: NULL or valid for `$count` bytes, unwritten during
+        // the call.
+        unsafe { $crate::vk::base::ffi::Arr::new($arg.cast::<u8>(), $count) }
     };
 }
 

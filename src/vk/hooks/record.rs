@@ -8,343 +8,352 @@ use ash::vk;
 use ash::vk::Handle as _;
 
 use crate::vk::base::chain;
-use crate::vk::base::ffi::{guard, key};
+use crate::vk::base::ffi::{key, slice, Arr, Call, In};
 use crate::vk::convert;
 use crate::vk::own::bindings::{Bound, PushRange};
 use crate::vk::registry::{
     self, command_pool_destroyed, forget_command_buffers, record_of, remember_command_buffer,
-    with_record,
+    with_record, Device,
 };
 
-/// `vkAllocateCommandBuffers`: each new command buffer gets its record, with its pool, and its
-/// queue family is noted for ownership transfers ([`registry::buffers_allocated`]).
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn allocate_command_buffers(
-    device: vk::Device,
-    info: *const vk::CommandBufferAllocateInfo<'_>,
-    out: *mut vk::CommandBuffer,
-) -> vk::Result {
-    guard(
-        "vkAllocateCommandBuffers",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let rec = unsafe { registry::recording(device) };
-            let Some(next) = rec.and_then(|r| r.next.allocate_command_buffers) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            // SAFETY: the next layer's function, with the caller's arguments.
-            let r = unsafe { next(device, info, out) };
-            // SAFETY: as the caller promised.
-            let (Some(k), Some(i)) = (unsafe { key(device) }, unsafe { info.as_ref() }) else {
-                return r;
-            };
-            if r == vk::Result::SUCCESS && !out.is_null() {
-                let n = i.command_buffer_count as usize;
-                // SAFETY: the driver wrote `command_buffer_count` handles.
-                let cbs = unsafe { std::slice::from_raw_parts(out, n) };
-                let secondary = i.level == vk::CommandBufferLevel::SECONDARY;
-                for &cb in cbs {
-                    remember_command_buffer(cb, k, i.command_pool.as_raw(), secondary);
-                }
-                registry::buffers_allocated(i, cbs);
-            }
-            r
-        },
-    )
+hook! {
+    /// `vkAllocateCommandBuffers`: each new command buffer gets its record, with its pool, and
+    /// its queue family is noted for ownership transfers ([`registry::buffers_allocated`]).
+    allocate_command_buffers = "vkAllocateCommandBuffers";
+    on device_ref(device), next allocate_command_buffers,
+    fails(vk::Result::ERROR_INITIALIZATION_FAILED);
+    allocate(
+        device: val vk::Device,
+        info: in vk::CommandBufferAllocateInfo<'_>,
+        out: val *mut vk::CommandBuffer,
+    ) -> vk::Result
 }
 
-/// `vkDestroyCommandPool`: its command buffers are freed with it, and their records go
-/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkDestroyCommandPool.html>).
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn destroy_command_pool(
+fn allocate(
+    c: Call<'_, Device, vk::PFN_vkAllocateCommandBuffers>,
+    device: vk::Device,
+    info: In<'_, vk::CommandBufferAllocateInfo<'_>>,
+    out: *mut vk::CommandBuffer,
+) -> vk::Result {
+    // SAFETY: the next layer's function, with the application's arguments.
+    let r = unsafe { (c.next)(device, info.raw(), out) };
+    // SAFETY: a device the loader dispatched.
+    let (Some(k), Some(i)) = (unsafe { key(device) }, info.get()) else {
+        return r;
+    };
+    if r == vk::Result::SUCCESS && !out.is_null() {
+        // SAFETY: on success the next layer wrote `commandBufferCount` handles to `out`, valid
+        // for that many (the command's valid usage).
+        let cbs = unsafe { slice(out, i.command_buffer_count) };
+        let secondary = i.level == vk::CommandBufferLevel::SECONDARY;
+        for &cb in cbs {
+            remember_command_buffer(cb, k, i.command_pool.as_raw(), secondary);
+        }
+        registry::buffers_allocated(i, cbs);
+    }
+    r
+}
+
+hook! {
+    /// `vkDestroyCommandPool`: its command buffers are freed with it, and their records go
+    /// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkDestroyCommandPool.html>),
+    /// whether or not the layer knows the device.
+    destroy_command_pool = "vkDestroyCommandPool"; raw, fails(());
+    destroy_pool(
+        device: val vk::Device,
+        pool: val vk::CommandPool,
+        alloc: val *const vk::AllocationCallbacks<'_>,
+    ) -> ()
+}
+
+fn destroy_pool(
     device: vk::Device,
     pool: vk::CommandPool,
     alloc: *const vk::AllocationCallbacks<'_>,
 ) {
-    guard("vkDestroyCommandPool", (), || {
-        // SAFETY: as the caller promised.
-        let key = unsafe { key(device) };
-        if let (Some(k), false) = (key, pool == vk::CommandPool::null()) {
-            command_pool_destroyed(k, pool.as_raw());
-        }
-        // SAFETY: as the caller promised.
-        let next = unsafe { registry::recording(device) }.and_then(|r| r.next.destroy_command_pool);
-        if let Some(next) = next {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            unsafe { next(device, pool, alloc) };
-        }
-    })
+    // SAFETY: a device the loader dispatched (or NULL): its first word is its dispatch key.
+    let key = unsafe { key(device) };
+    if let (Some(k), false) = (key, pool == vk::CommandPool::null()) {
+        command_pool_destroyed(k, pool.as_raw());
+    }
+    // SAFETY: as above; the borrow ends with this call.
+    let dev = unsafe { registry::device_ref(device) };
+    if let Some(next) = dev.and_then(|d| d.next.destroy_command_pool) {
+        // SAFETY: the next layer's function, with the application's arguments.
+        unsafe { next(device, pool, alloc) };
+    }
 }
 
-/// `vkBeginCommandBuffer`: the command buffer's bindings start empty
-/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkBeginCommandBuffer.html>); its
-/// record is made (once per command buffer) or cleared, and its conversion slots of destroyed
-/// maps go ([`convert::begun`]).
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn begin_command_buffer(
+hook! {
+    /// `vkBeginCommandBuffer`: the command buffer's bindings start empty
+    /// (<https://registry.khronos.org/vulkan/specs/latest/man/html/vkBeginCommandBuffer.html>);
+    /// its record is made (once per command buffer) or cleared, and its conversion slots of
+    /// destroyed maps go ([`convert::begun`]).
+    begin_command_buffer = "vkBeginCommandBuffer";
+    on device_ref(cb), next begin_command_buffer, fails(vk::Result::ERROR_INITIALIZATION_FAILED);
+    begin(cb: val vk::CommandBuffer, info: in vk::CommandBufferBeginInfo<'_>) -> vk::Result
+}
+
+fn begin(
+    c: Call<'_, Device, vk::PFN_vkBeginCommandBuffer>,
     cb: vk::CommandBuffer,
-    info: *const vk::CommandBufferBeginInfo<'_>,
+    info: In<'_, vk::CommandBufferBeginInfo<'_>>,
 ) -> vk::Result {
-    guard(
-        "vkBeginCommandBuffer",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let rec = unsafe { registry::recording(cb) };
-            let Some(next) = rec.and_then(|r| r.next.begin_command_buffer) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
+    let found = record_of(cb, |r| {
+        // Its inheritance info is read for secondary command buffers only, as the
+        // specification says.
+        let inherits = r.secondary && inherits_conditional_rendering(info);
+        {
+            let mut b = r.bound.lock();
+            *b = Bound {
+                inherited_conditional: inherits,
+                recording: b.recording + 1,
+                ..Bound::default()
             };
-            let found = record_of(cb, |r| {
-                // SAFETY: the caller's begin info, read only; its inheritance info is read for
-                // secondary command buffers only, as the specification says.
-                let inherits = r.secondary && unsafe { inherits_conditional_rendering(info) };
-                {
-                    let mut b = r.bound.lock();
-                    *b = Bound {
-                        inherited_conditional: inherits,
-                        recording: b.recording + 1,
-                        ..Bound::default()
-                    };
-                }
-                convert::begun(r);
-                // A pass left open by the previous recording ends nowhere.
-                registry::take_plan(r);
-            });
-            if found.is_none() {
-                // Allocated before the layer saw it (not expected on an emulating device): a
-                // primary's record without a pool, dropped with the command buffer or its device.
-                // SAFETY: as the caller promised.
-                let device = unsafe { key(cb) }.unwrap_or(0);
-                remember_command_buffer(cb, device, 0, false);
-            }
-            // SAFETY: the next layer's function, with the caller's arguments.
-            unsafe { next(cb, info) }
-        },
-    )
+        }
+        convert::begun(r);
+        // A pass left open by the previous recording ends nowhere.
+        registry::take_plan(r);
+    });
+    if found.is_none() {
+        // Allocated before the layer saw it (not expected on an emulating device): a primary's
+        // record without a pool, dropped with the command buffer or its device.
+        // SAFETY: a command buffer the loader dispatched: its first word is its dispatch key.
+        let device = unsafe { key(cb) }.unwrap_or(0);
+        remember_command_buffer(cb, device, 0, false);
+    }
+    // SAFETY: the next layer's function, with the application's arguments.
+    unsafe { (c.next)(cb, info.raw()) }
 }
 
-/// `vkFreeCommandBuffers`: their records go.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn free_command_buffers(
-    device: vk::Device,
-    pool: vk::CommandPool,
-    count: u32,
-    cbs: *const vk::CommandBuffer,
-) {
-    guard("vkFreeCommandBuffers", (), || {
-        if !cbs.is_null() {
-            // SAFETY: the caller's array.
-            forget_command_buffers(unsafe { std::slice::from_raw_parts(cbs, count as usize) });
-        }
-        // The leaf table, not the registry's ranked map: fovea's own uploads free their command
-        // buffers through the layer under their submit lock (`crate::common::lock::Rank`).
-        // SAFETY: as the caller promised.
-        let next = unsafe { registry::recording(device) }.and_then(|r| r.next.free_command_buffers);
-        if let Some(next) = next {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            unsafe { next(device, pool, count, cbs) };
-        }
-    })
+hook! {
+    /// `vkFreeCommandBuffers`: their records go, whether or not the layer knows the device.
+    free_command_buffers = "vkFreeCommandBuffers"; raw, fails(());
+    free(
+        device: val vk::Device,
+        pool: val vk::CommandPool,
+        count: val u32,
+        cbs: (array count) vk::CommandBuffer,
+    ) -> ()
 }
 
-/// Whether a begin info's inheritance info makes the command buffer inherit conditional rendering.
-///
-/// # Safety
-/// `info` must be NULL or a valid begin info of a secondary command buffer.
-unsafe fn inherits_conditional_rendering(info: *const vk::CommandBufferBeginInfo<'_>) -> bool {
-    // SAFETY: as the caller promised.
-    let Some(begin) = (unsafe { info.as_ref() }) else {
+fn free(device: vk::Device, pool: vk::CommandPool, count: u32, cbs: Arr<'_, vk::CommandBuffer>) {
+    forget_command_buffers(cbs.slice());
+    // The leaf table, not the registry's ranked map: fovea's own uploads free their command
+    // buffers through the layer under their submit lock (`crate::common::lock::Rank`).
+    // SAFETY: a device the loader dispatched (or NULL); the borrow ends with this call.
+    let dev = unsafe { registry::device_ref(device) };
+    if let Some(next) = dev.and_then(|d| d.next.free_command_buffers) {
+        // SAFETY: the next layer's function, with the application's arguments.
+        unsafe { next(device, pool, count, cbs.raw()) };
+    }
+}
+
+/// Whether a secondary command buffer's begin info makes it inherit conditional rendering.
+fn inherits_conditional_rendering(info: In<'_, vk::CommandBufferBeginInfo<'_>>) -> bool {
+    let Some(begin) = info.get() else {
         return false;
     };
-    // SAFETY: as the caller promised: a secondary's begin info has a valid inheritance info.
+    // SAFETY: the command's valid usage: a secondary's begin info has a valid inheritance info,
+    // with a valid chain.
     let Some(inh) = (unsafe { begin.p_inheritance_info.as_ref() }) else {
         return false;
     };
     let ty = vk::StructureType::COMMAND_BUFFER_INHERITANCE_CONDITIONAL_RENDERING_INFO_EXT;
-    // SAFETY: the caller's chain, read only.
-    let found = unsafe {
+    // SAFETY: as above; found by its sType, read only.
+    unsafe {
         chain::find::<vk::CommandBufferInheritanceConditionalRenderingInfoEXT<'_>>(inh.p_next, ty)
-    };
-    let Some(c) = found.ok().flatten() else {
-        return false;
-    };
-    // SAFETY: found by its sType in a valid chain.
-    unsafe { (*c).conditional_rendering_enable == vk::TRUE }
+            .ok()
+            .flatten()
+            .is_some_and(|c| (*c).conditional_rendering_enable == vk::TRUE)
+    }
 }
 
-/// `vkCmdBeginConditionalRenderingEXT`: the condition is noted, so a conversion can suspend it.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_begin_conditional_rendering(
+hook! {
+    /// `vkCmdBeginConditionalRenderingEXT`: the condition is noted, so a conversion can suspend
+    /// it.
+    cmd_begin_conditional_rendering = "vkCmdBeginConditionalRenderingEXT";
+    on device_ref(cb), next cmd_begin_conditional_rendering_ext, fails(());
+    begin_conditional(
+        cb: val vk::CommandBuffer,
+        info: in vk::ConditionalRenderingBeginInfoEXT<'_>,
+    ) -> ()
+}
+
+fn begin_conditional(
+    c: Call<'_, Device, vk::PFN_vkCmdBeginConditionalRenderingEXT>,
     cb: vk::CommandBuffer,
-    info: *const vk::ConditionalRenderingBeginInfoEXT<'_>,
+    info: In<'_, vk::ConditionalRenderingBeginInfoEXT<'_>>,
 ) {
-    guard("vkCmdBeginConditionalRenderingEXT", (), || {
-        // SAFETY: as the caller promised.
-        let rec = unsafe { registry::recording(cb) };
-        let Some(next) = rec.and_then(|r| r.next.cmd_begin_conditional_rendering_ext) else {
-            return;
-        };
-        // SAFETY: as the caller promised.
-        if let Some(i) = unsafe { info.as_ref() } {
-            let c = (i.buffer, i.offset, i.flags);
-            with_record(cb, |b| b.conditional = Some(c));
-        }
-        // SAFETY: the next layer's function, with the caller's arguments.
-        unsafe { next(cb, info) }
-    })
+    if let Some(i) = info.get() {
+        let condition = (i.buffer, i.offset, i.flags);
+        with_record(cb, |b| b.conditional = Some(condition));
+    }
+    // SAFETY: the next layer's function, with the application's arguments.
+    unsafe { (c.next)(cb, info.raw()) }
 }
 
-/// `vkCmdEndConditionalRenderingEXT`: the condition is forgotten.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_end_conditional_rendering(cb: vk::CommandBuffer) {
-    guard("vkCmdEndConditionalRenderingEXT", (), || {
-        // SAFETY: as the caller promised.
-        let rec = unsafe { registry::recording(cb) };
-        let Some(next) = rec.and_then(|r| r.next.cmd_end_conditional_rendering_ext) else {
-            return;
-        };
-        with_record(cb, |b| b.conditional = None);
-        // SAFETY: the next layer's function, with the caller's arguments.
-        unsafe { next(cb) }
-    })
+hook! {
+    /// `vkCmdEndConditionalRenderingEXT`: the condition is forgotten.
+    cmd_end_conditional_rendering = "vkCmdEndConditionalRenderingEXT";
+    on device_ref(cb), next cmd_end_conditional_rendering_ext, fails(());
+    end_conditional(cb: val vk::CommandBuffer) -> ()
 }
 
-/// `vkCmdBindPipeline`: a compute pipeline is noted.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_bind_pipeline(
+fn end_conditional(
+    c: Call<'_, Device, vk::PFN_vkCmdEndConditionalRenderingEXT>,
+    cb: vk::CommandBuffer,
+) {
+    with_record(cb, |b| b.conditional = None);
+    // SAFETY: the next layer's function, with the application's command buffer.
+    unsafe { (c.next)(cb) }
+}
+
+hook! {
+    /// `vkCmdBindPipeline`: a compute pipeline is noted.
+    cmd_bind_pipeline = "vkCmdBindPipeline";
+    on device_ref(cb), next cmd_bind_pipeline, fails(());
+    bind_pipeline(
+        cb: val vk::CommandBuffer,
+        point: val vk::PipelineBindPoint,
+        pipeline: val vk::Pipeline,
+    ) -> ()
+}
+
+fn bind_pipeline(
+    c: Call<'_, Device, vk::PFN_vkCmdBindPipeline>,
     cb: vk::CommandBuffer,
     point: vk::PipelineBindPoint,
     pipeline: vk::Pipeline,
 ) {
-    guard("vkCmdBindPipeline", (), || {
-        // SAFETY: as the caller promised.
-        let rec = unsafe { registry::recording(cb) };
-        let Some(next) = rec.and_then(|r| r.next.cmd_bind_pipeline) else {
-            return;
-        };
-        if point == vk::PipelineBindPoint::COMPUTE {
-            with_record(cb, |b| b.pipeline = pipeline);
-        }
-        // SAFETY: the next layer's function, with the caller's arguments.
-        unsafe { next(cb, point, pipeline) }
-    })
+    if point == vk::PipelineBindPoint::COMPUTE {
+        with_record(cb, |b| b.pipeline = pipeline);
+    }
+    // SAFETY: the next layer's function, with the application's arguments.
+    unsafe { (c.next)(cb, point, pipeline) }
 }
 
-/// `vkCmdBindDescriptorSets`: compute sets and their dynamic offsets are noted.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
+hook! {
+    /// `vkCmdBindDescriptorSets`: compute sets and their dynamic offsets are noted.
+    cmd_bind_descriptor_sets = "vkCmdBindDescriptorSets";
+    on device_ref(cb), next cmd_bind_descriptor_sets, fails(());
+    bind_sets(
+        cb: val vk::CommandBuffer,
+        point: val vk::PipelineBindPoint,
+        layout: val vk::PipelineLayout,
+        first: val u32,
+        set_count: val u32,
+        sets: (array set_count) vk::DescriptorSet,
+        dynamic_count: val u32,
+        dynamic: (array dynamic_count) u32,
+    ) -> ()
+}
+
 #[allow(clippy::too_many_arguments)]
-pub unsafe extern "system" fn cmd_bind_descriptor_sets(
+fn bind_sets(
+    c: Call<'_, Device, vk::PFN_vkCmdBindDescriptorSets>,
     cb: vk::CommandBuffer,
     point: vk::PipelineBindPoint,
     layout: vk::PipelineLayout,
     first: u32,
     set_count: u32,
-    sets: *const vk::DescriptorSet,
+    sets: Arr<'_, vk::DescriptorSet>,
     dynamic_count: u32,
-    dynamic: *const u32,
+    dynamic: Arr<'_, u32>,
 ) {
-    guard("vkCmdBindDescriptorSets", (), || {
-        // SAFETY: as the caller promised.
-        let rec = unsafe { registry::recording(cb) };
-        let Some(next) = rec.and_then(|r| r.next.cmd_bind_descriptor_sets) else {
-            return;
-        };
-        if point == vk::PipelineBindPoint::COMPUTE && !sets.is_null() {
-            // SAFETY: the caller's arrays.
-            let s = unsafe { std::slice::from_raw_parts(sets, set_count as usize) };
-            let dy = if dynamic.is_null() {
-                &[][..]
+    if point == vk::PipelineBindPoint::COMPUTE && !sets.raw().is_null() {
+        let (s, dy) = (sets.slice(), dynamic.slice());
+        with_record(cb, |b| {
+            // Which sets take how many dynamic offsets is in their layouts, which the layer does
+            // not look into: one set with all of them is exact; several sets with dynamic
+            // offsets cannot be split, so the record gives up.
+            if dy.is_empty() || s.len() == 1 {
+                let n = dy.len() as u32;
+                b.bind_sets(layout, first, s, dy, |_| Some(n));
             } else {
-                // SAFETY: as above.
-                unsafe { std::slice::from_raw_parts(dynamic, dynamic_count as usize) }
-            };
-            with_record(cb, |b| {
-                // Which sets take how many dynamic offsets is in their layouts, which the layer
-                // does not look into: one set with all of them is exact; several sets with dynamic
-                // offsets cannot be split, so the record gives up.
-                if dy.is_empty() || s.len() == 1 {
-                    let n = dy.len() as u32;
-                    b.bind_sets(layout, first, s, dy, |_| Some(n));
-                } else {
-                    b.lost = true;
-                }
-            });
-        }
-        // SAFETY: the next layer's function, with the caller's arguments.
-        unsafe {
-            next(
-                cb,
-                point,
-                layout,
-                first,
-                set_count,
-                sets,
-                dynamic_count,
-                dynamic,
-            )
-        }
-    })
+                b.lost = true;
+            }
+        });
+    }
+    // SAFETY: the next layer's function, with the application's arguments.
+    unsafe {
+        (c.next)(
+            cb,
+            point,
+            layout,
+            first,
+            set_count,
+            sets.raw(),
+            dynamic_count,
+            dynamic.raw(),
+        )
+    }
 }
 
-/// `vkCmdPushConstants`: the bytes and the range are noted where the conversion's compute
-/// dispatch would disturb them ([`Bound::push`]).
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_push_constants(
+hook! {
+    /// `vkCmdPushConstants`: the bytes and the range are noted where the conversion's compute
+    /// dispatch would disturb them ([`Bound::push`]).
+    cmd_push_constants = "vkCmdPushConstants";
+    on device_ref(cb), next cmd_push_constants, fails(());
+    push_constants(
+        cb: val vk::CommandBuffer,
+        layout: val vk::PipelineLayout,
+        stages: val vk::ShaderStageFlags,
+        offset: val u32,
+        size: val u32,
+        values: (bytes size) c_void,
+    ) -> ()
+}
+
+fn push_constants(
+    c: Call<'_, Device, vk::PFN_vkCmdPushConstants>,
     cb: vk::CommandBuffer,
     layout: vk::PipelineLayout,
     stages: vk::ShaderStageFlags,
     offset: u32,
     size: u32,
-    values: *const c_void,
+    values: Arr<'_, u8>,
 ) {
-    guard("vkCmdPushConstants", (), || {
-        // SAFETY: as the caller promised.
-        let rec = unsafe { registry::recording(cb) };
-        let Some(next) = rec.and_then(|r| r.next.cmd_push_constants) else {
-            return;
+    if !values.raw().is_null() {
+        let range = PushRange {
+            layout,
+            stages,
+            offset,
+            size,
+            seq: 0,
         };
-        if !values.is_null() {
-            // SAFETY: the caller's `size` bytes.
-            let v = unsafe { std::slice::from_raw_parts(values as *const u8, size as usize) };
-            let range = PushRange {
-                layout,
-                stages,
-                offset,
-                size,
-                seq: 0,
-            };
-            with_record(cb, |b| b.push(range, v));
-        }
-        // SAFETY: the next layer's function, with the caller's arguments.
-        unsafe { next(cb, layout, stages, offset, size, values) }
-    })
+        with_record(cb, |b| b.push(range, values.slice()));
+    }
+    // SAFETY: the next layer's function, with the application's arguments.
+    unsafe {
+        (c.next)(
+            cb,
+            layout,
+            stages,
+            offset,
+            size,
+            values.raw().cast::<c_void>(),
+        )
+    }
 }
 
-/// `vkCmdPushDescriptorSetKHR`: a compute push descriptor cannot be given back (its writes would
-/// have to be copied); the command buffer's maps are not converted from then on.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_push_descriptor_set_khr(
+hook! {
+    /// `vkCmdPushDescriptorSetKHR`: a compute push descriptor cannot be given back (its writes
+    /// would have to be copied); the command buffer's maps are not converted from then on.
+    cmd_push_descriptor_set_khr = "vkCmdPushDescriptorSetKHR";
+    on device_ref(cb), next cmd_push_descriptor_set_khr, fails(());
+    push_descriptor_set(
+        cb: val vk::CommandBuffer,
+        point: val vk::PipelineBindPoint,
+        layout: val vk::PipelineLayout,
+        set: val u32,
+        count: val u32,
+        writes: val *const vk::WriteDescriptorSet<'_>,
+    ) -> ()
+}
+
+fn push_descriptor_set(
+    c: Call<'_, Device, vk::PFN_vkCmdPushDescriptorSetKHR>,
     cb: vk::CommandBuffer,
     point: vk::PipelineBindPoint,
     layout: vk::PipelineLayout,
@@ -352,40 +361,36 @@ pub unsafe extern "system" fn cmd_push_descriptor_set_khr(
     count: u32,
     writes: *const vk::WriteDescriptorSet<'_>,
 ) {
-    guard("vkCmdPushDescriptorSetKHR", (), || {
-        // SAFETY: as the caller promised.
-        let rec = unsafe { registry::recording(cb) };
-        let Some(next) = rec.and_then(|r| r.next.cmd_push_descriptor_set_khr) else {
-            return;
-        };
-        if point == vk::PipelineBindPoint::COMPUTE {
-            with_record(cb, |b| b.lost = true);
-        }
-        // SAFETY: the next layer's function, with the caller's arguments.
-        unsafe { next(cb, point, layout, set, count, writes) }
-    })
+    if point == vk::PipelineBindPoint::COMPUTE {
+        with_record(cb, |b| b.lost = true);
+    }
+    // SAFETY: the next layer's function, with the application's arguments.
+    unsafe { (c.next)(cb, point, layout, set, count, writes) }
 }
 
-/// `vkCmdPushDescriptorSetWithTemplateKHR`: as [`cmd_push_descriptor_set_khr`] (the template's
-/// bind point is not looked up, so any use gives up).
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_push_descriptor_set_with_template_khr(
+hook! {
+    /// `vkCmdPushDescriptorSetWithTemplateKHR`: as [`cmd_push_descriptor_set_khr`] (the
+    /// template's bind point is not looked up, so any use gives up).
+    cmd_push_descriptor_set_with_template_khr = "vkCmdPushDescriptorSetWithTemplateKHR";
+    on device_ref(cb), next cmd_push_descriptor_set_with_template_khr, fails(());
+    push_with_template(
+        cb: val vk::CommandBuffer,
+        template: val vk::DescriptorUpdateTemplate,
+        layout: val vk::PipelineLayout,
+        set: val u32,
+        data: val *const c_void,
+    ) -> ()
+}
+
+fn push_with_template(
+    c: Call<'_, Device, vk::PFN_vkCmdPushDescriptorSetWithTemplateKHR>,
     cb: vk::CommandBuffer,
     template: vk::DescriptorUpdateTemplate,
     layout: vk::PipelineLayout,
     set: u32,
     data: *const c_void,
 ) {
-    guard("vkCmdPushDescriptorSetWithTemplateKHR", (), || {
-        // SAFETY: as the caller promised.
-        let rec = unsafe { registry::recording(cb) };
-        let Some(next) = rec.and_then(|r| r.next.cmd_push_descriptor_set_with_template_khr) else {
-            return;
-        };
-        with_record(cb, |b| b.lost = true);
-        // SAFETY: the next layer's function, with the caller's arguments.
-        unsafe { next(cb, template, layout, set, data) }
-    })
+    with_record(cb, |b| b.lost = true);
+    // SAFETY: the next layer's function, with the application's arguments.
+    unsafe { (c.next)(cb, template, layout, set, data) }
 }
