@@ -939,7 +939,8 @@ impl Converter {
         // The begin hooks run outside any render pass, where a condition begun outside one may
         // end and begin again (VUID-vkCmdEndConditionalRenderingEXT-None-01986).
         // SAFETY: `cb` is recording on this device.
-        let next = unsafe { registry::recording(cb) }.map(|r| r.next);
+        let dev = unsafe { registry::device_ref(cb) };
+        let next = dev.as_ref().map(|d| &d.next);
         let suspend = bound.conditional.and_then(|c| {
             let n = next?;
             Some((

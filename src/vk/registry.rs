@@ -402,31 +402,6 @@ pub fn forget_devices_of(instance: Key) -> Vec<Key> {
         .collect()
 }
 
-/// What a command-recording hook needs of its device: whether it emulates density maps, and the
-/// next layer's pointers, borrowed from the device's record (see [`device_ref`]).
-#[derive(Clone, Copy)]
-pub struct Recording<'a> {
-    pub emulated: bool,
-    pub next: &'a DeviceNext,
-    /// The layer's own calls on the device, where it emulates or injects.
-    pub own: Option<&'a Own>,
-}
-
-/// The recording state of a command buffer's (or queue's) device: [`device_ref`], without a lock,
-/// a reference count or a copy of the next layer's table.
-///
-/// # Safety
-/// As [`device_ref`].
-#[inline]
-pub unsafe fn recording<'a>(handle: impl vk::Handle) -> Option<Recording<'a>> {
-    // SAFETY: as the caller promised.
-    unsafe { device_ref::<'a>(handle) }.map(|d| Recording {
-        emulated: d.device.fdm.is_some(),
-        next: &d.device.next,
-        own: d.device.attachments.own.as_deref(),
-    })
-}
-
 // ---------------------------------------------------------------------------------------------
 // Command pools' and command buffers' queue families.
 
@@ -804,7 +779,7 @@ mod tests {
             }
             for i in 0..3 {
                 assert_eq!(device_ref(cb(i)).map(|d| d.api_version), Some(i as u32));
-                assert_eq!(recording(cb(i)).map(|r| r.emulated), Some(false));
+                assert!(device_ref(cb(i)).is_some_and(|d| d.fdm.is_none()));
             }
             let gone = remove_device(vk::Device::from_raw(cb(1).as_raw())).expect("recorded");
             assert_eq!(gone.api_version, 1);

@@ -6,6 +6,7 @@ use std::mem::size_of;
 
 use ash::vk;
 
+use crate::vk::base::ffi::In;
 use crate::vk::base::{link, structs};
 
 /// The longest chain the layer follows; a longer one is taken for a loop, which the spec forbids
@@ -62,6 +63,86 @@ pub unsafe fn find_out<T>(next: *mut c_void, ty: vk::StructureType) -> Option<*m
         .ok()
         .flatten()
         .map(|p| p as *mut T)
+}
+
+/// An input struct whose `pNext` chain the layer reads through [`In`] without `unsafe`.
+///
+/// # Safety
+/// [`Chained::p_next`] must return the struct's own `pNext` member.
+pub unsafe trait Chained {
+    fn p_next(&self) -> *const c_void;
+}
+
+macro_rules! chained {
+    ($($t:ident),* $(,)?) => {
+        $(
+            // SAFETY: the struct's own `pNext`.
+            unsafe impl Chained for vk::$t<'_> {
+                fn p_next(&self) -> *const c_void {
+                    self.p_next
+                }
+            }
+        )*
+    };
+}
+
+chained!(
+    RenderPassCreateInfo,
+    RenderPassCreateInfo2,
+    FramebufferCreateInfo,
+    RenderPassBeginInfo,
+    RenderingInfo,
+    SubpassEndInfo,
+    DeviceCreateInfo,
+);
+
+// SAFETY: the struct's own `pNext`.
+unsafe impl Chained for crate::vk::base::ffi::offset::RenderingEndInfo {
+    fn p_next(&self) -> *const c_void {
+        self.p_next
+    }
+}
+
+impl<'a, T: Chained> In<'a, T> {
+    /// The first struct of `U`'s type in the struct's chain (`None` for a NULL struct).
+    pub fn find<U: vk::TaggedStructure>(self) -> Result<Option<&'a U>, ChainError> {
+        let Some(s) = self.get() else {
+            return Ok(None);
+        };
+        // SAFETY: the chain is valid for `'a` ([`In::new`]); the struct found by `U`'s sType is a
+        // `U`.
+        unsafe { find::<U>(s.p_next(), U::STRUCTURE_TYPE).map(|f| f.map(|p| &*p)) }
+    }
+
+    /// Whether a struct of type `ty` is in the struct's chain.
+    pub fn has(self, ty: vk::StructureType) -> bool {
+        let Some(s) = self.get() else {
+            return false;
+        };
+        // SAFETY: the chain is valid for `'a` ([`In::new`]); nothing is read as the struct found.
+        matches!(unsafe { find::<u8>(s.p_next(), ty) }, Ok(Some(_)))
+    }
+
+    /// [`ChainCopy::without`] on the struct's chain (an empty copy for a NULL struct).
+    pub fn without(
+        self,
+        remove: impl Fn(vk::StructureType) -> bool,
+    ) -> Result<ChainCopy, ChainError> {
+        let next = self.get().map_or(std::ptr::null(), |s| s.p_next());
+        // SAFETY: the chain is valid for `'a` ([`In::new`]).
+        unsafe { ChainCopy::without(next, remove) }
+    }
+
+    /// [`with_removed`] on the struct's chain.
+    pub fn with_removed<R>(
+        self,
+        remove: impl Fn(vk::StructureType) -> bool,
+        f: impl FnOnce(Result<*const c_void, ChainError>) -> R,
+    ) -> R {
+        let next = self.get().map_or(std::ptr::null(), |s| s.p_next());
+        // SAFETY: the chain is valid for `'a` ([`In::new`]).
+        unsafe { with_removed(next, remove, f) }
+    }
 }
 
 /// Byte sizes of the structs that may precede one the layer removes from a chain: every struct

@@ -26,21 +26,6 @@ pub unsafe fn name<'a>(p: *const c_char) -> Option<&'a CStr> {
     (!p.is_null()).then(|| unsafe { CStr::from_ptr(p) })
 }
 
-/// Whether `want` is among `count` extension names.
-///
-/// # Safety
-/// `names` must be NULL or hold `count` NUL-terminated strings.
-pub unsafe fn extension_enabled(names: *const *const c_char, count: u32, want: &CStr) -> bool {
-    if names.is_null() {
-        return false;
-    }
-    // SAFETY: as the caller promised.
-    unsafe { std::slice::from_raw_parts(names, count as usize) }
-        .iter()
-        // SAFETY: as the caller promised.
-        .any(|&n| unsafe { name(n) } == Some(want))
-}
-
 /// The Vulkan two-call idiom: NULL `out` asks for the count; otherwise as many as fit are written
 /// and `VK_INCOMPLETE` says some were left out
 /// (<https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-returncodes>).
@@ -101,12 +86,28 @@ pub unsafe fn slice<'a, T>(p: *const T, n: u32) -> &'a [T] {
 
 /// What a hook body gets besides the command's own arguments (the `hook!` chassis of
 /// `crate::vk::hooks`): the command's name for its log lines, the record its dispatchable handle
-/// was looked up in (a device, or an instance for a physical device), and the next layer's
-/// function, picked from that record's table.
-pub struct Call<'a, D, F> {
+/// was looked up in (a device, or an instance for a physical device), the next layer's function,
+/// picked from that record's table, and the call down with the application's arguments as they
+/// came ([`Call::as_given`]).
+pub struct Call<'a, D, F, G> {
     pub name: &'static str,
     pub dev: &'a D,
     pub next: F,
+    pub given: G,
+}
+
+impl<D, F, G> Call<'_, D, F, G> {
+    /// Calls the next layer's function with the application's own arguments, unchanged: the
+    /// chassis made this call where it still had them raw, under the caller's promise that they
+    /// are valid as the command requires (a `maybe` hook goes down only where the next layer has
+    /// the command).
+    #[inline(always)]
+    pub fn as_given<R>(&self) -> R
+    where
+        G: Fn() -> R,
+    {
+        (self.given)()
+    }
 }
 
 /// An input struct the application passes by pointer (`const T*`): NULL or valid, with a valid
@@ -127,8 +128,9 @@ impl<T> Copy for In<'_, T> {}
 
 impl<'a, T> In<'a, T> {
     /// # Safety
-    /// `ptr` must be NULL or point at a valid `T` (its `pNext` chain valid too, where it has one)
-    /// that is not written while `'a` lasts.
+    /// `ptr` must be NULL or point at a `T` valid as the command's valid usage defines it (its
+    /// `pNext` chain, and the arrays and strings its members point at, valid too), not written
+    /// while `'a` lasts.
     #[inline(always)]
     pub unsafe fn new(ptr: *const T) -> Self {
         In {
@@ -143,16 +145,59 @@ impl<'a, T> In<'a, T> {
         self.ptr
     }
 
-    #[inline(always)]
-    pub fn is_null(self) -> bool {
-        self.ptr.is_null()
-    }
-
     /// The struct, `None` for NULL.
     #[inline(always)]
     pub fn get(self) -> Option<&'a T> {
         // SAFETY: NULL or valid for `'a` ([`In::new`]).
         unsafe { self.ptr.as_ref() }
+    }
+}
+
+/// A create info that enables extensions by name (`ppEnabledExtensionNames`).
+pub trait Named {
+    /// The names' array and its count, as the application set them.
+    fn names(&self) -> (*const *const c_char, u32);
+}
+
+impl Named for vk::InstanceCreateInfo<'_> {
+    fn names(&self) -> (*const *const c_char, u32) {
+        (
+            self.pp_enabled_extension_names,
+            self.enabled_extension_count,
+        )
+    }
+}
+
+impl Named for vk::DeviceCreateInfo<'_> {
+    fn names(&self) -> (*const *const c_char, u32) {
+        (
+            self.pp_enabled_extension_names,
+            self.enabled_extension_count,
+        )
+    }
+}
+
+impl<'a, T: Named> In<'a, T> {
+    /// The extension names the application enables, as it passed them (none for a NULL struct).
+    pub fn names(self) -> &'a [*const c_char] {
+        let Some((p, n)) = self.get().map(Named::names) else {
+            return &[];
+        };
+        // SAFETY: the array of `n` names is valid for `'a` ([`In::new`]).
+        unsafe { slice(p, n) }
+    }
+
+    /// Each name the application enables, with the string it points at (`None` for NULL).
+    pub fn named(self) -> impl Iterator<Item = (*const c_char, Option<&'a CStr>)> {
+        self.names().iter().map(|&n| {
+            // SAFETY: each name is NULL or NUL-terminated, valid for `'a` ([`In::new`]).
+            (n, unsafe { name(n) })
+        })
+    }
+
+    /// Whether the application enables the extension `want`.
+    pub fn enables(self, want: &CStr) -> bool {
+        self.named().any(|(_, n)| n == Some(want))
     }
 }
 

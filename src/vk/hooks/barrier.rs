@@ -45,15 +45,14 @@ hook! {
 }
 
 fn create_pool(
-    c: Call<'_, Device, vk::PFN_vkCreateCommandPool>,
-    device: vk::Device,
+    c: Call<'_, Device, vk::PFN_vkCreateCommandPool, impl Fn() -> vk::Result>,
+    _device: vk::Device,
     info: In<'_, vk::CommandPoolCreateInfo<'_>>,
-    alloc: *const vk::AllocationCallbacks<'_>,
+    _alloc: *const vk::AllocationCallbacks<'_>,
     out: Out<'_, vk::CommandPool>,
 ) -> vk::Result {
     use ash::vk::Handle as _;
-    // SAFETY: the next layer's function, with the application's arguments.
-    let r = unsafe { (c.next)(device, info.raw(), alloc, out.raw()) };
+    let r = c.as_given();
     if let (vk::Result::SUCCESS, Some(i), Some(pool)) = (r, info.get(), out.read()) {
         registry::pool_created(pool.as_raw(), i.queue_family_index);
     }
@@ -288,34 +287,20 @@ fn translated1(
 
 #[allow(clippy::too_many_arguments)]
 fn pipeline_barrier(
-    c: Call<'_, Device, vk::PFN_vkCmdPipelineBarrier>,
+    c: Call<'_, Device, vk::PFN_vkCmdPipelineBarrier, impl Fn()>,
     cb: vk::CommandBuffer,
     src: vk::PipelineStageFlags,
     dst: vk::PipelineStageFlags,
     flags: vk::DependencyFlags,
-    memory_count: u32,
+    _memory_count: u32,
     memory: Arr<'_, vk::MemoryBarrier<'_>>,
-    buffer_count: u32,
+    _buffer_count: u32,
     buffers: Arr<'_, vk::BufferMemoryBarrier<'_>>,
-    image_count: u32,
+    _image_count: u32,
     images: Arr<'_, vk::ImageMemoryBarrier<'_>>,
 ) {
     let Some(given) = to_translate1(c.dev, [src, dst], memory, buffers, images) else {
-        // SAFETY: the next layer's function, with the application's arguments.
-        return unsafe {
-            (c.next)(
-                cb,
-                src,
-                dst,
-                flags,
-                memory_count,
-                memory.raw(),
-                buffer_count,
-                buffers.raw(),
-                image_count,
-                images.raw(),
-            )
-        };
+        return c.as_given();
     };
     translated1(cb, [src, dst], given, |[src, dst], m, b, i| {
         // SAFETY: the next layer's function, with the application's arrays or copies that live
@@ -357,7 +342,7 @@ hook! {
 const ONE: u32 = 1;
 
 fn pipeline_barrier2(
-    c: Call<'_, Device, vk::PFN_vkCmdPipelineBarrier2>,
+    c: Call<'_, Device, vk::PFN_vkCmdPipelineBarrier2, impl Fn()>,
     cb: vk::CommandBuffer,
     info: Arr<'_, vk::DependencyInfo<'_>>,
 ) {
@@ -381,7 +366,7 @@ hook! {
 }
 
 fn set_event2(
-    c: Call<'_, Device, vk::PFN_vkCmdSetEvent2>,
+    c: Call<'_, Device, vk::PFN_vkCmdSetEvent2, impl Fn()>,
     cb: vk::CommandBuffer,
     event: vk::Event,
     info: Arr<'_, vk::DependencyInfo<'_>>,
@@ -412,36 +397,21 @@ hook! {
 
 #[allow(clippy::too_many_arguments)]
 fn wait_events(
-    c: Call<'_, Device, vk::PFN_vkCmdWaitEvents>,
+    c: Call<'_, Device, vk::PFN_vkCmdWaitEvents, impl Fn()>,
     cb: vk::CommandBuffer,
     event_count: u32,
     events: *const vk::Event,
     src: vk::PipelineStageFlags,
     dst: vk::PipelineStageFlags,
-    memory_count: u32,
+    _memory_count: u32,
     memory: Arr<'_, vk::MemoryBarrier<'_>>,
-    buffer_count: u32,
+    _buffer_count: u32,
     buffers: Arr<'_, vk::BufferMemoryBarrier<'_>>,
-    image_count: u32,
+    _image_count: u32,
     images: Arr<'_, vk::ImageMemoryBarrier<'_>>,
 ) {
     let Some(given) = to_translate1(c.dev, [src, dst], memory, buffers, images) else {
-        // SAFETY: the next layer's function, with the application's arguments.
-        return unsafe {
-            (c.next)(
-                cb,
-                event_count,
-                events,
-                src,
-                dst,
-                memory_count,
-                memory.raw(),
-                buffer_count,
-                buffers.raw(),
-                image_count,
-                images.raw(),
-            )
-        };
+        return c.as_given();
     };
     translated1(cb, [src, dst], given, |[src, dst], m, b, i| {
         // SAFETY: the next layer's function, with the application's arrays or copies that live
@@ -477,7 +447,7 @@ hook! {
 }
 
 fn wait_events2(
-    c: Call<'_, Device, vk::PFN_vkCmdWaitEvents2>,
+    c: Call<'_, Device, vk::PFN_vkCmdWaitEvents2, impl Fn()>,
     cb: vk::CommandBuffer,
     count: u32,
     events: *const vk::Event,
@@ -511,7 +481,7 @@ hook! {
 }
 
 fn set_event(
-    c: Call<'_, Device, vk::PFN_vkCmdSetEvent>,
+    c: Call<'_, Device, vk::PFN_vkCmdSetEvent, impl Fn()>,
     cb: vk::CommandBuffer,
     event: vk::Event,
     mask: vk::PipelineStageFlags,
@@ -532,7 +502,7 @@ hook! {
 }
 
 fn reset_event(
-    c: Call<'_, Device, vk::PFN_vkCmdResetEvent>,
+    c: Call<'_, Device, vk::PFN_vkCmdResetEvent, impl Fn()>,
     cb: vk::CommandBuffer,
     event: vk::Event,
     mask: vk::PipelineStageFlags,
@@ -553,7 +523,7 @@ hook! {
 }
 
 fn reset_event2(
-    c: Call<'_, Device, vk::PFN_vkCmdResetEvent2>,
+    c: Call<'_, Device, vk::PFN_vkCmdResetEvent2, impl Fn()>,
     cb: vk::CommandBuffer,
     event: vk::Event,
     mask: vk::PipelineStageFlags2,
@@ -576,7 +546,7 @@ hook! {
 }
 
 fn write_timestamp(
-    c: Call<'_, Device, vk::PFN_vkCmdWriteTimestamp>,
+    c: Call<'_, Device, vk::PFN_vkCmdWriteTimestamp, impl Fn()>,
     cb: vk::CommandBuffer,
     at: vk::PipelineStageFlags,
     pool: vk::QueryPool,
@@ -601,7 +571,7 @@ hook! {
 }
 
 fn write_timestamp2(
-    c: Call<'_, Device, vk::PFN_vkCmdWriteTimestamp2>,
+    c: Call<'_, Device, vk::PFN_vkCmdWriteTimestamp2, impl Fn()>,
     cb: vk::CommandBuffer,
     at: vk::PipelineStageFlags2,
     pool: vk::QueryPool,

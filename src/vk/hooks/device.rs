@@ -18,15 +18,17 @@
 //! attachments win per pass.
 
 use std::ffi::{c_char, CStr};
+use std::sync::Arc;
 
 use ash::vk;
 
 use crate::bridge::FdmEmulation;
 use crate::vk::base::chain::{self, ChainCopy};
-use crate::vk::base::ffi::{guard, key, name, offset, raw, slice};
+use crate::vk::base::ffi::{key, offset, raw, In, Out};
 use crate::vk::base::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
 use crate::vk::base::next::DeviceNext;
 use crate::vk::own::calls::{self, Own};
+use crate::vk::own::injector::Injector;
 use crate::vk::registry::{self, Decision, Instance};
 use crate::vk::{convert, decide, emulation, reconstruct};
 
@@ -126,11 +128,11 @@ fn timeline_struct(ty: vk::StructureType) -> bool {
 /// adds it then).
 ///
 /// # Safety
-/// `ci` must be a valid create info; `physical` must belong to `inst`.
+/// `physical` must belong to `inst`.
 unsafe fn timelines(
     inst: &Instance,
     physical: vk::PhysicalDevice,
-    ci: &vk::DeviceCreateInfo<'_>,
+    info: In<'_, vk::DeviceCreateInfo<'_>>,
     version: u32,
     enabled: &dyn Fn(&CStr) -> bool,
 ) -> Timelines {
@@ -139,7 +141,10 @@ unsafe fn timelines(
     else {
         return Timelines::Unneeded;
     };
-    // SAFETY: as the caller promised.
+    let Some(ci) = info.get() else {
+        return Timelines::Unneeded;
+    };
+    // SAFETY: the application's create info, valid with its queue create infos ([`In`]).
     let readers: u32 = unsafe { calls::graphics_queues(ci, &families) }
         .map(|(_, n)| n)
         .sum();
@@ -162,18 +167,12 @@ unsafe fn timelines(
     }
 }
 
-/// The [`Timeline`] struct for `ci`'s chain, built from the application's Vulkan 1.2 features
-/// where it has them.
-///
-/// # Safety
-/// `ci` must be a valid create info.
-unsafe fn timeline_feature(ci: &vk::DeviceCreateInfo<'_>) -> Timeline {
-    let ty = vk::StructureType::PHYSICAL_DEVICE_VULKAN_1_2_FEATURES;
-    // SAFETY: as the caller promised; found by its sType, read only, copied.
-    match unsafe { chain::find::<vk::PhysicalDeviceVulkan12Features<'static>>(ci.p_next, ty) } {
+/// The [`Timeline`] struct for the create info's chain, built from the application's Vulkan 1.2
+/// features where it has them.
+fn timeline_feature(info: In<'_, vk::DeviceCreateInfo<'_>>) -> Timeline {
+    match info.find::<vk::PhysicalDeviceVulkan12Features<'static>>() {
         Ok(Some(f)) => {
-            // SAFETY: as above.
-            let mut copy = unsafe { *f };
+            let mut copy = *f;
             copy.timeline_semaphore = vk::TRUE;
             Timeline::V12(Box::new(copy))
         }
@@ -257,6 +256,66 @@ fn injection_impossible(decision: &Decision) -> Option<String> {
     ))
 }
 
+/// What the application's device create info asks for, read once for [`plan`].
+struct Request<'a> {
+    info: In<'a, vk::DeviceCreateInfo<'a>>,
+    /// The application's own shading-rate feature struct.
+    app_fsr: Option<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'static>>,
+    /// NV shading-rate images, by name or feature struct.
+    nv_rates: bool,
+    /// Shading rates of its own: the KHR extension, its feature struct, or NV's.
+    own_rates: bool,
+    fdm_named: bool,
+    /// Any density-map feature struct in the chain.
+    fdm_structs: bool,
+    offset_named: bool,
+    /// The names less the density-map family, which the driver does not have.
+    kept: Vec<*const c_char>,
+}
+
+impl<'a> Request<'a> {
+    fn read(info: In<'a, vk::DeviceCreateInfo<'a>>) -> Request<'a> {
+        let app_fsr = info
+            .find::<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'static>>()
+            .ok()
+            .flatten()
+            .copied();
+        let nv_rates = info.enables(ash::nv::shading_rate_image::NAME)
+            || info.has(vk::StructureType::PHYSICAL_DEVICE_SHADING_RATE_IMAGE_FEATURES_NV);
+        let fdm_name = ash::ext::fragment_density_map::NAME;
+        // The offset extensions, which the layer offers with density maps, go with them.
+        let leaves = |n: &CStr| n == fdm_name || n == offset::EXT_NAME || n == offset::QCOM_NAME;
+        Request {
+            info,
+            app_fsr,
+            nv_rates,
+            own_rates: info.enables(ash::khr::fragment_shading_rate::NAME)
+                || nv_rates
+                || app_fsr.is_some(),
+            fdm_named: info.enables(fdm_name),
+            fdm_structs: [
+                vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT,
+                vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_2_FEATURES_EXT,
+                vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_FEATURES_QCOM,
+                FRAGMENT_DENSITY_MAP_LAYERED_FEATURES_VALVE,
+            ]
+            .into_iter()
+            .any(|t| info.has(t)),
+            offset_named: info.enables(offset::EXT_NAME) || info.enables(offset::QCOM_NAME),
+            kept: info
+                .named()
+                .filter(|(_, n)| !n.is_some_and(leaves))
+                .map(|(p, _)| p)
+                .collect(),
+        }
+    }
+
+    /// Whether the application enables the extension `want`.
+    fn enabled(&self, want: &CStr) -> bool {
+        self.info.enables(want)
+    }
+}
+
 /// Decides and builds the rewritten create info.
 ///
 /// On a physical device the layer emulates density maps for, whatever else happens, the
@@ -268,60 +327,21 @@ fn injection_impossible(decision: &Decision) -> Option<String> {
 /// ([`Plan::Refused`]).
 ///
 /// # Safety
-/// `ci` must be a valid create info; `physical` must belong to `inst`.
+/// `physical` must belong to `inst`.
 unsafe fn plan(
     inst: &Instance,
     physical: vk::PhysicalDevice,
-    ci: &vk::DeviceCreateInfo<'_>,
+    info: In<'_, vk::DeviceCreateInfo<'_>>,
 ) -> Plan {
     let decision = decide::decision(inst, physical);
     let Decision::Emulate { fdm, api_version } = &*decision else {
         return Plan::Untouched(injection_impossible(&decision));
     };
-    // SAFETY: as the caller promised.
-    let names = unsafe { slice(ci.pp_enabled_extension_names, ci.enabled_extension_count) };
-    // SAFETY: the application's names, NUL-terminated.
-    let enabled = |want: &CStr| names.iter().any(|&n| unsafe { name(n) } == Some(want));
-    // SAFETY: as the caller promised.
-    let in_chain = |ty| matches!(unsafe { chain::find::<u8>(ci.p_next, ty) }, Ok(Some(_)));
-    let fsr_features = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR;
-    // SAFETY: as the caller promised; found by its sType, read only.
-    let app_fsr = unsafe {
-        chain::find::<vk::PhysicalDeviceFragmentShadingRateFeaturesKHR<'_>>(ci.p_next, fsr_features)
-    }
-    .ok()
-    .flatten()
-    // SAFETY: as above.
-    .map(|f| unsafe { *f });
-    let nv_rates = enabled(ash::nv::shading_rate_image::NAME)
-        || in_chain(vk::StructureType::PHYSICAL_DEVICE_SHADING_RATE_IMAGE_FEATURES_NV);
-    let own_rates = enabled(ash::khr::fragment_shading_rate::NAME) || nv_rates || app_fsr.is_some();
-    let fdm_name = ash::ext::fragment_density_map::NAME;
-    let fdm_named = enabled(fdm_name);
-    let fdm_structs = [
-        vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT,
-        vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_2_FEATURES_EXT,
-        vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_FEATURES_QCOM,
-        FRAGMENT_DENSITY_MAP_LAYERED_FEATURES_VALVE,
-    ]
-    .into_iter()
-    .any(in_chain);
-    // The offset extensions, which the layer offers with density maps, go with them.
-    let leaves = |n: &CStr| n == fdm_name || n == offset::EXT_NAME || n == offset::QCOM_NAME;
-    let kept: Vec<*const c_char> = names
-        .iter()
-        .copied()
-        .filter(|&n| {
-            // SAFETY: the application's names, NUL-terminated.
-            !unsafe { name(n) }.is_some_and(leaves)
-        })
-        .collect();
-    let offset_named = enabled(offset::EXT_NAME) || enabled(offset::QCOM_NAME);
+    let req = Request::read(info);
     let version = inst.api_version.min(*api_version);
     // SAFETY: as the caller promised.
-    let timelines = unsafe { timelines(inst, physical, ci, version, &enabled) };
+    let timelines = unsafe { timelines(inst, physical, info, version, &|n| req.enabled(n)) };
     let ordered = matches!(timelines, Timelines::Enable { .. });
-    let add_name = timelines == Timelines::Enable { name: true };
     if timelines == Timelines::Unsupported {
         tracing::warn!(
             "the device has several graphics queues but no timeline semaphores (Vulkan 1.2 or \
@@ -329,53 +349,91 @@ unsafe fn plan(
              on other queues than the one they run on"
         );
     }
-    // SAFETY: as the caller promised.
-    let timeline = ordered.then(|| unsafe { timeline_feature(ci) });
-    let leaves_chain = |t| density_map_struct(t) || (ordered && timeline_struct(t));
-    let apps_kept = kept.clone();
-    let mut kept = kept;
-    if add_name {
+    let mut kept = req.kept.clone();
+    if timelines == (Timelines::Enable { name: true }) {
         kept.push(ash::khr::timeline_semaphore::NAME.as_ptr());
     }
-    if fdm_named && !own_rates {
-        let fdm_features = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_FEATURES_EXT;
-        // SAFETY: as the caller promised.
-        if let Ok(Some(f)) = unsafe {
-            chain::find::<vk::PhysicalDeviceFragmentDensityMapFeaturesEXT>(ci.p_next, fdm_features)
-        } {
-            // SAFETY: found by its sType.
-            if unsafe { (*f).fragment_density_map_dynamic } == vk::TRUE {
-                tracing::warn!(
-                    "the application enables fragmentDensityMapDynamic, which the layer does not \
-                     offer; density maps are emulated as static ones"
-                );
-            }
-        }
-        // SAFETY: as the caller promised.
-        let chain = match unsafe { ChainCopy::without(ci.p_next, leaves_chain) } {
-            Ok(c) => c,
-            Err(e) => return Plan::Refused(cannot_strip(e)),
-        };
-        tracing::debug!(
-            feature_structs_removed = chain.removed(),
-            "density maps stripped from the device create info"
-        );
-        return Plan::Emulate(
-            fdm.clone(),
-            with_shading_rates(&kept, &enabled, chain, version, None, timeline),
+    let goal = Goal {
+        fdm,
+        version,
+        kept,
+        ordered,
+        timeline: ordered.then(|| timeline_feature(info)),
+    };
+    if req.fdm_named && !req.own_rates {
+        return plan_emulate(&req, goal);
+    }
+    plan_other(physical, &req, goal)
+}
+
+/// What an emulating or injecting device's create info becomes, decided by [`plan`].
+struct Goal<'a> {
+    fdm: &'a FdmEmulation,
+    /// The device's Vulkan version.
+    version: u32,
+    /// The names that go down: the application's less the density-map family, with
+    /// `VK_KHR_timeline_semaphore` where the layer adds it.
+    kept: Vec<*const c_char>,
+    /// Whether the layer orders its uploads across queues with timeline semaphores.
+    ordered: bool,
+    timeline: Option<Timeline>,
+}
+
+impl Goal<'_> {
+    /// The structs that leave the chain: the density-map family, and where the layer puts its own
+    /// timeline-semaphore struct in front, the application's.
+    fn leaves_chain(&self, t: vk::StructureType) -> bool {
+        density_map_struct(t) || (self.ordered && timeline_struct(t))
+    }
+}
+
+/// The application asks for density maps and has no shading rates of its own: they are emulated.
+fn plan_emulate(req: &Request<'_>, goal: Goal<'_>) -> Plan {
+    let dynamic = req
+        .info
+        .find::<vk::PhysicalDeviceFragmentDensityMapFeaturesEXT>()
+        .ok()
+        .flatten()
+        .is_some_and(|f| f.fragment_density_map_dynamic == vk::TRUE);
+    if dynamic {
+        tracing::warn!(
+            "the application enables fragmentDensityMapDynamic, which the layer does not offer; \
+             density maps are emulated as static ones"
         );
     }
-    // Density maps are not emulated on this device: the application does not ask for them, or it
-    // enables shading rates itself (Godot enables every extension the device lists, density maps
-    // included, and then uses shading rates; the two are exclusive,
-    // VUID-VkDeviceCreateInfo-fragmentDensityMap-04481). Whatever density-map name or struct it
-    // sent still leaves the create info.
-    let stripped = if fdm_named || offset_named || fdm_structs {
-        // SAFETY: as the caller promised.
-        match unsafe { ChainCopy::without(ci.p_next, density_map_struct) } {
+    let chain = match req.info.without(|t| goal.leaves_chain(t)) {
+        Ok(c) => c,
+        Err(e) => return Plan::Refused(cannot_strip(e)),
+    };
+    tracing::debug!(
+        feature_structs_removed = chain.removed(),
+        "density maps stripped from the device create info"
+    );
+    let enabled = |n: &CStr| req.enabled(n);
+    Plan::Emulate(
+        goal.fdm.clone(),
+        with_shading_rates(
+            &goal.kept,
+            &enabled,
+            chain,
+            goal.version,
+            None,
+            goal.timeline,
+        ),
+    )
+}
+
+/// Density maps are not emulated on this device: the application does not ask for them, or it
+/// enables shading rates itself (Godot enables every extension the device lists, density maps
+/// included, and then uses shading rates; the two are exclusive,
+/// VUID-VkDeviceCreateInfo-fragmentDensityMap-04481). Whatever density-map name or struct it
+/// sent still leaves the create info; injection, where it is on, may still come in.
+fn plan_other(physical: vk::PhysicalDevice, req: &Request<'_>, goal: Goal<'_>) -> Plan {
+    let stripped = if req.fdm_named || req.offset_named || req.fdm_structs {
+        match req.info.without(density_map_struct) {
             Ok(chain) => Some(Rewrite {
                 chain,
-                names: apps_kept,
+                names: req.kept.clone(),
                 fsr: None,
                 timeline: None,
             }),
@@ -384,12 +442,12 @@ unsafe fn plan(
     } else {
         None
     };
-    let why_stripped = if fdm_named {
+    let why_stripped = if req.fdm_named {
         "the application enables shading rates itself; VK_EXT_fragment_density_map is not \
-             emulated on this device, and its name and structs are left out"
+         emulated on this device, and its name and structs are left out"
     } else {
         "density-map structs in a device create info without VK_EXT_fragment_density_map are \
-             left out"
+         left out"
     };
     let untouched = |stripped: Option<Rewrite>, why: Option<String>| match stripped {
         Some(rewrite) => Plan::Stripped(rewrite, why.unwrap_or_else(|| why_stripped.to_owned())),
@@ -400,14 +458,9 @@ unsafe fn plan(
     }
     // NV shading-rate images: the application's maps are the ones that count
     // (docs/injection.md#switching-it-on).
-    if nv_rates {
-        return untouched(
-            stripped,
-            Some(
-                "the application uses NV shading-rate images; nothing is injected on this device"
-                    .into(),
-            ),
-        );
+    if req.nv_rates {
+        let why = "the application uses NV shading-rate images; nothing is injected on this device";
+        return untouched(stripped, Some(why.into()));
     }
     if !crate::bridge::inject::device_gets_maps() {
         tracing::info!(
@@ -418,10 +471,20 @@ unsafe fn plan(
         );
         return untouched(stripped, None);
     }
+    match plan_inject(req, goal) {
+        Ok((fdm, rewrite)) => Plan::Inject(fdm, rewrite, stripped),
+        Err(why) => untouched(stripped, Some(why)),
+    }
+}
+
+/// Injection is on and this device renders the session's views: the create info gains the
+/// attachment feature. `Err` says why it cannot.
+fn plan_inject(req: &Request<'_>, goal: Goal<'_>) -> Result<(FdmEmulation, Rewrite), String> {
     // The attachment feature enabled (vkd3d-proton enables every shading-rate feature the
     // device has): whether the application uses attachments of its own is told per pass, and
     // where it does, its own wins (docs/injection.md#apps-that-set-rates). Its feature struct
     // already asks for what injection needs and goes down as it came.
+    let app_fsr = req.app_fsr;
     let own_attachments = app_fsr.is_some_and(|f| f.attachment_fragment_shading_rate == vk::TRUE);
     // Pipeline or primitive rates (vkd3d-proton's every pipeline): the injected attachment is
     // combined with them (docs/injection.md#apps-that-set-rates).
@@ -429,70 +492,57 @@ unsafe fn plan(
         f.pipeline_fragment_shading_rate == vk::TRUE
             || f.primitive_fragment_shading_rate == vk::TRUE
     });
-    // SAFETY: as the caller promised; the application's feature struct, if any, is left out
-    // and stands in the layer's copy in front, unless it enables attachments itself.
-    let chain = match unsafe {
-        ChainCopy::without(ci.p_next, |t| {
-            leaves_chain(t) || (!own_attachments && t == fsr_features)
-        })
-    } {
-        Ok(c) => c,
-        Err(e) => {
-            return untouched(
-                stripped,
-                Some(format!(
-                    "cannot extend the device create info's pNext chain ({e:?}); nothing is \
-                 injected on this device"
-                )),
-            )
-        }
-    };
+    let fsr_features = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_SHADING_RATE_FEATURES_KHR;
+    // The application's feature struct, if any, is left out and stands in the layer's copy in
+    // front, unless it enables attachments itself.
+    let chain = req
+        .info
+        .without(|t| goal.leaves_chain(t) || (!own_attachments && t == fsr_features))
+        .map_err(|e| {
+            format!(
+            "cannot extend the device create info's pNext chain ({e:?}); nothing is injected on \
+             this device"
+        )
+        })?;
     if own_attachments {
         tracing::info!(
-            "the application enables shading-rate attachments itself: fovea's maps go into \
-             its eye passes without attachments of their own; where it names one, its own \
-             wins"
+            "the application enables shading-rate attachments itself: fovea's maps go into its \
+             eye passes without attachments of their own; where it names one, its own wins"
         );
     }
     if app_sets_rates {
         tracing::info!(
-            non_trivial_combiners = fdm.non_trivial_combiners,
+            non_trivial_combiners = goal.fdm.non_trivial_combiners,
             "the application sets shading rates per pipeline or per draw: injected maps are \
              combined with its rates"
         );
     }
-    let mut rewrite =
-        with_shading_rates(&kept, &enabled, chain, version, app_fsr.as_ref(), timeline);
+    let enabled = |n: &CStr| req.enabled(n);
+    let mut rewrite = with_shading_rates(
+        &goal.kept,
+        &enabled,
+        chain,
+        goal.version,
+        app_fsr.as_ref(),
+        goal.timeline,
+    );
     if own_attachments {
         rewrite.fsr = None;
     }
-    Plan::Inject(fdm.clone(), rewrite, stripped)
+    Ok((goal.fdm.clone(), rewrite))
 }
 
 /// Whether a device create info enables density-map offsets: `VK_EXT_fragment_density_map_offset`
 /// or `VK_QCOM_fragment_density_map_offset` named, and `fragmentDensityMapOffset` true in its
 /// features struct, which images with `VK_IMAGE_CREATE_FRAGMENT_DENSITY_MAP_OFFSET_BIT_EXT` need
 /// (VUID-VkImageCreateInfo-fragmentDensityMapOffset-06514).
-///
-/// # Safety
-/// `ci` must be a valid create info.
-unsafe fn enables_offsets(ci: &vk::DeviceCreateInfo<'_>) -> bool {
-    // SAFETY: as the caller promised.
-    let names = unsafe { slice(ci.pp_enabled_extension_names, ci.enabled_extension_count) };
-    let named = names.iter().any(|&n| {
-        // SAFETY: the application's names, NUL-terminated.
-        let n = unsafe { name(n) };
-        n == Some(offset::EXT_NAME) || n == Some(offset::QCOM_NAME)
-    });
-    let ty = vk::StructureType::PHYSICAL_DEVICE_FRAGMENT_DENSITY_MAP_OFFSET_FEATURES_QCOM;
-    // SAFETY: as the caller promised; found by its sType, read only.
-    let feature = unsafe {
-        chain::find::<vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM<'_>>(ci.p_next, ty)
-    }
-    .ok()
-    .flatten()
-    // SAFETY: as above.
-    .is_some_and(|f| unsafe { (*f).fragment_density_map_offset } == vk::TRUE);
+fn enables_offsets(info: In<'_, vk::DeviceCreateInfo<'_>>) -> bool {
+    let named = info.enables(offset::EXT_NAME) || info.enables(offset::QCOM_NAME);
+    let feature = info
+        .find::<vk::PhysicalDeviceFragmentDensityMapOffsetFeaturesQCOM<'_>>()
+        .ok()
+        .flatten()
+        .is_some_and(|f| f.fragment_density_map_offset == vk::TRUE);
     named && feature
 }
 
@@ -552,279 +602,296 @@ fn with_shading_rates(
     }
 }
 
-/// `vkCreateDevice`: finds the next layer in the loader's link info, creates the device there
-/// (rewritten where the layer emulates density maps) and records it.
-///
-/// # Safety
-/// Called by the loader with valid arguments and link info.
-pub unsafe extern "system" fn create_device(
-    physical: vk::PhysicalDevice,
-    info: *const vk::DeviceCreateInfo<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::Device,
-) -> vk::Result {
-    guard(
-        "vkCreateDevice",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        // SAFETY: the caller's arguments, checked and passed on.
-        || unsafe { create_device_impl(physical, info, alloc, out) },
-    )
+hook! {
+    /// `vkCreateDevice`: finds the next layer in the loader's link info, creates the device there
+    /// (rewritten where the layer emulates density maps or injects, [`plan`]) and records it.
+    create_device = "vkCreateDevice"; raw, fails(vk::Result::ERROR_INITIALIZATION_FAILED);
+    create(
+        physical: val vk::PhysicalDevice,
+        info: in vk::DeviceCreateInfo<'_>,
+        alloc: val *const vk::AllocationCallbacks<'_>,
+        out: out vk::Device,
+    ) -> vk::Result
 }
 
-unsafe fn create_device_impl(
+fn create(
     physical: vk::PhysicalDevice,
-    info: *const vk::DeviceCreateInfo<'_>,
+    info: In<'_, vk::DeviceCreateInfo<'_>>,
     alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::Device,
+    out: Out<'_, vk::Device>,
 ) -> vk::Result {
-    if info.is_null() || out.is_null() {
+    let (Some(ci), false) = (info.get(), out.is_null()) else {
         return vk::Result::ERROR_INITIALIZATION_FAILED;
-    }
-    // SAFETY: a physical device dispatched by the loader.
+    };
+    // SAFETY: a physical device the loader dispatched: its first word is its dispatch key.
     let Some(inst) = (unsafe { registry::instance(physical) }) else {
         tracing::error!("vkCreateDevice on a physical device the layer does not know");
         return vk::Result::ERROR_INITIALIZATION_FAILED;
     };
-    // SAFETY: the loader's create info.
-    let ci = unsafe { &*info };
-    // SAFETY: the chain is valid.
+    // SAFETY: the loader's create info, its chain valid.
     let Some(link_info) = (unsafe { device_link(ci) }) else {
         tracing::error!("vkCreateDevice without the loader's link info");
         return vk::Result::ERROR_INITIALIZATION_FAILED;
     };
-    // SAFETY: the loader's list of layers below. The protocol has each layer advance `pLayerInfo`
-    // in the loader's struct before calling down; it is the loader's struct, not the app's.
-    let (layer, gipa, gdpa) = unsafe {
-        let layer = (*link_info).u as *mut LayerDeviceLink;
-        if layer.is_null() {
-            return vk::Result::ERROR_INITIALIZATION_FAILED;
-        }
-        (*link_info).u = (*layer).p_next as *mut _;
-        (
-            layer,
-            (*layer).pfn_next_get_instance_proc_addr,
-            (*layer).pfn_next_get_device_proc_addr,
-        )
+    // SAFETY: the loader's link info, found in its create info; the next layer's
+    // `vkGetInstanceProcAddr` from it, asked with the instance (not NULL, which would reach the
+    // wrong layer).
+    let Some((link, create)) = (unsafe { Link::advance(link_info, inst.handle) }) else {
+        return vk::Result::ERROR_INITIALIZATION_FAILED;
     };
-    // SAFETY: the next layer's vkCreateDevice, asked of it with the instance (not NULL, which
-    // would reach the wrong layer), of the type its name implies.
-    let create = unsafe {
-        let Some(f) = gipa(inst.handle, c"vkCreateDevice".as_ptr()) else {
-            return vk::Result::ERROR_INITIALIZATION_FAILED;
+    // SAFETY: `physical` belongs to `inst`, which the loader dispatched it through.
+    let plan = unsafe { plan(&inst, physical, info) };
+    let app_offsets = enables_offsets(info);
+    let made = Made {
+        inject: matches!(plan, Plan::Inject(..)),
+        timelines: matches!(
+            &plan,
+            Plan::Emulate(_, r) | Plan::Inject(_, r, _) if r.timeline.is_some()
+        ),
+        app_offsets,
+        untouched: matches!(plan, Plan::Untouched(_)),
+    };
+    let down = Down {
+        create,
+        physical,
+        info,
+        alloc,
+        out: out.raw(),
+        link: &link,
+    };
+    let (r, fdm) = match down.go(plan) {
+        Ok(made) => made,
+        Err(refused) => return refused,
+    };
+    if let (vk::Result::SUCCESS, Some(handle)) = (r, out.read()) {
+        let new = New {
+            inst: &inst,
+            physical,
+            ci,
+            handle,
+            gdpa: link.gdpa,
         };
-        std::mem::transmute::<unsafe extern "system" fn(), vk::PFN_vkCreateDevice>(f)
-    };
-    // SAFETY: as the caller promised.
-    let plan = unsafe { plan(&inst, physical, ci) };
-    let inject = matches!(plan, Plan::Inject(..));
-    let timelines = matches!(
-        &plan,
-        Plan::Emulate(_, r) | Plan::Inject(_, r, _) if r.timeline.is_some()
-    );
-    // SAFETY: as the caller promised.
-    let app_offsets = unsafe { enables_offsets(ci) };
-    let untouched = matches!(plan, Plan::Untouched(_));
-    /// The create info `rewrite` describes: the caller's, with its chain and names.
-    fn rewritten<'a>(
-        ci: &vk::DeviceCreateInfo<'a>,
-        rewrite: &'a Rewrite,
-    ) -> vk::DeviceCreateInfo<'a> {
+        new.record(fdm, made);
+    }
+    r
+}
+
+/// The loader's link to the next layer: its `VK_LAYER_LINK_INFO` struct and the layer's entry in
+/// it.
+struct Link {
+    info: *mut LayerDeviceCreateInfo,
+    layer: *mut LayerDeviceLink,
+    gdpa: vk::PFN_vkGetDeviceProcAddr,
+}
+
+impl Link {
+    /// The next layer's link, with the loader's struct advanced past it for the layers below, and
+    /// the next layer's `vkCreateDevice`.
+    ///
+    /// # Safety
+    /// `info` must be the loader's link info of the create info being handled, `instance` the
+    /// physical device's instance.
+    unsafe fn advance(
+        info: *mut LayerDeviceCreateInfo,
+        instance: vk::Instance,
+    ) -> Option<(Link, vk::PFN_vkCreateDevice)> {
+        // SAFETY: the loader's list of layers below. The protocol has each layer advance
+        // `pLayerInfo` in the loader's struct before calling down; it is the loader's struct, not
+        // the application's. The pointer the next layer returns is of the type its name implies.
+        unsafe {
+            let layer = (*info).u as *mut LayerDeviceLink;
+            if layer.is_null() {
+                return None;
+            }
+            let link = Link {
+                info,
+                layer,
+                gdpa: (*layer).pfn_next_get_device_proc_addr,
+            };
+            link.rewind();
+            let gipa = (*layer).pfn_next_get_instance_proc_addr;
+            let f = gipa(instance, c"vkCreateDevice".as_ptr())?;
+            let create =
+                std::mem::transmute::<unsafe extern "system" fn(), vk::PFN_vkCreateDevice>(f);
+            Some((link, create))
+        }
+    }
+
+    /// Points the loader's struct past this layer (again, for a retry of the call down).
+    ///
+    /// # Safety
+    /// As [`Link::advance`].
+    unsafe fn rewind(&self) {
+        // SAFETY: as the caller promised.
+        unsafe { (*self.info).u = (*self.layer).p_next as *mut _ };
+    }
+}
+
+/// What [`create`] knew of the device before it went down.
+#[derive(Clone, Copy)]
+struct Made {
+    inject: bool,
+    timelines: bool,
+    app_offsets: bool,
+    untouched: bool,
+}
+
+/// The call down: the next layer's `vkCreateDevice` and the application's arguments.
+struct Down<'a> {
+    create: vk::PFN_vkCreateDevice,
+    physical: vk::PhysicalDevice,
+    info: In<'a, vk::DeviceCreateInfo<'a>>,
+    alloc: *const vk::AllocationCallbacks<'a>,
+    out: *mut vk::Device,
+    link: &'a Link,
+}
+
+impl Down<'_> {
+    /// Creates the device below as `plan` says: the driver's answer and, on success, the facts
+    /// it emulates (or injects) with; `Err` with the answer of a refusal that never reached it.
+    fn go(&self, plan: Plan) -> Result<(vk::Result, Option<FdmEmulation>), vk::Result> {
+        let physical = raw(self.physical);
+        Ok(match plan {
+            Plan::Untouched(why) => {
+                if let Some(why) = why {
+                    tracing::warn!(physical, why = why.as_str(), "vkCreateDevice");
+                }
+                (self.as_given(), None)
+            }
+            Plan::Refused(why) => {
+                tracing::error!(physical, why = why.as_str(), "vkCreateDevice");
+                return Err(vk::Result::ERROR_FEATURE_NOT_PRESENT);
+            }
+            Plan::Stripped(rewrite, why) => {
+                tracing::info!(physical, why = why.as_str(), "vkCreateDevice");
+                (self.rewritten(&rewrite), None)
+            }
+            Plan::Emulate(fdm, rewrite) => {
+                // No retry: the application asked for density maps, which this driver has only
+                // as shading-rate attachments; its own request would name an extension the
+                // driver lacks. The driver's answer is the application's.
+                let r = self.rewritten(&rewrite);
+                (r, (r == vk::Result::SUCCESS).then_some(fdm))
+            }
+            Plan::Inject(fdm, rewrite, fallback) => self.inject(fdm, rewrite, fallback),
+        })
+    }
+
+    /// The application's create info, as it came.
+    fn as_given(&self) -> vk::Result {
+        // SAFETY: the next layer's function, with the application's arguments.
+        unsafe { (self.create)(self.physical, self.info.raw(), self.alloc, self.out) }
+    }
+
+    /// The application's create info as `rewrite` describes it: its chain and names.
+    fn rewritten(&self, rewrite: &Rewrite) -> vk::Result {
+        let Some(ci) = self.info.get() else {
+            return self.as_given();
+        };
         let mut copy = *ci;
         copy.p_next = rewrite.head();
         copy.enabled_extension_count = rewrite.names.len() as u32;
         copy.pp_enabled_extension_names = rewrite.names.as_ptr();
-        copy
+        // SAFETY: the next layer's function; the copy and everything it points at live across
+        // the call.
+        unsafe { (self.create)(self.physical, &copy, self.alloc, self.out) }
     }
-    let (r, fdm) = match plan {
-        Plan::Untouched(why) => {
-            if let Some(why) = why {
-                tracing::warn!(
-                    physical = raw(physical),
-                    why = why.as_str(),
-                    "vkCreateDevice"
-                );
-            }
-            // SAFETY: the next layer's function, with the caller's arguments.
-            (unsafe { create(physical, info, alloc, out) }, None)
+
+    /// The create info with shading-rate attachments for injection; where the driver refuses
+    /// it, the application's own request (`fallback`: less density maps, which the driver does
+    /// not have) gets its answer (fail open).
+    fn inject(
+        &self,
+        fdm: FdmEmulation,
+        rewrite: Rewrite,
+        fallback: Option<Rewrite>,
+    ) -> (vk::Result, Option<FdmEmulation>) {
+        let r = self.rewritten(&rewrite);
+        drop(rewrite);
+        if r == vk::Result::SUCCESS {
+            return (r, Some(fdm));
         }
-        Plan::Refused(why) => {
-            tracing::error!(
-                physical = raw(physical),
-                why = why.as_str(),
-                "vkCreateDevice"
-            );
-            return vk::Result::ERROR_FEATURE_NOT_PRESENT;
+        if matches!(
+            r,
+            vk::Result::ERROR_OUT_OF_HOST_MEMORY
+                | vk::Result::ERROR_OUT_OF_DEVICE_MEMORY
+                | vk::Result::ERROR_DEVICE_LOST
+        ) {
+            // Not the rewrite's doing: the driver's answer, unchanged.
+            return (r, None);
         }
-        Plan::Stripped(rewrite, why) => {
-            tracing::info!(
-                physical = raw(physical),
-                why = why.as_str(),
-                "vkCreateDevice"
-            );
-            let copy = rewritten(ci, &rewrite);
-            // SAFETY: the copy and everything it points at live across the call.
-            (unsafe { create(physical, &copy, alloc, out) }, None)
-        }
-        Plan::Emulate(fdm, rewrite) => {
-            let copy = rewritten(ci, &rewrite);
-            // SAFETY: the copy and everything it points at live across the call.
-            let r = unsafe { create(physical, &copy, alloc, out) };
-            // No retry: the application asked for density maps, which this driver has only as
-            // shading-rate attachments; its own request would name an extension the driver
-            // lacks. The driver's answer is the application's.
-            (r, (r == vk::Result::SUCCESS).then_some(fdm))
-        }
-        Plan::Inject(fdm, rewrite, fallback) => {
-            let copy = rewritten(ci, &rewrite);
-            // SAFETY: the copy and everything it points at live across the call.
-            let r = unsafe { create(physical, &copy, alloc, out) };
-            drop(rewrite);
-            if r == vk::Result::SUCCESS {
-                (r, Some(fdm))
-            } else if matches!(
-                r,
-                vk::Result::ERROR_OUT_OF_HOST_MEMORY
-                    | vk::Result::ERROR_OUT_OF_DEVICE_MEMORY
-                    | vk::Result::ERROR_DEVICE_LOST
-            ) {
-                // Not the rewrite's doing: the driver's answer, unchanged.
-                (r, None)
-            } else {
-                // Fail open: the application's own request (less density maps, which the driver
-                // does not have) gets its answer.
-                tracing::warn!(
-                    physical = raw(physical),
-                    result = ?r,
-                    inject,
-                    "creating the device with shading-rate attachments failed; retrying without"
-                );
-                // SAFETY: the loader's struct gets its link back for the retry.
-                unsafe { (*link_info).u = (*layer).p_next as *mut _ };
-                let r = match &fallback {
-                    Some(f) => {
-                        let copy = rewritten(ci, f);
-                        // SAFETY: the copy and everything it points at live across the call.
-                        unsafe { create(physical, &copy, alloc, out) }
-                    }
-                    // SAFETY: the next layer's function, with the caller's arguments.
-                    None => unsafe { create(physical, info, alloc, out) },
-                };
-                (r, None)
-            }
-        }
-    };
-    if r != vk::Result::SUCCESS {
-        return r;
+        tracing::warn!(
+            physical = raw(self.physical),
+            result = ?r,
+            inject = true,
+            "creating the device with shading-rate attachments failed; retrying without"
+        );
+        // SAFETY: the loader's struct gets its link back for the retry.
+        unsafe { self.link.rewind() };
+        let r = match &fallback {
+            Some(f) => self.rewritten(f),
+            None => self.as_given(),
+        };
+        (r, None)
     }
-    // Injection uses the device's shading-rate facts, but emulates nothing.
-    let (fdm, inject) = if inject { (None, fdm) } else { (fdm, None) };
-    // SAFETY: the device was just created.
-    unsafe {
-        let handle = *out;
-        let next = DeviceNext::load(gdpa, handle);
-        let api_version = match &*decide::decision(&inst, physical) {
-            registry::Decision::Emulate { api_version, .. } => inst.api_version.min(*api_version),
+}
+
+/// A device just created below, to be recorded.
+struct New<'a> {
+    inst: &'a Instance,
+    physical: vk::PhysicalDevice,
+    ci: &'a vk::DeviceCreateInfo<'a>,
+    handle: vk::Device,
+    gdpa: vk::PFN_vkGetDeviceProcAddr,
+}
+
+impl New<'_> {
+    /// Records the device with the next layer's table, the layer's own calls on it and each
+    /// mode's state, and tells the bridge whether offsets reach its density maps.
+    fn record(&self, fdm: Option<FdmEmulation>, made: Made) {
+        let (inst, handle) = (self.inst, self.handle);
+        // Injection uses the device's shading-rate facts, but emulates nothing.
+        let (fdm, inject) = if made.inject {
+            (None, fdm)
+        } else {
+            (fdm, None)
+        };
+        // SAFETY: the next layer's `vkGetDeviceProcAddr`, and the device it just created.
+        let next = unsafe { DeviceNext::load(self.gdpa, handle) };
+        let api_version = match &*decide::decision(inst, self.physical) {
+            Decision::Emulate { api_version, .. } => inst.api_version.min(*api_version),
             _ => inst.api_version,
         };
-        let mut own = None;
-        if fdm.is_some() {
-            tracing::info!(
-                device = raw(handle),
-                "device emulates fragment density maps"
-            );
-            match Own::new(
-                inst.handle,
-                inst.gipa,
-                physical,
-                ci,
-                handle,
-                gdpa,
-                timelines,
-            ) {
-                Ok(o) => own = Some(std::sync::Arc::new(o)),
-                Err(why) => tracing::warn!(
-                    device = raw(handle),
-                    why = why.as_str(),
-                    "density maps on this device get no shading-rate shadows: they render at \
-                     full rate"
-                ),
-            }
-        }
-        let inject = inject.and_then(|facts| {
-            match Own::new(
-                inst.handle,
-                inst.gipa,
-                physical,
-                ci,
-                handle,
-                gdpa,
-                timelines,
-            ) {
-                Ok(o) => {
-                    own = Some(std::sync::Arc::new(o));
-                    tracing::info!(
-                        device = raw(handle),
-                        "device has shading-rate attachments for injection"
-                    );
-                    Some(crate::vk::own::injector::Injector::new(facts))
-                }
-                // Fail open: the device keeps the feature, and its passes run unmodified.
-                Err(why) => {
-                    tracing::warn!(
-                        device = raw(handle),
-                        why = why.as_str(),
-                        "nothing is injected on this device: the layer cannot make its \
-                         shading-rate maps there"
-                    );
-                    None
-                }
-            }
-        });
-        // The device was just created, so its handle is live for `registry::key`.
-        if let Some(k) = key(handle).filter(|&k| registry::has_key(k)) {
-            tracing::warn!(
-                device = raw(handle),
-                "a new device has the dispatch key of one that was never destroyed (its instance \
-                 was destroyed first): what the layer kept for the old one is forgotten"
-            );
-            convert::device_key_reused(k);
-            reconstruct::device_key_reused(k);
-        }
-        // `vkCmdEndRendering2EXT`, which the driver does not have, goes down as the plain end:
-        // the core name from Vulkan 1.3, `VK_KHR_dynamic_rendering`'s below (a driver returns no
-        // pointer for a core name above the device's version).
+        let (own, inject) = self.own(fdm.is_some(), inject, made.timelines);
+        self.forget_reused_key();
         let end_rendering = if fdm.is_some() {
-            let core = api_version >= vk::API_VERSION_1_3;
-            let (first, second) = if core {
-                (c"vkCmdEndRendering", c"vkCmdEndRenderingKHR")
-            } else {
-                (c"vkCmdEndRenderingKHR", c"vkCmdEndRendering")
-            };
-            gdpa(handle, first.as_ptr())
-                .or_else(|| gdpa(handle, second.as_ptr()))
-                .map(|f| {
-                    std::mem::transmute::<unsafe extern "system" fn(), vk::PFN_vkCmdEndRendering>(f)
-                })
+            self.end_rendering(api_version)
         } else {
             None
         };
-        let emulated = fdm.is_some();
-        let injects = inject.is_some();
-        registry::add_device(registry::Device {
-            handle,
-            instance: key(inst.handle).unwrap_or(0),
-            gdpa,
-            next,
-            end_rendering,
-            fdm,
-            inject,
-            api_version,
-            attachments: registry::Attachments::new(own),
-        });
-        let converts = convert::device_created(&inst, physical, ci, handle);
+        let (emulated, injects) = (fdm.is_some(), inject.is_some());
+        // SAFETY: the live device just created.
+        unsafe {
+            registry::add_device(registry::Device {
+                handle,
+                instance: key(inst.handle).unwrap_or(0),
+                gdpa: self.gdpa,
+                next,
+                end_rendering,
+                fdm,
+                inject,
+                api_version,
+                attachments: registry::Attachments::new(own),
+            });
+        }
+        // SAFETY: as above; `physical` belongs to `inst`, `ci` made the device.
+        let converts = unsafe { convert::device_created(inst, self.physical, self.ci, handle) };
         if injects || emulated {
-            let why = convert::dispatch_blocked(&inst, physical, ci, api_version);
-            reconstruct::device_created(handle, why);
+            // SAFETY: as above.
+            unsafe {
+                let why = convert::dispatch_blocked(inst, self.physical, self.ci, api_version);
+                reconstruct::device_created(handle, why);
+            }
         }
         // Offsets reach density maps where the driver got the application's request as it was
         // (so it has the extension), or where the layer emulates them and converts: an emulated
@@ -835,40 +902,136 @@ unsafe fn create_device_impl(
         // this says they apply (docs/eye-tracking.md#what-moves-when).
         crate::bridge::set_device_offsets(
             handle,
-            Some(app_offsets && (untouched || (emulated && converts))),
+            Some(made.app_offsets && (made.untouched || (emulated && converts))),
         );
     }
-    r
-}
 
-/// `vkDestroyDevice`: forgets the device and destroys it below.
-///
-/// # Safety
-/// `device` must be NULL or a device created through the layer.
-pub unsafe extern "system" fn destroy_device(
-    device: vk::Device,
-    alloc: *const vk::AllocationCallbacks<'_>,
-) {
-    guard("vkDestroyDevice", (), || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::remove_device(device) }) else {
-            return;
+    /// The layer's own calls on the device, where it emulates (`emulates`) or injects
+    /// (`inject`: the facts the maps are made for), and the injector; where they cannot be set
+    /// up, the device renders at full rate (fail open).
+    fn own(
+        &self,
+        emulates: bool,
+        inject: Option<FdmEmulation>,
+        timelines: bool,
+    ) -> (Option<Arc<Own>>, Option<Injector>) {
+        let handle = raw(self.handle);
+        if emulates {
+            tracing::info!(device = handle, "device emulates fragment density maps");
+            let own = self.own_calls(timelines).map_err(|why| {
+                tracing::warn!(
+                    device = handle,
+                    why = why.as_str(),
+                    "density maps on this device get no shading-rate shadows: they render at \
+                     full rate"
+                )
+            });
+            return (own.ok(), None);
+        }
+        let Some(facts) = inject else {
+            return (None, None);
         };
-        // SAFETY: the device is live; the application has finished with it (destroy_all waits
-        // for the layer's clears and uploads in flight before the maps go).
-        unsafe {
-            convert::device_destroyed(device);
-            reconstruct::device_destroyed(device);
-            emulation::destroy_all(&dev);
-            if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
-                inj.destroy(own);
+        match self.own_calls(timelines) {
+            Ok(o) => {
+                tracing::info!(
+                    device = handle,
+                    "device has shading-rate attachments for injection"
+                );
+                (Some(o), Some(Injector::new(facts)))
+            }
+            // Fail open: the device keeps the feature, and its passes run unmodified.
+            Err(why) => {
+                tracing::warn!(
+                    device = handle,
+                    why = why.as_str(),
+                    "nothing is injected on this device: the layer cannot make its shading-rate \
+                     maps there"
+                );
+                (None, None)
             }
         }
-        if let Some(destroy) = dev.next.destroy_device {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            unsafe { destroy(device, alloc) };
+    }
+
+    fn own_calls(&self, timelines: bool) -> Result<Arc<Own>, String> {
+        let inst = self.inst;
+        // SAFETY: the live device just created from `ci` on `physical`, with the next layer's
+        // pointers.
+        unsafe {
+            Own::new(
+                inst.handle,
+                inst.gipa,
+                self.physical,
+                self.ci,
+                self.handle,
+                self.gdpa,
+                timelines,
+            )
         }
-    })
+        .map(Arc::new)
+    }
+
+    /// A new device with the dispatch key of one that was never destroyed (its instance was
+    /// destroyed first): what the layer kept for the old one is forgotten.
+    fn forget_reused_key(&self) {
+        // SAFETY: the device was just created, so its handle is live for `key`.
+        let Some(k) = (unsafe { key(self.handle) }).filter(|&k| registry::has_key(k)) else {
+            return;
+        };
+        tracing::warn!(
+            device = raw(self.handle),
+            "a new device has the dispatch key of one that was never destroyed (its instance was \
+             destroyed first): what the layer kept for the old one is forgotten"
+        );
+        convert::device_key_reused(k);
+        reconstruct::device_key_reused(k);
+    }
+
+    /// The next layer's plain end of dynamic rendering, which `vkCmdEndRendering2EXT` (the driver
+    /// does not have it) goes down as: the core name from Vulkan 1.3, `VK_KHR_dynamic_rendering`'s
+    /// below (a driver returns no pointer for a core name above the device's version).
+    fn end_rendering(&self, api_version: u32) -> Option<vk::PFN_vkCmdEndRendering> {
+        let (first, second) = if api_version >= vk::API_VERSION_1_3 {
+            (c"vkCmdEndRendering", c"vkCmdEndRenderingKHR")
+        } else {
+            (c"vkCmdEndRenderingKHR", c"vkCmdEndRendering")
+        };
+        // SAFETY: the next layer's `vkGetDeviceProcAddr` and its live device; the pointer is of
+        // the type its name implies.
+        unsafe {
+            (self.gdpa)(self.handle, first.as_ptr())
+                .or_else(|| (self.gdpa)(self.handle, second.as_ptr()))
+                .map(|f| {
+                    std::mem::transmute::<unsafe extern "system" fn(), vk::PFN_vkCmdEndRendering>(f)
+                })
+        }
+    }
+}
+
+hook! {
+    /// `vkDestroyDevice`: forgets the device and destroys it below.
+    destroy_device = "vkDestroyDevice"; raw, fails(());
+    destroy(device: val vk::Device, alloc: val *const vk::AllocationCallbacks<'_>) -> ()
+}
+
+fn destroy(device: vk::Device, alloc: *const vk::AllocationCallbacks<'_>) {
+    // SAFETY: a device the loader dispatched (or NULL): its first word is its dispatch key.
+    let Some(dev) = (unsafe { registry::remove_device(device) }) else {
+        return;
+    };
+    // SAFETY: the device is live; the application has finished with it (destroy_all waits for
+    // the layer's clears and uploads in flight before the maps go).
+    unsafe {
+        convert::device_destroyed(device);
+        reconstruct::device_destroyed(device);
+        emulation::destroy_all(&dev);
+        if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+            inj.destroy(own);
+        }
+    }
+    if let Some(destroy) = dev.next.destroy_device {
+        // SAFETY: the next layer's function, with the application's arguments.
+        unsafe { destroy(device, alloc) };
+    }
 }
 
 #[cfg(test)]
@@ -890,7 +1053,7 @@ mod tests {
                 info = info.push_next(&mut f);
             }
             // SAFETY: a valid create info whose names and chain live across the call.
-            unsafe { enables_offsets(&info) }
+            enables_offsets(unsafe { In::new(&info) })
         };
         assert!(enables(&[offset::EXT_NAME], Some(true)));
         assert!(enables(&[offset::QCOM_NAME], Some(true)));

@@ -33,7 +33,7 @@ hook! {
 }
 
 fn create_view(
-    c: Call<'_, Device, vk::PFN_vkCreateImageView>,
+    c: Call<'_, Device, vk::PFN_vkCreateImageView, impl Fn() -> vk::Result>,
     device: vk::Device,
     info: In<'_, vk::ImageViewCreateInfo<'_>>,
     alloc: *const vk::AllocationCallbacks<'_>,
@@ -121,16 +121,14 @@ hook! {
 }
 
 fn destroy_view(
-    c: Call<'_, Device, Option<vk::PFN_vkDestroyImageView>>,
-    device: vk::Device,
+    c: Call<'_, Device, Option<vk::PFN_vkDestroyImageView>, impl Fn()>,
+    _device: vk::Device,
     view: vk::ImageView,
-    alloc: *const vk::AllocationCallbacks<'_>,
+    _alloc: *const vk::AllocationCallbacks<'_>,
 ) {
     let dev = c.dev;
-    if let Some(next) = c.next {
-        // SAFETY: the next layer's function, with the application's arguments.
-        unsafe { next(device, view, alloc) };
-    }
+    // Where the next layer has it.
+    c.as_given();
     if let Some(inj) = &dev.inject {
         inj.view_destroyed(view);
     }
@@ -157,19 +155,17 @@ hook! {
 }
 
 fn destroy(
-    c: Call<'_, Device, Option<vk::PFN_vkDestroyImage>>,
-    device: vk::Device,
+    c: Call<'_, Device, Option<vk::PFN_vkDestroyImage>, impl Fn()>,
+    _device: vk::Device,
     image: vk::Image,
-    alloc: *const vk::AllocationCallbacks<'_>,
+    _alloc: *const vk::AllocationCallbacks<'_>,
 ) {
     let dev = c.dev;
     // The layer's view of the image goes first.
     // SAFETY: the device is live; the application's uses of the image have ended.
     unsafe { convert::map_destroyed(dev, image) };
-    if let Some(next) = c.next {
-        // SAFETY: the next layer's function, with the application's arguments.
-        unsafe { next(device, image, alloc) };
-    }
+    // Where the next layer has it.
+    c.as_given();
     if let Some(inj) = &dev.inject {
         inj.image_destroyed(image);
     }
@@ -206,7 +202,7 @@ hook! {
 }
 
 fn transition(
-    c: Call<'_, Device, vk::PFN_vkTransitionImageLayoutEXT>,
+    c: Call<'_, Device, vk::PFN_vkTransitionImageLayoutEXT, impl Fn() -> vk::Result>,
     device: vk::Device,
     count: u32,
     infos: Arr<'_, vk::HostImageLayoutTransitionInfoEXT<'_>>,
@@ -217,8 +213,7 @@ fn transition(
         .iter()
         .any(|t| t.old_layout == fdm || t.new_layout == fdm)
     {
-        // SAFETY: the next layer's function, with the application's arguments.
-        return unsafe { (c.next)(device, count, infos.raw()) };
+        return c.as_given();
     }
     convert::map_may_have_changed();
     let copy: Vec<vk::HostImageLayoutTransitionInfoEXT<'_>> = given
@@ -254,15 +249,14 @@ hook! {
 }
 
 fn create(
-    c: Call<'_, Device, vk::PFN_vkCreateImage>,
+    c: Call<'_, Device, vk::PFN_vkCreateImage, impl Fn() -> vk::Result>,
     device: vk::Device,
     info: In<'_, vk::ImageCreateInfo<'_>>,
     alloc: *const vk::AllocationCallbacks<'_>,
     out: Out<'_, vk::Image>,
 ) -> vk::Result {
     let (dev, next) = (c.dev, c.next);
-    // SAFETY: the next layer's function, with the application's arguments.
-    let as_given = || unsafe { next(device, info.raw(), alloc, out.raw()) };
+    let as_given = || c.as_given();
     if let Some(inj) = &dev.inject {
         let r = as_given();
         if let (vk::Result::SUCCESS, Some(ci), Some(image)) = (r, info.get(), out.read()) {

@@ -39,7 +39,9 @@
 ///   [`Arr<T>`](crate::vk::base::ffi::Arr); `(bytes n) c_void`, a `const void*` of `n` bytes, as
 ///   an `Arr<u8>`.
 /// - The body gets a [`Call`](crate::vk::base::ffi::Call) (the command's name, the record, the
-///   next function) and the typed parameters.
+///   next function, and the call down with the application's arguments as they came,
+///   `Call::as_given`, so that the path that changes nothing needs no `unsafe`) and the typed
+///   parameters.
 ///
 /// `raw` in place of `on …` declares a hook that finds its records itself (instance and device
 /// creation and destruction, and the hooks that forget command buffers whether or not their
@@ -93,8 +95,9 @@ macro_rules! hook {
                     return hook!(@fail $fails);
                 };
                 let next = hook!(@pick $pick dev $field $fails);
+                let given = hook!(@given $pick next ($($arg),*));
                 $(let $arg = hook!(@arg $mode $arg);)*
-                let call = $crate::vk::base::ffi::Call { name: $name, dev: &*dev, next };
+                let call = $crate::vk::base::ffi::Call { name: $name, dev: &*dev, next, given };
                 $body(call, $($arg),*)
             })
         }
@@ -123,6 +126,19 @@ macro_rules! hook {
     };
     (@pick maybe $dev:ident $field:ident $fails:tt) => {
         $dev.next.$field
+    };
+    (@given next $next:ident ($($arg:ident),*)) => {
+        // SAFETY: the next layer's function, with the application's own arguments, unchanged:
+        // what the caller promised of them holds for the call down.
+        move || unsafe { $next($($arg),*) }
+    };
+    (@given maybe $next:ident ($($arg:ident),*)) => {
+        move || {
+            if let Some(f) = $next {
+                // SAFETY: as for `next`.
+                unsafe { f($($arg),*) }
+            }
+        }
     };
     (@fail ($fail:expr $(, panic $panic:expr)?)) => {
         $fail
@@ -161,35 +177,6 @@ macro_rules! hook {
         // SAFETY: the command's valid usage: NULL or valid for `$count` bytes, unwritten during
         // the call.
         unsafe { $crate::vk::base::ffi::Arr::new($arg.cast::<u8>(), $count) }
-    };
-}
-
-/// A command's hook and its KHR alias's: two `extern "system"` functions that hand their arguments
-/// to one shared body, `$shared(name, pick, arguments…)`, where `pick` takes the next layer's
-/// function of the hook's own name from the device (or recording) state.
-macro_rules! hook_and_khr_alias {
-    (
-        $(#[$doc:meta])*
-        $hook:ident, $khr:ident = $shared:ident($name:literal)
-        ($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?
-    ) => {
-        $(#[$doc])*
-        ///
-        /// # Safety
-        /// The caller's arguments, valid as the command requires.
-        pub unsafe extern "system" fn $hook($($arg: $ty),*) $(-> $ret)? {
-            // SAFETY: the caller's arguments.
-            unsafe { $shared($name, |d| d.next.$hook, $($arg),*) }
-        }
-
-        #[doc = concat!("`", $name, "KHR`: as [`", stringify!($hook), "`].")]
-        ///
-        /// # Safety
-        /// The caller's arguments, valid as the command requires.
-        pub unsafe extern "system" fn $khr($($arg: $ty),*) $(-> $ret)? {
-            // SAFETY: the caller's arguments.
-            unsafe { $shared(concat!($name, "KHR"), |d| d.next.$khr, $($arg),*) }
-        }
     };
 }
 

@@ -26,9 +26,10 @@ use std::sync::atomic::AtomicBool;
 use ash::vk;
 use ash::vk::Handle as _;
 
-use crate::vk::base::chain::{self, ChainCopy};
-use crate::vk::base::ffi::{guard, offset, once, pfn, raw, slice};
-use crate::vk::registry::{self, Device};
+use crate::vk::base::chain::{ChainCopy, Chained};
+use crate::vk::base::ffi::{offset, once, pfn, raw, slice, Call, In, Out};
+use crate::vk::own::injector::Injector;
+use crate::vk::registry::Device;
 use crate::vk::translate::formats::{SHADOW_FORMAT, SHADOW_LAYOUT};
 use crate::vk::translate::render_pass::{
     add_shading_rate, apps_rate_attachment, chain_without, density_attachment, rate_store_op,
@@ -42,41 +43,6 @@ fn texel_of(dev: &Device) -> Option<vk::Extent2D> {
         width: f.texel[0],
         height: f.texel[1],
     })
-}
-
-/// The body of a command-buffer hook under [`guard`]: `body` gets the command buffer's device;
-/// a command buffer the layer does not know is left alone.
-///
-/// # Safety
-/// `cb` must be the caller's command buffer, valid as the command requires.
-unsafe fn on_device(which: &'static str, cb: vk::CommandBuffer, body: impl FnOnce(&Device)) {
-    guard(which, (), || {
-        // SAFETY: as the caller promised.
-        if let Some(dev) = unsafe { registry::device_ref(cb) } {
-            body(&dev)
-        }
-    })
-}
-
-/// [`on_device`] where `body` also gets the next layer's function (`next` picks it from the
-/// device's table); without one the command goes nowhere.
-///
-/// # Safety
-/// As [`on_device`].
-unsafe fn with_next<F>(
-    which: &'static str,
-    cb: vk::CommandBuffer,
-    next: impl FnOnce(&Device) -> Option<F>,
-    body: impl FnOnce(&Device, F),
-) {
-    // SAFETY: as the caller promised.
-    unsafe {
-        on_device(which, cb, |dev| {
-            if let Some(down) = next(dev) {
-                body(dev, down)
-            }
-        })
-    }
 }
 
 /// Creates `pass` below, with the shading-rate attachment where `density` names one; on success
@@ -93,7 +59,7 @@ unsafe fn create_rewritten(
     p_next: *const c_void,
     density: u32,
     alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::RenderPass,
+    out: Out<'_, vk::RenderPass>,
 ) -> vk::Result {
     // Whether the application names the map in the density layout itself when the pass begins
     // (before the translation makes it `GENERAL`): `crate::vk::convert` relies on it.
@@ -108,7 +74,7 @@ unsafe fn create_rewritten(
     if let Some(inj) = &dev.inject {
         // SAFETY: as the caller promised.
         return unsafe {
-            injection::create_injected(dev, inj, create2, pass, flags, p_next, alloc, out)
+            injection::create_injected(dev, inj, create2, pass, flags, p_next, alloc, out.raw())
         };
     }
     let texel = texel_of(dev);
@@ -121,416 +87,446 @@ unsafe fn create_rewritten(
     }
     let info = pass.info(flags, p_next);
     // SAFETY: the copy and everything it points at live across the call.
-    let r = unsafe { create2(dev.handle, &info, alloc, out) };
-    if r == vk::Result::SUCCESS && density == vk::ATTACHMENT_UNUSED {
+    let r = unsafe { create2(dev.handle, &info, alloc, out.raw()) };
+    match (r, out.read()) {
         // A pass that names the density layout, stage or access but reads no map writes or
         // orders one.
-        // SAFETY: just created.
-        convert::writer_pass_created(unsafe { *out });
-    }
-    if r == vk::Result::SUCCESS && density != vk::ATTACHMENT_UNUSED && texel.is_some() {
-        // SAFETY: just created.
-        let handle = unsafe { *out };
-        dev.attachments
-            .passes
-            .lock()
-            .insert(handle.as_raw(), density);
-        // SAFETY: the device is live.
-        unsafe { convert::pass_changed(dev, handle, layouts) };
-        reconstruct::pass_created(dev, handle, &pass, density);
-        tracing::debug!(
-            render_pass = raw(handle),
-            density,
-            "render pass: density map → shading-rate attachment"
-        );
+        (vk::Result::SUCCESS, Some(handle)) if density == vk::ATTACHMENT_UNUSED => {
+            convert::writer_pass_created(handle)
+        }
+        (vk::Result::SUCCESS, Some(handle)) if texel.is_some() => {
+            rewritten_created(dev, handle, &pass, density, layouts)
+        }
+        _ => {}
     }
     r
 }
 
-/// `vkCreateRenderPass`: with the density-map struct, upgraded to `vkCreateRenderPass2` and
-/// rewritten; on an injecting device every pass is (see [`injection::create_injected`]); otherwise untouched.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_render_pass(
-    device: vk::Device,
-    info: *const vk::RenderPassCreateInfo<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::RenderPass,
-) -> vk::Result {
-    guard(
-        "vkCreateRenderPass",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let Some(dev) = (unsafe { registry::device(device) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = dev.next.create_render_pass else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            // SAFETY: the caller's create info, read only.
-            let density = match unsafe { info.as_ref() } {
-                // SAFETY: the caller's valid chain.
-                Some(ci) if dev.fdm.is_some() => unsafe { density_attachment(ci.p_next) },
-                _ => None,
-            };
-            let inject = dev.inject.is_some() && !info.is_null();
-            // A pass without the density-map struct that still names the density layout, stage
-            // or access (it writes a map, or orders one) goes down translated.
-            // SAFETY: the caller's create info, read only.
-            let ci = unsafe { info.as_ref() };
-            // SAFETY: as above.
-            let names = dev.fdm.is_some() && ci.is_some_and(|ci| unsafe { v1_names_density(ci) });
-            let Some(density) = density.or((inject || names).then_some(vk::ATTACHMENT_UNUSED))
-            else {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(device, info, alloc, out) };
-            };
-            // Below Vulkan 1.2 the core name may not be called (drivers return no pointer for
-            // it); the extension's, which the layer enabled, is the one.
-            let (first, second) = (
-                dev.next.create_render_pass2,
-                dev.next.create_render_pass2_khr,
-            );
-            let create2 = if dev.api_version < vk::API_VERSION_1_2 {
-                second.or(first)
-            } else {
-                first.or(second)
-            };
-            // SAFETY: as above.
-            let ci = unsafe { &*info };
-            use vk::StructureType as S;
-            let folded = |t| {
-                t == S::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT
-                    || t == S::RENDER_PASS_MULTIVIEW_CREATE_INFO
-                    || t == S::RENDER_PASS_INPUT_ATTACHMENT_ASPECT_CREATE_INFO
-            };
-            // SAFETY: the caller's chain, read only.
-            let (chain, multiview, aspects) = unsafe {
-                (
-                    chain_without(ci.p_next, folded, "vkCreateRenderPass"),
-                    chain::find::<vk::RenderPassMultiviewCreateInfo>(
-                        ci.p_next,
-                        S::RENDER_PASS_MULTIVIEW_CREATE_INFO,
-                    ),
-                    chain::find::<vk::RenderPassInputAttachmentAspectCreateInfo>(
-                        ci.p_next,
-                        S::RENDER_PASS_INPUT_ATTACHMENT_ASPECT_CREATE_INFO,
-                    ),
-                )
-            };
-            // A chain too long to look through to its end has neither struct where the layer
-            // looks; the copy shares what lies past its limit.
-            let (multiview, aspects) = (multiview.ok().flatten(), aspects.ok().flatten());
-            let (Some(create2), Ok(chain)) = (create2, chain) else {
-                // Every emulating device has render pass 2 (the layer enables it), so this is an
-                // injecting one: no density enums are valid on it anyway.
-                tracing::warn!(
-                    inject,
-                    "vkCreateRenderPass: cannot upgrade a render pass to version 2 (no \
-                     vkCreateRenderPass2 below, or a pNext chain the layer cannot copy); passed \
-                     on as is, at full rate"
-                );
-                if dev.fdm.is_some() {
-                    // A driver without the density-map extension must not get its enums; an
-                    // unexpected failure is what any command may answer with VK_ERROR_UNKNOWN
-                    // (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkResult.html>).
-                    return vk::Result::ERROR_UNKNOWN;
-                }
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(device, info, alloc, out) };
-            };
-            // SAFETY: the structs were found by their sTypes in the caller's valid chain.
-            let pass = unsafe { v1_to_v2(ci, multiview.map(|m| &*m), aspects.map(|a| &*a)) };
-            // SAFETY: the converted pass and the chain copy live across the call.
-            unsafe {
-                create_rewritten(
-                    &dev,
-                    create2,
-                    pass,
-                    ci.flags,
-                    chain.head(),
-                    density,
-                    alloc,
-                    out,
-                )
-            }
-        },
-    )
+/// Notes a render pass just created with its density attachment `density` turned into a
+/// shading-rate attachment.
+fn rewritten_created(
+    dev: &Device,
+    handle: vk::RenderPass,
+    pass: &Pass2,
+    density: u32,
+    layouts: Option<(vk::ImageLayout, vk::ImageLayout, bool)>,
+) {
+    dev.attachments
+        .passes
+        .lock()
+        .insert(handle.as_raw(), density);
+    // SAFETY: the device is live; the pass was just created on it.
+    unsafe { convert::pass_changed(dev, handle, layouts) };
+    reconstruct::pass_created(dev, handle, pass, density);
+    tracing::debug!(
+        render_pass = raw(handle),
+        density,
+        "render pass: density map → shading-rate attachment"
+    );
 }
 
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn create_render_pass2_with(
-    which: &'static str,
-    next: fn(&Device) -> Option<vk::PFN_vkCreateRenderPass2>,
-    device: vk::Device,
-    info: *const vk::RenderPassCreateInfo2<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::RenderPass,
-) -> vk::Result {
-    guard(which, vk::Result::ERROR_INITIALIZATION_FAILED, || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device(device) }) else {
-            return vk::Result::ERROR_INITIALIZATION_FAILED;
-        };
-        let Some(create2) = next(&dev) else {
-            return vk::Result::ERROR_INITIALIZATION_FAILED;
-        };
-        // SAFETY: the caller's create info, read only.
-        let density = match unsafe { info.as_ref() } {
-            // SAFETY: the caller's valid chain.
-            Some(ci) if dev.fdm.is_some() => unsafe { density_attachment(ci.p_next) },
-            _ => None,
-        };
-        let inject = dev.inject.is_some() && !info.is_null();
-        // As in `create_render_pass`: density enums outside the density-map struct.
-        // SAFETY: the caller's create info, read only.
-        let ci = unsafe { info.as_ref() };
-        // SAFETY: as above.
-        let names = dev.fdm.is_some() && ci.is_some_and(|ci| unsafe { v2_names_density(ci) });
-        let Some(density) = density.or((inject || names).then_some(vk::ATTACHMENT_UNUSED)) else {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { create2(device, info, alloc, out) };
-        };
-        // SAFETY: as above.
-        let ci = unsafe { &*info };
-        if let (Some(inj), vk::ATTACHMENT_UNUSED) = (&dev.inject, density) {
-            // SAFETY: the caller's subpasses and their chains, read only.
-            match unsafe { apps_rate_attachment(ci) } {
-                Ok(false) => {}
-                Ok(true) => {
-                    inj.apps_own_attachment(which);
-                    // SAFETY: the next layer's function, with the caller's arguments.
-                    let r = unsafe { create2(device, info, alloc, out) };
-                    if r == vk::Result::SUCCESS {
-                        // SAFETY: just created.
-                        inj.apps_pass_created(unsafe { *out });
-                    }
-                    return r;
-                }
-                Err(e) => {
-                    tracing::warn!(
-                        error = ?e,
-                        "{which}: a subpass pNext chain the layer cannot read; passed on as is, \
-                         at full rate"
-                    );
-                    // SAFETY: the next layer's function, with the caller's arguments.
-                    return unsafe { create2(device, info, alloc, out) };
-                }
-            }
-        }
-        let fdm = vk::StructureType::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT;
-        // SAFETY: the caller's chain, read only.
-        let Ok(chain) = (unsafe { chain_without(ci.p_next, |t| t == fdm, which) }) else {
-            // `chain_without` leaves out what it cannot copy, so this is not expected; the
-            // driver must not get the density-map struct all the same.
-            tracing::warn!(
-                "{which}: a pNext chain the layer cannot copy; the render pass is refused"
-            );
-            return vk::Result::ERROR_UNKNOWN;
-        };
-        // SAFETY: the caller's arrays outlive the call.
-        let pass = unsafe { Pass2::from_v2(ci) };
-        // SAFETY: the copied pass and chain live across the call.
-        unsafe {
-            create_rewritten(
-                &dev,
-                create2,
-                pass,
-                ci.flags,
-                chain.head(),
-                density,
-                alloc,
-                out,
-            )
-        }
-    })
+/// The attachment a pass's rewrite is about: the density map's where the create info names one
+/// on an emulating device (`density`), `VK_ATTACHMENT_UNUSED` where the pass is rewritten all the
+/// same (every pass on an injecting device; on an emulating one, a pass that names the density
+/// layout, stage or access without the struct: it writes a map, or orders one); `None` where it
+/// goes down untouched.
+fn rewritten_about(dev: &Device, density: Option<u32>, names_density: bool) -> Option<u32> {
+    density.or((dev.inject.is_some() || names_density).then_some(vk::ATTACHMENT_UNUSED))
 }
 
-hook_and_khr_alias! {
-    /// `vkCreateRenderPass2`: see the module documentation.
-    create_render_pass2, create_render_pass2_khr = create_render_pass2_with("vkCreateRenderPass2")
-    (
-        device: vk::Device,
-        info: *const vk::RenderPassCreateInfo2<'_>,
-        alloc: *const vk::AllocationCallbacks<'_>,
-        out: *mut vk::RenderPass,
+hook! {
+    /// `vkCreateRenderPass`: with the density-map struct, upgraded to `vkCreateRenderPass2` and
+    /// rewritten; on an injecting device every pass is (see [`injection::create_injected`]);
+    /// otherwise untouched.
+    create_render_pass = "vkCreateRenderPass";
+    on device(device), next create_render_pass, fails(vk::Result::ERROR_INITIALIZATION_FAILED);
+    create_pass(
+        device: val vk::Device,
+        info: in vk::RenderPassCreateInfo<'_>,
+        alloc: val *const vk::AllocationCallbacks<'_>,
+        out: out vk::RenderPass,
     ) -> vk::Result
 }
 
-/// `vkDestroyRenderPass`: forgets a rewritten pass.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn destroy_render_pass(
-    device: vk::Device,
-    pass: vk::RenderPass,
+fn create_pass(
+    c: Call<'_, Device, vk::PFN_vkCreateRenderPass, impl Fn() -> vk::Result>,
+    _device: vk::Device,
+    info: In<'_, vk::RenderPassCreateInfo<'_>>,
     alloc: *const vk::AllocationCallbacks<'_>,
-) {
-    guard("vkDestroyRenderPass", (), || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device(device) }) else {
-            return;
-        };
-        dev.attachments.passes.lock().remove(&pass.as_raw());
-        if let Some(inj) = &dev.inject {
-            inj.pass_destroyed(pass);
-        }
-        // SAFETY: the device is live.
-        unsafe { convert::pass_changed(&dev, pass, None) };
-        // SAFETY: the device is live.
-        unsafe { reconstruct::pass_destroyed(&dev, pass) };
-        if let Some(next) = dev.next.destroy_render_pass {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            unsafe { next(device, pass, alloc) };
-        }
-    })
-}
-
-/// `vkCreateFramebuffer`: a rewritten pass's density view becomes its shadow view; an imageless
-/// framebuffer describes the shadow instead.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn create_framebuffer(
-    device: vk::Device,
-    info: *const vk::FramebufferCreateInfo<'_>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::Framebuffer,
+    out: Out<'_, vk::RenderPass>,
 ) -> vk::Result {
-    guard(
-        "vkCreateFramebuffer",
-        vk::Result::ERROR_INITIALIZATION_FAILED,
-        || {
-            // SAFETY: as the caller promised.
-            let Some(dev) = (unsafe { registry::device(device) }) else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            let Some(next) = dev.next.create_framebuffer else {
-                return vk::Result::ERROR_INITIALIZATION_FAILED;
-            };
-            // SAFETY: the caller's create info, read only.
-            let Some(ci) = (unsafe { info.as_ref() }) else {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                return unsafe { next(device, info, alloc, out) };
-            };
-            if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
-                let Some(p) = inj.pass(ci.render_pass) else {
-                    // SAFETY: as above.
-                    return unsafe { next(device, info, alloc, out) };
-                };
-                // SAFETY: the caller's arguments; `own` is the device's.
-                return unsafe {
-                    injection::create_injected_framebuffer(
-                        inj, own, p, next, device, ci, alloc, out,
-                    )
-                };
-            }
-            let Some(density) = dev.attachments.density_attachment(ci.render_pass) else {
-                // SAFETY: as above.
-                return unsafe { next(device, info, alloc, out) };
-            };
-            let mut copy = *ci;
-            if ci.flags.contains(vk::FramebufferCreateFlags::IMAGELESS) {
-                let ty = vk::StructureType::FRAMEBUFFER_ATTACHMENTS_CREATE_INFO;
-                let found =
-                    // SAFETY: the caller's chain, read only.
-                    unsafe { chain::find::<vk::FramebufferAttachmentsCreateInfo>(ci.p_next, ty) };
-                // SAFETY: as above.
-                let rest = unsafe { ChainCopy::without(ci.p_next, |t| t == ty) };
-                let (Ok(Some(found)), Ok(rest)) = (found, rest) else {
-                    tracing::warn!(
-                        "vkCreateFramebuffer: an imageless framebuffer the layer cannot rewrite; \
-                         passed on as is"
-                    );
-                    // SAFETY: as above.
-                    return unsafe { next(device, info, alloc, out) };
-                };
-                // SAFETY: found by its sType in a valid chain.
-                let found = unsafe { &*found };
-                // SAFETY: the caller's array.
-                let mut infos: Vec<vk::FramebufferAttachmentImageInfo<'_>> = unsafe {
-                    slice(
-                        found.p_attachment_image_infos,
-                        found.attachment_image_info_count,
-                    )
-                }
-                .to_vec();
-                let formats = [SHADOW_FORMAT];
-                let layered = dev.fdm.as_ref().is_some_and(|f| f.layered);
-                if let Some(a) = infos.get_mut(density as usize) {
-                    *a = shadow_attachment_info(a, layered, &formats);
-                }
-                let mut attachments = *found;
-                attachments.p_next = rest.head();
-                attachments.attachment_image_info_count = infos.len() as u32;
-                attachments.p_attachment_image_infos = infos.as_ptr();
-                copy.p_next = &attachments as *const _ as *const c_void;
-                // SAFETY: the copies live across the call.
-                return unsafe { next(device, &copy, alloc, out) };
-            }
-            let mut views: Vec<vk::ImageView> =
-                // SAFETY: the caller's array.
-                unsafe { slice(ci.p_attachments, ci.attachment_count) }.to_vec();
-            let app_view = views.get(density as usize).copied();
-            if let Some(v) = views.get_mut(density as usize) {
-                // A density view without a shadow (it could not be made) gets the device's
-                // full-rate stand-in ([`crate::vk::own::calls::Own::full_rate_view`]).
-                let shadow = dev.attachments.shadow_view(*v).or_else(|| {
-                    let (own, fdm) = (dev.attachments.own.as_ref()?, dev.fdm.as_ref()?);
-                    // SAFETY: the device is live and emulates as `fdm` says.
-                    unsafe { own.full_rate_view(fdm, ci.width, ci.height) }
-                });
-                match shadow {
-                    Some(s) => *v = s,
-                    None => tracing::warn!(
-                        view = raw(*v),
-                        "vkCreateFramebuffer: the density view has no shadow; passed on as is"
-                    ),
-                }
-            }
-            copy.p_attachments = views.as_ptr();
-            // SAFETY: the copy and the views live across the call.
-            let r = unsafe { next(device, &copy, alloc, out) };
-            if r == vk::Result::SUCCESS && !out.is_null() {
-                // SAFETY: the framebuffer was just created on the live device.
-                unsafe { convert::framebuffer_changed(&dev, *out, app_view) };
-                // SAFETY: as above, from the application's create info.
-                unsafe { reconstruct::framebuffer_created(&dev, *out, ci) };
-            }
-            r
-        },
-    )
+    let dev = c.dev;
+    let as_given = || c.as_given();
+    let Some(ci) = info.get() else {
+        return as_given();
+    };
+    let emulates = dev.fdm.is_some();
+    // SAFETY: the application's create info, valid with its chain and arrays.
+    let (density, names) = unsafe {
+        (
+            emulates.then(|| density_attachment(ci.p_next)).flatten(),
+            emulates && v1_names_density(ci),
+        )
+    };
+    let Some(density) = rewritten_about(dev, density, names) else {
+        return as_given();
+    };
+    let Some((create2, chain, pass)) = upgraded(dev, info, ci) else {
+        // Every emulating device has render pass 2 (the layer enables it), so this is an
+        // injecting one: no density enums are valid on it anyway.
+        tracing::warn!(
+            inject = dev.inject.is_some(),
+            "vkCreateRenderPass: cannot upgrade a render pass to version 2 (no \
+             vkCreateRenderPass2 below, or a pNext chain the layer cannot copy); passed on as is, \
+             at full rate"
+        );
+        if emulates {
+            // A driver without the density-map extension must not get its enums; an unexpected
+            // failure is what any command may answer with VK_ERROR_UNKNOWN
+            // (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkResult.html>).
+            return vk::Result::ERROR_UNKNOWN;
+        }
+        return as_given();
+    };
+    // SAFETY: the converted pass and the chain copy live across the call.
+    unsafe {
+        create_rewritten(
+            dev,
+            create2,
+            pass,
+            ci.flags,
+            chain.head(),
+            density,
+            alloc,
+            out,
+        )
+    }
 }
 
-/// `vkDestroyFramebuffer` on an injecting device: forgets what the framebuffer got.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn destroy_framebuffer(
+/// A v1 create info upgraded to render pass 2: the next layer's `vkCreateRenderPass2` (below
+/// Vulkan 1.2 the extension's, which the layer enabled: drivers return no pointer for the core
+/// name), a copy of the chain without what version 2 folds into the pass, and the pass.
+fn upgraded<'a>(
+    dev: &Device,
+    info: In<'a, vk::RenderPassCreateInfo<'a>>,
+    ci: &'a vk::RenderPassCreateInfo<'a>,
+) -> Option<(vk::PFN_vkCreateRenderPass2, ChainCopy, Pass2)> {
+    let (first, second) = (
+        dev.next.create_render_pass2,
+        dev.next.create_render_pass2_khr,
+    );
+    let create2 = if dev.api_version < vk::API_VERSION_1_2 {
+        second.or(first)
+    } else {
+        first.or(second)
+    };
+    use vk::StructureType as S;
+    let folded = |t| {
+        t == S::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT
+            || t == S::RENDER_PASS_MULTIVIEW_CREATE_INFO
+            || t == S::RENDER_PASS_INPUT_ATTACHMENT_ASPECT_CREATE_INFO
+    };
+    // SAFETY: the application's chain, read only.
+    let chain = unsafe { chain_without(ci.p_next, folded, "vkCreateRenderPass") };
+    // A chain too long to look through to its end has neither struct where the layer looks; the
+    // copy shares what lies past its limit.
+    let multiview = info.find::<vk::RenderPassMultiviewCreateInfo>();
+    let aspects = info.find::<vk::RenderPassInputAttachmentAspectCreateInfo>();
+    let (Some(create2), Ok(chain)) = (create2, chain) else {
+        return None;
+    };
+    let (multiview, aspects) = (multiview.ok().flatten(), aspects.ok().flatten());
+    // SAFETY: the application's create info and arrays; the structs were found by their sTypes
+    // in its chain.
+    let pass = unsafe { v1_to_v2(ci, multiview, aspects) };
+    Some((create2, chain, pass))
+}
+
+hook! {
+    /// `vkCreateRenderPass2`: see the module documentation.
+    create_render_pass2 = "vkCreateRenderPass2", create_render_pass2_khr = "vkCreateRenderPass2KHR";
+    on device(device), next create_render_pass2 / create_render_pass2_khr,
+    fails(vk::Result::ERROR_INITIALIZATION_FAILED);
+    create_pass2(
+        device: val vk::Device,
+        info: in vk::RenderPassCreateInfo2<'_>,
+        alloc: val *const vk::AllocationCallbacks<'_>,
+        out: out vk::RenderPass,
+    ) -> vk::Result
+}
+
+fn create_pass2(
+    c: Call<'_, Device, vk::PFN_vkCreateRenderPass2, impl Fn() -> vk::Result>,
+    device: vk::Device,
+    info: In<'_, vk::RenderPassCreateInfo2<'_>>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: Out<'_, vk::RenderPass>,
+) -> vk::Result {
+    let (dev, create2, which) = (c.dev, c.next, c.name);
+    // SAFETY: the next layer's function, with the application's arguments.
+    let as_given = || unsafe { create2(device, info.raw(), alloc, out.raw()) };
+    let Some(ci) = info.get() else {
+        return as_given();
+    };
+    let emulates = dev.fdm.is_some();
+    // SAFETY: the application's create info, valid with its chain and arrays.
+    let (density, names) = unsafe {
+        (
+            emulates.then(|| density_attachment(ci.p_next)).flatten(),
+            emulates && v2_names_density(ci),
+        )
+    };
+    let Some(density) = rewritten_about(dev, density, names) else {
+        return as_given();
+    };
+    if let (Some(inj), vk::ATTACHMENT_UNUSED) = (&dev.inject, density) {
+        if let Some(r) = apps_own(which, inj, ci, as_given, &out) {
+            return r;
+        }
+    }
+    let fdm = vk::StructureType::RENDER_PASS_FRAGMENT_DENSITY_MAP_CREATE_INFO_EXT;
+    // SAFETY: the application's chain, read only.
+    let Ok(chain) = (unsafe { chain_without(ci.p_next, |t| t == fdm, which) }) else {
+        // `chain_without` leaves out what it cannot copy, so this is not expected; the driver
+        // must not get the density-map struct all the same.
+        tracing::warn!("{which}: a pNext chain the layer cannot copy; the render pass is refused");
+        return vk::Result::ERROR_UNKNOWN;
+    };
+    // SAFETY: the application's arrays outlive the call; the copied pass and chain live across
+    // the call down.
+    unsafe {
+        let pass = Pass2::from_v2(ci);
+        create_rewritten(
+            dev,
+            create2,
+            pass,
+            ci.flags,
+            chain.head(),
+            density,
+            alloc,
+            out,
+        )
+    }
+}
+
+/// On an injecting device, a pass with the application's own shading-rate attachment, or with a
+/// subpass chain the layer cannot read, goes down as it came (`as_given`): `Some` with its
+/// result; `None` where the layer injects into it.
+fn apps_own(
+    which: &str,
+    inj: &Injector,
+    ci: &vk::RenderPassCreateInfo2<'_>,
+    as_given: impl FnOnce() -> vk::Result,
+    out: &Out<'_, vk::RenderPass>,
+) -> Option<vk::Result> {
+    // SAFETY: the application's subpasses and their chains, read only.
+    match unsafe { apps_rate_attachment(ci) } {
+        Ok(false) => None,
+        Ok(true) => {
+            inj.apps_own_attachment(which);
+            let r = as_given();
+            if let (vk::Result::SUCCESS, Some(pass)) = (r, out.read()) {
+                inj.apps_pass_created(pass);
+            }
+            Some(r)
+        }
+        Err(e) => {
+            tracing::warn!(
+                error = ?e,
+                "{which}: a subpass pNext chain the layer cannot read; passed on as is, at full \
+                 rate"
+            );
+            Some(as_given())
+        }
+    }
+}
+
+hook! {
+    /// `vkDestroyRenderPass`: forgets a rewritten pass.
+    destroy_render_pass = "vkDestroyRenderPass";
+    on device(device), maybe destroy_render_pass, fails(());
+    destroy_pass(
+        device: val vk::Device,
+        pass: val vk::RenderPass,
+        alloc: val *const vk::AllocationCallbacks<'_>,
+    ) -> ()
+}
+
+fn destroy_pass(
+    c: Call<'_, Device, Option<vk::PFN_vkDestroyRenderPass>, impl Fn()>,
+    _device: vk::Device,
+    pass: vk::RenderPass,
+    _alloc: *const vk::AllocationCallbacks<'_>,
+) {
+    let dev = c.dev;
+    dev.attachments.passes.lock().remove(&pass.as_raw());
+    if let Some(inj) = &dev.inject {
+        inj.pass_destroyed(pass);
+    }
+    // SAFETY: the device is live; the application's uses of the pass have ended.
+    unsafe {
+        convert::pass_changed(dev, pass, None);
+        reconstruct::pass_destroyed(dev, pass);
+    }
+    // Where the next layer has it.
+    c.as_given();
+}
+
+hook! {
+    /// `vkCreateFramebuffer`: a rewritten pass's density view becomes its shadow view; an
+    /// imageless framebuffer describes the shadow instead.
+    create_framebuffer = "vkCreateFramebuffer";
+    on device(device), next create_framebuffer, fails(vk::Result::ERROR_INITIALIZATION_FAILED);
+    framebuffer(
+        device: val vk::Device,
+        info: in vk::FramebufferCreateInfo<'_>,
+        alloc: val *const vk::AllocationCallbacks<'_>,
+        out: out vk::Framebuffer,
+    ) -> vk::Result
+}
+
+fn framebuffer(
+    c: Call<'_, Device, vk::PFN_vkCreateFramebuffer, impl Fn() -> vk::Result>,
+    device: vk::Device,
+    info: In<'_, vk::FramebufferCreateInfo<'_>>,
+    alloc: *const vk::AllocationCallbacks<'_>,
+    out: Out<'_, vk::Framebuffer>,
+) -> vk::Result {
+    let (dev, next) = (c.dev, c.next);
+    // SAFETY: the next layer's function, with the application's arguments or a copy of its create
+    // info that lives across the call.
+    let down =
+        |ci: *const vk::FramebufferCreateInfo<'_>| unsafe { next(device, ci, alloc, out.raw()) };
+    let Some(ci) = info.get() else {
+        return down(info.raw());
+    };
+    if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+        let Some(p) = inj.pass(ci.render_pass) else {
+            return down(info.raw());
+        };
+        // SAFETY: the application's arguments; `own` is the device's.
+        return unsafe {
+            injection::create_injected_framebuffer(inj, own, p, next, device, ci, alloc, out.raw())
+        };
+    }
+    let Some(density) = dev.attachments.density_attachment(ci.render_pass) else {
+        return down(info.raw());
+    };
+    if ci.flags.contains(vk::FramebufferCreateFlags::IMAGELESS) {
+        return imageless(dev, info, ci, density, down);
+    }
+    with_shadow_view(dev, ci, density, down, &out)
+}
+
+/// An imageless framebuffer of a rewritten pass: the density attachment's
+/// `VkFramebufferAttachmentImageInfo` describes the shadow (format, usage, flags, layers), on
+/// copies of the struct and its array.
+fn imageless(
+    dev: &Device,
+    info: In<'_, vk::FramebufferCreateInfo<'_>>,
+    ci: &vk::FramebufferCreateInfo<'_>,
+    density: u32,
+    down: impl Fn(*const vk::FramebufferCreateInfo<'_>) -> vk::Result,
+) -> vk::Result {
+    let ty = vk::StructureType::FRAMEBUFFER_ATTACHMENTS_CREATE_INFO;
+    let found = info.find::<vk::FramebufferAttachmentsCreateInfo>();
+    let rest = info.without(|t| t == ty);
+    let (Ok(Some(found)), Ok(rest)) = (found, rest) else {
+        tracing::warn!(
+            "vkCreateFramebuffer: an imageless framebuffer the layer cannot rewrite; passed on as is"
+        );
+        return down(info.raw());
+    };
+    // SAFETY: the command's valid usage: the struct's array of `attachmentImageInfoCount`
+    // infos.
+    let given = unsafe {
+        slice(
+            found.p_attachment_image_infos,
+            found.attachment_image_info_count,
+        )
+    };
+    let mut infos: Vec<vk::FramebufferAttachmentImageInfo<'_>> = given.to_vec();
+    let formats = [SHADOW_FORMAT];
+    let layered = dev.fdm.as_ref().is_some_and(|f| f.layered);
+    if let Some(a) = infos.get_mut(density as usize) {
+        *a = shadow_attachment_info(a, layered, &formats);
+    }
+    let mut attachments = *found;
+    attachments.p_next = rest.head();
+    attachments.attachment_image_info_count = infos.len() as u32;
+    attachments.p_attachment_image_infos = infos.as_ptr();
+    let mut copy = *ci;
+    copy.p_next = &attachments as *const _ as *const c_void;
+    down(&copy)
+}
+
+/// A framebuffer of a rewritten pass with views of its own: the density view goes down as its
+/// shadow view (or, where it has none, the device's full-rate stand-in,
+/// [`crate::vk::own::calls::Own::full_rate_view`]), on a copy of the array; what was made is noted
+/// for the conversion and the reconstruction.
+fn with_shadow_view(
+    dev: &Device,
+    ci: &vk::FramebufferCreateInfo<'_>,
+    density: u32,
+    down: impl Fn(*const vk::FramebufferCreateInfo<'_>) -> vk::Result,
+    out: &Out<'_, vk::Framebuffer>,
+) -> vk::Result {
+    // SAFETY: the command's valid usage: `attachmentCount` views.
+    let mut views = unsafe { slice(ci.p_attachments, ci.attachment_count) }.to_vec();
+    let app_view = views.get(density as usize).copied();
+    if let Some(v) = views.get_mut(density as usize) {
+        let shadow = dev.attachments.shadow_view(*v).or_else(|| {
+            let (own, fdm) = (dev.attachments.own.as_ref()?, dev.fdm.as_ref()?);
+            // SAFETY: the device is live and emulates as `fdm` says.
+            unsafe { own.full_rate_view(fdm, ci.width, ci.height) }
+        });
+        match shadow {
+            Some(s) => *v = s,
+            None => tracing::warn!(
+                view = raw(*v),
+                "vkCreateFramebuffer: the density view has no shadow; passed on as is"
+            ),
+        }
+    }
+    let mut copy = *ci;
+    copy.p_attachments = views.as_ptr();
+    let r = down(&copy);
+    if let (vk::Result::SUCCESS, Some(fb)) = (r, out.read()) {
+        // SAFETY: the framebuffer was just created on the live device from `ci`.
+        unsafe {
+            convert::framebuffer_changed(dev, fb, app_view);
+            reconstruct::framebuffer_created(dev, fb, ci);
+        }
+    }
+    r
+}
+
+hook! {
+    /// `vkDestroyFramebuffer`: forgets what the framebuffer got.
+    destroy_framebuffer = "vkDestroyFramebuffer";
+    on device(device), maybe destroy_framebuffer, fails(());
+    destroy_fb(
+        device: val vk::Device,
+        fb: val vk::Framebuffer,
+        alloc: val *const vk::AllocationCallbacks<'_>,
+    ) -> ()
+}
+
+fn destroy_fb(
+    c: Call<'_, Device, Option<vk::PFN_vkDestroyFramebuffer>, impl Fn()>,
     device: vk::Device,
     fb: vk::Framebuffer,
-    alloc: *const vk::AllocationCallbacks<'_>,
+    _alloc: *const vk::AllocationCallbacks<'_>,
 ) {
-    guard("vkDestroyFramebuffer", (), || {
-        // SAFETY: as the caller promised.
-        let Some(dev) = (unsafe { registry::device(device) }) else {
-            return;
-        };
-        if let Some(inj) = &dev.inject {
-            inj.framebuffer_destroyed(fb);
-        }
-        // SAFETY: the device is live.
-        unsafe { reconstruct::framebuffer_destroyed(&dev, fb) };
-        if let Some(next) = dev.next.destroy_framebuffer {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            unsafe { next(device, fb, alloc) };
-        }
-        // SAFETY: as the caller promised.
-        unsafe { convert::framebuffer_destroyed(device, fb) };
-    })
+    if let Some(inj) = &c.dev.inject {
+        inj.framebuffer_destroyed(fb);
+    }
+    // SAFETY: the device is live; the application's uses of the framebuffer have ended.
+    unsafe { reconstruct::framebuffer_destroyed(c.dev, fb) };
+    // Where the next layer has it.
+    c.as_given();
+    // SAFETY: a device the loader dispatched.
+    unsafe { convert::framebuffer_destroyed(device, fb) };
 }
 
 /// The begin a render pass goes down with: on an injecting device injection's
@@ -553,169 +549,172 @@ unsafe fn begin_pass(
     unsafe { emulation::with_swapped_begin(dev, begin, f) }
 }
 
-/// `vkCmdBeginRenderPass`: see [`begin_pass`].
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_begin_render_pass(
+hook! {
+    /// `vkCmdBeginRenderPass`: see [`begin_pass`].
+    cmd_begin_render_pass = "vkCmdBeginRenderPass";
+    on device_ref(cb), next cmd_begin_render_pass, fails(());
+    begin_render_pass(
+        cb: val vk::CommandBuffer,
+        begin: val *const vk::RenderPassBeginInfo<'_>,
+        contents: val vk::SubpassContents,
+    ) -> ()
+}
+
+fn begin_render_pass(
+    c: Call<'_, Device, vk::PFN_vkCmdBeginRenderPass, impl Fn()>,
     cb: vk::CommandBuffer,
     begin: *const vk::RenderPassBeginInfo<'_>,
     contents: vk::SubpassContents,
 ) {
-    let body = |dev: &Device, next: vk::PFN_vkCmdBeginRenderPass| {
-        // SAFETY: as the caller promised; recorded before the pass begins.
-        unsafe { convert::before_render_pass(dev, cb, begin) };
-        // SAFETY: as the caller promised.
-        unsafe { reconstruct::begin_render_pass(dev, cb, begin) };
-        // SAFETY: the next layer's function, with the caller's arguments or a copy that lives
-        // across the call.
-        unsafe { begin_pass(dev, cb, begin, |b| next(cb, b, contents)) }
-    };
-    // SAFETY: as the caller promised.
+    // SAFETY: the application's begin info, valid as the command requires: the conversion and
+    // the reconstruction's plan are recorded before the pass begins, which goes down through the
+    // next layer's function with that begin info or a copy that lives across the call.
     unsafe {
-        with_next(
-            "vkCmdBeginRenderPass",
-            cb,
-            |d| d.next.cmd_begin_render_pass,
-            body,
-        )
+        convert::before_render_pass(c.dev, cb, begin);
+        reconstruct::begin_render_pass(c.dev, cb, begin);
+        begin_pass(c.dev, cb, begin, |b| (c.next)(cb, b, contents))
     }
 }
 
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn cmd_begin_render_pass2_with(
-    which: &'static str,
-    next: fn(&Device) -> Option<vk::PFN_vkCmdBeginRenderPass2>,
+hook! {
+    /// `vkCmdBeginRenderPass2`: see [`begin_pass`].
+    cmd_begin_render_pass2 = "vkCmdBeginRenderPass2",
+        cmd_begin_render_pass2_khr = "vkCmdBeginRenderPass2KHR";
+    on device_ref(cb), next cmd_begin_render_pass2 / cmd_begin_render_pass2_khr, fails(());
+    begin_render_pass2(
+        cb: val vk::CommandBuffer,
+        begin: val *const vk::RenderPassBeginInfo<'_>,
+        subpass: val *const vk::SubpassBeginInfo<'_>,
+    ) -> ()
+}
+
+fn begin_render_pass2(
+    c: Call<'_, Device, vk::PFN_vkCmdBeginRenderPass2, impl Fn()>,
     cb: vk::CommandBuffer,
     begin: *const vk::RenderPassBeginInfo<'_>,
     subpass: *const vk::SubpassBeginInfo<'_>,
 ) {
-    let body = |dev: &Device, next: vk::PFN_vkCmdBeginRenderPass2| {
-        // SAFETY: as the caller promised; recorded before the pass begins.
-        unsafe { convert::before_render_pass(dev, cb, begin) };
-        // SAFETY: as the caller promised.
-        unsafe { reconstruct::begin_render_pass(dev, cb, begin) };
-        // SAFETY: as in cmd_begin_render_pass.
-        unsafe { begin_pass(dev, cb, begin, |b| next(cb, b, subpass)) }
-    };
-    // SAFETY: as the caller promised.
-    unsafe { with_next(which, cb, next, body) }
+    // SAFETY: as in `begin_render_pass`.
+    unsafe {
+        convert::before_render_pass(c.dev, cb, begin);
+        reconstruct::begin_render_pass(c.dev, cb, begin);
+        begin_pass(c.dev, cb, begin, |b| (c.next)(cb, b, subpass))
+    }
 }
 
-hook_and_khr_alias! {
-    /// `vkCmdBeginRenderPass2`: see [`begin_pass`].
-    cmd_begin_render_pass2, cmd_begin_render_pass2_khr =
-        cmd_begin_render_pass2_with("vkCmdBeginRenderPass2")
-    (
-        cb: vk::CommandBuffer,
-        begin: *const vk::RenderPassBeginInfo<'_>,
-        subpass: *const vk::SubpassBeginInfo<'_>,
+hook! {
+    /// `vkCmdBeginRendering`: the density-map attachment becomes a shading-rate attachment.
+    cmd_begin_rendering = "vkCmdBeginRendering", cmd_begin_rendering_khr = "vkCmdBeginRenderingKHR";
+    on device_ref(cb), next cmd_begin_rendering / cmd_begin_rendering_khr, fails(());
+    begin_rendering(cb: val vk::CommandBuffer, info: in vk::RenderingInfo<'_>) -> ()
+}
+
+fn begin_rendering(
+    c: Call<'_, Device, vk::PFN_vkCmdBeginRendering, impl Fn()>,
+    cb: vk::CommandBuffer,
+    info: In<'_, vk::RenderingInfo<'_>>,
+) {
+    let (dev, next) = (c.dev, c.next);
+    // SAFETY: the application's rendering info, valid as the command requires; recorded before
+    // rendering begins.
+    unsafe { convert::before_rendering(dev, cb, info.raw()) };
+    if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+        // SAFETY: the application's arguments; `own` is the device's.
+        return unsafe { injection::begin_injected(inj, own, next, cb, info.raw()) };
+    }
+    // SAFETY: the next layer's function, with the application's rendering info or a copy that
+    // lives across the call.
+    let down = |i: *const vk::RenderingInfo<'_>| unsafe { next(cb, i) };
+    let ri = match info.get() {
+        Some(ri) if !ri.p_next.is_null() => ri,
+        _ => return down(info.raw()),
+    };
+    let found = info.find::<vk::RenderingFragmentDensityMapAttachmentInfoEXT>();
+    let (Ok(Some(found)), Some(texel)) = (found, texel_of(dev)) else {
+        return down(info.raw());
+    };
+    let view = found.image_view;
+    let shadow = (view != vk::ImageView::null())
+        .then(|| dev.attachments.shadow_view(view))
+        .flatten();
+    if shadow.is_some() {
+        // SAFETY: the application's rendering info.
+        unsafe { reconstruct::begin_rendering(dev, cb, ri, view) };
+    }
+    let attachment = Rate {
+        which: c.name,
+        texel,
+        view,
+        shadow,
+    };
+    with_rate_attachment(info, ri, attachment, down)
+}
+
+/// The shading-rate attachment that stands in for a dynamic rendering's density map.
+struct Rate {
+    which: &'static str,
+    texel: vk::Extent2D,
+    /// The application's density view.
+    view: vk::ImageView,
+    /// Its shadow view; `None` renders at full rate.
+    shadow: Option<vk::ImageView>,
+}
+
+/// Calls `down` with a copy of the rendering info whose chain has the density-map struct replaced
+/// by a shading-rate attachment naming the shadow (left out where there is none). The edited
+/// chain is built in per-thread scratch storage: no heap allocation per command
+/// (docs/ARCHITECTURE.md, "Nothing per frame that can be done at creation").
+fn with_rate_attachment(
+    info: In<'_, vk::RenderingInfo<'_>>,
+    ri: &vk::RenderingInfo<'_>,
+    a: Rate,
+    down: impl Fn(*const vk::RenderingInfo<'_>),
+) {
+    let ty = vk::StructureType::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_INFO_EXT;
+    info.with_removed(
+        |t| t == ty,
+        |rest| {
+            let Ok(rest) = rest else {
+                tracing::warn!(
+                    "{}: a pNext chain the layer cannot copy; passed on as is",
+                    a.which
+                );
+                return down(info.raw());
+            };
+            let mut rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
+                .image_layout(SHADOW_LAYOUT)
+                .shading_rate_attachment_texel_size(a.texel);
+            rate.p_next = rest;
+            let mut copy = *ri;
+            match a.shadow {
+                Some(s) => {
+                    rate.image_view = s;
+                    copy.p_next = &rate as *const _ as *const c_void;
+                }
+                None => {
+                    if a.view != vk::ImageView::null() {
+                        tracing::debug!(
+                            view = raw(a.view),
+                            "{}: the density view has no shadow; rendering at full rate",
+                            a.which
+                        );
+                    }
+                    copy.p_next = rest;
+                }
+            }
+            // The copy and everything it points at live across the call.
+            down(&copy)
+        },
     )
 }
 
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn cmd_begin_rendering_with(
-    which: &'static str,
-    next: fn(&Device) -> Option<vk::PFN_vkCmdBeginRendering>,
-    cb: vk::CommandBuffer,
-    info: *const vk::RenderingInfo<'_>,
-) {
-    let body = |dev: &Device, next: vk::PFN_vkCmdBeginRendering| {
-        // SAFETY: as the caller promised; recorded before rendering begins.
-        unsafe { convert::before_rendering(dev, cb, info) };
-        if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
-            // SAFETY: the caller's arguments; `own` is the device's.
-            return unsafe { injection::begin_injected(inj, own, next, cb, info) };
-        }
-        // SAFETY: the caller's rendering info, read only.
-        let ri = match unsafe { info.as_ref() } {
-            Some(ri) if !ri.p_next.is_null() => ri,
-            // SAFETY: the next layer's function, with the caller's arguments.
-            _ => return unsafe { next(cb, info) },
-        };
-        let ty = vk::StructureType::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_INFO_EXT;
-        // SAFETY: the caller's chain, read only.
-        let found = unsafe {
-            chain::find::<vk::RenderingFragmentDensityMapAttachmentInfoEXT>(ri.p_next, ty)
-        };
-        let (Ok(Some(found)), Some(texel)) = (found, texel_of(dev)) else {
-            // SAFETY: as above.
-            return unsafe { next(cb, info) };
-        };
-        // SAFETY: found by its sType.
-        let view = unsafe { (*found).image_view };
-        let shadow = (view != vk::ImageView::null())
-            .then(|| dev.attachments.shadow_view(view))
-            .flatten();
-        if shadow.is_some() {
-            // SAFETY: the caller's rendering info.
-            unsafe { reconstruct::begin_rendering(dev, cb, ri, view) };
-        }
-        // The edited chain is built in per-thread scratch storage: no heap allocation per
-        // command (docs/ARCHITECTURE.md, "Nothing per frame that can be done at creation").
-        // SAFETY: the caller's chain, read only.
-        unsafe {
-            chain::with_removed(
-                ri.p_next,
-                |t| t == ty,
-                |rest| {
-                    let Ok(rest) = rest else {
-                        tracing::warn!(
-                            "{which}: a pNext chain the layer cannot copy; passed on as is"
-                        );
-                        return next(cb, info);
-                    };
-                    let mut rate = vk::RenderingFragmentShadingRateAttachmentInfoKHR::default()
-                        .image_layout(SHADOW_LAYOUT)
-                        .shading_rate_attachment_texel_size(texel);
-                    rate.p_next = rest;
-                    let mut copy = *ri;
-                    match shadow {
-                        Some(s) => {
-                            rate.image_view = s;
-                            copy.p_next = &rate as *const _ as *const c_void;
-                        }
-                        None => {
-                            if view != vk::ImageView::null() {
-                                tracing::debug!(
-                                    view = raw(view),
-                                    "{which}: the density view has no shadow; rendering at full \
-                                     rate"
-                                );
-                            }
-                            copy.p_next = rest;
-                        }
-                    }
-                    // The copy and everything it points at live across the call.
-                    next(cb, &copy)
-                },
-            )
-        }
-    };
-    // SAFETY: as the caller promised.
-    unsafe { with_next(which, cb, next, body) }
-}
-
-hook_and_khr_alias! {
-    /// `vkCmdBeginRendering`: the density-map attachment becomes a shading-rate attachment.
-    cmd_begin_rendering, cmd_begin_rendering_khr = cmd_begin_rendering_with("vkCmdBeginRendering")
-    (cb: vk::CommandBuffer, info: *const vk::RenderingInfo<'_>)
-}
-
 /// The density-map offsets in an end info's chain (`VkRenderPassFragmentDensityMapOffsetEndInfoEXT`,
-/// the QCOM struct under its EXT name), as a slice of the caller's array: empty where there are
-/// none or the count is zero, which both mean offset (0, 0).
-///
-/// # Safety
-/// `next` must be NULL or a valid chain; the slice must not outlive the caller's call.
-unsafe fn offsets_in<'a>(next: *const c_void) -> &'a [vk::Offset2D] {
-    // SAFETY: as the caller promised.
-    let found = unsafe { chain::find::<offset::EndInfo<'_>>(next, offset::END_INFO) };
-    // SAFETY: found by its sType in a valid chain.
-    match found.ok().flatten().and_then(|p| unsafe { p.as_ref() }) {
-        // SAFETY: the caller's array of `fragment_density_offset_count` offsets.
+/// the QCOM struct under its EXT name), as a slice of the application's array: empty where there
+/// are none or the count is zero, which both mean offset (0, 0).
+fn offsets_in<'a, T: Chained>(end: In<'a, T>) -> &'a [vk::Offset2D] {
+    match end.find::<offset::EndInfo<'a>>().ok().flatten() {
+        // SAFETY: the command's valid usage: the struct's array of
+        // `fragmentDensityOffsetCount` offsets.
         Some(e) => unsafe {
             slice(
                 e.p_fragment_density_offsets,
@@ -726,264 +725,170 @@ unsafe fn offsets_in<'a>(next: *const c_void) -> &'a [vk::Offset2D] {
     }
 }
 
-/// Calls `f` with `next` less the offsets struct, which a driver without offsets must not get.
-/// Where the chain cannot be copied (a struct of a type the layer does not know before the
-/// offsets), `f` gets an empty chain, logged once: the specification lets nothing but the offsets
-/// extend an end info (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkSubpassEndInfo.html>,
+/// Calls `f` with the end info's chain less the offsets struct, which a driver without offsets
+/// must not get. Where the chain cannot be copied (a struct of a type the layer does not know
+/// before the offsets), `f` gets an empty chain, logged once: the specification lets nothing but
+/// the offsets extend an end info
+/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkSubpassEndInfo.html>,
 /// <https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingEndInfoKHR.html>), so
 /// the end itself is kept.
-///
-/// # Safety
-/// `next` must be NULL or a valid chain.
-unsafe fn without_offsets(which: &str, next: *const c_void, f: impl FnOnce(*const c_void)) {
+fn without_offsets<T: Chained>(which: &str, end: In<'_, T>, f: impl FnOnce(*const c_void)) {
     static LOGGED: AtomicBool = AtomicBool::new(false);
-    // SAFETY: as the caller promised.
-    unsafe {
-        chain::with_removed(
-            next,
-            |t| t == offset::END_INFO,
-            |rest| match rest {
-                Ok(rest) => f(rest),
-                Err(e) => {
-                    once(
-                        &LOGGED,
-                        &format!(
-                            "{which}: an end info's pNext chain with a struct the layer does not \
-                             know ({e:?}): it goes down without a chain"
-                        ),
-                    );
-                    f(std::ptr::null())
-                }
-            },
-        )
-    }
-}
-
-/// `vkCmdEndRenderPass2(KHR)`: the offsets of the last subpass's end
-/// ([`convert::ended`]); the end goes down without their struct.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn cmd_end_render_pass2_with(
-    which: &'static str,
-    next: fn(&Device) -> Option<vk::PFN_vkCmdEndRenderPass2>,
-    cb: vk::CommandBuffer,
-    end: *const vk::SubpassEndInfo<'_>,
-) {
-    let body = |_: &Device, down: vk::PFN_vkCmdEndRenderPass2| {
-        // SAFETY: the caller's end info, read only.
-        let Some(e) = (unsafe { end.as_ref() }).filter(|e| !e.p_next.is_null()) else {
-            convert::ended(cb, &[]);
-            // SAFETY: the next layer's function, with the caller's arguments.
-            unsafe { down(cb, end) };
-            reconstruct::ended(cb);
-            return;
-        };
-        // SAFETY: the caller's chain, read only; the offsets live across the call.
-        let offsets = unsafe { offsets_in(e.p_next) };
-        convert::ended(cb, offsets);
-        // SAFETY: as above.
-        unsafe {
-            without_offsets(which, e.p_next, |rest| {
-                let mut copy = *e;
-                copy.p_next = rest;
-                down(cb, &copy)
-            })
-        }
-        reconstruct::ended(cb);
-    };
-    // SAFETY: as the caller promised.
-    unsafe { with_next(which, cb, next, body) }
-}
-
-hook_and_khr_alias! {
-    /// `vkCmdEndRenderPass2`: see [`cmd_end_render_pass2_with`].
-    cmd_end_render_pass2, cmd_end_render_pass2_khr =
-        cmd_end_render_pass2_with("vkCmdEndRenderPass2")
-    (cb: vk::CommandBuffer, end: *const vk::SubpassEndInfo<'_>)
-}
-
-/// `vkCmdEndRenderPass`: the end goes down, then the reconstruction its begin planned
-/// ([`reconstruct::ended`], docs/reconstruction.md).
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_end_render_pass(cb: vk::CommandBuffer) {
-    let body = |_: &Device, down: vk::PFN_vkCmdEndRenderPass| {
-        // SAFETY: the next layer's function, with the caller's arguments.
-        unsafe { down(cb) };
-        reconstruct::ended(cb);
-    };
-    // SAFETY: as the caller promised.
-    unsafe {
-        with_next(
-            "vkCmdEndRenderPass",
-            cb,
-            |d| d.next.cmd_end_render_pass,
-            body,
-        )
-    }
-}
-
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn cmd_end_rendering_with(
-    which: &'static str,
-    next: fn(&Device) -> Option<vk::PFN_vkCmdEndRendering>,
-    cb: vk::CommandBuffer,
-) {
-    let body = |_: &Device, down: vk::PFN_vkCmdEndRendering| {
-        // SAFETY: the next layer's function, with the caller's arguments.
-        unsafe { down(cb) };
-        reconstruct::ended(cb);
-    };
-    // SAFETY: as the caller promised.
-    unsafe { with_next(which, cb, next, body) }
-}
-
-hook_and_khr_alias! {
-    /// `vkCmdEndRendering`: as [`cmd_end_render_pass`]; a suspending end reconstructs nothing,
-    /// the end after the instance's last resumption does.
-    cmd_end_rendering, cmd_end_rendering_khr = cmd_end_rendering_with("vkCmdEndRendering")
-    (cb: vk::CommandBuffer)
-}
-
-/// `vkCmdNextSubpass2(KHR)`: offsets at the end of a subpass other than the last are ignored
-/// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderPassFragmentDensityMapOffsetEndInfoEXT.html>);
-/// their struct is left out all the same.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn cmd_next_subpass2_with(
-    which: &'static str,
-    next: fn(&Device) -> Option<vk::PFN_vkCmdNextSubpass2>,
-    cb: vk::CommandBuffer,
-    begin: *const vk::SubpassBeginInfo<'_>,
-    end: *const vk::SubpassEndInfo<'_>,
-) {
-    let body = |_: &Device, down: vk::PFN_vkCmdNextSubpass2| {
-        // SAFETY: the caller's end info, read only.
-        let Some(e) = (unsafe { end.as_ref() }).filter(|e| !e.p_next.is_null()) else {
-            // SAFETY: the next layer's function, with the caller's arguments.
-            return unsafe { down(cb, begin, end) };
-        };
-        // SAFETY: the caller's chain, read only.
-        unsafe {
-            without_offsets(which, e.p_next, |rest| {
-                let mut copy = *e;
-                copy.p_next = rest;
-                down(cb, begin, &copy)
-            })
-        }
-    };
-    // SAFETY: as the caller promised.
-    unsafe { with_next(which, cb, next, body) }
-}
-
-hook_and_khr_alias! {
-    /// `vkCmdNextSubpass2`: see [`cmd_next_subpass2_with`].
-    cmd_next_subpass2, cmd_next_subpass2_khr = cmd_next_subpass2_with("vkCmdNextSubpass2")
-    (
-        cb: vk::CommandBuffer,
-        begin: *const vk::SubpassBeginInfo<'_>,
-        end: *const vk::SubpassEndInfo<'_>,
+    end.with_removed(
+        |t| t == offset::END_INFO,
+        |rest| match rest {
+            Ok(rest) => f(rest),
+            Err(e) => {
+                once(
+                    &LOGGED,
+                    &format!(
+                        "{which}: an end info's pNext chain with a struct the layer does not                          know ({e:?}): it goes down without a chain"
+                    ),
+                );
+                f(std::ptr::null())
+            }
+        },
     )
 }
 
-/// `vkCmdEndRendering2EXT` and `vkCmdEndRendering2KHR` (`VK_KHR_maintenance10`, where the driver
-/// has it). On an emulating device: the offsets of the end ([`convert::ended`]); the end goes down
-/// as `vkCmdEndRendering2KHR` without their struct where the driver has it, else as the plain
-/// `vkCmdEndRendering`, which the end info's other structs cannot reach (the specification allows
-/// none but the offsets,
-/// <https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingEndInfoKHR.html>).
-/// Elsewhere (the hook handed out by `vkGetInstanceProcAddr` before the device was known) the
-/// command goes down as it is, where the next layer has it.
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-unsafe fn cmd_end_rendering2_with(
-    which: &'static str,
-    own: fn(&Device) -> Option<pfn::PFN_vkCmdEndRendering2KHR>,
+hook! {
+    /// `vkCmdEndRenderPass2`: the offsets of the last subpass's end ([`convert::ended`]); the end
+    /// goes down without their struct.
+    cmd_end_render_pass2 = "vkCmdEndRenderPass2", cmd_end_render_pass2_khr = "vkCmdEndRenderPass2KHR";
+    on device_ref(cb), next cmd_end_render_pass2 / cmd_end_render_pass2_khr, fails(());
+    end_render_pass2(cb: val vk::CommandBuffer, end: in vk::SubpassEndInfo<'_>) -> ()
+}
+
+fn end_render_pass2(
+    c: Call<'_, Device, vk::PFN_vkCmdEndRenderPass2, impl Fn()>,
     cb: vk::CommandBuffer,
-    info: *const offset::RenderingEndInfo,
+    end: In<'_, vk::SubpassEndInfo<'_>>,
 ) {
-    let body = |dev: &Device| {
-        if dev.fdm.is_none() {
-            if let Some(down) = own(dev) {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                unsafe { down(cb, info) };
-                reconstruct::ended(cb);
-            }
-            return;
-        }
-        // SAFETY: the caller's end info, read only.
-        let next = unsafe { info.as_ref() }.map_or(std::ptr::null(), |i| i.p_next);
-        // SAFETY: the caller's chain, read only; the offsets live across the call.
-        convert::ended(cb, unsafe { offsets_in(next) });
-        if let Some(down) = dev.next.cmd_end_rendering2_khr {
-            if next.is_null() {
-                // SAFETY: the next layer's function, with the caller's arguments.
-                unsafe { down(cb, info) };
-            } else {
-                // SAFETY: the caller's chain, read only.
-                unsafe {
-                    without_offsets(which, next, |rest| {
-                        let copy = offset::RenderingEndInfo {
-                            s_type: offset::RENDERING_END_INFO,
-                            p_next: rest,
-                        };
-                        down(cb, &copy)
-                    })
-                };
-            }
-            reconstruct::ended(cb);
-            return;
-        }
-        if let Some(down) = dev.end_rendering {
-            // SAFETY: the next layer's function, on the caller's command buffer.
-            unsafe { down(cb) };
-            reconstruct::ended(cb);
-        }
+    let Some(e) = end.get().filter(|e| !e.p_next.is_null()) else {
+        convert::ended(cb, &[]);
+        c.as_given();
+        reconstruct::ended(cb);
+        return;
     };
-    // SAFETY: as the caller promised.
-    unsafe { on_device(which, cb, body) }
+    convert::ended(cb, offsets_in(end));
+    without_offsets(c.name, end, |rest| {
+        let mut copy = *e;
+        copy.p_next = rest;
+        // SAFETY: the next layer's function; the copy lives across the call.
+        unsafe { (c.next)(cb, &copy) }
+    });
+    reconstruct::ended(cb);
 }
 
-/// `vkCmdEndRendering2EXT`: see [`cmd_end_rendering2_with`].
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_end_rendering2_ext(
+hook! {
+    /// `vkCmdEndRenderPass`: the end goes down, then the reconstruction its begin planned
+    /// ([`reconstruct::ended`], docs/reconstruction.md).
+    cmd_end_render_pass = "vkCmdEndRenderPass";
+    on device_ref(cb), next cmd_end_render_pass, fails(());
+    end_render_pass(cb: val vk::CommandBuffer) -> ()
+}
+
+fn end_render_pass(
+    c: Call<'_, Device, vk::PFN_vkCmdEndRenderPass, impl Fn()>,
     cb: vk::CommandBuffer,
-    info: *const offset::RenderingEndInfo,
 ) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        cmd_end_rendering2_with(
-            "vkCmdEndRendering2EXT",
-            |d| d.next.cmd_end_rendering2_ext,
-            cb,
-            info,
-        )
+    c.as_given();
+    reconstruct::ended(cb);
+}
+
+hook! {
+    /// `vkCmdEndRendering`: as [`cmd_end_render_pass`]; a suspending end reconstructs nothing,
+    /// the end after the instance's last resumption does.
+    cmd_end_rendering = "vkCmdEndRendering", cmd_end_rendering_khr = "vkCmdEndRenderingKHR";
+    on device_ref(cb), next cmd_end_rendering / cmd_end_rendering_khr, fails(());
+    end_rendering(cb: val vk::CommandBuffer) -> ()
+}
+
+fn end_rendering(c: Call<'_, Device, vk::PFN_vkCmdEndRendering, impl Fn()>, cb: vk::CommandBuffer) {
+    c.as_given();
+    reconstruct::ended(cb);
+}
+
+hook! {
+    /// `vkCmdNextSubpass2`: offsets at the end of a subpass other than the last are ignored
+    /// (<https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderPassFragmentDensityMapOffsetEndInfoEXT.html>);
+    /// their struct is left out all the same.
+    cmd_next_subpass2 = "vkCmdNextSubpass2", cmd_next_subpass2_khr = "vkCmdNextSubpass2KHR";
+    on device_ref(cb), next cmd_next_subpass2 / cmd_next_subpass2_khr, fails(());
+    next_subpass2(
+        cb: val vk::CommandBuffer,
+        begin: val *const vk::SubpassBeginInfo<'_>,
+        end: in vk::SubpassEndInfo<'_>,
+    ) -> ()
+}
+
+fn next_subpass2(
+    c: Call<'_, Device, vk::PFN_vkCmdNextSubpass2, impl Fn()>,
+    cb: vk::CommandBuffer,
+    begin: *const vk::SubpassBeginInfo<'_>,
+    end: In<'_, vk::SubpassEndInfo<'_>>,
+) {
+    let Some(e) = end.get().filter(|e| !e.p_next.is_null()) else {
+        return c.as_given();
+    };
+    without_offsets(c.name, end, |rest| {
+        let mut copy = *e;
+        copy.p_next = rest;
+        // SAFETY: the next layer's function; the copy lives across the call.
+        unsafe { (c.next)(cb, begin, &copy) }
+    })
+}
+
+hook! {
+    /// `vkCmdEndRendering2EXT` and `vkCmdEndRendering2KHR` (`VK_KHR_maintenance10`, where the
+    /// driver has it). On an emulating device: the offsets of the end ([`convert::ended`]); the
+    /// end goes down as `vkCmdEndRendering2KHR` without their struct where the driver has it, else
+    /// as the plain `vkCmdEndRendering`, which the end info's other structs cannot reach (the
+    /// specification allows none but the offsets,
+    /// <https://registry.khronos.org/vulkan/specs/latest/man/html/VkRenderingEndInfoKHR.html>).
+    /// Elsewhere (the hook handed out by `vkGetInstanceProcAddr` before the device was known) the
+    /// command goes down as it is, where the next layer has it.
+    cmd_end_rendering2_ext = "vkCmdEndRendering2EXT",
+        cmd_end_rendering2_khr = "vkCmdEndRendering2KHR";
+    on device_ref(cb), maybe cmd_end_rendering2_ext / cmd_end_rendering2_khr, fails(());
+    end_rendering2(cb: val vk::CommandBuffer, info: in offset::RenderingEndInfo) -> ()
+}
+
+fn end_rendering2(
+    c: Call<'_, Device, Option<pfn::PFN_vkCmdEndRendering2KHR>, impl Fn()>,
+    cb: vk::CommandBuffer,
+    info: In<'_, offset::RenderingEndInfo>,
+) {
+    let dev = c.dev;
+    if dev.fdm.is_none() {
+        if c.next.is_some() {
+            c.as_given();
+            reconstruct::ended(cb);
+        }
+        return;
     }
-}
-
-/// `vkCmdEndRendering2KHR`: see [`cmd_end_rendering2_with`].
-///
-/// # Safety
-/// The caller's arguments, valid as the command requires.
-pub unsafe extern "system" fn cmd_end_rendering2_khr(
-    cb: vk::CommandBuffer,
-    info: *const offset::RenderingEndInfo,
-) {
-    // SAFETY: the caller's arguments.
-    unsafe {
-        cmd_end_rendering2_with(
-            "vkCmdEndRendering2KHR",
-            |d| d.next.cmd_end_rendering2_khr,
-            cb,
-            info,
-        )
+    convert::ended(cb, offsets_in(info));
+    if let Some(down) = dev.next.cmd_end_rendering2_khr {
+        if info.get().is_none_or(|i| i.p_next.is_null()) {
+            // SAFETY: the next layer's function, with the application's arguments.
+            unsafe { down(cb, info.raw()) };
+        } else {
+            without_offsets(c.name, info, |rest| {
+                let copy = offset::RenderingEndInfo {
+                    s_type: offset::RENDERING_END_INFO,
+                    p_next: rest,
+                };
+                // SAFETY: the next layer's function; the copy lives across the call.
+                unsafe { down(cb, &copy) }
+            });
+        }
+        reconstruct::ended(cb);
+        return;
+    }
+    if let Some(down) = dev.end_rendering {
+        // SAFETY: the next layer's function, on the application's command buffer.
+        unsafe { down(cb) };
+        reconstruct::ended(cb);
     }
 }
 
@@ -997,8 +902,10 @@ mod tests {
     use super::*;
     use crate::bridge::inject;
     use crate::common::lock::{shared_taken, Mutex, Rank};
+    use crate::vk::base::chain;
     use crate::vk::own::calls::{Clears, Own};
     use crate::vk::own::injector::{InjectedFramebuffer, InjectedPass, Injector};
+    use crate::vk::registry;
     use fovea_model::inject::Views;
 
     thread_local! {

@@ -31,7 +31,7 @@ hook! {
 }
 
 fn enumerate_extensions(
-    c: Call<'_, Instance, vk::PFN_vkEnumerateDeviceExtensionProperties>,
+    c: Call<'_, Instance, vk::PFN_vkEnumerateDeviceExtensionProperties, impl Fn() -> vk::Result>,
     physical: vk::PhysicalDevice,
     layer: *const c_char,
     count: *mut u32,
@@ -44,8 +44,7 @@ fn enumerate_extensions(
     let list = match ours_asked {
         Some(true) => ours(inst, physical),
         Some(false) => {
-            // SAFETY: the next layer's function, with the application's arguments.
-            return unsafe { (c.next)(physical, layer, count, out) };
+            return c.as_given();
         }
         None if emulated(inst, physical).is_none() => {
             // SAFETY: as above.
@@ -124,12 +123,11 @@ hook! {
 }
 
 fn features2(
-    c: Call<'_, Instance, vk::PFN_vkGetPhysicalDeviceFeatures2>,
+    c: Call<'_, Instance, vk::PFN_vkGetPhysicalDeviceFeatures2, impl Fn()>,
     physical: vk::PhysicalDevice,
     out: Out<'_, vk::PhysicalDeviceFeatures2<'_>>,
 ) {
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe { (c.next)(physical, out.raw()) };
+    c.as_given();
     if emulated(c.dev, physical).is_none() {
         return;
     }
@@ -155,12 +153,11 @@ hook! {
 }
 
 fn properties2(
-    c: Call<'_, Instance, vk::PFN_vkGetPhysicalDeviceProperties2>,
+    c: Call<'_, Instance, vk::PFN_vkGetPhysicalDeviceProperties2, impl Fn()>,
     physical: vk::PhysicalDevice,
     out: Out<'_, vk::PhysicalDeviceProperties2<'_>>,
 ) {
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe { (c.next)(physical, out.raw()) };
+    c.as_given();
     let (Some(fdm), Some(props)) = (emulated(c.dev, physical), out.into_mut()) else {
         return;
     };
@@ -204,13 +201,12 @@ hook! {
 }
 
 fn format_properties(
-    c: Call<'_, Instance, vk::PFN_vkGetPhysicalDeviceFormatProperties>,
+    c: Call<'_, Instance, vk::PFN_vkGetPhysicalDeviceFormatProperties, impl Fn()>,
     physical: vk::PhysicalDevice,
     format: vk::Format,
     out: Out<'_, vk::FormatProperties>,
 ) {
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe { (c.next)(physical, format, out.raw()) };
+    c.as_given();
     if format != FDM_FORMAT || emulated(c.dev, physical).is_none() {
         return;
     }
@@ -233,13 +229,12 @@ hook! {
 }
 
 fn format_properties2(
-    c: Call<'_, Instance, vk::PFN_vkGetPhysicalDeviceFormatProperties2>,
+    c: Call<'_, Instance, vk::PFN_vkGetPhysicalDeviceFormatProperties2, impl Fn()>,
     physical: vk::PhysicalDevice,
     format: vk::Format,
     out: Out<'_, vk::FormatProperties2<'_>>,
 ) {
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe { (c.next)(physical, format, out.raw()) };
+    c.as_given();
     if format != FDM_FORMAT || emulated(c.dev, physical).is_none() {
         return;
     }
@@ -278,7 +273,12 @@ hook! {
 
 #[allow(clippy::too_many_arguments)]
 fn image_format_properties(
-    c: Call<'_, Instance, vk::PFN_vkGetPhysicalDeviceImageFormatProperties>,
+    c: Call<
+        '_,
+        Instance,
+        vk::PFN_vkGetPhysicalDeviceImageFormatProperties,
+        impl Fn() -> vk::Result,
+    >,
     physical: vk::PhysicalDevice,
     format: vk::Format,
     ty: vk::ImageType,
@@ -314,7 +314,12 @@ hook! {
 }
 
 fn image_format_properties2(
-    c: Call<'_, Instance, vk::PFN_vkGetPhysicalDeviceImageFormatProperties2>,
+    c: Call<
+        '_,
+        Instance,
+        vk::PFN_vkGetPhysicalDeviceImageFormatProperties2,
+        impl Fn() -> vk::Result,
+    >,
     physical: vk::PhysicalDevice,
     info: In<'_, vk::PhysicalDeviceImageFormatInfo2<'_>>,
     out: *mut vk::ImageFormatProperties2<'_>,

@@ -107,7 +107,7 @@ unsafe fn rewritten(
 }
 
 fn create_pipelines(
-    c: Call<'_, Device, vk::PFN_vkCreateGraphicsPipelines>,
+    c: Call<'_, Device, vk::PFN_vkCreateGraphicsPipelines, impl Fn() -> vk::Result>,
     device: vk::Device,
     cache: vk::PipelineCache,
     count: u32,
@@ -119,8 +119,7 @@ fn create_pipelines(
     let list = infos.slice();
     let facts = facts_of(dev, list);
     if (dev.fdm.is_none() && dev.inject.is_none()) || !facts.iter().any(Facts::rewrite) {
-        // SAFETY: the next layer's function, with the application's arguments.
-        return unsafe { next(device, cache, count, infos.raw(), alloc, out) };
+        return c.as_given();
     }
     let mut copies = Vec::with_capacity(list.len());
     let mut owned = Vec::with_capacity(list.len());
@@ -159,7 +158,7 @@ hook! {
 }
 
 fn set_rate(
-    c: Call<'_, Device, vk::PFN_vkCmdSetFragmentShadingRateKHR>,
+    c: Call<'_, Device, vk::PFN_vkCmdSetFragmentShadingRateKHR, impl Fn()>,
     cb: vk::CommandBuffer,
     size: In<'_, vk::Extent2D>,
     ops: In<'_, [CombinerOp; 2]>,
@@ -174,8 +173,7 @@ fn set_rate(
     match retuned {
         // SAFETY: the next layer's function; the copy of the combiners lives across the call.
         Some(copy) => unsafe { (c.next)(cb, size.raw(), &copy) },
-        // SAFETY: the next layer's function, with the application's arguments.
-        None => unsafe { (c.next)(cb, size.raw(), ops.raw()) },
+        None => c.as_given(),
     }
 }
 
@@ -194,7 +192,7 @@ hook! {
 }
 
 fn create_shaders(
-    c: Call<'_, Device, vk::PFN_vkCreateShadersEXT>,
+    c: Call<'_, Device, vk::PFN_vkCreateShadersEXT, impl Fn() -> vk::Result>,
     device: vk::Device,
     count: u32,
     infos: Arr<'_, vk::ShaderCreateInfoEXT<'_>>,
@@ -203,8 +201,7 @@ fn create_shaders(
 ) -> vk::Result {
     let list = infos.slice();
     if c.dev.fdm.is_none() || !list.iter().any(|ci| ci.flags.contains(SHADER_FDM)) {
-        // SAFETY: the next layer's function, with the application's arguments.
-        return unsafe { (c.next)(device, count, infos.raw(), alloc, out) };
+        return c.as_given();
     }
     let copies: Vec<vk::ShaderCreateInfoEXT<'_>> = list
         .iter()
@@ -234,11 +231,11 @@ hook! {
 }
 
 fn create_module(
-    c: Call<'_, Device, vk::PFN_vkCreateShaderModule>,
-    device: vk::Device,
+    c: Call<'_, Device, vk::PFN_vkCreateShaderModule, impl Fn() -> vk::Result>,
+    _device: vk::Device,
     info: In<'_, vk::ShaderModuleCreateInfo<'_>>,
-    alloc: *const vk::AllocationCallbacks<'_>,
-    out: *mut vk::ShaderModule,
+    _alloc: *const vk::AllocationCallbacks<'_>,
+    _out: *mut vk::ShaderModule,
 ) -> vk::Result {
     if let (Some(_), Some(ci)) = (&c.dev.fdm, info.get()) {
         // SAFETY: the command's valid usage: `pCode` holds `codeSize` bytes of 4-byte-aligned
@@ -253,8 +250,7 @@ fn create_module(
             );
         }
     }
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe { (c.next)(device, info.raw(), alloc, out) }
+    c.as_given()
 }
 
 static SUBSAMPLED_SAID: AtomicBool = AtomicBool::new(false);
@@ -272,7 +268,7 @@ hook! {
 }
 
 fn sampler(
-    c: Call<'_, Device, vk::PFN_vkCreateSampler>,
+    c: Call<'_, Device, vk::PFN_vkCreateSampler, impl Fn() -> vk::Result>,
     device: vk::Device,
     info: In<'_, vk::SamplerCreateInfo<'_>>,
     alloc: *const vk::AllocationCallbacks<'_>,
@@ -280,8 +276,7 @@ fn sampler(
 ) -> vk::Result {
     let subsampled = info.get().filter(|i| i.flags.intersects(SUBSAMPLED));
     let (Some(ci), Some(_)) = (subsampled, &c.dev.fdm) else {
-        // SAFETY: the next layer's function, with the application's arguments.
-        return unsafe { (c.next)(device, info.raw(), alloc, out) };
+        return c.as_given();
     };
     once(
         &SUBSAMPLED_SAID,

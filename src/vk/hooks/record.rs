@@ -30,13 +30,12 @@ hook! {
 }
 
 fn allocate(
-    c: Call<'_, Device, vk::PFN_vkAllocateCommandBuffers>,
+    c: Call<'_, Device, vk::PFN_vkAllocateCommandBuffers, impl Fn() -> vk::Result>,
     device: vk::Device,
     info: In<'_, vk::CommandBufferAllocateInfo<'_>>,
     out: *mut vk::CommandBuffer,
 ) -> vk::Result {
-    // SAFETY: the next layer's function, with the application's arguments.
-    let r = unsafe { (c.next)(device, info.raw(), out) };
+    let r = c.as_given();
     // SAFETY: a device the loader dispatched.
     let (Some(k), Some(i)) = (unsafe { key(device) }, info.get()) else {
         return r;
@@ -95,7 +94,7 @@ hook! {
 }
 
 fn begin(
-    c: Call<'_, Device, vk::PFN_vkBeginCommandBuffer>,
+    c: Call<'_, Device, vk::PFN_vkBeginCommandBuffer, impl Fn() -> vk::Result>,
     cb: vk::CommandBuffer,
     info: In<'_, vk::CommandBufferBeginInfo<'_>>,
 ) -> vk::Result {
@@ -122,8 +121,7 @@ fn begin(
         let device = unsafe { key(cb) }.unwrap_or(0);
         remember_command_buffer(cb, device, 0, false);
     }
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe { (c.next)(cb, info.raw()) }
+    c.as_given()
 }
 
 hook! {
@@ -181,7 +179,7 @@ hook! {
 }
 
 fn begin_conditional(
-    c: Call<'_, Device, vk::PFN_vkCmdBeginConditionalRenderingEXT>,
+    c: Call<'_, Device, vk::PFN_vkCmdBeginConditionalRenderingEXT, impl Fn()>,
     cb: vk::CommandBuffer,
     info: In<'_, vk::ConditionalRenderingBeginInfoEXT<'_>>,
 ) {
@@ -189,8 +187,7 @@ fn begin_conditional(
         let condition = (i.buffer, i.offset, i.flags);
         with_record(cb, |b| b.conditional = Some(condition));
     }
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe { (c.next)(cb, info.raw()) }
+    c.as_given()
 }
 
 hook! {
@@ -201,12 +198,11 @@ hook! {
 }
 
 fn end_conditional(
-    c: Call<'_, Device, vk::PFN_vkCmdEndConditionalRenderingEXT>,
+    c: Call<'_, Device, vk::PFN_vkCmdEndConditionalRenderingEXT, impl Fn()>,
     cb: vk::CommandBuffer,
 ) {
     with_record(cb, |b| b.conditional = None);
-    // SAFETY: the next layer's function, with the application's command buffer.
-    unsafe { (c.next)(cb) }
+    c.as_given()
 }
 
 hook! {
@@ -221,7 +217,7 @@ hook! {
 }
 
 fn bind_pipeline(
-    c: Call<'_, Device, vk::PFN_vkCmdBindPipeline>,
+    c: Call<'_, Device, vk::PFN_vkCmdBindPipeline, impl Fn()>,
     cb: vk::CommandBuffer,
     point: vk::PipelineBindPoint,
     pipeline: vk::Pipeline,
@@ -229,8 +225,7 @@ fn bind_pipeline(
     if point == vk::PipelineBindPoint::COMPUTE {
         with_record(cb, |b| b.pipeline = pipeline);
     }
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe { (c.next)(cb, point, pipeline) }
+    c.as_given()
 }
 
 hook! {
@@ -251,14 +246,14 @@ hook! {
 
 #[allow(clippy::too_many_arguments)]
 fn bind_sets(
-    c: Call<'_, Device, vk::PFN_vkCmdBindDescriptorSets>,
+    c: Call<'_, Device, vk::PFN_vkCmdBindDescriptorSets, impl Fn()>,
     cb: vk::CommandBuffer,
     point: vk::PipelineBindPoint,
     layout: vk::PipelineLayout,
     first: u32,
-    set_count: u32,
+    _set_count: u32,
     sets: Arr<'_, vk::DescriptorSet>,
-    dynamic_count: u32,
+    _dynamic_count: u32,
     dynamic: Arr<'_, u32>,
 ) {
     if point == vk::PipelineBindPoint::COMPUTE && !sets.raw().is_null() {
@@ -275,19 +270,7 @@ fn bind_sets(
             }
         });
     }
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe {
-        (c.next)(
-            cb,
-            point,
-            layout,
-            first,
-            set_count,
-            sets.raw(),
-            dynamic_count,
-            dynamic.raw(),
-        )
-    }
+    c.as_given()
 }
 
 hook! {
@@ -306,7 +289,7 @@ hook! {
 }
 
 fn push_constants(
-    c: Call<'_, Device, vk::PFN_vkCmdPushConstants>,
+    c: Call<'_, Device, vk::PFN_vkCmdPushConstants, impl Fn()>,
     cb: vk::CommandBuffer,
     layout: vk::PipelineLayout,
     stages: vk::ShaderStageFlags,
@@ -324,17 +307,7 @@ fn push_constants(
         };
         with_record(cb, |b| b.push(range, values.slice()));
     }
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe {
-        (c.next)(
-            cb,
-            layout,
-            stages,
-            offset,
-            size,
-            values.raw().cast::<c_void>(),
-        )
-    }
+    c.as_given()
 }
 
 hook! {
@@ -353,19 +326,18 @@ hook! {
 }
 
 fn push_descriptor_set(
-    c: Call<'_, Device, vk::PFN_vkCmdPushDescriptorSetKHR>,
+    c: Call<'_, Device, vk::PFN_vkCmdPushDescriptorSetKHR, impl Fn()>,
     cb: vk::CommandBuffer,
     point: vk::PipelineBindPoint,
-    layout: vk::PipelineLayout,
-    set: u32,
-    count: u32,
-    writes: *const vk::WriteDescriptorSet<'_>,
+    _layout: vk::PipelineLayout,
+    _set: u32,
+    _count: u32,
+    _writes: *const vk::WriteDescriptorSet<'_>,
 ) {
     if point == vk::PipelineBindPoint::COMPUTE {
         with_record(cb, |b| b.lost = true);
     }
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe { (c.next)(cb, point, layout, set, count, writes) }
+    c.as_given()
 }
 
 hook! {
@@ -383,14 +355,13 @@ hook! {
 }
 
 fn push_with_template(
-    c: Call<'_, Device, vk::PFN_vkCmdPushDescriptorSetWithTemplateKHR>,
+    c: Call<'_, Device, vk::PFN_vkCmdPushDescriptorSetWithTemplateKHR, impl Fn()>,
     cb: vk::CommandBuffer,
-    template: vk::DescriptorUpdateTemplate,
-    layout: vk::PipelineLayout,
-    set: u32,
-    data: *const c_void,
+    _template: vk::DescriptorUpdateTemplate,
+    _layout: vk::PipelineLayout,
+    _set: u32,
+    _data: *const c_void,
 ) {
     with_record(cb, |b| b.lost = true);
-    // SAFETY: the next layer's function, with the application's arguments.
-    unsafe { (c.next)(cb, template, layout, set, data) }
+    c.as_given()
 }

@@ -74,7 +74,7 @@ hook! {
 }
 
 fn submit(
-    c: Call<'_, Device, vk::PFN_vkQueueSubmit>,
+    c: Call<'_, Device, vk::PFN_vkQueueSubmit, impl Fn() -> vk::Result>,
     queue: vk::Queue,
     count: u32,
     submits: Arr<'_, vk::SubmitInfo<'_>>,
@@ -166,7 +166,7 @@ fn waits_and_signals<'a>(s: &vk::SubmitInfo2<'a>) -> [&'a [vk::SemaphoreSubmitIn
 }
 
 fn submit2(
-    c: Call<'_, Device, vk::PFN_vkQueueSubmit2>,
+    c: Call<'_, Device, vk::PFN_vkQueueSubmit2, impl Fn() -> vk::Result>,
     queue: vk::Queue,
     count: u32,
     submits: Arr<'_, vk::SubmitInfo2<'_>>,
