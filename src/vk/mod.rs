@@ -17,7 +17,7 @@
 //! | 9 | `mod.rs` | this table and the module declarations |
 //! | 8 | `loader.rs` | the loader interface: negotiation, `vkGetInstanceProcAddr`, `vkGetDeviceProcAddr` |
 //! | 7 | `dispatch.rs` | the hook tables, expanded from the one command list |
-//! | 6 | `hooks/` (`mod.rs`, `instance.rs`, `physical.rs`, `device.rs`, `image.rs`, `pass.rs`, `pipeline.rs`, `barrier.rs`, `record.rs`, `submit.rs`) | the `extern "system"` bodies, one file per kind of object: look the device up, call each mode in turn, call down; create and destroy of a thing side by side |
+//! | 6 | `hooks/` (`mod.rs`, `instance.rs`, `physical.rs`, `device.rs`, `image.rs`, `pass.rs`, `pipeline.rs`, `barrier.rs`, `record.rs`, `submit.rs`) | the hooks, one file per kind of object, each declared once with the chassis (`hook!` in `hooks/mod.rs`: guard, look-up, next pick, failure value, typed arguments) beside its plain Rust body: call each mode in turn, call down; create and destroy of a thing side by side |
 //! | 5 | `decide.rs` | the mode per physical device: native, emulate or pass through |
 //! | 5 | `emulation.rs` | emulation's shadows made and destroyed with density maps, and the render pass begins that name them |
 //! | 5 | `convert.rs` | density maps the application writes, converted at pass begin |
@@ -26,7 +26,7 @@
 //! | 4 | `registry.rs` | per-instance and per-device records, the lock-free device table, and every per-handle index (command pools' queue families, each device's own calls and converter, command buffers' records) |
 //! | 3 | `own/` (`mod.rs`, `calls.rs`, `shadows.rs`, `converter.rs`, `convert_shader.rs`, `bindings.rs`, `injector.rs`, `order.rs`, `recon_shader.rs`, `reconstructor.rs`), `shaders/` | the layer's own device objects: its calls on a device with the clears and uploads ahead of the application's submits (ordered against its other graphics queues by `order.rs`), shadows and their views, the GPU converter with its shader and the compute bindings it gives back, injection's maps and tracking, the reconstruction of coarse blocks with its shader |
 //! | 2 | `translate/` (`mod.rs`, `render_pass.rs`, `render_pass_v1.rs`, `sync.rs`, `rate_state.rs`, `formats.rs`) | pure struct translation, no device calls: render passes v1 → v2 and without the density map, sync stages, accesses and layouts, pipelines' rate state, formats |
-//! | 1 | `base/` (`mod.rs`, `ffi.rs`, `chain.rs`, `structs.rs`, `link.rs`, `commands.rs`, `next.rs`) | the FFI edge (guard, names, slices, two-call, handle keys), `pNext` chains and the size of every struct a device create info may chain, the loader's link structs, the one command list, the next-layer tables |
+//! | 1 | `base/` (`mod.rs`, `ffi.rs`, `chain.rs`, `structs.rs`, `link.rs`, `commands.rs`, `next.rs`) | the FFI edge (guard, names, slices, typed views of the application's pointers and what a hook body gets, two-call, handle keys), `pNext` chains (read through the typed views too) and the size of every struct a device create info may chain, the loader's link structs, the one command list, the next-layer tables |
 //!
 //! Inside a folder: `base/chain.rs` uses `base/link.rs` and `base/structs.rs`, `base/next.rs` uses
 //! `base/commands.rs` and `base/ffi.rs`; `own/calls.rs` uses `own/shadows.rs` and `own/order.rs`, `own/converter.rs` uses

@@ -8,7 +8,10 @@
 //! listed here is never intercepted: `vkGetDeviceProcAddr` hands out the next layer's own pointer
 //! for it (<https://github.com/KhronosGroup/Vulkan-Loader/blob/main/docs/LoaderLayerInterface.md>,
 //! "Layer Conventions and Rules"). The hooks are named by the module they live in under
-//! `crate::vk::hooks`; only the hook tables, where they are expanded, resolve those names.
+//! `crate::vk::hooks`, where each is declared with the chassis (`hook!`: how its record is found,
+//! which field of the next-layer table it goes down through, what it returns where the layer
+//! cannot act; docs/ARCHITECTURE.md#how-a-hook-is-declared); only the hook tables, where they are
+//! expanded, resolve those names.
 
 /// When a device command's hook is handed out by `vkGetDeviceProcAddr`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -252,9 +252,7 @@ fn to_translate1<'a>(
     buffers: Arr<'a, vk::BufferMemoryBarrier<'a>>,
     images: Arr<'a, vk::ImageMemoryBarrier<'a>>,
 ) -> Option<Barriers1<'a>> {
-    if dev.fdm.is_none() {
-        return None;
-    }
+    dev.fdm.as_ref()?;
     let (m, b, i) = (memory.slice(), buffers.slice(), images.slice());
     // SAFETY: the application's barriers, valid as the command requires.
     unsafe { needs1(src, dst, m, b, i) }.then_some((m, b, i))

@@ -641,16 +641,7 @@ fn create(
     };
     // SAFETY: `physical` belongs to `inst`, which the loader dispatched it through.
     let plan = unsafe { plan(&inst, physical, info) };
-    let app_offsets = enables_offsets(info);
-    let made = Made {
-        inject: matches!(plan, Plan::Inject(..)),
-        timelines: matches!(
-            &plan,
-            Plan::Emulate(_, r) | Plan::Inject(_, r, _) if r.timeline.is_some()
-        ),
-        app_offsets,
-        untouched: matches!(plan, Plan::Untouched(_)),
-    };
+    let made = Made::of(&plan, enables_offsets(info));
     let down = Down {
         create,
         physical,
@@ -734,6 +725,21 @@ struct Made {
     timelines: bool,
     app_offsets: bool,
     untouched: bool,
+}
+
+impl Made {
+    /// What `plan` says of the device; `app_offsets`: whether the application enables offsets.
+    fn of(plan: &Plan, app_offsets: bool) -> Made {
+        Made {
+            inject: matches!(plan, Plan::Inject(..)),
+            timelines: matches!(
+                plan,
+                Plan::Emulate(_, r) | Plan::Inject(_, r, _) if r.timeline.is_some()
+            ),
+            app_offsets,
+            untouched: matches!(plan, Plan::Untouched(_)),
+        }
+    }
 }
 
 /// The call down: the next layer's `vkCreateDevice` and the application's arguments.

@@ -150,10 +150,8 @@ impl Down<'_> {
             unsafe { link.rewind() };
         }
         // SAFETY: the next layer's function, with the application's arguments.
-        (
-            unsafe { (self.create)(self.info.raw(), self.alloc, self.out) },
-            false,
-        )
+        let r = unsafe { (self.create)(self.info.raw(), self.alloc, self.out) };
+        (r, false)
     }
 
     /// The call down with `VK_KHR_get_physical_device_properties2` added to a copy.

@@ -393,10 +393,11 @@ fn framebuffer(
     out: Out<'_, vk::Framebuffer>,
 ) -> vk::Result {
     let (dev, next) = (c.dev, c.next);
-    // SAFETY: the next layer's function, with the application's arguments or a copy of its create
-    // info that lives across the call.
-    let down =
-        |ci: *const vk::FramebufferCreateInfo<'_>| unsafe { next(device, ci, alloc, out.raw()) };
+    let down = |ci: *const vk::FramebufferCreateInfo<'_>| {
+        // SAFETY: the next layer's function, with the application's arguments or a copy of its
+        // create info that lives across the call.
+        unsafe { next(device, ci, alloc, out.raw()) }
+    };
     let Some(ci) = info.get() else {
         return down(info.raw());
     };

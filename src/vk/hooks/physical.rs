@@ -39,8 +39,8 @@ fn enumerate_extensions(
 ) -> vk::Result {
     let inst = c.dev;
     // SAFETY: the command's valid usage: NULL or a NUL-terminated layer name.
-    let ours_asked =
-        unsafe { name(layer) }.map(|n| n.to_bytes() == fovea_abi::VK_LAYER_NAME.as_bytes());
+    let asked = unsafe { name(layer) };
+    let ours_asked = asked.map(|n| n.to_bytes() == fovea_abi::VK_LAYER_NAME.as_bytes());
     let list = match ours_asked {
         Some(true) => ours(inst, physical),
         Some(false) => {

@@ -96,10 +96,11 @@ fn submit(
         }
     };
     let list = submits.slice();
-    // SAFETY: the command's valid usage: each submit's `pWaitDstStageMask` holds
-    // `waitSemaphoreCount` masks.
-    let masks =
-        |s: &vk::SubmitInfo<'_>| unsafe { slice(s.p_wait_dst_stage_mask, s.wait_semaphore_count) };
+    let masks = |s: &vk::SubmitInfo<'_>| {
+        // SAFETY: the command's valid usage: each submit's `pWaitDstStageMask` holds
+        // `waitSemaphoreCount` masks.
+        unsafe { slice(s.p_wait_dst_stage_mask, s.wait_semaphore_count) }
+    };
     if !list.iter().any(|s| masks(s).iter().any(|&m| stage(m) != m)) {
         return down(count, submits.raw());
     }
