@@ -257,14 +257,13 @@ hook! {
 
 fn create_pass2(
     c: Call<'_, Device, vk::PFN_vkCreateRenderPass2, impl Fn() -> vk::Result>,
-    device: vk::Device,
+    _device: vk::Device,
     info: In<'_, vk::RenderPassCreateInfo2<'_>>,
     alloc: *const vk::AllocationCallbacks<'_>,
     out: Out<'_, vk::RenderPass>,
 ) -> vk::Result {
     let (dev, create2, which) = (c.dev, c.next, c.name);
-    // SAFETY: the next layer's function, with the application's arguments.
-    let as_given = || unsafe { create2(device, info.raw(), alloc, out.raw()) };
+    let as_given = || c.as_given();
     let Some(ci) = info.get() else {
         return as_given();
     };
