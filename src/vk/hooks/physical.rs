@@ -43,13 +43,8 @@ fn enumerate_extensions(
     let ours_asked = asked.map(|n| n.to_bytes() == fovea_abi::VK_LAYER_NAME.as_bytes());
     let list = match ours_asked {
         Some(true) => ours(inst, physical),
-        Some(false) => {
-            return c.as_given();
-        }
-        None if emulated(inst, physical).is_none() => {
-            // SAFETY: as above.
-            return unsafe { (c.next)(physical, layer, count, out) };
-        }
+        Some(false) => return c.as_given(),
+        None if emulated(inst, physical).is_none() => return c.as_given(),
         None => {
             // SAFETY: `physical` belongs to `inst`.
             let mut exts = match unsafe { driver_extensions(inst, physical) } {
