@@ -380,6 +380,41 @@ unsafe fn removed_into(
 mod tests {
     use super::*;
 
+    #[test]
+    fn a_typed_input_finds_and_leaves_out_structs_of_its_chain() {
+        use ash::vk::Handle as _;
+        let fdm = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
+            .image_view(vk::ImageView::from_raw(0x77));
+        let mut multiview = vk::MultiviewPerViewAttributesInfoNVX::default();
+        multiview.p_next = &fdm as *const _ as *const c_void;
+        let mut info = vk::RenderingInfo::default();
+        info.p_next = &multiview as *const _ as *const c_void;
+        // SAFETY: a rendering info whose chain lives across the test.
+        let info = unsafe { In::new(&info) };
+        let found = info.find::<vk::RenderingFragmentDensityMapAttachmentInfoEXT>();
+        assert_eq!(
+            found.map(|f| f.map(|f| f.image_view.as_raw())),
+            Ok(Some(0x77))
+        );
+        let ty = vk::StructureType::RENDERING_FRAGMENT_DENSITY_MAP_ATTACHMENT_INFO_EXT;
+        assert!(info.has(ty));
+        let copy = info.without(|t| t == ty).expect("copied");
+        assert_eq!(copy.removed(), 1);
+        // SAFETY: the copy's chain, alive with it.
+        let left = unsafe { find::<u8>(copy.head(), ty) };
+        assert_eq!(left, Ok(None), "the copy has no density-map struct");
+        assert_eq!(
+            multiview.p_next, &fdm as *const _ as *const c_void,
+            "the original is kept"
+        );
+        // SAFETY: NULL.
+        let null = unsafe { In::<vk::RenderingInfo<'_>>::new(std::ptr::null()) };
+        assert!(matches!(
+            null.find::<vk::RenderingFragmentDensityMapAttachmentInfoEXT>(),
+            Ok(None)
+        ));
+    }
+
     fn types(head: *const c_void) -> Vec<vk::StructureType> {
         let mut out = Vec::new();
         let mut node = head as *const vk::BaseInStructure<'static>;

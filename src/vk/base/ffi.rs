@@ -350,6 +350,46 @@ mod tests {
     }
 
     #[test]
+    fn typed_views_read_what_the_application_passed_and_nothing_for_null() {
+        let x = 7u32;
+        // SAFETY: NULL, or a local alive for the test.
+        let (none, some) = unsafe { (In::<u32>::new(std::ptr::null()), In::new(&x)) };
+        assert_eq!((none.get(), some.get()), (None, Some(&7)));
+        let a = [1u32, 2, 3];
+        // SAFETY: NULL, or the local array with at least as many elements.
+        let (null, two) = unsafe {
+            (
+                Arr::<u32>::new(std::ptr::null(), 3),
+                Arr::new(a.as_ptr(), 2),
+            )
+        };
+        assert!(null.slice().is_empty(), "NULL with a count is no array");
+        assert_eq!((two.slice(), two.raw()), (&a[..2], a.as_ptr()));
+        let mut y = 1u32;
+        // SAFETY: a local, borrowed by nothing else while `out` lives.
+        let out = unsafe { Out::new(&mut y) };
+        assert_eq!(out.read(), Some(1));
+        *out.into_mut().expect("not NULL") = 5;
+        assert_eq!(y, 5);
+        // SAFETY: NULL.
+        assert_eq!(
+            unsafe { Out::<u32>::new(std::ptr::null_mut()) }.read(),
+            None
+        );
+        let names = [c"VK_KHR_a".as_ptr(), std::ptr::null(), c"VK_KHR_b".as_ptr()];
+        let ci = vk::DeviceCreateInfo {
+            enabled_extension_count: 3,
+            pp_enabled_extension_names: names.as_ptr(),
+            ..Default::default()
+        };
+        // SAFETY: a create info whose names live across the test.
+        let info = unsafe { In::new(&ci) };
+        assert!(info.enables(c"VK_KHR_b") && !info.enables(c"VK_KHR_c"));
+        assert_eq!(info.names().len(), 3);
+        assert_eq!(info.named().filter(|(_, n)| n.is_none()).count(), 1);
+    }
+
+    #[test]
     fn guard_turns_panics_into_the_failure_value() {
         assert_eq!(guard("t", 1, || panic!("boom")), 1);
         assert_eq!(guard("t", 1, || 2), 2);

@@ -222,6 +222,22 @@ fn submit2(
 mod tests {
     use super::*;
 
+    /// The chassis answers a command on a handle the layer does not know with the failure value
+    /// the hook declares, without a call down (there is no next function to call).
+    #[test]
+    fn an_unknown_queue_gets_the_declared_failure_value() {
+        use ash::vk::Handle as _;
+        // A dispatch key no device has.
+        let word = Box::new(0x5151usize);
+        let queue = vk::Queue::from_raw(&*word as *const usize as u64);
+        // SAFETY: a handle whose first word is a dispatch key; no submits.
+        let r = unsafe { queue_submit(queue, 0, std::ptr::null(), vk::Fence::null()) };
+        assert_eq!(r, vk::Result::ERROR_INITIALIZATION_FAILED);
+        // SAFETY: as above.
+        let r = unsafe { queue_submit2_khr(queue, 0, std::ptr::null(), vk::Fence::null()) };
+        assert_eq!(r, vk::Result::ERROR_INITIALIZATION_FAILED);
+    }
+
     #[test]
     fn semaphore_stages_are_translated_on_a_copy_and_only_where_needed() {
         let plain = [vk::SemaphoreSubmitInfo::default()
