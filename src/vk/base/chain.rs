@@ -385,10 +385,14 @@ mod tests {
         use ash::vk::Handle as _;
         let fdm = vk::RenderingFragmentDensityMapAttachmentInfoEXT::default()
             .image_view(vk::ImageView::from_raw(0x77));
-        let mut multiview = vk::MultiviewPerViewAttributesInfoNVX::default();
-        multiview.p_next = &fdm as *const _ as *const c_void;
-        let mut info = vk::RenderingInfo::default();
-        info.p_next = &multiview as *const _ as *const c_void;
+        let multiview = vk::MultiviewPerViewAttributesInfoNVX {
+            p_next: &fdm as *const _ as *const c_void,
+            ..Default::default()
+        };
+        let info = vk::RenderingInfo {
+            p_next: &multiview as *const _ as *const c_void,
+            ..Default::default()
+        };
         // SAFETY: a rendering info whose chain lives across the test.
         let info = unsafe { In::new(&info) };
         let found = info.find::<vk::RenderingFragmentDensityMapAttachmentInfoEXT>();
