@@ -372,10 +372,8 @@ mod tests {
         *out.into_mut().expect("not NULL") = 5;
         assert_eq!(y, 5);
         // SAFETY: NULL.
-        assert_eq!(
-            unsafe { Out::<u32>::new(std::ptr::null_mut()) }.read(),
-            None
-        );
+        let null = unsafe { Out::<u32>::new(std::ptr::null_mut()) };
+        assert_eq!(null.read(), None);
         let names = [c"VK_KHR_a".as_ptr(), std::ptr::null(), c"VK_KHR_b".as_ptr()];
         let ci = vk::DeviceCreateInfo {
             enabled_extension_count: 3,
