@@ -2040,17 +2040,8 @@ mod tests {
 
     #[test]
     fn shaders_match_their_sources() {
-        let found = std::process::Command::new("glslangValidator")
-            .arg("--version")
-            .output();
-        if found.is_err() {
-            skip("glslangValidator is not installed (glslang-tools)");
-            return;
-        }
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/foveated_vulkan/shaders");
-        let out = std::env::temp_dir().join(format!("fovea-shaders-{}", std::process::id()));
-        std::fs::create_dir_all(&out).unwrap();
-        for (source, define, built) in [
+        for (source, defines, built) in [
             ("fullscreen.vert", &[][..], render::VERTEX),
             ("pattern.frag", &[], render::PATTERN),
             ("pattern.frag", &["-DOVERLAY"], render::OVERLAY),
@@ -2064,25 +2055,8 @@ mod tests {
             ("scene.frag", &[], render::SCENE),
             ("scene.frag", &["-DOVERLAY"], render::SCENE_OVERLAY),
         ] {
-            let spv = out.join("out.spv");
-            let run = std::process::Command::new("glslangValidator")
-                .args(["-V", "--target-env", "vulkan1.1", "-o"])
-                .arg(&spv)
-                .args(define)
-                .arg(dir.join(source))
-                .output()
-                .unwrap();
-            assert!(
-                run.status.success(),
-                "{source} {define:?} does not compile: {}",
-                String::from_utf8_lossy(&run.stdout)
-            );
-            assert!(
-                std::fs::read(&spv).unwrap() == built,
-                "{source} {define:?}: the checked-in SPIR-V is stale; run shaders/build.sh"
-            );
+            fovea_harness::assert_spirv_built_from(&dir.join(source), defines, built);
         }
-        std::fs::remove_dir_all(&out).ok();
     }
 
     #[test]
