@@ -15,9 +15,10 @@
 //! `vkCmdWaitEvents(done)` with the host as source, and copies back. At submit a thread of the
 //! double waits for each `ready` in execution order, computes from the attachment's snapshot
 //! (copied in front of the pass, [`super::snapshot`]) the finest fragment size any draw of the
-//! pass got per texel, replicates each block's top-left pixel over the block in the buffer, and
-//! sets `done` (the host may signal an event a command buffer waits on after the submit, outside
-//! a render pass: "vkCmdWaitEvents", VUID-vkCmdWaitEvents-pEvents-01163,
+//! pass got per texel, gives each block the value its fragment's shader computes at the
+//! fragment's centre ([`super::centre`]) in the buffer, and sets `done` (the host may signal an
+//! event a command buffer waits on after the submit, outside a render pass: "vkCmdWaitEvents",
+//! VUID-vkCmdWaitEvents-pEvents-01163,
 //! <https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdWaitEvents.html>). Lavapipe
 //! executes a command buffer's commands in order on the CPU, so the copy back runs after the host
 //! finished.
@@ -30,6 +31,7 @@ use std::time::{Duration, Instant};
 use ash::vk::{self, Handle as _};
 use serde_json::json;
 
+use super::centre::{self, Codec};
 use super::{
     full_barrier, host_buffer, lock, pixel_bytes, subresource, view_rates, Codes, ColourTarget,
     DeviceData, PassRec, Snapshot,
@@ -407,7 +409,7 @@ unsafe fn coarsen_job(d: &DeviceData, j: &Job, rates: &[[u32; 2]]) {
         if !codes.iter().any(|&c| c != 0) {
             continue;
         }
-        let Some(bpp) = pixel_bytes(target.format) else {
+        let Some(codec) = Codec::of(target.format) else {
             continue;
         };
         // SAFETY: the double's own host-visible memory, not in use by the device now.
@@ -418,14 +420,14 @@ unsafe fn coarsen_job(d: &DeviceData, j: &Job, rates: &[[u32; 2]]) {
             {
                 Ok(p) => {
                     let pixels = std::slice::from_raw_parts_mut(p as *mut u8, b.size as usize);
-                    replicate(
+                    coarsen(
                         target.extent,
                         j.pass.area,
                         texel,
                         columns,
                         &codes,
                         pixels,
-                        bpp as usize,
+                        codec,
                     );
                     d.fns.unmap_memory(b.memory);
                 }
@@ -443,18 +445,20 @@ unsafe fn coarsen_job(d: &DeviceData, j: &Job, rates: &[[u32; 2]]) {
     }
 }
 
-/// Replicates each block's top-left pixel over the block, per attachment texel: the block is
-/// the finest fragment size at that texel (`codes`, `columns` texels a row), within the render
+/// Gives every block the value its fragment's shader computes at the fragment's centre
+/// ([`centre`]: the mean of the pixels nearest it), per attachment texel: the block is the
+/// finest fragment size at that texel (`codes`, `columns` texels a row), within the render
 /// area.
-fn replicate(
+fn coarsen(
     e: vk::Extent2D,
     area: vk::Extent2D,
     texel: vk::Extent2D,
     columns: u32,
     codes: &[u8],
     pixels: &mut [u8],
-    bpp: usize,
+    codec: Codec,
 ) {
+    let bpp = codec.bytes();
     let right = area.width.min(e.width);
     let bottom = area.height.min(e.height);
     let row = e.width as usize * bpp;
@@ -469,12 +473,28 @@ fn replicate(
         let x1 = (x0 + texel.width).min(right);
         let y1 = (y0 + texel.height).min(bottom);
         for by in (y0..y1).step_by(h as usize) {
+            let (bh, ys) = ((by + h).min(y1) - by, centre::middle(h, (by + h).min(y1) - by));
             for bx in (x0..x1).step_by(w as usize) {
-                let src = by as usize * row + bx as usize * bpp;
+                let (bw, xs) = ((bx + w).min(x1) - bx, centre::middle(w, (bx + w).min(x1) - bx));
                 let mut value = [0u8; 16];
-                value[..bpp].copy_from_slice(&pixels[src..src + bpp]);
-                for y in by..(by + h).min(y1) {
-                    for x in bx..(bx + w).min(x1) {
+                {
+                    let at = |x: u32, y: u32| {
+                        let i = (by + y) as usize * row + (bx + x) as usize * bpp;
+                        &pixels[i..i + bpp]
+                    };
+                    let one = |m: &[u32; 2]| if m[0] == m[1] { 1 } else { 2 };
+                    let mut texels: [&[u8]; 4] = [&[]; 4];
+                    let mut n = 0;
+                    for &y in &ys[..one(&ys)] {
+                        for &x in &xs[..one(&xs)] {
+                            texels[n] = at(x, y);
+                            n += 1;
+                        }
+                    }
+                    codec.mean(&texels[..n], &mut value);
+                }
+                for y in by..by + bh {
+                    for x in bx..bx + bw {
                         let at = y as usize * row + x as usize * bpp;
                         pixels[at..at + bpp].copy_from_slice(&value[..bpp]);
                     }
