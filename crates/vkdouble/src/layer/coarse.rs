@@ -503,3 +503,54 @@ fn coarsen(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 6×5 image, red = 10 x, green = 10 y, in one 8×8 shading-rate texel of `code`.
+    fn coarsened(code: u8) -> Vec<[u8; 4]> {
+        let (w, h) = (6u32, 5u32);
+        let mut pixels: Vec<u8> = (0..w * h)
+            .flat_map(|i| [(i % w * 10) as u8, (i / w * 10) as u8, 7, 255])
+            .collect();
+        let e = vk::Extent2D {
+            width: w,
+            height: h,
+        };
+        let texel = vk::Extent2D {
+            width: 8,
+            height: 8,
+        };
+        let codec = Codec::of(vk::Format::R8G8B8A8_UNORM).unwrap();
+        coarsen(e, e, texel, 1, &[code], &mut pixels, codec);
+        pixels
+            .chunks(4)
+            .map(|p| [p[0], p[1], p[2], p[3]])
+            .collect()
+    }
+
+    #[test]
+    fn a_block_gets_the_value_at_its_centre_and_a_cut_block_that_of_its_written_pixels_nearest_it(
+    ) {
+        let px = coarsened(0b1010); // 4×4
+        let at = |x: usize, y: usize| px[y * 6 + x];
+        for y in 0..5 {
+            for x in 0..6 {
+                // Whole block (0..4): the mean of columns and rows 1 and 2, i.e. 15 (the value at
+                // 2.0, its centre; its top-left pixel has 0). Cut blocks (columns 4..6, row 4):
+                // the written pixel nearest the centre (column 5, row 4).
+                let r = if x < 4 { 15 } else { 50 };
+                let g = if y < 4 { 15 } else { 40 };
+                assert_eq!(at(x, y), [r, g, 7, 255], "({x},{y})");
+            }
+        }
+        let px = coarsened(0b0100); // 2×1
+        for y in 0..5 {
+            for x in 0..6 {
+                let r = (x / 2 * 20 + 5) as u8;
+                assert_eq!(px[y * 6 + x], [r, (y * 10) as u8, 7, 255], "({x},{y})");
+            }
+        }
+    }
+}
