@@ -1981,7 +1981,10 @@ mod tests {
         };
         let middle = |origin: usize, size: usize, extent: usize| {
             let last = size.min(extent - origin) - 1;
-            [origin + ((size - 1) / 2).min(last), origin + (size / 2).min(last)]
+            [
+                origin + ((size - 1) / 2).min(last),
+                origin + (size / 2).min(last),
+            ]
         };
         let fragment_value = |x: usize, y: usize, fw: usize, fh: usize| {
             let (xs, ys) = (middle(x - x % fw, fw, w), middle(y - y % fh, fh, h));

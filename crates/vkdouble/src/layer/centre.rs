@@ -126,7 +126,9 @@ impl Codec {
                 }
             }
             Codec::Unorm1010102 => {
-                let w = int(c[0], 1023) | int(c[1], 1023) << 10 | int(c[2], 1023) << 20
+                let w = int(c[0], 1023)
+                    | int(c[1], 1023) << 10
+                    | int(c[2], 1023) << 20
                     | int(c[3], 3) << 30;
                 out[..4].copy_from_slice(&w.to_le_bytes());
             }
@@ -277,7 +279,11 @@ mod tests {
         for m in [5, 6, 10] {
             for bits in 0..(0x1fu16 << m) {
                 let v = small_float(bits, m);
-                assert_eq!(to_small_float(v, m), bits, "{m} mantissa bits: {bits:#x} ({v})");
+                assert_eq!(
+                    to_small_float(v, m),
+                    bits,
+                    "{m} mantissa bits: {bits:#x} ({v})"
+                );
             }
         }
         assert_eq!(f16_to_f32(0x3c00), 1.0);
@@ -307,12 +313,15 @@ mod tests {
         let a = (100u32 | 200 << 10 | 300 << 20 | 1 << 30).to_le_bytes();
         let b = (200u32 | 400 << 10 | 500 << 20 | 3 << 30).to_le_bytes();
         Codec::Unorm1010102.mean(&[&a, &b], &mut out);
-        assert_eq!(u32::from_le_bytes(out), 150 | 300 << 10 | 400 << 20 | 2 << 30);
+        assert_eq!(
+            u32::from_le_bytes(out),
+            150 | 300 << 10 | 400 << 20 | 2 << 30
+        );
         // 11:11:10 floats: 1 and 2 give 1.5.
-        let one = u32::from(to_small_float(1.0, 6)) * (1 | 1 << 11)
-            | u32::from(to_small_float(1.0, 5)) << 22;
-        let two = u32::from(to_small_float(2.0, 6)) * (1 | 1 << 11)
-            | u32::from(to_small_float(2.0, 5)) << 22;
+        let one = (u32::from(to_small_float(1.0, 6)) * (1 | 1 << 11))
+            | (u32::from(to_small_float(1.0, 5)) << 22);
+        let two = (u32::from(to_small_float(2.0, 6)) * (1 | 1 << 11))
+            | (u32::from(to_small_float(2.0, 5)) << 22);
         Codec::Ufloat111110.mean(&[&one.to_le_bytes(), &two.to_le_bytes()], &mut out);
         assert_eq!(Codec::Ufloat111110.decode(&out), [1.5, 1.5, 1.5, 0.0]);
         // 16-bit float and UNORM, 32-bit float.
@@ -343,7 +352,10 @@ mod tests {
         let (p, q) = (f([0.1, 0.2, 0.3, 1.0]), f([0.3, 0.4, 0.5, 1.0]));
         Codec::Rgba32Float.mean(&[&p, &q], &mut wide);
         let got = Codec::Rgba32Float.decode(&wide);
-        assert!((got[0] - 0.2).abs() < 1e-7 && (got[2] - 0.4).abs() < 1e-7, "{got:?}");
+        assert!(
+            (got[0] - 0.2).abs() < 1e-7 && (got[2] - 0.4).abs() < 1e-7,
+            "{got:?}"
+        );
         // One texel: the same bytes, even a NaN payload a round trip would not keep.
         let nan = f([f32::from_bits(0x7fc0_1234), 0.0, 0.0, 0.0]);
         Codec::Rgba32Float.mean(&[&nan], &mut wide);

@@ -473,9 +473,15 @@ fn coarsen(
         let x1 = (x0 + texel.width).min(right);
         let y1 = (y0 + texel.height).min(bottom);
         for by in (y0..y1).step_by(h as usize) {
-            let (bh, ys) = ((by + h).min(y1) - by, centre::middle(h, (by + h).min(y1) - by));
+            let (bh, ys) = (
+                (by + h).min(y1) - by,
+                centre::middle(h, (by + h).min(y1) - by),
+            );
             for bx in (x0..x1).step_by(w as usize) {
-                let (bw, xs) = ((bx + w).min(x1) - bx, centre::middle(w, (bx + w).min(x1) - bx));
+                let (bw, xs) = (
+                    (bx + w).min(x1) - bx,
+                    centre::middle(w, (bx + w).min(x1) - bx),
+                );
                 let mut value = [0u8; 16];
                 {
                     let at = |x: u32, y: u32| {
@@ -524,15 +530,12 @@ mod tests {
         };
         let codec = Codec::of(vk::Format::R8G8B8A8_UNORM).unwrap();
         coarsen(e, e, texel, 1, &[code], &mut pixels, codec);
-        pixels
-            .chunks(4)
-            .map(|p| [p[0], p[1], p[2], p[3]])
-            .collect()
+        pixels.chunks(4).map(|p| [p[0], p[1], p[2], p[3]]).collect()
     }
 
     #[test]
-    fn a_block_gets_the_value_at_its_centre_and_a_cut_block_that_of_its_written_pixels_nearest_it(
-    ) {
+    fn a_block_gets_the_value_at_its_centre_and_a_cut_block_that_of_its_written_pixels_nearest_it()
+    {
         let px = coarsened(0b1010); // 4×4
         let at = |x: usize, y: usize| px[y * 6 + x];
         for y in 0..5 {
