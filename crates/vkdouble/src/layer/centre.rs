@@ -28,6 +28,8 @@
 //! nearest the true centre). The value then differs from a GPU's by the shaded value's change
 //! over that distance; it only concerns fragments on the last columns or rows.
 
+use std::sync::OnceLock;
+
 use ash::vk;
 
 /// How a format's texel decodes into linear channel values and back.
@@ -80,12 +82,12 @@ impl Codec {
         match self {
             Codec::Rgba8 { srgb } => {
                 // In units of the 8-bit step; sRGB channels as linear values so scaled.
+                let table = srgb_tables();
                 let c = |i: usize| {
-                    let v = f32::from(t[i]);
                     if srgb && i < 3 {
-                        srgb_to_linear(v / 255.0) * 255.0
+                        table.linear[usize::from(t[i])]
                     } else {
-                        v
+                        f32::from(t[i])
                     }
                 };
                 [c(0), c(1), c(2), c(3)]
@@ -116,13 +118,14 @@ impl Codec {
         let int = |v: f32, max: u32| v.round().clamp(0.0, max as f32) as u32;
         match self {
             Codec::Rgba8 { srgb } => {
+                let table = srgb_tables();
                 for (i, v) in c.into_iter().enumerate() {
-                    let v = if srgb && i < 3 {
-                        linear_to_srgb(v / 255.0) * 255.0
+                    out[i] = if srgb && i < 3 {
+                        // The code whose interval holds `v`: round(sRGB(v) · 255).
+                        table.up.partition_point(|&u| u <= v) as u8
                     } else {
-                        v
+                        int(v, 255) as u8
                     };
-                    out[i] = int(v, 255) as u8;
                 }
             }
             Codec::Unorm1010102 => {
@@ -183,6 +186,22 @@ pub(super) fn middle(size: u32, written: u32) -> [u32; 2] {
     [((size - 1) / 2).min(last), (size / 2).min(last)]
 }
 
+/// 8-bit sRGB codes as linear values (in units of 1/255), and the linear values (so scaled) where
+/// rounding passes from one code to the next: built once, so that coarsening a frame (every
+/// block of every coarse pass) costs no transcendental functions.
+struct SrgbTables {
+    linear: [f32; 256],
+    up: [f32; 255],
+}
+
+fn srgb_tables() -> &'static SrgbTables {
+    static TABLES: OnceLock<SrgbTables> = OnceLock::new();
+    TABLES.get_or_init(|| SrgbTables {
+        linear: std::array::from_fn(|k| srgb_to_linear(k as f32 / 255.0) * 255.0),
+        up: std::array::from_fn(|k| srgb_to_linear((k as f32 + 0.5) / 255.0) * 255.0),
+    })
+}
+
 /// The sRGB transfer function's inverse ("sRGB EOTF" of the Khronos Data Format
 /// Specification, the conversion Vulkan applies on reads of sRGB formats).
 fn srgb_to_linear(v: f32) -> f32 {
@@ -190,15 +209,6 @@ fn srgb_to_linear(v: f32) -> f32 {
         v / 12.92
     } else {
         ((v + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// The sRGB transfer function, as writes to sRGB formats apply it.
-fn linear_to_srgb(v: f32) -> f32 {
-    if v <= 0.003_130_8 {
-        v * 12.92
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
     }
 }
 
@@ -262,6 +272,38 @@ fn to_small_float(v: f32, mantissa: u32) -> u16 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The sRGB transfer function, as writes to sRGB formats apply it.
+    fn linear_to_srgb(v: f32) -> f32 {
+        if v <= 0.003_130_8 {
+            v * 12.92
+        } else {
+            1.055 * v.powf(1.0 / 2.4) - 0.055
+        }
+    }
+
+    #[test]
+    fn srgb_codes_round_as_the_transfer_function_does() {
+        let rgba = Codec::Rgba8 { srgb: true };
+        let mut out = [0u8; 4];
+        for i in 0..=100_000u32 {
+            let v = i as f32 / 100_000.0;
+            rgba.encode([v * 255.0, 0.0, 0.0, 0.0], &mut out);
+            let want = (linear_to_srgb(v) * 255.0).round() as u8;
+            assert!(out[0].abs_diff(want) <= 1, "{v}: {} against {want}", out[0]);
+            // Off by one only where the value lies on a rounding boundary, to float precision.
+            if out[0] != want {
+                let s = linear_to_srgb(v) * 255.0;
+                assert!((s - s.floor() - 0.5).abs() < 1e-3, "{v}: {s}");
+            }
+        }
+        for k in 0..=255u8 {
+            assert_eq!(
+                rgba.decode(&[k, 0, 0, 0])[0],
+                srgb_to_linear(f32::from(k) / 255.0) * 255.0
+            );
+        }
+    }
 
     #[test]
     fn the_middle_pixels_are_those_around_the_centre_clamped_into_those_written() {
