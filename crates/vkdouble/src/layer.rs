@@ -26,6 +26,7 @@ use crate::record::{self, error, event};
 use crate::shade::PipelineRate;
 use crate::Profile;
 
+mod centre;
 mod coarse;
 mod queues;
 
