@@ -135,11 +135,16 @@ pub struct FramebufferTargets {
     pub layers: u32,
 }
 
-/// What an emulating device's reconstruction knows of its objects, filled at their creation.
+/// What an emulating device's reconstruction knows of its objects, filled at their creation
+/// (`usage` on injecting devices too).
 #[derive(Default)]
 pub struct Tables {
     /// Application images created with `VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT`, and their layers.
     pub images: HashMap<u64, u32>,
+    /// Colour images with transfer usage (on an emulating or injecting device): the usage each
+    /// was created with, and what of it the layer added (`crate::vk::reconstruct::image_made`),
+    /// for giving their views the application's usage.
+    pub usage: HashMap<u64, (vk::ImageUsageFlags, vk::ImageUsageFlags)>,
     /// Views whose image is reconstructed.
     pub views: HashMap<u64, Target>,
     /// Rewritten render passes' colour targets.

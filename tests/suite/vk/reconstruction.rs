@@ -37,6 +37,10 @@ enum Case {
     Mrt,
     /// The same in dynamic rendering.
     DynamicMrt,
+    /// As `Pass`, with an imageless framebuffer whose colour attachment names the usage the
+    /// application gave its image: `COLOR_ATTACHMENT | TRANSFER_SRC` (for the read-back), without
+    /// the `TRANSFER_DST` reconstruction adds to a subsampled image.
+    Imageless,
 }
 
 impl Case {
@@ -145,13 +149,18 @@ fn draw_on(
         } else {
             vk::ImageCreateFlags::empty()
         };
+        let colour_usage = if case == Case::Imageless {
+            vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC
+        } else {
+            vk::ImageUsageFlags::COLOR_ATTACHMENT
+                | vk::ImageUsageFlags::TRANSFER_SRC
+                | vk::ImageUsageFlags::TRANSFER_DST
+        };
         let (colour, colour_mem) = image(
             format,
             SIDE,
             layers,
-            vk::ImageUsageFlags::COLOR_ATTACHMENT
-                | vk::ImageUsageFlags::TRANSFER_SRC
-                | vk::ImageUsageFlags::TRANSFER_DST,
+            colour_usage,
             flags,
             vk::SampleCountFlags::TYPE_1,
         );
@@ -184,11 +193,13 @@ fn draw_on(
             (i, m, view(i, format, layers))
         });
         let n = SIDE / texel;
+        let density_usage =
+            vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT | vk::ImageUsageFlags::TRANSFER_DST;
         let (density, density_mem) = image(
             vk::Format::R8G8_UNORM,
             n,
             layers,
-            vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT | vk::ImageUsageFlags::TRANSFER_DST,
+            density_usage,
             vk::ImageCreateFlags::empty(),
             vk::SampleCountFlags::TYPE_1,
         );
@@ -301,16 +312,36 @@ fn draw_on(
                 (_, Some((_, _, v))) => vec![colour_view, density_view, v],
                 _ => vec![colour_view, density_view],
             };
-            d.create_framebuffer(
-                &vk::FramebufferCreateInfo::default()
-                    .render_pass(p)
-                    .attachments(&list)
+            let formats = [[format], [vk::Format::R8G8_UNORM]];
+            let described = [
+                vk::FramebufferAttachmentImageInfo::default()
+                    .usage(colour_usage)
                     .width(SIDE)
                     .height(SIDE)
-                    .layers(1),
-                None,
-            )
-            .unwrap()
+                    .layer_count(layers)
+                    .view_formats(&formats[0]),
+                vk::FramebufferAttachmentImageInfo::default()
+                    .usage(density_usage)
+                    .width(n)
+                    .height(n)
+                    .layer_count(layers)
+                    .view_formats(&formats[1]),
+            ];
+            let mut imageless =
+                vk::FramebufferAttachmentsCreateInfo::default().attachment_image_infos(&described);
+            let mut info = vk::FramebufferCreateInfo::default()
+                .render_pass(p)
+                .width(SIDE)
+                .height(SIDE)
+                .layers(1);
+            info = if case == Case::Imageless {
+                info.flags(vk::FramebufferCreateFlags::IMAGELESS)
+                    .attachment_count(2)
+                    .push_next(&mut imageless)
+            } else {
+                info.attachments(&list)
+            };
+            d.create_framebuffer(&info, None).unwrap()
         });
         let words = spv(VERTEX);
         let vert = d
@@ -532,11 +563,16 @@ fn draw_on(
         };
         match (pass, framebuffer) {
             (Some(p), Some(fb)) => {
-                let begin = vk::RenderPassBeginInfo::default()
+                let views = [colour_view, density_view];
+                let mut named = vk::RenderPassAttachmentBeginInfo::default().attachments(&views);
+                let mut begin = vk::RenderPassBeginInfo::default()
                     .render_pass(p)
                     .framebuffer(fb)
                     .render_area(area)
                     .clear_values(&clear);
+                if case == Case::Imageless {
+                    begin = begin.push_next(&mut named);
+                }
                 d.cmd_begin_render_pass2(
                     cb,
                     &begin,
@@ -933,6 +969,15 @@ fn targets_recreated_a_thousand_times_with_reconstruction_on() {
     dev.destroy();
     assert_only_stage_false_positives();
     drop(vk);
+}
+
+/// An imageless framebuffer names, for each attachment, the usage the application gave its image,
+/// which must equal its view's at each begin (VUID-VkRenderPassBeginInfo-framebuffer-04627): the
+/// transfer usage fovea adds to a subsampled image for the copies is not the application's, and
+/// validation says nothing, while the coarse blocks are reconstructed all the same.
+#[test]
+fn an_imageless_framebuffer_names_the_applications_usage_and_is_reconstructed() {
+    check(Profile::Nvidia, Case::Imageless, vk::Format::R8G8B8A8_UNORM);
 }
 
 /// A multisampled pass resolves into the image that is read: that image is reconstructed (the
