@@ -453,6 +453,11 @@ impl Reconstructor {
         if dispatched {
             // SAFETY: as the caller promised: `bound` is `cb`'s.
             unsafe { restore(&self.own.fns, cb, bound) };
+            // The scratch is the device's: submits on its other graphics queues are ordered
+            // against this one's from now on (docs/reconstruction.md#queues).
+            if let Some(o) = &self.own.clears.order {
+                o.serialise();
+            }
         }
     }
 
