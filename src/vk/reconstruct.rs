@@ -25,7 +25,7 @@ use crate::vk::own::reconstructor::{
 };
 use crate::vk::registry::{self, record_of, Device, RECONSTRUCTORS};
 use crate::vk::translate::render_pass::{
-    pass_colours, rendering_target, too_many_targets, Pass2, MAX_TARGETS,
+    pass_colours, pass_view_mask, rendering_target, too_many_targets, Pass2, MAX_TARGETS,
 };
 
 /// Sets up reconstruction on a device just recorded in the registry that injects shading-rate
@@ -342,7 +342,7 @@ pub fn pass_created(dev: &Device, handle: vk::RenderPass, pass: &Pass2, density:
         if colours[0].is_none() {
             return;
         }
-        let view_mask = pass.subpasses.first().map_or(0, |s| s.view_mask);
+        let view_mask = pass_view_mask(pass);
         r.tables.lock().passes.insert(
             handle.as_raw(),
             PassTarget {

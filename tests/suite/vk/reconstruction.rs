@@ -41,6 +41,8 @@ enum Case {
     /// application gave its image: `COLOR_ATTACHMENT | TRANSFER_SRC` (for the read-back), without
     /// the `TRANSFER_DST` reconstruction adds to a subsampled image.
     Imageless,
+    /// As `Pass`, drawn in the second subpass of a pass whose first names no attachment.
+    Subpass,
 }
 
 impl Case {
@@ -265,13 +267,26 @@ fn draw_on(
             let resolve_ref = [vk::AttachmentReference2::default()
                 .attachment(2)
                 .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-            let mut subpass = [vk::SubpassDescription2::default()
-                .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-                .view_mask(mask)
-                .color_attachments(&colour_ref[..colours])];
+            let mut subpass = [
+                vk::SubpassDescription2::default()
+                    .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+                    .view_mask(mask)
+                    .color_attachments(&colour_ref[..colours]),
+                vk::SubpassDescription2::default()
+                    .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+                    .view_mask(mask),
+            ];
             if case.msaa() {
                 subpass[0] = subpass[0].resolve_attachments(&resolve_ref);
             }
+            // The drawing subpass second, after one that names nothing.
+            let drawing = if case == Case::Subpass {
+                subpass.swap(0, 1);
+                1
+            } else {
+                0
+            };
+            let subpasses = if case == Case::Subpass { 2 } else { 1 };
             let count = if case.msaa() || case.mrt() { 3 } else { 2 };
             let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
                 .fragment_density_map_attachment(vk::AttachmentReference {
@@ -283,7 +298,7 @@ fn draw_on(
             let out = [
                 vk::SubpassDependency2::default()
                     .src_subpass(vk::SUBPASS_EXTERNAL)
-                    .dst_subpass(0)
+                    .dst_subpass(drawing)
                     .src_stage_mask(vk::PipelineStageFlags::TRANSFER)
                     .dst_stage_mask(vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT)
                     .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
@@ -292,7 +307,7 @@ fn draw_on(
                             | vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
                     ),
                 vk::SubpassDependency2::default()
-                    .src_subpass(0)
+                    .src_subpass(drawing)
                     .dst_subpass(vk::SUBPASS_EXTERNAL)
                     .src_stage_mask(vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT)
                     .dst_stage_mask(vk::PipelineStageFlags::TRANSFER)
@@ -301,7 +316,7 @@ fn draw_on(
             ];
             let info = vk::RenderPassCreateInfo2::default()
                 .attachments(&atts[..count])
-                .subpasses(&subpass)
+                .subpasses(&subpass[..subpasses])
                 .dependencies(&out)
                 .push_next(&mut fdm);
             d.create_render_pass2(&info, None).unwrap()
@@ -369,7 +384,11 @@ fn draw_on(
             .view_mask(mask);
         let mut info = fixed.info(&st, layout);
         match pass {
-            Some(p) => info = info.render_pass(p).subpass(0),
+            Some(p) => {
+                info = info
+                    .render_pass(p)
+                    .subpass(u32::from(case == Case::Subpass))
+            }
             None => {
                 info = info
                     .push_next(&mut rendering)
@@ -573,11 +592,11 @@ fn draw_on(
                 if case == Case::Imageless {
                     begin = begin.push_next(&mut named);
                 }
-                d.cmd_begin_render_pass2(
-                    cb,
-                    &begin,
-                    &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-                );
+                let inline = vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE);
+                d.cmd_begin_render_pass2(cb, &begin, &inline);
+                if case == Case::Subpass {
+                    d.cmd_next_subpass2(cb, &inline, &vk::SubpassEndInfo::default());
+                }
                 draw_it();
                 d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
             }
@@ -978,6 +997,13 @@ fn targets_recreated_a_thousand_times_with_reconstruction_on() {
 #[test]
 fn an_imageless_framebuffer_names_the_applications_usage_and_is_reconstructed() {
     check(Profile::Nvidia, Case::Imageless, vk::Format::R8G8B8A8_UNORM);
+}
+
+/// Every subpass renders with the shading-rate attachment: a colour attachment that only the
+/// second subpass draws into is reconstructed at the pass's end as one of the first's is.
+#[test]
+fn a_colour_attachment_of_a_second_subpass_is_reconstructed() {
+    check(Profile::Nvidia, Case::Subpass, vk::Format::R8G8B8A8_UNORM);
 }
 
 /// A multisampled pass resolves into the image that is read: that image is reconstructed (the
