@@ -30,11 +30,17 @@ use crate::vk::translate::render_pass::{
 
 /// Sets up reconstruction on a device just recorded in the registry that injects shading-rate
 /// maps or emulates density maps, or logs why not. `why_not`: why the device cannot record compute dispatches into the
-/// application's command buffers and give its bindings back, as the converter found.
+/// application's command buffers and give its bindings back, as the converter found. `ci`: the
+/// application's create info, whose `imagelessFramebuffer` decides whether its views need the
+/// added usage hidden ([`hide_added_usage`]).
 ///
 /// # Safety
-/// `handle` must be a live device just recorded.
-pub unsafe fn device_created(handle: vk::Device, why_not: Option<String>) {
+/// `handle` must be a live device just recorded; `ci` the application's valid create info.
+pub unsafe fn device_created(
+    handle: vk::Device,
+    why_not: Option<String>,
+    ci: &vk::DeviceCreateInfo<'_>,
+) {
     crate::bridge::subsampled::set_hides_usage(handle.as_raw(), false);
     // SAFETY: as the caller promised.
     let Some(dev) = (unsafe { registry::device(handle) }) else {
@@ -56,13 +62,16 @@ pub unsafe fn device_created(handle: vk::Device, why_not: Option<String>) {
     }
     // SAFETY: the layer's own objects on a live device.
     match unsafe { Reconstructor::new(Arc::clone(own), fdm) } {
-        Ok(r) => {
+        Ok(mut r) => {
+            // SAFETY: as the caller promised.
+            r.imageless = unsafe { enables_imageless(ci) };
             // SAFETY: as the caller promised.
             let Some(k) = (unsafe { key(handle) }) else {
                 // SAFETY: made on this live device, used by nothing yet.
                 unsafe { r.destroy() };
                 return;
             };
+            let imageless = r.imageless;
             {
                 let mut v = RECONSTRUCTORS.write();
                 v.retain(|(key, _)| *key != k);
@@ -70,7 +79,7 @@ pub unsafe fn device_created(handle: vk::Device, why_not: Option<String>) {
             }
             crate::bridge::subsampled::set_hides_usage(
                 handle.as_raw(),
-                dev.api_version >= vk::API_VERSION_1_1,
+                hides_usage(dev.api_version, imageless),
             );
         }
         Err(e) => tracing::warn!(
@@ -79,6 +88,36 @@ pub unsafe fn device_created(handle: vk::Device, why_not: Option<String>) {
             "coarse blocks are not reconstructed on this device: its objects could not be made"
         ),
     }
+}
+
+/// Whether a device created from `ci` enables `imagelessFramebuffer` (Vulkan 1.2's features, or
+/// `VK_KHR_imageless_framebuffer`'s): only such an application names a view's usage that added
+/// usage could contradict (VUID-VkRenderPassBeginInfo-framebuffer-04627).
+///
+/// # Safety
+/// `ci` must be a valid create info.
+unsafe fn enables_imageless(ci: &vk::DeviceCreateInfo<'_>) -> bool {
+    let v12 = vk::StructureType::PHYSICAL_DEVICE_VULKAN_1_2_FEATURES;
+    let ext = vk::StructureType::PHYSICAL_DEVICE_IMAGELESS_FRAMEBUFFER_FEATURES;
+    // SAFETY: the caller's chain, read only; a node found by its sType is that struct.
+    unsafe {
+        let core = chain::find::<vk::PhysicalDeviceVulkan12Features<'_>>(ci.p_next, v12)
+            .ok()
+            .flatten()
+            .is_some_and(|f| (*f).imageless_framebuffer == vk::TRUE);
+        let own = chain::find::<vk::PhysicalDeviceImagelessFramebufferFeatures<'_>>(ci.p_next, ext)
+            .ok()
+            .flatten()
+            .is_some_and(|f| (*f).imageless_framebuffer == vk::TRUE);
+        core || own
+    }
+}
+
+/// Whether the layer hides added usage from the application's views on a device of `api_version`
+/// whose application enabled imageless framebuffers or not: where they are enabled (nobody else
+/// can tell a view's usage from its image's), from Vulkan 1.1 (`VkImageViewUsageCreateInfo`).
+fn hides_usage(api_version: u32, imageless: bool) -> bool {
+    imageless && api_version >= vk::API_VERSION_1_1
 }
 
 /// Destroys a device's reconstruction objects; the device is about to be destroyed, and its
@@ -182,9 +221,9 @@ pub unsafe fn subsampled_usage(
 /// the application created subsampled, the usage the layer added on the copy that went down
 /// ([`subsampled_usage`]; `None` where the create info went down with the application's usage).
 /// Two facts are kept: an image the application created subsampled is reconstructed (with its
-/// layers); and a colour image with transfer usage (the runtime's
-/// swapchain images, whose transfer usage the OpenXR side may have added) keeps its usage, so that
-/// its views can be given the application's ([`hide_added_usage`]).
+/// layers); and, on a device with imageless framebuffers, a colour image with transfer usage (the
+/// runtime's swapchain images, whose transfer usage the OpenXR side may have added) keeps its
+/// usage, so that its views can be given the application's ([`hide_added_usage`]).
 ///
 /// # Safety
 /// `dev` must be live; `out` and `ci` NULL or valid.
@@ -212,7 +251,9 @@ pub unsafe fn image_made(
         if subsampled.is_some() {
             t.images.insert(image, ci.array_layers.max(1));
         }
-        t.usage.insert(image, (usage, added));
+        if r.imageless {
+            t.usage.insert(image, (usage, added));
+        }
     });
 }
 
@@ -244,8 +285,10 @@ fn with_any_reconstructor<R>(dev: &Device, f: impl FnOnce(&Reconstructor) -> R) 
 /// docs/reconstruction.md#usage-the-application-does-not-see. The copies reconstruction records
 /// name the image, whose usage has the transfer bits; a view never needs them.
 ///
-/// `None` (the create info goes down as it is) for any other image, where the application chained
-/// a `VkImageViewUsageCreateInfo` itself (its usage is then the one it names), on a device below
+/// `None` (the create info goes down as it is) for any other image, on a device whose application
+/// did not enable imageless framebuffers (nothing there compares a view's usage with what the
+/// application believes), where the application chained a `VkImageViewUsageCreateInfo` itself
+/// (its usage is then the one it names), on a device below
 /// Vulkan 1.1 (where that struct is `VK_KHR_maintenance2`'s; such a device's imageless
 /// framebuffers keep the mismatch, said once), and for a swapchain image the layer did not see
 /// created (its usage unknown; said once).
@@ -261,9 +304,17 @@ pub unsafe fn hide_added_usage<'a>(
     // SAFETY: as the caller promised.
     let ci = unsafe { ci.as_ref() }?;
     let image = ci.image.as_raw();
-    let (usage, own) = with_any_reconstructor(dev, |r| r.tables.lock().usage.get(&image).copied())
-        .flatten()
-        .unwrap_or_default();
+    let (usage, own) = with_any_reconstructor(dev, |r| {
+        r.imageless.then(|| {
+            r.tables
+                .lock()
+                .usage
+                .get(&image)
+                .copied()
+                .unwrap_or_default()
+        })
+    })
+    .flatten()?;
     let added = own | crate::bridge::subsampled::added_usage(image);
     if added.is_empty() {
         return None;
@@ -274,7 +325,7 @@ pub unsafe fn hide_added_usage<'a>(
     if !matches!(apps, Ok(None)) {
         return None;
     }
-    if usage.is_empty() || dev.api_version < vk::API_VERSION_1_1 {
+    if usage.is_empty() || !hides_usage(dev.api_version, true) {
         if !LOGGED.swap(true, Ordering::Relaxed) {
             tracing::warn!(
                 image = image,

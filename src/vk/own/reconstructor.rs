@@ -189,6 +189,9 @@ pub struct Reconstructor {
     /// Set once a view whose image is reconstructed was noted: until then a begin looks no
     /// further.
     pub any: AtomicBool,
+    /// The application enabled imageless framebuffers on the device: its views of images whose
+    /// usage fovea widened get its usage (`crate::vk::reconstruct::hide_added_usage`).
+    pub imageless: bool,
 }
 
 impl Reconstructor {
@@ -275,6 +278,7 @@ impl Reconstructor {
                 logged_scratch: AtomicBool::new(false),
                 tables: parking_lot::Mutex::new(Tables::default()),
                 any: AtomicBool::new(false),
+                imageless: false,
             })
         }
     }
