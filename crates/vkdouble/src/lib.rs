@@ -132,10 +132,11 @@ pub const LIBRARY_FILE: &str = "libfovea_vkdouble.so";
 pub const PROFILE_ENV: &str = "FOVEA_VKDOUBLE_PROFILE";
 /// Set (to anything) when a device is created, the environment variable that makes that device's
 /// barrier, render-pass, dynamic-rendering, shading-rate, compute-binding, dispatch and
-/// buffer-to-image copy recording commands do nothing: the double hands out empty functions for
+/// buffer-image copy recording commands do nothing: the double hands out empty functions for
 /// them instead of going down to the driver. A benchmark of the layers above then measures their
 /// own cost per command, not the driver's (`benches/vk_commands.rs`; the density-map pass cases
-/// include the conversion fovea records in front of them).
+/// include the conversion fovea records in front of them, the reconstructed ones the copies and the
+/// dispatch it records after them).
 pub const NULL_COMMANDS_ENV: &str = "FOVEA_VKDOUBLE_NULL_COMMANDS";
 /// Set (to anything) when the shading-rate properties are queried, the environment variable that
 /// makes either profile report `fragmentShadingRateNonTrivialCombinerOps` false: only `KEEP` and

@@ -824,7 +824,7 @@ unsafe fn create_device_impl(
         let converts = convert::device_created(&inst, physical, ci, handle);
         if injects || emulated {
             let why = convert::dispatch_blocked(&inst, physical, ci, api_version);
-            reconstruct::device_created(handle, why);
+            reconstruct::device_created(handle, why, ci);
         }
         // Offsets reach density maps where the driver got the application's request as it was
         // (so it has the extension), or where the layer emulates them and converts: an emulated

@@ -51,6 +51,11 @@ pub unsafe extern "system" fn create_image_view(
                     })
                 });
             let down = copy.as_ref().map_or(info, |c| c as *const _);
+            // A view of an image with usage fovea added gets the application's usage (on a copy).
+            let mut usage = vk::ImageViewUsageCreateInfo::default();
+            // SAFETY: `down` is NULL or the caller's valid create info (or a copy of it).
+            let hidden = unsafe { reconstruct::hide_added_usage(&dev, down, &mut usage) };
+            let down = hidden.as_ref().map_or(down, |c| c as *const _);
             // SAFETY: the next layer's function, with the caller's arguments (or a copy of its
             // create info).
             let r = unsafe { next(device, down, alloc, out) };
@@ -309,6 +314,8 @@ pub unsafe extern "system" fn create_image(
                     // SAFETY: the caller's create info, read only; the image just created.
                     unsafe { inj.image_created(*out, &*info) };
                 }
+                // SAFETY: as above.
+                unsafe { reconstruct::image_made(&dev, r, out, info, None) };
                 return r;
             }
             if info.is_null() || dev.fdm.is_none() {
@@ -326,7 +333,10 @@ pub unsafe extern "system" fn create_image(
             }
             if !needs_translation(copy.usage, copy.flags) {
                 // SAFETY: as above.
-                return unsafe { next(device, info, alloc, out) };
+                let r = unsafe { next(device, info, alloc, out) };
+                // SAFETY: as above; the image just created.
+                unsafe { reconstruct::image_made(&dev, r, out, info, None) };
+                return r;
             }
             match translate_image(
                 copy.format,
@@ -352,10 +362,9 @@ pub unsafe extern "system" fn create_image(
             let r = unsafe { next(device, &copy, alloc, out) };
             // SAFETY: the caller's create info, read only.
             let app = unsafe { &*info };
-            if r == vk::Result::SUCCESS && !out.is_null() && subsampled.is_some() {
-                // SAFETY: the image was just created on the live device.
-                unsafe { reconstruct::image_created(&dev, *out, app) };
-            }
+            let added = subsampled.map(|u| u & !app.usage);
+            // SAFETY: the image was just created on the live device, from `app`.
+            unsafe { reconstruct::image_made(&dev, r, out, app, added) };
             if r == vk::Result::SUCCESS
                 && !out.is_null()
                 && app
