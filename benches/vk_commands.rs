@@ -37,6 +37,13 @@
 //! flag, ended with an offset, and `vkCmdBeginRendering` + `vkCmdEndRendering2EXT` with an offset
 //! (the bare device records the plain pair in their place): each such pass gets a conversion of
 //! its own in front of it, whose shifts its end writes.
+//! Reconstruction of coarse blocks (docs/reconstruction.md), `fovea` only: the density-map render
+//! pass and dynamic rendering again, into a colour image created with
+//! `VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT`, whose end gets the copies, the dispatch and the compute
+//! bindings given back; before any round is timed, the first such pass must have made the
+//! layer's scratch buffer (`proves_reconstruction`), or the run fails. A second table sets each against the same
+//! pass into the image without the flag, on the same device in interleaved rounds: what
+//! reconstruction adds to recording a pass.
 //! `vkCmdBindPipeline` of a compute pipeline (both devices): the layer notes the application's
 //! compute bindings on emulating devices, to give them back after it converts a density map the
 //! application writes (src/vk/convert.rs).
@@ -119,6 +126,9 @@ struct Side {
     /// Where the layer emulates density maps: a density image with the offset flag, its pass and
     /// framebuffer, and `vkCmdEndRendering2EXT`.
     offsets: Option<(Target, vk::RenderPass, vk::Framebuffer, EndRendering2)>,
+    /// Where the layer emulates density maps: a subsampled colour image (reconstructed) and a pass
+    /// and framebuffer rendering it with the density image of `fdm`.
+    subsampled: Option<(Target, vk::RenderPass, vk::Framebuffer)>,
     /// Where the device has pipeline shading rates (not on the emulating one).
     set_rate: Option<ash::khr::fragment_shading_rate::Device>,
     /// A compute pipeline (`tests/suite/shaders/store.comp`) and its layout.
@@ -200,6 +210,19 @@ impl Side {
                 (density, p, f)
             };
             let fdm = (kind == Kind::Fdm).then(|| density_pass(vk::ImageCreateFlags::empty()));
+            let subsampled = fdm.as_ref().map(|(density, _, _)| {
+                let colour = Target::with_flags(
+                    &instance,
+                    physical,
+                    &device,
+                    vk::Format::R8G8B8A8_UNORM,
+                    [SIZE, SIZE],
+                    vk::ImageUsageFlags::COLOR_ATTACHMENT,
+                    vk::ImageCreateFlags::SUBSAMPLED_EXT,
+                );
+                let (p, f) = pass_and_framebuffer(&device, colour.view, Some(density.view), SIZE);
+                (colour, p, f)
+            });
             let offsets = (kind == Kind::Fdm).then(|| {
                 let (density, p, f) =
                     density_pass(vk::ImageCreateFlags::FRAGMENT_DENSITY_MAP_OFFSET_QCOM);
@@ -224,6 +247,7 @@ impl Side {
                 pass,
                 framebuffer,
                 fdm,
+                subsampled,
                 offsets,
                 compute,
                 xr,
@@ -273,7 +297,9 @@ impl Side {
                 | Case::RenderPassFdm
                 | Case::RenderingFdm
                 | Case::RenderPassOffsets
-                | Case::RenderingOffsets,
+                | Case::RenderingOffsets
+                | Case::RenderPassReconstructed
+                | Case::RenderingReconstructed,
                 None,
             ) => return false,
             (
@@ -333,9 +359,13 @@ impl Side {
                         &vk::DependencyInfo::default().image_memory_barriers(&barrier),
                     );
                 }
-                Case::RenderPass | Case::RenderPassFdm | Case::RenderPassInjected => {
-                    let (pass, framebuffer) = match (case, &self.fdm) {
-                        (Case::RenderPassFdm, Some((_, p, f))) => (*p, *f),
+                Case::RenderPass
+                | Case::RenderPassFdm
+                | Case::RenderPassInjected
+                | Case::RenderPassReconstructed => {
+                    let (pass, framebuffer) = match (case, &self.fdm, &self.subsampled) {
+                        (Case::RenderPassFdm, Some((_, p, f)), _) => (*p, *f),
+                        (Case::RenderPassReconstructed, _, Some((_, p, f))) => (*p, *f),
                         _ => (self.pass, self.framebuffer),
                     };
                     let begin = vk::RenderPassBeginInfo::default()
@@ -403,9 +433,14 @@ impl Side {
                 Case::Rendering
                 | Case::RenderingFdm
                 | Case::RenderingInjected
-                | Case::RenderingInjectedNull => {
+                | Case::RenderingInjectedNull
+                | Case::RenderingReconstructed => {
+                    let view = match (case, &self.subsampled) {
+                        (Case::RenderingReconstructed, Some((colour, _, _))) => colour.view,
+                        _ => self.color.view,
+                    };
                     let colors = [vk::RenderingAttachmentInfo::default()
-                        .image_view(self.color.view)
+                        .image_view(view)
                         .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                         .load_op(vk::AttachmentLoadOp::DONT_CARE)
                         .store_op(vk::AttachmentStoreOp::STORE)];
@@ -415,7 +450,11 @@ impl Side {
                         .render_area(whole)
                         .layer_count(1)
                         .color_attachments(&colors);
-                    if let (Case::RenderingFdm, Some((density, _, _))) = (case, &self.fdm) {
+                    if let (
+                        Case::RenderingFdm | Case::RenderingReconstructed,
+                        Some((density, _, _)),
+                    ) = (case, &self.fdm)
+                    {
                         fdm.image_view = density.view;
                         info = info.push_next(&mut fdm);
                     }
@@ -466,6 +505,11 @@ impl Drop for Side {
                 d.destroy_render_pass(p, None);
                 density.destroy(d);
             }
+            if let Some((colour, p, f)) = self.subsampled.take() {
+                d.destroy_framebuffer(f, None);
+                d.destroy_render_pass(p, None);
+                colour.destroy(d);
+            }
             if let Some((density, p, f)) = self.fdm.take() {
                 d.destroy_framebuffer(f, None);
                 d.destroy_render_pass(p, None);
@@ -507,10 +551,14 @@ enum Case {
     RenderPass2,
     RenderPassOffsets,
     RenderingOffsets,
+    /// The density-map pass into a subsampled image: reconstructed at its end.
+    RenderPassReconstructed,
+    /// The density-map rendering into a subsampled image: reconstructed at its end.
+    RenderingReconstructed,
 }
 
 impl Case {
-    const ALL: [Case; 15] = [
+    const ALL: [Case; 17] = [
         Case::Barrier,
         Case::Barrier2,
         Case::RenderPass,
@@ -526,6 +574,8 @@ impl Case {
         Case::RenderPass2,
         Case::RenderPassOffsets,
         Case::RenderingOffsets,
+        Case::RenderPassReconstructed,
+        Case::RenderingReconstructed,
     ];
 
     /// Whether the injecting device records it.
@@ -558,6 +608,19 @@ impl Case {
             Case::RenderPass2 => "vkCmdBeginRenderPass2+End2",
             Case::RenderPassOffsets => "vkCmdBeginRenderPass2+End2 (FDM pass, offsets)",
             Case::RenderingOffsets => "vkCmdBeginRendering+End2EXT (FDM attachment, offsets)",
+            Case::RenderPassReconstructed => "vkCmdBeginRenderPass+End (FDM pass, reconstructed)",
+            Case::RenderingReconstructed => {
+                "vkCmdBeginRendering+End (FDM attachment, reconstructed)"
+            }
+        }
+    }
+
+    /// The same pass without reconstruction, for the reconstructed cases.
+    fn unreconstructed(self) -> Option<Case> {
+        match self {
+            Case::RenderPassReconstructed => Some(Case::RenderPassFdm),
+            Case::RenderingReconstructed => Some(Case::RenderingFdm),
+            _ => None,
         }
     }
 
@@ -565,10 +628,11 @@ impl Case {
     fn bare(self) -> Case {
         match self {
             Case::BarrierFdm => Case::Barrier,
-            Case::RenderPassFdm => Case::RenderPass,
-            Case::RenderingFdm | Case::RenderingInjected | Case::RenderingInjectedNull => {
-                Case::Rendering
-            }
+            Case::RenderPassFdm | Case::RenderPassReconstructed => Case::RenderPass,
+            Case::RenderingFdm
+            | Case::RenderingInjected
+            | Case::RenderingInjectedNull
+            | Case::RenderingReconstructed => Case::Rendering,
             Case::RenderPassInjected => Case::RenderPass,
             Case::RenderPassOffsets => Case::RenderPass2,
             Case::RenderingOffsets => Case::Rendering,
@@ -675,6 +739,65 @@ fn proves_injection(
     Ok(())
 }
 
+/// That the emulating side's reconstructed cases reconstruct, before any round is timed: the
+/// first pass into the subsampled image makes the scratch buffer the layer keeps for that target
+/// size (one `vkCreateBuffer` reaching the double), after the same passes into the image without
+/// the flag made whatever they make; the second reconstructed case reuses it.
+fn proves_reconstruction(double: &fovea_vkdouble::Loaded, side: &Side) -> Result<(), String> {
+    for case in [Case::RenderPassReconstructed, Case::RenderingReconstructed] {
+        let plain = case.unreconstructed().expect("a reconstructed case");
+        side.round(plain, 1)
+            .ok_or_else(|| format!("{} not recordable", plain.name()))?;
+    }
+    let before = double.calls("vkCreateBuffer");
+    for case in [Case::RenderPassReconstructed, Case::RenderingReconstructed] {
+        side.round(case, 1)
+            .ok_or_else(|| format!("{} not recordable", case.name()))?;
+    }
+    let made = double.calls("vkCreateBuffer") - before;
+    if made != 1 {
+        return Err(format!(
+            "{made} buffers made by the first reconstructed passes, not the one scratch"
+        ));
+    }
+    Ok(())
+}
+
+/// What reconstruction adds to recording a pass: each reconstructed case against the same pass
+/// into an image without the subsampled flag, on the same emulating device, in interleaved
+/// rounds.
+fn reconstruction_summary(sides: &Sides) {
+    const ROUNDS: usize = 200;
+    println!(
+        "\nvk_commands reconstruction, {} below the layers: median ns per pass over {ROUNDS} \
+         interleaved rounds of {ROUND}, fovea's emulating device both",
+        sides.bottom.name()
+    );
+    println!(
+        "{:<46} {:>11} {:>11} {:>9} {:>7}",
+        "pass", "plain ns", "recon ns", "added ns", "ratio"
+    );
+    for case in [Case::RenderPassReconstructed, Case::RenderingReconstructed] {
+        let plain = case.unreconstructed().expect("a reconstructed case");
+        let (mut tp, mut tr) = (Vec::new(), Vec::new());
+        for _ in 0..ROUNDS {
+            let (t, _) = sides.fovea.round(plain, ROUND).expect("recordable");
+            tp.push(t.as_nanos() as f64 / ROUND as f64);
+            let (t, _) = sides.fovea.round(case, ROUND).expect("recordable");
+            tr.push(t.as_nanos() as f64 / ROUND as f64);
+        }
+        let (p, r) = (median(tp), median(tr));
+        println!(
+            "{:<46} {:>11.1} {:>11.1} {:>9.1} {:>7.3}",
+            case.name(),
+            p,
+            r,
+            r - p,
+            r / p
+        );
+    }
+}
+
 /// The three sides on both bottoms, each injecting side proven to inject, what keeps injection on,
 /// and the double's library (kept loaded: its records live there); or why not. Panics where an
 /// injecting side does not inject: its rows would measure nothing.
@@ -695,6 +818,13 @@ fn sides() -> Result<(Vec<Sides>, Xr, fovea_vkdouble::Loaded), String> {
         }
         let bare = Side::new(&entry, Kind::Bare)?;
         let fovea = Side::new(&entry, Kind::Fdm)?;
+        if let Err(e) = proves_reconstruction(&double, &fovea) {
+            panic!(
+                "vk_commands: the emulating device ({} bottom) does not reconstruct, so its \
+                 reconstructed rows would measure nothing: {e}",
+                bottom.name()
+            );
+        }
         double.clear();
         let inject = Side::injecting(&entry, &xr)?;
         if let Err(e) = proves_injection(&double, &inject, bottom) {
@@ -826,6 +956,9 @@ fn benches() {
     let mut added = Vec::new();
     for sides in &all {
         added.extend(summary(sides));
+    }
+    for sides in &all {
+        reconstruction_summary(sides);
     }
     // Recording allocates nothing in the layer, density-map commands included: a regression fails
     // the run.

@@ -19,6 +19,13 @@ further right than the head's 15°):
   block inside it uniform), against the reference's own share (the scene is textured down to the
   pixel, so at full rate few are). The same measure as `fovea_vkdouble::blocks::uniform_share`.
 
+A control, from the fixed reference frame alone (no layer, no double): the frame shaded at one
+fragment size everywhere (2×2, 4×4), each fragment's value the mean of its middle pixels in linear
+light (the double's stand-in for the value at the fragment's centre, crates/vkdouble/src/layer/centre.rs),
+shown as blocks and as the bilinear blend between fragment centres (reconstruction's rule,
+docs/reconstruction.md), FLIP per band: what the metric makes of blocks against the blend on this
+scene, apart from fovea's maps and shaders.
+
 Each figure is given for the frame as shaded (coarse blocks: FOVEA_SUBSAMPLED=off) and, where a run
 with reconstruction exists (folder HEADSET-GAZE-LEVEL-smooth, FOVEA_SUBSAMPLED=on), for the
 reconstructed frame in the "reconstructed" rows; where that frame is identical to the blocky one
@@ -27,8 +34,8 @@ reconstructed frame in the "reconstructed" rows; where that frame is identical t
 Usage: perceptual.py FRAMES_DIR MODEL_JSON_DIR OUT_DIR, where FRAMES_DIR holds one folder per run
 named HEADSET-GAZE-LEVEL (or HEADSET-GAZE-LEVEL-smooth) with the example's PNGs and a `run.txt` of
 its stdout (the located FOVs),
-and MODEL_JSON_DIR holds `fovea report --headset H --json` as H.json. Writes OUT_DIR/table.md and
-OUT_DIR/table.json.
+and MODEL_JSON_DIR holds `fovea report --headset H --json` as H.json. Writes OUT_DIR/table.md,
+OUT_DIR/table.json (the runs) and OUT_DIR/control.json (the control).
 
 It is a measuring tool, run from a script: nothing of fovea links it.
 """
@@ -206,6 +213,95 @@ def analyse(frames_dir, models_dir):
     return rows
 
 
+def to_linear(s):
+    return np.where(s <= 0.04045, s / 12.92, ((s + 0.055) / 1.055) ** 2.4)
+
+
+def to_srgb8(lin):
+    lin = np.clip(lin, 0.0, 1.0)
+    s = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055)
+    return np.round(s * 255.0).astype(np.uint8)
+
+
+def shaded_at(lin, size):
+    """Per size×size fragment (aligned to the origin): the mean of its middle 2×2 (1 for size 1)."""
+    a, b = (size - 1) // 2, size // 2
+    return (lin[a::size, a::size] + lin[a::size, b::size] + lin[b::size, a::size]
+            + lin[b::size, b::size]) / 4.0
+
+
+def blocks_of(values, size):
+    return np.repeat(np.repeat(values, size, 0), size, 1)
+
+
+def blend_of(values, size, shape):
+    """Bilinear between fragment centres (pixel coordinate i·size + size/2), clamped at the edges."""
+    h, w = shape
+
+    def axis(n, count):
+        g = (np.arange(n) + 0.5 - size / 2.0) / size
+        g0 = np.floor(g)
+        f = g - g0
+        i0 = np.clip(g0.astype(int), 0, count - 1)
+        return i0, np.clip(i0 + 1, 0, count - 1), f
+
+    y0, y1, fy = axis(h, values.shape[0])
+    x0, x1, fx = axis(w, values.shape[1])
+    fy, fx = fy[:, None, None], fx[None, :, None]
+    top = values[y0][:, x0] * (1 - fx) + values[y0][:, x1] * fx
+    bottom = values[y1][:, x0] * (1 - fx) + values[y1][:, x1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def control(frames_dir):
+    """FLIP per band of the fixed reference shaded at one size everywhere: blocks and blend."""
+    rows = []
+    for ref_dir in sorted(frames_dir.glob("*-fixed-none")):
+        headset = ref_dir.name.split("-")[0]
+        fov = fovs((ref_dir / "run.txt").read_text())
+        ref = load(last_left_frame(ref_dir, "none"))
+        ppd = centre_ppd(ref.shape[:2], fov)
+        for size in (2, 4):
+            h, w = ref.shape[0] // size * size, ref.shape[1] // size * size
+            crop = ref[:h, :w]
+            ecc = eccentricity(ref.shape[:2], fov, left_eye_gaze(GAZE["fixed"]))[:h, :w]
+            values = shaded_at(to_linear(crop.astype(np.float64) / 255.0), size)
+            for form, lin in (("blocks", blocks_of(values, size)),
+                              ("blend", blend_of(values, size, (h, w)))):
+                error, _, _ = flip.evaluate(
+                    crop.astype(np.float32) / 255.0,
+                    to_srgb8(lin).astype(np.float32) / 255.0,
+                    "LDR",
+                    inputsRGB=True,
+                    applyMagma=False,
+                    computeMeanError=True,
+                    parameters={"ppd": ppd},
+                )
+                error = np.asarray(error).reshape(h, w)
+                bands = [
+                    float(error[(ecc >= lo) & (ecc < hi)].mean())
+                    if ((ecc >= lo) & (ecc < hi)).any() else None
+                    for lo, hi in BANDS
+                ]
+                rows.append({"headset": headset, "size": size, "form": form, "flip": bands})
+    return rows
+
+
+def control_table(rows):
+    heads = " | ".join(f"{lo}–{hi}°" if hi < 180 else f"≥{lo}°" for lo, hi in BANDS)
+    out = [
+        "**Control: FLIP per band of the fixed reference shaded at one size everywhere, "
+        "as blocks and as the blend between fragment centres**\n",
+        f"| headset | fragment | form | {heads} |",
+        "|---|---|---|" + "---|" * len(BANDS),
+    ]
+    for r in rows:
+        cells = " | ".join("–" if v is None else f"{v:.3f}" for v in r["flip"])
+        out.append(f"| {r['headset']} | {r['size']}×{r['size']} | {r['form']} | {cells} |")
+    out.append("")
+    return "\n".join(out)
+
+
 def cell(band, key):
     if band is None or band.get(key) is None:
         return "–"
@@ -269,9 +365,11 @@ def main():
     rows.sort(key=lambda r: (r["headset"], r["gaze"], order[r["level"]], bool(r["reconstructed"])))
     if not rows:
         raise SystemExit(f"{frames_dir}: no runs")
+    controls = control(frames_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "table.json").write_text(json.dumps(rows, indent=1))
-    text = table(rows)
+    (out / "control.json").write_text(json.dumps(controls, indent=1))
+    text = table(rows) + "\n" + control_table(controls)
     (out / "table.md").write_text(text)
     print(text)
 

@@ -22,8 +22,11 @@
 # GPU through fovea's Vulkan layer instead of lavapipe and the double: scripts/gpu-proof.sh),
 # FRAMES_ONLY=1 (write the frames and the model's figures, not the table: for a machine without
 # the metric's environment; run scripts/perceptual.py on OUT_DIR elsewhere).
-# The metric's own environment (flip-evaluator, numpy, Pillow) is a virtual environment in
-# OUT_DIR/venv, made on first use from PyPI. Nothing of it is shipped or linked.
+# FOVVIDEOVDP=1 also rates each frame with FovVideoVDP (scripts/fovvideovdp.py: one figure in JOD
+# for the whole frame as the eye that fixates the gaze sees it; pyfvvdp pulls in torch, about 4 GB,
+# and takes about 20 s a frame on two CPU cores).
+# The metrics' own environment (flip-evaluator, numpy, Pillow; pyfvvdp) is a virtual environment
+# in OUT_DIR/venv, made on first use from PyPI. Nothing of it is shipped or linked.
 set -eu
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -39,6 +42,10 @@ OUT=$(cd "$OUT" && pwd)
 if [ "${FRAMES_ONLY:-0}" != 1 ] && [ ! -x "$OUT/venv/bin/python" ]; then
     python3 -m venv "$OUT/venv"
     "$OUT/venv/bin/pip" install --quiet flip-evaluator==1.7 numpy pillow
+fi
+if [ "${FOVVIDEOVDP:-0}" = 1 ] && [ "${FRAMES_ONLY:-0}" != 1 ] \
+    && ! "$OUT/venv/bin/python" -c 'import pyfvvdp' 2>/dev/null; then
+    "$OUT/venv/bin/pip" install --quiet pyfvvdp==1.2.2
 fi
 if [ "${NO_BUILD:-0}" != 1 ]; then
     cargo build --release -p fovea -p fovea-sim -p fovea-cli -p fovea-vkdouble --lib --bins \
@@ -111,3 +118,7 @@ if [ "${FRAMES_ONLY:-0}" = 1 ]; then
 fi
 "$OUT/venv/bin/python" scripts/perceptual.py "$OUT/frames" "$OUT/model" "$OUT"
 echo "table: $OUT/table.md"
+if [ "${FOVVIDEOVDP:-0}" = 1 ]; then
+    (cd scripts && "$OUT/venv/bin/python" fovvideovdp.py "$OUT/frames" "$OUT")
+    echo "FovVideoVDP: $OUT/fovvideovdp.md"
+fi

@@ -49,14 +49,11 @@ pub struct Injection {
     /// How many views the application renders (2 for stereo).
     pub views: u8,
     pub swapchains: Vec<EyeSwapchain>,
-    /// Per view, where its fovea is while a gaze is followed (NDC of its own FOV, y up); `None`:
-    /// the fixed map's place (docs/eye-tracking.md#what-moves-when). Published only when a fovea
-    /// moved by half a texel or more ([`set_centres`]).
-    pub centres: [Option<[f32; 2]>; MAX_VIEWS],
     /// Bumped when the pattern, the FOVs or `max_fragment` change: what the fixed maps hold, which
     /// a gaze only shifts.
     pub fixed: u64,
-    /// Bumped when anything a map holds changes: what [`Injection::fixed`] counts, and the centres.
+    /// Bumped when anything a map holds changes except the centres: what [`Injection::fixed`]
+    /// counts ([`Injection::key`] adds the centres' moves).
     pub maps: u64,
 }
 
@@ -72,16 +69,24 @@ impl Injection {
             fovs: [None; MAX_VIEWS],
             views: 2,
             swapchains: Vec::new(),
-            centres: [None; MAX_VIEWS],
             fixed: 0,
             maps: 0,
         }
     }
 
     /// The generation of what the maps hold: an injected shading-rate image filled for another
-    /// key is stale.
+    /// key is stale. Both counts only grow, so their sum moves exactly when either does. Read it
+    /// before [`Injection::centres`]: a map filled with centres newer than its key is filled again
+    /// at the next look, never one with older centres kept.
     pub fn key(&self) -> u64 {
-        self.maps
+        self.maps + MOVES.load(Ordering::Acquire)
+    }
+
+    /// Per view, where its fovea is while a gaze is followed (NDC of its own FOV, y up); `None`:
+    /// the fixed map's place (docs/eye-tracking.md#what-moves-when). Published only when a fovea
+    /// moved by half a texel or more ([`set_centres`]).
+    pub fn centres(&self) -> [Option<[f32; 2]>; MAX_VIEWS] {
+        published_centres()
     }
 
     /// Which swapchain `image` belongs to, if any.
@@ -149,6 +154,42 @@ static WANTED: AtomicBool = AtomicBool::new(false);
 /// Bumped by every change to [`STATE`].
 static GENERATION: AtomicU64 = AtomicU64::new(0);
 
+/// The published centres, one word per view ([`pack`]), beside [`STATE`] rather than in it: a
+/// gaze moves them most frames, and a move then costs a few atomic stores, where a new `STATE`
+/// would copy the swapchains' lists (heap allocations and the write lock, per frame).
+static CENTRES: [AtomicU64; MAX_VIEWS] = [const { AtomicU64::new(NO_CENTRE) }; MAX_VIEWS];
+
+/// Bumped after each publication of [`CENTRES`] (the writer stores the centres first).
+static MOVES: AtomicU64 = AtomicU64::new(0);
+
+/// A view without a centre of its own: the bits of two NaNs, which [`pack`] never stores.
+const NO_CENTRE: u64 = u64::MAX;
+
+/// A centre as one word (x's bits high, y's low); a centre that is not finite is none.
+fn pack(c: Option<[f32; 2]>) -> u64 {
+    match c {
+        Some([x, y]) if x.is_finite() && y.is_finite() => {
+            u64::from(x.to_bits()) << 32 | u64::from(y.to_bits())
+        }
+        _ => NO_CENTRE,
+    }
+}
+
+fn unpack(w: u64) -> Option<[f32; 2]> {
+    (w != NO_CENTRE).then(|| [f32::from_bits((w >> 32) as u32), f32::from_bits(w as u32)])
+}
+
+fn published_centres() -> [Option<[f32; 2]>; MAX_VIEWS] {
+    std::array::from_fn(|i| unpack(CENTRES[i].load(Ordering::Acquire)))
+}
+
+fn publish_centres(now: &[Option<[f32; 2]>; MAX_VIEWS]) {
+    for (word, c) in CENTRES.iter().zip(now) {
+        word.store(pack(*c), Ordering::Release);
+    }
+    MOVES.fetch_add(1, Ordering::AcqRel);
+}
+
 static STATE: crate::common::lock::SharedRwLock<Option<Arc<Injection>>> =
     crate::common::lock::SharedRwLock::new(None);
 
@@ -171,7 +212,8 @@ pub fn current() -> Option<Arc<Injection>> {
 /// loading this value is good for as long as the value stays the same (the Vulkan side's per-thread
 /// cache of begin decisions, `crate::vk::injection`).
 pub fn generation() -> u64 {
-    GENERATION.load(Ordering::Acquire)
+    // Both only grow, so the sum moves exactly when either does.
+    GENERATION.load(Ordering::Acquire) + MOVES.load(Ordering::Acquire)
 }
 
 thread_local! {
@@ -268,6 +310,7 @@ pub fn for_every_app() -> bool {
 /// Switches injection on at `level` (at `xrCreateInstance`); `every_app`: `inject` is on
 /// ([`for_every_app`]).
 pub fn start(level: Level, every_app: bool) {
+    publish_centres(&[None; MAX_VIEWS]);
     *STATE.write() = Some(Arc::new(Injection::new(level)));
     FOR_EVERY_APP.store(every_app, Ordering::Release);
     WANTED.store(true, Ordering::Release);
@@ -371,8 +414,9 @@ fn texel() -> [u32; 2] {
 /// following, or its fovea moved by half a texel or more in the pixels of the eye swapchains'
 /// views ([`fovea_model::shift::moved_enough`]); before any eye swapchain is known, any change.
 fn centres_moved(s: &Injection, now: &[Option<[f32; 2]>; MAX_VIEWS]) -> bool {
+    let published = s.centres();
     let Some(extent) = s.swapchains.first().map(|e| e.shape.view_extent()) else {
-        return s.centres != *now;
+        return published != *now;
     };
     let grid = fovea_model::density::Grid::new(extent, texel());
     let px = |c: [f32; 2]| {
@@ -381,7 +425,7 @@ fn centres_moved(s: &Injection, now: &[Option<[f32; 2]>; MAX_VIEWS]) -> bool {
             (1.0 - c[1]) * 0.5 * extent[1] as f32,
         ]
     };
-    s.centres.iter().zip(now).any(|(a, b)| match (a, b) {
+    published.iter().zip(now).any(|(a, b)| match (a, b) {
         (None, None) => false,
         (Some(a), Some(b)) => fovea_model::shift::moved_enough(&grid, px(*a), px(*b)),
         _ => true,
@@ -390,17 +434,12 @@ fn centres_moved(s: &Injection, now: &[Option<[f32; 2]>; MAX_VIEWS]) -> bool {
 
 /// Where each view's fovea is now (`None`: fixed foveation), from the OpenXR side every frame: a
 /// comparison in steady state, published only when a fovea moved by half a texel or more, so the
-/// generation does not move with a trembling gaze.
+/// generation does not move with a trembling gaze; a publication is a few atomic stores, with no
+/// lock and no allocation ([`CENTRES`]). Nothing is published where injection is off.
 pub fn set_centres(now: &[Option<[f32; 2]>; MAX_VIEWS]) {
-    if with_current(|s| s.is_none_or(|s| !centres_moved(s, now))) {
-        return;
+    if with_current(|s| s.is_some_and(|s| centres_moved(s, now))) {
+        publish_centres(now);
     }
-    update(|s| {
-        if centres_moved(s, now) {
-            s.centres = *now;
-            s.maps += 1;
-        }
-    });
 }
 
 /// A swapchain that holds views was created (or what it holds was learned anew); `own`: the
@@ -572,7 +611,7 @@ pub(crate) mod tests {
         let fixed = current().unwrap().fixed;
         set_centres(&c);
         let s = current().unwrap();
-        assert_eq!(s.centres, c);
+        assert_eq!(s.centres(), c);
         assert_eq!(s.fixed, fixed, "a move keeps the fixed maps");
         let (g, key) = (GENERATION.load(Ordering::Acquire), s.key());
         // A texel of 16 px on 1600 px is 0.02 in NDC: half of it is 0.01.
@@ -585,12 +624,49 @@ pub(crate) mod tests {
         moved[1] = Some([0.1, 0.011]);
         set_centres(&moved);
         assert!(current().unwrap().key() > key, "half a texel: published");
-        assert_eq!(current().unwrap().centres, moved);
+        assert_eq!(current().unwrap().centres(), moved);
         let key = current().unwrap().key();
         set_centres(&[None; MAX_VIEWS]);
         assert!(current().unwrap().key() > key, "back to fixed foveation");
         assert_eq!(current().unwrap().fixed, fixed);
         stop();
+    }
+
+    /// An eye tracker moves the centres most frames: each publication is a few stores, with no
+    /// heap allocation, and the Vulkan side sees it (the key and the generation move).
+    #[test]
+    fn a_moving_gaze_is_published_without_allocating() {
+        use crate::common::alloc_count::allocations;
+        let _one = STATE_TESTS.lock();
+        stop();
+        start(Level::High, true);
+        set_swapchain(
+            9,
+            inject::Swapchain {
+                extent: [1600, 1600],
+                layers: 2,
+                holds: Holds::Layers,
+            },
+            false,
+        );
+        set_images(9, &[0x51, 0x52, 0x53]);
+        set_texel([16, 16]);
+        let mut c = [None; MAX_VIEWS];
+        c[0] = Some([0.0, 0.0]);
+        set_centres(&c);
+        let mut counts = Vec::new();
+        for frame in 1..=30u16 {
+            let (key, generation) = (current().unwrap().key(), super::generation());
+            c[0] = Some([f32::from(frame) * 0.02, 0.0]);
+            let before = allocations();
+            set_centres(&c);
+            counts.push(allocations() - before);
+            let s = current().unwrap();
+            assert_eq!(s.centres(), c, "frame {frame}");
+            assert!(s.key() > key && super::generation() > generation);
+        }
+        stop();
+        assert_eq!(counts, [0; 30], "allocations per published move");
     }
 
     #[test]

@@ -426,6 +426,9 @@ pub unsafe fn begin_injected_pass(
     }
     let rate = vk::ImageView::from_raw(rate);
     crate::bridge::inject::count_pass(eye);
+    if eye && inj.reconstructs() {
+        plan_imageless_pass(inj, cb, b, app, rate);
+    }
     let mut inline = [vk::ImageView::null(); INLINE_VIEWS];
     let heap: Vec<vk::ImageView>;
     let views: &[vk::ImageView] = if app.len() < INLINE_VIEWS {
@@ -656,6 +659,26 @@ fn plan_render_pass(
         .into_iter()
         .zip(fb.pass.targets)
         .filter_map(|(v, t)| Some((v?, t?.1)));
+    plan(inj, cb, targets, map, fb.layers, b.render_area, false);
+}
+
+/// [`plan`] for a render pass begun on an imageless framebuffer whose colour view got the eye map
+/// `map`: the pass's targets are the views this begin names (`views`, the application's) at the
+/// pass's target attachments.
+fn plan_imageless_pass(
+    inj: &crate::vk::own::injector::Injector,
+    cb: vk::CommandBuffer,
+    b: &vk::RenderPassBeginInfo<'_>,
+    views: &[vk::ImageView],
+    map: vk::ImageView,
+) {
+    let Some(fb) = inj.framebuffer(b.framebuffer) else {
+        return;
+    };
+    let targets = fb.pass.targets.into_iter().filter_map(|t| {
+        let (i, layout) = t?;
+        Some((*views.get(i as usize)?, layout))
+    });
     plan(inj, cb, targets, map, fb.layers, b.render_area, false);
 }
 

@@ -25,16 +25,23 @@ use crate::vk::own::reconstructor::{
 };
 use crate::vk::registry::{self, record_of, Device, RECONSTRUCTORS};
 use crate::vk::translate::render_pass::{
-    pass_colours, rendering_target, too_many_targets, Pass2, MAX_TARGETS,
+    pass_colours, pass_view_mask, rendering_target, too_many_targets, Pass2, MAX_TARGETS,
 };
 
 /// Sets up reconstruction on a device just recorded in the registry that injects shading-rate
 /// maps or emulates density maps, or logs why not. `why_not`: why the device cannot record compute dispatches into the
-/// application's command buffers and give its bindings back, as the converter found.
+/// application's command buffers and give its bindings back, as the converter found. `ci`: the
+/// application's create info, whose `imagelessFramebuffer` decides whether its views need the
+/// added usage hidden ([`hide_added_usage`]).
 ///
 /// # Safety
-/// `handle` must be a live device just recorded.
-pub unsafe fn device_created(handle: vk::Device, why_not: Option<String>) {
+/// `handle` must be a live device just recorded; `ci` the application's valid create info.
+pub unsafe fn device_created(
+    handle: vk::Device,
+    why_not: Option<String>,
+    ci: &vk::DeviceCreateInfo<'_>,
+) {
+    crate::bridge::subsampled::set_hides_usage(handle.as_raw(), false);
     // SAFETY: as the caller promised.
     let Some(dev) = (unsafe { registry::device(handle) }) else {
         return;
@@ -55,16 +62,25 @@ pub unsafe fn device_created(handle: vk::Device, why_not: Option<String>) {
     }
     // SAFETY: the layer's own objects on a live device.
     match unsafe { Reconstructor::new(Arc::clone(own), fdm) } {
-        Ok(r) => {
+        Ok(mut r) => {
+            // SAFETY: as the caller promised.
+            r.imageless = unsafe { enables_imageless(ci) };
             // SAFETY: as the caller promised.
             let Some(k) = (unsafe { key(handle) }) else {
                 // SAFETY: made on this live device, used by nothing yet.
                 unsafe { r.destroy() };
                 return;
             };
-            let mut v = RECONSTRUCTORS.write();
-            v.retain(|(key, _)| *key != k);
-            v.push((k, Arc::new(r)));
+            let imageless = r.imageless;
+            {
+                let mut v = RECONSTRUCTORS.write();
+                v.retain(|(key, _)| *key != k);
+                v.push((k, Arc::new(r)));
+            }
+            crate::bridge::subsampled::set_hides_usage(
+                handle.as_raw(),
+                hides_usage(dev.api_version, imageless),
+            );
         }
         Err(e) => tracing::warn!(
             device = raw(handle),
@@ -74,12 +90,43 @@ pub unsafe fn device_created(handle: vk::Device, why_not: Option<String>) {
     }
 }
 
+/// Whether a device created from `ci` enables `imagelessFramebuffer` (Vulkan 1.2's features, or
+/// `VK_KHR_imageless_framebuffer`'s): only such an application names a view's usage that added
+/// usage could contradict (VUID-VkRenderPassBeginInfo-framebuffer-04627).
+///
+/// # Safety
+/// `ci` must be a valid create info.
+unsafe fn enables_imageless(ci: &vk::DeviceCreateInfo<'_>) -> bool {
+    let v12 = vk::StructureType::PHYSICAL_DEVICE_VULKAN_1_2_FEATURES;
+    let ext = vk::StructureType::PHYSICAL_DEVICE_IMAGELESS_FRAMEBUFFER_FEATURES;
+    // SAFETY: the caller's chain, read only; a node found by its sType is that struct.
+    unsafe {
+        let core = chain::find::<vk::PhysicalDeviceVulkan12Features<'_>>(ci.p_next, v12)
+            .ok()
+            .flatten()
+            .is_some_and(|f| (*f).imageless_framebuffer == vk::TRUE);
+        let own = chain::find::<vk::PhysicalDeviceImagelessFramebufferFeatures<'_>>(ci.p_next, ext)
+            .ok()
+            .flatten()
+            .is_some_and(|f| (*f).imageless_framebuffer == vk::TRUE);
+        core || own
+    }
+}
+
+/// Whether the layer hides added usage from the application's views on a device of `api_version`
+/// whose application enabled imageless framebuffers or not: where they are enabled (nobody else
+/// can tell a view's usage from its image's), from Vulkan 1.1 (`VkImageViewUsageCreateInfo`).
+fn hides_usage(api_version: u32, imageless: bool) -> bool {
+    imageless && api_version >= vk::API_VERSION_1_1
+}
+
 /// Destroys a device's reconstruction objects; the device is about to be destroyed, and its
 /// command buffers' records are gone.
 ///
 /// # Safety
 /// `handle` must be live and idle.
 pub unsafe fn device_destroyed(handle: vk::Device) {
+    crate::bridge::subsampled::set_hides_usage(handle.as_raw(), false);
     // SAFETY: as the caller promised.
     let Some(k) = (unsafe { key(handle) }) else {
         return;
@@ -169,24 +216,130 @@ pub unsafe fn subsampled_usage(
     Some(ci.usage | vk::ImageUsageFlags::TRANSFER_SRC | vk::ImageUsageFlags::TRANSFER_DST)
 }
 
-/// An application's subsampled colour image was created with the copies' usage
-/// ([`subsampled_usage`]).
+/// An image was created on a device that reconstructs, from the application's create info `ci`
+/// (`r`: what the creation returned, `out`: where it wrote the image). `subsampled`: for an image
+/// the application created subsampled, the usage the layer added on the copy that went down
+/// ([`subsampled_usage`]; `None` where the create info went down with the application's usage).
+/// Two facts are kept: an image the application created subsampled is reconstructed (with its
+/// layers); and, on a device with imageless framebuffers, a colour image with transfer usage (the
+/// runtime's swapchain images, whose transfer usage the OpenXR side may have added) keeps its
+/// usage, so that its views can be given the application's ([`hide_added_usage`]).
 ///
 /// # Safety
-/// `dev` must be live.
-pub unsafe fn image_created(dev: &Device, image: vk::Image, ci: &vk::ImageCreateInfo<'_>) {
-    with_reconstructor(dev, |r| {
-        r.tables
-            .lock()
-            .images
-            .insert(image.as_raw(), ci.array_layers.max(1));
+/// `dev` must be live; `out` and `ci` NULL or valid.
+pub unsafe fn image_made(
+    dev: &Device,
+    r: vk::Result,
+    out: *const vk::Image,
+    ci: *const vk::ImageCreateInfo<'_>,
+    subsampled: Option<vk::ImageUsageFlags>,
+) {
+    if r != vk::Result::SUCCESS || out.is_null() || ci.is_null() {
+        return;
+    }
+    // SAFETY: as the caller promised.
+    let (image, ci) = unsafe { ((*out).as_raw(), &*ci) };
+    let added = subsampled.unwrap_or_default();
+    let usage = ci.usage | added;
+    let transfer = vk::ImageUsageFlags::TRANSFER_SRC | vk::ImageUsageFlags::TRANSFER_DST;
+    let colour = usage.contains(vk::ImageUsageFlags::COLOR_ATTACHMENT);
+    if subsampled.is_none() && (!colour || !usage.intersects(transfer)) {
+        return;
+    }
+    with_any_reconstructor(dev, |r| {
+        let mut t = r.tables.lock();
+        if subsampled.is_some() {
+            t.images.insert(image, ci.array_layers.max(1));
+        }
+        if r.imageless {
+            t.usage.insert(image, (usage, added));
+        }
     });
 }
 
 /// # Safety
 /// `dev` must be live.
 pub unsafe fn image_destroyed(dev: &Device, image: vk::Image) {
-    with_reconstructor(dev, |r| r.tables.lock().images.remove(&image.as_raw()));
+    with_any_reconstructor(dev, |r| {
+        let mut t = r.tables.lock();
+        t.images.remove(&image.as_raw());
+        t.usage.remove(&image.as_raw());
+    });
+}
+
+/// Runs `f` with the reconstructor of a device that emulates or injects, if it has one.
+fn with_any_reconstructor<R>(dev: &Device, f: impl FnOnce(&Reconstructor) -> R) -> Option<R> {
+    // SAFETY: the device is live (the caller's hook is running on it).
+    let k = unsafe { key(dev.handle) }?;
+    let r = registry::reconstructor_by_key(k)?;
+    Some(f(&r))
+}
+
+/// `vkCreateImageView` of an image whose usage fovea widened for reconstruction (the OpenXR side's
+/// transfer usage on a swapchain image, [`crate::bridge::subsampled::added_usage`], or the layer's
+/// on an application's subsampled image, [`subsampled_usage`]): a copy of `ci` (NULL or the
+/// create info going down) with `slot` in front of its chain, a `VkImageViewUsageCreateInfo`
+/// naming the usage the application gave the image, so the view's usage is what the application
+/// believes it is. An application's imageless framebuffer names that usage for each attachment,
+/// and it must equal the view's at each begin (VUID-VkRenderPassBeginInfo-framebuffer-04627):
+/// docs/reconstruction.md#usage-the-application-does-not-see. The copies reconstruction records
+/// name the image, whose usage has the transfer bits; a view never needs them.
+///
+/// `None` (the create info goes down as it is) for any other image, on a device whose application
+/// did not enable imageless framebuffers (nothing there compares a view's usage with what the
+/// application believes), where the application chained a `VkImageViewUsageCreateInfo` itself
+/// (its usage is then the one it names), on a device below
+/// Vulkan 1.1 (where that struct is `VK_KHR_maintenance2`'s; such a device's imageless
+/// framebuffers keep the mismatch, said once), and for a swapchain image the layer did not see
+/// created (its usage unknown; said once).
+///
+/// # Safety
+/// `dev` must be live; `ci` NULL or valid.
+pub unsafe fn hide_added_usage<'a>(
+    dev: &Device,
+    ci: *const vk::ImageViewCreateInfo<'a>,
+    slot: &'a mut vk::ImageViewUsageCreateInfo<'a>,
+) -> Option<vk::ImageViewCreateInfo<'a>> {
+    static LOGGED: AtomicBool = AtomicBool::new(false);
+    // SAFETY: as the caller promised.
+    let ci = unsafe { ci.as_ref() }?;
+    let image = ci.image.as_raw();
+    let (usage, own) = with_any_reconstructor(dev, |r| {
+        r.imageless.then(|| {
+            r.tables
+                .lock()
+                .usage
+                .get(&image)
+                .copied()
+                .unwrap_or_default()
+        })
+    })
+    .flatten()?;
+    let added = own | crate::bridge::subsampled::added_usage(image);
+    if added.is_empty() {
+        return None;
+    }
+    let ty = vk::StructureType::IMAGE_VIEW_USAGE_CREATE_INFO;
+    // SAFETY: the caller's chain, read only.
+    let apps = unsafe { chain::find::<vk::ImageViewUsageCreateInfo<'_>>(ci.p_next, ty) };
+    if !matches!(apps, Ok(None)) {
+        return None;
+    }
+    if usage.is_empty() || !hides_usage(dev.api_version, true) {
+        if !LOGGED.swap(true, Ordering::Relaxed) {
+            tracing::warn!(
+                image = image,
+                "a view of an image with the transfer usage reconstruction added keeps that usage                  (the layer did not see the image created, or the device is below Vulkan 1.1): an                  imageless framebuffer that names the application's usage for it does not match"
+            );
+        }
+        return None;
+    }
+    slot.usage = usage & !added;
+    slot.p_next = ci.p_next;
+    Some(vk::ImageViewCreateInfo {
+        p_next: (slot as *const vk::ImageViewUsageCreateInfo<'a>).cast(),
+        ..*ci
+    })
 }
 
 /// A view was created on an emulating device: where its image is reconstructed (the OpenXR side
@@ -240,7 +393,7 @@ pub fn pass_created(dev: &Device, handle: vk::RenderPass, pass: &Pass2, density:
         if colours[0].is_none() {
             return;
         }
-        let view_mask = pass.subpasses.first().map_or(0, |s| s.view_mask);
+        let view_mask = pass_view_mask(pass);
         r.tables.lock().passes.insert(
             handle.as_raw(),
             PassTarget {

@@ -458,9 +458,27 @@ pub struct Swapchain {
     /// (docs/openxr-layer.md#subsampled-images), decided at creation; `None`: nothing is decided
     /// for it (nobody foveates it as far as fovea knows, and the application asked nothing).
     pub reconstruct: Option<bool>,
+    /// The usage fovea had the runtime add to the images that the application did not ask for
+    /// (reconstruction's transfer usage), published with the decision: the Vulkan side hides it
+    /// from the application's views (docs/reconstruction.md#usage-the-application-does-not-see).
+    pub added_usage: xr::SwapchainUsageFlags,
     /// The `VkImage`s the decision was published for ([`crate::bridge::subsampled`]), forgotten
     /// when the runtime has destroyed them ([`Swapchain::forget_published`]).
     pub published: Mutex<Vec<u64>>,
+}
+
+/// The Vulkan usage of the transfer bits of `usage`, as XR_KHR_vulkan_enable maps them ("Swapchain
+/// usage flags"): the only ones fovea adds.
+fn vulkan_usage(usage: xr::SwapchainUsageFlags) -> ash::vk::ImageUsageFlags {
+    use ash::vk::ImageUsageFlags as V;
+    let mut v = V::empty();
+    if usage.contains(xr::SwapchainUsageFlags::TRANSFER_SRC) {
+        v |= V::TRANSFER_SRC;
+    }
+    if usage.contains(xr::SwapchainUsageFlags::TRANSFER_DST) {
+        v |= V::TRANSFER_DST;
+    }
+    v
 }
 
 impl Swapchain {
@@ -470,7 +488,7 @@ impl Swapchain {
         let Some(reconstruct) = self.reconstruct else {
             return;
         };
-        crate::bridge::subsampled::publish(images, reconstruct);
+        crate::bridge::subsampled::publish(images, reconstruct, vulkan_usage(self.added_usage));
         tracing::debug!(
             swapchain = self.handle.into_raw(),
             ?images,

@@ -206,8 +206,6 @@ fn check_fresh(library: &Path, file: &str) -> Result<(), String> {
     }
 }
 
-/// Whether tests that need a system component must fail rather than skip (`FOVEA_REQUIRE_SYSTEM=1`,
-/// set by CI).
 /// The validation layer's features the tests' Vulkan instances turn on: synchronization validation
 /// (hazards between commands and submissions,
 /// <https://vulkan.lunarg.com/doc/sdk/latest/linux/synchronization_usage.html>), unless
@@ -224,6 +222,8 @@ pub fn validation_enables() -> &'static [ash::vk::ValidationFeatureEnableEXT] {
     }
 }
 
+/// Whether tests that need a system component must fail rather than skip (`FOVEA_REQUIRE_SYSTEM=1`,
+/// set by CI).
 pub fn require_system() -> bool {
     std::env::var("FOVEA_REQUIRE_SYSTEM").is_ok_and(|v| v == "1")
 }
@@ -235,6 +235,46 @@ pub fn skip(reason: &str) -> bool {
     }
     eprintln!("SKIPPED: {reason}");
     true
+}
+
+/// Checks that `checked_in` is the SPIR-V glslang builds from the GLSL file `source` with `defines`
+/// (`-DNAME` arguments), as the shaders' `build.sh` scripts build it: a shader edited without
+/// rebuilding its SPIR-V fails here. Skips ([`skip`]) where glslang-tools is not installed. The
+/// bytes are the installed glslang's: other releases emit others (`.ci/run` skips these checks in
+/// the Debian 13 root for that reason).
+pub fn assert_spirv_built_from(source: &Path, defines: &[&str], checked_in: &[u8]) {
+    let version = std::process::Command::new("glslangValidator")
+        .arg("--version")
+        .output();
+    if version.is_err() {
+        skip("glslangValidator is not installed (glslang-tools)");
+        return;
+    }
+    let out = std::env::temp_dir().join(format!(
+        "fovea-spirv-{}-{:?}.spv",
+        std::process::id(),
+        std::thread::current().id()
+    ));
+    let run = std::process::Command::new("glslangValidator")
+        .args(["-V", "--target-env", "vulkan1.1", "-o"])
+        .arg(&out)
+        .args(defines)
+        .arg(source)
+        .output()
+        .expect("glslangValidator runs");
+    let built = std::fs::read(&out);
+    let _ = std::fs::remove_file(&out);
+    assert!(
+        run.status.success(),
+        "{} {defines:?} does not compile: {}",
+        source.display(),
+        String::from_utf8_lossy(&run.stdout)
+    );
+    assert!(
+        built.expect("glslang's output") == checked_in,
+        "{} {defines:?}: the checked-in SPIR-V is stale; run the build.sh beside it",
+        source.display()
+    );
 }
 
 /// One loaded, negotiated layer library.

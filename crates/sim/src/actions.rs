@@ -27,14 +27,13 @@ const EYES: &str = "/user/eyes_ext";
 
 /// The top-level user paths of the spec's interaction profiles and the eye tracker's (Monado
 /// answers XR_ERROR_PATH_UNSUPPORTED for any other path in xrGetCurrentInteractionProfile).
-const TOP_LEVEL_PATHS: [&str; 7] = [
+const TOP_LEVEL_PATHS: [&str; 6] = [
     "/user/hand/left",
     "/user/hand/right",
     "/user/head",
     "/user/gamepad",
     "/user/treadmill",
     "/user/eyes_ext",
-    "/user/vendor",
 ];
 
 /// Action and action set names (spec xrCreateActionSet, xrCreateAction): empty is

@@ -48,9 +48,11 @@ impl Space {
     /// time its sample was taken (`XrEyeGazeSampleTimeEXT`).
     fn pose_in_local(&self, w: &World, time: i64) -> Option<(xr::Posef, Option<i64>)> {
         let (origin, sampled) = match self.kind {
-            SpaceKind::Reference(xr::ReferenceSpaceType::STAGE) => {
-                (translation(0.0, -EYE_HEIGHT_M, 0.0), None)
-            }
+            // LOCAL_FLOOR: LOCAL's origin and yaw, on the floor (spec "Reference Spaces"); the
+            // stage here is centred under LOCAL, so the two share a pose.
+            SpaceKind::Reference(
+                xr::ReferenceSpaceType::STAGE | xr::ReferenceSpaceType::LOCAL_FLOOR,
+            ) => (translation(0.0, -EYE_HEIGHT_M, 0.0), None),
             SpaceKind::Reference(xr::ReferenceSpaceType::VIEW) => {
                 (head_in_local(w, self.session, time), None)
             }
@@ -174,11 +176,26 @@ fn inverse(p: xr::Posef) -> xr::Posef {
     }
 }
 
-const REFERENCE_SPACES: [xr::ReferenceSpaceType; 3] = [
+/// The reference spaces of an instance of API 1.0, then `LOCAL_FLOOR`, which OpenXR 1.1 made core
+/// and requires of every runtime (spec "Reference Spaces": XR_REFERENCE_SPACE_TYPE_LOCAL_FLOOR,
+/// "available in OpenXR 1.1"; under 1.0 it needs XR_EXT_local_floor, which this runtime does
+/// not offer).
+const REFERENCE_SPACES: [xr::ReferenceSpaceType; 4] = [
     xr::ReferenceSpaceType::VIEW,
     xr::ReferenceSpaceType::LOCAL,
     xr::ReferenceSpaceType::STAGE,
+    xr::ReferenceSpaceType::LOCAL_FLOOR,
 ];
+
+/// The reference spaces `session`'s instance offers.
+fn reference_spaces(w: &World, session: u64) -> &'static [xr::ReferenceSpaceType] {
+    let version = w.instances[&w.sessions[&session].instance].api_version;
+    if (version.major(), version.minor()) >= (1, 1) {
+        &REFERENCE_SPACES
+    } else {
+        &REFERENCE_SPACES[..3]
+    }
+}
 
 pub(crate) unsafe extern "system" fn enumerate_reference_spaces(
     session: xr::Session,
@@ -188,17 +205,12 @@ pub(crate) unsafe extern "system" fn enumerate_reference_spaces(
 ) -> xr::Result {
     entry("xrEnumerateReferenceSpaces", |ctx| {
         let mut w = world();
-        w.enter_session(ctx, session)?;
-        ffi::two_call(
-            capacity,
-            count_out,
-            spaces,
-            REFERENCE_SPACES.len(),
-            |i, p| {
-                *p = REFERENCE_SPACES[i];
-                Ok(())
-            },
-        )?;
+        let session = w.enter_session(ctx, session)?;
+        let offered = reference_spaces(&w, session);
+        ffi::two_call(capacity, count_out, spaces, offered.len(), |i, p| {
+            *p = offered[i];
+            Ok(())
+        })?;
         Ok(xr::Result::SUCCESS)
     })
 }
@@ -214,7 +226,7 @@ pub(crate) unsafe extern "system" fn create_reference_space(
         let info = ffi::input(create_info, xr::StructureType::REFERENCE_SPACE_CREATE_INFO)?;
         ffi::non_null(space)?;
         ctx.next_types = ffi::chain_types(info.next);
-        if !REFERENCE_SPACES.contains(&info.reference_space_type) {
+        if !reference_spaces(&w, session).contains(&info.reference_space_type) {
             return Err(xr::Result::ERROR_REFERENCE_SPACE_UNSUPPORTED);
         }
         check_pose(&info.pose_in_reference_space)?;
@@ -241,9 +253,9 @@ pub(crate) unsafe extern "system" fn get_reference_space_bounds_rect(
 ) -> xr::Result {
     entry("xrGetReferenceSpaceBoundsRect", |ctx| {
         let mut w = world();
-        w.enter_session(ctx, session)?;
+        let session = w.enter_session(ctx, session)?;
         ffi::non_null(bounds)?;
-        if !REFERENCE_SPACES.contains(&reference_space_type) {
+        if !reference_spaces(&w, session).contains(&reference_space_type) {
             return Err(xr::Result::ERROR_REFERENCE_SPACE_UNSUPPORTED);
         }
         // Spec: with no known bounds the runtime returns XR_SPACE_BOUNDS_UNAVAILABLE and zero extents.

@@ -26,6 +26,7 @@ use crate::record::{self, error, event};
 use crate::shade::PipelineRate;
 use crate::Profile;
 
+mod centre;
 mod coarse;
 mod queues;
 
@@ -429,6 +430,7 @@ table! { null_commands:
     b"vkCmdPushConstants" => null_push_constants as PFN_vkCmdPushConstants,
     b"vkCmdDispatch" => null_dispatch as PFN_vkCmdDispatch,
     b"vkCmdCopyBufferToImage" => null_copy_buffer_to_image as PFN_vkCmdCopyBufferToImage,
+    b"vkCmdCopyImageToBuffer" => null_copy_image_to_buffer as PFN_vkCmdCopyImageToBuffer,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -520,6 +522,16 @@ unsafe extern "system" fn null_copy_buffer_to_image(
     _: vk::Buffer,
     _: vk::Image,
     _: vk::ImageLayout,
+    _: u32,
+    _: *const vk::BufferImageCopy,
+) {
+}
+
+unsafe extern "system" fn null_copy_image_to_buffer(
+    _: vk::CommandBuffer,
+    _: vk::Image,
+    _: vk::ImageLayout,
+    _: vk::Buffer,
     _: u32,
     _: *const vk::BufferImageCopy,
 ) {

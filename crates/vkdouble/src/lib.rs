@@ -75,14 +75,24 @@
 //! colour attachment (a 2D image with the colour-attachment usage, in an 8-, 16- or
 //! 32-bit-per-channel RGBA or 32-bit packed format) of a pass with a draw that can shade coarser
 //! than 1×1: per shading-rate attachment texel, the finest effective fragment size any of the
-//! pass's draws got there; every block of that size gets the value of its top-left pixel, one
-//! shaded value per fragment. The double records after the pass copies of those layers into
-//! buffers of its own, an event it sets, a wait on an event the host sets, and copies back; at
-//! submit a thread of the double replicates between the two events (`layer/coarse.rs`). Passes
-//! whose draws can only shade 1×1 get nothing recorded. Approximations, where a GPU differs: the
-//! whole block is replaced, so edges of geometry become blocky where a GPU keeps per-pixel
-//! coverage; the value is the top-left pixel's, where a GPU shades at the fragment's centre;
-//! pixels no draw wrote (a cleared background, loaded contents) are coarsened too.
+//! pass's draws got there; every block of that size (aligned to multiples of its size, as a
+//! fragment's area is) gets one value: what its shader computes at the centre of the fragment
+//! area, where a GPU evaluates a coarse fragment (inputs are interpolated "at the center of the
+//! fragment area", Vulkan, "Interpolation Decorations",
+//! <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#shaders-interpolation-decorations>;
+//! `FragCoord` is "the center of the fragment"). Lavapipe shaded each pixel at its own centre,
+//! so the double takes the mean, in linear terms, of the pixels nearest the fragment's centre:
+//! one for a size of 1, the middle two of 2 or 4, per axis (`layer/centre.rs`). The double
+//! records after the pass copies of those layers into buffers of its own, an event it sets, a
+//! wait on an event the host sets, and copies back; at submit a thread of the double coarsens
+//! between the two events (`layer/coarse.rs`). Passes whose draws can only shade 1×1 get nothing
+//! recorded. Approximations, where a GPU differs: the whole block is replaced, so edges of
+//! geometry become blocky where a GPU keeps per-pixel coverage; the mean equals the value at the
+//! centre where the shaded value varies linearly over the middle pixels, and mixes the two sides
+//! where an edge the shader draws runs between them (a GPU gives one side); where the
+//! framebuffer or render area cuts a fragment, a GPU still shades at the whole area's centre,
+//! outside the pixels written, and the double takes the written pixels nearest it; pixels no
+//! draw wrote (a cleared background, loaded contents) are coarsened too.
 //! [`blocks::uniform_share`] measures the result from pixels read back.
 //!
 //! Strictness: after a render pass whose shading-rate attachment has `storeOp = DONT_CARE`, the
@@ -122,10 +132,11 @@ pub const LIBRARY_FILE: &str = "libfovea_vkdouble.so";
 pub const PROFILE_ENV: &str = "FOVEA_VKDOUBLE_PROFILE";
 /// Set (to anything) when a device is created, the environment variable that makes that device's
 /// barrier, render-pass, dynamic-rendering, shading-rate, compute-binding, dispatch and
-/// buffer-to-image copy recording commands do nothing: the double hands out empty functions for
+/// buffer-image copy recording commands do nothing: the double hands out empty functions for
 /// them instead of going down to the driver. A benchmark of the layers above then measures their
 /// own cost per command, not the driver's (`benches/vk_commands.rs`; the density-map pass cases
-/// include the conversion fovea records in front of them).
+/// include the conversion fovea records in front of them, the reconstructed ones the copies and the
+/// dispatch it records after them).
 pub const NULL_COMMANDS_ENV: &str = "FOVEA_VKDOUBLE_NULL_COMMANDS";
 /// Set (to anything) when the shading-rate properties are queried, the environment variable that
 /// makes either profile report `fragmentShadingRateNonTrivialCombinerOps` false: only `KEEP` and

@@ -896,7 +896,7 @@ impl New<'_> {
             // SAFETY: as above.
             unsafe {
                 let why = convert::dispatch_blocked(inst, self.physical, self.ci, api_version);
-                reconstruct::device_created(handle, why);
+                reconstruct::device_created(handle, why, self.ci);
             }
         }
         // Offsets reach density maps where the driver got the application's request as it was

@@ -49,6 +49,11 @@ fn create_view(
         })
     });
     let down = copy.as_ref().map_or(info.raw(), |c| c as *const _);
+    // A view of an image with usage fovea added gets the application's usage (on a copy).
+    let mut usage = vk::ImageViewUsageCreateInfo::default();
+    // SAFETY: `down` is NULL or the application's valid create info (or a copy of it).
+    let hidden = unsafe { reconstruct::hide_added_usage(dev, down, &mut usage) };
+    let down = hidden.as_ref().map_or(down, |c| c as *const _);
     // SAFETY: the next layer's function, with the application's arguments (or a copy of its
     // create info that lives across the call).
     let r = unsafe { (c.next)(device, down, alloc, out.raw()) };
@@ -256,36 +261,55 @@ fn create(
     out: Out<'_, vk::Image>,
 ) -> vk::Result {
     let (dev, next) = (c.dev, c.next);
-    let as_given = || c.as_given();
+    // What reconstruction keeps of an image made as the application asked for it.
+    let made = |r| {
+        // SAFETY: the device is live; the image was just created from the application's create
+        // info (where `r` says so).
+        unsafe { reconstruct::image_made(dev, r, out.raw(), info.raw(), None) };
+        r
+    };
     if let Some(inj) = &dev.inject {
-        let r = as_given();
+        let r = c.as_given();
         if let (vk::Result::SUCCESS, Some(ci), Some(image)) = (r, info.get(), out.read()) {
             inj.image_created(image, ci);
         }
-        return r;
+        return made(r);
     }
     let (Some(app), Some(_)) = (info.get(), &dev.fdm) else {
-        return as_given();
+        return c.as_given();
     };
-    let Some((copy, subsampled)) = translated(dev, app) else {
-        return as_given();
+    let (copy, subsampled) = match translated(dev, app) {
+        Ok(t) => t,
+        Err(Untranslated::Unneeded) => return made(c.as_given()),
+        Err(Untranslated::Refused) => return c.as_given(),
     };
     // SAFETY: the next layer's function; the translated copy lives across the call.
     let r = unsafe { next(device, &copy, alloc, out.raw()) };
+    let added = subsampled.map(|u| u & !app.usage);
+    // SAFETY: the device is live; the image was just created from `app` (where `r` says so).
+    unsafe { reconstruct::image_made(dev, r, out.raw(), app, added) };
     if let (vk::Result::SUCCESS, Some(image)) = (r, out.read()) {
-        image_made(dev, image, app, subsampled);
+        density_map_made(dev, image, app);
     }
     r
 }
 
+/// Why an emulating device's image create info goes down as the application passed it.
+enum Untranslated {
+    /// Nothing in it names the density map.
+    Unneeded,
+    /// A density map the layer cannot emulate (not 2D, optimal `R8G8_UNORM`).
+    Refused,
+}
+
 /// The copy of an emulating device's image create info that goes down in its place: the usage
 /// its reconstruction needs (docs/reconstruction.md), and without the density-map usage and
-/// flags; `None` where the application's goes down as it came. The second value says whether the
-/// image is reconstructed.
+/// flags; `Err` where the application's goes down as it came. The second value is the usage the
+/// reconstruction asked for, where it reconstructs the image.
 fn translated<'a>(
     dev: &Device,
     app: &vk::ImageCreateInfo<'a>,
-) -> Option<(vk::ImageCreateInfo<'a>, bool)> {
+) -> Result<(vk::ImageCreateInfo<'a>, Option<vk::ImageUsageFlags>), Untranslated> {
     let mut copy = *app;
     // An application's subsampled colour image gets the copies' usage its reconstruction needs.
     // SAFETY: the application's create info, valid as the command requires.
@@ -294,7 +318,7 @@ fn translated<'a>(
         copy.usage = usage;
     }
     if !needs_translation(copy.usage, copy.flags) {
-        return None;
+        return Err(Untranslated::Unneeded);
     }
     let Some((usage, flags)) = translate_image(
         copy.format,
@@ -307,30 +331,26 @@ fn translated<'a>(
             format = ?copy.format,
             "a density-map image that is not 2D, optimal R8G8_UNORM; passed on as is"
         );
-        return None;
+        return Err(Untranslated::Refused);
     };
     copy.usage = usage;
     copy.flags = flags;
-    Some((copy, subsampled.is_some()))
+    Ok((copy, subsampled))
 }
 
-/// What an emulating device keeps of an image just created from `app`: its reconstruction
-/// where it is subsampled, its shadow and conversion where it is a density map.
-fn image_made(dev: &Device, image: vk::Image, app: &vk::ImageCreateInfo<'_>, subsampled: bool) {
-    if subsampled {
-        // SAFETY: the image was just created on the live device from `app`.
-        unsafe { reconstruct::image_created(dev, image, app) };
-    }
+/// What an emulating device keeps of a density map just created from `app`: its shadow and its
+/// conversion.
+fn density_map_made(dev: &Device, image: vk::Image, app: &vk::ImageCreateInfo<'_>) {
     if !app
         .usage
         .contains(vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT)
     {
         return;
     }
-    // SAFETY: as above.
+    // SAFETY: the image was just created on the live device from `app`.
     if let Some(s) = unsafe { emulation::image_created(dev, image, app) } {
         let offsets = emulation::takes_offsets(app.flags);
-        // SAFETY: as above, shadowed by `s`.
+        // SAFETY: as above, and shadowed by `s`.
         unsafe { convert::map_created(dev, image, &s, offsets) };
     }
 }

@@ -292,32 +292,7 @@ mod tests {
     /// The checked-in SPIR-V is what `shaders/build.sh` makes of the checked-in source.
     #[test]
     fn shader_matches_its_source() {
-        if std::process::Command::new("glslangValidator")
-            .arg("--version")
-            .output()
-            .is_err()
-        {
-            eprintln!("skipped: glslangValidator is not installed (glslang-tools)");
-            return;
-        }
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/vk/shaders");
-        let out = std::env::temp_dir().join(format!("fovea-convert-{}.spv", std::process::id()));
-        let run = std::process::Command::new("glslangValidator")
-            .args(["-V", "--target-env", "vulkan1.1", "-o"])
-            .arg(&out)
-            .arg(dir.join("convert.comp"))
-            .output()
-            .unwrap();
-        assert!(
-            run.status.success(),
-            "convert.comp does not compile: {}",
-            String::from_utf8_lossy(&run.stdout)
-        );
-        let built = std::fs::read(&out).unwrap();
-        let _ = std::fs::remove_file(&out);
-        assert!(
-            built == SHADER,
-            "the checked-in convert.comp.spv is stale; run src/vk/shaders/build.sh"
-        );
+        fovea_harness::assert_spirv_built_from(&dir.join("convert.comp"), &[], SHADER);
     }
 }

@@ -473,7 +473,7 @@ impl Injector {
                 let Some((_, fixed)) = &m.fixed else {
                     return Some(o.view);
                 };
-                fixed.codes_into(&state.centres, &mut m.scratch, &mut m.codes);
+                fixed.codes_into(&state.centres(), &mut m.scratch, &mut m.codes);
                 // A shape's texels and layers follow from its extent, views and the device alone,
                 // so the image always fits; checked all the same, never written past.
                 if fixed.texels == o.texels && fixed.out_layers() == o.layers {
@@ -491,7 +491,7 @@ impl Injector {
                             width = extent[0],
                             height = extent[1],
                             ?views,
-                            centres = ?state.centres,
+                            centres = ?state.centres(),
                             "injected shading-rate map's fovea moved"
                         );
                     }
@@ -503,7 +503,7 @@ impl Injector {
         let (texels, layers) = (fixed.texels, fixed.out_layers());
         let mut scratch = Vec::new();
         let mut codes = Vec::new();
-        fixed.codes_into(&state.centres, &mut scratch, &mut codes);
+        fixed.codes_into(&state.centres(), &mut scratch, &mut codes);
         // SAFETY: as the caller promised.
         let made = unsafe { make(own, texels, layers) };
         let objects = match made {
@@ -789,8 +789,11 @@ mod tests {
                 let s = s.unwrap();
                 let mut scratch = Vec::new();
                 let mut codes = Vec::new();
-                inj.fixed_codes(s, extent, views)
-                    .codes_into(&s.centres, &mut scratch, &mut codes);
+                inj.fixed_codes(s, extent, views).codes_into(
+                    &s.centres(),
+                    &mut scratch,
+                    &mut codes,
+                );
                 codes
             });
             let st = own.clears.state.lock();

@@ -34,6 +34,14 @@
 //! so its storage is never contended), keep a submit free of allocation and of process-wide
 //! locks.
 //!
+//! The same timelines order the layer's reconstructions of coarse blocks (docs/reconstruction.md#queues):
+//! they go into the application's command buffers and use scratch buffers of the device, shared
+//! by every queue. Within one queue their barriers order them; across queues nothing would, so
+//! once the device has recorded one ([`Order::serialise`]), every application submit on one of
+//! these queues also waits, in the same front batch, on every other queue's last signal, already
+//! submitted as above. Two queues' submissions then run one after the other, in the order they
+//! were submitted: the price of one scratch per target size rather than one per queue.
+//!
 //! Only a device where the layer acts (emulating or injecting) and whose application created more
 //! than one graphics-family queue gets an [`Order`]; with one such queue there is nothing to
 //! order and submits go down as before. The timeline-semaphore feature is enabled for it at
@@ -60,11 +68,15 @@ pub struct Lane {
 struct Scratch {
     submits: Vec<vk::SubmitInfo<'static>>,
     submits2: Vec<vk::SubmitInfo2<'static>>,
-    wait_value: u64,
+    /// The front batch's waits: the upload timeline, then (where the order serialises) the other
+    /// queues' timelines; sized for all of them at device creation.
+    waits: Vec<vk::Semaphore>,
+    wait_values: Vec<u64>,
+    wait_stages: Vec<vk::PipelineStageFlags>,
+    waits2: Vec<vk::SemaphoreSubmitInfo<'static>>,
     signal_value: u64,
     wait_timeline: vk::TimelineSemaphoreSubmitInfo<'static>,
     signal_timeline: vk::TimelineSemaphoreSubmitInfo<'static>,
-    wait2: vk::SemaphoreSubmitInfo<'static>,
     signal2: vk::SemaphoreSubmitInfo<'static>,
 }
 
@@ -91,6 +103,11 @@ pub struct Order {
     /// Shared by application submits, exclusive for an upload's (see the module documentation).
     pub gate: parking_lot::RwLock<()>,
     pub waits: parking_lot::Mutex<UploadWaits>,
+    /// Set once the device recorded a reconstruction of coarse blocks (docs/reconstruction.md):
+    /// its scratch buffers are the device's, shared by every queue, so from then on each
+    /// application submit on one of these queues also waits on every other queue's last signal
+    /// ([`Order::serialise`]), and no two queues' reconstructions run at once.
+    serialised: std::sync::atomic::AtomicBool,
 }
 
 /// A timeline semaphore at 0.
@@ -143,11 +160,13 @@ impl Order {
                 scratch: parking_lot::Mutex::new(Scratch {
                     submits: Vec::with_capacity(4),
                     submits2: Vec::with_capacity(4),
-                    wait_value: 0,
+                    waits: Vec::with_capacity(queues.len()),
+                    wait_values: Vec::with_capacity(queues.len()),
+                    wait_stages: Vec::with_capacity(queues.len()),
+                    waits2: Vec::with_capacity(queues.len()),
                     signal_value: 0,
                     wait_timeline: vk::TimelineSemaphoreSubmitInfo::default(),
                     signal_timeline: vk::TimelineSemaphoreSubmitInfo::default(),
-                    wait2: vk::SemaphoreSubmitInfo::default(),
                     signal2: vk::SemaphoreSubmitInfo::default(),
                 }),
             })
@@ -162,6 +181,47 @@ impl Order {
                 values: Vec::with_capacity(queues.len()),
                 stages: Vec::with_capacity(queues.len()),
             }),
+            serialised: std::sync::atomic::AtomicBool::new(false),
+        }
+    }
+
+    /// From now on each application submit on one of the queues waits, in front of its batches,
+    /// on every other queue's last signal as well: the queues' submissions run in the order they
+    /// were submitted in, one queue's after another's. Called when the device first records a
+    /// reconstruction, whose scratch buffers every queue shares (docs/reconstruction.md#queues).
+    pub fn serialise(&self) {
+        self.serialised.store(true, Ordering::Release);
+    }
+
+    /// The front batch's waits for a submit on `lane`, into its storage: the upload timeline at
+    /// `uploaded` where `wait`, then where the order serialises every other queue's last signal.
+    fn front_waits(&self, lane: &Lane, s: &mut Scratch, wait: bool, uploaded: u64) {
+        s.waits.clear();
+        s.wait_values.clear();
+        s.wait_stages.clear();
+        if wait {
+            s.waits.push(self.upload);
+            s.wait_values.push(uploaded);
+            s.wait_stages.push(vk::PipelineStageFlags::ALL_COMMANDS);
+        }
+        if self.serialised.load(Ordering::Acquire) {
+            for l in self.lanes.iter().filter(|l| l.queue != lane.queue) {
+                let v = l.signalled.load(Ordering::Acquire);
+                if v > 0 {
+                    s.waits.push(l.timeline);
+                    s.wait_values.push(v);
+                    s.wait_stages.push(vk::PipelineStageFlags::ALL_COMMANDS);
+                }
+            }
+        }
+        s.waits2.clear();
+        for (&semaphore, &value) in s.waits.iter().zip(&s.wait_values) {
+            s.waits2.push(
+                vk::SemaphoreSubmitInfo::default()
+                    .semaphore(semaphore)
+                    .value(value)
+                    .stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS),
+            );
         }
     }
 
@@ -229,11 +289,11 @@ impl Order {
         let uploaded = self.uploaded.load(Ordering::Acquire);
         let wait = uploaded > lane.waited.load(Ordering::Acquire);
         let value = lane.signalled.load(Ordering::Acquire) + 1;
-        s.wait_value = uploaded;
+        self.front_waits(lane, s, wait, uploaded);
         s.signal_value = value;
         s.wait_timeline = vk::TimelineSemaphoreSubmitInfo {
-            wait_semaphore_value_count: 1,
-            p_wait_semaphore_values: &s.wait_value,
+            wait_semaphore_value_count: s.wait_values.len() as u32,
+            p_wait_semaphore_values: s.wait_values.as_ptr(),
             ..Default::default()
         };
         s.signal_timeline = vk::TimelineSemaphoreSubmitInfo {
@@ -242,12 +302,12 @@ impl Order {
             ..Default::default()
         };
         s.submits.clear();
-        if wait {
+        if !s.waits.is_empty() {
             s.submits.push(vk::SubmitInfo {
                 p_next: &s.wait_timeline as *const _ as *const _,
-                wait_semaphore_count: 1,
-                p_wait_semaphores: &self.upload,
-                p_wait_dst_stage_mask: &vk::PipelineStageFlags::ALL_COMMANDS,
+                wait_semaphore_count: s.waits.len() as u32,
+                p_wait_semaphores: s.waits.as_ptr(),
+                p_wait_dst_stage_mask: s.wait_stages.as_ptr(),
                 ..Default::default()
             });
         }
@@ -301,19 +361,16 @@ impl Order {
         let uploaded = self.uploaded.load(Ordering::Acquire);
         let wait = uploaded > lane.waited.load(Ordering::Acquire);
         let value = lane.signalled.load(Ordering::Acquire) + 1;
-        s.wait2 = vk::SemaphoreSubmitInfo::default()
-            .semaphore(self.upload)
-            .value(uploaded)
-            .stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS);
+        self.front_waits(lane, s, wait, uploaded);
         s.signal2 = vk::SemaphoreSubmitInfo::default()
             .semaphore(lane.timeline)
             .value(value)
             .stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS);
         s.submits2.clear();
-        if wait {
+        if !s.waits2.is_empty() {
             s.submits2.push(vk::SubmitInfo2 {
-                wait_semaphore_info_count: 1,
-                p_wait_semaphore_infos: &s.wait2,
+                wait_semaphore_info_count: s.waits2.len() as u32,
+                p_wait_semaphore_infos: s.waits2.as_ptr(),
                 ..Default::default()
             });
         }
@@ -489,5 +546,34 @@ mod tests {
         // A queue the order does not know goes down as it came.
         assert_eq!(submit(0x9999), vk::Result::SUCCESS);
         assert_eq!(seen(), [(vec![], 1, vec![])]);
+        // Once the device reconstructs, each submit also waits on the other queue's last signal,
+        // still without allocating or taking a process-wide lock.
+        order.serialise();
+        let (a, l) = (allocations(), shared_taken());
+        assert_eq!(submit(q0), vk::Result::SUCCESS);
+        let (allocs, locks) = (allocations() - a, shared_taken() - l);
+        let on_q0 = seen();
+        let (a, l) = (allocations(), shared_taken());
+        assert_eq!(submit(q1), vk::Result::SUCCESS);
+        let (allocs, locks) = (allocs + allocations() - a, locks + shared_taken() - l);
+        let on_q1 = seen();
+        assert_eq!(allocs, 0, "allocations per serialised submit");
+        assert_eq!(locks, 0, "process-wide locks per serialised submit");
+        assert_eq!(
+            on_q0,
+            [
+                (vec![(0x52, 3)], 0, vec![]),
+                (vec![], 1, vec![]),
+                (vec![], 0, vec![(0x51, 3)])
+            ]
+        );
+        assert_eq!(
+            on_q1,
+            [
+                (vec![(0x51, 3)], 0, vec![]),
+                (vec![], 1, vec![]),
+                (vec![], 0, vec![(0x52, 4)])
+            ]
+        );
     }
 }

@@ -135,11 +135,16 @@ pub struct FramebufferTargets {
     pub layers: u32,
 }
 
-/// What an emulating device's reconstruction knows of its objects, filled at their creation.
+/// What an emulating device's reconstruction knows of its objects, filled at their creation
+/// (`usage` on injecting devices too).
 #[derive(Default)]
 pub struct Tables {
     /// Application images created with `VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT`, and their layers.
     pub images: HashMap<u64, u32>,
+    /// Colour images with transfer usage (on an emulating or injecting device): the usage each
+    /// was created with, and what of it the layer added (`crate::vk::reconstruct::image_made`),
+    /// for giving their views the application's usage.
+    pub usage: HashMap<u64, (vk::ImageUsageFlags, vk::ImageUsageFlags)>,
     /// Views whose image is reconstructed.
     pub views: HashMap<u64, Target>,
     /// Rewritten render passes' colour targets.
@@ -184,6 +189,9 @@ pub struct Reconstructor {
     /// Set once a view whose image is reconstructed was noted: until then a begin looks no
     /// further.
     pub any: AtomicBool,
+    /// The application enabled imageless framebuffers on the device: its views of images whose
+    /// usage fovea widened get its usage (`crate::vk::reconstruct::hide_added_usage`).
+    pub imageless: bool,
 }
 
 impl Reconstructor {
@@ -270,6 +278,7 @@ impl Reconstructor {
                 logged_scratch: AtomicBool::new(false),
                 tables: parking_lot::Mutex::new(Tables::default()),
                 any: AtomicBool::new(false),
+                imageless: false,
             })
         }
     }
@@ -448,6 +457,11 @@ impl Reconstructor {
         if dispatched {
             // SAFETY: as the caller promised: `bound` is `cb`'s.
             unsafe { restore(&self.own.fns, cb, bound) };
+            // The scratch is the device's: submits on its other graphics queues are ordered
+            // against this one's from now on (docs/reconstruction.md#queues).
+            if let Some(o) = &self.own.clears.order {
+                o.serialise();
+            }
         }
     }
 

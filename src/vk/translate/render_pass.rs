@@ -456,55 +456,62 @@ pub fn too_many_targets() {
     }
 }
 
-/// The attachments of `pass`'s first subpass that are reconstructed where their images are
-/// (docs/reconstruction.md): each stored single-sample colour attachment, and for a multisampled
-/// one its resolve attachment where that is stored (what is read; the multisampled attachment
-/// itself is left alone); with the layout the pass leaves each in. At most [`MAX_TARGETS`].
+/// The attachments of `pass` that are reconstructed where their images are
+/// (docs/reconstruction.md): of every subpass (each gets the shading-rate attachment,
+/// [`add_shading_rate`], so each renders coarse), each stored single-sample colour attachment,
+/// and for a multisampled one its resolve attachment where that is stored (what is read; the
+/// multisampled attachment itself is left alone); with the layout the pass leaves each in. In
+/// subpass order, each attachment once (the pass's end reconstructs what it leaves, whichever
+/// subpasses wrote it). At most [`MAX_TARGETS`].
 pub fn pass_colours(pass: &Pass2) -> [Option<(u32, vk::ImageLayout)>; MAX_TARGETS] {
     let mut out = [None; MAX_TARGETS];
-    let Some(s) = pass.subpasses.first() else {
-        return out;
-    };
-    // SAFETY: the application's array, alive while `pass` is.
-    let colours = unsafe { slice(s.p_color_attachments, s.color_attachment_count) };
-    let resolves = if s.p_resolve_attachments.is_null() {
-        &[]
-    } else {
-        // SAFETY: the application's array, one per colour attachment.
-        unsafe { slice(s.p_resolve_attachments, s.color_attachment_count) }
-    };
     let mut n = 0;
-    for (i, c) in colours.iter().enumerate() {
-        let Some(a) = pass.attachments.get(c.attachment as usize) else {
-            continue;
-        };
-        let index = if a.samples == vk::SampleCountFlags::TYPE_1 {
-            c.attachment
+    for s in &pass.subpasses {
+        // SAFETY: the application's array, alive while `pass` is.
+        let colours = unsafe { slice(s.p_color_attachments, s.color_attachment_count) };
+        let resolves = if s.p_resolve_attachments.is_null() {
+            &[]
         } else {
-            match resolves.get(i).map(|r| r.attachment) {
-                Some(r) if r != vk::ATTACHMENT_UNUSED => r,
-                _ => continue,
+            // SAFETY: the application's array, one per colour attachment.
+            unsafe { slice(s.p_resolve_attachments, s.color_attachment_count) }
+        };
+        for (i, c) in colours.iter().enumerate() {
+            let Some(a) = pass.attachments.get(c.attachment as usize) else {
+                continue;
+            };
+            let index = if a.samples == vk::SampleCountFlags::TYPE_1 {
+                c.attachment
+            } else {
+                match resolves.get(i).map(|r| r.attachment) {
+                    Some(r) if r != vk::ATTACHMENT_UNUSED => r,
+                    _ => continue,
+                }
+            };
+            let Some(a) = pass.attachments.get(index as usize) else {
+                continue;
+            };
+            let kept = a.samples == vk::SampleCountFlags::TYPE_1
+                && !matches!(
+                    a.store_op,
+                    vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
+                );
+            if !kept || out[..n].iter().flatten().any(|(j, _)| *j == index) {
+                continue;
             }
-        };
-        let Some(a) = pass.attachments.get(index as usize) else {
-            continue;
-        };
-        let kept = a.samples == vk::SampleCountFlags::TYPE_1
-            && !matches!(
-                a.store_op,
-                vk::AttachmentStoreOp::DONT_CARE | vk::AttachmentStoreOp::NONE
-            );
-        if !kept {
-            continue;
+            if n == MAX_TARGETS {
+                too_many_targets();
+                return out;
+            }
+            out[n] = Some((index, a.final_layout));
+            n += 1;
         }
-        if n == MAX_TARGETS {
-            too_many_targets();
-            break;
-        }
-        out[n] = Some((index, a.final_layout));
-        n += 1;
     }
     out
+}
+
+/// The view mask of every subpass of `pass` together: the views it renders.
+pub fn pass_view_mask(pass: &Pass2) -> u32 {
+    pass.subpasses.iter().fold(0, |m, s| m | s.view_mask)
 }
 
 /// The view a dynamic rendering's colour attachment `a` leaves what it renders in, and its
@@ -572,6 +579,47 @@ mod tests {
         let mut want = vec![Some((0, vk::ImageLayout::GENERAL)), Some((3, src))];
         want.extend((5..11).map(|a| Some((a, src))));
         assert_eq!(got.to_vec(), want);
+    }
+
+    /// A later subpass's stored colour attachments are targets too (every subpass renders with
+    /// the shading-rate attachment), after the earlier subpasses', each attachment once; an
+    /// empty subpass adds nothing; the view masks of all subpasses make the pass's.
+    #[test]
+    fn every_subpasss_colour_attachments_are_targets_once() {
+        let att = |layout| {
+            vk::AttachmentDescription2::default()
+                .format(vk::Format::R8G8B8A8_UNORM)
+                .samples(vk::SampleCountFlags::TYPE_1)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .final_layout(layout)
+        };
+        let (a, b) = (
+            vk::ImageLayout::GENERAL,
+            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+        );
+        let atts = [att(a), att(b), att(a)];
+        let r = |i| [vk::AttachmentReference2::default().attachment(i)];
+        let (first, second, third) = (r(2), r(1), r(2));
+        let subpasses = [
+            vk::SubpassDescription2::default().view_mask(0b01),
+            vk::SubpassDescription2::default()
+                .color_attachments(&first)
+                .view_mask(0b01),
+            vk::SubpassDescription2::default()
+                .color_attachments(&second)
+                .view_mask(0b10),
+            vk::SubpassDescription2::default()
+                .color_attachments(&third)
+                .view_mask(0b01),
+        ];
+        let ci = vk::RenderPassCreateInfo2::default()
+            .attachments(&atts)
+            .subpasses(&subpasses);
+        // SAFETY: the arrays live across the test.
+        let pass = unsafe { Pass2::from_v2(&ci) };
+        let got: Vec<_> = pass_colours(&pass).into_iter().flatten().collect();
+        assert_eq!(got, [(2, a), (1, b)]);
+        assert_eq!(pass_view_mask(&pass), 0b11);
     }
 
     /// A pass that writes a density map (no density-map struct): its attachment's final layout,

@@ -58,8 +58,10 @@ pub struct SubsampledInputs {
     /// A colour swapchain of a Vulkan session: the only kind whose images fovea's Vulkan layer
     /// draws into and can reconstruct.
     pub vulkan_colour: bool,
-    /// The session's VkDevice enabled `imagelessFramebuffer`: the application names the usage it
-    /// expects of each image its framebuffers bind, which must equal the image's
+    /// The session's VkDevice enabled `imagelessFramebuffer` (known where it was created through
+    /// `xrCreateVulkanDeviceKHR`) and fovea's Vulkan layer does not hide the added usage from the
+    /// application's views on it: the application names the usage it expects of each image its
+    /// framebuffers bind, which must equal its view's
     /// (VUID-VkRenderPassBeginInfo-framebuffer-04627), so the usage reconstruction adds would
     /// break its render passes.
     pub imageless: bool,
@@ -293,10 +295,13 @@ pub fn create_swapchain(
         .flags
         .contains(xr::SwapchainCreateFoveationFlagsFB::FRAGMENT_DENSITY_MAP)
         && exts.provided(Ext::FoveationVulkan);
-    let imageless = state
-        .vulkan
-        .as_ref()
-        .is_some_and(|b| state.instance.vulkan.lock().imageless(b.device));
+    let imageless = state.vulkan.as_ref().is_some_and(|b| {
+        // Where fovea's Vulkan layer hides the added usage from the application's views
+        // (docs/reconstruction.md#usage-the-application-does-not-see), its imageless
+        // framebuffers name the usage it asked for, and the added usage breaks nothing.
+        state.instance.vulkan.lock().imageless(b.device)
+            && !crate::bridge::subsampled::hides_usage(b.device)
+    });
     let inputs = |foveator| SubsampledInputs {
         asked,
         property: state.instance.overrides.current().subsampled,
@@ -414,6 +419,9 @@ pub fn create_swapchain(
         submitted: Mutex::default(),
         app_offsets,
         reconstruct: decision.map(|d| d.on),
+        added_usage: xr::SwapchainUsageFlags::from_raw(
+            down.usage_flags.into_raw() & !i.usage_flags.into_raw(),
+        ),
         published: Mutex::default(),
     };
     if record.app_offsets {

@@ -27,7 +27,6 @@
 //! [`crate::both::fdm_vulkan`]'s frame helpers and its lock on the harness's validation messages. Skips
 //! with a reason when a system piece is missing; fails instead under `FOVEA_REQUIRE_SYSTEM=1`.
 
-use std::ffi::c_void;
 use std::ptr::{null, null_mut};
 
 use ash::vk;
@@ -38,11 +37,10 @@ use fovea_model::density::{self, Grid, Level, Pattern, Rect, View};
 use fovea_model::{shading_rate, Fov};
 use fovea_vkdouble::Profile;
 use openxr_sys as xr;
-use xr::Handle as _;
 
 use crate::both::fdm_vulkan::{
-    app, apply_profile, enumerate, func, running_session, swapchain_info, vulkan_or_skip, Frame,
-    FDM_BIT, HEIGHT, VALIDATED, WIDTH,
+    app, apply_profile, enumerate, fdm_swapchain, func, running_session, vulkan_or_skip, Frame,
+    HEIGHT, VALIDATED, WIDTH,
 };
 use crate::support::device::{allocate, env, resettable_pool, Env};
 use crate::support::level_info;
@@ -670,20 +668,7 @@ fn run(env: &Env, profile: Profile, layout: Layout) -> bool {
     assert_eq!(devices[0]["features"]["attachment"], true, "{what}");
 
     let (session, space) = running_session(&app, sys, &v);
-    let create_swapchain: xr::pfn::CreateSwapchain = func(&app, "xrCreateSwapchain");
-    let fdm_flag = xr::SwapchainCreateInfoFoveationFB {
-        ty: xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
-        next: null_mut(),
-        flags: xr::SwapchainCreateFoveationFlagsFB::from_raw(FDM_BIT),
-    };
-    let mut swapchain = xr::Swapchain::NULL;
-    let info = xr::SwapchainCreateInfo {
-        array_size: layout.layers(),
-        ..swapchain_info(&fdm_flag as *const _ as *const c_void)
-    };
-    // SAFETY: the create info and the output live across the call.
-    let r = unsafe { create_swapchain(session, &info, &mut swapchain) };
-    assert_eq!(r, xr::Result::SUCCESS);
+    let swapchain = fdm_swapchain(&app, session, layout.layers());
 
     // The density images follow the device's texel: 16×16 on `nvidia`, 8×8 on `amd`.
     let t = profile.texel();

@@ -402,6 +402,30 @@ pub(crate) fn swapchain_info(next: *const c_void) -> xr::SwapchainCreateInfo {
     }
 }
 
+/// The chain that asks for a swapchain with density images (XR_FB_foveation_vulkan).
+pub(crate) fn fdm_flag() -> xr::SwapchainCreateInfoFoveationFB {
+    xr::SwapchainCreateInfoFoveationFB {
+        ty: xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
+        next: null_mut(),
+        flags: xr::SwapchainCreateFoveationFlagsFB::from_raw(FDM_BIT),
+    }
+}
+
+/// A [`swapchain_info`] swapchain of `layers` layers with density images, created on `session`.
+pub(crate) fn fdm_swapchain(app: &App, session: xr::Session, layers: u32) -> xr::Swapchain {
+    let create_swapchain: xr::pfn::CreateSwapchain = func(app, "xrCreateSwapchain");
+    let flag = fdm_flag();
+    let info = xr::SwapchainCreateInfo {
+        array_size: layers,
+        ..swapchain_info(&flag as *const _ as *const c_void)
+    };
+    let mut swapchain = xr::Swapchain::NULL;
+    // SAFETY: the create info, its chain and the output live across the call.
+    let r = unsafe { create_swapchain(session, &info, &mut swapchain) };
+    assert_eq!(r, xr::Result::SUCCESS);
+    swapchain
+}
+
 fn foveation_image() -> xr::SwapchainImageFoveationVulkanFB {
     xr::SwapchainImageFoveationVulkanFB {
         ty: xr::StructureType::SWAPCHAIN_IMAGE_FOVEATION_VULKAN_FB,
@@ -674,11 +698,7 @@ fn density_images_on_lavapipe_hold_the_model_and_leave_nothing_behind() {
 
     // A foveated swapchain with the FRAGMENT_DENSITY_MAP flag, and one without the flag.
     let create_swapchain: xr::pfn::CreateSwapchain = func(&app, "xrCreateSwapchain");
-    let fdm_flag = xr::SwapchainCreateInfoFoveationFB {
-        ty: xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
-        next: null_mut(),
-        flags: xr::SwapchainCreateFoveationFlagsFB::from_raw(FDM_BIT),
-    };
+    let fdm_flag = fdm_flag();
     let no_flag = xr::SwapchainCreateInfoFoveationFB {
         flags: xr::SwapchainCreateFoveationFlagsFB::EMPTY,
         ..fdm_flag
@@ -862,23 +882,7 @@ fn instance_destruction_takes_live_sessions_density_images_with_it() {
         return;
     };
     let (session, space) = running_session(&app, sys, &v);
-    let create_swapchain: xr::pfn::CreateSwapchain = func(&app, "xrCreateSwapchain");
-    let fdm_flag = xr::SwapchainCreateInfoFoveationFB {
-        ty: xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
-        next: null_mut(),
-        flags: xr::SwapchainCreateFoveationFlagsFB::from_raw(FDM_BIT),
-    };
-    let mut swapchain = xr::Swapchain::NULL;
-    assert_eq!(
-        unsafe {
-            create_swapchain(
-                session,
-                &swapchain_info(&fdm_flag as *const _ as *const c_void),
-                &mut swapchain,
-            )
-        },
-        xr::Result::SUCCESS
-    );
+    let swapchain = fdm_swapchain(&app, session, 2);
     let frame = Frame {
         app: &app,
         session,
@@ -1084,18 +1088,7 @@ fn submitted_views_decide_what_each_layer_holds() {
         return;
     };
     let (session, space) = running_session(&app, sys, &v);
-    let create_swapchain: xr::pfn::CreateSwapchain = func(&app, "xrCreateSwapchain");
-    let fdm_flag = xr::SwapchainCreateInfoFoveationFB {
-        ty: xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
-        next: null_mut(),
-        flags: xr::SwapchainCreateFoveationFlagsFB::from_raw(FDM_BIT),
-    };
-    let mut swapchain = xr::Swapchain::NULL;
-    let info = swapchain_info(&fdm_flag as *const _ as *const c_void);
-    assert_eq!(
-        unsafe { create_swapchain(session, &info, &mut swapchain) },
-        xr::Result::SUCCESS
-    );
+    let swapchain = fdm_swapchain(&app, session, 2);
     let images = enumerate(&app, swapchain);
     let create_profile: xr::pfn::CreateFoveationProfileFB =
         func(&app, "xrCreateFoveationProfileFB");

@@ -18,7 +18,6 @@
 //! layers (the double counts them, `fovea_vkdouble::COUNTED`) are the same after every cycle.
 
 use std::ffi::c_void;
-use std::ptr::null_mut;
 
 use fovea_harness::vulkan::{self, pick_lavapipe};
 use fovea_model::density::{Level, Pattern};
@@ -30,7 +29,7 @@ use crate::both::fdm_emulated::{
     color_images, expected_codes, rates_drawn, release, start, Layout, Renderer,
 };
 use crate::both::fdm_vulkan::{
-    apply_profile, enumerate, func, running_session, swapchain_info, Frame, FDM_BIT, HEIGHT,
+    apply_profile, enumerate, fdm_flag, func, running_session, swapchain_info, Frame, HEIGHT,
     VALIDATED, WIDTH,
 };
 use crate::support::device::{allocate, env, resettable_pool, Env};
@@ -84,11 +83,7 @@ fn sessions(env: &Env, profile: Profile, inject: bool) -> bool {
     let mut after = Vec::new();
     for cycle in 0..SESSIONS {
         let (session, space) = running_session(&app, sys, &v);
-        let fdm_flag = xr::SwapchainCreateInfoFoveationFB {
-            ty: xr::StructureType::SWAPCHAIN_CREATE_INFO_FOVEATION_FB,
-            next: null_mut(),
-            flags: xr::SwapchainCreateFoveationFlagsFB::from_raw(FDM_BIT),
-        };
+        let fdm_flag = fdm_flag();
         let next = if inject {
             std::ptr::null()
         } else {

@@ -11,7 +11,9 @@
 //!   [`XR_FLOORS`], as docs/ARCHITECTURE.md draws them) and import only from lower floors: never
 //!   up, never sideways between rows of one floor, never between the files of a folder whose
 //!   files are kept apart; the same in `crates/cli` and `crates/sim` ([`CLI_FLOORS`],
-//!   [`SIM_FLOORS`]).
+//!   [`SIM_FLOORS`]);
+//! - every prose floors table (docs/ARCHITECTURE.md, `src/vk/mod.rs`, `src/xr/mod.rs`, and the
+//!   crate docs of `crates/cli` and `crates/sim`) is the table here.
 //!
 //! Each rule is a checker function over a file's path and text, tested below on small strings so
 //! that each is seen to fail, then run over the tree. Comments and string literals are blanked out
@@ -1195,6 +1197,25 @@ fn the_prose_floors_tables_are_the_tidy_tests() {
             assert!(rows.len() > 5, "{doc}: no floors table read for src/{name}");
             found.extend(prose_drift(&doc, &rows, &files, table));
         }
+    }
+    // The two crates built in floors draw theirs in their crate docs; the crate root is the door.
+    for (name, table, root_file) in [
+        ("cli", CLI_FLOORS, "main.rs"),
+        ("sim", SIM_FLOORS, "lib.rs"),
+    ] {
+        let doc = format!("crates/{name}/src/{root_file}");
+        let mut rows = prose_floors(&read(&root().join(&doc)), "| floor |");
+        for (p, ..) in &mut rows {
+            if p == root_file {
+                *p = "mod.rs".to_owned();
+            }
+        }
+        assert!(rows.len() > 5, "{doc}: no floors table read");
+        let files: Vec<String> = crate_tree_files(name)
+            .into_iter()
+            .map(|(rel, _)| rel)
+            .collect();
+        found.extend(prose_drift(&doc, &rows, &files, table));
     }
     assert!(
         found.is_empty(),

@@ -160,3 +160,120 @@ fn a_shadow_cleared_on_one_queue_is_ordered_before_a_pass_on_another() {
         dev.finish(env, vk);
     }
 }
+
+/// The positions, in the order the driver got them, of the submits of `cbs`.
+fn driver_order(env: &Env, cbs: &[vk::CommandBuffer]) -> Vec<usize> {
+    use ash::vk::Handle as _;
+    let submits = env.double.events("submit");
+    cbs.iter()
+        .map(|cb| {
+            submits
+                .iter()
+                .position(|s| {
+                    s["command_buffers"]
+                        .as_array()
+                        .is_some_and(|a| a.contains(&json!(cb.as_raw())))
+                })
+                .expect("submitted")
+        })
+        .collect()
+}
+
+/// Reconstructions of coarse blocks (docs/reconstruction.md#queues) go into the application's
+/// command buffers and use one scratch buffer per target size, the device's: two of them on two
+/// queues at once would write and read the same scratch. The double runs its queues' work one
+/// submission at a time (it cannot show the corrupt pixels of a real overlap), but it runs work
+/// the application did not order in the order that exposes a missing dependency: a submission on
+/// queue 1 is held back and one on queue 0 that waits on nothing overtakes it. Here two command
+/// buffers each reconstruct a subsampled image of the same size (so the same scratch), the first
+/// submitted on queue 1, the second on queue 0 with nothing of the application's between them:
+/// the driver must get the first before the second (fovea's wait on queue 1's last submission),
+/// and validation must report nothing. Without the ordering the second overtakes the first.
+#[test]
+fn reconstructions_on_two_queues_run_in_submission_order() {
+    for how in [Submit::V1, Submit::V2] {
+        let Some((_serial, env)) = env() else {
+            return;
+        };
+        let _two = TwoQueues::new(env);
+        let Some(vk) = Vk::new(env, Profile::Nvidia, true) else {
+            return;
+        };
+        let d = vk
+            .try_device_queues(&[], Features::FDM, None, 2)
+            .unwrap_or_else(|e| panic!("vkCreateDevice with two queues: {e}"));
+        let dev = Dev::new(&vk, d);
+        // SAFETY: the device is alive; every struct lives across its call; every object made here
+        // is destroyed before the device.
+        unsafe {
+            let q1 = dev.d.get_device_queue(0, 1);
+            assert_ne!(q1, dev.queue, "two queues");
+            let targets: Vec<_> = (0..2)
+                .map(|_| {
+                    dev.image_with_flags(
+                        COLOR,
+                        SIZE,
+                        1,
+                        vk::ImageUsageFlags::COLOR_ATTACHMENT,
+                        vk::ImageCreateFlags::SUBSAMPLED_EXT,
+                    )
+                })
+                .collect();
+            let (map_image, map_memory, map) =
+                dev.image(DENSITY, N, 1, vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT);
+            let pass = density_pass(
+                &dev.d,
+                vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                vk::ImageLayout::UNDEFINED,
+            )
+            .expect("vkCreateRenderPass2");
+            let fbs: Vec<_> = targets
+                .iter()
+                .map(|&(_, _, v)| framebuffer(&dev.d, pass, &[v, map], SIZE))
+                .collect();
+            let cbs: Vec<_> = fbs
+                .iter()
+                .map(|&fb| {
+                    let cb = dev.begin();
+                    begin_pass(&dev.d, cb, pass, fb);
+                    dev.d
+                        .cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
+                    dev.d.end_command_buffer(cb).expect("vkEndCommandBuffer");
+                    cb
+                })
+                .collect();
+            // The map's shadow is cleared ahead of the first submit; each queue waits for that
+            // once, here, so that nothing of the layer's uploads orders the submits below.
+            for q in [dev.queue, q1] {
+                let warm = dev.begin();
+                dev.d.end_command_buffer(warm).expect("vkEndCommandBuffer");
+                submit(&dev.d, how, q, warm);
+            }
+            dev.d.device_wait_idle().expect("vkDeviceWaitIdle");
+            submit(&dev.d, how, q1, cbs[0]);
+            submit(&dev.d, how, dev.queue, cbs[1]);
+            dev.d.device_wait_idle().expect("vkDeviceWaitIdle");
+            let order = driver_order(env, &cbs);
+            assert!(
+                order[0] < order[1],
+                "{how:?}: the reconstruction submitted second (queue 0) reached the driver \
+                 before the first (queue 1): {order:?}"
+            );
+            let messages = take_real_messages();
+            assert!(
+                messages.is_empty(),
+                "{how:?}: validation reported: {messages:#?}"
+            );
+            for fb in fbs {
+                dev.d.destroy_framebuffer(fb, None);
+            }
+            dev.d.destroy_render_pass(pass, None);
+            for (i, m, v) in targets.into_iter().chain([(map_image, map_memory, map)]) {
+                dev.d.destroy_image_view(v, None);
+                dev.d.destroy_image(i, None);
+                dev.d.free_memory(m, None);
+            }
+        }
+        dev.finish(env, vk);
+    }
+}

@@ -37,6 +37,12 @@ enum Case {
     Mrt,
     /// The same in dynamic rendering.
     DynamicMrt,
+    /// As `Pass`, with an imageless framebuffer whose colour attachment names the usage the
+    /// application gave its image: `COLOR_ATTACHMENT | TRANSFER_SRC` (for the read-back), without
+    /// the `TRANSFER_DST` reconstruction adds to a subsampled image.
+    Imageless,
+    /// As `Pass`, drawn in the second subpass of a pass whose first names no attachment.
+    Subpass,
 }
 
 impl Case {
@@ -145,13 +151,18 @@ fn draw_on(
         } else {
             vk::ImageCreateFlags::empty()
         };
+        let colour_usage = if case == Case::Imageless {
+            vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC
+        } else {
+            vk::ImageUsageFlags::COLOR_ATTACHMENT
+                | vk::ImageUsageFlags::TRANSFER_SRC
+                | vk::ImageUsageFlags::TRANSFER_DST
+        };
         let (colour, colour_mem) = image(
             format,
             SIDE,
             layers,
-            vk::ImageUsageFlags::COLOR_ATTACHMENT
-                | vk::ImageUsageFlags::TRANSFER_SRC
-                | vk::ImageUsageFlags::TRANSFER_DST,
+            colour_usage,
             flags,
             vk::SampleCountFlags::TYPE_1,
         );
@@ -184,11 +195,13 @@ fn draw_on(
             (i, m, view(i, format, layers))
         });
         let n = SIDE / texel;
+        let density_usage =
+            vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT | vk::ImageUsageFlags::TRANSFER_DST;
         let (density, density_mem) = image(
             vk::Format::R8G8_UNORM,
             n,
             layers,
-            vk::ImageUsageFlags::FRAGMENT_DENSITY_MAP_EXT | vk::ImageUsageFlags::TRANSFER_DST,
+            density_usage,
             vk::ImageCreateFlags::empty(),
             vk::SampleCountFlags::TYPE_1,
         );
@@ -254,13 +267,26 @@ fn draw_on(
             let resolve_ref = [vk::AttachmentReference2::default()
                 .attachment(2)
                 .layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)];
-            let mut subpass = [vk::SubpassDescription2::default()
-                .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-                .view_mask(mask)
-                .color_attachments(&colour_ref[..colours])];
+            let mut subpass = [
+                vk::SubpassDescription2::default()
+                    .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+                    .view_mask(mask)
+                    .color_attachments(&colour_ref[..colours]),
+                vk::SubpassDescription2::default()
+                    .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
+                    .view_mask(mask),
+            ];
             if case.msaa() {
                 subpass[0] = subpass[0].resolve_attachments(&resolve_ref);
             }
+            // The drawing subpass second, after one that names nothing.
+            let drawing = if case == Case::Subpass {
+                subpass.swap(0, 1);
+                1
+            } else {
+                0
+            };
+            let subpasses = if case == Case::Subpass { 2 } else { 1 };
             let count = if case.msaa() || case.mrt() { 3 } else { 2 };
             let mut fdm = vk::RenderPassFragmentDensityMapCreateInfoEXT::default()
                 .fragment_density_map_attachment(vk::AttachmentReference {
@@ -272,7 +298,7 @@ fn draw_on(
             let out = [
                 vk::SubpassDependency2::default()
                     .src_subpass(vk::SUBPASS_EXTERNAL)
-                    .dst_subpass(0)
+                    .dst_subpass(drawing)
                     .src_stage_mask(vk::PipelineStageFlags::TRANSFER)
                     .dst_stage_mask(vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT)
                     .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
@@ -281,7 +307,7 @@ fn draw_on(
                             | vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
                     ),
                 vk::SubpassDependency2::default()
-                    .src_subpass(0)
+                    .src_subpass(drawing)
                     .dst_subpass(vk::SUBPASS_EXTERNAL)
                     .src_stage_mask(vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT)
                     .dst_stage_mask(vk::PipelineStageFlags::TRANSFER)
@@ -290,7 +316,7 @@ fn draw_on(
             ];
             let info = vk::RenderPassCreateInfo2::default()
                 .attachments(&atts[..count])
-                .subpasses(&subpass)
+                .subpasses(&subpass[..subpasses])
                 .dependencies(&out)
                 .push_next(&mut fdm);
             d.create_render_pass2(&info, None).unwrap()
@@ -301,16 +327,36 @@ fn draw_on(
                 (_, Some((_, _, v))) => vec![colour_view, density_view, v],
                 _ => vec![colour_view, density_view],
             };
-            d.create_framebuffer(
-                &vk::FramebufferCreateInfo::default()
-                    .render_pass(p)
-                    .attachments(&list)
+            let formats = [[format], [vk::Format::R8G8_UNORM]];
+            let described = [
+                vk::FramebufferAttachmentImageInfo::default()
+                    .usage(colour_usage)
                     .width(SIDE)
                     .height(SIDE)
-                    .layers(1),
-                None,
-            )
-            .unwrap()
+                    .layer_count(layers)
+                    .view_formats(&formats[0]),
+                vk::FramebufferAttachmentImageInfo::default()
+                    .usage(density_usage)
+                    .width(n)
+                    .height(n)
+                    .layer_count(layers)
+                    .view_formats(&formats[1]),
+            ];
+            let mut imageless =
+                vk::FramebufferAttachmentsCreateInfo::default().attachment_image_infos(&described);
+            let mut info = vk::FramebufferCreateInfo::default()
+                .render_pass(p)
+                .width(SIDE)
+                .height(SIDE)
+                .layers(1);
+            info = if case == Case::Imageless {
+                info.flags(vk::FramebufferCreateFlags::IMAGELESS)
+                    .attachment_count(2)
+                    .push_next(&mut imageless)
+            } else {
+                info.attachments(&list)
+            };
+            d.create_framebuffer(&info, None).unwrap()
         });
         let words = spv(VERTEX);
         let vert = d
@@ -338,7 +384,11 @@ fn draw_on(
             .view_mask(mask);
         let mut info = fixed.info(&st, layout);
         match pass {
-            Some(p) => info = info.render_pass(p).subpass(0),
+            Some(p) => {
+                info = info
+                    .render_pass(p)
+                    .subpass(u32::from(case == Case::Subpass))
+            }
             None => {
                 info = info
                     .push_next(&mut rendering)
@@ -532,16 +582,21 @@ fn draw_on(
         };
         match (pass, framebuffer) {
             (Some(p), Some(fb)) => {
-                let begin = vk::RenderPassBeginInfo::default()
+                let views = [colour_view, density_view];
+                let mut named = vk::RenderPassAttachmentBeginInfo::default().attachments(&views);
+                let mut begin = vk::RenderPassBeginInfo::default()
                     .render_pass(p)
                     .framebuffer(fb)
                     .render_area(area)
                     .clear_values(&clear);
-                d.cmd_begin_render_pass2(
-                    cb,
-                    &begin,
-                    &vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE),
-                );
+                if case == Case::Imageless {
+                    begin = begin.push_next(&mut named);
+                }
+                let inline = vk::SubpassBeginInfo::default().contents(vk::SubpassContents::INLINE);
+                d.cmd_begin_render_pass2(cb, &begin, &inline);
+                if case == Case::Subpass {
+                    d.cmd_next_subpass2(cb, &inline, &vk::SubpassEndInfo::default());
+                }
                 draw_it();
                 d.cmd_end_render_pass2(cb, &vk::SubpassEndInfo::default());
             }
@@ -933,6 +988,22 @@ fn targets_recreated_a_thousand_times_with_reconstruction_on() {
     dev.destroy();
     assert_only_stage_false_positives();
     drop(vk);
+}
+
+/// An imageless framebuffer names, for each attachment, the usage the application gave its image,
+/// which must equal its view's at each begin (VUID-VkRenderPassBeginInfo-framebuffer-04627): the
+/// transfer usage fovea adds to a subsampled image for the copies is not the application's, and
+/// validation says nothing, while the coarse blocks are reconstructed all the same.
+#[test]
+fn an_imageless_framebuffer_names_the_applications_usage_and_is_reconstructed() {
+    check(Profile::Nvidia, Case::Imageless, vk::Format::R8G8B8A8_UNORM);
+}
+
+/// Every subpass renders with the shading-rate attachment: a colour attachment that only the
+/// second subpass draws into is reconstructed at the pass's end as one of the first's is.
+#[test]
+fn a_colour_attachment_of_a_second_subpass_is_reconstructed() {
+    check(Profile::Nvidia, Case::Subpass, vk::Format::R8G8B8A8_UNORM);
 }
 
 /// A multisampled pass resolves into the image that is read: that image is reconstructed (the

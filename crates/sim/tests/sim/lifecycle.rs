@@ -1392,3 +1392,79 @@ fn minimal_input_is_accepted_and_inactive() {
     );
     destroy_instance(instance);
 }
+
+/// OpenXR 1.1 made `LOCAL_FLOOR` core and every runtime offers it there; under 1.0 it needs
+/// XR_EXT_local_floor, which the runtime does not offer, so a 1.0 session neither lists nor makes it.
+#[test]
+fn local_floor_is_a_reference_space_of_api_1_1_only() {
+    for (api, floor) in [
+        (xr::Version::new(1, 0, 34), false),
+        (xr::Version::new(1, 1, 40), true),
+    ] {
+        let instance = try_create_instance(config("quest3"), &["XR_MND_headless"], api).unwrap();
+        let session = create_session_with(instance, null()).unwrap();
+        let enumerate = xrfn!(instance, EnumerateReferenceSpaces);
+        let mut count = 0;
+        let mut spaces = [xr::ReferenceSpaceType::VIEW; 8];
+        assert_eq!(
+            unsafe { enumerate(session, 8, &mut count, spaces.as_mut_ptr()) },
+            xr::Result::SUCCESS
+        );
+        let listed = &spaces[..count as usize];
+        assert_eq!(
+            listed.contains(&xr::ReferenceSpaceType::LOCAL_FLOOR),
+            floor,
+            "{api:?}: {listed:?}"
+        );
+        let create = xrfn!(instance, CreateReferenceSpace);
+        let info = xr::ReferenceSpaceCreateInfo {
+            ty: xr::ReferenceSpaceCreateInfo::TYPE,
+            next: null(),
+            reference_space_type: xr::ReferenceSpaceType::LOCAL_FLOOR,
+            pose_in_reference_space: xr::Posef {
+                orientation: xr::Quaternionf {
+                    x: 0.0,
+                    y: 0.0,
+                    z: 0.0,
+                    w: 1.0,
+                },
+                position: xr::Vector3f {
+                    x: 0.0,
+                    y: 0.0,
+                    z: 0.0,
+                },
+            },
+        };
+        let mut space = xr::Space::NULL;
+        let want = if floor {
+            xr::Result::SUCCESS
+        } else {
+            xr::Result::ERROR_REFERENCE_SPACE_UNSUPPORTED
+        };
+        assert_eq!(
+            unsafe { create(session, &info, &mut space) },
+            want,
+            "{api:?}"
+        );
+        if floor {
+            // On the floor, under LOCAL's origin: as far below LOCAL as the stage.
+            let locate = xrfn!(instance, LocateSpace);
+            let local = reference_space(instance, session, xr::ReferenceSpaceType::LOCAL);
+            let stage = reference_space(instance, session, xr::ReferenceSpaceType::STAGE);
+            let at = |s: xr::Space| {
+                let mut l = xr::SpaceLocation {
+                    ty: xr::SpaceLocation::TYPE,
+                    next: null_mut(),
+                    location_flags: xr::SpaceLocationFlags::EMPTY,
+                    pose: Default::default(),
+                };
+                let t = xr::Time::from_nanos(1_000_000_000);
+                assert_eq!(unsafe { locate(s, local, t, &mut l) }, xr::Result::SUCCESS);
+                l.pose.position.y
+            };
+            let (floor_y, stage_y) = (at(space), at(stage));
+            assert!(floor_y < -1.0 && floor_y == stage_y, "{floor_y} {stage_y}");
+        }
+        destroy_instance(instance);
+    }
+}

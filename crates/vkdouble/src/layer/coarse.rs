@@ -15,9 +15,10 @@
 //! `vkCmdWaitEvents(done)` with the host as source, and copies back. At submit a thread of the
 //! double waits for each `ready` in execution order, computes from the attachment's snapshot
 //! (copied in front of the pass, [`super::snapshot`]) the finest fragment size any draw of the
-//! pass got per texel, replicates each block's top-left pixel over the block in the buffer, and
-//! sets `done` (the host may signal an event a command buffer waits on after the submit, outside
-//! a render pass: "vkCmdWaitEvents", VUID-vkCmdWaitEvents-pEvents-01163,
+//! pass got per texel, gives each block the value its fragment's shader computes at the
+//! fragment's centre ([`super::centre`]) in the buffer, and sets `done` (the host may signal an
+//! event a command buffer waits on after the submit, outside a render pass: "vkCmdWaitEvents",
+//! VUID-vkCmdWaitEvents-pEvents-01163,
 //! <https://registry.khronos.org/vulkan/specs/latest/man/html/vkCmdWaitEvents.html>). Lavapipe
 //! executes a command buffer's commands in order on the CPU, so the copy back runs after the host
 //! finished.
@@ -30,6 +31,7 @@ use std::time::{Duration, Instant};
 use ash::vk::{self, Handle as _};
 use serde_json::json;
 
+use super::centre::{self, Codec};
 use super::{
     full_barrier, host_buffer, lock, pixel_bytes, subresource, view_rates, Codes, ColourTarget,
     DeviceData, PassRec, Snapshot,
@@ -407,7 +409,7 @@ unsafe fn coarsen_job(d: &DeviceData, j: &Job, rates: &[[u32; 2]]) {
         if !codes.iter().any(|&c| c != 0) {
             continue;
         }
-        let Some(bpp) = pixel_bytes(target.format) else {
+        let Some(codec) = Codec::of(target.format) else {
             continue;
         };
         // SAFETY: the double's own host-visible memory, not in use by the device now.
@@ -418,14 +420,14 @@ unsafe fn coarsen_job(d: &DeviceData, j: &Job, rates: &[[u32; 2]]) {
             {
                 Ok(p) => {
                     let pixels = std::slice::from_raw_parts_mut(p as *mut u8, b.size as usize);
-                    replicate(
+                    coarsen(
                         target.extent,
                         j.pass.area,
                         texel,
                         columns,
                         &codes,
                         pixels,
-                        bpp as usize,
+                        codec,
                     );
                     d.fns.unmap_memory(b.memory);
                 }
@@ -443,18 +445,20 @@ unsafe fn coarsen_job(d: &DeviceData, j: &Job, rates: &[[u32; 2]]) {
     }
 }
 
-/// Replicates each block's top-left pixel over the block, per attachment texel: the block is
-/// the finest fragment size at that texel (`codes`, `columns` texels a row), within the render
+/// Gives every block the value its fragment's shader computes at the fragment's centre
+/// ([`centre`]: the mean of the pixels nearest it), per attachment texel: the block is the
+/// finest fragment size at that texel (`codes`, `columns` texels a row), within the render
 /// area.
-fn replicate(
+fn coarsen(
     e: vk::Extent2D,
     area: vk::Extent2D,
     texel: vk::Extent2D,
     columns: u32,
     codes: &[u8],
     pixels: &mut [u8],
-    bpp: usize,
+    codec: Codec,
 ) {
+    let bpp = codec.bytes();
     let right = area.width.min(e.width);
     let bottom = area.height.min(e.height);
     let row = e.width as usize * bpp;
@@ -469,16 +473,86 @@ fn replicate(
         let x1 = (x0 + texel.width).min(right);
         let y1 = (y0 + texel.height).min(bottom);
         for by in (y0..y1).step_by(h as usize) {
+            let (bh, ys) = (
+                (by + h).min(y1) - by,
+                centre::middle(h, (by + h).min(y1) - by),
+            );
             for bx in (x0..x1).step_by(w as usize) {
-                let src = by as usize * row + bx as usize * bpp;
+                let (bw, xs) = (
+                    (bx + w).min(x1) - bx,
+                    centre::middle(w, (bx + w).min(x1) - bx),
+                );
                 let mut value = [0u8; 16];
-                value[..bpp].copy_from_slice(&pixels[src..src + bpp]);
-                for y in by..(by + h).min(y1) {
-                    for x in bx..(bx + w).min(x1) {
+                {
+                    let at = |x: u32, y: u32| {
+                        let i = (by + y) as usize * row + (bx + x) as usize * bpp;
+                        &pixels[i..i + bpp]
+                    };
+                    let one = |m: &[u32; 2]| if m[0] == m[1] { 1 } else { 2 };
+                    let mut texels: [&[u8]; 4] = [&[]; 4];
+                    let mut n = 0;
+                    for &y in &ys[..one(&ys)] {
+                        for &x in &xs[..one(&xs)] {
+                            texels[n] = at(x, y);
+                            n += 1;
+                        }
+                    }
+                    codec.mean(&texels[..n], &mut value);
+                }
+                for y in by..by + bh {
+                    for x in bx..bx + bw {
                         let at = y as usize * row + x as usize * bpp;
                         pixels[at..at + bpp].copy_from_slice(&value[..bpp]);
                     }
                 }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 6×5 image, red = 10 x, green = 10 y, in one 8×8 shading-rate texel of `code`.
+    fn coarsened(code: u8) -> Vec<[u8; 4]> {
+        let (w, h) = (6u32, 5u32);
+        let mut pixels: Vec<u8> = (0..w * h)
+            .flat_map(|i| [(i % w * 10) as u8, (i / w * 10) as u8, 7, 255])
+            .collect();
+        let e = vk::Extent2D {
+            width: w,
+            height: h,
+        };
+        let texel = vk::Extent2D {
+            width: 8,
+            height: 8,
+        };
+        let codec = Codec::of(vk::Format::R8G8B8A8_UNORM).unwrap();
+        coarsen(e, e, texel, 1, &[code], &mut pixels, codec);
+        pixels.chunks(4).map(|p| [p[0], p[1], p[2], p[3]]).collect()
+    }
+
+    #[test]
+    fn a_block_gets_the_value_at_its_centre_and_a_cut_block_that_of_its_written_pixels_nearest_it()
+    {
+        let px = coarsened(0b1010); // 4×4
+        let at = |x: usize, y: usize| px[y * 6 + x];
+        for y in 0..5 {
+            for x in 0..6 {
+                // Whole block (0..4): the mean of columns and rows 1 and 2, i.e. 15 (the value at
+                // 2.0, its centre; its top-left pixel has 0). Cut blocks (columns 4..6, row 4):
+                // the written pixel nearest the centre (column 5, row 4).
+                let r = if x < 4 { 15 } else { 50 };
+                let g = if y < 4 { 15 } else { 40 };
+                assert_eq!(at(x, y), [r, g, 7, 255], "({x},{y})");
+            }
+        }
+        let px = coarsened(0b0100); // 2×1
+        for y in 0..5 {
+            for x in 0..6 {
+                let r = (x / 2 * 20 + 5) as u8;
+                assert_eq!(px[y * 6 + x], [r, (y * 10) as u8, 7, 255], "({x},{y})");
             }
         }
     }

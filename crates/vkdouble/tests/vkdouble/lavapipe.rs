@@ -1945,10 +1945,14 @@ fn load_store_op_none_is_offered_as_desktop_drivers_do_and_a_device_gets_it() {
 
 /// Where a GPU leaves coarse fragments: at the end of the pass instance, so a copy recorded in
 /// the same command buffer right after the pass (the example's `--dump`) reads the blocks, and so
-/// does a later submit. Codes: 1×1 on the left half, 4×4 on the right (the AMD profile clamps it
-/// to 2×2); the reference is the same gradient drawn without a shading-rate attachment.
+/// does a later submit. And what they hold: the shader's value at the centre of the fragment
+/// area (Vulkan, "Interpolation Decorations"; `FragCoord` is the fragment's centre), here the
+/// gradient (x / 64, y / 64) at the block's centre, within one 8-bit step, which a block filled
+/// with its top-left pixel misses by 1.5 / 64 (4×4) or 0.5 / 64 (2×2) of the range: 6 or 2 steps.
+/// Codes: 1×1 on the left half, 4×4 on the right (the AMD profile clamps it to 2×2); the
+/// reference is the same gradient drawn without a shading-rate attachment.
 #[test]
-fn a_read_back_in_the_same_command_buffer_sees_the_blocks() {
+fn a_read_back_in_the_same_command_buffer_sees_the_blocks_shaded_at_their_centres() {
     for (profile, texel, block) in [(Profile::Nvidia, 16, 4), (Profile::Amd, 8, 2)] {
         for path in [Path::RenderPass, Path::Dynamic] {
             with_vk(profile, |env, vk| {
@@ -1976,16 +1980,32 @@ fn a_read_back_in_the_same_command_buffer_sees_the_blocks() {
                     let i = ((y * SIZE + x) * 4) as usize;
                     [p[i], p[i + 1], p[i + 2], p[i + 3]]
                 };
+                // The gradient's 8-bit value at the centre of the block holding `p`.
+                let centre = |p: u32| {
+                    let c = f64::from(p / block * block) + f64::from(block) / 2.0;
+                    c / 64.0 * 255.0
+                };
                 for y in 0..SIZE {
                     for x in 0..SIZE {
-                        let want = if x < SIZE / 2 {
-                            px(&full.pixels, x, y)
-                        } else {
-                            px(&full.pixels, x / block * block, y / block * block)
-                        };
                         let what = format!("{profile:?} {path:?} ({x},{y})");
-                        assert_eq!(px(&drawn.pixels, x, y), want, "same command buffer {what}");
-                        assert_eq!(px(&drawn.after, x, y), want, "later submit {what}");
+                        let full_px = px(&full.pixels, x, y);
+                        for (when, got) in [
+                            ("same command buffer", px(&drawn.pixels, x, y)),
+                            ("later submit", px(&drawn.after, x, y)),
+                        ] {
+                            if x < SIZE / 2 {
+                                assert_eq!(got, full_px, "{when} {what}");
+                                continue;
+                            }
+                            let [r, g] = [x, y].map(centre);
+                            assert!(
+                                (f64::from(got[0]) - r).abs() <= 1.0
+                                    && (f64::from(got[1]) - g).abs() <= 1.0
+                                    && got[2..] == full_px[2..],
+                                "{when} {what}: {got:?}, the gradient at the block's centre \
+                                 ({r:.1}, {g:.1}), full rate {full_px:?}"
+                            );
+                        }
                     }
                 }
                 // The gradient differs between neighbours, so the comparison shows something.

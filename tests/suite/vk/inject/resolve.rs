@@ -6,7 +6,9 @@
 //! and on: in the 16×16 tiles of the shading-rate map that the blocky frame shows shaded at 4×4
 //! (every 4×4 block uniform; the pattern gives every pixel its own colour) the share of uniform
 //! blocks drops, and the tiles it shows at full rate (no uniform 2×2 block) are bit-identical.
-//! Version-1 render pass and dynamic rendering, on `nvidia` (16×16 texels).
+//! Version-1 render pass, on a framebuffer with views and on an imageless one (whose attachment
+//! infos name the usage the application asked the runtime for: the transfer usage reconstruction
+//! added is not it), and dynamic rendering, on `nvidia` (16×16 texels).
 
 use std::ptr::null;
 
@@ -30,9 +32,21 @@ const SAMPLES: vk::SampleCountFlags = vk::SampleCountFlags::TYPE_4;
 /// The shading-rate texel on `nvidia`, in pixels.
 const TILE: u32 = 16;
 
+/// How the frame's pass is begun.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    /// `vkCmdBeginRenderPass` on a framebuffer with views.
+    RenderPass,
+    /// `vkCmdBeginRenderPass` on an imageless framebuffer, the views named at the begin.
+    Imageless,
+    /// `vkCmdBeginRendering`.
+    Dynamic,
+}
+
 /// One frame: a 4× multisampled eye-shaped pass resolved into the acquired swapchain image, which
 /// is read back (RGBA8, rows top to bottom).
-fn frame(dynamic: bool, subsampled: bool, label: &str) -> Option<Vec<u8>> {
+fn frame(kind: Kind, subsampled: bool, label: &str) -> Option<Vec<u8>> {
+    let dynamic = kind == Kind::Dynamic;
     let _dir = set_up(label, Setup::Inject(Level::High));
     std::env::set_var(
         "DEBUG_OCULUS_FOVEATION_SUBSAMPLED",
@@ -51,13 +65,18 @@ fn frame(dynamic: bool, subsampled: bool, label: &str) -> Option<Vec<u8>> {
         VALIDATION_LAYER,
         fovea_vkdouble::LAYER_NAME,
     ];
+    let imageless = vk::PhysicalDeviceVulkan12Features::default().imageless_framebuffer(true);
     let options = Options {
         layers: &layers,
         api_version: vk::API_VERSION_1_3,
         multiview: false,
         dynamic_rendering: true,
         device_extensions: &[],
-        device_next: null(),
+        device_next: if kind == Kind::Imageless {
+            &imageless as *const _ as *const std::ffi::c_void
+        } else {
+            null()
+        },
         queues: 1,
     };
     let v = match Vulkan::through_xr_with(&env.entry, app.chain.gipa(), app.instance, sys, &options)
@@ -207,18 +226,41 @@ fn frame(dynamic: bool, subsampled: bool, label: &str) -> Option<Vec<u8>> {
             )
             .unwrap()
         });
+        let views = [ms_view, target_view];
         let framebuffer = render_pass.map(|rp| {
-            let views = [ms_view, target_view];
-            d.create_framebuffer(
-                &vk::FramebufferCreateInfo::default()
-                    .render_pass(rp)
-                    .attachments(&views)
+            // An imageless framebuffer names each attachment's usage as the application knows it:
+            // its own image's, and what it asked the runtime for (colour attachment, transfer
+            // source) with the sampled usage the simulated runtime adds.
+            let formats = [FORMAT];
+            let described = [
+                vk::ImageUsageFlags::COLOR_ATTACHMENT,
+                vk::ImageUsageFlags::COLOR_ATTACHMENT
+                    | vk::ImageUsageFlags::TRANSFER_SRC
+                    | vk::ImageUsageFlags::SAMPLED,
+            ]
+            .map(|usage| {
+                vk::FramebufferAttachmentImageInfo::default()
+                    .usage(usage)
                     .width(WIDTH)
                     .height(HEIGHT)
-                    .layers(1),
-                None,
-            )
-            .unwrap()
+                    .layer_count(1)
+                    .view_formats(&formats)
+            });
+            let mut infos =
+                vk::FramebufferAttachmentsCreateInfo::default().attachment_image_infos(&described);
+            let info = vk::FramebufferCreateInfo::default()
+                .render_pass(rp)
+                .width(WIDTH)
+                .height(HEIGHT)
+                .layers(1);
+            let info = if kind == Kind::Imageless {
+                info.flags(vk::FramebufferCreateFlags::IMAGELESS)
+                    .attachment_count(2)
+                    .push_next(&mut infos)
+            } else {
+                info.attachments(&views)
+            };
+            d.create_framebuffer(&info, None).unwrap()
         });
         let modules = [VERTEX, PATTERN].map(|b| {
             let words = spv(b);
@@ -298,15 +340,16 @@ fn frame(dynamic: bool, subsampled: bool, label: &str) -> Option<Vec<u8>> {
         };
         match (render_pass, framebuffer) {
             (Some(rp), Some(fb)) => {
-                d.cmd_begin_render_pass(
-                    cb,
-                    &vk::RenderPassBeginInfo::default()
-                        .render_pass(rp)
-                        .framebuffer(fb)
-                        .render_area(area)
-                        .clear_values(&clear),
-                    vk::SubpassContents::INLINE,
-                );
+                let mut named = vk::RenderPassAttachmentBeginInfo::default().attachments(&views);
+                let mut begin = vk::RenderPassBeginInfo::default()
+                    .render_pass(rp)
+                    .framebuffer(fb)
+                    .render_area(area)
+                    .clear_values(&clear);
+                if kind == Kind::Imageless {
+                    begin = begin.push_next(&mut named);
+                }
+                d.cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE);
                 draw();
                 d.cmd_end_render_pass(cb);
             }
@@ -471,12 +514,16 @@ fn an_injected_multisampled_eye_pass_gets_its_resolve_target_reconstructed() {
         module_path!(),
         "an_injected_multisampled_eye_pass_gets_its_resolve_target_reconstructed",
         || {
-            for (label, dynamic) in [("rp", false), ("dynamic", true)] {
-                let Some(blocky) = frame(dynamic, false, &format!("resolve-blocky-{label}")) else {
+            for (label, kind) in [
+                ("rp", Kind::RenderPass),
+                ("imageless", Kind::Imageless),
+                ("dynamic", Kind::Dynamic),
+            ] {
+                let Some(blocky) = frame(kind, false, &format!("resolve-blocky-{label}")) else {
                     return;
                 };
                 let smooth =
-                    frame(dynamic, true, &format!("resolve-smooth-{label}")).expect("drawn once");
+                    frame(kind, true, &format!("resolve-smooth-{label}")).expect("drawn once");
                 let (mut coarse, mut still_uniform, mut full, mut kept) = (0, 0, 0, 0);
                 for ty in 0..HEIGHT / TILE {
                     for tx in 0..WIDTH / TILE {
