@@ -38,9 +38,10 @@ pub unsafe extern "system" fn allocate_command_buffers(
             // SAFETY: the next layer's function, with the caller's arguments.
             let r = unsafe { next(device, info, out) };
             // SAFETY: as the caller promised.
-            let (Some(rec), Some(k), Some(i)) =
-                (rec, unsafe { key(device) }, unsafe { info.as_ref() })
-            else {
+            let (Some(k), Some(i)) = (unsafe { key(device) }, unsafe { info.as_ref() }) else {
+                return r;
+            };
+            let Some(rec) = rec else {
                 return r;
             };
             if r == vk::Result::SUCCESS && !out.is_null() {
