@@ -867,6 +867,39 @@ mod tests {
         );
     }
 
+    /// A command buffer's queue family is its record's, taken from its pool at allocation: however
+    /// many command buffers are allocated after it (more than any fixed-size table of families
+    /// holds, so one whose handle hashes where its does), an acquire half recorded into it stays an
+    /// acquire, and its pool's family goes with the pool.
+    #[test]
+    fn a_command_buffers_family_outlives_any_number_of_others() {
+        let k: Key = 0x8001;
+        let object = object(k);
+        let dev = record(&object, 1);
+        let (pool, other_pool) = (0x8800_0001u64, 0x8800_0002u64);
+        pool_created(&dev, pool, 1);
+        pool_created(&dev, other_pool, 0);
+        let cb = vk::CommandBuffer::from_raw(0x8100_0000);
+        remember_command_buffer(cb, CbRecord::new(&dev, k, pool, false));
+        let others: Vec<vk::CommandBuffer> = (1..=5000u64)
+            .map(|i| vk::CommandBuffer::from_raw(0x8100_0000 + i * 8))
+            .collect();
+        for &o in &others {
+            remember_command_buffer(o, CbRecord::new(&dev, k, other_pool, false));
+        }
+        assert!(
+            !is_release(cb, 0, 1),
+            "recorded on the destination family after 5000 other allocations: acquire"
+        );
+        assert!(
+            is_release(others[0], 0, 1),
+            "the others' family is the source's"
+        );
+        command_pool_destroyed(&dev, k, pool);
+        command_pool_destroyed(&dev, k, other_pool);
+        assert!(dev.command_pools.lock().is_empty());
+    }
+
     /// A pool's destruction drops the records of the command buffers allocated from it, and only
     /// those: over many create, allocate and destroy cycles the records do not grow.
     #[test]

@@ -525,7 +525,6 @@ pub unsafe extern "system" fn destroy_framebuffer(
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, fb, alloc) };
         }
-        // SAFETY: as the caller promised.
         convert::framebuffer_destroyed(&dev, fb);
     })
 }
