@@ -60,7 +60,7 @@ pub unsafe extern "system" fn create_command_pool(
             if let (vk::Result::SUCCESS, Some(i), false) = (r, info, out.is_null()) {
                 // SAFETY: on success `out` holds the new pool.
                 let raw = unsafe { *out }.as_raw();
-                registry::pool_created(raw, i.queue_family_index);
+                registry::pool_created(rec.device, raw, i.queue_family_index);
             }
             r
         },

@@ -787,8 +787,7 @@ unsafe fn create_device_impl(
                 "a new device has the dispatch key of one that was never destroyed (its instance \
                  was destroyed first): what the layer kept for the old one is forgotten"
             );
-            convert::device_key_reused(k);
-            reconstruct::device_key_reused(k);
+            registry::device_key_reused(k);
         }
         // `vkCmdEndRendering2EXT`, which the driver does not have, goes down as the plain end:
         // the core name from Vulkan 1.3, `VK_KHR_dynamic_rendering`'s below (a driver returns no
@@ -810,6 +809,23 @@ unsafe fn create_device_impl(
         };
         let emulated = fdm.is_some();
         let injects = inject.is_some();
+        // Whether the layer can record compute dispatches into the device's command buffers, the
+        // conversion's and the reconstruction's condition.
+        let blocked = (own.is_some() && (injects || emulated))
+            .then(|| convert::dispatch_blocked(&inst, physical, ci, api_version))
+            .flatten();
+        let converter =
+            convert::converter_for(handle, fdm.as_ref(), own.as_ref(), blocked.as_deref());
+        let recon_fdm = inject.as_ref().map(|i| &i.fdm).or(fdm.as_ref());
+        let reconstructor = reconstruct::reconstructor_for(
+            handle,
+            recon_fdm,
+            own.as_ref(),
+            blocked.as_deref(),
+            ci,
+            api_version,
+        );
+        let converts = converter.is_some();
         registry::add_device(registry::Device {
             handle,
             instance: key(inst.handle).unwrap_or(0),
@@ -817,15 +833,13 @@ unsafe fn create_device_impl(
             next,
             end_rendering,
             fdm,
-            inject,
             api_version,
-            attachments: registry::Attachments::new(own),
+            own,
+            emulation: registry::Emulation::new(converter),
+            injection: inject,
+            reconstructor,
+            command_pools: Default::default(),
         });
-        let converts = convert::device_created(&inst, physical, ci, handle);
-        if injects || emulated {
-            let why = convert::dispatch_blocked(&inst, physical, ci, api_version);
-            reconstruct::device_created(handle, why, ci);
-        }
         // Offsets reach density maps where the driver got the application's request as it was
         // (so it has the extension), or where the layer emulates them and converts: an emulated
         // map takes offsets only through its conversion in front of each pass
@@ -857,10 +871,10 @@ pub unsafe extern "system" fn destroy_device(
         // SAFETY: the device is live; the application has finished with it (destroy_all waits
         // for the layer's clears and uploads in flight before the maps go).
         unsafe {
-            convert::device_destroyed(device);
-            reconstruct::device_destroyed(device);
+            convert::device_destroyed(&dev);
+            reconstruct::device_destroyed(&dev);
             emulation::destroy_all(&dev);
-            if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+            if let (Some(inj), Some(own)) = (&dev.injection, &dev.own) {
                 inj.destroy(own);
             }
         }

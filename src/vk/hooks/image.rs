@@ -66,18 +66,13 @@ pub unsafe extern "system" fn create_image_view(
             let ci = unsafe { &*info };
             // SAFETY: the view was just created on the live device.
             unsafe { reconstruct::view_created(&dev, *out, ci) };
-            if let Some(inj) = &dev.inject {
+            if let Some(inj) = &dev.injection {
                 // SAFETY: the view was just created.
                 inj.view_created(unsafe { *out }, ci);
                 return r;
             }
-            let shadow = dev
-                .attachments
-                .images
-                .lock()
-                .get(&ci.image.as_raw())
-                .copied();
-            let (Some(s), Some(own)) = (shadow, &dev.attachments.own) else {
+            let shadow = dev.emulation.images.lock().get(&ci.image.as_raw()).copied();
+            let (Some(s), Some(own)) = (shadow, &dev.own) else {
                 return r;
             };
             // SAFETY: the view was just created.
@@ -88,7 +83,7 @@ pub unsafe extern "system" fn create_image_view(
             match unsafe { own.fns.create_image_view(&shadow_info, None) } {
                 Ok(view) => {
                     let r = shadow_info.subresource_range;
-                    dev.attachments.views.lock().insert(
+                    dev.emulation.views.lock().insert(
                         app_view.as_raw(),
                         ShadowView {
                             view,
@@ -132,15 +127,15 @@ pub unsafe extern "system" fn destroy_image_view(
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, view, alloc) };
         }
-        if let Some(inj) = &dev.inject {
+        if let Some(inj) = &dev.injection {
             inj.view_destroyed(view);
         }
         // SAFETY: the device is live.
         unsafe { reconstruct::view_destroyed(&dev, view) };
-        let shadow = dev.attachments.views.lock().remove(&view.as_raw());
+        let shadow = dev.emulation.views.lock().remove(&view.as_raw());
         // SAFETY: the device is live.
         unsafe { convert::view_changed(&dev, view, None) };
-        if let (Some(s), Some(own)) = (shadow, &dev.attachments.own) {
+        if let (Some(s), Some(own)) = (shadow, &dev.own) {
             // SAFETY: the layer's own view; the application's use of it ended with its view's.
             unsafe { own.fns.destroy_image_view(s.view, None) };
         }
@@ -168,15 +163,15 @@ pub unsafe extern "system" fn destroy_image(
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, image, alloc) };
         }
-        if let Some(inj) = &dev.inject {
+        if let Some(inj) = &dev.injection {
             inj.image_destroyed(image);
         }
         // SAFETY: the device is live.
         unsafe { reconstruct::image_destroyed(&dev, image) };
-        let shadow = dev.attachments.images.lock().remove(&image.as_raw());
+        let shadow = dev.emulation.images.lock().remove(&image.as_raw());
         if let Some(s) = shadow {
             bridge::set_shadow(image, None);
-            if let Some(own) = &dev.attachments.own {
+            if let Some(own) = &dev.own {
                 // SAFETY: the layer's own image and memory, no longer used by the application
                 // (its image, which every use of the shadow stood in for, is being destroyed);
                 // a pending clear is dropped, one in flight is waited for.
@@ -307,7 +302,7 @@ pub unsafe extern "system" fn create_image(
             let Some(next) = dev.next.create_image else {
                 return vk::Result::ERROR_INITIALIZATION_FAILED;
             };
-            if let Some(inj) = &dev.inject {
+            if let Some(inj) = &dev.injection {
                 // SAFETY: the next layer's function, with the caller's arguments.
                 let r = unsafe { next(device, info, alloc, out) };
                 if r == vk::Result::SUCCESS && !info.is_null() && !out.is_null() {

@@ -9,7 +9,6 @@ use crate::vk::base::chain;
 use crate::vk::base::ffi::{extension_enabled, guard, key, raw};
 use crate::vk::base::link::{self, LayerInstanceCreateInfo, LayerInstanceLink};
 use crate::vk::base::next::InstanceNext;
-use crate::vk::convert;
 use crate::vk::registry;
 
 /// `vkCreateInstance`: finds the next layer in the loader's link info, advances the link for the
@@ -201,7 +200,7 @@ pub unsafe extern "system" fn destroy_instance(
                 );
             }
             for d in devices {
-                convert::device_key_reused(d);
+                registry::device_key_reused(d);
             }
         }
         if let Some(destroy) = inst.next.destroy_instance {

@@ -105,7 +105,7 @@ unsafe fn create_rewritten(
         // SAFETY: as the caller promised.
         unsafe { pass.without_density_enums() };
     }
-    if let Some(inj) = &dev.inject {
+    if let Some(inj) = &dev.injection {
         // SAFETY: as the caller promised.
         return unsafe {
             injection::create_injected(dev, inj, create2, pass, flags, p_next, alloc, out)
@@ -131,10 +131,7 @@ unsafe fn create_rewritten(
     if r == vk::Result::SUCCESS && density != vk::ATTACHMENT_UNUSED && texel.is_some() {
         // SAFETY: just created.
         let handle = unsafe { *out };
-        dev.attachments
-            .passes
-            .lock()
-            .insert(handle.as_raw(), density);
+        dev.emulation.passes.lock().insert(handle.as_raw(), density);
         // SAFETY: the device is live.
         unsafe { convert::pass_changed(dev, handle, layouts) };
         reconstruct::pass_created(dev, handle, &pass, density);
@@ -175,7 +172,7 @@ pub unsafe extern "system" fn create_render_pass(
                 Some(ci) if dev.fdm.is_some() => unsafe { density_attachment(ci.p_next) },
                 _ => None,
             };
-            let inject = dev.inject.is_some() && !info.is_null();
+            let inject = dev.injection.is_some() && !info.is_null();
             // A pass without the density-map struct that still names the density layout, stage
             // or access (it writes a map, or orders one) goes down translated.
             // SAFETY: the caller's create info, read only.
@@ -284,7 +281,7 @@ unsafe fn create_render_pass2_with(
             Some(ci) if dev.fdm.is_some() => unsafe { density_attachment(ci.p_next) },
             _ => None,
         };
-        let inject = dev.inject.is_some() && !info.is_null();
+        let inject = dev.injection.is_some() && !info.is_null();
         // As in `create_render_pass`: density enums outside the density-map struct.
         // SAFETY: the caller's create info, read only.
         let ci = unsafe { info.as_ref() };
@@ -296,7 +293,7 @@ unsafe fn create_render_pass2_with(
         };
         // SAFETY: as above.
         let ci = unsafe { &*info };
-        if let (Some(inj), vk::ATTACHMENT_UNUSED) = (&dev.inject, density) {
+        if let (Some(inj), vk::ATTACHMENT_UNUSED) = (&dev.injection, density) {
             // SAFETY: the caller's subpasses and their chains, read only.
             match unsafe { apps_rate_attachment(ci) } {
                 Ok(false) => {}
@@ -374,8 +371,8 @@ pub unsafe extern "system" fn destroy_render_pass(
         let Some(dev) = (unsafe { registry::device(device) }) else {
             return;
         };
-        dev.attachments.passes.lock().remove(&pass.as_raw());
-        if let Some(inj) = &dev.inject {
+        dev.emulation.passes.lock().remove(&pass.as_raw());
+        if let Some(inj) = &dev.injection {
             inj.pass_destroyed(pass);
         }
         // SAFETY: the device is live.
@@ -416,7 +413,7 @@ pub unsafe extern "system" fn create_framebuffer(
                 // SAFETY: the next layer's function, with the caller's arguments.
                 return unsafe { next(device, info, alloc, out) };
             };
-            if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+            if let (Some(inj), Some(own)) = (&dev.injection, &dev.own) {
                 let Some(p) = inj.pass(ci.render_pass) else {
                     // SAFETY: as above.
                     return unsafe { next(device, info, alloc, out) };
@@ -428,7 +425,7 @@ pub unsafe extern "system" fn create_framebuffer(
                     )
                 };
             }
-            let Some(density) = dev.attachments.density_attachment(ci.render_pass) else {
+            let Some(density) = dev.emulation.density_attachment(ci.render_pass) else {
                 // SAFETY: as above.
                 return unsafe { next(device, info, alloc, out) };
             };
@@ -478,8 +475,8 @@ pub unsafe extern "system" fn create_framebuffer(
             if let Some(v) = views.get_mut(density as usize) {
                 // A density view without a shadow (it could not be made) gets the device's
                 // full-rate stand-in ([`crate::vk::own::calls::Own::full_rate_view`]).
-                let shadow = dev.attachments.shadow_view(*v).or_else(|| {
-                    let (own, fdm) = (dev.attachments.own.as_ref()?, dev.fdm.as_ref()?);
+                let shadow = dev.emulation.shadow_view(*v).or_else(|| {
+                    let (own, fdm) = (dev.own.as_ref()?, dev.fdm.as_ref()?);
                     // SAFETY: the device is live and emulates as `fdm` says.
                     unsafe { own.full_rate_view(fdm, ci.width, ci.height) }
                 });
@@ -519,7 +516,7 @@ pub unsafe extern "system" fn destroy_framebuffer(
         let Some(dev) = (unsafe { registry::device(device) }) else {
             return;
         };
-        if let Some(inj) = &dev.inject {
+        if let Some(inj) = &dev.injection {
             inj.framebuffer_destroyed(fb);
         }
         // SAFETY: the device is live.
@@ -528,8 +525,7 @@ pub unsafe extern "system" fn destroy_framebuffer(
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, fb, alloc) };
         }
-        // SAFETY: as the caller promised.
-        unsafe { convert::framebuffer_destroyed(device, fb) };
+        convert::framebuffer_destroyed(&dev, fb);
     })
 }
 
@@ -545,7 +541,7 @@ unsafe fn begin_pass(
     begin: *const vk::RenderPassBeginInfo<'_>,
     f: impl FnOnce(*const vk::RenderPassBeginInfo<'_>),
 ) {
-    if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+    if let (Some(inj), Some(own)) = (&dev.injection, &dev.own) {
         // SAFETY: as the caller promised; `own` is the device's.
         return unsafe { injection::begin_injected_pass(inj, own, cb, begin, f) };
     }
@@ -625,7 +621,7 @@ unsafe fn cmd_begin_rendering_with(
     let body = |dev: &Device, next: vk::PFN_vkCmdBeginRendering| {
         // SAFETY: as the caller promised; recorded before rendering begins.
         unsafe { convert::before_rendering(dev, cb, info) };
-        if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+        if let (Some(inj), Some(own)) = (&dev.injection, &dev.own) {
             // SAFETY: the caller's arguments; `own` is the device's.
             return unsafe { injection::begin_injected(inj, own, next, cb, info) };
         }
@@ -647,7 +643,7 @@ unsafe fn cmd_begin_rendering_with(
         // SAFETY: found by its sType.
         let view = unsafe { (*found).image_view };
         let shadow = (view != vk::ImageView::null())
-            .then(|| dev.attachments.shadow_view(view))
+            .then(|| dev.emulation.shadow_view(view))
             .flatten();
         if shadow.is_some() {
             // SAFETY: the caller's rendering info.
@@ -1175,9 +1171,12 @@ mod tests {
                 next,
                 end_rendering: None,
                 fdm: None,
-                inject: Some(inj),
                 api_version: vk::API_VERSION_1_3,
-                attachments: registry::Attachments::new(Some(Arc::clone(&own))),
+                own: Some(Arc::clone(&own)),
+                emulation: registry::Emulation::new(None),
+                injection: Some(inj),
+                reconstructor: None,
+                command_pools: Default::default(),
             });
         }
 

@@ -49,7 +49,7 @@ pub unsafe extern "system" fn create_graphics_pipelines(
             let fdm_pass = |pass: vk::RenderPass| {
                 use ash::vk::Handle as _;
                 pass != vk::RenderPass::null()
-                    && dev.attachments.passes.lock().contains_key(&pass.as_raw())
+                    && dev.emulation.passes.lock().contains_key(&pass.as_raw())
             };
             let facts: Vec<Facts> = list
                 .iter()
@@ -60,17 +60,17 @@ pub unsafe extern "system" fn create_graphics_pipelines(
                     // as it came (docs/injection.md#switching-it-on): its pipelines keep the
                     // application's state, as they would without the layer.
                     inject: dev
-                        .inject
+                        .injection
                         .as_ref()
                         .is_some_and(|i| !i.is_apps_pass(ci.render_pass)),
                     non_trivial: dev
-                        .inject
+                        .injection
                         .as_ref()
                         .is_some_and(|i| i.fdm.non_trivial_combiners),
                     ..f
                 })
                 .collect();
-            if (dev.fdm.is_none() && dev.inject.is_none()) || !facts.iter().any(Facts::rewrite) {
+            if (dev.fdm.is_none() && dev.injection.is_none()) || !facts.iter().any(Facts::rewrite) {
                 // SAFETY: the next layer's function, with the caller's arguments.
                 return unsafe { next(device, cache, count, infos, alloc, out) };
             }
@@ -155,7 +155,7 @@ pub unsafe extern "system" fn cmd_set_fragment_shading_rate(
         let Some(next) = dev.next.cmd_set_fragment_shading_rate else {
             return;
         };
-        let retuned = match &dev.inject {
+        let retuned = match &dev.injection {
             Some(inj) if !size.is_null() && !ops.is_null() => {
                 // SAFETY: the caller's arguments, read only.
                 let (s, o) = unsafe { (*size, *ops) };

@@ -13,11 +13,11 @@ use crate::vk::convert;
 use crate::vk::own::bindings::{Bound, PushRange};
 use crate::vk::registry::{
     self, command_pool_destroyed, forget_command_buffers, record_of, remember_command_buffer,
-    with_record,
+    with_record, CbRecord,
 };
 
-/// `vkAllocateCommandBuffers`: each new command buffer gets its record, with its pool, and its
-/// queue family is noted for ownership transfers ([`registry::buffers_allocated`]).
+/// `vkAllocateCommandBuffers`: each new command buffer gets its record, with its pool and its
+/// pool's queue family, for ownership transfers ([`registry::is_release`]).
 ///
 /// # Safety
 /// The caller's arguments, valid as the command requires.
@@ -41,15 +41,18 @@ pub unsafe extern "system" fn allocate_command_buffers(
             let (Some(k), Some(i)) = (unsafe { key(device) }, unsafe { info.as_ref() }) else {
                 return r;
             };
+            let Some(rec) = rec else {
+                return r;
+            };
             if r == vk::Result::SUCCESS && !out.is_null() {
                 let n = i.command_buffer_count as usize;
                 // SAFETY: the driver wrote `command_buffer_count` handles.
                 let cbs = unsafe { std::slice::from_raw_parts(out, n) };
                 let secondary = i.level == vk::CommandBufferLevel::SECONDARY;
                 for &cb in cbs {
-                    remember_command_buffer(cb, k, i.command_pool.as_raw(), secondary);
+                    let pool = i.command_pool.as_raw();
+                    remember_command_buffer(cb, CbRecord::new(rec.device, k, pool, secondary));
                 }
-                registry::buffers_allocated(i, cbs);
             }
             r
         },
@@ -68,12 +71,13 @@ pub unsafe extern "system" fn destroy_command_pool(
 ) {
     guard("vkDestroyCommandPool", (), || {
         // SAFETY: as the caller promised.
-        let key = unsafe { key(device) };
-        if let (Some(k), false) = (key, pool == vk::CommandPool::null()) {
-            command_pool_destroyed(k, pool.as_raw());
+        let (rec, key) = (unsafe { registry::recording(device) }, unsafe {
+            key(device)
+        });
+        if let (Some(rec), Some(k), false) = (rec, key, pool == vk::CommandPool::null()) {
+            command_pool_destroyed(rec.device, k, pool.as_raw());
         }
-        // SAFETY: as the caller promised.
-        let next = unsafe { registry::recording(device) }.and_then(|r| r.next.destroy_command_pool);
+        let next = rec.and_then(|r| r.next.destroy_command_pool);
         if let Some(next) = next {
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(device, pool, alloc) };
@@ -117,12 +121,12 @@ pub unsafe extern "system" fn begin_command_buffer(
                 // A pass left open by the previous recording ends nowhere.
                 registry::take_plan(r);
             });
-            if found.is_none() {
+            if let (None, Some(rec)) = (found, rec) {
                 // Allocated before the layer saw it (not expected on an emulating device): a
                 // primary's record without a pool, dropped with the command buffer or its device.
                 // SAFETY: as the caller promised.
                 let device = unsafe { key(cb) }.unwrap_or(0);
-                remember_command_buffer(cb, device, 0, false);
+                remember_command_buffer(cb, CbRecord::new(rec.device, device, 0, false));
             }
             // SAFETY: the next layer's function, with the caller's arguments.
             unsafe { next(cb, info) }
