@@ -60,7 +60,7 @@ pub unsafe fn image_created(
     app: vk::Image,
     ci: &vk::ImageCreateInfo<'_>,
 ) -> Option<ShadowImage> {
-    let (Some(fdm), Some(own)) = (&dev.fdm, &dev.attachments.own) else {
+    let (Some(fdm), Some(own)) = (&dev.fdm, &dev.own) else {
         if dev.fdm.is_some() {
             tracing::warn!(
                 image = raw(app),
@@ -74,7 +74,7 @@ pub unsafe fn image_created(
     // SAFETY: as the caller promised.
     match unsafe { make_shadow(own, fdm, ci.extent, ci.array_layers, !own_image) } {
         Ok(s) => {
-            dev.attachments.images.lock().insert(app.as_raw(), s);
+            dev.emulation.images.lock().insert(app.as_raw(), s);
             bridge::set_shadow(
                 app,
                 Some(Shadow {
@@ -121,17 +121,11 @@ pub fn takes_offsets(flags: vk::ImageCreateFlags) -> bool {
 /// # Safety
 /// `dev` must be live, with nothing in flight.
 pub unsafe fn destroy_all(dev: &Device) {
-    let Some(own) = &dev.attachments.own else {
+    let Some(own) = &dev.own else {
         return;
     };
-    let views: Vec<ShadowView> = dev
-        .attachments
-        .views
-        .lock()
-        .drain()
-        .map(|(_, v)| v)
-        .collect();
-    let images: Vec<(u64, ShadowImage)> = dev.attachments.images.lock().drain().collect();
+    let views: Vec<ShadowView> = dev.emulation.views.lock().drain().map(|(_, v)| v).collect();
+    let images: Vec<(u64, ShadowImage)> = dev.emulation.images.lock().drain().collect();
     let fallbacks: Vec<(ShadowImage, vk::ImageView)> = own.fallbacks.lock().drain(..).collect();
     // SAFETY: the layer's own objects on a live, idle device.
     unsafe {
@@ -177,7 +171,7 @@ pub unsafe fn with_swapped_begin(
     else {
         return f(begin);
     };
-    let Some(density) = dev.attachments.density_attachment(b.render_pass) else {
+    let Some(density) = dev.emulation.density_attachment(b.render_pass) else {
         return f(begin);
     };
     // SAFETY: found by its sType in a valid chain.
@@ -187,7 +181,7 @@ pub unsafe fn with_swapped_begin(
         unsafe { slice(found.p_attachments, found.attachment_count) }.to_vec();
     let Some(shadow) = views
         .get(density as usize)
-        .and_then(|v| dev.attachments.shadow_view(*v))
+        .and_then(|v| dev.emulation.shadow_view(*v))
     else {
         return f(begin);
     };

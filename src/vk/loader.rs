@@ -164,7 +164,7 @@ unsafe extern "system" fn get_device_proc_addr(
         let dev = unsafe { registry::device(device) }?;
         if let Some(h) = dispatch::device_hook(name) {
             let offered = (h.offered)(&dev.next) || h.when == When::Provided;
-            if offered && h.when.applies(dev.fdm.is_some(), dev.inject.is_some()) {
+            if offered && h.when.applies(dev.fdm.is_some(), dev.injection.is_some()) {
                 return Some(h.function);
             }
         }

@@ -23,14 +23,14 @@
 //! | 5 | `convert.rs` | density maps the application writes, converted at pass begin |
 //! | 5 | `injection.rs` | injection's render passes, framebuffers and eye-pass begins |
 //! | 5 | `reconstruct.rs` | reconstruction of coarse blocks at the end of eye passes (docs/reconstruction.md) |
-//! | 4 | `registry.rs` | per-instance and per-device records, the lock-free device table, and every per-handle index (command pools' queue families, each device's own calls and converter, command buffers' records) |
-//! | 3 | `own/` (`mod.rs`, `calls.rs`, `shadows.rs`, `converter.rs`, `convert_shader.rs`, `bindings.rs`, `injector.rs`, `order.rs`, `recon_shader.rs`, `reconstructor.rs`), `shaders/` | the layer's own device objects: its calls on a device with the clears and uploads ahead of the application's submits (ordered against its other graphics queues by `order.rs`), shadows and their views, the GPU converter with its shader and the compute bindings it gives back, injection's maps and tracking, the reconstruction of coarse blocks with its shader |
+//! | 4 | `registry.rs` | per-instance and per-device records (each device's holding every mode's state: its own calls, emulation's shadows and converter, injection's maps, the reconstructor, its command pools' queue families), the lock-free device table, and command buffers' records (docs/ARCHITECTURE.md#who-owns-what) |
+//! | 3 | `own/` (`mod.rs`, `calls.rs`, `shadows.rs`, `converter.rs`, `convert_shader.rs`, `bindings.rs`, `injector.rs`, `order.rs`, `recon_shader.rs`, `reconstructor.rs`), `shaders/` | the layer's own device objects: its calls on a device with the clears and uploads ahead of the application's submits (ordered against its other graphics queues by `order.rs`), shadows and their views, the GPU converter with its shader, each command buffer's conversion slots and the compute bindings it gives back, injection's maps and tracking, the reconstruction of coarse blocks with its shader |
 //! | 2 | `translate/` (`mod.rs`, `render_pass.rs`, `render_pass_v1.rs`, `sync.rs`, `rate_state.rs`, `formats.rs`) | pure struct translation, no device calls: render passes v1 → v2 and without the density map, sync stages, accesses and layouts, pipelines' rate state, formats |
 //! | 1 | `base/` (`mod.rs`, `ffi.rs`, `chain.rs`, `structs.rs`, `link.rs`, `commands.rs`, `next.rs`) | the FFI edge (guard, names, slices, typed views of the application's pointers and what a hook body gets, two-call, handle keys), `pNext` chains (read through the typed views too) and the size of every struct a device create info may chain, the loader's link structs, the one command list, the next-layer tables |
 //!
 //! Inside a folder: `base/chain.rs` uses `base/link.rs` and `base/structs.rs`, `base/next.rs` uses
 //! `base/commands.rs` and `base/ffi.rs`; `own/calls.rs` uses `own/shadows.rs` and `own/order.rs`, `own/converter.rs` uses
-//! `own/calls.rs`, `own/convert_shader.rs` and `own/shadows.rs`, `own/reconstructor.rs` uses
+//! `own/bindings.rs`, `own/calls.rs`, `own/convert_shader.rs` and `own/shadows.rs`, `own/reconstructor.rs` uses
 //! `own/calls.rs`, `own/bindings.rs` and `own/recon_shader.rs`,
 //! `own/injector.rs` uses `own/calls.rs`; `translate/render_pass.rs` uses `translate/formats.rs`
 //! and `translate/sync.rs`, `translate/render_pass_v1.rs` uses `translate/render_pass.rs` and

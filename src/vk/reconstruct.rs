@@ -6,7 +6,8 @@
 //! [`ended`] after the end went down, which records the copies and the dispatch
 //! ([`Reconstructor::record`]).
 //!
-//! Objects: the pipeline and layouts at device creation ([`device_created`]); scratch buffers at
+//! Objects: the pipeline and layouts at device creation ([`reconstructor_for`]), owned by the
+//! device's record; scratch buffers at
 //! the first pass of a target size, kept with the device. Per end of a pass that reconstructs
 //! nothing: one atomic load while no command buffer of the process has a plan open
 //! ([`registry::OPEN_PLANS`]), else the command buffer's record (this thread's cache) and one
@@ -18,75 +19,68 @@ use std::sync::Arc;
 use ash::vk;
 use ash::vk::Handle as _;
 
+use crate::bridge::FdmEmulation;
 use crate::vk::base::chain;
-use crate::vk::base::ffi::{key, raw, slice};
+use crate::vk::base::ffi::{raw, slice};
+use crate::vk::own::calls::Own;
 use crate::vk::own::reconstructor::{
     rate_layers, Colour, FramebufferTargets, PassTarget, Plan, Reconstructor, Target,
 };
-use crate::vk::registry::{self, record_of, Device, RECONSTRUCTORS};
+use crate::vk::registry::{self, record_of, Device};
 use crate::vk::translate::render_pass::{
     pass_colours, pass_view_mask, rendering_target, too_many_targets, Pass2, MAX_TARGETS,
 };
 
-/// Sets up reconstruction on a device just recorded in the registry that injects shading-rate
-/// maps or emulates density maps, or logs why not. `why_not`: why the device cannot record compute dispatches into the
-/// application's command buffers and give its bindings back, as the converter found. `ci`: the
-/// application's create info, whose `imagelessFramebuffer` decides whether its views need the
-/// added usage hidden ([`hide_added_usage`]).
+/// The reconstructor of a device being created that injects shading-rate maps or emulates density
+/// maps (`fdm`: how) with the layer's own calls `own`, or `None` with the log saying why.
+/// `why_not`: why the device cannot record compute dispatches into the application's command
+/// buffers and give its bindings back (`crate::vk::convert::dispatch_blocked`). The device's
+/// record owns it ([`Device::reconstructor`]). `ci`, the application's create info, and
+/// `api_version` decide whether its views need the added usage hidden ([`hide_added_usage`]),
+/// which the bridge is told.
 ///
 /// # Safety
-/// `handle` must be a live device just recorded; `ci` the application's valid create info.
-pub unsafe fn device_created(
+/// `own` must belong to the live device `handle`; `ci` must be the application's valid create
+/// info.
+pub unsafe fn reconstructor_for(
     handle: vk::Device,
-    why_not: Option<String>,
+    fdm: Option<&FdmEmulation>,
+    own: Option<&Arc<Own>>,
+    why_not: Option<&str>,
     ci: &vk::DeviceCreateInfo<'_>,
-) {
+    api_version: u32,
+) -> Option<Arc<Reconstructor>> {
     crate::bridge::subsampled::set_hides_usage(handle.as_raw(), false);
-    // SAFETY: as the caller promised.
-    let Some(dev) = (unsafe { registry::device(handle) }) else {
-        return;
-    };
-    let Some(own) = &dev.attachments.own else {
-        return;
-    };
-    let Some(fdm) = dev.inject.as_ref().map(|i| &i.fdm).or(dev.fdm.as_ref()) else {
-        return;
+    let (Some(fdm), Some(own)) = (fdm, own) else {
+        return None;
     };
     if let Some(why) = why_not {
         tracing::info!(
             device = raw(handle),
-            why = why.as_str(),
+            why,
             "coarse blocks are not reconstructed on this device"
         );
-        return;
+        return None;
     }
     // SAFETY: the layer's own objects on a live device.
     match unsafe { Reconstructor::new(Arc::clone(own), fdm) } {
         Ok(mut r) => {
             // SAFETY: as the caller promised.
             r.imageless = unsafe { enables_imageless(ci) };
-            // SAFETY: as the caller promised.
-            let Some(k) = (unsafe { key(handle) }) else {
-                // SAFETY: made on this live device, used by nothing yet.
-                unsafe { r.destroy() };
-                return;
-            };
-            let imageless = r.imageless;
-            {
-                let mut v = RECONSTRUCTORS.write();
-                v.retain(|(key, _)| *key != k);
-                v.push((k, Arc::new(r)));
-            }
             crate::bridge::subsampled::set_hides_usage(
                 handle.as_raw(),
-                hides_usage(dev.api_version, imageless),
+                hides_usage(api_version, r.imageless),
             );
+            Some(Arc::new(r))
         }
-        Err(e) => tracing::warn!(
-            device = raw(handle),
-            result = ?e,
-            "coarse blocks are not reconstructed on this device: its objects could not be made"
-        ),
+        Err(e) => {
+            tracing::warn!(
+                device = raw(handle),
+                result = ?e,
+                "coarse blocks are not reconstructed on this device: its objects could not be made"
+            );
+            None
+        }
     }
 }
 
@@ -124,27 +118,13 @@ fn hides_usage(api_version: u32, imageless: bool) -> bool {
 /// command buffers' records are gone.
 ///
 /// # Safety
-/// `handle` must be live and idle.
-pub unsafe fn device_destroyed(handle: vk::Device) {
-    crate::bridge::subsampled::set_hides_usage(handle.as_raw(), false);
-    // SAFETY: as the caller promised.
-    let Some(k) = (unsafe { key(handle) }) else {
-        return;
-    };
-    let r = {
-        let mut v = RECONSTRUCTORS.write();
-        let at = v.iter().position(|(key, _)| *key == k);
-        at.map(|i| v.swap_remove(i).1)
-    };
-    if let Some(r) = r {
+/// `dev` must be live and idle.
+pub unsafe fn device_destroyed(dev: &Device) {
+    crate::bridge::subsampled::set_hides_usage(dev.handle.as_raw(), false);
+    if let Some(r) = &dev.reconstructor {
         // SAFETY: as the caller promised.
         unsafe { r.destroy() };
     }
-}
-
-/// What the layer kept for a device gone without `vkDestroyDevice` is dropped without a call.
-pub fn device_key_reused(k: crate::vk::base::ffi::Key) {
-    RECONSTRUCTORS.write().retain(|(key, _)| *key != k);
 }
 
 /// The end of a render pass instance just went down in `cb` (`vkCmdEndRenderPass(2)`,
@@ -177,10 +157,7 @@ pub fn ended(cb: vk::CommandBuffer) {
 /// Runs `f` with the reconstructor of an emulating device, if it has one.
 fn with_reconstructor<R>(dev: &Device, f: impl FnOnce(&Reconstructor) -> R) -> Option<R> {
     dev.fdm.as_ref()?;
-    // SAFETY: the device is live (the caller's hook is running on it).
-    let k = unsafe { key(dev.handle) }?;
-    let r = registry::reconstructor_by_key(k)?;
-    Some(f(&r))
+    dev.reconstructor.as_deref().map(f)
 }
 
 /// The usage an application's colour image created with `VK_IMAGE_CREATE_SUBSAMPLED_BIT_EXT` on an
@@ -269,10 +246,7 @@ pub unsafe fn image_destroyed(dev: &Device, image: vk::Image) {
 
 /// Runs `f` with the reconstructor of a device that emulates or injects, if it has one.
 fn with_any_reconstructor<R>(dev: &Device, f: impl FnOnce(&Reconstructor) -> R) -> Option<R> {
-    // SAFETY: the device is live (the caller's hook is running on it).
-    let k = unsafe { key(dev.handle) }?;
-    let r = registry::reconstructor_by_key(k)?;
-    Some(f(&r))
+    dev.reconstructor.as_deref().map(f)
 }
 
 /// `vkCreateImageView` of an image whose usage fovea widened for reconstruction (the OpenXR side's
@@ -486,7 +460,7 @@ fn plan(
     area: vk::Rect2D,
     suspending: bool,
 ) {
-    let Some(sv) = dev.attachments.views.lock().get(&density).copied() else {
+    let Some(sv) = dev.emulation.views.lock().get(&density).copied() else {
         return;
     };
     let mut p = Plan::new(area, sv.image, sv.texels, sv.base_layer, suspending);

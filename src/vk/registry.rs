@@ -1,6 +1,9 @@
-//! The layer's per-instance and per-device state, keyed by the loader's dispatch pointer, and every
-//! per-handle index: command pools' and command buffers' queue families, each device's own calls
-//! and converter, and each command buffer's record.
+//! The layer's instance and device records, keyed by the loader's dispatch pointer, and each
+//! command buffer's record, keyed by its handle: what a hook finds from the dispatchable handle it
+//! is given. Everything else the layer keeps per device hangs off the device's record
+//! ([`Device`]: each mode's state, the layer's own calls, the command pools' queue families), and
+//! per command buffer off its record ([`CbRecord`]: its bindings, its conversions, its plan), so
+//! it goes with them (docs/ARCHITECTURE.md#who-owns-what).
 //!
 //! Every dispatchable handle (instance, physical device, device, queue, command buffer) points at
 //! an object whose first word is the loader's dispatch table pointer; a physical device shares its
@@ -18,12 +21,13 @@ use ash::vk;
 use ash::vk::Handle as _;
 
 use crate::bridge::FdmEmulation;
-use crate::common::lock::{MapLock, Mutex, Rank, SharedMutex, SharedRwLock};
+use crate::common::lock::{MapLock, Mutex, Rank, SharedMutex};
 use crate::vk::base::ffi::{key, AddressHasher, Key};
 use crate::vk::base::next::{DeviceNext, InstanceNext};
 use crate::vk::own::bindings::Bound;
 use crate::vk::own::calls::Own;
-use crate::vk::own::converter::{Converter, Slot};
+use crate::vk::own::converter::{Conversion, Converter};
+use crate::vk::own::injector::Injector;
 use crate::vk::own::reconstructor::{Plan, Reconstructor};
 use crate::vk::own::shadows::{ShadowImage, ShadowView};
 
@@ -98,7 +102,8 @@ impl Instance {
     }
 }
 
-/// One `VkDevice` created through the layer.
+/// One `VkDevice` created through the layer, and everything the layer keeps for it: each mode's
+/// state is a field here, made before the record is entered and dropped with it.
 pub struct Device {
     pub handle: vk::Device,
     /// The dispatch key of the instance it was made from, whose destruction forgets it
@@ -112,42 +117,56 @@ pub struct Device {
     pub end_rendering: Option<vk::PFN_vkCmdEndRendering>,
     /// `Some` where the device emulates fragment density maps.
     pub fdm: Option<FdmEmulation>,
-    /// Where injection is on (docs/injection.md), the device got shading-rate attachments at
-    /// `vkCreateDevice` and the layer could set up its own calls on it: its injected maps and what
-    /// it tracks to find eye passes ([`crate::vk::own::injector`]).
-    pub inject: Option<crate::vk::own::injector::Injector>,
     /// The device's Vulkan version (the instance's and the physical device's lower one): below
     /// 1.2 render pass 2 is `VK_KHR_create_renderpass2`'s, which the layer enables for emulation,
     /// and the core names may not be called.
     pub api_version: u32,
-    /// The attachment path's state: shadows and rewritten passes (empty where not emulating).
-    pub attachments: Attachments,
+    /// The layer's own device-level calls (creating, clearing and destroying shadows and injected
+    /// maps, the conversion's and the reconstruction's objects), shared by the modes; `None` where
+    /// the device neither emulates nor injects, or the layer could not set them up (no shadows,
+    /// maps, conversion or reconstruction then).
+    pub own: Option<Arc<Own>>,
+    /// Emulation's state: shadows, rewritten passes and the converter (empty where not
+    /// emulating).
+    pub emulation: Emulation,
+    /// Where injection is on (docs/injection.md), the device got shading-rate attachments at
+    /// `vkCreateDevice` and the layer could set up its own calls on it: its injected maps and what
+    /// it tracks to find eye passes ([`crate::vk::own::injector`]).
+    pub injection: Option<Injector>,
+    /// The reconstruction of coarse blocks (docs/reconstruction.md), where the device injects or
+    /// emulates and can record compute dispatches.
+    pub reconstructor: Option<Arc<Reconstructor>>,
+    /// Command pool → its queue family (from `vkCreateCommandPool`, hooked on emulating devices),
+    /// which its command buffers' records take at allocation ([`CbRecord::family`]). A leaf lock,
+    /// taken when pools are made and destroyed and command buffers allocated.
+    pub command_pools: parking_lot::Mutex<HashMap<u64, u32>>,
 }
 
-/// Per device: application handles → the layer's shadows, and the render passes the layer
-/// rewrote (by handle → the index of the density attachment, now a shading-rate attachment).
-pub struct Attachments {
-    /// The layer's own device-level calls (creating, clearing and destroying shadows and injected
-    /// maps); `None` where the device neither emulates nor injects, or the layer could not set them
-    /// up (no shadows or maps then).
-    pub own: Option<Arc<Own>>,
+/// Per device: application handles → the layer's shadows, the render passes the layer rewrote
+/// (by handle → the index of the density attachment, now a shading-rate attachment), and the
+/// converter of the maps the application writes itself.
+pub struct Emulation {
     pub images: Mutex<HashMap<u64, ShadowImage>>,
     pub views: Mutex<HashMap<u64, ShadowView>>,
     pub passes: Mutex<HashMap<u64, u32>>,
     /// Set once the log has said that the application writes density maps itself (converted at
     /// pass begin, [`crate::vk::convert`]).
     pub app_maps_logged: std::sync::atomic::AtomicBool,
+    /// The conversion of density maps the application writes (`None` where the device does not
+    /// emulate or cannot convert, `crate::vk::convert::converter_for`); each command buffer's
+    /// record holds its share ([`CbRecord::conversion`]).
+    pub converter: Option<Arc<Converter>>,
 }
 
-impl Attachments {
+impl Emulation {
     /// No shadows yet.
-    pub fn new(own: Option<Arc<Own>>) -> Attachments {
-        Attachments {
-            own,
+    pub fn new(converter: Option<Arc<Converter>>) -> Emulation {
+        Emulation {
             images: Mutex::ranked(Rank::Record, "vk shadow images", HashMap::new()),
             views: Mutex::ranked(Rank::Record, "vk shadow views", HashMap::new()),
             passes: Mutex::ranked(Rank::Record, "vk rewritten passes", HashMap::new()),
             app_maps_logged: std::sync::atomic::AtomicBool::new(false),
+            converter,
         }
     }
 
@@ -377,7 +396,7 @@ pub unsafe fn remove_device(handle: vk::Device) -> Option<Arc<Device>> {
 /// VUID-vkDestroyInstance-instance-00629, that real applications have): the loader frees their
 /// dispatch tables with the instance, so their keys may come back for new devices, and their
 /// command buffers' handles for new command buffers. Returns the forgotten devices' keys: what
-/// the modes kept for them is dropped as it is (`crate::vk::convert::device_key_reused`).
+/// their command buffers' records hold is dropped as it is ([`device_key_reused`]).
 pub fn forget_devices_of(instance: Key) -> Vec<Key> {
     let gone: Vec<(Key, Arc<Device>)> = {
         let mut devices = DEVICES.write();
@@ -405,65 +424,17 @@ pub fn forget_devices_of(instance: Key) -> Vec<Key> {
 // ---------------------------------------------------------------------------------------------
 // Command pools' and command buffers' queue families.
 
-/// Slots per table in [`Families`]: more command pools and command buffers than an application
-/// keeps alive at once, so that a live one is rarely evicted.
-const POOL_SLOTS: usize = 256;
-const BUFFER_SLOTS: usize = 4096;
-
-/// The queue family of command pools (from `vkCreateCommandPool`) and of command buffers (from
-/// their pool at `vkAllocateCommandBuffers`), for [`is_release`]. Direct-mapped tables of fixed
-/// size, so nothing grows however many pools and buffers come and go (a freed handle's slot is
-/// taken by the next one that maps there, and a handle the driver reuses is entered again when it
-/// is made). Written when pools and buffers are made, read only for an ownership transfer of a
-/// density image: a leaf lock, never taken per command on the common path.
-struct Families {
-    pools: SharedMutex<[(u64, u32); POOL_SLOTS]>,
-    buffers: SharedMutex<[(u64, u32); BUFFER_SLOTS]>,
-}
-
-static FAMILIES: Families = Families {
-    pools: SharedMutex::new([(0, 0); POOL_SLOTS]),
-    buffers: SharedMutex::new([(0, 0); BUFFER_SLOTS]),
-};
-
-fn slot(raw: u64, slots: usize) -> usize {
-    ((raw ^ (raw >> 29)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40) as usize % slots
-}
-
-impl Families {
-    fn command_buffer(&self, cb: vk::CommandBuffer) -> Option<u32> {
-        let raw = cb.as_raw();
-        let t = self.buffers.lock();
-        let (h, f) = t[slot(raw, BUFFER_SLOTS)];
-        (raw != 0 && h == raw).then_some(f)
-    }
-}
-
-/// Notes the queue family (their pool's) of command buffers `vkAllocateCommandBuffers` just made
-/// from `info` (its hook is [`crate::vk::hooks::record::allocate_command_buffers`], which also gives
-/// each its record).
-pub fn buffers_allocated(info: &vk::CommandBufferAllocateInfo<'_>, cbs: &[vk::CommandBuffer]) {
-    use ash::vk::Handle as _;
-    let pool = info.command_pool.as_raw();
-    let family = {
-        let t = FAMILIES.pools.lock();
-        let (h, f) = t[slot(pool, POOL_SLOTS)];
-        (h == pool).then_some(f)
-    };
-    let mut t = FAMILIES.buffers.lock();
-    for cb in cbs {
-        let raw = cb.as_raw();
-        // A pool whose family is not known leaves its buffers unknown too.
-        t[slot(raw, BUFFER_SLOTS)] = family.map_or((0, 0), |f| (raw, f));
-    }
+/// Notes the queue family of a command pool `vkCreateCommandPool` just made on `dev`.
+pub fn pool_created(dev: &Device, pool: u64, family: u32) {
+    dev.command_pools.lock().insert(pool, family);
 }
 
 /// Whether a barrier with these queue family indices, recorded into `cb`, is the release half of a
 /// queue family ownership transfer. Not a transfer where the indices are equal or either is
 /// `IGNORED`; a release where the destination is outside the device (`EXTERNAL`, `FOREIGN`), an
 /// acquire where the source is; between two of the device's families, a release where `cb`'s pool
-/// belongs to the source family ([`FAMILIES`]). Where that family is not known, a release: an
-/// acquire half then goes without the shadow's barrier, which is what the application wrote.
+/// belongs to the source family ([`CbRecord::family`]). Where that family is not known, a release:
+/// an acquire half then goes without the shadow's barrier, which is what the application wrote.
 pub fn is_release(cb: vk::CommandBuffer, src: u32, dst: u32) -> bool {
     let outside = |q: u32| q == vk::QUEUE_FAMILY_EXTERNAL || q == vk::QUEUE_FAMILY_FOREIGN_EXT;
     if src == dst || src == vk::QUEUE_FAMILY_IGNORED || dst == vk::QUEUE_FAMILY_IGNORED {
@@ -475,26 +446,13 @@ pub fn is_release(cb: vk::CommandBuffer, src: u32, dst: u32) -> bool {
     if outside(src) {
         return false;
     }
-    FAMILIES.command_buffer(cb).is_none_or(|f| f == src)
-}
-
-/// Notes the queue family of a command pool `vkCreateCommandPool` just made.
-pub fn pool_created(pool: u64, family: u32) {
-    FAMILIES.pools.lock()[slot(pool, POOL_SLOTS)] = (pool, family);
+    record_of(cb, |r| r.family)
+        .flatten()
+        .is_none_or(|f| f == src)
 }
 
 // ---------------------------------------------------------------------------------------------
-// Each converting device's converter, and every command buffer's record.
-
-/// Each converting device's [`Converter`], by dispatch key: a leaf lock outside
-/// [`crate::common::lock::Rank`]'s order, held for a scan and an `Arc` clone only.
-pub static CONVERTERS: SharedRwLock<Vec<(Key, Arc<Converter>)>> = SharedRwLock::new(Vec::new());
-
-/// Each reconstructing device's [`Reconstructor`] (docs/reconstruction.md), by dispatch key; a
-/// leaf lock like [`OWNS`], taken at device creation and destruction and at command-buffer
-/// allocation, never while recording.
-pub static RECONSTRUCTORS: SharedRwLock<Vec<(Key, Arc<Reconstructor>)>> =
-    SharedRwLock::new(Vec::new());
+// Every command buffer's record.
 
 /// Plans noted in command buffers' records and not yet taken by their pass's end (or dropped by a
 /// new recording): while none is, the end of a pass costs one atomic load
@@ -517,38 +475,6 @@ pub fn take_plan(record: &CbRecord) -> Option<Plan> {
     p
 }
 
-/// The reconstructor of a device's dispatch key.
-pub fn reconstructor_by_key(k: Key) -> Option<Arc<Reconstructor>> {
-    RECONSTRUCTORS
-        .read()
-        .iter()
-        .find(|(key, _)| *key == k)
-        .map(|(_, c)| Arc::clone(c))
-}
-
-/// The converter of a device's dispatch key.
-pub fn converter_by_key(k: Key) -> Option<Arc<Converter>> {
-    CONVERTERS
-        .read()
-        .iter()
-        .find(|(key, _)| *key == k)
-        .map(|(_, c)| Arc::clone(c))
-}
-
-/// The converter of a device's (or command buffer's) dispatch key.
-///
-/// # Safety
-/// `handle` must be NULL or a live dispatchable handle made by the loader.
-pub unsafe fn converter(handle: impl vk::Handle) -> Option<Arc<Converter>> {
-    // SAFETY: as the caller promised.
-    let k = unsafe { key(handle) }?;
-    CONVERTERS
-        .read()
-        .iter()
-        .find(|(key, _)| *key == k)
-        .map(|(_, c)| Arc::clone(c))
-}
-
 /// One command buffer's record: what it has bound ([`Bound`]), behind a lock of its own. Command
 /// buffers are externally synchronised (a command buffer and its pool are used by one thread at a
 /// time, <https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-threadingbehavior>),
@@ -560,23 +486,38 @@ pub struct CbRecord {
     /// The pool it was allocated from (0 where the layer did not see the allocation), whose
     /// destruction drops the record.
     pub pool: u64,
+    /// The queue family of its pool, where the layer saw the pool made ([`is_release`]).
+    pub family: Option<u32>,
     /// A secondary command buffer (whose begin info's inheritance info is read).
     pub secondary: bool,
     pub bound: parking_lot::Mutex<Bound>,
-    /// The command buffer's conversion objects, one per map it converted ([`Slot`]).
-    pub slots: parking_lot::Mutex<Vec<Slot>>,
-    /// The converter's [`Converter::maps_destroyed`] when `slots` last lost their dead maps'
-    /// slots (`crate::vk::convert::begun`).
-    pub swept: std::sync::atomic::AtomicU64,
-    /// The device's converter (`None` where it converts nothing), found once at allocation, so
-    /// that a pass begin reaches it without the process-wide [`CONVERTERS`].
-    pub converter: Option<Arc<Converter>>,
-    /// The device's reconstructor (`None` where it reconstructs nothing), found once at
-    /// allocation like the converter.
+    /// Its share of the device's converter (`None` where the device converts nothing): the slots
+    /// it converts with, which it owns ([`Conversion`]). Taken once at allocation, so that a pass
+    /// begin reaches it through this record without a look-up of the device's.
+    pub conversion: Option<Conversion>,
+    /// The device's reconstructor (`None` where it reconstructs nothing), taken at allocation like
+    /// the conversion.
     pub reconstructor: Option<Arc<Reconstructor>>,
     /// What the end of the render pass instance open in this command buffer reconstructs
     /// (docs/reconstruction.md), set where it begins.
     pub plan: parking_lot::Mutex<Option<Plan>>,
+}
+
+impl CbRecord {
+    /// The record of a command buffer of `dev` (dispatch key `device`) allocated from `pool` (0:
+    /// not seen): nothing bound, its share of the device's converter, the device's reconstructor.
+    pub fn new(dev: &Device, device: Key, pool: u64, secondary: bool) -> CbRecord {
+        CbRecord {
+            device,
+            pool,
+            family: dev.command_pools.lock().get(&pool).copied(),
+            secondary,
+            bound: parking_lot::Mutex::new(Bound::default()),
+            conversion: dev.emulation.converter.clone().map(Conversion::new),
+            reconstructor: dev.reconstructor.clone(),
+            plan: parking_lot::Mutex::new(None),
+        }
+    }
 }
 
 type Records = HashMap<u64, Arc<CbRecord>, BuildHasherDefault<AddressHasher>>;
@@ -649,11 +590,6 @@ pub fn with_record(cb: vk::CommandBuffer, f: impl FnOnce(&mut Bound)) {
     record_of(cb, |r| f(&mut r.bound.lock()));
 }
 
-/// A copy of `cb`'s bindings, `None` where it has no record or they cannot be given back.
-pub fn bound_of(cb: vk::CommandBuffer) -> Option<Bound> {
-    record_of(cb, |r| *r.bound.lock()).filter(|b| !b.lost)
-}
-
 /// Drops the records `drop` selects, and destroys their conversion objects (their command
 /// buffers are being freed, with their pool or device, and so are not pending).
 pub fn forget_command_buffers_where(drop: impl Fn(u64, &CbRecord) -> bool) {
@@ -695,48 +631,57 @@ pub fn forget_command_buffers(cbs: &[vk::CommandBuffer]) {
 /// Destroys the conversion objects of dropped records.
 fn destroy_records(gone: Vec<Arc<CbRecord>>) {
     for r in gone {
-        let slots = std::mem::take(&mut *r.slots.lock());
-        if slots.is_empty() {
-            continue;
-        }
-        if let Some(c) = &r.converter {
-            // SAFETY: the converter's own slots; their command buffer is not pending.
-            unsafe { c.destroy_slots(&slots) };
+        if let Some(c) = &r.conversion {
+            // SAFETY: the record's own slots; their command buffer is being freed (with its pool
+            // or device) or its handle names a new one, so it is not pending.
+            unsafe { c.destroy() };
         }
     }
 }
 
 /// Adds (or renews) `cb`'s record. A record the handle still had belonged to a command buffer the
 /// layer did not see go (its handle now names a new one): its objects go.
-pub fn remember_command_buffer(cb: vk::CommandBuffer, device: Key, pool: u64, secondary: bool) {
-    let record = Arc::new(CbRecord {
-        device,
-        pool,
-        secondary,
-        bound: parking_lot::Mutex::new(Bound::default()),
-        slots: parking_lot::Mutex::new(Vec::new()),
-        swept: std::sync::atomic::AtomicU64::new(0),
-        converter: converter_by_key(device),
-        reconstructor: reconstructor_by_key(device),
-        plan: parking_lot::Mutex::new(None),
-    });
+pub fn remember_command_buffer(cb: vk::CommandBuffer, record: CbRecord) {
     let old = {
         let mut map = CB_RECORDS.lock();
-        let old = map.insert(cb.as_raw(), record);
+        let old = map.insert(cb.as_raw(), Arc::new(record));
         CB_GENERATION.fetch_add(1, Ordering::Release);
         old
     };
     destroy_records(old.into_iter().collect());
 }
 
-/// The records of a destroyed pool's command buffers go.
-pub fn command_pool_destroyed(device: Key, pool: u64) {
+/// The records of a destroyed pool's command buffers go, and the pool's family.
+pub fn command_pool_destroyed(dev: &Device, device: Key, pool: u64) {
+    dev.command_pools.lock().remove(&pool);
     forget_command_buffers_where(|_, r| r.device == device && r.pool == pool);
+}
+
+/// Forgets, without a call to the driver, the command buffers' records of a device that is gone
+/// without `vkDestroyDevice` (see [`forget_devices_of`]): the application destroyed its instance
+/// with the device still alive (VUID-vkDestroyInstance-instance-00629), and the loader freed the
+/// device's dispatch table, whose address a new device may get. Called at that
+/// `vkDestroyInstance`, and where a new device has the dispatch key of one the layer still knows.
+/// The old device's objects are gone with it; destroying them now would call a driver that no
+/// longer has them, so the records are dropped as they are (their [`Conversion`]s destroy
+/// nothing on drop), and with the device's record go its converter and reconstructor.
+pub fn device_key_reused(k: Key) {
+    let mut map = CB_RECORDS.lock();
+    let before = map.len();
+    map.retain(|_, r| r.device != k);
+    if map.len() != before {
+        CB_GENERATION.fetch_add(1, Ordering::Release);
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A copy of `cb`'s bindings, `None` where it has no record or they cannot be given back.
+    fn bound_of(cb: vk::CommandBuffer) -> Option<Bound> {
+        record_of(cb, |r| *r.bound.lock()).filter(|b| !b.lost)
+    }
 
     unsafe extern "system" fn no_gdpa(
         _: vk::Device,
@@ -758,9 +703,12 @@ mod tests {
             next: DeviceNext::default(),
             end_rendering: None,
             fdm: None,
-            inject: None,
             api_version,
-            attachments: Attachments::new(None),
+            own: None,
+            emulation: Emulation::new(None),
+            injection: None,
+            reconstructor: None,
+            command_pools: parking_lot::Mutex::new(HashMap::new()),
         }
     }
 
@@ -816,15 +764,18 @@ mod tests {
             }
         }
         let cb = |i: u64| vk::CommandBuffer::from_raw(0xE0_0000 + i);
-        remember_command_buffer(cb(0), keys[0], 9, false);
-        remember_command_buffer(cb(1), keys[1], 9, false);
+        let dev = record(&objects[0], 1);
+        let remember =
+            |cb, k, pool| remember_command_buffer(cb, CbRecord::new(&dev, k, pool, false));
+        remember(cb(0), keys[0], 9);
+        remember(cb(1), keys[1], 9);
         let of = |k: Key| CB_RECORDS.lock().values().filter(|r| r.device == k).count();
         assert_eq!((of(keys[0]), of(keys[1])), (1, 1));
 
         assert_eq!(forget_devices_of(dead), vec![keys[0]]);
-        // What `vkDestroyInstance` does next for each forgotten device (`convert`'s
-        // `device_key_reused`): its command buffers' records go, without a driver call.
-        forget_command_buffers_where(|_, r| r.device == keys[0]);
+        // What `vkDestroyInstance` does next for each forgotten device: its command buffers'
+        // records go, without a driver call.
+        device_key_reused(keys[0]);
         // SAFETY: as above.
         unsafe {
             assert!(device_ref(vk::Device::from_raw(handle(0))).is_none());
@@ -838,7 +789,7 @@ mod tests {
         );
         assert!(forget_devices_of(dead).is_empty(), "forgotten once");
         // The dead device's command buffer handle, recycled by a later device.
-        remember_command_buffer(cb(0), keys[1], 10, false);
+        remember(cb(0), keys[1], 10);
         assert_eq!(
             record_of(cb(0), |r| (r.device, r.pool)),
             Some((keys[1], 10))
@@ -862,7 +813,13 @@ mod tests {
         assert!(!is_release(cb, external, 0));
         // Between two families: by the command buffer's; unknown counts as a release.
         assert!(is_release(cb, 0, 1));
-        FAMILIES.buffers.lock()[slot(cb.as_raw(), BUFFER_SLOTS)] = (cb.as_raw(), 1);
+        let object = object(0x7001);
+        let dev = record(&object, 1);
+        let pool = 0x5a5a_0020;
+        remember_command_buffer(cb, CbRecord::new(&dev, 0x7001, pool, false));
+        assert!(is_release(cb, 0, 1), "a pool the layer did not see made");
+        pool_created(&dev, pool, 1);
+        remember_command_buffer(cb, CbRecord::new(&dev, 0x7001, pool, false));
         assert!(
             !is_release(cb, 0, 1),
             "recorded on the destination family: acquire"
@@ -871,7 +828,48 @@ mod tests {
             is_release(cb, 1, 0),
             "recorded on the source family: release"
         );
-        FAMILIES.buffers.lock()[slot(cb.as_raw(), BUFFER_SLOTS)] = (0, 0);
+        command_pool_destroyed(&dev, 0x7001, pool);
+        assert!(
+            dev.command_pools.lock().is_empty(),
+            "the pool's family goes with it"
+        );
+        assert!(
+            is_release(cb, 0, 1),
+            "the command buffer's record went with its pool"
+        );
+    }
+
+    /// A command buffer's queue family is its record's, taken from its pool at allocation: however
+    /// many command buffers are allocated after it (more than any fixed-size table of families
+    /// holds, so one whose handle hashes where its does), an acquire half recorded into it stays an
+    /// acquire, and its pool's family goes with the pool.
+    #[test]
+    fn a_command_buffers_family_outlives_any_number_of_others() {
+        let k: Key = 0x8001;
+        let object = object(k);
+        let dev = record(&object, 1);
+        let (pool, other_pool) = (0x8800_0001u64, 0x8800_0002u64);
+        pool_created(&dev, pool, 1);
+        pool_created(&dev, other_pool, 0);
+        let cb = vk::CommandBuffer::from_raw(0x8100_0000);
+        remember_command_buffer(cb, CbRecord::new(&dev, k, pool, false));
+        let others: Vec<vk::CommandBuffer> = (1..=5000u64)
+            .map(|i| vk::CommandBuffer::from_raw(0x8100_0000 + i * 8))
+            .collect();
+        for &o in &others {
+            remember_command_buffer(o, CbRecord::new(&dev, k, other_pool, false));
+        }
+        assert!(
+            !is_release(cb, 0, 1),
+            "recorded on the destination family after 5000 other allocations: acquire"
+        );
+        assert!(
+            is_release(others[0], 0, 1),
+            "the others' family is the source's"
+        );
+        command_pool_destroyed(&dev, k, pool);
+        command_pool_destroyed(&dev, k, other_pool);
+        assert!(dev.command_pools.lock().is_empty());
     }
 
     /// A pool's destruction drops the records of the command buffers allocated from it, and only
@@ -879,6 +877,12 @@ mod tests {
     #[test]
     fn destroyed_pools_take_their_command_buffers_records() {
         let device: Key = 0xD0_0000;
+        let object = object(device);
+        let dev = record(&object, 1);
+        let remember_command_buffer = |cb, _: Key, pool, secondary| {
+            remember_command_buffer(cb, CbRecord::new(&dev, device, pool, secondary))
+        };
+        let command_pool_destroyed = |_: Key, pool| command_pool_destroyed(&dev, device, pool);
         let count = |pool: u64| {
             CB_RECORDS
                 .lock()

@@ -124,6 +124,60 @@ struct Fill {
     mapped: Mapped,
 }
 
+impl Fill {
+    /// Nothing filled yet for `count` images; the map's bytes (`density_bytes`) allocated once.
+    fn new(count: usize, density_bytes: usize) -> Fill {
+        Fill {
+            filled: vec![None; count],
+            cached: None,
+            bytes: vec![0; density_bytes],
+            codes: Vec::new(),
+            layer_codes: Vec::new(),
+            layer_codes_current: false,
+            moved: Vec::new(),
+            moved_codes: Vec::new(),
+            moved_layer_codes: Vec::new(),
+            staged: None,
+            mapped: Mapped(std::ptr::null_mut()),
+        }
+    }
+}
+
+/// Whether the device makes density images of `extent` texels and `layers` layers with the
+/// session's usage and `flags`.
+///
+/// # Safety
+/// The session's instance and physical device must be live.
+unsafe fn check_size(
+    gpu: &SessionGpu,
+    [mw, mh]: [u32; 2],
+    layers: u32,
+    flags: vk::ImageCreateFlags,
+) -> Result<(), VkError> {
+    // SAFETY: as the caller promised.
+    let props = unsafe {
+        gpu.instance.get_physical_device_image_format_properties(
+            gpu.physical_device,
+            FORMAT,
+            vk::ImageType::TYPE_2D,
+            vk::ImageTiling::OPTIMAL,
+            gpu.usage,
+            flags,
+        )
+    }
+    .map_err(step("vkGetPhysicalDeviceImageFormatProperties"))?;
+    let fits = props.max_extent.width >= mw
+        && props.max_extent.height >= mh
+        && props.max_array_layers >= layers;
+    if !fits || mw == 0 || mh == 0 {
+        return Err(VkError {
+            step: "density image size",
+            result: vk::Result::ERROR_FORMAT_NOT_SUPPORTED,
+        });
+    }
+    Ok(())
+}
+
 /// How fovea's density maps become shading-rate codes on a device that emulates fragment density
 /// maps on shading-rate attachments (docs/vulkan-fdm-on-fsr.md#rate-encoding).
 #[derive(Clone, Debug)]
@@ -190,145 +244,146 @@ impl DensityImages {
         count: u32,
         flags: vk::ImageCreateFlags,
     ) -> Result<DensityImages, VkError> {
-        // SAFETY: the caller's contract: the session's device (and its instance and physical device)
-        // are live. Every object made here is fovea's own and recorded in `out` as soon as it exists, so
-        // an early return destroys exactly what was made (Drop); the memory is mapped once, for the
-        // record's lifetime; the command buffers come from the session's pool under its mutex.
+        let grid = Grid::new(extent, gpu.texel);
+        let [mw, mh] = grid.map_extent();
+        let layers = layers.max(1);
+        // SAFETY: as the caller promised.
+        unsafe { check_size(gpu, [mw, mh], layers, flags) }?;
+        let density_bytes = u64::from(mw) * u64::from(mh) * 2 * u64::from(layers);
+        let rates = crate::bridge::device_fdm(gpu.device.handle())
+            .map(|fdm| Rates::new(&fdm, layers, density_bytes));
+        let size = match &rates {
+            Some(r) => r.offset + u64::from(mw) * u64::from(mh) * u64::from(r.layers),
+            None => density_bytes,
+        };
+        let fill = Fill::new(count as usize, density_bytes as usize);
+        let mut out = DensityImages {
+            gpu: gpu.clone(),
+            extent: [mw, mh],
+            layers,
+            grid,
+            images: Vec::new(),
+            shadows: Vec::new(),
+            rates,
+            staging: (vk::Buffer::null(), vk::DeviceMemory::null()),
+            command_buffers: Vec::new(),
+            fill: Mutex::ranked(Rank::DensityFill, "density fill", fill),
+        };
+        // From here on, an early return drops `out`, which destroys what exists so far: every
+        // object made below is fovea's own and recorded in `out` as soon as it exists.
+        for _ in 0..count {
+            // SAFETY: as the caller promised.
+            unsafe { out.push_image(flags) }?;
+        }
+        out.rates_from_shadows();
+        // SAFETY: as the caller promised.
         unsafe {
-            let grid = Grid::new(extent, gpu.texel);
-            let [mw, mh] = grid.map_extent();
-            let layers = layers.max(1);
-            let d = &gpu.device;
-            let props = gpu
-                .instance
-                .get_physical_device_image_format_properties(
-                    gpu.physical_device,
-                    FORMAT,
-                    vk::ImageType::TYPE_2D,
-                    vk::ImageTiling::OPTIMAL,
-                    gpu.usage,
-                    flags,
+            out.make_staging(size)?;
+            out.allocate_command_buffers(count)?;
+        }
+        Ok(out)
+    }
+
+    /// Makes one density image with device-local memory, through the application's device, and
+    /// notes its shading-rate shadow where it has one the rates fit.
+    ///
+    /// # Safety
+    /// As [`DensityImages::new`].
+    unsafe fn push_image(&mut self, flags: vk::ImageCreateFlags) -> Result<(), VkError> {
+        let gpu = &*self.gpu;
+        let d = &gpu.device;
+        let [mw, mh] = self.extent;
+        let create = vk::ImageCreateInfo::default()
+            .flags(flags)
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(FORMAT)
+            .extent(vk::Extent3D {
+                width: mw,
+                height: mh,
+                depth: 1,
+            })
+            .mip_levels(1)
+            .array_layers(self.layers)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(gpu.usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .initial_layout(vk::ImageLayout::UNDEFINED);
+        // SAFETY: the session's live device (as the caller promised); the image is destroyed
+        // again where its memory is not made, and recorded once it is.
+        unsafe {
+            // Through the application's device: on a device that emulates density maps the
+            // Vulkan layer gives the image its shadow, and learns that fovea writes its rates.
+            let image = crate::bridge::own_density_images(|| d.create_image(&create, None))
+                .map_err(step("vkCreateImage"))?;
+            let req = d.get_image_memory_requirements(image);
+            let memory = memory_type(
+                &gpu.memory,
+                req.memory_type_bits,
+                vk::MemoryPropertyFlags::DEVICE_LOCAL,
+                true,
+            )
+            .ok_or(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY)
+            .and_then(|i| {
+                d.allocate_memory(
+                    &vk::MemoryAllocateInfo::default()
+                        .allocation_size(req.size)
+                        .memory_type_index(i),
+                    None,
                 )
-                .map_err(step("vkGetPhysicalDeviceImageFormatProperties"))?;
-            if props.max_extent.width < mw
-                || props.max_extent.height < mh
-                || props.max_array_layers < layers
-                || mw == 0
-                || mh == 0
-            {
-                return Err(VkError {
-                    step: "density image size",
-                    result: vk::Result::ERROR_FORMAT_NOT_SUPPORTED,
-                });
-            }
-            let density_bytes = u64::from(mw) * u64::from(mh) * 2 * u64::from(layers);
-            let rates = crate::bridge::device_fdm(d.handle())
-                .map(|fdm| Rates::new(&fdm, layers, density_bytes));
-            let size = match &rates {
-                Some(r) => r.offset + u64::from(mw) * u64::from(mh) * u64::from(r.layers),
-                None => density_bytes,
-            };
-            let mut out = DensityImages {
-                gpu: gpu.clone(),
-                extent: [mw, mh],
-                layers,
-                grid,
-                images: Vec::new(),
-                shadows: Vec::new(),
-                rates,
-                staging: (vk::Buffer::null(), vk::DeviceMemory::null()),
-                command_buffers: Vec::new(),
-                fill: Mutex::ranked(
-                    Rank::DensityFill,
-                    "density fill",
-                    Fill {
-                        filled: vec![None; count as usize],
-                        cached: None,
-                        bytes: vec![0; density_bytes as usize],
-                        codes: Vec::new(),
-                        layer_codes: Vec::new(),
-                        layer_codes_current: false,
-                        moved: Vec::new(),
-                        moved_codes: Vec::new(),
-                        moved_layer_codes: Vec::new(),
-                        staged: None,
-                        mapped: Mapped(std::ptr::null_mut()),
-                    },
-                ),
-            };
-            // From here on, an early return drops `out`, which destroys what exists so far.
-            for _ in 0..count {
-                let create = vk::ImageCreateInfo::default()
-                    .flags(flags)
-                    .image_type(vk::ImageType::TYPE_2D)
-                    .format(FORMAT)
-                    .extent(vk::Extent3D {
-                        width: mw,
-                        height: mh,
-                        depth: 1,
-                    })
-                    .mip_levels(1)
-                    .array_layers(layers)
-                    .samples(vk::SampleCountFlags::TYPE_1)
-                    .tiling(vk::ImageTiling::OPTIMAL)
-                    .usage(gpu.usage)
-                    .sharing_mode(vk::SharingMode::EXCLUSIVE)
-                    .initial_layout(vk::ImageLayout::UNDEFINED);
-                // Through the application's device: on a device that emulates density maps the
-                // Vulkan layer gives the image its shadow, and learns that fovea writes its rates.
-                let image = crate::bridge::own_density_images(|| d.create_image(&create, None))
-                    .map_err(step("vkCreateImage"))?;
-                let req = d.get_image_memory_requirements(image);
-                let memory = memory_type(
-                    &gpu.memory,
-                    req.memory_type_bits,
-                    vk::MemoryPropertyFlags::DEVICE_LOCAL,
-                    true,
-                )
-                .ok_or(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY)
-                .and_then(|i| {
-                    d.allocate_memory(
-                        &vk::MemoryAllocateInfo::default()
-                            .allocation_size(req.size)
-                            .memory_type_index(i),
-                        None,
-                    )
-                });
-                let memory = match memory {
-                    Ok(m) => m,
-                    Err(e) => {
-                        d.destroy_image(image, None);
-                        return Err(step("vkAllocateMemory (image)")(e));
-                    }
-                };
-                out.images.push((image, memory));
-                d.bind_image_memory(image, memory, 0)
-                    .map_err(step("vkBindImageMemory"))?;
-                let shadow = crate::bridge::shadow_of(image);
-                out.shadows.push(
-                    shadow
-                        .filter(|s| out.rates.as_ref().is_some_and(|r| r.fits(s, [mw, mh])))
-                        .map(|s| s.image),
-                );
-                if shadow.is_some() && out.shadows.last() == Some(&None) {
-                    tracing::warn!(
-                        ?shadow,
-                        "a density image's shading-rate shadow does not match it; that image \
-                         renders at full rate"
-                    );
+            });
+            let memory = match memory {
+                Ok(m) => m,
+                Err(e) => {
+                    d.destroy_image(image, None);
+                    return Err(step("vkAllocateMemory (image)")(e));
                 }
-            }
-            if out.shadows.iter().all(Option::is_none) {
-                out.rates = None;
-            }
-            if let Some(r) = &out.rates {
-                out.fill.get_mut().codes = vec![0; (mw * mh * r.layers) as usize];
-                tracing::info!(
-                    layers = r.layers,
-                    max_fragment = ?r.max_fragment,
-                    "density images carry their shading rates"
+            };
+            self.images.push((image, memory));
+            d.bind_image_memory(image, memory, 0)
+                .map_err(step("vkBindImageMemory"))?;
+            let shadow = crate::bridge::shadow_of(image);
+            let fits = |s: &crate::bridge::Shadow| {
+                self.rates.as_ref().is_some_and(|r| r.fits(s, [mw, mh]))
+            };
+            self.shadows.push(shadow.filter(fits).map(|s| s.image));
+            if shadow.is_some() && self.shadows.last() == Some(&None) {
+                tracing::warn!(
+                    ?shadow,
+                    "a density image's shading-rate shadow does not match it; that image renders \
+                     at full rate"
                 );
             }
+        }
+        Ok(())
+    }
+
+    /// Where no image got a shadow, nothing computes codes; else their buffer is made once.
+    fn rates_from_shadows(&mut self) {
+        if self.shadows.iter().all(Option::is_none) {
+            self.rates = None;
+        }
+        if let Some(r) = &self.rates {
+            let [mw, mh] = self.extent;
+            self.fill.get_mut().codes = vec![0; (mw * mh * r.layers) as usize];
+            tracing::info!(
+                layers = r.layers,
+                max_fragment = ?r.max_fragment,
+                "density images carry their shading rates"
+            );
+        }
+    }
+
+    /// The staging buffer of `size` bytes: host-visible and coherent, mapped for good.
+    ///
+    /// # Safety
+    /// As [`DensityImages::new`].
+    unsafe fn make_staging(&mut self, size: u64) -> Result<(), VkError> {
+        let gpu = &*self.gpu;
+        let d = &gpu.device;
+        // SAFETY: the session's live device (as the caller promised); each object is recorded
+        // in `self` as soon as it exists, so Drop destroys it on a later failure.
+        unsafe {
             let buffer = d
                 .create_buffer(
                     &vk::BufferCreateInfo::default()
@@ -338,7 +393,7 @@ impl DensityImages {
                     None,
                 )
                 .map_err(step("vkCreateBuffer"))?;
-            out.staging.0 = buffer;
+            self.staging.0 = buffer;
             let req = d.get_buffer_memory_requirements(buffer);
             // Vulkan guarantees a HOST_VISIBLE | HOST_COHERENT type for buffers ("Memory Types").
             let index = memory_type(
@@ -351,7 +406,7 @@ impl DensityImages {
                 step: "a host-coherent memory type",
                 result: vk::Result::ERROR_OUT_OF_HOST_MEMORY,
             })?;
-            out.staging.1 = d
+            self.staging.1 = d
                 .allocate_memory(
                     &vk::MemoryAllocateInfo::default()
                         .allocation_size(req.size)
@@ -359,29 +414,32 @@ impl DensityImages {
                     None,
                 )
                 .map_err(step("vkAllocateMemory (staging)"))?;
-            d.bind_buffer_memory(buffer, out.staging.1, 0)
+            d.bind_buffer_memory(buffer, self.staging.1, 0)
                 .map_err(step("vkBindBufferMemory"))?;
+            let flags = vk::MemoryMapFlags::empty();
             let mapped = d
-                .map_memory(
-                    out.staging.1,
-                    0,
-                    vk::WHOLE_SIZE,
-                    vk::MemoryMapFlags::empty(),
-                )
+                .map_memory(self.staging.1, 0, vk::WHOLE_SIZE, flags)
                 .map_err(step("vkMapMemory"))?;
-            out.fill.get_mut().mapped = Mapped(mapped as *mut u8);
-            let s = gpu.submit.lock();
-            out.command_buffers = d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(s.pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(count),
-                )
-                .map_err(step("vkAllocateCommandBuffers"))?;
-            drop(s);
-            Ok(out)
+            self.fill.get_mut().mapped = Mapped(mapped as *mut u8);
         }
+        Ok(())
+    }
+
+    /// A command buffer per image, from the session's pool under its mutex.
+    ///
+    /// # Safety
+    /// As [`DensityImages::new`].
+    unsafe fn allocate_command_buffers(&mut self, count: u32) -> Result<(), VkError> {
+        let gpu = &*self.gpu;
+        let s = gpu.submit.lock();
+        let info = vk::CommandBufferAllocateInfo::default()
+            .command_pool(s.pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(count);
+        // SAFETY: the session's live device and pool, used under its mutex.
+        self.command_buffers = unsafe { gpu.device.allocate_command_buffers(&info) }
+            .map_err(step("vkAllocateCommandBuffers"))?;
+        Ok(())
     }
 
     /// The VkImage of swapchain image `i`, as XrSwapchainImageFoveationVulkanFB wants it.

@@ -20,10 +20,10 @@ pub enum When {
     Always,
     /// Only on devices that emulate fragment density maps; others get the next layer's pointer.
     Emulated,
-    /// On devices that emulate, and on devices that inject shading-rate maps into eye passes
-    /// (docs/injection.md): image and view tracking, pipelines, dynamic rendering, and the submits
-    /// that carry the maps' uploads.
-    Injected,
+    /// On every device fovea foveates, by emulating density maps or by injecting shading-rate maps
+    /// into eye passes (docs/injection.md): image and view tracking, pipelines, dynamic rendering,
+    /// command buffers' records, and the submits that carry the maps' uploads.
+    Foveating,
     /// Only on devices that inject: what concerns an application's own shading rates, which an
     /// emulating device never has (docs/injection.md#apps-that-set-rates).
     Injecting,
@@ -40,7 +40,7 @@ impl When {
         match self {
             When::Always => true,
             When::Emulated => emulated,
-            When::Injected => emulated || injected,
+            When::Foveating => emulated || injected,
             When::Injecting => injected,
             When::Provided => emulated,
         }
@@ -80,9 +80,9 @@ macro_rules! command_list {
             }
             device {
                 c"vkDestroyDevice" => destroy_device: PFN_vkDestroyDevice = device::destroy_device, When::Always;
-                c"vkCreateImage" => create_image: PFN_vkCreateImage = image::create_image, When::Injected;
+                c"vkCreateImage" => create_image: PFN_vkCreateImage = image::create_image, When::Foveating;
                 c"vkCreateGraphicsPipelines" => create_graphics_pipelines: PFN_vkCreateGraphicsPipelines =
-                    pipeline::create_graphics_pipelines, When::Injected;
+                    pipeline::create_graphics_pipelines, When::Foveating;
                 c"vkCreateShadersEXT" => create_shaders_ext: PFN_vkCreateShadersEXT =
                     pipeline::create_shaders_ext, When::Emulated;
                 c"vkCreateShaderModule" => create_shader_module: PFN_vkCreateShaderModule =
@@ -124,58 +124,58 @@ macro_rules! command_list {
                 c"vkCmdWriteTimestamp2KHR" => cmd_write_timestamp2_khr: PFN_vkCmdWriteTimestamp2 =
                     barrier::cmd_write_timestamp2_khr, When::Emulated;
                 // Shadow clears go ahead of the application's submits; wait stages are translated.
-                c"vkQueueSubmit" => queue_submit: PFN_vkQueueSubmit = submit::queue_submit, When::Injected;
+                c"vkQueueSubmit" => queue_submit: PFN_vkQueueSubmit = submit::queue_submit, When::Foveating;
                 c"vkQueueSubmit2" => queue_submit2: PFN_vkQueueSubmit2 = submit::queue_submit2,
-                    When::Injected;
+                    When::Foveating;
                 c"vkQueueSubmit2KHR" => queue_submit2_khr: PFN_vkQueueSubmit2 = submit::queue_submit2_khr,
-                    When::Injected;
+                    When::Foveating;
                 // The attachment path: shadows, render passes, framebuffers, dynamic rendering.
-                c"vkDestroyImage" => destroy_image: PFN_vkDestroyImage = image::destroy_image, When::Injected;
+                c"vkDestroyImage" => destroy_image: PFN_vkDestroyImage = image::destroy_image, When::Foveating;
                 // Host-side transitions name the density-map layout as barriers do (host image copy).
                 c"vkTransitionImageLayout" => transition_image_layout: PFN_vkTransitionImageLayoutEXT =
                     image::transition_image_layout, When::Emulated;
                 c"vkTransitionImageLayoutEXT" => transition_image_layout_ext:
                     PFN_vkTransitionImageLayoutEXT = image::transition_image_layout_ext, When::Emulated;
                 c"vkCreateImageView" => create_image_view: PFN_vkCreateImageView =
-                    image::create_image_view, When::Injected;
+                    image::create_image_view, When::Foveating;
                 c"vkDestroyImageView" => destroy_image_view: PFN_vkDestroyImageView =
-                    image::destroy_image_view, When::Injected;
+                    image::destroy_image_view, When::Foveating;
                 c"vkCreateRenderPass" => create_render_pass: PFN_vkCreateRenderPass =
-                    pass::create_render_pass, When::Injected;
+                    pass::create_render_pass, When::Foveating;
                 c"vkCreateRenderPass2" => create_render_pass2: PFN_vkCreateRenderPass2 =
-                    pass::create_render_pass2, When::Injected;
+                    pass::create_render_pass2, When::Foveating;
                 c"vkCreateRenderPass2KHR" => create_render_pass2_khr: PFN_vkCreateRenderPass2 =
-                    pass::create_render_pass2_khr, When::Injected;
+                    pass::create_render_pass2_khr, When::Foveating;
                 c"vkDestroyRenderPass" => destroy_render_pass: PFN_vkDestroyRenderPass =
-                    pass::destroy_render_pass, When::Injected;
+                    pass::destroy_render_pass, When::Foveating;
                 c"vkCreateFramebuffer" => create_framebuffer: PFN_vkCreateFramebuffer =
-                    pass::create_framebuffer, When::Injected;
+                    pass::create_framebuffer, When::Foveating;
                 c"vkDestroyFramebuffer" => destroy_framebuffer: PFN_vkDestroyFramebuffer =
-                    pass::destroy_framebuffer, When::Injected;
+                    pass::destroy_framebuffer, When::Foveating;
                 c"vkCmdBeginRenderPass" => cmd_begin_render_pass: PFN_vkCmdBeginRenderPass =
-                    pass::cmd_begin_render_pass, When::Injected;
+                    pass::cmd_begin_render_pass, When::Foveating;
                 c"vkCmdBeginRenderPass2" => cmd_begin_render_pass2: PFN_vkCmdBeginRenderPass2 =
-                    pass::cmd_begin_render_pass2, When::Injected;
+                    pass::cmd_begin_render_pass2, When::Foveating;
                 c"vkCmdBeginRenderPass2KHR" => cmd_begin_render_pass2_khr: PFN_vkCmdBeginRenderPass2 =
-                    pass::cmd_begin_render_pass2_khr, When::Injected;
+                    pass::cmd_begin_render_pass2_khr, When::Foveating;
                 c"vkCmdBeginRendering" => cmd_begin_rendering: PFN_vkCmdBeginRendering =
-                    pass::cmd_begin_rendering, When::Injected;
+                    pass::cmd_begin_rendering, When::Foveating;
                 c"vkCmdBeginRenderingKHR" => cmd_begin_rendering_khr: PFN_vkCmdBeginRendering =
-                    pass::cmd_begin_rendering_khr, When::Injected;
+                    pass::cmd_begin_rendering_khr, When::Foveating;
                 // Density-map offsets arrive with the end of a pass; their structs never reach the
                 // driver (docs/vulkan-layer.md#density-map-offsets).
                 // Coarse blocks are reconstructed after the pass instance ends
                 // (docs/reconstruction.md).
                 c"vkCmdEndRenderPass" => cmd_end_render_pass: PFN_vkCmdEndRenderPass =
-                    pass::cmd_end_render_pass, When::Injected;
+                    pass::cmd_end_render_pass, When::Foveating;
                 c"vkCmdEndRendering" => cmd_end_rendering: PFN_vkCmdEndRendering =
-                    pass::cmd_end_rendering, When::Injected;
+                    pass::cmd_end_rendering, When::Foveating;
                 c"vkCmdEndRenderingKHR" => cmd_end_rendering_khr: PFN_vkCmdEndRendering =
-                    pass::cmd_end_rendering_khr, When::Injected;
+                    pass::cmd_end_rendering_khr, When::Foveating;
                 c"vkCmdEndRenderPass2" => cmd_end_render_pass2: PFN_vkCmdEndRenderPass2 =
-                    pass::cmd_end_render_pass2, When::Injected;
+                    pass::cmd_end_render_pass2, When::Foveating;
                 c"vkCmdEndRenderPass2KHR" => cmd_end_render_pass2_khr: PFN_vkCmdEndRenderPass2 =
-                    pass::cmd_end_render_pass2_khr, When::Injected;
+                    pass::cmd_end_render_pass2_khr, When::Foveating;
                 c"vkCmdNextSubpass2" => cmd_next_subpass2: PFN_vkCmdNextSubpass2 =
                     pass::cmd_next_subpass2, When::Emulated;
                 c"vkCmdNextSubpass2KHR" => cmd_next_subpass2_khr: PFN_vkCmdNextSubpass2 =
@@ -183,7 +183,7 @@ macro_rules! command_list {
                 c"vkCmdEndRendering2EXT" => cmd_end_rendering2_ext: PFN_vkCmdEndRendering2KHR =
                     pass::cmd_end_rendering2_ext, When::Provided;
                 c"vkCmdEndRendering2KHR" => cmd_end_rendering2_khr: PFN_vkCmdEndRendering2KHR =
-                    pass::cmd_end_rendering2_khr, When::Injected;
+                    pass::cmd_end_rendering2_khr, When::Foveating;
                 // The application's own rates meet the injected attachment.
                 c"vkCmdSetFragmentShadingRateKHR" => cmd_set_fragment_shading_rate:
                     PFN_vkCmdSetFragmentShadingRateKHR = pipeline::cmd_set_fragment_shading_rate,
@@ -192,31 +192,31 @@ macro_rules! command_list {
                 // reconstructed at pass end (docs/reconstruction.md); the application's compute
                 // bindings are recorded so that they can be given back after either dispatch.
                 c"vkBeginCommandBuffer" => begin_command_buffer: PFN_vkBeginCommandBuffer =
-                    record::begin_command_buffer, When::Injected;
+                    record::begin_command_buffer, When::Foveating;
                 c"vkAllocateCommandBuffers" => allocate_command_buffers: PFN_vkAllocateCommandBuffers =
-                    record::allocate_command_buffers, When::Injected;
+                    record::allocate_command_buffers, When::Foveating;
                 c"vkFreeCommandBuffers" => free_command_buffers: PFN_vkFreeCommandBuffers =
-                    record::free_command_buffers, When::Injected;
+                    record::free_command_buffers, When::Foveating;
                 c"vkDestroyCommandPool" => destroy_command_pool: PFN_vkDestroyCommandPool =
-                    record::destroy_command_pool, When::Injected;
+                    record::destroy_command_pool, When::Foveating;
                 // Conversions run outside the application's conditional rendering.
                 c"vkCmdBeginConditionalRenderingEXT" => cmd_begin_conditional_rendering_ext:
                     PFN_vkCmdBeginConditionalRenderingEXT = record::cmd_begin_conditional_rendering,
-                    When::Injected;
+                    When::Foveating;
                 c"vkCmdEndConditionalRenderingEXT" => cmd_end_conditional_rendering_ext:
                     PFN_vkCmdEndConditionalRenderingEXT = record::cmd_end_conditional_rendering,
-                    When::Injected;
+                    When::Foveating;
                 c"vkCmdBindPipeline" => cmd_bind_pipeline: PFN_vkCmdBindPipeline =
-                    record::cmd_bind_pipeline, When::Injected;
+                    record::cmd_bind_pipeline, When::Foveating;
                 c"vkCmdBindDescriptorSets" => cmd_bind_descriptor_sets: PFN_vkCmdBindDescriptorSets =
-                    record::cmd_bind_descriptor_sets, When::Injected;
+                    record::cmd_bind_descriptor_sets, When::Foveating;
                 c"vkCmdPushConstants" => cmd_push_constants: PFN_vkCmdPushConstants =
-                    record::cmd_push_constants, When::Injected;
+                    record::cmd_push_constants, When::Foveating;
                 c"vkCmdPushDescriptorSetKHR" => cmd_push_descriptor_set_khr: PFN_vkCmdPushDescriptorSetKHR =
-                    record::cmd_push_descriptor_set_khr, When::Injected;
+                    record::cmd_push_descriptor_set_khr, When::Foveating;
                 c"vkCmdPushDescriptorSetWithTemplateKHR" => cmd_push_descriptor_set_with_template_khr:
                     PFN_vkCmdPushDescriptorSetWithTemplateKHR =
-                    record::cmd_push_descriptor_set_with_template_khr, When::Injected;
+                    record::cmd_push_descriptor_set_with_template_khr, When::Foveating;
             }
         }
     };

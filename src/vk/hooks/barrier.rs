@@ -54,7 +54,7 @@ fn create_pool(
     use ash::vk::Handle as _;
     let r = c.as_given();
     if let (vk::Result::SUCCESS, Some(i), Some(pool)) = (r, info.get(), out.read()) {
-        registry::pool_created(pool.as_raw(), i.queue_family_index);
+        registry::pool_created(c.dev, pool.as_raw(), i.queue_family_index);
     }
     r
 }

@@ -28,7 +28,9 @@ use crate::vk::base::ffi::{key, offset, raw, In, Out};
 use crate::vk::base::link::{self, LayerDeviceCreateInfo, LayerDeviceLink};
 use crate::vk::base::next::DeviceNext;
 use crate::vk::own::calls::{self, Own};
+use crate::vk::own::converter::Converter;
 use crate::vk::own::injector::Injector;
+use crate::vk::own::reconstructor::Reconstructor;
 use crate::vk::registry::{self, Decision, Instance};
 use crate::vk::{convert, decide, emulation, reconstruct};
 
@@ -875,7 +877,9 @@ impl New<'_> {
         } else {
             None
         };
-        let (emulated, injects) = (fdm.is_some(), inject.is_some());
+        let emulated = fdm.is_some();
+        let (converter, reconstructor) = self.modes(fdm.as_ref(), &inject, &own, api_version);
+        let converts = converter.is_some();
         // SAFETY: the live device just created.
         unsafe {
             registry::add_device(registry::Device {
@@ -885,19 +889,13 @@ impl New<'_> {
                 next,
                 end_rendering,
                 fdm,
-                inject,
                 api_version,
-                attachments: registry::Attachments::new(own),
+                own,
+                emulation: registry::Emulation::new(converter),
+                injection: inject,
+                reconstructor,
+                command_pools: Default::default(),
             });
-        }
-        // SAFETY: as above; `physical` belongs to `inst`, `ci` made the device.
-        let converts = unsafe { convert::device_created(inst, self.physical, self.ci, handle) };
-        if injects || emulated {
-            // SAFETY: as above.
-            unsafe {
-                let why = convert::dispatch_blocked(inst, self.physical, self.ci, api_version);
-                reconstruct::device_created(handle, why, self.ci);
-            }
         }
         // Offsets reach density maps where the driver got the application's request as it was
         // (so it has the extension), or where the layer emulates them and converts: an emulated
@@ -910,6 +908,37 @@ impl New<'_> {
             handle,
             Some(made.app_offsets && (made.untouched || (emulated && converts))),
         );
+    }
+
+    /// The converter of the maps the application writes and the reconstructor of coarse blocks,
+    /// where the layer can record compute dispatches into the device's command buffers (their
+    /// condition, [`convert::dispatch_blocked`]).
+    fn modes(
+        &self,
+        fdm: Option<&FdmEmulation>,
+        inject: &Option<Injector>,
+        own: &Option<Arc<Own>>,
+        api_version: u32,
+    ) -> (Option<Arc<Converter>>, Option<Arc<Reconstructor>>) {
+        let (inst, handle, ci) = (self.inst, self.handle, self.ci);
+        // SAFETY: the live device just created from `ci` on `physical`, a physical device of
+        // `inst`; `own` is its own calls, and it emulates as `fdm` says.
+        unsafe {
+            let blocked = (own.is_some() && (inject.is_some() || fdm.is_some()))
+                .then(|| convert::dispatch_blocked(inst, self.physical, ci, api_version))
+                .flatten();
+            let converter = convert::converter_for(handle, fdm, own.as_ref(), blocked.as_deref());
+            let recon_fdm = inject.as_ref().map(|i| &i.fdm).or(fdm);
+            let reconstructor = reconstruct::reconstructor_for(
+                handle,
+                recon_fdm,
+                own.as_ref(),
+                blocked.as_deref(),
+                ci,
+                api_version,
+            );
+            (converter, reconstructor)
+        }
     }
 
     /// The layer's own calls on the device, where it emulates (`emulates`) or injects
@@ -988,8 +1017,7 @@ impl New<'_> {
             "a new device has the dispatch key of one that was never destroyed (its instance was \
              destroyed first): what the layer kept for the old one is forgotten"
         );
-        convert::device_key_reused(k);
-        reconstruct::device_key_reused(k);
+        registry::device_key_reused(k);
     }
 
     /// The next layer's plain end of dynamic rendering, which `vkCmdEndRendering2EXT` (the driver
@@ -1027,10 +1055,10 @@ fn destroy(device: vk::Device, alloc: *const vk::AllocationCallbacks<'_>) {
     // SAFETY: the device is live; the application has finished with it (destroy_all waits for
     // the layer's clears and uploads in flight before the maps go).
     unsafe {
-        convert::device_destroyed(device);
-        reconstruct::device_destroyed(device);
+        convert::device_destroyed(&dev);
+        reconstruct::device_destroyed(&dev);
         emulation::destroy_all(&dev);
-        if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+        if let (Some(inj), Some(own)) = (&dev.injection, &dev.own) {
             inj.destroy(own);
         }
     }

@@ -62,17 +62,12 @@ fn create_view(
     };
     // SAFETY: the view was just created on the live device from `ci`.
     unsafe { reconstruct::view_created(dev, app_view, ci) };
-    if let Some(inj) = &dev.inject {
+    if let Some(inj) = &dev.injection {
         inj.view_created(app_view, ci);
         return r;
     }
-    let shadow = dev
-        .attachments
-        .images
-        .lock()
-        .get(&ci.image.as_raw())
-        .copied();
-    if let (Some(s), Some(own)) = (shadow, &dev.attachments.own) {
+    let shadow = dev.emulation.images.lock().get(&ci.image.as_raw()).copied();
+    if let (Some(s), Some(own)) = (shadow, &dev.own) {
         shadow_view(dev, own, app_view, ci, &s);
     }
     r
@@ -91,7 +86,7 @@ fn shadow_view(
     match unsafe { own.fns.create_image_view(&shadow_info, None) } {
         Ok(view) => {
             let r = shadow_info.subresource_range;
-            dev.attachments.views.lock().insert(
+            dev.emulation.views.lock().insert(
                 app_view.as_raw(),
                 ShadowView {
                     view,
@@ -134,15 +129,15 @@ fn destroy_view(
     let dev = c.dev;
     // Where the next layer has it.
     c.as_given();
-    if let Some(inj) = &dev.inject {
+    if let Some(inj) = &dev.injection {
         inj.view_destroyed(view);
     }
     // SAFETY: the device is live; the view is gone.
     unsafe { reconstruct::view_destroyed(dev, view) };
-    let shadow = dev.attachments.views.lock().remove(&view.as_raw());
+    let shadow = dev.emulation.views.lock().remove(&view.as_raw());
     // SAFETY: as above.
     unsafe { convert::view_changed(dev, view, None) };
-    if let (Some(s), Some(own)) = (shadow, &dev.attachments.own) {
+    if let (Some(s), Some(own)) = (shadow, &dev.own) {
         // SAFETY: the layer's own view; the application's use of it ended with its view's.
         unsafe { own.fns.destroy_image_view(s.view, None) };
     }
@@ -171,15 +166,15 @@ fn destroy(
     unsafe { convert::map_destroyed(dev, image) };
     // Where the next layer has it.
     c.as_given();
-    if let Some(inj) = &dev.inject {
+    if let Some(inj) = &dev.injection {
         inj.image_destroyed(image);
     }
     // SAFETY: the device is live; the image is gone.
     unsafe { reconstruct::image_destroyed(dev, image) };
-    let shadow = dev.attachments.images.lock().remove(&image.as_raw());
+    let shadow = dev.emulation.images.lock().remove(&image.as_raw());
     if let Some(s) = shadow {
         bridge::set_shadow(image, None);
-        if let Some(own) = &dev.attachments.own {
+        if let Some(own) = &dev.own {
             // SAFETY: the layer's own image and memory, no longer used by the application (its
             // image, which every use of the shadow stood in for, is being destroyed); a pending
             // clear is dropped, one in flight is waited for.
@@ -268,7 +263,7 @@ fn create(
         unsafe { reconstruct::image_made(dev, r, out.raw(), info.raw(), None) };
         r
     };
-    if let Some(inj) = &dev.inject {
+    if let Some(inj) = &dev.injection {
         let r = c.as_given();
         if let (vk::Result::SUCCESS, Some(ci), Some(image)) = (r, info.get(), out.read()) {
             inj.image_created(image, ci);

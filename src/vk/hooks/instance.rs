@@ -9,7 +9,6 @@ use crate::vk::base::chain;
 use crate::vk::base::ffi::{key, raw, In, Out};
 use crate::vk::base::link::{self, LayerInstanceCreateInfo, LayerInstanceLink};
 use crate::vk::base::next::InstanceNext;
-use crate::vk::convert;
 use crate::vk::registry;
 
 hook! {
@@ -246,7 +245,7 @@ fn destroy(instance: vk::Instance, alloc: *const vk::AllocationCallbacks<'_>) {
             );
         }
         for d in devices {
-            convert::device_key_reused(d);
+            registry::device_key_reused(d);
         }
     }
     if let Some(destroy) = inst.next.destroy_instance {

@@ -71,7 +71,7 @@ unsafe fn create_rewritten(
         // SAFETY: as the caller promised.
         unsafe { pass.without_density_enums() };
     }
-    if let Some(inj) = &dev.inject {
+    if let Some(inj) = &dev.injection {
         // SAFETY: as the caller promised.
         return unsafe {
             injection::create_injected(dev, inj, create2, pass, flags, p_next, alloc, out.raw())
@@ -111,10 +111,7 @@ fn rewritten_created(
     density: u32,
     layouts: Option<(vk::ImageLayout, vk::ImageLayout, bool)>,
 ) {
-    dev.attachments
-        .passes
-        .lock()
-        .insert(handle.as_raw(), density);
+    dev.emulation.passes.lock().insert(handle.as_raw(), density);
     // SAFETY: the device is live; the pass was just created on it.
     unsafe { convert::pass_changed(dev, handle, layouts) };
     reconstruct::pass_created(dev, handle, pass, density);
@@ -131,7 +128,7 @@ fn rewritten_created(
 /// layout, stage or access without the struct: it writes a map, or orders one); `None` where it
 /// goes down untouched.
 fn rewritten_about(dev: &Device, density: Option<u32>, names_density: bool) -> Option<u32> {
-    density.or((dev.inject.is_some() || names_density).then_some(vk::ATTACHMENT_UNUSED))
+    density.or((dev.injection.is_some() || names_density).then_some(vk::ATTACHMENT_UNUSED))
 }
 
 hook! {
@@ -175,7 +172,7 @@ fn create_pass(
         // Every emulating device has render pass 2 (the layer enables it), so this is an
         // injecting one: no density enums are valid on it anyway.
         tracing::warn!(
-            inject = dev.inject.is_some(),
+            inject = dev.injection.is_some(),
             "vkCreateRenderPass: cannot upgrade a render pass to version 2 (no \
              vkCreateRenderPass2 below, or a pNext chain the layer cannot copy); passed on as is, \
              at full rate"
@@ -278,7 +275,7 @@ fn create_pass2(
     let Some(density) = rewritten_about(dev, density, names) else {
         return as_given();
     };
-    if let (Some(inj), vk::ATTACHMENT_UNUSED) = (&dev.inject, density) {
+    if let (Some(inj), vk::ATTACHMENT_UNUSED) = (&dev.injection, density) {
         if let Some(r) = apps_own(which, inj, ci, as_given, &out) {
             return r;
         }
@@ -358,8 +355,8 @@ fn destroy_pass(
     _alloc: *const vk::AllocationCallbacks<'_>,
 ) {
     let dev = c.dev;
-    dev.attachments.passes.lock().remove(&pass.as_raw());
-    if let Some(inj) = &dev.inject {
+    dev.emulation.passes.lock().remove(&pass.as_raw());
+    if let Some(inj) = &dev.injection {
         inj.pass_destroyed(pass);
     }
     // SAFETY: the device is live; the application's uses of the pass have ended.
@@ -400,7 +397,7 @@ fn framebuffer(
     let Some(ci) = info.get() else {
         return down(info.raw());
     };
-    if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+    if let (Some(inj), Some(own)) = (&dev.injection, &dev.own) {
         let Some(p) = inj.pass(ci.render_pass) else {
             return down(info.raw());
         };
@@ -409,7 +406,7 @@ fn framebuffer(
             injection::create_injected_framebuffer(inj, own, p, next, device, ci, alloc, out.raw())
         };
     }
-    let Some(density) = dev.attachments.density_attachment(ci.render_pass) else {
+    let Some(density) = dev.emulation.density_attachment(ci.render_pass) else {
         return down(info.raw());
     };
     if ci.flags.contains(vk::FramebufferCreateFlags::IMAGELESS) {
@@ -475,8 +472,8 @@ fn with_shadow_view(
     let mut views = unsafe { slice(ci.p_attachments, ci.attachment_count) }.to_vec();
     let app_view = views.get(density as usize).copied();
     if let Some(v) = views.get_mut(density as usize) {
-        let shadow = dev.attachments.shadow_view(*v).or_else(|| {
-            let (own, fdm) = (dev.attachments.own.as_ref()?, dev.fdm.as_ref()?);
+        let shadow = dev.emulation.shadow_view(*v).or_else(|| {
+            let (own, fdm) = (dev.own.as_ref()?, dev.fdm.as_ref()?);
             // SAFETY: the device is live and emulates as `fdm` says.
             unsafe { own.full_rate_view(fdm, ci.width, ci.height) }
         });
@@ -514,19 +511,18 @@ hook! {
 
 fn destroy_fb(
     c: Call<'_, Device, Option<vk::PFN_vkDestroyFramebuffer>, impl Fn()>,
-    device: vk::Device,
+    _device: vk::Device,
     fb: vk::Framebuffer,
     _alloc: *const vk::AllocationCallbacks<'_>,
 ) {
-    if let Some(inj) = &c.dev.inject {
+    if let Some(inj) = &c.dev.injection {
         inj.framebuffer_destroyed(fb);
     }
     // SAFETY: the device is live; the application's uses of the framebuffer have ended.
     unsafe { reconstruct::framebuffer_destroyed(c.dev, fb) };
     // Where the next layer has it.
     c.as_given();
-    // SAFETY: a device the loader dispatched.
-    unsafe { convert::framebuffer_destroyed(device, fb) };
+    convert::framebuffer_destroyed(c.dev, fb);
 }
 
 /// The begin a render pass goes down with: on an injecting device injection's
@@ -541,7 +537,7 @@ unsafe fn begin_pass(
     begin: *const vk::RenderPassBeginInfo<'_>,
     f: impl FnOnce(*const vk::RenderPassBeginInfo<'_>),
 ) {
-    if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+    if let (Some(inj), Some(own)) = (&dev.injection, &dev.own) {
         // SAFETY: as the caller promised; `own` is the device's.
         return unsafe { injection::begin_injected_pass(inj, own, cb, begin, f) };
     }
@@ -618,7 +614,7 @@ fn begin_rendering(
     // SAFETY: the application's rendering info, valid as the command requires; recorded before
     // rendering begins.
     unsafe { convert::before_rendering(dev, cb, info.raw()) };
-    if let (Some(inj), Some(own)) = (&dev.inject, &dev.attachments.own) {
+    if let (Some(inj), Some(own)) = (&dev.injection, &dev.own) {
         // SAFETY: the application's arguments; `own` is the device's.
         return unsafe { injection::begin_injected(inj, own, next, cb, info.raw()) };
     }
@@ -635,7 +631,7 @@ fn begin_rendering(
     };
     let view = found.image_view;
     let shadow = (view != vk::ImageView::null())
-        .then(|| dev.attachments.shadow_view(view))
+        .then(|| dev.emulation.shadow_view(view))
         .flatten();
     if shadow.is_some() {
         // SAFETY: the application's rendering info.
@@ -1082,9 +1078,12 @@ mod tests {
                 next,
                 end_rendering: None,
                 fdm: None,
-                inject: Some(inj),
                 api_version: vk::API_VERSION_1_3,
-                attachments: registry::Attachments::new(Some(Arc::clone(&own))),
+                own: Some(Arc::clone(&own)),
+                emulation: registry::Emulation::new(None),
+                injection: Some(inj),
+                reconstructor: None,
+                command_pools: Default::default(),
             });
         }
 

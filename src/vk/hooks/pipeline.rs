@@ -38,7 +38,7 @@ fn facts_of(dev: &Device, list: &[vk::GraphicsPipelineCreateInfo<'_>]) -> Vec<Fa
     // that lets the shading-rate attachment decide, or they ignore it.
     let fdm_pass = |pass: vk::RenderPass| {
         use ash::vk::Handle as _;
-        pass != vk::RenderPass::null() && dev.attachments.passes.lock().contains_key(&pass.as_raw())
+        pass != vk::RenderPass::null() && dev.emulation.passes.lock().contains_key(&pass.as_raw())
     };
     list.iter()
         // SAFETY: the application's create infos, valid as the command requires.
@@ -48,11 +48,11 @@ fn facts_of(dev: &Device, list: &[vk::GraphicsPipelineCreateInfo<'_>]) -> Vec<Fa
             // came (docs/injection.md#switching-it-on): its pipelines keep the application's
             // state, as they would without the layer.
             inject: dev
-                .inject
+                .injection
                 .as_ref()
                 .is_some_and(|i| !i.is_apps_pass(ci.render_pass)),
             non_trivial: dev
-                .inject
+                .injection
                 .as_ref()
                 .is_some_and(|i| i.fdm.non_trivial_combiners),
             ..f
@@ -118,7 +118,7 @@ fn create_pipelines(
     let (dev, next) = (c.dev, c.next);
     let list = infos.slice();
     let facts = facts_of(dev, list);
-    if (dev.fdm.is_none() && dev.inject.is_none()) || !facts.iter().any(Facts::rewrite) {
+    if (dev.fdm.is_none() && dev.injection.is_none()) || !facts.iter().any(Facts::rewrite) {
         return c.as_given();
     }
     let mut copies = Vec::with_capacity(list.len());
@@ -163,7 +163,7 @@ fn set_rate(
     size: In<'_, vk::Extent2D>,
     ops: In<'_, [CombinerOp; 2]>,
 ) {
-    let retuned = match (&c.dev.inject, size.get(), ops.get()) {
+    let retuned = match (&c.dev.injection, size.get(), ops.get()) {
         (Some(inj), Some(&s), Some(&o)) => {
             let op = attachment_combiner(inj.fdm.non_trivial_combiners, s, o);
             (op != o[1]).then_some([o[0], op])

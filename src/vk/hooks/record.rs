@@ -13,7 +13,7 @@ use crate::vk::convert;
 use crate::vk::own::bindings::{Bound, PushRange};
 use crate::vk::registry::{
     self, command_pool_destroyed, forget_command_buffers, record_of, remember_command_buffer,
-    with_record, Device,
+    with_record, CbRecord, Device,
 };
 
 hook! {
@@ -46,9 +46,9 @@ fn allocate(
         let cbs = unsafe { slice(out, i.command_buffer_count) };
         let secondary = i.level == vk::CommandBufferLevel::SECONDARY;
         for &cb in cbs {
-            remember_command_buffer(cb, k, i.command_pool.as_raw(), secondary);
+            let pool = i.command_pool.as_raw();
+            remember_command_buffer(cb, CbRecord::new(c.dev, k, pool, secondary));
         }
-        registry::buffers_allocated(i, cbs);
     }
     r
 }
@@ -70,13 +70,12 @@ fn destroy_pool(
     pool: vk::CommandPool,
     alloc: *const vk::AllocationCallbacks<'_>,
 ) {
-    // SAFETY: a device the loader dispatched (or NULL): its first word is its dispatch key.
-    let key = unsafe { key(device) };
-    if let (Some(k), false) = (key, pool == vk::CommandPool::null()) {
-        command_pool_destroyed(k, pool.as_raw());
+    // SAFETY: a device the loader dispatched (or NULL): its first word is its dispatch key; the
+    // borrow ends with this call.
+    let (dev, key) = unsafe { (registry::device_ref(device), key(device)) };
+    if let (Some(d), Some(k), false) = (&dev, key, pool == vk::CommandPool::null()) {
+        command_pool_destroyed(d, k, pool.as_raw());
     }
-    // SAFETY: as above; the borrow ends with this call.
-    let dev = unsafe { registry::device_ref(device) };
     if let Some(next) = dev.and_then(|d| d.next.destroy_command_pool) {
         // SAFETY: the next layer's function, with the application's arguments.
         unsafe { next(device, pool, alloc) };
@@ -119,7 +118,7 @@ fn begin(
         // record without a pool, dropped with the command buffer or its device.
         // SAFETY: a command buffer the loader dispatched: its first word is its dispatch key.
         let device = unsafe { key(cb) }.unwrap_or(0);
-        remember_command_buffer(cb, device, 0, false);
+        remember_command_buffer(cb, CbRecord::new(c.dev, device, 0, false));
     }
     c.as_given()
 }

@@ -80,7 +80,7 @@ fn submit(
     submits: Arr<'_, vk::SubmitInfo<'_>>,
     fence: vk::Fence,
 ) -> vk::Result {
-    let own = c.dev.attachments.own.as_deref();
+    let own = c.dev.own.as_deref();
     // SAFETY: inside the application's submit on `queue`, a queue the loader dispatched.
     if let Err(e) = unsafe { before_submit(c.name, queue, own) } {
         return e;
@@ -173,7 +173,7 @@ fn submit2(
     submits: Arr<'_, vk::SubmitInfo2<'_>>,
     fence: vk::Fence,
 ) -> vk::Result {
-    let own = c.dev.attachments.own.as_deref();
+    let own = c.dev.own.as_deref();
     // SAFETY: inside the application's submit on `queue`, a queue the loader dispatched.
     if let Err(e) = unsafe { before_submit(c.name, queue, own) } {
         return e;
