@@ -159,6 +159,43 @@ impl Codec {
         }
     }
 
+    /// [`Codec::mean`] of the texels of `pixels` at byte offsets `at` (1, 2 or 4 of them), with
+    /// the 8-bit formats (the eye buffers' usual ones) summed directly: the double does this for
+    /// every block of every coarse pass.
+    pub(super) fn mean_at(self, pixels: &[u8], at: &[usize], out: &mut [u8]) {
+        let n = self.bytes();
+        if let [one] = at {
+            out[..n].copy_from_slice(&pixels[*one..*one + n]);
+            return;
+        }
+        if let Codec::Rgba8 { srgb } = self {
+            let k = at.len() as u32;
+            let table = srgb_tables();
+            for c in 0..4 {
+                if srgb && c < 3 {
+                    let mut sum = 0f32;
+                    for &a in at {
+                        sum += table.linear[usize::from(pixels[a + c])];
+                    }
+                    let v = sum / k as f32;
+                    out[c] = table.up.partition_point(|&u| u <= v) as u8;
+                } else {
+                    let mut sum = 0u32;
+                    for &a in at {
+                        sum += u32::from(pixels[a + c]);
+                    }
+                    out[c] = ((sum + k / 2) / k) as u8;
+                }
+            }
+            return;
+        }
+        let mut texels: [&[u8]; 4] = [&[]; 4];
+        for (t, &a) in texels.iter_mut().zip(at) {
+            *t = &pixels[a..a + n];
+        }
+        self.mean(&texels[..at.len()], out);
+    }
+
     /// The mean of `texels` (1, 2 or 4 of them), in linear terms, into `out`. A single texel is
     /// copied as it is (bit for bit: no round trip through the codec).
     pub(super) fn mean(self, texels: &[&[u8]], out: &mut [u8]) {

@@ -483,22 +483,15 @@ fn coarsen(
                     centre::middle(w, (bx + w).min(x1) - bx),
                 );
                 let mut value = [0u8; 16];
-                {
-                    let at = |x: u32, y: u32| {
-                        let i = (by + y) as usize * row + (bx + x) as usize * bpp;
-                        &pixels[i..i + bpp]
-                    };
-                    let one = |m: &[u32; 2]| if m[0] == m[1] { 1 } else { 2 };
-                    let mut texels: [&[u8]; 4] = [&[]; 4];
-                    let mut n = 0;
-                    for &y in &ys[..one(&ys)] {
-                        for &x in &xs[..one(&xs)] {
-                            texels[n] = at(x, y);
-                            n += 1;
-                        }
+                let mut at = [0usize; 4];
+                let mut n = 0;
+                for &y in &ys[..1 + usize::from(ys[0] != ys[1])] {
+                    for &x in &xs[..1 + usize::from(xs[0] != xs[1])] {
+                        at[n] = (by + y) as usize * row + (bx + x) as usize * bpp;
+                        n += 1;
                     }
-                    codec.mean(&texels[..n], &mut value);
                 }
+                codec.mean_at(pixels, &at[..n], &mut value);
                 for y in by..by + bh {
                     for x in bx..bx + bw {
                         let at = y as usize * row + x as usize * bpp;
