@@ -590,9 +590,10 @@ pub(crate) mod tests {
         assert_eq!(level(), None, "off is seen too");
     }
 
-    #[test]
-    fn centres_are_published_per_half_texel_and_keep_the_fixed_maps() {
-        let _one = STATE_TESTS.lock();
+    /// Injection on at HIGH with one layered eye swapchain of 1600×1600 (handle 9), for the
+    /// centres' tests, which hold the returned guard (the state is process-wide).
+    fn start_with_eye_swapchain() -> parking_lot::MutexGuard<'static, ()> {
+        let one = STATE_TESTS.lock();
         stop();
         start(Level::High, true);
         set_swapchain(
@@ -604,6 +605,12 @@ pub(crate) mod tests {
             },
             false,
         );
+        one
+    }
+
+    #[test]
+    fn centres_are_published_per_half_texel_and_keep_the_fixed_maps() {
+        let _one = start_with_eye_swapchain();
         set_texel([16, 16]);
         let mut c = [None; MAX_VIEWS];
         c[0] = Some([0.1, 0.0]);
@@ -613,12 +620,12 @@ pub(crate) mod tests {
         let s = current().unwrap();
         assert_eq!(s.centres(), c);
         assert_eq!(s.fixed, fixed, "a move keeps the fixed maps");
-        let (g, key) = (GENERATION.load(Ordering::Acquire), s.key());
+        let (g, key) = (super::generation(), s.key());
         // A texel of 16 px on 1600 px is 0.02 in NDC: half of it is 0.01.
         let mut tremble = c;
         tremble[0] = Some([0.1 + 0.0099, -0.0099]);
         set_centres(&tremble);
-        assert_eq!(GENERATION.load(Ordering::Acquire), g, "inside half a texel");
+        assert_eq!(super::generation(), g, "inside half a texel");
         assert_eq!(current().unwrap().key(), key);
         let mut moved = c;
         moved[1] = Some([0.1, 0.011]);
@@ -637,18 +644,7 @@ pub(crate) mod tests {
     #[test]
     fn a_moving_gaze_is_published_without_allocating() {
         use crate::common::alloc_count::allocations;
-        let _one = STATE_TESTS.lock();
-        stop();
-        start(Level::High, true);
-        set_swapchain(
-            9,
-            inject::Swapchain {
-                extent: [1600, 1600],
-                layers: 2,
-                holds: Holds::Layers,
-            },
-            false,
-        );
+        let _one = start_with_eye_swapchain();
         set_images(9, &[0x51, 0x52, 0x53]);
         set_texel([16, 16]);
         let mut c = [None; MAX_VIEWS];
